@@ -1,0 +1,20 @@
+"""gbviewer: view trained 3D Gaussian Splatting scenes and compare Gaussian Blending with scalar blending."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .camera import Camera, load_cameras_json, orbit_camera
+from .errors import BackendUnavailable, CameraError, GBViewerError, RenderError, SceneFormatError
+from .io import load
+from .render import Frame, Mode, Renderer, RenderSettings, get_renderer, render
+from .scene import Scene
+
+ASSETS = Path(__file__).parent / "assets"
+DEFAULT_SCENE = ASSETS / "fruit_drops_minimal.ply"
+
+__all__ = [
+    "ASSETS", "DEFAULT_SCENE", "BackendUnavailable", "Camera", "CameraError", "Frame", "GBViewerError", "Mode",
+    "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError", "get_renderer", "load",
+    "load_cameras_json", "orbit_camera", "render",
+]

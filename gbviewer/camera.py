@@ -1,0 +1,169 @@
+"""Pinhole cameras (OpenCV axes: x right, y down, z forward) and where they come from."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .errors import CameraError
+
+if TYPE_CHECKING:
+    from .scene import Scene
+
+NEAR_PLANE = 0.2  # published 3DGS near cull (KERNELS.md §0.4)
+UP_AXES = {"-y": (0.0, -1.0, 0.0), "+y": (0.0, 1.0, 0.0), "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0)}
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Intrinsics in pixels and a world-to-camera pose: x_cam = R @ x_world + t.
+
+    Pixel (i, j) covers [j, j+1] x [i, i+1]; a centred 3DGS camera has cx = W/2, cy = H/2.
+    """
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    R: np.ndarray
+    t: np.ndarray
+    near: float = NEAR_PLANE
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        R = np.asarray(self.R, dtype=np.float64).reshape(3, 3)
+        t = np.asarray(self.t, dtype=np.float64).reshape(3)
+        object.__setattr__(self, "R", R)
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+        if not (1 <= self.width <= 16384 and 1 <= self.height <= 16384):
+            raise CameraError(f"camera {self.name!r}: size {self.width}x{self.height}; expected 1..16384 per axis")
+        vals = [self.fx, self.fy, self.cx, self.cy, self.near]
+        if not all(math.isfinite(v) for v in vals) or self.fx <= 0 or self.fy <= 0 or self.near <= 0:
+            raise CameraError(f"camera {self.name!r}: fx, fy, near must be finite and > 0, cx, cy finite; got {vals}")
+        if not (np.isfinite(R).all() and np.isfinite(t).all()):
+            raise CameraError(f"camera {self.name!r}: pose has non-finite values")
+        if abs(np.linalg.det(R) - 1.0) > 1e-3 or np.abs(R @ R.T - np.eye(3)).max() > 1e-3:
+            raise CameraError(f"camera {self.name!r}: R is not a rotation matrix (det {np.linalg.det(R):.4f})")
+
+    @property
+    def position(self) -> np.ndarray:
+        """Camera centre in world coordinates."""
+        return -self.R.T @ self.t
+
+    def at_sampling_rate(self, s: float) -> "Camera":
+        """The same view with s times as many pixels per axis (s = 1/8 zooms out 8x, s = 8 zooms in)."""
+        if not (s > 0 and math.isfinite(s)):
+            raise CameraError(f"sampling rate must be a finite number > 0, got {s}")
+        w, h = max(1, round(self.width * s)), max(1, round(self.height * s))
+        sx, sy = w / self.width, h / self.height
+        return replace(self, width=w, height=h, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy)
+
+    def with_size(self, width: int, height: int) -> "Camera":
+        """Same pose and field of view at another resolution."""
+        return replace(
+            self,
+            width=width,
+            height=height,
+            fx=self.fx * width / self.width,
+            fy=self.fy * height / self.height,
+            cx=self.cx * width / self.width,
+            cy=self.cy * height / self.height,
+        )
+
+    @staticmethod
+    def look_at(
+        eye: np.ndarray,
+        target: np.ndarray,
+        up: np.ndarray | tuple[float, float, float] = UP_AXES["-y"],
+        width: int = 640,
+        height: int = 480,
+        fov_y_deg: float = 50.0,
+        name: str = "",
+    ) -> "Camera":
+        """A centred pinhole camera at `eye` looking at `target`, with `up` pointing up on screen."""
+        eye, target = np.asarray(eye, np.float64), np.asarray(target, np.float64)
+        z = target - eye
+        if np.linalg.norm(z) < 1e-12:
+            raise CameraError("look_at: eye and target coincide")
+        z /= np.linalg.norm(z)
+        up_v = np.asarray(up, np.float64)
+        x = np.cross(-up_v, z)  # image y points down: camera +y is -up, and x = y cross z
+        if np.linalg.norm(x) < 1e-6:
+            x = np.cross(np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 0.0, 1.0]), z)
+        x /= np.linalg.norm(x)
+        y = np.cross(z, x)
+        R = np.stack([x, y, z])  # rows: camera axes in world
+        f = 0.5 * height / math.tan(math.radians(fov_y_deg) / 2)
+        return Camera(width, height, f, f, width / 2, height / 2, R, -R @ eye, name=name)
+
+
+def orbit_camera(
+    scene: "Scene",
+    azimuth_deg: float = 30.0,
+    elevation_deg: float = 20.0,
+    distance: float | None = None,
+    width: int = 640,
+    height: int = 480,
+    fov_y_deg: float = 50.0,
+    up: str = "-y",
+) -> Camera:
+    """A camera orbiting the scene's robust centre; default distance frames the robust bounds.
+
+    Percentile bounds keep stray far splats from pushing the camera away.
+    """
+    if up not in UP_AXES:
+        raise CameraError(f"up axis {up!r}; expected one of {sorted(UP_AXES)}")
+    lo, hi = scene.robust_bounds()
+    centre = (lo + hi) / 2
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
+    if distance is None:
+        fov = math.radians(fov_y_deg) * min(1.0, width / height)
+        distance = radius / math.sin(fov / 2) * 0.9
+    if not (distance > 0 and math.isfinite(distance)):
+        raise CameraError(f"orbit distance must be > 0, got {distance}")
+    up_v = np.array(UP_AXES[up])
+    # build an orthonormal frame (a, b) perpendicular to up for the azimuth circle
+    a = np.cross(up_v, [1.0, 0.0, 0.0] if abs(up_v[0]) < 0.9 else [0.0, 0.0, 1.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(up_v, a)
+    az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
+    direction = math.cos(el) * (math.cos(az) * a + math.sin(az) * b) + math.sin(el) * up_v
+    eye = centre + distance * direction
+    return Camera.look_at(eye, centre, up_v, width, height, fov_y_deg, name=f"orbit({azimuth_deg},{elevation_deg})")
+
+
+def load_cameras_json(path: str | Path) -> list[Camera]:
+    """Cameras from a 3DGS `cameras.json` (camera-to-world rotation rows and centre; fx, fy at full size)."""
+    path = Path(path)
+    try:
+        entries = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CameraError(f"{path}: cannot read cameras.json: {exc}") from None
+    if not isinstance(entries, list) or not entries:
+        raise CameraError(f"{path}: expected a non-empty JSON list of cameras")
+    cams = []
+    for k, e in enumerate(entries):
+        try:
+            w, h = int(e["width"]), int(e["height"])
+            fx, fy = float(e["fx"]), float(e["fy"])
+            rot = np.asarray(e["rotation"], dtype=np.float64).reshape(3, 3)
+            pos = np.asarray(e["position"], dtype=np.float64).reshape(3)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise CameraError(f"{path}: camera {k}: missing or malformed field ({exc!r}); expected "
+                              "width, height, fx, fy, rotation (3x3), position (3)") from None
+        R = rot.T  # stored rotation is camera-to-world
+        name = str(e.get("img_name", e.get("id", k)))
+        try:
+            cams.append(Camera(w, h, fx, fy, w / 2, h / 2, R, -R @ pos, name=name))
+        except CameraError as exc:
+            raise CameraError(f"{path}: camera {k}: {exc}") from None
+    return cams

@@ -1,0 +1,29 @@
+"""Typed errors: each names the file (or object), the field and what was expected."""
+
+from __future__ import annotations
+
+
+class GBViewerError(Exception):
+    """Base class of every error gbviewer raises on bad input."""
+
+
+class SceneFormatError(GBViewerError):
+    """A scene file cannot be read: wrong format, missing or malformed field, truncated data."""
+
+    def __init__(self, path: object, message: str, field: str | None = None):
+        self.path = str(path)
+        self.field = field
+        where = f"{self.path}: " + (f"field '{field}': " if field else "")
+        super().__init__(where + message)
+
+
+class CameraError(GBViewerError):
+    """A camera (or cameras.json entry) is invalid."""
+
+
+class RenderError(GBViewerError):
+    """Invalid render settings or a backend that cannot run."""
+
+
+class BackendUnavailable(RenderError):
+    """The requested backend cannot run on this machine; the message says why."""

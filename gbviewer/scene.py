@@ -1,0 +1,117 @@
+"""The `Scene` type: activated Gaussian splat parameters as a structure of float32 arrays."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .errors import GBViewerError
+
+SH_COEFFS = {0: 1, 1: 4, 2: 9, 3: 16}
+
+
+def sh_degree_for(num_coeffs: int) -> int:
+    """SH degree for K = (deg+1)^2 coefficients per channel."""
+    for deg, k in SH_COEFFS.items():
+        if k == num_coeffs:
+            return deg
+    raise GBViewerError(f"sh has {num_coeffs} coefficients per channel; expected one of 1, 4, 9, 16")
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """Splats with activated parameters (scales after exp, opacities after sigmoid, unit quaternions).
+
+    means (N,3), scales (N,3), quats (N,4) as (w,x,y,z), opacities (N,), sh (N,K,3) with DC first,
+    optional filter_3d (N,) (Mip-Splatting's 3D filter, applied by every renderer mode).
+    `meta` holds loader facts (format, version, property names) for `gbviewer info`.
+    """
+
+    means: np.ndarray
+    scales: np.ndarray
+    quats: np.ndarray
+    opacities: np.ndarray
+    sh: np.ndarray
+    filter_3d: np.ndarray | None = None
+    source: str = "<arrays>"
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def num_splats(self) -> int:
+        return int(self.means.shape[0])
+
+    @property
+    def sh_degree(self) -> int:
+        return sh_degree_for(self.sh.shape[1])
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned bounding box of all splat centres."""
+        return self.means.min(axis=0), self.means.max(axis=0)
+
+    def robust_bounds(self, percentile: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of the central splats (per-axis percentiles), ignoring stray far splats."""
+        lo, hi = np.percentile(self.means, [percentile, 100.0 - percentile], axis=0)
+        return lo.astype(np.float32), hi.astype(np.float32)
+
+    @classmethod
+    def from_arrays(
+        cls,
+        means: np.ndarray,
+        scales: np.ndarray,
+        quats: np.ndarray,
+        opacities: np.ndarray,
+        sh: np.ndarray,
+        filter_3d: np.ndarray | None = None,
+        source: str = "<arrays>",
+        meta: dict[str, Any] | None = None,
+    ) -> "Scene":
+        """Validate activated arrays, drop non-finite splats (warning once), normalise quaternions."""
+        arrays = {
+            "means": np.asarray(means, dtype=np.float32),
+            "scales": np.asarray(scales, dtype=np.float32),
+            "quats": np.asarray(quats, dtype=np.float32),
+            "opacities": np.asarray(opacities, dtype=np.float32).reshape(-1),
+            "sh": np.asarray(sh, dtype=np.float32),
+        }
+        if filter_3d is not None:
+            arrays["filter_3d"] = np.asarray(filter_3d, dtype=np.float32).reshape(-1)
+        if arrays["sh"].ndim == 2:
+            arrays["sh"] = arrays["sh"][:, None, :]
+        n = arrays["means"].shape[0] if arrays["means"].ndim == 2 else -1
+        expected = {"means": (n, 3), "scales": (n, 3), "quats": (n, 4), "opacities": (n,), "filter_3d": (n,)}
+        for name, shape in expected.items():
+            if name in arrays and arrays[name].shape != shape:
+                raise GBViewerError(f"{source}: field '{name}': shape {arrays[name].shape}, expected {shape}")
+        sh_arr = arrays["sh"]
+        if sh_arr.ndim != 3 or sh_arr.shape[0] != n or sh_arr.shape[2] != 3:
+            raise GBViewerError(f"{source}: field 'sh': shape {sh_arr.shape}, expected ({n}, K, 3)")
+        sh_degree_for(sh_arr.shape[1])
+        if n == 0:
+            raise GBViewerError(f"{source}: the scene has zero splats")
+
+        finite = np.ones(n, dtype=bool)
+        for arr in arrays.values():
+            finite &= np.isfinite(arr.reshape(n, -1)).all(axis=1)
+        dropped = int(n - finite.sum())
+        if dropped:
+            warnings.warn(f"{source}: dropped {dropped} of {n} splats with non-finite values", stacklevel=2)
+            arrays = {k: v[finite] for k, v in arrays.items()}
+            if dropped == n:
+                raise GBViewerError(f"{source}: every splat has non-finite values")
+
+        if (arrays["scales"] < 0).any():
+            raise GBViewerError(f"{source}: field 'scales': negative values; expected activated scales >= 0")
+        q = arrays["quats"]
+        norm = np.linalg.norm(q, axis=1, keepdims=True)
+        degenerate = norm[:, 0] < 1e-12
+        q = np.where(degenerate[:, None], np.array([1, 0, 0, 0], np.float32), q / np.maximum(norm, 1e-12))
+        arrays["quats"] = q.astype(np.float32)
+        arrays["opacities"] = np.clip(arrays["opacities"], 0.0, 1.0)
+        if "filter_3d" in arrays:
+            arrays["filter_3d"] = np.abs(arrays["filter_3d"])
+        arrays = {k: np.ascontiguousarray(v) for k, v in arrays.items()}
+        return cls(source=source, meta=dict(meta or {}), **arrays)

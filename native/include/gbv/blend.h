@@ -1,0 +1,153 @@
+// Per-pixel blending steps, one splat at a time, front to back. Each step returns true once the pixel
+// is finished (early termination). Shared by every backend; the GLSL port keeps the same names.
+#pragma once
+
+#include "common.h"
+
+namespace gbv {
+
+// Scalar front-to-back compositing of one alpha (3DGS renderCUDA, KERNELS.md §0.7): skip below
+// min_alpha; stop without adding the splat when T(1 - alpha) < 1e-4.
+GBV_HD bool composite_scalar(float alpha, const float color[3], float& T, float C[3]) {
+    if (alpha < MIN_ALPHA_3DGS) return false;
+    const float test_T = T * (1.0f - alpha);
+    if (test_T < T_STOP) return true;
+    const float w = alpha * T;
+    C[0] += color[0] * w;
+    C[1] += color[1] * w;
+    C[2] += color[2] * w;
+    T = test_T;
+    return false;
+}
+
+// Gaussian value exp(power) at offset d = xy - p, or 0 when power > 0 (numerically invalid).
+GBV_HD float gaussian_at(const Splat2D& s, Vec2 d) {
+    const float power = -0.5f * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
+    return power > 0.0f ? 0.0f : expf(power);
+}
+
+// `scalar` and `mip`: alpha at the pixel centre (eq. 5).
+GBV_HD bool blend_scalar(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
+    const float alpha = fminf(MAX_ALPHA, s.opacity * gaussian_at(s, s.xy - pix));
+    return composite_scalar(alpha, s.color, T, C);
+}
+
+// Analytic-Splatting's logistic approximation of the standard normal CDF (KERNELS.md §4).
+GBV_HD float approx_cdf(float x) { return 0.5f * tanhf(0.5f * (1.6f * x + 0.07f * x * x * x)) + 0.5f; }
+
+// `analytic`: mean alpha over the unit pixel, separable in the splat's eigen-frame (Analytic-Splatting).
+GBV_HD bool blend_analytic(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
+    const Vec2 d = pix - s.xy;
+    const Vec2 v2 = {-s.v1.y, s.v1.x};
+    const float u = dot(d, s.v1), v = dot(d, v2);
+    const float iu = s.sigma1 * (approx_cdf((u + 0.5f) / s.sigma1) - approx_cdf((u - 0.5f) / s.sigma1));
+    const float iv = s.sigma2 * (approx_cdf((v + 0.5f) / s.sigma2) - approx_cdf((v - 0.5f) / s.sigma2));
+    const float alpha = fminf(MAX_ALPHA, s.opacity * TWO_PI * iu * iv);
+    return composite_scalar(alpha, s.color, T, C);
+}
+
+// Moments of exp(-t^2/2) from 0 to x (paper eq. 13 with sigma = 1): zeroth, first, second.
+GBV_HD float gaussian_moment0(float x) { return SQRT_PI_2 * erff(x * 0.7071067811865476f); }
+GBV_HD float gaussian_moment1(float x) { return -expm1f(-0.5f * x * x); }
+GBV_HD float gaussian_moment2(float x) { return gaussian_moment0(x) - x * expf(-0.5f * x * x); }
+
+// Gaussian Blending's transmittance: a uniform window of total mass T (pixel area = 1) centred at xy
+// with side lengths wh (paper §3.3). Initially the pixel itself.
+struct TransmittanceWindow {
+    float T;
+    Vec2 xy;
+    Vec2 wh;
+};
+
+// `gaussian_blending`: blend one splat onto the window and replace the window by the uniform one
+// with the same mass, mean and variance of T(x)(1 - alpha(x)) (eqs. 8-11, Appendix A), as the
+// authors' renderCUDA does it (KERNELS.md §6.3): window sides go to the eigen-axis within 45 degrees,
+// a window outside [0.1, 1e6] sigma falls back to scalar alpha at the window centre, and the pixel
+// stops after adding a splat that leaves T < 1e-4.
+GBV_HD bool blend_gaussian(const Splat2D& s, TransmittanceWindow& win, float C[3]) {
+    const Vec2 d = win.xy - s.xy;
+    const Vec2 v2 = {-s.v1.y, s.v1.x};
+    const float u = dot(d, s.v1), v = dot(d, v2);
+    const bool aligned = fabsf(s.v1.x) > fabsf(s.v1.y);
+    const float lu = aligned ? win.wh.x : win.wh.y;
+    const float lv = aligned ? win.wh.y : win.wh.x;
+    const float ru = RADIUS_SIGMAS_GB * s.sigma1, rv = RADIUS_SIGMAS_GB * s.sigma2;
+    if (u - 0.5f * lu > ru || u + 0.5f * lu < -ru || v - 0.5f * lv > rv || v + 0.5f * lv < -rv) return false;
+
+    const float U1 = (u - 0.5f * lu) / s.sigma1, U2 = (u + 0.5f * lu) / s.sigma1;
+    const float V1 = (v - 0.5f * lv) / s.sigma2, V2 = (v + 0.5f * lv) / s.sigma2;
+    const float du = U2 - U1, dv = V2 - V1;
+    if (!(du >= GB_MIN_UV_DIFF && dv >= GB_MIN_UV_DIFF && du <= GB_MAX_UV_DIFF && dv <= GB_MAX_UV_DIFF)) {
+        // Stability fallback (Appendix B.1): scalar alpha at the window centre, window unchanged.
+        const float alpha = fminf(MAX_ALPHA, s.opacity * gaussian_at(s, d));
+        if (alpha < MIN_ALPHA_GB) return false;
+        const float w = win.T * alpha;
+        C[0] += s.color[0] * w;
+        C[1] += s.color[1] * w;
+        C[2] += s.color[2] * w;
+        win.T -= w;
+        return win.T < T_STOP;
+    }
+    const float i0u = s.sigma1 * (gaussian_moment0(U2) - gaussian_moment0(U1));
+    const float i0v = s.sigma2 * (gaussian_moment0(V2) - gaussian_moment0(V1));
+    const float area = lu * lv;
+    const float alpha = fminf(MAX_ALPHA, s.opacity * i0u * i0v / area);  // mean alpha over the window
+    if (alpha < MIN_ALPHA_GB) return false;
+    const float weight = win.T * alpha;  // eq. 9
+    C[0] += s.color[0] * weight;
+    C[1] += s.color[1] * weight;
+    C[2] += s.color[2] * weight;
+
+    const float s1sq = s.sigma1 * s.sigma1, s2sq = s.sigma2 * s.sigma2;
+    const float i1u = s1sq * (gaussian_moment1(U2) - gaussian_moment1(U1));
+    const float i1v = s2sq * (gaussian_moment1(V2) - gaussian_moment1(V1));
+    const float i2u = s1sq * s.sigma1 * (gaussian_moment2(U2) - gaussian_moment2(U1));
+    const float i2v = s2sq * s.sigma2 * (gaussian_moment2(V2) - gaussian_moment2(V1));
+    const float k = win.T / area * s.opacity;
+    // eq. 10: moments of T(x)(1 - alpha(x)) over the window, in the splat's eigen-frame
+    const float m0 = win.T - weight;
+    const float m1u = win.T * u - k * i1u * i0v, m1v = win.T * v - k * i0u * i1v;
+    const float m2u = win.T * (u * u + lu * lu / 12.0f) - k * i2u * i0v;
+    const float m2v = win.T * (v * v + lv * lv / 12.0f) - k * i0u * i2v;
+    // eq. 11: the uniform window with the same mass, mean and variance
+    const float mu = m1u / m0, mv = m1v / m0;
+    const float var_u = fmaxf(m2u / m0 - mu * mu, GB_MIN_VAR), var_v = fmaxf(m2v / m0 - mv * mv, GB_MIN_VAR);
+    win.T = m0;
+    win.xy = s.xy + mu * s.v1 + mv * v2;
+    const float wu = sqrtf(12.0f * var_u), wv = sqrtf(12.0f * var_v);
+    win.wh = aligned ? Vec2{wu, wv} : Vec2{wv, wu};
+    return win.T < T_STOP;
+}
+
+// Result of blending one pixel (or sub-pixel sample).
+struct PixelOut {
+    float C[3];
+    float T;         // final transmittance
+    int32_t evals;   // splats evaluated
+    Vec2 window;     // final window size (gaussian_blending only)
+};
+
+// Blend the depth-sorted splats `list[0..n)` at pixel centre `pix` in `mode`.
+template <typename SplatAt>
+GBV_HD PixelOut blend_pixel(Mode mode, Vec2 pix, int n, SplatAt splat_at) {
+    PixelOut o = {{0.0f, 0.0f, 0.0f}, 1.0f, 0, {1.0f, 1.0f}};
+    if (mode == GAUSSIAN_BLENDING) {
+        TransmittanceWindow win = {1.0f, pix, {1.0f, 1.0f}};
+        int i = 0;
+        while (i < n && !blend_gaussian(splat_at(i), win, o.C)) ++i;
+        o.evals = i < n ? i + 1 : n;
+        o.T = win.T;
+        o.window = win.wh;
+        return o;
+    }
+    int i = 0;
+    if (mode == ANALYTIC) {
+        while (i < n && !blend_analytic(splat_at(i), pix, o.T, o.C)) ++i;
+    } else {
+        while (i < n && !blend_scalar(splat_at(i), pix, o.T, o.C)) ++i;
+    }
+    o.evals = i < n ? i + 1 : n;
+    return o;
+}
+
+}  // namespace gbv

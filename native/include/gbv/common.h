@@ -1,0 +1,83 @@
+// Shared definitions for the host (g++) and device (nvcc) builds of the gbviewer kernels.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+
+#if defined(__CUDACC__)
+#define GBV_HD __host__ __device__ __forceinline__
+#else
+#define GBV_HD inline
+#endif
+
+namespace gbv {
+
+// Blending modes; the integer values are the Python enum's values (gbviewer/render.py).
+enum Mode : int32_t { SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3 };
+
+constexpr int TILE = 16;                       // BLOCK_X = BLOCK_Y (KERNELS.md §0.4)
+constexpr float DILATION_3DGS = 0.3f;          // +0.3 px^2, no compensation (§0.3)
+constexpr float MIP_KERNEL_SIZE = 0.1f;        // Mip-Splatting 2D filter (§2)
+constexpr float MAX_ALPHA = 0.99f;
+constexpr float MIN_ALPHA_3DGS = 1.0f / 255.0f;
+constexpr float MIN_ALPHA_GB = 1.0f / 256.0f;  // Gaussian Blending uses 1/256 (§6.1)
+constexpr float T_STOP = 1e-4f;                // early termination threshold
+constexpr float RADIUS_SIGMAS_3DGS = 3.0f;
+constexpr float RADIUS_SIGMAS_GB = 3.33021844f;  // sqrt(-2 ln(1/256))
+constexpr float GB_MIN_UV_DIFF = 0.1f;         // window narrower than 0.1 sigma -> scalar fallback
+constexpr float GB_MAX_UV_DIFF = 1e6f;
+constexpr float GB_MIN_VAR = 0.001f;           // window variance floor
+constexpr float SQRT_PI_2 = 1.2533141373155003f;
+constexpr float TWO_PI = 6.283185307179586f;
+
+struct Vec2 {
+    float x, y;
+};
+struct Vec3 {
+    float x, y, z;
+};
+
+GBV_HD Vec2 operator+(Vec2 a, Vec2 b) { return {a.x + b.x, a.y + b.y}; }
+GBV_HD Vec2 operator-(Vec2 a, Vec2 b) { return {a.x - b.x, a.y - b.y}; }
+GBV_HD Vec2 operator*(float s, Vec2 a) { return {s * a.x, s * a.y}; }
+GBV_HD float dot(Vec2 a, Vec2 b) { return a.x * b.x + a.y * b.y; }
+
+GBV_HD float clampf(float v, float lo, float hi) { return fminf(fmaxf(v, lo), hi); }
+
+GBV_HD bool finitef(float v) {
+#if defined(__CUDA_ARCH__)
+    return isfinite(v);
+#else
+    return std::isfinite(v);
+#endif
+}
+
+// Camera as the kernels see it: world-to-camera rotation (row-major) and translation, pinhole
+// intrinsics with pixel centres at half-integers, and the frustum limits used to clamp the EWA Jacobian.
+struct CameraParams {
+    float R[9];
+    float t[3];
+    float campos[3];
+    float fx, fy, cx, cy;
+    int32_t width, height;
+    float near_plane;
+    float lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos;
+};
+
+// Per-splat output of preprocess; everything the blend step needs, computed once per frame.
+struct Splat2D {
+    Vec2 xy;       // screen position (pixel centres at half-integers)
+    float depth;   // view-space z
+    float opacity; // after the mode's compensation and the 3D filter
+    float conic[3];  // inverse 2D covariance (a, b, c)
+    float color[3];
+    Vec2 v1;       // unit major eigenvector (v2 = perp(v1))
+    float sigma1, sigma2;  // sqrt of the eigenvalues of the 2D covariance
+};
+
+// Tile rectangle [x0, x1) x [y0, y1) in tile units.
+struct TileRect {
+    int32_t x0, y0, x1, y1;
+};
+
+}  // namespace gbv

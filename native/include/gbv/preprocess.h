@@ -1,0 +1,223 @@
+// Per-splat preprocess: cull, covariance, EWA projection, per-mode 2D filter, eigen-decomposition,
+// colour from SH, tile rectangle. One function for every backend (KERNELS.md §0, §2, §4, §6.2).
+#pragma once
+
+#include "common.h"
+
+namespace gbv {
+
+constexpr float SH_C0 = 0.28209479177387814f;
+constexpr float SH_C1 = 0.4886025119029199f;
+constexpr float SH_C2[5] = {1.0925484305920792f, -1.0925484305920792f, 0.31539156525252005f,
+                            -1.0925484305920792f, 0.5462742152960396f};
+constexpr float SH_C3[7] = {-0.5900435899266435f, 2.890611442640554f, -0.4570457994644658f,
+                            0.3731763325901154f,  -0.4570457994644658f, 1.445305721320277f,
+                            -0.5900435899266435f};
+
+// View-dependent colour from SH coefficients sh[K][3] (DC first), as computeColorFromSH:
+// +0.5 offset, clamped at 0 from below only.
+GBV_HD void sh_to_rgb(const float* sh, int deg, Vec3 dir, float out[3]) {
+    const float x = dir.x, y = dir.y, z = dir.z;
+    float basis[16];
+    basis[0] = SH_C0;
+    int k = 1;
+    if (deg > 0) {
+        basis[1] = -SH_C1 * y;
+        basis[2] = SH_C1 * z;
+        basis[3] = -SH_C1 * x;
+        k = 4;
+        if (deg > 1) {
+            const float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
+            basis[4] = SH_C2[0] * xy;
+            basis[5] = SH_C2[1] * yz;
+            basis[6] = SH_C2[2] * (2.0f * zz - xx - yy);
+            basis[7] = SH_C2[3] * xz;
+            basis[8] = SH_C2[4] * (xx - yy);
+            k = 9;
+            if (deg > 2) {
+                basis[9] = SH_C3[0] * y * (3.0f * xx - yy);
+                basis[10] = SH_C3[1] * xy * z;
+                basis[11] = SH_C3[2] * y * (4.0f * zz - xx - yy);
+                basis[12] = SH_C3[3] * z * (2.0f * zz - 3.0f * xx - 3.0f * yy);
+                basis[13] = SH_C3[4] * x * (4.0f * zz - xx - yy);
+                basis[14] = SH_C3[5] * z * (xx - yy);
+                basis[15] = SH_C3[6] * x * (xx - 3.0f * yy);
+                k = 16;
+            }
+        }
+    }
+    for (int c = 0; c < 3; ++c) {
+        float v = 0.5f;
+        for (int i = 0; i < k; ++i) v += basis[i] * sh[i * 3 + c];
+        out[c] = fmaxf(v, 0.0f);
+    }
+}
+
+// 3D covariance Sigma = R S S^T R^T (upper triangle: xx, xy, xz, yy, yz, zz) from a unit (w,x,y,z)
+// quaternion and per-axis scales (eq. 1).
+GBV_HD void covariance_3d(const float* q, const float* s, float cov[6]) {
+    const float r = q[0], x = q[1], y = q[2], z = q[3];
+    const float R[9] = {1.f - 2.f * (y * y + z * z), 2.f * (x * y - r * z),       2.f * (x * z + r * y),
+                        2.f * (x * y + r * z),       1.f - 2.f * (x * x + z * z), 2.f * (y * z - r * x),
+                        2.f * (x * z - r * y),       2.f * (y * z + r * x),       1.f - 2.f * (x * x + y * y)};
+    float M[9];  // M = R S
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) M[i * 3 + j] = R[i * 3 + j] * s[j];
+    cov[0] = M[0] * M[0] + M[1] * M[1] + M[2] * M[2];
+    cov[1] = M[0] * M[3] + M[1] * M[4] + M[2] * M[5];
+    cov[2] = M[0] * M[6] + M[1] * M[7] + M[2] * M[8];
+    cov[3] = M[3] * M[3] + M[4] * M[4] + M[5] * M[5];
+    cov[4] = M[3] * M[6] + M[4] * M[7] + M[5] * M[8];
+    cov[5] = M[6] * M[6] + M[7] * M[7] + M[8] * M[8];
+}
+
+// EWA projection of a 3D covariance to screen space (eq. 3): J W Sigma W^T J^T, with the view-space
+// point clamped to 1.3x the frustum for the Jacobian only (computeCov2D). Returns (a, b, c).
+GBV_HD void project_covariance(const CameraParams& cam, const float cov3[6], const float pv[3], float out[3]) {
+    const float tz = pv[2];
+    const float tx = clampf(pv[0] / tz, -cam.lim_x_neg, cam.lim_x_pos) * tz;
+    const float ty = clampf(pv[1] / tz, -cam.lim_y_neg, cam.lim_y_pos) * tz;
+    const float j00 = cam.fx / tz, j02 = -cam.fx * tx / (tz * tz);
+    const float j11 = cam.fy / tz, j12 = -cam.fy * ty / (tz * tz);
+    const float* W = cam.R;
+    // T = J W (2x3)
+    float T[6];
+    for (int c = 0; c < 3; ++c) {
+        T[c] = j00 * W[c] + j02 * W[6 + c];
+        T[3 + c] = j11 * W[3 + c] + j12 * W[6 + c];
+    }
+    const float S[9] = {cov3[0], cov3[1], cov3[2], cov3[1], cov3[3], cov3[4], cov3[2], cov3[4], cov3[5]};
+    float TS[6];
+    for (int r = 0; r < 2; ++r)
+        for (int c = 0; c < 3; ++c)
+            TS[r * 3 + c] = T[r * 3] * S[c] + T[r * 3 + 1] * S[3 + c] + T[r * 3 + 2] * S[6 + c];
+    out[0] = TS[0] * T[0] + TS[1] * T[1] + TS[2] * T[2];
+    out[1] = TS[0] * T[3] + TS[1] * T[4] + TS[2] * T[5];
+    out[2] = TS[3] * T[3] + TS[4] * T[4] + TS[5] * T[5];
+}
+
+// Eigen-decomposition of a 2x2 covariance (a, b, c): sigma = sqrt(eigenvalues) and the unit major
+// eigenvector. lambda2 = det / lambda1 equals mid - sqrt(mid^2 - det) exactly and avoids cancellation;
+// the eigenvector is taken from whichever of its two formulas is better conditioned, so isotropic
+// splats get a valid axis instead of normalize(0, 0).
+GBV_HD void eigen_2d(float a, float b, float c, float det, float* sigma1, float* sigma2, Vec2* v1) {
+    const float mid = 0.5f * (a + c);
+    const float root = sqrtf(fmaxf(0.0f, mid * mid - det));
+    const float l1 = mid + root;
+    const float l2 = det / l1;
+    *sigma1 = sqrtf(l1);
+    *sigma2 = sqrtf(l2);
+    Vec2 e1 = {b, l1 - a}, e2 = {l1 - c, b};
+    const float n1 = dot(e1, e1), n2 = dot(e2, e2);
+    Vec2 e = n1 >= n2 ? e1 : e2;
+    const float n = fmaxf(n1, n2);
+    *v1 = n > 1e-30f ? (1.0f / sqrtf(n)) * e : Vec2{1.0f, 0.0f};
+}
+
+// Screen-space bounding radius in pixels: ceil(k * sqrt(max eigenvalue)) with the published
+// max(0.1, mid^2 - det) floor.
+GBV_HD float splat_radius(float a, float c, float det, float sigmas) {
+    const float mid = 0.5f * (a + c);
+    const float lmax = mid + sqrtf(fmaxf(0.1f, mid * mid - det));
+    return ceilf(sigmas * sqrtf(lmax));
+}
+
+// Tiles touched by a splat at xy with radius r (getRect), in the published integer-centre pixel
+// convention (our xy minus 0.5). Empty when x1 <= x0 or y1 <= y0.
+GBV_HD TileRect tile_rect(Vec2 xy, float r, int grid_x, int grid_y) {
+    const float px = xy.x - 0.5f, py = xy.y - 0.5f;
+    const float gx = (float)grid_x, gy = (float)grid_y;
+    TileRect t;
+    t.x0 = (int)clampf((px - r) / TILE, 0.0f, gx);
+    t.y0 = (int)clampf((py - r) / TILE, 0.0f, gy);
+    t.x1 = (int)clampf((px + r + TILE - 1) / TILE, 0.0f, gx);
+    t.y1 = (int)clampf((py + r + TILE - 1) / TILE, 0.0f, gy);
+    return t;
+}
+
+// Inputs of one splat (activated parameters, see gbviewer.Scene).
+struct SplatIn {
+    const float* mean;   // 3
+    const float* scale;  // 3
+    const float* quat;   // 4 (w, x, y, z), unit
+    float opacity;
+    const float* sh;     // K*3
+    float filter_3d;     // 0 when the scene has none
+};
+
+// Preprocess one splat for `mode`; returns false when it is culled (behind the near plane, degenerate,
+// invisible, or touching no tile).
+GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& cam, Mode mode, int grid_x,
+                             int grid_y, Splat2D* out, TileRect* rect) {
+    const float* m = in.mean;
+    const float* R = cam.R;
+    float pv[3];
+    for (int i = 0; i < 3; ++i) pv[i] = R[i * 3] * m[0] + R[i * 3 + 1] * m[1] + R[i * 3 + 2] * m[2] + cam.t[i];
+    if (!(pv[2] > cam.near_plane)) return false;
+
+    // Mip-Splatting 3D filter (applied in every mode when present): scales grow, opacity compensates.
+    float s[3];
+    float opacity = in.opacity;
+    if (in.filter_3d > 0.0f) {
+        const float f2 = in.filter_3d * in.filter_3d;
+        float ratio = 1.0f;
+        for (int i = 0; i < 3; ++i) {
+            const float s2 = in.scale[i] * in.scale[i];
+            s[i] = sqrtf(s2 + f2);
+            ratio *= s2 / (s2 + f2);
+        }
+        opacity *= sqrtf(ratio);
+    } else {
+        for (int i = 0; i < 3; ++i) s[i] = in.scale[i];
+    }
+
+    float cov3[6], cov[3];
+    covariance_3d(in.quat, s, cov3);
+    project_covariance(cam, cov3, pv, cov);
+
+    float sigmas = RADIUS_SIGMAS_3DGS;
+    float min_alpha = MIN_ALPHA_3DGS;
+    if (mode == SCALAR) {
+        cov[0] += DILATION_3DGS;
+        cov[2] += DILATION_3DGS;
+    } else if (mode == MIP) {
+        const float det0 = fmaxf(1e-6f, cov[0] * cov[2] - cov[1] * cov[1]);
+        cov[0] += MIP_KERNEL_SIZE;
+        cov[2] += MIP_KERNEL_SIZE;
+        const float det1 = fmaxf(1e-6f, cov[0] * cov[2] - cov[1] * cov[1]);
+        const float coef = (det0 <= 1e-6f || det1 <= 1e-6f) ? 0.0f : sqrtf(det0 / (det1 + 1e-6f) + 1e-6f);
+        opacity *= coef;
+    } else if (mode == GAUSSIAN_BLENDING) {
+        sigmas = RADIUS_SIGMAS_GB;
+        min_alpha = MIN_ALPHA_GB;
+    }
+    if (!(opacity >= min_alpha)) return false;  // alpha = opacity * g <= opacity would be skipped anyway
+
+    const float det = cov[0] * cov[2] - cov[1] * cov[1];
+    if (!(det > 0.0f) || !finitef(det)) return false;
+    const float inv = 1.0f / det;
+
+    const float px = cam.fx * pv[0] / pv[2] + cam.cx;
+    const float py = cam.fy * pv[1] / pv[2] + cam.cy;
+    const float r = splat_radius(cov[0], cov[2], det, sigmas);
+    if (!finitef(px) || !finitef(py) || !finitef(r)) return false;
+    const int gx = grid_x, gy = grid_y;
+    *rect = tile_rect(Vec2{px, py}, r, gx, gy);
+    if (rect->x1 <= rect->x0 || rect->y1 <= rect->y0) return false;
+
+    out->xy = Vec2{px, py};
+    out->depth = pv[2];
+    out->opacity = opacity;
+    out->conic[0] = cov[2] * inv;
+    out->conic[1] = -cov[1] * inv;
+    out->conic[2] = cov[0] * inv;
+    eigen_2d(cov[0], cov[1], cov[2], det, &out->sigma1, &out->sigma2, &out->v1);
+
+    Vec3 dir = {m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]};
+    const float dn = sqrtf(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
+    dir = dn > 0.0f ? Vec3{dir.x / dn, dir.y / dn, dir.z / dn} : Vec3{0.0f, 0.0f, 1.0f};
+    sh_to_rgb(in.sh, sh_deg, dir, out->color);
+    return true;
+}
+
+}  // namespace gbv
