@@ -1,0 +1,182 @@
+"""The `gbviewer` command line: info, render, demo (the main job)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+
+from . import DEFAULT_SCENE
+from .camera import Camera, load_cameras_json, orbit_camera
+from .errors import GBViewerError
+from .figure import compose_grid, parse_rate, render_grid, save_image
+from .io import load
+from .render import BACKENDS, Mode, RenderSettings, get_renderer
+from .scene import Scene
+
+
+def _triple(text: str) -> tuple[float, float, float]:
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        vals = ()
+    if len(vals) != 3:
+        raise argparse.ArgumentTypeError(f"expected three comma-separated numbers, got {text!r}")
+    return vals  # type: ignore[return-value]
+
+
+def _rate(text: str) -> float:
+    try:
+        return parse_rate(text)
+    except GBViewerError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_camera_args(p: argparse.ArgumentParser) -> None:
+    """--cameras/--camera, --orbit, --width/--height, --up: shared by the commands that render."""
+    p.add_argument("--cameras", type=Path, help="3DGS cameras.json")
+    p.add_argument("--camera", type=int, default=0, help="index into --cameras (default 0)")
+    p.add_argument("--orbit", type=_triple, metavar="AZ,EL,DIST",
+                   help="orbit camera: azimuth and elevation in degrees, distance in scene units (<= 0: auto)")
+    p.add_argument("--width", type=int, help="image width (default 640, or the training camera's)")
+    p.add_argument("--height", type=int, help="image height (default 480, or the training camera's)")
+    p.add_argument("--up", default="-y", choices=["-y", "+y", "+z", "-z"], help="scene up axis for orbit cameras")
+
+
+def camera_from_args(scene: Scene, args: argparse.Namespace) -> Camera:
+    """The camera the arguments describe: a training camera, an orbit, or the default framing."""
+    if args.cameras is not None:
+        cams = load_cameras_json(args.cameras)
+        if not 0 <= args.camera < len(cams):
+            raise GBViewerError(f"{args.cameras}: camera {args.camera} out of range (0..{len(cams) - 1})")
+        cam = cams[args.camera]
+        if args.width or args.height:
+            w = args.width or round(cam.width * args.height / cam.height)
+            h = args.height or round(cam.height * args.width / cam.width)
+            cam = cam.with_size(w, h)
+        return cam
+    w, h = args.width or 640, args.height or 480
+    if args.orbit is not None:
+        az, el, dist = args.orbit
+        return orbit_camera(scene, az, el, dist if dist > 0 else None, w, h, up=args.up)
+    return orbit_camera(scene, width=w, height=h, up=args.up)
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    scene = load(args.scene)
+    lo, hi = scene.bounds
+    rlo, rhi = scene.robust_bounds()
+    info = {
+        "file": str(args.scene),
+        "format": scene.meta.get("format"),
+        "version": scene.meta.get("version"),
+        "splats": scene.num_splats,
+        "sh_degree": scene.sh_degree,
+        "filter_3D": scene.filter_3d is not None,
+        "bounds": [lo.tolist(), hi.tolist()],
+        "robust_bounds_2_98": [rlo.tolist(), rhi.tolist()],
+        "properties": scene.meta.get("properties", []),
+    }
+    if args.json:
+        print(json.dumps(info, indent=2))
+    else:
+        for key, val in info.items():
+            if key == "properties":
+                val = ", ".join(val) if len(val) <= 20 else ", ".join(val[:18]) + f", ... ({len(val)} in all)"
+            print(f"{key:>20}: {val}")
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    if out.suffix.lower() not in (".png", ".npy"):
+        raise GBViewerError(f"{out}: output must end in .png or .npy")
+    if out.exists() and not args.force:
+        raise GBViewerError(f"{out}: exists; pass --force to overwrite")
+    scene = load(args.scene)
+    cam = camera_from_args(scene, args).at_sampling_rate(args.scale)
+    settings = RenderSettings(Mode.parse(args.mode), args.supersample, args.background, args.sh_degree)
+    frame = get_renderer(scene, args.backend).render(cam, settings)
+    save_image(out, frame.rgb, force=args.force)
+    st = frame.stats
+    print(f"{out}: {cam.width}x{cam.height} {settings.label} on {args.backend}: {st['total_ms']:.1f} ms "
+          f"(preprocess {st['preprocess_ms']:.1f}, sort {st['sort_ms']:.1f}, blend {st['blend_ms']:.1f}), "
+          f"{st['visible']} visible splats, {st['evals_per_pixel']:.1f} evaluations/pixel")
+    return 0
+
+
+DEMO_SETTINGS = [RenderSettings(Mode.SCALAR), RenderSettings(Mode.SCALAR, supersample=3),
+                 RenderSettings(Mode.GAUSSIAN_BLENDING)]
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """The main job: side-by-side comparison of the bundled (or given) scene at x1 and x1/8."""
+    scene_path = args.scene or DEFAULT_SCENE
+    scene = load(scene_path)
+    args.cameras = getattr(args, "cameras", None)
+    cam = camera_from_args(scene, args)
+    if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        print("no display found: writing the comparison images instead of opening a window")
+    out_dir = Path(args.out)
+    cells = render_grid(scene, cam, DEMO_SETTINGS, [1.0, 1.0 / 8.0], args.backend)
+    img = compose_grid(cells, cam.width, cam.height)
+    path = save_image(out_dir / "comparison.png", img, force=True)
+    print(f"wrote {path} ({img.width}x{img.height}): {Path(scene_path).name}, "
+          + ", ".join(f"{c.settings.label} {c.stats['total_ms']:.0f} ms" for c in cells[0]))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="gbviewer", description=__doc__)
+    parser.add_argument("--debug", action="store_true", help="show tracebacks")
+    sub = parser.add_subparsers(dest="command")
+
+    p = sub.add_parser("info", help="describe a scene file")
+    p.add_argument("scene", type=Path)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("render", help="render one image")
+    p.add_argument("scene", type=Path)
+    add_camera_args(p)
+    p.add_argument("--mode", default="scalar", choices=[m.label for m in Mode])
+    p.add_argument("--supersample", type=int, default=1, choices=range(1, 9), metavar="N")
+    p.add_argument("--scale", type=_rate, default=1.0, help="sampling rate: 8, 1, 0.125 or 1/8")
+    p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
+    p.add_argument("--background", type=_triple, default=(0.0, 0.0, 0.0), metavar="R,G,B")
+    p.add_argument("--sh-degree", type=int, default=3, choices=range(0, 4))
+    p.add_argument("--out", required=True, help="FILE.png or FILE.npy (float32 RGB)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=cmd_render)
+
+    p = sub.add_parser("demo", help="write the side-by-side comparison of the bundled scene to a folder")
+    p.add_argument("scene", type=Path, nargs="?")
+    add_camera_args(p)
+    p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
+    p.add_argument("--out", default="out", help="output folder (default ./out)")
+    p.set_defaults(func=cmd_demo)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        args = parser.parse_args(["demo", *(argv or [])] if argv is not None else ["demo", *sys.argv[1:]])
+    try:
+        return args.func(args)
+    except (GBViewerError, OSError) as exc:
+        if args.debug:
+            raise
+        print(f"gbviewer: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("gbviewer: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
