@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Set up gbviewer on a fresh Debian-like machine: system packages (when root), a venv in .venv, the package
+# with its native module and test dependencies. Safe to run again; it only installs what is missing.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+APT_PACKAGES=(build-essential cmake python3-venv)
+if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+  missing=()
+  for p in "${APT_PACKAGES[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
+  if [ ${#missing[@]} -gt 0 ]; then
+    echo "setup: installing system packages: ${missing[*]}"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  fi
+fi
+
+PY=${PYTHON:-python3}
+[ -x .venv/bin/python ] || "$PY" -m venv .venv
+pip_install() {
+  if ! .venv/bin/python -m pip install -q "$@" > .venv/pip.log 2>&1; then
+    grep -v "^WARNING: Location" .venv/pip.log >&2
+    echo "setup: pip install $* failed" >&2
+    exit 1
+  fi
+}
+pip_install --upgrade pip
+echo "setup: building and installing gbviewer and its native CPU module (about a minute)"
+pip_install ".[test]"

@@ -1,0 +1,41 @@
+"""Shared fixtures: paths to the shared scenes and small synthetic scenes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gbviewer as gb
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_SCENES = REPO.parent / "shared" / "scenes"
+
+
+def shared_scene(name: str) -> Path:
+    """Path of a scene in ../shared/scenes; skips (with the reason) where that folder is absent."""
+    path = SHARED_SCENES / name
+    if not path.exists():
+        pytest.skip(f"{path} not present (shared/ is not beside this checkout)")
+    return path
+
+
+@pytest.fixture(scope="session")
+def bundled_scene() -> gb.Scene:
+    return gb.load(gb.DEFAULT_SCENE)
+
+
+def random_scene(n: int = 100, seed: int = 0, sh_degree: int = 0, spread: float = 1.0) -> gb.Scene:
+    """Random splats in front of a camera at the origin looking down +z (depths 2..6)."""
+    rng = np.random.default_rng(seed)
+    means = np.stack([rng.uniform(-spread, spread, n), rng.uniform(-spread, spread, n), rng.uniform(2, 6, n)], 1)
+    scales = np.exp(rng.uniform(-4.0, -1.5, (n, 3)))
+    quats = rng.normal(size=(n, 4))
+    opac = rng.uniform(0.05, 1.0, n)
+    sh = rng.normal(0, 0.5, (n, (sh_degree + 1) ** 2, 3))
+    return gb.Scene.from_arrays(means, scales, quats, opac, sh)
+
+
+def front_camera(width: int = 64, height: int = 48, f: float = 60.0) -> gb.Camera:
+    return gb.Camera(width, height, f, f, width / 2, height / 2, np.eye(3), np.zeros(3))

@@ -1,0 +1,91 @@
+import json
+
+import numpy as np
+import pytest
+
+import gbviewer as gb
+from gbviewer.camera import orbit_camera
+
+
+def project(cam: gb.Camera, p: np.ndarray) -> np.ndarray:
+    x = cam.R @ p + cam.t
+    return np.array([cam.fx * x[0] / x[2] + cam.cx, cam.fy * x[1] / x[2] + cam.cy])
+
+
+def rot(axis: np.ndarray, angle: float) -> np.ndarray:
+    axis = axis / np.linalg.norm(axis)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def test_sampling_rate_keeps_the_view():
+    cam = gb.Camera(640, 480, 500, 510, 320, 240, rot(np.array([1.0, 2, 3]), 0.4), [0.1, -0.2, 3])
+    p = np.array([0.3, -0.1, 0.5])
+    for s in (8, 2, 0.5, 1 / 8):
+        c = cam.at_sampling_rate(s)
+        assert (c.width, c.height) == (round(640 * s), round(480 * s))
+        np.testing.assert_allclose(project(c, p), project(cam, p) * s, rtol=1e-9)
+    with pytest.raises(gb.CameraError):
+        cam.at_sampling_rate(0)
+
+
+def test_cameras_json_round_trip(tmp_path):
+    R_w2c = rot(np.array([0.2, 1.0, -0.4]), 1.1)
+    centre = np.array([1.0, -2.0, 0.5])
+    entry = {"id": 0, "img_name": "00001", "width": 800, "height": 600, "position": centre.tolist(),
+             "rotation": R_w2c.T.tolist(), "fx": 700.0, "fy": 710.0}
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps([entry]))
+    (cam,) = gb.load_cameras_json(path)
+    np.testing.assert_allclose(cam.R, R_w2c, atol=1e-12)
+    np.testing.assert_allclose(cam.position, centre, atol=1e-12)
+    assert (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy) == (800, 600, 700.0, 710.0, 400.0, 300.0)
+    # a point straight ahead of the camera projects to the image centre
+    ahead = centre + 3.0 * R_w2c[2]
+    np.testing.assert_allclose(project(cam, ahead), [400, 300], atol=1e-9)
+
+
+@pytest.mark.parametrize("bad", [[], [{"width": 10}], [{"width": 10, "height": 10, "fx": 5, "fy": 5,
+                                                          "position": [0, 0, 0], "rotation": [[2, 0, 0], [0, 1, 0], [0, 0, 1]]}]])
+def test_cameras_json_errors_name_the_file(tmp_path, bad):
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps(bad))
+    with pytest.raises(gb.CameraError, match="cameras.json"):
+        gb.load_cameras_json(path)
+
+
+def test_look_at_axes():
+    cam = gb.Camera.look_at(np.array([0.0, 0, -5]), np.zeros(3), up=(0, -1, 0))
+    np.testing.assert_allclose(cam.R @ cam.R.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(cam.R) == pytest.approx(1.0)
+    # world -y is up, so a point above the target appears above the image centre (smaller row)
+    assert project(cam, np.array([0.0, -1, 0]))[1] < cam.cy
+    assert project(cam, np.zeros(3)) == pytest.approx([cam.cx, cam.cy])
+
+
+def test_default_camera_ignores_stray_splats():
+    rng = np.random.default_rng(1)
+    n = 2000
+    means = rng.uniform(-1, 1, (n, 3))
+    base = dict(scales=np.full((n, 3), 0.01), quats=np.tile([1.0, 0, 0, 0], (n, 1)), opacities=np.full(n, 0.5),
+                sh=np.zeros((n, 1, 3)))
+    scene = gb.Scene.from_arrays(means, **base)
+    stray = means.copy()
+    stray[:10] = rng.uniform(-1, 1, (10, 3)) * 1000.0  # 0.5% of splats far away
+    scene_stray = gb.Scene.from_arrays(stray, **base)
+    c1, c2 = orbit_camera(scene), orbit_camera(scene_stray)
+    assert np.linalg.norm(c1.position - c2.position) < 0.1 * np.linalg.norm(c1.position)
+    # the scene fills a good part of the view: the robust box corners project inside the image
+    lo, hi = scene.robust_bounds()
+    for corner in np.array(np.meshgrid(*zip(lo, hi))).T.reshape(-1, 3):
+        x, y = project(c1, corner)
+        assert -0.05 * c1.width <= x <= 1.05 * c1.width and -0.05 * c1.height <= y <= 1.05 * c1.height
+
+
+def test_invalid_cameras_raise():
+    with pytest.raises(gb.CameraError):
+        gb.Camera(0, 10, 1, 1, 0, 0, np.eye(3), np.zeros(3))
+    with pytest.raises(gb.CameraError):
+        gb.Camera(10, 10, float("nan"), 1, 0, 0, np.eye(3), np.zeros(3))
+    with pytest.raises(gb.CameraError):
+        gb.Camera(10, 10, 1, 1, 0, 0, np.eye(3) * 2, np.zeros(3))
