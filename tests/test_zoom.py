@@ -1,0 +1,31 @@
+"""Zoom-out consistency on real scenes: at x1/8, Gaussian Blending is closer than scalar blending to the
+x1 render box-downsampled by 8 (the multi-scale Blender construction, DESIGN.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import gbviewer as gb
+from conftest import shared_scene
+
+
+def box_downsample(img: np.ndarray, k: int) -> np.ndarray:
+    h, w = img.shape[0] // k, img.shape[1] // k
+    return img[: h * k, : w * k].reshape(h, k, w, k, -1).mean(axis=(1, 3))
+
+
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    return float(-10 * np.log10(np.mean((np.clip(a, 0, 1) - np.clip(b, 0, 1)) ** 2)))
+
+
+@pytest.mark.parametrize("scene_name", ["bundled", "v3dg-donut.fused.ply"])
+def test_gaussian_blending_zoom_out_beats_scalar(scene_name):
+    scene = gb.load(gb.DEFAULT_SCENE if scene_name == "bundled" else shared_scene(scene_name))
+    cam = gb.orbit_camera(scene, 30, 20, width=384, height=256)
+    reference = box_downsample(gb.render(scene, cam, "scalar").rgb, 8)
+    low = cam.at_sampling_rate(1 / 8)
+    assert (low.width, low.height) == (48, 32)
+    scores = {m: psnr(gb.render(scene, low, m).rgb, reference) for m in ("scalar", "gaussian_blending")}
+    # measured: bundled 24.0 vs 48.8 dB, donut 16.3 vs 38.6 dB at 512x384; require a clear margin
+    assert scores["gaussian_blending"] > scores["scalar"] + 6.0, scores
