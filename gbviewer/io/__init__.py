@@ -7,18 +7,35 @@ from pathlib import Path
 from ..camera import load_cameras_json
 from ..errors import SceneFormatError
 from ..scene import Scene
+from .compressed_ply import is_compressed_ply, load_compressed_ply
 from .ply import load_inria_ply, read_ply
+from .sog import ZIP_MAGIC, load_sog
+from .splat import load_splat, looks_like_splat
+from .spz import GZIP_MAGIC, MAGIC as SPZ_MAGIC, load_spz
+from .write import write_inria_ply
 
-__all__ = ["load", "load_cameras_json"]
+__all__ = ["load", "load_cameras_json", "write_inria_ply"]
+
+FORMATS = ("INRIA or compressed .ply, .spz, .sog (zip, folder or meta.json) or .splat")
 
 
 def load(path: str | Path) -> Scene:
-    """Load a splat scene file (format detected from its first bytes, not its extension)."""
+    """Load a splat scene file or SOG folder; the format comes from the content, not the extension."""
     path = Path(path)
+    if path.is_dir():
+        return load_sog(path)
     if not path.is_file():
         raise SceneFormatError(path, "no such file" if not path.exists() else "not a regular file")
     with open(path, "rb") as fh:
         head = fh.read(16)
     if head.startswith(b"ply"):
-        return load_inria_ply(path, read_ply(path))
-    raise SceneFormatError(path, "unrecognised scene format; expected an INRIA 3DGS .ply")
+        ply = read_ply(path)
+        return load_compressed_ply(path, ply) if is_compressed_ply(ply) else load_inria_ply(path, ply)
+    if head.startswith(ZIP_MAGIC) or head.lstrip().startswith(b"{"):
+        return load_sog(path)
+    data = path.read_bytes()
+    if head.startswith(SPZ_MAGIC) or head.startswith(GZIP_MAGIC):
+        return load_spz(path, data)
+    if looks_like_splat(data):
+        return load_splat(path, data)
+    raise SceneFormatError(path, f"unrecognised scene format; expected {FORMATS}")

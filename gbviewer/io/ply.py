@@ -57,6 +57,18 @@ def vertex_columns(path: Path, ply: plyfile.PlyData, names: list[str]) -> np.nda
     return np.stack([np.asarray(data[n], dtype=np.float32) for n in names], axis=1)
 
 
+def activate_opacity(raw: np.ndarray) -> np.ndarray:
+    """sigmoid in float32 (the writer inverts exactly this)."""
+    with np.errstate(over="ignore"):
+        return 1.0 / (1.0 + np.exp(-raw))
+
+
+def activate_scales(raw: np.ndarray) -> np.ndarray:
+    """exp in float32 (the writer inverts exactly this)."""
+    with np.errstate(over="ignore"):
+        return np.exp(raw)
+
+
 def load_inria_ply(path: Path, ply: plyfile.PlyData) -> Scene:
     """Load an INRIA-layout splat PLY: exp scales, sigmoid opacity, normalised (w,x,y,z) quaternions."""
     if "vertex" not in ply:
@@ -80,9 +92,8 @@ def load_inria_ply(path: Path, ply: plyfile.PlyData) -> Scene:
     sh[:, 0, :] = cols[:, 3:6]
     if k > 1:  # f_rest is channel-major: all R coefficients, then G, then B
         sh[:, 1:, :] = cols[:, 14:14 + 3 * (k - 1)].reshape(n, 3, k - 1).transpose(0, 2, 1)
-    with np.errstate(over="ignore"):
-        opacities = 1.0 / (1.0 + np.exp(-cols[:, 6]))
-        scales = np.exp(cols[:, 7:10])
+    opacities = activate_opacity(cols[:, 6])
+    scales = activate_scales(cols[:, 7:10])
     quats = cols[:, 10:14]
     filter_3d = cols[:, -1] if has_filter else None
     meta = {"format": "inria-ply", "version": None, "properties": names, "sh_degree": degree,

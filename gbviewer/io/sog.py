@@ -1,0 +1,165 @@
+"""PlayCanvas SOG v2: `meta.json` plus lossless WebP images, bundled in a zip (`.sog`) or in a folder.
+
+Pixel i (row-major) of every per-splat image belongs to splat i. means_l/means_u: low/high bytes of
+16-bit fractions of the [mins, maxs] range of sign(x) * log(|x| + 1); quats: three components
+(byte / 255 * 2 - 1) / sqrt2 in (w, x, y, z) order skipping the largest, whose index + 252 is in
+alpha; scales: RGB index a 256-entry codebook of log scales; sh0: RGB index a codebook of DC
+coefficients, alpha = sigmoid(opacity) * 255; optional shN: labels (16-bit, R + 256 G) pick a
+palette entry in the centroids image (64 entries per row, one pixel per coefficient, RGB index a
+codebook). Positions are in the source `.ply` frame.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+from collections.abc import Callable
+from pathlib import Path, PurePosixPath
+
+import numpy as np
+from PIL import Image, features
+
+from ..errors import SceneFormatError
+from ..scene import Scene
+from .packing import MAX_SPLATS, smallest_three
+
+ZIP_MAGIC = b"PK"
+MAX_MEMBER_BYTES = 1 << 30
+SH_COEFFS = {1: 3, 2: 8, 3: 15}
+
+
+def load_sog(path: Path) -> Scene:
+    """Load a bundled `.sog` zip, a folder holding `meta.json`, or a `meta.json` file with its images."""
+    if path.is_dir():
+        return _load(path, lambda name: _read_file(path, name), bundled=False)
+    with open(path, "rb") as fh:
+        is_zip = fh.read(2) == ZIP_MAGIC
+    if not is_zip:
+        return _load(path.parent, lambda name: _read_file(path.parent, name), bundled=False, meta_name=path.name)
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return _load(path, lambda name: _read_member(path, zf, name), bundled=True)
+    except (zipfile.BadZipFile, zipfile.LargeZipFile) as exc:
+        raise SceneFormatError(path, f"corrupt .sog zip: {exc}", field="zip") from None
+
+
+def _read_file(folder: Path, name: str) -> bytes:
+    try:
+        return (folder / name).read_bytes()
+    except OSError:
+        raise SceneFormatError(folder, "missing file in the SOG folder", field=name) from None
+
+
+def _read_member(path: Path, zf: zipfile.ZipFile, name: str) -> bytes:
+    try:
+        info = zf.getinfo(name)
+    except KeyError:
+        raise SceneFormatError(path, "missing from the .sog zip", field=name) from None
+    if info.file_size > MAX_MEMBER_BYTES:
+        raise SceneFormatError(path, f"member of {info.file_size} bytes exceeds {MAX_MEMBER_BYTES}", field=name)
+    try:
+        return zf.read(info)
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as exc:
+        raise SceneFormatError(path, f"cannot read zip member: {exc}", field=name) from None
+
+
+def _load(where: Path, read: Callable[[str], bytes], bundled: bool, meta_name: str = "meta.json") -> Scene:
+    try:
+        meta = json.loads(read(meta_name))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise SceneFormatError(where, f"invalid JSON: {exc}", field=meta_name) from None
+    try:
+        return _decode(where, read, meta, bundled)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise SceneFormatError(where, f"malformed meta.json: {type(exc).__name__}: {exc}", field="meta.json") from None
+
+
+def _codebook(where: Path, section: dict, name: str) -> np.ndarray:
+    book = np.asarray(section["codebook"], dtype=np.float32)
+    if book.shape != (256,):
+        raise SceneFormatError(where, f"codebook has shape {book.shape}; expected 256 entries", field=f"{name}.codebook")
+    return book
+
+
+def _decode(where: Path, read: Callable[[str], bytes], meta: dict, bundled: bool) -> Scene:
+    if not isinstance(meta, dict) or meta.get("version") != 2:
+        version = meta.get("version") if isinstance(meta, dict) else None
+        raise SceneFormatError(where, f"SOG meta version {version!r}; supported: 2", field="version")
+    n = meta["count"]
+    if not isinstance(n, int) or not 0 < n <= MAX_SPLATS:
+        raise SceneFormatError(where, f"count {n!r}; expected 1..{MAX_SPLATS}", field="count")
+    images = _Images(where, read, n)
+
+    lo, hi = images.get(meta["means"]["files"][0]), images.get(meta["means"]["files"][1])
+    mins = np.asarray(meta["means"]["mins"], dtype=np.float64).reshape(3)
+    span = np.asarray(meta["means"]["maxs"], dtype=np.float64).reshape(3) - mins
+    span[span == 0] = 1.0
+    t = mins + span * ((lo[:, :3] | (hi[:, :3].astype(np.uint16) << 8)) / 65535.0)
+    means = np.sign(t) * np.expm1(np.abs(t))
+
+    q = images.get(meta["quats"]["files"][0])
+    if (q[:, 3] < 252).any():
+        raise SceneFormatError(where, "quaternion tag (alpha) below 252", field=meta["quats"]["files"][0])
+    quats = smallest_three((q[:, :3] / np.float32(127.5) - np.float32(1)) / np.float32(np.sqrt(2)),
+                           (q[:, 3] - 252).astype(np.intp))
+
+    scales = np.exp(_codebook(where, meta["scales"], "scales")[images.get(meta["scales"]["files"][0])[:, :3]])
+    c = images.get(meta["sh0"]["files"][0])
+    sh = _codebook(where, meta["sh0"], "sh0")[c[:, None, :3]]
+    opacities = c[:, 3] / np.float32(255)
+    if meta.get("shN"):
+        sh = np.concatenate([sh, _sh_rest(where, images, meta["shN"], n)], axis=1)
+
+    info = {"format": "sog", "version": 2, "bundled": bundled, "antialiased": bool(meta.get("antialias", False)),
+            "properties": sorted(k for k in meta if isinstance(meta[k], dict) and "files" in meta[k])}
+    return Scene.from_arrays(means, scales, quats, opacities, sh, source=str(where), meta=info)
+
+
+def _sh_rest(where: Path, images: "_Images", shn: dict, n: int) -> np.ndarray:
+    """Higher SH bands from the palette: (N, K-1, 3)."""
+    bands, palette = shn["bands"], shn["count"]
+    if bands not in SH_COEFFS or not isinstance(palette, int) or not 0 < palette <= 65536:
+        raise SceneFormatError(where, f"bands {bands!r}, count {palette!r}; expected bands 1-3, count 1..65536",
+                               field="shN")
+    k = SH_COEFFS[bands]
+    centroids_name, labels_name = shn["files"][0], shn["files"][1]
+    centroids, (width, _) = images.decode(centroids_name)
+    if width != 64 * k or len(centroids) < palette * k:
+        raise SceneFormatError(where, f"centroids image is {width} wide with {len(centroids)} pixels; expected "
+                               f"{64 * k} wide with at least {palette * k}", field=centroids_name)
+    labels = images.get(labels_name)
+    index = labels[:, 0].astype(np.intp) | (labels[:, 1].astype(np.intp) << 8)
+    if index.max() >= palette:
+        raise SceneFormatError(where, f"label {index.max()} outside the palette of {palette}", field=labels_name)
+    entries = centroids[:palette * k, :3].reshape(palette, k, 3)
+    return _codebook(where, shn, "shN")[entries[index]]
+
+
+class _Images:
+    """Decodes the per-splat images, checking they share one size that holds every splat."""
+
+    def __init__(self, where: Path, read: Callable[[str], bytes], count: int):
+        self.where, self.read, self.count, self.size = where, read, count, None
+
+    def decode(self, name: str) -> tuple[np.ndarray, tuple[int, int]]:
+        if not isinstance(name, str) or PurePosixPath(name).is_absolute() or ".." in PurePosixPath(name).parts:
+            raise SceneFormatError(self.where, f"image name {name!r} must be a relative path", field="files")
+        data = self.read(name)
+        if data[:4] == b"RIFF" and not features.check("webp"):
+            raise SceneFormatError(self.where, "this Pillow build cannot decode WebP", field=name)
+        try:
+            with Image.open(io.BytesIO(data)) as im:
+                rgba = np.asarray(im.convert("RGBA"))
+        except (OSError, ValueError, Image.DecompressionBombError) as exc:
+            raise SceneFormatError(self.where, f"cannot decode image: {exc}", field=name) from None
+        return rgba.reshape(-1, 4), (rgba.shape[1], rgba.shape[0])
+
+    def get(self, name: str) -> np.ndarray:
+        pixels, size = self.decode(name)
+        if self.size is None:
+            self.size = size
+        if size != self.size or len(pixels) < self.count:
+            raise SceneFormatError(self.where, f"image is {size[0]}x{size[1]}; expected {self.size[0]}x{self.size[1]} "
+                                   f"holding {self.count} splats", field=name)
+        return pixels[:self.count]
