@@ -13,7 +13,7 @@ from . import DEFAULT_SCENE
 from .camera import Camera, load_cameras_json, orbit_camera
 from .errors import GBViewerError
 from .figure import compose_grid, parse_rate, render_grid, save_image
-from .io import load
+from .io import load, write_inria_ply
 from .render import BACKENDS, Mode, RenderSettings, get_renderer
 from .scene import Scene
 
@@ -90,6 +90,19 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_convert(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    if out.suffix.lower() != ".ply":
+        raise GBViewerError(f"{out}: output must end in .ply (a standard INRIA 3DGS ply)")
+    if out.exists() and not args.force:
+        raise GBViewerError(f"{out}: exists; pass --force to overwrite")
+    scene = load(args.scene)
+    write_inria_ply(scene, out, force=args.force)
+    print(f"{out}: {scene.num_splats} splats, SH degree {scene.sh_degree}, from {scene.meta.get('format')} "
+          f"(version {scene.meta.get('version')})")
+    return 0
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".npy"):
@@ -129,6 +142,51 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 640x480, got {text!r}") from None
+    if not (1 <= w <= 16384 and 1 <= h <= 16384):
+        raise argparse.ArgumentTypeError(f"size {text!r} out of range")
+    return w, h
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    """Speed and zoom fidelity per scene, mode, backend and rate; tables, JSON, plots."""
+    from rich.progress import Progress
+
+    from . import bench
+
+    settings = RenderSettings.parse_list(args.modes)
+    rates = [parse_rate(r) for r in args.rates.split(",")]
+    unknown = [b for b in args.backends.split(",") if b not in BACKENDS]
+    if unknown:
+        raise GBViewerError(f"unknown backend(s) {unknown}; expected some of {', '.join(BACKENDS)}")
+    backends = [b for b in args.backends.split(",") if BACKENDS[b].available()[0]]
+    for b in set(args.backends.split(",")) - set(backends):
+        print(f"skipping backend {b}: {BACKENDS[b].available()[1]}")
+    speed, fidelity = [], []
+    w, h = args.size
+    for path in args.scenes:
+        scene = load(path)
+        cams = bench.bench_views(scene, args.views, w, h, args.cameras, args.up)
+        n_speed = len(backends) * len(rates) * len(settings) * len(cams)
+        n_fid = len(cams) * len(settings) * sum(r != 1 for r in rates)
+        with Progress(transient=True) as progress:
+            task = progress.add_task(f"{Path(path).name}", total=n_speed + n_fid)
+            step = lambda: progress.advance(task)  # noqa: E731
+            speed += bench.measure_speed(scene, Path(path).name, cams, settings, backends, rates, args.repeat, step)
+            fidelity += bench.measure_fidelity(scene, Path(path).name, cams, settings, rates, backends[0], step)
+    bench.print_tables(speed, fidelity)
+    if args.json:
+        print(f"wrote {bench.write_json(Path(args.json), speed, fidelity)}")
+    if args.plots:
+        for p in bench.write_plots(Path(args.plots), speed, fidelity):
+            print(f"wrote {p}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gbviewer", description=__doc__)
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -138,6 +196,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene", type=Path)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("convert", help="write any supported scene as a standard INRIA 3DGS .ply")
+    p.add_argument("scene", type=Path)
+    p.add_argument("out", type=Path, help="OUT.ply")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=cmd_convert)
 
     p = sub.add_parser("render", help="render one image")
     p.add_argument("scene", type=Path)
@@ -158,6 +222,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
     p.add_argument("--out", default="out", help="output folder (default ./out)")
     p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("bench", help="speed and zoom fidelity per mode, backend and sampling rate")
+    p.add_argument("scenes", type=Path, nargs="+")
+    p.add_argument("--modes", default="scalar,mip,analytic,gaussian_blending,supersample:3",
+                   help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N)")
+    p.add_argument("--backends", default="cpu")
+    p.add_argument("--rates", default="4,2,1,1/2,1/4,1/8", help="sampling rates, e.g. 8,4,2,1,1/2,1/4,1/8")
+    p.add_argument("--views", type=int, default=3, help="views per scene (orbit, or spread over --cameras)")
+    p.add_argument("--cameras", type=Path, help="3DGS cameras.json: use training views")
+    p.add_argument("--up", default="-y", choices=["-y", "+y", "+z", "-z"])
+    p.add_argument("--size", type=_size, default=(320, 240), metavar="WxH", help="x1 image size")
+    p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--json", help="write every number and the machine description here")
+    p.add_argument("--plots", help="write PNG plots into this folder")
+    p.set_defaults(func=cmd_bench)
     return parser
 
 

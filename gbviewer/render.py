@@ -75,6 +75,30 @@ class RenderSettings:
     def label(self) -> str:
         return self.mode.label + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "")
 
+    @property
+    def spec(self) -> str:
+        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', ..."""
+        return self.mode.label + (f":{self.supersample}" if self.supersample > 1 else "")
+
+    @classmethod
+    def parse(cls, spec: str, **kwargs) -> "RenderSettings":
+        """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples."""
+        name, _, n = spec.strip().partition(":")
+        try:
+            supersample = int(n) if n else 1
+        except ValueError:
+            raise RenderError(f"mode {spec!r}: supersampling factor {n!r} is not an integer") from None
+        mode = Mode.SCALAR if name.strip().lower() == "supersample" else Mode.parse(name)
+        return cls(mode, supersample, **kwargs)
+
+    @classmethod
+    def parse_list(cls, specs: str, **kwargs) -> "list[RenderSettings]":
+        """Comma-separated mode specs, e.g. 'scalar,supersample:3,gaussian_blending'."""
+        out = [cls.parse(s, **kwargs) for s in specs.split(",") if s.strip()]
+        if not out:
+            raise RenderError("no modes given")
+        return out
+
 
 @dataclass
 class Frame:

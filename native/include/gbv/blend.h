@@ -32,8 +32,9 @@ GBV_HD bool blend_scalar(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
     return composite_scalar(alpha, s.color, T, C);
 }
 
-// Analytic-Splatting's logistic approximation of the standard normal CDF (KERNELS.md §4).
-GBV_HD float approx_cdf(float x) { return 0.5f * tanhf(0.5f * (1.6f * x + 0.07f * x * x * x)) + 0.5f; }
+// Analytic-Splatting's logistic approximation of the standard normal CDF (KERNELS.md §4):
+// sigmoid(1.6x + 0.07x^3), written with expf (the published 0.5 tanh(z/2) + 0.5 is the same function).
+GBV_HD float approx_cdf(float x) { return 1.0f / (1.0f + expf(-(1.6f * x + 0.07f * x * x * x))); }
 
 // `analytic`: mean alpha over the unit pixel, separable in the splat's eigen-frame (Analytic-Splatting).
 GBV_HD bool blend_analytic(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
