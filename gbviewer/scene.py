@@ -108,7 +108,9 @@ class Scene:
         q = arrays["quats"]
         norm = np.linalg.norm(q, axis=1, keepdims=True)
         degenerate = norm[:, 0] < 1e-12
-        q = np.where(degenerate[:, None], np.array([1, 0, 0, 0], np.float32), q / np.maximum(norm, 1e-12))
+        unit = np.abs(norm - 1) <= 4 * np.finfo(np.float32).eps  # already unit: kept, so loading is idempotent
+        q = np.where(unit, q, q / np.maximum(norm, 1e-12))
+        q = np.where(degenerate[:, None], np.array([1, 0, 0, 0], np.float32), q)
         arrays["quats"] = q.astype(np.float32)
         arrays["opacities"] = np.clip(arrays["opacities"], 0.0, 1.0)
         if "filter_3d" in arrays:

@@ -1,9 +1,9 @@
 """Write a Scene as a standard INRIA 3DGS `.ply` (binary float32, KERNELS.md §1.1).
 
 Raw parameters are chosen so that loading the file gives back the Scene bit for bit whenever such
-values exist (always for a Scene loaded from an INRIA `.ply`): log and logit are refined by whole
-float32 steps until exp and sigmoid reproduce the stored values, and each unit quaternion is given
-a scale that normalises back to itself.
+values exist (always for a Scene loaded from an INRIA `.ply`): log and logit are refined, by
+bisection over float32 values, until exp and sigmoid reproduce the stored values. Quaternions are
+written as stored; being unit, `Scene.from_arrays` keeps them unchanged.
 """
 
 from __future__ import annotations
@@ -17,39 +17,40 @@ from ..scene import Scene
 from .ply import activate_opacity, activate_scales
 
 RAW_LIMIT = 110.0  # |logit| and |log| beyond this saturate float32 sigmoid and exp
-MAX_STEPS = 16
-QUAT_SCALES = [1.0] + [1.0 + s * k * 2.0 ** -24 for k in range(1, 9) for s in (1, -1)]
+SEARCH_ULPS = 1 << 16  # how far (in float32 steps) the exact preimage may lie from the float64 inverse
+NEIGHBOURS = 8  # float32 steps scanned around the bisection result
+
+
+def _key(x: np.ndarray) -> np.ndarray:
+    """float32 -> int64 keys ordered like the floats (adjacent floats have adjacent keys)."""
+    i = x.astype(np.float32).view(np.int32).astype(np.int64)
+    return np.where(i < 0, -(i & 0x7FFFFFFF), i)
+
+
+def _unkey(k: np.ndarray) -> np.ndarray:
+    return np.where(k < 0, (-k) | 0x80000000, k).astype(np.uint32).view(np.float32)
 
 
 def _invert(activate, guess: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """float32 raw values with activate(raw) == target, stepping the initial guess by ulps where needed."""
-    raw = np.clip(np.nan_to_num(guess, nan=0.0), -RAW_LIMIT, RAW_LIMIT).astype(np.float32)
-    for _ in range(MAX_STEPS):
-        got = activate(raw)
-        bad = got != target
-        if not bad.any():
-            break
-        raw[bad] = np.nextafter(raw[bad], np.where(got[bad] < target[bad], np.float32(np.inf), np.float32(-np.inf)))
-    return raw
-
-
-def _normalise(q: np.ndarray) -> np.ndarray:
-    """The loader's quaternion normalisation (Scene.from_arrays)."""
-    return q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-12)
-
-
-def _quat_preimage(quats: np.ndarray) -> np.ndarray:
-    """Quaternions that normalise back to exactly `quats` (falls back to `quats` itself)."""
-    out = quats.copy()
-    todo = np.flatnonzero((_normalise(quats) != quats).any(axis=1))
-    for s in QUAT_SCALES[1:]:
-        if todo.size == 0:
-            break
-        cand = (quats[todo].astype(np.float64) * s).astype(np.float32)
-        ok = (_normalise(cand) == quats[todo]).all(axis=1)
-        out[todo[ok]] = cand[ok]
-        todo = todo[~ok]
-    return out
+    """float32 raw with activate(raw) == target: bisection around the float64 guess, then a local scan."""
+    raw = np.clip(np.nan_to_num(guess, nan=0.0), -RAW_LIMIT, RAW_LIMIT).astype(np.float32).ravel()
+    want = np.asarray(target, np.float32).ravel()
+    bad = np.flatnonzero(activate(raw) != want)
+    if bad.size:
+        lo = _key(raw[bad]) - SEARCH_ULPS
+        hi = lo + 2 * SEARCH_ULPS
+        while (hi - lo > 1).any():  # the first float with activate(raw) >= want
+            mid = (lo + hi) // 2
+            below = activate(_unkey(mid)) < want[bad]
+            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+        best = _unkey(hi)
+        found = activate(best) == want[bad]
+        for step in range(-NEIGHBOURS, NEIGHBOURS + 1):  # numpy's float32 exp is monotone only within an ulp
+            cand = _unkey(hi + step)
+            hit = ~found & (activate(cand) == want[bad])
+            best[hit], found = cand[hit], found | hit
+        raw[bad] = best
+    return raw.reshape(np.shape(target))
 
 
 def inria_columns(scene: Scene) -> dict[str, np.ndarray]:
@@ -66,8 +67,7 @@ def inria_columns(scene: Scene) -> dict[str, np.ndarray]:
     cols.update({f"f_rest_{i}": rest[:, i] for i in range(rest.shape[1])})
     cols["opacity"] = opacity
     cols.update({f"scale_{i}": scale[:, i] for i in range(3)})
-    quats = _quat_preimage(scene.quats)
-    cols.update({f"rot_{i}": quats[:, i] for i in range(4)})
+    cols.update({f"rot_{i}": scene.quats[:, i] for i in range(4)})  # unit, so loading keeps them as they are
     if scene.filter_3d is not None:
         cols["filter_3D"] = scene.filter_3d
     return cols
