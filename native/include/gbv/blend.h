@@ -26,9 +26,13 @@ GBV_HD float gaussian_at(const Splat2D& s, Vec2 d) {
     return power > 0.0f ? 0.0f : expf(power);
 }
 
-// `scalar` and `mip`: alpha at the pixel centre (eq. 5).
+// `scalar` and `mip`: alpha at the pixel centre (eq. 5). Offsets whose power is below
+// log_min_alpha = ln(1/(255 opacity)) would give alpha < 1/255 and are skipped before the exp.
 GBV_HD bool blend_scalar(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
-    const float alpha = fminf(MAX_ALPHA, s.opacity * gaussian_at(s, s.xy - pix));
+    const Vec2 d = s.xy - pix;
+    const float power = -0.5f * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
+    if (power > 0.0f || power < s.log_min_alpha) return false;
+    const float alpha = fminf(MAX_ALPHA, s.opacity * expf(power));
     return composite_scalar(alpha, s.color, T, C);
 }
 
