@@ -56,7 +56,7 @@ def test_render_refuses_to_overwrite(tmp_path, capsys):
     (["render", "{scene}", "--scale", "0", "--out", "x.png"], "sampling rate"),
     (["render", "{scene}", "--out", "x.jpg"], ".png or .npy"),
     (["render", "{scene}", "--cameras", "{bad}", "--out", "x.png"], "cameras.json"),
-    (["info", "{bad}"], "cameras.json: unrecognised scene format"),
+    (["info", "{bad}"], "cameras.json"),
 ])
 def test_bad_input_one_line_exit_2(tmp_path, args, message):
     bad = tmp_path / "cameras.json"
