@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..camera import load_cameras_json
-from ..errors import SceneFormatError
+from ..errors import GBViewerError, SceneFormatError
 from ..scene import Scene
 from .compressed_ply import is_compressed_ply, load_compressed_ply
 from .ply import load_inria_ply, read_ply
@@ -22,6 +22,15 @@ FORMATS = ("INRIA or compressed .ply, .spz, .sog (zip, folder or meta.json) or .
 def load(path: str | Path) -> Scene:
     """Load a splat scene file or SOG folder; the format comes from the content, not the extension."""
     path = Path(path)
+    try:
+        return _load(path)
+    except SceneFormatError:
+        raise
+    except GBViewerError as exc:  # Scene validation of decoded data, e.g. every splat non-finite
+        raise SceneFormatError(path, str(exc).removeprefix(f"{path}: ")) from None
+
+
+def _load(path: Path) -> Scene:
     if path.is_dir():
         return load_sog(path)
     if not path.is_file():
