@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
-import numpy as np
-import pytest
+# `python -m pytest` run from the repository root puts the source tree first on sys.path, and its gbviewer/
+# has no compiled _native (the build installs that into site-packages). Prefer the installed package then.
+_SRC = Path(__file__).resolve().parents[1]
+if not any((_SRC / "gbviewer").glob("_native*")):
+    sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _SRC]
 
-import gbviewer as gb
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import gbviewer as gb  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_SCENES = REPO.parent / "shared" / "scenes"
