@@ -95,7 +95,8 @@ class Scene:
 
         finite = np.ones(n, dtype=bool)
         for arr in arrays.values():
-            finite &= np.isfinite(arr.reshape(n, -1)).all(axis=1)
+            if not np.isfinite(arr).all():  # the per-splat reduction is slow: only when needed
+                finite &= np.isfinite(arr.reshape(n, -1)).all(axis=1)
         dropped = int(n - finite.sum())
         if dropped:
             warnings.warn(f"{source}: dropped {dropped} of {n} splats with non-finite values", stacklevel=2)

@@ -40,7 +40,7 @@ def load_sog(path: Path) -> Scene:
     try:
         with zipfile.ZipFile(path) as zf:
             return _load(path, lambda name: _read_member(path, zf, name), bundled=True)
-    except (zipfile.BadZipFile, zipfile.LargeZipFile) as exc:
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, NotImplementedError, RuntimeError) as exc:
         raise SceneFormatError(path, f"corrupt .sog zip: {exc}", field="zip") from None
 
 
@@ -60,7 +60,7 @@ def _read_member(path: Path, zf: zipfile.ZipFile, name: str) -> bytes:
         raise SceneFormatError(path, f"member of {info.file_size} bytes exceeds {MAX_MEMBER_BYTES}", field=name)
     try:
         return zf.read(info)
-    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as exc:
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError, RuntimeError) as exc:
         raise SceneFormatError(path, f"cannot read zip member: {exc}", field=name) from None
 
 
@@ -132,8 +132,8 @@ def _sh_rest(where: Path, images: "_Images", shn: dict, n: int) -> np.ndarray:
     index = labels[:, 0].astype(np.intp) | (labels[:, 1].astype(np.intp) << 8)
     if index.max() >= palette:
         raise SceneFormatError(where, f"label {index.max()} outside the palette of {palette}", field=labels_name)
-    entries = centroids[:palette * k, :3].reshape(palette, k, 3)
-    return _codebook(where, shn, "shN")[entries[index]]
+    entries = _codebook(where, shn, "shN")[centroids[:palette * k, :3]].reshape(palette, k, 3)
+    return entries[index]
 
 
 class _Images:

@@ -77,9 +77,12 @@ def _gunzip(path: Path, data: bytes) -> bytes:
             raise SceneFormatError(path, f"gzip data does not start with NGSP (got {magic!r})", field="magic")
         _check_header(path, version, n, sh_degree, range(1, 4))
         limit = sum(_sizes(version, n, sh_degree).values()) + MAX_EXTENSION_BYTES
-        return head + d.decompress(d.unconsumed_tail, limit)
+        payload = head + d.decompress(d.unconsumed_tail, limit)
     except zlib.error as exc:
         raise SceneFormatError(path, f"corrupt gzip stream: {exc}", field="gzip") from None
+    if not d.eof and not d.unconsumed_tail:
+        raise SceneFormatError(path, "truncated gzip stream (no end-of-stream marker)", field="gzip")
+    return payload
 
 
 def _load_legacy(path: Path, payload: bytes, container: str) -> Scene:
@@ -127,8 +130,12 @@ def _load_ngsp(path: Path, data: bytes) -> Scene:
         if start + compressed > len(data):
             raise SceneFormatError(path, f"truncated: needs {compressed} compressed bytes at {start}, the file "
                                    f"has {len(data) - start}", field=where)
+        frame = memoryview(data)[start:start + compressed]
         try:
-            out = dctx.decompress(data[start:start + compressed], max_output_size=size)
+            declared = zstandard.get_frame_parameters(frame).content_size
+            if declared not in (size, zstandard.CONTENTSIZE_UNKNOWN):
+                raise SceneFormatError(path, f"zstd frame declares {declared} bytes, expected {size}", field=where)
+            out = dctx.decompress(frame, max_output_size=size)
         except zstandard.ZstdError as exc:
             raise SceneFormatError(path, f"corrupt zstd stream: {exc}", field=where) from None
         if len(out) != size:
