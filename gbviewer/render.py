@@ -134,6 +134,27 @@ class Renderer(Protocol):
     def render(self, camera: Camera, settings: RenderSettings) -> Frame: ...
 
 
+def _camera_args(camera: Camera) -> tuple:
+    """Camera as the native modules take it: R (3x3), t, fx, fy, cx, cy, width, height, near."""
+    return (np.ascontiguousarray(camera.R, np.float32), np.ascontiguousarray(camera.t, np.float32), camera.fx,
+            camera.fy, camera.cx, camera.cy, camera.width, camera.height, camera.near)
+
+
+def _frame(out: dict, camera: Camera, settings: RenderSettings, backend: str, t0: float) -> Frame:
+    """A Frame from a native module's result dict (rgb, alpha, evals, window?, per-stage ms and counts)."""
+    stats = {k: out[k] for k in ("preprocess_ms", "sort_ms", "blend_ms", "visible", "sort_length", "evaluations")}
+    stats.update(
+        total_ms=(time.perf_counter() - t0) * 1e3,
+        evals_per_pixel=out["evaluations"] / (camera.width * camera.height),
+        backend=backend,
+        mode=settings.label,
+    )
+    debug = {"evals": out["evals"]}
+    if "window" in out:
+        debug["window"] = out["window"]
+    return Frame(out["rgb"], out["alpha"], stats, debug)
+
+
 class CpuRenderer:
     """Native C++/OpenMP backend (gbviewer._native)."""
 
@@ -166,26 +187,65 @@ class CpuRenderer:
         t0 = time.perf_counter()
         out = self._native.render(
             scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d,
-            np.ascontiguousarray(camera.R, np.float32), np.ascontiguousarray(camera.t, np.float32),
-            camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height, camera.near,
-            int(settings.mode), settings.supersample, settings.sh_degree,
+            *_camera_args(camera), int(settings.mode), settings.supersample, settings.sh_degree,
             np.asarray(settings.background, np.float32), settings.debug == "window", settings.threads,
         )
-        total_ms = (time.perf_counter() - t0) * 1e3
-        stats = {k: out[k] for k in ("preprocess_ms", "sort_ms", "blend_ms", "visible", "sort_length", "evaluations")}
-        stats.update(
-            total_ms=total_ms,
-            evals_per_pixel=out["evaluations"] / (camera.width * camera.height),
-            backend=self.name,
-            mode=settings.label,
-        )
-        debug = {"evals": out["evals"]}
-        if "window" in out:
-            debug["window"] = out["window"]
-        return Frame(out["rgb"], out["alpha"], stats, debug)
+        return _frame(out, camera, settings, self.name, t0)
 
 
-BACKENDS: dict[str, type] = {"cpu": CpuRenderer}
+class CudaRenderer:
+    """Native CUDA backend (gbviewer._native_cuda, built when a CUDA toolkit is present): the scene stays on the
+    device; `render_to_texture` fills an OpenGL texture without a round trip through host memory."""
+
+    name = "cuda"
+
+    def __init__(self) -> None:
+        ok, why = self.available()
+        if not ok:
+            raise BackendUnavailable(f"cuda backend unavailable: {why}")
+        from . import _native_cuda
+
+        try:
+            self._impl = _native_cuda.Renderer()
+        except RuntimeError as exc:
+            raise BackendUnavailable(f"cuda backend unavailable: {exc}") from None
+
+    @classmethod
+    def available(cls) -> tuple[bool, str]:
+        try:
+            from . import _native_cuda
+        except ImportError:
+            return False, "not built: no CUDA toolkit (nvcc) was found when gbviewer was installed"
+        ok, why = _native_cuda.availability()
+        return ok, "" if ok else why
+
+    def upload(self, scene: Scene) -> None:
+        try:
+            self._impl.upload(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d)
+        except RuntimeError as exc:
+            raise RenderError(f"cuda: {exc}") from None
+
+    def render(self, camera: Camera, settings: RenderSettings) -> Frame:
+        t0 = time.perf_counter()
+        try:
+            out = self._impl.render(*_camera_args(camera), int(settings.mode), settings.supersample,
+                                    settings.sh_degree, np.asarray(settings.background, np.float32),
+                                    settings.debug == "window")
+        except RuntimeError as exc:
+            raise RenderError(f"cuda: {exc}") from None
+        return _frame(out, camera, settings, self.name, t0)
+
+    def render_to_texture(self, texture_id: int, camera: Camera, settings: RenderSettings) -> None:
+        """Render into an existing GL_RGBA32F texture of the camera's size (its GL context must be current)."""
+        try:
+            self._impl.render_to_gl_texture(texture_id, *_camera_args(camera), int(settings.mode),
+                                            settings.supersample, settings.sh_degree,
+                                            np.asarray(settings.background, np.float32))
+        except RuntimeError as exc:
+            raise RenderError(f"cuda: {exc}") from None
+
+
+BACKENDS: dict[str, type] = {"cpu": CpuRenderer, "cuda": CudaRenderer}
 
 _renderers: "weakref.WeakKeyDictionary[Scene, dict[str, Renderer]]" = weakref.WeakKeyDictionary()
 
@@ -215,3 +275,6 @@ def render(
     """Render `scene` from `camera` in `mode` on `backend`."""
     settings = RenderSettings(Mode.parse(mode), supersample, tuple(background), sh_degree, debug)
     return get_renderer(scene, backend).render(camera, settings)
+
+
+

@@ -8,11 +8,12 @@ namespace gbv {
 
 constexpr float SH_C0 = 0.28209479177387814f;
 constexpr float SH_C1 = 0.4886025119029199f;
-constexpr float SH_C2[5] = {1.0925484305920792f, -1.0925484305920792f, 0.31539156525252005f,
-                            -1.0925484305920792f, 0.5462742152960396f};
-constexpr float SH_C3[7] = {-0.5900435899266435f, 2.890611442640554f, -0.4570457994644658f,
-                            0.3731763325901154f,  -0.4570457994644658f, 1.445305721320277f,
-                            -0.5900435899266435f};
+// Scalars rather than arrays: nvcc cannot read namespace-scope constexpr arrays in device code.
+constexpr float SH_C2_0 = 1.0925484305920792f, SH_C2_1 = -1.0925484305920792f, SH_C2_2 = 0.31539156525252005f,
+                SH_C2_3 = -1.0925484305920792f, SH_C2_4 = 0.5462742152960396f;
+constexpr float SH_C3_0 = -0.5900435899266435f, SH_C3_1 = 2.890611442640554f, SH_C3_2 = -0.4570457994644658f,
+                SH_C3_3 = 0.3731763325901154f, SH_C3_4 = -0.4570457994644658f, SH_C3_5 = 1.445305721320277f,
+                SH_C3_6 = -0.5900435899266435f;
 
 // View-dependent colour from SH coefficients sh[K][3] (DC first), as computeColorFromSH:
 // +0.5 offset, clamped at 0 from below only.
@@ -28,20 +29,20 @@ GBV_HD void sh_to_rgb(const float* sh, int deg, Vec3 dir, float out[3]) {
         k = 4;
         if (deg > 1) {
             const float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
-            basis[4] = SH_C2[0] * xy;
-            basis[5] = SH_C2[1] * yz;
-            basis[6] = SH_C2[2] * (2.0f * zz - xx - yy);
-            basis[7] = SH_C2[3] * xz;
-            basis[8] = SH_C2[4] * (xx - yy);
+            basis[4] = SH_C2_0 * xy;
+            basis[5] = SH_C2_1 * yz;
+            basis[6] = SH_C2_2 * (2.0f * zz - xx - yy);
+            basis[7] = SH_C2_3 * xz;
+            basis[8] = SH_C2_4 * (xx - yy);
             k = 9;
             if (deg > 2) {
-                basis[9] = SH_C3[0] * y * (3.0f * xx - yy);
-                basis[10] = SH_C3[1] * xy * z;
-                basis[11] = SH_C3[2] * y * (4.0f * zz - xx - yy);
-                basis[12] = SH_C3[3] * z * (2.0f * zz - 3.0f * xx - 3.0f * yy);
-                basis[13] = SH_C3[4] * x * (4.0f * zz - xx - yy);
-                basis[14] = SH_C3[5] * z * (xx - yy);
-                basis[15] = SH_C3[6] * x * (xx - 3.0f * yy);
+                basis[9] = SH_C3_0 * y * (3.0f * xx - yy);
+                basis[10] = SH_C3_1 * xy * z;
+                basis[11] = SH_C3_2 * y * (4.0f * zz - xx - yy);
+                basis[12] = SH_C3_3 * z * (2.0f * zz - 3.0f * xx - 3.0f * yy);
+                basis[13] = SH_C3_4 * x * (4.0f * zz - xx - yy);
+                basis[14] = SH_C3_5 * z * (xx - yy);
+                basis[15] = SH_C3_6 * x * (xx - 3.0f * yy);
                 k = 16;
             }
         }

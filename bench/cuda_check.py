@@ -1,0 +1,36 @@
+"""Run on a machine with an NVIDIA GPU: CUDA-vs-CPU agreement for every mode, then the speed table.
+
+    bash scripts/setup.sh            # builds gbviewer._native_cuda when nvcc is on PATH
+    .venv/bin/python bench/cuda_check.py [SCENE ...]
+
+Exits non-zero when the CUDA backend is unavailable or disagrees with the CPU backend."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import gbviewer as gb
+from gbviewer.render import CudaRenderer
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def main(argv: list[str]) -> int:
+    ok, why = CudaRenderer.available()
+    if not ok:
+        print(f"CUDA backend unavailable: {why}")
+        return 1
+    print(f"CUDA device: {why}")
+    tests = subprocess.run([sys.executable, "-m", "pytest", "-q", str(REPO / "tests" / "test_cuda.py")], cwd=REPO)
+    if tests.returncode != 0:
+        return tests.returncode
+    scenes = argv or [str(gb.DEFAULT_SCENE)]
+    return subprocess.run([sys.executable, "-m", "gbviewer", "bench", *scenes, "--backends", "cpu,cuda",
+                           "--modes", "scalar,mip,analytic,gaussian_blending,supersample:3", "--size", "800x800",
+                           "--views", "3", "--repeat", "10", "--rates", "1,1/2,1/4,1/8"]).returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,410 @@
+// CUDA driver around the shared kernel headers: preprocess (one thread per splat), tile keys and a CUB radix
+// sort of (tile, depth), tile ranges, blending (one 16x16 block per tile, splats batched through shared memory,
+// early termination when every pixel of the block is done), box-average for supersampling.
+#include <cuda_runtime.h>
+
+#include <GL/gl.h>
+#include <cuda_gl_interop.h>
+
+#include <algorithm>
+#include <cub/cub.cuh>
+#include <map>
+#include <stdexcept>
+#include <string>
+
+#include "gbv/blend.h"
+#include "gbv/preprocess.h"
+#include "renderer.h"
+
+namespace gbv::cuda {
+namespace {
+
+void check(cudaError_t e, const char* what) {
+    if (e != cudaSuccess) throw std::runtime_error(std::string("CUDA error in ") + what + ": " + cudaGetErrorString(e));
+}
+#define CUDA_CHECK(x) check((x), #x)
+
+// A device allocation that only grows (by 1.5x) and is reused between frames.
+template <typename T>
+struct DeviceBuffer {
+    T* ptr = nullptr;
+    size_t capacity = 0;
+    void ensure(size_t n) {
+        if (n <= capacity) return;
+        release();
+        const size_t count = std::max<size_t>(n + n / 2, 1);
+        const cudaError_t e = cudaMalloc(&ptr, count * sizeof(T));
+        if (e == cudaErrorMemoryAllocation) {
+            cudaGetLastError();
+            ptr = nullptr;
+            throw std::runtime_error("CUDA out of device memory: could not allocate " +
+                                     std::to_string((count * sizeof(T)) >> 20) + " MiB");
+        }
+        CUDA_CHECK(e);
+        capacity = count;
+    }
+    void release() {
+        if (ptr) cudaFree(ptr);
+        ptr = nullptr;
+        capacity = 0;
+    }
+    ~DeviceBuffer() { release(); }
+};
+
+__global__ void preprocess_kernel(int64_t n, const float* means, const float* scales, const float* quats,
+                                  const float* opacities, const float* sh, const float* filter_3d, int k, int sh_deg,
+                                  CameraParams cam, Mode mode, int gx, int gy, Splat2D* splats, TileRect* rects,
+                                  uint32_t* touched, unsigned long long* visible) {
+    const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    SplatIn in{means + 3 * i, scales + 3 * i, quats + 4 * i, opacities[i], sh + (size_t)k * 3 * i,
+               filter_3d ? filter_3d[i] : 0.0f};
+    TileRect r;
+    uint32_t count = 0;
+    if (preprocess_splat(in, sh_deg, cam, mode, gx, gy, &splats[i], &r)) {
+        count = (uint32_t)((r.x1 - r.x0) * (r.y1 - r.y0));
+        rects[i] = r;
+        atomicAdd(visible, 1ull);
+    }
+    touched[i] = count;
+}
+
+// One key per touched tile: tile id in the high 32 bits, depth bits (positive floats sort as uints) below.
+// Keys are written in splat order and the radix sort is stable, so equal depths keep index order (as the CPU).
+__global__ void duplicate_kernel(int64_t n, const Splat2D* splats, const TileRect* rects, const uint32_t* touched,
+                                 const uint64_t* offsets, int gx, uint64_t* keys, uint32_t* values) {
+    const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
+    if (i >= n || touched[i] == 0) return;
+    uint64_t off = offsets[i] - touched[i];
+    const uint32_t depth_bits = __float_as_uint(splats[i].depth);
+    const TileRect r = rects[i];
+    for (int ty = r.y0; ty < r.y1; ++ty)
+        for (int tx = r.x0; tx < r.x1; ++tx) {
+            keys[off] = ((uint64_t)(ty * gx + tx) << 32) | depth_bits;
+            values[off] = (uint32_t)i;
+            ++off;
+        }
+}
+
+__global__ void ranges_kernel(int64_t total, const uint64_t* keys, uint2* ranges) {
+    const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
+    if (i >= total) return;
+    const uint32_t tile = (uint32_t)(keys[i] >> 32);
+    if (i == 0) {
+        ranges[tile].x = 0;
+    } else {
+        const uint32_t prev = (uint32_t)(keys[i - 1] >> 32);
+        if (tile != prev) {
+            ranges[prev].y = (uint32_t)i;
+            ranges[tile].x = (uint32_t)i;
+        }
+    }
+    if (i == total - 1) ranges[tile].y = (uint32_t)total;
+}
+
+constexpr int BLOCK = TILE * TILE;
+
+template <int M>
+__global__ void __launch_bounds__(BLOCK)
+    render_kernel(const uint2* ranges, const uint32_t* values, const Splat2D* splats, int W, int H, int gx,
+                  float3 bg, float* rgb, float* alpha, int32_t* evals, float* window) {
+    __shared__ Splat2D batch[BLOCK];
+    const int x = blockIdx.x * TILE + threadIdx.x, y = blockIdx.y * TILE + threadIdx.y;
+    const int tid = threadIdx.y * TILE + threadIdx.x;
+    const bool inside = x < W && y < H;
+    const Vec2 pix = {x + 0.5f, y + 0.5f};
+    const uint2 range = ranges[blockIdx.y * gx + blockIdx.x];
+    bool done = !inside;
+    float T = 1.0f, C[3] = {0.0f, 0.0f, 0.0f};
+    TransmittanceWindow win = {1.0f, pix, {1.0f, 1.0f}};
+    int32_t ev = 0;
+    for (uint32_t start = range.x; start < range.y; start += BLOCK) {
+        if (__syncthreads_count(done) == BLOCK) break;
+        if (start + tid < range.y) batch[tid] = splats[values[start + tid]];
+        __syncthreads();
+        const int count = (int)min((uint32_t)BLOCK, range.y - start);
+        for (int j = 0; j < count && !done; ++j) {
+            ++ev;
+            if (M == GAUSSIAN_BLENDING)
+                done = blend_gaussian(batch[j], win, C);
+            else if (M == ANALYTIC)
+                done = blend_analytic(batch[j], pix, T, C);
+            else
+                done = blend_scalar(batch[j], pix, T, C);
+        }
+    }
+    if (!inside) return;
+    if (M == GAUSSIAN_BLENDING) T = win.T;
+    const size_t p = (size_t)y * W + x;
+    rgb[p * 3] = C[0] + T * bg.x;
+    rgb[p * 3 + 1] = C[1] + T * bg.y;
+    rgb[p * 3 + 2] = C[2] + T * bg.z;
+    alpha[p] = 1.0f - T;
+    evals[p] = ev;
+    if (window) {
+        window[p * 2] = win.wh.x;
+        window[p * 2 + 1] = win.wh.y;
+    }
+}
+
+// Box-average N x N blocks (supersampling); evaluations are summed, window sizes converted to output pixels.
+__global__ void downsample_kernel(int N, int w, int h, const float* rgb, const float* alpha, const int32_t* evals,
+                                  const float* window, float* o_rgb, float* o_alpha, int32_t* o_evals,
+                                  float* o_window) {
+    const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
+    if (x >= w || y >= h) return;
+    float acc[6] = {0, 0, 0, 0, 0, 0};
+    int32_t ev = 0;
+    const int W = w * N;
+    for (int sy = 0; sy < N; ++sy)
+        for (int sx = 0; sx < N; ++sx) {
+            const size_t q = (size_t)(y * N + sy) * W + (x * N + sx);
+            for (int c = 0; c < 3; ++c) acc[c] += rgb[q * 3 + c];
+            acc[3] += alpha[q];
+            if (window) {
+                acc[4] += window[q * 2];
+                acc[5] += window[q * 2 + 1];
+            }
+            ev += evals[q];
+        }
+    const float inv = 1.0f / (N * N);
+    const size_t p = (size_t)y * w + x;
+    for (int c = 0; c < 3; ++c) o_rgb[p * 3 + c] = acc[c] * inv;
+    o_alpha[p] = acc[3] * inv;
+    o_evals[p] = ev;
+    if (o_window) {
+        o_window[p * 2] = acc[4] * inv / N;
+        o_window[p * 2 + 1] = acc[5] * inv / N;
+    }
+}
+
+__global__ void pack_rgba_kernel(int n, const float* rgb, const float* alpha, float4* out) {
+    const int i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < n) out[i] = make_float4(rgb[i * 3], rgb[i * 3 + 1], rgb[i * 3 + 2], alpha[i]);
+}
+
+int blocks(int64_t n, int per = 256) { return (int)((n + per - 1) / per); }
+
+}  // namespace
+
+struct Renderer::Impl {
+    int64_t n = 0;
+    int k = 1;
+    DeviceBuffer<float> means, scales, quats, opacities, sh, filter_3d;
+    bool has_filter = false;
+    DeviceBuffer<Splat2D> splats;
+    DeviceBuffer<TileRect> rects;
+    DeviceBuffer<uint32_t> touched, values_in, values_out;
+    DeviceBuffer<uint64_t> offsets, keys_in, keys_out;
+    DeviceBuffer<uint2> ranges;
+    DeviceBuffer<unsigned char> temp;
+    DeviceBuffer<unsigned long long> visible;
+    DeviceBuffer<float> rgb, alpha, window, o_rgb, o_alpha, o_window;
+    DeviceBuffer<int32_t> evals, o_evals;
+    DeviceBuffer<float4> rgba;
+    struct GLTexture {
+        cudaGraphicsResource_t resource;
+        int width, height;
+    };
+    std::map<unsigned int, GLTexture> gl_textures;
+    cudaEvent_t ev[4];
+
+    Impl() {
+        for (auto& e : ev) CUDA_CHECK(cudaEventCreate(&e));
+    }
+    ~Impl() {
+        for (auto& kv : gl_textures) cudaGraphicsUnregisterResource(kv.second.resource);
+        for (auto& e : ev) cudaEventDestroy(e);
+    }
+
+    // Render into the device output buffers (o_* when supersampling, else the full-resolution ones).
+    void run(const CameraParams& cam, Mode mode, int N, int sh_deg, const float bg[3], bool want_window,
+             RenderResult& res) {
+        if (n == 0) throw std::runtime_error("CUDA renderer: upload a scene before rendering");
+        const int W = cam.width, H = cam.height;
+        const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE, num_tiles = gx * gy;
+        splats.ensure(n);
+        rects.ensure(n);
+        touched.ensure(n);
+        offsets.ensure(n);
+        visible.ensure(1);
+        CUDA_CHECK(cudaMemset(visible.ptr, 0, sizeof(unsigned long long)));
+
+        CUDA_CHECK(cudaEventRecord(ev[0]));
+        preprocess_kernel<<<blocks(n), 256>>>(n, means.ptr, scales.ptr, quats.ptr, opacities.ptr, sh.ptr,
+                                              has_filter ? filter_3d.ptr : nullptr, k, sh_deg, cam, mode, gx, gy,
+                                              splats.ptr, rects.ptr, touched.ptr, visible.ptr);
+        CUDA_CHECK(cudaGetLastError());
+        CUDA_CHECK(cudaEventRecord(ev[1]));
+
+        size_t temp_bytes = 0;
+        CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, touched.ptr, offsets.ptr, n));
+        temp.ensure(temp_bytes);
+        CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.ptr, temp_bytes, touched.ptr, offsets.ptr, n));
+        uint64_t total = 0;
+        CUDA_CHECK(cudaMemcpy(&total, offsets.ptr + (n - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
+        if (total >= (1ull << 31)) throw std::runtime_error("CUDA renderer: more than 2^31 tile-splat pairs");
+        ranges.ensure(num_tiles);
+        CUDA_CHECK(cudaMemset(ranges.ptr, 0, sizeof(uint2) * num_tiles));
+        if (total > 0) {
+            keys_in.ensure(total);
+            keys_out.ensure(total);
+            values_in.ensure(total);
+            values_out.ensure(total);
+            duplicate_kernel<<<blocks(n), 256>>>(n, splats.ptr, rects.ptr, touched.ptr, offsets.ptr, gx,
+                                                 keys_in.ptr, values_in.ptr);
+            CUDA_CHECK(cudaGetLastError());
+            int bits = 0;
+            while ((1 << bits) < num_tiles) ++bits;
+            CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, keys_in.ptr, keys_out.ptr,
+                                                       values_in.ptr, values_out.ptr, (int)total, 0, 32 + bits));
+            temp.ensure(temp_bytes);
+            CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp.ptr, temp_bytes, keys_in.ptr, keys_out.ptr,
+                                                       values_in.ptr, values_out.ptr, (int)total, 0, 32 + bits));
+            ranges_kernel<<<blocks(total), 256>>>((int64_t)total, keys_out.ptr, ranges.ptr);
+            CUDA_CHECK(cudaGetLastError());
+        }
+        CUDA_CHECK(cudaEventRecord(ev[2]));
+
+        const size_t px = (size_t)W * H;
+        const bool window_on = want_window && mode == GAUSSIAN_BLENDING;
+        rgb.ensure(px * 3);
+        alpha.ensure(px);
+        evals.ensure(px);
+        if (window_on) window.ensure(px * 2);
+        const dim3 grid(gx, gy), block(TILE, TILE);
+        const float3 bgc = make_float3(bg[0], bg[1], bg[2]);
+        float* win = window_on ? window.ptr : nullptr;
+        switch (mode) {
+            case GAUSSIAN_BLENDING:
+                render_kernel<GAUSSIAN_BLENDING><<<grid, block>>>(ranges.ptr, values_out.ptr, splats.ptr, W, H, gx,
+                                                                   bgc, rgb.ptr, alpha.ptr, evals.ptr, win);
+                break;
+            case ANALYTIC:
+                render_kernel<ANALYTIC><<<grid, block>>>(ranges.ptr, values_out.ptr, splats.ptr, W, H, gx, bgc,
+                                                          rgb.ptr, alpha.ptr, evals.ptr, win);
+                break;
+            default:
+                render_kernel<SCALAR><<<grid, block>>>(ranges.ptr, values_out.ptr, splats.ptr, W, H, gx, bgc,
+                                                        rgb.ptr, alpha.ptr, evals.ptr, win);
+        }
+        CUDA_CHECK(cudaGetLastError());
+        if (N > 1) {
+            const int w = W / N, h = H / N;
+            o_rgb.ensure((size_t)w * h * 3);
+            o_alpha.ensure((size_t)w * h);
+            o_evals.ensure((size_t)w * h);
+            if (window_on) o_window.ensure((size_t)w * h * 2);
+            const dim3 g2((w + 15) / 16, (h + 15) / 16);
+            downsample_kernel<<<g2, block>>>(N, w, h, rgb.ptr, alpha.ptr, evals.ptr, win, o_rgb.ptr, o_alpha.ptr,
+                                             o_evals.ptr, window_on ? o_window.ptr : nullptr);
+            CUDA_CHECK(cudaGetLastError());
+        }
+        CUDA_CHECK(cudaEventRecord(ev[3]));
+        CUDA_CHECK(cudaEventSynchronize(ev[3]));
+        float ms[3];
+        for (int i = 0; i < 3; ++i) CUDA_CHECK(cudaEventElapsedTime(&ms[i], ev[i], ev[i + 1]));
+        res.preprocess_ms = ms[0];
+        res.sort_ms = ms[1];
+        res.blend_ms = ms[2];
+        unsigned long long vis = 0;
+        CUDA_CHECK(cudaMemcpy(&vis, visible.ptr, sizeof(vis), cudaMemcpyDeviceToHost));
+        res.visible = (int64_t)vis;
+        res.sort_length = (int64_t)total;
+    }
+};
+
+std::pair<bool, std::string> availability() {
+    int count = 0;
+    const cudaError_t e = cudaGetDeviceCount(&count);
+    if (e != cudaSuccess) {
+        cudaGetLastError();
+        return {false, std::string("no usable CUDA device: ") + cudaGetErrorString(e)};
+    }
+    if (count == 0) return {false, "no CUDA device found"};
+    cudaDeviceProp prop;
+    CUDA_CHECK(cudaGetDeviceProperties(&prop, 0));
+    if (prop.major < 7 || (prop.major == 7 && prop.minor < 5))
+        return {false, std::string(prop.name) + " is older than sm_75, the oldest architecture built"};
+    return {true, prop.name};
+}
+
+Renderer::Renderer() : impl_(nullptr) {
+    const auto [ok, why] = availability();
+    if (!ok) throw std::runtime_error(why);
+    impl_ = new Impl();
+}
+
+Renderer::~Renderer() { delete impl_; }
+
+void Renderer::upload(const float* means, const float* scales, const float* quats, const float* opacities,
+                      const float* sh, const float* filter_3d, int64_t n, int k) {
+    Impl& m = *impl_;
+    auto put = [](DeviceBuffer<float>& buf, const float* src, size_t count) {
+        buf.ensure(count);
+        CUDA_CHECK(cudaMemcpy(buf.ptr, src, count * sizeof(float), cudaMemcpyHostToDevice));
+    };
+    put(m.means, means, n * 3);
+    put(m.scales, scales, n * 3);
+    put(m.quats, quats, n * 4);
+    put(m.opacities, opacities, n);
+    put(m.sh, sh, (size_t)n * k * 3);
+    m.has_filter = filter_3d != nullptr;
+    if (filter_3d) put(m.filter_3d, filter_3d, n);
+    m.n = n;
+    m.k = k;
+}
+
+RenderResult Renderer::render(const CameraParams& cam, Mode mode, int supersample, int sh_degree, const float bg[3],
+                              bool want_window) {
+    Impl& m = *impl_;
+    RenderResult res;
+    m.run(cam, mode, supersample, sh_degree, bg, want_window, res);
+    const int N = supersample, w = cam.width / N, h = cam.height / N;
+    const size_t px = (size_t)w * h;
+    const bool window_on = want_window && mode == GAUSSIAN_BLENDING;
+    res.rgb.resize(px * 3);
+    res.alpha.resize(px);
+    res.evals.resize(px);
+    CUDA_CHECK(cudaMemcpy(res.rgb.data(), N > 1 ? m.o_rgb.ptr : m.rgb.ptr, px * 3 * 4, cudaMemcpyDeviceToHost));
+    CUDA_CHECK(cudaMemcpy(res.alpha.data(), N > 1 ? m.o_alpha.ptr : m.alpha.ptr, px * 4, cudaMemcpyDeviceToHost));
+    CUDA_CHECK(cudaMemcpy(res.evals.data(), N > 1 ? m.o_evals.ptr : m.evals.ptr, px * 4, cudaMemcpyDeviceToHost));
+    if (window_on) {
+        res.window.resize(px * 2);
+        CUDA_CHECK(cudaMemcpy(res.window.data(), N > 1 ? m.o_window.ptr : m.window.ptr, px * 2 * 4,
+                              cudaMemcpyDeviceToHost));
+    }
+    return res;
+}
+
+void Renderer::render_to_gl_texture(unsigned int texture, const CameraParams& cam, Mode mode, int supersample,
+                                    int sh_degree, const float bg[3]) {
+    Impl& m = *impl_;
+    RenderResult res;
+    m.run(cam, mode, supersample, sh_degree, bg, false, res);
+    const int N = supersample, w = cam.width / N, h = cam.height / N;
+    m.rgba.ensure((size_t)w * h);
+    pack_rgba_kernel<<<blocks((int64_t)w * h), 256>>>(w * h, N > 1 ? m.o_rgb.ptr : m.rgb.ptr,
+                                                      N > 1 ? m.o_alpha.ptr : m.alpha.ptr, m.rgba.ptr);
+    CUDA_CHECK(cudaGetLastError());
+    // A texture id re-created at another size must be registered again.
+    auto it = m.gl_textures.find(texture);
+    if (it != m.gl_textures.end() && (it->second.width != w || it->second.height != h)) {
+        cudaGraphicsUnregisterResource(it->second.resource);
+        m.gl_textures.erase(it);
+        it = m.gl_textures.end();
+    }
+    if (it == m.gl_textures.end()) {
+        cudaGraphicsResource_t r;
+        CUDA_CHECK(cudaGraphicsGLRegisterImage(&r, texture, GL_TEXTURE_2D, cudaGraphicsRegisterFlagsWriteDiscard));
+        it = m.gl_textures.emplace(texture, Impl::GLTexture{r, w, h}).first;
+    }
+    CUDA_CHECK(cudaGraphicsMapResources(1, &it->second.resource));
+    cudaArray_t array;
+    CUDA_CHECK(cudaGraphicsSubResourceGetMappedArray(&array, it->second.resource, 0, 0));
+    CUDA_CHECK(cudaMemcpy2DToArray(array, 0, 0, m.rgba.ptr, w * sizeof(float4), w * sizeof(float4), h,
+                                   cudaMemcpyDeviceToDevice));
+    CUDA_CHECK(cudaGraphicsUnmapResources(1, &it->second.resource));
+}
+
+}  // namespace gbv::cuda
