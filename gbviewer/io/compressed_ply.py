@@ -95,7 +95,12 @@ def _sh_rest(path: Path, element: plyfile.PlyElement, n: int) -> np.ndarray:
     if k3 not in SH_COUNTS or element.count != n:
         raise SceneFormatError(path, f"{k3} properties x {element.count} rows; expected 9, 24 or 45 f_rest_* "
                                f"properties and {n} rows", field="sh")
-    cols = np.stack(_columns(path, element, [f"f_rest_{i}" for i in range(k3)], "u1"), axis=1)
+    columns = _columns(path, element, [f"f_rest_{i}" for i in range(k3)], "u1")
+    data = element.data
+    if data.dtype.itemsize == k3 and list(data.dtype.names) == [f"f_rest_{i}" for i in range(k3)]:
+        cols = np.asarray(data).view(np.uint8).reshape(n, k3)  # the usual layout: one (N, K3) byte view
+    else:
+        cols = np.stack(columns, axis=1)
     lut = ((np.arange(256, dtype=np.float32) + 0.5) / 256 - 0.5) * 8
     lut[0], lut[255] = -4.0, 4.0
     return lut[cols].reshape(n, 3, k3 // 3).transpose(0, 2, 1)
