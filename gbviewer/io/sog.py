@@ -78,7 +78,7 @@ def _load(where: Path, read: Callable[[str], bytes], bundled: bool, meta_name: s
 def _codebook(where: Path, section: dict, name: str) -> np.ndarray:
     book = np.asarray(section["codebook"], dtype=np.float32)
     if book.shape != (256,):
-        raise SceneFormatError(where, f"codebook has shape {book.shape}; expected 256 entries", field=f"{name}.codebook")
+        raise SceneFormatError(where, f"shape {book.shape}; expected 256 entries", field=f"{name}.codebook")
     return book
 
 
@@ -96,7 +96,8 @@ def _decode(where: Path, read: Callable[[str], bytes], meta: dict, bundled: bool
     span = np.asarray(meta["means"]["maxs"], dtype=np.float64).reshape(3) - mins
     span[span == 0] = 1.0
     t = mins + span * ((lo[:, :3] | (hi[:, :3].astype(np.uint16) << 8)) / 65535.0)
-    means = np.sign(t) * np.expm1(np.abs(t))
+    with np.errstate(over="ignore"):  # absurd ranges give inf, and Scene drops those splats
+        means = np.sign(t) * np.expm1(np.abs(t))
 
     q = images.get(meta["quats"]["files"][0])
     if (q[:, 3] < 252).any():
