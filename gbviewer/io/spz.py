@@ -34,6 +34,7 @@ TOC_ENTRY = struct.Struct("<QQ")
 EXTENSIONS_FLAG = 0x2
 ANTIALIASED_FLAG = 0x1
 MAX_EXTENSION_BYTES = 1 << 20  # extension records allowed ahead of the legacy attribute arrays
+MAX_COMPRESSION_RATIO = 1024  # as the reference loader: larger claims are corrupt headers
 SH_DIM = {0: 0, 1: 3, 2: 8, 3: 15, 4: 24}
 COLOR_SCALE = 0.15
 FLIP_XYZ = np.array([1.0, -1.0, -1.0], dtype=np.float32)  # RUB -> RDF, for positions and quaternion xyz
@@ -112,6 +113,8 @@ def _load_ngsp(path: Path, data: bytes) -> Scene:
     _, version, n, sh_degree, frac_bits, flags, num_streams, toc = NGSP_HEADER.unpack_from(data)
     _check_header(path, version, n, sh_degree, range(4, 5))
     sizes = {k: v for k, v in _sizes(version, n, sh_degree).items() if v}
+    if sum(sizes.values()) > MAX_COMPRESSION_RATIO * len(data):
+        raise SceneFormatError(path, f"{n} splats cannot fit in {len(data)} bytes", field="numPoints")
     if num_streams != len(sizes):
         raise SceneFormatError(path, f"{num_streams} streams; SH degree {sh_degree} needs {len(sizes)}",
                                field="numStreams")
