@@ -27,7 +27,7 @@ GBV_HD float gaussian_at(const Splat2D& s, Vec2 d) {
 }
 
 // `scalar` and `mip`: alpha at the pixel centre (eq. 5). Offsets whose power is below
-// log_min_alpha = ln(1/(255 opacity)) would give alpha < 1/255 and are skipped before the exp.
+// log_min_alpha = ln((1/255) / opacity) would give alpha < 1/255 and are skipped before the exp.
 GBV_HD bool blend_scalar(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
     const Vec2 d = s.xy - pix;
     const float power = -0.5f * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
@@ -51,10 +51,18 @@ GBV_HD bool blend_analytic(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
     return composite_scalar(alpha, s.color, T, C);
 }
 
-// Moments of exp(-t^2/2) from 0 to x (paper eq. 13 with sigma = 1): zeroth, first, second.
-GBV_HD float gaussian_moment0(float x) { return SQRT_PI_2 * erff(x * 0.7071067811865476f); }
-GBV_HD float gaussian_moment1(float x) { return -expm1f(-0.5f * x * x); }
-GBV_HD float gaussian_moment2(float x) { return gaussian_moment0(x) - x * expf(-0.5f * x * x); }
+// Zeroth moment of exp(-t^2/2) from 0 to x (paper eq. 13 with sigma = 1), sqrt(pi/2) erf(x/sqrt(2)), given
+// e = exp(-x^2/2). erf uses Abramowitz & Stegun 7.1.26 (absolute error < 1.5e-7, about float32 rounding),
+// whose exp(-z^2) is that same e: one exp per window edge serves all three moments, and every backend
+// (GLSL has no erf) computes the identical function. The first and second moments over [a, b] follow from
+// e: I1 = e(a) - e(b), I2 = I0 + a e(a) - b e(b).
+GBV_HD float gaussian_moment0(float x, float e) {
+    const float z = fabsf(x) * 0.7071067811865476f;
+    const float t = 1.0f / (1.0f + 0.3275911f * z);
+    const float poly = t * (0.254829592f + t * (-0.284496736f + t * (1.421413741f + t * (-1.453152027f + t * 1.061405429f))));
+    const float erf_abs = 1.0f - poly * e;
+    return SQRT_PI_2 * (x < 0.0f ? -erf_abs : erf_abs);
+}
 
 // Gaussian Blending's transmittance: a uniform window of total mass T (pixel area = 1) centred at xy
 // with side lengths wh (paper §3.3). Initially the pixel itself.
@@ -79,6 +87,11 @@ GBV_HD bool blend_gaussian(const Splat2D& s, TransmittanceWindow& win, float C[3
     const float ru = RADIUS_SIGMAS_GB * s.sigma1, rv = RADIUS_SIGMAS_GB * s.sigma2;
     if (u - 0.5f * lu > ru || u + 0.5f * lu < -ru || v - 0.5f * lv > rv || v + 0.5f * lv < -rv) return false;
 
+    // The mean alpha over the window is at most the splat's largest value on it: skip before any erf when
+    // even that is below 1/256 (log_min_alpha = ln(MIN_ALPHA_GB / opacity)).
+    const float gu = fmaxf(fabsf(u) - 0.5f * lu, 0.0f) / s.sigma1, gv = fmaxf(fabsf(v) - 0.5f * lv, 0.0f) / s.sigma2;
+    if (-0.5f * (gu * gu + gv * gv) < s.log_min_alpha) return false;
+
     const float U1 = (u - 0.5f * lu) / s.sigma1, U2 = (u + 0.5f * lu) / s.sigma1;
     const float V1 = (v - 0.5f * lv) / s.sigma2, V2 = (v + 0.5f * lv) / s.sigma2;
     const float du = U2 - U1, dv = V2 - V1;
@@ -93,8 +106,10 @@ GBV_HD bool blend_gaussian(const Splat2D& s, TransmittanceWindow& win, float C[3
         win.T -= w;
         return win.T < T_STOP;
     }
-    const float i0u = s.sigma1 * (gaussian_moment0(U2) - gaussian_moment0(U1));
-    const float i0v = s.sigma2 * (gaussian_moment0(V2) - gaussian_moment0(V1));
+    const float eU1 = expf(-0.5f * U1 * U1), eU2 = expf(-0.5f * U2 * U2);
+    const float eV1 = expf(-0.5f * V1 * V1), eV2 = expf(-0.5f * V2 * V2);
+    const float i0u = s.sigma1 * (gaussian_moment0(U2, eU2) - gaussian_moment0(U1, eU1));
+    const float i0v = s.sigma2 * (gaussian_moment0(V2, eV2) - gaussian_moment0(V1, eV1));
     const float area = lu * lv;
     const float alpha = fminf(MAX_ALPHA, s.opacity * i0u * i0v / area);  // mean alpha over the window
     if (alpha < MIN_ALPHA_GB) return false;
@@ -104,10 +119,9 @@ GBV_HD bool blend_gaussian(const Splat2D& s, TransmittanceWindow& win, float C[3
     C[2] += s.color[2] * weight;
 
     const float s1sq = s.sigma1 * s.sigma1, s2sq = s.sigma2 * s.sigma2;
-    const float i1u = s1sq * (gaussian_moment1(U2) - gaussian_moment1(U1));
-    const float i1v = s2sq * (gaussian_moment1(V2) - gaussian_moment1(V1));
-    const float i2u = s1sq * s.sigma1 * (gaussian_moment2(U2) - gaussian_moment2(U1));
-    const float i2v = s2sq * s.sigma2 * (gaussian_moment2(V2) - gaussian_moment2(V1));
+    const float i1u = s1sq * (eU1 - eU2), i1v = s2sq * (eV1 - eV2);
+    const float i2u = s1sq * (i0u + s.sigma1 * (U1 * eU1 - U2 * eU2));
+    const float i2v = s2sq * (i0v + s.sigma2 * (V1 * eV1 - V2 * eV2));
     const float k = win.T / area * s.opacity;
     // eq. 10: moments of T(x)(1 - alpha(x)) over the window, in the splat's eigen-frame
     const float m0 = win.T - weight;

@@ -73,7 +73,7 @@ struct Splat2D {
     float color[3];
     Vec2 v1;       // unit major eigenvector (v2 = perp(v1))
     float sigma1, sigma2;  // sqrt of the eigenvalues of the 2D covariance
-    float log_min_alpha;   // ln(MIN_ALPHA_3DGS / opacity): lowest power with a visible alpha (scalar, mip)
+    float log_min_alpha;   // ln(min_alpha / opacity): lowest log-Gaussian value that can give a visible alpha
 };
 
 // Tile rectangle [x0, x1) x [y0, y1) in tile units.

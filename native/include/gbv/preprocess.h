@@ -209,7 +209,7 @@ GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& 
     out->xy = Vec2{px, py};
     out->depth = pv[2];
     out->opacity = opacity;
-    out->log_min_alpha = logf(MIN_ALPHA_3DGS / opacity);
+    out->log_min_alpha = logf(min_alpha / opacity);
     out->conic[0] = cov[2] * inv;
     out->conic[1] = -cov[1] * inv;
     out->conic[2] = cov[0] * inv;
