@@ -277,4 +277,6 @@ def render(
     return get_renderer(scene, backend).render(camera, settings)
 
 
+from .glsl import GlslRenderer  # noqa: E402 - glsl.py imports Frame, Mode, RenderSettings from this module
 
+BACKENDS["glsl"] = GlslRenderer

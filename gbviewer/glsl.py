@@ -1,0 +1,445 @@
+"""GLSL compute backend: the CPU renderer's pipeline in OpenGL 4.3 compute shaders, through moderngl.
+
+Every stage runs on the GPU (shaders/*.comp; the math is shaders/*.glsl, a port of native/include/gbv/*.h with the
+same function names and constants):
+
+1. preprocess.comp: `preprocess_splat` per splat -> Splat2D, tile rectangle, survivor flag; atomics count the
+   tile-splat pairs and the depth range.
+2. scan of the flags, compact.comp: survivors in splat-index order, key = depth bits - min depth bits.
+3. radix sort (radix_count + scan + radix_scatter, 4-bit digits, stable) of the survivors by depth: order (depth,
+   index). Sorting the per-splat depth once and then the pairs by tile is the LSD radix sort of the (tile, depth)
+   keys with its low (depth) digits done before duplication, where they are the same for all of a splat's pairs.
+4. gather_counts + scan + duplicate.comp: one (tile, splat) pair per touched tile, in depth order.
+5. radix sort of the pairs by tile (stable): every tile's list is ordered by (depth, splat index), exactly as the
+   CPU driver's per-tile std::sort of (depth bits, index) keys.
+6. tile_ranges.comp, then blend.comp: one work group per 16x16 output block; supersampling blends the N x N
+   render tiles of the block and box-averages them in shared memory.
+
+The scene is uploaded once (`upload`); per frame the camera goes up as uniforms, 20 bytes of counters come back
+(visible splats, pairs and depth range: they size the pair buffers and the number of radix passes), and
+`render` reads the image back while `render_texture` leaves it in an RGBA32F texture for the app to draw. Buffers
+grow (by 1.5x) when a frame needs more and are reused otherwise; `allocations` counts (re)allocations.
+
+Contexts: by default a headless EGL context shared by every renderer of the process
+(`moderngl.create_context(standalone=True, backend="egl")`); or pass the app's `moderngl.Context`.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+import time
+import weakref
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera
+from .errors import BackendUnavailable, RenderError
+from .render import Frame, Mode, RenderSettings
+from .scene import Scene
+
+GL_REQUIRED = 430
+SHADER_DIR = Path(__file__).parent / "shaders"
+if not SHADER_DIR.is_dir():  # running from a source checkout: shaders/ is at the repository top
+    SHADER_DIR = Path(__file__).resolve().parents[1] / "shaders"
+
+WG = 256  # work-group size of the 1D kernels
+SCAN_BLOCK = 1024  # elements per scan_blocks group
+RADIX_BLOCK = 2048  # keys per radix group (256 threads x 8)
+RADIX_BITS = 4
+MAX_GROUPS = 65535
+GROWTH = 1.5
+
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.M)
+
+
+def shader_source(name: str, defines: dict[str, object] | None = None) -> str:
+    """The GLSL 4.30 source of shaders/`name` with its #include "file" lines expanded (each file once)."""
+    seen: set[str] = set()
+
+    def expand(fname: str) -> str:
+        if fname in seen:
+            return ""
+        seen.add(fname)
+        path = SHADER_DIR / fname
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise BackendUnavailable(f"glsl backend: shader {path} not found ({exc}); reinstall gbviewer") from None
+        return _INCLUDE.sub(lambda m: expand(m.group(1)), text)
+
+    head = "#version 430\n" + "".join(f"#define {k} {v}\n" for k, v in (defines or {}).items())
+    return head + expand(name)
+
+
+# ---- contexts ---------------------------------------------------------------------------------------------------
+
+_standalone: dict[str, object] = {}
+
+
+def _create_standalone():
+    import moderngl
+
+    kwargs = {"standalone": True, "require": GL_REQUIRED}
+    if sys.platform.startswith("linux"):
+        kwargs["backend"] = "egl"
+    return moderngl.create_context(**kwargs)
+
+
+def standalone_context():
+    """The process-wide headless context (created on first use); raises BackendUnavailable with the reason."""
+    if "ctx" not in _standalone and "error" not in _standalone:
+        try:
+            import moderngl  # noqa: F401
+        except ImportError as exc:
+            _standalone["error"] = f"moderngl is not installed ({exc}); pip install 'moderngl>=5.8'"
+        else:
+            try:
+                ctx = _create_standalone()
+            except Exception as exc:  # noqa: BLE001 - glcontext raises plain Exceptions with the driver's message
+                msg = str(exc).strip() or type(exc).__name__
+                _standalone["error"] = (
+                    f"no OpenGL {GL_REQUIRED // 100}.{GL_REQUIRED % 100 // 10} context: {msg} (headless Linux needs "
+                    "EGL and Mesa: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri)"
+                )
+            else:
+                _standalone["ctx"] = ctx
+    if "ctx" in _standalone:
+        return _standalone["ctx"]
+    raise BackendUnavailable(f"glsl backend unavailable: {_standalone['error']}")
+
+
+def _check_context(ctx) -> None:
+    if ctx.version_code < GL_REQUIRED:
+        raise BackendUnavailable(
+            f"glsl backend unavailable: the context is OpenGL {ctx.version_code / 100:.1f} "
+            f"({ctx.info.get('GL_RENDERER', '?')}); compute shaders need OpenGL 4.3"
+        )
+
+
+_program_cache: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+class GlslRenderer:
+    """OpenGL 4.3 compute-shader renderer; see the module docstring.
+
+    `ctx`: a moderngl.Context to render in (the app's window context), or None for the shared headless EGL context.
+    `precise_math`: use the shaders' ~1-ulp expf/logf instead of GLSL exp()/log() (whose accuracy is up to the
+    driver; the built-ins are faster on GPUs with hardware exp2/log2).
+    """
+
+    name = "glsl"
+
+    def __init__(self, ctx=None, precise_math: bool = True) -> None:
+        self.ctx = standalone_context() if ctx is None else ctx
+        _check_context(self.ctx)
+        self.precise_math = bool(precise_math)
+        self.allocations = 0  # buffer and texture (re)allocations since creation
+        self._buffers: dict[str, object] = {}
+        self._texture = None
+        self._scene: Scene | None = None
+        self._n = 0
+        self._sh_k = 1
+        self.max_block = int(self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 1 << 27)
+        self.last_stats: dict = {}
+
+    # ---- protocol ------------------------------------------------------------------------------------------------
+
+    @classmethod
+    def available(cls) -> tuple[bool, str]:
+        try:
+            _check_context(standalone_context())
+        except BackendUnavailable as exc:
+            return False, str(exc)
+        return True, ""
+
+    @classmethod
+    def describe(cls) -> str:
+        """GL renderer and version of the headless context (for benchmark reports)."""
+        try:
+            ctx = standalone_context()
+        except BackendUnavailable as exc:
+            return str(exc)
+        return f"{ctx.info.get('GL_RENDERER', '?')}; OpenGL {ctx.info.get('GL_VERSION', '?')}"
+
+    def upload(self, scene: Scene) -> None:
+        """Copy the scene to the GPU once (geometry 48 B and SH 12K B per splat); reuses buffers that are big enough."""
+        n = scene.num_splats
+        f3d = scene.filter_3d if scene.filter_3d is not None else np.zeros(n, np.float32)
+        geom = np.empty((n, 12), np.float32)
+        geom[:, 0:3] = scene.means
+        geom[:, 3] = scene.opacities
+        geom[:, 4:7] = scene.scales
+        geom[:, 7] = f3d
+        geom[:, 8:12] = scene.quats
+        sh = np.ascontiguousarray(scene.sh, np.float32)
+        self._upload("geom", geom, f"scene {scene.source}: splat geometry")
+        self._upload("sh", sh, f"scene {scene.source}: SH coefficients")
+        self._scene = scene
+        self._n = n
+        self._sh_k = int(scene.sh.shape[1])
+
+    def render(self, camera: Camera, settings: RenderSettings) -> Frame:
+        t0 = time.perf_counter()
+        want_window = settings.debug == "window" and settings.mode == Mode.GAUSSIAN_BLENDING
+        tex, stats = self._frame(camera, settings, want_window)
+        W, H = camera.width, camera.height
+        img = np.frombuffer(tex.read(), np.float32).reshape(H, W, 4)
+        evals = np.frombuffer(self._buffers["evals"].read(size=W * H * 4), np.int32).reshape(H, W).copy()
+        debug = {"evals": evals}
+        if want_window:
+            debug["window"] = np.frombuffer(self._buffers["window"].read(size=W * H * 8), np.float32).reshape(H, W, 2).copy()
+        evaluations = int(evals.sum(dtype=np.int64))
+        stats.update(
+            evaluations=evaluations,
+            evals_per_pixel=evaluations / (W * H),
+            total_ms=(time.perf_counter() - t0) * 1e3,
+        )
+        self.last_stats = stats
+        return Frame(img[:, :, :3].copy(), img[:, :, 3].copy(), stats, debug)
+
+    def render_texture(self, camera: Camera, settings: RenderSettings):
+        """Render into the renderer's RGBA32F texture (rgb, alpha) and return it without reading it back.
+
+        Row 0 of the texture is the top image row (flip v when drawing). The texture is reused by the next frame of
+        the same size. Stats (without `evaluations`) are in `last_stats`.
+        """
+        t0 = time.perf_counter()
+        tex, stats = self._frame(camera, settings, False)
+        stats["total_ms"] = (time.perf_counter() - t0) * 1e3
+        self.last_stats = stats
+        return tex
+
+    def release(self) -> None:
+        """Free the GPU buffers now (they are otherwise freed with the context)."""
+        for buf in self._buffers.values():
+            buf.release()
+        self._buffers.clear()
+        if self._texture is not None:
+            self._texture.release()
+            self._texture = None
+
+    # ---- buffers -------------------------------------------------------------------------------------------------
+
+    def _check_size(self, nbytes: int, what: str) -> None:
+        if nbytes > self.max_block:
+            raise RenderError(
+                f"glsl backend: {what} needs {nbytes / 2**20:.0f} MiB in one storage buffer, more than this GPU's "
+                f"limit of {self.max_block / 2**20:.0f} MiB (GL_MAX_SHADER_STORAGE_BLOCK_SIZE, "
+                f"{self.ctx.info.get('GL_RENDERER', '?')}); render a smaller scene or image, or use backend='cpu'"
+            )
+
+    def _allocated(self, obj, what: str, nbytes: int):
+        err = self.ctx.error
+        if err == "GL_OUT_OF_MEMORY":
+            obj.release()
+            raise RenderError(f"glsl backend: out of GPU memory allocating {nbytes / 2**20:.0f} MiB for {what}")
+        self.allocations += 1
+        return obj
+
+    def _ensure(self, name: str, nbytes: int, what: str = ""):
+        """Buffer `name` with at least `nbytes` (grown by GROWTH, never shrunk)."""
+        nbytes = max(int(nbytes), 16)
+        buf = self._buffers.get(name)
+        if buf is not None and buf.size >= nbytes:
+            return buf
+        what = what or name
+        self._check_size(nbytes, what)
+        size = nbytes if buf is None else min(max(nbytes, int(buf.size * GROWTH)), self.max_block)
+        size = (size + 255) // 256 * 256
+        if buf is not None:
+            buf.release()
+            del self._buffers[name]
+        self.ctx.error  # noqa: B018 - clear a stale error flag before checking ours
+        buf = self._allocated(self.ctx.buffer(reserve=size), what, size)
+        self._buffers[name] = buf
+        return buf
+
+    def _upload(self, name: str, data: np.ndarray, what: str) -> None:
+        buf = self._ensure(name, data.nbytes, what)
+        buf.write(data.tobytes())
+
+    def _ensure_texture(self, W: int, H: int):
+        tex = self._texture
+        if tex is not None and tex.size == (W, H):
+            return tex
+        if tex is not None:
+            tex.release()
+        self.ctx.error  # noqa: B018
+        tex = self._allocated(self.ctx.texture((W, H), 4, dtype="f4"), "the output image", W * H * 16)
+        import moderngl
+
+        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self._texture = tex
+        return tex
+
+    # ---- programs ------------------------------------------------------------------------------------------------
+
+    def _program(self, name: str, **defines):
+        defines.setdefault("GBV_PRECISE_MATH", int(self.precise_math))
+        key = (name, tuple(sorted(defines.items())))
+        cache = _program_cache.setdefault(self.ctx, {})
+        prog = cache.get(key)
+        if prog is None:
+            src = shader_source(name, defines)
+            try:
+                prog = self.ctx.compute_shader(src)
+            except Exception as exc:  # noqa: BLE001 - moderngl raises its Error with the compiler log
+                raise BackendUnavailable(f"glsl backend: {name} does not compile on "
+                                         f"{self.ctx.info.get('GL_RENDERER', '?')}: {exc}") from None
+            cache[key] = prog
+        return prog
+
+    @staticmethod
+    def _set(prog, **uniforms) -> None:
+        for k, v in uniforms.items():
+            u = prog.get(k, None)
+            if u is None:
+                continue  # optimised out
+            if isinstance(v, np.ndarray):
+                u.write(v.tobytes())
+            else:
+                u.value = v
+
+    def _dispatch(self, prog, groups: int, *bindings) -> None:
+        for i, buf in enumerate(bindings):
+            buf.bind_to_storage_buffer(i)
+        if groups <= 0:
+            return
+        gx = min(groups, MAX_GROUPS)
+        prog.run(gx, -(-groups // gx), 1)
+        self.ctx.memory_barrier()
+
+    # ---- pipeline ------------------------------------------------------------------------------------------------
+
+    def _scan(self, buf, n: int, total_slot: int = -1, level: int = 0) -> None:
+        """Exclusive prefix sum of uint buf[0..n) in place; the total goes to totals[total_slot] when >= 0."""
+        if n <= 0:
+            return
+        blocks = -(-n // SCAN_BLOCK)
+        sums = self._ensure(f"scan_sums{level}", blocks * 4)
+        prog = self._program("scan_blocks.comp")
+        self._set(prog, n=n, num_blocks=blocks, total_slot=total_slot)
+        self._dispatch(prog, blocks, buf, sums, self._buffers["totals"])
+        if blocks > 1:
+            self._scan(sums, blocks, total_slot, level + 1)
+            add = self._program("scan_add.comp")
+            self._set(add, n=n, num_blocks=blocks)
+            self._dispatch(add, blocks, buf, sums)
+
+    def _radix_sort(self, keys, vals, keys_tmp, vals_tmp, n: int, bits: int):
+        """Stable LSD sort of (keys, vals)[0..n) by the low `bits` of the keys; returns the buffers holding it."""
+        passes = -(-bits // RADIX_BITS)
+        if n <= 1 or passes == 0:
+            return keys, vals
+        blocks = -(-n // RADIX_BLOCK)
+        counts = self._ensure("radix_counts", 16 * blocks * 4)
+        count, scatter = self._program("radix_count.comp"), self._program("radix_scatter.comp")
+        for p in range(passes):
+            shift = p * RADIX_BITS
+            self._set(count, n=n, shift=shift, num_blocks=blocks)
+            self._dispatch(count, blocks, keys, counts)
+            self._scan(counts, 16 * blocks)
+            self._set(scatter, n=n, shift=shift, num_blocks=blocks)
+            self._dispatch(scatter, blocks, keys, vals, keys_tmp, vals_tmp, counts)
+            keys, vals, keys_tmp, vals_tmp = keys_tmp, vals_tmp, keys, vals
+        return keys, vals
+
+    def _fill(self, buf, n: int, value: int) -> None:
+        prog = self._program("fill.comp")
+        self._set(prog, n=n, value=value)
+        self._dispatch(prog, -(-n // WG), buf)
+
+    def _frame(self, camera: Camera, settings: RenderSettings, want_window: bool):
+        scene = self._scene
+        if scene is None:
+            raise RenderError("glsl renderer: upload(scene) before render()")
+        ctx = self.ctx
+        n, N = self._n, settings.supersample
+        W, H = camera.width, camera.height
+        RW, RH = W * N, H * N
+        gx, gy = -(-RW // 16), -(-RH // 16)
+        num_tiles = gx * gy
+        max_deg = {1: 0, 4: 1, 9: 2, 16: 3}[self._sh_k]
+        sh_deg = max(0, min(settings.sh_degree, max_deg))
+        f32 = np.float32
+        Nf = f32(N)
+
+        t0 = time.perf_counter()
+        # per-scene buffers (sized by the splat count; allocated on the first frame, grown with the scene)
+        splats = self._ensure("splats", n * 64, "preprocessed splats")
+        rects = self._ensure("rects", n * 16, "tile rectangles")
+        flags = self._ensure("flags", n * 4, "survivor flags")
+        dkeys = [self._ensure(f"depth_keys{i}", n * 4, "depth keys") for i in (0, 1)]
+        dvals = [self._ensure(f"depth_vals{i}", n * 4, "depth order") for i in (0, 1)]
+        counts = self._ensure("pair_counts", n * 4, "pair counts")
+        totals = self._ensure("totals", 64)
+        totals.write(np.array([0, 0, 0xFFFFFFFF, 0, 0, 0, 0, 0], np.uint32).tobytes())
+
+        prog = self._program("preprocess.comp")
+        self._set(
+            prog, num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(settings.mode), grid=(gx, gy),
+            cam_R=np.ascontiguousarray(camera.R, f32).reshape(9), cam_t=np.ascontiguousarray(camera.t, f32),
+            cam_f=(float(f32(camera.fx) * Nf), float(f32(camera.fy) * Nf), float(f32(camera.cx) * Nf),
+                   float(f32(camera.cy) * Nf)),
+            cam_size=(RW, RH), cam_near=float(f32(camera.near)),
+        )
+        self._dispatch(prog, -(-n // WG), self._buffers["geom"], self._buffers["sh"], splats, rects, flags, totals)
+        self._scan(flags, n, total_slot=0)
+        prog = self._program("compact.comp")
+        self._set(prog, num_splats=n)
+        self._dispatch(prog, -(-n // WG), splats, rects, flags, totals, dkeys[0], dvals[0])
+        visible, pairs, dmin, dmax, overflow = (int(v) for v in np.frombuffer(totals.read(size=20), np.uint32))
+        t1 = time.perf_counter()
+
+        if overflow:
+            raise RenderError(f"glsl backend: more than 2^32 tile-splat pairs at {RW}x{RH}; render a smaller image")
+        keys0, vals0 = self._ensure("tile_keys0", pairs * 4, "tile-splat pairs"), self._ensure(
+            "tile_vals0", pairs * 4, "tile-splat pairs")
+        keys1, vals1 = self._ensure("tile_keys1", pairs * 4, "tile-splat pairs"), self._ensure(
+            "tile_vals1", pairs * 4, "tile-splat pairs")
+        ranges = self._ensure("ranges", num_tiles * 8, "tile ranges")
+        self._fill(ranges, num_tiles * 2, 0)
+        if visible > 0:
+            _, order = self._radix_sort(dkeys[0], dvals[0], dkeys[1], dvals[1], visible, (dmax - dmin).bit_length())
+            prog = self._program("gather_counts.comp")
+            self._set(prog, n=visible)
+            self._dispatch(prog, -(-visible // WG), order, rects, counts)
+            self._scan(counts, visible)
+            prog = self._program("duplicate.comp")
+            self._set(prog, n=visible, grid_x=gx, capacity=keys0.size // 4)
+            self._dispatch(prog, -(-visible // WG), order, rects, counts, keys0, vals0)
+            tkeys, tvals = self._radix_sort(keys0, vals0, keys1, vals1, pairs, (num_tiles - 1).bit_length())
+            prog = self._program("tile_ranges.comp")
+            self._set(prog, n=pairs)
+            self._dispatch(prog, -(-pairs // WG), tkeys, ranges)
+        else:
+            tvals = vals0
+        ctx.finish()
+        t2 = time.perf_counter()
+
+        tex = self._ensure_texture(W, H)
+        evals = self._ensure("evals", W * H * 4, "evaluation counts")
+        window = self._ensure("window", W * H * 8 if want_window else 16, "window sizes")
+        prog = self._program("blend.comp", **{f"BLEND_MODE_{settings.mode.name}": 1, "SUPERSAMPLED": int(N > 1)})
+        self._set(prog, out_size=(W, H), supersample=N, grid=(gx, gy), background=tuple(settings.background),
+                  want_window=int(want_window))
+        for i, buf in enumerate((splats, tvals, ranges, evals, window)):
+            buf.bind_to_storage_buffer(i)
+        tex.bind_to_image(0, read=False, write=True)
+        prog.run(-(-W // 16), -(-H // 16), 1)
+        ctx.memory_barrier()
+        ctx.finish()
+        t3 = time.perf_counter()
+
+        stats = {
+            "preprocess_ms": (t1 - t0) * 1e3,
+            "sort_ms": (t2 - t1) * 1e3,
+            "blend_ms": (t3 - t2) * 1e3,
+            "visible": visible,
+            "sort_length": pairs,
+            "backend": self.name,
+            "mode": settings.label,
+        }
+        return tex, stats

@@ -1,0 +1,37 @@
+#include "common.glsl"
+
+// Helpers shared by the compute kernels (*.comp): flat work-group index of a 2D dispatch, and the storage layout
+// of Splat2D in the per-frame splat buffer (4 vec4 per splat, indexed like the scene).
+
+// The driver spreads large 1D dispatches over x and y (at most 65535 groups per axis); kernels that see an index
+// past their work return before any barrier, for the whole group at once.
+uint group_index() { return gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x; }
+
+// vec4 0: xy, depth, opacity; 1: conic, sigma1; 2: color, sigma2; 3: v1, log_min_alpha, unused.
+void pack_splat(Splat2D s, out vec4 p0, out vec4 p1, out vec4 p2, out vec4 p3) {
+    p0 = vec4(s.xy, s.depth, s.opacity);
+    p1 = vec4(s.conic, s.sigma1);
+    p2 = vec4(s.color, s.sigma2);
+    p3 = vec4(s.v1, s.log_min_alpha, 0.0);
+}
+
+Splat2D unpack_splat(vec4 p0, vec4 p1, vec4 p2, vec4 p3) {
+    Splat2D s;
+    s.xy = p0.xy;
+    s.depth = p0.z;
+    s.opacity = p0.w;
+    s.conic = p1.xyz;
+    s.sigma1 = p1.w;
+    s.color = p2.xyz;
+    s.sigma2 = p2.w;
+    s.v1 = p3.xy;
+    s.log_min_alpha = p3.z;
+    return s;
+}
+
+// Slots of the small per-frame counter buffer (read back once per frame).
+const int TOTAL_VISIBLE = 0;    // splats that survive preprocess (written by the scan of their flags)
+const int TOTAL_PAIRS = 1;      // tile-splat pairs (sum of the tile rectangles' areas)
+const int TOTAL_DEPTH_MIN = 2;  // min / max bits of the visible depths (positive floats order as uints)
+const int TOTAL_DEPTH_MAX = 3;
+const int TOTAL_OVERFLOW = 4;   // set when TOTAL_PAIRS wrapped past 2^32

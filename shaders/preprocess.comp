@@ -1,0 +1,60 @@
+// Preprocess every splat (preprocess_splat), store its Splat2D and tile rectangle, flag survivors, count tile-splat
+// pairs and the depth range.
+#include "common.glsl"
+#include "mathf.glsl"
+#include "camera.glsl"
+#include "preprocess.glsl"
+#include "kernel.glsl"
+
+layout(local_size_x = 256) in;
+layout(std430, binding = 0) readonly buffer Geom { vec4 geom[]; };  // per splat: mean+opacity, scale+filter, quat
+layout(std430, binding = 1) readonly buffer Sh { float sh_data[]; };  // per splat: K x 3 floats
+layout(std430, binding = 2) writeonly buffer Splats { vec4 splats[]; };
+layout(std430, binding = 3) writeonly buffer Rects { ivec4 rects[]; };
+layout(std430, binding = 4) writeonly buffer Flags { uint flags[]; };
+layout(std430, binding = 5) buffer Totals { uint totals[]; };
+
+uniform uint num_splats;
+uniform int sh_k;    // SH coefficients per channel stored in the scene
+uniform int sh_deg;  // degree evaluated
+uniform int mode;
+uniform ivec2 grid;
+uniform float cam_R[9];
+uniform float cam_t[3];
+uniform vec4 cam_f;  // fx, fy, cx, cy
+uniform ivec2 cam_size;
+uniform float cam_near;
+
+float load_sh(uint splat, int coeff, int channel) {
+    return sh_data[splat * uint(3 * sh_k) + uint(coeff * 3 + channel)];
+}
+
+void main() {
+    const uint i = group_index() * 256u + gl_LocalInvocationID.x;
+    if (i >= num_splats) return;
+    const CameraParams cam = make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y,
+                                         cam_near);
+    const vec4 g0 = geom[3u * i], g1 = geom[3u * i + 1u], g2 = geom[3u * i + 2u];
+    const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, g0.w, i, g1.w);
+    Splat2D s;
+    TileRect r;
+    const bool valid = preprocess_splat(in_, sh_deg, cam, mode, grid.x, grid.y, s, r);
+    flags[i] = valid ? 1u : 0u;
+    if (!valid) {
+        rects[i] = ivec4(0);
+        return;
+    }
+    rects[i] = ivec4(r.x0, r.y0, r.x1, r.y1);
+    vec4 p0, p1, p2, p3;
+    pack_splat(s, p0, p1, p2, p3);
+    splats[4u * i] = p0;
+    splats[4u * i + 1u] = p1;
+    splats[4u * i + 2u] = p2;
+    splats[4u * i + 3u] = p3;
+    const uint area = uint((r.x1 - r.x0) * (r.y1 - r.y0));
+    const uint before = atomicAdd(totals[TOTAL_PAIRS], area);
+    if (before + area < before) atomicOr(totals[TOTAL_OVERFLOW], 1u);
+    const uint bits = floatBitsToUint(s.depth);  // depth > near > 0
+    atomicMin(totals[TOTAL_DEPTH_MIN], bits);
+    atomicMax(totals[TOTAL_DEPTH_MAX], bits);
+}

@@ -1,0 +1,221 @@
+// GLSL port of native/include/gbv/preprocess.h, function by function with the same names and constants.
+// Per-splat preprocess: cull, covariance, EWA projection, per-mode 2D filter, eigen-decomposition, colour from
+// SH, tile rectangle (KERNELS.md §0, §2, §4, §6.2). Needs common.glsl, mathf.glsl and, from the including kernel,
+// `float load_sh(uint splat, int coeff, int channel)` (the scene's SH, coefficient-major, DC first).
+
+const float SH_C0 = 0.28209479177387814;
+const float SH_C1 = 0.4886025119029199;
+// Scalars rather than arrays, as in preprocess.h (where nvcc needs them).
+const float SH_C2_0 = 1.0925484305920792, SH_C2_1 = -1.0925484305920792, SH_C2_2 = 0.31539156525252005,
+            SH_C2_3 = -1.0925484305920792, SH_C2_4 = 0.5462742152960396;
+const float SH_C3_0 = -0.5900435899266435, SH_C3_1 = 2.890611442640554, SH_C3_2 = -0.4570457994644658,
+            SH_C3_3 = 0.3731763325901154, SH_C3_4 = -0.4570457994644658, SH_C3_5 = 1.445305721320277,
+            SH_C3_6 = -0.5900435899266435;
+
+float load_sh(uint splat, int coeff, int channel);
+
+// View-dependent colour from SH coefficients (DC first), as computeColorFromSH: +0.5 offset, clamped at 0 from
+// below only. `splat` selects the coefficients (C++: a pointer to them).
+void sh_to_rgb(uint splat, int deg, vec3 dir, out vec3 result) {
+    const float x = dir.x, y = dir.y, z = dir.z;
+    float basis[16];
+    basis[0] = SH_C0;
+    int k = 1;
+    if (deg > 0) {
+        basis[1] = -SH_C1 * y;
+        basis[2] = SH_C1 * z;
+        basis[3] = -SH_C1 * x;
+        k = 4;
+        if (deg > 1) {
+            const float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
+            basis[4] = SH_C2_0 * xy;
+            basis[5] = SH_C2_1 * yz;
+            basis[6] = SH_C2_2 * (2.0 * zz - xx - yy);
+            basis[7] = SH_C2_3 * xz;
+            basis[8] = SH_C2_4 * (xx - yy);
+            k = 9;
+            if (deg > 2) {
+                basis[9] = SH_C3_0 * y * (3.0 * xx - yy);
+                basis[10] = SH_C3_1 * xy * z;
+                basis[11] = SH_C3_2 * y * (4.0 * zz - xx - yy);
+                basis[12] = SH_C3_3 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
+                basis[13] = SH_C3_4 * x * (4.0 * zz - xx - yy);
+                basis[14] = SH_C3_5 * z * (xx - yy);
+                basis[15] = SH_C3_6 * x * (xx - 3.0 * yy);
+                k = 16;
+            }
+        }
+    }
+    for (int c = 0; c < 3; ++c) {
+        float v = 0.5;
+        for (int i = 0; i < k; ++i) v += basis[i] * load_sh(splat, i, c);
+        result[c] = max(v, 0.0);
+    }
+}
+
+// 3D covariance Sigma = R S S^T R^T (upper triangle: xx, xy, xz, yy, yz, zz) from a unit (w,x,y,z) quaternion and
+// per-axis scales (eq. 1).
+void covariance_3d(vec4 q, vec3 s, out float cov[6]) {
+    const float r = q[0], x = q[1], y = q[2], z = q[3];
+    const float R[9] = float[](1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - r * z), 2.0 * (x * z + r * y),
+                               2.0 * (x * y + r * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - r * x),
+                               2.0 * (x * z - r * y), 2.0 * (y * z + r * x), 1.0 - 2.0 * (x * x + y * y));
+    float M[9];  // M = R S
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) M[i * 3 + j] = R[i * 3 + j] * s[j];
+    cov[0] = M[0] * M[0] + M[1] * M[1] + M[2] * M[2];
+    cov[1] = M[0] * M[3] + M[1] * M[4] + M[2] * M[5];
+    cov[2] = M[0] * M[6] + M[1] * M[7] + M[2] * M[8];
+    cov[3] = M[3] * M[3] + M[4] * M[4] + M[5] * M[5];
+    cov[4] = M[3] * M[6] + M[4] * M[7] + M[5] * M[8];
+    cov[5] = M[6] * M[6] + M[7] * M[7] + M[8] * M[8];
+}
+
+// EWA projection of a 3D covariance to screen space (eq. 3): J W Sigma W^T J^T, with the view-space point
+// clamped to 1.3x the frustum for the Jacobian only (computeCov2D). Returns (a, b, c).
+void project_covariance(CameraParams cam, float cov3[6], vec3 pv, out vec3 result) {
+    const float tz = pv[2];
+    const float tx = clampf(pv[0] / tz, -cam.lim_x_neg, cam.lim_x_pos) * tz;
+    const float ty = clampf(pv[1] / tz, -cam.lim_y_neg, cam.lim_y_pos) * tz;
+    const float j00 = cam.fx / tz, j02 = -cam.fx * tx / (tz * tz);
+    const float j11 = cam.fy / tz, j12 = -cam.fy * ty / (tz * tz);
+    // T = J W (2x3), W = cam.R
+    float T[6];
+    for (int c = 0; c < 3; ++c) {
+        T[c] = j00 * cam.R[c] + j02 * cam.R[6 + c];
+        T[3 + c] = j11 * cam.R[3 + c] + j12 * cam.R[6 + c];
+    }
+    const float S[9] = float[](cov3[0], cov3[1], cov3[2], cov3[1], cov3[3], cov3[4], cov3[2], cov3[4], cov3[5]);
+    float TS[6];
+    for (int r = 0; r < 2; ++r)
+        for (int c = 0; c < 3; ++c)
+            TS[r * 3 + c] = T[r * 3] * S[c] + T[r * 3 + 1] * S[3 + c] + T[r * 3 + 2] * S[6 + c];
+    result[0] = TS[0] * T[0] + TS[1] * T[1] + TS[2] * T[2];
+    result[1] = TS[0] * T[3] + TS[1] * T[4] + TS[2] * T[5];
+    result[2] = TS[3] * T[3] + TS[4] * T[4] + TS[5] * T[5];
+}
+
+// Eigen-decomposition of a 2x2 covariance (a, b, c): sigma = sqrt(eigenvalues) and the unit major eigenvector.
+// lambda2 = det / lambda1 equals mid - sqrt(mid^2 - det) exactly and avoids cancellation; the eigenvector is
+// taken from whichever of its two formulas is better conditioned, so isotropic splats get a valid axis.
+void eigen_2d(float a, float b, float c, float det, out float sigma1, out float sigma2, out vec2 v1) {
+    const float mid = 0.5 * (a + c);
+    const float root = sqrt(max(0.0, mid * mid - det));
+    const float l1 = mid + root;
+    const float l2 = det / l1;
+    sigma1 = sqrt(l1);
+    sigma2 = sqrt(l2);
+    const vec2 e1 = vec2(b, l1 - a), e2 = vec2(l1 - c, b);
+    const float n1 = dot(e1, e1), n2 = dot(e2, e2);
+    const vec2 e = n1 >= n2 ? e1 : e2;
+    const float n = max(n1, n2);
+    v1 = n > 1e-30 ? (1.0 / sqrt(n)) * e : vec2(1.0, 0.0);
+}
+
+// Screen-space bounding radius in pixels: ceil(k * sqrt(max eigenvalue)) with the published max(0.1, mid^2 - det)
+// floor.
+float splat_radius(float a, float c, float det, float sigmas) {
+    const float mid = 0.5 * (a + c);
+    const float lmax = mid + sqrt(max(0.1, mid * mid - det));
+    return ceil(sigmas * sqrt(lmax));
+}
+
+// Tiles touched by a splat at xy with radius r (getRect), in the published integer-centre pixel convention (our
+// xy minus 0.5). Empty when x1 <= x0 or y1 <= y0.
+TileRect tile_rect(vec2 xy, float r, int grid_x, int grid_y) {
+    const float px = xy.x - 0.5, py = xy.y - 0.5;
+    const float gx = float(grid_x), gy = float(grid_y);
+    TileRect t;
+    t.x0 = int(clampf((px - r) / float(TILE), 0.0, gx));
+    t.y0 = int(clampf((py - r) / float(TILE), 0.0, gy));
+    t.x1 = int(clampf((px + r + float(TILE - 1)) / float(TILE), 0.0, gx));
+    t.y1 = int(clampf((py + r + float(TILE - 1)) / float(TILE), 0.0, gy));
+    return t;
+}
+
+// Inputs of one splat (activated parameters, see gbviewer.Scene); `index` locates its SH coefficients.
+struct SplatIn {
+    vec3 mean;
+    vec3 scale;
+    vec4 quat;  // (w, x, y, z), unit
+    float opacity;
+    uint index;
+    float filter_3d;  // 0 when the scene has none
+};
+
+// Preprocess one splat for `mode`; returns false when it is culled (behind the near plane, degenerate, invisible,
+// or touching no tile).
+bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, int grid_x, int grid_y,
+                      out Splat2D result, out TileRect rect) {
+    rect = TileRect(0, 0, 0, 0);
+    const vec3 m = in_.mean;
+    vec3 pv;
+    for (int i = 0; i < 3; ++i)
+        pv[i] = cam.R[i * 3] * m[0] + cam.R[i * 3 + 1] * m[1] + cam.R[i * 3 + 2] * m[2] + cam.t[i];
+    if (!(pv[2] > cam.near_plane)) return false;
+
+    // Mip-Splatting 3D filter (applied in every mode when present): scales grow, opacity compensates.
+    vec3 s;
+    float opacity = in_.opacity;
+    if (in_.filter_3d > 0.0) {
+        const float f2 = in_.filter_3d * in_.filter_3d;
+        float ratio = 1.0;
+        for (int i = 0; i < 3; ++i) {
+            const float s2 = in_.scale[i] * in_.scale[i];
+            s[i] = sqrt(s2 + f2);
+            ratio *= s2 / (s2 + f2);
+        }
+        opacity *= sqrt(ratio);
+    } else {
+        s = in_.scale;
+    }
+
+    float cov3[6];
+    vec3 cov;
+    covariance_3d(in_.quat, s, cov3);
+    project_covariance(cam, cov3, pv, cov);
+
+    float sigmas = RADIUS_SIGMAS_3DGS;
+    float min_alpha = MIN_ALPHA_3DGS;
+    if (mode == SCALAR) {
+        cov[0] += DILATION_3DGS;
+        cov[2] += DILATION_3DGS;
+    } else if (mode == MIP) {
+        const float det0 = max(1e-6, cov[0] * cov[2] - cov[1] * cov[1]);
+        cov[0] += MIP_KERNEL_SIZE;
+        cov[2] += MIP_KERNEL_SIZE;
+        const float det1 = max(1e-6, cov[0] * cov[2] - cov[1] * cov[1]);
+        const float coef = (det0 <= 1e-6 || det1 <= 1e-6) ? 0.0 : sqrt(det0 / (det1 + 1e-6) + 1e-6);
+        opacity *= coef;
+    } else if (mode == GAUSSIAN_BLENDING) {
+        sigmas = RADIUS_SIGMAS_GB;
+        min_alpha = MIN_ALPHA_GB;
+    }
+    if (!(opacity >= min_alpha)) return false;  // alpha = opacity * g <= opacity would be skipped anyway
+
+    const float det = cov[0] * cov[2] - cov[1] * cov[1];
+    if (!(det > 0.0) || !finitef(det)) return false;
+    const float inv = 1.0 / det;
+
+    const float px = cam.fx * pv[0] / pv[2] + cam.cx;
+    const float py = cam.fy * pv[1] / pv[2] + cam.cy;
+    const float r = splat_radius(cov[0], cov[2], det, sigmas);
+    if (!finitef(px) || !finitef(py) || !finitef(r)) return false;
+    rect = tile_rect(vec2(px, py), r, grid_x, grid_y);
+    if (rect.x1 <= rect.x0 || rect.y1 <= rect.y0) return false;
+
+    result.xy = vec2(px, py);
+    result.depth = pv[2];
+    result.opacity = opacity;
+    result.log_min_alpha = logf(min_alpha / opacity);
+    result.conic[0] = cov[2] * inv;
+    result.conic[1] = -cov[1] * inv;
+    result.conic[2] = cov[0] * inv;
+    eigen_2d(cov[0], cov[1], cov[2], det, result.sigma1, result.sigma2, result.v1);
+
+    vec3 dir = vec3(m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]);
+    const float dn = sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
+    dir = dn > 0.0 ? vec3(dir.x / dn, dir.y / dn, dir.z / dn) : vec3(0.0, 0.0, 1.0);
+    sh_to_rgb(in_.index, sh_deg, dir, result.color);
+    return true;
+}
