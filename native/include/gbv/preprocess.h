@@ -214,6 +214,8 @@ GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& 
     out->conic[1] = -cov[1] * inv;
     out->conic[2] = cov[0] * inv;
     eigen_2d(cov[0], cov[1], cov[2], det, &out->sigma1, &out->sigma2, &out->v1);
+    out->inv_sigma1 = 1.0f / out->sigma1;
+    out->inv_sigma2 = 1.0f / out->sigma2;
 
     Vec3 dir = {m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]};
     const float dn = sqrtf(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
