@@ -148,8 +148,19 @@ class GlslRenderer:
 
     @classmethod
     def available(cls) -> tuple[bool, str]:
+        """Whether the headless context (created here on first use, current in this thread) has OpenGL 4.3."""
         try:
             _check_context(standalone_context())
+        except BackendUnavailable as exc:
+            return False, str(exc)
+        return True, ""
+
+    @classmethod
+    def check_context(cls, ctx) -> tuple[bool, str]:
+        """(usable, reason) for an app's own context. Unlike available(), this creates no headless context (which
+        would become current in the calling thread)."""
+        try:
+            _check_context(ctx)
         except BackendUnavailable as exc:
             return False, str(exc)
         return True, ""
@@ -211,8 +222,14 @@ class GlslRenderer:
         self.last_stats = stats
         return tex
 
+    def __del__(self) -> None:
+        try:
+            self.release()
+        except Exception:  # noqa: BLE001 - context already gone (interpreter exit)
+            pass
+
     def release(self) -> None:
-        """Free the GPU buffers now (they are otherwise freed with the context)."""
+        """Free the GPU buffers and the output texture (also done when the renderer is garbage-collected)."""
         for buf in self._buffers.values():
             buf.release()
         self._buffers.clear()
@@ -321,7 +338,7 @@ class GlslRenderer:
         sums = self._ensure(f"scan_sums{level}", blocks * 4)
         prog = self._program("scan_blocks.comp")
         self._set(prog, n=n, num_blocks=blocks, total_slot=total_slot)
-        self._dispatch(prog, blocks, buf, sums, self._buffers["totals"])
+        self._dispatch(prog, blocks, buf, sums, self._ensure("totals", 64))
         if blocks > 1:
             self._scan(sums, blocks, total_slot, level + 1)
             add = self._program("scan_add.comp")

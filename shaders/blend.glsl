@@ -80,16 +80,15 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
     const bool aligned = abs(s.v1.x) > abs(s.v1.y);
     const float lu = aligned ? win.wh.x : win.wh.y;
     const float lv = aligned ? win.wh.y : win.wh.x;
-    const float ru = RADIUS_SIGMAS_GB * s.sigma1, rv = RADIUS_SIGMAS_GB * s.sigma2;
-    if (u - 0.5 * lu > ru || u + 0.5 * lu < -ru || v - 0.5 * lv > rv || v + 0.5 * lv < -rv) return false;
-
-    // The mean alpha over the window is at most the splat's largest value on it: skip before any erf when
-    // even that is below 1/256 (log_min_alpha = ln(MIN_ALPHA_GB / opacity)).
-    const float gu = max(abs(u) - 0.5 * lu, 0.0) / s.sigma1, gv = max(abs(v) - 0.5 * lv, 0.0) / s.sigma2;
+    // The mean alpha over the window is at most the splat's largest value on it: skip before any erf when even
+    // that is below 1/256 (log_min_alpha = ln(MIN_ALPHA_GB / opacity)). This also rejects every window lying
+    // outside the published +-3.33 sigma box, whose edge value is exactly 1/256.
+    const float gu = max(abs(u) - 0.5 * lu, 0.0) * s.inv_sigma1;
+    const float gv = max(abs(v) - 0.5 * lv, 0.0) * s.inv_sigma2;
     if (-0.5 * (gu * gu + gv * gv) < s.log_min_alpha) return false;
 
-    const float U1 = (u - 0.5 * lu) / s.sigma1, U2 = (u + 0.5 * lu) / s.sigma1;
-    const float V1 = (v - 0.5 * lv) / s.sigma2, V2 = (v + 0.5 * lv) / s.sigma2;
+    const float U1 = (u - 0.5 * lu) * s.inv_sigma1, U2 = (u + 0.5 * lu) * s.inv_sigma1;
+    const float V1 = (v - 0.5 * lv) * s.inv_sigma2, V2 = (v + 0.5 * lv) * s.inv_sigma2;
     const float du = U2 - U1, dv = V2 - V1;
     if (!(du >= GB_MIN_UV_DIFF && dv >= GB_MIN_UV_DIFF && du <= GB_MAX_UV_DIFF && dv <= GB_MAX_UV_DIFF)) {
         // Stability fallback (Appendix B.1): scalar alpha at the window centre, window unchanged.

@@ -48,6 +48,7 @@ struct Splat2D {
     vec3 color;
     vec2 v1;         // unit major eigenvector (v2 = perp(v1))
     float sigma1, sigma2;  // sqrt of the eigenvalues of the 2D covariance
+    float inv_sigma1, inv_sigma2;
     float log_min_alpha;   // ln(min_alpha / opacity): lowest log-Gaussian value that can give a visible alpha
 };
 

@@ -7,7 +7,8 @@
 // past their work return before any barrier, for the whole group at once.
 uint group_index() { return gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x; }
 
-// vec4 0: xy, depth, opacity; 1: conic, sigma1; 2: color, sigma2; 3: v1, log_min_alpha, unused.
+// vec4 0: xy, depth, opacity; 1: conic, sigma1; 2: color, sigma2; 3: v1, log_min_alpha, unused. inv_sigma1/2 are
+// not stored (64 bytes per splat instead of 80): unpacking recomputes them with the same division as preprocess.
 void pack_splat(Splat2D s, out vec4 p0, out vec4 p1, out vec4 p2, out vec4 p3) {
     p0 = vec4(s.xy, s.depth, s.opacity);
     p1 = vec4(s.conic, s.sigma1);
@@ -24,6 +25,8 @@ Splat2D unpack_splat(vec4 p0, vec4 p1, vec4 p2, vec4 p3) {
     s.sigma1 = p1.w;
     s.color = p2.xyz;
     s.sigma2 = p2.w;
+    s.inv_sigma1 = 1.0 / s.sigma1;
+    s.inv_sigma2 = 1.0 / s.sigma2;
     s.v1 = p3.xy;
     s.log_min_alpha = p3.z;
     return s;

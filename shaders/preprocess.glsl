@@ -212,6 +212,8 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, int g
     result.conic[1] = -cov[1] * inv;
     result.conic[2] = cov[0] * inv;
     eigen_2d(cov[0], cov[1], cov[2], det, result.sigma1, result.sigma2, result.v1);
+    result.inv_sigma1 = 1.0 / result.sigma1;
+    result.inv_sigma2 = 1.0 / result.sigma2;
 
     vec3 dir = vec3(m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]);
     const float dn = sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
