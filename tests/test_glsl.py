@@ -242,6 +242,17 @@ def test_exclusive_scan(gl, n):
     r.release()
 
 
+def test_dispatch_over_two_axes(gl, monkeypatch):
+    """More than 65535 groups go over x and y (scenes of > 16.7M splats); force that path with a limit of 3."""
+    monkeypatch.setattr(glsl, "MAX_GROUPS", 3)
+    scene = awkward_scene(6, n=4000)
+    r = GlslRenderer()
+    r.upload(scene)
+    for spec in ("scalar", "gaussian_blending:2"):
+        compare(scene, front_camera(64, 48), spec, renderer=r)
+    r.release()
+
+
 # ---- GLSL vs CPU --------------------------------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
