@@ -95,7 +95,9 @@ class Scene:
 
         finite = np.ones(n, dtype=bool)
         for arr in arrays.values():
-            if not np.isfinite(arr).all():  # the per-splat reduction is slow: only when needed
+            # A finite sum proves every element finite (NaN and inf propagate); the per-splat reduction is only
+            # needed when it is not (or when a float32 sum of finite values overflowed).
+            if not np.isfinite(arr.sum()):
                 finite &= np.isfinite(arr.reshape(n, -1)).all(axis=1)
         dropped = int(n - finite.sum())
         if dropped:
@@ -106,13 +108,14 @@ class Scene:
 
         if (arrays["scales"] < 0).any():
             raise GBViewerError(f"{source}: field 'scales': negative values; expected activated scales >= 0")
-        q = arrays["quats"]
-        norm = np.linalg.norm(q, axis=1, keepdims=True)
-        degenerate = norm[:, 0] < 1e-12
-        unit = np.abs(norm - 1) <= 4 * np.finfo(np.float32).eps  # already unit: kept, so loading is idempotent
-        q = np.where(unit, q, q / np.maximum(norm, 1e-12))
-        q = np.where(degenerate[:, None], np.array([1, 0, 0, 0], np.float32), q)
-        arrays["quats"] = q.astype(np.float32)
+        q = np.array(arrays["quats"], dtype=np.float32)  # a contiguous copy, normalised in place
+        norm = np.sqrt(np.einsum("ij,ij->i", q, q))
+        fix = np.abs(norm - 1) > 4 * np.finfo(np.float32).eps  # already unit: kept, so loading is idempotent
+        if fix.any():
+            degenerate = norm < 1e-12
+            q[fix] /= np.maximum(norm[fix], 1e-12)[:, None]
+            q[degenerate] = (1.0, 0.0, 0.0, 0.0)
+        arrays["quats"] = q
         arrays["opacities"] = np.clip(arrays["opacities"], 0.0, 1.0)
         if "filter_3d" in arrays:
             arrays["filter_3d"] = np.abs(arrays["filter_3d"])
