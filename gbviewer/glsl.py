@@ -9,11 +9,17 @@ same function names and constants):
 3. radix sort (radix_count + scan + radix_scatter, 4-bit digits, stable) of the survivors by depth: order (depth,
    index). Sorting the per-splat depth once and then the pairs by tile is the LSD radix sort of the (tile, depth)
    keys with its low (depth) digits done before duplication, where they are the same for all of a splat's pairs.
-4. gather_counts + scan + duplicate.comp: one (tile, splat) pair per touched tile, in depth order.
+4. gather_counts + scan + duplicate.comp: one (tile, splat) pair per touched tile, in depth order (one invocation
+   per pair, which finds its splat by binary search).
 5. radix sort of the pairs by tile (stable): every tile's list is ordered by (depth, splat index), exactly as the
    CPU driver's per-tile std::sort of (depth bits, index) keys.
 6. tile_ranges.comp, then blend.comp: one work group per 16x16 output block; supersampling blends the N x N
    render tiles of the block and box-averages them in shared memory.
+
+Drivers may cap the loop iterations of one invocation: Mesa's llvmpipe ends every loop of an invocation once it has
+run 65535 iterations in total, silently, so a 100k-splat tile list would be cut short. `loop_limit()` measures the
+cap once per context; when a frame's longest tile list does not fit under it, blend.comp runs as several
+dispatches (groups of render tiles, windows of the lists) that keep the per-pixel state in a buffer in between.
 
 The scene is uploaded once (`upload`); per frame the camera goes up as uniforms, 20 bytes of counters come back
 (visible splats, pairs and depth range: they size the pair buffers and the number of radix passes), and
@@ -119,6 +125,48 @@ def _check_context(ctx) -> None:
 
 
 _program_cache: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_loop_limits: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+LOOP_PROBE = 1 << 20
+
+
+def loop_limit(ctx) -> int | None:
+    """Loop iterations one invocation may run on this context (None: no cap up to 2^20), measured once."""
+    if ctx not in _loop_limits:
+        prog = ctx.compute_shader(shader_source("loop_probe.comp"))
+        buf = ctx.buffer(reserve=4)
+        buf.bind_to_storage_buffer(0)
+        prog["n"].value = LOOP_PROBE
+        prog.run(1, 1, 1)
+        ctx.memory_barrier()
+        count = int(np.frombuffer(buf.read(), np.uint32)[0])
+        buf.release()
+        prog.release()
+        _loop_limits[ctx] = None if count >= LOOP_PROBE else count
+    return _loop_limits[ctx]
+
+
+def plan_blend(supersample: int, longest: int, limit: int | None) -> list[tuple[int, int, int, int]]:
+    """Blend dispatches as (subtile_begin, subtile_end, chunk_begin, chunk_end), each within `limit` loop iterations
+    per invocation. A render tile costs one iteration per splat plus two per batch of 256 and a few for the tile;
+    the box sum costs N^2 in all; 1024 iterations are kept in reserve."""
+    tiles = supersample * supersample
+    big = 2**31 - 1
+    if limit is None:
+        return [(0, tiles, 0, big)]
+    budget = limit - 2 * tiles - 1024
+
+    def cost(n: int) -> int:
+        return n + 2 * -(-n // 256) + 4
+
+    if cost(longest) <= budget:
+        group = max(1, min(tiles, budget // cost(longest)))
+        return [(t, min(t + group, tiles), 0, big) for t in range(0, tiles, group)]
+    chunk = 256
+    while cost(chunk + 256) <= budget:
+        chunk += 256
+    if cost(chunk) > budget:
+        raise RenderError(f"glsl backend: the driver allows only {limit} loop iterations per invocation")
+    return [(t, t + 1, c, c + chunk) for t in range(tiles) for c in range(0, longest, chunk)]
 
 
 class GlslRenderer:
@@ -425,28 +473,45 @@ class GlslRenderer:
             self._dispatch(prog, -(-visible // WG), order, rects, counts)
             self._scan(counts, visible)
             prog = self._program("duplicate.comp")
-            self._set(prog, n=visible, grid_x=gx, capacity=keys0.size // 4)
-            self._dispatch(prog, -(-visible // WG), order, rects, counts, keys0, vals0)
+            self._set(prog, num_pairs=pairs, num_splats=visible, grid_x=gx)
+            self._dispatch(prog, -(-pairs // WG), order, rects, counts, keys0, vals0)
             tkeys, tvals = self._radix_sort(keys0, vals0, keys1, vals1, pairs, (num_tiles - 1).bit_length())
             prog = self._program("tile_ranges.comp")
             self._set(prog, n=pairs)
             self._dispatch(prog, -(-pairs // WG), tkeys, ranges)
         else:
             tvals = vals0
+        limit = loop_limit(ctx)
+        longest = 0
+        if limit is not None and pairs > 0:
+            prog = self._program("list_max.comp")
+            self._set(prog, n=num_tiles)
+            self._dispatch(prog, -(-num_tiles // WG), ranges, totals)
+            longest = int(np.frombuffer(totals.read(size=4, offset=20), np.uint32)[0])
+        plan = plan_blend(N, longest, limit)
         ctx.finish()
         t2 = time.perf_counter()
 
         tex = self._ensure_texture(W, H)
         evals = self._ensure("evals", W * H * 4, "evaluation counts")
         window = self._ensure("window", W * H * 8 if want_window else 16, "window sizes")
+        bx, by = -(-W // 16), -(-H // 16)
+        split = len(plan) > 1
+        state = self._ensure("blend_state", bx * by * 256 * 48 if split else 16, "blend state")
+        accum = self._ensure("blend_accum", bx * by * 256 * 32 if split else 16, "blend sums")
         prog = self._program("blend.comp", **{f"BLEND_MODE_{settings.mode.name}": 1, "SUPERSAMPLED": int(N > 1)})
         self._set(prog, out_size=(W, H), supersample=N, grid=(gx, gy), background=tuple(settings.background),
                   want_window=int(want_window))
-        for i, buf in enumerate((splats, tvals, ranges, evals, window)):
+        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum)):
             buf.bind_to_storage_buffer(i)
         tex.bind_to_image(0, read=False, write=True)
-        prog.run(-(-W // 16), -(-H // 16), 1)
-        ctx.memory_barrier()
+        tiles = N * N
+        for sub0, sub1, c0, c1 in plan:
+            self._set(prog, subtile_begin=sub0, subtile_end=sub1, chunk_begin=c0, chunk_end=c1,
+                      load_state=int(c0 > 0), store_state=int(c1 < longest), load_accum=int(sub0 > 0),
+                      store_accum=int(sub1 < tiles))
+            prog.run(bx, by, 1)
+            ctx.memory_barrier()
         ctx.finish()
         t3 = time.perf_counter()
 

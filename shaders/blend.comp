@@ -3,6 +3,14 @@
 // which the group blends one after another and box-averages in shared memory, like the CPU driver's
 // render-then-box_downsample. A tile's depth-sorted splats go through shared memory in batches of 256; the loop
 // over batches stops when every pixel of the tile has terminated.
+//
+// Normally one dispatch does all N x N render tiles over their whole lists. On drivers that cap the loop
+// iterations of an invocation (llvmpipe: 65535), the driver splits the work over several dispatches: a range of
+// render tiles [subtile_begin, subtile_end) and a window [chunk_begin, chunk_end) of every tile's list. The
+// per-sample state then survives between dispatches in `state` (load_state / store_state) and the box sum of
+// the output pixel in `accum` (load_accum / store_accum); the dispatch that ends with store_accum == 0 writes
+// the image.
+//
 // Compiled once per mode and sampling: the driver defines BLEND_MODE_<MODE> (SCALAR, MIP, ANALYTIC or
 // GAUSSIAN_BLENDING) and SUPERSAMPLED (0 or 1).
 #include "common.glsl"
@@ -16,6 +24,8 @@ layout(std430, binding = 1) readonly buffer TileVals { uint tile_vals[]; };  // 
 layout(std430, binding = 2) readonly buffer Ranges { uvec2 ranges[]; };
 layout(std430, binding = 3) writeonly buffer EvalsOut { int evals_out[]; };
 layout(std430, binding = 4) writeonly buffer WindowOut { vec2 window_out[]; };
+layout(std430, binding = 5) buffer State { vec4 state[]; };  // 3 per invocation: C, T; window xy, wh; evals, done
+layout(std430, binding = 6) buffer Accum { vec4 accum[]; };  // 2 per invocation: rgba sum; window sum, evals sum
 layout(rgba32f, binding = 0) uniform writeonly image2D out_image;  // rgb, alpha = 1 - T; row 0 = image top
 
 uniform ivec2 out_size;
@@ -23,6 +33,14 @@ uniform int supersample;
 uniform ivec2 grid;  // render tiles
 uniform vec3 background;
 uniform int want_window;
+uniform int subtile_begin;
+uniform int subtile_end;
+uniform int chunk_begin;
+uniform int chunk_end;
+uniform int load_state;
+uniform int store_state;
+uniform int load_accum;
+uniform int store_accum;
 
 shared Splat2D batch[256];
 shared int done_count;
@@ -36,6 +54,7 @@ void main() {
     const ivec2 l = ivec2(gl_LocalInvocationID.xy);
     const int lid = l.y * TILE + l.x;
     const ivec2 block = ivec2(gl_WorkGroupID.xy);
+    const uint slot = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * 256u + uint(lid);
     const ivec2 opix = block * TILE + l;
     const bool inside = all(lessThan(opix, out_size));
     const int N = supersample;
@@ -43,96 +62,124 @@ void main() {
     vec4 acc = vec4(0.0);
     vec2 acc_window = vec2(0.0);
     int acc_evals = 0;
-
-    for (int ty = 0; ty < N; ++ty) {
-        for (int tx = 0; tx < N; ++tx) {
-            const ivec2 tile = block * N + ivec2(tx, ty);
-            const ivec2 rpix = tile * TILE + l;
-            bool done = !all(lessThan(rpix, render_size));
-            uvec2 range = uvec2(0u);
-            if (tile.x < grid.x && tile.y < grid.y) range = ranges[tile.y * grid.x + tile.x];
-            const int n = int(range.y - range.x);
-            const vec2 pix = vec2(rpix) + 0.5;
-#if defined(BLEND_MODE_GAUSSIAN_BLENDING)
-            TransmittanceWindow win = TransmittanceWindow(1.0, pix, vec2(1.0, 1.0));
-#else
-            float T = 1.0;
-#endif
-            vec3 C = vec3(0.0);
-            int evals = 0;
-
-            memoryBarrierShared();
-            barrier();  // the previous tile's readers of done_count and the sample arrays are finished
-            if (lid == 0) done_count = 0;
-            memoryBarrierShared();
-            barrier();
-            if (done) atomicAdd(done_count, 1);
-            for (int start = 0; start < n; start += 256) {
-                memoryBarrierShared();
-                barrier();  // everyone finished the previous batch (and its done_count increments)
-                const bool all_done = done_count == 256;
-                if (!all_done && start + lid < n) {
-                    const uint s = tile_vals[range.x + uint(start + lid)];
-                    batch[lid] = unpack_splat(splats[4u * s], splats[4u * s + 1u], splats[4u * s + 2u],
-                                              splats[4u * s + 3u]);
-                }
-                memoryBarrierShared();
-                barrier();  // batch loaded; nobody changes done_count before everyone has read it
-                if (all_done) break;
-                if (!done) {
-                    const int count = min(256, n - start);
-                    for (int j = 0; j < count; ++j) {
-                        ++evals;
-#if defined(BLEND_MODE_GAUSSIAN_BLENDING)
-                        const bool finished = blend_gaussian(batch[j], win, C);
-#elif defined(BLEND_MODE_ANALYTIC)
-                        const bool finished = blend_analytic(batch[j], pix, T, C);
-#else
-                        const bool finished = blend_scalar(batch[j], pix, T, C);
-#endif
-                        if (finished) {
-                            done = true;
-                            atomicAdd(done_count, 1);
-                            break;
-                        }
-                    }
-                }
-            }
-#if defined(BLEND_MODE_GAUSSIAN_BLENDING)
-            const float T_final = win.T;
-            const vec2 wh = win.wh;
-#else
-            const float T_final = T;
-            const vec2 wh = vec2(1.0, 1.0);
-#endif
-            const vec4 rgba = vec4(C + T_final * background, 1.0 - T_final);
-#if SUPERSAMPLED
-            sample_rgba[lid] = rgba;
-            sample_evals[lid] = evals;
-            sample_window[lid] = wh;
-            memoryBarrierShared();
-            barrier();
-            if (inside) {  // add this tile's samples of my output pixel, rows then columns as box_downsample
-                for (int sy = 0; sy < N; ++sy) {
-                    for (int sx = 0; sx < N; ++sx) {
-                        const ivec2 q = opix * N + ivec2(sx, sy) - tile * TILE;
-                        if (all(greaterThanEqual(q, ivec2(0))) && all(lessThan(q, ivec2(TILE)))) {
-                            const int k = q.y * TILE + q.x;
-                            acc += sample_rgba[k];
-                            acc_evals += sample_evals[k];
-                            acc_window += sample_window[k];
-                        }
-                    }
-                }
-            }
-#else
-            acc = rgba;
-            acc_evals = evals;
-            acc_window = wh;
-#endif
-        }
+    if (load_accum != 0) {
+        acc = accum[2u * slot];
+        acc_window = accum[2u * slot + 1u].xy;
+        acc_evals = floatBitsToInt(accum[2u * slot + 1u].z);
     }
-    if (!inside) return;
+
+    for (int sub = subtile_begin; sub < subtile_end; ++sub) {
+        const ivec2 tile = block * N + ivec2(sub % N, sub / N);
+        const ivec2 rpix = tile * TILE + l;
+        bool done = !all(lessThan(rpix, render_size));
+        uvec2 range = uvec2(0u);
+        if (tile.x < grid.x && tile.y < grid.y) range = ranges[tile.y * grid.x + tile.x];
+        const int n = int(range.y - range.x);
+        const int begin = min(n, chunk_begin), end = min(n, chunk_end);
+        const vec2 pix = vec2(rpix) + 0.5;
+#if defined(BLEND_MODE_GAUSSIAN_BLENDING)
+        TransmittanceWindow win = TransmittanceWindow(1.0, pix, vec2(1.0, 1.0));
+#else
+        float T = 1.0;
+#endif
+        vec3 C = vec3(0.0);
+        int evals = 0;
+        if (load_state != 0) {
+            const vec4 s0 = state[3u * slot], s1 = state[3u * slot + 1u], s2 = state[3u * slot + 2u];
+            C = s0.xyz;
+#if defined(BLEND_MODE_GAUSSIAN_BLENDING)
+            win = TransmittanceWindow(s0.w, s1.xy, s1.zw);
+#else
+            T = s0.w;
+#endif
+            evals = floatBitsToInt(s2.x);
+            done = s2.y != 0.0;
+        }
+
+        memoryBarrierShared();
+        barrier();  // the previous tile's readers of done_count and the sample arrays are finished
+        if (lid == 0) done_count = 0;
+        memoryBarrierShared();
+        barrier();
+        if (done) atomicAdd(done_count, 1);
+        for (int start = begin; start < end; start += 256) {
+            memoryBarrierShared();
+            barrier();  // everyone finished the previous batch (and its done_count increments)
+            const bool all_done = done_count == 256;
+            if (!all_done && start + lid < end) {
+                const uint s = tile_vals[range.x + uint(start + lid)];
+                batch[lid] = unpack_splat(splats[4u * s], splats[4u * s + 1u], splats[4u * s + 2u],
+                                          splats[4u * s + 3u]);
+            }
+            memoryBarrierShared();
+            barrier();  // batch loaded; nobody changes done_count before everyone has read it
+            if (all_done) break;
+            if (!done) {
+                const int count = min(256, end - start);
+                for (int j = 0; j < count; ++j) {
+                    ++evals;
+#if defined(BLEND_MODE_GAUSSIAN_BLENDING)
+                    const bool finished = blend_gaussian(batch[j], win, C);
+#elif defined(BLEND_MODE_ANALYTIC)
+                    const bool finished = blend_analytic(batch[j], pix, T, C);
+#else
+                    const bool finished = blend_scalar(batch[j], pix, T, C);
+#endif
+                    if (finished) {
+                        done = true;
+                        atomicAdd(done_count, 1);
+                        break;
+                    }
+                }
+            }
+        }
+#if defined(BLEND_MODE_GAUSSIAN_BLENDING)
+        const float T_final = win.T;
+        const vec2 wh = win.wh;
+        const vec2 wxy = win.xy;
+#else
+        const float T_final = T;
+        const vec2 wh = vec2(1.0, 1.0);
+        const vec2 wxy = pix;
+#endif
+        if (store_state != 0) {  // more of this tile's list follows in a later dispatch
+            state[3u * slot] = vec4(C, T_final);
+            state[3u * slot + 1u] = vec4(wxy, wh);
+            state[3u * slot + 2u] = vec4(intBitsToFloat(evals), done ? 1.0 : 0.0, 0.0, 0.0);
+            continue;  // store_state is uniform, and the driver then gives this dispatch one render tile
+        }
+        const vec4 rgba = vec4(C + T_final * background, 1.0 - T_final);
+#if SUPERSAMPLED
+        sample_rgba[lid] = rgba;
+        sample_evals[lid] = evals;
+        sample_window[lid] = wh;
+        memoryBarrierShared();
+        barrier();
+        if (inside) {  // add this tile's samples of my output pixel, rows then columns as box_downsample
+            const ivec2 first = max(tile * TILE - opix * N, ivec2(0));
+            const ivec2 last = min(tile * TILE + TILE - opix * N, ivec2(N));
+            for (int sy = first.y; sy < last.y; ++sy) {
+                for (int sx = first.x; sx < last.x; ++sx) {
+                    const ivec2 q = opix * N + ivec2(sx, sy) - tile * TILE;
+                    const int k = q.y * TILE + q.x;
+                    acc += sample_rgba[k];
+                    acc_evals += sample_evals[k];
+                    acc_window += sample_window[k];
+                }
+            }
+        }
+#else
+        acc = rgba;
+        acc_evals = evals;
+        acc_window = wh;
+#endif
+    }
+    if (store_state != 0 || !inside) return;
+    if (store_accum != 0) {  // more render tiles of this block follow in a later dispatch
+        accum[2u * slot] = acc;
+        accum[2u * slot + 1u] = vec4(acc_window, intBitsToFloat(acc_evals), 0.0);
+        return;
+    }
 #if SUPERSAMPLED
     const float inv = 1.0 / float(N * N);
     acc *= inv;

@@ -38,3 +38,4 @@ const int TOTAL_PAIRS = 1;      // tile-splat pairs (sum of the tile rectangles'
 const int TOTAL_DEPTH_MIN = 2;  // min / max bits of the visible depths (positive floats order as uints)
 const int TOTAL_DEPTH_MAX = 3;
 const int TOTAL_OVERFLOW = 4;   // set when TOTAL_PAIRS wrapped past 2^32
+const int TOTAL_MAX_LIST = 5;   // longest tile list (list_max.comp)

@@ -324,6 +324,37 @@ def test_odd_sizes_and_off_centre(gl):
         compare(scene, cam, spec)
 
 
+def test_long_tile_lists(gl):
+    """One tile with a list longer than llvmpipe's 65535 loop iterations per invocation: every splat is evaluated
+    (the blend is split over dispatches there), as on the CPU. Faint sub-pixel splats, so most pixels never
+    terminate."""
+    rng = np.random.default_rng(7)
+    n = 70_000
+    means = np.stack([rng.uniform(-0.25, 0.25, n), rng.uniform(-0.25, 0.25, n), rng.uniform(2.0, 3.0, n)], 1)
+    scene = gb.Scene.from_arrays(means, np.full((n, 3), 0.002), rng.normal(size=(n, 4)), rng.uniform(0.01, 0.3, n),
+                                 rng.uniform(-1, 1, (n, 1, 3)), source="long lists")
+    cam = front_camera(16, 16, 30.0)
+    compare(scene, cam, "scalar")
+    out = gb.get_renderer(scene, "glsl").render(cam, RenderSettings.parse("scalar"))
+    ref = gb.get_renderer(scene, "cpu").render(cam, RenderSettings.parse("scalar"))
+    assert out.stats["sort_length"] == out.stats["visible"] > 65535
+    assert out.debug["evals"].max() == out.stats["sort_length"]
+    np.testing.assert_array_equal(out.debug["evals"], ref.debug["evals"])
+
+
+@pytest.mark.parametrize("spec", ["scalar", "gaussian_blending", "analytic:2", "gaussian_blending:3"])
+def test_blend_split_over_dispatches(gl, monkeypatch, spec):
+    """The multi-dispatch blend (groups of render tiles, windows of the lists, state kept in buffers) that drivers
+    with a loop cap need, forced here with a cap of 2000 iterations (lists of 768 splats per dispatch)."""
+    renderer = GlslRenderer()
+    monkeypatch.setitem(glsl._loop_limits, renderer.ctx, 2000)
+    assert len(glsl.plan_blend(3, 5000, 2000)) == 9 * 7
+    scene = awkward_scene(8, n=6000)
+    renderer.upload(scene)
+    compare(scene, front_camera(48, 32), spec, renderer=renderer)
+    renderer.release()
+
+
 def test_debug_planes(gl, bundled):
     cam = gb.orbit_camera(bundled, width=64, height=48)
     s = RenderSettings.parse("gaussian_blending:2", debug="window")
