@@ -22,7 +22,8 @@ cap once per context; when a frame's longest tile list does not fit under it, bl
 dispatches (groups of render tiles, windows of the lists) that keep the per-pixel state in a buffer in between.
 
 The scene is uploaded once (`upload`); per frame the camera goes up as uniforms, 20 bytes of counters come back
-(visible splats, pairs and depth range: they size the pair buffers and the number of radix passes), and
+(visible splats, pairs and depth range: they size the pair buffers and the number of radix passes; 4 more with a
+loop cap: the longest tile list), and
 `render` reads the image back while `render_texture` leaves it in an RGBA32F texture for the app to draw. Buffers
 grow (by 1.5x) when a frame needs more and are reused otherwise; `allocations` counts (re)allocations.
 
@@ -248,7 +249,8 @@ class GlslRenderer:
         evals = np.frombuffer(self._buffers["evals"].read(size=W * H * 4), np.int32).reshape(H, W).copy()
         debug = {"evals": evals}
         if want_window:
-            debug["window"] = np.frombuffer(self._buffers["window"].read(size=W * H * 8), np.float32).reshape(H, W, 2).copy()
+            window = self._buffers["window"].read(size=W * H * 8)
+            debug["window"] = np.frombuffer(window, np.float32).reshape(H, W, 2).copy()
         evaluations = int(evals.sum(dtype=np.int64))
         stats.update(
             evaluations=evaluations,

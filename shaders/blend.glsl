@@ -55,7 +55,8 @@ bool blend_analytic(Splat2D s, vec2 pix, inout float T, inout vec3 C) {
 float gaussian_moment0(float x, float e) {
     const float z = abs(x) * 0.7071067811865476;
     const float t = 1.0 / (1.0 + 0.3275911 * z);
-    const float poly = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))));
+    const float poly =
+        t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))));
     const float erf_abs = 1.0 - poly * e;
     return SQRT_PI_2 * (x < 0.0 ? -erf_abs : erf_abs);
 }

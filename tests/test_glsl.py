@@ -415,7 +415,11 @@ def test_existing_context_texture_drawn_directly(gl, bundled):
     prog = ctx.program(
         vertex_shader="""#version 330
             out vec2 uv;
-            void main() { vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2); uv = p; gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0); }""",
+            void main() {
+                vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);  // full-screen triangle
+                uv = p;
+                gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+            }""",
         fragment_shader="""#version 330
             uniform sampler2D image; in vec2 uv; out vec4 colour;
             void main() { colour = texture(image, vec2(uv.x, 1.0 - uv.y)); }""",  # row 0 is the image top
