@@ -29,7 +29,7 @@ bool blend_scalar(Splat2D s, vec2 pix, inout float T, inout vec3 C) {
     const vec2 d = s.xy - pix;
     const float power = -0.5 * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
     if (power > 0.0 || power < s.log_min_alpha) return false;
-    const float alpha = min(MAX_ALPHA, s.opacity * expf(power));
+    const float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
     return composite_scalar(alpha, s.color, T, C);
 }
 
@@ -43,7 +43,7 @@ bool blend_analytic(Splat2D s, vec2 pix, inout float T, inout vec3 C) {
     const float u = dot(d, s.v1), v = dot(d, v2);
     const float iu = s.sigma1 * (approx_cdf((u + 0.5) / s.sigma1) - approx_cdf((u - 0.5) / s.sigma1));
     const float iv = s.sigma2 * (approx_cdf((v + 0.5) / s.sigma2) - approx_cdf((v - 0.5) / s.sigma2));
-    const float alpha = min(MAX_ALPHA, s.opacity * TWO_PI * iu * iv);
+    const float alpha = minf(s.opacity * TWO_PI * iu * iv, MAX_ALPHA);
     return composite_scalar(alpha, s.color, T, C);
 }
 
@@ -84,8 +84,8 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
     // The mean alpha over the window is at most the splat's largest value on it: skip before any erf when even
     // that is below 1/256 (log_min_alpha = ln(MIN_ALPHA_GB / opacity)). This also rejects every window lying
     // outside the published +-3.33 sigma box, whose edge value is exactly 1/256.
-    const float gu = max(abs(u) - 0.5 * lu, 0.0) * s.inv_sigma1;
-    const float gv = max(abs(v) - 0.5 * lv, 0.0) * s.inv_sigma2;
+    const float gu = maxf(abs(u) - 0.5 * lu, 0.0) * s.inv_sigma1;
+    const float gv = maxf(abs(v) - 0.5 * lv, 0.0) * s.inv_sigma2;
     if (-0.5 * (gu * gu + gv * gv) < s.log_min_alpha) return false;
 
     const float U1 = (u - 0.5 * lu) * s.inv_sigma1, U2 = (u + 0.5 * lu) * s.inv_sigma1;
@@ -93,7 +93,7 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
     const float du = U2 - U1, dv = V2 - V1;
     if (!(du >= GB_MIN_UV_DIFF && dv >= GB_MIN_UV_DIFF && du <= GB_MAX_UV_DIFF && dv <= GB_MAX_UV_DIFF)) {
         // Stability fallback (Appendix B.1): scalar alpha at the window centre, window unchanged.
-        const float alpha = min(MAX_ALPHA, s.opacity * gaussian_at(s, d));
+        const float alpha = minf(s.opacity * gaussian_at(s, d), MAX_ALPHA);
         if (alpha < MIN_ALPHA_GB) return false;
         const float w = win.T * alpha;
         C[0] += s.color[0] * w;
@@ -106,8 +106,8 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
     const float eV1 = expf(-0.5 * V1 * V1), eV2 = expf(-0.5 * V2 * V2);
     const float i0u = s.sigma1 * (gaussian_moment0(U2, eU2) - gaussian_moment0(U1, eU1));
     const float i0v = s.sigma2 * (gaussian_moment0(V2, eV2) - gaussian_moment0(V1, eV1));
-    const float area = lu * lv;
-    const float alpha = min(MAX_ALPHA, s.opacity * i0u * i0v / area);  // mean alpha over the window
+    const float inv_area = 1.0 / (lu * lv);
+    const float alpha = minf(s.opacity * i0u * i0v * inv_area, MAX_ALPHA);  // mean alpha over the window
     if (alpha < MIN_ALPHA_GB) return false;
     const float weight = win.T * alpha;  // eq. 9
     C[0] += s.color[0] * weight;
@@ -118,15 +118,16 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
     const float i1u = s1sq * (eU1 - eU2), i1v = s2sq * (eV1 - eV2);
     const float i2u = s1sq * (i0u + s.sigma1 * (U1 * eU1 - U2 * eU2));
     const float i2v = s2sq * (i0v + s.sigma2 * (V1 * eV1 - V2 * eV2));
-    const float k = win.T / area * s.opacity;
+    const float k = win.T * inv_area * s.opacity;
     // eq. 10: moments of T(x)(1 - alpha(x)) over the window, in the splat's eigen-frame
     const float m0 = win.T - weight;
     const float m1u = win.T * u - k * i1u * i0v, m1v = win.T * v - k * i0u * i1v;
     const float m2u = win.T * (u * u + lu * lu / 12.0) - k * i2u * i0v;
     const float m2v = win.T * (v * v + lv * lv / 12.0) - k * i0u * i2v;
     // eq. 11: the uniform window with the same mass, mean and variance
-    const float mu = m1u / m0, mv = m1v / m0;
-    const float var_u = max(m2u / m0 - mu * mu, GB_MIN_VAR), var_v = max(m2v / m0 - mv * mv, GB_MIN_VAR);
+    const float inv_m0 = 1.0 / m0;
+    const float mu = m1u * inv_m0, mv = m1v * inv_m0;
+    const float var_u = maxf(m2u * inv_m0 - mu * mu, GB_MIN_VAR), var_v = maxf(m2v * inv_m0 - mv * mv, GB_MIN_VAR);
     win.T = m0;
     win.xy = s.xy + mu * s.v1 + mv * v2;
     const float wu = sqrt(12.0 * var_u), wv = sqrt(12.0 * var_v);

@@ -24,6 +24,8 @@ const float SQRT_PI_2 = 1.2533141373155003;
 const float TWO_PI = 6.283185307179586;
 
 float clampf(float v, float lo, float hi) { return min(max(v, lo), hi); }
+float minf(float a, float b) { return a < b ? a : b; }
+float maxf(float a, float b) { return a > b ? a : b; }
 
 bool finitef(float v) { return !isnan(v) && !isinf(v); }
 

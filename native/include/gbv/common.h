@@ -44,6 +44,11 @@ GBV_HD float dot(Vec2 a, Vec2 b) { return a.x * b.x + a.y * b.y; }
 
 GBV_HD float clampf(float v, float lo, float hi) { return fminf(fmaxf(v, lo), hi); }
 
+// min/max for the per-pixel loops: single instructions, where fminf/fmaxf are libm calls on the host
+// (their NaN rules stop the compiler inlining them). Like those, a NaN first argument yields the second.
+GBV_HD float minf(float a, float b) { return a < b ? a : b; }
+GBV_HD float maxf(float a, float b) { return a > b ? a : b; }
+
 GBV_HD bool finitef(float v) {
 #if defined(__CUDA_ARCH__)
     return isfinite(v);
