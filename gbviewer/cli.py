@@ -240,11 +240,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _join_signed_values(argv: list[str]) -> list[str]:
+    """'--up -y' -> '--up=-y': argparse would take '-y' for an option."""
+    out: list[str] = []
+    for arg in argv:
+        if out and out[-1] == "--up" and arg in ("-y", "-z", "+y", "+z"):
+            out[-1] = f"--up={arg}"
+        else:
+            out.append(arg)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    argv = _join_signed_values(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     if args.command is None:
-        args = parser.parse_args(["demo", *(argv or [])] if argv is not None else ["demo", *sys.argv[1:]])
+        args = parser.parse_args(["demo", *argv])
     try:
         return args.func(args)
     except (GBViewerError, OSError) as exc:
