@@ -190,6 +190,9 @@ class GlslRenderer:
         self._scene: Scene | None = None
         self._n = 0
         self._sh_k = 1
+        self._weight_k = 0
+        self._cells = None
+        self._view = None  # the decoded per-view scene last uploaded (trained Duplex-GS models)
         self.max_block = int(self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 1 << 27)
         self.last_stats: dict = {}
 
@@ -224,7 +227,15 @@ class GlslRenderer:
         return f"{ctx.info.get('GL_RENDERER', '?')}; OpenGL {ctx.info.get('GL_VERSION', '?')}"
 
     def upload(self, scene: Scene) -> None:
-        """Copy the scene to the GPU once (geometry 48 B and SH 12K B per splat); reuses buffers that are big enough."""
+        """Copy the scene to the GPU once (geometry 48 B and SH 12K B per splat); reuses buffers that are big enough.
+        A trained Duplex-GS model is decoded per view instead, and its splats go up with every frame."""
+        self._scene = scene
+        self._cells = None
+        self._view = None
+        if scene.neural is None:
+            self._upload_splats(scene)
+
+    def _upload_splats(self, scene: Scene) -> None:
         n = scene.num_splats
         f3d = scene.filter_3d if scene.filter_3d is not None else np.zeros(n, np.float32)
         geom = np.empty((n, 12), np.float32)
@@ -236,9 +247,28 @@ class GlslRenderer:
         sh = np.ascontiguousarray(scene.sh, np.float32)
         self._upload("geom", geom, f"scene {scene.source}: splat geometry")
         self._upload("sh", sh, f"scene {scene.source}: SH coefficients")
-        self._scene = scene
+        self._weight_k = 0 if scene.view_weight_sh is None else int(scene.view_weight_sh.shape[1])
+        if self._weight_k:
+            self._upload("weight_sh", np.ascontiguousarray(scene.view_weight_sh, np.float32),
+                         f"scene {scene.source}: view-weight SH")
         self._n = n
         self._sh_k = int(scene.sh.shape[1])
+        self._cells = None
+
+    def _upload_cells(self, cells, n: int) -> None:
+        """Cell ellipsoids (48 B per cell), member lists and each splat's cell (duplex)."""
+        m = cells.num_cells
+        geom = np.zeros((m, 12), np.float32)
+        geom[:, 0:3] = cells.means
+        geom[:, 4:7] = cells.scales
+        geom[:, 8:12] = cells.quats
+        cell_of = np.full(n, -1, np.int32)
+        cell_of[cells.members] = np.repeat(np.arange(m, dtype=np.int32), cells.sizes)
+        self._upload("cell_geom", geom, "cell ellipsoids")
+        self._upload("cell_offsets", np.ascontiguousarray(cells.offsets, np.int32), "cell offsets")
+        self._upload("cell_members", np.ascontiguousarray(cells.members, np.int32), "cell members")
+        self._upload("cell_of", cell_of, "splat cells")
+        self._cells = cells
 
     def render(self, camera: Camera, settings: RenderSettings) -> Frame:
         t0 = time.perf_counter()
@@ -419,9 +449,26 @@ class GlslRenderer:
         self._dispatch(prog, -(-n // WG), buf)
 
     def _frame(self, camera: Camera, settings: RenderSettings, want_window: bool):
+        from .cells import cells_for
+        from .render import SORT_ENTRY_BYTES, oit_params
+
         scene = self._scene
         if scene is None:
             raise RenderError("glsl renderer: upload(scene) before render()")
+        t_decode = time.perf_counter()
+        if scene.neural is not None:
+            scene = scene.neural.decode(camera)
+            self._upload_splats(scene)
+        decode_ms = (time.perf_counter() - t_decode) * 1e3
+        mode = settings.mode
+        params = oit_params(scene, settings) if mode in (Mode.WSR, Mode.DUPLEX) else None
+        oit = (0.0, 0.0, 1.0, 0.0) if params is None else (
+            params["sigma"], params["weight_background"], params["et_grade"], float(params["depth_correct"]))
+        cells = None
+        if mode == Mode.DUPLEX:
+            cells = cells_for(scene, settings.cell_size)
+            if self._cells is not cells:
+                self._upload_cells(cells, scene.num_splats)
         ctx = self.ctx
         n, N = self._n, settings.supersample
         W, H = camera.width, camera.height
@@ -442,17 +489,22 @@ class GlslRenderer:
         dvals = [self._ensure(f"depth_vals{i}", n * 4, "depth order") for i in (0, 1)]
         counts = self._ensure("pair_counts", n * 4, "pair counts")
         totals = self._ensure("totals", 64)
-        totals.write(np.array([0, 0, 0xFFFFFFFF, 0, 0, 0, 0, 0], np.uint32).tobytes())
+        totals.write(np.array([0, 0, 0xFFFFFFFF, 0, 0, 0, 0, 0xFFFFFFFF, 0, 0, 0, 0, 0, 0, 0, 0],
+                              np.uint32).tobytes())
 
-        prog = self._program("preprocess.comp")
-        self._set(
-            prog, num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(settings.mode), grid=(gx, gy),
-            cam_R=np.ascontiguousarray(camera.R, f32).reshape(9), cam_t=np.ascontiguousarray(camera.t, f32),
+        cam_uniforms = dict(
+            grid=(gx, gy), cam_R=np.ascontiguousarray(camera.R, f32).reshape(9),
+            cam_t=np.ascontiguousarray(camera.t, f32),
             cam_f=(float(f32(camera.fx) * Nf), float(f32(camera.fy) * Nf), float(f32(camera.cx) * Nf),
                    float(f32(camera.cy) * Nf)),
             cam_size=(RW, RH), cam_near=float(f32(camera.near)),
         )
-        self._dispatch(prog, -(-n // WG), self._buffers["geom"], self._buffers["sh"], splats, rects, flags, totals)
+        prog = self._program("preprocess.comp")
+        self._set(prog, num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k,
+                  oit=oit, **cam_uniforms)
+        weight = self._buffers["weight_sh"] if self._weight_k else self._ensure("dummy", 16)
+        self._dispatch(prog, -(-n // WG), self._buffers["geom"], self._buffers["sh"], splats, rects, flags, totals,
+                       weight)
         self._scan(flags, n, total_slot=0)
         prog = self._program("compact.comp")
         self._set(prog, num_splats=n)
@@ -462,6 +514,32 @@ class GlslRenderer:
 
         if overflow:
             raise RenderError(f"glsl backend: more than 2^32 tile-splat pairs at {RW}x{RH}; render a smaller image")
+        extra = {}
+        if mode == Mode.DUPLEX:
+            tvals, ranges, sort_length, pairs, visible, extra = self._bin_duplex(cells, cam_uniforms, num_tiles)
+        else:
+            tvals, ranges = self._bin_splats(mode, visible, pairs, dmin, dmax, num_tiles, gx)
+            sort_length = 0 if mode == Mode.WSR else pairs
+        limit = loop_limit(ctx)
+        longest = 0
+        if limit is not None and pairs > 0:
+            prog = self._program("list_max.comp")
+            self._set(prog, n=num_tiles)
+            self._dispatch(prog, -(-num_tiles // WG), ranges, totals)
+            longest = int(np.frombuffer(totals.read(size=4, offset=20), np.uint32)[0])
+        plan = plan_blend(N, longest, limit)
+        ctx.finish()
+        t2 = time.perf_counter()
+        return self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, oit, dict(
+            preprocess_ms=(t1 - t0) * 1e3, sort_ms=(t2 - t1) * 1e3, visible=visible, sort_length=sort_length,
+            pairs=pairs, sort_bytes=sort_length * SORT_ENTRY_BYTES, **extra,
+            **({"decode_ms": decode_ms} if self._scene.neural is not None else {})), t2)
+
+    def _bin_splats(self, mode: Mode, visible: int, pairs: int, dmin: int, dmax: int, num_tiles: int, gx: int):
+        """Tile lists of splats: by (tile, depth, index), or for wsr by (tile, index) with no depth sort."""
+        dkeys = [self._buffers[f"depth_keys{i}"] for i in (0, 1)]
+        dvals = [self._buffers[f"depth_vals{i}"] for i in (0, 1)]
+        rects, counts = self._buffers["rects"], self._buffers["pair_counts"]
         keys0, vals0 = self._ensure("tile_keys0", pairs * 4, "tile-splat pairs"), self._ensure(
             "tile_vals0", pairs * 4, "tile-splat pairs")
         keys1, vals1 = self._ensure("tile_keys1", pairs * 4, "tile-splat pairs"), self._ensure(
@@ -469,7 +547,11 @@ class GlslRenderer:
         ranges = self._ensure("ranges", num_tiles * 8, "tile ranges")
         self._fill(ranges, num_tiles * 2, 0)
         if visible > 0:
-            _, order = self._radix_sort(dkeys[0], dvals[0], dkeys[1], dvals[1], visible, (dmax - dmin).bit_length())
+            if mode == Mode.WSR:
+                order = dvals[0]  # survivors in splat-index order: binning only
+            else:
+                _, order = self._radix_sort(dkeys[0], dvals[0], dkeys[1], dvals[1], visible,
+                                            (dmax - dmin).bit_length())
             prog = self._program("gather_counts.comp")
             self._set(prog, n=visible)
             self._dispatch(prog, -(-visible // WG), order, rects, counts)
@@ -483,17 +565,81 @@ class GlslRenderer:
             self._dispatch(prog, -(-pairs // WG), tkeys, ranges)
         else:
             tvals = vals0
-        limit = loop_limit(ctx)
-        longest = 0
-        if limit is not None and pairs > 0:
-            prog = self._program("list_max.comp")
-            self._set(prog, n=num_tiles)
-            self._dispatch(prog, -(-num_tiles // WG), ranges, totals)
-            longest = int(np.frombuffer(totals.read(size=4, offset=20), np.uint32)[0])
-        plan = plan_blend(N, longest, limit)
-        ctx.finish()
-        t2 = time.perf_counter()
+        return tvals, ranges
 
+    def _bin_duplex(self, cells, cam_uniforms: dict, num_tiles: int):
+        """Duplex binning (KERNELS.md §8.3): project the cells with a visible splat, sort them by depth, one pair per
+        (tile, cell), sort the pairs by tile, expand every pair to its cell's visible splats. Returns the splat list,
+        the tile ranges in it, the tile-cell pairs (the sort length), the list length, the visible splats and the
+        cell counts."""
+        m = cells.num_cells
+        gx = cam_uniforms["grid"][0]
+        totals = self._buffers["totals"]
+        cell_out = self._ensure("cell_out", m * 16, "projected cells")
+        cell_rects = self._ensure("cell_rects", m * 16, "cell rectangles")
+        cflags = self._ensure("cell_flags", m * 4, "cell flags")
+        vis = self._ensure("cell_vis", len(cells.members) * 4, "visible cell members")
+        prog = self._program("cells.comp")
+        self._set(prog, num_cells=m, **cam_uniforms)
+        self._dispatch(prog, -(-m // WG), self._buffers["cell_geom"], self._buffers["cell_offsets"],
+                       self._buffers["cell_members"], self._buffers["rects"], vis, cell_out, cell_rects, cflags,
+                       totals)
+        self._scan(cflags, m, total_slot=9)
+        t = np.frombuffer(totals.read(size=48), np.uint32)
+        cell_pairs, cmin, cmax, ncells, visible = (int(t[i]) for i in (6, 7, 8, 9, 11))
+        ckeys = [self._ensure(f"cell_keys{i}", m * 4, "cell keys") for i in (0, 1)]
+        cvals = [self._ensure(f"cell_vals{i}", m * 4, "cell order") for i in (0, 1)]
+        prog = self._program("cell_compact.comp")
+        self._set(prog, num_cells=m)
+        self._dispatch(prog, -(-m // WG), cell_out, cell_rects, cflags, totals, ckeys[0], cvals[0])
+        keys0 = self._ensure("tile_keys0", cell_pairs * 4, "tile-cell pairs")
+        vals0 = self._ensure("tile_vals0", cell_pairs * 4, "tile-cell pairs")
+        keys1 = self._ensure("tile_keys1", cell_pairs * 4, "tile-cell pairs")
+        vals1 = self._ensure("tile_vals1", cell_pairs * 4, "tile-cell pairs")
+        cell_ranges = self._ensure("cell_ranges", num_tiles * 8, "tile ranges of cells")
+        ranges = self._ensure("ranges", num_tiles * 8, "tile ranges")
+        self._fill(ranges, num_tiles * 2, 0)
+        self._fill(cell_ranges, num_tiles * 2, 0)
+        expanded = 0
+        tlist = self._ensure("expanded", 16)
+        if ncells > 0 and cell_pairs > 0:
+            _, order = self._radix_sort(ckeys[0], cvals[0], ckeys[1], cvals[1], ncells, (cmax - cmin).bit_length())
+            counts = self._ensure("cell_pair_counts", ncells * 4, "cell tile counts")
+            prog = self._program("gather_counts.comp")
+            self._set(prog, n=ncells)
+            self._dispatch(prog, -(-ncells // WG), order, cell_rects, counts)
+            self._scan(counts, ncells)
+            prog = self._program("duplicate.comp")
+            self._set(prog, num_pairs=cell_pairs, num_splats=ncells, grid_x=gx)
+            self._dispatch(prog, -(-cell_pairs // WG), order, cell_rects, counts, keys0, vals0)
+            tkeys, tvals = self._radix_sort(keys0, vals0, keys1, vals1, cell_pairs, (num_tiles - 1).bit_length())
+            prog = self._program("tile_ranges.comp")
+            self._set(prog, n=cell_pairs)
+            self._dispatch(prog, -(-cell_pairs // WG), tkeys, cell_ranges)
+            offs = self._ensure("expand_offsets", cell_pairs * 4, "expanded list offsets")
+            prog = self._program("expand.comp")
+            self._set(prog, n=cell_pairs, mode=0)
+            self._dispatch(prog, -(-cell_pairs // WG), tvals, cell_out, self._buffers["cell_offsets"], vis, offs,
+                           tlist)
+            self._scan(offs, cell_pairs, total_slot=10)
+            expanded = int(np.frombuffer(totals.read(size=4, offset=40), np.uint32)[0])
+            tlist = self._ensure("expanded", expanded * 4, "expanded tile lists")
+            self._set(prog, n=cell_pairs, mode=1)
+            self._dispatch(prog, -(-cell_pairs // WG), tvals, cell_out, self._buffers["cell_offsets"], vis, offs,
+                           tlist)
+            prog = self._program("expand_ranges.comp")
+            self._set(prog, num_tiles=num_tiles, n=cell_pairs)
+            self._dispatch(prog, -(-num_tiles // WG), cell_ranges, offs, totals, ranges)
+        extra = {"cells_visible": ncells, "cells": m}
+        return tlist, ranges, cell_pairs, expanded, visible, extra
+
+    def _blend(self, camera: Camera, settings: RenderSettings, want_window: bool, plan, longest: int, splats, tvals,
+               ranges, oit, stats: dict, t2: float):
+        ctx = self.ctx
+        N = settings.supersample
+        W, H = camera.width, camera.height
+        RW, RH = W * N, H * N
+        gx, gy = -(-RW // 16), -(-RH // 16)
         tex = self._ensure_texture(W, H)
         evals = self._ensure("evals", W * H * 4, "evaluation counts")
         window = self._ensure("window", W * H * 8 if want_window else 16, "window sizes")
@@ -503,8 +649,9 @@ class GlslRenderer:
         accum = self._ensure("blend_accum", bx * by * 256 * 32 if split else 16, "blend sums")
         prog = self._program("blend.comp", **{f"BLEND_MODE_{settings.mode.name}": 1, "SUPERSAMPLED": int(N > 1)})
         self._set(prog, out_size=(W, H), supersample=N, grid=(gx, gy), background=tuple(settings.background),
-                  want_window=int(want_window))
-        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum)):
+                  want_window=int(want_window), oit=oit)
+        cell_of = self._buffers["cell_of"] if settings.mode == Mode.DUPLEX else self._ensure("dummy", 16)
+        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of)):
             buf.bind_to_storage_buffer(i)
         tex.bind_to_image(0, read=False, write=True)
         tiles = N * N
@@ -517,13 +664,5 @@ class GlslRenderer:
         ctx.finish()
         t3 = time.perf_counter()
 
-        stats = {
-            "preprocess_ms": (t1 - t0) * 1e3,
-            "sort_ms": (t2 - t1) * 1e3,
-            "blend_ms": (t3 - t2) * 1e3,
-            "visible": visible,
-            "sort_length": pairs,
-            "backend": self.name,
-            "mode": settings.label,
-        }
+        stats.update(blend_ms=(t3 - t2) * 1e3, backend=self.name, mode=settings.label_for(self._scene))
         return tex, stats

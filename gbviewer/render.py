@@ -22,6 +22,8 @@ class Mode(enum.IntEnum):
     MIP = 1  # Mip-Splatting 2D filter (0.1 px^2 with opacity compensation)
     ANALYTIC = 2  # Analytic-Splatting: alpha integrated over the pixel, scalar transmittance
     GAUSSIAN_BLENDING = 3  # spatial transmittance window (Gaussian Blending)
+    WSR = 4  # sort-free weighted sum (LC-WSR, Hou et al.): order independent, no sort
+    DUPLEX = 5  # Duplex-GS: cells sorted, weighted sum inside a cell, cell transmittance and early termination
 
     @classmethod
     def parse(cls, value: "str | int | Mode") -> "Mode":
@@ -45,12 +47,21 @@ class Mode(enum.IntEnum):
 
 DEBUG_OUTPUTS = ("none", "window")
 
+ORDER_INDEPENDENT = (Mode.WSR, Mode.DUPLEX)
+DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (KERNELS.md §8.1)
+DEFAULT_SIGMA = 10.0  # sort-free GS's initial sigma, for depth correction on scenes without a trained one
+SORT_ENTRY_BYTES = 24  # per sorted key: 8-byte key + 4-byte value, input and output buffers (CUB SortPairs)
+
 
 @dataclass(frozen=True)
 class RenderSettings:
     """How to render: mode, N x N supersampling (1..8), background colour, SH degree cap, debug planes.
 
     `debug="window"` adds the final Gaussian Blending window size per pixel (H, W, 2) to `Frame.debug`.
+
+    wsr and duplex: `depth_correct` multiplies each splat's weight by LC-WSR's max(0, 1 - z/sigma) (sigma: the
+    scene's trained value, else 10); `et_grade` is Duplex-GS's E (None: the scene's trained value, else 4.0, the
+    published final value); `cell_size` is the number of splats per cell built for scenes without cells.
     """
 
     mode: Mode = Mode.SCALAR
@@ -59,6 +70,9 @@ class RenderSettings:
     sh_degree: int = 3
     debug: str = "none"
     threads: int = 0  # CPU threads, 0 = all
+    depth_correct: bool = False
+    et_grade: float | None = None
+    cell_size: int = 5
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mode", Mode.parse(self.mode))
@@ -70,6 +84,21 @@ class RenderSettings:
         object.__setattr__(self, "background", bg)
         if self.debug not in DEBUG_OUTPUTS:
             raise RenderError(f"debug output {self.debug!r}; expected one of {DEBUG_OUTPUTS}")
+        if self.et_grade is not None and not (np.isfinite(self.et_grade) and self.et_grade > 0):
+            raise RenderError(f"et_grade must be a finite number > 0, got {self.et_grade!r}")
+        if not (isinstance(self.cell_size, (int, np.integer)) and self.cell_size >= 1):
+            raise RenderError(f"cell_size must be an integer >= 1, got {self.cell_size!r}")
+        object.__setattr__(self, "depth_correct", bool(self.depth_correct))
+
+    def label_for(self, scene: Scene) -> str:
+        """The label with what the scene makes of the mode: wsr on a scene without trained view weights is an
+        approximation (v = 1); duplex names where its cells come from."""
+        label = self.label
+        if self.mode == Mode.WSR and scene.view_weight_sh is None and scene.neural is None:
+            label += " (approx.: v=1)"
+        elif self.mode == Mode.DUPLEX and scene.cells is None and scene.neural is None:
+            label += f" (built cells, K={self.cell_size})"
+        return label
 
     @property
     def label(self) -> str:
@@ -134,25 +163,75 @@ class Renderer(Protocol):
     def render(self, camera: Camera, settings: RenderSettings) -> Frame: ...
 
 
+def oit_params(scene: Scene, settings: RenderSettings) -> dict:
+    """sigma, weight_background, et_grade, depth_correct for the native call.
+
+    Trained values when the scene has them. Otherwise w_bg is chosen so that a lone faint splat of alpha a gets the
+    coverage alpha blending gives it, to first order in a: wsr's a / (a + w_bg) needs w_bg = 1; duplex's
+    (a/E) / (a/E + w_bg (1 - a/E)) needs w_bg = 1/E.
+    """
+    et = settings.et_grade if settings.et_grade is not None else (scene.et_grade or DEFAULT_ET_GRADE)
+    wbg = scene.weight_background
+    if wbg is None:
+        wbg = 1.0 / et if settings.mode == Mode.DUPLEX else 1.0
+    return {"sigma": scene.wsr_sigma or DEFAULT_SIGMA, "weight_background": float(wbg), "et_grade": float(et),
+            "depth_correct": settings.depth_correct}
+
+
+def view_scene(scene: Scene, camera: Camera) -> Scene:
+    """The splats to render for this view: the scene itself, or a trained Duplex-GS model decoded for the camera."""
+    return scene.neural.decode(camera) if scene.neural is not None else scene
+
+
+def _native_extra(scene: Scene, settings: RenderSettings) -> dict:
+    """Keyword arguments of the native render calls for wsr and duplex (view weights, cells, globals)."""
+    if settings.mode not in ORDER_INDEPENDENT:
+        return {}
+    extra = dict(oit_params(scene, settings), weight_sh=scene.view_weight_sh)
+    if settings.mode == Mode.DUPLEX:
+        from .cells import cells_for
+
+        cells = cells_for(scene, settings.cell_size)
+        extra.update(cell_means=cells.means, cell_scales=cells.scales, cell_quats=cells.quats,
+                     cell_offsets=cells.offsets, cell_members=cells.members)
+    return extra
+
+
 def _camera_args(camera: Camera) -> tuple:
     """Camera as the native modules take it: R (3x3), t, fx, fy, cx, cy, width, height, near."""
     return (np.ascontiguousarray(camera.R, np.float32), np.ascontiguousarray(camera.t, np.float32), camera.fx,
             camera.fy, camera.cx, camera.cy, camera.width, camera.height, camera.near)
 
 
-def _frame(out: dict, camera: Camera, settings: RenderSettings, backend: str, t0: float) -> Frame:
+def _frame(out: dict, camera: Camera, settings: RenderSettings, backend: str, t0: float,
+           scene: Scene | None = None) -> Frame:
     """A Frame from a native module's result dict (rgb, alpha, evals, window?, per-stage ms and counts)."""
     stats = {k: out[k] for k in ("preprocess_ms", "sort_ms", "blend_ms", "visible", "sort_length", "evaluations")}
     stats.update(
         total_ms=(time.perf_counter() - t0) * 1e3,
         evals_per_pixel=out["evaluations"] / (camera.width * camera.height),
         backend=backend,
-        mode=settings.label,
+        mode=settings.label if scene is None else settings.label_for(scene),
     )
+    stats.update(sort_stats(out, scene, settings))
     debug = {"evals": out["evals"]}
     if "window" in out:
         debug["window"] = out["window"]
     return Frame(out["rgb"], out["alpha"], stats, debug)
+
+
+def sort_stats(out: dict, scene: Scene | None, settings: RenderSettings) -> dict:
+    """pairs (tile-list entries blended), sort_bytes (sort_length keys of SORT_ENTRY_BYTES), and for duplex the
+    visible cells, all cells and the splat-tile pairs outside their cell's rectangle (cell_misses)."""
+    st = {"pairs": int(out.get("pairs", out["sort_length"])), "sort_bytes": int(out["sort_length"]) * SORT_ENTRY_BYTES}
+    if settings.mode == Mode.DUPLEX:
+        st["cells_visible"] = int(out.get("cells_visible", 0))
+        st["cell_misses"] = int(out.get("cell_misses", 0))
+        if scene is not None:
+            from .cells import cells_for
+
+            st["cells"] = cells_for(scene, settings.cell_size).num_cells
+    return st
 
 
 class CpuRenderer:
@@ -185,12 +264,18 @@ class CpuRenderer:
         if scene is None:
             raise RenderError("cpu renderer: upload(scene) before render()")
         t0 = time.perf_counter()
+        scene = view_scene(scene, camera)
+        decode_ms = (time.perf_counter() - t0) * 1e3
         out = self._native.render(
             scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d,
             *_camera_args(camera), int(settings.mode), settings.supersample, settings.sh_degree,
             np.asarray(settings.background, np.float32), settings.debug == "window", settings.threads,
+            **_native_extra(scene, settings),
         )
-        return _frame(out, camera, settings, self.name, t0)
+        frame = _frame(out, camera, settings, self.name, t0, scene)
+        if self._scene.neural is not None:
+            frame.stats["decode_ms"] = decode_ms
+        return frame
 
 
 class CudaRenderer:
@@ -271,9 +356,10 @@ def render(
     background: tuple[float, float, float] = (0.0, 0.0, 0.0),
     sh_degree: int = 3,
     debug: str = "none",
+    **options,
 ) -> Frame:
-    """Render `scene` from `camera` in `mode` on `backend`."""
-    settings = RenderSettings(Mode.parse(mode), supersample, tuple(background), sh_degree, debug)
+    """Render `scene` from `camera` in `mode` on `backend`; `options`: depth_correct, et_grade, cell_size, threads."""
+    settings = RenderSettings(Mode.parse(mode), supersample, tuple(background), sh_degree, debug, **options)
     return get_renderer(scene, backend).render(camera, settings)
 
 

@@ -28,6 +28,13 @@ class Scene:
     means (N,3), scales (N,3), quats (N,4) as (w,x,y,z), opacities (N,), sh (N,K,3) with DC first,
     optional filter_3d (N,) (Mip-Splatting's 3D filter, applied by every renderer mode).
     `meta` holds loader facts (format, version, property names) for `gbviewer info`.
+
+    Optional data of the order-independent modes (KERNELS.md §7-8), None for ordinary scenes:
+    view_weight_sh (N,K) the sort-free view weight v_i as a raw 1-channel SH (f_do_0, f_ro_*; wsr and duplex
+    multiply the opacity by it); wsr_sigma and weight_background, the trained globals (ply `info` rows); et_grade,
+    a trained Duplex-GS E; cells, the scene's own Duplex-GS cells (`gbviewer.cells.Cells`); neural, a trained
+    Duplex-GS model whose splats are decoded per view (`gbviewer.io.duplex.DuplexModel`; the splat arrays then
+    only hold the view-independent centres, for bounds and framing).
     """
 
     means: np.ndarray
@@ -38,6 +45,12 @@ class Scene:
     filter_3d: np.ndarray | None = None
     source: str = "<arrays>"
     meta: dict[str, Any] = field(default_factory=dict)
+    view_weight_sh: np.ndarray | None = None
+    wsr_sigma: float | None = None
+    weight_background: float | None = None
+    et_grade: float | None = None
+    cells: Any = None
+    neural: Any = None
 
     @property
     def num_splats(self) -> int:
@@ -68,6 +81,12 @@ class Scene:
         filter_3d: np.ndarray | None = None,
         source: str = "<arrays>",
         meta: dict[str, Any] | None = None,
+        view_weight_sh: np.ndarray | None = None,
+        wsr_sigma: float | None = None,
+        weight_background: float | None = None,
+        et_grade: float | None = None,
+        cells: Any = None,
+        neural: Any = None,
     ) -> "Scene":
         """Validate activated arrays, drop non-finite splats (warning once), normalise quaternions."""
         arrays = {
@@ -79,6 +98,9 @@ class Scene:
         }
         if filter_3d is not None:
             arrays["filter_3d"] = np.asarray(filter_3d, dtype=np.float32).reshape(-1)
+        if view_weight_sh is not None:
+            vw = np.asarray(view_weight_sh, dtype=np.float32)
+            arrays["view_weight_sh"] = vw.reshape(len(vw), -1) if vw.ndim != 2 else vw
         if arrays["sh"].ndim == 2:
             arrays["sh"] = arrays["sh"][:, None, :]
         n = arrays["means"].shape[0] if arrays["means"].ndim == 2 else -1
@@ -90,6 +112,15 @@ class Scene:
         if sh_arr.ndim != 3 or sh_arr.shape[0] != n or sh_arr.shape[2] != 3:
             raise GBViewerError(f"{source}: field 'sh': shape {sh_arr.shape}, expected ({n}, K, 3)")
         sh_degree_for(sh_arr.shape[1])
+        if "view_weight_sh" in arrays:
+            vw = arrays["view_weight_sh"]
+            if vw.shape[0] != n:
+                raise GBViewerError(f"{source}: field 'view_weight_sh': shape {vw.shape}, expected ({n}, K)")
+            sh_degree_for(vw.shape[1])
+        for name, val in (("wsr_sigma", wsr_sigma), ("weight_background", weight_background), ("et_grade", et_grade)):
+            if val is not None and not (np.isfinite(val) and (val >= 0 if name == "weight_background" else val > 0)):
+                raise GBViewerError(f"{source}: {name} = {val!r}; expected a finite number "
+                                    + (">= 0" if name == "weight_background" else "> 0"))
         if n == 0:
             raise GBViewerError(f"{source}: the scene has zero splats")
 
@@ -105,6 +136,12 @@ class Scene:
             arrays = {k: v[finite] for k, v in arrays.items()}
             if dropped == n:
                 raise GBViewerError(f"{source}: every splat has non-finite values")
+            if cells is not None:  # renumber the members, drop the removed splats from their cells
+                cell_of = np.full(n, -1, np.int64)
+                cell_of[cells.members] = np.repeat(np.arange(cells.num_cells), cells.sizes)
+                cell_of = cell_of[finite]
+                cells = type(cells).from_groups(cells.means, cells.scales, cells.quats, cell_of, cells.origin,
+                                                cells.build_ms, cells.info)
 
         if (arrays["scales"] < 0).any():
             raise GBViewerError(f"{source}: field 'scales': negative values; expected activated scales >= 0")
@@ -120,4 +157,9 @@ class Scene:
         if "filter_3d" in arrays:
             arrays["filter_3d"] = np.abs(arrays["filter_3d"])
         arrays = {k: np.ascontiguousarray(v) for k, v in arrays.items()}
-        return cls(source=source, meta=dict(meta or {}), **arrays)
+        if cells is not None:
+            if len(cells.members) and (cells.members.min() < 0 or cells.members.max() >= len(arrays["means"])):
+                raise GBViewerError(f"{source}: field 'cells': member indices outside 0..{len(arrays['means']) - 1}")
+        globals_ = {"wsr_sigma": wsr_sigma, "weight_background": weight_background, "et_grade": et_grade}
+        globals_ = {k: None if v is None else float(v) for k, v in globals_.items()}
+        return cls(source=source, meta=dict(meta or {}), cells=cells, neural=neural, **globals_, **arrays)

@@ -11,8 +11,9 @@
 // the output pixel in `accum` (load_accum / store_accum); the dispatch that ends with store_accum == 0 writes
 // the image.
 //
-// Compiled once per mode and sampling: the driver defines BLEND_MODE_<MODE> (SCALAR, MIP, ANALYTIC or
-// GAUSSIAN_BLENDING) and SUPERSAMPLED (0 or 1).
+// Compiled once per mode and sampling: the driver defines BLEND_MODE_<MODE> (SCALAR, MIP, ANALYTIC,
+// GAUSSIAN_BLENDING, WSR or DUPLEX) and SUPERSAMPLED (0 or 1). wsr walks index-ordered lists with no early
+// termination; duplex walks cell-sorted lists, reads each splat's cell from `cell_of` and uses `oit`.
 #include "common.glsl"
 #include "mathf.glsl"
 #include "blend.glsl"
@@ -26,6 +27,7 @@ layout(std430, binding = 3) writeonly buffer EvalsOut { int evals_out[]; };
 layout(std430, binding = 4) writeonly buffer WindowOut { vec2 window_out[]; };
 layout(std430, binding = 5) buffer State { vec4 state[]; };  // 3 per invocation: C, T; window xy, wh; evals, done
 layout(std430, binding = 6) buffer Accum { vec4 accum[]; };  // 2 per invocation: rgba sum; window sum, evals sum
+layout(std430, binding = 7) readonly buffer CellOf { int cell_of[]; };  // duplex: each splat's cell
 layout(rgba32f, binding = 0) uniform writeonly image2D out_image;  // rgb, alpha = 1 - T; row 0 = image top
 
 uniform ivec2 out_size;
@@ -41,6 +43,7 @@ uniform int load_state;
 uniform int store_state;
 uniform int load_accum;
 uniform int store_accum;
+uniform vec4 oit;  // sigma, weight_background, et_grade, depth_correct
 
 shared Splat2D batch[256];
 shared int done_count;
@@ -79,6 +82,10 @@ void main() {
         const vec2 pix = vec2(rpix) + 0.5;
 #if defined(BLEND_MODE_GAUSSIAN_BLENDING)
         TransmittanceWindow win = TransmittanceWindow(1.0, pix, vec2(1.0, 1.0));
+#elif defined(BLEND_MODE_WSR)
+        WsrSums acc_wsr = WsrSums(vec3(0.0), 0.0);
+#elif defined(BLEND_MODE_DUPLEX)
+        DuplexState dst = DuplexState(1.0, 1.0, -1, 0.0, vec3(0.0));
 #else
         float T = 1.0;
 #endif
@@ -89,6 +96,10 @@ void main() {
             C = s0.xyz;
 #if defined(BLEND_MODE_GAUSSIAN_BLENDING)
             win = TransmittanceWindow(s0.w, s1.xy, s1.zw);
+#elif defined(BLEND_MODE_WSR)
+            acc_wsr = WsrSums(s0.xyz, s0.w);
+#elif defined(BLEND_MODE_DUPLEX)
+            dst = DuplexState(s0.w, s1.x, floatBitsToInt(s1.z), s1.y, s0.xyz);
 #else
             T = s0.w;
 #endif
@@ -110,6 +121,9 @@ void main() {
                 const uint s = tile_vals[range.x + uint(start + lid)];
                 batch[lid] = unpack_splat(splats[4u * s], splats[4u * s + 1u], splats[4u * s + 2u],
                                           splats[4u * s + 3u]);
+#if defined(BLEND_MODE_DUPLEX)
+                batch[lid].cell = cell_of[s];
+#endif
             }
             memoryBarrierShared();
             barrier();  // batch loaded; nobody changes done_count before everyone has read it
@@ -120,6 +134,10 @@ void main() {
                     ++evals;
 #if defined(BLEND_MODE_GAUSSIAN_BLENDING)
                     const bool finished = blend_gaussian(batch[j], win, C);
+#elif defined(BLEND_MODE_WSR)
+                    const bool finished = blend_wsr(batch[j], pix, acc_wsr);
+#elif defined(BLEND_MODE_DUPLEX)
+                    const bool finished = blend_duplex(batch[j], pix, oit.z, dst);
 #elif defined(BLEND_MODE_ANALYTIC)
                     const bool finished = blend_analytic(batch[j], pix, T, C);
 #else
@@ -134,20 +152,39 @@ void main() {
             }
         }
 #if defined(BLEND_MODE_GAUSSIAN_BLENDING)
-        const float T_final = win.T;
+        float T_final = win.T;
         const vec2 wh = win.wh;
         const vec2 wxy = win.xy;
+#elif defined(BLEND_MODE_WSR)
+        float T_final = acc_wsr.S;
+        C = acc_wsr.C;
+        const vec2 wh = vec2(1.0, 1.0);
+        const vec2 wxy = pix;
+#elif defined(BLEND_MODE_DUPLEX)
+        float T_final = dst.T;
+        C = dst.C;
+        const vec2 wh = vec2(1.0, 1.0);
+        const vec2 wxy = vec2(dst.T_cell, dst.S);
 #else
-        const float T_final = T;
+        float T_final = T;
         const vec2 wh = vec2(1.0, 1.0);
         const vec2 wxy = pix;
 #endif
         if (store_state != 0) {  // more of this tile's list follows in a later dispatch
             state[3u * slot] = vec4(C, T_final);
+#if defined(BLEND_MODE_DUPLEX)
+            state[3u * slot + 1u] = vec4(wxy, intBitsToFloat(dst.cell), 0.0);
+#else
             state[3u * slot + 1u] = vec4(wxy, wh);
+#endif
             state[3u * slot + 2u] = vec4(intBitsToFloat(evals), done ? 1.0 : 0.0, 0.0, 0.0);
             continue;  // store_state is uniform, and the driver then gives this dispatch one render tile
         }
+#if defined(BLEND_MODE_WSR)
+        resolve_weighted(acc_wsr.C, acc_wsr.S, oit.y, 1.0, C, T_final);
+#elif defined(BLEND_MODE_DUPLEX)
+        resolve_weighted(dst.C, dst.S, dst.T < DUPLEX_T_STOP ? 0.0 : oit.y, dst.T, C, T_final);
+#endif
         const vec4 rgba = vec4(C + T_final * background, 1.0 - T_final);
 #if SUPERSAMPLED
         sample_rgba[lid] = rgba;

@@ -134,3 +134,67 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
     win.wh = aligned ? vec2(wu, wv) : vec2(wv, wu);
     return win.T < T_STOP;
 }
+
+// ---- order-independent modes ------------------------------------------------------------------------------------
+
+// LC-WSR sums for one pixel. The C++ keeps them in 64-bit fixed point (bitwise order independent); GLSL 4.30 core
+// has no 64-bit integers, so here they are float sums in tile-list order (splat-index order).
+struct WsrSums {
+    vec3 C;
+    float S;
+};
+
+// `wsr`: sort-free weighted sum (KERNELS.md §7.2): alpha = o' exp(power), no 0.99 clamp, skipped below 1/255,
+// C += c alpha, S += alpha; no transmittance and no early termination (never returns true).
+bool blend_wsr(Splat2D s, vec2 pix, inout WsrSums acc) {
+    const vec2 d = s.xy - pix;
+    const float power = -0.5 * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
+    if (power > 0.0 || power < s.log_min_alpha) return false;
+    const float alpha = s.opacity * expf(power);
+    if (alpha < MIN_ALPHA_3DGS) return false;
+    acc.C[0] += s.color[0] * alpha;
+    acc.C[1] += s.color[1] * alpha;
+    acc.C[2] += s.color[2] * alpha;
+    acc.S += alpha;
+    return false;
+}
+
+// Duplex-GS per-pixel state (KERNELS.md §8.4): T = cummult, T_cell = T when the current cell was entered, the sums.
+struct DuplexState {
+    float T;
+    float T_cell;
+    int cell;
+    float S;
+    vec3 C;
+};
+
+// `duplex`: one splat of a cell-sorted list; see blend.h.
+bool blend_duplex(Splat2D s, vec2 pix, float et_grade, inout DuplexState st) {
+    const vec2 d = s.xy - pix;
+    if (d.x * d.x + d.y * d.y > s.radius * s.radius) return false;
+    const float power = -0.5 * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
+    if (power > 0.0 || power < s.log_min_alpha) return false;
+    float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
+    if (alpha < MIN_ALPHA_3DGS) return false;
+    if (s.cell != st.cell) {
+        if (st.T < DUPLEX_T_STOP) return true;
+        st.cell = s.cell;
+        st.T_cell = st.T;
+    }
+    alpha = alpha / et_grade;
+    st.T *= 1.0 - alpha;
+    const float w = alpha * st.T_cell;
+    st.C[0] += s.color[0] * w;
+    st.C[1] += s.color[1] * w;
+    st.C[2] += s.color[2] * w;
+    st.S += w;
+    return false;
+}
+
+// out = (C + bg w_bg) / (S + w_bg T_bg) as C' + T' bg: C' = C / total, T' = w_bg / total (see blend.h).
+void resolve_weighted(vec3 C, float S, float wbg, float T_bg, out vec3 out_C, out float out_T) {
+    float total = S + wbg * T_bg;
+    if (total == 0.0) total = WSR_EMPTY_SUM;
+    for (int c = 0; c < 3; ++c) out_C[c] = C[c] / total;
+    out_T = wbg / total;
+}

@@ -7,6 +7,8 @@ const int SCALAR = 0;
 const int MIP = 1;
 const int ANALYTIC = 2;
 const int GAUSSIAN_BLENDING = 3;
+const int WSR = 4;
+const int DUPLEX = 5;
 
 const int TILE = 16;                       // BLOCK_X = BLOCK_Y (KERNELS.md §0.4)
 const float DILATION_3DGS = 0.3;           // +0.3 px^2, no compensation (§0.3)
@@ -21,6 +23,11 @@ const float GB_MIN_UV_DIFF = 0.1;          // window narrower than 0.1 sigma -> 
 const float GB_MAX_UV_DIFF = 1e6;
 const float GB_MIN_VAR = 0.001;            // window variance floor
 const float SQRT_PI_2 = 1.2533141373155003;
+const float WSR_EMPTY_SUM = 1e-4;          // LC-WSR: a weight sum of exactly 0 becomes 1e-4 (§7.2)
+const float WSR_FIXED_SCALE = 68719476736.0;  // 2^36: the CPU's fixed-point sums (unused here: GLSL sums in float)
+const float WSR_FIXED_MAX = 67108864.0;    // 2^26
+const float DUPLEX_CELL_SIGMAS = 2.0;      // cell radius ceil(2 sqrt(lambda1)) (§8.3)
+const float DUPLEX_T_STOP = 0.01;          // CUMMULT_THRESHOLD: cell-level early termination (§8.1)
 const float TWO_PI = 6.283185307179586;
 
 float clampf(float v, float lo, float hi) { return min(max(v, lo), hi); }
@@ -52,6 +59,17 @@ struct Splat2D {
     float sigma1, sigma2;  // sqrt of the eigenvalues of the 2D covariance
     float inv_sigma1, inv_sigma2;
     float log_min_alpha;   // ln(min_alpha / opacity): lowest log-Gaussian value that can give a visible alpha
+    float radius;    // screen-space bounding radius in pixels (duplex rejects pixels outside this circle)
+    int cell;        // index of the splat's cell (duplex), -1 otherwise
+};
+
+// Globals of the order-independent modes (wsr, duplex): LC-WSR's depth correction max(0, 1 - z/sigma) when
+// depth_correct is 1, the background weight w_bg, and Duplex-GS's ET_grade E (alpha / E inside cells).
+struct OitParams {
+    float sigma;
+    float weight_background;
+    float et_grade;
+    int depth_correct;
 };
 
 // Tile rectangle [x0, x1) x [y0, y1) in tile units.

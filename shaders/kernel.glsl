@@ -7,13 +7,14 @@
 // past their work return before any barrier, for the whole group at once.
 uint group_index() { return gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x; }
 
-// vec4 0: xy, depth, opacity; 1: conic, sigma1; 2: color, sigma2; 3: v1, log_min_alpha, unused. inv_sigma1/2 are
+// vec4 0: xy, depth, opacity; 1: conic, sigma1; 2: color, sigma2; 3: v1, log_min_alpha, radius. inv_sigma1/2 are
 // not stored (64 bytes per splat instead of 80): unpacking recomputes them with the same division as preprocess.
+// `cell` is not stored either: duplex reads it from the scene's per-splat cell buffer (unpack gives -1).
 void pack_splat(Splat2D s, out vec4 p0, out vec4 p1, out vec4 p2, out vec4 p3) {
     p0 = vec4(s.xy, s.depth, s.opacity);
     p1 = vec4(s.conic, s.sigma1);
     p2 = vec4(s.color, s.sigma2);
-    p3 = vec4(s.v1, s.log_min_alpha, 0.0);
+    p3 = vec4(s.v1, s.log_min_alpha, s.radius);
 }
 
 Splat2D unpack_splat(vec4 p0, vec4 p1, vec4 p2, vec4 p3) {
@@ -29,6 +30,8 @@ Splat2D unpack_splat(vec4 p0, vec4 p1, vec4 p2, vec4 p3) {
     s.inv_sigma2 = 1.0 / s.sigma2;
     s.v1 = p3.xy;
     s.log_min_alpha = p3.z;
+    s.radius = p3.w;
+    s.cell = -1;
     return s;
 }
 
@@ -39,3 +42,9 @@ const int TOTAL_DEPTH_MIN = 2;  // min / max bits of the visible depths (positiv
 const int TOTAL_DEPTH_MAX = 3;
 const int TOTAL_OVERFLOW = 4;   // set when TOTAL_PAIRS wrapped past 2^32
 const int TOTAL_MAX_LIST = 5;   // longest tile list (list_max.comp)
+const int TOTAL_CELL_PAIRS = 6;      // duplex: tile-cell pairs
+const int TOTAL_CELL_DEPTH_MIN = 7;  // duplex: min / max bits of the visible cells' depths
+const int TOTAL_CELL_DEPTH_MAX = 8;
+const int TOTAL_CELLS = 9;           // duplex: visible cells (scan of their flags)
+const int TOTAL_EXPANDED = 10;       // duplex: entries of the expanded tile lists (splats)
+const int TOTAL_CELL_SPLATS = 11;    // duplex: visible splats of the visible cells

@@ -13,6 +13,7 @@ layout(std430, binding = 2) writeonly buffer Splats { vec4 splats[]; };
 layout(std430, binding = 3) writeonly buffer Rects { ivec4 rects[]; };
 layout(std430, binding = 4) writeonly buffer Flags { uint flags[]; };
 layout(std430, binding = 5) buffer Totals { uint totals[]; };
+layout(std430, binding = 6) readonly buffer WeightSh { float weight_sh[]; };  // per splat: weight_k floats
 
 uniform uint num_splats;
 uniform int sh_k;    // SH coefficients per channel stored in the scene
@@ -24,10 +25,14 @@ uniform float cam_t[3];
 uniform vec4 cam_f;  // fx, fy, cx, cy
 uniform ivec2 cam_size;
 uniform float cam_near;
+uniform int weight_k;  // view-weight SH coefficients per splat, 0: none (v = 1)
+uniform vec4 oit;      // sigma, weight_background, et_grade, depth_correct (wsr, duplex)
 
 float load_sh(uint splat, int coeff, int channel) {
     return sh_data[splat * uint(3 * sh_k) + uint(coeff * 3 + channel)];
 }
+
+float load_weight_sh(uint splat, int coeff) { return weight_sh[splat * uint(weight_k) + uint(coeff)]; }
 
 void main() {
     const uint i = group_index() * 256u + gl_LocalInvocationID.x;
@@ -35,10 +40,12 @@ void main() {
     const CameraParams cam = make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y,
                                          cam_near);
     const vec4 g0 = geom[3u * i], g1 = geom[3u * i + 1u], g2 = geom[3u * i + 2u];
-    const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, g0.w, i, g1.w);
+    const int weight_deg = weight_k >= 16 ? 3 : weight_k >= 9 ? 2 : weight_k >= 4 ? 1 : 0;
+    const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, g0.w, i, g1.w, weight_k > 0, weight_deg, -1);
+    const OitParams params = OitParams(oit.x, oit.y, oit.z, int(oit.w));
     Splat2D s;
     TileRect r;
-    const bool valid = preprocess_splat(in_, sh_deg, cam, mode, grid.x, grid.y, s, r);
+    const bool valid = preprocess_splat(in_, sh_deg, cam, mode, params, grid.x, grid.y, s, r);
     flags[i] = valid ? 1u : 0u;
     if (!valid) {
         rects[i] = ivec4(0);

@@ -13,44 +13,54 @@ const float SH_C3_0 = -0.5900435899266435, SH_C3_1 = 2.890611442640554, SH_C3_2 
             SH_C3_6 = -0.5900435899266435;
 
 float load_sh(uint splat, int coeff, int channel);
+float load_weight_sh(uint splat, int coeff);  // the scene's view-weight SH (wsr, duplex); only read when present
+
+// Real SH basis of degree `deg` (0..3) at the unit direction `dir`, in the 3DGS order and signs; returns the number
+// of coefficients used, (deg + 1)^2.
+int sh_basis(int deg, vec3 dir, out float basis[16]) {
+    const float x = dir.x, y = dir.y, z = dir.z;
+    basis[0] = SH_C0;
+    if (deg < 1) return 1;
+    basis[1] = -SH_C1 * y;
+    basis[2] = SH_C1 * z;
+    basis[3] = -SH_C1 * x;
+    if (deg < 2) return 4;
+    const float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
+    basis[4] = SH_C2_0 * xy;
+    basis[5] = SH_C2_1 * yz;
+    basis[6] = SH_C2_2 * (2.0 * zz - xx - yy);
+    basis[7] = SH_C2_3 * xz;
+    basis[8] = SH_C2_4 * (xx - yy);
+    if (deg < 3) return 9;
+    basis[9] = SH_C3_0 * y * (3.0 * xx - yy);
+    basis[10] = SH_C3_1 * xy * z;
+    basis[11] = SH_C3_2 * y * (4.0 * zz - xx - yy);
+    basis[12] = SH_C3_3 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
+    basis[13] = SH_C3_4 * x * (4.0 * zz - xx - yy);
+    basis[14] = SH_C3_5 * z * (xx - yy);
+    basis[15] = SH_C3_6 * x * (xx - 3.0 * yy);
+    return 16;
+}
 
 // View-dependent colour from SH coefficients (DC first), as computeColorFromSH: +0.5 offset, clamped at 0 from
 // below only. `splat` selects the coefficients (C++: a pointer to them).
 void sh_to_rgb(uint splat, int deg, vec3 dir, out vec3 result) {
-    const float x = dir.x, y = dir.y, z = dir.z;
     float basis[16];
-    basis[0] = SH_C0;
-    int k = 1;
-    if (deg > 0) {
-        basis[1] = -SH_C1 * y;
-        basis[2] = SH_C1 * z;
-        basis[3] = -SH_C1 * x;
-        k = 4;
-        if (deg > 1) {
-            const float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
-            basis[4] = SH_C2_0 * xy;
-            basis[5] = SH_C2_1 * yz;
-            basis[6] = SH_C2_2 * (2.0 * zz - xx - yy);
-            basis[7] = SH_C2_3 * xz;
-            basis[8] = SH_C2_4 * (xx - yy);
-            k = 9;
-            if (deg > 2) {
-                basis[9] = SH_C3_0 * y * (3.0 * xx - yy);
-                basis[10] = SH_C3_1 * xy * z;
-                basis[11] = SH_C3_2 * y * (4.0 * zz - xx - yy);
-                basis[12] = SH_C3_3 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
-                basis[13] = SH_C3_4 * x * (4.0 * zz - xx - yy);
-                basis[14] = SH_C3_5 * z * (xx - yy);
-                basis[15] = SH_C3_6 * x * (xx - 3.0 * yy);
-                k = 16;
-            }
-        }
-    }
+    const int k = sh_basis(deg, dir, basis);
     for (int c = 0; c < 3; ++c) {
         float v = 0.5;
         for (int i = 0; i < k; ++i) v += basis[i] * load_sh(splat, i, c);
         result[c] = max(v, 0.0);
     }
+}
+
+// Sort-free GS's view-dependent weight v_i (KERNELS.md §7.3): the raw sum of a 1-channel SH (no +0.5, no clamp).
+float sh_to_weight(uint splat, int deg, vec3 dir) {
+    float basis[16];
+    const int k = sh_basis(deg, dir, basis);
+    float v = 0.0;
+    for (int i = 0; i < k; ++i) v += basis[i] * load_weight_sh(splat, i);
+    return v;
 }
 
 // 3D covariance Sigma = R S S^T R^T (upper triangle: xx, xy, xz, yy, yz, zz) from a unit (w,x,y,z) quaternion and
@@ -141,11 +151,14 @@ struct SplatIn {
     float opacity;
     uint index;
     float filter_3d;  // 0 when the scene has none
+    bool has_weight;  // the scene has view-weight SH (C++: weight_sh != null)
+    int weight_deg;
+    int cell;         // the splat's cell (duplex), -1 when none
 };
 
 // Preprocess one splat for `mode`; returns false when it is culled (behind the near plane, degenerate, invisible,
-// or touching no tile).
-bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, int grid_x, int grid_y,
+// or touching no tile). wsr and duplex fold the view weight and the optional depth correction into the opacity.
+bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitParams oit, int grid_x, int grid_y,
                       out Splat2D result, out TileRect rect) {
     rect = TileRect(0, 0, 0, 0);
     const vec3 m = in_.mean;
@@ -153,6 +166,9 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, int g
     for (int i = 0; i < 3; ++i)
         pv[i] = cam.R[i * 3] * m[0] + cam.R[i * 3 + 1] * m[1] + cam.R[i * 3 + 2] * m[2] + cam.t[i];
     if (!(pv[2] > cam.near_plane)) return false;
+    vec3 dir = vec3(m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]);
+    const float dn = sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
+    dir = dn > 0.0 ? vec3(dir.x / dn, dir.y / dn, dir.z / dn) : vec3(0.0, 0.0, 1.0);
 
     // Mip-Splatting 3D filter (applied in every mode when present): scales grow, opacity compensates.
     vec3 s;
@@ -190,6 +206,17 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, int g
     } else if (mode == GAUSSIAN_BLENDING) {
         sigmas = RADIUS_SIGMAS_GB;
         min_alpha = MIN_ALPHA_GB;
+    } else if (mode == WSR || mode == DUPLEX) {
+        cov[0] += DILATION_3DGS;
+        cov[2] += DILATION_3DGS;
+        float w = in_.has_weight ? sh_to_weight(in_.index, sh_deg < in_.weight_deg ? sh_deg : in_.weight_deg, dir)
+                                 : 1.0;
+        if (oit.depth_correct != 0) {
+            if (!(pv[2] < oit.sigma)) return false;
+            w *= 1.0 - pv[2] / oit.sigma;
+        }
+        if (!(w > 0.0)) return false;
+        opacity *= w;
     }
     if (!(opacity >= min_alpha)) return false;  // alpha = opacity * g <= opacity would be skipped anyway
 
@@ -214,10 +241,51 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, int g
     eigen_2d(cov[0], cov[1], cov[2], det, result.sigma1, result.sigma2, result.v1);
     result.inv_sigma1 = 1.0 / result.sigma1;
     result.inv_sigma2 = 1.0 / result.sigma2;
-
-    vec3 dir = vec3(m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]);
-    const float dn = sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
-    dir = dn > 0.0 ? vec3(dir.x / dn, dir.y / dn, dir.z / dn) : vec3(0.0, 0.0, 1.0);
+    result.radius = r;
+    result.cell = in_.cell;
     sh_to_rgb(in_.index, sh_deg, dir, result.color);
+    return true;
+}
+
+// A Duplex-GS cell: an ellipsoid (centre, scales, unit (w,x,y,z) rotation) that covers its splats.
+struct CellIn {
+    vec3 mean;
+    vec3 scale;
+    vec4 quat;
+};
+
+// Screen-space proxy of a cell: position, view-space depth (the sort key) and radius.
+struct Cell2D {
+    vec2 xy;
+    float depth;
+    float radius;
+};
+
+// Project a cell as Duplex-GS's preprocessCUDA_anchor does (KERNELS.md §8.3): near cull, EWA projection with the
+// +0.3 dilation, radius ceil(2 sqrt(lambda1)), tile rectangle; false when culled.
+bool preprocess_cell(CellIn in_, CameraParams cam, int grid_x, int grid_y, out Cell2D result, out TileRect rect) {
+    rect = TileRect(0, 0, 0, 0);
+    const vec3 m = in_.mean;
+    vec3 pv;
+    for (int i = 0; i < 3; ++i)
+        pv[i] = cam.R[i * 3] * m[0] + cam.R[i * 3 + 1] * m[1] + cam.R[i * 3 + 2] * m[2] + cam.t[i];
+    if (!(pv[2] > cam.near_plane)) return false;
+    float cov3[6];
+    vec3 cov;
+    covariance_3d(in_.quat, in_.scale, cov3);
+    project_covariance(cam, cov3, pv, cov);
+    cov[0] += DILATION_3DGS;
+    cov[2] += DILATION_3DGS;
+    const float det = cov[0] * cov[2] - cov[1] * cov[1];
+    if (!(det > 0.0) || !finitef(det)) return false;
+    const float px = cam.fx * pv[0] / pv[2] + cam.cx;
+    const float py = cam.fy * pv[1] / pv[2] + cam.cy;
+    const float r = splat_radius(cov[0], cov[2], det, DUPLEX_CELL_SIGMAS);
+    if (!finitef(px) || !finitef(py) || !finitef(r)) return false;
+    rect = tile_rect(vec2(px, py), r, grid_x, grid_y);
+    if (rect.x1 <= rect.x0 || rect.y1 <= rect.y0) return false;
+    result.xy = vec2(px, py);
+    result.depth = pv[2];
+    result.radius = r;
     return true;
 }

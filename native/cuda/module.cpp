@@ -32,7 +32,8 @@ CameraParams scaled_camera(FArr R, FArr t, float fx, float fy, float cx, float c
 }
 
 Mode check_mode(int mode) {
-    if (mode < SCALAR || mode > GAUSSIAN_BLENDING) throw std::invalid_argument("render: unknown mode");
+    if (mode < SCALAR || mode > GAUSSIAN_BLENDING)
+        throw std::invalid_argument("render: unknown mode (the CUDA backend does not have wsr and duplex yet)");
     return (Mode)mode;
 }
 

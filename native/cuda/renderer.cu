@@ -58,10 +58,11 @@ __global__ void preprocess_kernel(int64_t n, const float* means, const float* sc
     const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     if (i >= n) return;
     SplatIn in{means + 3 * i, scales + 3 * i, quats + 4 * i, opacities[i], sh + (size_t)k * 3 * i,
-               filter_3d ? filter_3d[i] : 0.0f};
+               filter_3d ? filter_3d[i] : 0.0f, nullptr, 0, -1};
     TileRect r;
     uint32_t count = 0;
-    if (preprocess_splat(in, sh_deg, cam, mode, gx, gy, &splats[i], &r)) {
+    const OitParams oit{10.0f, 1.0f, 4.0f, 0};
+    if (preprocess_splat(in, sh_deg, cam, mode, oit, gx, gy, &splats[i], &r)) {
         count = (uint32_t)((r.x1 - r.x0) * (r.y1 - r.y0));
         rects[i] = r;
         atomicAdd(visible, 1ull);

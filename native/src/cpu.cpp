@@ -29,6 +29,13 @@ struct SceneView {
     const float *means, *scales, *quats, *opacities, *sh, *filter_3d;
     int64_t n;
     int k;  // SH coefficients per channel
+    const float* weight_sh = nullptr;  // (n, weight_k) sort-free view-weight SH, or null
+    int weight_k = 0;
+    // Duplex cells: cell c holds the splats members[offsets[c] .. offsets[c+1]); cell_of[i] is splat i's cell.
+    const float *cell_means = nullptr, *cell_scales = nullptr, *cell_quats = nullptr;
+    const int32_t *cell_offsets = nullptr, *cell_members = nullptr;
+    int64_t m = 0;
+    std::vector<int32_t> cell_of;
 };
 
 struct Image {
@@ -48,32 +55,40 @@ struct Image {
 
 struct Stats {
     double preprocess_ms = 0, sort_ms = 0, blend_ms = 0;
-    int64_t visible = 0, sort_length = 0, evaluations = 0;
+    // sort_length: keys ordered by depth (tile-splat pairs; 0 for wsr, whose tile lists are only binned;
+    // tile-cell pairs for duplex); pairs: entries of the tile lists that the blend walks.
+    int64_t visible = 0, sort_length = 0, pairs = 0, evaluations = 0;
+    // duplex: visible cells, and tile-splat pairs of the splats' own rectangles outside their cell's rectangle
+    // (pixels there miss the splat: the cell ellipsoid does not cover it on screen).
+    int64_t cells_visible = 0, cell_misses = 0;
 };
 
-// Render one image at the camera's resolution, one sample per pixel.
-void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, int sh_deg, const float bg[3],
-                  Image& img, Stats& st) {
-    const int W = cam.width, H = cam.height;
-    const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE;
-    const int num_tiles = gx * gy;
-    const int64_t n = sc.n;
+int sh_degree_of(int k) { return k >= 16 ? 3 : k >= 9 ? 2 : k >= 4 ? 1 : 0; }
 
-    auto t0 = Clock::now();
-    std::vector<Splat2D> splats(n);
-    std::vector<TileRect> rects(n);
-    std::vector<uint8_t> valid(n);
-#pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < n; ++i) {
-        SplatIn in{sc.means + 3 * i, sc.scales + 3 * i, sc.quats + 4 * i, sc.opacities[i],
-                   sc.sh + (size_t)sc.k * 3 * i, sc.filter_3d ? sc.filter_3d[i] : 0.0f};
-        valid[i] = preprocess_splat(in, sh_deg, cam, mode, gx, gy, &splats[i], &rects[i]);
+// Total order on a preprocessed splat's fields (depth first): a canonical order for the members of a cell that
+// does not depend on the order the scene lists them in. Identical keys mean identical splats for the blend.
+bool splat_less(const Splat2D& a, const Splat2D& b) {
+    const float ka[12] = {a.depth, a.xy.x, a.xy.y, a.opacity, a.conic[0], a.conic[1], a.conic[2],
+                          a.color[0], a.color[1], a.color[2], a.radius, a.log_min_alpha};
+    const float kb[12] = {b.depth, b.xy.x, b.xy.y, b.opacity, b.conic[0], b.conic[1], b.conic[2],
+                          b.color[0], b.color[1], b.color[2], b.radius, b.log_min_alpha};
+    for (int i = 0; i < 12; ++i) {
+        uint32_t ua, ub;
+        std::memcpy(&ua, &ka[i], 4);
+        std::memcpy(&ub, &kb[i], 4);
+        if (ua != ub) return ua < ub;
     }
-    st.preprocess_ms += ms_since(t0);
+    return false;
+}
 
-    // Binning: count per tile, prefix sum, scatter splat ids, then sort each tile's list by depth.
-    t0 = Clock::now();
-    std::vector<int64_t> tile_start(num_tiles + 1, 0);
+// Binning of splats: count per tile, prefix sum, scatter (depth bits, splat id) keys in splat order, then (when
+// `sort`) sort each tile's list by depth; wsr keeps the splat order.
+void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>& rects,
+                const std::vector<uint8_t>& valid, int gx, bool sort, std::vector<int64_t>& tile_start,
+                std::vector<uint64_t>& keys, Stats& st) {
+    const int num_tiles = (int)tile_start.size() - 1;
+    const int64_t n = (int64_t)splats.size();
+    auto t0 = Clock::now();
     int64_t visible = 0;
     for (int64_t i = 0; i < n; ++i) {
         if (!valid[i]) continue;
@@ -84,7 +99,7 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, int s
     }
     for (int t = 0; t < num_tiles; ++t) tile_start[t + 1] += tile_start[t];
     const int64_t total = tile_start[num_tiles];
-    std::vector<uint64_t> keys(total);
+    keys.resize(total);
     {
         std::vector<int64_t> cursor(tile_start.begin(), tile_start.end() - 1);
         for (int64_t i = 0; i < n; ++i) {
@@ -97,14 +112,118 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, int s
                 for (int tx = r.x0; tx < r.x1; ++tx) keys[cursor[ty * gx + tx]++] = key;
         }
     }
+    if (sort) {
 #pragma omp parallel for schedule(dynamic, 4)
-    for (int t = 0; t < num_tiles; ++t) std::sort(keys.begin() + tile_start[t], keys.begin() + tile_start[t + 1]);
+        for (int t = 0; t < num_tiles; ++t)
+            std::sort(keys.begin() + tile_start[t], keys.begin() + tile_start[t + 1]);
+        st.sort_length += total;
+    }
     st.sort_ms += ms_since(t0);
     st.visible += visible;
-    st.sort_length += total;
+    st.pairs += total;
+}
 
-    // Blend: each tile copies its splats into a contiguous per-thread buffer, then blends its pixels.
+// Duplex binning (KERNELS.md §8.3): each cell with at least one visible splat is projected as an ellipsoid; one
+// depth sort of the (tile, cell depth, cell index) keys orders each tile's cells front to back; each tile's list
+// is then its cells expanded to their visible splats, which follow a canonical order inside the cell
+// (splat_less) so that the image does not depend on how the scene orders a cell's splats.
+void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<Splat2D>& splats,
+                const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
+                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st) {
+    const int num_tiles = gx * gy;
+    const int64_t m = sc.m;
+    auto t0 = Clock::now();
+    // visible members of each cell, canonically ordered; then the cell's screen proxy
+    std::vector<int64_t> vis_start(m + 1, 0);
+    for (int64_t c = 0; c < m; ++c) {
+        int64_t cnt = 0;
+        for (int32_t j = sc.cell_offsets[c]; j < sc.cell_offsets[c + 1]; ++j) cnt += valid[sc.cell_members[j]];
+        vis_start[c + 1] = vis_start[c] + cnt;
+    }
+    std::vector<int32_t> vis(vis_start[m]);
+    std::vector<Cell2D> cells(m);
+    std::vector<TileRect> crects(m);
+    std::vector<uint8_t> cvalid(m, 0);
+#pragma omp parallel for schedule(static)
+    for (int64_t c = 0; c < m; ++c) {
+        int64_t o = vis_start[c];
+        for (int32_t j = sc.cell_offsets[c]; j < sc.cell_offsets[c + 1]; ++j)
+            if (valid[sc.cell_members[j]]) vis[o++] = sc.cell_members[j];
+        if (o == vis_start[c]) continue;
+        std::sort(vis.begin() + vis_start[c], vis.begin() + o,
+                  [&](int32_t a, int32_t b) { return splat_less(splats[a], splats[b]); });
+        CellIn in{sc.cell_means + 3 * c, sc.cell_scales + 3 * c, sc.cell_quats + 4 * c};
+        cvalid[c] = preprocess_cell(in, cam, gx, gy, &cells[c], &crects[c]);
+    }
+    st.preprocess_ms += ms_since(t0);
+
     t0 = Clock::now();
+    std::vector<int64_t> cell_tile_start(num_tiles + 1, 0);
+    int64_t visible_cells = 0, misses = 0;
+    for (int64_t c = 0; c < m; ++c) {
+        if (!cvalid[c]) continue;
+        ++visible_cells;
+        const TileRect& r = crects[c];
+        const int64_t members = vis_start[c + 1] - vis_start[c];
+        for (int ty = r.y0; ty < r.y1; ++ty)
+            for (int tx = r.x0; tx < r.x1; ++tx) {
+                ++cell_tile_start[ty * gx + tx + 1];
+                tile_start[ty * gx + tx + 1] += members;
+            }
+        for (int64_t j = vis_start[c]; j < vis_start[c + 1]; ++j) {  // splat tiles outside the cell's rect
+            const TileRect& q = rects[vis[j]];
+            const int ix = std::max(0, std::min(q.x1, r.x1) - std::max(q.x0, r.x0));
+            const int iy = std::max(0, std::min(q.y1, r.y1) - std::max(q.y0, r.y0));
+            misses += (int64_t)(q.x1 - q.x0) * (q.y1 - q.y0) - (int64_t)ix * iy;
+        }
+    }
+    for (int t = 0; t < num_tiles; ++t) {
+        cell_tile_start[t + 1] += cell_tile_start[t];
+        tile_start[t + 1] += tile_start[t];
+    }
+    const int64_t cell_pairs = cell_tile_start[num_tiles];
+    std::vector<uint64_t> ckeys(cell_pairs);
+    {
+        std::vector<int64_t> cursor(cell_tile_start.begin(), cell_tile_start.end() - 1);
+        for (int64_t c = 0; c < m; ++c) {
+            if (!cvalid[c]) continue;
+            uint32_t depth_bits;
+            std::memcpy(&depth_bits, &cells[c].depth, 4);
+            const uint64_t key = ((uint64_t)depth_bits << 32) | (uint32_t)c;
+            const TileRect& r = crects[c];
+            for (int ty = r.y0; ty < r.y1; ++ty)
+                for (int tx = r.x0; tx < r.x1; ++tx) ckeys[cursor[ty * gx + tx]++] = key;
+        }
+    }
+    keys.resize(tile_start[num_tiles]);
+#pragma omp parallel for schedule(dynamic, 4)
+    for (int t = 0; t < num_tiles; ++t) {
+        std::sort(ckeys.begin() + cell_tile_start[t], ckeys.begin() + cell_tile_start[t + 1]);
+        int64_t o = tile_start[t];
+        for (int64_t k = cell_tile_start[t]; k < cell_tile_start[t + 1]; ++k) {
+            const uint32_t c = (uint32_t)ckeys[k];
+            for (int64_t j = vis_start[c]; j < vis_start[c + 1]; ++j) keys[o++] = (uint32_t)vis[j];
+        }
+    }
+    st.sort_ms += ms_since(t0);
+    int64_t visible = 0;
+    for (int64_t c = 0; c < m; ++c)
+        if (cvalid[c]) visible += vis_start[c + 1] - vis_start[c];
+    st.visible += visible;
+    st.cells_visible += visible_cells;
+    st.cell_misses += misses;
+    st.sort_length += cell_pairs;
+    st.pairs += tile_start[num_tiles];
+}
+
+// Blend: each tile copies its splats into a contiguous per-thread buffer, then blends its pixels.
+void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>& tile_start,
+                 const std::vector<uint64_t>& keys, const CameraParams& cam, Mode mode, const OitParams& oit,
+                 const float bg[3], Image& img, Stats& st) {
+    const int W = cam.width, H = cam.height;
+    const int gx = (W + TILE - 1) / TILE;
+    const int num_tiles = (int)tile_start.size() - 1;
+    auto t0 = Clock::now();
     int64_t evaluations = 0;
     const bool want_window = !img.window.empty();
 #pragma omp parallel reduction(+ : evaluations)
@@ -120,8 +239,8 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, int s
             for (int y = y0; y < std::min(y0 + TILE, H); ++y) {
                 for (int x = x0; x < std::min(x0 + TILE, W); ++x) {
                     const Vec2 pix = {x + 0.5f, y + 0.5f};
-                    const PixelOut o =
-                        blend_pixel(mode, pix, (int)count, [list](int i) -> const Splat2D& { return list[i]; });
+                    const PixelOut o = blend_pixel(
+                        mode, pix, (int)count, [list](int i) -> const Splat2D& { return list[i]; }, oit);
                     const size_t p = (size_t)y * W + x;
                     for (int c = 0; c < 3; ++c) img.rgb[p * 3 + c] = o.C[c] + o.T * bg[c];
                     img.alpha[p] = 1.0f - o.T;
@@ -137,6 +256,38 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, int s
     }
     st.blend_ms += ms_since(t0);
     st.evaluations += evaluations;
+}
+
+// Render one image at the camera's resolution, one sample per pixel.
+void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
+                  const float bg[3], Image& img, Stats& st) {
+    const int W = cam.width, H = cam.height;
+    const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE;
+    const int num_tiles = gx * gy;
+    const int64_t n = sc.n;
+
+    auto t0 = Clock::now();
+    std::vector<Splat2D> splats(n);
+    std::vector<TileRect> rects(n);
+    std::vector<uint8_t> valid(n);
+#pragma omp parallel for schedule(static)
+    for (int64_t i = 0; i < n; ++i) {
+        SplatIn in{sc.means + 3 * i, sc.scales + 3 * i, sc.quats + 4 * i, sc.opacities[i],
+                   sc.sh + (size_t)sc.k * 3 * i, sc.filter_3d ? sc.filter_3d[i] : 0.0f,
+                   sc.weight_sh ? sc.weight_sh + (size_t)sc.weight_k * i : nullptr, sh_degree_of(sc.weight_k),
+                   mode == DUPLEX ? sc.cell_of[i] : -1};
+        valid[i] = preprocess_splat(in, sh_deg, cam, mode, oit, gx, gy, &splats[i], &rects[i]);
+    }
+    st.preprocess_ms += ms_since(t0);
+
+    std::vector<int64_t> tile_start(num_tiles + 1, 0);
+    std::vector<uint64_t> keys;  // per tile list entry: splat id in the low 32 bits
+    if (mode == DUPLEX) {
+        bin_duplex(sc, cam, splats, rects, valid, gx, gy, tile_start, keys, st);
+    } else {
+        bin_splats(splats, rects, valid, gx, mode != WSR, tile_start, keys, st);
+    }
+    blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, img, st);
 }
 
 // Box-average N x N blocks of `hi` into `lo` (supersampling).
@@ -180,23 +331,66 @@ nb::ndarray<nb::numpy, T> to_numpy(std::vector<T>&& v, std::initializer_list<siz
 }
 
 using FArr = nb::ndarray<const float, nb::c_contig, nb::device::cpu>;
+using IArr = nb::ndarray<const int32_t, nb::c_contig, nb::device::cpu>;
 
 nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, std::optional<FArr> filter_3d,
                 FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height, float near_plane,
-                int mode, int supersample, int sh_degree, FArr background, bool want_window, int threads) {
+                int mode, int supersample, int sh_degree, FArr background, bool want_window, int threads,
+                std::optional<FArr> weight_sh, std::optional<FArr> cell_means, std::optional<FArr> cell_scales,
+                std::optional<FArr> cell_quats, std::optional<IArr> cell_offsets, std::optional<IArr> cell_members,
+                float sigma, float weight_background, float et_grade, bool depth_correct) {
     const int64_t n = (int64_t)means.shape(0);
     if (means.ndim() != 2 || means.shape(1) != 3 || scales.size() != (size_t)n * 3 || quats.size() != (size_t)n * 4 ||
         opacities.size() != (size_t)n || sh.ndim() != 3 || sh.shape(0) != (size_t)n || sh.shape(2) != 3 ||
         (filter_3d && filter_3d->size() != (size_t)n) || R.size() != 9 || t.size() != 3 || background.size() != 3)
         throw std::invalid_argument("render: array shapes do not match (N,3) means/scales, (N,4) quats, "
                                     "(N,) opacities, (N,K,3) sh, (N,) filter_3d, 3x3 R, 3 t, 3 background");
-    if (mode < SCALAR || mode > GAUSSIAN_BLENDING) throw std::invalid_argument("render: unknown mode");
+    if (mode < SCALAR || mode > DUPLEX) throw std::invalid_argument("render: unknown mode");
     if (supersample < 1 || supersample > 8) throw std::invalid_argument("render: supersample must be 1..8");
     const int k = (int)sh.shape(1);
     const int max_deg = k >= 16 ? 3 : k >= 9 ? 2 : k >= 4 ? 1 : 0;
     const int sh_deg = std::max(0, std::min(sh_degree, max_deg));
     SceneView sc{means.data(), scales.data(), quats.data(), opacities.data(), sh.data(),
                  filter_3d ? filter_3d->data() : nullptr, n, k};
+    if (weight_sh) {
+        const int wk = weight_sh->ndim() == 2 ? (int)weight_sh->shape(1) : -1;
+        if (weight_sh->shape(0) != (size_t)n || (wk != 1 && wk != 4 && wk != 9 && wk != 16))
+            throw std::invalid_argument("render: weight_sh must be (N, K) with K = 1, 4, 9 or 16");
+        sc.weight_sh = weight_sh->data();
+        sc.weight_k = wk;
+    }
+    if (mode == DUPLEX) {
+        if (!(cell_means && cell_scales && cell_quats && cell_offsets && cell_members))
+            throw std::invalid_argument("render: duplex needs cell_means, cell_scales, cell_quats, cell_offsets, "
+                                        "cell_members");
+        const int64_t m = (int64_t)cell_means->shape(0);
+        if (cell_means->size() != (size_t)m * 3 || cell_scales->size() != (size_t)m * 3 ||
+            cell_quats->size() != (size_t)m * 4 || cell_offsets->size() != (size_t)m + 1)
+            throw std::invalid_argument("render: cells must be (M,3) means and scales, (M,4) quats, (M+1,) offsets");
+        const int32_t* off = cell_offsets->data();
+        const int32_t* mem = cell_members->data();
+        sc.cell_of.assign(n, -1);
+        bool ok = off[0] == 0 && off[m] == (int64_t)cell_members->size();
+        for (int64_t c = 0; ok && c < m; ++c) {
+            ok = off[c] <= off[c + 1];
+            for (int32_t j = off[c]; ok && j < off[c + 1]; ++j) {
+                ok = mem[j] >= 0 && mem[j] < n && sc.cell_of[mem[j]] < 0;
+                if (ok) sc.cell_of[mem[j]] = (int32_t)c;
+            }
+        }
+        if (!ok)
+            throw std::invalid_argument("render: cell_offsets / cell_members are not a partition of splats into "
+                                        "cells (offsets from 0 to len(members), each splat in at most one cell)");
+        sc.cell_means = cell_means->data();
+        sc.cell_scales = cell_scales->data();
+        sc.cell_quats = cell_quats->data();
+        sc.cell_offsets = off;
+        sc.cell_members = mem;
+        sc.m = m;
+    }
+    if (mode == DUPLEX && !(et_grade > 0.0f))
+        throw std::invalid_argument("render: et_grade must be > 0");
+    const OitParams oit{sigma, weight_background, et_grade, depth_correct ? 1 : 0};
     const int N = supersample;
     const CameraParams cam = make_camera(R.data(), t.data(), fx * N, fy * N, cx * N, cy * N, width * N,
                                          height * N, near_plane);
@@ -211,11 +405,11 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
         if (threads > 0) omp_set_num_threads(threads);
         out.resize(width, height, window);
         if (N == 1) {
-            render_image(sc, cam, (Mode)mode, sh_deg, bg, out, st);
+            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, out, st);
         } else {
             Image hi;
             hi.resize(width * N, height * N, window);
-            render_image(sc, cam, (Mode)mode, sh_deg, bg, hi, st);
+            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, hi, st);
             auto t0 = Clock::now();
             box_downsample(hi, N, out);
             st.blend_ms += ms_since(t0);
@@ -233,6 +427,9 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
     d["blend_ms"] = st.blend_ms;
     d["visible"] = st.visible;
     d["sort_length"] = st.sort_length;
+    d["pairs"] = st.pairs;
+    d["cells_visible"] = st.cells_visible;
+    d["cell_misses"] = st.cell_misses;
     d["evaluations"] = st.evaluations;
     return d;
 }
@@ -245,6 +442,10 @@ NB_MODULE(_native, m) {
           nb::arg("sh"), nb::arg("filter_3d").none(), nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"),
           nb::arg("cx"), nb::arg("cy"), nb::arg("width"), nb::arg("height"), nb::arg("near_plane"),
           nb::arg("mode"), nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"),
-          nb::arg("want_window"), nb::arg("threads"));
+          nb::arg("want_window"), nb::arg("threads"), nb::arg("weight_sh").none() = nb::none(),
+          nb::arg("cell_means").none() = nb::none(), nb::arg("cell_scales").none() = nb::none(),
+          nb::arg("cell_quats").none() = nb::none(), nb::arg("cell_offsets").none() = nb::none(),
+          nb::arg("cell_members").none() = nb::none(), nb::arg("sigma") = 10.0f,
+          nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false);
     m.def("max_threads", []() { return omp_get_max_threads(); });
 }

@@ -138,6 +138,84 @@ GBV_HD bool blend_gaussian(const Splat2D& s, TransmittanceWindow& win, float C[3
     return win.T < T_STOP;
 }
 
+// ---- order-independent modes -----------------------------------------------------------------------------------
+
+// LC-WSR sums for one pixel: sum of alpha_i c_i and of alpha_i, in 64-bit fixed point with 2^-36 resolution.
+// Integer addition is associative, so the sums (and the pixel) are bitwise the same for any order of the
+// splats: the CPU's tile lists stay in splat-index order, unsorted, and still give a permutation-invariant
+// image. Each float term is rounded once to the fixed-point grid (absolute error <= 2^-37 per term, ~1e-7 after
+// 10^4 terms, far below float32 rounding of the final quotient). The GLSL port accumulates in float.
+struct WsrSums {
+    int64_t C[3];
+    int64_t S;
+};
+
+// A non-negative float on the fixed-point grid (terms are clamped to 2^26 so that 2^37 of them fit in int64).
+GBV_HD int64_t to_fixed(float x) { return (int64_t)rintf(minf(x, WSR_FIXED_MAX) * WSR_FIXED_SCALE); }
+
+// `wsr`: sort-free weighted sum (KERNELS.md §7.2): alpha = o' exp(power), no 0.99 clamp, skipped below 1/255,
+// C += c alpha, S += alpha; no transmittance and no early termination (never returns true).
+GBV_HD bool blend_wsr(const Splat2D& s, Vec2 pix, WsrSums& acc) {
+    const Vec2 d = s.xy - pix;
+    const float power = -0.5f * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
+    if (power > 0.0f || power < s.log_min_alpha) return false;
+    const float alpha = s.opacity * expf(power);
+    if (alpha < MIN_ALPHA_3DGS) return false;
+    acc.C[0] += to_fixed(s.color[0] * alpha);
+    acc.C[1] += to_fixed(s.color[1] * alpha);
+    acc.C[2] += to_fixed(s.color[2] * alpha);
+    acc.S += to_fixed(alpha);
+    return false;
+}
+
+// Duplex-GS per-pixel state (KERNELS.md §8.4): T = cummult, the product of (1 - alpha/E) over every splat blended
+// so far; T_cell = T when the current cell was entered (anchor_correct); the weighted sums C and S.
+struct DuplexState {
+    float T;
+    float T_cell;
+    int32_t cell;
+    float S;
+    float C[3];
+};
+
+// `duplex`: one splat of a cell-sorted list (cells front to back, a cell's splats in any order). Pixels outside
+// the splat's radius are skipped (False Positive Skip); alpha = min(o' exp(power), 0.99), skipped below 1/255. On
+// entering a new cell the pixel stops when T < 0.01, else T_cell = T. Then alpha /= E, T *= 1 - alpha, and the
+// splat adds with weight alpha T_cell. Inside a cell every weight uses the same T_cell: the cell's sum does not
+// depend on the order of its splats (only the float rounding of T does).
+GBV_HD bool blend_duplex(const Splat2D& s, Vec2 pix, float et_grade, DuplexState& st) {
+    const Vec2 d = s.xy - pix;
+    if (d.x * d.x + d.y * d.y > s.radius * s.radius) return false;
+    const float power = -0.5f * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
+    if (power > 0.0f || power < s.log_min_alpha) return false;
+    float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
+    if (alpha < MIN_ALPHA_3DGS) return false;
+    if (s.cell != st.cell) {
+        if (st.T < DUPLEX_T_STOP) return true;
+        st.cell = s.cell;
+        st.T_cell = st.T;
+    }
+    alpha = alpha / et_grade;
+    st.T *= 1.0f - alpha;
+    const float w = alpha * st.T_cell;
+    st.C[0] += s.color[0] * w;
+    st.C[1] += s.color[1] * w;
+    st.C[2] += s.color[2] * w;
+    st.S += w;
+    return false;
+}
+
+// The published normalisation out = (C + bg w_bg) / (S + w_bg T_bg), written as out = C' + T' bg with
+// C' = C / S_total and T' = w_bg / S_total (the background's share of the weights; Frame.alpha = 1 - T'). wsr:
+// T_bg = 1; duplex: T_bg = the final cummult, and w_bg = 0 once it is below 0.01. A total of exactly 0 becomes
+// 1e-4 (LC-WSR; duplex does the same here instead of dividing by zero).
+GBV_HD void resolve_weighted(const float C[3], float S, float wbg, float T_bg, float out_C[3], float* out_T) {
+    float total = S + wbg * T_bg;
+    if (total == 0.0f) total = WSR_EMPTY_SUM;
+    for (int c = 0; c < 3; ++c) out_C[c] = C[c] / total;
+    *out_T = wbg / total;
+}
+
 // Result of blending one pixel (or sub-pixel sample).
 struct PixelOut {
     float C[3];
@@ -146,10 +224,29 @@ struct PixelOut {
     Vec2 window;     // final window size (gaussian_blending only)
 };
 
-// Blend the depth-sorted splats `list[0..n)` at pixel centre `pix` in `mode`.
+// Blend the splats `list[0..n)` at pixel centre `pix` in `mode`: depth-sorted for the alpha-blending modes, in
+// any order for wsr, cell-sorted for duplex. The output is C + T bg in every mode (see resolve_weighted).
 template <typename SplatAt>
-GBV_HD PixelOut blend_pixel(Mode mode, Vec2 pix, int n, SplatAt splat_at) {
+GBV_HD PixelOut blend_pixel(Mode mode, Vec2 pix, int n, SplatAt splat_at, const OitParams& oit) {
     PixelOut o = {{0.0f, 0.0f, 0.0f}, 1.0f, 0, {1.0f, 1.0f}};
+    if (mode == WSR) {
+        WsrSums acc = {{0, 0, 0}, 0};
+        for (int i = 0; i < n; ++i) blend_wsr(splat_at(i), pix, acc);
+        const float C[3] = {(float)acc.C[0] * (1.0f / WSR_FIXED_SCALE), (float)acc.C[1] * (1.0f / WSR_FIXED_SCALE),
+                            (float)acc.C[2] * (1.0f / WSR_FIXED_SCALE)};
+        resolve_weighted(C, (float)acc.S * (1.0f / WSR_FIXED_SCALE), oit.weight_background, 1.0f, o.C, &o.T);
+        o.evals = n;
+        return o;
+    }
+    if (mode == DUPLEX) {
+        DuplexState st = {1.0f, 1.0f, -1, 0.0f, {0.0f, 0.0f, 0.0f}};
+        int i = 0;
+        while (i < n && !blend_duplex(splat_at(i), pix, oit.et_grade, st)) ++i;
+        o.evals = i < n ? i + 1 : n;
+        const float wbg = st.T < DUPLEX_T_STOP ? 0.0f : oit.weight_background;
+        resolve_weighted(st.C, st.S, wbg, st.T, o.C, &o.T);
+        return o;
+    }
     if (mode == GAUSSIAN_BLENDING) {
         TransmittanceWindow win = {1.0f, pix, {1.0f, 1.0f}};
         int i = 0;

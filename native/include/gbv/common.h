@@ -13,7 +13,7 @@
 namespace gbv {
 
 // Blending modes; the integer values are the Python enum's values (gbviewer/render.py).
-enum Mode : int32_t { SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3 };
+enum Mode : int32_t { SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5 };
 
 constexpr int TILE = 16;                       // BLOCK_X = BLOCK_Y (KERNELS.md §0.4)
 constexpr float DILATION_3DGS = 0.3f;          // +0.3 px^2, no compensation (§0.3)
@@ -28,6 +28,11 @@ constexpr float GB_MIN_UV_DIFF = 0.1f;         // window narrower than 0.1 sigma
 constexpr float GB_MAX_UV_DIFF = 1e6f;
 constexpr float GB_MIN_VAR = 0.001f;           // window variance floor
 constexpr float SQRT_PI_2 = 1.2533141373155003f;
+constexpr float WSR_EMPTY_SUM = 1e-4f;         // LC-WSR: a weight sum of exactly 0 becomes 1e-4 (§7.2)
+constexpr float WSR_FIXED_SCALE = 68719476736.0f;  // 2^36: CPU weighted sums in 64-bit fixed point (blend.h)
+constexpr float WSR_FIXED_MAX = 67108864.0f;   // 2^26: per-term clamp that keeps a fixed-point sum in int64
+constexpr float DUPLEX_CELL_SIGMAS = 2.0f;     // cell radius ceil(2 sqrt(lambda1)) (§8.3)
+constexpr float DUPLEX_T_STOP = 0.01f;         // CUMMULT_THRESHOLD: cell-level early termination (§8.1)
 constexpr float TWO_PI = 6.283185307179586f;
 
 struct Vec2 {
@@ -80,6 +85,17 @@ struct Splat2D {
     float sigma1, sigma2;  // sqrt of the eigenvalues of the 2D covariance
     float inv_sigma1, inv_sigma2;
     float log_min_alpha;   // ln(min_alpha / opacity): lowest log-Gaussian value that can give a visible alpha
+    float radius;  // screen-space bounding radius in pixels (duplex rejects pixels outside this circle)
+    int32_t cell;  // index of the splat's cell (duplex), -1 otherwise
+};
+
+// Globals of the order-independent modes (wsr, duplex): LC-WSR's depth correction max(0, 1 - z/sigma) when
+// depth_correct is 1, the background weight w_bg, and Duplex-GS's ET_grade E (alpha / E inside cells).
+struct OitParams {
+    float sigma;
+    float weight_background;
+    float et_grade;
+    int32_t depth_correct;
 };
 
 // Tile rectangle [x0, x1) x [y0, y1) in tile units.

@@ -15,43 +15,53 @@ constexpr float SH_C3_0 = -0.5900435899266435f, SH_C3_1 = 2.890611442640554f, SH
                 SH_C3_3 = 0.3731763325901154f, SH_C3_4 = -0.4570457994644658f, SH_C3_5 = 1.445305721320277f,
                 SH_C3_6 = -0.5900435899266435f;
 
+// Real SH basis of degree `deg` (0..3) at the unit direction `dir`, in the 3DGS order and signs; returns the
+// number of coefficients used, (deg + 1)^2.
+GBV_HD int sh_basis(int deg, Vec3 dir, float basis[16]) {
+    const float x = dir.x, y = dir.y, z = dir.z;
+    basis[0] = SH_C0;
+    if (deg < 1) return 1;
+    basis[1] = -SH_C1 * y;
+    basis[2] = SH_C1 * z;
+    basis[3] = -SH_C1 * x;
+    if (deg < 2) return 4;
+    const float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
+    basis[4] = SH_C2_0 * xy;
+    basis[5] = SH_C2_1 * yz;
+    basis[6] = SH_C2_2 * (2.0f * zz - xx - yy);
+    basis[7] = SH_C2_3 * xz;
+    basis[8] = SH_C2_4 * (xx - yy);
+    if (deg < 3) return 9;
+    basis[9] = SH_C3_0 * y * (3.0f * xx - yy);
+    basis[10] = SH_C3_1 * xy * z;
+    basis[11] = SH_C3_2 * y * (4.0f * zz - xx - yy);
+    basis[12] = SH_C3_3 * z * (2.0f * zz - 3.0f * xx - 3.0f * yy);
+    basis[13] = SH_C3_4 * x * (4.0f * zz - xx - yy);
+    basis[14] = SH_C3_5 * z * (xx - yy);
+    basis[15] = SH_C3_6 * x * (xx - 3.0f * yy);
+    return 16;
+}
+
 // View-dependent colour from SH coefficients sh[K][3] (DC first), as computeColorFromSH:
 // +0.5 offset, clamped at 0 from below only.
 GBV_HD void sh_to_rgb(const float* sh, int deg, Vec3 dir, float out[3]) {
-    const float x = dir.x, y = dir.y, z = dir.z;
     float basis[16];
-    basis[0] = SH_C0;
-    int k = 1;
-    if (deg > 0) {
-        basis[1] = -SH_C1 * y;
-        basis[2] = SH_C1 * z;
-        basis[3] = -SH_C1 * x;
-        k = 4;
-        if (deg > 1) {
-            const float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
-            basis[4] = SH_C2_0 * xy;
-            basis[5] = SH_C2_1 * yz;
-            basis[6] = SH_C2_2 * (2.0f * zz - xx - yy);
-            basis[7] = SH_C2_3 * xz;
-            basis[8] = SH_C2_4 * (xx - yy);
-            k = 9;
-            if (deg > 2) {
-                basis[9] = SH_C3_0 * y * (3.0f * xx - yy);
-                basis[10] = SH_C3_1 * xy * z;
-                basis[11] = SH_C3_2 * y * (4.0f * zz - xx - yy);
-                basis[12] = SH_C3_3 * z * (2.0f * zz - 3.0f * xx - 3.0f * yy);
-                basis[13] = SH_C3_4 * x * (4.0f * zz - xx - yy);
-                basis[14] = SH_C3_5 * z * (xx - yy);
-                basis[15] = SH_C3_6 * x * (xx - 3.0f * yy);
-                k = 16;
-            }
-        }
-    }
+    const int k = sh_basis(deg, dir, basis);
     for (int c = 0; c < 3; ++c) {
         float v = 0.5f;
         for (int i = 0; i < k; ++i) v += basis[i] * sh[i * 3 + c];
         out[c] = fmaxf(v, 0.0f);
     }
+}
+
+// Sort-free GS's view-dependent weight v_i (KERNELS.md §7.3): a 1-channel SH w[K] (f_do_0, f_ro_*), the raw
+// sum: no +0.5, no clamp (non-positive weights are culled by the caller).
+GBV_HD float sh_to_weight(const float* w, int deg, Vec3 dir) {
+    float basis[16];
+    const int k = sh_basis(deg, dir, basis);
+    float v = 0.0f;
+    for (int i = 0; i < k; ++i) v += basis[i] * w[i];
+    return v;
 }
 
 // 3D covariance Sigma = R S S^T R^T (upper triangle: xx, xy, xz, yy, yz, zz) from a unit (w,x,y,z)
@@ -144,17 +154,26 @@ struct SplatIn {
     float opacity;
     const float* sh;     // K*3
     float filter_3d;     // 0 when the scene has none
+    const float* weight_sh;  // sort-free view weight, weight_deg's (deg+1)^2 coefficients; null: v = 1
+    int weight_deg;
+    int32_t cell;        // the splat's cell (duplex), -1 when none
 };
 
 // Preprocess one splat for `mode`; returns false when it is culled (behind the near plane, degenerate,
-// invisible, or touching no tile).
-GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& cam, Mode mode, int grid_x,
-                             int grid_y, Splat2D* out, TileRect* rect) {
+// invisible, or touching no tile). wsr and duplex (KERNELS.md §7.2, §8.3) keep the 3DGS +0.3 dilation and
+// 3-sigma radius and fold the view weight and the optional depth correction into the opacity:
+// o' = o * (v * (depth_correct ? 1 - z/sigma : 1)), culled when z >= sigma (depth_correct), v * dc <= 0 or
+// o' < 1/255.
+GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& cam, Mode mode, const OitParams& oit,
+                             int grid_x, int grid_y, Splat2D* out, TileRect* rect) {
     const float* m = in.mean;
     const float* R = cam.R;
     float pv[3];
     for (int i = 0; i < 3; ++i) pv[i] = R[i * 3] * m[0] + R[i * 3 + 1] * m[1] + R[i * 3 + 2] * m[2] + cam.t[i];
     if (!(pv[2] > cam.near_plane)) return false;
+    Vec3 dir = {m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]};
+    const float dn = sqrtf(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
+    dir = dn > 0.0f ? Vec3{dir.x / dn, dir.y / dn, dir.z / dn} : Vec3{0.0f, 0.0f, 1.0f};
 
     // Mip-Splatting 3D filter (applied in every mode when present): scales grow, opacity compensates.
     float s[3];
@@ -191,6 +210,17 @@ GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& 
     } else if (mode == GAUSSIAN_BLENDING) {
         sigmas = RADIUS_SIGMAS_GB;
         min_alpha = MIN_ALPHA_GB;
+    } else if (mode == WSR || mode == DUPLEX) {
+        cov[0] += DILATION_3DGS;
+        cov[2] += DILATION_3DGS;
+        float w = in.weight_sh ? sh_to_weight(in.weight_sh, sh_deg < in.weight_deg ? sh_deg : in.weight_deg, dir)
+                               : 1.0f;
+        if (oit.depth_correct) {
+            if (!(pv[2] < oit.sigma)) return false;
+            w *= 1.0f - pv[2] / oit.sigma;
+        }
+        if (!(w > 0.0f)) return false;
+        opacity *= w;
     }
     if (!(opacity >= min_alpha)) return false;  // alpha = opacity * g <= opacity would be skipped anyway
 
@@ -216,11 +246,51 @@ GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& 
     eigen_2d(cov[0], cov[1], cov[2], det, &out->sigma1, &out->sigma2, &out->v1);
     out->inv_sigma1 = 1.0f / out->sigma1;
     out->inv_sigma2 = 1.0f / out->sigma2;
-
-    Vec3 dir = {m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]};
-    const float dn = sqrtf(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
-    dir = dn > 0.0f ? Vec3{dir.x / dn, dir.y / dn, dir.z / dn} : Vec3{0.0f, 0.0f, 1.0f};
+    out->radius = r;
+    out->cell = in.cell;
     sh_to_rgb(in.sh, sh_deg, dir, out->color);
+    return true;
+}
+
+// A Duplex-GS cell: an ellipsoid (centre, scales, unit (w,x,y,z) rotation) that covers its splats.
+struct CellIn {
+    const float* mean;
+    const float* scale;
+    const float* quat;
+};
+
+// Screen-space proxy of a cell: position, view-space depth (the sort key) and radius.
+struct Cell2D {
+    Vec2 xy;
+    float depth;
+    float radius;
+};
+
+// Project a cell as Duplex-GS's preprocessCUDA_anchor does (KERNELS.md §8.3): near cull, EWA projection with
+// the +0.3 dilation, radius ceil(2 sqrt(lambda1)) (the splats use 3), tile rectangle; false when culled.
+GBV_HD bool preprocess_cell(const CellIn& in, const CameraParams& cam, int grid_x, int grid_y, Cell2D* out,
+                            TileRect* rect) {
+    const float* m = in.mean;
+    const float* R = cam.R;
+    float pv[3];
+    for (int i = 0; i < 3; ++i) pv[i] = R[i * 3] * m[0] + R[i * 3 + 1] * m[1] + R[i * 3 + 2] * m[2] + cam.t[i];
+    if (!(pv[2] > cam.near_plane)) return false;
+    float cov3[6], cov[3];
+    covariance_3d(in.quat, in.scale, cov3);
+    project_covariance(cam, cov3, pv, cov);
+    cov[0] += DILATION_3DGS;
+    cov[2] += DILATION_3DGS;
+    const float det = cov[0] * cov[2] - cov[1] * cov[1];
+    if (!(det > 0.0f) || !finitef(det)) return false;
+    const float px = cam.fx * pv[0] / pv[2] + cam.cx;
+    const float py = cam.fy * pv[1] / pv[2] + cam.cy;
+    const float r = splat_radius(cov[0], cov[2], det, DUPLEX_CELL_SIGMAS);
+    if (!finitef(px) || !finitef(py) || !finitef(r)) return false;
+    *rect = tile_rect(Vec2{px, py}, r, grid_x, grid_y);
+    if (rect->x1 <= rect->x0 || rect->y1 <= rect->y0) return false;
+    out->xy = Vec2{px, py};
+    out->depth = pv[2];
+    out->radius = r;
     return true;
 }
 
