@@ -1,5 +1,5 @@
 """Brute-force float64 reference renderer, written from the written spec (KERNELS.md §0, §2, §4-§6,
-gaussian-blending paper §3 and Appendix A-B), independently of native/include/gbv/*.h.
+gaussian-blending paper §3 and Appendix A-B; §7-§8 for wsr and duplex), independently of native/include/gbv/*.h.
 
 It is deliberately simple: preprocess is vectorised over splats, blending loops over the depth-sorted
 splats of each 16x16 tile and is vectorised over that tile's pixels (every pixel still runs its own
@@ -29,6 +29,9 @@ GB_MAX_UV = 1e6
 GB_MIN_VAR = 0.001
 
 MODES = ("scalar", "mip", "analytic", "gaussian_blending")
+OIT_MODES = ("wsr", "duplex")
+DUPLEX_STOP = 0.01  # CUMMULT_THRESHOLD (KERNELS.md §8.1)
+WSR_EMPTY = 1e-4
 
 # Spherical-harmonics constants of 3DGS (KERNELS.md §0.5).
 SH_C0 = 0.28209479177387814
@@ -90,9 +93,32 @@ def camera_params(cam, supersample: int = 1) -> dict:
     )
 
 
-def preprocess(scene, cam, mode: str, supersample: int = 1) -> dict:
-    """Per-splat screen-space quantities (float64). Arrays are indexed like the scene; `keep` marks survivors."""
-    assert mode in MODES, mode
+def _sh_raw(c: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """A 1-channel SH (N,K) at unit dirs (N,3): the raw sum (sort-free GS's v_i, KERNELS.md §7.3)."""
+    k = c.shape[1]
+    x, y, z = dirs.T
+    res = SH_C0 * c[:, 0]
+    if k > 1:
+        res = res - SH_C1 * y * c[:, 1] + SH_C1 * z * c[:, 2] - SH_C1 * x * c[:, 3]
+    if k > 4:
+        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
+        res = (res + SH_C2[0] * xy * c[:, 4] + SH_C2[1] * yz * c[:, 5] + SH_C2[2] * (2 * zz - xx - yy) * c[:, 6]
+               + SH_C2[3] * xz * c[:, 7] + SH_C2[4] * (xx - yy) * c[:, 8])
+    if k > 9:
+        res = (res + SH_C3[0] * y * (3 * xx - yy) * c[:, 9] + SH_C3[1] * xy * z * c[:, 10]
+               + SH_C3[2] * y * (4 * zz - xx - yy) * c[:, 11] + SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * c[:, 12]
+               + SH_C3[4] * x * (4 * zz - xx - yy) * c[:, 13] + SH_C3[5] * z * (xx - yy) * c[:, 14]
+               + SH_C3[6] * x * (xx - 3 * yy) * c[:, 15])
+    return res
+
+
+def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = None) -> dict:
+    """Per-splat screen-space quantities (float64). Arrays are indexed like the scene; `keep` marks survivors.
+
+    wsr / duplex (KERNELS.md §7.2, §8.3): as scalar (+0.3, radius 3 sqrt(lambda_max)), and the opacity becomes
+    o * v * (1 - z/sigma if depth_correct), with v the view-weight SH (raw) or 1; culled when z >= sigma
+    (depth_correct) or v * correction <= 0."""
+    assert mode in MODES + OIT_MODES, mode
     cp = camera_params(cam, supersample)
     W, H, fx, fy, cx, cy, R, t = (cp[k] for k in ("W", "H", "fx", "fy", "cx", "cy", "R", "t"))
     means = np.asarray(_get(scene, "means"), np.float64)
@@ -133,9 +159,20 @@ def preprocess(scene, cam, mode: str, supersample: int = 1) -> dict:
     cov = T @ Sigma @ T.transpose(0, 2, 1)
     a, b, c = cov[:, 0, 0].copy(), cov[:, 0, 1].copy(), cov[:, 1, 1].copy()
 
-    if mode == "scalar":
+    if mode in ("scalar",) + OIT_MODES:
         a += 0.3
         c += 0.3
+    if mode in OIT_MODES:
+        campos0 = -R.T @ t
+        d0 = means - campos0
+        d0 = d0 / np.maximum(np.linalg.norm(d0, axis=1, keepdims=True), 1e-300)
+        vw = getattr(scene, "view_weight_sh", None) if not isinstance(scene, dict) else scene.get("view_weight_sh")
+        w = _sh_raw(np.asarray(vw, np.float64), d0) if vw is not None else np.ones(n)
+        if oit["depth_correct"]:
+            keep &= Z < oit["sigma"]
+            w = w * (1.0 - Z / oit["sigma"])
+        keep &= w > 0
+        opac = opac * w
     elif mode == "mip":
         det0 = np.maximum(1e-6, a * c - b * b)
         a += 0.1
@@ -377,6 +414,156 @@ def render_full_res(scene, cam, mode: str, supersample: int = 1, background=(0.0
             Tout[i0:i1, j0:j1] = T.reshape(i1 - i0, j1 - j0)
             ties[i0:i1, j0:j1] = tie.reshape(i1 - i0, j1 - j0)
     return dict(rgb=rgb, T=Tout, window=win, tie=ties, pre=pre)
+
+
+def preprocess_cells(cells, cam, supersample: int = 1) -> dict:
+    """Cells as Duplex-GS projects them (KERNELS.md §8.3): near cull, EWA with +0.3, radius ceil(2 sqrt(lambda1))."""
+    cp = camera_params(cam, supersample)
+    W, H, fx, fy, cx, cy, R, t = (cp[k] for k in ("W", "H", "fx", "fy", "cx", "cy", "R", "t"))
+    means = np.asarray(cells.means, np.float64)
+    m = len(means)
+    view = means @ R.T + t
+    X, Y, Z = view.T
+    keep = Z > cp["near"]
+    Zs = np.where(keep, Z, 1.0)
+    Rq = quat_to_rotmat(cells.quats)
+    M = Rq * np.asarray(cells.scales, np.float64)[:, None, :]
+    Sigma = M @ M.transpose(0, 2, 1)
+    tan_x, tan_y = 0.5 * W / fx, 0.5 * H / fy
+    tx = np.clip(X / Zs, -(cx / fx + 0.3 * tan_x), (W - cx) / fx + 0.3 * tan_x) * Zs
+    ty = np.clip(Y / Zs, -(cy / fy + 0.3 * tan_y), (H - cy) / fy + 0.3 * tan_y) * Zs
+    J = np.zeros((m, 2, 3))
+    J[:, 0, 0] = fx / Zs
+    J[:, 0, 2] = -fx * tx / Zs ** 2
+    J[:, 1, 1] = fy / Zs
+    J[:, 1, 2] = -fy * ty / Zs ** 2
+    T = J @ R
+    cov = T @ Sigma @ T.transpose(0, 2, 1)
+    a, b, c = cov[:, 0, 0] + 0.3, cov[:, 0, 1], cov[:, 1, 1] + 0.3
+    det = a * c - b * b
+    keep &= det > 0
+    mid = 0.5 * (a + c)
+    radius = np.ceil(2.0 * np.sqrt(mid + np.sqrt(np.maximum(0.1, mid * mid - det))))
+    x, y = fx * X / Zs + cx, fy * Y / Zs + cy
+    gx, gy = math.ceil(W / TILE), math.ceil(H / TILE)
+    with np.errstate(invalid="ignore"):
+        x0 = np.clip((x - 0.5 - radius) / TILE, 0, gx).astype(np.int64)
+        x1 = np.clip((x - 0.5 + radius + TILE - 1) / TILE, 0, gx).astype(np.int64)
+        y0 = np.clip((y - 0.5 - radius) / TILE, 0, gy).astype(np.int64)
+        y1 = np.clip((y - 0.5 + radius + TILE - 1) / TILE, 0, gy).astype(np.int64)
+    keep &= (x1 > x0) & (y1 > y0)
+    return dict(keep=keep, depth=Z, rect=np.stack([x0, x1, y0, y1], -1))
+
+
+def _blend_wsr(pre, idx, pix, wbg, bg):
+    """LC-WSR (KERNELS.md §7.2) over the splats idx, in any order. Returns rgb (P,3), T' = wbg / total, tie."""
+    P = pix.shape[0]
+    C = np.zeros((P, 3))
+    S = np.zeros(P)
+    tie = np.zeros(P, bool)
+    for s in idx:
+        d = pix - pre["xy"][s]
+        A, B, Cc = pre["conic"][s]
+        power = -0.5 * (A * d[:, 0] ** 2 + Cc * d[:, 1] ** 2) - B * d[:, 0] * d[:, 1]
+        alpha = pre["opacity"][s] * np.exp(np.minimum(power, 0.0))
+        tie |= _near(alpha, MIN_ALPHA_3DGS)
+        ok = (power <= 0) & (alpha >= MIN_ALPHA_3DGS)
+        C[ok] += pre["color"][s] * alpha[ok, None]
+        S[ok] += alpha[ok]
+    total = S + wbg
+    total = np.where(total == 0, WSR_EMPTY, total)
+    return (C + bg * wbg) / total[:, None], wbg / total, tie
+
+
+def _blend_duplex(pre, idx, cell_of, pix, et, wbg, bg):
+    """Duplex-GS (KERNELS.md §8.4) over a cell-sorted list idx. Returns rgb (P,3), T' = w_bg / total, tie."""
+    P = pix.shape[0]
+    C = np.zeros((P, 3))
+    S = np.zeros(P)
+    cum = np.ones(P)
+    Tcell = np.ones(P)
+    cur = np.full(P, -1)
+    done = np.zeros(P, bool)
+    tie = np.zeros(P, bool)
+    for s in idx:
+        d = pix - pre["xy"][s]
+        r2 = pre["radius"][s] ** 2
+        dd = d[:, 0] ** 2 + d[:, 1] ** 2
+        A, B, Cc = pre["conic"][s]
+        power = -0.5 * (A * d[:, 0] ** 2 + Cc * d[:, 1] ** 2) - B * d[:, 0] * d[:, 1]
+        alpha = np.minimum(0.99, pre["opacity"][s] * np.exp(np.minimum(power, 0.0)))
+        live = ~done & (power <= 0)
+        tie |= live & (_near(alpha, MIN_ALPHA_3DGS) | (np.abs(dd - r2) <= TIE_REL * max(r2, 1.0)))
+        ok = live & (dd <= r2) & (alpha >= MIN_ALPHA_3DGS)
+        new = ok & (cur != cell_of[s])
+        tie |= new & _near(cum, DUPLEX_STOP, TIE_REL_T)
+        stop = new & (cum < DUPLEX_STOP)
+        done |= stop
+        ok &= ~stop
+        enter = ok & new
+        cur = np.where(enter, cell_of[s], cur)
+        Tcell = np.where(enter, cum, Tcell)
+        a = alpha / et
+        w = np.where(ok, a * Tcell, 0.0)
+        cum = np.where(ok, cum * (1.0 - a), cum)
+        C += pre["color"][s] * w[:, None]
+        S += w
+    tie |= _near(cum, DUPLEX_STOP, TIE_REL_T)
+    wb = np.where(cum < DUPLEX_STOP, 0.0, wbg)
+    total = S + wb * cum
+    total = np.where(total == 0, WSR_EMPTY, total)
+    return (C + bg * wb[:, None]) / total[:, None], wb / total, tie
+
+
+def render_oit(scene, cam, mode: str, oit: dict, cells=None, supersample: int = 1, background=(0.0, 0.0, 0.0)):
+    """wsr / duplex at the (super-sampled) resolution; returns dict rgb, T (= w_bg / total, so alpha = 1 - T), tie.
+
+    wsr: each tile's list is every kept splat whose rectangle touches it, in index order (the result does not
+    depend on the order). duplex: cells with at least one kept splat, projected, sorted per tile by (depth, index);
+    each expanded to its kept splats (in member order: the result depends on it only through rounding)."""
+    pre = preprocess(scene, cam, mode, supersample, oit)
+    W, H = pre["W"], pre["H"]
+    gx, gy = math.ceil(W / TILE), math.ceil(H / TILE)
+    bg = np.asarray(background, np.float64)
+    rgb, Tout, ties = np.zeros((H, W, 3)), np.ones((H, W)), np.zeros((H, W), bool)
+    kept = np.nonzero(pre["keep"])[0]
+    if mode == "duplex":
+        cpre = preprocess_cells(cells, cam, supersample)
+        members = [cells.members[cells.offsets[c]:cells.offsets[c + 1]] for c in range(len(cells.means))]
+        members = [mm[pre["keep"][mm]] for mm in members]
+        ckeep = cpre["keep"] & np.array([len(mm) > 0 for mm in members], bool)
+        cell_of = np.full(len(pre["keep"]), -1)
+        for c, mm in enumerate(members):
+            cell_of[mm] = c
+        corder = np.nonzero(ckeep)[0]
+        corder = corder[np.argsort(cpre["depth"][corder], kind="stable")]
+    for ty in range(gy):
+        for tx in range(gx):
+            i0, i1 = ty * TILE, min(H, (ty + 1) * TILE)
+            j0, j1 = tx * TILE, min(W, (tx + 1) * TILE)
+            ii, jj = np.meshgrid(np.arange(i0, i1), np.arange(j0, j1), indexing="ij")
+            pix = np.stack([jj.ravel() + 0.5, ii.ravel() + 0.5], -1).astype(np.float64)
+            if mode == "wsr":
+                r = pre["rect"][kept]
+                sel = kept[(r[:, 0] <= tx) & (tx < r[:, 1]) & (r[:, 2] <= ty) & (ty < r[:, 3])]
+                out, T, tie = _blend_wsr(pre, sel, pix, oit["weight_background"], bg)
+            else:
+                r = cpre["rect"][corder]
+                cs = corder[(r[:, 0] <= tx) & (tx < r[:, 1]) & (r[:, 2] <= ty) & (ty < r[:, 3])]
+                sel = np.concatenate([members[c] for c in cs]) if len(cs) else np.zeros(0, int)
+                out, T, tie = _blend_duplex(pre, sel, cell_of, pix, oit["et_grade"], oit["weight_background"], bg)
+            rgb[i0:i1, j0:j1] = out.reshape(i1 - i0, j1 - j0, 3)
+            Tout[i0:i1, j0:j1] = T.reshape(i1 - i0, j1 - j0)
+            ties[i0:i1, j0:j1] = tie.reshape(i1 - i0, j1 - j0)
+    return dict(rgb=rgb, T=Tout, tie=ties, pre=pre)
+
+
+def reference_render_oit(scene, cam, mode: str, oit: dict, cells=None, supersample: int = 1,
+                         background=(0.0, 0.0, 0.0)):
+    """(rgb, alpha = 1 - w_bg / total, tie mask) at output resolution, box-averaged like the renderer."""
+    n = int(supersample)
+    r = render_oit(scene, cam, mode, oit, cells, n, background)
+    return box_down(r["rgb"], n), box_down(1.0 - r["T"], n), box_down(r["tie"].astype(float), n) > 0
 
 
 def box_down(img: np.ndarray, n: int) -> np.ndarray:

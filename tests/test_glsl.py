@@ -50,7 +50,7 @@ MAX_TOL = 1.0 / 255.0
 THRESHOLD_FRACTION = 0.002
 COUNT_SLACK = 1e-4  # visible / sort_length: allowed relative difference (threshold flips, see above)
 
-MODES = ["scalar", "mip", "analytic", "gaussian_blending", "scalar:2", "gaussian_blending:2"]
+MODES = ["scalar", "mip", "analytic", "gaussian_blending", "scalar:2", "gaussian_blending:2", "wsr", "duplex"]
 
 
 @pytest.fixture(scope="module")
@@ -66,9 +66,9 @@ def gl():
 
 
 def compare(scene: gb.Scene, cam: gb.Camera, spec: str, renderer: GlslRenderer | None = None,
-            background=(0.0, 0.0, 0.0)) -> dict:
+            background=(0.0, 0.0, 0.0), **options) -> dict:
     """Render with both backends; assert the tolerances of the module docstring; return the measurements."""
-    settings = RenderSettings.parse(spec, background=background)
+    settings = RenderSettings.parse(spec, background=background, **options)
     ref = gb.get_renderer(scene, "cpu").render(cam, settings)
     out = (renderer or gb.get_renderer(scene, "glsl")).render(cam, settings)
     assert out.rgb.shape == ref.rgb.shape and out.alpha.shape == ref.alpha.shape
@@ -345,7 +345,8 @@ def test_long_tile_lists(gl):
     np.testing.assert_array_equal(out.debug["evals"], ref.debug["evals"])
 
 
-@pytest.mark.parametrize("spec", ["scalar", "gaussian_blending", "analytic:2", "gaussian_blending:3"])
+@pytest.mark.parametrize("spec", ["scalar", "gaussian_blending", "analytic:2", "gaussian_blending:3", "wsr",
+                                  "duplex:2"])
 def test_blend_split_over_dispatches(gl, monkeypatch, spec):
     """The multi-dispatch blend (groups of render tiles, windows of the lists, state kept in buffers) that drivers
     with a loop cap need, forced here with a cap of 2000 iterations (lists of 768 splats per dispatch)."""
@@ -356,6 +357,25 @@ def test_blend_split_over_dispatches(gl, monkeypatch, spec):
     renderer.upload(scene)
     compare(scene, front_camera(48, 32), spec, renderer=renderer)
     renderer.release()
+
+
+def test_order_independent_options(gl):
+    """wsr and duplex with trained view weights, depth correction, other E and cell sizes, supersampling; the GLSL
+    backend sums the weights in float in list order, the CPU in fixed point (same values to ~1e-7)."""
+    base = awkward_scene(9, n=2000)
+    rng = np.random.default_rng(9)
+    vw = rng.normal(0.0, 0.3, (base.num_splats, 9))
+    vw[:, 0] = rng.uniform(-0.3, 3.0, base.num_splats)
+    scene = gb.Scene.from_arrays(base.means, base.scales, base.quats, base.opacities, base.sh, view_weight_sh=vw,
+                                 wsr_sigma=5.0, weight_background=0.1)
+    r = GlslRenderer()
+    r.upload(scene)
+    cam = front_camera(64, 48)
+    for spec, opts in [("wsr", {"depth_correct": True}), ("wsr:2", {}), ("duplex", {"depth_correct": True}),
+                       ("duplex:3", {"et_grade": 1.5, "cell_size": 3}), ("duplex", {"cell_size": 9})]:
+        m = compare(scene, cam, spec, renderer=r, background=(0.3, 0.2, 0.1), **opts)
+        assert m["max"] < 1e-3, (spec, opts, m)
+    r.release()
 
 
 def test_debug_planes(gl, bundled):

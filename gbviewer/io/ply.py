@@ -1,4 +1,8 @@
-"""INRIA 3DGS `.ply` (KERNELS.md §1.1): raw parameters per vertex, activated on load."""
+"""INRIA 3DGS `.ply` (KERNELS.md §1.1): raw parameters per vertex, activated on load.
+
+Also the sort-free GS layout (KERNELS.md §1.2): the INRIA columns plus `f_do_0`, `f_ro_*` (the view weight v_i as a
+raw 1-channel SH, kept as `Scene.view_weight_sh`) and `info`, a column that carries the globals in its first rows:
+info[0] = weight_background, info[1] = sigma."""
 
 from __future__ import annotations
 
@@ -15,6 +19,7 @@ from ..scene import Scene
 REQUIRED = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
             "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
 REST_COUNTS = {0: 0, 9: 1, 24: 2, 45: 3}  # f_rest_* count -> SH degree
+REST_COUNTS_1 = {0: 0, 3: 1, 8: 2, 15: 3}  # f_ro_* count (1-channel view weight) -> SH degree
 
 
 def read_ply(path: Path) -> plyfile.PlyData:
@@ -93,7 +98,20 @@ def load_inria_ply(path: Path, ply: plyfile.PlyData) -> Scene:
     degree = REST_COUNTS[len(rest_idx)]
     has_filter = "filter_3D" in names
     rest = [f"f_rest_{i}" for i in rest_idx]
-    columns = vertex_columns(path, ply, REQUIRED + rest + (["filter_3D"] if has_filter else []))
+    ro_idx = sorted(int(m.group(1)) for n in names if (m := re.fullmatch(r"f_ro_(\d+)", n)))
+    sort_free = "f_do_0" in names or bool(ro_idx)
+    weight_cols: list[str] = []
+    if sort_free:
+        if "f_do_0" not in names or len(ro_idx) not in REST_COUNTS_1 or ro_idx != list(range(len(ro_idx))):
+            raise SceneFormatError(
+                path, f"sort-free view weight: f_do_0 {'present' if 'f_do_0' in names else 'missing'} and "
+                f"{len(ro_idx)} f_ro_* properties; expected f_do_0 and f_ro_0.. with 0, 3, 8 or 15 of them",
+                field="f_ro")
+        if "info" not in names:
+            raise SceneFormatError(path, "sort-free layout (f_do_0) without the 'info' column that holds "
+                                   "weight_background and sigma", field="info")
+        weight_cols = ["f_do_0"] + [f"f_ro_{i}" for i in ro_idx] + ["info"]
+    columns = vertex_columns(path, ply, REQUIRED + rest + (["filter_3D"] if has_filter else []) + weight_cols)
     means = columns(["x", "y", "z"])
     n = means.shape[0]
     k = (degree + 1) ** 2
@@ -107,4 +125,16 @@ def load_inria_ply(path: Path, ply: plyfile.PlyData) -> Scene:
     filter_3d = columns(["filter_3D"])[:, 0] if has_filter else None
     meta = {"format": "inria-ply", "version": None, "properties": names, "sh_degree": degree,
             "filter_3D": has_filter}
-    return Scene.from_arrays(means, scales, quats, opacities, sh, filter_3d, source=str(path), meta=meta)
+    extra: dict = {}
+    if sort_free:
+        info = columns(["info"])[:, 0]
+        if n < 2:
+            raise SceneFormatError(path, f"sort-free layout with {n} vertex; the info column needs 2 rows "
+                                   "(weight_background, sigma)", field="info")
+        wbg, sigma = float(info[0]), float(info[1])
+        if not (np.isfinite(wbg) and wbg >= 0 and np.isfinite(sigma) and sigma > 0):
+            raise SceneFormatError(path, f"info rows 0, 1 (weight_background, sigma) = {wbg}, {sigma}; expected "
+                                   "weight_background >= 0 and sigma > 0", field="info")
+        extra = {"view_weight_sh": columns(weight_cols[:-1]), "weight_background": wbg, "wsr_sigma": sigma}
+        meta.update(format="sort-free-ply", sort_free=True)
+    return Scene.from_arrays(means, scales, quats, opacities, sh, filter_3d, source=str(path), meta=meta, **extra)
