@@ -94,7 +94,8 @@ class RenderSettings:
         """The label with what the scene makes of the mode: wsr on a scene without trained view weights is an
         approximation (v = 1); duplex names where its cells come from."""
         label = self.label
-        if self.mode == Mode.WSR and scene.view_weight_sh is None and scene.neural is None:
+        trained = scene.neural is not None or scene.meta.get("view_weights_in_opacity")
+        if self.mode == Mode.WSR and scene.view_weight_sh is None and not trained:
             label += " (approx.: v=1)"
         elif self.mode == Mode.DUPLEX and scene.cells is None and scene.neural is None:
             label += f" (built cells, K={self.cell_size})"

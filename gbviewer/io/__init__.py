@@ -8,6 +8,7 @@ from ..camera import load_cameras_json
 from ..errors import GBViewerError, SceneFormatError
 from ..scene import Scene
 from .compressed_ply import is_compressed_ply, load_compressed_ply
+from .duplex import is_duplex_ply, load_duplex
 from .ply import load_inria_ply, read_ply
 from .sog import ZIP_MAGIC, load_sog
 from .splat import load_splat, looks_like_splat
@@ -16,7 +17,7 @@ from .write import write_inria_ply
 
 __all__ = ["load", "load_cameras_json", "write_inria_ply"]
 
-FORMATS = ("INRIA or compressed .ply, .spz, .sog (zip, folder or meta.json) or .splat")
+FORMATS = ("INRIA (incl. sort-free GS), Duplex-GS or compressed .ply, .spz, .sog (zip, folder or meta.json) or .splat")
 
 
 def load(path: str | Path) -> Scene:
@@ -39,7 +40,9 @@ def _load(path: Path) -> Scene:
         head = fh.read(16)
     if head.startswith(b"ply"):
         ply = read_ply(path)
-        return load_compressed_ply(path, ply) if is_compressed_ply(ply) else load_inria_ply(path, ply)
+        if is_compressed_ply(ply):
+            return load_compressed_ply(path, ply)
+        return load_duplex(path, ply) if is_duplex_ply(ply) else load_inria_ply(path, ply)
     if head.startswith(ZIP_MAGIC) or head.lstrip().startswith(b"{"):
         return load_sog(path)
     data = path.read_bytes()

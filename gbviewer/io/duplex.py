@@ -1,0 +1,334 @@
+"""Trained Duplex-GS checkpoints (KERNELS.md §1.2, §8.2): an anchor ply plus TorchScript MLPs, decoded per view.
+
+Layout (LiYukeee/Duplex-GS `save_ply`, `save_mlp_checkpoints`): `point_cloud.ply` with one vertex per anchor (cell):
+`x y z level extra_level info f_offset_* f_anchor_feat_* anchor_size_0..2 anchor_rot_0..3 anchor_shd_0 anchor_shv_*`,
+where `f_offset_*` is channel-major (all x offsets, then y, then z), `anchor_size` is a log scale and `info` carries
+the globals in its first rows (voxel_size, standard_dist, sigma, raw w_bg, ET_grade). The MLPs lie beside the ply
+(or in a `checkpoint.pth/` folder there): `opacity_mlp.pt` (Tanh, K outputs), `cov_mlp.pt` (7K), `color_mlp.pt`
+(Sigmoid, 3K), optional `feature_bank_mlp.pt` and `embedding_appearance.pt`; or all of them as state dicts in one
+`checkpoints.pth` ('unite' mode), rebuilt here as the published Linear-ReLU-Linear(-activation) stacks.
+
+Decoding for a camera (`DuplexModel.decode`), as `generate_neural_gaussians`:
+- anchors kept: Octree-GS level of detail (level <= round(log2(standard_dist / distance) + extra_level), clamped to
+  the levels present; dist2level 'round') and in front of the near plane (z > 0.2; the published prefilter also
+  drops anchors whose tile rectangle is off screen, which the renderer's cell culling does for duplex);
+- MLP input per anchor: [feature (through the feature bank when present), view direction, (distance), (level)],
+  (+ appearance embedding 0 for colour). Which of distance / level each MLP takes follows from its input size; when
+  every MLP has exactly one extra input it is taken as the distance (Scaffold-GS's add_*_dist; Octree-GS's
+  add_level is off by default);
+- per child k: opacity o (Tanh), colour (RGB, no SH), scale = anchor_scale * min(sigmoid(raw), (2 - |offset|)/3),
+  rotation = normalize(raw), centre = anchor + offset * anchor_scale (offsets clamped to [-1, 1]);
+- v = sigmoid(eval_sh(anchor_sh, view direction)) per anchor; the decoded splat's opacity is o * v (the published
+  rasterizer multiplies them first; non-positive ones are culled);
+- cell = the anchor: centre, scale exp(anchor_size), rotation = normalized mean of its children's quaternions
+  weighted by max(o * v, 0).
+
+The result is a per-view `Scene` with those splats, their cells and the trained globals (sigma, w_bg = relu(raw) +
+0.1, ET_grade), which every mode renders (wsr and duplex use the globals; the others alpha-blend the decoded
+splats). torch is imported only here (`pip install 'gbviewer[duplex]'`); the MLPs run on CUDA when torch has it.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from pathlib import Path
+
+import numpy as np
+import plyfile
+
+from ..errors import SceneFormatError
+from ..scene import Scene
+
+SH_C0 = 0.28209479177387814
+MLP_FILES = {"opacity": "opacity_mlp.pt", "cov": "cov_mlp.pt", "color": "color_mlp.pt"}
+OPTIONAL_FILES = {"feature_bank": "feature_bank_mlp.pt", "appearance": "embedding_appearance.pt"}
+UNITE_FILE = "checkpoints.pth"
+NEAR = 0.2
+
+
+def is_duplex_ply(ply: plyfile.PlyData) -> bool:
+    names = set(ply["vertex"].data.dtype.names or ()) if "vertex" in ply else set()
+    return "f_anchor_feat_0" in names and "f_offset_0" in names
+
+
+def _indexed(names: list[str], prefix: str) -> list[str]:
+    idx = sorted(int(m.group(1)) for n in names if (m := re.fullmatch(re.escape(prefix) + r"(\d+)", n)))
+    return [f"{prefix}{i}" for i in idx] if idx == list(range(len(idx))) else []
+
+
+def _import_torch(path: Path):
+    try:
+        import torch
+    except ImportError as exc:
+        raise SceneFormatError(path, f"a Duplex-GS checkpoint needs PyTorch to run its MLPs ({exc}); install it with "
+                               "pip install 'gbviewer[duplex]'") from None
+    return torch
+
+
+def _linear_shapes(module) -> list[tuple[int, int]]:
+    """(in, out) of every weight matrix of a (scripted) module, in order."""
+    return [(int(p.shape[1]), int(p.shape[0])) for name, p in module.named_parameters()
+            if name.endswith("weight") and p.dim() == 2]
+
+
+def _rebuild(torch, state: dict, kind: str):
+    """A published MLP from its state dict ('unite' checkpoints): Linear-ReLU-Linear + the kind's activation."""
+    nn = torch.nn
+    if kind == "appearance":
+        w = state["embedding.weight"] if "embedding.weight" in state else state["weight"]
+        emb = nn.Embedding(w.shape[0], w.shape[1])
+        emb.weight.data.copy_(w)
+        return emb
+    w0, w2 = state["0.weight"], state["2.weight"]
+    layers = [nn.Linear(w0.shape[1], w0.shape[0]), nn.ReLU(True), nn.Linear(w2.shape[1], w2.shape[0])]
+    act = {"opacity": nn.Tanh(), "color": nn.Sigmoid(), "feature_bank": nn.Softmax(dim=1)}.get(kind)
+    seq = nn.Sequential(*layers, *([act] if act is not None else []))
+    seq.load_state_dict({k: v for k, v in state.items() if k.split(".")[0] in ("0", "2")})
+    return seq.eval()
+
+
+def load_mlps(path: Path, torch) -> dict:
+    """The checkpoint's MLPs (TorchScript files or a 'unite' checkpoints.pth) found beside the ply."""
+    folders = [path.parent, path.parent / "checkpoint.pth"]
+    for folder in folders:
+        if all((folder / f).is_file() for f in MLP_FILES.values()):
+            mlps = {}
+            for kind, fname in {**MLP_FILES, **OPTIONAL_FILES}.items():
+                f = folder / fname
+                if kind in OPTIONAL_FILES and not f.is_file():
+                    continue
+                try:
+                    with warnings.catch_warnings():  # torch 2.x deprecates TorchScript, which these files are
+                        warnings.simplefilter("ignore", DeprecationWarning)
+                        mlps[kind] = torch.jit.load(str(f), map_location="cpu").eval()
+                except Exception as exc:  # noqa: BLE001 - torch raises RuntimeError / ValueError with its message
+                    raise SceneFormatError(f, f"not a TorchScript module: {str(exc).splitlines()[0]}") from None
+            return mlps
+    unite = path.parent / UNITE_FILE
+    if unite.is_file():
+        try:
+            ckpt = torch.load(str(unite), map_location="cpu", weights_only=True)
+        except Exception as exc:  # noqa: BLE001
+            raise SceneFormatError(unite, f"cannot read the MLP checkpoint: {str(exc).splitlines()[0]}") from None
+        keys = {"opacity": "opacity_mlp", "cov": "cov_mlp", "color": "color_mlp", "feature_bank": "feature_bank_mlp",
+                "appearance": "appearance"}
+        missing = [k for k in ("opacity_mlp", "cov_mlp", "color_mlp") if k not in ckpt]
+        if missing:
+            raise SceneFormatError(unite, f"missing state dicts {missing}")
+        try:
+            return {kind: _rebuild(torch, ckpt[key], kind) for kind, key in keys.items() if key in ckpt}
+        except (KeyError, RuntimeError) as exc:
+            raise SceneFormatError(unite, f"unexpected MLP state dict: {exc}") from None
+    present = [f for f in MLP_FILES.values() if (path.parent / f).is_file()]
+    missing = [f for f in MLP_FILES.values() if f not in present]
+    raise SceneFormatError(path.parent / missing[0], f"missing: a Duplex-GS checkpoint needs {', '.join(MLP_FILES.values())} "
+                           f"(or {UNITE_FILE}) beside {path.name}; found {present or 'none of them'}")
+
+
+class DuplexModel:
+    """Anchors, MLPs and globals of a trained Duplex-GS model; `decode(camera)` gives the per-view splats and cells."""
+
+    def __init__(self, path: Path, anchors, levels, extra_levels, offsets, feats, anchor_scales, sh_vi, info, mlps,
+                 torch):
+        self.path, self.torch = path, torch
+        self.anchors = anchors.astype(np.float64)
+        self.levels, self.extra_levels = levels, extra_levels
+        self.offsets = np.clip(offsets, -1.0, 1.0)  # get_offset
+        self.feats, self.anchor_scales, self.sh_vi = feats, anchor_scales, sh_vi
+        self.voxel_size, self.standard_dist = float(info[0]), float(info[1])
+        self.sigma = float(info[2])
+        self.weight_background = max(float(info[3]), 0.0) + 0.1  # get_wbg = relu(_wbg) + 0.1
+        self.et_grade = float(info[4])
+        self.num_levels = int(levels.max() - levels.min() + 1)
+        self.k = offsets.shape[1]
+        self.device = "cuda" if torch.cuda.is_available() else "cpu"
+        self.mlps = {kind: m.to(self.device) for kind, m in mlps.items()}
+        self._check_mlps()
+
+    def _check_mlps(self) -> None:
+        """Input and output sizes of every MLP against the anchors' features and K offsets."""
+        F, k = self.feats.shape[1], self.k
+        shapes = {kind: _linear_shapes(m) for kind, m in self.mlps.items() if kind != "appearance"}
+        self.app_dim = 0
+        if "appearance" in self.mlps:
+            w = [p for p in self.mlps["appearance"].parameters()]
+            self.app_dim = int(w[0].shape[1]) if w else 0
+        feat_in = F
+        if "feature_bank" in shapes:
+            fin, fout = shapes["feature_bank"][0][0], shapes["feature_bank"][-1][1]
+            if fout != 3 or fin not in (3, 4) or F % 4:
+                raise SceneFormatError(self.path.parent / OPTIONAL_FILES["feature_bank"],
+                                       f"feature bank maps {fin} inputs to {fout}; expected 3 (+1 level) -> 3 weights "
+                                       f"over {F} features (a multiple of 4)")
+        outs = {"opacity": k, "cov": 7 * k, "color": 3 * k}
+        self.extra = {}
+        for kind, want_out in outs.items():
+            fname = MLP_FILES[kind]
+            if not shapes[kind]:
+                raise SceneFormatError(self.path.parent / fname, "has no linear layers")
+            n_in, n_out = shapes[kind][0][0], shapes[kind][-1][1]
+            base = feat_in + 3 + (self.app_dim if kind == "color" else 0)
+            if n_out != want_out:
+                raise SceneFormatError(self.path.parent / fname, f"wrong output size {n_out}; the anchors have {k} "
+                                       f"offsets, so expected {want_out}")
+            if not base <= n_in <= base + 2:
+                raise SceneFormatError(self.path.parent / fname, f"wrong feature size: takes {n_in} inputs; the anchors "
+                                       f"have {F} features + 3 view direction"
+                                       + (f" + {self.app_dim} appearance" if kind == "color" and self.app_dim else "")
+                                       + f" (+1 distance, +1 level): expected {base}..{base + 2}")
+            self.extra[kind] = n_in - base
+        self.level_input = 2 in self.extra.values()
+        if self.level_input and 0 in self.extra.values():
+            raise SceneFormatError(self.path.parent / MLP_FILES["opacity"], "inconsistent MLP input sizes "
+                                   f"{self.extra}: the level input is shared by all MLPs")
+
+    def anchor_mask(self, campos: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Anchors of this view: Octree-GS level of detail ('round') and in front of the near plane."""
+        dist = np.linalg.norm(self.anchors - campos, axis=1)
+        with np.errstate(divide="ignore"):
+            pred = np.log2(self.standard_dist / np.maximum(dist, 1e-30)) + self.extra_levels
+        lod = np.clip(np.round(pred), 0, self.num_levels - 1)
+        z = self.anchors @ R[2] + t[2]
+        return (self.levels <= lod) & (z > NEAR)
+
+    def decode(self, camera) -> Scene:
+        """The splats and cells of this view (see the module docstring)."""
+        from ..cells import Cells
+
+        torch = self.torch
+        campos = camera.position
+        keep = self.anchor_mask(campos, camera.R, camera.t)
+        idx = np.flatnonzero(keep)
+        A, k = len(idx), self.k
+        dev = self.device
+        f32 = torch.float32
+        anchor = self.anchors[idx]
+        ob = anchor - campos
+        dist = np.linalg.norm(ob, axis=1, keepdims=True)
+        view = ob / np.maximum(dist, 1e-30)
+        with torch.no_grad():
+            feat = torch.as_tensor(self.feats[idx], dtype=f32, device=dev)
+            tview = torch.as_tensor(view, dtype=f32, device=dev)
+            tdist = torch.as_tensor(dist, dtype=f32, device=dev)
+            tlevel = torch.as_tensor(self.levels[idx, None], dtype=f32, device=dev)
+            if "feature_bank" in self.mlps:
+                cat = torch.cat([tview, tlevel], 1) if self.level_input else tview
+                w = self.mlps["feature_bank"](cat).unsqueeze(1)  # (A, 1, 3)
+                f = feat.unsqueeze(-1)
+                feat = (f[:, ::4, :1].repeat([1, 4, 1]) * w[:, :, :1] + f[:, ::2, :1].repeat([1, 2, 1]) * w[:, :, 1:2]
+                        + f * w[:, :, 2:]).squeeze(-1)
+
+            def inputs(kind: str):
+                parts = [feat, tview]
+                if self.extra[kind] == 2 or (self.extra[kind] == 1 and not self.level_input):
+                    parts.append(tdist)
+                if self.level_input:
+                    parts.append(tlevel)
+                if kind == "color" and self.app_dim:
+                    app = self.mlps["appearance"](torch.zeros(A, dtype=torch.long, device=dev))
+                    parts.append(app)
+                return torch.cat(parts, 1)
+
+            opacity = self.mlps["opacity"](inputs("opacity")).reshape(-1).float()
+            color = self.mlps["color"](inputs("color")).reshape(A * k, 3).float()
+            scale_rot = self.mlps["cov"](inputs("cov")).reshape(A * k, 7).float()
+            offsets = torch.as_tensor(self.offsets[idx].reshape(-1, 3), dtype=f32, device=dev)
+            a_scale = torch.as_tensor(self.anchor_scales[idx], dtype=f32, device=dev).repeat_interleave(k, 0)
+            a_pos = torch.as_tensor(anchor, dtype=f32, device=dev).repeat_interleave(k, 0)
+            ratio_max = (2.0 - torch.sqrt((offsets ** 2).sum(1, keepdim=True))) / 3.0
+            scaling = a_scale * torch.minimum(torch.sigmoid(scale_rot[:, :3]), ratio_max)
+            rot = torch.nn.functional.normalize(scale_rot[:, 3:7])
+            xyz = a_pos + offsets * a_scale
+            vi = torch.sigmoid(torch.as_tensor(_eval_sh(self.sh_vi[idx], view), dtype=f32, device=dev))
+            vi = vi.repeat_interleave(k, 0)
+            weights = (opacity * vi).clamp(min=0.0).reshape(-1, k)
+            cell_rot = torch.nn.functional.normalize((rot.reshape(-1, k, 4) * weights.unsqueeze(2)).mean(1))
+            opac = opacity * vi
+            out = {name: v.cpu().numpy() for name, v in (("xyz", xyz), ("scaling", scaling), ("rot", rot),
+                                                           ("color", color), ("opac", opac), ("cell_rot", cell_rot))}
+        sh = ((out["color"] - 0.5) / SH_C0)[:, None, :]
+        cells = Cells(anchor.astype(np.float32), self.anchor_scales[idx].astype(np.float32),
+                      out["cell_rot"].astype(np.float32), np.arange(0, A * k + 1, k, dtype=np.int32),
+                      np.arange(A * k, dtype=np.int32), "duplex-gs anchors", 0.0)
+        quats = out["rot"]
+        quats[np.linalg.norm(quats, axis=1) < 1e-12] = (1.0, 0.0, 0.0, 0.0)
+        cq = cells.quats
+        cq[np.linalg.norm(cq, axis=1) < 1e-12] = (1.0, 0.0, 0.0, 0.0)
+        return Scene.from_arrays(out["xyz"], out["scaling"], quats, np.clip(out["opac"], 0.0, 1.0), sh,
+                                 source=f"{self.path} @ view", meta={"format": "duplex-gs decoded",
+                                                                     "view_weights_in_opacity": True},
+                                 wsr_sigma=self.sigma if self.sigma > 0 else None,
+                                 weight_background=self.weight_background, et_grade=self.et_grade, cells=cells)
+
+
+def _eval_sh(coeffs: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """eval_sh of 3DGS for a 1-channel SH (A,K) at unit directions (A,3): the raw sum (no +0.5)."""
+    c = np.asarray(coeffs, np.float64)
+    x, y, z = np.asarray(dirs, np.float64).T
+    k = c.shape[1]
+    basis = [np.full_like(x, SH_C0)]
+    if k > 1:
+        c1 = 0.4886025119029199
+        basis += [-c1 * y, c1 * z, -c1 * x]
+    if k > 4:
+        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
+        basis += [1.0925484305920792 * xy, -1.0925484305920792 * yz, 0.31539156525252005 * (2 * zz - xx - yy),
+                  -1.0925484305920792 * xz, 0.5462742152960396 * (xx - yy)]
+    if k > 9:
+        basis += [-0.5900435899266435 * y * (3 * xx - yy), 2.890611442640554 * xy * z,
+                  -0.4570457994644658 * y * (4 * zz - xx - yy), 0.3731763325901154 * z * (2 * zz - 3 * xx - 3 * yy),
+                  -0.4570457994644658 * x * (4 * zz - xx - yy), 1.445305721320277 * z * (xx - yy),
+                  -0.5900435899266435 * x * (xx - 3 * yy)]
+    return (np.stack(basis, 1) * c).sum(1)
+
+
+def load_duplex(path: Path, ply: plyfile.PlyData) -> Scene:
+    """A Duplex-GS anchor ply and its MLPs. The returned Scene renders through `neural.decode`; its splat arrays
+    only hold the view-independent child centres (for bounds and framing)."""
+    from .ply import vertex_columns
+
+    names = list(ply["vertex"].data.dtype.names or ())
+    n = ply["vertex"].count
+    groups = {p: _indexed(names, p) for p in ("f_offset_", "f_anchor_feat_", "anchor_size_", "anchor_shv_")}
+    for field in ("x", "y", "z", "level", "extra_level", "info", "anchor_shd_0"):
+        if field not in names:
+            raise SceneFormatError(path, "missing Duplex-GS anchor property", field=field)
+    if len(groups["f_offset_"]) == 0 or len(groups["f_offset_"]) % 3:
+        raise SceneFormatError(path, f"{len(groups['f_offset_'])} f_offset_* properties; expected 3 K (f_offset_0..)",
+                               field="f_offset")
+    if len(groups["anchor_size_"]) != 3:
+        raise SceneFormatError(path, "expected anchor_size_0..2", field="anchor_size")
+    if len(groups["anchor_shv_"]) not in (0, 3, 8, 15):
+        raise SceneFormatError(path, f"{len(groups['anchor_shv_'])} anchor_shv_* properties; expected 0, 3, 8 or 15",
+                               field="anchor_shv")
+    if n < 5:
+        raise SceneFormatError(path, f"{n} anchors; the info column needs 5 rows", field="info")
+    torch = _import_torch(path)
+    wanted = (["x", "y", "z", "level", "extra_level", "info"] + groups["f_offset_"] + groups["f_anchor_feat_"]
+              + groups["anchor_size_"] + ["anchor_shd_0"] + groups["anchor_shv_"])
+    cols = vertex_columns(path, ply, wanted)
+    data = np.asarray(cols(wanted), np.float32)
+    if not np.isfinite(data).all():
+        raise SceneFormatError(path, "non-finite anchor values")
+    pos = {name: i for i, name in enumerate(wanted)}
+
+    def take(names_):
+        return data[:, [pos[x] for x in names_]]
+
+    k = len(groups["f_offset_"]) // 3
+    offsets = take(groups["f_offset_"]).reshape(n, 3, k).transpose(0, 2, 1)  # channel-major in the file
+    info = data[:5, pos["info"]]
+    mlps = load_mlps(path, torch)
+    model = DuplexModel(path, take(["x", "y", "z"]), data[:, pos["level"]].astype(np.int64), data[:, pos["extra_level"]],
+                        offsets, take(groups["f_anchor_feat_"]), np.exp(take(groups["anchor_size_"])),
+                        take(["anchor_shd_0"] + groups["anchor_shv_"]), info, mlps, torch)
+    centres = (model.anchors[:, None, :] + model.offsets * model.anchor_scales[:, None, :]).reshape(-1, 3)
+    m = len(centres)
+    meta = {"format": "duplex-gs", "version": None, "properties": names, "anchors": n, "offsets_per_anchor": k,
+            "features": model.feats.shape[1], "mlps": sorted(model.mlps), "et_grade": model.et_grade,
+            "sigma": model.sigma, "weight_background": model.weight_background}
+    return Scene.from_arrays(centres, np.repeat(model.anchor_scales, k, 0) / 3.0, np.tile([1.0, 0, 0, 0], (m, 1)),
+                             np.full(m, 0.5), np.zeros((m, 1, 3)), source=str(path), meta=meta, neural=model,
+                             wsr_sigma=model.sigma if model.sigma > 0 else None,
+                             weight_background=model.weight_background, et_grade=model.et_grade)
