@@ -55,6 +55,108 @@ def bench_views(scene: Scene, views: int, width: int, height: int, cameras: Path
 
 
 @dataclass
+class OitRow:
+    """Sorted scalar blending against the order-independent modes on one scene (means over the bench views).
+
+    sort_length: keys ordered by depth per frame (tile-splat pairs for scalar, 0 for wsr, tile-cell pairs for
+    duplex: the paper's Table VI quantity), sort_mb: their memory (render.SORT_ENTRY_BYTES each), pairs: tile-list
+    entries the blend walks, visible: splats that survive preprocess, cells / cells_visible: duplex cells in the
+    scene / in the view (cells vs splats), stages_ms: median per stage, psnr_vs_scalar: against the sorted scalar
+    render of the same view, flicker / pops: see `flicker`."""
+
+    scene: str
+    backend: str
+    mode: str
+    label: str
+    width: int
+    height: int
+    visible: int
+    sort_length: int
+    sort_mb: float
+    pairs: int
+    cells: int
+    cells_visible: int
+    cell_misses: int
+    stages_ms: dict
+    psnr_vs_scalar: float
+    flicker: float
+    pops: float
+
+
+POP_THRESHOLD = 4.0 / 255.0
+
+
+def flicker(frames: list[np.ndarray]) -> tuple[float, float]:
+    """Popping along a slow camera path: frames I_0..I_{F-1} (clipped to [0, 1]) rendered at equal small steps.
+
+    flicker = 255 x mean over t = 1..F-2, pixels and channels of |I_{t+1} - 2 I_t + I_{t-1}|, in 8-bit levels.
+    Smooth motion at a constant step changes a pixel by about the same amount every frame, so its second
+    difference is O(step^2); a sort-order swap (popping) is a step in one frame, which shows up at full size in the
+    second difference of two consecutive t. pops = fraction of (pixel, t) whose largest channel |second difference|
+    exceeds POP_THRESHOLD (4/255, a visible jump)."""
+    if len(frames) < 3:
+        return float("nan"), float("nan")
+    f = np.clip(np.stack(frames).astype(np.float64), 0.0, 1.0)
+    d2 = np.abs(f[2:] - 2.0 * f[1:-1] + f[:-2])
+    return float(255.0 * d2.mean()), float((d2.max(axis=-1) > POP_THRESHOLD).mean())
+
+
+def measure_oit(scene: Scene, name: str, cams: list[Camera], settings: list[RenderSettings], backend: str = "cpu",
+                flicker_frames: int = 16, flicker_step: float = 0.1, up: str = "-y", progress=None) -> list[OitRow]:
+    """scalar, wsr and duplex (those of `settings` at 1 sample per pixel, plus scalar as the reference) on the bench
+    views, and the flicker of each along an orbit of `flicker_frames` frames, `flicker_step` degrees apart."""
+    wanted = {Mode.SCALAR: RenderSettings(Mode.SCALAR)}
+    for s in settings:
+        if s.mode in (Mode.WSR, Mode.DUPLEX) and s.supersample == 1:
+            wanted.setdefault(s.mode, s)
+    renderer = get_renderer(scene, backend)
+    rows = []
+    for mode, s in wanted.items():
+        acc: dict[str, list] = {}
+        last = None
+        for cam in cams:
+            ref = renderer.render(cam, RenderSettings(Mode.SCALAR)).rgb
+            renderer.render(cam, s)  # warm-up (duplex: builds the cells once)
+            f = renderer.render(cam, s)
+            last = f.stats
+            for k in STAGES + ("visible", "sort_length", "sort_bytes", "pairs", "cells", "cells_visible",
+                               "cell_misses"):
+                acc.setdefault(k, []).append(f.stats.get(k, 0))
+            acc.setdefault("psnr", []).append(psnr(f.rgb, ref))
+            if progress:
+                progress()
+        c0 = cams[0]
+        frames = [renderer.render(orbit_camera(scene, 30.0 + i * flicker_step, 20.0, width=c0.width,
+                                               height=c0.height, up=up), s).rgb for i in range(flicker_frames)]
+        fl, pops = flicker(frames)
+        mean = {k: float(np.mean(v)) for k, v in acc.items()}
+        rows.append(OitRow(
+            name, backend, s.spec, last["mode"], c0.width, c0.height, round(mean["visible"]),
+            round(mean["sort_length"]), mean["sort_bytes"] / 2**20, round(mean["pairs"]), round(mean["cells"]),
+            round(mean["cells_visible"]), round(mean["cell_misses"]),
+            {k: float(statistics.median(acc[k])) for k in STAGES}, mean["psnr"], fl, pops))
+    return rows
+
+
+def print_oit(rows: list[OitRow]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title="Sorted vs order-independent modes (mean over views; flicker along a slow orbit)")
+    for col in ("scene", "mode", "visible", "cells vis/all", "sort length", "sort MB", "list entries", "preprocess",
+                "sort", "blend", "total ms", "PSNR vs scalar", "flicker", "pops %"):
+        t.add_column(col, justify="left" if col in ("scene", "mode") else "right")
+    for r in rows:
+        cells = f"{r.cells_visible}/{r.cells}" if r.cells else "-"
+        t.add_row(r.scene, r.label, str(r.visible), cells, str(r.sort_length), f"{r.sort_mb:.2f}", str(r.pairs),
+                  f"{r.stages_ms['preprocess_ms']:.1f}", f"{r.stages_ms['sort_ms']:.1f}",
+                  f"{r.stages_ms['blend_ms']:.1f}", f"{r.stages_ms['total_ms']:.1f}",
+                  "inf" if math.isinf(r.psnr_vs_scalar) else f"{r.psnr_vs_scalar:.2f}", f"{r.flicker:.3f}",
+                  f"{100 * r.pops:.3f}")
+    Console().print(t)
+
+
+@dataclass
 class SpeedRow:
     scene: str
     backend: str
@@ -170,9 +272,12 @@ def machine_description() -> dict:
     return desc
 
 
-def write_json(path: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = True) -> Path:
+def write_json(path: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = True,
+               oit: list[OitRow] | None = None) -> Path:
     doc = {"machine": machine_description(), "speed": [asdict(r) for r in speed],
            "fidelity": [asdict(r) for r in fidelity], "ratios": ratios(speed)}
+    if oit:
+        doc["order_independent"] = [asdict(r) for r in oit]
     return atomic_write(path, lambda p: p.write_text(json.dumps(doc, indent=2, allow_nan=True)), force)
 
 

@@ -10,10 +10,12 @@ scene gets cells built once, on first use, by `build_cells`:
   Gaussians), so that the sort-length reduction is measured at the granularity the paper's Table VI reports.
 - Ellipsoid: centre = mean of the members' centres; axes = eigenvectors of the members' second moment about the
   centre including their own covariances, (1/K) sum_i (d_i d_i^T + Sigma_i); per axis u the half extent
-  e = max_i (|d_i . u| + 3 sqrt(u^T Sigma_i u)) bounds every member's 3-sigma ellipsoid by the box [-e, e]; the box
-  lies inside the ellipsoid with semi-axes sqrt(3) e, which is made the cell's 2-sigma ellipsoid (Duplex-GS projects
-  cells with radius 2 sqrt(lambda1), splats with 3 sqrt(lambda1)): scales = sqrt(3) e / 2. So a cell's tile
-  rectangle covers its splats' up to projection approximations; the renderer counts the splat-tile pairs it misses
+  e = max_i (|d_i . u| + 3 sqrt(u^T Sigma_i u)) bounds every member's 3-sigma ellipsoid by the box [-e, e]. The cell's
+  2-sigma ellipsoid (Duplex-GS projects cells with radius 2 sqrt(lambda1), splats with 3 sqrt(lambda1)) gets the
+  semi-axes lambda e with the smallest lambda that contains every member's 3-sigma ellipsoid, bounded through the
+  triangle inequality: lambda = max_i (|D^-1 d_i| + 3 |D^-1 L_i|_2), D = diag(e), Sigma_i = L_i L_i^T in the cell
+  frame; lambda <= sqrt(3) (the box's circumscribed ellipsoid). scales = lambda e / 2. So a cell's tile rectangle
+  covers its splats' up to projection approximations; the renderer counts the splat-tile pairs it misses
   (Frame.stats["cell_misses"]).
 """
 
@@ -162,10 +164,18 @@ def covering_ellipsoids(means, scales, quats, order: np.ndarray, starts: np.ndar
     _, U = np.linalg.eigh(second)  # columns: axes
     U[:, :, 2] *= np.sign(np.linalg.det(U))[:, None]  # a proper rotation
     Us = U[seg]
-    along = np.abs(np.einsum("ni,nia->na", d, Us))
-    spread = np.sqrt(np.maximum(np.einsum("nia,nij,nja->na", Us, Sig, Us), 0.0))
-    half = np.maximum.reduceat(along + COVER_SIGMAS * spread, st, axis=0)
-    return centre, np.sqrt(3.0) / 2.0 * half, _quat_from_matrix(U)
+    local = np.einsum("ni,nia->na", d, Us)  # member centres in the cell frame
+    Sl = Us.transpose(0, 2, 1) @ Sig @ Us  # member covariances in the cell frame
+    spread = np.sqrt(np.maximum(np.einsum("naa->na", Sl), 0.0))
+    half = np.maximum.reduceat(np.abs(local) + COVER_SIGMAS * spread, st, axis=0)
+    half = np.maximum(half, 1e-9 * np.maximum(half.max(axis=1, keepdims=True), 1e-30))
+    # smallest lambda with every member's 3-sigma ellipsoid inside the ellipsoid of semi-axes lambda * half
+    # (triangle inequality in the frame scaled by 1/half; lambda <= sqrt(3), the box's circumscribed ellipsoid)
+    inv = 1.0 / half[seg]
+    scaled = Sl * inv[:, :, None] * inv[:, None, :]
+    reach = np.linalg.norm(local * inv, axis=1) + COVER_SIGMAS * np.sqrt(np.maximum(np.linalg.eigvalsh(scaled)[:, -1], 0))
+    lam = np.minimum(np.maximum.reduceat(reach, st), np.sqrt(3.0))
+    return centre, 0.5 * lam[:, None] * half, _quat_from_matrix(U)
 
 
 def build_cells(scene, k: int = DEFAULT_CELL_SIZE) -> Cells:

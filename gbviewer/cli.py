@@ -166,7 +166,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     backends = [b for b in args.backends.split(",") if BACKENDS[b].available()[0]]
     for b in set(args.backends.split(",")) - set(backends):
         print(f"skipping backend {b}: {BACKENDS[b].available()[1]}")
-    speed, fidelity = [], []
+    speed, fidelity, oit = [], [], []
     w, h = args.size
     for path in args.scenes:
         scene = load(path)
@@ -178,9 +178,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
             step = lambda: progress.advance(task)  # noqa: E731
             speed += bench.measure_speed(scene, Path(path).name, cams, settings, backends, rates, args.repeat, step)
             fidelity += bench.measure_fidelity(scene, Path(path).name, cams, settings, rates, backends[0], step)
+            if any(s.mode in (Mode.WSR, Mode.DUPLEX) for s in settings):
+                oit += bench.measure_oit(scene, Path(path).name, cams, settings, backends[0], args.flicker_frames,
+                                         args.flicker_step, args.up)
     bench.print_tables(speed, fidelity)
+    if oit:
+        bench.print_oit(oit)
     if args.json:
-        print(f"wrote {bench.write_json(Path(args.json), speed, fidelity)}")
+        print(f"wrote {bench.write_json(Path(args.json), speed, fidelity, oit=oit)}")
     if args.plots:
         for p in bench.write_plots(Path(args.plots), speed, fidelity):
             print(f"wrote {p}")
@@ -226,7 +231,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="speed and zoom fidelity per mode, backend and sampling rate")
     p.add_argument("scenes", type=Path, nargs="+")
     p.add_argument("--modes", default="scalar,mip,analytic,gaussian_blending,supersample:3",
-                   help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N)")
+                   help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N); with wsr "
+                   "or duplex the sort length, cells, PSNR vs scalar and flicker are measured too")
     p.add_argument("--backends", default="cpu")
     p.add_argument("--rates", default="4,2,1,1/2,1/4,1/8", help="sampling rates, e.g. 8,4,2,1,1/2,1/4,1/8")
     p.add_argument("--views", type=int, default=3, help="views per scene (orbit, or spread over --cameras)")
@@ -236,6 +242,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--json", help="write every number and the machine description here")
     p.add_argument("--plots", help="write PNG plots into this folder")
+    p.add_argument("--flicker-frames", type=int, default=16,
+                   help="with wsr or duplex among --modes: frames of the slow orbit that measures popping")
+    p.add_argument("--flicker-step", type=float, default=0.1, help="degrees of azimuth between those frames")
     p.set_defaults(func=cmd_bench)
     return parser
 

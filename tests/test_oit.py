@@ -320,3 +320,34 @@ def test_cli_render_new_modes(tmp_path):
         img = np.load(out)
         assert img.shape == (32, 48, 3) and np.isfinite(img).all() and img.max() > 0.05
     assert math.isfinite(float(img.mean()))
+
+
+def test_flicker_measure():
+    from gbviewer.bench import flicker
+
+    h, w = 8, 8
+    smooth = [np.full((h, w, 3), 0.1 + 0.01 * t) for t in range(6)]  # constant-speed change: no second difference
+    fl, pops = flicker(smooth)
+    assert fl < 1e-9 and pops == 0
+    popping = [f.copy() for f in smooth]
+    for f in popping[3:]:
+        f[2, 2] += 0.2  # one pixel jumps between frames 2 and 3
+    fl, pops = flicker(popping)
+    assert pops == pytest.approx(2 / (4 * h * w))  # seen at t = 2 and t = 3
+    assert fl == pytest.approx(255 * 0.2 * 2 * 3 / (4 * h * w * 3))
+
+
+def test_cli_bench_order_independent(tmp_path):
+    import json
+
+    from gbviewer.cli import main
+
+    out = tmp_path / "b.json"
+    assert main(["bench", str(gb.DEFAULT_SCENE), "--modes", "wsr,duplex", "--views", "1", "--repeat", "1",
+                 "--size", "48x32", "--rates", "1", "--flicker-frames", "3", "--json", str(out)]) == 0
+    rows = {r["mode"]: r for r in json.loads(out.read_text())["order_independent"]}
+    assert set(rows) == {"scalar", "wsr", "duplex"}
+    assert rows["wsr"]["sort_length"] == 0 and rows["wsr"]["pairs"] == rows["scalar"]["pairs"] > 0
+    assert 0 < rows["duplex"]["sort_length"] and rows["duplex"]["cells_visible"] <= rows["duplex"]["cells"]
+    assert rows["scalar"]["psnr_vs_scalar"] == float("inf") and rows["duplex"]["psnr_vs_scalar"] > 10
+    assert all(r["flicker"] >= 0 and r["stages_ms"]["blend_ms"] > 0 for r in rows.values())
