@@ -516,7 +516,7 @@ class GlslRenderer:
             raise RenderError(f"glsl backend: more than 2^32 tile-splat pairs at {RW}x{RH}; render a smaller image")
         extra = {}
         if mode == Mode.DUPLEX:
-            tvals, ranges, sort_length, pairs, visible, extra = self._bin_duplex(cells, cam_uniforms, num_tiles)
+            tvals, ranges, sort_length, pairs, _, extra = self._bin_duplex(cells, cam_uniforms, num_tiles)
         else:
             tvals, ranges = self._bin_splats(mode, visible, pairs, dmin, dmax, num_tiles, gx)
             sort_length = 0 if mode == Mode.WSR else pairs

@@ -306,27 +306,62 @@ class CudaRenderer:
         return ok, "" if ok else why
 
     def upload(self, scene: Scene) -> None:
+        self._scene = scene
+        self._uploaded = None
+        self._cells = None
+        if scene.neural is None:
+            self._upload(scene)
+
+    def _upload(self, scene: Scene) -> None:
         try:
             self._impl.upload(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d)
+            if scene.view_weight_sh is not None:
+                self._impl.upload_weights(np.ascontiguousarray(scene.view_weight_sh, np.float32))
         except RuntimeError as exc:
             raise RenderError(f"cuda: {exc}") from None
+        self._uploaded = scene
+        self._cells = None
+
+    def _prepare(self, camera: Camera, settings: RenderSettings) -> tuple[Scene, tuple]:
+        """The view's scene on the device (trained Duplex-GS models: decoded and uploaded per frame), its cells for
+        duplex, and the globals of wsr / duplex as positional arguments."""
+        scene = view_scene(self._scene, camera)
+        if scene is not self._uploaded:
+            self._upload(scene)
+        p = oit_params(scene, settings)
+        if settings.mode == Mode.DUPLEX:
+            from .cells import cells_for
+
+            cells = cells_for(scene, settings.cell_size)
+            if cells is not self._cells:
+                cell_of = np.full(scene.num_splats, -1, np.int32)
+                cell_of[cells.members] = np.repeat(np.arange(cells.num_cells, dtype=np.int32), cells.sizes)
+                try:
+                    self._impl.upload_cells(cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
+                                            cell_of)
+                except RuntimeError as exc:
+                    raise RenderError(f"cuda: {exc}") from None
+                self._cells = cells
+        return scene, (p["sigma"], p["weight_background"], p["et_grade"], p["depth_correct"])
 
     def render(self, camera: Camera, settings: RenderSettings) -> Frame:
         t0 = time.perf_counter()
+        scene, oit = self._prepare(camera, settings)
         try:
             out = self._impl.render(*_camera_args(camera), int(settings.mode), settings.supersample,
                                     settings.sh_degree, np.asarray(settings.background, np.float32),
-                                    settings.debug == "window")
+                                    settings.debug == "window", *oit)
         except RuntimeError as exc:
             raise RenderError(f"cuda: {exc}") from None
-        return _frame(out, camera, settings, self.name, t0)
+        return _frame(out, camera, settings, self.name, t0, scene)
 
     def render_to_texture(self, texture_id: int, camera: Camera, settings: RenderSettings) -> None:
         """Render into an existing GL_RGBA32F texture of the camera's size (its GL context must be current)."""
+        _, oit = self._prepare(camera, settings)
         try:
             self._impl.render_to_gl_texture(texture_id, *_camera_args(camera), int(settings.mode),
                                             settings.supersample, settings.sh_degree,
-                                            np.asarray(settings.background, np.float32))
+                                            np.asarray(settings.background, np.float32), *oit)
         except RuntimeError as exc:
             raise RenderError(f"cuda: {exc}") from None
 

@@ -13,7 +13,7 @@ import gbviewer as gb
 from conftest import front_camera, random_scene, shared_scene
 from gbviewer.render import CudaRenderer
 
-MODES = ["scalar", "mip", "analytic", "gaussian_blending"]
+MODES = ["scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex"]
 CUDA_OK, CUDA_WHY = CudaRenderer.available()
 needs_gpu = pytest.mark.skipif(not CUDA_OK, reason=f"no CUDA runtime here: {CUDA_WHY}")
 

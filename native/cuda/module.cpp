@@ -13,6 +13,7 @@
 namespace nb = nanobind;
 using namespace gbv;
 using FArr = nb::ndarray<const float, nb::c_contig, nb::device::cpu>;
+using IArr = nb::ndarray<const int32_t, nb::c_contig, nb::device::cpu>;
 
 namespace {
 
@@ -32,8 +33,7 @@ CameraParams scaled_camera(FArr R, FArr t, float fx, float fy, float cx, float c
 }
 
 Mode check_mode(int mode) {
-    if (mode < SCALAR || mode > GAUSSIAN_BLENDING)
-        throw std::invalid_argument("render: unknown mode (the CUDA backend does not have wsr and duplex yet)");
+    if (mode < SCALAR || mode > DUPLEX) throw std::invalid_argument("render: unknown mode");
     return (Mode)mode;
 }
 
@@ -55,16 +55,31 @@ NB_MODULE(_native_cuda, m) {
                  r.upload(means.data(), scales.data(), quats.data(), opacities.data(), sh.data(),
                           filter_3d ? filter_3d->data() : nullptr, n, (int)sh.shape(1));
              })
+        .def("upload_weights",
+             [](cuda::Renderer& r, FArr weight_sh) {
+                 if (weight_sh.ndim() != 2) throw std::invalid_argument("upload_weights: (N, K) view-weight SH");
+                 r.upload_weights(weight_sh.data(), (int64_t)weight_sh.shape(0), (int)weight_sh.shape(1));
+             })
+        .def("upload_cells",
+             [](cuda::Renderer& r, FArr means, FArr scales, FArr quats, IArr offsets, IArr members, IArr cell_of) {
+                 const int64_t m = (int64_t)means.shape(0);
+                 if (scales.size() != (size_t)m * 3 || quats.size() != (size_t)m * 4 || offsets.size() != (size_t)m + 1)
+                     throw std::invalid_argument("upload_cells: (M,3) means, scales, (M,4) quats, (M+1,) offsets");
+                 r.upload_cells(means.data(), scales.data(), quats.data(), offsets.data(), members.data(),
+                                cell_of.data(), m, (int64_t)members.size());
+             })
         .def("render",
              [](cuda::Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
-                float near_plane, int mode, int supersample, int sh_degree, FArr background, bool want_window) {
+                float near_plane, int mode, int supersample, int sh_degree, FArr background, bool want_window,
+                float sigma, float weight_background, float et_grade, bool depth_correct) {
                  const CameraParams cam =
                      scaled_camera(R, t, fx, fy, cx, cy, width, height, near_plane, supersample);
                  const float bg[3] = {background.data()[0], background.data()[1], background.data()[2]};
+                 const OitParams oit{sigma, weight_background, et_grade, depth_correct ? 1 : 0};
                  cuda::RenderResult res;
                  {
                      nb::gil_scoped_release release;
-                     res = r.render(cam, check_mode(mode), supersample, sh_degree, bg, want_window);
+                     res = r.render(cam, check_mode(mode), supersample, sh_degree, bg, want_window, oit);
                  }
                  int64_t evaluations = 0;
                  for (int32_t e : res.evals) evaluations += e;
@@ -79,17 +94,23 @@ NB_MODULE(_native_cuda, m) {
                  d["blend_ms"] = res.blend_ms;
                  d["visible"] = res.visible;
                  d["sort_length"] = res.sort_length;
+                 d["pairs"] = res.pairs;
                  d["evaluations"] = evaluations;
                  return d;
              })
         .def("render_to_gl_texture",
              [](cuda::Renderer& r, unsigned int texture, FArr R, FArr t, float fx, float fy, float cx, float cy,
                 int width, int height, float near_plane, int mode, int supersample, int sh_degree,
-                FArr background) {
+                FArr background, float sigma, float weight_background, float et_grade, bool depth_correct) {
                  const CameraParams cam =
                      scaled_camera(R, t, fx, fy, cx, cy, width, height, near_plane, supersample);
                  const float bg[3] = {background.data()[0], background.data()[1], background.data()[2]};
-                 r.render_to_gl_texture(texture, cam, check_mode(mode), supersample, sh_degree, bg);
+                 const OitParams oit{sigma, weight_background, et_grade, depth_correct ? 1 : 0};
+                 r.render_to_gl_texture(texture, cam, check_mode(mode), supersample, sh_degree, bg, oit);
              },
+             nb::arg("texture"), nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"), nb::arg("cx"),
+             nb::arg("cy"), nb::arg("width"), nb::arg("height"), nb::arg("near_plane"), nb::arg("mode"),
+             nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"), nb::arg("sigma") = 10.0f,
+             nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
              "Render into an existing GL_RGBA32F texture of the output size (the GL context must be current).");
 }

@@ -53,15 +53,17 @@ struct DeviceBuffer {
 
 __global__ void preprocess_kernel(int64_t n, const float* means, const float* scales, const float* quats,
                                   const float* opacities, const float* sh, const float* filter_3d, int k, int sh_deg,
+                                  const float* weight_sh, int weight_k, const int32_t* cell_of, OitParams oit,
                                   CameraParams cam, Mode mode, int gx, int gy, Splat2D* splats, TileRect* rects,
                                   uint32_t* touched, unsigned long long* visible) {
     const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     if (i >= n) return;
+    const int weight_deg = weight_k >= 16 ? 3 : weight_k >= 9 ? 2 : weight_k >= 4 ? 1 : 0;
     SplatIn in{means + 3 * i, scales + 3 * i, quats + 4 * i, opacities[i], sh + (size_t)k * 3 * i,
-               filter_3d ? filter_3d[i] : 0.0f, nullptr, 0, -1};
+               filter_3d ? filter_3d[i] : 0.0f, weight_sh ? weight_sh + (size_t)weight_k * i : nullptr, weight_deg,
+               cell_of ? cell_of[i] : -1};
     TileRect r;
     uint32_t count = 0;
-    const OitParams oit{10.0f, 1.0f, 4.0f, 0};
     if (preprocess_splat(in, sh_deg, cam, mode, oit, gx, gy, &splats[i], &r)) {
         count = (uint32_t)((r.x1 - r.x0) * (r.y1 - r.y0));
         rects[i] = r;
@@ -72,12 +74,13 @@ __global__ void preprocess_kernel(int64_t n, const float* means, const float* sc
 
 // One key per touched tile: tile id in the high 32 bits, depth bits (positive floats sort as uints) below.
 // Keys are written in splat order and the radix sort is stable, so equal depths keep index order (as the CPU).
+// wsr (by_depth false): the key is the tile alone, so the stable sort keeps splat-index order inside a tile.
 __global__ void duplicate_kernel(int64_t n, const Splat2D* splats, const TileRect* rects, const uint32_t* touched,
-                                 const uint64_t* offsets, int gx, uint64_t* keys, uint32_t* values) {
+                                 const uint64_t* offsets, int gx, bool by_depth, uint64_t* keys, uint32_t* values) {
     const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     if (i >= n || touched[i] == 0) return;
     uint64_t off = offsets[i] - touched[i];
-    const uint32_t depth_bits = __float_as_uint(splats[i].depth);
+    const uint32_t depth_bits = by_depth ? __float_as_uint(splats[i].depth) : 0u;
     const TileRect r = rects[i];
     for (int ty = r.y0; ty < r.y1; ++ty)
         for (int tx = r.x0; tx < r.x1; ++tx) {
@@ -103,12 +106,74 @@ __global__ void ranges_kernel(int64_t total, const uint64_t* keys, uint2* ranges
     if (i == total - 1) ranges[tile].y = (uint32_t)total;
 }
 
+// Duplex, one thread per cell: its visible splats to the front of its member slots (member order), then the cell's
+// screen proxy (preprocess_cell); cell_touched = tiles of a cell with at least one visible splat.
+__global__ void cells_kernel(int64_t m, const float* cmeans, const float* cscales, const float* cquats,
+                             const int32_t* coffsets, const int32_t* cmembers, const uint32_t* touched,
+                             CameraParams cam, int gx, int gy, uint32_t* vis, uint32_t* vis_count, Cell2D* cells,
+                             TileRect* crects, uint32_t* cell_touched) {
+    const int64_t c = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
+    if (c >= m) return;
+    uint32_t count = 0;
+    for (int32_t j = coffsets[c]; j < coffsets[c + 1]; ++j)
+        if (touched[cmembers[j]] > 0) vis[coffsets[c] + count++] = (uint32_t)cmembers[j];
+    vis_count[c] = count;
+    cell_touched[c] = 0;
+    if (count == 0) return;
+    CellIn in{cmeans + 3 * c, cscales + 3 * c, cquats + 4 * c};
+    TileRect r;
+    if (!preprocess_cell(in, cam, gx, gy, &cells[c], &r)) return;
+    crects[c] = r;
+    cell_touched[c] = (uint32_t)((r.x1 - r.x0) * (r.y1 - r.y0));
+}
+
+__global__ void duplicate_cells_kernel(int64_t m, const Cell2D* cells, const TileRect* crects,
+                                       const uint32_t* cell_touched, const uint64_t* offsets, int gx, uint64_t* keys,
+                                       uint32_t* values) {
+    const int64_t c = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
+    if (c >= m || cell_touched[c] == 0) return;
+    uint64_t off = offsets[c] - cell_touched[c];
+    const uint32_t depth_bits = __float_as_uint(cells[c].depth);
+    const TileRect r = crects[c];
+    for (int ty = r.y0; ty < r.y1; ++ty)
+        for (int tx = r.x0; tx < r.x1; ++tx) {
+            keys[off] = ((uint64_t)(ty * gx + tx) << 32) | depth_bits;
+            values[off] = (uint32_t)c;
+            ++off;
+        }
+}
+
+// Duplex expansion: each (tile, cell) pair of the sorted list becomes its cell's visible splats.
+__global__ void pair_counts_kernel(int64_t pairs, const uint32_t* pair_cells, const uint32_t* vis_count,
+                                   uint32_t* counts) {
+    const int64_t k = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
+    if (k < pairs) counts[k] = vis_count[pair_cells[k]];
+}
+
+__global__ void expand_kernel(int64_t pairs, const uint32_t* pair_cells, const uint32_t* vis_count,
+                              const int32_t* coffsets, const uint32_t* vis, const uint64_t* ends, uint32_t* list) {
+    const int64_t k = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
+    if (k >= pairs) return;
+    const uint32_t c = pair_cells[k], count = vis_count[c];
+    const uint64_t out0 = ends[k] - count;
+    for (uint32_t j = 0; j < count; ++j) list[out0 + j] = vis[coffsets[c] + j];
+}
+
+// Tile ranges of cell pairs -> tile ranges of the expanded splat list (ends: inclusive scan of the pair counts).
+__global__ void expand_ranges_kernel(int num_tiles, const uint2* cell_ranges, const uint64_t* ends, uint2* ranges) {
+    const int t = blockIdx.x * blockDim.x + threadIdx.x;
+    if (t >= num_tiles) return;
+    const uint2 r = cell_ranges[t];
+    ranges[t] = r.y > r.x ? make_uint2(r.x > 0 ? (uint32_t)ends[r.x - 1] : 0u, (uint32_t)ends[r.y - 1])
+                          : make_uint2(0u, 0u);
+}
+
 constexpr int BLOCK = TILE * TILE;
 
 template <int M>
 __global__ void __launch_bounds__(BLOCK)
     render_kernel(const uint2* ranges, const uint32_t* values, const Splat2D* splats, int W, int H, int gx,
-                  float3 bg, float* rgb, float* alpha, int32_t* evals, float* window) {
+                  float3 bg, OitParams oit, float* rgb, float* alpha, int32_t* evals, float* window) {
     __shared__ Splat2D batch[BLOCK];
     const int x = blockIdx.x * TILE + threadIdx.x, y = blockIdx.y * TILE + threadIdx.y;
     const int tid = threadIdx.y * TILE + threadIdx.x;
@@ -118,6 +183,8 @@ __global__ void __launch_bounds__(BLOCK)
     bool done = !inside;
     float T = 1.0f, C[3] = {0.0f, 0.0f, 0.0f};
     TransmittanceWindow win = {1.0f, pix, {1.0f, 1.0f}};
+    WsrSums wsr = {{0, 0, 0}, 0};
+    DuplexState dst = {1.0f, 1.0f, -1, 0.0f, {0.0f, 0.0f, 0.0f}};
     int32_t ev = 0;
     for (uint32_t start = range.x; start < range.y; start += BLOCK) {
         if (__syncthreads_count(done) == BLOCK) break;
@@ -128,6 +195,10 @@ __global__ void __launch_bounds__(BLOCK)
             ++ev;
             if (M == GAUSSIAN_BLENDING)
                 done = blend_gaussian(batch[j], win, C);
+            else if (M == WSR)
+                done = blend_wsr(batch[j], pix, wsr);
+            else if (M == DUPLEX)
+                done = blend_duplex(batch[j], pix, oit.et_grade, dst);
             else if (M == ANALYTIC)
                 done = blend_analytic(batch[j], pix, T, C);
             else
@@ -136,6 +207,13 @@ __global__ void __launch_bounds__(BLOCK)
     }
     if (!inside) return;
     if (M == GAUSSIAN_BLENDING) T = win.T;
+    if (M == WSR) {
+        const float inv = 1.0f / WSR_FIXED_SCALE;
+        const float Cw[3] = {(float)wsr.C[0] * inv, (float)wsr.C[1] * inv, (float)wsr.C[2] * inv};
+        resolve_weighted(Cw, (float)wsr.S * inv, oit.weight_background, 1.0f, C, &T);
+    } else if (M == DUPLEX) {
+        resolve_weighted(dst.C, dst.S, dst.T < DUPLEX_T_STOP ? 0.0f : oit.weight_background, dst.T, C, &T);
+    }
     const size_t p = (size_t)y * W + x;
     rgb[p * 3] = C[0] + T * bg.x;
     rgb[p * 3 + 1] = C[1] + T * bg.y;
@@ -191,8 +269,18 @@ int blocks(int64_t n, int per = 256) { return (int)((n + per - 1) / per); }
 struct Renderer::Impl {
     int64_t n = 0;
     int k = 1;
-    DeviceBuffer<float> means, scales, quats, opacities, sh, filter_3d;
+    DeviceBuffer<float> means, scales, quats, opacities, sh, filter_3d, weight_sh;
     bool has_filter = false;
+    int weight_k = 0;
+    // duplex cells (uploaded with each duplex frame) and their per-frame buffers
+    int64_t m = 0;
+    DeviceBuffer<float> cmeans, cscales, cquats;
+    DeviceBuffer<int32_t> coffsets, cmembers, cell_of;
+    DeviceBuffer<uint32_t> vis, vis_count, cell_touched, pair_counts, list;
+    DeviceBuffer<uint64_t> cell_offsets, pair_ends;
+    DeviceBuffer<Cell2D> cells;
+    DeviceBuffer<TileRect> crects;
+    DeviceBuffer<uint2> cell_ranges;
     DeviceBuffer<Splat2D> splats;
     DeviceBuffer<TileRect> rects;
     DeviceBuffer<uint32_t> touched, values_in, values_out;
@@ -219,8 +307,8 @@ struct Renderer::Impl {
     }
 
     // Render into the device output buffers (o_* when supersampling, else the full-resolution ones).
-    void run(const CameraParams& cam, Mode mode, int N, int sh_deg, const float bg[3], bool want_window,
-             RenderResult& res) {
+    void run(const CameraParams& cam, Mode mode, const OitParams& oit, int N, int sh_deg, const float bg[3],
+             bool want_window, RenderResult& res) {
         if (n == 0) throw std::runtime_error("CUDA renderer: upload a scene before rendering");
         const int W = cam.width, H = cam.height;
         const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE, num_tiles = gx * gy;
@@ -232,41 +320,129 @@ struct Renderer::Impl {
         CUDA_CHECK(cudaMemset(visible.ptr, 0, sizeof(unsigned long long)));
 
         CUDA_CHECK(cudaEventRecord(ev[0]));
+        if (mode == DUPLEX && m == 0) throw std::runtime_error("CUDA renderer: duplex needs cells");
         preprocess_kernel<<<blocks(n), 256>>>(n, means.ptr, scales.ptr, quats.ptr, opacities.ptr, sh.ptr,
-                                              has_filter ? filter_3d.ptr : nullptr, k, sh_deg, cam, mode, gx, gy,
+                                              has_filter ? filter_3d.ptr : nullptr, k, sh_deg,
+                                              weight_k ? weight_sh.ptr : nullptr, weight_k,
+                                              mode == DUPLEX ? cell_of.ptr : nullptr, oit, cam, mode, gx, gy,
                                               splats.ptr, rects.ptr, touched.ptr, visible.ptr);
         CUDA_CHECK(cudaGetLastError());
         CUDA_CHECK(cudaEventRecord(ev[1]));
 
+        int bits = 0;
+        while ((1 << bits) < num_tiles) ++bits;
+        ranges.ensure(num_tiles);
+        CUDA_CHECK(cudaMemset(ranges.ptr, 0, sizeof(uint2) * num_tiles));
+        uint64_t total = 0, sort_length = 0;
+        if (mode == DUPLEX) {
+            bin_duplex(cam, gx, gy, num_tiles, bits, total, sort_length);
+        } else {
+            bin_splats(mode, gx, num_tiles, bits, total);
+            sort_length = mode == WSR ? 0 : total;
+        }
+        CUDA_CHECK(cudaEventRecord(ev[2]));
+        render(mode, oit, W, H, gx, gy, N, bg, want_window, mode == DUPLEX ? list.ptr : values_out.ptr);
+        CUDA_CHECK(cudaEventRecord(ev[3]));
+        CUDA_CHECK(cudaEventSynchronize(ev[3]));
+        float ms[3];
+        for (int i = 0; i < 3; ++i) CUDA_CHECK(cudaEventElapsedTime(&ms[i], ev[i], ev[i + 1]));
+        res.preprocess_ms = ms[0];
+        res.sort_ms = ms[1];
+        res.blend_ms = ms[2];
+        unsigned long long vis_total = 0;
+        CUDA_CHECK(cudaMemcpy(&vis_total, visible.ptr, sizeof(vis_total), cudaMemcpyDeviceToHost));
+        res.visible = (int64_t)vis_total;
+        res.sort_length = (int64_t)sort_length;
+        res.pairs = (int64_t)total;
+    }
+
+    // Tile lists of splats: one (tile, depth) key per touched tile (tile only for wsr), sorted by CUB.
+    void bin_splats(Mode mode, int gx, int num_tiles, int bits, uint64_t& total) {
         size_t temp_bytes = 0;
         CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, touched.ptr, offsets.ptr, n));
         temp.ensure(temp_bytes);
         CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.ptr, temp_bytes, touched.ptr, offsets.ptr, n));
-        uint64_t total = 0;
         CUDA_CHECK(cudaMemcpy(&total, offsets.ptr + (n - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
         if (total >= (1ull << 31)) throw std::runtime_error("CUDA renderer: more than 2^31 tile-splat pairs");
-        ranges.ensure(num_tiles);
-        CUDA_CHECK(cudaMemset(ranges.ptr, 0, sizeof(uint2) * num_tiles));
         if (total > 0) {
             keys_in.ensure(total);
             keys_out.ensure(total);
             values_in.ensure(total);
             values_out.ensure(total);
             duplicate_kernel<<<blocks(n), 256>>>(n, splats.ptr, rects.ptr, touched.ptr, offsets.ptr, gx,
-                                                 keys_in.ptr, values_in.ptr);
+                                                 mode != WSR, keys_in.ptr, values_in.ptr);
             CUDA_CHECK(cudaGetLastError());
-            int bits = 0;
-            while ((1 << bits) < num_tiles) ++bits;
+            const int begin_bit = mode == WSR ? 32 : 0;
             CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, keys_in.ptr, keys_out.ptr,
-                                                       values_in.ptr, values_out.ptr, (int)total, 0, 32 + bits));
+                                                       values_in.ptr, values_out.ptr, (int)total, begin_bit,
+                                                       32 + bits));
             temp.ensure(temp_bytes);
             CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp.ptr, temp_bytes, keys_in.ptr, keys_out.ptr,
-                                                       values_in.ptr, values_out.ptr, (int)total, 0, 32 + bits));
+                                                       values_in.ptr, values_out.ptr, (int)total, begin_bit,
+                                                       32 + bits));
             ranges_kernel<<<blocks(total), 256>>>((int64_t)total, keys_out.ptr, ranges.ptr);
             CUDA_CHECK(cudaGetLastError());
         }
-        CUDA_CHECK(cudaEventRecord(ev[2]));
+    }
 
+    // Duplex binning (KERNELS.md §8.3): cells with a visible splat projected; one CUB sort of (tile, cell depth);
+    // every tile's cells expanded to their visible splats. total = expanded entries, sort_length = tile-cell pairs.
+    void bin_duplex(const CameraParams& cam, int gx, int gy, int num_tiles, int bits, uint64_t& total,
+                    uint64_t& sort_length) {
+        vis.ensure(std::max<int64_t>(cmembers.capacity, 1));
+        vis_count.ensure(m);
+        cell_touched.ensure(m);
+        cell_offsets.ensure(m);
+        cells.ensure(m);
+        crects.ensure(m);
+        cells_kernel<<<blocks(m), 256>>>(m, cmeans.ptr, cscales.ptr, cquats.ptr, coffsets.ptr, cmembers.ptr,
+                                         touched.ptr, cam, gx, gy, vis.ptr, vis_count.ptr, cells.ptr, crects.ptr,
+                                         cell_touched.ptr);
+        CUDA_CHECK(cudaGetLastError());
+        size_t temp_bytes = 0;
+        CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, cell_touched.ptr, cell_offsets.ptr, m));
+        temp.ensure(temp_bytes);
+        CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.ptr, temp_bytes, cell_touched.ptr, cell_offsets.ptr, m));
+        uint64_t pairs = 0;
+        CUDA_CHECK(cudaMemcpy(&pairs, cell_offsets.ptr + (m - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
+        if (pairs >= (1ull << 31)) throw std::runtime_error("CUDA renderer: more than 2^31 tile-cell pairs");
+        sort_length = pairs;
+        total = 0;
+        cell_ranges.ensure(num_tiles);
+        CUDA_CHECK(cudaMemset(cell_ranges.ptr, 0, sizeof(uint2) * num_tiles));
+        list.ensure(1);
+        if (pairs == 0) return;
+        keys_in.ensure(pairs);
+        keys_out.ensure(pairs);
+        values_in.ensure(pairs);
+        values_out.ensure(pairs);
+        duplicate_cells_kernel<<<blocks(m), 256>>>(m, cells.ptr, crects.ptr, cell_touched.ptr, cell_offsets.ptr, gx,
+                                                   keys_in.ptr, values_in.ptr);
+        CUDA_CHECK(cudaGetLastError());
+        CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, keys_in.ptr, keys_out.ptr, values_in.ptr,
+                                                   values_out.ptr, (int)pairs, 0, 32 + bits));
+        temp.ensure(temp_bytes);
+        CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp.ptr, temp_bytes, keys_in.ptr, keys_out.ptr, values_in.ptr,
+                                                   values_out.ptr, (int)pairs, 0, 32 + bits));
+        ranges_kernel<<<blocks(pairs), 256>>>((int64_t)pairs, keys_out.ptr, cell_ranges.ptr);
+        pair_counts.ensure(pairs);
+        pair_ends.ensure(pairs);
+        pair_counts_kernel<<<blocks(pairs), 256>>>((int64_t)pairs, values_out.ptr, vis_count.ptr, pair_counts.ptr);
+        CUDA_CHECK(cudaGetLastError());
+        CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, pair_counts.ptr, pair_ends.ptr, pairs));
+        temp.ensure(temp_bytes);
+        CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.ptr, temp_bytes, pair_counts.ptr, pair_ends.ptr, pairs));
+        CUDA_CHECK(cudaMemcpy(&total, pair_ends.ptr + (pairs - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
+        if (total >= (1ull << 31)) throw std::runtime_error("CUDA renderer: more than 2^31 tile-splat entries");
+        list.ensure(std::max<uint64_t>(total, 1));
+        expand_kernel<<<blocks(pairs), 256>>>((int64_t)pairs, values_out.ptr, vis_count.ptr, coffsets.ptr, vis.ptr,
+                                              pair_ends.ptr, list.ptr);
+        expand_ranges_kernel<<<blocks(num_tiles), 256>>>(num_tiles, cell_ranges.ptr, pair_ends.ptr, ranges.ptr);
+        CUDA_CHECK(cudaGetLastError());
+    }
+
+    void render(Mode mode, const OitParams& oit, int W, int H, int gx, int gy, int N, const float bg[3],
+                bool want_window, const uint32_t* tile_values) {
         const size_t px = (size_t)W * H;
         const bool window_on = want_window && mode == GAUSSIAN_BLENDING;
         rgb.ensure(px * 3);
@@ -276,18 +452,27 @@ struct Renderer::Impl {
         const dim3 grid(gx, gy), block(TILE, TILE);
         const float3 bgc = make_float3(bg[0], bg[1], bg[2]);
         float* win = window_on ? window.ptr : nullptr;
+        const uint32_t* v = tile_values;
         switch (mode) {
             case GAUSSIAN_BLENDING:
-                render_kernel<GAUSSIAN_BLENDING><<<grid, block>>>(ranges.ptr, values_out.ptr, splats.ptr, W, H, gx,
-                                                                   bgc, rgb.ptr, alpha.ptr, evals.ptr, win);
+                render_kernel<GAUSSIAN_BLENDING><<<grid, block>>>(ranges.ptr, v, splats.ptr, W, H, gx, bgc, oit,
+                                                                   rgb.ptr, alpha.ptr, evals.ptr, win);
                 break;
             case ANALYTIC:
-                render_kernel<ANALYTIC><<<grid, block>>>(ranges.ptr, values_out.ptr, splats.ptr, W, H, gx, bgc,
-                                                          rgb.ptr, alpha.ptr, evals.ptr, win);
+                render_kernel<ANALYTIC><<<grid, block>>>(ranges.ptr, v, splats.ptr, W, H, gx, bgc, oit, rgb.ptr,
+                                                          alpha.ptr, evals.ptr, win);
+                break;
+            case WSR:
+                render_kernel<WSR><<<grid, block>>>(ranges.ptr, v, splats.ptr, W, H, gx, bgc, oit, rgb.ptr,
+                                                     alpha.ptr, evals.ptr, win);
+                break;
+            case DUPLEX:
+                render_kernel<DUPLEX><<<grid, block>>>(ranges.ptr, v, splats.ptr, W, H, gx, bgc, oit, rgb.ptr,
+                                                        alpha.ptr, evals.ptr, win);
                 break;
             default:
-                render_kernel<SCALAR><<<grid, block>>>(ranges.ptr, values_out.ptr, splats.ptr, W, H, gx, bgc,
-                                                        rgb.ptr, alpha.ptr, evals.ptr, win);
+                render_kernel<SCALAR><<<grid, block>>>(ranges.ptr, v, splats.ptr, W, H, gx, bgc, oit, rgb.ptr,
+                                                        alpha.ptr, evals.ptr, win);
         }
         CUDA_CHECK(cudaGetLastError());
         if (N > 1) {
@@ -301,17 +486,6 @@ struct Renderer::Impl {
                                              o_evals.ptr, window_on ? o_window.ptr : nullptr);
             CUDA_CHECK(cudaGetLastError());
         }
-        CUDA_CHECK(cudaEventRecord(ev[3]));
-        CUDA_CHECK(cudaEventSynchronize(ev[3]));
-        float ms[3];
-        for (int i = 0; i < 3; ++i) CUDA_CHECK(cudaEventElapsedTime(&ms[i], ev[i], ev[i + 1]));
-        res.preprocess_ms = ms[0];
-        res.sort_ms = ms[1];
-        res.blend_ms = ms[2];
-        unsigned long long vis = 0;
-        CUDA_CHECK(cudaMemcpy(&vis, visible.ptr, sizeof(vis), cudaMemcpyDeviceToHost));
-        res.visible = (int64_t)vis;
-        res.sort_length = (int64_t)total;
     }
 };
 
@@ -354,13 +528,39 @@ void Renderer::upload(const float* means, const float* scales, const float* quat
     if (filter_3d) put(m.filter_3d, filter_3d, n);
     m.n = n;
     m.k = k;
+    m.weight_k = 0;
+    m.m = 0;
+}
+
+void Renderer::upload_weights(const float* weight_sh, int64_t n, int weight_k) {
+    Impl& m = *impl_;
+    if (n != m.n) throw std::runtime_error("CUDA renderer: view weights for another scene size");
+    m.weight_sh.ensure((size_t)n * weight_k);
+    CUDA_CHECK(cudaMemcpy(m.weight_sh.ptr, weight_sh, (size_t)n * weight_k * sizeof(float), cudaMemcpyHostToDevice));
+    m.weight_k = weight_k;
+}
+
+void Renderer::upload_cells(const float* means, const float* scales, const float* quats, const int32_t* offsets,
+                            const int32_t* members, const int32_t* cell_of, int64_t num_cells, int64_t num_members) {
+    Impl& m = *impl_;
+    auto put = [](auto& buf, const auto* src, size_t count) {
+        buf.ensure(std::max<size_t>(count, 1));
+        if (count) CUDA_CHECK(cudaMemcpy(buf.ptr, src, count * sizeof(*src), cudaMemcpyHostToDevice));
+    };
+    put(m.cmeans, means, num_cells * 3);
+    put(m.cscales, scales, num_cells * 3);
+    put(m.cquats, quats, num_cells * 4);
+    put(m.coffsets, offsets, num_cells + 1);
+    put(m.cmembers, members, num_members);
+    put(m.cell_of, cell_of, m.n);
+    m.m = num_cells;
 }
 
 RenderResult Renderer::render(const CameraParams& cam, Mode mode, int supersample, int sh_degree, const float bg[3],
-                              bool want_window) {
+                              bool want_window, const OitParams& oit) {
     Impl& m = *impl_;
     RenderResult res;
-    m.run(cam, mode, supersample, sh_degree, bg, want_window, res);
+    m.run(cam, mode, oit, supersample, sh_degree, bg, want_window, res);
     const int N = supersample, w = cam.width / N, h = cam.height / N;
     const size_t px = (size_t)w * h;
     const bool window_on = want_window && mode == GAUSSIAN_BLENDING;
@@ -379,10 +579,10 @@ RenderResult Renderer::render(const CameraParams& cam, Mode mode, int supersampl
 }
 
 void Renderer::render_to_gl_texture(unsigned int texture, const CameraParams& cam, Mode mode, int supersample,
-                                    int sh_degree, const float bg[3]) {
+                                    int sh_degree, const float bg[3], const OitParams& oit) {
     Impl& m = *impl_;
     RenderResult res;
-    m.run(cam, mode, supersample, sh_degree, bg, false, res);
+    m.run(cam, mode, oit, supersample, sh_degree, bg, false, res);
     const int N = supersample, w = cam.width / N, h = cam.height / N;
     m.rgba.ensure((size_t)w * h);
     pack_rgba_kernel<<<blocks((int64_t)w * h), 256>>>(w * h, N > 1 ? m.o_rgb.ptr : m.rgb.ptr,

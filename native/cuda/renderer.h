@@ -14,7 +14,7 @@ struct RenderResult {
     std::vector<float> rgb, alpha, window;
     std::vector<int32_t> evals;
     double preprocess_ms = 0, sort_ms = 0, blend_ms = 0;
-    int64_t visible = 0, sort_length = 0;
+    int64_t visible = 0, sort_length = 0, pairs = 0;
 };
 
 // (usable, reason): false with the CUDA runtime's explanation when there is no device or driver.
@@ -31,14 +31,21 @@ public:
     void upload(const float* means, const float* scales, const float* quats, const float* opacities, const float* sh,
                 const float* filter_3d, int64_t n, int k);
 
+    // The sort-free view-weight SH of the uploaded scene (n, weight_k), for wsr and duplex.
+    void upload_weights(const float* weight_sh, int64_t n, int weight_k);
+
+    // Duplex cells of the uploaded scene: cell c holds members[offsets[c] .. offsets[c+1]); cell_of[i] per splat.
+    void upload_cells(const float* means, const float* scales, const float* quats, const int32_t* offsets,
+                      const int32_t* members, const int32_t* cell_of, int64_t num_cells, int64_t num_members);
+
     // Render at cam's resolution times `supersample` per axis and box-average back; cam is at output size.
     RenderResult render(const CameraParams& cam, Mode mode, int supersample, int sh_degree, const float bg[3],
-                        bool want_window);
+                        bool want_window, const OitParams& oit);
 
     // Render and copy the RGBA result into an OpenGL texture (GL_RGBA32F, cam-sized) through CUDA-GL interop,
     // without a round trip through host memory.
     void render_to_gl_texture(unsigned int texture, const CameraParams& cam, Mode mode, int supersample,
-                              int sh_degree, const float bg[3]);
+                              int sh_degree, const float bg[3], const OitParams& oit);
 
 private:
     struct Impl;

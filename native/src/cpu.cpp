@@ -206,9 +206,8 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
         }
     }
     st.sort_ms += ms_since(t0);
-    int64_t visible = 0;
-    for (int64_t c = 0; c < m; ++c)
-        if (cvalid[c]) visible += vis_start[c + 1] - vis_start[c];
+    int64_t visible = 0;  // splats that survive preprocess, as in the other modes
+    for (uint8_t v : valid) visible += v;
     st.visible += visible;
     st.cells_visible += visible_cells;
     st.cell_misses += misses;
