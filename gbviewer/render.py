@@ -134,8 +134,12 @@ class RenderSettings:
 class Frame:
     """A rendered image: rgb (H,W,3) float32, alpha = 1 - final transmittance (H,W), debug planes, stats.
 
-    stats: preprocess_ms, sort_ms, blend_ms, total_ms, visible (splats), sort_length (tile-splat pairs),
-    evaluations (splat-pixel evaluations), evals_per_pixel (mean), backend, mode.
+    stats: preprocess_ms, sort_ms, blend_ms, total_ms, visible (splats that survive preprocess), sort_length
+    (keys sorted by depth: tile-splat pairs; 0 for wsr, whose tile lists are only binned; tile-cell pairs for
+    duplex), sort_bytes (sort_length x SORT_ENTRY_BYTES), pairs (tile-list entries blended), evaluations
+    (splat-pixel evaluations), evals_per_pixel (mean), backend, mode (label_for the scene); duplex adds cells,
+    cells_visible and cell_misses (splat-tile pairs outside their cell's tiles); trained Duplex-GS models add
+    decode_ms (the MLPs, per view).
     debug: "evals" (H,W) splats evaluated per output pixel (summed over sub-samples); "window" (H,W,2)
     when requested.
     """

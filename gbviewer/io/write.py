@@ -84,6 +84,11 @@ def inria_columns(scene: Scene) -> dict[str, np.ndarray]:
 
 def write_inria_ply(scene: Scene, path: str | Path, force: bool = False) -> Path:
     """Write `scene` to `path` atomically; refuses to overwrite an existing file unless `force`."""
+    if scene.neural is not None:
+        from ..errors import GBViewerError
+
+        raise GBViewerError(f"{scene.source}: a Duplex-GS checkpoint has no fixed splats (its MLPs decode them per "
+                            "view), so it cannot be written as an INRIA ply")
     cols = inria_columns(scene)
     header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {scene.num_splats}\n"
               + "".join(f"property float {name}\n" for name in cols) + "end_header\n").encode("ascii")
