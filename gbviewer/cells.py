@@ -173,7 +173,8 @@ def covering_ellipsoids(means, scales, quats, order: np.ndarray, starts: np.ndar
     # (triangle inequality in the frame scaled by 1/half; lambda <= sqrt(3), the box's circumscribed ellipsoid)
     inv = 1.0 / half[seg]
     scaled = Sl * inv[:, :, None] * inv[:, None, :]
-    reach = np.linalg.norm(local * inv, axis=1) + COVER_SIGMAS * np.sqrt(np.maximum(np.linalg.eigvalsh(scaled)[:, -1], 0))
+    widest = np.sqrt(np.maximum(np.linalg.eigvalsh(scaled)[:, -1], 0.0))
+    reach = np.linalg.norm(local * inv, axis=1) + COVER_SIGMAS * widest
     lam = np.minimum(np.maximum.reduceat(reach, st), np.sqrt(3.0))
     return centre, 0.5 * lam[:, None] * half, _quat_from_matrix(U)
 

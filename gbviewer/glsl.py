@@ -487,7 +487,7 @@ class GlslRenderer:
         flags = self._ensure("flags", n * 4, "survivor flags")
         dkeys = [self._ensure(f"depth_keys{i}", n * 4, "depth keys") for i in (0, 1)]
         dvals = [self._ensure(f"depth_vals{i}", n * 4, "depth order") for i in (0, 1)]
-        counts = self._ensure("pair_counts", n * 4, "pair counts")
+        self._ensure("pair_counts", n * 4, "pair counts")  # read by _bin_splats
         totals = self._ensure("totals", 64)
         totals.write(np.array([0, 0, 0xFFFFFFFF, 0, 0, 0, 0, 0xFFFFFFFF, 0, 0, 0, 0, 0, 0, 0, 0],
                               np.uint32).tobytes())

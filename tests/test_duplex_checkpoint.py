@@ -142,7 +142,8 @@ def test_decode_matches_numpy(tmp_path):
     info = [0.01, 10.0, 6.0, -0.3, 4.0]
     write_anchor_ply(tmp_path / "point_cloud.ply", anchors, offsets, feats, log_sizes, sh_vi, info)
     mlps = {"opacity": mlp(F + 4, F, k, nn.Tanh(), seed=1), "cov": mlp(F + 3, F, 7 * k, seed=2),
-            "color": mlp(F + 3, F, 3 * k, nn.Sigmoid(), seed=3), "feature_bank": mlp(3, F, 3, nn.Softmax(dim=1), seed=4)}
+            "color": mlp(F + 3, F, 3 * k, nn.Sigmoid(), seed=3),
+            "feature_bank": mlp(3, F, 3, nn.Softmax(dim=1), seed=4)}
     save_mlps(tmp_path, mlps)
     scene = gb.load(tmp_path / "point_cloud.ply")
     assert scene.weight_background == pytest.approx(0.1)  # relu(-0.3) + 0.1

@@ -122,8 +122,9 @@ def load_mlps(path: Path, torch) -> dict:
             raise SceneFormatError(unite, f"unexpected MLP state dict: {exc}") from None
     present = [f for f in MLP_FILES.values() if (path.parent / f).is_file()]
     missing = [f for f in MLP_FILES.values() if f not in present]
-    raise SceneFormatError(path.parent / missing[0], f"missing: a Duplex-GS checkpoint needs {', '.join(MLP_FILES.values())} "
-                           f"(or {UNITE_FILE}) beside {path.name}; found {present or 'none of them'}")
+    raise SceneFormatError(path.parent / missing[0], "missing: a Duplex-GS checkpoint needs "
+                           f"{', '.join(MLP_FILES.values())} (or {UNITE_FILE}) beside {path.name}; found "
+                           f"{present or 'none of them'}")
 
 
 class DuplexModel:
@@ -173,8 +174,8 @@ class DuplexModel:
                 raise SceneFormatError(self.path.parent / fname, f"wrong output size {n_out}; the anchors have {k} "
                                        f"offsets, so expected {want_out}")
             if not base <= n_in <= base + 2:
-                raise SceneFormatError(self.path.parent / fname, f"wrong feature size: takes {n_in} inputs; the anchors "
-                                       f"have {F} features + 3 view direction"
+                raise SceneFormatError(self.path.parent / fname, f"wrong feature size: takes {n_in} inputs; the "
+                                       f"anchors have {F} features + 3 view direction"
                                        + (f" + {self.app_dim} appearance" if kind == "color" and self.app_dim else "")
                                        + f" (+1 distance, +1 level): expected {base}..{base + 2}")
             self.extra[kind] = n_in - base
@@ -320,8 +321,8 @@ def load_duplex(path: Path, ply: plyfile.PlyData) -> Scene:
     offsets = take(groups["f_offset_"]).reshape(n, 3, k).transpose(0, 2, 1)  # channel-major in the file
     info = data[:5, pos["info"]]
     mlps = load_mlps(path, torch)
-    model = DuplexModel(path, take(["x", "y", "z"]), data[:, pos["level"]].astype(np.int64), data[:, pos["extra_level"]],
-                        offsets, take(groups["f_anchor_feat_"]), np.exp(take(groups["anchor_size_"])),
+    model = DuplexModel(path, take(["x", "y", "z"]), data[:, pos["level"]].astype(np.int64),
+                        data[:, pos["extra_level"]], offsets, take(groups["f_anchor_feat_"]), np.exp(take(groups["anchor_size_"])),
                         take(["anchor_shd_0"] + groups["anchor_shv_"]), info, mlps, torch)
     centres = (model.anchors[:, None, :] + model.offsets * model.anchor_scales[:, None, :]).reshape(-1, 3)
     m = len(centres)
