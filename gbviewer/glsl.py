@@ -16,6 +16,12 @@ same function names and constants):
 6. tile_ranges.comp, then blend.comp: one work group per 16x16 output block; supersampling blends the N x N
    render tiles of the block and box-averages them in shared memory.
 
+wsr skips the depth sort of step 3: its tile lists are binned by a radix sort of the tile alone and stay in
+splat-index order (stats sort_length 0, as on the CPU), and blend.comp sums the weights in float. duplex replaces
+steps 3-5 with cells.comp (each cell's visible splats, its screen proxy), a depth sort of the visible cells,
+(tile, cell) pairs sorted by tile, and expand.comp / expand_ranges.comp, which turn every tile's cells into the
+list of their splats; blend.comp reads each splat's cell from the scene's cell buffer.
+
 Drivers may cap the loop iterations of one invocation: Mesa's llvmpipe ends every loop of an invocation once it has
 run 65535 iterations in total, silently, so a 100k-splat tile list would be cut short. `loop_limit()` measures the
 cap once per context; when a frame's longest tile list does not fit under it, blend.comp runs as several

@@ -351,3 +351,16 @@ def test_cli_bench_order_independent(tmp_path):
     assert 0 < rows["duplex"]["sort_length"] and rows["duplex"]["cells_visible"] <= rows["duplex"]["cells"]
     assert rows["scalar"]["psnr_vs_scalar"] == float("inf") and rows["duplex"]["psnr_vs_scalar"] > 10
     assert all(r["flicker"] >= 0 and r["stages_ms"]["blend_ms"] > 0 for r in rows.values())
+
+
+def test_cells_follow_dropped_splats():
+    """Scene.from_arrays drops non-finite splats; the members of given cells are renumbered with them."""
+    scene, cam = random_scene(93, n=40, sh_degree=0)
+    cells = build_cells(scene, 4)
+    means = scene.means.copy()
+    means[5] = np.nan
+    with pytest.warns(UserWarning, match="dropped 1"):
+        sc = gb.Scene.from_arrays(means, scene.scales, scene.quats, scene.opacities, scene.sh, cells=cells)
+    assert sc.num_splats == 39 and sc.cells.sizes.sum() == 39 and sc.cells.num_cells == cells.num_cells
+    assert sorted(sc.cells.members) == list(range(39))
+    assert np.isfinite(gb.render(sc, cam, "duplex").rgb).all()
