@@ -1,0 +1,197 @@
+"""Background work for the viewer, off the UI thread: one render thread fed per-slot requests (the newest request of
+a slot replaces an older one still waiting: stale requests are dropped), and scene loading. No OpenGL here; the
+'glsl' backend makes its own headless context current in the render thread (so it never touches the window's)."""
+
+from __future__ import annotations
+
+import gc
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Hashable
+
+from ..camera import Camera, load_cameras_json
+from ..errors import GBViewerError
+from ..render import BACKENDS, Frame, RenderSettings, get_renderer
+from ..scene import Scene
+
+
+@dataclass
+class RenderJob:
+    slot: Hashable  # e.g. (pane index, part)
+    scene: Scene
+    camera: Camera
+    settings: RenderSettings
+    backend: str = "cpu"
+    info: dict = field(default_factory=dict)  # what the UI needs to show with the result (rate, preview...)
+    seq: int = 0  # set by the worker: submission order
+
+
+@dataclass
+class RenderResult:
+    job: RenderJob
+    frame: Frame | None
+    error: str = ""
+    finished: float = 0.0
+
+
+class RenderWorker:
+    """One thread rendering the latest request per slot, least recently served slot first."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
+        self._pending: dict[Hashable, RenderJob] = {}
+        self._running: RenderJob | None = None
+        self._results: list[RenderResult] = []
+        self._served: dict[Hashable, float] = {}
+        self._seq = 0
+        self._stop = False
+        self._scene: Scene | None = None  # the scene whose renderers the thread holds (freed in this thread)
+        self.dropped = 0  # requests replaced before they started
+        self.rendered = 0
+        self.backends: dict[str, tuple[bool, str]] = {}  # availability, measured in the render thread
+        self.backends_ready = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="gbviewer-render", daemon=True)
+        self._thread.start()
+
+    # ---- UI side -----------------------------------------------------------------------------------------------
+
+    def submit(self, job: RenderJob) -> None:
+        with self._lock:
+            self._seq += 1
+            job.seq = self._seq
+            if job.slot in self._pending:
+                self.dropped += 1
+            self._pending[job.slot] = job
+            self._wake.notify()
+
+    def cancel(self, slot: Hashable) -> None:
+        with self._lock:
+            self._pending.pop(slot, None)
+
+    def results(self) -> list[RenderResult]:
+        with self._lock:
+            out, self._results = self._results, []
+        return out
+
+    def busy(self, slot: Hashable | None = None) -> bool:
+        """Whether `slot` (or any slot) has a request waiting or rendering."""
+        with self._lock:
+            if slot is None:
+                return bool(self._pending) or self._running is not None
+            return slot in self._pending or (self._running is not None and self._running.slot == slot)
+
+    def stop(self, timeout: float = 30.0) -> None:
+        with self._lock:
+            self._stop = True
+            self._pending.clear()
+            self._wake.notify()
+        self._thread.join(timeout)
+
+    # ---- render thread -----------------------------------------------------------------------------------------
+
+    def _check_backends(self) -> None:
+        for name, cls in BACKENDS.items():
+            try:
+                self.backends[name] = tuple(cls.available())  # type: ignore[assignment]
+            except Exception as exc:  # noqa: BLE001 - a backend's probe must not take the viewer down
+                self.backends[name] = (False, f"{type(exc).__name__}: {exc}")
+        self.backends_ready.set()
+
+    def _loop(self) -> None:
+        self._check_backends()
+        while True:
+            with self._lock:
+                while not self._pending and not self._stop:
+                    self._wake.wait()
+                if self._stop:
+                    break
+                slot = min(self._pending, key=lambda s: (self._served.get(s, 0.0), self._pending[s].seq))
+                job = self._pending.pop(slot)
+                self._running = job
+            result = self._render(job)
+            with self._lock:
+                self._running = None
+                self._served[slot] = time.perf_counter()
+                self._results.append(result)
+                self.rendered += 1
+        self._scene = None
+        gc.collect()
+
+    def _render(self, job: RenderJob) -> RenderResult:
+        if job.scene is not self._scene:
+            self._scene = job.scene
+            gc.collect()  # free the previous scene's renderers (and GL buffers) in this thread
+        try:
+            frame = get_renderer(job.scene, job.backend).render(job.camera, job.settings)
+            return RenderResult(job, frame, "", time.perf_counter())
+        except GBViewerError as exc:
+            return RenderResult(job, None, str(exc), time.perf_counter())
+        except Exception as exc:  # noqa: BLE001 - shown in the window, never kills the thread
+            traceback.print_exc()
+            return RenderResult(job, None, f"{type(exc).__name__}: {exc}", time.perf_counter())
+
+
+@dataclass
+class LoadResult:
+    path: Path
+    scene: Scene | None = None
+    cameras: list[Camera] | None = None
+    cameras_path: Path | None = None
+    cameras_error: str = ""
+    error: str = ""
+    seconds: float = 0.0
+
+
+class SceneLoader:
+    """Loads one scene (and a cameras.json beside it) in a thread; `poll()` returns the result once."""
+
+    def __init__(self, path: str | Path, load_fn: Any = None) -> None:
+        from ..io import load
+
+        self.path = Path(path).expanduser()
+        self.started = time.perf_counter()
+        try:
+            self.size = self.path.stat().st_size if self.path.is_file() else 0
+        except OSError:
+            self.size = 0
+        self._load = load_fn or load
+        self._result: LoadResult | None = None
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="gbviewer-load", daemon=True)
+        self._thread.start()
+
+    @property
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.started
+
+    def _run(self) -> None:
+        res = LoadResult(self.path)
+        try:
+            res.scene = self._load(self.path)
+            side = self.path.parent / "cameras.json" if not self.path.is_dir() else self.path / "cameras.json"
+            if side.is_file():
+                res.cameras_path = side
+                try:
+                    res.cameras = load_cameras_json(side)
+                except GBViewerError as exc:
+                    res.cameras_error = str(exc)
+        except GBViewerError as exc:
+            res.error = str(exc)
+        except (OSError, MemoryError) as exc:
+            res.error = f"{self.path}: {exc}"
+        except Exception as exc:  # noqa: BLE001 - a loader bug is shown, the viewer keeps the previous scene
+            traceback.print_exc()
+            res.error = f"{self.path}: {type(exc).__name__}: {exc}"
+        res.seconds = self.elapsed
+        self._result = res
+        self._done.set()
+
+    def done(self) -> bool:
+        return self._done.is_set()
+
+    def poll(self) -> LoadResult | None:
+        return self._result if self._done.is_set() else None
