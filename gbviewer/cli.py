@@ -12,7 +12,7 @@ from pathlib import Path
 from . import DEFAULT_SCENE
 from .camera import Camera, load_cameras_json, orbit_camera
 from .errors import GBViewerError
-from .figure import compose_grid, parse_rate, render_grid, save_image
+from .figure import compose_grid, format_rate, parse_rate, render_grid, save_image
 from .io import load, write_inria_ply
 from .render import BACKENDS, Mode, RenderSettings, get_renderer
 from .scene import Scene
@@ -192,6 +192,90 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _box(text: str) -> tuple[float, float, float, float]:
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        vals = ()
+    if len(vals) != 4 or not (vals[2] > 0 and vals[3] > 0):
+        raise argparse.ArgumentTypeError(f"expected X,Y,W,H (x1 pixels, W and H > 0), got {text!r}")
+    return vals  # type: ignore[return-value]
+
+
+VIDEO_PANE = (480, 360)  # default pane size of `gbviewer video`
+
+
+def cmd_video(args: argparse.Namespace) -> int:
+    """Side-by-side zoom video of several modes (H.264 MP4)."""
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                               TimeRemainingColumn)
+
+    from . import video
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".mp4":
+        raise GBViewerError(f"{out}: output must end in .mp4")
+    if out.exists() and not args.force:
+        raise GBViewerError(f"{out}: exists; pass --force to overwrite")
+    if not (args.fps > 0):
+        raise GBViewerError(f"--fps must be > 0, got {args.fps}")
+    settings = RenderSettings.parse_list(args.modes)
+    if args.size:
+        args.width, args.height = args.size
+    elif not (args.width or args.height or args.cameras):
+        args.width, args.height = VIDEO_PANE
+    scene = load(args.scene)
+    cam = camera_from_args(scene, args)
+    keys = None if args.path in video.PATHS else video.load_keyframes(args.path, cam, scene, args.up)
+    if args.frames:
+        n = args.frames
+    elif args.seconds:
+        n = max(1, round(args.seconds * args.fps))
+    elif keys is not None and keys[0].time is not None:
+        n = round((keys[-1].time - keys[0].time) * args.fps) + 1
+    else:
+        n = round(4 * args.fps)
+    if keys is not None:
+        path = video.keyframe_path(keys, n)
+    else:
+        path = video.camera_path(args.path, cam, n, args.from_rate, args.to_rate, scene, args.up)
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("frames"),
+               TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn())
+    with Progress(*columns) as progress:
+        task = progress.add_task(f"{out.name}", total=n)
+        info = video.record_video(scene, path, settings, out, fps=args.fps, backend=args.backend, inset=args.inset,
+                                  crf=args.crf, force=args.force,
+                                  progress=lambda done, total: progress.update(task, completed=done))
+    print(f"wrote {info.path}: {info.frames} frames of {info.width}x{info.height} at {info.fps:g} fps "
+          f"({info.frames / info.fps:.1f} s), {', '.join(s.label for s in settings)}, {args.path} "
+          f"{'' if keys is not None else f'{args.from_rate:g} -> {args.to_rate:g} '}"
+          f"in {info.elapsed_s:.1f} s")
+    return 0
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    """Labelled grid of modes x sampling rates with PSNR under each cell."""
+    from . import video
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".png":
+        raise GBViewerError(f"{out}: output must end in .png")
+    if out.exists() and not args.force:
+        raise GBViewerError(f"{out}: exists; pass --force to overwrite")
+    settings = RenderSettings.parse_list(args.modes)
+    rates = [parse_rate(r) for r in args.rates.split(",") if r.strip()]
+    scene = load(args.scene)
+    cam = camera_from_args(scene, args)
+    cmp = video.compare_figure(scene, cam, settings, rates, args.backend, args.inset)
+    video.write_comparison(out, cmp, force=args.force)
+    print(f"wrote {out} ({cmp.image.width}x{cmp.image.height}): {len(rates)} rates x {len(settings)} modes")
+    for row, prow in zip(cmp.cells, cmp.psnr):
+        for cell, p in zip(row, prow):
+            if p is not None and p != float("inf"):
+                print(f"  {cell.settings.label:>20} {format_rate(cell.rate):>6}: PSNR {p:.2f} dB")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gbviewer", description=__doc__)
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -246,6 +330,40 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with wsr or duplex among --modes: frames of the slow orbit that measures popping")
     p.add_argument("--flicker-step", type=float, default=0.1, help="degrees of azimuth between those frames")
     p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser("video", help="side-by-side zoom video of several modes (H.264 MP4)")
+    p.add_argument("scene", type=Path)
+    add_camera_args(p)
+    p.add_argument("--modes", default="scalar,supersample:3,gaussian_blending",
+                   help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N)")
+    p.add_argument("--path", default="zoom",
+                   help="zoom (focal length), dolly (camera along its axis), rate (same view, rendered at the rate "
+                   "and nearest-upscaled) or a keyframes FILE.json (see gbviewer.video.load_keyframes)")
+    p.add_argument("--from", dest="from_rate", type=_rate, default=1.0, help="first sampling rate (default 1)")
+    p.add_argument("--to", dest="to_rate", type=_rate, default=1.0 / 8.0, help="last sampling rate (default 1/8)")
+    length = p.add_mutually_exclusive_group()
+    length.add_argument("--frames", type=int, help="number of frames")
+    length.add_argument("--seconds", type=float, help="length in seconds (default 4, or the keyframes' span)")
+    p.add_argument("--fps", type=float, default=30.0)
+    p.add_argument("--size", type=_size, metavar="WxH", help="size of each pane (default 480x360)")
+    p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
+    p.add_argument("--inset", type=_box, metavar="X,Y,W,H", help="magnify this region (x1 pixels) in a corner")
+    p.add_argument("--crf", type=int, default=18, choices=range(0, 52), metavar="0..51",
+                   help="H.264 constant rate factor (0 lossless, 18 default, 23 ffmpeg's default)")
+    p.add_argument("--out", required=True, help="FILE.mp4")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=cmd_video)
+
+    p = sub.add_parser("compare", help="labelled grid of modes x sampling rates with PSNR (PNG)")
+    p.add_argument("scene", type=Path)
+    add_camera_args(p)
+    p.add_argument("--modes", default="scalar,supersample:3,gaussian_blending")
+    p.add_argument("--rates", default="1,1/2,1/4,1/8", help="sampling rates, e.g. 1,1/2,1/4,1/8")
+    p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
+    p.add_argument("--inset", type=_box, metavar="X,Y,W,H", help="magnify this region (x1 pixels) in a corner")
+    p.add_argument("--out", required=True, help="FILE.png")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=cmd_compare)
     return parser
 
 

@@ -30,9 +30,12 @@ def upscale_nearest(img: np.ndarray, height: int, width: int) -> np.ndarray:
 
 
 def format_rate(rate: float) -> str:
-    """x8, x1, x1/8 style label for a sampling rate."""
+    """x8, x1, x1/8 style label for a sampling rate; rates between simple fractions (a continuous zoom) read
+    x1/3.7 or x2.5."""
     f = Fraction(rate).limit_denominator(64)
-    return f"x{f.numerator}" if f.denominator == 1 else f"x{f.numerator}/{f.denominator}"
+    if abs(float(f) - rate) <= 1e-9 * rate and 1 in (f.numerator, f.denominator):
+        return f"x{f.numerator}" if f.denominator == 1 else f"x{f.numerator}/{f.denominator}"
+    return f"x1/{1 / rate:.3g}" if rate < 1 else f"x{rate:.3g}"
 
 
 def parse_rate(text: str) -> float:
@@ -87,17 +90,108 @@ def render_grid(scene: Scene, camera: Camera, settings: list[RenderSettings], ra
     return rows
 
 
-def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = 4) -> Image.Image:
-    """Labelled grid: each cell nearest-upscaled to width x height and captioned with mode, rate and time."""
-    n_rows, n_cols = len(cells), len(cells[0])
-    out = Image.new("RGB", (n_cols * width + (n_cols - 1) * gap, n_rows * height + (n_rows - 1) * gap), (40, 40, 40))
+def caption_font_size(height: int) -> int:
+    """Caption text size for cells `height` pixels tall (11..22 px)."""
+    return max(11, min(22, round(height / 22)))
+
+
+@dataclass(frozen=True)
+class GridLayout:
+    """Where `compose_grid` puts things: rows x cols cells of width x height, `gap` apart, each with a caption strip
+    `caption_height` tall directly below it (0: labels drawn over the cell), the canvas padded by one pixel on the
+    right / bottom where `even` asks for even sizes (H.264 with 4:2:0 chroma needs them)."""
+
+    rows: int
+    cols: int
+    width: int
+    height: int
+    gap: int = 4
+    caption_height: int = 0
+    even: bool = False
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) of the whole canvas."""
+        w = self.cols * self.width + (self.cols - 1) * self.gap
+        h = self.rows * (self.height + self.caption_height) + (self.rows - 1) * self.gap
+        return (w + w % 2, h + h % 2) if self.even else (w, h)
+
+    def origin(self, row: int, col: int) -> tuple[int, int]:
+        """(x, y) of the top-left pixel of a cell's image; its caption strip starts at y + height."""
+        return col * (self.width + self.gap), row * (self.height + self.caption_height + self.gap)
+
+    @staticmethod
+    def caption_height_for(lines: int, font_size: int) -> int:
+        return 0 if lines == 0 else lines * (font_size + 4) + 6
+
+
+def draw_inset(tile: Image.Image, box: tuple[float, float, float, float], frac: float = 0.4,
+               colour: tuple[int, int, int] = (255, 200, 0)) -> None:
+    """Magnify the region box = (x, y, w, h) (pixels of `tile`) with nearest filtering into the bottom-right corner
+    of `tile` (its longer side `frac` of the tile's shorter side), framed, and outline the region itself."""
+    x0, y0 = max(0, int(np.floor(box[0]))), max(0, int(np.floor(box[1])))
+    x1 = min(tile.width, max(x0 + 1, int(np.ceil(box[0] + box[2]))))
+    y1 = min(tile.height, max(y0 + 1, int(np.ceil(box[1] + box[3]))))
+    if x0 >= tile.width or y0 >= tile.height or x1 <= x0 or y1 <= y0:
+        return
+    crop = tile.crop((x0, y0, x1, y1))
+    side = max(4, round(frac * min(tile.width, tile.height)))
+    scale = side / max(x1 - x0, y1 - y0)
+    iw, ih = max(1, round((x1 - x0) * scale)), max(1, round((y1 - y0) * scale))
+    px, py = tile.width - iw - 3, tile.height - ih - 3
+    draw = ImageDraw.Draw(tile)
+    draw.rectangle((x0 - 1, y0 - 1, x1, y1), outline=colour)
+    tile.paste(crop.resize((iw, ih), Image.Resampling.NEAREST), (px, py))
+    draw.rectangle((px - 1, py - 1, px + iw, py + ih), outline=colour)
+
+
+def _default_lines(cell: Cell) -> list[str]:
+    h, w = cell.rgb.shape[:2]
+    return [f"{cell.stats.get('mode', cell.settings.label)}  {format_rate(cell.rate)} ({w}x{h})",
+            f"{cell.stats.get('total_ms', 0):.0f} ms"]
+
+
+def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = 4, captions: str = "overlay",
+                 lines=None, inset: tuple[float, float, float, float] | None = None, even: bool = False,
+                 font_size: int | None = None) -> Image.Image:
+    """Labelled grid: each cell nearest-upscaled to width x height.
+
+    captions="overlay": mode, rate, size and time written over the cell's top-left corner (the demo's look).
+    captions="below": the text lines(cell) -> list[str] (default: mode, rate and size; time) in a strip below each
+    cell, so every cell's pixels are exactly its nearest-upscaled render (see `GridLayout` for where they are).
+    inset: a region (x, y, w, h) in cell pixels (x1 pixels for the grid's full size) magnified into each cell's
+    bottom-right corner (`draw_inset`). even: pad the canvas to even sizes.
+    """
+    if captions not in ("overlay", "below"):
+        raise GBViewerError(f"captions {captions!r}; expected 'overlay' or 'below'")
+    lines = lines or _default_lines
+    fs = font_size or caption_font_size(height)
+    texts = [[lines(cell) for cell in row] for row in cells] if captions == "below" else None
+    n_lines = max((len(t) for row in texts for t in row), default=0) if texts else 0
+    layout = GridLayout(len(cells), len(cells[0]), width, height, gap, GridLayout.caption_height_for(n_lines, fs),
+                        even)
+    out = Image.new("RGB", layout.size, (40, 40, 40))
+    font = _font(fs)
     for r, row in enumerate(cells):
         for c, cell in enumerate(row):
-            tile = Image.fromarray(upscale_nearest(to_uint8(cell.rgb), height, width))
-            h, w = cell.rgb.shape[:2]
-            draw_label(tile, f"{cell.settings.label}  {format_rate(cell.rate)} ({w}x{h})  "
-                             f"{cell.stats.get('total_ms', 0):.0f} ms")
-            out.paste(tile, (c * (width + gap), r * (height + gap)))
+            rgb = to_uint8(cell.rgb)
+            if rgb.shape[:2] != (height, width):
+                rgb = upscale_nearest(rgb, height, width)
+            tile = Image.fromarray(rgb)
+            if inset is not None:
+                draw_inset(tile, inset)
+            x, y = layout.origin(r, c)
+            if texts is None:
+                h, w = cell.rgb.shape[:2]
+                draw_label(tile, f"{cell.settings.label}  {format_rate(cell.rate)} ({w}x{h})  "
+                                 f"{cell.stats.get('total_ms', 0):.0f} ms")
+            else:
+                strip = Image.new("RGB", (width, layout.caption_height), (0, 0, 0))
+                sdraw = ImageDraw.Draw(strip)
+                for k, text in enumerate(texts[r][c]):
+                    sdraw.text((4, 4 + k * (fs + 4)), text, fill=(255, 255, 255), font=font)
+                out.paste(strip, (x, y + height))
+            out.paste(tile, (x, y))
     return out
 
 
