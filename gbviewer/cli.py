@@ -142,6 +142,21 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_view(args: argparse.Namespace) -> int:
+    """`gbviewer [SCENE]`: the desktop viewer; without a display, say so and write the comparison instead."""
+    from .app import open_window
+    from .app.logic import has_display_env
+
+    if args.scene is not None and not args.scene.exists():
+        raise GBViewerError(f"{args.scene}: no such file or folder")
+    opened, why = open_window(args.scene)
+    if opened:
+        return 0
+    if has_display_env()[0]:  # (without one, demo says so itself)
+        print(f"cannot open the viewer window: {why}; writing the comparison images instead")
+    return cmd_demo(args)
+
+
 def _size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -305,6 +320,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=cmd_render)
 
+    p = sub.add_parser("view", help="open the desktop viewer (what `gbviewer [SCENE]` runs); without a display, "
+                                    "write the comparison images like demo")
+    p.add_argument("scene", type=Path, nargs="?")
+    add_camera_args(p)
+    p.add_argument("--backend", default="cpu", choices=list(BACKENDS), help="backend of the no-display fallback")
+    p.add_argument("--out", default="out", help="output folder of the no-display fallback (default ./out)")
+    p.set_defaults(func=cmd_view)
+
     p = sub.add_parser("demo", help="write the side-by-side comparison of the bundled scene to a folder")
     p.add_argument("scene", type=Path, nargs="?")
     add_camera_args(p)
@@ -381,9 +404,13 @@ def _join_signed_values(argv: list[str]) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     argv = _join_signed_values(sys.argv[1:] if argv is None else argv)
+    commands = set(next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices)
+    first = next((a for a in argv if a != "--debug"), None)
+    if first is None or (first not in commands and first not in ("-h", "--help")):
+        argv = ["view", *argv] if first is None else [*argv[:argv.index(first)], "view", *argv[argv.index(first):]]
     args = parser.parse_args(argv)
     if args.command is None:
-        args = parser.parse_args(["demo", *argv])
+        args = parser.parse_args(["view", *argv])
     try:
         return args.func(args)
     except (GBViewerError, OSError) as exc:

@@ -75,6 +75,63 @@ class PaneState:
         return PANE_NAMES[self.index]
 
 
+class Blitter:
+    """Draws image textures into the window with nearest filtering (Dear ImGui's OpenGL 3 backend binds its own
+    linear sampler, so pane images are drawn here, before and after the UI, not through imgui.image)."""
+
+    VS = """#version 330
+    uniform vec2 screen;
+    in vec2 pos;
+    in vec2 uv;
+    out vec2 v_uv;
+    void main() {
+        v_uv = uv;
+        gl_Position = vec4(pos.x / screen.x * 2.0 - 1.0, 1.0 - pos.y / screen.y * 2.0, 0.0, 1.0);
+    }"""
+    FS = """#version 330
+    uniform sampler2D tex;
+    in vec2 v_uv;
+    out vec4 colour;
+    void main() { colour = vec4(texture(tex, v_uv).rgb, 1.0); }"""
+
+    def __init__(self, ctx) -> None:
+        self.ctx = ctx
+        self.prog = ctx.program(vertex_shader=self.VS, fragment_shader=self.FS)
+        self.vbo = ctx.buffer(reserve=16 * 4)
+        self.vao = ctx.vertex_array(self.prog, [(self.vbo, "2f 2f", "pos", "uv")])
+        self.sampler = ctx.sampler(filter=(moderngl.NEAREST, moderngl.NEAREST), repeat_x=False, repeat_y=False)
+        self.quads: list[tuple] = []
+
+    def add(self, texture, x0: float, y0: float, x1: float, y1: float, uv=(0.0, 0.0, 1.0, 1.0)) -> None:
+        """Queue a quad (window coordinates) showing the texture's uv rectangle."""
+        if texture is not None and x1 > x0 and y1 > y0:
+            self.quads.append((texture, x0, y0, x1, y1, uv))
+
+    def flush(self, fb_w: int, fb_h: int, scale: tuple[float, float]) -> None:
+        if not self.quads:
+            return
+        ctx = self.ctx
+        ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        ctx.screen.use()
+        ctx.viewport = (0, 0, fb_w, fb_h)
+        ctx.scissor = None
+        self.prog["screen"].value = (float(fb_w), float(fb_h))
+        self.prog["tex"].value = 0
+        sx, sy = scale
+        for tex, x0, y0, x1, y1, (u0, v0, u1, v1) in self.quads:
+            x0, x1, y0, y1 = x0 * sx, x1 * sx, y0 * sy, y1 * sy
+            self.vbo.write(np.array([x0, y0, u0, v0, x1, y0, u1, v0, x0, y1, u0, v1, x1, y1, u1, v1], np.float32))
+            tex.use(0)
+            self.sampler.use(0)
+            self.vao.render(moderngl.TRIANGLE_STRIP)
+        self.sampler.clear(0)
+        self.quads.clear()
+
+    def release(self) -> None:
+        for obj in (self.vao, self.vbo, self.prog, self.sampler):
+            obj.release()
+
+
 class ViewerApp:
     """The viewer window. `ViewerApp(path).run()` is `gbviewer [SCENE]`."""
 
@@ -118,9 +175,11 @@ class ViewerApp:
     # ---- window and GL ------------------------------------------------------------------------------------------
 
     def _init_window(self, visible: bool) -> None:
+        glfw.ERROR_REPORTING = "ignore"  # failures are reported below, in one line
         if not glfw.init():
-            desc = glfw.get_error()
-            raise GBViewerError(f"cannot open a window: glfw failed to initialise ({desc})")
+            _, desc = glfw.get_error()
+            desc = desc.decode(errors="replace") if isinstance(desc, bytes) else str(desc or "no reason given")
+            raise GBViewerError(f"glfw could not initialise ({desc})")
         glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 3)
         glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
         glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
@@ -130,7 +189,9 @@ class ViewerApp:
         self.window = glfw.create_window(w, h, "gbviewer", None, None)
         if not self.window:
             glfw.terminate()
-            raise GBViewerError("cannot open a window: glfw could not create an OpenGL 3.3 context")
+            _, desc = glfw.get_error()
+            desc = desc.decode(errors="replace") if isinstance(desc, bytes) else str(desc or "")
+            raise GBViewerError(f"glfw could not create an OpenGL 3.3 window ({desc})")
         glfw.make_context_current(self.window)
         glfw.swap_interval(1)
         self.ctx = moderngl.create_context()
@@ -152,6 +213,8 @@ class ViewerApp:
         imgui.backends.opengl3_init("#version 330")
         glfw.set_drop_callback(self.window, self._on_drop)
         self.gl_renderer = self.ctx.info.get("GL_RENDERER", "?")
+        self.blit_panes = Blitter(self.ctx)  # drawn under the UI
+        self.blit_loupe = Blitter(self.ctx)  # drawn over it
 
     def _style(self) -> None:
         imgui.style_colors_dark()
@@ -374,7 +437,11 @@ class ViewerApp:
         self.ctx.screen.use()
         self.ctx.viewport = (0, 0, fw, fh)
         self.ctx.clear(0.07, 0.075, 0.085, 1.0)
+        io = imgui.get_io()
+        scale = (io.display_framebuffer_scale.x or 1.0, io.display_framebuffer_scale.y or 1.0)
+        self.blit_panes.flush(fw, fh, scale)
         imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
+        self.blit_loupe.flush(fw, fh, scale)
         if self._pending_screenshot is not None:
             path, self._pending_screenshot = self._pending_screenshot, None
             self._write_window_png(path)
@@ -396,6 +463,8 @@ class ViewerApp:
             for s in p.parts.values():
                 if s.texture is not None:
                     s.texture.release()
+        self.blit_panes.release()
+        self.blit_loupe.release()
         imgui.backends.opengl3_shutdown()
         imgui.backends.glfw_shutdown()
         imgui.destroy_context()
@@ -737,6 +806,9 @@ class ViewerApp:
             if imgui.menu_item("Shortcuts", "F1", self.show_help)[0]:
                 self.show_help = not self.show_help
             imgui.end_menu()
+        hint = "F1 or ? : shortcuts"
+        imgui.same_line(imgui.get_io().display_size.x - imgui.calc_text_size(hint).x - 16)
+        imgui.text_disabled(hint)
         imgui.end_main_menu_bar()
 
     def _section(self, title: str) -> bool:
@@ -982,14 +1054,12 @@ class ViewerApp:
     def _draw_panes(self) -> None:
         dl = imgui.get_background_draw_list()
         v = self.viewport
-        dl.add_rect_filled((v.x, v.y), (v.x + v.w, v.y + v.h), col(18, 19, 22))
         if self.scene is None and self.loader is not None:
             self._text(dl, v.x + v.w / 2 - 80, v.y + v.h / 2, f"loading {self.loader.path.name}...")
             return
         for p in self.panes[: self.settings.pane_count]:
             r = p.rect
             ps = self.settings.panes[p.index]
-            dl.add_rect_filled((r.x, r.y), (r.x + r.w, r.y + r.h), col(0, 0, 0))
             parts = self._parts(p.index)
             ranges = logic.split_parts(ps.split_pos) if ps.split else ((0.0, 1.0),)
             for part, (u0, u1) in zip(parts, ranges):
@@ -997,7 +1067,7 @@ class ViewerApp:
                 if shown.texture is None or u1 <= u0:
                     continue
                 x0, x1 = r.x + u0 * r.w, r.x + u1 * r.w
-                dl.add_image(imgui.ImTextureRef(shown.texture.glo), (x0, r.y), (x1, r.y + r.h), (u0, 0), (u1, 1))
+                self.blit_panes.add(shown.texture, x0, r.y, x1, r.y + r.h, (u0, 0.0, u1, 1.0))
             # overlays
             y = r.y + 4
             self._text(dl, r.x + 4, y, self._label(p, "a"))
@@ -1067,8 +1137,6 @@ class ViewerApp:
             imgui.same_line(0, 24)
             c = imgui.ImVec4((colour & 255) / 255, ((colour >> 8) & 255) / 255, ((colour >> 16) & 255) / 255, 1)
             imgui.text_colored(c, text)
-        imgui.same_line(io.display_size.x - 150)
-        imgui.text_disabled("F1: shortcuts")
         imgui.end()
         imgui.pop_style_var()
 
@@ -1094,11 +1162,11 @@ class ViewerApp:
             dl.add_rect_filled((x0 - 2, y - 2), (x0 + side + 2, y + side + 22), col(0, 0, 0, 230), 3.0)
             if shown.texture is not None:
                 u0, v0, u1, v1 = logic.loupe_uv(u, v, p.rect.w, p.rect.h, radius, zoom)
-                dl.add_image(imgui.ImTextureRef(shown.texture.glo), (x0, y), (x0 + side, y + side), (u0, v0),
-                             (u1, v1))
-                cx = x0 + (u - u0) / (u1 - u0) * side
-                cy = y + (v - v0) / (v1 - v0) * side
-                dl.add_rect((cx - 3, cy - 3), (cx + 3, cy + 3), col(255, 60, 60, 230))
+                self.blit_loupe.add(shown.texture, x0, y, x0 + side, y + side, (u0, v0, u1, v1))
+                cx = x0 + (u - u0) / (u1 - u0) * side  # the cursor: tick marks on the frame (the image covers
+                cy = y + (v - v0) / (v1 - v0) * side  # the inside, it is drawn after the UI)
+                dl.add_line((cx, y - 2), (cx, y - 8), col(255, 80, 80), 2.0)
+                dl.add_line((x0 - 2, cy), (x0 - 8, cy), col(255, 80, 80), 2.0)
             mode = ps.split_mode if part == "b" else ps.mode
             dl.add_text((x0 + 3, y + side + 3), WHITE, f"{p.name}{chr(39) if part == 'b' else ''} {mode}"[:22])
 
@@ -1106,10 +1174,10 @@ class ViewerApp:
         if not self.show_help:
             return
         io = imgui.get_io()
-        w, h = 620, 40 + 25 * len(logic.SHORTCUTS)
+        w, h = 720, 44 + 25 * len(logic.SHORTCUTS)
         imgui.set_next_window_pos((io.display_size.x / 2, io.display_size.y / 2), 0, (0.5, 0.5))
         imgui.set_next_window_size((w, h))
-        imgui.set_next_window_bg_alpha(0.94)
+        imgui.set_next_window_bg_alpha(0.98)
         flags = (imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_saved_settings
                  | imgui.WindowFlags_.no_move).value
         opened, keep = imgui.begin("Keyboard and mouse (F1 or ? to close)", True, flags)

@@ -1,0 +1,297 @@
+"""The real viewer window under an Xvfb server the fixture starts (Mesa llvmpipe): what a person would check.
+
+Inputs go through Dear ImGui's input queue (the same path as glfw's callbacks) or the methods the UI calls. Each
+run keeps screenshots in tests/output/ (a CI artefact).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gbviewer as gb
+from gbviewer.app import logic
+from gbviewer.figure import to_uint8, upscale_nearest
+
+pytestmark = pytest.mark.display
+
+OUTPUT = Path(__file__).resolve().parent / "output"
+LABEL_BAND = 60  # pixels at the top of a pane that hold the label and the preview/rendering line
+
+
+@pytest.fixture(scope="module")
+def xvfb():
+    exe = shutil.which("Xvfb")
+    if exe is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb; scripts/setup.sh installs it)")
+    for n in range(91, 120):
+        if not Path(f"/tmp/.X11-unix/X{n}").exists() and not Path(f"/tmp/.X{n}-lock").exists():
+            break
+    proc = subprocess.Popen([exe, f":{n}", "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    t0 = time.time()
+    while not Path(f"/tmp/.X11-unix/X{n}").exists():
+        if proc.poll() is not None or time.time() - t0 > 20:
+            proc.kill()
+            pytest.fail(f"Xvfb :{n} did not start (exit {proc.poll()})")
+        time.sleep(0.05)
+    old = os.environ.get("DISPLAY")
+    os.environ["DISPLAY"] = f":{n}"
+    yield f":{n}"
+    if old is None:
+        os.environ.pop("DISPLAY", None)
+    else:
+        os.environ["DISPLAY"] = old
+    proc.terminate()
+    try:
+        proc.wait(10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
+@pytest.fixture
+def app(xvfb, tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+    from gbviewer.app.window import ViewerApp
+
+    a = ViewerApp(None, size=(1040, 700))
+    a.settings.show_info = False  # comparisons below need the image without the stats lines; one test turns it on
+    yield a
+    a.close()
+
+
+def shot(app, name: str) -> np.ndarray:
+    """A screenshot through the app's own function, kept in tests/output/."""
+    OUTPUT.mkdir(exist_ok=True)
+    path = app.screenshot_window(OUTPUT / f"{name}.png")
+    app.step()
+    from PIL import Image
+
+    return np.asarray(Image.open(path).convert("RGB"))
+
+
+def pane_pixels(img: np.ndarray, rect) -> np.ndarray:
+    return img[rect.y:rect.y + rect.h, rect.x:rect.x + rect.w]
+
+
+def expected_pane(app, i: int, part: str = "a", view: str = "color") -> np.ndarray:
+    """gb.render at the pane's render camera, nearest-upscaled to the pane."""
+    p = app.panes[i]
+    job = p.parts[part].job
+    frame = gb.render(app.scene, job.camera, job.settings.mode, job.settings.supersample,
+                      debug=job.settings.debug)
+    rgb, _ = logic.visualize(frame, view)
+    return upscale_nearest(to_uint8(rgb), p.rect.h, p.rect.w)
+
+
+def agree(a: np.ndarray, b: np.ndarray, border: int = 1) -> float:
+    """Fraction of pixels equal within 1 level, `border` pixels in from the edges (the hovered pane's outline)."""
+    if border:
+        a, b = a[:-border, border:-border], b[:-border, border:-border]
+    return float((np.abs(a.astype(int) - b.astype(int)).max(axis=2) <= 1).mean())
+
+
+def wait(app):
+    assert app.wait_rendered(180), "the panes did not finish rendering"
+
+
+def test_panes_show_the_renders_at_their_resolution_and_labels(app):
+    app.set_pane_count(2)
+    app.settings.layout = "row"
+    app.set_pane(0, mode="scalar", supersample=1, split=False, view="color")
+    app.set_pane(1, mode="gaussian_blending", supersample=1, split=False, view="color")
+    app.set_rate(1 / 8)
+    wait(app)
+    img = shot(app, "viewer-x1_8")
+    sizes = []
+    for i in range(2):
+        p = app.panes[i]
+        cam = p.parts["a"].job.camera
+        assert (cam.width, cam.height) == logic.render_size(p.rect.w, p.rect.h, 1 / 8) == p.render_size
+        sizes.append((cam.width, cam.height))
+        got = pane_pixels(img, p.rect)
+        want = expected_pane(app, i)
+        assert agree(got[LABEL_BAND:], want[LABEL_BAND:]) > 0.995
+        assert got[LABEL_BAND:].std() > 10, "pane is blank"
+        # the label is drawn on the image: white text on a dark box where the render is dark
+        white = lambda a: int((a[4:26, 4:200].min(axis=2) > 200).sum())  # noqa: E731
+        assert white(got) > 30 + white(want)
+    a, b = (pane_pixels(img, app.panes[i].rect)[LABEL_BAND:].astype(int) for i in range(2))
+    h, w = min(a.shape[0], b.shape[0]), min(a.shape[1], b.shape[1])
+    assert np.abs(a[:h, :w] - b[:h, :w]).mean() > 2, "scalar and gaussian_blending look the same at x1/8"
+
+    app.set_rate(1 / 2)  # the sampling rate changes the render resolution
+    wait(app)
+    img = shot(app, "viewer-x1_2")
+    for i in range(2):
+        p = app.panes[i]
+        cam = p.parts["a"].job.camera
+        assert (cam.width, cam.height) == logic.render_size(p.rect.w, p.rect.h, 1 / 2)
+        assert cam.width > 3 * sizes[i][0]
+        assert agree(pane_pixels(img, p.rect)[LABEL_BAND:], expected_pane(app, i)[LABEL_BAND:]) > 0.995
+
+
+def test_split_view_loupe_help_debug_views_and_pane_screenshot(app, tmp_path):
+    app.set_pane_count(1)
+    app.set_pane(0, mode="scalar", split=True, split_mode="gaussian_blending", split_pos=0.5, view="color")
+    app.set_rate(1 / 4)
+    wait(app)
+    img = shot(app, "viewer-split")
+    p = app.panes[0]
+    got = pane_pixels(img, p.rect)
+    half = p.rect.w // 2
+    left, right = expected_pane(app, 0, "a"), expected_pane(app, 0, "b")
+    assert agree(got[LABEL_BAND:, :half - 6], left[LABEL_BAND:, :half - 6]) > 0.995
+    assert agree(got[LABEL_BAND:, half + 6:], right[LABEL_BAND:, half + 6:]) > 0.995
+
+    # drag the divider with the mouse
+    from imgui_bundle import imgui
+
+    io = imgui.get_io()
+    r = p.rect
+    io.add_mouse_pos_event(r.x + r.w / 2, r.y + r.h / 2)
+    app.step()
+    io.add_mouse_button_event(0, True)
+    app.step()
+    io.add_mouse_pos_event(r.x + r.w * 0.25, r.y + r.h / 2)
+    app.step()
+    io.add_mouse_button_event(0, False)
+    app.step()
+    assert app.settings.panes[0].split_pos == pytest.approx(0.25, abs=0.01)
+
+    # loupe under the cursor, help overlay through F1, information overlay
+    app.settings.loupe = True
+    app.settings.show_info = True
+    io.add_mouse_pos_event(r.x + r.w * 0.6, r.y + r.h * 0.6)
+    io.add_key_event(imgui.Key.f1, True)
+    app.step()
+    io.add_key_event(imgui.Key.f1, False)
+    app.run_frames(2)
+    assert app.show_help and app.hover is not None and app.hover[0] == 0
+    img2 = shot(app, "viewer-loupe-help")
+    assert np.abs(img2.astype(int) - img.astype(int)).mean() > 1
+    app.show_help = False
+
+    # pane screenshot: the render itself at 16 bits
+    path = app.screenshot_pane(0, tmp_path / "pane.png")
+    data = logic.decode_png16(path.read_bytes())
+    frame = app.panes[0].parts["a"].frame
+    assert data.shape == frame.rgb.shape
+    assert np.abs(data / 65535 - np.clip(frame.rgb, 0, 1)).max() < 1e-4
+
+    # debug views
+    app.set_pane(0, split=False, mode="gaussian_blending")
+    for view in ("alpha", "transmittance", "window", "evals"):
+        app.set_pane(0, view=view)
+        wait(app)
+        shown = app.panes[0].parts["a"]
+        assert shown.view == view and shown.legend and "only" not in shown.legend
+        assert shown.image.std() > 1
+    shot(app, "viewer-window-size")
+
+
+def test_four_panes_grid_camera_input_and_training_cameras(app):
+    app.set_pane_count(4)
+    app.settings.layout = "grid"
+    app.set_rate(1 / 8)
+    wait(app)
+    rects = [p.rect for p in app.panes]
+    assert rects[0].y == rects[1].y < rects[2].y == rects[3].y and rects[0].x == rects[2].x < rects[1].x
+    img = shot(app, "viewer-grid")
+    for i in range(4):
+        assert agree(pane_pixels(img, rects[i])[LABEL_BAND:], expected_pane(app, i)[LABEL_BAND:]) > 0.995
+
+    from imgui_bundle import imgui
+
+    io = imgui.get_io()
+    R0, d0 = app.controller.R.copy(), app.controller.distance
+    r = rects[0]
+    io.add_mouse_pos_event(r.x + 40, r.y + 80)
+    app.step()
+    io.add_mouse_button_event(0, True)
+    app.step()
+    for k in range(5):
+        io.add_mouse_pos_event(r.x + 40 + 10 * k, r.y + 80)
+        app.step()
+    io.add_mouse_button_event(0, False)
+    app.step()
+    io.add_mouse_wheel_event(0, 2)
+    app.step()
+    assert np.abs(app.controller.R - R0).max() > 0.05 and app.controller.distance < d0
+    app.reset_camera()
+    assert app.controller.R == pytest.approx(R0)
+    # training cameras: snap and step
+    cams = [gb.orbit_camera(app.scene, az, 10, width=320, height=240) for az in (0, 90)]
+    app.cameras = cams
+    app.step_camera(1)
+    assert app.controller.camera(320, 240).R == pytest.approx(cams[0].R)
+    app.step_camera(1)
+    assert app.controller.camera(320, 240).t == pytest.approx(cams[1].t)
+
+
+def test_bad_file_keeps_the_scene_and_shows_the_error_then_settings_persist(app, tmp_path):
+    app.set_rate(1 / 8)
+    wait(app)
+    scene = app.scene
+    bad = tmp_path / "broken.ply"
+    bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nend_header\n\x00")
+    app.open(bad)
+    t0 = time.time()
+    while app.loader is not None and time.time() - t0 < 30:
+        app.step()
+    app.run_frames(2)
+    assert app.scene is scene and "broken.ply" in app.load_error and "\n" not in app.load_error
+    img = shot(app, "viewer-bad-file")
+    panel = img[:, :340].astype(int)
+    reddish = (panel[..., 0] > 200) & (panel[..., 1] < 150) & (panel[..., 2] < 140)
+    assert reddish.sum() > 30, "the error is not shown in the window"
+    p = app.panes[0]
+    assert pane_pixels(img, p.rect)[LABEL_BAND:].std() > 10, "the previous scene is no longer shown"
+
+    # settings persist across runs
+    app.set_pane_count(3)
+    app.settings.layout = "grid"
+    app.set_pane(2, mode="analytic", supersample=2)
+    app.close()
+    saved = logic.settings_path()
+    assert saved.exists()
+    s, warning = logic.load_settings()
+    assert warning == "" and s.pane_count == 3 and s.layout == "grid" and s.rate == 1 / 8
+    assert s.panes[2].mode == "analytic" and s.panes[2].supersample == 2
+    assert str(gb.DEFAULT_SCENE.resolve()) in s.recent
+
+
+def test_gbviewer_command_opens_the_window_and_exits_cleanly(xvfb, tmp_path):
+    """`gbviewer` on a display: a window, and a clean exit when it is closed (here after a few frames)."""
+    code = ("import glfw, sys\n"
+            "from gbviewer.app import window\n"
+            "orig = window.ViewerApp.step\n"
+            "def step(self, poll=True):\n"
+            "    orig(self, poll)\n"
+            "    if self.frame_count >= 5 and self.scene is not None:\n"
+            "        glfw.set_window_should_close(self.window, True)\n"
+            "window.ViewerApp.step = step\n"
+            "from gbviewer.cli import main\n"
+            "sys.exit(main([]))\n")
+    env = dict(os.environ, XDG_CONFIG_HOME=str(tmp_path / "cfg"))
+    proc = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path, capture_output=True, text=True,
+                          timeout=180)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "cfg" / "gbviewer" / "settings.json").exists()
+    assert not (tmp_path / "out").exists()  # the window opened: no fallback images
+
+
+def test_no_display_falls_back_to_the_comparison_images(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.run([sys.executable, "-m", "gbviewer", "--width", "64", "--height", "48"], env=env,
+                          cwd=tmp_path, capture_output=True, text=True, timeout=180)
+    assert proc.returncode == 0, proc.stderr
+    assert "no display" in proc.stdout
+    assert (tmp_path / "out" / "comparison.png").exists()
