@@ -234,6 +234,8 @@ def cmd_video(args: argparse.Namespace) -> int:
         raise GBViewerError(f"{out}: exists; pass --force to overwrite")
     if not (args.fps > 0):
         raise GBViewerError(f"--fps must be > 0, got {args.fps}")
+    if args.path not in video.PATHS and not args.path.lower().endswith(".json"):
+        raise GBViewerError(f"--path {args.path!r}; expected {', '.join(video.PATHS)} or a keyframes FILE.json")
     settings = RenderSettings.parse_list(args.modes)
     if args.size:
         args.width, args.height = args.size

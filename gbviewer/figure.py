@@ -172,6 +172,12 @@ def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = 4,
                         even)
     out = Image.new("RGB", layout.size, (40, 40, 40))
     font = _font(fs)
+    if texts is not None:  # smaller text where a caption would not fit the cell (the strip keeps its height)
+        longest = max((t for row in texts for cell_lines in row for t in cell_lines), key=len, default="")
+        size = fs
+        while size > 8 and ImageDraw.Draw(out).textlength(longest, font=font) > width - 8:
+            size -= 1
+            font = _font(size)
     for r, row in enumerate(cells):
         for c, cell in enumerate(row):
             rgb = to_uint8(cell.rgb)
