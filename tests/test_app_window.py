@@ -34,7 +34,7 @@ def xvfb():
     for n in range(91, 120):
         if not Path(f"/tmp/.X11-unix/X{n}").exists() and not Path(f"/tmp/.X{n}-lock").exists():
             break
-    proc = subprocess.Popen([exe, f":{n}", "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
+    proc = subprocess.Popen([exe, f":{n}", "-screen", "0", "1280x800x24", "-nolisten", "tcp", "-noreset"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     t0 = time.time()
     while not Path(f"/tmp/.X11-unix/X{n}").exists():
@@ -266,6 +266,27 @@ def test_bad_file_keeps_the_scene_and_shows_the_error_then_settings_persist(app,
     assert warning == "" and s.pane_count == 3 and s.layout == "grid" and s.rate == 1 / 8
     assert s.panes[2].mode == "analytic" and s.panes[2].supersample == 2
     assert str(gb.DEFAULT_SCENE.resolve()) in s.recent
+
+
+def test_record_zoom_video_in_the_background(app, tmp_path):
+    from gbviewer.app.worker import video_available
+
+    if not video_available()[0]:
+        pytest.skip(video_available()[1])
+    app.set_pane_count(2)
+    app.set_rate(1 / 8)
+    wait(app)
+    job = app.record_video(frames=3, out=tmp_path / "zoom.mp4")
+    t0 = time.time()
+    while not job.finished() and time.time() - t0 < 180:
+        app.step()  # the UI keeps running while the video renders
+        time.sleep(0.02)
+    app.step()
+    assert job.error == "" and (tmp_path / "zoom.mp4").stat().st_size > 1000
+    assert any("zoom.mp4" in m[1] for m in app.messages)
+    job = app.record_video(frames=200, out=tmp_path / "cancelled.mp4")
+    job.cancel(wait=60)
+    assert job.finished() and not (tmp_path / "cancelled.mp4").exists()
 
 
 def test_gbviewer_command_opens_the_window_and_exits_cleanly(xvfb, tmp_path):

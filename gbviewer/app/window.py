@@ -29,9 +29,10 @@ from ..figure import atomic_write, to_uint8  # noqa: E402
 from ..render import BACKENDS, Mode, RenderSettings  # noqa: E402
 from . import logic  # noqa: E402
 from .logic import PANE_NAMES, AppSettings, CameraController, PaneSettings, Rect  # noqa: E402
-from .worker import RenderJob, RenderResult, RenderWorker, SceneLoader  # noqa: E402
+from .worker import RenderJob, RenderResult, RenderWorker, SceneLoader, VideoJob, video_available  # noqa: E402
 
 PANEL_W = 340
+VIDEO_PANE_W = 480
 PREVIEW_BUDGET_MS = 60.0
 MOVING_HOLD_S = 0.25
 SCENE_EXTS = (".ply", ".splat", ".spz", ".sog", ".json", ".pth")
@@ -167,7 +168,9 @@ class ViewerApp:
         self.closed = False
         self._needs_reset = False
         self.last_screenshot: Path | None = None
-        self.video = None  # background zoom-video job, when gbviewer.video provides one
+        self.video: VideoJob | None = None  # background zoom video, when gbviewer.video provides record_video
+        self.video_ok = video_available()[0]
+        self.video_frames = 90
         self._init_window(visible)
         self.worker = RenderWorker()
         self.open(scene_path or DEFAULT_SCENE)
@@ -365,7 +368,8 @@ class ViewerApp:
     def run(self) -> None:
         try:
             while not glfw.window_should_close(self.window) and not self.closed:
-                busy = self.moving or self.loader is not None or self.worker.busy() or self.fly
+                busy = (self.moving or self.loader is not None or self.worker.busy() or self.fly
+                        or (self.video is not None and not self.video.finished()))
                 if busy:
                     glfw.poll_events()
                 else:
@@ -412,6 +416,7 @@ class ViewerApp:
         self._poll_loader()
         self._poll_results()
         self._poll_dialog()
+        self._poll_video()
         imgui.backends.opengl3_new_frame()
         imgui.backends.glfw_new_frame()
         imgui.new_frame()
@@ -457,7 +462,7 @@ class ViewerApp:
         self.save_settings()
         self.closed = True
         if self.video is not None:
-            self.video.cancel()
+            self.video.cancel(wait=10.0)
         self.worker.stop()
         for p in self.panes:
             for s in p.parts.values():
@@ -989,8 +994,50 @@ class ViewerApp:
             self._draw_stats_table()
         imgui.end()
 
+    def record_video(self, frames: int | None = None, out: str | Path | None = None) -> VideoJob | None:
+        """Start the zoom video (x1 to x1/8) of the current view, one column per visible pane's mode, in the
+        background; 480 px wide panes with the panes' aspect."""
+        if self.scene is None or (self.video is not None and not self.video.finished()):
+            return None
+        r = self.panes[0].rect
+        w = VIDEO_PANE_W
+        h = max(2, round(w * r.h / max(1, r.w) / 2) * 2)
+        cam = self.controller.camera(w, h)
+        settings = [self._settings_for(self.settings.panes[i], "a") for i in range(self.settings.pane_count)]
+        settings = [RenderSettings(s.mode, s.supersample, s.background) for s in settings]
+        out = Path(out) if out else self._shot_name("zoom").with_suffix(".mp4")
+        self.video = VideoJob(self.scene, cam, settings, out, frames or self.video_frames)
+        self.message(f"recording {out.name} ({self.video.total} frames) in the background")
+        return self.video
+
+    def _poll_video(self) -> None:
+        v = self.video
+        if v is None or not v.finished() or getattr(v, "reported", False):
+            return
+        v.reported = True
+        if v.error:
+            self.message(f"video: {v.error}", YELLOW if v.cancelled else RED)
+        elif v.info is not None:
+            self.message(f"saved {v.info.path} ({v.info.frames} frames, {v.info.elapsed_s:.0f} s)")
+
     def _draw_video_button(self) -> None:
-        pass  # wired in when gbviewer.video provides a background zoom-video function
+        if not self.video_ok:
+            return  # gbviewer.video without record_video: no button
+        v = self.video
+        if v is not None and not v.finished():
+            imgui.progress_bar(v.fraction, (PANEL_W - 100, 0), f"video {v.done_frames}/{v.total}")
+            imgui.same_line()
+            if imgui.button("Cancel"):
+                v.cancel()
+            return
+        if imgui.button("Record zoom video"):
+            self.record_video()
+        if imgui.is_item_hovered():
+            imgui.set_tooltip("x1 to x1/8 zoom of this view, one column per pane's mode (H.264 MP4), rendered in "
+                              "the background")
+        imgui.same_line()
+        imgui.set_next_item_width(110)
+        _, self.video_frames = imgui.slider_int("frames", self.video_frames, 15, 300)
 
     def _draw_stats_table(self) -> None:
         flags = (imgui.TableFlags_.borders_inner_h | imgui.TableFlags_.row_bg | imgui.TableFlags_.sizing_fixed_fit

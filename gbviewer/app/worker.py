@@ -195,3 +195,65 @@ class SceneLoader:
 
     def poll(self) -> LoadResult | None:
         return self._result if self._done.is_set() else None
+
+
+def video_available() -> tuple[bool, str]:
+    """Whether gbviewer.video offers record_video (the zoom-video feature)."""
+    try:
+        from .. import video
+    except ImportError as exc:
+        return False, f"gbviewer.video cannot be imported ({exc})"
+    if not hasattr(video, "record_video") or not hasattr(video, "zoom_path"):
+        return False, "gbviewer.video has no record_video"
+    return True, ""
+
+
+class VideoJob:
+    """A zoom video (x1 to x1/8, one column per mode) written by gbviewer.video.record_video in a thread."""
+
+    def __init__(self, scene: Scene, camera: Camera, settings: list[RenderSettings], out: Path, frames: int = 90,
+                 fps: float = 30.0, backend: str = "cpu", start: float = 1.0, end: float = 0.125) -> None:
+        from .. import video
+
+        self.out = Path(out)
+        self.done_frames, self.total = 0, frames
+        self.error = ""
+        self.info = None
+        self.started = time.perf_counter()
+        self._cancel = threading.Event()
+        self._finished = threading.Event()
+
+        def progress(done: int, total: int) -> None:
+            self.done_frames, self.total = done, total
+
+        def run() -> None:
+            try:
+                path = video.zoom_path(camera, frames, start, end)
+                self.info = video.record_video(scene, path, settings, self.out, fps=fps, backend=backend,
+                                               progress=progress, cancel=self._cancel)
+            except GBViewerError as exc:
+                self.error = str(exc)
+            except Exception as exc:  # noqa: BLE001 - shown in the window
+                traceback.print_exc()
+                self.error = f"{type(exc).__name__}: {exc}"
+            finally:
+                self._finished.set()
+
+        self._thread = threading.Thread(target=run, name="gbviewer-video", daemon=True)
+        self._thread.start()
+
+    @property
+    def fraction(self) -> float:
+        return self.done_frames / max(1, self.total)
+
+    def finished(self) -> bool:
+        return self._finished.is_set()
+
+    def cancel(self, wait: float = 0.0) -> None:
+        self._cancel.set()
+        if wait:
+            self._thread.join(wait)
+
+    @property
+    def cancelled(self) -> bool:
+        return self._cancel.is_set()
