@@ -465,7 +465,8 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
     composed and piped to ffmpeg (imageio-ffmpeg's bundled one: libx264, yuv420p, constant quality `crf`) one at a
     time, so memory does not grow with the length; the CPU backend uses every core for each frame.
 
-    Safe to call from a background thread (the native renderer releases the GIL):
+    Safe to call from a background thread with the cpu backend (the native renderer keeps no state between calls
+    and releases the GIL; a GL backend's context belongs to the thread that made it):
       progress(done, total) is called after each frame is encoded (from the calling thread);
       cancel: anything with is_set() (a threading.Event), checked before each render; when set, ffmpeg is stopped,
       the partial file removed and `Cancelled` raised.
@@ -517,6 +518,9 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
         finally:
             if writer is not None:
                 writer.close()  # ffmpeg finishes (or is stopped) before the file is renamed or removed
+        written = imageio_ffmpeg.count_frames_and_secs(str(tmp))[0]  # imageio does not check ffmpeg's exit status
+        if written != len(frames):
+            raise GBViewerError(f"ffmpeg wrote {written} of {len(frames)} frames; see its messages above")
 
     atomic_write(out, write, force)
     return VideoInfo(out, len(frames), size[0], size[1], float(fps), time.perf_counter() - t0)
