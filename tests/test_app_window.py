@@ -268,6 +268,81 @@ def test_bad_file_keeps_the_scene_and_shows_the_error_then_settings_persist(app,
     assert str(gb.DEFAULT_SCENE.resolve()) in s.recent
 
 
+def press(app, key, shift: bool = False, frames: int = 1) -> None:
+    from imgui_bundle import imgui
+
+    io = imgui.get_io()
+    if shift:
+        io.add_key_event(imgui.Key.left_shift, True)
+        io.add_key_event(imgui.Key.mod_shift, True)
+    io.add_key_event(key, True)
+    app.run_frames(frames)
+    io.add_key_event(key, False)
+    if shift:
+        io.add_key_event(imgui.Key.left_shift, False)
+        io.add_key_event(imgui.Key.mod_shift, False)
+    app.step()
+
+
+def test_keyboard_shortcuts(app, tmp_path):
+    from imgui_bundle import imgui
+
+    K = imgui.Key
+    app.settings.screenshot_dir = str(tmp_path)
+    app.set_rate(1.0)
+    app.set_pane_count(2)
+    app.run_frames(2)
+    press(app, K.minus)
+    assert app.settings.rate == 0.5
+    press(app, K.equal)
+    press(app, K.equal)
+    assert app.settings.rate == 2
+    press(app, K._0)
+    assert app.settings.rate == 1
+    press(app, K._3)
+    assert app.settings.pane_count == 3
+    layout = app.settings.layout
+    press(app, K.g)
+    assert app.settings.layout != layout
+    loupe, info = app.settings.loupe, app.settings.show_info
+    press(app, K.l)
+    press(app, K.i)
+    assert app.settings.loupe != loupe and app.settings.show_info != info
+    io = imgui.get_io()
+    r = app.panes[1].rect
+    io.add_mouse_pos_event(r.x + r.w / 2, r.y + r.h / 2)
+    app.step()
+    mode = app.settings.panes[1].mode
+    press(app, K.m)
+    assert app.settings.panes[1].mode != mode
+    press(app, K.m, shift=True)
+    assert app.settings.panes[1].mode == mode
+    press(app, K.v)
+    assert app.settings.panes[1].split
+    press(app, K.slash, shift=True)
+    assert app.show_help
+    press(app, K.escape)
+    assert not app.show_help
+    up = app.settings.up
+    press(app, K.u)
+    assert app.settings.up != up and app.controller.up == app.settings.up
+    press(app, K.f)
+    assert app.fly
+    eye = app.controller.eye
+    press(app, K.w, frames=5)
+    assert (app.controller.eye - eye) @ app.controller.forward > 0
+    press(app, K.f)
+    assert not app.fly
+    press(app, K.r)
+    press(app, K.f12)
+    assert len(list(tmp_path.glob("*-window-*.png"))) == 1
+    app.wait_rendered(120)
+    io.add_mouse_pos_event(r.x + r.w / 2, r.y + r.h / 2)
+    app.step()
+    press(app, K.f12, shift=True)
+    assert len(list(tmp_path.glob("*-paneB-*.png"))) == 1
+
+
 def test_record_zoom_video_in_the_background(app, tmp_path):
     from gbviewer.app.worker import video_available
 

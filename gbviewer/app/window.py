@@ -12,7 +12,7 @@ import math
 import os
 import shutil
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -628,6 +628,8 @@ class ViewerApp:
                 cam = self.pane_camera(p.index, f)
                 settings = self._settings_for(ps, part)
                 key = (id(self.scene), state, (cam.width, cam.height), settings, backend)
+                if moving and (os.cpu_count() or 1) > 1:  # leave a core to the UI thread while the camera moves
+                    settings = replace(settings, threads=(os.cpu_count() or 2) - 1)
                 if p.submitted.get(part) == key:
                     continue
                 p.submitted[part] = key
@@ -699,7 +701,12 @@ class ViewerApp:
 
     def _shot_name(self, what: str) -> Path:
         stem = self.scene_path.stem if self.scene_path else "gbviewer"
-        return self.shot_dir() / f"{stem}-{what}-{time.strftime('%Y%m%d-%H%M%S')}.png"
+        base = self.shot_dir() / f"{stem}-{what}-{time.strftime('%Y%m%d-%H%M%S')}"
+        path, k = base.with_suffix(".png"), 1
+        while path.exists():
+            k += 1
+            path = base.parent / f"{base.name}-{k}.png"
+        return path
 
     def screenshot_window(self, path: str | Path | None = None) -> Path:
         """Queue a PNG of the whole window (written at the end of this frame, after drawing)."""
@@ -893,7 +900,9 @@ class ViewerApp:
                 self.set_rate(logic.slider_to_rate(val))
             sizes = ", ".join(f"{p.name} {p.render_size[0]}x{p.render_size[1]}"
                               for p in self.panes[: s.pane_count])
+            imgui.push_text_wrap_pos(PANEL_W - 16)
             imgui.text_disabled(f"render: {sizes}")
+            imgui.pop_text_wrap_pos()
         # panes
         if self._section("Panes"):
             for n in range(1, 5):
@@ -1215,7 +1224,10 @@ class ViewerApp:
                 dl.add_line((cx, y - 2), (cx, y - 8), col(255, 80, 80), 2.0)
                 dl.add_line((x0 - 2, cy), (x0 - 8, cy), col(255, 80, 80), 2.0)
             mode = ps.split_mode if part == "b" else ps.mode
-            dl.add_text((x0 + 3, y + side + 3), WHITE, f"{p.name}{chr(39) if part == 'b' else ''} {mode}"[:22])
+            label = f"{p.name}{chr(39) if part == 'b' else ''} {mode}"
+            while len(label) > 3 and imgui.calc_text_size(label).x > side - 6:
+                label = label[:-2] + "."
+            dl.add_text((x0 + 3, y + side + 3), WHITE, label)
 
     def _draw_help(self) -> None:
         if not self.show_help:
