@@ -343,6 +343,35 @@ def test_keyboard_shortcuts(app, tmp_path):
     assert len(list(tmp_path.glob("*-paneB-*.png"))) == 1
 
 
+def test_drop_a_file_glsl_backend_and_render_limit(app, tmp_path):
+    dropped = tmp_path / "dropped.ply"
+    shutil.copy(gb.DEFAULT_SCENE, dropped)
+    app.set_pane_count(2)
+    app.set_rate(1 / 8)
+    app._on_drop(app.window, [str(dropped)])  # what glfw's drop callback calls
+    wait(app)
+    assert app.scene_path == dropped and app.settings.recent[0] == str(dropped.resolve())
+    ok, why = app.backend_status("glsl")
+    if ok:
+        app.settings.backend = "glsl"
+        wait(app)
+        for i in range(2):
+            shown = app.panes[i].parts["a"]
+            assert shown.job.backend == "glsl" and shown.frame.stats["backend"] == "glsl"
+            ref = gb.render(app.scene, shown.job.camera, shown.job.settings.mode)
+            assert np.abs(shown.frame.rgb - ref.rgb).max() < 5e-3
+    else:
+        assert why  # greyed out with a reason
+    app.settings.backend = "cpu"
+    app.set_pane(0, supersample=8)
+    app.set_rate(8)
+    app.run_frames(2)
+    assert "limit" in app.panes[0].parts["a"].error
+    app.set_rate(1 / 8)
+    wait(app)
+    assert app.panes[0].parts["a"].error == ""
+
+
 def test_record_zoom_video_in_the_background(app, tmp_path):
     from gbviewer.app.worker import video_available
 

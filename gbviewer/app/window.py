@@ -32,6 +32,7 @@ from .logic import PANE_NAMES, AppSettings, CameraController, PaneSettings, Rect
 from .worker import RenderJob, RenderResult, RenderWorker, SceneLoader, VideoJob, video_available  # noqa: E402
 
 PANEL_W = 340
+MAX_SAMPLES = 96_000_000  # per render (pixels x supersampling^2): bounds memory and time at x8 with 8x8
 VIDEO_PANE_W = 480
 PREVIEW_BUDGET_MS = 60.0
 MOVING_HOLD_S = 0.25
@@ -627,6 +628,15 @@ class ViewerApp:
                                          PREVIEW_BUDGET_MS * 2 / max(2, slots), moving)
                 cam = self.pane_camera(p.index, f)
                 settings = self._settings_for(ps, part)
+                samples = cam.width * cam.height * settings.supersample ** 2
+                if samples > MAX_SAMPLES:
+                    p.parts[part].error = (f"{cam.width}x{cam.height} with {settings.supersample}x"
+                                           f"{settings.supersample} samples is {samples / 1e6:.0f}M samples, over "
+                                           f"the {MAX_SAMPLES // 1_000_000}M limit: lower the rate or supersampling")
+                    p.submitted.pop(part, None)
+                    continue
+                if "M limit: lower" in p.parts[part].error:
+                    p.parts[part].error = ""
                 key = (id(self.scene), state, (cam.width, cam.height), settings, backend)
                 if moving and (os.cpu_count() or 1) > 1:  # leave a core to the UI thread while the camera moves
                     settings = replace(settings, threads=(os.cpu_count() or 2) - 1)
@@ -1124,7 +1134,8 @@ class ViewerApp:
                     continue
                 x0, x1 = r.x + u0 * r.w, r.x + u1 * r.w
                 self.blit_panes.add(shown.texture, x0, r.y, x1, r.y + r.h, (u0, 0.0, u1, 1.0))
-            # overlays
+            # overlays, clipped to the pane
+            dl.push_clip_rect((r.x, r.y), (r.x + r.w, r.y + r.h), True)
             y = r.y + 4
             self._text(dl, r.x + 4, y, self._label(p, "a"))
             if ps.split:
@@ -1166,6 +1177,7 @@ class ViewerApp:
                     self._text(dl, r.x + 4, r.y + r.h - 24 - 21 * k, line, col(220, 220, 220))
             if self.hover is not None and self.hover[0] == p.index:
                 dl.add_rect((r.x, r.y), (r.x + r.w, r.y + r.h), col(90, 170, 255, 120), 0.0, 1.0)
+            dl.pop_clip_rect()
 
     def _draw_status(self) -> None:
         io = imgui.get_io()

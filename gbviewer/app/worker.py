@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Hashable
 
 from ..camera import Camera, load_cameras_json
-from ..errors import GBViewerError
+from ..errors import BackendUnavailable, GBViewerError
 from ..render import BACKENDS, Frame, RenderSettings, get_renderer
 from ..scene import Scene
 
@@ -50,6 +50,8 @@ class RenderWorker:
         self._seq = 0
         self._stop = False
         self._scene: Scene | None = None  # the scene whose renderers the thread holds (freed in this thread)
+        self._gl_ctx = None  # this thread's headless context for the glsl backend
+        self._glsl: tuple[Scene, Any] | None = None
         self.dropped = 0  # requests replaced before they started
         self.rendered = 0
         self.backends: dict[str, tuple[bool, str]] = {}  # availability, measured in the render thread
@@ -96,10 +98,39 @@ class RenderWorker:
     def _check_backends(self) -> None:
         for name, cls in BACKENDS.items():
             try:
-                self.backends[name] = tuple(cls.available())  # type: ignore[assignment]
+                if name == "glsl":
+                    self.backends[name] = self._glsl_context_status()
+                else:
+                    self.backends[name] = tuple(cls.available())  # type: ignore[assignment]
             except Exception as exc:  # noqa: BLE001 - a backend's probe must not take the viewer down
                 self.backends[name] = (False, f"{type(exc).__name__}: {exc}")
         self.backends_ready.set()
+
+    def _glsl_context_status(self) -> tuple[bool, str]:
+        """The glsl backend runs in this thread on a headless context of its own (an OpenGL context is current in
+        one thread only: the process-wide one of gbviewer.glsl may be current in another thread, and the window's
+        is the UI thread's)."""
+        from .. import glsl
+
+        try:
+            self._gl_ctx = glsl._create_standalone()
+        except Exception as exc:  # noqa: BLE001 - glcontext raises plain Exceptions with the driver's message
+            return False, f"no headless OpenGL 4.3 context: {str(exc).strip() or type(exc).__name__}"
+        return BACKENDS["glsl"].check_context(self._gl_ctx)
+
+    def _renderer(self, scene: Scene, backend: str):
+        if backend != "glsl" or "glsl" not in BACKENDS:
+            return get_renderer(scene, backend)
+        ok, why = self.backends.get("glsl", (False, "not checked"))
+        if not ok:
+            raise BackendUnavailable(why)
+        if self._glsl is None or self._glsl[0] is not scene:
+            if self._glsl is not None:
+                self._glsl[1].release()
+            renderer = BACKENDS["glsl"](ctx=self._gl_ctx)
+            renderer.upload(scene)
+            self._glsl = (scene, renderer)
+        return self._glsl[1]
 
     def _loop(self) -> None:
         self._check_backends()
@@ -119,6 +150,12 @@ class RenderWorker:
                 self._results.append(result)
                 self.rendered += 1
         self._scene = None
+        if self._glsl is not None:
+            self._glsl[1].release()
+            self._glsl = None
+        if self._gl_ctx is not None:
+            self._gl_ctx.release()
+            self._gl_ctx = None
         gc.collect()
 
     def _render(self, job: RenderJob) -> RenderResult:
@@ -126,7 +163,7 @@ class RenderWorker:
             self._scene = job.scene
             gc.collect()  # free the previous scene's renderers (and GL buffers) in this thread
         try:
-            frame = get_renderer(job.scene, job.backend).render(job.camera, job.settings)
+            frame = self._renderer(job.scene, job.backend).render(job.camera, job.settings)
             return RenderResult(job, frame, "", time.perf_counter())
         except GBViewerError as exc:
             return RenderResult(job, None, str(exc), time.perf_counter())
