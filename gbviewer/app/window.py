@@ -154,7 +154,7 @@ class ViewerApp:
         self.cameras_path: Path | None = None
         self.cam_index = -1
         self.loader: SceneLoader | None = None
-        self.load_error = ""
+        self.load_error = self.load_error_short = ""
         self.fly = False
         self.show_help = False
         self.last_move = 0.0
@@ -249,14 +249,14 @@ class ViewerApp:
         if logic.is_cameras_file(path):
             self.open_cameras(path)
             return
-        self.load_error = ""
+        self.load_error = self.load_error_short = ""
         self.loader = SceneLoader(path)
 
     def open_cameras(self, path: str | Path) -> None:
         try:
             cams = load_cameras_json(path)
         except GBViewerError as exc:
-            self.load_error = str(exc)
+            self.load_error, self.load_error_short = str(exc), ""
             self.message(str(exc), RED)
             return
         self.cameras, self.cameras_path, self.cam_index = cams, Path(path), -1
@@ -270,10 +270,12 @@ class ViewerApp:
         self.loader = None
         if res.error:
             self.load_error = res.error
+            self.load_error_short = res.error.replace(str(res.path), res.path.name)
             self.message(f"could not open {res.path.name}: kept the current scene", RED)
             return
         first = self.scene is None
         self.scene, self.scene_path = res.scene, res.path
+        self.load_error = ""
         self.settings.recent = logic.add_recent(self.settings.recent, res.path)
         self.cameras, self.cameras_path, self.cam_index = (res.cameras or []), res.cameras_path, -1
         if res.cameras_error:
@@ -283,6 +285,7 @@ class ViewerApp:
             p.submitted.clear()
             p.ms_per_px.clear()
         self._needs_reset = True  # framed once the panes have their size (after this frame's layout)
+        glfw.set_window_title(self.window, f"gbviewer - {res.path.name}")
         self.message(f"opened {res.path.name}: {res.scene.num_splats:,} splats in {res.seconds:.2f} s"
                      + (f", {len(self.cameras)} training cameras" if self.cameras else ""))
         if first:
@@ -1120,8 +1123,11 @@ class ViewerApp:
     def _draw_panes(self) -> None:
         dl = imgui.get_background_draw_list()
         v = self.viewport
-        if self.scene is None and self.loader is not None:
-            self._text(dl, v.x + v.w / 2 - 80, v.y + v.h / 2, f"loading {self.loader.path.name}...")
+        if self.loader is not None:  # over the previous scene, which stays until the new one is ready
+            size = f", {self.loader.size / 1e6:.1f} MB" if self.loader.size else ""
+            y = v.y + v.h / 2 if self.scene is None else v.y + 40
+            self._banner(dl, f"loading {self.loader.path.name}{size} ... {self.loader.elapsed:.1f} s", y, WHITE)
+        if self.scene is None:
             return
         for p in self.panes[: self.settings.pane_count]:
             r = p.rect
@@ -1178,6 +1184,20 @@ class ViewerApp:
             if self.hover is not None and self.hover[0] == p.index:
                 dl.add_rect((r.x, r.y), (r.x + r.w, r.y + r.h), col(90, 170, 255, 120), 0.0, 1.0)
             dl.pop_clip_rect()
+        if self.load_error:
+            self._banner(dl, self.load_error_short or self.load_error,
+                         self.viewport.y + self.viewport.h - 60, RED)
+
+    def _banner(self, dl, text: str, y: float, colour: int) -> None:
+        v = self.viewport
+        if self.mono is not None:
+            imgui.push_font(self.mono, 15.0)
+        while len(text) > 10 and imgui.calc_text_size(text).x > v.w - 24:
+            text = text[: len(text) - 8] + "..."
+        w = imgui.calc_text_size(text).x + 8
+        if self.mono is not None:
+            imgui.pop_font()
+        self._text(dl, v.x + max(4, (v.w - w) / 2), y, text, colour, col(0, 0, 0, 220))
 
     def _draw_status(self) -> None:
         io = imgui.get_io()
