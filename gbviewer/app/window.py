@@ -190,6 +190,11 @@ class ViewerApp:
         glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
         glfw.window_hint(glfw.VISIBLE, visible)
         w, h = self.settings.window
+        monitor = glfw.get_primary_monitor()
+        if monitor:  # fit the screen (a saved size may come from a bigger one)
+            _, _, mw, mh = glfw.get_monitor_workarea(monitor)
+            if mw > 0 and mh > 0:
+                w, h = min(w, mw), min(h, mh)
         self.window = glfw.create_window(w, h, "gbviewer", None, None)
         if not self.window:
             glfw.terminate()
