@@ -6,6 +6,7 @@ run keeps screenshots in tests/output/ (a CI artefact).
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -197,7 +198,7 @@ def test_split_view_loupe_help_debug_views_and_pane_screenshot(app, tmp_path):
     shot(app, "viewer-window-size")
 
 
-def test_four_panes_grid_camera_input_and_training_cameras(app):
+def test_four_panes_grid_camera_input_and_training_cameras(app, tmp_path):
     app.set_pane_count(4)
     app.settings.layout = "grid"
     app.set_rate(1 / 8)
@@ -227,13 +228,20 @@ def test_four_panes_grid_camera_input_and_training_cameras(app):
     assert np.abs(app.controller.R - R0).max() > 0.05 and app.controller.distance < d0
     app.reset_camera()
     assert app.controller.R == pytest.approx(R0)
-    # training cameras: snap and step
+    # training cameras from an opened cameras.json: snap to the first, step to the next
     cams = [gb.orbit_camera(app.scene, az, 10, width=320, height=240) for az in (0, 90)]
-    app.cameras = cams
-    app.step_camera(1)
+    entries = [{"id": k, "img_name": f"view{k}", "width": 320, "height": 240, "fx": c.fx, "fy": c.fy,
+                "position": c.position.tolist(), "rotation": c.R.T.tolist()} for k, c in enumerate(cams)]
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps(entries))
+    app.open(path)
+    assert len(app.cameras) == 2 and app.cam_index == 0
     assert app.controller.camera(320, 240).R == pytest.approx(cams[0].R)
-    app.step_camera(1)
-    assert app.controller.camera(320, 240).t == pytest.approx(cams[1].t)
+    assert app.controller.camera(320, 240).t == pytest.approx(cams[0].t)
+    press(app, imgui.Key.right_bracket)
+    assert app.cam_index == 1 and app.controller.camera(320, 240).t == pytest.approx(cams[1].t)
+    wait(app)
+    shot(app, "viewer-training-camera")
 
 
 def test_bad_file_keeps_the_scene_and_shows_the_error_then_settings_persist(app, tmp_path):
