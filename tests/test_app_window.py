@@ -380,6 +380,32 @@ def test_drop_a_file_glsl_backend_and_render_limit(app, tmp_path):
     assert app.panes[0].parts["a"].error == ""
 
 
+def test_file_dialog_opens_the_chosen_file(app, tmp_path, monkeypatch):
+    """File > Open goes through portable-file-dialogs (here answered by a stand-in zenity on PATH)."""
+    chosen = tmp_path / "chosen.ply"
+    shutil.copy(gb.DEFAULT_SCENE, chosen)
+    fake = tmp_path / "bin" / "zenity"
+    fake.parent.mkdir()
+    fake.write_text(f"#!/bin/sh\necho {chosen}\n")
+    fake.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{fake.parent}:{os.environ['PATH']}")
+    app.set_rate(1 / 8)
+    app.open_dialog()
+    assert app._file_dialog is not None
+    t0 = time.time()
+    while (app._file_dialog is not None or app.loader is not None) and time.time() - t0 < 60:
+        app.step()
+    assert app.scene_path == chosen
+
+
+def test_built_in_browser_without_a_dialog_program(app, monkeypatch):
+    monkeypatch.setenv("PATH", "/nonexistent")
+    app.open_dialog()
+    assert app._file_dialog is None and app._browser is not None
+    app.run_frames(2)
+    shot(app, "viewer-browser")
+
+
 def test_record_zoom_video_in_the_background(app, tmp_path):
     from gbviewer.app.worker import video_available
 
