@@ -39,6 +39,7 @@ Contexts: by default a headless EGL context shared by every renderer of the proc
 
 from __future__ import annotations
 
+import contextlib
 import re
 import sys
 import time
@@ -187,6 +188,7 @@ class GlslRenderer:
     name = "glsl"
 
     def __init__(self, ctx=None, precise_math: bool = True) -> None:
+        self._owns_ctx = ctx is None
         self.ctx = standalone_context() if ctx is None else ctx
         _check_context(self.ctx)
         self.precise_math = bool(precise_math)
@@ -232,9 +234,19 @@ class GlslRenderer:
             return str(exc)
         return f"{ctx.info.get('GL_RENDERER', '?')}; OpenGL {ctx.info.get('GL_VERSION', '?')}"
 
+    def _current(self):
+        """The headless context this renderer owns is made current while it works (another one, an app window's
+        say, may be current in this thread) and the previous EGL context restored after; a context the app passed
+        in is the app's to keep current."""
+        return self.ctx if self._owns_ctx else contextlib.nullcontext()
+
     def upload(self, scene: Scene) -> None:
         """Copy the scene to the GPU once (geometry 48 B and SH 12K B per splat); reuses buffers that are big enough.
         A trained Duplex-GS model is decoded per view instead, and its splats go up with every frame."""
+        with self._current():
+            self._upload_scene(scene)
+
+    def _upload_scene(self, scene: Scene) -> None:
         self._scene = scene
         self._cells = None
         self._view = None
@@ -277,6 +289,10 @@ class GlslRenderer:
         self._cells = cells
 
     def render(self, camera: Camera, settings: RenderSettings) -> Frame:
+        with self._current():
+            return self._render(camera, settings)
+
+    def _render(self, camera: Camera, settings: RenderSettings) -> Frame:
         t0 = time.perf_counter()
         want_window = settings.debug == "window" and settings.mode == Mode.GAUSSIAN_BLENDING
         tex, stats = self._frame(camera, settings, want_window)
@@ -303,7 +319,8 @@ class GlslRenderer:
         the same size. Stats (without `evaluations`) are in `last_stats`.
         """
         t0 = time.perf_counter()
-        tex, stats = self._frame(camera, settings, False)
+        with self._current():
+            tex, stats = self._frame(camera, settings, False)
         stats["total_ms"] = (time.perf_counter() - t0) * 1e3
         self.last_stats = stats
         return tex

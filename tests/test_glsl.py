@@ -426,39 +426,40 @@ def test_empty_frame(gl):
 
 def test_existing_context_texture_drawn_directly(gl, bundled):
     """An app passes its moderngl.Context; the output texture is drawable as is (no CPU round trip)."""
-    ctx = glsl.standalone_context()  # stands in for the app's window context
-    r = GlslRenderer(ctx=ctx)
-    r.upload(bundled)
-    cam, s = gb.orbit_camera(bundled, width=48, height=40), RenderSettings.parse("gaussian_blending")
-    tex = r.render_texture(cam, s)
-    assert tex.size == (48, 40) and tex.components == 4 and tex.dtype == "f4"
-    assert {"preprocess_ms", "sort_ms", "blend_ms", "total_ms", "visible"} <= set(r.last_stats)
-    prog = ctx.program(
-        vertex_shader="""#version 330
-            out vec2 uv;
-            void main() {
-                vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);  // full-screen triangle
-                uv = p;
-                gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
-            }""",
-        fragment_shader="""#version 330
-            uniform sampler2D image; in vec2 uv; out vec4 colour;
-            void main() { colour = texture(image, vec2(uv.x, 1.0 - uv.y)); }""",  # row 0 is the image top
-    )
-    target = ctx.texture((48, 40), 4, dtype="f4")
-    fbo = ctx.framebuffer(color_attachments=[target])
-    fbo.use()
-    tex.use(0)
-    prog["image"] = 0
-    vao = ctx.vertex_array(prog, [])
-    vao.render(vertices=3)
-    drawn = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(40, 48, 4)[::-1]  # GL rows: bottom up
-    frame = gb.get_renderer(bundled, "cpu").render(cam, s)
-    assert np.abs(drawn[..., :3] - frame.rgb).mean() < MEAN_TOL
-    assert np.abs(drawn[..., :3] - frame.rgb).max() < MAX_TOL
-    for obj in (vao, fbo, target, prog):
-        obj.release()
-    r.release()
+    ctx = glsl.standalone_context()  # stands in for the app's window context,
+    with ctx:  # which the app keeps current in its thread
+        r = GlslRenderer(ctx=ctx)
+        r.upload(bundled)
+        cam, s = gb.orbit_camera(bundled, width=48, height=40), RenderSettings.parse("gaussian_blending")
+        tex = r.render_texture(cam, s)
+        assert tex.size == (48, 40) and tex.components == 4 and tex.dtype == "f4"
+        assert {"preprocess_ms", "sort_ms", "blend_ms", "total_ms", "visible"} <= set(r.last_stats)
+        prog = ctx.program(
+            vertex_shader="""#version 330
+                out vec2 uv;
+                void main() {
+                    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);  // full-screen triangle
+                    uv = p;
+                    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+                }""",
+            fragment_shader="""#version 330
+                uniform sampler2D image; in vec2 uv; out vec4 colour;
+                void main() { colour = texture(image, vec2(uv.x, 1.0 - uv.y)); }""",  # row 0 is the image top
+        )
+        target = ctx.texture((48, 40), 4, dtype="f4")
+        fbo = ctx.framebuffer(color_attachments=[target])
+        fbo.use()
+        tex.use(0)
+        prog["image"] = 0
+        vao = ctx.vertex_array(prog, [])
+        vao.render(vertices=3)
+        drawn = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(40, 48, 4)[::-1]  # GL rows: bottom up
+        frame = gb.get_renderer(bundled, "cpu").render(cam, s)
+        assert np.abs(drawn[..., :3] - frame.rgb).mean() < MEAN_TOL
+        assert np.abs(drawn[..., :3] - frame.rgb).max() < MAX_TOL
+        for obj in (vao, fbo, target, prog):
+            obj.release()
+        r.release()
 
 
 def test_unavailable_is_clear(monkeypatch):
@@ -511,3 +512,21 @@ def test_cli_bench_cpu_and_glsl(gl, tmp_path, capsys):
     assert len(rows) == 4 and all(r["stages_ms"]["blend_ms"] > 0 and r["visible"] > 0 for r in rows)
     assert "OpenGL" in doc["machine"]["glsl_backend"]
     assert any(r["backend"] == "glsl" and r["ratio"] == "gaussian_blending / scalar" for r in doc["ratios"])
+
+
+def test_headless_renderer_survives_another_current_context(gl, bundled):
+    """Another context made current in this thread (an app window, say) must not receive the renderer's work."""
+    import moderngl
+
+    cam = gb.orbit_camera(bundled, width=48, height=40)
+    r = GlslRenderer()
+    r.upload(bundled)
+    other = moderngl.create_context(standalone=True, backend="egl")  # current from here on
+    try:
+        frame = r.render(cam, RenderSettings())
+        other.clear(0.0, 0.0, 0.0)  # the other context still works
+    finally:
+        other.release()
+    ref = gb.get_renderer(bundled, "cpu").render(cam, RenderSettings())
+    assert frame.stats["visible"] == ref.stats["visible"] > 0
+    assert np.abs(frame.rgb - ref.rgb).max() < MAX_TOL
