@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import threading
 import time
 import weakref
 from dataclasses import dataclass, field
@@ -372,19 +373,22 @@ class CudaRenderer:
 
 BACKENDS: dict[str, type] = {"cpu": CpuRenderer, "cuda": CudaRenderer}
 
-_renderers: "weakref.WeakKeyDictionary[Scene, dict[str, Renderer]]" = weakref.WeakKeyDictionary()
+_renderers: dict[str, tuple[Renderer, "weakref.ref[Scene]"]] = {}
+_renderers_lock = threading.Lock()
 
 
 def get_renderer(scene: Scene, backend: str = "cpu") -> Renderer:
-    """A renderer of `backend` with `scene` uploaded, cached per scene (uploads happen once)."""
+    """The process's renderer of `backend` with `scene` uploaded. One renderer per backend, uploading only when the
+    scene changes: it keeps the last scene alive, never every scene it has seen."""
     if backend not in BACKENDS:
         raise RenderError(f"unknown backend {backend!r}; expected one of {', '.join(BACKENDS)}")
-    per_scene = _renderers.setdefault(scene, {})
-    if backend not in per_scene:
-        renderer = BACKENDS[backend]()
-        renderer.upload(scene)
-        per_scene[backend] = renderer
-    return per_scene[backend]
+    with _renderers_lock:
+        entry = _renderers.get(backend)
+        renderer = entry[0] if entry is not None else BACKENDS[backend]()
+        if entry is None or entry[1]() is not scene:
+            renderer.upload(scene)
+            _renderers[backend] = (renderer, weakref.ref(scene))
+        return renderer
 
 
 def render(
