@@ -1252,7 +1252,8 @@ class ViewerApp:
             part = "b" if ps.split and u > ps.split_pos else "a"
             shown = p.parts[part]
             x0 = x + k * (side + 6)
-            dl.add_rect_filled((x0 - 2, y - 2), (x0 + side + 2, y + side + 22), col(0, 0, 0, 230), 3.0)
+            dl.add_rect_filled((x0 - 3, y - 3), (x0 + side + 3, y + side + 22), col(20, 22, 26, 240), 3.0)
+            dl.add_rect((x0 - 2, y - 2), (x0 + side + 2, y + side + 2), col(170, 175, 185), 0.0, 2.0)
             if shown.texture is not None:
                 u0, v0, u1, v1 = logic.loupe_uv(u, v, p.rect.w, p.rect.h, radius, zoom)
                 self.blit_loupe.add(shown.texture, x0, y, x0 + side, y + side, (u0, v0, u1, v1))
