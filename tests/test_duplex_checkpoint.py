@@ -130,6 +130,19 @@ def test_load_and_render_hand_computed(tmp_path, camera):
     assert np.abs(wsr.rgb - expect_wsr).max() < 1e-5 and "approx" not in wsr.stats["mode"]
 
 
+def test_view_without_anchors_is_background(tmp_path):
+    """Looking away from every anchor (or LOD dropping them all) draws the background in every mode."""
+    path, _ = hand_checkpoint(tmp_path)
+    scene = gb.load(path)
+    looking_along_minus_y = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
+    away = gb.Camera(16, 12, 20.0, 20.0, 8.0, 6.0, looking_along_minus_y, np.zeros(3))
+    bg = (0.2, 0.4, 0.6)
+    for mode in ("duplex", "wsr", "scalar", "gaussian_blending"):
+        f = gb.render(scene, away, mode, background=bg)
+        np.testing.assert_allclose(f.rgb, np.broadcast_to(bg, f.rgb.shape), atol=1e-6, err_msg=mode)
+        assert f.stats["visible"] == 0
+
+
 def test_decode_matches_numpy(tmp_path):
     """Random MLPs with a distance input (opacity only) and a feature bank; decoded splats against numpy."""
     rng = np.random.default_rng(5)

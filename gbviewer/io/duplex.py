@@ -193,6 +193,20 @@ class DuplexModel:
         z = self.anchors @ R[2] + t[2]
         return (self.levels <= lod) & (z > NEAR)
 
+    def _empty_view(self, camera) -> Scene:
+        """No anchor in this view: one transparent splat in one cell, which every mode and backend culls, so the
+        frame is the background (a Scene cannot be empty)."""
+        from ..cells import Cells
+
+        centre = (camera.position + 1.0 * camera.R[2]).astype(np.float32)[None]
+        cells = Cells(centre, np.ones((1, 3), np.float32), np.array([[1.0, 0, 0, 0]], np.float32),
+                      np.array([0, 1], np.int32), np.array([0], np.int32), "duplex-gs anchors (none in view)", 0.0)
+        return Scene.from_arrays(centre, np.full((1, 3), 1e-3), np.array([[1.0, 0, 0, 0]]), np.zeros(1),
+                                 np.zeros((1, 1, 3)), source=f"{self.path} @ view (no anchors)",
+                                 meta={"format": "duplex-gs decoded", "view_weights_in_opacity": True},
+                                 wsr_sigma=self.sigma if self.sigma > 0 else None,
+                                 weight_background=self.weight_background, et_grade=self.et_grade, cells=cells)
+
     def decode(self, camera) -> Scene:
         """The splats and cells of this view (see the module docstring)."""
         from ..cells import Cells
@@ -202,6 +216,8 @@ class DuplexModel:
         keep = self.anchor_mask(campos, camera.R, camera.t)
         idx = np.flatnonzero(keep)
         A, k = len(idx), self.k
+        if A == 0:
+            return self._empty_view(camera)
         dev = self.device
         f32 = torch.float32
         anchor = self.anchors[idx]
