@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from .camera import Camera, load_cameras_json, orbit_camera
-from .figure import atomic_write, format_rate
+from .figure import format_rate
+from .io.files import atomic_write
 from .render import BACKENDS, Mode, RenderSettings, get_renderer
 from .scene import Scene
 

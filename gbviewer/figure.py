@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -13,6 +11,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from .camera import Camera
 from .errors import GBViewerError
+from .io.files import atomic_write
 from .render import RenderSettings, get_renderer
 from .scene import Scene
 
@@ -199,23 +198,6 @@ def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = 4,
                 out.paste(strip, (x, y + height))
             out.paste(tile, (x, y))
     return out
-
-
-def atomic_write(path: str | Path, write, force: bool = False) -> Path:
-    """Call write(tmp_path) then rename onto `path`; refuse to overwrite an existing file unless `force`."""
-    path = Path(path)
-    if path.exists() and not force:
-        raise GBViewerError(f"{path}: exists; pass --force to overwrite")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
 
 
 def save_image(path: str | Path, img: Image.Image | np.ndarray, force: bool = False) -> Path:

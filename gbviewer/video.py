@@ -22,7 +22,8 @@ from PIL import Image
 
 from .camera import UP_AXES, Camera, orbit_camera
 from .errors import CameraError, GBViewerError
-from .figure import Cell, GridLayout, atomic_write, compose_grid, format_rate, render_grid, save_image
+from .figure import Cell, GridLayout, compose_grid, format_rate, render_grid, save_image
+from .io.files import atomic_write
 from .render import Mode, RenderSettings, get_renderer
 from .scene import Scene
 

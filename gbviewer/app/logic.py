@@ -524,7 +524,7 @@ def load_settings(path: Path | None = None) -> tuple[AppSettings, str]:
 
 
 def save_settings(settings: AppSettings, path: Path | None = None) -> Path:
-    from ..figure import atomic_write
+    from ..io.files import atomic_write
 
     path = path or settings_path()
     text = settings.normalised().to_json()

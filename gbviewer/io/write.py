@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..figure import atomic_write
+from .files import atomic_write
 from ..scene import Scene
 from .ply import activate_opacity, activate_scales
 

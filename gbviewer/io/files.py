@@ -1,0 +1,48 @@
+"""Writing output files safely: complete or absent, never a surprise overwrite."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+from ..errors import GBViewerError
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def atomic_write(path: str | Path, write: Callable[[Path], object], force: bool = False) -> Path:
+    """Call write(tmp) for a temporary file beside `path`, flush it to disk, then move it into place, so readers
+    never see a partial file. Without `force` an existing file is refused, including one that appears while
+    writing (the final step links rather than renames). The file gets the usual umask permissions."""
+    path = Path(path)
+    if path.exists() and not force:
+        raise GBViewerError(f"{path}: exists; pass --force to overwrite")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        write(tmp)
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())
+        if force:
+            os.replace(tmp, path)
+        else:
+            try:
+                os.link(tmp, path)  # fails if the file exists by now
+            except FileExistsError:
+                raise GBViewerError(f"{path}: exists; pass --force to overwrite") from None
+            except OSError:  # a file system without hard links
+                if path.exists():
+                    raise GBViewerError(f"{path}: exists; pass --force to overwrite") from None
+                os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
