@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 
 # libgl-dev: GL headers for CUDA-GL interop; libegl1, libegl-mesa0, libgl1-mesa-dri: headless OpenGL 4.5 (Mesa
 # llvmpipe through EGL) for the glsl backend and its tests.
-APT_PACKAGES=(build-essential cmake python3-venv libgl-dev libegl1 libegl-mesa0 libgl1-mesa-dri
+APT_PACKAGES=(build-essential cmake python3-venv python3-dev libgl-dev libegl1 libegl-mesa0 libgl1-mesa-dri
   xvfb xauth libglfw3 libxrandr2 libxinerama1 libxcursor1 libxi6)  # second line: the viewer window, tested under Xvfb
 if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
   missing=()

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 # `python -m pytest` run from the repository root puts the source tree first on sys.path, and its gbviewer/
 # has no compiled _native (the build installs that into site-packages). Prefer the installed package then.
@@ -18,13 +20,22 @@ import gbviewer as gb  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_SCENES = REPO.parent / "shared" / "scenes"
+IN_CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
+
+
+def skip_or_fail(reason: str) -> NoReturn:
+    """Skip, saying why, where a prerequisite is missing; in CI (CI=true), which installs everything and has
+    shared/ beside the clone, a missing prerequisite is a failure rather than a silently skipped path."""
+    if IN_CI:
+        pytest.fail(f"CI=true but {reason}")
+    pytest.skip(reason)
 
 
 def shared_scene(name: str) -> Path:
-    """Path of a scene in ../shared/scenes; skips (with the reason) where that folder is absent."""
+    """Path of a scene in ../shared/scenes (see skip_or_fail where that folder is absent)."""
     path = SHARED_SCENES / name
     if not path.exists():
-        pytest.skip(f"{path} not present (shared/ is not beside this checkout)")
+        skip_or_fail(f"{path} not present (shared/ is not beside this checkout)")
     return path
 
 

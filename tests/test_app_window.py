@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
+from conftest import skip_or_fail
 from gbviewer.app import logic
 from gbviewer.figure import to_uint8, upscale_nearest
 
@@ -31,7 +32,7 @@ LABEL_BAND = 60  # pixels at the top of a pane that hold the label and the previ
 def xvfb():
     exe = shutil.which("Xvfb")
     if exe is None:
-        pytest.skip("Xvfb is not installed (apt-get install xvfb; scripts/setup.sh installs it)")
+        skip_or_fail("Xvfb is not installed (apt-get install xvfb; scripts/setup.sh installs it)")
     for n in range(91, 120):
         if not Path(f"/tmp/.X11-unix/X{n}").exists() and not Path(f"/tmp/.X{n}-lock").exists():
             break
@@ -410,7 +411,7 @@ def test_record_zoom_video_in_the_background(app, tmp_path):
     from gbviewer.app.worker import video_available
 
     if not video_available()[0]:
-        pytest.skip(video_available()[1])
+        skip_or_fail(video_available()[1])
     app.set_pane_count(2)
     app.set_rate(1 / 8)
     wait(app)

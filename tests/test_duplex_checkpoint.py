@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
+from conftest import skip_or_fail
 from gbviewer.errors import SceneFormatError
 
 torch = pytest.importorskip("torch", reason="Duplex-GS checkpoints need torch (pip install 'gbviewer[duplex]')")
@@ -240,7 +241,7 @@ def test_glsl_renders_checkpoint(tmp_path, camera):
 
     ok, why = GlslRenderer.available()
     if not ok:
-        pytest.skip(why)
+        skip_or_fail(why)
     path, _ = hand_checkpoint(tmp_path)
     scene = gb.load(path)
     for mode in ("duplex", "wsr", "scalar"):

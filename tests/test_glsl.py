@@ -22,15 +22,15 @@ moves most pixels of an image by more than 1/255.
 
 from __future__ import annotations
 
+import importlib
 import json
 import math
-import os
 import re
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import front_camera, random_scene, shared_scene
+from conftest import front_camera, random_scene, shared_scene, skip_or_fail
 
 import gbviewer as gb
 import gbviewer.glsl as glsl
@@ -55,14 +55,11 @@ MODES = ["scalar", "mip", "analytic", "gaussian_blending", "scalar:2", "gaussian
 
 @pytest.fixture(scope="module")
 def gl():
-    """Skip (printing why) only where no OpenGL 4.3 context can be created; CI sets GBVIEWER_REQUIRE_GL=1 (.ci/run),
-    where a missing context is a failure instead."""
+    """Skip (printing why) only where no OpenGL 4.3 context can be created; in CI a failure (skip_or_fail)."""
     ok, why = GlslRenderer.available()
     if not ok:
         print(f"\nglsl backend unavailable: {why}")
-        if os.environ.get("GBVIEWER_REQUIRE_GL") == "1":
-            pytest.fail(f"GBVIEWER_REQUIRE_GL=1 but {why}")
-        pytest.skip(why)
+        skip_or_fail(why)
 
 
 def compare(scene: gb.Scene, cam: gb.Camera, spec: str, renderer: GlslRenderer | None = None,
@@ -464,6 +461,7 @@ def test_existing_context_texture_drawn_directly(gl, bundled):
 
 def test_unavailable_is_clear(monkeypatch):
     monkeypatch.setattr(glsl, "_standalone", {})
+    monkeypatch.setattr(importlib.import_module("gbviewer.render"), "_renderers", {})  # none made while GL was there
 
     def no_egl():
         raise Exception("eglInitialize failed (0x3001)")
