@@ -27,5 +27,5 @@ def test_gaussian_blending_zoom_out_beats_scalar(scene_name):
     low = cam.at_sampling_rate(1 / 8)
     assert (low.width, low.height) == (48, 32)
     scores = {m: psnr(gb.render(scene, low, m).rgb, reference) for m in ("scalar", "gaussian_blending")}
-    # measured: bundled 24.0 vs 48.8 dB, donut 16.3 vs 38.6 dB at 512x384; require a clear margin
+    # a clear margin: the gap measured at 512x384 was 25 dB (bundled) and 22 dB (donut)
     assert scores["gaussian_blending"] > scores["scalar"] + 6.0, scores
