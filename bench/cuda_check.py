@@ -22,7 +22,9 @@ def main(argv: list[str]) -> int:
     if not ok:
         print(f"CUDA backend unavailable: {why}")
         return 1
-    print(f"CUDA device: {why}")
+    from gbviewer._native_cuda import availability
+
+    print(f"CUDA device: {availability()[1]}")
     tests = subprocess.run([sys.executable, "-m", "pytest", "-q", str(REPO / "tests" / "test_cuda.py")], cwd=REPO)
     if tests.returncode != 0:
         return tests.returncode

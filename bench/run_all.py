@@ -24,6 +24,7 @@ import scaling  # noqa: E402
 import gbviewer as gb  # noqa: E402
 from gbviewer import bench  # noqa: E402
 from gbviewer.figure import format_rate  # noqa: E402
+from gbviewer.io.files import atomic_write  # noqa: E402
 from gbviewer.render import BACKENDS, RenderSettings  # noqa: E402
 
 MODES = "scalar,mip,analytic,gaussian_blending,supersample:3,gaussian_blending:2"
@@ -50,7 +51,7 @@ def scene_benchmarks(quick: bool) -> tuple[list, list, list[str]]:
         if path != gb.DEFAULT_SCENE and path.name == gb.DEFAULT_SCENE.name:
             continue
         scene = gb.load(path)
-        cams = bench.bench_views(scene, 1 if quick else 3, 320, 240, up=UP.get(path.name, "-y"))
+        cams = bench.bench_views(scene, 1 if quick else 3, 320, 240, up=UP.get(path.name, "-y"), multiple=8)
         speed += bench.measure_speed(scene, name, cams, settings, backends, [1.0, 0.125], 1 if quick else 3)
         fidelity += bench.measure_fidelity(scene, name, cams, settings, RATES, "cpu")
         names.append(name)
@@ -81,10 +82,10 @@ def main() -> int:
     out_dir.mkdir(exist_ok=True)
 
     speed, fidelity, names = scene_benchmarks(args.quick)
-    bench.write_json(out_dir / "scenes.json", speed, fidelity)
-    plots = bench.write_plots(out_dir, speed, fidelity)
+    bench.write_json(out_dir / "scenes.json", speed, fidelity, force=True)
+    plots = bench.write_plots(out_dir, speed, fidelity, force=True)
     scale = scaling.run(300_000 if args.quick else 10_000_000, 1 if args.quick else 3, ["scalar", "gaussian_blending"])
-    (out_dir / "scaling.json").write_text(json.dumps(scale, indent=2))
+    atomic_write(out_dir / "scaling.json", lambda p: p.write_text(json.dumps(scale, indent=2)), force=True)
     load = subprocess.run([sys.executable, str(HERE / "load_speed.py"), "--n", "100000" if args.quick else "1000000"],
                           capture_output=True, text=True)
 
@@ -127,7 +128,7 @@ def main() -> int:
                          f"{r['peak_rss_mib']:.0f}"] for r in scale["splats"] + scale["pixels"]]), ""]
     lines += ["## Loading speed", "", "```", (load.stdout or load.stderr).strip(), "```", ""]
     lines += ["## Plots", ""] + [f"![{p.stem}](results/{p.name})" for p in plots] + [""]
-    (HERE / "RESULTS.md").write_text("\n".join(lines))
+    atomic_write(HERE / "RESULTS.md", lambda p: p.write_text("\n".join(lines)), force=True)
 
     readme = REPO / "README.md"
     head = md_table(["scene", "gaussian_blending / scalar", "scalar 3x3 / gaussian_blending",
@@ -135,7 +136,7 @@ def main() -> int:
     text = readme.read_text()
     block = f"<!-- headline:start -->\n{head}\n<!-- headline:end -->"
     text = re.sub(r"<!-- headline:start -->.*<!-- headline:end -->", block, text, flags=re.S)
-    readme.write_text(text)
+    atomic_write(readme, lambda p: p.write_text(text), force=True)
     print(f"wrote {HERE / 'RESULTS.md'} and the README headline")
     return 0
 

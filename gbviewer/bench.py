@@ -39,15 +39,18 @@ def ssim(a: np.ndarray, b: np.ndarray) -> float:
     from skimage.metrics import structural_similarity
 
     a, b = np.clip(a, 0, 1).astype(np.float64), np.clip(b, 0, 1).astype(np.float64)
-    if min(a.shape[:2]) < 7:
+    if min(a.shape[:2]) < 11:  # the 11x11 Gaussian window (sigma 1.5) must fit
         return float("nan")
     return float(structural_similarity(a, b, channel_axis=2, data_range=1.0, gaussian_weights=True, sigma=1.5,
                                        use_sample_covariance=False))
 
 
 def bench_views(scene: Scene, views: int, width: int, height: int, cameras: Path | None = None,
-                up: str = "-y") -> list[Camera]:
-    """Training cameras (resized to width x height) when given, else `views` orbit views around the robust bounds."""
+                up: str = "-y", multiple: int = 1) -> list[Camera]:
+    """Training cameras (resized to width x height) when given, else `views` orbit views around the robust bounds.
+    The size is rounded down to a multiple of `multiple` (the largest zoom factor), so that every box-downsampled
+    reference covers exactly the pixels of the low-rate render."""
+    width, height = max(multiple, width // multiple * multiple), max(multiple, height // multiple * multiple)
     if cameras is not None:
         cams = load_cameras_json(cameras)
         step = max(1, len(cams) // views)
@@ -273,7 +276,7 @@ def machine_description() -> dict:
     return desc
 
 
-def write_json(path: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = True,
+def write_json(path: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = False,
                oit: list[OitRow] | None = None) -> Path:
     doc = {"machine": machine_description(), "speed": [asdict(r) for r in speed],
            "fidelity": [asdict(r) for r in fidelity], "ratios": ratios(speed)}
@@ -282,8 +285,9 @@ def write_json(path: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], f
     return atomic_write(path, lambda p: p.write_text(json.dumps(doc, indent=2, allow_nan=True)), force)
 
 
-def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow]) -> list[Path]:
-    """PSNR vs sampling rate per mode, and time per mode (one figure per scene), as PNG."""
+def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = False) -> list[Path]:
+    """PSNR vs sampling rate per mode, and time per mode (one figure per scene), as PNG; existing plots are only
+    replaced with `force`."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -315,8 +319,10 @@ def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow
         ax2.tick_params(axis="x", labelsize=7)
         fig.tight_layout()
         path = out_dir / f"{Path(scene).stem}.png"
-        atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"), force=True)
-        plt.close(fig)
+        try:
+            atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"), force)
+        finally:
+            plt.close(fig)
         written.append(path)
     return written
 

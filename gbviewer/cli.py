@@ -181,11 +181,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
     backends = [b for b in args.backends.split(",") if BACKENDS[b].available()[0]]
     for b in set(args.backends.split(",")) - set(backends):
         print(f"skipping backend {b}: {BACKENDS[b].available()[1]}")
+    if args.json and Path(args.json).exists() and not args.force:
+        raise GBViewerError(f"{args.json}: exists; pass --force to overwrite")
     speed, fidelity, oit = [], [], []
     w, h = args.size
     for path in args.scenes:
         scene = load(path)
-        cams = bench.bench_views(scene, args.views, w, h, args.cameras, args.up)
+        multiple = max(round(1 / r) if r < 1 else round(r) for r in rates)
+        cams = bench.bench_views(scene, args.views, w, h, args.cameras, args.up, multiple)
         n_speed = len(backends) * len(rates) * len(settings) * len(cams)
         n_fid = len(cams) * len(settings) * sum(r != 1 for r in rates)
         with Progress(transient=True) as progress:
@@ -200,9 +203,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if oit:
         bench.print_oit(oit)
     if args.json:
-        print(f"wrote {bench.write_json(Path(args.json), speed, fidelity, oit=oit)}")
+        print(f"wrote {bench.write_json(Path(args.json), speed, fidelity, args.force, oit=oit)}")
     if args.plots:
-        for p in bench.write_plots(Path(args.plots), speed, fidelity):
+        for p in bench.write_plots(Path(args.plots), speed, fidelity, args.force):
             print(f"wrote {p}")
     return 0
 
@@ -351,6 +354,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--json", help="write every number and the machine description here")
     p.add_argument("--plots", help="write PNG plots into this folder")
+    p.add_argument("--force", action="store_true", help="overwrite existing --json/--plots files")
     p.add_argument("--flicker-frames", type=int, default=16,
                    help="with wsr or duplex among --modes: frames of the slow orbit that measures popping")
     p.add_argument("--flicker-step", type=float, default=0.1, help="degrees of azimuth between those frames")
