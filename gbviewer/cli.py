@@ -149,7 +149,7 @@ def cmd_view(args: argparse.Namespace) -> int:
 
     if args.scene is not None and not args.scene.exists():
         raise GBViewerError(f"{args.scene}: no such file or folder")
-    opened, why = open_window(args.scene)
+    opened, why = open_window(args.scene, args.cameras)
     if opened:
         return 0
     if has_display_env()[0]:  # (without one, demo says so itself)

@@ -448,6 +448,24 @@ def test_gbviewer_command_opens_the_window_and_exits_cleanly(xvfb, tmp_path):
     assert not (tmp_path / "out").exists()  # the window opened: no fallback images
 
 
+def test_cameras_from_the_command_line(xvfb, tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+    from gbviewer.app.window import ViewerApp
+
+    scene = gb.load(gb.DEFAULT_SCENE)
+    cam = gb.orbit_camera(scene, 60, 5, width=320, height=240)
+    path = tmp_path / "cams.json"
+    path.write_text(json.dumps([{"id": 0, "img_name": "v", "width": 320, "height": 240, "fx": cam.fx, "fy": cam.fy,
+                                 "position": cam.position.tolist(), "rotation": cam.R.T.tolist()}]))
+    a = ViewerApp(None, size=(800, 600), cameras=path)
+    try:
+        wait(a)
+        assert len(a.cameras) == 1 and a.cam_index == 0
+        assert a.controller.camera(320, 240).t == pytest.approx(cam.t)
+    finally:
+        a.close()
+
+
 def test_no_display_falls_back_to_the_comparison_images(tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     proc = subprocess.run([sys.executable, "-m", "gbviewer", "--width", "64", "--height", "48"], env=env,

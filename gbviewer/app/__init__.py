@@ -8,7 +8,7 @@ from pathlib import Path
 from .logic import has_display_env
 
 
-def open_window(scene: str | Path | None = None) -> "tuple[bool, str]":
+def open_window(scene: str | Path | None = None, cameras: str | Path | None = None) -> "tuple[bool, str]":
     """Open the viewer and run it until closed: (True, '') or (False, why no window could be opened)."""
     ok, why = has_display_env()
     if not ok:
@@ -20,7 +20,7 @@ def open_window(scene: str | Path | None = None) -> "tuple[bool, str]":
     from ..errors import GBViewerError
 
     try:
-        app = ViewerApp(scene)
+        app = ViewerApp(scene, cameras=cameras)
     except GBViewerError as exc:
         return False, str(exc)
     app.run()

@@ -138,7 +138,8 @@ class ViewerApp:
     """The viewer window. `ViewerApp(path).run()` is `gbviewer [SCENE]`."""
 
     def __init__(self, scene_path: str | Path | None = None, settings_file: Path | None = None,
-                 size: tuple[int, int] | None = None, visible: bool = True, persist: bool = True) -> None:
+                 size: tuple[int, int] | None = None, visible: bool = True, persist: bool = True,
+                 cameras: str | Path | None = None) -> None:
         self.settings_file = settings_file
         self.persist = persist
         self.settings, warning = logic.load_settings(settings_file)
@@ -174,6 +175,7 @@ class ViewerApp:
         self.video_frames = 90
         self._init_window(visible)
         self.worker = RenderWorker()
+        self._cli_cameras = cameras  # opened once the first scene is in
         self.open(scene_path or DEFAULT_SCENE)
 
     # ---- window and GL ------------------------------------------------------------------------------------------
@@ -295,6 +297,11 @@ class ViewerApp:
                      + (f", {len(self.cameras)} training cameras" if self.cameras else ""))
         if first:
             self.frame_count = 0
+        if self._cli_cameras is not None:
+            path, self._cli_cameras = self._cli_cameras, None
+            self._needs_reset = False
+            self.reset_camera()
+            self.open_cameras(path)
 
     # ---- camera -------------------------------------------------------------------------------------------------
 
