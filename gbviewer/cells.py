@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import GBViewerError
+
 DEFAULT_CELL_SIZE = 5  # splats per cell for scenes without cells (Duplex-GS NUM_GS_PER_ANCHOR)
 COVER_SIGMAS = 3.0  # members are covered out to their 3-sigma ellipsoid (the splat radius of the blend)
 
@@ -37,6 +39,11 @@ class Cells:
 
     means (M,3), scales (M,3) (activated; the 1-sigma ellipsoid), quats (M,4) unit (w,x,y,z), offsets (M+1,) int32,
     members (<= N,) int32. `origin` says where they came from, `build_ms` how long building took.
+
+    The cells must partition splats: offsets rise from 0 to len(members), members are distinct splat indices. The
+    shapes and offsets are checked on construction (arrays become float32 / int32, C-contiguous), the members against
+    the scene by `validate(num_splats)`, which `cells_for` calls for every backend: the renderers index with them
+    unchecked on the device. Violations raise GBViewerError.
     """
 
     means: np.ndarray
@@ -47,6 +54,43 @@ class Cells:
     origin: str = ""
     build_ms: float = 0.0
     info: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("means", "scales", "quats"):
+            object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name), np.float32))
+        for name in ("offsets", "members"):
+            a = np.asarray(getattr(self, name))
+            if a.ndim != 1 or (a.size and a.dtype.kind not in "iu"):
+                raise GBViewerError(f"{self._name}: {name} must be a 1-D integer array, got {a.dtype} {a.shape}")
+            if a.size and (a.min() < 0 or a.max() > np.iinfo(np.int32).max):
+                raise GBViewerError(f"{self._name}: {name} must lie in 0..2^31-1, got {a.min()}..{a.max()}")
+            object.__setattr__(self, name, np.ascontiguousarray(a, np.int32))
+        m = self.means.shape[0] if self.means.ndim == 2 else -1
+        if m < 0 or self.means.shape != (m, 3) or self.scales.shape != (m, 3) or self.quats.shape != (m, 4):
+            raise GBViewerError(f"{self._name}: means and scales must be (M,3), quats (M,4); got "
+                                f"{self.means.shape}, {self.scales.shape}, {self.quats.shape}")
+        off = self.offsets
+        if off.shape != (m + 1,) or off[0] != 0 or off[-1] != len(self.members) or (np.diff(off) < 0).any():
+            raise GBViewerError(f"{self._name}: offsets must be {m + 1} non-decreasing values from 0 to "
+                                f"len(members) = {len(self.members)}")
+
+    @property
+    def _name(self) -> str:
+        return f"cells ({self.origin})" if self.origin else "cells"
+
+    def validate(self, num_splats: int) -> "Cells":
+        """Check that the members are distinct splats of a scene of num_splats (once per size); returns self."""
+        if getattr(self, "_valid_for", None) == num_splats:
+            return self
+        mem = self.members
+        if len(mem) and mem.max() >= num_splats:
+            raise GBViewerError(f"{self._name}: member index {int(mem.max())} outside the scene's splats "
+                                f"0..{num_splats - 1}")
+        if len(mem) and np.bincount(mem, minlength=num_splats).max() > 1:
+            raise GBViewerError(f"{self._name}: a splat is listed more than once in members (each splat belongs "
+                                "to at most one cell)")
+        object.__setattr__(self, "_valid_for", num_splats)
+        return self
 
     @property
     def num_cells(self) -> int:
@@ -198,10 +242,12 @@ _cache: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def cells_for(scene, k: int = DEFAULT_CELL_SIZE) -> Cells:
-    """The scene's own cells when it has them (trained Duplex-GS), else cells of k splats, built once and cached."""
-    if getattr(scene, "cells", None) is not None:
-        return scene.cells
-    per_scene = _cache.setdefault(scene, {})
-    if k not in per_scene:
-        per_scene[k] = build_cells(scene, k)
-    return per_scene[k]
+    """The scene's own cells when it has them (trained Duplex-GS), else cells of k splats, built once and cached;
+    validated against the scene (every backend takes its cells from here)."""
+    cells = getattr(scene, "cells", None)
+    if cells is None:
+        per_scene = _cache.setdefault(scene, {})
+        if k not in per_scene:
+            per_scene[k] = build_cells(scene, k)
+        cells = per_scene[k]
+    return cells.validate(scene.num_splats)

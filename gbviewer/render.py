@@ -229,10 +229,10 @@ def _frame(out: dict, camera: Camera, settings: RenderSettings, backend: str, t0
 def sort_stats(out: dict, scene: Scene | None, settings: RenderSettings) -> dict:
     """pairs (tile-list entries blended), sort_bytes (sort_length keys of SORT_ENTRY_BYTES), and for duplex the
     visible cells, all cells and the splat-tile pairs outside their cell's rectangle (cell_misses)."""
-    st = {"pairs": int(out.get("pairs", out["sort_length"])), "sort_bytes": int(out["sort_length"]) * SORT_ENTRY_BYTES}
+    st = {"pairs": int(out["pairs"]), "sort_bytes": int(out["sort_length"]) * SORT_ENTRY_BYTES}
     if settings.mode == Mode.DUPLEX:
-        st["cells_visible"] = int(out.get("cells_visible", 0))
-        st["cell_misses"] = int(out.get("cell_misses", 0))
+        st["cells_visible"] = int(out["cells_visible"])
+        st["cell_misses"] = int(out["cell_misses"])
         if scene is not None:
             from .cells import cells_for
 

@@ -138,23 +138,25 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
 // ---- order-independent modes ------------------------------------------------------------------------------------
 
 // LC-WSR sums for one pixel. The C++ keeps them in 64-bit fixed point (bitwise order independent); GLSL 4.30 core
-// has no 64-bit integers, so here they are float sums in tile-list order (splat-index order).
+// has no 64-bit integers, so here they are float sums in tile-list order (splat-index order). The terms get the
+// C++'s clamps (to_fixed, blend_wsr) so that both backends weigh huge trained view weights alike.
 struct WsrSums {
     vec3 C;
     float S;
 };
 
 // `wsr`: sort-free weighted sum (KERNELS.md §7.2): alpha = o' exp(power), no 0.99 clamp, skipped below 1/255,
-// C += c alpha, S += alpha; no transmittance and no early termination (never returns true).
+// C += c alpha, S += alpha; no transmittance and no early termination (never returns true). alpha and each term
+// are capped at WSR_FIXED_MAX, as in blend.h.
 bool blend_wsr(Splat2D s, vec2 pix, inout WsrSums acc) {
     const vec2 d = s.xy - pix;
     const float power = -0.5 * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
     if (power > 0.0 || power < s.log_min_alpha) return false;
-    const float alpha = s.opacity * expf(power);
+    const float alpha = minf(s.opacity * expf(power), WSR_FIXED_MAX);
     if (alpha < MIN_ALPHA_3DGS) return false;
-    acc.C[0] += s.color[0] * alpha;
-    acc.C[1] += s.color[1] * alpha;
-    acc.C[2] += s.color[2] * alpha;
+    acc.C[0] += minf(s.color[0] * alpha, WSR_FIXED_MAX);
+    acc.C[1] += minf(s.color[1] * alpha, WSR_FIXED_MAX);
+    acc.C[2] += minf(s.color[2] * alpha, WSR_FIXED_MAX);
     acc.S += alpha;
     return false;
 }

@@ -25,7 +25,7 @@ const float GB_MIN_VAR = 0.001;            // window variance floor
 const float SQRT_PI_2 = 1.2533141373155003;
 const float WSR_EMPTY_SUM = 1e-4;          // LC-WSR: a weight sum of exactly 0 becomes 1e-4 (§7.2)
 const float WSR_FIXED_SCALE = 68719476736.0;  // 2^36: the CPU's fixed-point sums (unused here: GLSL sums in float)
-const float WSR_FIXED_MAX = 67108864.0;    // 2^26
+const float WSR_FIXED_MAX = 64.0;          // 2^6: the CPU's per-term clamp (applied here too, blend.glsl)
 const float DUPLEX_CELL_SIGMAS = 2.0;      // cell radius ceil(2 sqrt(lambda1)) (§8.3)
 const float DUPLEX_T_STOP = 0.01;          // CUMMULT_THRESHOLD: cell-level early termination (§8.1)
 const float TWO_PI = 6.283185307179586;
@@ -33,6 +33,9 @@ const float TWO_PI = 6.283185307179586;
 float clampf(float v, float lo, float hi) { return min(max(v, lo), hi); }
 float minf(float a, float b) { return a < b ? a : b; }
 float maxf(float a, float b) { return a > b ? a : b; }
+
+// SH degree whose (deg + 1)^2 coefficients fit in k per channel (k = 1, 4, 9, 16 -> 0..3).
+int sh_degree_for_coeffs(int k) { return k >= 16 ? 3 : k >= 9 ? 2 : k >= 4 ? 1 : 0; }
 
 bool finitef(float v) { return !isnan(v) && !isinf(v); }
 

@@ -40,8 +40,7 @@ void main() {
     const CameraParams cam = make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y,
                                          cam_near);
     const vec4 g0 = geom[3u * i], g1 = geom[3u * i + 1u], g2 = geom[3u * i + 2u];
-    const int weight_deg = weight_k >= 16 ? 3 : weight_k >= 9 ? 2 : weight_k >= 4 ? 1 : 0;
-    const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, g0.w, i, g1.w, weight_k > 0, weight_deg, -1);
+    const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, g0.w, i, g1.w, weight_k > 0, sh_degree_for_coeffs(weight_k), -1);
     const OitParams params = OitParams(oit.x, oit.y, oit.z, int(oit.w));
     Splat2D s;
     TileRect r;

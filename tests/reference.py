@@ -32,6 +32,7 @@ MODES = ("scalar", "mip", "analytic", "gaussian_blending")
 OIT_MODES = ("wsr", "duplex")
 DUPLEX_STOP = 0.01  # CUMMULT_THRESHOLD (KERNELS.md §8.1)
 WSR_EMPTY = 1e-4
+WSR_TERM_MAX = 64.0  # wsr: alpha and each colour term are capped here (the renderer's int64 fixed-point bound)
 
 # Spherical-harmonics constants of 3DGS (KERNELS.md §0.5).
 SH_C0 = 0.28209479177387814
@@ -468,7 +469,8 @@ def _blend_wsr(pre, idx, pix, wbg, bg):
         alpha = pre["opacity"][s] * np.exp(np.minimum(power, 0.0))
         tie |= _near(alpha, MIN_ALPHA_3DGS)
         ok = (power <= 0) & (alpha >= MIN_ALPHA_3DGS)
-        C[ok] += pre["color"][s] * alpha[ok, None]
+        alpha = np.minimum(alpha, WSR_TERM_MAX)
+        C[ok] += np.minimum(pre["color"][s] * alpha[ok, None], WSR_TERM_MAX)
         S[ok] += alpha[ok]
     total = S + wbg
     total = np.where(total == 0, WSR_EMPTY, total)

@@ -157,6 +157,7 @@ NOT_PORTED = {
     "blend_pixel": "the per-pixel loop is blend.comp's batch loop over the tile's shared-memory splats",
     "dot": "GLSL built-in",
     "to_fixed": "GLSL 4.30 core has no 64-bit integers: the wsr sums stay in float there (blend.glsl)",
+    "tiles_outside": "duplex's cell_misses statistic, which the GLSL backend does not report",
 }
 
 
@@ -373,6 +374,19 @@ def test_order_independent_options(gl):
         m = compare(scene, cam, spec, renderer=r, background=(0.3, 0.2, 0.1), **opts)
         assert m["max"] < 1e-3, (spec, opts, m)
     r.release()
+
+
+def test_wsr_huge_view_weights(gl):
+    """View weights of 10^6..10^9: both backends cap alpha and each weighted colour at WSR_FIXED_MAX (the CPU's
+    int64 fixed-point bound), so they weigh the splats alike (uncapped float sums would not match the CPU)."""
+    base = awkward_scene(10, n=1500)
+    vw = np.zeros((base.num_splats, 4))
+    vw[:, 0] = np.random.default_rng(10).uniform(1e6, 1e9, base.num_splats)
+    scene = gb.Scene.from_arrays(base.means, base.scales, base.quats, base.opacities, base.sh, view_weight_sh=vw,
+                                 weight_background=0.5)
+    for spec in ("wsr", "wsr:2"):
+        m = compare(scene, front_camera(64, 48), spec, background=(0.3, 0.2, 0.1))
+        assert m["max"] < 1e-3, (spec, m)
 
 
 def test_debug_planes(gl, bundled):

@@ -5,10 +5,10 @@
 
 #include <GL/gl.h>
 #include <cuda_gl_interop.h>
+#include <thrust/iterator/transform_iterator.h>
 
 #include <algorithm>
 #include <cub/cub.cuh>
-#include <map>
 #include <stdexcept>
 #include <string>
 
@@ -58,10 +58,9 @@ __global__ void preprocess_kernel(int64_t n, const float* means, const float* sc
                                   uint32_t* touched, unsigned long long* visible) {
     const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     if (i >= n) return;
-    const int weight_deg = weight_k >= 16 ? 3 : weight_k >= 9 ? 2 : weight_k >= 4 ? 1 : 0;
     SplatIn in{means + 3 * i, scales + 3 * i, quats + 4 * i, opacities[i], sh + (size_t)k * 3 * i,
-               filter_3d ? filter_3d[i] : 0.0f, weight_sh ? weight_sh + (size_t)weight_k * i : nullptr, weight_deg,
-               cell_of ? cell_of[i] : -1};
+               filter_3d ? filter_3d[i] : 0.0f, weight_sh ? weight_sh + (size_t)weight_k * i : nullptr,
+               sh_degree_for_coeffs(weight_k), cell_of ? cell_of[i] : -1};
     TileRect r;
     uint32_t count = 0;
     if (preprocess_splat(in, sh_deg, cam, mode, oit, gx, gy, &splats[i], &r)) {
@@ -72,15 +71,17 @@ __global__ void preprocess_kernel(int64_t n, const float* means, const float* sc
     touched[i] = count;
 }
 
-// One key per touched tile: tile id in the high 32 bits, depth bits (positive floats sort as uints) below.
-// Keys are written in splat order and the radix sort is stable, so equal depths keep index order (as the CPU).
-// wsr (by_depth false): the key is the tile alone, so the stable sort keeps splat-index order inside a tile.
-__global__ void duplicate_kernel(int64_t n, const Splat2D* splats, const TileRect* rects, const uint32_t* touched,
-                                 const uint64_t* offsets, int gx, bool by_depth, uint64_t* keys, uint32_t* values) {
+// One key per touched tile of each splat (Splat2D) or cell (Cell2D): tile id in the high 32 bits, depth bits
+// (positive floats sort as uints) below; value = the item's index. Keys are written in item order and the radix
+// sort is stable, so equal depths keep index order (as the CPU). wsr (by_depth false): the key is the tile alone,
+// so the stable sort keeps splat-index order inside a tile. ends: inclusive scan of `touched`.
+template <class Item>
+__global__ void duplicate_kernel(int64_t n, const Item* items, const TileRect* rects, const uint32_t* touched,
+                                 const uint64_t* ends, int gx, bool by_depth, uint64_t* keys, uint32_t* values) {
     const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     if (i >= n || touched[i] == 0) return;
-    uint64_t off = offsets[i] - touched[i];
-    const uint32_t depth_bits = by_depth ? __float_as_uint(splats[i].depth) : 0u;
+    uint64_t off = ends[i] - touched[i];
+    const uint32_t depth_bits = by_depth ? __float_as_uint(items[i].depth) : 0u;
     const TileRect r = rects[i];
     for (int ty = r.y0; ty < r.y1; ++ty)
         for (int tx = r.x0; tx < r.x1; ++tx) {
@@ -107,11 +108,13 @@ __global__ void ranges_kernel(int64_t total, const uint64_t* keys, uint2* ranges
 }
 
 // Duplex, one thread per cell: its visible splats to the front of its member slots (member order), then the cell's
-// screen proxy (preprocess_cell); cell_touched = tiles of a cell with at least one visible splat.
+// screen proxy (preprocess_cell); cell_touched = tiles of a cell with at least one visible splat. Counts the visible
+// cells and the tiles of their visible splats outside the cell's rectangle (the CPU's cells_visible, cell_misses).
 __global__ void cells_kernel(int64_t m, const float* cmeans, const float* cscales, const float* cquats,
                              const int32_t* coffsets, const int32_t* cmembers, const uint32_t* touched,
-                             CameraParams cam, int gx, int gy, uint32_t* vis, uint32_t* vis_count, Cell2D* cells,
-                             TileRect* crects, uint32_t* cell_touched) {
+                             const TileRect* rects, CameraParams cam, int gx, int gy, uint32_t* vis,
+                             uint32_t* vis_count, Cell2D* cells, TileRect* crects, uint32_t* cell_touched,
+                             unsigned long long* cells_visible, unsigned long long* cell_misses) {
     const int64_t c = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     if (c >= m) return;
     uint32_t count = 0;
@@ -125,22 +128,10 @@ __global__ void cells_kernel(int64_t m, const float* cmeans, const float* cscale
     if (!preprocess_cell(in, cam, gx, gy, &cells[c], &r)) return;
     crects[c] = r;
     cell_touched[c] = (uint32_t)((r.x1 - r.x0) * (r.y1 - r.y0));
-}
-
-__global__ void duplicate_cells_kernel(int64_t m, const Cell2D* cells, const TileRect* crects,
-                                       const uint32_t* cell_touched, const uint64_t* offsets, int gx, uint64_t* keys,
-                                       uint32_t* values) {
-    const int64_t c = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
-    if (c >= m || cell_touched[c] == 0) return;
-    uint64_t off = offsets[c] - cell_touched[c];
-    const uint32_t depth_bits = __float_as_uint(cells[c].depth);
-    const TileRect r = crects[c];
-    for (int ty = r.y0; ty < r.y1; ++ty)
-        for (int tx = r.x0; tx < r.x1; ++tx) {
-            keys[off] = ((uint64_t)(ty * gx + tx) << 32) | depth_bits;
-            values[off] = (uint32_t)c;
-            ++off;
-        }
+    unsigned long long misses = 0;
+    for (uint32_t j = 0; j < count; ++j) misses += (unsigned long long)tiles_outside(rects[vis[coffsets[c] + j]], r);
+    atomicAdd(cells_visible, 1ull);
+    atomicAdd(cell_misses, misses);
 }
 
 // Duplex expansion: each (tile, cell) pair of the sorted list becomes its cell's visible splats.
@@ -264,6 +255,15 @@ __global__ void pack_rgba_kernel(int n, const float* rgb, const float* alpha, fl
 
 int blocks(int64_t n, int per = 256) { return (int)((n + per - 1) / per); }
 
+// A 32-bit count read as 64 bits. CUB's scans accumulate in the value type of their input, so a scan over the
+// uint32 counts themselves wraps at 2^32 (and the wrapped total can pass the 2^31 guards).
+struct WidenU64 {
+    __host__ __device__ uint64_t operator()(uint32_t x) const { return x; }
+};
+
+// Device counters of a frame: visible splats, visible cells, cell misses (duplex).
+enum Counter { VISIBLE = 0, CELLS_VISIBLE = 1, CELL_MISSES = 2, NUM_COUNTERS = 3 };
+
 }  // namespace
 
 struct Renderer::Impl {
@@ -287,37 +287,44 @@ struct Renderer::Impl {
     DeviceBuffer<uint64_t> offsets, keys_in, keys_out;
     DeviceBuffer<uint2> ranges;
     DeviceBuffer<unsigned char> temp;
-    DeviceBuffer<unsigned long long> visible;
+    DeviceBuffer<unsigned long long> counters;
     DeviceBuffer<float> rgb, alpha, window, o_rgb, o_alpha, o_window;
     DeviceBuffer<int32_t> evals, o_evals;
     DeviceBuffer<float4> rgba;
-    struct GLTexture {
-        cudaGraphicsResource_t resource;
-        int width, height;
-    };
-    std::map<unsigned int, GLTexture> gl_textures;
     cudaEvent_t ev[4];
 
     Impl() {
         for (auto& e : ev) CUDA_CHECK(cudaEventCreate(&e));
     }
     ~Impl() {
-        for (auto& kv : gl_textures) cudaGraphicsUnregisterResource(kv.second.resource);
         for (auto& e : ev) cudaEventDestroy(e);
     }
 
+    // Inclusive prefix sum of n > 0 32-bit counts, accumulated in 64 bits into ends; returns the total.
+    uint64_t inclusive_sum(const uint32_t* counts, uint64_t* ends, int64_t n) {
+        const auto in = thrust::make_transform_iterator(counts, WidenU64{});
+        size_t temp_bytes = 0;
+        CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, in, ends, n));
+        temp.ensure(temp_bytes);
+        CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.ptr, temp_bytes, in, ends, n));
+        uint64_t total = 0;
+        CUDA_CHECK(cudaMemcpy(&total, ends + (n - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
+        return total;
+    }
+
     // Render into the device output buffers (o_* when supersampling, else the full-resolution ones).
-    void run(const CameraParams& cam, Mode mode, const OitParams& oit, int N, int sh_deg, const float bg[3],
+    void run(const CameraParams& cam, Mode mode, const OitParams& oit, int N, int sh_degree, const float bg[3],
              bool want_window, RenderResult& res) {
         if (n == 0) throw std::runtime_error("CUDA renderer: upload a scene before rendering");
         const int W = cam.width, H = cam.height;
         const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE, num_tiles = gx * gy;
+        const int sh_deg = std::max(0, std::min(sh_degree, sh_degree_for_coeffs(k)));  // no reads past k coeffs
         splats.ensure(n);
         rects.ensure(n);
         touched.ensure(n);
         offsets.ensure(n);
-        visible.ensure(1);
-        CUDA_CHECK(cudaMemset(visible.ptr, 0, sizeof(unsigned long long)));
+        counters.ensure(NUM_COUNTERS);
+        CUDA_CHECK(cudaMemset(counters.ptr, 0, NUM_COUNTERS * sizeof(unsigned long long)));
 
         CUDA_CHECK(cudaEventRecord(ev[0]));
         if (mode == DUPLEX && m == 0) throw std::runtime_error("CUDA renderer: duplex needs cells");
@@ -325,7 +332,7 @@ struct Renderer::Impl {
                                               has_filter ? filter_3d.ptr : nullptr, k, sh_deg,
                                               weight_k ? weight_sh.ptr : nullptr, weight_k,
                                               mode == DUPLEX ? cell_of.ptr : nullptr, oit, cam, mode, gx, gy,
-                                              splats.ptr, rects.ptr, touched.ptr, visible.ptr);
+                                              splats.ptr, rects.ptr, touched.ptr, counters.ptr + VISIBLE);
         CUDA_CHECK(cudaGetLastError());
         CUDA_CHECK(cudaEventRecord(ev[1]));
 
@@ -349,28 +356,27 @@ struct Renderer::Impl {
         res.preprocess_ms = ms[0];
         res.sort_ms = ms[1];
         res.blend_ms = ms[2];
-        unsigned long long vis_total = 0;
-        CUDA_CHECK(cudaMemcpy(&vis_total, visible.ptr, sizeof(vis_total), cudaMemcpyDeviceToHost));
-        res.visible = (int64_t)vis_total;
+        unsigned long long count[NUM_COUNTERS];
+        CUDA_CHECK(cudaMemcpy(count, counters.ptr, sizeof(count), cudaMemcpyDeviceToHost));
+        res.visible = (int64_t)count[VISIBLE];
+        res.cells_visible = (int64_t)count[CELLS_VISIBLE];
+        res.cell_misses = (int64_t)count[CELL_MISSES];
         res.sort_length = (int64_t)sort_length;
         res.pairs = (int64_t)total;
     }
 
     // Tile lists of splats: one (tile, depth) key per touched tile (tile only for wsr), sorted by CUB.
     void bin_splats(Mode mode, int gx, int num_tiles, int bits, uint64_t& total) {
-        size_t temp_bytes = 0;
-        CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, touched.ptr, offsets.ptr, n));
-        temp.ensure(temp_bytes);
-        CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.ptr, temp_bytes, touched.ptr, offsets.ptr, n));
-        CUDA_CHECK(cudaMemcpy(&total, offsets.ptr + (n - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
+        total = inclusive_sum(touched.ptr, offsets.ptr, n);
         if (total >= (1ull << 31)) throw std::runtime_error("CUDA renderer: more than 2^31 tile-splat pairs");
         if (total > 0) {
+            size_t temp_bytes = 0;
             keys_in.ensure(total);
             keys_out.ensure(total);
             values_in.ensure(total);
             values_out.ensure(total);
-            duplicate_kernel<<<blocks(n), 256>>>(n, splats.ptr, rects.ptr, touched.ptr, offsets.ptr, gx,
-                                                 mode != WSR, keys_in.ptr, values_in.ptr);
+            duplicate_kernel<Splat2D><<<blocks(n), 256>>>(n, splats.ptr, rects.ptr, touched.ptr, offsets.ptr, gx,
+                                                          mode != WSR, keys_in.ptr, values_in.ptr);
             CUDA_CHECK(cudaGetLastError());
             const int begin_bit = mode == WSR ? 32 : 0;
             CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, keys_in.ptr, keys_out.ptr,
@@ -396,15 +402,11 @@ struct Renderer::Impl {
         cells.ensure(m);
         crects.ensure(m);
         cells_kernel<<<blocks(m), 256>>>(m, cmeans.ptr, cscales.ptr, cquats.ptr, coffsets.ptr, cmembers.ptr,
-                                         touched.ptr, cam, gx, gy, vis.ptr, vis_count.ptr, cells.ptr, crects.ptr,
-                                         cell_touched.ptr);
+                                         touched.ptr, rects.ptr, cam, gx, gy, vis.ptr, vis_count.ptr, cells.ptr,
+                                         crects.ptr, cell_touched.ptr, counters.ptr + CELLS_VISIBLE,
+                                         counters.ptr + CELL_MISSES);
         CUDA_CHECK(cudaGetLastError());
-        size_t temp_bytes = 0;
-        CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, cell_touched.ptr, cell_offsets.ptr, m));
-        temp.ensure(temp_bytes);
-        CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.ptr, temp_bytes, cell_touched.ptr, cell_offsets.ptr, m));
-        uint64_t pairs = 0;
-        CUDA_CHECK(cudaMemcpy(&pairs, cell_offsets.ptr + (m - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
+        const uint64_t pairs = inclusive_sum(cell_touched.ptr, cell_offsets.ptr, m);
         if (pairs >= (1ull << 31)) throw std::runtime_error("CUDA renderer: more than 2^31 tile-cell pairs");
         sort_length = pairs;
         total = 0;
@@ -416,9 +418,10 @@ struct Renderer::Impl {
         keys_out.ensure(pairs);
         values_in.ensure(pairs);
         values_out.ensure(pairs);
-        duplicate_cells_kernel<<<blocks(m), 256>>>(m, cells.ptr, crects.ptr, cell_touched.ptr, cell_offsets.ptr, gx,
-                                                   keys_in.ptr, values_in.ptr);
+        duplicate_kernel<Cell2D><<<blocks(m), 256>>>(m, cells.ptr, crects.ptr, cell_touched.ptr, cell_offsets.ptr, gx,
+                                                     true, keys_in.ptr, values_in.ptr);
         CUDA_CHECK(cudaGetLastError());
+        size_t temp_bytes = 0;
         CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, keys_in.ptr, keys_out.ptr, values_in.ptr,
                                                    values_out.ptr, (int)pairs, 0, 32 + bits));
         temp.ensure(temp_bytes);
@@ -429,10 +432,7 @@ struct Renderer::Impl {
         pair_ends.ensure(pairs);
         pair_counts_kernel<<<blocks(pairs), 256>>>((int64_t)pairs, values_out.ptr, vis_count.ptr, pair_counts.ptr);
         CUDA_CHECK(cudaGetLastError());
-        CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, pair_counts.ptr, pair_ends.ptr, pairs));
-        temp.ensure(temp_bytes);
-        CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.ptr, temp_bytes, pair_counts.ptr, pair_ends.ptr, pairs));
-        CUDA_CHECK(cudaMemcpy(&total, pair_ends.ptr + (pairs - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
+        total = inclusive_sum(pair_counts.ptr, pair_ends.ptr, (int64_t)pairs);
         if (total >= (1ull << 31)) throw std::runtime_error("CUDA renderer: more than 2^31 tile-splat entries");
         list.ensure(std::max<uint64_t>(total, 1));
         expand_kernel<<<blocks(pairs), 256>>>((int64_t)pairs, values_out.ptr, vis_count.ptr, coffsets.ptr, vis.ptr,
@@ -512,6 +512,8 @@ Renderer::Renderer() : impl_(nullptr) {
 
 Renderer::~Renderer() { delete impl_; }
 
+int64_t Renderer::num_splats() const { return impl_->n; }
+
 void Renderer::upload(const float* means, const float* scales, const float* quats, const float* opacities,
                       const float* sh, const float* filter_3d, int64_t n, int k) {
     Impl& m = *impl_;
@@ -588,24 +590,23 @@ void Renderer::render_to_gl_texture(unsigned int texture, const CameraParams& ca
     pack_rgba_kernel<<<blocks((int64_t)w * h), 256>>>(w * h, N > 1 ? m.o_rgb.ptr : m.rgb.ptr,
                                                       N > 1 ? m.o_alpha.ptr : m.alpha.ptr, m.rgba.ptr);
     CUDA_CHECK(cudaGetLastError());
-    // A texture id re-created at another size must be registered again.
-    auto it = m.gl_textures.find(texture);
-    if (it != m.gl_textures.end() && (it->second.width != w || it->second.height != h)) {
-        cudaGraphicsUnregisterResource(it->second.resource);
-        m.gl_textures.erase(it);
-        it = m.gl_textures.end();
+    // Registered for this copy only: GL reuses the names of deleted textures, so a registration kept by texture id
+    // could outlive its texture and point at a stale one.
+    cudaGraphicsResource_t resource;
+    CUDA_CHECK(cudaGraphicsGLRegisterImage(&resource, texture, GL_TEXTURE_2D, cudaGraphicsRegisterFlagsWriteDiscard));
+    cudaError_t e = cudaGraphicsMapResources(1, &resource);
+    if (e == cudaSuccess) {
+        cudaArray_t array;
+        e = cudaGraphicsSubResourceGetMappedArray(&array, resource, 0, 0);
+        if (e == cudaSuccess)
+            e = cudaMemcpy2DToArray(array, 0, 0, m.rgba.ptr, w * sizeof(float4), w * sizeof(float4), h,
+                                    cudaMemcpyDeviceToDevice);
+        const cudaError_t unmap = cudaGraphicsUnmapResources(1, &resource);
+        if (e == cudaSuccess) e = unmap;
     }
-    if (it == m.gl_textures.end()) {
-        cudaGraphicsResource_t r;
-        CUDA_CHECK(cudaGraphicsGLRegisterImage(&r, texture, GL_TEXTURE_2D, cudaGraphicsRegisterFlagsWriteDiscard));
-        it = m.gl_textures.emplace(texture, Impl::GLTexture{r, w, h}).first;
-    }
-    CUDA_CHECK(cudaGraphicsMapResources(1, &it->second.resource));
-    cudaArray_t array;
-    CUDA_CHECK(cudaGraphicsSubResourceGetMappedArray(&array, it->second.resource, 0, 0));
-    CUDA_CHECK(cudaMemcpy2DToArray(array, 0, 0, m.rgba.ptr, w * sizeof(float4), w * sizeof(float4), h,
-                                   cudaMemcpyDeviceToDevice));
-    CUDA_CHECK(cudaGraphicsUnmapResources(1, &it->second.resource));
+    const cudaError_t unregister = cudaGraphicsUnregisterResource(resource);
+    if (e == cudaSuccess) e = unregister;
+    check(e, "render_to_gl_texture (copy into the GL texture)");
 }
 
 }  // namespace gbv::cuda

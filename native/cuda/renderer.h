@@ -15,6 +15,7 @@ struct RenderResult {
     std::vector<int32_t> evals;
     double preprocess_ms = 0, sort_ms = 0, blend_ms = 0;
     int64_t visible = 0, sort_length = 0, pairs = 0;
+    int64_t cells_visible = 0, cell_misses = 0;  // duplex, as the CPU module defines them (0 otherwise)
 };
 
 // (usable, reason): false with the CUDA runtime's explanation when there is no device or driver.
@@ -31,10 +32,14 @@ public:
     void upload(const float* means, const float* scales, const float* quats, const float* opacities, const float* sh,
                 const float* filter_3d, int64_t n, int k);
 
+    // Splats of the uploaded scene (0 before the first upload).
+    int64_t num_splats() const;
+
     // The sort-free view-weight SH of the uploaded scene (n, weight_k), for wsr and duplex.
     void upload_weights(const float* weight_sh, int64_t n, int weight_k);
 
-    // Duplex cells of the uploaded scene: cell c holds members[offsets[c] .. offsets[c+1]); cell_of[i] per splat.
+    // Duplex cells of the uploaded scene: cell c holds members[offsets[c] .. offsets[c+1]); cell_of[i] per splat
+    // (num_splats() entries). The caller checks that this is a partition: the kernels index with it unchecked.
     void upload_cells(const float* means, const float* scales, const float* quats, const int32_t* offsets,
                       const int32_t* members, const int32_t* cell_of, int64_t num_cells, int64_t num_members);
 

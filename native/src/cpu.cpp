@@ -1,8 +1,5 @@
 // CPU driver: preprocess (parallel over splats), per-tile binning and depth sort, blending
 // (parallel over tiles, dynamic schedule). The math is in include/gbv/*.h, shared with CUDA.
-#include <nanobind/nanobind.h>
-#include <nanobind/ndarray.h>
-#include <nanobind/stl/optional.h>
 #include <omp.h>
 
 #include <algorithm>
@@ -14,9 +11,11 @@
 #include "gbv/blend.h"
 #include "gbv/camera.h"
 #include "gbv/preprocess.h"
+#include "nb_common.h"
 
 namespace nb = nanobind;
 using namespace gbv;
+using namespace gbv::nbc;
 
 namespace {
 
@@ -57,13 +56,11 @@ struct Stats {
     double preprocess_ms = 0, sort_ms = 0, blend_ms = 0;
     // sort_length: keys ordered by depth (tile-splat pairs; 0 for wsr, whose tile lists are only binned;
     // tile-cell pairs for duplex); pairs: entries of the tile lists that the blend walks.
-    int64_t visible = 0, sort_length = 0, pairs = 0, evaluations = 0;
+    int64_t visible = 0, sort_length = 0, pairs = 0;
     // duplex: visible cells, and tile-splat pairs of the splats' own rectangles outside their cell's rectangle
     // (pixels there miss the splat: the cell ellipsoid does not cover it on screen).
     int64_t cells_visible = 0, cell_misses = 0;
 };
-
-int sh_degree_of(int k) { return k >= 16 ? 3 : k >= 9 ? 2 : k >= 4 ? 1 : 0; }
 
 // Total order on a preprocessed splat's fields (depth first): a canonical order for the members of a cell that
 // does not depend on the order the scene lists them in. Identical keys mean identical splats for the blend.
@@ -170,12 +167,7 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
                 ++cell_tile_start[ty * gx + tx + 1];
                 tile_start[ty * gx + tx + 1] += members;
             }
-        for (int64_t j = vis_start[c]; j < vis_start[c + 1]; ++j) {  // splat tiles outside the cell's rect
-            const TileRect& q = rects[vis[j]];
-            const int ix = std::max(0, std::min(q.x1, r.x1) - std::max(q.x0, r.x0));
-            const int iy = std::max(0, std::min(q.y1, r.y1) - std::max(q.y0, r.y0));
-            misses += (int64_t)(q.x1 - q.x0) * (q.y1 - q.y0) - (int64_t)ix * iy;
-        }
+        for (int64_t j = vis_start[c]; j < vis_start[c + 1]; ++j) misses += tiles_outside(rects[vis[j]], r);
     }
     for (int t = 0; t < num_tiles; ++t) {
         cell_tile_start[t + 1] += cell_tile_start[t];
@@ -223,9 +215,8 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
     const int gx = (W + TILE - 1) / TILE;
     const int num_tiles = (int)tile_start.size() - 1;
     auto t0 = Clock::now();
-    int64_t evaluations = 0;
     const bool want_window = !img.window.empty();
-#pragma omp parallel reduction(+ : evaluations)
+#pragma omp parallel
     {
         std::vector<Splat2D> local;
 #pragma omp for schedule(dynamic, 1)
@@ -248,13 +239,11 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
                         img.window[p * 2] = o.window.x;
                         img.window[p * 2 + 1] = o.window.y;
                     }
-                    evaluations += o.evals;
                 }
             }
         }
     }
     st.blend_ms += ms_since(t0);
-    st.evaluations += evaluations;
 }
 
 // Render one image at the camera's resolution, one sample per pixel.
@@ -273,8 +262,8 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
     for (int64_t i = 0; i < n; ++i) {
         SplatIn in{sc.means + 3 * i, sc.scales + 3 * i, sc.quats + 4 * i, sc.opacities[i],
                    sc.sh + (size_t)sc.k * 3 * i, sc.filter_3d ? sc.filter_3d[i] : 0.0f,
-                   sc.weight_sh ? sc.weight_sh + (size_t)sc.weight_k * i : nullptr, sh_degree_of(sc.weight_k),
-                   mode == DUPLEX ? sc.cell_of[i] : -1};
+                   sc.weight_sh ? sc.weight_sh + (size_t)sc.weight_k * i : nullptr,
+                   sh_degree_for_coeffs(sc.weight_k), mode == DUPLEX ? sc.cell_of[i] : -1};
         valid[i] = preprocess_splat(in, sh_deg, cam, mode, oit, gx, gy, &splats[i], &rects[i]);
     }
     st.preprocess_ms += ms_since(t0);
@@ -322,69 +311,36 @@ void box_downsample(const Image& hi, int N, Image& lo) {
     }
 }
 
-template <typename T>
-nb::ndarray<nb::numpy, T> to_numpy(std::vector<T>&& v, std::initializer_list<size_t> shape) {
-    auto* heap = new std::vector<T>(std::move(v));
-    nb::capsule owner(heap, [](void* p) noexcept { delete static_cast<std::vector<T>*>(p); });
-    return nb::ndarray<nb::numpy, T>(heap->data(), shape, owner);
-}
-
-using FArr = nb::ndarray<const float, nb::c_contig, nb::device::cpu>;
-using IArr = nb::ndarray<const int32_t, nb::c_contig, nb::device::cpu>;
-
 nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, std::optional<FArr> filter_3d,
                 FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height, float near_plane,
                 int mode, int supersample, int sh_degree, FArr background, bool want_window, int threads,
                 std::optional<FArr> weight_sh, std::optional<FArr> cell_means, std::optional<FArr> cell_scales,
                 std::optional<FArr> cell_quats, std::optional<IArr> cell_offsets, std::optional<IArr> cell_members,
                 float sigma, float weight_background, float et_grade, bool depth_correct) {
-    const int64_t n = (int64_t)means.shape(0);
-    if (means.ndim() != 2 || means.shape(1) != 3 || scales.size() != (size_t)n * 3 || quats.size() != (size_t)n * 4 ||
-        opacities.size() != (size_t)n || sh.ndim() != 3 || sh.shape(0) != (size_t)n || sh.shape(2) != 3 ||
-        (filter_3d && filter_3d->size() != (size_t)n) || R.size() != 9 || t.size() != 3 || background.size() != 3)
-        throw std::invalid_argument("render: array shapes do not match (N,3) means/scales, (N,4) quats, "
-                                    "(N,) opacities, (N,K,3) sh, (N,) filter_3d, 3x3 R, 3 t, 3 background");
-    if (mode < SCALAR || mode > DUPLEX) throw std::invalid_argument("render: unknown mode");
-    if (supersample < 1 || supersample > 8) throw std::invalid_argument("render: supersample must be 1..8");
+    const int64_t n = check_scene("render", means, scales, quats, opacities, sh, filter_3d);
+    check_view("render", R, t, background);
+    check_mode("render", mode);
+    check_supersample("render", supersample);
     const int k = (int)sh.shape(1);
-    const int max_deg = k >= 16 ? 3 : k >= 9 ? 2 : k >= 4 ? 1 : 0;
-    const int sh_deg = std::max(0, std::min(sh_degree, max_deg));
+    const int sh_deg = std::max(0, std::min(sh_degree, sh_degree_for_coeffs(k)));
     SceneView sc{means.data(), scales.data(), quats.data(), opacities.data(), sh.data(),
                  filter_3d ? filter_3d->data() : nullptr, n, k};
     if (weight_sh) {
-        const int wk = weight_sh->ndim() == 2 ? (int)weight_sh->shape(1) : -1;
-        if (weight_sh->shape(0) != (size_t)n || (wk != 1 && wk != 4 && wk != 9 && wk != 16))
-            throw std::invalid_argument("render: weight_sh must be (N, K) with K = 1, 4, 9 or 16");
+        sc.weight_k = check_weight_sh("render", *weight_sh, n);
         sc.weight_sh = weight_sh->data();
-        sc.weight_k = wk;
     }
     if (mode == DUPLEX) {
         if (!(cell_means && cell_scales && cell_quats && cell_offsets && cell_members))
             throw std::invalid_argument("render: duplex needs cell_means, cell_scales, cell_quats, cell_offsets, "
                                         "cell_members");
-        const int64_t m = (int64_t)cell_means->shape(0);
-        if (cell_means->size() != (size_t)m * 3 || cell_scales->size() != (size_t)m * 3 ||
-            cell_quats->size() != (size_t)m * 4 || cell_offsets->size() != (size_t)m + 1)
-            throw std::invalid_argument("render: cells must be (M,3) means and scales, (M,4) quats, (M+1,) offsets");
-        const int32_t* off = cell_offsets->data();
-        const int32_t* mem = cell_members->data();
-        sc.cell_of.assign(n, -1);
-        bool ok = off[0] == 0 && off[m] == (int64_t)cell_members->size();
-        for (int64_t c = 0; ok && c < m; ++c) {
-            ok = off[c] <= off[c + 1];
-            for (int32_t j = off[c]; ok && j < off[c + 1]; ++j) {
-                ok = mem[j] >= 0 && mem[j] < n && sc.cell_of[mem[j]] < 0;
-                if (ok) sc.cell_of[mem[j]] = (int32_t)c;
-            }
-        }
-        if (!ok)
-            throw std::invalid_argument("render: cell_offsets / cell_members are not a partition of splats into "
-                                        "cells (offsets from 0 to len(members), each splat in at most one cell)");
+        const int64_t m = check_cell_arrays("render", *cell_means, *cell_scales, *cell_quats, *cell_offsets);
+        sc.cell_of = partition_cell_of("render", cell_offsets->data(), cell_members->data(), m,
+                                       (int64_t)cell_members->size(), n);
         sc.cell_means = cell_means->data();
         sc.cell_scales = cell_scales->data();
         sc.cell_quats = cell_quats->data();
-        sc.cell_offsets = off;
-        sc.cell_members = mem;
+        sc.cell_offsets = cell_offsets->data();
+        sc.cell_members = cell_members->data();
         sc.m = m;
     }
     if (mode == DUPLEX && !(et_grade > 0.0f))
@@ -415,22 +371,7 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
         }
         if (threads > 0) omp_set_num_threads(prev_threads);
     }
-    const size_t H = height, W = width;
-    nb::dict d;
-    d["rgb"] = to_numpy(std::move(out.rgb), {H, W, 3});
-    d["alpha"] = to_numpy(std::move(out.alpha), {H, W});
-    d["evals"] = to_numpy(std::move(out.evals), {H, W});
-    if (window) d["window"] = to_numpy(std::move(out.window), {H, W, 2});
-    d["preprocess_ms"] = st.preprocess_ms;
-    d["sort_ms"] = st.sort_ms;
-    d["blend_ms"] = st.blend_ms;
-    d["visible"] = st.visible;
-    d["sort_length"] = st.sort_length;
-    d["pairs"] = st.pairs;
-    d["cells_visible"] = st.cells_visible;
-    d["cell_misses"] = st.cell_misses;
-    d["evaluations"] = st.evaluations;
-    return d;
+    return result_dict(out, st, (size_t)height, (size_t)width);
 }
 
 }  // namespace
@@ -446,5 +387,4 @@ NB_MODULE(_native, m) {
           nb::arg("cell_quats").none() = nb::none(), nb::arg("cell_offsets").none() = nb::none(),
           nb::arg("cell_members").none() = nb::none(), nb::arg("sigma") = 10.0f,
           nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false);
-    m.def("max_threads", []() { return omp_get_max_threads(); });
 }

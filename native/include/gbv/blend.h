@@ -150,16 +150,19 @@ struct WsrSums {
     int64_t S;
 };
 
-// A non-negative float on the fixed-point grid (terms are clamped to 2^26 so that 2^37 of them fit in int64).
+// A non-negative float on the fixed-point grid. Terms are clamped to WSR_FIXED_MAX = 2^6, 2^42 on the grid, so
+// that a sum of up to 2^21 - 1 terms (2M splats at one pixel) stays below 2^63: no signed overflow.
 GBV_HD int64_t to_fixed(float x) { return (int64_t)rintf(minf(x, WSR_FIXED_MAX) * WSR_FIXED_SCALE); }
 
 // `wsr`: sort-free weighted sum (KERNELS.md §7.2): alpha = o' exp(power), no 0.99 clamp, skipped below 1/255,
-// C += c alpha, S += alpha; no transmittance and no early termination (never returns true).
+// C += c alpha, S += alpha; no transmittance and no early termination (never returns true). The weight alpha is
+// capped at WSR_FIXED_MAX (the fixed-point bound; only huge trained view weights reach it) before it multiplies
+// the colour, so a capped splat keeps its colour.
 GBV_HD bool blend_wsr(const Splat2D& s, Vec2 pix, WsrSums& acc) {
     const Vec2 d = s.xy - pix;
     const float power = -0.5f * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
     if (power > 0.0f || power < s.log_min_alpha) return false;
-    const float alpha = s.opacity * expf(power);
+    const float alpha = minf(s.opacity * expf(power), WSR_FIXED_MAX);
     if (alpha < MIN_ALPHA_3DGS) return false;
     acc.C[0] += to_fixed(s.color[0] * alpha);
     acc.C[1] += to_fixed(s.color[1] * alpha);

@@ -30,7 +30,7 @@ constexpr float GB_MIN_VAR = 0.001f;           // window variance floor
 constexpr float SQRT_PI_2 = 1.2533141373155003f;
 constexpr float WSR_EMPTY_SUM = 1e-4f;         // LC-WSR: a weight sum of exactly 0 becomes 1e-4 (§7.2)
 constexpr float WSR_FIXED_SCALE = 68719476736.0f;  // 2^36: CPU weighted sums in 64-bit fixed point (blend.h)
-constexpr float WSR_FIXED_MAX = 67108864.0f;   // 2^26: per-term clamp that keeps a fixed-point sum in int64
+constexpr float WSR_FIXED_MAX = 64.0f;         // 2^6: per-term clamp; 2^21 - 1 such terms fit a fixed-point int64
 constexpr float DUPLEX_CELL_SIGMAS = 2.0f;     // cell radius ceil(2 sqrt(lambda1)) (§8.3)
 constexpr float DUPLEX_T_STOP = 0.01f;         // CUMMULT_THRESHOLD: cell-level early termination (§8.1)
 constexpr float TWO_PI = 6.283185307179586f;
@@ -53,6 +53,9 @@ GBV_HD float clampf(float v, float lo, float hi) { return fminf(fmaxf(v, lo), hi
 // (their NaN rules stop the compiler inlining them). Like those, a NaN first argument yields the second.
 GBV_HD float minf(float a, float b) { return a < b ? a : b; }
 GBV_HD float maxf(float a, float b) { return a > b ? a : b; }
+
+// SH degree whose (deg + 1)^2 coefficients fit in k per channel (k = 1, 4, 9, 16 -> 0..3).
+GBV_HD int sh_degree_for_coeffs(int k) { return k >= 16 ? 3 : k >= 9 ? 2 : k >= 4 ? 1 : 0; }
 
 GBV_HD bool finitef(float v) {
 #if defined(__CUDA_ARCH__)

@@ -146,6 +146,13 @@ GBV_HD TileRect tile_rect(Vec2 xy, float r, int grid_x, int grid_y) {
     return t;
 }
 
+// Tiles of rectangle q outside rectangle r: duplex's cell_misses statistic counts a splat's tiles outside its cell's.
+GBV_HD int64_t tiles_outside(const TileRect& q, const TileRect& r) {
+    const int ix = (q.x1 < r.x1 ? q.x1 : r.x1) - (q.x0 > r.x0 ? q.x0 : r.x0);
+    const int iy = (q.y1 < r.y1 ? q.y1 : r.y1) - (q.y0 > r.y0 ? q.y0 : r.y0);
+    return (int64_t)(q.x1 - q.x0) * (q.y1 - q.y0) - (ix > 0 && iy > 0 ? (int64_t)ix * iy : 0);
+}
+
 // Inputs of one splat (activated parameters, see gbviewer.Scene).
 struct SplatIn {
     const float* mean;   // 3

@@ -1,0 +1,125 @@
+// nanobind helpers shared by the CPU module (src/cpu.cpp) and the CUDA module (cuda/module.cpp): argument checks
+// that throw std::invalid_argument (Python ValueError), numpy arrays that own a vector, the result dict.
+#pragma once
+
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/optional.h>
+
+#include <cstdint>
+#include <initializer_list>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "gbv/common.h"
+
+namespace gbv::nbc {
+
+namespace nb = nanobind;
+using FArr = nb::ndarray<const float, nb::c_contig, nb::device::cpu>;
+using IArr = nb::ndarray<const int32_t, nb::c_contig, nb::device::cpu>;
+
+[[noreturn]] inline void fail(const char* where, const char* what) {
+    throw std::invalid_argument(std::string(where) + ": " + what);
+}
+
+// A numpy array that takes over the vector's storage.
+template <typename T>
+nb::ndarray<nb::numpy, T> to_numpy(std::vector<T>&& v, std::initializer_list<size_t> shape) {
+    auto* heap = new std::vector<T>(std::move(v));
+    nb::capsule owner(heap, [](void* p) noexcept { delete static_cast<std::vector<T>*>(p); });
+    return nb::ndarray<nb::numpy, T>(heap->data(), shape, owner);
+}
+
+// The scene arrays (activated parameters, as gbviewer.Scene); returns N.
+inline int64_t check_scene(const char* where, const FArr& means, const FArr& scales, const FArr& quats,
+                           const FArr& opacities, const FArr& sh, const std::optional<FArr>& filter_3d) {
+    const int64_t n = means.ndim() == 2 ? (int64_t)means.shape(0) : -1;
+    if (n < 0 || means.shape(1) != 3 || scales.size() != (size_t)n * 3 || quats.size() != (size_t)n * 4 ||
+        opacities.size() != (size_t)n || sh.ndim() != 3 || sh.shape(0) != (size_t)n || sh.shape(2) != 3 ||
+        (filter_3d && filter_3d->size() != (size_t)n))
+        fail(where, "array shapes do not match (N,3) means/scales, (N,4) quats, (N,) opacities, (N,K,3) sh, "
+                    "(N,) filter_3d");
+    return n;
+}
+
+// Camera pose and background colour.
+inline void check_view(const char* where, const FArr& R, const FArr& t, const FArr& background) {
+    if (R.size() != 9 || t.size() != 3 || background.size() != 3)
+        fail(where, "R must be 3x3, t and background 3 floats");
+}
+
+inline Mode check_mode(const char* where, int mode) {
+    if (mode < SCALAR || mode > DUPLEX) fail(where, "unknown mode");
+    return (Mode)mode;
+}
+
+inline void check_supersample(const char* where, int N) {
+    if (N < 1 || N > 8) fail(where, "supersample must be 1..8");
+}
+
+// The sort-free view-weight SH of N splats; returns its K.
+inline int check_weight_sh(const char* where, const FArr& weight_sh, int64_t n) {
+    const int wk = weight_sh.ndim() == 2 ? (int)weight_sh.shape(1) : -1;
+    if (weight_sh.shape(0) != (size_t)n || (wk != 1 && wk != 4 && wk != 9 && wk != 16))
+        fail(where, "weight_sh must be (N, K) with K = 1, 4, 9 or 16");
+    return wk;
+}
+
+// Cell ellipsoids and offsets; returns M.
+inline int64_t check_cell_arrays(const char* where, const FArr& means, const FArr& scales, const FArr& quats,
+                                 const IArr& offsets) {
+    const int64_t m = means.ndim() == 2 ? (int64_t)means.shape(0) : -1;
+    if (m < 0 || means.size() != (size_t)m * 3 || scales.size() != (size_t)m * 3 || quats.size() != (size_t)m * 4 ||
+        offsets.size() != (size_t)m + 1)
+        fail(where, "cells must be (M,3) means and scales, (M,4) quats, (M+1,) offsets");
+    return m;
+}
+
+// The cell of each of n splats (-1: none) for cells whose cell c holds members[offsets[c] .. offsets[c+1]). Throws
+// unless that is a partition: offsets from 0 to num_members, not decreasing, each member a splat of at most one
+// cell. gbviewer.cells.Cells validates the same in Python; this guards the native reads (O(M + members)).
+inline std::vector<int32_t> partition_cell_of(const char* where, const int32_t* offsets, const int32_t* members,
+                                              int64_t m, int64_t num_members, int64_t n) {
+    std::vector<int32_t> cell_of(n, -1);
+    bool ok = offsets[0] == 0 && offsets[m] == num_members;
+    for (int64_t c = 0; ok && c < m; ++c) {
+        ok = offsets[c] <= offsets[c + 1];
+        for (int32_t j = offsets[c]; ok && j < offsets[c + 1]; ++j) {
+            ok = members[j] >= 0 && members[j] < n && cell_of[members[j]] < 0;
+            if (ok) cell_of[members[j]] = (int32_t)c;
+        }
+    }
+    if (!ok)
+        fail(where, "cell_offsets / cell_members are not a partition of splats into cells (offsets from 0 to "
+                    "len(members), each splat in at most one cell)");
+    return cell_of;
+}
+
+// The dict a render returns (gbviewer.render._frame reads it): rgb (H,W,3), alpha, evals (H,W), window (H,W,2)
+// when rendered, per-stage ms, counts, and evaluations = the sum of evals. `img` has the vectors rgb, alpha, evals,
+// window (moved out), `st` the stats fields.
+template <class Img, class Stats>
+nb::dict result_dict(Img& img, const Stats& st, size_t H, size_t W) {
+    int64_t evaluations = 0;
+    for (int32_t e : img.evals) evaluations += e;
+    nb::dict d;
+    d["rgb"] = to_numpy(std::move(img.rgb), {H, W, 3});
+    d["alpha"] = to_numpy(std::move(img.alpha), {H, W});
+    d["evals"] = to_numpy(std::move(img.evals), {H, W});
+    if (!img.window.empty()) d["window"] = to_numpy(std::move(img.window), {H, W, 2});
+    d["preprocess_ms"] = st.preprocess_ms;
+    d["sort_ms"] = st.sort_ms;
+    d["blend_ms"] = st.blend_ms;
+    d["visible"] = st.visible;
+    d["sort_length"] = st.sort_length;
+    d["pairs"] = st.pairs;
+    d["cells_visible"] = st.cells_visible;
+    d["cell_misses"] = st.cell_misses;
+    d["evaluations"] = evaluations;
+    return d;
+}
+
+}  // namespace gbv::nbc
