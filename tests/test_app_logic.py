@@ -65,7 +65,7 @@ def test_preview_factor_only_while_moving_and_only_as_much_as_needed():
     assert logic.preview_factor(4000 * 4000, 1e-3, 1, moving=True) == 0.125  # never below 1/8
 
 
-# ---- layout, loupe, split ---------------------------------------------------------------------------------------------
+# ---- layout, loupe, split -------------------------------------------------------------------------------------------
 
 
 @pytest.mark.parametrize("n,layout,shape", [(1, "row", (1, 1)), (2, "row", (1, 2)), (4, "row", (1, 4)),
@@ -100,7 +100,7 @@ def test_split_parts():
     assert logic.split_parts(-1) == ((0.0, 0.0), (0.0, 1.0))
 
 
-# ---- camera controller ------------------------------------------------------------------------------------------------
+# ---- camera controller ----------------------------------------------------------------------------------------------
 
 
 def framed(up: str = "-y") -> CameraController:

@@ -8,7 +8,6 @@
 from __future__ import annotations
 
 import ctypes
-import math
 import os
 import shutil
 import time
@@ -28,7 +27,7 @@ from ..errors import GBViewerError  # noqa: E402
 from ..figure import atomic_write, to_uint8  # noqa: E402
 from ..render import BACKENDS, Mode, RenderSettings  # noqa: E402
 from . import logic  # noqa: E402
-from .logic import PANE_NAMES, AppSettings, CameraController, PaneSettings, Rect  # noqa: E402
+from .logic import PANE_NAMES, CameraController, PaneSettings, Rect  # noqa: E402
 from .worker import RenderJob, RenderResult, RenderWorker, SceneLoader, VideoJob, video_available  # noqa: E402
 
 PANEL_W = 340
@@ -469,8 +468,6 @@ class ViewerApp:
         glfw.swap_buffers(self.window)
         self.frame_count += 1
         self.ui_fps.tick()
-        if glfw.window_should_close(self.window):
-            self.closed_requested = True
 
     def close(self) -> None:
         if self.closed:
@@ -881,8 +878,7 @@ class ViewerApp:
             if imgui.button("Open..."):
                 self.open_dialog()
             imgui.same_line()
-            if imgui.begin_combo("##recent", "Recent files", imgui.ComboFlags_.no_preview.value
-                                 if False else 0):
+            if imgui.begin_combo("##recent", "Recent files"):
                 for r in s.recent:
                     if imgui.selectable(r, False, 0 if Path(r).exists() else
                                         imgui.SelectableFlags_.disabled.value)[0]:
@@ -1336,10 +1332,8 @@ class ViewerApp:
                 if not is_dir and e.suffix.lower() not in SCENE_EXTS:
                     continue
                 label = f"[{e.name}]" if is_dir else e.name
-                if imgui.selectable(label, False, imgui.SelectableFlags_.allow_double_click.value)[0]:
-                    if is_dir and not imgui.is_mouse_double_clicked(0) and not (e / "meta.json").exists():
-                        b["dir"] = e
-                    elif is_dir and not (e / "meta.json").exists():
+                if imgui.selectable(label, False)[0]:
+                    if is_dir and not (e / "meta.json").exists():  # a folder to enter, not a SOG scene
                         b["dir"] = e
                     else:
                         self._browser = None
