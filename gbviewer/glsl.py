@@ -39,7 +39,6 @@ Contexts: by default a headless EGL context shared by every renderer of the proc
 
 from __future__ import annotations
 
-import contextlib
 import re
 import sys
 import time
@@ -234,19 +233,18 @@ class GlslRenderer:
             return str(exc)
         return f"{ctx.info.get('GL_RENDERER', '?')}; OpenGL {ctx.info.get('GL_VERSION', '?')}"
 
-    def _current(self):
-        """The headless context this renderer owns is made current while it works (another one, an app window's
-        say, may be current in this thread) and the previous EGL context restored after; a context the app passed
-        in is the app's to keep current."""
-        return self.ctx if self._owns_ctx else contextlib.nullcontext()
+    def _make_current(self) -> None:
+        """Make the headless context this renderer owns current before it works: another one (an app window's,
+        say) may have become current in this thread since. It stays current afterwards, as after its creation
+        (leaving a `with ctx:` block would leave no context current: glcontext's EGL exit does not restore the
+        previous one). A context the app passed in is the app's to keep current."""
+        if self._owns_ctx:
+            self.ctx.__enter__()
 
     def upload(self, scene: Scene) -> None:
         """Copy the scene to the GPU once (geometry 48 B and SH 12K B per splat); reuses buffers that are big enough.
         A trained Duplex-GS model is decoded per view instead, and its splats go up with every frame."""
-        with self._current():
-            self._upload_scene(scene)
-
-    def _upload_scene(self, scene: Scene) -> None:
+        self._make_current()
         self._scene = scene
         self._cells = None
         self._view = None
@@ -289,10 +287,7 @@ class GlslRenderer:
         self._cells = cells
 
     def render(self, camera: Camera, settings: RenderSettings) -> Frame:
-        with self._current():
-            return self._render(camera, settings)
-
-    def _render(self, camera: Camera, settings: RenderSettings) -> Frame:
+        self._make_current()
         t0 = time.perf_counter()
         want_window = settings.debug == "window" and settings.mode == Mode.GAUSSIAN_BLENDING
         tex, stats = self._frame(camera, settings, want_window)
@@ -319,8 +314,8 @@ class GlslRenderer:
         the same size. Stats (without `evaluations`) are in `last_stats`.
         """
         t0 = time.perf_counter()
-        with self._current():
-            tex, stats = self._frame(camera, settings, False)
+        self._make_current()
+        tex, stats = self._frame(camera, settings, False)
         stats["total_ms"] = (time.perf_counter() - t0) * 1e3
         self.last_stats = stats
         return tex
