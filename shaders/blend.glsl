@@ -76,6 +76,10 @@ struct TransmittanceWindow {
 // T < 1e-4.
 bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
     const vec2 d = win.xy - s.xy;
+    // Cheapest exact rejection first: the window (within half its perimeter of its centre) lies outside the splat's
+    // bounding circle (radius >= the distance where its value falls below 1/256).
+    const float reach = s.radius + 0.5 * (win.wh.x + win.wh.y);
+    if (dot(d, d) > reach * reach) return false;
     const vec2 v2 = vec2(-s.v1.y, s.v1.x);
     const float u = dot(d, s.v1), v = dot(d, v2);
     const bool aligned = abs(s.v1.x) > abs(s.v1.y);

@@ -68,8 +68,15 @@ def test_bad_input_one_line_exit_2(tmp_path, args, message):
     assert len(proc.stderr.strip().splitlines()) == 1 or "usage:" in proc.stderr
 
 
-def test_demo_writes_comparison(tmp_path):
+def test_demo_writes_comparison_and_zoom_video(tmp_path):
+    import imageio_ffmpeg
+
+    from gbviewer.cli import DEMO_VIDEO_FRAMES
+
     proc = run("demo", "--width", "96", "--height", "64", "--out", "out", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     img = Image.open(tmp_path / "out" / "comparison.png")
     assert img.size == (3 * 96 + 2 * 4, 2 * 64 + 4)
+    frames, _ = imageio_ffmpeg.count_frames_and_secs(str(tmp_path / "out" / "zoom.mp4"))
+    assert frames == DEMO_VIDEO_FRAMES
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["comparison.png", "zoom.mp4"]

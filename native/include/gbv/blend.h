@@ -79,6 +79,10 @@ struct TransmittanceWindow {
 // stops after adding a splat that leaves T < 1e-4.
 GBV_HD bool blend_gaussian(const Splat2D& s, TransmittanceWindow& win, float C[3]) {
     const Vec2 d = win.xy - s.xy;
+    // Cheapest exact rejection first: the window (within half its perimeter of its centre) lies outside the splat's
+    // bounding circle (radius >= the distance where its value falls below 1/256).
+    const float reach = s.radius + 0.5f * (win.wh.x + win.wh.y);
+    if (dot(d, d) > reach * reach) return false;
     const Vec2 v2 = {-s.v1.y, s.v1.x};
     const float u = dot(d, s.v1), v = dot(d, v2);
     const bool aligned = fabsf(s.v1.x) > fabsf(s.v1.y);
