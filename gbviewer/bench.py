@@ -7,6 +7,7 @@ import json
 import math
 import os
 import platform
+import re
 import statistics
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -318,7 +319,7 @@ def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow
         ax2.legend(fontsize=8)
         ax2.tick_params(axis="x", labelsize=7)
         fig.tight_layout()
-        path = out_dir / f"{Path(scene).stem}.png"
+        path = out_dir / (re.sub(r"[^A-Za-z0-9._-]+", "_", Path(scene).stem) + ".png")
         try:
             atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"), force)
         finally:
