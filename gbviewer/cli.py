@@ -428,8 +428,6 @@ def main(argv: list[str] | None = None) -> int:
     if first is None or (first not in commands and first not in ("-h", "--help")):
         argv = ["view", *argv] if first is None else [*argv[:argv.index(first)], "view", *argv[argv.index(first):]]
     args = parser.parse_args(argv)
-    if args.command is None:
-        args = parser.parse_args(["view", *argv])
     try:
         return args.func(args)
     except (GBViewerError, OSError) as exc:
