@@ -156,6 +156,23 @@ struct SplatIn {
     int cell;         // the splat's cell (duplex), -1 when none
 };
 
+// View-space position R m + t of a world point; false behind the near plane (z <= 0.2, KERNELS.md §0.4).
+bool view_point(CameraParams cam, vec3 m, out vec3 pv) {
+    for (int i = 0; i < 3; ++i)
+        pv[i] = cam.R[i * 3] * m[0] + cam.R[i * 3 + 1] * m[1] + cam.R[i * 3 + 2] * m[2] + cam.t[i];
+    return pv[2] > cam.near_plane;
+}
+
+// Screen position of the view-space point pv and the tiles within radius r of it (getRect); false when a value is
+// not finite or no tile is touched.
+bool screen_footprint(CameraParams cam, vec3 pv, float r, int grid_x, int grid_y, out vec2 xy, out TileRect rect) {
+    xy = vec2(cam.fx * pv[0] / pv[2] + cam.cx, cam.fy * pv[1] / pv[2] + cam.cy);
+    rect = TileRect(0, 0, 0, 0);
+    if (!finitef(xy.x) || !finitef(xy.y) || !finitef(r)) return false;
+    rect = tile_rect(xy, r, grid_x, grid_y);
+    return rect.x1 > rect.x0 && rect.y1 > rect.y0;
+}
+
 // Preprocess one splat for `mode`; returns false when it is culled (behind the near plane, degenerate, invisible,
 // or touching no tile). wsr and duplex fold the view weight and the optional depth correction into the opacity.
 bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitParams oit, int grid_x, int grid_y,
@@ -163,9 +180,7 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
     rect = TileRect(0, 0, 0, 0);
     const vec3 m = in_.mean;
     vec3 pv;
-    for (int i = 0; i < 3; ++i)
-        pv[i] = cam.R[i * 3] * m[0] + cam.R[i * 3 + 1] * m[1] + cam.R[i * 3 + 2] * m[2] + cam.t[i];
-    if (!(pv[2] > cam.near_plane)) return false;
+    if (!view_point(cam, m, pv)) return false;
     vec3 dir = vec3(m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]);
     const float dn = sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
     dir = dn > 0.0 ? vec3(dir.x / dn, dir.y / dn, dir.z / dn) : vec3(0.0, 0.0, 1.0);
@@ -224,14 +239,11 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
     if (!(det > 0.0) || !finitef(det)) return false;
     const float inv = 1.0 / det;
 
-    const float px = cam.fx * pv[0] / pv[2] + cam.cx;
-    const float py = cam.fy * pv[1] / pv[2] + cam.cy;
     const float r = splat_radius(cov[0], cov[2], det, sigmas);
-    if (!finitef(px) || !finitef(py) || !finitef(r)) return false;
-    rect = tile_rect(vec2(px, py), r, grid_x, grid_y);
-    if (rect.x1 <= rect.x0 || rect.y1 <= rect.y0) return false;
+    vec2 xy;
+    if (!screen_footprint(cam, pv, r, grid_x, grid_y, xy, rect)) return false;
 
-    result.xy = vec2(px, py);
+    result.xy = xy;
     result.depth = pv[2];
     result.opacity = opacity;
     result.log_min_alpha = logf(min_alpha / opacity);
@@ -267,9 +279,7 @@ bool preprocess_cell(CellIn in_, CameraParams cam, int grid_x, int grid_y, out C
     rect = TileRect(0, 0, 0, 0);
     const vec3 m = in_.mean;
     vec3 pv;
-    for (int i = 0; i < 3; ++i)
-        pv[i] = cam.R[i * 3] * m[0] + cam.R[i * 3 + 1] * m[1] + cam.R[i * 3 + 2] * m[2] + cam.t[i];
-    if (!(pv[2] > cam.near_plane)) return false;
+    if (!view_point(cam, m, pv)) return false;
     float cov3[6];
     vec3 cov;
     covariance_3d(in_.quat, in_.scale, cov3);
@@ -278,13 +288,10 @@ bool preprocess_cell(CellIn in_, CameraParams cam, int grid_x, int grid_y, out C
     cov[2] += DILATION_3DGS;
     const float det = cov[0] * cov[2] - cov[1] * cov[1];
     if (!(det > 0.0) || !finitef(det)) return false;
-    const float px = cam.fx * pv[0] / pv[2] + cam.cx;
-    const float py = cam.fy * pv[1] / pv[2] + cam.cy;
     const float r = splat_radius(cov[0], cov[2], det, DUPLEX_CELL_SIGMAS);
-    if (!finitef(px) || !finitef(py) || !finitef(r)) return false;
-    rect = tile_rect(vec2(px, py), r, grid_x, grid_y);
-    if (rect.x1 <= rect.x0 || rect.y1 <= rect.y0) return false;
-    result.xy = vec2(px, py);
+    vec2 xy;
+    if (!screen_footprint(cam, pv, r, grid_x, grid_y, xy, rect)) return false;
+    result.xy = xy;
     result.depth = pv[2];
     result.radius = r;
     return true;

@@ -166,6 +166,23 @@ struct SplatIn {
     int32_t cell;        // the splat's cell (duplex), -1 when none
 };
 
+// View-space position R m + t of a world point; false behind the near plane (z <= 0.2, KERNELS.md §0.4).
+GBV_HD bool view_point(const CameraParams& cam, const float* m, float pv[3]) {
+    const float* R = cam.R;
+    for (int i = 0; i < 3; ++i) pv[i] = R[i * 3] * m[0] + R[i * 3 + 1] * m[1] + R[i * 3 + 2] * m[2] + cam.t[i];
+    return pv[2] > cam.near_plane;
+}
+
+// Screen position of the view-space point pv and the tiles within radius r of it (getRect); false when a value is
+// not finite or no tile is touched.
+GBV_HD bool screen_footprint(const CameraParams& cam, const float pv[3], float r, int grid_x, int grid_y, Vec2* xy,
+                             TileRect* rect) {
+    *xy = Vec2{cam.fx * pv[0] / pv[2] + cam.cx, cam.fy * pv[1] / pv[2] + cam.cy};
+    if (!finitef(xy->x) || !finitef(xy->y) || !finitef(r)) return false;
+    *rect = tile_rect(*xy, r, grid_x, grid_y);
+    return rect->x1 > rect->x0 && rect->y1 > rect->y0;
+}
+
 // Preprocess one splat for `mode`; returns false when it is culled (behind the near plane, degenerate,
 // invisible, or touching no tile). wsr and duplex (KERNELS.md §7.2, §8.3) keep the 3DGS +0.3 dilation and
 // 3-sigma radius and fold the view weight and the optional depth correction into the opacity:
@@ -174,10 +191,8 @@ struct SplatIn {
 GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& cam, Mode mode, const OitParams& oit,
                              int grid_x, int grid_y, Splat2D* out, TileRect* rect) {
     const float* m = in.mean;
-    const float* R = cam.R;
     float pv[3];
-    for (int i = 0; i < 3; ++i) pv[i] = R[i * 3] * m[0] + R[i * 3 + 1] * m[1] + R[i * 3 + 2] * m[2] + cam.t[i];
-    if (!(pv[2] > cam.near_plane)) return false;
+    if (!view_point(cam, m, pv)) return false;
     Vec3 dir = {m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]};
     const float dn = sqrtf(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
     dir = dn > 0.0f ? Vec3{dir.x / dn, dir.y / dn, dir.z / dn} : Vec3{0.0f, 0.0f, 1.0f};
@@ -235,15 +250,11 @@ GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& 
     if (!(det > 0.0f) || !finitef(det)) return false;
     const float inv = 1.0f / det;
 
-    const float px = cam.fx * pv[0] / pv[2] + cam.cx;
-    const float py = cam.fy * pv[1] / pv[2] + cam.cy;
     const float r = splat_radius(cov[0], cov[2], det, sigmas);
-    if (!finitef(px) || !finitef(py) || !finitef(r)) return false;
-    const int gx = grid_x, gy = grid_y;
-    *rect = tile_rect(Vec2{px, py}, r, gx, gy);
-    if (rect->x1 <= rect->x0 || rect->y1 <= rect->y0) return false;
+    Vec2 xy;
+    if (!screen_footprint(cam, pv, r, grid_x, grid_y, &xy, rect)) return false;
 
-    out->xy = Vec2{px, py};
+    out->xy = xy;
     out->depth = pv[2];
     out->opacity = opacity;
     out->log_min_alpha = logf(min_alpha / opacity);
@@ -278,10 +289,8 @@ struct Cell2D {
 GBV_HD bool preprocess_cell(const CellIn& in, const CameraParams& cam, int grid_x, int grid_y, Cell2D* out,
                             TileRect* rect) {
     const float* m = in.mean;
-    const float* R = cam.R;
     float pv[3];
-    for (int i = 0; i < 3; ++i) pv[i] = R[i * 3] * m[0] + R[i * 3 + 1] * m[1] + R[i * 3 + 2] * m[2] + cam.t[i];
-    if (!(pv[2] > cam.near_plane)) return false;
+    if (!view_point(cam, m, pv)) return false;
     float cov3[6], cov[3];
     covariance_3d(in.quat, in.scale, cov3);
     project_covariance(cam, cov3, pv, cov);
@@ -289,13 +298,8 @@ GBV_HD bool preprocess_cell(const CellIn& in, const CameraParams& cam, int grid_
     cov[2] += DILATION_3DGS;
     const float det = cov[0] * cov[2] - cov[1] * cov[1];
     if (!(det > 0.0f) || !finitef(det)) return false;
-    const float px = cam.fx * pv[0] / pv[2] + cam.cx;
-    const float py = cam.fy * pv[1] / pv[2] + cam.cy;
     const float r = splat_radius(cov[0], cov[2], det, DUPLEX_CELL_SIGMAS);
-    if (!finitef(px) || !finitef(py) || !finitef(r)) return false;
-    *rect = tile_rect(Vec2{px, py}, r, grid_x, grid_y);
-    if (rect->x1 <= rect->x0 || rect->y1 <= rect->y0) return false;
-    out->xy = Vec2{px, py};
+    if (!screen_footprint(cam, pv, r, grid_x, grid_y, &out->xy, rect)) return false;
     out->depth = pv[2];
     out->radius = r;
     return true;
