@@ -557,33 +557,36 @@ class GlslRenderer:
         """Tile lists of splats: by (tile, depth, index), or for wsr by (tile, index) with no depth sort."""
         dkeys = [self._buffers[f"depth_keys{i}"] for i in (0, 1)]
         dvals = [self._buffers[f"depth_vals{i}"] for i in (0, 1)]
-        rects, counts = self._buffers["rects"], self._buffers["pair_counts"]
-        keys0, vals0 = self._ensure("tile_keys0", pairs * 4, "tile-splat pairs"), self._ensure(
-            "tile_vals0", pairs * 4, "tile-splat pairs")
-        keys1, vals1 = self._ensure("tile_keys1", pairs * 4, "tile-splat pairs"), self._ensure(
-            "tile_vals1", pairs * 4, "tile-splat pairs")
         ranges = self._ensure("ranges", num_tiles * 8, "tile ranges")
         self._fill(ranges, num_tiles * 2, 0)
-        if visible > 0:
-            if mode == Mode.WSR:
-                order = dvals[0]  # survivors in splat-index order: binning only
-            else:
-                _, order = self._radix_sort(dkeys[0], dvals[0], dkeys[1], dvals[1], visible,
-                                            (dmax - dmin).bit_length())
-            prog = self._program("gather_counts.comp")
-            self._set(prog, n=visible)
-            self._dispatch(prog, -(-visible // WG), order, rects, counts)
-            self._scan(counts, visible)
-            prog = self._program("duplicate.comp")
-            self._set(prog, num_pairs=pairs, num_splats=visible, grid_x=gx)
-            self._dispatch(prog, -(-pairs // WG), order, rects, counts, keys0, vals0)
-            tkeys, tvals = self._radix_sort(keys0, vals0, keys1, vals1, pairs, (num_tiles - 1).bit_length())
-            prog = self._program("tile_ranges.comp")
-            self._set(prog, n=pairs)
-            self._dispatch(prog, -(-pairs // WG), tkeys, ranges)
+        if visible == 0:
+            return self._ensure("tile_vals0", pairs * 4, "tile-splat pairs"), ranges
+        if mode == Mode.WSR:
+            order = dvals[0]  # survivors in splat-index order: binning only
         else:
-            tvals = vals0
+            _, order = self._radix_sort(dkeys[0], dvals[0], dkeys[1], dvals[1], visible, (dmax - dmin).bit_length())
+        tvals = self._pairs_by_tile(order, self._buffers["rects"], self._buffers["pair_counts"], visible, pairs, gx,
+                                    num_tiles, ranges, "tile-splat pairs")
         return tvals, ranges
+
+    def _pairs_by_tile(self, order, rects, counts, n: int, pairs: int, gx: int, num_tiles: int, ranges, what: str):
+        """One (tile, item) pair for every tile each of the n ordered items touches (`rects`), stably radix-sorted by
+        tile, so every tile keeps the items' order; writes each tile's [start, end) into `ranges` and returns the
+        items in tile order."""
+        keys0, vals0, keys1, vals1 = (self._ensure(f"tile_{k}{i}", pairs * 4, what) for i in (0, 1)
+                                      for k in ("keys", "vals"))
+        prog = self._program("gather_counts.comp")
+        self._set(prog, n=n)
+        self._dispatch(prog, -(-n // WG), order, rects, counts)
+        self._scan(counts, n)
+        prog = self._program("duplicate.comp")
+        self._set(prog, num_pairs=pairs, num_splats=n, grid_x=gx)
+        self._dispatch(prog, -(-pairs // WG), order, rects, counts, keys0, vals0)
+        tkeys, tvals = self._radix_sort(keys0, vals0, keys1, vals1, pairs, (num_tiles - 1).bit_length())
+        prog = self._program("tile_ranges.comp")
+        self._set(prog, n=pairs)
+        self._dispatch(prog, -(-pairs // WG), tkeys, ranges)
+        return tvals
 
     def _bin_duplex(self, cells, cam_uniforms: dict, num_tiles: int):
         """Duplex binning (KERNELS.md §8.3): project the cells with a visible splat, sort them by depth, one pair per
@@ -610,10 +613,6 @@ class GlslRenderer:
         prog = self._program("cell_compact.comp")
         self._set(prog, num_cells=m)
         self._dispatch(prog, -(-m // WG), cell_out, cell_rects, cflags, totals, ckeys[0], cvals[0])
-        keys0 = self._ensure("tile_keys0", cell_pairs * 4, "tile-cell pairs")
-        vals0 = self._ensure("tile_vals0", cell_pairs * 4, "tile-cell pairs")
-        keys1 = self._ensure("tile_keys1", cell_pairs * 4, "tile-cell pairs")
-        vals1 = self._ensure("tile_vals1", cell_pairs * 4, "tile-cell pairs")
         cell_ranges = self._ensure("cell_ranges", num_tiles * 8, "tile ranges of cells")
         ranges = self._ensure("ranges", num_tiles * 8, "tile ranges")
         self._fill(ranges, num_tiles * 2, 0)
@@ -623,17 +622,8 @@ class GlslRenderer:
         if ncells > 0 and cell_pairs > 0:
             _, order = self._radix_sort(ckeys[0], cvals[0], ckeys[1], cvals[1], ncells, (cmax - cmin).bit_length())
             counts = self._ensure("cell_pair_counts", ncells * 4, "cell tile counts")
-            prog = self._program("gather_counts.comp")
-            self._set(prog, n=ncells)
-            self._dispatch(prog, -(-ncells // WG), order, cell_rects, counts)
-            self._scan(counts, ncells)
-            prog = self._program("duplicate.comp")
-            self._set(prog, num_pairs=cell_pairs, num_splats=ncells, grid_x=gx)
-            self._dispatch(prog, -(-cell_pairs // WG), order, cell_rects, counts, keys0, vals0)
-            tkeys, tvals = self._radix_sort(keys0, vals0, keys1, vals1, cell_pairs, (num_tiles - 1).bit_length())
-            prog = self._program("tile_ranges.comp")
-            self._set(prog, n=cell_pairs)
-            self._dispatch(prog, -(-cell_pairs // WG), tkeys, cell_ranges)
+            tvals = self._pairs_by_tile(order, cell_rects, counts, ncells, cell_pairs, gx, num_tiles, cell_ranges,
+                                        "tile-cell pairs")
             offs = self._ensure("expand_offsets", cell_pairs * 4, "expanded list offsets")
             prog = self._program("expand.comp")
             self._set(prog, n=cell_pairs, mode=0)
