@@ -25,8 +25,9 @@ REST_COUNTS_1 = {0: 0, 3: 1, 8: 2, 15: 3}  # f_ro_* count (1-channel view weight
 def read_ply(path: Path) -> plyfile.PlyData:
     """Parse a PLY header and memory-map its data, with typed errors for non-PLY and truncated files."""
     with open(path, "rb") as fh:
-        if fh.read(4) != b"ply\n" and not _starts_with_ply_crlf(path):
-            raise SceneFormatError(path, "not a PLY file (missing 'ply' magic line)")
+        head = fh.read(5)
+    if not (head.startswith(b"ply\n") or head == b"ply\r\n"):
+        raise SceneFormatError(path, "not a PLY file (missing 'ply' magic line)")
     try:
         return plyfile.PlyData.read(str(path))
     except plyfile.PlyElementParseError as exc:
@@ -36,11 +37,6 @@ def read_ply(path: Path) -> plyfile.PlyData:
         raise SceneFormatError(path, f"malformed PLY header: {exc}") from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise SceneFormatError(path, f"malformed PLY: {exc}") from None
-
-
-def _starts_with_ply_crlf(path: Path) -> bool:
-    with open(path, "rb") as fh:
-        return fh.read(5) == b"ply\r\n"
 
 
 def vertex_columns(path: Path, ply: plyfile.PlyData, names: list[str]) -> Callable[[list[str]], np.ndarray]:
