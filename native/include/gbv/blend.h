@@ -1,75 +1,112 @@
-// Per-pixel blending steps, one splat at a time, front to back. Each step returns true once the pixel
-// is finished (early termination). Shared by every backend; the GLSL port keeps the same names.
+// Per-pixel blending steps, one splat at a time, front to back. Shared by every backend; the GLSL port keeps the
+// one-pixel functions' names.
+//
+// Each step is written once, as a template over a lane type L (lanes.h): L::F is one float per pixel lane, L::M
+// one flag per lane. A step takes the lanes still blending (`live`) and returns the lanes that finished at this
+// splat (early termination); lanes a splat cannot reach are left untouched, and the work is skipped when no lane
+// needs it. With L = Lanes1 (one pixel) the steps are the plain per-pixel functions CUDA and the scalar CPU path
+// run; the CPU's vector path instantiates them for 8 or 16 pixels. The one-pixel wrappers at the end of each
+// section keep the signatures CUDA and the GLSL port use.
+//
+// NaN rule (every backend): a NaN Gaussian exponent rejects the splat at that pixel.
 #pragma once
 
 #include "common.h"
+#include "lanes.h"
 
 namespace gbv {
 
-// Scalar front-to-back compositing of one alpha (3DGS renderCUDA, KERNELS.md §0.7): skip below
-// min_alpha; stop without adding the splat when T(1 - alpha) < 1e-4.
-GBV_HD bool composite_scalar(float alpha, const float color[3], float& T, float C[3]) {
-    if (alpha < MIN_ALPHA_3DGS) return false;
-    const float test_T = T * (1.0f - alpha);
-    if (test_T < T_STOP) return true;
-    const float w = alpha * T;
-    C[0] += color[0] * w;
-    C[1] += color[1] * w;
-    C[2] += color[2] * w;
-    T = test_T;
-    return false;
+// Exponent of the splat's Gaussian at offset (dx, dy) from its centre (eq. 5; either sign of the offset).
+template <class L>
+GBV_HD typename L::F gaussian_power(const Splat2D& s, typename L::F dx, typename L::F dy) {
+    return L::set(-0.5f) * (L::set(s.conic[0]) * dx * dx + L::set(s.conic[2]) * dy * dy) -
+           L::set(s.conic[1]) * dx * dy;
 }
 
-// Gaussian value exp(power) at offset d = xy - p, or 0 when power > 0 (numerically invalid).
-GBV_HD float gaussian_at(const Splat2D& s, Vec2 d) {
-    const float power = -0.5f * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
-    return power > 0.0f ? 0.0f : expf(power);
+// ---- scalar transmittance (scalar, mip, analytic) -----------------------------------------------------------------
+
+template <class L>
+struct AlphaState {
+    typename L::F T, C[3];
+};
+
+// Scalar front-to-back compositing of one alpha per lane (3DGS renderCUDA, KERNELS.md §0.7): skip below
+// min_alpha; stop without adding the splat when T(1 - alpha) < 1e-4. Returns the lanes that stopped.
+template <class L>
+GBV_HD typename L::M composite_scalar(typename L::M pass, typename L::F alpha, const float color[3],
+                                      AlphaState<L>& st) {
+    using F = typename L::F;
+    using M = typename L::M;
+    pass = L::and_not(pass, alpha < L::set(MIN_ALPHA_3DGS));
+    const F test_T = st.T * (L::set(1.0f) - alpha);
+    const M low = test_T < L::set(T_STOP);
+    const M add = L::and_not(pass, low);
+    const F w = alpha * st.T;
+    for (int c = 0; c < 3; ++c) st.C[c] = L::select(add, st.C[c] + L::set(color[c]) * w, st.C[c]);
+    st.T = L::select(add, test_T, st.T);
+    return L::and_(pass, low);
 }
 
 // `scalar` and `mip`: alpha at the pixel centre (eq. 5). Offsets whose power is below
 // log_min_alpha = ln((1/255) / opacity) would give alpha < 1/255 and are skipped before the exp.
-GBV_HD bool blend_scalar(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
-    const Vec2 d = s.xy - pix;
-    const float power = -0.5f * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
-    if (power > 0.0f || power < s.log_min_alpha) return false;
-    const float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
-    return composite_scalar(alpha, s.color, T, C);
+template <class L>
+GBV_HD typename L::M blend_scalar(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
+                                  AlphaState<L>& st) {
+    using F = typename L::F;
+    using M = typename L::M;
+    const F power = gaussian_power<L>(s, L::set(s.xy.x) - px, L::set(s.xy.y) - py);
+    const M pass = L::and_(live, L::and_(power <= L::set(0.0f), power >= L::set(s.log_min_alpha)));
+    if (!L::any(pass)) return L::none();
+    const F alpha = L::min(L::set(s.opacity) * L::exp(L::select(pass, power, L::set(0.0f))), L::set(MAX_ALPHA));
+    return composite_scalar<L>(pass, alpha, s.color, st);
 }
 
 // Analytic-Splatting's logistic approximation of the standard normal CDF (KERNELS.md §4):
-// sigmoid(1.6x + 0.07x^3), written with expf (the published 0.5 tanh(z/2) + 0.5 is the same function).
-GBV_HD float approx_cdf(float x) { return 1.0f / (1.0f + expf(-(1.6f * x + 0.07f * x * x * x))); }
+// sigmoid(1.6x + 0.07x^3), written with exp (the published 0.5 tanh(z/2) + 0.5 is the same function).
+template <class L>
+GBV_HD typename L::F approx_cdf(typename L::F x) {
+    return L::set(1.0f) / (L::set(1.0f) + L::exp(L::neg(L::set(1.6f) * x + L::set(0.07f) * x * x * x)));
+}
 
 // `analytic`: mean alpha over the unit pixel, separable in the splat's eigen-frame (Analytic-Splatting).
-GBV_HD bool blend_analytic(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
-    const Vec2 d = pix - s.xy;
-    const Vec2 v2 = {-s.v1.y, s.v1.x};
-    const float u = dot(d, s.v1), v = dot(d, v2);
-    const float iu = s.sigma1 * (approx_cdf((u + 0.5f) / s.sigma1) - approx_cdf((u - 0.5f) / s.sigma1));
-    const float iv = s.sigma2 * (approx_cdf((v + 0.5f) / s.sigma2) - approx_cdf((v - 0.5f) / s.sigma2));
-    const float alpha = minf(s.opacity * TWO_PI * iu * iv, MAX_ALPHA);
-    return composite_scalar(alpha, s.color, T, C);
+template <class L>
+GBV_HD typename L::M blend_analytic(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
+                                    AlphaState<L>& st) {
+    using F = typename L::F;
+    const F dx = px - L::set(s.xy.x), dy = py - L::set(s.xy.y);
+    const F u = dx * L::set(s.v1.x) + dy * L::set(s.v1.y);
+    const F v = dx * L::set(-s.v1.y) + dy * L::set(s.v1.x);
+    const F s1 = L::set(s.sigma1), s2 = L::set(s.sigma2), h = L::set(0.5f);
+    const F iu = s1 * (approx_cdf<L>((u + h) / s1) - approx_cdf<L>((u - h) / s1));
+    const F iv = s2 * (approx_cdf<L>((v + h) / s2) - approx_cdf<L>((v - h) / s2));
+    const F alpha = L::min(L::set(s.opacity * TWO_PI) * iu * iv, L::set(MAX_ALPHA));
+    return composite_scalar<L>(live, alpha, s.color, st);
 }
+
+// ---- Gaussian Blending ----------------------------------------------------------------------------------------------
 
 // Zeroth moment of exp(-t^2/2) from 0 to x (paper eq. 13 with sigma = 1), sqrt(pi/2) erf(x/sqrt(2)), given
 // e = exp(-x^2/2). erf uses Abramowitz & Stegun 7.1.26 (absolute error < 1.5e-7, about float32 rounding),
 // whose exp(-z^2) is that same e: one exp per window edge serves all three moments, and every backend
 // (GLSL has no erf) computes the identical function. The first and second moments over [a, b] follow from
 // e: I1 = e(a) - e(b), I2 = I0 + a e(a) - b e(b).
-GBV_HD float gaussian_moment0(float x, float e) {
-    const float z = fabsf(x) * 0.7071067811865476f;
-    const float t = 1.0f / (1.0f + 0.3275911f * z);
-    const float poly = t * (0.254829592f + t * (-0.284496736f + t * (1.421413741f + t * (-1.453152027f + t * 1.061405429f))));
-    const float erf_abs = 1.0f - poly * e;
-    return SQRT_PI_2 * (x < 0.0f ? -erf_abs : erf_abs);
+template <class L>
+GBV_HD typename L::F gaussian_moment0(typename L::F x, typename L::F e) {
+    using F = typename L::F;
+    const F z = L::abs(x) * L::set(0.7071067811865476f);
+    const F t = L::set(1.0f) / (L::set(1.0f) + L::set(0.3275911f) * z);
+    const F poly = t * (L::set(0.254829592f) +
+                        t * (L::set(-0.284496736f) +
+                             t * (L::set(1.421413741f) + t * (L::set(-1.453152027f) + t * L::set(1.061405429f)))));
+    const F erf_abs = L::set(1.0f) - poly * e;
+    return L::set(SQRT_PI_2) * L::select(x < L::set(0.0f), L::neg(erf_abs), erf_abs);
 }
 
-// Gaussian Blending's transmittance: a uniform window of total mass T (pixel area = 1) centred at xy
-// with side lengths wh (paper §3.3). Initially the pixel itself.
-struct TransmittanceWindow {
-    float T;
-    Vec2 xy;
-    Vec2 wh;
+// Gaussian Blending's transmittance per lane: a uniform window of total mass T (pixel area = 1) centred at
+// (x, y) with side lengths (w, h) (paper §3.3). Initially the pixel itself.
+template <class L>
+struct WindowState {
+    typename L::F T, x, y, w, h, C[3];
 };
 
 // `gaussian_blending`: blend one splat onto the window and replace the window by the uniform one
@@ -77,81 +114,104 @@ struct TransmittanceWindow {
 // authors' renderCUDA does it (KERNELS.md §6.3): window sides go to the eigen-axis within 45 degrees,
 // a window outside [0.1, 1e6] sigma falls back to scalar alpha at the window centre, and the pixel
 // stops after adding a splat that leaves T < 1e-4.
-GBV_HD bool blend_gaussian(const Splat2D& s, TransmittanceWindow& win, float C[3]) {
-    const Vec2 d = win.xy - s.xy;
+template <class L>
+GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, WindowState<L>& win) {
+    using F = typename L::F;
+    using M = typename L::M;
+    const F dx = win.x - L::set(s.xy.x), dy = win.y - L::set(s.xy.y);
+    const F half = L::set(0.5f), zero = L::set(0.0f);
     // Cheapest exact rejection first: the window (within half its perimeter of its centre) lies outside the splat's
     // bounding circle (radius >= the distance where its value falls below 1/256).
-    const float reach = s.radius + 0.5f * (win.wh.x + win.wh.y);
-    if (dot(d, d) > reach * reach) return false;
-    const Vec2 v2 = {-s.v1.y, s.v1.x};
-    const float u = dot(d, s.v1), v = dot(d, v2);
+    const F reach = L::set(s.radius) + half * (win.w + win.h);
+    M pass = L::and_not(live, dx * dx + dy * dy > reach * reach);
+    if (!L::any(pass)) return L::none();
+    const F u = dx * L::set(s.v1.x) + dy * L::set(s.v1.y);
+    const F v = dx * L::set(-s.v1.y) + dy * L::set(s.v1.x);
     const bool aligned = fabsf(s.v1.x) > fabsf(s.v1.y);
-    const float lu = aligned ? win.wh.x : win.wh.y;
-    const float lv = aligned ? win.wh.y : win.wh.x;
+    const F lu = aligned ? win.w : win.h;
+    const F lv = aligned ? win.h : win.w;
+    const F is1 = L::set(s.inv_sigma1), is2 = L::set(s.inv_sigma2);
     // The mean alpha over the window is at most the splat's largest value on it: skip before any erf when even
     // that is below 1/256 (log_min_alpha = ln(MIN_ALPHA_GB / opacity)). This also rejects every window lying
     // outside the published +-3.33 sigma box, whose edge value is exactly 1/256.
-    const float gu = maxf(fabsf(u) - 0.5f * lu, 0.0f) * s.inv_sigma1;
-    const float gv = maxf(fabsf(v) - 0.5f * lv, 0.0f) * s.inv_sigma2;
-    if (-0.5f * (gu * gu + gv * gv) < s.log_min_alpha) return false;
+    const F gu = L::max(L::abs(u) - half * lu, zero) * is1;
+    const F gv = L::max(L::abs(v) - half * lv, zero) * is2;
+    pass = L::and_not(pass, L::set(-0.5f) * (gu * gu + gv * gv) < L::set(s.log_min_alpha));
+    if (!L::any(pass)) return L::none();
 
-    const float U1 = (u - 0.5f * lu) * s.inv_sigma1, U2 = (u + 0.5f * lu) * s.inv_sigma1;
-    const float V1 = (v - 0.5f * lv) * s.inv_sigma2, V2 = (v + 0.5f * lv) * s.inv_sigma2;
-    const float du = U2 - U1, dv = V2 - V1;
-    if (!(du >= GB_MIN_UV_DIFF && dv >= GB_MIN_UV_DIFF && du <= GB_MAX_UV_DIFF && dv <= GB_MAX_UV_DIFF)) {
+    const F U1 = (u - half * lu) * is1, U2 = (u + half * lu) * is1;
+    const F V1 = (v - half * lv) * is2, V2 = (v + half * lv) * is2;
+    const F du = U2 - U1, dv = V2 - V1;
+    const F lo = L::set(GB_MIN_UV_DIFF), hi = L::set(GB_MAX_UV_DIFF);
+    const M normal = L::and_(L::and_(du >= lo, dv >= lo), L::and_(du <= hi, dv <= hi));
+    M stop = L::none();
+    const M fallback = L::and_not(pass, normal);
+    if (L::any(fallback)) {
         // Stability fallback (Appendix B.1): scalar alpha at the window centre, window unchanged.
-        const float alpha = minf(s.opacity * gaussian_at(s, d), MAX_ALPHA);
-        if (alpha < MIN_ALPHA_GB) return false;
-        const float w = win.T * alpha;
-        C[0] += s.color[0] * w;
-        C[1] += s.color[1] * w;
-        C[2] += s.color[2] * w;
-        win.T -= w;
-        return win.T < T_STOP;
+        const F power = gaussian_power<L>(s, dx, dy);
+        const M valid = L::and_(fallback, power <= zero);
+        const F g = L::select(valid, L::exp(L::select(valid, power, zero)), zero);
+        const F alpha = L::min(L::set(s.opacity) * g, L::set(MAX_ALPHA));
+        const M take = L::and_not(fallback, alpha < L::set(MIN_ALPHA_GB));
+        const F w = win.T * alpha;
+        for (int c = 0; c < 3; ++c) win.C[c] = L::select(take, win.C[c] + L::set(s.color[c]) * w, win.C[c]);
+        win.T = L::select(take, win.T - w, win.T);
+        stop = L::and_(take, win.T < L::set(T_STOP));
     }
-    const float eU1 = expf(-0.5f * U1 * U1), eU2 = expf(-0.5f * U2 * U2);
-    const float eV1 = expf(-0.5f * V1 * V1), eV2 = expf(-0.5f * V2 * V2);
-    const float i0u = s.sigma1 * (gaussian_moment0(U2, eU2) - gaussian_moment0(U1, eU1));
-    const float i0v = s.sigma2 * (gaussian_moment0(V2, eV2) - gaussian_moment0(V1, eV1));
-    const float inv_area = 1.0f / (lu * lv);
-    const float alpha = minf(s.opacity * i0u * i0v * inv_area, MAX_ALPHA);  // mean alpha over the window
-    if (alpha < MIN_ALPHA_GB) return false;
-    const float weight = win.T * alpha;  // eq. 9
-    C[0] += s.color[0] * weight;
-    C[1] += s.color[1] * weight;
-    C[2] += s.color[2] * weight;
+    const M inside = L::and_(pass, normal);
+    if (!L::any(inside)) return stop;
+    // Lanes outside `inside` are computed on harmless arguments and discarded.
+    const F U1c = L::select(inside, U1, zero), U2c = L::select(inside, U2, zero);
+    const F V1c = L::select(inside, V1, zero), V2c = L::select(inside, V2, zero);
+    const F m = L::set(-0.5f);
+    const F eU1 = L::exp(m * U1c * U1c), eU2 = L::exp(m * U2c * U2c);
+    const F eV1 = L::exp(m * V1c * V1c), eV2 = L::exp(m * V2c * V2c);
+    const F s1 = L::set(s.sigma1), s2 = L::set(s.sigma2);
+    const F i0u = s1 * (gaussian_moment0<L>(U2c, eU2) - gaussian_moment0<L>(U1c, eU1));
+    const F i0v = s2 * (gaussian_moment0<L>(V2c, eV2) - gaussian_moment0<L>(V1c, eV1));
+    const F inv_area = L::set(1.0f) / (lu * lv);
+    const F o = L::set(s.opacity);
+    const F alpha = L::min(o * i0u * i0v * inv_area, L::set(MAX_ALPHA));  // mean alpha over the window
+    const M take = L::and_not(inside, alpha < L::set(MIN_ALPHA_GB));
+    const F weight = win.T * alpha;  // eq. 9
+    for (int c = 0; c < 3; ++c) win.C[c] = L::select(take, win.C[c] + L::set(s.color[c]) * weight, win.C[c]);
 
-    const float s1sq = s.sigma1 * s.sigma1, s2sq = s.sigma2 * s.sigma2;
-    const float i1u = s1sq * (eU1 - eU2), i1v = s2sq * (eV1 - eV2);
-    const float i2u = s1sq * (i0u + s.sigma1 * (U1 * eU1 - U2 * eU2));
-    const float i2v = s2sq * (i0v + s.sigma2 * (V1 * eV1 - V2 * eV2));
-    const float k = win.T * inv_area * s.opacity;
+    const F s1sq = s1 * s1, s2sq = s2 * s2;
+    const F i1u = s1sq * (eU1 - eU2), i1v = s2sq * (eV1 - eV2);
+    const F i2u = s1sq * (i0u + s1 * (U1c * eU1 - U2c * eU2));
+    const F i2v = s2sq * (i0v + s2 * (V1c * eV1 - V2c * eV2));
+    const F k = win.T * inv_area * o;
+    const F twelfth = L::set(1.0f / 12.0f);
     // eq. 10: moments of T(x)(1 - alpha(x)) over the window, in the splat's eigen-frame
-    const float m0 = win.T - weight;
-    const float m1u = win.T * u - k * i1u * i0v, m1v = win.T * v - k * i0u * i1v;
-    const float m2u = win.T * (u * u + lu * lu / 12.0f) - k * i2u * i0v;
-    const float m2v = win.T * (v * v + lv * lv / 12.0f) - k * i0u * i2v;
+    const F m0 = win.T - weight;
+    const F m1u = win.T * u - k * i1u * i0v, m1v = win.T * v - k * i0u * i1v;
+    const F m2u = win.T * (u * u + lu * lu * twelfth) - k * i2u * i0v;
+    const F m2v = win.T * (v * v + lv * lv * twelfth) - k * i0u * i2v;
     // eq. 11: the uniform window with the same mass, mean and variance
-    const float inv_m0 = 1.0f / m0;
-    const float mu = m1u * inv_m0, mv = m1v * inv_m0;
-    const float var_u = maxf(m2u * inv_m0 - mu * mu, GB_MIN_VAR), var_v = maxf(m2v * inv_m0 - mv * mv, GB_MIN_VAR);
-    win.T = m0;
-    win.xy = s.xy + mu * s.v1 + mv * v2;
-    const float wu = sqrtf(12.0f * var_u), wv = sqrtf(12.0f * var_v);
-    win.wh = aligned ? Vec2{wu, wv} : Vec2{wv, wu};
-    return win.T < T_STOP;
+    const F inv_m0 = L::set(1.0f) / m0;
+    const F mu = m1u * inv_m0, mv = m1v * inv_m0;
+    const F min_var = L::set(GB_MIN_VAR), twelve = L::set(12.0f);
+    const F wu = L::sqrt(twelve * L::max(m2u * inv_m0 - mu * mu, min_var));
+    const F wv = L::sqrt(twelve * L::max(m2v * inv_m0 - mv * mv, min_var));
+    win.T = L::select(take, m0, win.T);
+    win.x = L::select(take, L::set(s.xy.x) + mu * L::set(s.v1.x) + mv * L::set(-s.v1.y), win.x);
+    win.y = L::select(take, L::set(s.xy.y) + mu * L::set(s.v1.y) + mv * L::set(s.v1.x), win.y);
+    win.w = L::select(take, aligned ? wu : wv, win.w);
+    win.h = L::select(take, aligned ? wv : wu, win.h);
+    return L::or_(stop, L::and_(take, win.T < L::set(T_STOP)));
 }
 
 // ---- order-independent modes -----------------------------------------------------------------------------------
 
-// LC-WSR sums for one pixel: sum of alpha_i c_i and of alpha_i, in 64-bit fixed point with 2^-36 resolution.
+// LC-WSR sums per lane: sum of alpha_i c_i and of alpha_i, in 64-bit fixed point with 2^-36 resolution.
 // Integer addition is associative, so the sums (and the pixel) are bitwise the same for any order of the
 // splats: the CPU's tile lists stay in splat-index order, unsorted, and still give a permutation-invariant
 // image. Each float term is rounded once to the fixed-point grid (absolute error <= 2^-37 per term, ~1e-7 after
 // 10^4 terms, far below float32 rounding of the final quotient). The GLSL port accumulates in float.
-struct WsrSums {
-    int64_t C[3];
-    int64_t S;
+template <int N>
+struct WsrSumsN {
+    int64_t C[3][N];
+    int64_t S[N];
 };
 
 // A non-negative float on the fixed-point grid. Terms are clamped to WSR_FIXED_MAX = 2^6, 2^42 on the grid, so
@@ -159,30 +219,38 @@ struct WsrSums {
 GBV_HD int64_t to_fixed(float x) { return (int64_t)rintf(minf(x, WSR_FIXED_MAX) * WSR_FIXED_SCALE); }
 
 // `wsr`: sort-free weighted sum (KERNELS.md §7.2): alpha = o' exp(power), no 0.99 clamp, skipped below 1/255,
-// C += c alpha, S += alpha; no transmittance and no early termination (never returns true). The weight alpha is
+// C += c alpha, S += alpha; no transmittance and no early termination (never stops a lane). The weight alpha is
 // capped at WSR_FIXED_MAX (the fixed-point bound; only huge trained view weights reach it) before it multiplies
-// the colour, so a capped splat keeps its colour.
-GBV_HD bool blend_wsr(const Splat2D& s, Vec2 pix, WsrSums& acc) {
-    const Vec2 d = s.xy - pix;
-    const float power = -0.5f * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
-    if (power > 0.0f || power < s.log_min_alpha) return false;
-    const float alpha = minf(s.opacity * expf(power), WSR_FIXED_MAX);
-    if (alpha < MIN_ALPHA_3DGS) return false;
-    acc.C[0] += to_fixed(s.color[0] * alpha);
-    acc.C[1] += to_fixed(s.color[1] * alpha);
-    acc.C[2] += to_fixed(s.color[2] * alpha);
-    acc.S += to_fixed(alpha);
-    return false;
+// the colour, so a capped splat keeps its colour. The fixed-point sums are added lane by lane.
+template <class L>
+GBV_HD void blend_wsr(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
+                      WsrSumsN<L::N>& acc) {
+    using F = typename L::F;
+    using M = typename L::M;
+    const F power = gaussian_power<L>(s, L::set(s.xy.x) - px, L::set(s.xy.y) - py);
+    M pass = L::and_(live, L::and_(power <= L::set(0.0f), power >= L::set(s.log_min_alpha)));
+    if (!L::any(pass)) return;
+    const F alpha = L::min(L::set(s.opacity) * L::exp(L::select(pass, power, L::set(0.0f))), L::set(WSR_FIXED_MAX));
+    pass = L::and_not(pass, alpha < L::set(MIN_ALPHA_3DGS));
+    const uint32_t bits = L::bits(pass);
+    if (!bits) return;
+    float a[L::N], c[3][L::N];
+    L::store(alpha, a);
+    for (int k = 0; k < 3; ++k) L::store(L::set(s.color[k]) * alpha, c[k]);
+    for (int i = 0; i < L::N; ++i) {
+        if (!((bits >> i) & 1u)) continue;
+        for (int k = 0; k < 3; ++k) acc.C[k][i] += to_fixed(c[k][i]);
+        acc.S[i] += to_fixed(a[i]);
+    }
 }
 
-// Duplex-GS per-pixel state (KERNELS.md §8.4): T = cummult, the product of (1 - alpha/E) over every splat blended
+// Duplex-GS per-lane state (KERNELS.md §8.4): T = cummult, the product of (1 - alpha/E) over every splat blended
 // so far; T_cell = T when the current cell was entered (anchor_correct); the weighted sums C and S.
-struct DuplexState {
-    float T;
-    float T_cell;
-    int32_t cell;
-    float S;
-    float C[3];
+template <class L>
+struct DuplexLanes {
+    typename L::F T, T_cell;
+    typename L::I cell;
+    typename L::F S, C[3];
 };
 
 // `duplex`: one splat of a cell-sorted list (cells front to back, a cell's splats in any order). Pixels outside
@@ -190,26 +258,32 @@ struct DuplexState {
 // entering a new cell the pixel stops when T < 0.01, else T_cell = T. Then alpha /= E, T *= 1 - alpha, and the
 // splat adds with weight alpha T_cell. Inside a cell every weight uses the same T_cell: the cell's sum does not
 // depend on the order of its splats (only the float rounding of T does).
-GBV_HD bool blend_duplex(const Splat2D& s, Vec2 pix, float et_grade, DuplexState& st) {
-    const Vec2 d = s.xy - pix;
-    if (d.x * d.x + d.y * d.y > s.radius * s.radius) return false;
-    const float power = -0.5f * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
-    if (power > 0.0f || power < s.log_min_alpha) return false;
-    float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
-    if (alpha < MIN_ALPHA_3DGS) return false;
-    if (s.cell != st.cell) {
-        if (st.T < DUPLEX_T_STOP) return true;
-        st.cell = s.cell;
-        st.T_cell = st.T;
-    }
-    alpha = alpha / et_grade;
-    st.T *= 1.0f - alpha;
-    const float w = alpha * st.T_cell;
-    st.C[0] += s.color[0] * w;
-    st.C[1] += s.color[1] * w;
-    st.C[2] += s.color[2] * w;
-    st.S += w;
-    return false;
+template <class L>
+GBV_HD typename L::M blend_duplex(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
+                                  float et_grade, DuplexLanes<L>& st) {
+    using F = typename L::F;
+    using M = typename L::M;
+    const F dx = L::set(s.xy.x) - px, dy = L::set(s.xy.y) - py;
+    const M near = L::and_not(live, dx * dx + dy * dy > L::set(s.radius * s.radius));
+    if (!L::any(near)) return L::none();
+    const F power = gaussian_power<L>(s, dx, dy);
+    M pass = L::and_(near, L::and_(power <= L::set(0.0f), power >= L::set(s.log_min_alpha)));
+    if (!L::any(pass)) return L::none();
+    F alpha = L::min(L::set(s.opacity) * L::exp(L::select(pass, power, L::set(0.0f))), L::set(MAX_ALPHA));
+    pass = L::and_not(pass, alpha < L::set(MIN_ALPHA_3DGS));
+    if (!L::any(pass)) return L::none();
+    const M entering = L::and_not(pass, L::eqi(st.cell, L::seti(s.cell)));
+    const M stop = L::and_(entering, st.T < L::set(DUPLEX_T_STOP));
+    const M enter = L::and_not(entering, stop);
+    st.cell = L::selecti(enter, L::seti(s.cell), st.cell);
+    st.T_cell = L::select(enter, st.T, st.T_cell);
+    const M add = L::and_not(pass, stop);
+    alpha = alpha / L::set(et_grade);
+    st.T = L::select(add, st.T * (L::set(1.0f) - alpha), st.T);
+    const F w = alpha * st.T_cell;
+    for (int c = 0; c < 3; ++c) st.C[c] = L::select(add, st.C[c] + L::set(s.color[c]) * w, st.C[c]);
+    st.S = L::select(add, st.S + w, st.S);
+    return stop;
 }
 
 // The published normalisation out = (C + bg w_bg) / (S + w_bg T_bg), written as out = C' + T' bg with
@@ -223,54 +297,54 @@ GBV_HD void resolve_weighted(const float C[3], float S, float wbg, float T_bg, f
     *out_T = wbg / total;
 }
 
-// Result of blending one pixel (or sub-pixel sample).
-struct PixelOut {
-    float C[3];
-    float T;         // final transmittance
-    int32_t evals;   // splats evaluated
-    Vec2 window;     // final window size (gaussian_blending only)
-};
+// ---- one pixel (CUDA's per-thread loop; the GLSL port has these names) ----------------------------------------------
 
-// Blend the splats `list[0..n)` at pixel centre `pix` in `mode`: depth-sorted for the alpha-blending modes, in
-// any order for wsr, cell-sorted for duplex. The output is C + T bg in every mode (see resolve_weighted).
-template <typename SplatAt>
-GBV_HD PixelOut blend_pixel(Mode mode, Vec2 pix, int n, SplatAt splat_at, const OitParams& oit) {
-    PixelOut o = {{0.0f, 0.0f, 0.0f}, 1.0f, 0, {1.0f, 1.0f}};
-    if (mode == WSR) {
-        WsrSums acc = {{0, 0, 0}, 0};
-        for (int i = 0; i < n; ++i) blend_wsr(splat_at(i), pix, acc);
-        const float C[3] = {(float)acc.C[0] * (1.0f / WSR_FIXED_SCALE), (float)acc.C[1] * (1.0f / WSR_FIXED_SCALE),
-                            (float)acc.C[2] * (1.0f / WSR_FIXED_SCALE)};
-        resolve_weighted(C, (float)acc.S * (1.0f / WSR_FIXED_SCALE), oit.weight_background, 1.0f, o.C, &o.T);
-        o.evals = n;
-        return o;
-    }
-    if (mode == DUPLEX) {
-        DuplexState st = {1.0f, 1.0f, -1, 0.0f, {0.0f, 0.0f, 0.0f}};
-        int i = 0;
-        while (i < n && !blend_duplex(splat_at(i), pix, oit.et_grade, st)) ++i;
-        o.evals = i < n ? i + 1 : n;
-        const float wbg = st.T < DUPLEX_T_STOP ? 0.0f : oit.weight_background;
-        resolve_weighted(st.C, st.S, wbg, st.T, o.C, &o.T);
-        return o;
-    }
-    if (mode == GAUSSIAN_BLENDING) {
-        TransmittanceWindow win = {1.0f, pix, {1.0f, 1.0f}};
-        int i = 0;
-        while (i < n && !blend_gaussian(splat_at(i), win, o.C)) ++i;
-        o.evals = i < n ? i + 1 : n;
-        o.T = win.T;
-        o.window = win.wh;
-        return o;
-    }
-    int i = 0;
-    if (mode == ANALYTIC) {
-        while (i < n && !blend_analytic(splat_at(i), pix, o.T, o.C)) ++i;
-    } else {
-        while (i < n && !blend_scalar(splat_at(i), pix, o.T, o.C)) ++i;
-    }
-    o.evals = i < n ? i + 1 : n;
-    return o;
+// Pixel state of the one-pixel wrappers: scalar transmittance T and colour C, the Gaussian Blending window,
+// the wsr sums, the duplex state.
+struct TransmittanceWindow {
+    float T;
+    Vec2 xy;
+    Vec2 wh;
+};
+struct WsrSums {
+    int64_t C[3];
+    int64_t S;
+};
+using DuplexState = DuplexLanes<Lanes1>;
+
+GBV_HD bool blend_scalar(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
+    AlphaState<Lanes1> st = {T, {C[0], C[1], C[2]}};
+    const bool stop = blend_scalar<Lanes1>(s, pix.x, pix.y, true, st);
+    T = st.T;
+    for (int c = 0; c < 3; ++c) C[c] = st.C[c];
+    return stop;
+}
+
+GBV_HD bool blend_analytic(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
+    AlphaState<Lanes1> st = {T, {C[0], C[1], C[2]}};
+    const bool stop = blend_analytic<Lanes1>(s, pix.x, pix.y, true, st);
+    T = st.T;
+    for (int c = 0; c < 3; ++c) C[c] = st.C[c];
+    return stop;
+}
+
+GBV_HD bool blend_gaussian(const Splat2D& s, TransmittanceWindow& win, float C[3]) {
+    WindowState<Lanes1> st = {win.T, win.xy.x, win.xy.y, win.wh.x, win.wh.y, {C[0], C[1], C[2]}};
+    const bool stop = blend_gaussian<Lanes1>(s, true, st);
+    win = {st.T, {st.x, st.y}, {st.w, st.h}};
+    for (int c = 0; c < 3; ++c) C[c] = st.C[c];
+    return stop;
+}
+
+GBV_HD bool blend_wsr(const Splat2D& s, Vec2 pix, WsrSums& acc) {
+    WsrSumsN<1> lane = {{{acc.C[0]}, {acc.C[1]}, {acc.C[2]}}, {acc.S}};
+    blend_wsr<Lanes1>(s, pix.x, pix.y, true, lane);
+    acc = {{lane.C[0][0], lane.C[1][0], lane.C[2][0]}, lane.S[0]};
+    return false;
+}
+
+GBV_HD bool blend_duplex(const Splat2D& s, Vec2 pix, float et_grade, DuplexState& st) {
+    return blend_duplex<Lanes1>(s, pix.x, pix.y, true, et_grade, st);
 }
 
 }  // namespace gbv

@@ -4,10 +4,15 @@
 #include <cmath>
 #include <cstdint>
 
+// GBV_HD: a kernel function for both compilers. On the host it has internal linkage, so the CPU's per-instruction-set
+// translation units (native/cpu/, each built with its own -m flags) each keep their own copy: the linker cannot
+// merge an AVX-512 copy into the baseline path. GBV_HDI: the same for member functions (always inlined).
 #if defined(__CUDACC__)
 #define GBV_HD __host__ __device__ __forceinline__
+#define GBV_HDI __host__ __device__ __forceinline__
 #else
-#define GBV_HD inline
+#define GBV_HD static inline __attribute__((always_inline))
+#define GBV_HDI inline __attribute__((always_inline))
 #endif
 
 namespace gbv {

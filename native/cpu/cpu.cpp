@@ -1,17 +1,25 @@
 // CPU driver: preprocess (parallel over splats), per-tile binning and depth sort, blending
 // (parallel over tiles, dynamic schedule). The math is in include/gbv/*.h, shared with CUDA.
 #include <omp.h>
+#if defined(__SSE__) || defined(__x86_64__)
+#include <xmmintrin.h>
+#endif
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <chrono>
 #include <cstring>
 #include <stdexcept>
 #include <vector>
 
-#include "gbv/blend.h"
+#include "blend_tile.h"
 #include "gbv/camera.h"
 #include "gbv/preprocess.h"
 #include "nb_common.h"
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+#include "simd.h"
 
 namespace nb = nanobind;
 using namespace gbv;
@@ -207,7 +215,44 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
     st.pairs += tile_start[num_tiles];
 }
 
-// Blend: each tile copies its splats into a contiguous per-thread buffer, then blends its pixels.
+// Box of pixel centres where the splat can pass its mode's cut-off (blend_tile skips it elsewhere without
+// evaluating it). scalar, mip, wsr, duplex: the ellipse power >= log_min_alpha, i.e. d^T conic d <= r2 with
+// r2 = -2 log_min_alpha, whose half-extents are sqrt(r2 Sigma_xx) and sqrt(r2 Sigma_yy) (Sigma = conic^-1), computed
+// in double and widened for float rounding: the float power at a pixel is off by at most ~4 ulp of
+// conic-weighted |d|^2, i.e. a relative 2.4e-7 (lambda_max / lambda_min) of r2 at the ellipse, so the box grows by
+// 1e-6 kappa^2 + 1e-5 relative plus 0.01 px (the rounding of d = xy - pixel). duplex also has its radius circle.
+// analytic and gaussian_blending (alpha integrated over a pixel or a moving window): no box.
+SplatBounds splat_bounds(const Splat2D& s, Mode mode) {
+    constexpr float inf = std::numeric_limits<float>::infinity();
+    if (mode == ANALYTIC || mode == GAUSSIAN_BLENDING) return {-inf, inf, -inf, inf};
+    const double a = s.conic[0], b = s.conic[1], c = s.conic[2];
+    const double det = a * c - b * b;
+    const double r2 = -2.0 * (double)s.log_min_alpha;
+    const double kappa = (double)s.sigma1 / (double)s.sigma2;
+    if (!(det > 0.0) || !(r2 >= 0.0) || !std::isfinite(kappa)) return {-inf, inf, -inf, inf};
+    const double grow = 1.0 + 1e-6 * kappa * kappa + 1e-5;
+    double ex = std::sqrt(r2 * c / det) * grow + 0.01, ey = std::sqrt(r2 * a / det) * grow + 0.01;
+    if (mode == DUPLEX) {
+        ex = std::min(ex, (double)s.radius + 0.01);
+        ey = std::min(ey, (double)s.radius + 0.01);
+    }
+    if (!std::isfinite(ex) || !std::isfinite(ey)) return {-inf, inf, -inf, inf};
+    return {(float)(s.xy.x - ex), (float)(s.xy.x + ex), (float)(s.xy.y - ey), (float)(s.xy.y + ey)};
+}
+
+// Flush-to-zero and denormals-are-zero for the calling thread while in scope: one subnormal lane would slow a whole
+// vector many times (exp of a very negative argument, products of tiny weights); results differ from IEEE only
+// below 1.2e-38.
+struct FlushDenormals {
+#if defined(__SSE__) || defined(__x86_64__)
+    unsigned saved = _mm_getcsr();
+    FlushDenormals() { _mm_setcsr(saved | 0x8040u); }
+    ~FlushDenormals() { _mm_setcsr(saved); }
+#endif
+};
+
+// Blend: each tile copies its splats (and their boxes) into contiguous per-thread buffers, then the selected SIMD
+// path blends its pixels in lane groups.
 void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>& tile_start,
                  const std::vector<uint64_t>& keys, const CameraParams& cam, Mode mode, const OitParams& oit,
                  const float bg[3], Image& img, Stats& st) {
@@ -215,32 +260,38 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
     const int gx = (W + TILE - 1) / TILE;
     const int num_tiles = (int)tile_start.size() - 1;
     auto t0 = Clock::now();
-    const bool want_window = !img.window.empty();
+    const BlendTileFn blend_tile = simd::current().blend_tile;
 #pragma omp parallel
     {
+        FlushDenormals ftz;
         std::vector<Splat2D> local;
+        std::vector<SplatBounds> bounds;
 #pragma omp for schedule(dynamic, 1)
         for (int t = 0; t < num_tiles; ++t) {
             const int64_t begin = tile_start[t], count = tile_start[t + 1] - begin;
             local.resize(count);
-            for (int64_t j = 0; j < count; ++j) local[j] = splats[(uint32_t)keys[begin + j]];
-            const Splat2D* list = local.data();
-            const int x0 = (t % gx) * TILE, y0 = (t / gx) * TILE;
-            for (int y = y0; y < std::min(y0 + TILE, H); ++y) {
-                for (int x = x0; x < std::min(x0 + TILE, W); ++x) {
-                    const Vec2 pix = {x + 0.5f, y + 0.5f};
-                    const PixelOut o = blend_pixel(
-                        mode, pix, (int)count, [list](int i) -> const Splat2D& { return list[i]; }, oit);
-                    const size_t p = (size_t)y * W + x;
-                    for (int c = 0; c < 3; ++c) img.rgb[p * 3 + c] = o.C[c] + o.T * bg[c];
-                    img.alpha[p] = 1.0f - o.T;
-                    img.evals[p] = o.evals;
-                    if (want_window) {
-                        img.window[p * 2] = o.window.x;
-                        img.window[p * 2 + 1] = o.window.y;
-                    }
-                }
+            bounds.resize(count);
+            for (int64_t j = 0; j < count; ++j) {
+                local[j] = splats[(uint32_t)keys[begin + j]];
+                bounds[j] = splat_bounds(local[j], mode);
             }
+            TileJob job;
+            job.list = local.data();
+            job.bounds = bounds.data();
+            job.n = (int)count;
+            job.x0 = (t % gx) * TILE;
+            job.y0 = (t / gx) * TILE;
+            job.x1 = std::min(job.x0 + TILE, W);
+            job.y1 = std::min(job.y0 + TILE, H);
+            job.width = W;
+            job.mode = mode;
+            job.oit = oit;
+            for (int c = 0; c < 3; ++c) job.bg[c] = bg[c];
+            job.rgb = img.rgb.data();
+            job.alpha = img.alpha.data();
+            job.window = img.window.empty() ? nullptr : img.window.data();
+            job.evals = img.evals.data();
+            blend_tile(job);
         }
     }
     st.blend_ms += ms_since(t0);
@@ -371,13 +422,41 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
         }
         if (threads > 0) omp_set_num_threads(prev_threads);
     }
-    return result_dict(out, st, (size_t)height, (size_t)width);
+    nb::dict d = result_dict(out, st, (size_t)height, (size_t)width);
+    d["simd"] = simd::current().name;
+    return d;
+}
+
+// Exp evaluations per second on one core through a SIMD path's exp (the benchmark's reference rate).
+double exp_rate(const std::string& path, int64_t n) {
+    for (const simd::Path* p : simd::supported()) {
+        if (path != p->name) continue;
+        nb::gil_scoped_release release;
+        FlushDenormals ftz;
+        auto t0 = Clock::now();
+        volatile float sink = p->exp_sum(n);
+        (void)sink;
+        return (double)n / (ms_since(t0) * 1e-3);
+    }
+    simd::select(path);  // throws the error naming the available paths
+    return 0.0;
 }
 
 }  // namespace
 
 NB_MODULE(_native, m) {
-    m.doc() = "gbviewer CPU renderer (C++17, OpenMP)";
+    m.doc() = "gbviewer CPU renderer (C++17, OpenMP; blend vectorised with Google Highway, chosen at run time)";
+    simd::init_from_env();
+    m.def("simd", [] { return std::string(simd::current().name); }, "The SIMD path renders use.");
+    m.def("simd_paths", [] {
+        std::vector<std::string> names;
+        for (const simd::Path* p : simd::supported()) names.push_back(p->name);
+        return names;
+    }, "SIMD paths this CPU and build can run, best last.");
+    m.def("set_simd", [](const std::string& name) { simd::select(name); }, nb::arg("name"),
+          "Use this SIMD path for later renders (scalar, avx2, avx512).");
+    m.def("exp_rate", &exp_rate, nb::arg("path"), nb::arg("n"),
+          "Exp evaluations per second on one core through the path's vector exp.");
     m.def("render", &render, nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"),
           nb::arg("sh"), nb::arg("filter_3d").none(), nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"),
           nb::arg("cx"), nb::arg("cy"), nb::arg("width"), nb::arg("height"), nb::arg("near_plane"),

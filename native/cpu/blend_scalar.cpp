@@ -1,0 +1,12 @@
+// The blend one pixel at a time (Lanes1): the path for CPUs without AVX2 and the reference the vector paths are
+// tested against. Built with the baseline flags.
+#include "blend_tile.h"
+#include "exp_sum.h"
+
+namespace gbv {
+
+void blend_tile_scalar(const TileJob& job) { blend_tile<Lanes1>(job); }
+
+float exp_sum_scalar(int64_t n) { return exp_sum<Lanes1>(n); }
+
+}  // namespace gbv

@@ -1,0 +1,175 @@
+// One tile's pixels, blended in groups of L::N lanes (a row segment of the tile): the splats of the tile's list go
+// front to back through the steps of gbv/blend.h for every lane at once, lanes drop out as they terminate, and the
+// group stops when none is left. Instantiated for Lanes1 (scalar path, blend_scalar.cpp) and for Highway's vector
+// lanes (blend_isa.cpp, once per instruction set). The TileJob interface is plain data, so the translation units
+// built for different instruction sets share nothing but these types.
+#pragma once
+
+#include "gbv/blend.h"
+
+namespace gbv {
+
+// Box of pixel centres a splat can change in its mode: outside it the splat is skipped without evaluating it (an
+// exact test, with margin for float rounding; see splat_bounds in cpu.cpp). Infinite where no such box is known.
+struct SplatBounds {
+    float x0, x1, y0, y1;
+};
+
+struct TileJob {
+    const Splat2D* list;        // the tile's splats in blend order
+    const SplatBounds* bounds;  // one per list entry
+    int n;
+    int x0, y0, x1, y1;  // pixel rectangle [x0, x1) x [y0, y1)
+    int width;           // image row stride in pixels
+    Mode mode;
+    OitParams oit;
+    float bg[3];
+    float *rgb, *alpha, *window;  // image planes; window may be null
+    int32_t* evals;
+};
+
+using BlendTileFn = void (*)(const TileJob&);
+
+namespace tile {
+
+// A lane group: N pixels of one row, `count` of them inside the tile.
+template <class L>
+struct Group {
+    typename L::F px, py;
+    typename L::M live;
+    float xa, xb, y;  // pixel centres of the first and last lane, row centre
+    int count;
+};
+
+inline bool outside(const SplatBounds& b, float xa, float xb, float y) {
+    return y < b.y0 || y > b.y1 || xb < b.x0 || xa > b.x1;
+}
+
+// Per-lane outputs of a group before they are written to the image.
+template <int N>
+struct Out {
+    float C[3][N], T[N], wx[N], wy[N];
+    int32_t evals[N];
+};
+
+// Walk the list for one group: `step(splat, live) -> stopped lanes`. A lane's evals is the list position where it
+// stopped (+1), else n: the same count as one pixel walking the list (skipped entries count as walked).
+template <class L, class Step>
+void walk(const TileJob& job, const Group<L>& g, Out<L::N>& out, Step step) {
+    typename L::M live = g.live;
+    for (int i = 0; i < L::N; ++i) out.evals[i] = job.n;
+    for (int i = 0; i < job.n; ++i) {
+        if (outside(job.bounds[i], g.xa, g.xb, g.y)) continue;
+        const typename L::M stop = step(job.list[i], live);
+        const uint32_t bits = L::bits(stop);
+        if (!bits) continue;
+        for (int k = 0; k < L::N; ++k)
+            if ((bits >> k) & 1u) out.evals[k] = i + 1;
+        live = L::and_not(live, stop);
+        if (!L::any(live)) break;
+    }
+}
+
+template <class L>
+void group_alpha(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
+    AlphaState<L> st = {L::set(1.0f), {L::set(0.0f), L::set(0.0f), L::set(0.0f)}};
+    if (job.mode == ANALYTIC)
+        walk(job, g, out, [&](const Splat2D& s, typename L::M live) {
+            return blend_analytic<L>(s, g.px, g.py, live, st);
+        });
+    else
+        walk(job, g, out, [&](const Splat2D& s, typename L::M live) {
+            return blend_scalar<L>(s, g.px, g.py, live, st);
+        });
+    for (int c = 0; c < 3; ++c) L::store(st.C[c], out.C[c]);
+    L::store(st.T, out.T);
+}
+
+template <class L>
+void group_gaussian(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
+    const typename L::F one = L::set(1.0f), zero = L::set(0.0f);
+    WindowState<L> win = {one, g.px, g.py, one, one, {zero, zero, zero}};
+    walk(job, g, out, [&](const Splat2D& s, typename L::M live) { return blend_gaussian<L>(s, live, win); });
+    for (int c = 0; c < 3; ++c) L::store(win.C[c], out.C[c]);
+    L::store(win.T, out.T);
+    L::store(win.w, out.wx);
+    L::store(win.h, out.wy);
+}
+
+template <class L>
+void group_wsr(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
+    WsrSumsN<L::N> acc = {};
+    walk(job, g, out, [&](const Splat2D& s, typename L::M live) {
+        blend_wsr<L>(s, g.px, g.py, live, acc);
+        return L::none();
+    });
+    const float inv = 1.0f / WSR_FIXED_SCALE;
+    for (int k = 0; k < L::N; ++k) {
+        const float C[3] = {(float)acc.C[0][k] * inv, (float)acc.C[1][k] * inv, (float)acc.C[2][k] * inv};
+        float rc[3];
+        resolve_weighted(C, (float)acc.S[k] * inv, job.oit.weight_background, 1.0f, rc, &out.T[k]);
+        for (int c = 0; c < 3; ++c) out.C[c][k] = rc[c];
+    }
+}
+
+template <class L>
+void group_duplex(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
+    const typename L::F one = L::set(1.0f), zero = L::set(0.0f);
+    DuplexLanes<L> st = {one, one, L::seti(-1), zero, {zero, zero, zero}};
+    walk(job, g, out, [&](const Splat2D& s, typename L::M live) {
+        return blend_duplex<L>(s, g.px, g.py, live, job.oit.et_grade, st);
+    });
+    float T[L::N], S[L::N], C[3][L::N];
+    L::store(st.T, T);
+    L::store(st.S, S);
+    for (int c = 0; c < 3; ++c) L::store(st.C[c], C[c]);
+    for (int k = 0; k < L::N; ++k) {
+        const float Ck[3] = {C[0][k], C[1][k], C[2][k]};
+        float rc[3];
+        resolve_weighted(Ck, S[k], T[k] < DUPLEX_T_STOP ? 0.0f : job.oit.weight_background, T[k], rc, &out.T[k]);
+        for (int c = 0; c < 3; ++c) out.C[c][k] = rc[c];
+    }
+}
+
+}  // namespace tile
+
+// Blend every pixel of the job's tile and write rgb = C + T bg, alpha = 1 - T, evals and (gaussian_blending) the
+// final window size.
+template <class L>
+void blend_tile(const TileJob& job) {
+    constexpr int N = L::N;
+    float offsets[N];
+    for (int k = 0; k < N; ++k) offsets[k] = (float)k + 0.5f;
+    const typename L::F lane_offset = L::load(offsets);
+    tile::Out<N> out;
+    for (int y = job.y0; y < job.y1; ++y) {
+        for (int x = job.x0; x < job.x1; x += N) {
+            tile::Group<L> g;
+            g.count = job.x1 - x < N ? job.x1 - x : N;
+            g.px = L::set((float)x) + lane_offset;  // x + k + 0.5 exactly, as one pixel computes it
+            g.py = L::set((float)y + 0.5f);
+            g.live = L::first_n(g.count);
+            g.xa = (float)x + 0.5f;
+            g.xb = (float)(x + g.count - 1) + 0.5f;
+            g.y = (float)y + 0.5f;
+            switch (job.mode) {
+                case GAUSSIAN_BLENDING: tile::group_gaussian<L>(job, g, out); break;
+                case WSR: tile::group_wsr<L>(job, g, out); break;
+                case DUPLEX: tile::group_duplex<L>(job, g, out); break;
+                default: tile::group_alpha<L>(job, g, out); break;
+            }
+            for (int k = 0; k < g.count; ++k) {
+                const size_t p = (size_t)y * job.width + x + k;
+                for (int c = 0; c < 3; ++c) job.rgb[p * 3 + c] = out.C[c][k] + out.T[k] * job.bg[c];
+                job.alpha[p] = 1.0f - out.T[k];
+                job.evals[p] = out.evals[k];
+                if (job.window) {
+                    job.window[p * 2] = out.wx[k];
+                    job.window[p * 2 + 1] = out.wy[k];
+                }
+            }
+        }
+    }
+}
+
+}  // namespace gbv

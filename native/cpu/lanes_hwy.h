@@ -1,0 +1,116 @@
+// Vector lanes for the blend steps (gbv/lanes.h) on Google Highway: 8 floats with AVX2, 16 with AVX-512. Included
+// by blend_isa.cpp, which is compiled once per instruction set with that set's -m flags, so Highway's static
+// target (hwy::HWY_NAMESPACE, e.g. N_AVX2) is the one the file is built for and the type lives in that namespace.
+#pragma once
+
+#include <hwy/highway.h>
+
+#include <type_traits>
+#include <hwy/contrib/math/math-inl.h>
+
+#include "gbv/common.h"
+
+namespace gbv::HWY_NAMESPACE {
+
+namespace hn = hwy::HWY_NAMESPACE;
+
+struct LanesHwy {
+    using D = hn::ScalableTag<float>;
+    using DI = hn::RebindToSigned<D>;
+    using F = hn::Vec<D>;
+    using M = hn::Mask<D>;
+    using I = hn::Vec<DI>;
+    static constexpr int N = HWY_LANES(float);
+    static HWY_INLINE F set(float v) { return hn::Set(D(), v); }
+    static HWY_INLINE I seti(int32_t v) { return hn::Set(DI(), v); }
+    static HWY_INLINE M none() { return hn::FirstN(D(), 0); }
+    static HWY_INLINE bool any(M m) { return !hn::AllFalse(D(), m); }
+    static HWY_INLINE M and_(M a, M b) { return hn::And(a, b); }
+    static HWY_INLINE M or_(M a, M b) { return hn::Or(a, b); }
+    static HWY_INLINE M and_not(M a, M b) { return hn::AndNot(b, a); }  // Highway's AndNot(x, y) is ~x & y
+    static HWY_INLINE M eqi(I a, I b) { return hn::RebindMask(D(), a == b); }
+    static HWY_INLINE F select(M m, F a, F b) { return hn::IfThenElse(m, a, b); }
+    static HWY_INLINE I selecti(M m, I a, I b) { return hn::IfThenElse(hn::RebindMask(DI(), m), a, b); }
+    static HWY_INLINE F neg(F x) { return hn::Neg(x); }
+    static HWY_INLINE F abs(F x) { return hn::Abs(x); }
+    static HWY_INLINE F min(F a, F b) { return hn::IfThenElse(a < b, a, b); }  // minf's NaN rule
+    static HWY_INLINE F max(F a, F b) { return hn::IfThenElse(a > b, a, b); }
+    static HWY_INLINE F sqrt(F x) { return hn::Sqrt(x); }
+    // Highway's Exp: 1 ulp on [-FLT_MAX, 104], 0 below -104. Arguments above 88.7 overflow float anyway; the clamp
+    // keeps them in Exp's range (the blend steps pass no NaN: they reject NaN exponents first).
+    static HWY_INLINE F exp(F x) { return hn::Exp(D(), hn::Min(x, hn::Set(D(), 88.0f))); }
+    static HWY_INLINE F load(const float* p) { return hn::LoadU(D(), p); }
+    static HWY_INLINE M first_n(int k) { return hn::FirstN(D(), (size_t)(k < 0 ? 0 : k)); }
+    static HWY_INLINE void store(F v, float* out) { hn::StoreU(v, D(), out); }
+    static HWY_INLINE uint32_t bits(M m) {
+        uint8_t b[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+        hn::StoreMaskBits(D(), m, b);
+        return (uint32_t)b[0] | (uint32_t)b[1] << 8;
+    }
+};
+
+}  // namespace gbv::HWY_NAMESPACE
+
+namespace gbv::HWY_NAMESPACE {
+
+// Two vectors as one lane type of 2N lanes: a whole 16-pixel tile row per splat walk with AVX2, which halves the
+// per-splat work outside the lanes and gives the core two independent dependency chains.
+template <class V>
+struct Pair {
+    V a, b;
+};
+template <class V>
+HWY_INLINE Pair<V> operator+(Pair<V> x, Pair<V> y) { return {x.a + y.a, x.b + y.b}; }
+template <class V>
+HWY_INLINE Pair<V> operator-(Pair<V> x, Pair<V> y) { return {x.a - y.a, x.b - y.b}; }
+template <class V>
+HWY_INLINE Pair<V> operator*(Pair<V> x, Pair<V> y) { return {x.a * y.a, x.b * y.b}; }
+template <class V>
+HWY_INLINE Pair<V> operator/(Pair<V> x, Pair<V> y) { return {x.a / y.a, x.b / y.b}; }
+#define GBV_PAIR_CMP(op)                                                                            \
+    template <class V>                                                                              \
+    HWY_INLINE Pair<decltype(V() op V())> operator op(Pair<V> x, Pair<V> y) {                       \
+        return {x.a op y.a, x.b op y.b};                                                            \
+    }
+GBV_PAIR_CMP(<)
+GBV_PAIR_CMP(>)
+GBV_PAIR_CMP(<=)
+GBV_PAIR_CMP(>=)
+GBV_PAIR_CMP(==)
+#undef GBV_PAIR_CMP
+
+template <class L>
+struct LanesX2 {
+    using F = Pair<typename L::F>;
+    using M = Pair<typename L::M>;
+    using I = Pair<typename L::I>;
+    static constexpr int N = 2 * L::N;
+    static HWY_INLINE F set(float v) { return {L::set(v), L::set(v)}; }
+    static HWY_INLINE I seti(int32_t v) { return {L::seti(v), L::seti(v)}; }
+    static HWY_INLINE M none() { return {L::none(), L::none()}; }
+    static HWY_INLINE bool any(M m) { return L::any(L::or_(m.a, m.b)); }
+    static HWY_INLINE M and_(M x, M y) { return {L::and_(x.a, y.a), L::and_(x.b, y.b)}; }
+    static HWY_INLINE M or_(M x, M y) { return {L::or_(x.a, y.a), L::or_(x.b, y.b)}; }
+    static HWY_INLINE M and_not(M x, M y) { return {L::and_not(x.a, y.a), L::and_not(x.b, y.b)}; }
+    static HWY_INLINE M eqi(I x, I y) { return {L::eqi(x.a, y.a), L::eqi(x.b, y.b)}; }
+    static HWY_INLINE F select(M m, F x, F y) { return {L::select(m.a, x.a, y.a), L::select(m.b, x.b, y.b)}; }
+    static HWY_INLINE I selecti(M m, I x, I y) { return {L::selecti(m.a, x.a, y.a), L::selecti(m.b, x.b, y.b)}; }
+    static HWY_INLINE F neg(F x) { return {L::neg(x.a), L::neg(x.b)}; }
+    static HWY_INLINE F abs(F x) { return {L::abs(x.a), L::abs(x.b)}; }
+    static HWY_INLINE F min(F x, F y) { return {L::min(x.a, y.a), L::min(x.b, y.b)}; }
+    static HWY_INLINE F max(F x, F y) { return {L::max(x.a, y.a), L::max(x.b, y.b)}; }
+    static HWY_INLINE F sqrt(F x) { return {L::sqrt(x.a), L::sqrt(x.b)}; }
+    static HWY_INLINE F exp(F x) { return {L::exp(x.a), L::exp(x.b)}; }
+    static HWY_INLINE F load(const float* p) { return {L::load(p), L::load(p + L::N)}; }
+    static HWY_INLINE M first_n(int k) { return {L::first_n(k), L::first_n(k - L::N)}; }
+    static HWY_INLINE void store(F v, float* out) {
+        L::store(v.a, out);
+        L::store(v.b, out + L::N);
+    }
+    static HWY_INLINE uint32_t bits(M m) { return L::bits(m.a) | L::bits(m.b) << L::N; }
+};
+
+// The lane type the blend uses: one tile row (16 pixels) per group.
+using BlendLanes = std::conditional_t<(LanesHwy::N >= 16), LanesHwy, LanesX2<LanesHwy>>;
+
+}  // namespace gbv::HWY_NAMESPACE

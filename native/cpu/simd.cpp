@@ -1,0 +1,95 @@
+// Run-time choice of the blend's instruction set. The vector paths are separate translation units built with their
+// own -m flags (CMakeLists.txt); this file is built for the baseline and only calls into them after checking the
+// CPU (and the OS's register state, which __builtin_cpu_supports includes) runs them.
+#include "simd.h"
+
+#include <atomic>
+#include <cstdlib>
+#include <stdexcept>
+
+namespace gbv {
+void blend_tile_scalar(const TileJob& job);
+float exp_sum_scalar(int64_t n);
+#ifdef GBV_HAVE_AVX2
+void blend_tile_avx2(const TileJob& job);
+float exp_sum_avx2(int64_t n);
+#endif
+#ifdef GBV_HAVE_AVX512
+void blend_tile_avx512(const TileJob& job);
+float exp_sum_avx512(int64_t n);
+#endif
+}  // namespace gbv
+
+namespace gbv::simd {
+namespace {
+
+const Path kScalar{"scalar", blend_tile_scalar, exp_sum_scalar};
+#ifdef GBV_HAVE_AVX2
+const Path kAvx2{"avx2", blend_tile_avx2, exp_sum_avx2};
+#endif
+#ifdef GBV_HAVE_AVX512
+const Path kAvx512{"avx512", blend_tile_avx512, exp_sum_avx512};
+#endif
+
+#if defined(GBV_HAVE_AVX2) || defined(GBV_HAVE_AVX512)
+// Everything Highway's AVX2 target is compiled with (its HWY_TARGET_STR_AVX2).
+bool cpu_has_avx2() {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") && __builtin_cpu_supports("bmi") &&
+           __builtin_cpu_supports("bmi2") && __builtin_cpu_supports("f16c") && __builtin_cpu_supports("sse4.2") &&
+           __builtin_cpu_supports("pclmul") && __builtin_cpu_supports("aes");
+}
+#endif
+
+std::atomic<const Path*> g_current{nullptr};
+
+}  // namespace
+
+std::vector<const Path*> supported() {
+    std::vector<const Path*> out{&kScalar};
+#ifdef GBV_HAVE_AVX2
+    if (cpu_has_avx2()) out.push_back(&kAvx2);
+#endif
+#ifdef GBV_HAVE_AVX512
+    if (cpu_has_avx2() && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+        __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw"))
+        out.push_back(&kAvx512);
+#endif
+    return out;
+}
+
+const Path& current() {
+    const Path* p = g_current.load();
+    if (!p) {
+        p = supported().back();
+        g_current.store(p);
+    }
+    return *p;
+}
+
+void select(const std::string& name) {
+    std::string names;
+    for (const Path* p : supported()) {
+        if (name == p->name) {
+            g_current.store(p);
+            return;
+        }
+        names += names.empty() ? p->name : std::string(", ") + p->name;
+    }
+    const bool known = name == "scalar" || name == "avx2" || name == "avx512";
+    throw std::invalid_argument("SIMD path '" + name + "' " +
+                                (known ? "is not supported by this CPU or build" : "is unknown") +
+                                "; available here: " + names);
+}
+
+void init_from_env() {
+    const char* env = std::getenv("GBVIEWER_SIMD");
+    if (!env || !*env) return;
+    try {
+        select(env);
+    } catch (const std::invalid_argument& e) {
+        throw std::runtime_error(std::string("GBVIEWER_SIMD=") + env + ": " + e.what());
+    }
+}
+
+}  // namespace gbv::simd

@@ -1,0 +1,23 @@
+// The SIMD paths of the CPU blend and the choice between them: the widest one the CPU runs, unless
+// GBVIEWER_SIMD=scalar|avx2|avx512 (read when the module loads) or set_simd() names another.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "blend_tile.h"
+
+namespace gbv::simd {
+
+struct Path {
+    const char* name;
+    BlendTileFn blend_tile;
+    float (*exp_sum)(int64_t);
+};
+
+std::vector<const Path*> supported();          // paths this build and CPU can run, best last
+const Path& current();                         // the path renders use now
+void select(const std::string& name);          // throws std::invalid_argument naming the paths available
+void init_from_env();                          // GBVIEWER_SIMD, when set
+
+}  // namespace gbv::simd
