@@ -261,6 +261,8 @@ class CpuRenderer:
         try:
             from . import _native  # noqa: F401
         except ImportError as exc:
+            if "GBVIEWER_SIMD" in str(exc):  # the environment forces a SIMD path this CPU or build lacks
+                return False, str(exc)
             return False, f"native module not built ({exc}); reinstall with pip install ."
         return True, ""
 

@@ -17,10 +17,11 @@ bool composite_scalar(float alpha, vec3 color, inout float T, inout vec3 C) {
     return false;
 }
 
-// Gaussian value exp(power) at offset d = xy - p, or 0 when power > 0 (numerically invalid).
+// Gaussian value exp(power) at offset d = xy - p, or 0 when power > 0 (numerically invalid) or NaN (the blend
+// steps' NaN rule, blend.h).
 float gaussian_at(Splat2D s, vec2 d) {
     const float power = -0.5 * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
-    return power > 0.0 ? 0.0 : expf(power);
+    return power <= 0.0 ? expf(power) : 0.0;
 }
 
 // `scalar` and `mip`: alpha at the pixel centre (eq. 5). Offsets whose power is below
@@ -28,7 +29,7 @@ float gaussian_at(Splat2D s, vec2 d) {
 bool blend_scalar(Splat2D s, vec2 pix, inout float T, inout vec3 C) {
     const vec2 d = s.xy - pix;
     const float power = -0.5 * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
-    if (power > 0.0 || power < s.log_min_alpha) return false;
+    if (!(power <= 0.0 && power >= s.log_min_alpha)) return false;  // NaN rejects (blend.h)
     const float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
     return composite_scalar(alpha, s.color, T, C);
 }
@@ -155,7 +156,7 @@ struct WsrSums {
 bool blend_wsr(Splat2D s, vec2 pix, inout WsrSums acc) {
     const vec2 d = s.xy - pix;
     const float power = -0.5 * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
-    if (power > 0.0 || power < s.log_min_alpha) return false;
+    if (!(power <= 0.0 && power >= s.log_min_alpha)) return false;  // NaN rejects (blend.h)
     const float alpha = minf(s.opacity * expf(power), WSR_FIXED_MAX);
     if (alpha < MIN_ALPHA_3DGS) return false;
     acc.C[0] += minf(s.color[0] * alpha, WSR_FIXED_MAX);
@@ -179,7 +180,7 @@ bool blend_duplex(Splat2D s, vec2 pix, float et_grade, inout DuplexState st) {
     const vec2 d = s.xy - pix;
     if (d.x * d.x + d.y * d.y > s.radius * s.radius) return false;
     const float power = -0.5 * (s.conic[0] * d.x * d.x + s.conic[2] * d.y * d.y) - s.conic[1] * d.x * d.y;
-    if (power > 0.0 || power < s.log_min_alpha) return false;
+    if (!(power <= 0.0 && power >= s.log_min_alpha)) return false;  // NaN rejects (blend.h)
     float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
     if (alpha < MIN_ALPHA_3DGS) return false;
     if (s.cell != st.cell) {

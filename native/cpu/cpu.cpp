@@ -6,6 +6,7 @@
 #endif
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <chrono>
@@ -42,7 +43,7 @@ struct SceneView {
     const float *cell_means = nullptr, *cell_scales = nullptr, *cell_quats = nullptr;
     const int32_t *cell_offsets = nullptr, *cell_members = nullptr;
     int64_t m = 0;
-    std::vector<int32_t> cell_of;
+    std::vector<int32_t> cell_of = {};
 };
 
 struct Image {
@@ -222,9 +223,12 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
 // conic-weighted |d|^2, i.e. a relative 2.4e-7 (lambda_max / lambda_min) of r2 at the ellipse, so the box grows by
 // 1e-6 kappa^2 + 1e-5 relative plus 0.01 px (the rounding of d = xy - pixel). duplex also has its radius circle.
 // analytic and gaussian_blending (alpha integrated over a pixel or a moving window): no box.
+std::atomic<bool> g_pixel_boxes{true};  // off only in tests, to show the boxes change no pixel
+
 SplatBounds splat_bounds(const Splat2D& s, Mode mode) {
     constexpr float inf = std::numeric_limits<float>::infinity();
-    if (mode == ANALYTIC || mode == GAUSSIAN_BLENDING) return {-inf, inf, -inf, inf};
+    if (mode == ANALYTIC || mode == GAUSSIAN_BLENDING || !g_pixel_boxes.load(std::memory_order_relaxed))
+        return {-inf, inf, -inf, inf};
     const double a = s.conic[0], b = s.conic[1], c = s.conic[2];
     const double det = a * c - b * b;
     const double r2 = -2.0 * (double)s.log_min_alpha;
@@ -455,6 +459,8 @@ NB_MODULE(_native, m) {
     }, "SIMD paths this CPU and build can run, best last.");
     m.def("set_simd", [](const std::string& name) { simd::select(name); }, nb::arg("name"),
           "Use this SIMD path for later renders (scalar, avx2, avx512).");
+    m.def("set_pixel_boxes", [](bool on) { g_pixel_boxes.store(on); }, nb::arg("on"),
+          "Test switch: skip lane groups outside a splat's pixel box (default) or evaluate every list entry.");
     m.def("exp_rate", &exp_rate, nb::arg("path"), nb::arg("n"),
           "Exp evaluations per second on one core through the path's vector exp.");
     m.def("render", &render, nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"),

@@ -1,0 +1,232 @@
+"""The CPU blend's SIMD paths (scalar, avx2, avx512) against each other and against the float64 reference.
+
+Tolerance between a vector path and the scalar path: the vector exp (Highway, 1 ulp) and libm's expf differ by up to
+1 ulp, and FMA contraction differs, so colours and alphas agree to ~1e-6 (asserted: 1e-5) except where an alpha within
+~1e-6 of the 1/255 (1/256) cut, or a transmittance that close to the 1e-4 stop, is decided the other way. One flipped
+decision costs up to ~alpha x colour (< 2e-2, as in test_render_reference's ties) in that pixel (and, in Gaussian
+Blending, a slightly different window for later splats there). Such pixels are counted: at most FLIP_FRACTION of an
+image's pixels plus 2. Visible splats, sort lengths and tile-list entries are identical (preprocess is shared).
+
+Gaussian Blending amplifies those ulps: its published window update takes the variance as a difference of large
+moments (float32 cancellation, see test_render_reference), so later windows and integrals drift; there the bounds are
+the reference test's for general scenes: 1e-4, at most 0.5% of the pixels beyond, none beyond 5e-3.
+
+Every path the CPU has runs; a path the CPU lacks (AVX-512 on an AVX2 machine) is skipped with that reason.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import tempfile
+import sys
+from contextlib import contextmanager
+
+import numpy as np
+import pytest
+
+import gbviewer as gb
+from gbviewer import _native
+from test_render_reference import BACKGROUND, SCENES, _check_strict, random_scene
+
+ALL_PATHS = ("scalar", "avx2", "avx512")
+MODES = ("scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex")
+TOL = 1e-5
+FLIP_FRACTION = 2e-3
+FLIP_MAX_ERR = 2e-2
+GB_TOL, GB_FRACTION, GB_MAX_ERR = 1e-4, 5e-3, 5e-3
+
+
+@contextmanager
+def simd(path: str):
+    """Renders inside use `path`; skips when this CPU or build has no such path."""
+    if path not in _native.simd_paths():
+        pytest.skip(f"this CPU/build has no {path} path (it has {', '.join(_native.simd_paths())})")
+    before = _native.simd()
+    _native.set_simd(path)
+    try:
+        yield
+    finally:
+        _native.set_simd(before)
+
+
+def render(path, scene, cam, mode, supersample=1, **kw):
+    with simd(path):
+        return gb.render(scene, cam, mode=mode, supersample=supersample, **kw)
+
+
+def assert_close_to_scalar(vec, ref, what, gaussian_blending=False):
+    tol, fraction, max_err = (GB_TOL, GB_FRACTION, GB_MAX_ERR) if gaussian_blending else (TOL, FLIP_FRACTION,
+                                                                                             FLIP_MAX_ERR)
+    for name in ("visible", "sort_length", "pairs"):
+        assert vec.stats[name] == ref.stats[name], f"{what}: {name} differs"
+    diff = np.maximum(np.abs(vec.rgb - ref.rgb).max(axis=2), np.abs(vec.alpha - ref.alpha))
+    flips = diff > tol
+    allowed = 2 + fraction * diff.size
+    assert flips.sum() <= allowed, f"{what}: {flips.sum()} pixels beyond {tol} (allowed {allowed:.0f})"
+    assert diff.max() <= max_err, f"{what}: max difference {diff.max():.2e}"
+    evals_differ = (vec.debug["evals"] != ref.debug["evals"]).sum()
+    assert evals_differ <= allowed, f"{what}: {evals_differ} pixels stop at another list entry"
+    assert np.isfinite(vec.rgb).all() and np.isfinite(vec.alpha).all()
+
+
+def test_paths_and_stats():
+    paths = _native.simd_paths()
+    assert paths[0] == "scalar" and set(paths) <= set(ALL_PATHS) and _native.simd() in paths
+    if sys.platform.startswith("linux") and os.uname().machine == "x86_64" and "avx2" in _cpu_flags():
+        assert "avx2" in paths, "an AVX2 CPU should get the avx2 path"
+    scene, cam = random_scene(1, n=40)
+    for path in paths:
+        assert render(path, scene, cam, "scalar").stats["simd"] == path
+    assert gb.render(scene, cam).stats["simd"] == _native.simd()
+
+
+def _cpu_flags() -> set[str]:
+    try:
+        text = open("/proc/cpuinfo").read()
+    except OSError:
+        return set()
+    return set(next((ln.split(":")[1].split() for ln in text.splitlines() if ln.startswith("flags")), []))
+
+
+@pytest.mark.parametrize("path", ["avx2", "avx512"])
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("supersample", [1, 2, 3])
+def test_vector_matches_scalar_random(path, mode, supersample):
+    for seed, sh_degree, filter3d in SCENES[:2]:
+        scene, cam = random_scene(seed, n=300, sh_degree=sh_degree, filter3d=filter3d, W=61, H=37)
+        ref = render("scalar", scene, cam, mode, supersample, debug="window" if mode == "gaussian_blending" else "none")
+        vec = render(path, scene, cam, mode, supersample, debug="window" if mode == "gaussian_blending" else "none")
+        assert_close_to_scalar(vec, ref, f"{path} {mode} x{supersample} seed {seed}", mode == "gaussian_blending")
+        if mode == "gaussian_blending":
+            assert np.abs(vec.debug["window"] - ref.debug["window"]).mean() < 1e-4
+
+
+@pytest.mark.parametrize("path", ["avx2", "avx512"])
+@pytest.mark.parametrize("mode", MODES)
+def test_vector_matches_scalar_bundled(path, mode, bundled_scene):
+    scene = bundled_scene
+    cam = gb.orbit_camera(scene, 40, 25, width=160, height=120)
+    for c in (cam, cam.at_sampling_rate(1 / 4)):
+        assert_close_to_scalar(render(path, scene, c, mode), render("scalar", scene, c, mode), f"{path} {mode}",
+                               mode == "gaussian_blending")
+
+
+@pytest.mark.parametrize("path", ALL_PATHS)
+@pytest.mark.parametrize("mode", ["scalar", "mip", "analytic"])
+def test_reference_through_each_path(path, mode):
+    """The float64 reference test (strict 1e-4, ties excepted) holds on every path, not only the default one."""
+    seed, sh_degree, filter3d = SCENES[1]
+    scene, cam = random_scene(seed, sh_degree=sh_degree, filter3d=filter3d)
+    with simd(path):
+        for supersample in (1, 2):
+            frame = gb.render(scene, cam, mode=mode, supersample=supersample, background=BACKGROUND)
+            _check_strict(frame, scene, cam, mode, supersample)
+
+
+@pytest.mark.parametrize("path", ALL_PATHS)
+def test_reference_gaussian_blending_each_path(path):
+    seed, sh_degree, filter3d = SCENES[0]
+    scene, cam = random_scene(seed, sh_degree=sh_degree, filter3d=filter3d, max_px_sigma=1.5)
+    with simd(path):
+        frame = gb.render(scene, cam, mode="gaussian_blending", background=BACKGROUND)
+        _check_strict(frame, scene, cam, "gaussian_blending", 1)
+
+
+def _needle_scene(seed):
+    """Needle-thin, rotated, huge and tiny splats: where the pixel boxes are tightest and float rounding largest."""
+    rng = np.random.default_rng(seed)
+    n = 400
+    means = np.c_[rng.uniform(-2, 2, n), rng.uniform(-1.5, 1.5, n), rng.uniform(2, 6, n)]
+    scales = np.exp(rng.uniform(np.log(1e-4), np.log(2.0), (n, 3)))
+    scales[: n // 3, 0] = rng.uniform(1.0, 8.0, n // 3)  # long in x, thin in y and z
+    scales[: n // 3, 1:] = rng.uniform(1e-5, 1e-3, (n // 3, 2))
+    quats = rng.normal(size=(n, 4))
+    op = rng.uniform(0.004, 1.0, n)
+    sh = rng.uniform(-1, 1, (n, 1, 3))
+    cam = gb.Camera(96, 72, 80.0, 70.0, 48.3, 35.7, np.eye(3), np.zeros(3))
+    return gb.Scene.from_arrays(means, scales, quats, op, sh), cam
+
+
+@pytest.mark.parametrize("path", ALL_PATHS)
+@pytest.mark.parametrize("mode", ["scalar", "mip", "wsr", "duplex"])
+def test_pixel_boxes_change_no_pixel(path, mode):
+    """Skipping lane groups outside a splat's pixel box is exact: bit-identical images and evaluation counts."""
+    scene, cam = _needle_scene(5)
+    for c in (cam, cam.at_sampling_rate(1 / 2)):
+        on = render(path, scene, c, mode, supersample=2)
+        _native.set_pixel_boxes(False)
+        try:
+            off = render(path, scene, c, mode, supersample=2)
+        finally:
+            _native.set_pixel_boxes(True)
+        np.testing.assert_array_equal(on.rgb, off.rgb)
+        np.testing.assert_array_equal(on.alpha, off.alpha)
+        np.testing.assert_array_equal(on.debug["evals"], off.debug["evals"])
+
+
+@pytest.mark.parametrize("path", ALL_PATHS)
+def test_hostile_splats_no_nan(path):
+    """Degenerate splats (zero scales and quaternions), exponents that underflow (faint, far and subnormal-scaled
+    splats), non-finite inputs (dropped by the scene with a warning): finite pixels on every path, within the
+    vector-vs-scalar tolerance."""
+    rng = np.random.default_rng(9)
+    n = 300
+    means = np.c_[rng.uniform(-3, 3, n), rng.uniform(-2, 2, n), rng.uniform(0.3, 50, n)]
+    scales = np.exp(rng.uniform(np.log(1e-30), np.log(3.0), (n, 3)))
+    scales[:20] = 0.0
+    scales[20:30] = 1e-38  # subnormal squares
+    quats = rng.normal(size=(n, 4))
+    quats[30:40] = 0.0
+    op = np.exp(rng.uniform(np.log(1.0 / 256), 0.0, n))
+    op[40:50] = 1.0
+    sh = rng.uniform(-1, 1, (n, 1, 3))
+    means[50, 0], scales[51, 1], op[52] = np.nan, np.inf, np.nan
+    with pytest.warns(UserWarning):
+        scene = gb.Scene.from_arrays(means, scales, quats, op, sh)
+    cam = gb.Camera(80, 60, 70.0, 70.0, 40.0, 30.0, np.eye(3), np.zeros(3))
+    for mode in MODES:
+        vec = render(path, scene, cam, mode, supersample=2)
+        assert np.isfinite(vec.rgb).all() and np.isfinite(vec.alpha).all(), mode
+        if path != "scalar":
+            assert_close_to_scalar(vec, render("scalar", scene, cam, mode, supersample=2), f"{path} {mode}",
+                                   mode == "gaussian_blending")
+
+
+def _python(code: str, simd_env: str | None) -> subprocess.CompletedProcess:
+    env = dict(os.environ)
+    env.pop("GBVIEWER_SIMD", None)
+    if simd_env is not None:
+        env["GBVIEWER_SIMD"] = simd_env
+    # outside the checkout, so that the installed package (with its built module) is the one imported
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120,
+                          cwd=tempfile.gettempdir())
+
+
+def test_env_var_forces_path():
+    res = _python("import gbviewer._native as n; print(n.simd())", "scalar")
+    assert res.returncode == 0 and res.stdout.strip() == "scalar", res.stderr
+    res = _python("import gbviewer._native as n; print(n.simd())", None)
+    assert res.stdout.strip() == _native.simd_paths()[-1]
+
+
+@pytest.mark.parametrize("value", ["avx9000", "AVX2 ", "avx512"])
+def test_env_var_rejects_unknown_or_unsupported(value):
+    res = _python("import gbviewer._native", value)
+    if value == "avx512" and "avx512" in _native.simd_paths():
+        assert res.returncode == 0
+        return
+    assert res.returncode != 0
+    assert f"GBVIEWER_SIMD={value}" in res.stderr and "available here: scalar" in res.stderr
+    # the renderer says why the CPU backend is unavailable, without suggesting a reinstall
+    res = _python("from gbviewer.render import CpuRenderer; print(CpuRenderer.available())", value)
+    assert "GBVIEWER_SIMD" in res.stdout and "reinstall" not in res.stdout
+
+
+def test_set_simd_and_exp_rate():
+    with pytest.raises(ValueError, match="available here"):
+        _native.set_simd("neon")
+    with pytest.raises(ValueError):
+        _native.exp_rate("neon", 1000)
+    for path in _native.simd_paths():
+        assert _native.exp_rate(path, 100_000) > 0
