@@ -62,6 +62,42 @@ float gaussian_moment0(float x, float e) {
     return SQRT_PI_2 * (x < 0.0 ? -erf_abs : erf_abs);
 }
 
+// Moments of exp(-t^2/2) over one window side [c - h, c + h] (splat sigma units) about the window centre c:
+// I0 = int e, J1 = int (t - c) e, J2 = int (t - c)^2 e. Hermite series of e(c + s) for h <= 1, the closed form
+// about the centre above that (port of blend.h's window_side_moments, which says why).
+struct SideMoments {
+    float I0;
+    float J1;
+    float J2;
+};
+
+SideMoments window_side_moments(float c, float h) {
+    if (h > GB_SERIES_MAX_HALF_WIDTH) {
+        const float a = c - h, b = c + h;
+        const float ea = expf(-0.5 * a * a), eb = expf(-0.5 * b * b);
+        const float I0 = gaussian_moment0(b, eb) - gaussian_moment0(a, ea);
+        const float J1 = (ea - eb) - c * I0;
+        return SideMoments(I0, J1, I0 - h * (ea + eb) - c * J1);
+    }
+    float he_prev = 1.0, he = c, p = h;  // He_{n-1}, He_n, h^n/n! at n = 1
+    float s0 = 1.0, s1 = -(p * he) * (1.0 / 3.0), s2 = 1.0 / 3.0;
+    for (int n = 2; n <= GB_SERIES_TERMS; ++n) {
+        const float he_next = c * he - float(n - 1) * he_prev;
+        he_prev = he;
+        he = he_next;
+        p = p * h * (1.0 / float(n));
+        if (n % 2 == 0) {
+            const float b = p * he;
+            s0 = s0 + b * (1.0 / float(n + 1));
+            s2 = s2 + b * (1.0 / float(n + 3));
+        } else {
+            s1 = s1 - p * he * (1.0 / float(n + 2));
+        }
+    }
+    const float two_h_e = 2.0 * h * expf(-0.5 * c * c);
+    return SideMoments(two_h_e * s0, two_h_e * h * s1, two_h_e * h * h * s2);
+}
+
 // Gaussian Blending's transmittance: a uniform window of total mass T (pixel area = 1) centred at xy with side
 // lengths wh (paper §3.3). Initially the pixel itself.
 struct TransmittanceWindow {
@@ -72,9 +108,9 @@ struct TransmittanceWindow {
 
 // `gaussian_blending`: blend one splat onto the window and replace the window by the uniform one with the same
 // mass, mean and variance of T(x)(1 - alpha(x)) (eqs. 8-11, Appendix A), as the authors' renderCUDA does it
-// (KERNELS.md §6.3): window sides go to the eigen-axis within 45 degrees, a window outside [0.1, 1e6] sigma
-// falls back to scalar alpha at the window centre, and the pixel stops after adding a splat that leaves
-// T < 1e-4.
+// (KERNELS.md §6.3), with the moments taken about the window centre (window_side_moments): window sides go to the
+// eigen-axis within 45 degrees, a window outside [0.1, 1e6] sigma falls back to scalar alpha at the window centre,
+// and the pixel stops after adding a splat that leaves T < 1e-4.
 bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
     const vec2 d = win.xy - s.xy;
     // Cheapest exact rejection first: the window (within half its perimeter of its centre) lies outside the splat's
@@ -95,8 +131,8 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
 
     const float U1 = (u - 0.5 * lu) * s.inv_sigma1, U2 = (u + 0.5 * lu) * s.inv_sigma1;
     const float V1 = (v - 0.5 * lv) * s.inv_sigma2, V2 = (v + 0.5 * lv) * s.inv_sigma2;
-    const float du = U2 - U1, dv = V2 - V1;
-    if (!(du >= GB_MIN_UV_DIFF && dv >= GB_MIN_UV_DIFF && du <= GB_MAX_UV_DIFF && dv <= GB_MAX_UV_DIFF)) {
+    const float wu_s = U2 - U1, wv_s = V2 - V1;  // window sides in sigma units
+    if (!(wu_s >= GB_MIN_UV_DIFF && wv_s >= GB_MIN_UV_DIFF && wu_s <= GB_MAX_UV_DIFF && wv_s <= GB_MAX_UV_DIFF)) {
         // Stability fallback (Appendix B.1): scalar alpha at the window centre, window unchanged.
         const float alpha = minf(s.opacity * gaussian_at(s, d), MAX_ALPHA);
         if (alpha < MIN_ALPHA_GB) return false;
@@ -107,10 +143,10 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
         win.T -= w;
         return win.T < T_STOP;
     }
-    const float eU1 = expf(-0.5 * U1 * U1), eU2 = expf(-0.5 * U2 * U2);
-    const float eV1 = expf(-0.5 * V1 * V1), eV2 = expf(-0.5 * V2 * V2);
-    const float i0u = s.sigma1 * (gaussian_moment0(U2, eU2) - gaussian_moment0(U1, eU1));
-    const float i0v = s.sigma2 * (gaussian_moment0(V2, eV2) - gaussian_moment0(V1, eV1));
+    // Moments of T(x)(1 - alpha(x)) about the window centre (eqs. 10-11), as blend.h computes them.
+    const SideMoments mu_ = window_side_moments(u * s.inv_sigma1, 0.5 * lu * s.inv_sigma1);
+    const SideMoments mv_ = window_side_moments(v * s.inv_sigma2, 0.5 * lv * s.inv_sigma2);
+    const float i0u = s.sigma1 * mu_.I0, i0v = s.sigma2 * mv_.I0;
     const float inv_area = 1.0 / (lu * lv);
     const float alpha = minf(s.opacity * i0u * i0v * inv_area, MAX_ALPHA);  // mean alpha over the window
     if (alpha < MIN_ALPHA_GB) return false;
@@ -119,22 +155,17 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
     C[1] += s.color[1] * weight;
     C[2] += s.color[2] * weight;
 
-    const float s1sq = s.sigma1 * s.sigma1, s2sq = s.sigma2 * s.sigma2;
-    const float i1u = s1sq * (eU1 - eU2), i1v = s2sq * (eV1 - eV2);
-    const float i2u = s1sq * (i0u + s.sigma1 * (U1 * eU1 - U2 * eU2));
-    const float i2v = s2sq * (i0v + s.sigma2 * (V1 * eV1 - V2 * eV2));
     const float k = win.T * inv_area * s.opacity;
-    // eq. 10: moments of T(x)(1 - alpha(x)) over the window, in the splat's eigen-frame
     const float m0 = win.T - weight;
-    const float m1u = win.T * u - k * i1u * i0v, m1v = win.T * v - k * i0u * i1v;
-    const float m2u = win.T * (u * u + lu * lu / 12.0) - k * i2u * i0v;
-    const float m2v = win.T * (v * v + lv * lv / 12.0) - k * i0u * i2v;
-    // eq. 11: the uniform window with the same mass, mean and variance
+    const float m1u = -(k * (s.sigma1 * s.sigma1 * mu_.J1) * i0v), m1v = -(k * i0u * (s.sigma2 * s.sigma2 * mv_.J1));
+    const float m2u = win.T * lu * lu * (1.0 / 12.0) - k * (s.sigma1 * s.sigma1 * s.sigma1 * mu_.J2) * i0v;
+    const float m2v = win.T * lv * lv * (1.0 / 12.0) - k * i0u * (s.sigma2 * s.sigma2 * s.sigma2 * mv_.J2);
+    // eq. 11: the uniform window with the same mass, mean and variance; its centre moves by (du, dv)
     const float inv_m0 = 1.0 / m0;
-    const float mu = m1u * inv_m0, mv = m1v * inv_m0;
-    const float var_u = maxf(m2u * inv_m0 - mu * mu, GB_MIN_VAR), var_v = maxf(m2v * inv_m0 - mv * mv, GB_MIN_VAR);
+    const float du = m1u * inv_m0, dv = m1v * inv_m0;
+    const float var_u = maxf(m2u * inv_m0 - du * du, GB_MIN_VAR), var_v = maxf(m2v * inv_m0 - dv * dv, GB_MIN_VAR);
     win.T = m0;
-    win.xy = s.xy + mu * s.v1 + mv * v2;
+    win.xy = win.xy + du * s.v1 + dv * v2;
     const float wu = sqrt(12.0 * var_u), wv = sqrt(12.0 * var_v);
     win.wh = aligned ? vec2(wu, wv) : vec2(wv, wu);
     return win.T < T_STOP;

@@ -261,13 +261,11 @@ def test_gb_window_update_matches_exact_moments(u_s, v_s, angle):
     assert err < 2e-4, f"window {win} vs exact {win_exact}: err {err:.2e}"
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "float32 cancellation in the published window update: var = m2/m0 - (m1/m0)^2 is taken about the splat "
-    "centre, so for a wide splat (sigma 8.8 px) with the window 2-3 sigma away both terms are ~u^2 = 600..800 "
-    "px^2 while var ~ 1/12; native window sizes are off by 1e-3..5e-3 (the float64 reference and a dense "
-    "quadrature agree to 1e-7). Remove this marker if the kernel computes the moments about the window centre."))
 @pytest.mark.parametrize("u_s", [2.0, 2.8, 3.2])
 def test_gb_window_update_wide_splat_far_from_window(u_s):
+    """A wide splat (sigma 8.8 px) 2-3 sigma from the window: the published float32 update (variance about the splat
+    centre, ~u^2 = 600..800 px^2 terms for var ~ 1/12) was off by 1e-3..5e-3; the moments about the window centre
+    (window_side_moments in blend.h) hold it to 2e-4."""
     T, T_exact, win, win_exact = _one_window_update((8.8, 4.4), u_s, 0.4, -1.086)
     assert abs(T - T_exact) < 2e-6
     err = np.abs(win - win_exact).max()

@@ -14,6 +14,14 @@
 #define GBV_HD static inline __attribute__((always_inline))
 #define GBV_HDI inline __attribute__((always_inline))
 #endif
+// Fully unroll the loop that follows (fixed, small trip counts).
+#if defined(__CUDACC__)
+#define GBV_UNROLL _Pragma("unroll")
+#elif defined(__GNUC__)
+#define GBV_UNROLL _Pragma("GCC unroll 16")
+#else
+#define GBV_UNROLL
+#endif
 
 namespace gbv {
 
@@ -32,6 +40,8 @@ constexpr float RADIUS_SIGMAS_GB = 3.33021844f;  // sqrt(-2 ln(1/256))
 constexpr float GB_MIN_UV_DIFF = 0.1f;         // window narrower than 0.1 sigma -> scalar fallback
 constexpr float GB_MAX_UV_DIFF = 1e6f;
 constexpr float GB_MIN_VAR = 0.001f;           // window variance floor
+constexpr float GB_SERIES_MAX_HALF_WIDTH = 1.0f;  // window moments: Hermite series up to this half side (sigmas)
+constexpr int GB_SERIES_TERMS = 12;
 constexpr float SQRT_PI_2 = 1.2533141373155003f;
 constexpr float WSR_EMPTY_SUM = 1e-4f;         // LC-WSR: a weight sum of exactly 0 becomes 1e-4 (§7.2)
 constexpr float WSR_FIXED_SCALE = 68719476736.0f;  // 2^36: CPU weighted sums in 64-bit fixed point (blend.h)
