@@ -537,7 +537,7 @@ def simd_table(rows: list[SpeedRow]) -> tuple[list[str], list[list[str]]]:
     header = ["scene", "mode", "rate", "size"] + [f"{p} blend ms" for p in paths]
     for p in vector:
         header += [f"{p} blend speedup", f"{p} frame speedup"]
-    header += [f"{p} Mevals/s/core" for p in paths] + [f"{p} max |diff|" for p in vector]
+    header += [f"{p} blend Mevals/s/core (exp)" for p in paths] + [f"{p} max abs diff" for p in vector]
     out = []
     for (scene, rate, w, h, mode), g in groups.items():
         row = [scene, mode, format_rate(rate), f"{w}x{h}"]
@@ -588,8 +588,8 @@ def print_tables(speed: list[SpeedRow], fidelity: list[FidelityRow], simd: dict 
     header, rows = simd_table(speed)
     if rows:
         st = Table(title="SIMD paths of the CPU backend (same run, taking turns render by render; speedup: scalar's "
-                         "ms / the path's; Mevals/s/core: blend stage (exp rate); max |diff|: largest rgb difference "
-                         "from the scalar path's image)")
+                         "ms / the path's; exp: the path's exp evaluations per second on a core; max abs diff: largest "
+                         "rgb difference from the scalar path's image)")
         for col in header:
             st.add_column(col, justify="left" if col in ("scene", "mode") else "right")
         for row in rows:

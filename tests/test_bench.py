@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -211,3 +212,45 @@ def test_bench_presets():
                                                                    ("modes", "rates", "views", "repeat", "simd"))
     e = parse("--full", "--modes", "scalar", "--rates", "1", "--repeat", "1", "--simd", "current")
     assert (e.modes, e.rates, e.views, e.repeat, e.simd) == ("scalar", "1", BENCH_FULL["views"], 1, "current")
+
+
+def _run_all():
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "run_all.py"
+    spec = importlib.util.spec_from_file_location("run_all_under_test", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_run_all_targets_check_the_simd_targets():
+    """bench/run_all.py's targets: the blend speedup of the vector path in use over the scalar path at 640x480
+    (>= 6 for gaussian_blending, >= 4 for scalar), and gaussian_blending's frame ms there (median over the shared
+    scenes <= 100), beside the existing ones; hand-made rows, no rendering."""
+    ra = _run_all()
+
+    def row(scene, mode, ms, blend, simd="avx2", rate=1.0, size=(320, 240)):
+        return bench.SpeedRow(scene, "cpu", mode, rate, *size, ms, ms, ms, {"preprocess_ms": 0, "sort_ms": 0,
+                              "blend_ms": blend, "total_ms": ms}, 1, 1, 1.0, 1.0, simd, simd)
+
+    names = ["bundled: a.ply", "b.ply", "c.ply"]
+    speed, fidelity, simd = [], [], []
+    for n in names:
+        speed += [row(n, "scalar", 10, 8), row(n, "gaussian_blending", 14, 12), row(n, "scalar:3", 50, 45)]
+        fidelity += [bench.FidelityRow(n, m, 0.125, "zoom-out", p, 0.9) for m, p in
+                     (("scalar", 20.0), ("gaussian_blending", 30.0), ("scalar:3", 29.0))]
+    for n, gb_vec, sc_vec in (("bundled: a.ply", 60, 10), ("b.ply", 90, 30), ("c.ply", 120, 20)):
+        simd += [row(n, "gaussian_blending", 600, 600, "scalar", size=(640, 480)),
+                 row(n, "gaussian_blending", gb_vec, gb_vec, size=(640, 480)),
+                 row(n, "scalar", 100, 100, "scalar", size=(640, 480)),
+                 row(n, "scalar", sc_vec, sc_vec, size=(640, 480))]
+    rows = ra.targets(speed, fidelity, names, simd, in_use="avx2")
+    assert len(rows) == len(names) + 1 and all(len(r) == len(ra.target_header()) for r in rows)
+    assert rows[0][1:5] == ["1.40 ok", "3.57 ok", "30.00 vs 29.00 ok", "+10.00 ok"]
+    assert rows[0][5:] == ["10.0x ok", "10.0x ok", "60"]
+    assert rows[1][5:] == ["6.7x ok", "3.3x MISSED", "90"]
+    assert rows[2][5:] == ["5.0x MISSED", "5.0x ok", "120"]
+    assert rows[3][0] == "median over the shared scenes" and rows[3][-1] == "105 MISSED"  # b and c, not bundled
+    scalar_only = ra.targets(speed, fidelity, names, simd, in_use="scalar")
+    assert all("MISSED" in r[5] and "MISSED" in r[6] for r in scalar_only[:-1])
