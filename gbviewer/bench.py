@@ -28,8 +28,12 @@ MODE_COST = {Mode.ANALYTIC: 8.0, Mode.GAUSSIAN_BLENDING: 3.0}  # rough cost per 
 
 
 def _native():
+    """The CPU module, with its SIMD API (simd_paths, simd, set_simd, exp_rate)."""
     from . import _native
 
+    if not hasattr(_native, "set_simd"):
+        raise GBViewerError(f"{_native.__file__} predates the SIMD paths (no set_simd/simd_paths/exp_rate): rebuild "
+                            "it (pip install .)")
     return _native
 
 
