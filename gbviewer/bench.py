@@ -246,8 +246,15 @@ def measure_oit(scene: Scene, name: str, cams: list[Camera], settings: list[Rend
     return rows
 
 
-def print_oit(rows: list[OitRow]) -> None:
+def _console():
+    """A rich console; into a file or pipe 200 columns wide, so that no number is cut short."""
     from rich.console import Console
+
+    console = Console()
+    return console if console.is_terminal else Console(width=max(console.width, 200))
+
+
+def print_oit(rows: list[OitRow]) -> None:
     from rich.table import Table
 
     t = Table(title="Sorted vs order-independent modes (mean over views; flicker along a slow orbit)")
@@ -261,7 +268,7 @@ def print_oit(rows: list[OitRow]) -> None:
                   f"{r.stages_ms['blend_ms']:.1f}", f"{r.stages_ms['total_ms']:.1f}",
                   "inf" if math.isinf(r.psnr_vs_scalar) else f"{r.psnr_vs_scalar:.2f}", f"{r.flicker:.3f}",
                   f"{100 * r.pops:.3f}")
-    Console().print(t)
+    _console().print(t)
 
 
 @dataclass
@@ -570,10 +577,9 @@ def simd_table(rows: list[SpeedRow]) -> tuple[list[str], list[list[str]]]:
 
 def print_tables(speed: list[SpeedRow], fidelity: list[FidelityRow], simd: dict | None = None) -> None:
     """Rich tables on the terminal: speed, SIMD paths, ratios, fidelity; `simd` (simd_info()) heads them."""
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    console = _console()
     if simd:
         console.print(simd_summary(simd), highlight=False)
     t = Table(title="Speed (median over repeats and views; Mevals/s/core: splat-pixel evaluations per second per "
