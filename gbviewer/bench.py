@@ -274,7 +274,8 @@ def print_oit(rows: list[OitRow]) -> None:
 @dataclass
 class SpeedRow:
     """One backend, SIMD path, mode and rate on one scene: median, min and max of the frame time over repeats and
-    views, median per stage, and the evaluation rates.
+    views, median per stage, evaluations per pixel (mean over views) and the evaluation rates (all the timed
+    renders' evaluations over all their time).
 
     simd: the path the CPU backend's blend ran (Frame.stats["simd"]; None on other backends), simd_requested: the
     path set for the measurement (the two differ where a mode has no vector code). mevals_per_s_per_core:
@@ -325,8 +326,8 @@ def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[Re
         try:
             for rate in rates:
                 for s in settings:
-                    acc = {p: {"totals": [], "stages": {k: [] for k in STAGES}, "last": None, "diff": None}
-                           for p in paths}
+                    acc = {p: {"totals": [], "stages": {k: [] for k in STAGES}, "evals": [], "last": None,
+                               "diff": None} for p in paths}
                     for i, cam in enumerate(cams):
                         c = cam.at_sampling_rate(rate)
                         cost = render_cost(c, s, scene.num_splats)
@@ -344,6 +345,7 @@ def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[Re
                                 a = acc[path]
                                 a["last"] = f.stats
                                 a["totals"].append(f.stats["total_ms"])
+                                a["evals"].append(f.stats["evals_per_pixel"])
                                 for k in STAGES:
                                     a["stages"][k].append(f.stats[k])
                                 images[path] = f.rgb
@@ -356,13 +358,14 @@ def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[Re
                         a = acc[path]
                         last, totals = a["last"], a["totals"]
                         med = {k: statistics.median(v) for k, v in a["stages"].items()}
-                        evals = last["evals_per_pixel"] * c.width * c.height
+                        # evaluation rates: all the timed renders' evaluations over all their time (views differ)
+                        evals = sum(a["evals"]) * c.width * c.height
                         ran = last["simd"] if cpu else None
                         rows.append(SpeedRow(
                             name, backend, s.spec, rate, c.width, c.height, statistics.median(totals), min(totals),
-                            max(totals), med, last["visible"], last["sort_length"], last["evals_per_pixel"],
-                            evals / max(med["total_ms"], 1e-9) / 1e3 / per_core, ran, path,
-                            evals / max(med["blend_ms"], 1e-9) / 1e3 / per_core,
+                            max(totals), med, last["visible"], last["sort_length"], float(np.mean(a["evals"])),
+                            evals / max(sum(totals), 1e-9) / 1e3 / per_core, ran, path,
+                            evals / max(sum(a["stages"]["blend_ms"]), 1e-9) / 1e3 / per_core,
                             exp[ran] / 1e6 if exp and ran in exp else None, a["diff"]))
         finally:
             if cpu and current_simd() != before:
