@@ -119,9 +119,9 @@ def targets(speed: list, fidelity: list, names: list[str], simd: list, in_use: s
     return rows
 
 
-def target_header(short: bool = False) -> list[str]:
+def target_header(short: bool = False, in_use: str | None = None) -> list[str]:
     w, h = SIMD_SIZE
-    in_use = bench.current_simd()
+    in_use = in_use or bench.current_simd()
     if short:
         return ["scene", "gaussian_blending / scalar", "scalar 3x3 / gaussian_blending", "x1/8 PSNR: GB vs scalar 3x3",
                 "x1/8 PSNR: GB - scalar", f"GB blend speedup {in_use} over scalar",

@@ -246,7 +246,7 @@ def test_run_all_targets_check_the_simd_targets():
                  row(n, "scalar", 100, 100, "scalar", size=(640, 480)),
                  row(n, "scalar", sc_vec, sc_vec, size=(640, 480))]
     rows = ra.targets(speed, fidelity, names, simd, in_use="avx2")
-    assert len(rows) == len(names) + 1 and all(len(r) == len(ra.target_header()) for r in rows)
+    assert len(rows) == len(names) + 1 and all(len(r) == len(ra.target_header(in_use="avx2")) for r in rows)
     assert rows[0][1:5] == ["1.40 ok", "3.57 ok", "30.00 vs 29.00 ok", "+10.00 ok"]
     assert rows[0][5:] == ["10.0x ok", "10.0x ok", "60"]
     assert rows[1][5:] == ["6.7x ok", "3.3x MISSED", "90"]
