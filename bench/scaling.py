@@ -1,14 +1,16 @@
 """How render time and memory grow with splat count and with pixel count (CPU backend, synthetic scenes).
 
-    python bench/scaling.py [--max-splats 10000000] [--json OUT.json]
+    python bench/scaling.py [--max-splats 10000000] [--simd avx2] [--json OUT.json]
 
 Each point runs in its own process so that its peak resident memory is its own; time is the median of
-`--repeat` renders after a warm-up."""
+`--repeat` renders after a warm-up. `--simd` sets GBVIEWER_SIMD for those processes (default: the variable as it
+is, else the best path); every point records the path that ran."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import statistics
 import subprocess
@@ -38,25 +40,27 @@ def measure_point(n: int, width: int, height: int, mode: str, repeat: int) -> di
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return {"splats": n, "width": width, "height": height, "mode": mode, **med,
             "sort_length": frames[-1]["sort_length"], "evals_per_pixel": frames[-1]["evals_per_pixel"],
-            "scene_rss_mib": rss_scene / 1024, "peak_rss_mib": peak / 1024}
+            "simd": frames[-1]["simd"], "scene_rss_mib": rss_scene / 1024, "peak_rss_mib": peak / 1024}
 
 
-def run_point(n: int, width: int, height: int, mode: str, repeat: int) -> dict:
+def run_point(n: int, width: int, height: int, mode: str, repeat: int, simd: str | None = None) -> dict:
+    env = dict(os.environ, **({"GBVIEWER_SIMD": simd} if simd else {}))
     out = subprocess.run([sys.executable, __file__, "--point", str(n), str(width), str(height), mode, str(repeat)],
-                         capture_output=True, text=True, check=True)
+                         capture_output=True, text=True, check=True, env=env)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def run(max_splats: int, repeat: int, modes: list[str], progress=print) -> dict:
-    """Splat series at 640x480 and pixel series at 300k splats, for each mode."""
+def run(max_splats: int, repeat: int, modes: list[str], progress=print, simd: str | None = None) -> dict:
+    """Splat series at 640x480 and pixel series at 300k splats, for each mode (on SIMD path `simd`: None, the one
+    GBVIEWER_SIMD or the CPU chooses)."""
     rows = {"splats": [], "pixels": []}
     for mode in modes:
         for n in [s for s in SPLATS if s <= max_splats]:
-            rows["splats"].append(run_point(n, 640, 480, mode, repeat))
-            progress(f"{mode} {n} splats: {rows['splats'][-1]['total_ms']:.0f} ms")
+            rows["splats"].append(run_point(n, 640, 480, mode, repeat, simd))
+            progress(f"{mode} {n} splats ({rows['splats'][-1]['simd']}): {rows['splats'][-1]['total_ms']:.0f} ms")
         for w, h in SIZES:
-            rows["pixels"].append(run_point(300_000, w, h, mode, repeat))
-            progress(f"{mode} {w}x{h}: {rows['pixels'][-1]['total_ms']:.0f} ms")
+            rows["pixels"].append(run_point(300_000, w, h, mode, repeat, simd))
+            progress(f"{mode} {w}x{h} ({rows['pixels'][-1]['simd']}): {rows['pixels'][-1]['total_ms']:.0f} ms")
     return rows
 
 
@@ -66,13 +70,14 @@ def main() -> int:
     parser.add_argument("--max-splats", type=float, default=10_000_000)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--modes", default="scalar,gaussian_blending")
+    parser.add_argument("--simd", help="GBVIEWER_SIMD for the measuring processes: scalar, avx2 or avx512")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     if args.point:
         n, w, h, mode, repeat = args.point
         print(json.dumps(measure_point(int(n), int(w), int(h), mode, int(repeat))))
         return 0
-    rows = run(int(args.max_splats), args.repeat, args.modes.split(","))
+    rows = run(int(args.max_splats), args.repeat, args.modes.split(","), simd=args.simd)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))
     return 0

@@ -180,43 +180,85 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+BENCH_DEFAULTS = {"modes": "scalar,gaussian_blending,supersample:3", "rates": "1,1/8", "views": 2, "repeat": 2,
+                  "simd": None}
+BENCH_FULL = {"modes": "scalar,mip,analytic,gaussian_blending,supersample:3", "rates": "4,2,1,1/2,1/4,1/8",
+              "views": 3, "repeat": 3, "simd": "all"}
+
+
+def progress_columns() -> tuple:
+    """A rich progress bar with percentage, elapsed time and ETA."""
+    from rich.progress import BarColumn, TaskProgressColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    return (TextColumn("{task.description}"), BarColumn(), TaskProgressColumn(), TimeElapsedColumn(),
+            TextColumn("eta"), TimeRemainingColumn())
+
+
+def resolve_bench_options(args: argparse.Namespace) -> argparse.Namespace:
+    """Fill --modes, --rates, --views, --repeat and --simd left out from BENCH_FULL (--full) or BENCH_DEFAULTS."""
+    preset = BENCH_FULL if args.full else BENCH_DEFAULTS
+    for key, value in preset.items():
+        if getattr(args, key) is None:
+            setattr(args, key, value)
+    if args.views < 1 or args.repeat < 1:
+        raise GBViewerError(f"--views and --repeat must be >= 1, got {args.views} and {args.repeat}")
+    return args
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
-    """Speed and zoom fidelity per scene, mode, backend and rate; tables, JSON, plots."""
+    """Speed (per SIMD path of the CPU backend) and zoom fidelity per scene, mode, backend and rate; tables, JSON,
+    plots."""
     from rich.progress import Progress
 
     from . import bench
 
+    simd_given = args.simd is not None
+    resolve_bench_options(args)
     settings = RenderSettings.parse_list(args.modes)
-    rates = [parse_rate(r) for r in args.rates.split(",")]
+    rates = [parse_rate(r) for r in args.rates.split(",") if r.strip()]
+    if not rates:
+        raise GBViewerError("--rates: no sampling rate given")
     unknown = [b for b in args.backends.split(",") if b not in BACKENDS]
     if unknown:
         raise GBViewerError(f"unknown backend(s) {unknown}; expected some of {', '.join(BACKENDS)}")
     backends = [b for b in args.backends.split(",") if BACKENDS[b].available()[0]]
     for b in set(args.backends.split(",")) - set(backends):
         print(f"skipping backend {b}: {BACKENDS[b].available()[1]}")
+    if not backends:
+        raise GBViewerError("no backend available")
     if args.json and Path(args.json).exists() and not args.force:
         raise GBViewerError(f"{args.json}: exists; pass --force to overwrite")
+    simd, info, exp = None, None, None
+    if "cpu" in backends:
+        simd = bench.parse_simd(args.simd)
+        info = bench.simd_info(simd)
+        exp = info["exp_per_s_per_core"]
+    elif simd_given:
+        raise GBViewerError("--simd chooses the cpu backend's paths; --backends has no cpu")
     speed, fidelity, oit = [], [], []
     w, h = args.size
+    with_oit = any(s.mode in (Mode.WSR, Mode.DUPLEX) for s in settings)
     for path in args.scenes:
         scene = load(path)
+        name = Path(path).name
         multiple = max(round(1 / r) if r < 1 else round(r) for r in rates)
         cams = bench.bench_views(scene, args.views, w, h, args.cameras, args.up, multiple)
-        n_speed = len(backends) * len(rates) * len(settings) * len(cams)
-        n_fid = len(cams) * len(settings) * sum(r != 1 for r in rates)
-        with Progress(transient=True) as progress:
-            task = progress.add_task(f"{Path(path).name}", total=n_speed + n_fid)
-            step = lambda: progress.advance(task)  # noqa: E731
-            speed += bench.measure_speed(scene, Path(path).name, cams, settings, backends, rates, args.repeat, step)
-            fidelity += bench.measure_fidelity(scene, Path(path).name, cams, settings, rates, backends[0], step)
-            if any(s.mode in (Mode.WSR, Mode.DUPLEX) for s in settings):
-                oit += bench.measure_oit(scene, Path(path).name, cams, settings, backends[0], args.flicker_frames,
-                                         args.flicker_step, args.up)
-    bench.print_tables(speed, fidelity)
+        total = (bench.speed_cost(scene, cams, settings, backends, rates, args.repeat, simd)
+                 + bench.fidelity_cost(scene, cams, settings, rates)
+                 + (bench.oit_cost(scene, cams, settings, args.flicker_frames) if with_oit else 0))
+        with Progress(*progress_columns(), transient=True) as progress:
+            task = progress.add_task(name, total=total)
+            step = lambda units: progress.advance(task, units)  # noqa: E731
+            speed += bench.measure_speed(scene, name, cams, settings, backends, rates, args.repeat, step, simd, exp)
+            fidelity += bench.measure_fidelity(scene, name, cams, settings, rates, backends[0], step)
+            if with_oit:
+                oit += bench.measure_oit(scene, name, cams, settings, backends[0], args.flicker_frames,
+                                         args.flicker_step, args.up, step)
+    bench.print_tables(speed, fidelity, info)
     if oit:
         bench.print_oit(oit)
     if args.json:
-        print(f"wrote {bench.write_json(Path(args.json), speed, fidelity, args.force, oit=oit)}")
+        print(f"wrote {bench.write_json(Path(args.json), speed, fidelity, args.force, oit=oit, simd=info)}")
     if args.plots:
         for p in bench.write_plots(Path(args.plots), speed, fidelity, args.force):
             print(f"wrote {p}")
@@ -353,18 +395,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out", help="output folder (default ./out)")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("bench", help="speed and zoom fidelity per mode, backend and sampling rate")
+    p = sub.add_parser("bench", help="speed (per SIMD path of the CPU backend) and zoom fidelity per mode, backend "
+                                     "and sampling rate")
     p.add_argument("scenes", type=Path, nargs="+")
-    p.add_argument("--modes", default="scalar,mip,analytic,gaussian_blending,supersample:3",
-                   help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N); with wsr "
-                   "or duplex the sort length, cells, PSNR vs scalar and flicker are measured too")
+    p.add_argument("--full", action="store_true",
+                   help=f"the full sweep (long: x4 renders 16x the pixels of x1): --modes {BENCH_FULL['modes']} "
+                   f"--rates {BENCH_FULL['rates']} --views {BENCH_FULL['views']} --repeat {BENCH_FULL['repeat']} "
+                   f"--simd {BENCH_FULL['simd']}; options given explicitly win")
+    p.add_argument("--modes", help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N); "
+                   "with wsr or duplex the sort length, cells, PSNR vs scalar and flicker are measured too "
+                   f"(default {BENCH_DEFAULTS['modes']})")
     p.add_argument("--backends", default="cpu")
-    p.add_argument("--rates", default="4,2,1,1/2,1/4,1/8", help="sampling rates, e.g. 8,4,2,1,1/2,1/4,1/8")
-    p.add_argument("--views", type=int, default=3, help="views per scene (orbit, or spread over --cameras)")
+    p.add_argument("--rates", help=f"sampling rates, e.g. 8,4,2,1,1/2,1/4,1/8 (default {BENCH_DEFAULTS['rates']})")
+    p.add_argument("--simd", help="the cpu backend's SIMD paths to measure, each in the same run (scalar, avx2, "
+                   "avx512; all: every path this CPU runs; current: the one in use, GBVIEWER_SIMD or the best); "
+                   "default: scalar and the one in use. Fidelity is measured on the one in use")
+    p.add_argument("--views", type=int, help=f"views per scene (orbit, or spread over --cameras; default "
+                   f"{BENCH_DEFAULTS['views']})")
     p.add_argument("--cameras", type=Path, help="3DGS cameras.json: use training views")
     p.add_argument("--up", default="-y", choices=["-y", "+y", "+z", "-z"])
-    p.add_argument("--size", type=_size, default=(320, 240), metavar="WxH", help="x1 image size")
-    p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--size", type=_size, default=(640, 480), metavar="WxH", help="x1 image size (default 640x480)")
+    p.add_argument("--repeat", type=int, help="timed renders per view and SIMD path, after one warm-up per mode, "
+                   f"rate and path (default {BENCH_DEFAULTS['repeat']})")
     p.add_argument("--json", help="write every number and the machine description here")
     p.add_argument("--plots", help="write PNG plots into this folder")
     p.add_argument("--force", action="store_true", help="overwrite existing --json/--plots files")

@@ -138,9 +138,10 @@ class Frame:
     stats: preprocess_ms, sort_ms, blend_ms, total_ms, visible (splats that survive preprocess), sort_length
     (keys sorted by depth: tile-splat pairs; 0 for wsr, whose tile lists are only binned; tile-cell pairs for
     duplex), sort_bytes (sort_length x SORT_ENTRY_BYTES), pairs (tile-list entries blended), evaluations
-    (splat-pixel evaluations), evals_per_pixel (mean), backend, mode (label_for the scene); duplex adds cells,
-    cells_visible and cell_misses (splat-tile pairs outside their cell's tiles); trained Duplex-GS models add
-    decode_ms (the MLPs, per view).
+    (splat-pixel evaluations), evals_per_pixel (mean), backend, mode (label_for the scene), simd (cpu backend:
+    the SIMD path the blend ran, "scalar", "avx2" or "avx512", chosen by GBVIEWER_SIMD at load or
+    gbviewer._native.set_simd); duplex adds cells, cells_visible and cell_misses (splat-tile pairs outside their
+    cell's tiles); trained Duplex-GS models add decode_ms (the MLPs, per view).
     debug: "evals" (H,W) splats evaluated per output pixel (summed over sub-samples); "window" (H,W,2)
     when requested.
     """
@@ -222,6 +223,8 @@ def _frame(out: dict, camera: Camera, settings: RenderSettings, backend: str, t0
         mode=settings.label if scene is None else settings.label_for(scene),
     )
     stats.update(sort_stats(out, scene, settings))
+    if "simd" in out:  # the CPU module: the SIMD path its blend ran ("scalar", "avx2" or "avx512")
+        stats["simd"] = str(out["simd"])
     debug = {"evals": out["evals"]}
     if "window" in out:
         debug["window"] = out["window"]
