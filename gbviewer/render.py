@@ -214,8 +214,6 @@ def _frame(out: dict, camera: Camera, settings: RenderSettings, backend: str, t0
            scene: Scene | None = None) -> Frame:
     """A Frame from a native module's result dict (rgb, alpha, evals, window?, per-stage ms and counts)."""
     stats = {k: out[k] for k in ("preprocess_ms", "sort_ms", "blend_ms", "visible", "sort_length", "evaluations")}
-    if "simd" in out:  # the CPU module: the blend path that ran (scalar, avx2, avx512)
-        stats["simd"] = out["simd"]
     stats.update(
         total_ms=(time.perf_counter() - t0) * 1e3,
         evals_per_pixel=out["evaluations"] / (camera.width * camera.height),
