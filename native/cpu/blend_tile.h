@@ -32,17 +32,19 @@ using BlendTileFn = void (*)(const TileJob&);
 
 namespace tile {
 
-// A lane group: N pixels of one row, `count` of them inside the tile.
+// A lane group: N pixels of one row, `count` of them inside the tile. [xa, xb] x [ya, yb]: the box a splat's
+// SplatBounds must meet to matter to any lane (the lanes' pixel centres; for gaussian_blending the lanes' window
+// centres grown by their largest half perimeter, updated as the windows move).
 template <class L>
 struct Group {
     typename L::F px, py;
     typename L::M live;
-    float xa, xb, y;  // pixel centres of the first and last lane, row centre
+    float xa, xb, ya, yb;
     int count;
 };
 
-inline bool outside(const SplatBounds& b, float xa, float xb, float y) {
-    return y < b.y0 || y > b.y1 || xb < b.x0 || xa > b.x1;
+static inline bool outside(const SplatBounds& b, float xa, float xb, float ya, float yb) {
+    return yb < b.y0 || ya > b.y1 || xb < b.x0 || xa > b.x1;
 }
 
 // Per-lane outputs of a group before they are written to the image.
@@ -59,7 +61,7 @@ void walk(const TileJob& job, const Group<L>& g, Out<L::N>& out, Step step) {
     typename L::M live = g.live;
     for (int i = 0; i < L::N; ++i) out.evals[i] = job.n;
     for (int i = 0; i < job.n; ++i) {
-        if (outside(job.bounds[i], g.xa, g.xb, g.y)) continue;
+        if (outside(job.bounds[i], g.xa, g.xb, g.ya, g.yb)) continue;
         const typename L::M stop = step(job.list[i], live);
         const uint32_t bits = L::bits(stop);
         if (!bits) continue;
@@ -85,11 +87,33 @@ void group_alpha(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     L::store(st.T, out.T);
 }
 
+// The group box of gaussian_blending: every lane's window centre, grown by the largest half perimeter (a lane
+// rejects a splat farther than radius + half perimeter from its window centre) and by float rounding.
 template <class L>
-void group_gaussian(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
+void window_box(const WindowState<L>& win, Group<L>& g) {
+    const float reach = 0.5f * L::reduce_max(win.w + win.h) + 1e-3f;
+    g.xa = L::reduce_min(win.x) - reach;
+    g.xb = L::reduce_max(win.x) + reach;
+    g.ya = L::reduce_min(win.y) - reach;
+    g.yb = L::reduce_max(win.y) + reach;
+    const float slack = 1e-6f * (fabsf(g.xa) + fabsf(g.xb) + fabsf(g.ya) + fabsf(g.yb));
+    g.xa -= slack;
+    g.xb += slack;
+    g.ya -= slack;
+    g.yb += slack;
+}
+
+template <class L>
+void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out) {
     const typename L::F one = L::set(1.0f), zero = L::set(0.0f);
     WindowState<L> win = {one, g.px, g.py, one, one, {zero, zero, zero}};
-    walk(job, g, out, [&](const Splat2D& s, typename L::M live) { return blend_gaussian<L>(s, live, win); });
+    window_box<L>(win, g);
+    walk(job, g, out, [&](const Splat2D& s, typename L::M live) {
+        typename L::M took = L::none();
+        const typename L::M stop = blend_gaussian<L>(s, live, win, &took);
+        if (L::any(took)) window_box<L>(win, g);
+        return stop;
+    });
     for (int c = 0; c < 3; ++c) L::store(win.C[c], out.C[c]);
     L::store(win.T, out.T);
     L::store(win.w, out.wx);
@@ -151,7 +175,7 @@ void blend_tile(const TileJob& job) {
             g.live = L::first_n(g.count);
             g.xa = (float)x + 0.5f;
             g.xb = (float)(x + g.count - 1) + 0.5f;
-            g.y = (float)y + 0.5f;
+            g.ya = g.yb = (float)y + 0.5f;
             switch (job.mode) {
                 case GAUSSIAN_BLENDING: tile::group_gaussian<L>(job, g, out); break;
                 case WSR: tile::group_wsr<L>(job, g, out); break;

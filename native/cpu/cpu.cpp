@@ -87,37 +87,57 @@ bool splat_less(const Splat2D& a, const Splat2D& b) {
     return false;
 }
 
-// Binning of splats: count per tile, prefix sum, scatter (depth bits, splat id) keys in splat order, then (when
-// `sort`) sort each tile's list by depth; wsr keeps the splat order.
+// Binning of splats, in parallel: each thread counts the tiles of its static range of splats, a prefix sum over
+// (tile, thread) gives every thread its slots in every tile, and each thread writes its (depth bits, splat id) keys
+// there. The ranges are in splat order, so each tile's list is in splat order as a sequential pass would leave it;
+// then (when `sort`) each tile's list is sorted by depth; wsr keeps the splat order.
 void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>& rects,
                 const std::vector<uint8_t>& valid, int gx, bool sort, std::vector<int64_t>& tile_start,
                 std::vector<uint64_t>& keys, Stats& st) {
     const int num_tiles = (int)tile_start.size() - 1;
     const int64_t n = (int64_t)splats.size();
     auto t0 = Clock::now();
+    const int threads = omp_get_max_threads();
+    std::vector<int64_t> slots((size_t)threads * num_tiles, 0);  // [thread][tile]: counts, then write cursors
     int64_t visible = 0;
-    for (int64_t i = 0; i < n; ++i) {
-        if (!valid[i]) continue;
-        ++visible;
-        const TileRect& r = rects[i];
-        for (int ty = r.y0; ty < r.y1; ++ty)
-            for (int tx = r.x0; tx < r.x1; ++tx) ++tile_start[ty * gx + tx + 1];
-    }
-    for (int t = 0; t < num_tiles; ++t) tile_start[t + 1] += tile_start[t];
-    const int64_t total = tile_start[num_tiles];
-    keys.resize(total);
+#pragma omp parallel num_threads(threads) reduction(+ : visible)
     {
-        std::vector<int64_t> cursor(tile_start.begin(), tile_start.end() - 1);
-        for (int64_t i = 0; i < n; ++i) {
+        const int th = omp_get_thread_num(), nth = omp_get_num_threads();
+        const int64_t i0 = n * th / nth, i1 = n * (th + 1) / nth;
+        int64_t* count = slots.data() + (size_t)th * num_tiles;
+        for (int64_t i = i0; i < i1; ++i) {
+            if (!valid[i]) continue;
+            ++visible;
+            const TileRect& r = rects[i];
+            for (int ty = r.y0; ty < r.y1; ++ty)
+                for (int tx = r.x0; tx < r.x1; ++tx) ++count[ty * gx + tx];
+        }
+#pragma omp barrier
+#pragma omp single
+        {
+            int64_t total = 0;
+            for (int t = 0; t < num_tiles; ++t) {
+                tile_start[t] = total;
+                for (int k = 0; k < nth; ++k) {
+                    const int64_t c = slots[(size_t)k * num_tiles + t];
+                    slots[(size_t)k * num_tiles + t] = total;
+                    total += c;
+                }
+            }
+            tile_start[num_tiles] = total;
+            keys.resize(total);
+        }
+        for (int64_t i = i0; i < i1; ++i) {
             if (!valid[i]) continue;
             uint32_t depth_bits;
             std::memcpy(&depth_bits, &splats[i].depth, 4);  // depth > near > 0: bits sort as floats
             const uint64_t key = ((uint64_t)depth_bits << 32) | (uint32_t)i;
             const TileRect& r = rects[i];
             for (int ty = r.y0; ty < r.y1; ++ty)
-                for (int tx = r.x0; tx < r.x1; ++tx) keys[cursor[ty * gx + tx]++] = key;
+                for (int tx = r.x0; tx < r.x1; ++tx) keys[count[ty * gx + tx]++] = key;
         }
     }
+    const int64_t total = tile_start[num_tiles];
     if (sort) {
 #pragma omp parallel for schedule(dynamic, 4)
         for (int t = 0; t < num_tiles; ++t)
@@ -216,19 +236,23 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
     st.pairs += tile_start[num_tiles];
 }
 
-// Box of pixel centres where the splat can pass its mode's cut-off (blend_tile skips it elsewhere without
-// evaluating it). scalar, mip, wsr, duplex: the ellipse power >= log_min_alpha, i.e. d^T conic d <= r2 with
-// r2 = -2 log_min_alpha, whose half-extents are sqrt(r2 Sigma_xx) and sqrt(r2 Sigma_yy) (Sigma = conic^-1), computed
-// in double and widened for float rounding: the float power at a pixel is off by at most ~4 ulp of
-// conic-weighted |d|^2, i.e. a relative 2.4e-7 (lambda_max / lambda_min) of r2 at the ellipse, so the box grows by
-// 1e-6 kappa^2 + 1e-5 relative plus 0.01 px (the rounding of d = xy - pixel). duplex also has its radius circle.
-// analytic and gaussian_blending (alpha integrated over a pixel or a moving window): no box.
+// Box a splat's SplatBounds span (blend_tile skips a lane group whose box misses it, without evaluating the splat).
+// scalar, mip, wsr, duplex: the pixel centres where the splat can pass its cut-off, the ellipse power >=
+// log_min_alpha, i.e. d^T conic d <= r2 with r2 = -2 log_min_alpha, whose half-extents are sqrt(r2 Sigma_xx) and
+// sqrt(r2 Sigma_yy) (Sigma = conic^-1), computed in double and widened for float rounding: the float power at a pixel
+// is off by at most ~4 ulp of conic-weighted |d|^2, i.e. a relative 2.4e-7 (lambda_max / lambda_min) of r2 at the
+// ellipse, so the box grows by 1e-6 kappa^2 + 1e-5 relative plus 0.01 px (the rounding of d = xy - pixel). duplex
+// also has its radius circle. gaussian_blending: the window centres within radius + half perimeter, so the square of
+// half side radius (the group box adds the half perimeters). analytic (alpha integrated over the pixel): no box.
 std::atomic<bool> g_pixel_boxes{true};  // off only in tests, to show the boxes change no pixel
 
 SplatBounds splat_bounds(const Splat2D& s, Mode mode) {
     constexpr float inf = std::numeric_limits<float>::infinity();
-    if (mode == ANALYTIC || mode == GAUSSIAN_BLENDING || !g_pixel_boxes.load(std::memory_order_relaxed))
-        return {-inf, inf, -inf, inf};
+    if (mode == ANALYTIC || !g_pixel_boxes.load(std::memory_order_relaxed)) return {-inf, inf, -inf, inf};
+    if (mode == GAUSSIAN_BLENDING) {
+        const double r = (double)s.radius * (1.0 + 1e-6) + 0.01 + 1e-6 * (fabs(s.xy.x) + fabs(s.xy.y));
+        return {(float)(s.xy.x - r), (float)(s.xy.x + r), (float)(s.xy.y - r), (float)(s.xy.y + r)};
+    }
     const double a = s.conic[0], b = s.conic[1], c = s.conic[2];
     const double det = a * c - b * b;
     const double r2 = -2.0 * (double)s.log_min_alpha;
@@ -265,6 +289,9 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
     const int num_tiles = (int)tile_start.size() - 1;
     auto t0 = Clock::now();
     const BlendTileFn blend_tile = simd::current().blend_tile;
+    std::vector<SplatBounds> boxes(splats.size());
+#pragma omp parallel for schedule(static)
+    for (int64_t i = 0; i < (int64_t)splats.size(); ++i) boxes[i] = splat_bounds(splats[i], mode);
 #pragma omp parallel
     {
         FlushDenormals ftz;
@@ -276,8 +303,9 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
             local.resize(count);
             bounds.resize(count);
             for (int64_t j = 0; j < count; ++j) {
-                local[j] = splats[(uint32_t)keys[begin + j]];
-                bounds[j] = splat_bounds(local[j], mode);
+                const uint32_t id = (uint32_t)keys[begin + j];
+                local[j] = splats[id];
+                bounds[j] = boxes[id];
             }
             TileJob job;
             job.list = local.data();
@@ -301,6 +329,14 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
     st.blend_ms += ms_since(t0);
 }
 
+struct FrameBuffers {
+    std::vector<Splat2D> splats;
+    std::vector<TileRect> rects;
+    std::vector<uint8_t> valid;
+    std::vector<int64_t> tile_start;
+    std::vector<uint64_t> keys;
+};
+
 // Render one image at the camera's resolution, one sample per pixel.
 void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
                   const float bg[3], Image& img, Stats& st) {
@@ -310,9 +346,16 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
     const int64_t n = sc.n;
 
     auto t0 = Clock::now();
-    std::vector<Splat2D> splats(n);
-    std::vector<TileRect> rects(n);
-    std::vector<uint8_t> valid(n);
+    // Per-frame buffers, kept by the calling thread between frames (no allocation, no page faults in the frame loop
+    // once sizes settle); every element is written before it is read. A much smaller scene releases them.
+    thread_local FrameBuffers buf;
+    if ((size_t)n < buf.splats.capacity() / 4) buf = FrameBuffers();
+    std::vector<Splat2D>& splats = buf.splats;
+    std::vector<TileRect>& rects = buf.rects;
+    std::vector<uint8_t>& valid = buf.valid;
+    splats.resize(n);
+    rects.resize(n);
+    valid.resize(n);
 #pragma omp parallel for schedule(static)
     for (int64_t i = 0; i < n; ++i) {
         SplatIn in{sc.means + 3 * i, sc.scales + 3 * i, sc.quats + 4 * i, sc.opacities[i],
@@ -323,8 +366,9 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
     }
     st.preprocess_ms += ms_since(t0);
 
-    std::vector<int64_t> tile_start(num_tiles + 1, 0);
-    std::vector<uint64_t> keys;  // per tile list entry: splat id in the low 32 bits
+    std::vector<int64_t>& tile_start = buf.tile_start;
+    std::vector<uint64_t>& keys = buf.keys;  // per tile list entry: splat id in the low 32 bits
+    tile_start.assign(num_tiles + 1, 0);
     if (mode == DUPLEX) {
         bin_duplex(sc, cam, splats, rects, valid, gx, gy, tile_start, keys, st);
     } else {

@@ -47,6 +47,8 @@ struct LanesHwy {
         hn::StoreMaskBits(D(), m, b);
         return (uint32_t)b[0] | (uint32_t)b[1] << 8;
     }
+    static HWY_INLINE float reduce_min(F v) { return hn::GetLane(hn::MinOfLanes(D(), v)); }
+    static HWY_INLINE float reduce_max(F v) { return hn::GetLane(hn::MaxOfLanes(D(), v)); }
 };
 
 }  // namespace gbv::HWY_NAMESPACE
@@ -108,6 +110,8 @@ struct LanesX2 {
         L::store(v.b, out + L::N);
     }
     static HWY_INLINE uint32_t bits(M m) { return L::bits(m.a) | L::bits(m.b) << L::N; }
+    static HWY_INLINE float reduce_min(F v) { return L::reduce_min(L::min(v.a, v.b)); }
+    static HWY_INLINE float reduce_max(F v) { return L::reduce_max(L::max(v.a, v.b)); }
 };
 
 // The lane type the blend uses: one tile row (16 pixels) per group.

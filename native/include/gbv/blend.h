@@ -171,9 +171,10 @@ struct WindowState {
 // authors' renderCUDA does it (KERNELS.md §6.3), with the moments taken about the window centre (more accurate
 // than the published float32 form, see window_side_moments): window sides go to the eigen-axis within 45 degrees,
 // a window outside [0.1, 1e6] sigma falls back to scalar alpha at the window centre, and the pixel
-// stops after adding a splat that leaves T < 1e-4.
+// stops after adding a splat that leaves T < 1e-4. `took`, when given, receives the lanes whose window changed.
 template <class L>
-GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, WindowState<L>& win) {
+GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, WindowState<L>& win,
+                                    typename L::M* took = nullptr) {
     using F = typename L::F;
     using M = typename L::M;
     const F dx = win.x - L::set(s.xy.x), dy = win.y - L::set(s.xy.y);
@@ -215,6 +216,7 @@ GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, Window
         for (int c = 0; c < 3; ++c) win.C[c] = L::select(take, win.C[c] + L::set(s.color[c]) * w, win.C[c]);
         win.T = L::select(take, win.T - w, win.T);
         stop = L::and_(take, win.T < L::set(T_STOP));
+        if (took) *took = take;
     }
     const M inside = L::and_(pass, normal);
     if (!L::any(inside)) return stop;
@@ -248,6 +250,7 @@ GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, Window
     win.y = L::select(take, win.y + du * L::set(s.v1.y) + dv * L::set(s.v1.x), win.y);
     win.w = L::select(take, aligned ? wu : wv, win.w);
     win.h = L::select(take, aligned ? wv : wu, win.h);
+    if (took) *took = L::or_(*took, take);
     return L::or_(stop, L::and_(take, win.T < L::set(T_STOP)));
 }
 

@@ -34,6 +34,8 @@ struct Lanes1 {
     static GBV_HDI M first_n(int k) { return k > 0; }  // lanes 0..k-1
     static GBV_HDI void store(F v, float* out) { out[0] = v; }
     static GBV_HDI uint32_t bits(M m) { return m ? 1u : 0u; }  // bit i: lane i
+    static GBV_HDI float reduce_min(F v) { return v; }
+    static GBV_HDI float reduce_max(F v) { return v; }
 };
 
 }  // namespace gbv
