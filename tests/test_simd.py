@@ -142,9 +142,10 @@ def _needle_scene(seed):
 
 
 @pytest.mark.parametrize("path", ALL_PATHS)
-@pytest.mark.parametrize("mode", ["scalar", "mip", "wsr", "duplex"])
+@pytest.mark.parametrize("mode", ["scalar", "mip", "gaussian_blending", "wsr", "duplex"])
 def test_pixel_boxes_change_no_pixel(path, mode):
-    """Skipping lane groups outside a splat's pixel box is exact: bit-identical images and evaluation counts."""
+    """Skipping lane groups outside a splat's pixel box (gaussian_blending: outside the group's window box) is exact:
+    bit-identical images and evaluation counts."""
     scene, cam = _needle_scene(5)
     for c in (cam, cam.at_sampling_rate(1 / 2)):
         on = render(path, scene, c, mode, supersample=2)
