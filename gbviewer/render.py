@@ -291,18 +291,26 @@ class CpuRenderer:
 
 class CudaRenderer:
     """Native CUDA backend (gbviewer._native_cuda, built when a CUDA toolkit is present): the scene stays on the
-    device; `render_to_texture` fills an OpenGL texture without a round trip through host memory."""
+    device; `render_to_texture` fills an OpenGL texture without a round trip through host memory.
+
+    Threads may share one renderer: uploads and renders are serialised (a lock here around the scene and cells on
+    the device, and a mutex in the native renderer around its buffers)."""
 
     name = "cuda"
 
-    def __init__(self) -> None:
+    def __init__(self, device: int = -1) -> None:
         ok, why = self.available()
         if not ok:
             raise BackendUnavailable(f"cuda backend unavailable: {why}")
         from . import _native_cuda
 
+        self._native = _native_cuda
+        self._lock = threading.Lock()
+        self._scene: Scene | None = None
+        self._uploaded: Scene | None = None
+        self._cells = None
         try:
-            self._impl = _native_cuda.Renderer()
+            self._impl = _native_cuda.Renderer(device)
         except RuntimeError as exc:
             raise BackendUnavailable(f"cuda backend unavailable: {exc}") from None
 
@@ -316,13 +324,17 @@ class CudaRenderer:
         return ok, "" if ok else why
 
     def upload(self, scene: Scene) -> None:
-        self._scene = scene
-        self._uploaded = None
-        self._cells = None
-        if scene.neural is None:
-            self._upload(scene)
+        with self._lock:
+            self._scene = scene
+            self._uploaded = None
+            self._cells = None
+            if scene.neural is None:
+                self._upload(scene)
 
     def _upload(self, scene: Scene) -> None:
+        # Forget what is on the device first: a failed upload (out of device memory) leaves no scene there.
+        self._uploaded = None
+        self._cells = None
         try:
             self._impl.upload(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d)
             if scene.view_weight_sh is not None:
@@ -330,11 +342,12 @@ class CudaRenderer:
         except RuntimeError as exc:
             raise RenderError(f"cuda: {exc}") from None
         self._uploaded = scene
-        self._cells = None
 
     def _prepare(self, camera: Camera, settings: RenderSettings) -> tuple[Scene, tuple]:
         """The view's scene on the device (trained Duplex-GS models: decoded and uploaded per frame), its cells for
-        duplex, and the globals of wsr / duplex as positional arguments."""
+        duplex, and the globals of wsr / duplex as positional arguments. Called with the lock held."""
+        if self._scene is None:
+            raise RenderError("cuda renderer: upload(scene) before render()")
         scene = view_scene(self._scene, camera)
         if scene is not self._uploaded:
             self._upload(scene)
@@ -346,6 +359,7 @@ class CudaRenderer:
             if cells is not self._cells:
                 cell_of = np.full(scene.num_splats, -1, np.int32)
                 cell_of[cells.members] = np.repeat(np.arange(cells.num_cells, dtype=np.int32), cells.sizes)
+                self._cells = None
                 try:
                     self._impl.upload_cells(cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
                                             cell_of)
@@ -356,24 +370,51 @@ class CudaRenderer:
 
     def render(self, camera: Camera, settings: RenderSettings) -> Frame:
         t0 = time.perf_counter()
-        scene, oit = self._prepare(camera, settings)
-        try:
-            out = self._impl.render(*_camera_args(camera), int(settings.mode), settings.supersample,
-                                    settings.sh_degree, np.asarray(settings.background, np.float32),
-                                    settings.debug == "window", *oit)
-        except RuntimeError as exc:
-            raise RenderError(f"cuda: {exc}") from None
+        with self._lock:
+            scene, oit = self._prepare(camera, settings)
+            try:
+                out = self._impl.render(*_camera_args(camera), int(settings.mode), settings.supersample,
+                                        settings.sh_degree, np.asarray(settings.background, np.float32),
+                                        settings.debug == "window", *oit)
+            except RuntimeError as exc:
+                raise RenderError(f"cuda: {exc}") from None
         return _frame(out, camera, settings, self.name, t0, scene)
 
+    @property
+    def device(self) -> int:
+        """The CUDA device that holds the scene."""
+        return self._impl.device
+
     def render_to_texture(self, texture_id: int, camera: Camera, settings: RenderSettings) -> None:
-        """Render into an existing GL_RGBA32F texture of the camera's size (its GL context must be current)."""
-        _, oit = self._prepare(camera, settings)
-        try:
-            self._impl.render_to_gl_texture(texture_id, *_camera_args(camera), int(settings.mode),
-                                            settings.supersample, settings.sh_degree,
-                                            np.asarray(settings.background, np.float32), *oit)
-        except RuntimeError as exc:
-            raise RenderError(f"cuda: {exc}") from None
+        """Render into an existing GL_RGBA32F texture of the camera's size; its GL context must be current.
+
+        The first call with a texture registers it with CUDA and the registration is kept: call
+        `release_texture(texture_id)` before deleting the texture (GL reuses texture names). When the GL context
+        runs on another CUDA device than the renderer, the renderer moves to that device (the scene is uploaded
+        again) so that the copy stays on one GPU."""
+        with self._lock:
+            devices = self._native.gl_devices()
+            if devices and self._impl.device not in devices:
+                try:
+                    impl = self._native.Renderer(devices[0])
+                except RuntimeError as exc:
+                    raise RenderError(f"cuda: the GL context's device {devices[0]}: {exc}") from None
+                self._impl, self._uploaded, self._cells = impl, None, None
+            _, oit = self._prepare(camera, settings)
+            try:
+                self._impl.render_to_gl_texture(texture_id, *_camera_args(camera), int(settings.mode),
+                                                settings.supersample, settings.sh_degree,
+                                                np.asarray(settings.background, np.float32), *oit)
+            except RuntimeError as exc:
+                raise RenderError(f"cuda: {exc}") from None
+
+    def release_texture(self, texture_id: int) -> None:
+        """Drop a texture's CUDA registration (before deleting the texture; its GL context must be current)."""
+        with self._lock:
+            try:
+                self._impl.release_gl_texture(texture_id)
+            except RuntimeError as exc:
+                raise RenderError(f"cuda: {exc}") from None
 
 
 BACKENDS: dict[str, type] = {"cpu": CpuRenderer, "cuda": CudaRenderer}

@@ -1,10 +1,11 @@
-// GLSL port of native/include/gbv/camera.h: the kernels' CameraParams from the Python-side camera values.
+// GLSL port of native/include/gbv/camera.h: the kernels' CameraParams from the Python-side camera values. `precise`
+// where the C++ code multiplies through mul_rn: no multiply-add contraction (see common.h).
 
 // R is row-major world-to-camera; the frustum limits follow gsplat's persp_proj, which equals the published
 // 1.3 * tan(fov/2) clamp for a centred principal point (KERNELS.md §3).
 CameraParams make_camera(float R[9], float t[3], float fx, float fy, float cx, float cy, int width, int height,
                          float near_plane) {
-    CameraParams c;
+    precise CameraParams c;
     for (int i = 0; i < 9; ++i) c.R[i] = R[i];
     for (int i = 0; i < 3; ++i) c.t[i] = t[i];
     for (int i = 0; i < 3; ++i)  // campos = -R^T t
@@ -16,7 +17,7 @@ CameraParams make_camera(float R[9], float t[3], float fx, float fy, float cx, f
     c.width = width;
     c.height = height;
     c.near_plane = near_plane;
-    const float tan_x = 0.5 * float(width) / fx, tan_y = 0.5 * float(height) / fy;
+    precise const float tan_x = 0.5 * float(width) / fx, tan_y = 0.5 * float(height) / fy;
     c.lim_x_pos = (float(width) - cx) / fx + 0.3 * tan_x;
     c.lim_x_neg = cx / fx + 0.3 * tan_x;
     c.lim_y_pos = (float(height) - cy) / fy + 0.3 * tan_y;

@@ -2,6 +2,8 @@
 // Per-splat preprocess: cull, covariance, EWA projection, per-mode 2D filter, eigen-decomposition, colour from
 // SH, tile rectangle (KERNELS.md §0, §2, §4, §6.2). Needs common.glsl, mathf.glsl and, from the including kernel,
 // `float load_sh(uint splat, int coeff, int channel)` (the scene's SH, coefficient-major, DC first).
+// Values whose C++ products go through mul_rn are `precise` here (function outputs, locals): no multiply-add
+// contraction, so culling decisions and tile rectangles do not depend on the driver's choice to fuse (common.h).
 
 const float SH_C0 = 0.28209479177387814;
 const float SH_C1 = 0.4886025119029199;
@@ -17,7 +19,7 @@ float load_weight_sh(uint splat, int coeff);  // the scene's view-weight SH (wsr
 
 // Real SH basis of degree `deg` (0..3) at the unit direction `dir`, in the 3DGS order and signs; returns the number
 // of coefficients used, (deg + 1)^2.
-int sh_basis(int deg, vec3 dir, out float basis[16]) {
+int sh_basis(int deg, vec3 dir, precise out float basis[16]) {
     const float x = dir.x, y = dir.y, z = dir.z;
     basis[0] = SH_C0;
     if (deg < 1) return 1;
@@ -25,7 +27,7 @@ int sh_basis(int deg, vec3 dir, out float basis[16]) {
     basis[2] = SH_C1 * z;
     basis[3] = -SH_C1 * x;
     if (deg < 2) return 4;
-    const float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
+    precise const float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
     basis[4] = SH_C2_0 * xy;
     basis[5] = SH_C2_1 * yz;
     basis[6] = SH_C2_2 * (2.0 * zz - xx - yy);
@@ -48,7 +50,7 @@ void sh_to_rgb(uint splat, int deg, vec3 dir, out vec3 result) {
     float basis[16];
     const int k = sh_basis(deg, dir, basis);
     for (int c = 0; c < 3; ++c) {
-        float v = 0.5;
+        precise float v = 0.5;
         for (int i = 0; i < k; ++i) v += basis[i] * load_sh(splat, i, c);
         result[c] = max(v, 0.0);
     }
@@ -58,19 +60,19 @@ void sh_to_rgb(uint splat, int deg, vec3 dir, out vec3 result) {
 float sh_to_weight(uint splat, int deg, vec3 dir) {
     float basis[16];
     const int k = sh_basis(deg, dir, basis);
-    float v = 0.0;
+    precise float v = 0.0;
     for (int i = 0; i < k; ++i) v += basis[i] * load_weight_sh(splat, i);
     return v;
 }
 
 // 3D covariance Sigma = R S S^T R^T (upper triangle: xx, xy, xz, yy, yz, zz) from a unit (w,x,y,z) quaternion and
 // per-axis scales (eq. 1).
-void covariance_3d(vec4 q, vec3 s, out float cov[6]) {
+void covariance_3d(vec4 q, vec3 s, precise out float cov[6]) {
     const float r = q[0], x = q[1], y = q[2], z = q[3];
-    const float R[9] = float[](1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - r * z), 2.0 * (x * z + r * y),
-                               2.0 * (x * y + r * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - r * x),
-                               2.0 * (x * z - r * y), 2.0 * (y * z + r * x), 1.0 - 2.0 * (x * x + y * y));
-    float M[9];  // M = R S
+    precise const float R[9] = float[](1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - r * z), 2.0 * (x * z + r * y),
+                                       2.0 * (x * y + r * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - r * x),
+                                       2.0 * (x * z - r * y), 2.0 * (y * z + r * x), 1.0 - 2.0 * (x * x + y * y));
+    precise float M[9];  // M = R S
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) M[i * 3 + j] = R[i * 3 + j] * s[j];
     cov[0] = M[0] * M[0] + M[1] * M[1] + M[2] * M[2];
@@ -83,20 +85,20 @@ void covariance_3d(vec4 q, vec3 s, out float cov[6]) {
 
 // EWA projection of a 3D covariance to screen space (eq. 3): J W Sigma W^T J^T, with the view-space point
 // clamped to 1.3x the frustum for the Jacobian only (computeCov2D). Returns (a, b, c).
-void project_covariance(CameraParams cam, float cov3[6], vec3 pv, out vec3 result) {
+void project_covariance(CameraParams cam, float cov3[6], vec3 pv, precise out vec3 result) {
     const float tz = pv[2];
-    const float tx = clampf(pv[0] / tz, -cam.lim_x_neg, cam.lim_x_pos) * tz;
-    const float ty = clampf(pv[1] / tz, -cam.lim_y_neg, cam.lim_y_pos) * tz;
-    const float j00 = cam.fx / tz, j02 = -cam.fx * tx / (tz * tz);
-    const float j11 = cam.fy / tz, j12 = -cam.fy * ty / (tz * tz);
+    precise const float tx = clampf(pv[0] / tz, -cam.lim_x_neg, cam.lim_x_pos) * tz;
+    precise const float ty = clampf(pv[1] / tz, -cam.lim_y_neg, cam.lim_y_pos) * tz;
+    precise const float j00 = cam.fx / tz, j02 = -cam.fx * tx / (tz * tz);
+    precise const float j11 = cam.fy / tz, j12 = -cam.fy * ty / (tz * tz);
     // T = J W (2x3), W = cam.R
-    float T[6];
+    precise float T[6];
     for (int c = 0; c < 3; ++c) {
         T[c] = j00 * cam.R[c] + j02 * cam.R[6 + c];
         T[3 + c] = j11 * cam.R[3 + c] + j12 * cam.R[6 + c];
     }
     const float S[9] = float[](cov3[0], cov3[1], cov3[2], cov3[1], cov3[3], cov3[4], cov3[2], cov3[4], cov3[5]);
-    float TS[6];
+    precise float TS[6];
     for (int r = 0; r < 2; ++r)
         for (int c = 0; c < 3; ++c)
             TS[r * 3 + c] = T[r * 3] * S[c] + T[r * 3 + 1] * S[3 + c] + T[r * 3 + 2] * S[6 + c];
@@ -125,21 +127,45 @@ void eigen_2d(float a, float b, float c, float det, out float sigma1, out float 
 // Screen-space bounding radius in pixels: ceil(k * sqrt(max eigenvalue)) with the published max(0.1, mid^2 - det)
 // floor.
 float splat_radius(float a, float c, float det, float sigmas) {
-    const float mid = 0.5 * (a + c);
-    const float lmax = mid + sqrt(max(0.1, mid * mid - det));
+    precise const float mid = 0.5 * (a + c);
+    precise const float lmax = mid + sqrt(max(0.1, mid * mid - det));
     return ceil(sigmas * sqrt(lmax));
 }
 
-// Tiles touched by a splat at xy with radius r (getRect), in the published integer-centre pixel convention (our
-// xy minus 0.5). Empty when x1 <= x0 or y1 <= y0.
-TileRect tile_rect(vec2 xy, float r, int grid_x, int grid_y) {
+// ln(x) for x >= 1, from above, by basic operations only (port of preprocess.h: x = m 2^e, ln m <= t - t^2/2 + t^3/3).
+float log_upper(float x) {
+    int e;
+    const float m = 2.0 * frexp(x, e);  // x = m 2^(e - 1)
+    precise const float t = m - 1.0;
+    precise const float t2 = t * t;
+    precise const float v = float(e - 1) * 0.69314720 + t - 0.5 * t2 + (t2 * t) * 0.33333334;
+    return v;
+}
+
+// Half sides of the screen box that binning gives a splat: the box of its cut-off ellipse (scalar, mip, wsr, duplex),
+// widened for rounding, plus getRect's one pixel, capped by the radius; the radius for gaussian_blending and analytic
+// (port of preprocess.h).
+vec2 cutoff_half_sides(int mode, vec3 cov, float det, float opacity, float min_alpha, float r) {
+    if (mode == GAUSSIAN_BLENDING || mode == ANALYTIC) return vec2(r, r);
+    precise const float r2 = 2.0 * log_upper(opacity / min_alpha);
+    precise const float mid = 0.5 * (cov[0] + cov[2]);
+    precise const float l1 = mid + sqrt(max(0.0, mid * mid - det));
+    precise const float grow = 1.00001 + 1e-6 * ((l1 * l1) / det);
+    precise const float hx = ceil(sqrt(r2 * cov[0]) * grow + 0.02) + 1.0;
+    precise const float hy = ceil(sqrt(r2 * cov[2]) * grow + 0.02) + 1.0;
+    return vec2(minf(hx, r), minf(hy, r));
+}
+
+// Tiles touched by a splat at xy with half sides h (getRect, which has h = (r, r)), in the published integer-centre
+// pixel convention (our xy minus 0.5). Empty when x1 <= x0 or y1 <= y0.
+TileRect tile_rect(vec2 xy, vec2 h, int grid_x, int grid_y) {
     const float px = xy.x - 0.5, py = xy.y - 0.5;
     const float gx = float(grid_x), gy = float(grid_y);
     TileRect t;
-    t.x0 = int(clampf((px - r) / float(TILE), 0.0, gx));
-    t.y0 = int(clampf((py - r) / float(TILE), 0.0, gy));
-    t.x1 = int(clampf((px + r + float(TILE - 1)) / float(TILE), 0.0, gx));
-    t.y1 = int(clampf((py + r + float(TILE - 1)) / float(TILE), 0.0, gy));
+    t.x0 = int(clampf((px - h.x) / float(TILE), 0.0, gx));
+    t.y0 = int(clampf((py - h.y) / float(TILE), 0.0, gy));
+    t.x1 = int(clampf((px + h.x + float(TILE - 1)) / float(TILE), 0.0, gx));
+    t.y1 = int(clampf((py + h.y + float(TILE - 1)) / float(TILE), 0.0, gy));
     return t;
 }
 
@@ -157,19 +183,20 @@ struct SplatIn {
 };
 
 // View-space position R m + t of a world point; false behind the near plane (z <= 0.2, KERNELS.md §0.4).
-bool view_point(CameraParams cam, vec3 m, out vec3 pv) {
+bool view_point(CameraParams cam, vec3 m, precise out vec3 pv) {
     for (int i = 0; i < 3; ++i)
         pv[i] = cam.R[i * 3] * m[0] + cam.R[i * 3 + 1] * m[1] + cam.R[i * 3 + 2] * m[2] + cam.t[i];
     return pv[2] > cam.near_plane;
 }
 
-// Screen position of the view-space point pv and the tiles within radius r of it (getRect); false when a value is
-// not finite or no tile is touched.
-bool screen_footprint(CameraParams cam, vec3 pv, float r, int grid_x, int grid_y, out vec2 xy, out TileRect rect) {
+// Screen position of the view-space point pv and the tiles of the box with half sides h around it (getRect); false
+// when a value is not finite or no tile is touched.
+bool screen_footprint(CameraParams cam, vec3 pv, vec2 h, int grid_x, int grid_y, precise out vec2 xy,
+                      out TileRect rect) {
     xy = vec2(cam.fx * pv[0] / pv[2] + cam.cx, cam.fy * pv[1] / pv[2] + cam.cy);
     rect = TileRect(0, 0, 0, 0);
-    if (!finitef(xy.x) || !finitef(xy.y) || !finitef(r)) return false;
-    rect = tile_rect(xy, r, grid_x, grid_y);
+    if (!finitef(xy.x) || !finitef(xy.y) || !finitef(h.x) || !finitef(h.y)) return false;
+    rect = tile_rect(xy, h, grid_x, grid_y);
     return rect.x1 > rect.x0 && rect.y1 > rect.y0;
 }
 
@@ -179,20 +206,20 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
                       out Splat2D result, out TileRect rect) {
     rect = TileRect(0, 0, 0, 0);
     const vec3 m = in_.mean;
-    vec3 pv;
+    precise vec3 pv;
     if (!view_point(cam, m, pv)) return false;
-    vec3 dir = vec3(m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]);
-    const float dn = sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
+    precise vec3 dir = vec3(m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]);
+    precise const float dn = sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
     dir = dn > 0.0 ? vec3(dir.x / dn, dir.y / dn, dir.z / dn) : vec3(0.0, 0.0, 1.0);
 
     // Mip-Splatting 3D filter (applied in every mode when present): scales grow, opacity compensates.
-    vec3 s;
-    float opacity = in_.opacity;
+    precise vec3 s;
+    precise float opacity = in_.opacity;
     if (in_.filter_3d > 0.0) {
-        const float f2 = in_.filter_3d * in_.filter_3d;
-        float ratio = 1.0;
+        precise const float f2 = in_.filter_3d * in_.filter_3d;
+        precise float ratio = 1.0;
         for (int i = 0; i < 3; ++i) {
-            const float s2 = in_.scale[i] * in_.scale[i];
+            precise const float s2 = in_.scale[i] * in_.scale[i];
             s[i] = sqrt(s2 + f2);
             ratio *= s2 / (s2 + f2);
         }
@@ -201,8 +228,8 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
         s = in_.scale;
     }
 
-    float cov3[6];
-    vec3 cov;
+    precise float cov3[6];
+    precise vec3 cov;
     covariance_3d(in_.quat, s, cov3);
     project_covariance(cam, cov3, pv, cov);
 
@@ -212,11 +239,11 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
         cov[0] += DILATION_3DGS;
         cov[2] += DILATION_3DGS;
     } else if (mode == MIP) {
-        const float det0 = max(1e-6, cov[0] * cov[2] - cov[1] * cov[1]);
+        precise const float det0 = max(1e-6, cov[0] * cov[2] - cov[1] * cov[1]);
         cov[0] += MIP_KERNEL_SIZE;
         cov[2] += MIP_KERNEL_SIZE;
-        const float det1 = max(1e-6, cov[0] * cov[2] - cov[1] * cov[1]);
-        const float coef = (det0 <= 1e-6 || det1 <= 1e-6) ? 0.0 : sqrt(det0 / (det1 + 1e-6) + 1e-6);
+        precise const float det1 = max(1e-6, cov[0] * cov[2] - cov[1] * cov[1]);
+        precise const float coef = (det0 <= 1e-6 || det1 <= 1e-6) ? 0.0 : sqrt(det0 / (det1 + 1e-6) + 1e-6);
         opacity *= coef;
     } else if (mode == GAUSSIAN_BLENDING) {
         sigmas = RADIUS_SIGMAS_GB;
@@ -224,8 +251,8 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
     } else if (mode == WSR || mode == DUPLEX) {
         cov[0] += DILATION_3DGS;
         cov[2] += DILATION_3DGS;
-        float w = in_.has_weight ? sh_to_weight(in_.index, sh_deg < in_.weight_deg ? sh_deg : in_.weight_deg, dir)
-                                 : 1.0;
+        precise float w =
+            in_.has_weight ? sh_to_weight(in_.index, sh_deg < in_.weight_deg ? sh_deg : in_.weight_deg, dir) : 1.0;
         if (oit.depth_correct != 0) {
             if (!(pv[2] < oit.sigma)) return false;
             w *= 1.0 - pv[2] / oit.sigma;
@@ -235,13 +262,15 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
     }
     if (!(opacity >= min_alpha)) return false;  // alpha = opacity * g <= opacity would be skipped anyway
 
-    const float det = cov[0] * cov[2] - cov[1] * cov[1];
+    precise const float det = cov[0] * cov[2] - cov[1] * cov[1];
     if (!(det > 0.0) || !finitef(det)) return false;
     const float inv = 1.0 / det;
 
-    const float r = splat_radius(cov[0], cov[2], det, sigmas);
-    vec2 xy;
-    if (!screen_footprint(cam, pv, r, grid_x, grid_y, xy, rect)) return false;
+    precise const float r = splat_radius(cov[0], cov[2], det, sigmas);
+    precise vec2 xy;
+    if (!screen_footprint(cam, pv, cutoff_half_sides(mode, cov, det, opacity, min_alpha, r), grid_x, grid_y, xy,
+                          rect))
+        return false;
 
     result.xy = xy;
     result.depth = pv[2];
@@ -278,19 +307,19 @@ struct Cell2D {
 bool preprocess_cell(CellIn in_, CameraParams cam, int grid_x, int grid_y, out Cell2D result, out TileRect rect) {
     rect = TileRect(0, 0, 0, 0);
     const vec3 m = in_.mean;
-    vec3 pv;
+    precise vec3 pv;
     if (!view_point(cam, m, pv)) return false;
-    float cov3[6];
-    vec3 cov;
+    precise float cov3[6];
+    precise vec3 cov;
     covariance_3d(in_.quat, in_.scale, cov3);
     project_covariance(cam, cov3, pv, cov);
     cov[0] += DILATION_3DGS;
     cov[2] += DILATION_3DGS;
-    const float det = cov[0] * cov[2] - cov[1] * cov[1];
+    precise const float det = cov[0] * cov[2] - cov[1] * cov[1];
     if (!(det > 0.0) || !finitef(det)) return false;
-    const float r = splat_radius(cov[0], cov[2], det, DUPLEX_CELL_SIGMAS);
-    vec2 xy;
-    if (!screen_footprint(cam, pv, r, grid_x, grid_y, xy, rect)) return false;
+    precise const float r = splat_radius(cov[0], cov[2], det, DUPLEX_CELL_SIGMAS);
+    precise vec2 xy;
+    if (!screen_footprint(cam, pv, vec2(r, r), grid_x, grid_y, xy, rect)) return false;
     result.xy = xy;
     result.depth = pv[2];
     result.radius = r;

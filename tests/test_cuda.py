@@ -1,21 +1,37 @@
-"""CUDA backend: the module must build wherever nvcc exists; runtime comparisons with the CPU backend run only
-where a CUDA device is present (they skip, saying why, elsewhere)."""
+"""CUDA backend: the module must build wherever nvcc exists; its argument checks and the Python wrapper's state
+handling run without a GPU; runtime comparisons with the CPU backend run only where a CUDA device is present (they
+skip, saying why, elsewhere).
+
+Exactness on a GPU: `visible` and `sort_length` must equal the CPU's. The preprocess decisions are bit-identical on
+every backend (products rounded through mul_rn, tests/test_fp_contract.py), and duplex orders each cell's splats
+canonically on both (gbv/order.h), so the only float differences left are in the blend (fused multiply-adds, device
+expf/logf), bounded per image below.
+"""
 
 from __future__ import annotations
 
 import importlib
 import shutil
+import threading
 
 import numpy as np
 import pytest
 
 import gbviewer as gb
 from conftest import front_camera, random_scene, shared_scene
+from gbviewer.cells import Cells, build_cells
+from gbviewer.errors import RenderError
 from gbviewer.render import CudaRenderer
+from test_render import check_concurrent_renders
 
 MODES = ["scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex"]
 CUDA_OK, CUDA_WHY = CudaRenderer.available()
 needs_gpu = pytest.mark.skipif(not CUDA_OK, reason=f"no CUDA runtime here: {CUDA_WHY}")
+try:
+    from gbviewer import _native_cuda
+except ImportError:
+    _native_cuda = None
+needs_module = pytest.mark.skipif(_native_cuda is None, reason="gbviewer._native_cuda is not built (no nvcc)")
 
 
 @pytest.mark.skipif(shutil.which("nvcc") is None, reason="no nvcc on PATH: the CUDA module is not built")
@@ -71,3 +87,200 @@ def test_cuda_buffers_grow_for_larger_scenes():
     f = r.render(cam.at_sampling_rate(4), gb.RenderSettings(gb.Mode.GAUSSIAN_BLENDING))
     ref = gb.render(big, cam.at_sampling_rate(4), "gaussian_blending")
     assert compare(f, ref)[0] < 1e-4
+
+
+@needs_gpu
+def test_cuda_concurrent_renders():
+    """Two Python threads share the process's CUDA renderer (every mode, duplex cells uploaded while the other
+    thread renders): frames equal the same renders done alone, bit for bit."""
+    check_concurrent_renders("cuda", random_scene(400, seed=5, sh_degree=1))
+
+
+def duplex_scene_with_ties(seed: int = 52) -> tuple[gb.Scene, Cells, int]:
+    """Random splats plus a copy of each with other colours (same depth, position, shape: splat_less orders such
+    pairs by colour), in cells of 6; returns the scene, its cells and the number of same-depth pairs in a cell."""
+    base = random_scene(150, seed=seed, sh_degree=3)
+    rng = np.random.default_rng(seed)
+    cat = lambda a: np.concatenate([a, a])  # noqa: E731
+    sh = np.concatenate([base.sh, rng.normal(0, 0.5, base.sh.shape)])
+    scene = gb.Scene.from_arrays(cat(base.means), cat(base.scales), cat(base.quats), cat(base.opacities), sh)
+    cells = build_cells(scene, 6)
+    ties = 0
+    for c in range(cells.num_cells):
+        z = scene.means[cells.members[cells.offsets[c]:cells.offsets[c + 1]], 2]
+        ties += len(z) - len(np.unique(z))
+    scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, cells=cells)
+    return scene, cells, ties
+
+
+@needs_gpu
+def test_cuda_duplex_order_inside_cells_is_canonical():
+    """Permuting the members of every cell leaves the CUDA image unchanged bit for bit (the CPU's canonical order,
+    gbv/order.h, splats of equal depth included), and equal to the CPU's up to blend rounding, counts exactly."""
+    scene, cells, ties = duplex_scene_with_ties()
+    assert ties > 20, ties
+    cam = front_camera(96, 72)
+    a = gb.render(scene, cam, "duplex", backend="cuda")
+    cpu = gb.render(scene, cam, "duplex", backend="cpu")
+    for seed in (1, 2):
+        rng = np.random.default_rng(seed)
+        members = cells.members.copy()
+        for c in range(cells.num_cells):
+            lo, hi = cells.offsets[c], cells.offsets[c + 1]
+            members[lo:hi] = rng.permutation(members[lo:hi])
+        shuffled = Cells(cells.means, cells.scales, cells.quats, cells.offsets, members)
+        other = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
+                                     cells=shuffled)
+        b = gb.render(other, cam, "duplex", backend="cuda")
+        assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.alpha, b.alpha), f"member permutation {seed}"
+    mean, worst, frac = compare(cpu, a)
+    assert mean < 1e-4 and frac < 0.002, (mean, worst, frac)
+    for key in ("visible", "sort_length", "pairs", "cells_visible", "cell_misses"):
+        assert a.stats[key] == cpu.stats[key], key
+
+
+@needs_gpu
+@pytest.mark.parametrize("mode", MODES)
+def test_cuda_empty_frame(mode):
+    """Every splat behind the camera: the background, no evaluations."""
+    cam = gb.Camera(32, 32, 30, 30, 16, 16, np.eye(3), [0.0, 0.0, -10.0])
+    f = gb.render(random_scene(50), cam, mode, backend="cuda", background=(0.5, 0.25, 1.0))
+    assert f.stats["visible"] == 0 and f.stats["sort_length"] == 0 and f.stats["pairs"] == 0
+    np.testing.assert_array_equal(f.rgb, np.broadcast_to(np.float32([0.5, 0.25, 1.0]), (32, 32, 3)))
+    assert (f.alpha == 0).all() and (f.debug["evals"] == 0).all()
+
+
+@needs_gpu
+def test_cuda_renderer_device():
+    r = CudaRenderer()
+    assert 0 <= r.device
+    with pytest.raises(gb.BackendUnavailable, match="does not exist"):
+        CudaRenderer(device=1 << 20)
+
+
+# ---- without a GPU: argument checks (gbviewer._native_cuda.check_render_args runs Renderer.render's) -------------
+
+GOOD = dict(R=np.eye(3, dtype=np.float32), t=np.zeros(3, np.float32), fx=60.0, fy=60.0, cx=32.0, cy=24.0, width=64,
+            height=48, near_plane=0.2, mode=0, supersample=1, sh_degree=3, background=np.zeros(3, np.float32),
+            want_window=False, sigma=10.0, weight_background=1.0, et_grade=4.0, depth_correct=False)
+DUPLEX, WSR = int(gb.Mode.DUPLEX), int(gb.Mode.WSR)
+# (changed arguments, message)
+BAD_ARGS = [
+    (dict(R=np.eye(2, dtype=np.float32)), "R must be 3x3"),
+    (dict(background=np.zeros(2, np.float32)), "background 3 floats"),
+    (dict(mode=6), "unknown mode"),
+    (dict(mode=-1), "unknown mode"),
+    (dict(supersample=0), "supersample must be 1..8"),
+    (dict(supersample=9), "supersample must be 1..8"),
+    (dict(mode=DUPLEX, et_grade=0.0), "et_grade must be"),
+    (dict(mode=DUPLEX, et_grade=-1.0), "et_grade must be"),
+    (dict(mode=DUPLEX, et_grade=float("nan")), "et_grade must be"),
+    (dict(mode=DUPLEX, et_grade=float("inf")), "et_grade must be"),
+    (dict(R=np.full((3, 3), np.nan, np.float32)), "must be finite"),
+    (dict(t=np.float32([0, np.inf, 0])), "must be finite"),
+    (dict(background=np.float32([0, 0, np.nan])), "must be finite"),
+    (dict(width=0), "width and height"),
+    (dict(height=-3), "width and height"),
+    (dict(width=16384, height=16384, supersample=8), "2\\^31"),
+    (dict(fx=0.0), "fx, fy and near_plane"),
+    (dict(fy=float("nan")), "fx, fy and near_plane"),
+    (dict(cx=float("inf")), "cx and cy finite"),
+    (dict(near_plane=0.0), "fx, fy and near_plane"),
+    (dict(mode=WSR, weight_background=-0.5), "weight_background"),
+    (dict(mode=DUPLEX, weight_background=float("nan")), "weight_background"),
+    (dict(mode=WSR, depth_correct=True, sigma=0.0), "sigma must be"),
+]
+
+
+@needs_module
+@pytest.mark.parametrize("changes, message", BAD_ARGS, ids=[f"{i}" for i in range(len(BAD_ARGS))])
+def test_cuda_binding_rejects_bad_render_args(changes, message):
+    _native_cuda.check_render_args(**GOOD)  # the baseline passes
+    with pytest.raises(ValueError, match=f"^render: .*{message}"):
+        _native_cuda.check_render_args(**dict(GOOD, **changes))
+
+
+@needs_module
+@pytest.mark.parametrize("changes", [dict(mode=0, et_grade=0.0), dict(mode=DUPLEX), dict(mode=WSR, sigma=0.0),
+                                     dict(width=1, height=1, supersample=8), dict(cx=-1e6, cy=1e6)])
+def test_cuda_binding_accepts_unused_or_odd_args(changes):
+    """et_grade matters for duplex only, sigma with depth correction only; off-image principal points are fine."""
+    _native_cuda.check_render_args(**dict(GOOD, **changes))
+
+
+@pytest.mark.parametrize("changes, message", BAD_ARGS)
+def test_cpu_binding_rejects_bad_render_args(changes, message):
+    """The CPU module parses its arguments with the same helper (nb_common.h's parse_render_args)."""
+    from gbviewer import _native
+
+    scene = random_scene(12, seed=3)
+    cells = build_cells(scene, 4)
+    args = dict(GOOD, **changes)
+    with pytest.raises(ValueError, match=f"^render: .*{message}"):
+        _native.render(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None, args["R"], args["t"],
+                       args["fx"], args["fy"], args["cx"], args["cy"], args["width"], args["height"],
+                       args["near_plane"], args["mode"], args["supersample"], args["sh_degree"], args["background"],
+                       args["want_window"], 1, cell_means=cells.means, cell_scales=cells.scales,
+                       cell_quats=cells.quats, cell_offsets=cells.offsets, cell_members=cells.members,
+                       sigma=args["sigma"], weight_background=args["weight_background"], et_grade=args["et_grade"],
+                       depth_correct=args["depth_correct"])
+
+
+# ---- without a GPU: the Python wrapper's state after failures and its lock, on a stand-in native renderer -------
+
+class FakeNative:
+    """Stands in for gbviewer._native_cuda.Renderer: records calls, fails the uploads it is told to."""
+
+    def __init__(self, fail: set[str] = frozenset()):
+        self.fail, self.calls, self.device = set(fail), [], 0
+        self.busy = threading.Lock()
+
+    def _call(self, name):
+        if not self.busy.acquire(blocking=False):
+            raise AssertionError(f"{name} entered while another call was running")
+        try:
+            self.calls.append(name)
+            if name in self.fail:
+                self.fail.discard(name)
+                raise RuntimeError("CUDA out of device memory: could not allocate 1 MiB")
+        finally:
+            self.busy.release()
+
+    def upload(self, *args):
+        self._call("upload")
+
+    def upload_weights(self, *args):
+        self._call("upload_weights")
+
+    def upload_cells(self, *args):
+        self._call("upload_cells")
+
+
+def fake_renderer(fake: FakeNative) -> CudaRenderer:
+    r = object.__new__(CudaRenderer)
+    r._native, r._lock, r._impl = None, threading.Lock(), fake
+    r._scene = r._uploaded = r._cells = None
+    return r
+
+
+def test_cuda_wrapper_failed_upload_is_retried():
+    """After an upload fails (out of device memory) the wrapper does not think the scene is on the device: the next
+    frame uploads it again; the same for duplex cells."""
+    scene = random_scene(30, seed=4)
+    fake = FakeNative(fail={"upload", "upload_cells"})
+    r = fake_renderer(fake)
+    with pytest.raises(RenderError, match="out of device memory"):
+        r.upload(scene)
+    assert r._uploaded is None
+    cam, duplex = front_camera(), gb.RenderSettings("duplex")
+    with pytest.raises(RenderError, match="out of device memory"):
+        r._prepare(cam, duplex)  # the scene goes up again; its cells fail
+    assert fake.calls == ["upload", "upload", "upload_cells"] and r._uploaded is scene and r._cells is None
+    r._prepare(cam, duplex)
+    r._prepare(cam, duplex)
+    assert fake.calls == ["upload", "upload", "upload_cells", "upload_cells"]
+
+
+def test_cuda_wrapper_without_scene():
+    with pytest.raises(RenderError, match="upload"):
+        fake_renderer(FakeNative())._prepare(front_camera(), gb.RenderSettings())

@@ -26,6 +26,8 @@ import importlib
 import json
 import math
 import re
+import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -156,6 +158,10 @@ def test_struct_fields_identical(struct):
 NOT_PORTED = {
     "blend_pixel": "the per-pixel loop is blend.comp's batch loop over the tile's shared-memory splats",
     "dot": "GLSL built-in",
+    "float_bits": "GLSL built-in floatBitsToUint",
+    "splat_less": "the GLSL duplex keeps each cell's member order (cells.comp), which differs from the CPU's canonical "
+                  "order only by float rounding, within the tolerances above",
+    "mul_rn": "GLSL declares the values that C++ multiplies through it `precise` (test_preprocess_is_not_contracted)",
     "to_fixed": "GLSL 4.30 core has no 64-bit integers: the wsr sums stay in float there (blend.glsl)",
     "tiles_outside": "duplex's cell_misses statistic, which the GLSL backend does not report",
 }
@@ -172,6 +178,43 @@ def test_function_names_ported():
     missing = sorted(cpp - glsl_funcs - set(NOT_PORTED))
     assert not missing, f"native functions without a GLSL port of the same name: {missing}"
     assert {"preprocess_splat", "blend_gaussian", "make_camera"} <= glsl_funcs
+
+
+# Functions whose C++ products go through mul_rn (common.h): no multiply-add of theirs may be contracted.
+NOT_CONTRACTED = {"make_camera", "sh_basis", "sh_to_rgb", "sh_to_weight", "covariance_3d", "project_covariance",
+                  "splat_radius", "tile_rect", "view_point", "screen_footprint", "preprocess_splat", "preprocess_cell"}
+
+
+@pytest.mark.parametrize("shader", ["preprocess.comp", "cells.comp"])
+def test_preprocess_is_not_contracted(shader, tmp_path, monkeypatch):
+    """The shaders compile (glslangValidator, OpenGL SPIR-V), and in the preprocess functions every multiply whose
+    result feeds an add or subtract is `precise` together with that add (SPIR-V NoContraction on both), as the C++
+    code routes those products through mul_rn: culling decisions and tile edges must not depend on whether the
+    driver fuses multiply-adds (tests/test_fp_contract.py checks the C++ side bit for bit)."""
+    exe = shutil.which("glslangValidator")
+    if exe is None:
+        skip_or_fail("glslangValidator (Debian: glslang-tools) is not installed")
+    monkeypatch.setattr(glsl, "SHADER_DIR", SHADERS)  # this checkout's shaders, not the installed copy
+    src = tmp_path / shader
+    src.write_text(glsl.shader_source(shader, {"GBV_PRECISE_MATH": 1}))
+    p = subprocess.run([exe, "-G", "--aml", "-H", str(src), "-o", str(tmp_path / "out.spv")], capture_output=True,
+                       text=True)
+    assert p.returncode == 0, p.stdout + p.stderr
+    exact = set(re.findall(r"Decorate (\d+) NoContraction", p.stdout))
+    function, ops, seen, fused = None, {}, set(), []
+    for line in p.stdout.splitlines():
+        if m := re.match(r"\s*\d+\((\w+)\(.*\bFunction\b", line):
+            function = m.group(1)
+            seen.add(function)
+        elif (m := re.match(r"\s*(\d+):\s+\S+\s+(FMul|FAdd|FSub|FNegate)\s+(\d+)(?:\s+(\d+))?", line)) and function:
+            ident, op, args = m.group(1), m.group(2), [a for a in m.group(3, 4) if a]
+            ops[ident] = op
+            if op in ("FAdd", "FSub") and function in NOT_CONTRACTED:
+                for a in args:
+                    if ops.get(a) == "FMul" and not (ident in exact and a in exact):
+                        fused.append(f"{function}: %{a} FMul -> %{ident} {op}")
+    assert NOT_CONTRACTED & seen, f"none of {sorted(NOT_CONTRACTED)} found in the SPIR-V of {shader}"
+    assert not fused, "multiply-adds a driver may contract:\n" + "\n".join(fused)
 
 
 def _eval_glsl(fn: str, xs: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@
 
 #include "blend_tile.h"
 #include "gbv/camera.h"
+#include "gbv/order.h"
 #include "gbv/preprocess.h"
 #include "nb_common.h"
 #include <nanobind/stl/string.h>
@@ -70,22 +71,6 @@ struct Stats {
     // (pixels there miss the splat: the cell ellipsoid does not cover it on screen).
     int64_t cells_visible = 0, cell_misses = 0;
 };
-
-// Total order on a preprocessed splat's fields (depth first): a canonical order for the members of a cell that
-// does not depend on the order the scene lists them in. Identical keys mean identical splats for the blend.
-bool splat_less(const Splat2D& a, const Splat2D& b) {
-    const float ka[12] = {a.depth, a.xy.x, a.xy.y, a.opacity, a.conic[0], a.conic[1], a.conic[2],
-                          a.color[0], a.color[1], a.color[2], a.radius, a.log_min_alpha};
-    const float kb[12] = {b.depth, b.xy.x, b.xy.y, b.opacity, b.conic[0], b.conic[1], b.conic[2],
-                          b.color[0], b.color[1], b.color[2], b.radius, b.log_min_alpha};
-    for (int i = 0; i < 12; ++i) {
-        uint32_t ua, ub;
-        std::memcpy(&ua, &ka[i], 4);
-        std::memcpy(&ub, &kb[i], 4);
-        if (ua != ub) return ua < ub;
-    }
-    return false;
-}
 
 // Binning of splats, in parallel: each thread counts the tiles of its static range of splats, a prefix sum over
 // (tile, thread) gives every thread its slots in every tile, and each thread writes its (depth bits, splat id) keys
@@ -417,9 +402,9 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
                 std::optional<FArr> cell_quats, std::optional<IArr> cell_offsets, std::optional<IArr> cell_members,
                 float sigma, float weight_background, float et_grade, bool depth_correct) {
     const int64_t n = check_scene("render", means, scales, quats, opacities, sh, filter_3d);
-    check_view("render", R, t, background);
-    check_mode("render", mode);
-    check_supersample("render", supersample);
+    const RenderArgs args = parse_render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, mode,
+                                              supersample, background, sigma, weight_background, et_grade,
+                                              depth_correct);
     const int k = (int)sh.shape(1);
     const int sh_deg = std::max(0, std::min(sh_degree, sh_degree_for_coeffs(k)));
     SceneView sc{means.data(), scales.data(), quats.data(), opacities.data(), sh.data(),
@@ -442,13 +427,10 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
         sc.cell_members = cell_members->data();
         sc.m = m;
     }
-    if (mode == DUPLEX && !(et_grade > 0.0f))
-        throw std::invalid_argument("render: et_grade must be > 0");
-    const OitParams oit{sigma, weight_background, et_grade, depth_correct ? 1 : 0};
+    const OitParams oit = args.oit;
     const int N = supersample;
-    const CameraParams cam = make_camera(R.data(), t.data(), fx * N, fy * N, cx * N, cy * N, width * N,
-                                         height * N, near_plane);
-    const float bg[3] = {background.data()[0], background.data()[1], background.data()[2]};
+    const CameraParams& cam = args.cam;
+    const float* bg = args.bg;
     const bool window = want_window && mode == GAUSSIAN_BLENDING;
 
     Image out;

@@ -6,6 +6,7 @@
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/optional.h>
 
+#include <cmath>
 #include <cstdint>
 #include <initializer_list>
 #include <optional>
@@ -13,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "gbv/camera.h"
 #include "gbv/common.h"
 
 namespace gbv::nbc {
@@ -58,6 +60,59 @@ inline Mode check_mode(const char* where, int mode) {
 
 inline void check_supersample(const char* where, int N) {
     if (N < 1 || N > 8) fail(where, "supersample must be 1..8");
+}
+
+// The per-frame arguments of a render call, checked.
+struct RenderArgs {
+    CameraParams cam;   // at supersample x the output size: supersampling renders there and box-averages
+    Mode mode;
+    int supersample;    // N, 1..8
+    int width, height;  // output size
+    float bg[3];
+    OitParams oit;      // wsr / duplex globals
+};
+
+// The render arguments both modules take (Python: gbviewer.render._camera_args, then mode, supersample, background
+// and the order-independent globals), checked; a bad one throws std::invalid_argument (ValueError) naming `where`.
+// Checks: R 3x3, t and background 3 floats, all finite; width and height >= 1 and at most 2^31 - 1 pixels at N x N
+// samples; fx, fy, near finite and > 0, cx, cy finite; mode known; N in 1..8; for wsr and duplex a finite
+// weight_background >= 0 and, with depth_correct, a finite sigma > 0; for duplex a finite et_grade > 0.
+inline RenderArgs parse_render_args(const char* where, const FArr& R, const FArr& t, float fx, float fy, float cx,
+                                    float cy, int width, int height, float near_plane, int mode, int supersample,
+                                    const FArr& background, float sigma, float weight_background, float et_grade,
+                                    bool depth_correct) {
+    check_view(where, R, t, background);
+    const Mode md = check_mode(where, mode);
+    check_supersample(where, supersample);
+    auto all_finite = [](const FArr& a) {
+        for (size_t i = 0; i < a.size(); ++i)
+            if (!std::isfinite(a.data()[i])) return false;
+        return true;
+    };
+    if (!all_finite(R) || !all_finite(t) || !all_finite(background))
+        fail(where, "R, t and background must be finite");
+    const int N = supersample;
+    const int64_t hi_w = (int64_t)width * N, hi_h = (int64_t)height * N;  // each < 2^34: the product fits
+    if (width < 1 || height < 1 || hi_w * hi_h > INT32_MAX)
+        fail(where, "width and height must be >= 1, with at most 2^31 - 1 pixels at supersample x supersample");
+    if (!(std::isfinite(fx) && fx > 0 && std::isfinite(fy) && fy > 0 && std::isfinite(cx) && std::isfinite(cy) &&
+          std::isfinite(near_plane) && near_plane > 0))
+        fail(where, "fx, fy and near_plane must be finite and > 0, cx and cy finite");
+    if (md == WSR || md == DUPLEX) {
+        if (!(std::isfinite(weight_background) && weight_background >= 0))
+            fail(where, "weight_background must be finite and >= 0");
+        if (depth_correct && !(std::isfinite(sigma) && sigma > 0)) fail(where, "sigma must be finite and > 0");
+    }
+    if (md == DUPLEX && !(std::isfinite(et_grade) && et_grade > 0)) fail(where, "et_grade must be finite and > 0");
+    RenderArgs a;
+    a.cam = make_camera(R.data(), t.data(), fx * N, fy * N, cx * N, cy * N, width * N, height * N, near_plane);
+    a.mode = md;
+    a.supersample = supersample;
+    a.width = width;
+    a.height = height;
+    for (int c = 0; c < 3; ++c) a.bg[c] = background.data()[c];
+    a.oit = OitParams{sigma, weight_background, et_grade, depth_correct ? 1 : 0};
+    return a;
 }
 
 // The sort-free view-weight SH of N splats; returns its K.

@@ -12,8 +12,8 @@ inline CameraParams make_camera(const float R[9], const float t[3], float fx, fl
     CameraParams c;
     for (int i = 0; i < 9; ++i) c.R[i] = R[i];
     for (int i = 0; i < 3; ++i) c.t[i] = t[i];
-    for (int i = 0; i < 3; ++i)  // campos = -R^T t
-        c.campos[i] = -(R[i] * t[0] + R[3 + i] * t[1] + R[6 + i] * t[2]);
+    for (int i = 0; i < 3; ++i)  // campos = -R^T t (products never fused: see mul_rn)
+        c.campos[i] = -(mul_rn(R[i], t[0]) + mul_rn(R[3 + i], t[1]) + mul_rn(R[6 + i], t[2]));
     c.fx = fx;
     c.fy = fy;
     c.cx = cx;
@@ -22,10 +22,10 @@ inline CameraParams make_camera(const float R[9], const float t[3], float fx, fl
     c.height = height;
     c.near_plane = near_plane;
     const float tan_x = 0.5f * width / fx, tan_y = 0.5f * height / fy;
-    c.lim_x_pos = (width - cx) / fx + 0.3f * tan_x;
-    c.lim_x_neg = cx / fx + 0.3f * tan_x;
-    c.lim_y_pos = (height - cy) / fy + 0.3f * tan_y;
-    c.lim_y_neg = cy / fy + 0.3f * tan_y;
+    c.lim_x_pos = (width - cx) / fx + mul_rn(0.3f, tan_x);
+    c.lim_x_neg = cx / fx + mul_rn(0.3f, tan_x);
+    c.lim_y_pos = (height - cy) / fy + mul_rn(0.3f, tan_y);
+    c.lim_y_neg = cy / fy + mul_rn(0.3f, tan_y);
     return c;
 }
 

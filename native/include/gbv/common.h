@@ -62,6 +62,33 @@ GBV_HD Vec2 operator-(Vec2 a, Vec2 b) { return {a.x - b.x, a.y - b.y}; }
 GBV_HD Vec2 operator*(float s, Vec2 a) { return {s * a.x, s * a.y}; }
 GBV_HD float dot(Vec2 a, Vec2 b) { return a.x * b.x + a.y * b.y; }
 
+// a * b rounded to float, never fused with a following add or subtract into a multiply-add. Compilers contract
+// a * b + c where they choose (g++ at -ffp-contract=fast, its default, with FMA hardware; nvcc by default), which
+// changes the last bit of a sum, and a near-flat splat's det > 0, opacity >= min_alpha, w > 0 or an integer tile
+// edge can then go the other way. preprocess.h and camera.h route every product that is added or subtracted
+// through this, so the preprocessed splats (every field splat_less compares but log_min_alpha) and the culling
+// decisions are bit-identical on every backend and compiler flag (tests/test_fp_contract.py; the GLSL port
+// declares those values `precise`). Device: __fmul_rn, which nvcc never contracts. Host: the product passes
+// through an empty asm statement, which the optimiser cannot see through (g++ ignores #pragma STDC FP_CONTRACT,
+// and optimize attributes are lost when inlined). GBV_UNGUARDED_PRODUCTS (tests only) makes it a plain product.
+GBV_HD float mul_rn(float a, float b) {
+#if defined(__CUDA_ARCH__)
+    return __fmul_rn(a, b);
+#else
+    float p = a * b;
+#if defined(GBV_UNGUARDED_PRODUCTS)
+#elif defined(__GNUC__) && (defined(__x86_64__) || (defined(__i386__) && defined(__SSE_MATH__)))
+    __asm__("" : "+x"(p));
+#elif defined(__GNUC__) && defined(__aarch64__)
+    __asm__("" : "+w"(p));
+#else
+    volatile float v = p;
+    p = v;
+#endif
+    return p;
+#endif
+}
+
 GBV_HD float clampf(float v, float lo, float hi) { return fminf(fmaxf(v, lo), hi); }
 
 // min/max for the per-pixel loops: single instructions, where fminf/fmaxf are libm calls on the host

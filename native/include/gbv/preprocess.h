@@ -25,20 +25,20 @@ GBV_HD int sh_basis(int deg, Vec3 dir, float basis[16]) {
     basis[2] = SH_C1 * z;
     basis[3] = -SH_C1 * x;
     if (deg < 2) return 4;
-    const float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
+    const float xx = mul_rn(x, x), yy = mul_rn(y, y), zz = mul_rn(z, z), xy = x * y, yz = y * z, xz = x * z;
     basis[4] = SH_C2_0 * xy;
     basis[5] = SH_C2_1 * yz;
-    basis[6] = SH_C2_2 * (2.0f * zz - xx - yy);
+    basis[6] = SH_C2_2 * (mul_rn(2.0f, zz) - xx - yy);
     basis[7] = SH_C2_3 * xz;
     basis[8] = SH_C2_4 * (xx - yy);
     if (deg < 3) return 9;
-    basis[9] = SH_C3_0 * y * (3.0f * xx - yy);
+    basis[9] = SH_C3_0 * y * (mul_rn(3.0f, xx) - yy);
     basis[10] = SH_C3_1 * xy * z;
-    basis[11] = SH_C3_2 * y * (4.0f * zz - xx - yy);
-    basis[12] = SH_C3_3 * z * (2.0f * zz - 3.0f * xx - 3.0f * yy);
-    basis[13] = SH_C3_4 * x * (4.0f * zz - xx - yy);
+    basis[11] = SH_C3_2 * y * (mul_rn(4.0f, zz) - xx - yy);
+    basis[12] = SH_C3_3 * z * (mul_rn(2.0f, zz) - mul_rn(3.0f, xx) - mul_rn(3.0f, yy));
+    basis[13] = SH_C3_4 * x * (mul_rn(4.0f, zz) - xx - yy);
     basis[14] = SH_C3_5 * z * (xx - yy);
-    basis[15] = SH_C3_6 * x * (xx - 3.0f * yy);
+    basis[15] = SH_C3_6 * x * (xx - mul_rn(3.0f, yy));
     return 16;
 }
 
@@ -49,7 +49,7 @@ GBV_HD void sh_to_rgb(const float* sh, int deg, Vec3 dir, float out[3]) {
     const int k = sh_basis(deg, dir, basis);
     for (int c = 0; c < 3; ++c) {
         float v = 0.5f;
-        for (int i = 0; i < k; ++i) v += basis[i] * sh[i * 3 + c];
+        for (int i = 0; i < k; ++i) v += mul_rn(basis[i], sh[i * 3 + c]);
         out[c] = fmaxf(v, 0.0f);
     }
 }
@@ -60,7 +60,7 @@ GBV_HD float sh_to_weight(const float* w, int deg, Vec3 dir) {
     float basis[16];
     const int k = sh_basis(deg, dir, basis);
     float v = 0.0f;
-    for (int i = 0; i < k; ++i) v += basis[i] * w[i];
+    for (int i = 0; i < k; ++i) v += mul_rn(basis[i], w[i]);
     return v;
 }
 
@@ -68,18 +68,20 @@ GBV_HD float sh_to_weight(const float* w, int deg, Vec3 dir) {
 // quaternion and per-axis scales (eq. 1).
 GBV_HD void covariance_3d(const float* q, const float* s, float cov[6]) {
     const float r = q[0], x = q[1], y = q[2], z = q[3];
-    const float R[9] = {1.f - 2.f * (y * y + z * z), 2.f * (x * y - r * z),       2.f * (x * z + r * y),
-                        2.f * (x * y + r * z),       1.f - 2.f * (x * x + z * z), 2.f * (y * z - r * x),
-                        2.f * (x * z - r * y),       2.f * (y * z + r * x),       1.f - 2.f * (x * x + y * y)};
+    const float xx = mul_rn(x, x), yy = mul_rn(y, y), zz = mul_rn(z, z), xy = mul_rn(x, y), xz = mul_rn(x, z),
+                yz = mul_rn(y, z), rx = mul_rn(r, x), ry = mul_rn(r, y), rz = mul_rn(r, z);
+    const float R[9] = {1.f - mul_rn(2.f, yy + zz), 2.f * (xy - rz),             2.f * (xz + ry),
+                        2.f * (xy + rz),             1.f - mul_rn(2.f, xx + zz), 2.f * (yz - rx),
+                        2.f * (xz - ry),             2.f * (yz + rx),             1.f - mul_rn(2.f, xx + yy)};
     float M[9];  // M = R S
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) M[i * 3 + j] = R[i * 3 + j] * s[j];
-    cov[0] = M[0] * M[0] + M[1] * M[1] + M[2] * M[2];
-    cov[1] = M[0] * M[3] + M[1] * M[4] + M[2] * M[5];
-    cov[2] = M[0] * M[6] + M[1] * M[7] + M[2] * M[8];
-    cov[3] = M[3] * M[3] + M[4] * M[4] + M[5] * M[5];
-    cov[4] = M[3] * M[6] + M[4] * M[7] + M[5] * M[8];
-    cov[5] = M[6] * M[6] + M[7] * M[7] + M[8] * M[8];
+    cov[0] = mul_rn(M[0], M[0]) + mul_rn(M[1], M[1]) + mul_rn(M[2], M[2]);
+    cov[1] = mul_rn(M[0], M[3]) + mul_rn(M[1], M[4]) + mul_rn(M[2], M[5]);
+    cov[2] = mul_rn(M[0], M[6]) + mul_rn(M[1], M[7]) + mul_rn(M[2], M[8]);
+    cov[3] = mul_rn(M[3], M[3]) + mul_rn(M[4], M[4]) + mul_rn(M[5], M[5]);
+    cov[4] = mul_rn(M[3], M[6]) + mul_rn(M[4], M[7]) + mul_rn(M[5], M[8]);
+    cov[5] = mul_rn(M[6], M[6]) + mul_rn(M[7], M[7]) + mul_rn(M[8], M[8]);
 }
 
 // EWA projection of a 3D covariance to screen space (eq. 3): J W Sigma W^T J^T, with the view-space
@@ -94,17 +96,17 @@ GBV_HD void project_covariance(const CameraParams& cam, const float cov3[6], con
     // T = J W (2x3)
     float T[6];
     for (int c = 0; c < 3; ++c) {
-        T[c] = j00 * W[c] + j02 * W[6 + c];
-        T[3 + c] = j11 * W[3 + c] + j12 * W[6 + c];
+        T[c] = mul_rn(j00, W[c]) + mul_rn(j02, W[6 + c]);
+        T[3 + c] = mul_rn(j11, W[3 + c]) + mul_rn(j12, W[6 + c]);
     }
     const float S[9] = {cov3[0], cov3[1], cov3[2], cov3[1], cov3[3], cov3[4], cov3[2], cov3[4], cov3[5]};
     float TS[6];
     for (int r = 0; r < 2; ++r)
         for (int c = 0; c < 3; ++c)
-            TS[r * 3 + c] = T[r * 3] * S[c] + T[r * 3 + 1] * S[3 + c] + T[r * 3 + 2] * S[6 + c];
-    out[0] = TS[0] * T[0] + TS[1] * T[1] + TS[2] * T[2];
-    out[1] = TS[0] * T[3] + TS[1] * T[4] + TS[2] * T[5];
-    out[2] = TS[3] * T[3] + TS[4] * T[4] + TS[5] * T[5];
+            TS[r * 3 + c] = mul_rn(T[r * 3], S[c]) + mul_rn(T[r * 3 + 1], S[3 + c]) + mul_rn(T[r * 3 + 2], S[6 + c]);
+    out[0] = mul_rn(TS[0], T[0]) + mul_rn(TS[1], T[1]) + mul_rn(TS[2], T[2]);
+    out[1] = mul_rn(TS[0], T[3]) + mul_rn(TS[1], T[4]) + mul_rn(TS[2], T[5]);
+    out[2] = mul_rn(TS[3], T[3]) + mul_rn(TS[4], T[4]) + mul_rn(TS[5], T[5]);
 }
 
 // Eigen-decomposition of a 2x2 covariance (a, b, c): sigma = sqrt(eigenvalues) and the unit major
@@ -128,21 +130,50 @@ GBV_HD void eigen_2d(float a, float b, float c, float det, float* sigma1, float*
 // Screen-space bounding radius in pixels: ceil(k * sqrt(max eigenvalue)) with the published
 // max(0.1, mid^2 - det) floor.
 GBV_HD float splat_radius(float a, float c, float det, float sigmas) {
-    const float mid = 0.5f * (a + c);
-    const float lmax = mid + sqrtf(fmaxf(0.1f, mid * mid - det));
+    const float mid = mul_rn(0.5f, a + c);
+    const float lmax = mid + sqrtf(fmaxf(0.1f, mul_rn(mid, mid) - det));
     return ceilf(sigmas * sqrtf(lmax));
 }
 
-// Tiles touched by a splat at xy with radius r (getRect), in the published integer-centre pixel
-// convention (our xy minus 0.5). Empty when x1 <= x0 or y1 <= y0.
-GBV_HD TileRect tile_rect(Vec2 xy, float r, int grid_x, int grid_y) {
+// ln(x) for x >= 1, from above, by basic float operations only, so that every backend computes the same value (logf
+// differs in its last bit between libm, CUDA and GLSL): x = m 2^e with m in [1, 2) (exact), ln m <= t - t^2/2 + t^3/3
+// with t = m - 1 (the alternating series cut after a positive term; at most 0.14 above).
+GBV_HD float log_upper(float x) {
+    int e;
+    const float m = 2.0f * frexpf(x, &e);  // x = m 2^(e - 1)
+    const float t = m - 1.0f, t2 = mul_rn(t, t);
+    return mul_rn((float)(e - 1), 0.69314720f) + t - mul_rn(0.5f, t2) + mul_rn(mul_rn(t2, t), 0.33333334f);
+}
+
+// Half sides (x, y) of the screen box that binning gives a splat. scalar, mip, wsr and duplex skip a pixel where
+// power < ln(min_alpha / opacity), i.e. outside the ellipse d^T Sigma^-1 d <= r2 = 2 ln(opacity / min_alpha), whose
+// bounding box has half sides sqrt(r2 Sigma_xx) and sqrt(r2 Sigma_yy): widened for the blend's float rounding
+// (relative 1e-5 + 1e-6 lambda1^2 / det, plus 0.02 px), rounded up to whole pixels, plus one pixel (getRect's upper
+// edge takes a tile only when the box reaches 1 px into it: tight to the pixel, it would drop the tile's first row or
+// column), and capped by the radius r (the published square): no tile a pixel could take the splat in is dropped.
+// gaussian_blending (its windows move: the published 3.33 sigma square) and analytic (alpha integrated over the
+// pixel): the radius.
+GBV_HD Vec2 cutoff_half_sides(Mode mode, const float cov[3], float det, float opacity, float min_alpha, float r) {
+    if (mode == GAUSSIAN_BLENDING || mode == ANALYTIC) return {r, r};
+    const float r2 = 2.0f * log_upper(opacity / min_alpha);
+    const float mid = mul_rn(0.5f, cov[0] + cov[2]);
+    const float l1 = mid + sqrtf(fmaxf(0.0f, mul_rn(mid, mid) - det));
+    const float grow = 1.00001f + mul_rn(1e-6f, mul_rn(l1, l1) / det);
+    const float hx = ceilf(mul_rn(sqrtf(r2 * cov[0]), grow) + 0.02f) + 1.0f;
+    const float hy = ceilf(mul_rn(sqrtf(r2 * cov[2]), grow) + 0.02f) + 1.0f;
+    return {minf(hx, r), minf(hy, r)};  // minf: a NaN side becomes r
+}
+
+// Tiles touched by a splat at xy with half sides h (getRect, which has h = (r, r)), in the published integer-centre
+// pixel convention (our xy minus 0.5). Empty when x1 <= x0 or y1 <= y0.
+GBV_HD TileRect tile_rect(Vec2 xy, Vec2 h, int grid_x, int grid_y) {
     const float px = xy.x - 0.5f, py = xy.y - 0.5f;
     const float gx = (float)grid_x, gy = (float)grid_y;
     TileRect t;
-    t.x0 = (int)clampf((px - r) / TILE, 0.0f, gx);
-    t.y0 = (int)clampf((py - r) / TILE, 0.0f, gy);
-    t.x1 = (int)clampf((px + r + TILE - 1) / TILE, 0.0f, gx);
-    t.y1 = (int)clampf((py + r + TILE - 1) / TILE, 0.0f, gy);
+    t.x0 = (int)clampf((px - h.x) / TILE, 0.0f, gx);
+    t.y0 = (int)clampf((py - h.y) / TILE, 0.0f, gy);
+    t.x1 = (int)clampf((px + h.x + TILE - 1) / TILE, 0.0f, gx);
+    t.y1 = (int)clampf((py + h.y + TILE - 1) / TILE, 0.0f, gy);
     return t;
 }
 
@@ -169,17 +200,18 @@ struct SplatIn {
 // View-space position R m + t of a world point; false behind the near plane (z <= 0.2, KERNELS.md §0.4).
 GBV_HD bool view_point(const CameraParams& cam, const float* m, float pv[3]) {
     const float* R = cam.R;
-    for (int i = 0; i < 3; ++i) pv[i] = R[i * 3] * m[0] + R[i * 3 + 1] * m[1] + R[i * 3 + 2] * m[2] + cam.t[i];
+    for (int i = 0; i < 3; ++i)
+        pv[i] = mul_rn(R[i * 3], m[0]) + mul_rn(R[i * 3 + 1], m[1]) + mul_rn(R[i * 3 + 2], m[2]) + cam.t[i];
     return pv[2] > cam.near_plane;
 }
 
-// Screen position of the view-space point pv and the tiles within radius r of it (getRect); false when a value is
-// not finite or no tile is touched.
-GBV_HD bool screen_footprint(const CameraParams& cam, const float pv[3], float r, int grid_x, int grid_y, Vec2* xy,
+// Screen position of the view-space point pv and the tiles of the box with half sides h around it (getRect); false
+// when a value is not finite or no tile is touched.
+GBV_HD bool screen_footprint(const CameraParams& cam, const float pv[3], Vec2 h, int grid_x, int grid_y, Vec2* xy,
                              TileRect* rect) {
     *xy = Vec2{cam.fx * pv[0] / pv[2] + cam.cx, cam.fy * pv[1] / pv[2] + cam.cy};
-    if (!finitef(xy->x) || !finitef(xy->y) || !finitef(r)) return false;
-    *rect = tile_rect(*xy, r, grid_x, grid_y);
+    if (!finitef(xy->x) || !finitef(xy->y) || !finitef(h.x) || !finitef(h.y)) return false;
+    *rect = tile_rect(*xy, h, grid_x, grid_y);
     return rect->x1 > rect->x0 && rect->y1 > rect->y0;
 }
 
@@ -194,17 +226,17 @@ GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& 
     float pv[3];
     if (!view_point(cam, m, pv)) return false;
     Vec3 dir = {m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]};
-    const float dn = sqrtf(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
+    const float dn = sqrtf(mul_rn(dir.x, dir.x) + mul_rn(dir.y, dir.y) + mul_rn(dir.z, dir.z));
     dir = dn > 0.0f ? Vec3{dir.x / dn, dir.y / dn, dir.z / dn} : Vec3{0.0f, 0.0f, 1.0f};
 
     // Mip-Splatting 3D filter (applied in every mode when present): scales grow, opacity compensates.
     float s[3];
     float opacity = in.opacity;
     if (in.filter_3d > 0.0f) {
-        const float f2 = in.filter_3d * in.filter_3d;
+        const float f2 = mul_rn(in.filter_3d, in.filter_3d);
         float ratio = 1.0f;
         for (int i = 0; i < 3; ++i) {
-            const float s2 = in.scale[i] * in.scale[i];
+            const float s2 = mul_rn(in.scale[i], in.scale[i]);
             s[i] = sqrtf(s2 + f2);
             ratio *= s2 / (s2 + f2);
         }
@@ -223,10 +255,10 @@ GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& 
         cov[0] += DILATION_3DGS;
         cov[2] += DILATION_3DGS;
     } else if (mode == MIP) {
-        const float det0 = fmaxf(1e-6f, cov[0] * cov[2] - cov[1] * cov[1]);
+        const float det0 = fmaxf(1e-6f, mul_rn(cov[0], cov[2]) - mul_rn(cov[1], cov[1]));
         cov[0] += MIP_KERNEL_SIZE;
         cov[2] += MIP_KERNEL_SIZE;
-        const float det1 = fmaxf(1e-6f, cov[0] * cov[2] - cov[1] * cov[1]);
+        const float det1 = fmaxf(1e-6f, mul_rn(cov[0], cov[2]) - mul_rn(cov[1], cov[1]));
         const float coef = (det0 <= 1e-6f || det1 <= 1e-6f) ? 0.0f : sqrtf(det0 / (det1 + 1e-6f) + 1e-6f);
         opacity *= coef;
     } else if (mode == GAUSSIAN_BLENDING) {
@@ -246,13 +278,14 @@ GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& 
     }
     if (!(opacity >= min_alpha)) return false;  // alpha = opacity * g <= opacity would be skipped anyway
 
-    const float det = cov[0] * cov[2] - cov[1] * cov[1];
+    const float det = mul_rn(cov[0], cov[2]) - mul_rn(cov[1], cov[1]);
     if (!(det > 0.0f) || !finitef(det)) return false;
     const float inv = 1.0f / det;
 
     const float r = splat_radius(cov[0], cov[2], det, sigmas);
     Vec2 xy;
-    if (!screen_footprint(cam, pv, r, grid_x, grid_y, &xy, rect)) return false;
+    const Vec2 half = cutoff_half_sides(mode, cov, det, opacity, min_alpha, r);
+    if (!screen_footprint(cam, pv, half, grid_x, grid_y, &xy, rect)) return false;
 
     out->xy = xy;
     out->depth = pv[2];
@@ -296,10 +329,10 @@ GBV_HD bool preprocess_cell(const CellIn& in, const CameraParams& cam, int grid_
     project_covariance(cam, cov3, pv, cov);
     cov[0] += DILATION_3DGS;
     cov[2] += DILATION_3DGS;
-    const float det = cov[0] * cov[2] - cov[1] * cov[1];
+    const float det = mul_rn(cov[0], cov[2]) - mul_rn(cov[1], cov[1]);
     if (!(det > 0.0f) || !finitef(det)) return false;
     const float r = splat_radius(cov[0], cov[2], det, DUPLEX_CELL_SIGMAS);
-    if (!screen_footprint(cam, pv, r, grid_x, grid_y, &out->xy, rect)) return false;
+    if (!screen_footprint(cam, pv, Vec2{r, r}, grid_x, grid_y, &out->xy, rect)) return false;
     out->depth = pv[2];
     out->radius = r;
     return true;
