@@ -156,7 +156,8 @@ def test_struct_fields_identical(struct):
 
 # C++ functions without a GLSL function of the same name, and why.
 NOT_PORTED = {
-    "blend_pixel": "the per-pixel loop is blend.comp's batch loop over the tile's shared-memory splats",
+    "blend_alpha_pixel": "the shared body of C++'s one-pixel blend_scalar / blend_analytic wrappers around the lane "
+                         "templates; GLSL has those two functions themselves",
     "dot": "GLSL built-in",
     "float_bits": "GLSL built-in floatBitsToUint",
     "splat_less": "the GLSL duplex keeps each cell's member order (cells.comp), which differs from the CPU's canonical "

@@ -365,20 +365,23 @@ struct WsrSums {
 };
 using DuplexState = DuplexLanes<Lanes1>;
 
-GBV_HD bool blend_scalar(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
+// One pixel through blend_analytic (Analytic) or blend_scalar.
+template <bool Analytic>
+GBV_HD bool blend_alpha_pixel(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
     AlphaState<Lanes1> st = {T, {C[0], C[1], C[2]}};
-    const bool stop = blend_scalar<Lanes1>(s, pix.x, pix.y, true, st);
+    const bool stop = Analytic ? blend_analytic<Lanes1>(s, pix.x, pix.y, true, st)
+                               : blend_scalar<Lanes1>(s, pix.x, pix.y, true, st);
     T = st.T;
     for (int c = 0; c < 3; ++c) C[c] = st.C[c];
     return stop;
 }
 
+GBV_HD bool blend_scalar(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
+    return blend_alpha_pixel<false>(s, pix, T, C);
+}
+
 GBV_HD bool blend_analytic(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
-    AlphaState<Lanes1> st = {T, {C[0], C[1], C[2]}};
-    const bool stop = blend_analytic<Lanes1>(s, pix.x, pix.y, true, st);
-    T = st.T;
-    for (int c = 0; c < 3; ++c) C[c] = st.C[c];
-    return stop;
+    return blend_alpha_pixel<true>(s, pix, T, C);
 }
 
 GBV_HD bool blend_gaussian(const Splat2D& s, TransmittanceWindow& win, float C[3]) {
