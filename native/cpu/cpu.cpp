@@ -268,13 +268,13 @@ struct FlushDenormals {
 // path blends its pixels in lane groups.
 void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>& tile_start,
                  const std::vector<uint64_t>& keys, const CameraParams& cam, Mode mode, const OitParams& oit,
-                 const float bg[3], Image& img, Stats& st) {
+                 const float bg[3], std::vector<SplatBounds>& boxes, Image& img, Stats& st) {
     const int W = cam.width, H = cam.height;
     const int gx = (W + TILE - 1) / TILE;
     const int num_tiles = (int)tile_start.size() - 1;
     auto t0 = Clock::now();
     const BlendTileFn blend_tile = simd::current().blend_tile;
-    std::vector<SplatBounds> boxes(splats.size());
+    boxes.resize(splats.size());
 #pragma omp parallel for schedule(static)
     for (int64_t i = 0; i < (int64_t)splats.size(); ++i) boxes[i] = splat_bounds(splats[i], mode);
 #pragma omp parallel
@@ -320,6 +320,7 @@ struct FrameBuffers {
     std::vector<uint8_t> valid;
     std::vector<int64_t> tile_start;
     std::vector<uint64_t> keys;
+    std::vector<SplatBounds> boxes;
 };
 
 // Render one image at the camera's resolution, one sample per pixel.
@@ -359,7 +360,7 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
     } else {
         bin_splats(splats, rects, valid, gx, mode != WSR, tile_start, keys, st);
     }
-    blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, img, st);
+    blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, buf.boxes, img, st);
 }
 
 // Box-average N x N blocks of `hi` into `lo` (supersampling).
