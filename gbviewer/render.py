@@ -268,6 +268,8 @@ class CpuRenderer:
         return True, ""
 
     def upload(self, scene: Scene) -> None:
+        if scene is not self._scene:
+            self._native.release_buffers()  # the per-frame buffers the native module keeps for the last scene
         self._scene = scene
 
     def render(self, camera: Camera, settings: RenderSettings) -> Frame:

@@ -147,7 +147,7 @@ float log_upper(float x) {
 // (port of preprocess.h).
 vec2 cutoff_half_sides(int mode, vec3 cov, float det, float opacity, float min_alpha, float r) {
     if (mode == GAUSSIAN_BLENDING || mode == ANALYTIC) return vec2(r, r);
-    precise const float r2 = 2.0 * log_upper(opacity / min_alpha);
+    precise const float r2 = 2.0 * log_upper(opacity / min_alpha) + 1e-6;
     precise const float mid = 0.5 * (cov[0] + cov[2]);
     precise const float l1 = mid + sqrt(max(0.0, mid * mid - det));
     precise const float grow = 1.00001 + 1e-6 * ((l1 * l1) / det);

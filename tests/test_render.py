@@ -72,3 +72,45 @@ def check_concurrent_renders(backend: str, scene: gb.Scene, threads: int = 2, ro
 def test_concurrent_renders_cpu():
     """Two Python threads rendering with one CPU renderer at once (the native render releases the GIL)."""
     check_concurrent_renders("cpu", random_scene(400, seed=5, sh_degree=1))
+
+
+_OOM_SCRIPT = r"""
+import resource, numpy as np, gbviewer as gb
+n = 3000
+rng = np.random.default_rng(0)
+scene = gb.Scene.from_arrays(np.c_[rng.uniform(-0.1, 0.1, (n, 2)), np.full(n, 3.0)], np.full((n, 3), 50.0),
+                             np.tile([1.0, 0, 0, 0], (n, 1)), np.full(n, 0.5), np.full((n, 1, 3), 0.2))
+cam = gb.Camera(1024, 1024, 500.0, 500.0, 512.0, 512.0, np.eye(3), np.zeros(3))
+gb.render(scene, cam.with_size(32, 32))  # starts the thread pool before the limit
+vm = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmSize")) * 1024
+resource.setrlimit(resource.RLIMIT_AS, (vm + 400 * 2**20, resource.RLIM_INFINITY))
+try:
+    gb.render(scene, cam, supersample=2)  # 3000 splats x 16384 tiles: 49M tile-list keys, 390 MB
+except MemoryError:
+    print("MemoryError")
+"""
+
+
+def test_tile_list_that_does_not_fit_is_a_memory_error(tmp_path):
+    """A frame whose tile lists exceed the memory left raises MemoryError; nothing aborts inside the parallel binning."""
+    import subprocess
+    import sys
+
+    res = subprocess.run([sys.executable, "-c", _OOM_SCRIPT], capture_output=True, text=True, timeout=300,
+                         cwd=tmp_path)
+    assert res.returncode == 0 and res.stdout.strip() == "MemoryError", (res.returncode, res.stdout, res.stderr[-2000:])
+
+
+def test_release_buffers():
+    """The CPU renderer frees the native per-frame buffers when its scene changes; renders are unchanged after."""
+    from gbviewer import _native
+    from gbviewer.render import CpuRenderer
+
+    scene, cam = random_scene(200, seed=4), front_camera()
+    r = CpuRenderer()
+    r.upload(scene)
+    a = r.render(cam, gb.RenderSettings())
+    r.upload(random_scene(10, seed=5))
+    _native.release_buffers()
+    r.upload(scene)
+    np.testing.assert_array_equal(r.render(cam, gb.RenderSettings()).rgb, a.rgb)

@@ -7,6 +7,8 @@
 
 #include <algorithm>
 #include <atomic>
+#include <memory>
+#include <mutex>
 #include <cmath>
 #include <limits>
 #include <chrono>
@@ -72,57 +74,57 @@ struct Stats {
     int64_t cells_visible = 0, cell_misses = 0;
 };
 
-// Binning of splats, in parallel: each thread counts the tiles of its static range of splats, a prefix sum over
-// (tile, thread) gives every thread its slots in every tile, and each thread writes its (depth bits, splat id) keys
-// there. The ranges are in splat order, so each tile's list is in splat order as a sequential pass would leave it;
-// then (when `sort`) each tile's list is sorted by depth; wsr keeps the splat order.
+// Binning of splats, in parallel: each of up to BIN_THREADS threads counts the tiles of its static range of splats, a
+// prefix sum over (tile, range) gives every range its slots in every tile, and each range writes its (depth bits,
+// splat id) keys there. The ranges are in splat order, so each tile's list is in splat order as a sequential pass
+// would leave it; then (when `sort`) each tile's list is sorted by depth; wsr keeps the splat order. The key buffer
+// is sized between the two parallel passes (an allocation failure is a MemoryError, not an abort inside OpenMP).
+constexpr int BIN_THREADS = 8;  // bounds the counts buffer (ranges x tiles) on many-core machines
+
 void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>& rects,
                 const std::vector<uint8_t>& valid, int gx, bool sort, std::vector<int64_t>& tile_start,
                 std::vector<uint64_t>& keys, Stats& st) {
     const int num_tiles = (int)tile_start.size() - 1;
     const int64_t n = (int64_t)splats.size();
     auto t0 = Clock::now();
-    const int threads = omp_get_max_threads();
-    std::vector<int64_t> slots((size_t)threads * num_tiles, 0);  // [thread][tile]: counts, then write cursors
+    const int ranges = std::max(1, std::min(omp_get_max_threads(), BIN_THREADS));
+    std::vector<int64_t> slots((size_t)ranges * num_tiles, 0);  // [range][tile]: counts, then write cursors
     int64_t visible = 0;
-#pragma omp parallel num_threads(threads) reduction(+ : visible)
-    {
-        const int th = omp_get_thread_num(), nth = omp_get_num_threads();
-        const int64_t i0 = n * th / nth, i1 = n * (th + 1) / nth;
-        int64_t* count = slots.data() + (size_t)th * num_tiles;
-        for (int64_t i = i0; i < i1; ++i) {
+#pragma omp parallel for num_threads(ranges) schedule(static, 1) reduction(+ : visible)
+    for (int k = 0; k < ranges; ++k) {
+        int64_t* count = slots.data() + (size_t)k * num_tiles;
+        for (int64_t i = n * k / ranges; i < n * (k + 1) / ranges; ++i) {
             if (!valid[i]) continue;
             ++visible;
             const TileRect& r = rects[i];
             for (int ty = r.y0; ty < r.y1; ++ty)
                 for (int tx = r.x0; tx < r.x1; ++tx) ++count[ty * gx + tx];
         }
-#pragma omp barrier
-#pragma omp single
-        {
-            int64_t total = 0;
-            for (int t = 0; t < num_tiles; ++t) {
-                tile_start[t] = total;
-                for (int k = 0; k < nth; ++k) {
-                    const int64_t c = slots[(size_t)k * num_tiles + t];
-                    slots[(size_t)k * num_tiles + t] = total;
-                    total += c;
-                }
-            }
-            tile_start[num_tiles] = total;
-            keys.resize(total);
+    }
+    int64_t total = 0;
+    for (int t = 0; t < num_tiles; ++t) {
+        tile_start[t] = total;
+        for (int k = 0; k < ranges; ++k) {
+            const int64_t c = slots[(size_t)k * num_tiles + t];
+            slots[(size_t)k * num_tiles + t] = total;
+            total += c;
         }
-        for (int64_t i = i0; i < i1; ++i) {
+    }
+    tile_start[num_tiles] = total;
+    keys.resize(total);
+#pragma omp parallel for num_threads(ranges) schedule(static, 1)
+    for (int k = 0; k < ranges; ++k) {
+        int64_t* cursor = slots.data() + (size_t)k * num_tiles;
+        for (int64_t i = n * k / ranges; i < n * (k + 1) / ranges; ++i) {
             if (!valid[i]) continue;
             uint32_t depth_bits;
             std::memcpy(&depth_bits, &splats[i].depth, 4);  // depth > near > 0: bits sort as floats
             const uint64_t key = ((uint64_t)depth_bits << 32) | (uint32_t)i;
             const TileRect& r = rects[i];
             for (int ty = r.y0; ty < r.y1; ++ty)
-                for (int tx = r.x0; tx < r.x1; ++tx) keys[count[ty * gx + tx]++] = key;
+                for (int tx = r.x0; tx < r.x1; ++tx) keys[cursor[ty * gx + tx]++] = key;
         }
     }
-    const int64_t total = tile_start[num_tiles];
     if (sort) {
 #pragma omp parallel for schedule(dynamic, 4)
         for (int t = 0; t < num_tiles; ++t)
@@ -268,12 +270,11 @@ struct FlushDenormals {
 // path blends its pixels in lane groups.
 void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>& tile_start,
                  const std::vector<uint64_t>& keys, const CameraParams& cam, Mode mode, const OitParams& oit,
-                 const float bg[3], std::vector<SplatBounds>& boxes, Image& img, Stats& st) {
+                 const float bg[3], BlendTileFn blend_tile, std::vector<SplatBounds>& boxes, Image& img, Stats& st) {
     const int W = cam.width, H = cam.height;
     const int gx = (W + TILE - 1) / TILE;
     const int num_tiles = (int)tile_start.size() - 1;
     auto t0 = Clock::now();
-    const BlendTileFn blend_tile = simd::current().blend_tile;
     boxes.resize(splats.size());
 #pragma omp parallel for schedule(static)
     for (int64_t i = 0; i < (int64_t)splats.size(); ++i) boxes[i] = splat_bounds(splats[i], mode);
@@ -323,18 +324,48 @@ struct FrameBuffers {
     std::vector<SplatBounds> boxes;
 };
 
+// Per-frame buffers reused between frames (no allocation, no page faults in the frame loop once sizes settle): a
+// render takes a set and gives it back; at most two sets are kept (two renders at once), a set much larger than a
+// frame needs is dropped, and release_buffers() (the Python renderer calls it when its scene changes) frees them.
+class BufferPool {
+    std::mutex mutex_;
+    std::vector<std::unique_ptr<FrameBuffers>> free_;
+
+  public:
+    std::unique_ptr<FrameBuffers> take() {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (free_.empty()) return std::make_unique<FrameBuffers>();
+        std::unique_ptr<FrameBuffers> b = std::move(free_.back());
+        free_.pop_back();
+        return b;
+    }
+    void give(std::unique_ptr<FrameBuffers> b) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (free_.size() < 2) free_.push_back(std::move(b));
+    }
+    void clear() {
+        std::lock_guard<std::mutex> lock(mutex_);
+        free_.clear();
+    }
+};
+BufferPool g_buffers;
+
+// A set from the pool for the scope of one render, returned even when the render throws.
+struct PooledBuffers {
+    std::unique_ptr<FrameBuffers> buf = g_buffers.take();
+    ~PooledBuffers() { g_buffers.give(std::move(buf)); }
+};
+
 // Render one image at the camera's resolution, one sample per pixel.
 void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
-                  const float bg[3], Image& img, Stats& st) {
+                  const float bg[3], BlendTileFn blend_tile, FrameBuffers& buf, Image& img, Stats& st) {
     const int W = cam.width, H = cam.height;
     const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE;
     const int num_tiles = gx * gy;
     const int64_t n = sc.n;
 
     auto t0 = Clock::now();
-    // Per-frame buffers, kept by the calling thread between frames (no allocation, no page faults in the frame loop
-    // once sizes settle); every element is written before it is read. A much smaller scene releases them.
-    thread_local FrameBuffers buf;
+    // every element of the reused buffers is written before it is read; a much smaller scene releases them
     if ((size_t)n < buf.splats.capacity() / 4) buf = FrameBuffers();
     std::vector<Splat2D>& splats = buf.splats;
     std::vector<TileRect>& rects = buf.rects;
@@ -360,7 +391,8 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
     } else {
         bin_splats(splats, rects, valid, gx, mode != WSR, tile_start, keys, st);
     }
-    blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, buf.boxes, img, st);
+    if (keys.capacity() > 4 * keys.size() + (1u << 20)) keys.shrink_to_fit();  // after a much larger frame
+    blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, blend_tile, buf.boxes, img, st);
 }
 
 // Box-average N x N blocks of `hi` into `lo` (supersampling).
@@ -436,17 +468,19 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
 
     Image out;
     Stats st;
+    const simd::Path& path = simd::current();  // the one this frame runs and reports, whatever set_simd does meanwhile
     {
         nb::gil_scoped_release release;
+        PooledBuffers pooled;
         const int prev_threads = omp_get_max_threads();
         if (threads > 0) omp_set_num_threads(threads);
         out.resize(width, height, window);
         if (N == 1) {
-            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, out, st);
+            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path.blend_tile, *pooled.buf, out, st);
         } else {
             Image hi;
             hi.resize(width * N, height * N, window);
-            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, hi, st);
+            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path.blend_tile, *pooled.buf, hi, st);
             auto t0 = Clock::now();
             box_downsample(hi, N, out);
             st.blend_ms += ms_since(t0);
@@ -454,7 +488,7 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
         if (threads > 0) omp_set_num_threads(prev_threads);
     }
     nb::dict d = result_dict(out, st, (size_t)height, (size_t)width);
-    d["simd"] = simd::current().name;
+    d["simd"] = path.name;
     return d;
 }
 
@@ -486,6 +520,7 @@ NB_MODULE(_native, m) {
     }, "SIMD paths this CPU and build can run, best last.");
     m.def("set_simd", [](const std::string& name) { simd::select(name); }, nb::arg("name"),
           "Use this SIMD path for later renders (scalar, avx2, avx512).");
+    m.def("release_buffers", [] { g_buffers.clear(); }, "Free the per-frame buffers kept between renders.");
     m.def("set_pixel_boxes", [](bool on) { g_pixel_boxes.store(on); }, nb::arg("on"),
           "Test switch: skip lane groups outside a splat's pixel box (default) or evaluate every list entry.");
     m.def("exp_rate", &exp_rate, nb::arg("path"), nb::arg("n"),

@@ -155,7 +155,8 @@ GBV_HD float log_upper(float x) {
 // pixel): the radius.
 GBV_HD Vec2 cutoff_half_sides(Mode mode, const float cov[3], float det, float opacity, float min_alpha, float r) {
     if (mode == GAUSSIAN_BLENDING || mode == ANALYTIC) return {r, r};
-    const float r2 = 2.0f * log_upper(opacity / min_alpha);
+    // + 1e-6: the blend's threshold is logf(min_alpha / opacity), from the other quotient (up to ~2e-7 apart)
+    const float r2 = mul_rn(2.0f, log_upper(opacity / min_alpha)) + 1e-6f;
     const float mid = mul_rn(0.5f, cov[0] + cov[2]);
     const float l1 = mid + sqrtf(fmaxf(0.0f, mul_rn(mid, mid) - det));
     const float grow = 1.00001f + mul_rn(1e-6f, mul_rn(l1, l1) / det);
