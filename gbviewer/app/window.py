@@ -1220,6 +1220,10 @@ class ViewerApp:
         s = self.settings
         sizes = "  ".join(f"{p.name} {p.render_size[0]}x{p.render_size[1]}" for p in self.panes[: s.pane_count])
         backend = s.backend if self.backend_usable(s.backend) else "cpu"
+        simd = next((part.frame.stats["simd"] for p in self.panes[: s.pane_count] for part in p.parts.values()
+                     if part.frame is not None and "simd" in part.frame.stats), None)
+        if backend == "cpu" and simd:
+            backend = f"cpu {simd}"  # the blend's SIMD path (GBVIEWER_SIMD forces one)
         imgui.text(f"rate {logic.format_rate(s.rate)}")
         imgui.same_line(0, 16)
         imgui.text_disabled(f"render {sizes}")
