@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
+from conftest import skip_or_fail
 from gbviewer import _native
 from test_render_reference import BACKGROUND, SCENES, _check_strict, random_scene
 
@@ -236,3 +237,46 @@ def test_set_simd_and_exp_rate():
         _native.exp_rate("neon", 1000)
     for path in _native.simd_paths():
         assert _native.exp_rate(path, 100_000) > 0
+
+
+_EMULATED = r"""
+import sys, json, numpy as np, gbviewer as gb
+from gbviewer import _native
+rng = np.random.default_rng(0); n = 300
+scene = gb.Scene.from_arrays(np.c_[rng.uniform(-1, 1, (n, 2)), rng.uniform(2, 4, n)], np.full((n, 3), 0.05),
+                             rng.normal(size=(n, 4)), rng.uniform(0.1, 1, n), rng.uniform(-1, 1, (n, 1, 3)))
+cam = gb.Camera(48, 32, 40.0, 40.0, 24.0, 16.0, np.eye(3), np.zeros(3))
+out = {"paths": _native.simd_paths()}
+for mode in ("scalar", "gaussian_blending", "wsr", "duplex", "analytic"):
+    f = gb.render(scene, cam, mode=mode, supersample=2)
+    np.save(f"{sys.argv[1]}/{mode}.npy", f.rgb)
+    out[mode] = f.stats["simd"]
+print(json.dumps(out))
+"""
+
+
+@pytest.mark.skipif(os.uname().machine != "x86_64", reason="the x86-64 build's instruction sets")
+@pytest.mark.parametrize("cpu, paths", [("Nehalem", ["scalar"]), ("Haswell", ["scalar", "avx2"])])
+def test_module_runs_on_an_older_cpu(tmp_path, cpu, paths):
+    """The built module on an emulated CPU (qemu-user): a Nehalem (SSE4.2, no AVX) gets the scalar path and no illegal
+    instruction (nothing is built for the build machine's CPU), a Haswell gets AVX2; images match this machine's."""
+    import json
+    import shutil
+
+    qemu = shutil.which("qemu-x86_64")
+    if qemu is None:
+        skip_or_fail("qemu-x86_64 not installed (Debian: qemu-user)")
+    res = subprocess.run([qemu, "-cpu", cpu, sys.executable, "-c", _EMULATED, str(tmp_path)], capture_output=True,
+                         text=True, timeout=300, cwd=tempfile.gettempdir(), env=dict(os.environ, GBVIEWER_SIMD=""))
+    assert res.returncode == 0, res.stderr[-3000:]
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    assert out["paths"] == paths
+    rng = np.random.default_rng(0)
+    n = 300
+    scene = gb.Scene.from_arrays(np.c_[rng.uniform(-1, 1, (n, 2)), rng.uniform(2, 4, n)], np.full((n, 3), 0.05),
+                                 rng.normal(size=(n, 4)), rng.uniform(0.1, 1, n), rng.uniform(-1, 1, (n, 1, 3)))
+    cam = gb.Camera(48, 32, 40.0, 40.0, 24.0, 16.0, np.eye(3), np.zeros(3))
+    for mode in ("scalar", "gaussian_blending", "wsr", "duplex", "analytic"):
+        assert out[mode] == paths[-1]
+        here = render(paths[-1], scene, cam, mode, supersample=2).rgb
+        assert np.abs(np.load(tmp_path / f"{mode}.npy") - here).max() < 1e-5, f"{cpu} {mode}"
