@@ -356,9 +356,17 @@ struct PooledBuffers {
     ~PooledBuffers() { g_buffers.give(std::move(buf)); }
 };
 
+// Test switch: keep a copy of the last frame's preprocess output (per splat: the valid flag, then the Splat2D and
+// TileRect bytes when valid, zeros when culled), so tests can compare the SIMD paths' preprocess bit for bit.
+std::atomic<bool> g_capture{false};
+std::mutex g_capture_mutex;
+std::vector<uint8_t> g_captured;
+
+constexpr int64_t PREPROCESS_BLOCK = 256;  // splats per call of a path's preprocess (a multiple of 16)
+
 // Render one image at the camera's resolution, one sample per pixel.
 void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
-                  const float bg[3], BlendTileFn blend_tile, FrameBuffers& buf, Image& img, Stats& st) {
+                  const float bg[3], const simd::Path& path, FrameBuffers& buf, Image& img, Stats& st) {
     const int W = cam.width, H = cam.height;
     const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE;
     const int num_tiles = gx * gy;
@@ -373,13 +381,25 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
     splats.resize(n);
     rects.resize(n);
     valid.resize(n);
+    // in blocks of PREPROCESS_BLOCK splats through the SIMD path's preprocess (bit-identical on every path)
+    PreprocessJob job{sc.means, sc.scales, sc.quats, sc.opacities, sc.sh, sc.filter_3d, sc.k, sc.weight_sh,
+                      sc.weight_k, mode == DUPLEX ? sc.cell_of.data() : nullptr, sh_deg, cam, mode, oit, gx, gy,
+                      splats.data(), rects.data(), valid.data()};
+    const int64_t blocks = (n + PREPROCESS_BLOCK - 1) / PREPROCESS_BLOCK;
 #pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < n; ++i) {
-        SplatIn in{sc.means + 3 * i, sc.scales + 3 * i, sc.quats + 4 * i, sc.opacities[i],
-                   sc.sh + (size_t)sc.k * 3 * i, sc.filter_3d ? sc.filter_3d[i] : 0.0f,
-                   sc.weight_sh ? sc.weight_sh + (size_t)sc.weight_k * i : nullptr,
-                   sh_degree_for_coeffs(sc.weight_k), mode == DUPLEX ? sc.cell_of[i] : -1};
-        valid[i] = preprocess_splat(in, sh_deg, cam, mode, oit, gx, gy, &splats[i], &rects[i]);
+    for (int64_t b = 0; b < blocks; ++b)
+        path.preprocess(job, b * PREPROCESS_BLOCK, std::min(n, (b + 1) * PREPROCESS_BLOCK));
+    if (g_capture.load(std::memory_order_relaxed)) {
+        constexpr size_t rec = 1 + sizeof(Splat2D) + sizeof(TileRect);
+        std::lock_guard<std::mutex> lock(g_capture_mutex);
+        g_captured.assign((size_t)n * rec, 0);
+        for (int64_t i = 0; i < n; ++i) {
+            uint8_t* p = g_captured.data() + (size_t)i * rec;
+            p[0] = valid[i];
+            if (!valid[i]) continue;
+            std::memcpy(p + 1, &splats[i], sizeof(Splat2D));
+            std::memcpy(p + 1 + sizeof(Splat2D), &rects[i], sizeof(TileRect));
+        }
     }
     st.preprocess_ms += ms_since(t0);
 
@@ -392,7 +412,7 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
         bin_splats(splats, rects, valid, gx, mode != WSR, tile_start, keys, st);
     }
     if (keys.capacity() > 4 * keys.size() + (1u << 20)) keys.shrink_to_fit();  // after a much larger frame
-    blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, blend_tile, buf.boxes, img, st);
+    blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, path.blend_tile, buf.boxes, img, st);
 }
 
 // Box-average N x N blocks of `hi` into `lo` (supersampling).
@@ -476,11 +496,11 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
         if (threads > 0) omp_set_num_threads(threads);
         out.resize(width, height, window);
         if (N == 1) {
-            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path.blend_tile, *pooled.buf, out, st);
+            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path, *pooled.buf, out, st);
         } else {
             Image hi;
             hi.resize(width * N, height * N, window);
-            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path.blend_tile, *pooled.buf, hi, st);
+            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path, *pooled.buf, hi, st);
             auto t0 = Clock::now();
             box_downsample(hi, N, out);
             st.blend_ms += ms_since(t0);
@@ -523,6 +543,12 @@ NB_MODULE(_native, m) {
     m.def("release_buffers", [] { g_buffers.clear(); }, "Free the per-frame buffers kept between renders.");
     m.def("set_pixel_boxes", [](bool on) { g_pixel_boxes.store(on); }, nb::arg("on"),
           "Test switch: skip lane groups outside a splat's pixel box (default) or evaluate every list entry.");
+    m.def("set_capture_preprocess", [](bool on) { g_capture.store(on); }, nb::arg("on"),
+          "Test switch: keep the next renders' preprocess output for captured_preprocess().");
+    m.def("captured_preprocess", [] {
+        std::lock_guard<std::mutex> lock(g_capture_mutex);
+        return nb::bytes(reinterpret_cast<const char*>(g_captured.data()), g_captured.size());
+    }, "The last captured frame's preprocess: per splat the valid byte, then its Splat2D and TileRect (zeros when culled).");
     m.def("exp_rate", &exp_rate, nb::arg("path"), nb::arg("n"),
           "Exp evaluations per second on one core through the path's vector exp.");
     m.def("render", &render, nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"),

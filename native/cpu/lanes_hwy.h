@@ -49,6 +49,41 @@ struct LanesHwy {
     }
     static HWY_INLINE float reduce_min(F v) { return hn::GetLane(hn::MinOfLanes(D(), v)); }
     static HWY_INLINE float reduce_max(F v) { return hn::GetLane(hn::MaxOfLanes(D(), v)); }
+
+    // For the preprocess (preprocess.h), bit-identical to Lanes1's libm functions on every lane. mul_rn: the product
+    // passes through an empty asm statement, as gbv::mul_rn's does, so it is never fused into a multiply-add.
+    static HWY_INLINE F mul_rn(F a, F b) {
+        F p = a * b;
+        __asm__("" : "+v"(p.raw));
+        return p;
+    }
+    // fminf / fmaxf: a NaN argument yields the other one; equal arguments yield the first (glibc's rule; the sign of
+    // a zero is the only difference it could make, and the preprocess never compares +0 with -0 where it matters)
+    static HWY_INLINE F fmin(F a, F b) {
+        return hn::IfThenElse(hn::IsNaN(a), b, hn::IfThenElse(hn::IsNaN(b), a, hn::IfThenElse(b < a, b, a)));
+    }
+    static HWY_INLINE F fmax(F a, F b) {
+        return hn::IfThenElse(hn::IsNaN(a), b, hn::IfThenElse(hn::IsNaN(b), a, hn::IfThenElse(b > a, b, a)));
+    }
+    static HWY_INLINE F ceil(F x) { return hn::Ceil(x); }
+    static HWY_INLINE M finite(F x) { return hn::IsFinite(x); }
+    // frexpf by exact bit manipulation: x = m 2^e with |m| in [0.5, 1); zero, infinity and NaN give m = x, e = 0
+    static HWY_INLINE F frexp(F x, I* e) {
+        const DI di;
+        const M sub = hn::And(hn::Abs(x) < set(1.17549435e-38f), x != set(0.0f));  // subnormal: scale by 2^24
+        const F xs = hn::IfThenElse(sub, x * set(16777216.0f), x);
+        const I bits = hn::BitCast(di, xs);
+        const I field = hn::And(hn::ShiftRight<23>(bits), hn::Set(di, 0xff));
+        const M special = hn::Or(hn::RebindMask(D(), field == hn::Zero(di)), hn::RebindMask(D(), field == hn::Set(di, 0xff)));
+        const I mbits = hn::Or(hn::And(bits, hn::Set(di, (int32_t)0x807fffff)), hn::Set(di, 126 << 23));
+        const I ex = field - hn::IfThenElse(hn::RebindMask(di, sub), hn::Set(di, 126 + 24), hn::Set(di, 126));
+        *e = hn::IfThenElse(hn::RebindMask(di, special), hn::Zero(di), ex);
+        return hn::IfThenElse(special, x, hn::BitCast(D(), mbits));
+    }
+    static HWY_INLINE I to_int(F x) { return hn::ConvertTo(DI(), x); }  // truncation
+    static HWY_INLINE F to_float(I v) { return hn::ConvertTo(D(), v); }
+    static HWY_INLINE M gti(I a, I b) { return hn::RebindMask(D(), a > b); }
+    static HWY_INLINE void storei(I v, int32_t* out) { hn::StoreU(v, DI(), out); }
 };
 
 }  // namespace gbv::HWY_NAMESPACE

@@ -10,25 +10,28 @@
 namespace gbv {
 void blend_tile_scalar(const TileJob& job);
 float exp_sum_scalar(int64_t n);
+void preprocess_range_scalar(const PreprocessJob& job, int64_t begin, int64_t end);
 #ifdef GBV_HAVE_AVX2
 void blend_tile_avx2(const TileJob& job);
 float exp_sum_avx2(int64_t n);
+void preprocess_range_avx2(const PreprocessJob& job, int64_t begin, int64_t end);
 #endif
 #ifdef GBV_HAVE_AVX512
 void blend_tile_avx512(const TileJob& job);
 float exp_sum_avx512(int64_t n);
+void preprocess_range_avx512(const PreprocessJob& job, int64_t begin, int64_t end);
 #endif
 }  // namespace gbv
 
 namespace gbv::simd {
 namespace {
 
-const Path kScalar{"scalar", blend_tile_scalar, exp_sum_scalar};
+const Path kScalar{"scalar", blend_tile_scalar, exp_sum_scalar, preprocess_range_scalar};
 #ifdef GBV_HAVE_AVX2
-const Path kAvx2{"avx2", blend_tile_avx2, exp_sum_avx2};
+const Path kAvx2{"avx2", blend_tile_avx2, exp_sum_avx2, preprocess_range_avx2};
 #endif
 #ifdef GBV_HAVE_AVX512
-const Path kAvx512{"avx512", blend_tile_avx512, exp_sum_avx512};
+const Path kAvx512{"avx512", blend_tile_avx512, exp_sum_avx512, preprocess_range_avx512};
 #endif
 
 #if defined(GBV_HAVE_AVX2) || defined(GBV_HAVE_AVX512)

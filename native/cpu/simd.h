@@ -1,4 +1,4 @@
-// The SIMD paths of the CPU blend and the choice between them: the widest one the CPU runs, unless
+// The SIMD paths of the CPU blend and preprocess and the choice between them: the widest one the CPU runs, unless
 // GBVIEWER_SIMD=scalar|avx2|avx512 (read when the module loads) or set_simd() names another.
 #pragma once
 
@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "blend_tile.h"
+#include "preprocess_range.h"
 
 namespace gbv::simd {
 
@@ -13,6 +14,7 @@ struct Path {
     const char* name;
     BlendTileFn blend_tile;
     float (*exp_sum)(int64_t);
+    PreprocessFn preprocess;
 };
 
 std::vector<const Path*> supported();          // paths this build and CPU can run, best last

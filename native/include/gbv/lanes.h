@@ -1,4 +1,4 @@
-// Lane types for the blend steps of blend.h. Each step is written once over a lane type L: L::F holds one float
+// Lane types for the blend steps of blend.h and the preprocess of preprocess.h. Each step is written once over a lane type L: L::F holds one float
 // per pixel lane, L::M one flag per lane, L::I one int32 per lane. `Lanes1` is one pixel (the scalar CPU path and
 // CUDA, one thread per pixel); the CPU's vector types (native/cpu/lanes_hwy.h, Google Highway) hold 8 or 16
 // pixels. Arithmetic uses the types' operators; everything else goes through these static functions, so the
@@ -36,6 +36,16 @@ struct Lanes1 {
     static GBV_HDI uint32_t bits(M m) { return m ? 1u : 0u; }  // bit i: lane i
     static GBV_HDI float reduce_min(F v) { return v; }
     static GBV_HDI float reduce_max(F v) { return v; }
+    // for the preprocess (preprocess.h): libm's rules, bit for bit on every lane type
+    static GBV_HDI F mul_rn(F a, F b) { return gbv::mul_rn(a, b); }
+    static GBV_HDI F fmin(F a, F b) { return fminf(a, b); }  // a NaN argument yields the other one
+    static GBV_HDI F fmax(F a, F b) { return fmaxf(a, b); }
+    static GBV_HDI F ceil(F x) { return ceilf(x); }
+    static GBV_HDI M finite(F x) { return finitef(x); }
+    static GBV_HDI F frexp(F x, I* e) { return frexpf(x, e); }
+    static GBV_HDI I to_int(F x) { return (int32_t)x; }  // truncation
+    static GBV_HDI F to_float(I v) { return (float)v; }
+    static GBV_HDI M gti(I a, I b) { return a > b; }
 };
 
 }  // namespace gbv

@@ -1,0 +1,17 @@
+// The preprocess for one vector instruction set: preprocess_splat<L> (gbv/preprocess.h) on Highway's lanes, 8 splats
+// at a time with AVX2, 16 with AVX-512. CMake compiles this file once per set, like blend_isa.cpp, and with
+// -ffp-contract=off besides the lane type's mul_rn barrier: no multiply-add is fused, so every lane computes what
+// preprocess_splat computes for one splat, bit for bit.
+#include "lanes_hwy.h"
+#include "preprocess_range.h"
+
+#define GBV_CAT2(a, b) a##b
+#define GBV_CAT(a, b) GBV_CAT2(a, b)
+
+namespace gbv {
+
+void GBV_CAT(preprocess_range_, GBV_ISA_NAME)(const PreprocessJob& job, int64_t begin, int64_t end) {
+    preprocess_range<HWY_NAMESPACE::LanesHwy>(job, begin, end);
+}
+
+}  // namespace gbv
