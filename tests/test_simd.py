@@ -1,5 +1,8 @@
 """The CPU blend's SIMD paths (scalar, avx2, avx512) against each other and against the float64 reference.
 
+The preprocess (gbv/preprocess.h) runs on the same SIMD path as the blend (8 or 16 splats per call) and is bit-identical
+to the scalar path's: every Splat2D field, tile rectangle and culling decision (test_preprocess_bitwise).
+
 Tolerance between a vector path and the scalar path: the vector exp (Highway, 1 ulp) and libm's expf differ by up to
 1 ulp, and FMA contraction differs, so colours and alphas agree to ~1e-6 (asserted: 1e-5) except where an alpha within
 ~1e-6 of the 1/255 (1/256) cut, or a transmittance that close to the 1e-4 stop, is decided the other way. One flipped
@@ -24,6 +27,7 @@ import pytest
 import gbviewer as gb
 from conftest import skip_or_fail
 from gbviewer import _native
+from gbviewer.cells import build_cells
 from test_render_reference import BACKGROUND, SCENES, _check_strict, random_scene
 
 ALL_PATHS = ("scalar", "avx2", "avx512")
@@ -125,6 +129,94 @@ def test_reference_gaussian_blending_each_path(path):
     with simd(path):
         frame = gb.render(scene, cam, mode="gaussian_blending", background=BACKGROUND)
         _check_strict(frame, scene, cam, "gaussian_blending", 1)
+
+
+# captured_preprocess(): per splat its valid byte, then (when valid) Splat2D and TileRect, zeros when culled
+SPLAT2D = np.dtype([("xy", "<u4", 2), ("depth", "<u4"), ("opacity", "<u4"), ("conic", "<u4", 3), ("color", "<u4", 3),
+                    ("v1", "<u4", 2), ("sigma", "<u4", 2), ("inv_sigma", "<u4", 2), ("log_min_alpha", "<u4"),
+                    ("radius", "<u4"), ("cell", "<i4")])
+PREPROCESS_RECORD = np.dtype([("valid", "u1"), ("splat", SPLAT2D), ("rect", "<i4", 4)])
+
+
+def preprocessed(path, scene, cam, mode, **kw):
+    """The preprocess output of a render on `path`, as PREPROCESS_RECORD per splat, and the frame."""
+    _native.set_capture_preprocess(True)
+    try:
+        frame = render(path, scene, cam, mode, **kw)
+        rec = np.frombuffer(_native.captured_preprocess(), PREPROCESS_RECORD)
+    finally:
+        _native.set_capture_preprocess(False)
+    assert len(rec) == scene.num_splats
+    return rec, frame
+
+
+def _cut_scene(seed):
+    """Splats at the preprocess's cuts: opacities at and next to 1/255 and 1/256 (after the mip compensation too),
+    depths at and next to the near plane, view weights near 0 (a sum of terms), 3D filters, subnormal and zero
+    scales; n = 1003 leaves a partial vector at the end."""
+    rng = np.random.default_rng(seed)
+    n = 1003
+    z = rng.uniform(0.15, 8.0, n)
+    z[:40] = np.nextafter(np.float32(0.2), np.float32([0.0, 1.0] * 20))
+    means = np.c_[rng.uniform(-1.3, 1.3, n) * z, rng.uniform(-1.3, 1.3, n) * z, z]
+    scales = np.exp(rng.uniform(np.log(1e-4), np.log(0.5), (n, 3)))
+    scales[40:60] = 0.0
+    scales[60:80, :2] = 1e-38
+    op = rng.uniform(0.003, 1.0, n).astype(np.float32)
+    for i, o in enumerate((1 / 255, 1 / 256)):
+        base = np.float32(o)
+        op[100 + 30 * i:130 + 30 * i] = np.nextafter(base, np.float32([0.0, 1.0, 1.0] * 10))
+        op[160 + 10 * i:170 + 10 * i] = base
+    quats = rng.normal(size=(n, 4))
+    quats[80:90] = 0.0
+    sh = rng.uniform(-1, 1, (n, 16, 3))
+    vw = rng.normal(0.0, 0.4, (n, 16))
+    vw[:, 0] = rng.uniform(-0.5, 4.0, n)
+    vw[200:300, 1:] = 0.0
+    vw[200:300, 0] = np.float32(rng.choice([0.0, 1e-30, -1e-30, 1e-3], 100))
+    f3d = np.where(rng.random(n) < 0.5, rng.uniform(0.0, 0.05, n), 0.0)
+    scene = gb.Scene.from_arrays(means, scales, quats, op, sh, f3d, view_weight_sh=vw, wsr_sigma=5.0,
+                                 weight_background=0.3)
+    R = np.array([[0.98, -0.17, 0.1], [0.17, 0.985, 0.0], [-0.1, 0.02, 0.995]])
+    R = np.linalg.qr(R)[0] * np.sign(np.diag(np.linalg.qr(R)[1]))
+    return scene, gb.Camera(97, 61, 52.3, 47.9, 50.1, 29.7, R, np.array([0.03, -0.02, 0.1]))
+
+
+def _preprocess_cases():
+    for seed, sh_degree, filter3d in SCENES[:3]:
+        yield f"random{seed}", random_scene(seed, n=777, sh_degree=sh_degree, filter3d=filter3d, W=61, H=37)
+    yield "needles", _needle_scene(5)
+    yield "cuts", _cut_scene(7)
+
+
+@pytest.mark.parametrize("path", ["avx2", "avx512"])
+@pytest.mark.parametrize("mode", MODES)
+def test_preprocess_bitwise(path, mode):
+    """The vector preprocess gives every splat's Splat2D (every field, bit for bit), tile rectangle and culling decision
+    exactly as the scalar one, in every mode, SH degree, with 3D filters, view weights, depth correction and cells."""
+    for name, (scene, cam) in _preprocess_cases():
+        variants = [{}]
+        if mode in ("wsr", "duplex"):
+            variants.append({"depth_correct": True})
+        if mode == "duplex":
+            scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
+                                         scene.filter_3d, view_weight_sh=scene.view_weight_sh,
+                                         cells=build_cells(scene, 6))
+        for kw in variants + [{"sh_degree": 1}]:
+            ref, ref_frame = preprocessed("scalar", scene, cam, mode, **kw)
+            vec, vec_frame = preprocessed(path, scene, cam, mode, **kw)
+            what = f"{path} {mode} {name} {kw}"
+            assert ref["valid"].sum() > 0 and (ref["valid"] == 0).sum() > 0, what
+            as_bytes = lambda r: r.view(np.uint8).reshape(len(r), -1)  # noqa: E731
+            bad = np.flatnonzero((as_bytes(ref) != as_bytes(vec)).any(axis=1))
+            if len(bad):
+                fields = [f for f in SPLAT2D.names if (ref["splat"][f][bad] != vec["splat"][f][bad]).any()]
+                decided = (ref["valid"][bad] != vec["valid"][bad]).sum()
+                rects = (ref["rect"][bad] != vec["rect"][bad]).any(axis=1).sum()
+                pytest.fail(f"{what}: {len(bad)} splats differ (first {bad[:5]}): {decided} decisions, {rects} "
+                            f"rectangles, fields {fields}")
+            for stat in ("visible", "sort_length", "pairs"):
+                assert vec_frame.stats[stat] == ref_frame.stats[stat], what
 
 
 def _needle_scene(seed):
