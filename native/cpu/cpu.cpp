@@ -1,4 +1,4 @@
-// CPU driver: preprocess (parallel over splats), per-tile binning and depth sort, blending
+// CPU driver: preprocess (parallel over blocks of splats, in vector lanes), per-tile binning and depth sort, blending
 // (parallel over tiles, dynamic schedule). The math is in include/gbv/*.h, shared with CUDA.
 #include <omp.h>
 #if defined(__SSE__) || defined(__x86_64__)

@@ -1,6 +1,7 @@
-// Vector lanes for the blend steps (gbv/lanes.h) on Google Highway: 8 floats with AVX2, 16 with AVX-512. Included
-// by blend_isa.cpp, which is compiled once per instruction set with that set's -m flags, so Highway's static
-// target (hwy::HWY_NAMESPACE, e.g. N_AVX2) is the one the file is built for and the type lives in that namespace.
+// Vector lanes for the blend and preprocess steps (gbv/lanes.h) on Google Highway: 8 floats with AVX2, 16 with
+// AVX-512. Included by blend_isa.cpp and preprocess_isa.cpp, which are compiled once per instruction set with that
+// set's -m flags, so Highway's static target (hwy::HWY_NAMESPACE, e.g. N_AVX2) is the one the files are built for and
+// the type lives in that namespace.
 #pragma once
 
 #include <hwy/highway.h>
