@@ -66,8 +66,10 @@ void preprocess_range(const PreprocessJob& job, int64_t begin, int64_t end) {
                 buf[11][j] = job.filter_3d ? job.filter_3d[i] : 0.0f;
                 const float* s = job.sh + (size_t)job.k * 3 * i;
                 for (int q = 0; q < nsh; ++q) shb[q][j] = s[q];
-                const float* ws = job.weight_sh + (size_t)job.weight_k * i;
-                for (int q = 0; q < nw; ++q) wb[q][j] = ws[q];
+                if (nw > 0) {
+                    const float* ws = job.weight_sh + (size_t)job.weight_k * i;
+                    for (int q = 0; q < nw; ++q) wb[q][j] = ws[q];
+                }
             }
             SplatInLanes<L> in;
             for (int c = 0; c < 3; ++c) in.mean[c] = L::load(buf[c]);
