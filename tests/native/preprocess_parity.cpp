@@ -18,7 +18,7 @@ using namespace gbv;
 
 namespace {
 
-// The decision, the tile rectangle and the fields splat_less (native/src/cpu.cpp) orders a cell's splats by.
+// The decision, the tile rectangle and the fields splat_less (native/include/gbv/order.h) orders a cell's splats by.
 struct Record {
     int32_t valid;
     TileRect rect;
