@@ -102,15 +102,29 @@ def test_tile_list_that_does_not_fit_is_a_memory_error(tmp_path):
 
 
 def test_release_buffers():
-    """The CPU renderer frees the native per-frame buffers when its scene changes; renders are unchanged after."""
+    """The CPU renderer frees the native per-frame buffers when its scene changes (not when the same scene comes
+    again); renders after a release are unchanged."""
     from gbviewer import _native
     from gbviewer.render import CpuRenderer
 
+    released = []
+
+    class Spy:  # the native module, counting release_buffers calls
+        def __getattr__(self, name):
+            return getattr(_native, name)
+
+        def release_buffers(self):
+            released.append(1)
+            _native.release_buffers()
+
     scene, cam = random_scene(200, seed=4), front_camera()
     r = CpuRenderer()
+    r._native = Spy()
     r.upload(scene)
     a = r.render(cam, gb.RenderSettings())
-    r.upload(random_scene(10, seed=5))
-    _native.release_buffers()
     r.upload(scene)
+    assert len(released) == 1, "uploading the same scene again keeps the buffers"
+    r.upload(random_scene(10, seed=5))
+    r.upload(scene)
+    assert len(released) == 3
     np.testing.assert_array_equal(r.render(cam, gb.RenderSettings()).rgb, a.rgb)

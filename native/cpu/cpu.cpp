@@ -278,6 +278,15 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
     boxes.resize(splats.size());
 #pragma omp parallel for schedule(static)
     for (int64_t i = 0; i < (int64_t)splats.size(); ++i) boxes[i] = splat_bounds(splats[i], mode);
+    TileJob frame = {};  // what every tile shares; each tile sets its list and rectangle
+    frame.width = W;
+    frame.mode = mode;
+    frame.oit = oit;
+    for (int c = 0; c < 3; ++c) frame.bg[c] = bg[c];
+    frame.rgb = img.rgb.data();
+    frame.alpha = img.alpha.data();
+    frame.window = img.window.empty() ? nullptr : img.window.data();
+    frame.evals = img.evals.data();
 #pragma omp parallel
     {
         FlushDenormals ftz;
@@ -293,7 +302,7 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
                 local[j] = splats[id];
                 bounds[j] = boxes[id];
             }
-            TileJob job;
+            TileJob job = frame;
             job.list = local.data();
             job.bounds = bounds.data();
             job.n = (int)count;
@@ -301,14 +310,6 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
             job.y0 = (t / gx) * TILE;
             job.x1 = std::min(job.x0 + TILE, W);
             job.y1 = std::min(job.y0 + TILE, H);
-            job.width = W;
-            job.mode = mode;
-            job.oit = oit;
-            for (int c = 0; c < 3; ++c) job.bg[c] = bg[c];
-            job.rgb = img.rgb.data();
-            job.alpha = img.alpha.data();
-            job.window = img.window.empty() ? nullptr : img.window.data();
-            job.evals = img.evals.data();
             blend_tile(job);
         }
     }
