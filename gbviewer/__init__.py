@@ -10,7 +10,9 @@ from .io import load
 from .render import Frame, Mode, Renderer, RenderSettings, get_renderer, render
 from .scene import Scene
 
-ASSETS = Path(__file__).parent / "assets"
+ASSETS = Path(__file__).parent / "assets"  # installed; a source checkout has it at the top level
+if not ASSETS.is_dir():
+    ASSETS = Path(__file__).resolve().parents[1] / "assets"
 DEFAULT_SCENE = ASSETS / "fruit_drops_minimal.ply"
 
 __all__ = [
