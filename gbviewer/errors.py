@@ -7,6 +7,10 @@ class GBViewerError(Exception):
     """Base class of every error gbviewer raises on bad input."""
 
 
+class InvalidValue(GBViewerError):
+    """A number or document from the command line or a file is out of range, non-finite or malformed."""
+
+
 class SceneFormatError(GBViewerError):
     """A scene file cannot be read: wrong format, missing or malformed field, truncated data."""
 

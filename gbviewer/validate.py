@@ -1,0 +1,136 @@
+"""Untrusted numbers and documents (command line, file headers, JSON) turned into checked values.
+
+Every option and loader goes through these, so a new one cannot forget a check: finite, in range, integral where
+it must be, representable in the type it is cast to (float32 included), declared counts within what the bytes
+present can hold, JSON bounded in size and depth. Failures raise `InvalidValue` whose message names `what`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import InvalidValue
+
+F32_MAX = float(np.finfo(np.float32).max)
+JSON_MAX_BYTES = 64 << 20
+JSON_MAX_DEPTH = 32
+
+
+def _describe(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def real(value: object, what: str, *, lo: float | None = None, hi: float | None = None, lo_open: bool = False,
+         f32: bool = False) -> float:
+    """`value` as a finite float in [lo, hi] ((lo, hi] with lo_open); with f32 it must also fit a float32."""
+    if isinstance(value, bool):
+        raise InvalidValue(f"{what}: expected a number, got {_describe(value)}")
+    try:
+        x = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        raise InvalidValue(f"{what}: expected a number, got {_describe(value)}") from None
+    if not math.isfinite(x) or (f32 and abs(x) > F32_MAX):
+        kind = "a finite float32 number" if f32 else "a finite number"
+        raise InvalidValue(f"{what}: expected {kind}, got {_describe(value)}")
+    if lo is not None and (x <= lo if lo_open else x < lo):
+        raise InvalidValue(f"{what}: expected {'>' if lo_open else '>='} {lo:g}, got {x:g}")
+    if hi is not None and x > hi:
+        raise InvalidValue(f"{what}: expected <= {hi:g}, got {x:g}")
+    return x
+
+
+def integer(value: object, what: str, *, lo: int | None = None, hi: int | None = None) -> int:
+    """`value` as an int in [lo, hi]; integral floats (2.0) pass, 2.5, NaN, booleans and 5000-digit texts do not."""
+    if isinstance(value, bool):
+        raise InvalidValue(f"{what}: expected an integer, got {_describe(value)}")
+    if isinstance(value, str):
+        text = value.strip()
+        if len(text) > 40:
+            raise InvalidValue(f"{what}: expected an integer, got {_describe(value)}")
+        try:
+            value = int(text)
+        except ValueError:
+            value = real(text, what)
+    if isinstance(value, (float, np.floating)):
+        x = real(value, what)
+        if not x.is_integer():
+            raise InvalidValue(f"{what}: expected an integer, got {x:g}")
+        value = int(x)
+    if not isinstance(value, (int, np.integer)):
+        raise InvalidValue(f"{what}: expected an integer, got {_describe(value)}")
+    n = int(value)
+    if lo is not None and n < lo:
+        raise InvalidValue(f"{what}: expected >= {lo}, got {n}")
+    if hi is not None and n > hi:
+        raise InvalidValue(f"{what}: expected <= {hi}, got {_describe(n)}")
+    return n
+
+
+def declared_count(value: object, what: str, *, item_bytes: int, available: int) -> int:
+    """A count a file declares, checked against the bytes actually present before anything is allocated:
+    `value` items of at least `item_bytes` each must fit in `available` bytes."""
+    n = integer(value, what, lo=0)
+    if n * max(item_bytes, 1) > available:
+        raise InvalidValue(f"{what}: declares {n} entries of >= {item_bytes} bytes but only {available} bytes "
+                           "follow")
+    return n
+
+
+def _reject_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a finite number")
+
+
+def _depth(doc: Any, limit: int) -> int:
+    """Nesting depth of a parsed JSON document (iterative, so it cannot recurse too deep itself)."""
+    deepest, stack = 0, [(doc, 1)]
+    while stack:
+        node, d = stack.pop()
+        if isinstance(node, (list, dict)):
+            deepest = max(deepest, d)
+            if deepest > limit:
+                break
+            stack.extend((child, d + 1) for child in (node.values() if isinstance(node, dict) else node))
+    return deepest
+
+
+def parse_json(text: str | bytes, what: str, *, max_bytes: int = JSON_MAX_BYTES,
+               max_depth: int = JSON_MAX_DEPTH) -> Any:
+    """A JSON document with its size, nesting depth and numbers bounded: `NaN`/`Infinity` and integers too long
+    to convert are errors, as are documents over `max_bytes` or nested deeper than `max_depth`."""
+    if len(text) > max_bytes:
+        raise InvalidValue(f"{what}: {len(text)} bytes of JSON, more than the {max_bytes} allowed")
+    try:
+        doc = json.loads(text, parse_constant=_reject_constant)
+    except RecursionError:
+        raise InvalidValue(f"{what}: JSON nested deeper than {max_depth} levels") from None
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InvalidValue(f"{what}: not valid JSON ({str(exc).splitlines()[0]})") from None
+    if _depth(doc, max_depth) > max_depth:
+        raise InvalidValue(f"{what}: JSON nested deeper than {max_depth} levels")
+    return doc
+
+
+def read_json(path: str | Path, *, max_bytes: int = JSON_MAX_BYTES, max_depth: int = JSON_MAX_DEPTH) -> Any:
+    """`parse_json` of a file, reading at most `max_bytes` + 1 bytes of it; errors name the file."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(max_bytes + 1)
+    except OSError as exc:
+        raise InvalidValue(f"{path}: cannot read ({exc.strerror or exc})") from None
+    return parse_json(data, str(path), max_bytes=max_bytes, max_depth=max_depth)
+
+
+def field(doc: Any, key: str, what: str) -> Any:
+    """`doc[key]` of a JSON object, with a one-line error naming `what` when doc is not an object or lacks key."""
+    if not isinstance(doc, dict):
+        raise InvalidValue(f"{what}: expected a JSON object, got {type(doc).__name__}")
+    if key not in doc:
+        raise InvalidValue(f"{what}: missing '{key}'")
+    return doc[key]
