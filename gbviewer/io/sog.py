@@ -12,7 +12,6 @@ codebook). Positions are in the source `.ply` frame.
 from __future__ import annotations
 
 import io
-import json
 import zipfile
 from collections.abc import Callable
 from pathlib import Path, PurePosixPath
@@ -20,55 +19,75 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 from PIL import Image, features
 
-from ..errors import SceneFormatError
+from ..errors import InvalidValue, SceneFormatError
 from ..scene import Scene
+from ..validate import parse_json
 from .packing import MAX_SPLATS, smallest_three
 
 ZIP_MAGIC = b"PK"
-MAX_MEMBER_BYTES = 1 << 30
+META_MAX_BYTES = 4 << 20  # meta.json: codebooks of 256 numbers and file names; real ones are ~10 KB
+IMAGE_BYTES_PER_PIXEL = 8  # a lossless WebP of RGBA bytes is < 4.1 bytes per pixel; headroom for other encoders
+SPARE_PIXELS = 65536  # beyond twice the pixels the count needs (padding rows, power-of-two textures)
 SH_COEFFS = {1: 3, 2: 8, 3: 15}
+
+
+Reader = Callable[[str, int], bytes]  # (member name, byte limit) -> its bytes
 
 
 def load_sog(path: Path) -> Scene:
     """Load a bundled `.sog` zip, a folder holding `meta.json`, or a `meta.json` file with its images."""
     if path.is_dir():
-        return _load(path, lambda name: _read_file(path, name), bundled=False)
+        return _load(path, lambda name, limit: _read_file(path, name, limit), bundled=False)
     with open(path, "rb") as fh:
         is_zip = fh.read(2) == ZIP_MAGIC
     if not is_zip:
-        return _load(path.parent, lambda name: _read_file(path.parent, name), bundled=False, meta_name=path.name)
+        return _load(path, lambda name, limit: _read_file(path.parent, name, limit), bundled=False,
+                     meta_name=path.name)
     try:
         with zipfile.ZipFile(path) as zf:
-            return _load(path, lambda name: _read_member(path, zf, name), bundled=True)
+            return _load(path, lambda name, limit: _read_member(path, zf, name, limit), bundled=True)
     except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, NotImplementedError, RuntimeError) as exc:
         raise SceneFormatError(path, f"corrupt .sog zip: {exc}", field="zip") from None
 
 
-def _read_file(folder: Path, name: str) -> bytes:
+def _too_big(where: Path, name: str, size: int, limit: int) -> SceneFormatError:
+    return SceneFormatError(where, f"{size} bytes or more; at most {limit} expected for this splat count", field=name)
+
+
+def _read_file(folder: Path, name: str, limit: int) -> bytes:
     try:
-        return (folder / name).read_bytes()
+        with open(folder / name, "rb") as fh:
+            data = fh.read(limit + 1)
     except OSError:
         raise SceneFormatError(folder, "missing file in the SOG folder", field=name) from None
+    if len(data) > limit:
+        raise _too_big(folder / name, name, len(data), limit)
+    return data
 
 
-def _read_member(path: Path, zf: zipfile.ZipFile, name: str) -> bytes:
+def _read_member(path: Path, zf: zipfile.ZipFile, name: str, limit: int) -> bytes:
+    """A zip member read through at most `limit` + 1 inflated bytes, whatever its header claims."""
     try:
         info = zf.getinfo(name)
     except KeyError:
         raise SceneFormatError(path, "missing from the .sog zip", field=name) from None
-    if info.file_size > MAX_MEMBER_BYTES:
-        raise SceneFormatError(path, f"member of {info.file_size} bytes exceeds {MAX_MEMBER_BYTES}", field=name)
+    if info.file_size > limit:
+        raise _too_big(path, name, info.file_size, limit)
     try:
-        return zf.read(info)
+        with zf.open(info) as fh:
+            data = fh.read(limit + 1)
     except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError, RuntimeError) as exc:
         raise SceneFormatError(path, f"cannot read zip member: {exc}", field=name) from None
+    if len(data) > limit:
+        raise _too_big(path, name, len(data), limit)
+    return data
 
 
-def _load(where: Path, read: Callable[[str], bytes], bundled: bool, meta_name: str = "meta.json") -> Scene:
+def _load(where: Path, read: Reader, bundled: bool, meta_name: str = "meta.json") -> Scene:
     try:
-        meta = json.loads(read(meta_name))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise SceneFormatError(where, f"invalid JSON: {exc}", field=meta_name) from None
+        meta = parse_json(read(meta_name, META_MAX_BYTES), meta_name)
+    except InvalidValue as exc:
+        raise SceneFormatError(where, str(exc).removeprefix(f"{meta_name}: "), field=meta_name) from None
     try:
         return _decode(where, read, meta, bundled)
     except (KeyError, TypeError, ValueError, IndexError) as exc:
@@ -82,7 +101,7 @@ def _codebook(where: Path, section: dict, name: str) -> np.ndarray:
     return book
 
 
-def _decode(where: Path, read: Callable[[str], bytes], meta: dict, bundled: bool) -> Scene:
+def _decode(where: Path, read: Reader, meta: dict, bundled: bool) -> Scene:
     if not isinstance(meta, dict) or meta.get("version") != 2:
         version = meta.get("version") if isinstance(meta, dict) else None
         raise SceneFormatError(where, f"SOG meta version {version!r}; supported: 2", field="version")
@@ -125,7 +144,7 @@ def _sh_rest(where: Path, images: "_Images", shn: dict, n: int) -> np.ndarray:
                                field="shN")
     k = SH_COEFFS[bands]
     centroids_name, labels_name = shn["files"][0], shn["files"][1]
-    centroids, (width, _) = images.decode(centroids_name)
+    centroids, (width, _) = images.decode(centroids_name, palette * k)
     if width != 64 * k or len(centroids) < palette * k:
         raise SceneFormatError(where, f"centroids image is {width} wide with {len(centroids)} pixels; expected "
                                f"{64 * k} wide with at least {palette * k}", field=centroids_name)
@@ -138,19 +157,25 @@ def _sh_rest(where: Path, images: "_Images", shn: dict, n: int) -> np.ndarray:
 
 
 class _Images:
-    """Decodes the per-splat images, checking they share one size that holds every splat."""
+    """Decodes the per-splat images, checking they share one size that holds every splat and that neither their
+    bytes nor their pixels exceed what that many splats can need (checked from the header, before decoding)."""
 
-    def __init__(self, where: Path, read: Callable[[str], bytes], count: int):
+    def __init__(self, where: Path, read: Reader, count: int):
         self.where, self.read, self.count, self.size = where, read, count, None
 
-    def decode(self, name: str) -> tuple[np.ndarray, tuple[int, int]]:
+    def decode(self, name: str, needed: int | None = None) -> tuple[np.ndarray, tuple[int, int]]:
+        """RGBA pixels of image `name`, which must hold `needed` pixels (the splat count by default)."""
         if not isinstance(name, str) or PurePosixPath(name).is_absolute() or ".." in PurePosixPath(name).parts:
             raise SceneFormatError(self.where, f"image name {name!r} must be a relative path", field="files")
-        data = self.read(name)
+        most = 2 * (needed or self.count) + SPARE_PIXELS
+        data = self.read(name, IMAGE_BYTES_PER_PIXEL * most + 4096)
         if data[:4] == b"RIFF" and not features.check("webp"):
             raise SceneFormatError(self.where, "this Pillow build cannot decode WebP", field=name)
         try:
             with Image.open(io.BytesIO(data)) as im:
+                if im.width * im.height > most:
+                    raise SceneFormatError(self.where, f"image is {im.width}x{im.height}; {needed or self.count} "
+                                           f"pixels are needed, at most {most} allowed", field=name)
                 rgba = np.asarray(im.convert("RGBA"))
         except (OSError, ValueError, Image.DecompressionBombError) as exc:
             raise SceneFormatError(self.where, f"cannot decode image: {exc}", field=name) from None

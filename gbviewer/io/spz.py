@@ -34,7 +34,8 @@ TOC_ENTRY = struct.Struct("<QQ")
 EXTENSIONS_FLAG = 0x2
 ANTIALIASED_FLAG = 0x1
 MAX_EXTENSION_BYTES = 1 << 20  # extension records allowed ahead of the legacy attribute arrays
-MAX_COMPRESSION_RATIO = 1024  # as the reference loader: larger claims are corrupt headers
+MAX_COMPRESSION_RATIO = 64  # declared attribute bytes per compressed byte: real splat data compresses < 4x, so a
+# larger claim is a corrupt or hostile header (the reference loader allows 1024, which lets 1.6 MB inflate to 1.6 GB)
 SH_DIM = {0: 0, 1: 3, 2: 8, 3: 15, 4: 24}
 COLOR_SCALE = 0.15
 FLIP_XYZ = np.array([1.0, -1.0, -1.0], dtype=np.float32)  # RUB -> RDF, for positions and quaternion xyz
@@ -46,6 +47,13 @@ def _sizes(version: int, n: int, sh_degree: int) -> dict[str, int]:
     """Byte size of each attribute array, in file order."""
     return {"positions": n * (6 if version == 1 else 9), "alphas": n, "colors": 3 * n, "scales": 3 * n,
             "rotations": n * (4 if version >= 3 else 3), "sh": n * SH_DIM[sh_degree] * 3}
+
+
+def _check_ratio(path: Path, declared: int, compressed: int) -> None:
+    """Refuse, before inflating anything, a header whose attribute bytes the compressed bytes cannot plausibly hold."""
+    if declared > MAX_COMPRESSION_RATIO * compressed:
+        raise SceneFormatError(path, f"{declared} bytes of attributes cannot come from {compressed} compressed bytes "
+                               f"(more than {MAX_COMPRESSION_RATIO}x); corrupt header", field="numPoints")
 
 
 def _check_header(path: Path, version: int, n: int, sh_degree: int, known: range) -> None:
@@ -77,6 +85,7 @@ def _gunzip(path: Path, data: bytes) -> bytes:
         if magic != MAGIC:
             raise SceneFormatError(path, f"gzip data does not start with NGSP (got {magic!r})", field="magic")
         _check_header(path, version, n, sh_degree, range(1, 4))
+        _check_ratio(path, sum(_sizes(version, n, sh_degree).values()), len(data))
         limit = sum(_sizes(version, n, sh_degree).values()) + MAX_EXTENSION_BYTES
         payload = head + d.decompress(d.unconsumed_tail, limit)
     except zlib.error as exc:
@@ -113,8 +122,7 @@ def _load_ngsp(path: Path, data: bytes) -> Scene:
     _, version, n, sh_degree, frac_bits, flags, num_streams, toc = NGSP_HEADER.unpack_from(data)
     _check_header(path, version, n, sh_degree, range(4, 5))
     sizes = {k: v for k, v in _sizes(version, n, sh_degree).items() if v}
-    if sum(sizes.values()) > MAX_COMPRESSION_RATIO * len(data):
-        raise SceneFormatError(path, f"{n} splats cannot fit in {len(data)} bytes", field="numPoints")
+    _check_ratio(path, sum(sizes.values()), len(data))
     if num_streams != len(sizes):
         raise SceneFormatError(path, f"{num_streams} streams; SH degree {sh_degree} needs {len(sizes)}",
                                field="numStreams")
