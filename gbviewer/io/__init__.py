@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from ..camera import load_cameras_json
 from ..errors import GBViewerError, SceneFormatError
 from ..scene import Scene
@@ -24,7 +26,8 @@ def load(path: str | Path) -> Scene:
     """Load a splat scene file or SOG folder; the format comes from the content, not the extension."""
     path = Path(path)
     try:
-        return _load(path)
+        with np.errstate(all="ignore"):  # overflow in decoding is data: Scene drops non-finite splats with a warning
+            return _load(path)
     except SceneFormatError:
         raise
     except GBViewerError as exc:  # Scene validation of decoded data, e.g. every splat non-finite

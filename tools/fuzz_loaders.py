@@ -1,0 +1,75 @@
+"""Coverage-guided fuzzing of the scene loaders with atheris (libFuzzer).
+
+    python tools/fuzz_loaders.py FORMAT [--seconds N] [--corpus DIR] [-- libFuzzer options]
+
+FORMAT is one of the seed folders in tests/io/fuzz/seeds (inria, compressed, spz, splat, sog, duplex, ...): its small
+seed files start the corpus, new inputs go to `--corpus` (default .fuzz/FORMAT, kept between runs). An input fails
+when loading it raises anything but a one-line GBViewerError, emits a numpy RuntimeWarning, or returns a scene with
+non-finite values; libFuzzer also flags inputs that take over 10 s or 2 GiB. Failing inputs are written to
+tests/io/fuzz/crashes/ where tests/io/test_fuzz_regressions.py replays them with `check_load` forever after.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+SEEDS = REPO / "tests" / "io" / "fuzz" / "seeds"
+CRASHES = REPO / "tests" / "io" / "fuzz" / "crashes"
+sys.path.insert(0, str(REPO))  # fuzz the working tree (with its compiled module copied in) rather than an install
+
+
+def check_load(path: Path) -> str:
+    """Load `path` as the CLI would; return 'ok' or 'error', raise AssertionError for anything a user must not see."""
+    import gbviewer as gb
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # numpy over/invalid warnings reaching the user are bugs
+        try:
+            scene = gb.load(path)
+        except gb.GBViewerError as exc:
+            if "\n" in str(exc) or not str(exc):
+                raise AssertionError(f"error message is not one line: {exc!r}") from None
+            return "error"
+    for name in ("means", "scales", "quats", "opacities", "sh"):
+        if not np.isfinite(getattr(scene, name)).all():
+            raise AssertionError(f"loaded scene has non-finite {name}")
+    return "ok"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("format", choices=sorted(p.name for p in SEEDS.iterdir()))
+    ap.add_argument("--seconds", type=int, default=600, help="fuzzing time (default 600)")
+    ap.add_argument("--corpus", type=Path, help="corpus folder kept between runs (default .fuzz/FORMAT)")
+    args, extra = ap.parse_known_args()
+    corpus = args.corpus or REPO / ".fuzz" / args.format
+    corpus.mkdir(parents=True, exist_ok=True)
+    CRASHES.mkdir(parents=True, exist_ok=True)
+
+    import atheris
+
+    with atheris.instrument_imports(include=["gbviewer"]):
+        import gbviewer.io  # noqa: F401  (instrumented for coverage)
+    scratch = Path(tempfile.mkdtemp(prefix="gbv-fuzz-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None))
+    target = scratch / "input"
+
+    def one_input(data: bytes) -> None:
+        target.write_bytes(data)
+        check_load(target)
+
+    flags = [sys.argv[0], str(corpus), str(SEEDS / args.format), f"-max_total_time={args.seconds}", "-timeout=10",
+             "-rss_limit_mb=2048", f"-artifact_prefix={CRASHES}/{args.format}-", "-print_final_stats=1", *extra]
+    atheris.Setup(flags, one_input)
+    atheris.Fuzz()
+
+
+if __name__ == "__main__":
+    main()
