@@ -13,8 +13,13 @@ from typing import Callable
 import numpy as np
 import plyfile
 
-from ..errors import SceneFormatError
+from ..errors import InvalidValue, SceneFormatError
 from ..scene import Scene
+from ..validate import declared_count
+
+HEADER_MAX_BYTES = 1 << 20
+TYPE_BYTES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
+              "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
 
 REQUIRED = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
             "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
@@ -28,6 +33,7 @@ def read_ply(path: Path) -> plyfile.PlyData:
         head = fh.read(5)
     if not (head.startswith(b"ply\n") or head == b"ply\r\n"):
         raise SceneFormatError(path, "not a PLY file (missing 'ply' magic line)")
+    check_element_counts(path)
     try:
         return plyfile.PlyData.read(str(path))
     except plyfile.PlyElementParseError as exc:
@@ -37,6 +43,34 @@ def read_ply(path: Path) -> plyfile.PlyData:
         raise SceneFormatError(path, f"malformed PLY header: {exc}") from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise SceneFormatError(path, f"malformed PLY: {exc}") from None
+
+
+def check_element_counts(path: Path) -> None:
+    """Before plyfile allocates anything: every element count the header declares must fit in the bytes that
+    follow it (binary: count x the smallest row; ASCII: two characters per value), so a small file cannot ask
+    for terabytes or for a count that does not fit an index."""
+    with open(path, "rb") as fh:
+        head = fh.read(HEADER_MAX_BYTES)
+        size = fh.seek(0, 2)
+    end = head.find(b"end_header")
+    if end < 0:
+        return  # no complete header: plyfile reports it
+    lines = head[:end].decode("ascii", "replace").splitlines()
+    binary = any(line.split()[:2] in (["format", "binary_little_endian"], ["format", "binary_big_endian"])
+                 for line in lines if line.strip())
+    elements: list[list] = []  # [name, count, smallest row bytes]
+    for line in lines:
+        words = line.split()
+        if len(words) == 3 and words[0] == "element":
+            elements.append([words[1], words[2], 0])
+        elif elements and len(words) >= 3 and words[0] == "property":
+            elements[-1][2] += TYPE_BYTES.get(words[2] if words[1] == "list" else words[1], 1) if binary else 2
+    available = size - end
+    for name, count, row in elements:
+        try:
+            available -= declared_count(count, f"element '{name}'", item_bytes=row, available=available) * row
+        except InvalidValue as exc:
+            raise SceneFormatError(path, str(exc).removeprefix(f"element '{name}': "), field=name) from None
 
 
 def vertex_columns(path: Path, ply: plyfile.PlyData, names: list[str]) -> Callable[[list[str]], np.ndarray]:

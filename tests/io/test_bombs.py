@@ -9,6 +9,7 @@ import struct
 import subprocess
 import sys
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -115,3 +116,25 @@ def test_sog_image_budget_allows_power_of_two_padding(tmp_path):
     a, b = gb.load(tmp_path / "a.sog"), gb.load(tmp_path / "b.sog")
     np.testing.assert_array_equal(a.means, b.means)
     np.testing.assert_array_equal(a.sh, b.sh)
+
+
+SEED_PLY = Path(__file__).parent / "fuzz" / "seeds" / "inria"
+
+
+@pytest.mark.parametrize("seed,element,count", [
+    ("sh1.ply", "vertex", "99999999999999999999"),  # does not fit an index
+    ("sh1.ply", "vertex", str(2**40)), ("ascii.ply", "vertex", str(2**40)),
+    ("sh1.ply", "junk", str(2**40)),  # an extra element after the vertices
+    ("sh1.ply", "vertex", "-3"), ("sh1.ply", "vertex", "1e3"),
+])
+def test_ply_declared_counts_are_checked_against_the_bytes_present(tmp_path, seed, element, count):
+    head, body = (SEED_PLY / seed).read_bytes().split(b"end_header\n", 1)
+    if element == "vertex":
+        head = head.replace(b"element vertex 12", f"element vertex {count}".encode())
+    else:
+        head += f"element {element} {count}\nproperty uchar v\n".encode()
+    path = tmp_path / "bad.ply"
+    path.write_bytes(head + b"end_header\n" + body)
+    with pytest.raises(SceneFormatError, match=f"field '{element}': ") as err:
+        gb.load(path)
+    assert "\n" not in str(err.value)
