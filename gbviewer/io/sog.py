@@ -46,7 +46,8 @@ def load_sog(path: Path) -> Scene:
     try:
         with zipfile.ZipFile(path) as zf:
             return _load(path, lambda name, limit: _read_member(path, zf, name, limit), bundled=True)
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, NotImplementedError, RuntimeError) as exc:
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, NotImplementedError, RuntimeError,
+            ValueError) as exc:  # ValueError: member names that are not valid UTF-8, among others
         raise SceneFormatError(path, f"corrupt .sog zip: {exc}", field="zip") from None
 
 
