@@ -85,7 +85,7 @@ class PaneState:
         return PANE_NAMES[self.index]
 
     def forget(self) -> None:
-        """Drop what belongs to the previous scene (its textures are released when replaced)."""
+        """Drop what belongs to the previous scene: its frames, requests and measured costs."""
         self.parts = {"a": Shown(), "b": Shown()}
         self.submitted.clear()
         self.ms_per_px.clear()
