@@ -157,8 +157,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def cmd_view(args: argparse.Namespace) -> int:
     """`gbviewer [SCENE]`: the desktop viewer; without a display, say so and write the comparison instead."""
-    from .app import open_window
-    from .app.logic import has_display_env
+    from .app import has_display_env, open_window
 
     if args.scene is not None and not args.scene.exists():
         raise GBViewerError(f"{args.scene}: no such file or folder")

@@ -1,11 +1,21 @@
-"""The desktop viewer (`gbviewer [SCENE]`): `logic` (pure, unit-tested), `worker` (render and load threads),
-`window` (glfw + imgui-bundle + moderngl; imported only when a window is opened)."""
+"""The desktop viewer (`gbviewer [SCENE]`). `window` (glfw + imgui-bundle + moderngl; imported only when a window is
+opened) composes `state` (scene, panes, settings and the actions on them), `keys` (the key map), `panes` (render
+requests and textures), `input`, `menu`, `panel/` (one module per section), `overlays`, `dialogs` and `screenshots`.
+Without a window: `camera_control`, `rates`, `layout`, `views`, `settings`, and the threads in `worker` (renders),
+`loading` (scenes) and `recording` (zoom videos)."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
-from .logic import has_display_env
+
+def has_display_env(env: dict | None = None) -> tuple[bool, str]:
+    """Whether the environment names a display a window could open on: (yes, '') or (no, why)."""
+    env = os.environ if env is None else env
+    if not (env.get("DISPLAY") or env.get("WAYLAND_DISPLAY")):
+        return False, "no display (neither DISPLAY nor WAYLAND_DISPLAY is set)"
+    return True, ""
 
 
 def open_window(scene: str | Path | None = None, cameras: str | Path | None = None) -> "tuple[bool, str]":

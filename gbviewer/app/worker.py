@@ -1,6 +1,6 @@
-"""Background work for the viewer, off the UI thread: one render thread fed per-slot requests (the newest request of
-a slot replaces an older one still waiting: stale requests are dropped), and scene loading. No OpenGL here; the
-'glsl' backend makes its own headless context current in the render thread (so it never touches the window's)."""
+"""The viewer's render thread, off the UI thread: fed per-slot requests (the newest request of a slot replaces an
+older one still waiting: stale requests are dropped). No OpenGL here; the 'glsl' backend makes its own headless
+context current in the render thread (so it never touches the window's)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,9 @@ import threading
 import time
 import traceback
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Hashable
 
-from ..camera import Camera, load_cameras_json
+from ..camera import Camera
 from ..errors import BackendUnavailable, GBViewerError
 from ..render import BACKENDS, Frame, RenderSettings, get_renderer
 from ..scene import Scene
@@ -85,6 +84,18 @@ class RenderWorker:
             if slot is None:
                 return bool(self._pending) or self._running is not None
             return slot in self._pending or (self._running is not None and self._running.slot == slot)
+
+    def backend_status(self, name: str) -> tuple[bool | None, str]:
+        """(usable, reason); None while the render thread is still probing."""
+        if name not in BACKENDS:
+            return False, "not part of this installation"
+        if not self.backends_ready.is_set():
+            return None, "checking..."
+        return self.backends.get(name, (False, "unknown"))
+
+    def backend_for(self, name: str) -> str:
+        """The backend a request for `name` renders on: `name` where usable, else cpu."""
+        return name if self.backend_status(name)[0] is True else "cpu"
 
     def stop(self, timeout: float = 30.0) -> None:
         with self._lock:
@@ -170,127 +181,3 @@ class RenderWorker:
         except Exception as exc:  # noqa: BLE001 - shown in the window, never kills the thread
             traceback.print_exc()
             return RenderResult(job, None, f"{type(exc).__name__}: {exc}", time.perf_counter())
-
-
-@dataclass
-class LoadResult:
-    path: Path
-    scene: Scene | None = None
-    cameras: list[Camera] | None = None
-    cameras_path: Path | None = None
-    cameras_error: str = ""
-    error: str = ""
-    seconds: float = 0.0
-
-
-class SceneLoader:
-    """Loads one scene (and a cameras.json beside it) in a thread; `poll()` returns the result once."""
-
-    def __init__(self, path: str | Path, load_fn: Any = None) -> None:
-        from ..io import load
-
-        self.path = Path(path).expanduser()
-        self.started = time.perf_counter()
-        try:
-            self.size = self.path.stat().st_size if self.path.is_file() else 0
-        except OSError:
-            self.size = 0
-        self._load = load_fn or load
-        self._result: LoadResult | None = None
-        self._done = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="gbviewer-load", daemon=True)
-        self._thread.start()
-
-    @property
-    def elapsed(self) -> float:
-        return time.perf_counter() - self.started
-
-    def _run(self) -> None:
-        res = LoadResult(self.path)
-        try:
-            res.scene = self._load(self.path)
-            side = self.path.parent / "cameras.json" if not self.path.is_dir() else self.path / "cameras.json"
-            if side.is_file():
-                res.cameras_path = side
-                try:
-                    res.cameras = load_cameras_json(side)
-                except GBViewerError as exc:
-                    res.cameras_error = str(exc)
-        except GBViewerError as exc:
-            res.error = str(exc)
-        except (OSError, MemoryError) as exc:
-            res.error = f"{self.path}: {exc}"
-        except Exception as exc:  # noqa: BLE001 - a loader bug is shown, the viewer keeps the previous scene
-            traceback.print_exc()
-            res.error = f"{self.path}: {type(exc).__name__}: {exc}"
-        res.seconds = self.elapsed
-        self._result = res
-        self._done.set()
-
-    def done(self) -> bool:
-        return self._done.is_set()
-
-    def poll(self) -> LoadResult | None:
-        return self._result if self._done.is_set() else None
-
-
-def video_available() -> tuple[bool, str]:
-    """Whether gbviewer.video offers record_video (the zoom-video feature)."""
-    try:
-        from .. import video
-    except ImportError as exc:
-        return False, f"gbviewer.video cannot be imported ({exc})"
-    if not hasattr(video, "record_video") or not hasattr(video, "zoom_path"):
-        return False, "gbviewer.video has no record_video"
-    return True, ""
-
-
-class VideoJob:
-    """A zoom video (x1 to x1/8, one column per mode) written by gbviewer.video.record_video in a thread."""
-
-    def __init__(self, scene: Scene, camera: Camera, settings: list[RenderSettings], out: Path, frames: int = 90,
-                 fps: float = 30.0, backend: str = "cpu", start: float = 1.0, end: float = 0.125) -> None:
-        from .. import video
-
-        self.out = Path(out)
-        self.done_frames, self.total = 0, frames
-        self.error = ""
-        self.info = None
-        self.started = time.perf_counter()
-        self._cancel = threading.Event()
-        self._finished = threading.Event()
-
-        def progress(done: int, total: int) -> None:
-            self.done_frames, self.total = done, total
-
-        def run() -> None:
-            try:
-                path = video.zoom_path(camera, frames, start, end)
-                self.info = video.record_video(scene, path, settings, self.out, fps=fps, backend=backend,
-                                               progress=progress, cancel=self._cancel)
-            except GBViewerError as exc:
-                self.error = str(exc)
-            except Exception as exc:  # noqa: BLE001 - shown in the window
-                traceback.print_exc()
-                self.error = f"{type(exc).__name__}: {exc}"
-            finally:
-                self._finished.set()
-
-        self._thread = threading.Thread(target=run, name="gbviewer-video", daemon=True)
-        self._thread.start()
-
-    @property
-    def fraction(self) -> float:
-        return self.done_frames / max(1, self.total)
-
-    def finished(self) -> bool:
-        return self._finished.is_set()
-
-    def cancel(self, wait: float = 0.0) -> None:
-        self._cancel.set()
-        if wait:
-            self._thread.join(wait)
-
-    @property
-    def cancelled(self) -> bool:
-        return self._cancel.is_set()

@@ -19,12 +19,16 @@ import pytest
 
 import gbviewer as gb
 from conftest import skip_or_fail
-from gbviewer.app import logic
+from gbviewer.app.panes import frame_stats
+from gbviewer.app.rates import render_size
+from gbviewer.app.settings import load_settings, settings_path
+from gbviewer.app.views import decode_png16, visualize
 from gbviewer.figure import to_uint8, upscale_nearest
 
 pytestmark = pytest.mark.display
 
-OUTPUT = Path(__file__).resolve().parent / "output"
+OUTPUT = Path(__file__).resolve().parents[1] / "output"
+GBVIEWER_ROOT = str(Path(gb.__file__).resolve().parents[1])  # subprocesses import the gbviewer under test
 LABEL_BAND = 60  # pixels at the top of a pane that hold the label and the preview/rendering line
 
 
@@ -64,7 +68,7 @@ def app(xvfb, tmp_path, monkeypatch):
     from gbviewer.app.window import ViewerApp
 
     a = ViewerApp(None, size=(1040, 700))
-    a.settings.show_info = False  # comparisons below need the image without the stats lines; one test turns it on
+    a.state.settings.show_info = False  # comparisons need the image without the stats lines; one test turns it on
     yield a
     a.close()
 
@@ -85,11 +89,11 @@ def pane_pixels(img: np.ndarray, rect) -> np.ndarray:
 
 def expected_pane(app, i: int, part: str = "a", view: str = "color") -> np.ndarray:
     """gb.render at the pane's render camera, nearest-upscaled to the pane."""
-    p = app.panes[i]
+    p = app.state.panes[i]
     job = p.parts[part].job
-    frame = gb.render(app.scene, job.camera, job.settings.mode, job.settings.supersample,
+    frame = gb.render(app.state.scene, job.camera, job.settings.mode, job.settings.supersample,
                       debug=job.settings.debug)
-    rgb, _ = logic.visualize(frame, view)
+    rgb, _ = visualize(frame, view)
     return upscale_nearest(to_uint8(rgb), p.rect.h, p.rect.w)
 
 
@@ -105,18 +109,18 @@ def wait(app):
 
 
 def test_panes_show_the_renders_at_their_resolution_and_labels(app):
-    app.set_pane_count(2)
-    app.settings.layout = "row"
-    app.set_pane(0, mode="scalar", supersample=1, split=False, view="color")
-    app.set_pane(1, mode="gaussian_blending", supersample=1, split=False, view="color")
-    app.set_rate(1 / 8)
+    app.state.set_pane_count(2)
+    app.state.settings.layout = "row"
+    app.state.set_pane(0, mode="scalar", supersample=1, split=False, view="color")
+    app.state.set_pane(1, mode="gaussian_blending", supersample=1, split=False, view="color")
+    app.state.set_rate(1 / 8)
     wait(app)
     img = shot(app, "viewer-x1_8")
     sizes = []
     for i in range(2):
-        p = app.panes[i]
+        p = app.state.panes[i]
         cam = p.parts["a"].job.camera
-        assert (cam.width, cam.height) == logic.render_size(p.rect.w, p.rect.h, 1 / 8) == p.render_size
+        assert (cam.width, cam.height) == render_size(p.rect.w, p.rect.h, 1 / 8) == p.render_size
         sizes.append((cam.width, cam.height))
         got = pane_pixels(img, p.rect)
         want = expected_pane(app, i)
@@ -125,28 +129,28 @@ def test_panes_show_the_renders_at_their_resolution_and_labels(app):
         # the label is drawn on the image: white text on a dark box where the render is dark
         white = lambda a: int((a[4:26, 4:200].min(axis=2) > 200).sum())  # noqa: E731
         assert white(got) > 30 + white(want)
-    a, b = (pane_pixels(img, app.panes[i].rect)[LABEL_BAND:].astype(int) for i in range(2))
+    a, b = (pane_pixels(img, app.state.panes[i].rect)[LABEL_BAND:].astype(int) for i in range(2))
     h, w = min(a.shape[0], b.shape[0]), min(a.shape[1], b.shape[1])
     assert np.abs(a[:h, :w] - b[:h, :w]).mean() > 2, "scalar and gaussian_blending look the same at x1/8"
 
-    app.set_rate(1 / 2)  # the sampling rate changes the render resolution
+    app.state.set_rate(1 / 2)  # the sampling rate changes the render resolution
     wait(app)
     img = shot(app, "viewer-x1_2")
     for i in range(2):
-        p = app.panes[i]
+        p = app.state.panes[i]
         cam = p.parts["a"].job.camera
-        assert (cam.width, cam.height) == logic.render_size(p.rect.w, p.rect.h, 1 / 2)
+        assert (cam.width, cam.height) == render_size(p.rect.w, p.rect.h, 1 / 2)
         assert cam.width > 3 * sizes[i][0]
         assert agree(pane_pixels(img, p.rect)[LABEL_BAND:], expected_pane(app, i)[LABEL_BAND:]) > 0.995
 
 
 def test_split_view_loupe_help_debug_views_and_pane_screenshot(app, tmp_path):
-    app.set_pane_count(1)
-    app.set_pane(0, mode="scalar", split=True, split_mode="gaussian_blending", split_pos=0.5, view="color")
-    app.set_rate(1 / 4)
+    app.state.set_pane_count(1)
+    app.state.set_pane(0, mode="scalar", split=True, split_mode="gaussian_blending", split_pos=0.5, view="color")
+    app.state.set_rate(1 / 4)
     wait(app)
     img = shot(app, "viewer-split")
-    p = app.panes[0]
+    p = app.state.panes[0]
     got = pane_pixels(img, p.rect)
     half = p.rect.w // 2
     left, right = expected_pane(app, 0, "a"), expected_pane(app, 0, "b")
@@ -166,45 +170,45 @@ def test_split_view_loupe_help_debug_views_and_pane_screenshot(app, tmp_path):
     app.step()
     io.add_mouse_button_event(0, False)
     app.step()
-    assert app.settings.panes[0].split_pos == pytest.approx(0.25, abs=0.01)
+    assert app.state.settings.panes[0].split_pos == pytest.approx(0.25, abs=0.01)
 
     # loupe under the cursor, help overlay through F1, information overlay
-    app.settings.loupe = True
-    app.settings.show_info = True
+    app.state.settings.loupe = True
+    app.state.settings.show_info = True
     io.add_mouse_pos_event(r.x + r.w * 0.6, r.y + r.h * 0.6)
     io.add_key_event(imgui.Key.f1, True)
     app.step()
     io.add_key_event(imgui.Key.f1, False)
     app.run_frames(2)
-    assert app.show_help and app.hover is not None and app.hover[0] == 0
+    assert app.state.show_help and app.state.hover is not None and app.state.hover[0] == 0
     img2 = shot(app, "viewer-loupe-help")
     assert np.abs(img2.astype(int) - img.astype(int)).mean() > 1
-    app.show_help = False
+    app.state.show_help = False
 
     # pane screenshot: the render itself at 16 bits
     path = app.screenshot_pane(0, tmp_path / "pane.png")
-    data = logic.decode_png16(path.read_bytes())
-    frame = app.panes[0].parts["a"].frame
+    data = decode_png16(path.read_bytes())
+    frame = app.state.panes[0].parts["a"].frame
     assert data.shape == frame.rgb.shape
     assert np.abs(data / 65535 - np.clip(frame.rgb, 0, 1)).max() < 1e-4
 
     # debug views
-    app.set_pane(0, split=False, mode="gaussian_blending")
+    app.state.set_pane(0, split=False, mode="gaussian_blending")
     for view in ("alpha", "transmittance", "window", "evals"):
-        app.set_pane(0, view=view)
+        app.state.set_pane(0, view=view)
         wait(app)
-        shown = app.panes[0].parts["a"]
+        shown = app.state.panes[0].parts["a"]
         assert shown.view == view and shown.legend and "only" not in shown.legend
         assert shown.image.std() > 1
     shot(app, "viewer-window-size")
 
 
 def test_four_panes_grid_camera_input_and_training_cameras(app, tmp_path):
-    app.set_pane_count(4)
-    app.settings.layout = "grid"
-    app.set_rate(1 / 8)
+    app.state.set_pane_count(4)
+    app.state.settings.layout = "grid"
+    app.state.set_rate(1 / 8)
     wait(app)
-    rects = [p.rect for p in app.panes]
+    rects = [p.rect for p in app.state.panes]
     assert rects[0].y == rects[1].y < rects[2].y == rects[3].y and rects[0].x == rects[2].x < rects[1].x
     img = shot(app, "viewer-grid")
     for i in range(4):
@@ -213,7 +217,7 @@ def test_four_panes_grid_camera_input_and_training_cameras(app, tmp_path):
     from imgui_bundle import imgui
 
     io = imgui.get_io()
-    R0, d0 = app.controller.R.copy(), app.controller.distance
+    R0, d0 = app.state.controller.R.copy(), app.state.controller.distance
     r = rects[0]
     io.add_mouse_pos_event(r.x + 40, r.y + 80)
     app.step()
@@ -226,52 +230,52 @@ def test_four_panes_grid_camera_input_and_training_cameras(app, tmp_path):
     app.step()
     io.add_mouse_wheel_event(0, 2)
     app.step()
-    assert np.abs(app.controller.R - R0).max() > 0.05 and app.controller.distance < d0
-    app.reset_camera()
-    assert app.controller.R == pytest.approx(R0)
+    assert np.abs(app.state.controller.R - R0).max() > 0.05 and app.state.controller.distance < d0
+    app.state.reset_camera()
+    assert app.state.controller.R == pytest.approx(R0)
     # training cameras from an opened cameras.json: snap to the first, step to the next
-    cams = [gb.orbit_camera(app.scene, az, 10, width=320, height=240) for az in (0, 90)]
+    cams = [gb.orbit_camera(app.state.scene, az, 10, width=320, height=240) for az in (0, 90)]
     entries = [{"id": k, "img_name": f"view{k}", "width": 320, "height": 240, "fx": c.fx, "fy": c.fy,
                 "position": c.position.tolist(), "rotation": c.R.T.tolist()} for k, c in enumerate(cams)]
     path = tmp_path / "cameras.json"
     path.write_text(json.dumps(entries))
-    app.open(path)
-    assert len(app.cameras) == 2 and app.cam_index == 0
-    assert app.controller.camera(320, 240).R == pytest.approx(cams[0].R)
-    assert app.controller.camera(320, 240).t == pytest.approx(cams[0].t)
+    app.state.open(path)
+    assert len(app.state.cameras) == 2 and app.state.cam_index == 0
+    assert app.state.controller.camera(320, 240).R == pytest.approx(cams[0].R)
+    assert app.state.controller.camera(320, 240).t == pytest.approx(cams[0].t)
     press(app, imgui.Key.right_bracket)
-    assert app.cam_index == 1 and app.controller.camera(320, 240).t == pytest.approx(cams[1].t)
+    assert app.state.cam_index == 1 and app.state.controller.camera(320, 240).t == pytest.approx(cams[1].t)
     wait(app)
     shot(app, "viewer-training-camera")
 
 
 def test_bad_file_keeps_the_scene_and_shows_the_error_then_settings_persist(app, tmp_path):
-    app.set_rate(1 / 8)
+    app.state.set_rate(1 / 8)
     wait(app)
-    scene = app.scene
+    scene = app.state.scene
     bad = tmp_path / "broken.ply"
     bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nend_header\n\x00")
-    app.open(bad)
+    app.state.open(bad)
     t0 = time.time()
-    while app.loader is not None and time.time() - t0 < 30:
+    while app.state.loader is not None and time.time() - t0 < 30:
         app.step()
     app.run_frames(2)
-    assert app.scene is scene and "broken.ply" in app.load_error and "\n" not in app.load_error
+    assert app.state.scene is scene and "broken.ply" in app.state.load_error and "\n" not in app.state.load_error
     img = shot(app, "viewer-bad-file")
     panel = img[:, :340].astype(int)
     reddish = (panel[..., 0] > 200) & (panel[..., 1] < 150) & (panel[..., 2] < 140)
     assert reddish.sum() > 30, "the error is not shown in the window"
-    p = app.panes[0]
+    p = app.state.panes[0]
     assert pane_pixels(img, p.rect)[LABEL_BAND:].std() > 10, "the previous scene is no longer shown"
 
     # settings persist across runs
-    app.set_pane_count(3)
-    app.settings.layout = "grid"
-    app.set_pane(2, mode="analytic", supersample=2)
+    app.state.set_pane_count(3)
+    app.state.settings.layout = "grid"
+    app.state.set_pane(2, mode="analytic", supersample=2)
     app.close()
-    saved = logic.settings_path()
+    saved = settings_path()
     assert saved.exists()
-    s, warning = logic.load_settings()
+    s, warning = load_settings()
     assert warning == "" and s.pane_count == 3 and s.layout == "grid" and s.rate == 1 / 8
     assert s.panes[2].mode == "analytic" and s.panes[2].supersample == 2
     assert str(gb.DEFAULT_SCENE.resolve()) in s.recent
@@ -297,51 +301,51 @@ def test_keyboard_shortcuts(app, tmp_path):
     from imgui_bundle import imgui
 
     K = imgui.Key
-    app.settings.screenshot_dir = str(tmp_path)
-    app.set_rate(1.0)
-    app.set_pane_count(2)
+    app.state.settings.screenshot_dir = str(tmp_path)
+    app.state.set_rate(1.0)
+    app.state.set_pane_count(2)
     app.run_frames(2)
     press(app, K.minus)
-    assert app.settings.rate == 0.5
+    assert app.state.settings.rate == 0.5
     press(app, K.equal)
     press(app, K.equal)
-    assert app.settings.rate == 2
+    assert app.state.settings.rate == 2
     press(app, K._0)
-    assert app.settings.rate == 1
+    assert app.state.settings.rate == 1
     press(app, K._3)
-    assert app.settings.pane_count == 3
-    layout = app.settings.layout
+    assert app.state.settings.pane_count == 3
+    layout = app.state.settings.layout
     press(app, K.g)
-    assert app.settings.layout != layout
-    loupe, info = app.settings.loupe, app.settings.show_info
+    assert app.state.settings.layout != layout
+    loupe, info = app.state.settings.loupe, app.state.settings.show_info
     press(app, K.l)
     press(app, K.i)
-    assert app.settings.loupe != loupe and app.settings.show_info != info
+    assert app.state.settings.loupe != loupe and app.state.settings.show_info != info
     io = imgui.get_io()
-    r = app.panes[1].rect
+    r = app.state.panes[1].rect
     io.add_mouse_pos_event(r.x + r.w / 2, r.y + r.h / 2)
     app.step()
-    mode = app.settings.panes[1].mode
+    mode = app.state.settings.panes[1].mode
     press(app, K.m)
-    assert app.settings.panes[1].mode != mode
+    assert app.state.settings.panes[1].mode != mode
     press(app, K.m, shift=True)
-    assert app.settings.panes[1].mode == mode
+    assert app.state.settings.panes[1].mode == mode
     press(app, K.v)
-    assert app.settings.panes[1].split
+    assert app.state.settings.panes[1].split
     press(app, K.slash, shift=True)
-    assert app.show_help
+    assert app.state.show_help
     press(app, K.escape)
-    assert not app.show_help
-    up = app.settings.up
+    assert not app.state.show_help
+    up = app.state.settings.up
     press(app, K.u)
-    assert app.settings.up != up and app.controller.up == app.settings.up
+    assert app.state.settings.up != up and app.state.controller.up == app.state.settings.up
     press(app, K.f)
-    assert app.fly
-    eye = app.controller.eye
+    assert app.state.fly
+    eye = app.state.controller.eye
     press(app, K.w, frames=5)
-    assert (app.controller.eye - eye) @ app.controller.forward > 0
+    assert (app.state.controller.eye - eye) @ app.state.controller.forward > 0
     press(app, K.f)
-    assert not app.fly
+    assert not app.state.fly
     press(app, K.r)
     press(app, K.f12)
     assert len(list(tmp_path.glob("*-window-*.png"))) == 1
@@ -355,30 +359,30 @@ def test_keyboard_shortcuts(app, tmp_path):
 def test_drop_a_file_glsl_backend_and_render_limit(app, tmp_path):
     dropped = tmp_path / "dropped.ply"
     shutil.copy(gb.DEFAULT_SCENE, dropped)
-    app.set_pane_count(2)
-    app.set_rate(1 / 8)
+    app.state.set_pane_count(2)
+    app.state.set_rate(1 / 8)
     app._on_drop(app.window, [str(dropped)])  # what glfw's drop callback calls
     wait(app)
-    assert app.scene_path == dropped and app.settings.recent[0] == str(dropped.resolve())
-    ok, why = app.backend_status("glsl")
+    assert app.state.scene_path == dropped and app.state.settings.recent[0] == str(dropped.resolve())
+    ok, why = app.worker.backend_status("glsl")
     if ok:
-        app.settings.backend = "glsl"
+        app.state.settings.backend = "glsl"
         wait(app)
         for i in range(2):
-            shown = app.panes[i].parts["a"]
-            assert shown.job.backend == "glsl" and shown.frame.stats["backend"] == "glsl"
-            ref = gb.render(app.scene, shown.job.camera, shown.job.settings.mode)
+            shown = app.state.panes[i].parts["a"]
+            assert shown.job.backend == "glsl" and frame_stats(shown.frame).backend == "glsl"
+            ref = gb.render(app.state.scene, shown.job.camera, shown.job.settings.mode)
             assert np.abs(shown.frame.rgb - ref.rgb).max() < 5e-3
     else:
         assert why  # greyed out with a reason
-    app.settings.backend = "cpu"
-    app.set_pane(0, supersample=8)
-    app.set_rate(8)
+    app.state.settings.backend = "cpu"
+    app.state.set_pane(0, supersample=8)
+    app.state.set_rate(8)
     app.run_frames(2)
-    assert "limit" in app.panes[0].parts["a"].error
-    app.set_rate(1 / 8)
+    assert "limit" in app.state.panes[0].parts["a"].error
+    app.state.set_rate(1 / 8)
     wait(app)
-    assert app.panes[0].parts["a"].error == ""
+    assert app.state.panes[0].parts["a"].error == ""
 
 
 def test_file_dialog_opens_the_chosen_file(app, tmp_path, monkeypatch):
@@ -390,40 +394,36 @@ def test_file_dialog_opens_the_chosen_file(app, tmp_path, monkeypatch):
     fake.write_text(f"#!/bin/sh\necho {chosen}\n")
     fake.chmod(0o755)
     monkeypatch.setenv("PATH", f"{fake.parent}:{os.environ['PATH']}")
-    app.set_rate(1 / 8)
+    app.state.set_rate(1 / 8)
     app.open_dialog()
-    assert app._file_dialog is not None
+    assert app.dialogs.file_dialog is not None
     t0 = time.time()
-    while (app._file_dialog is not None or app.loader is not None) and time.time() - t0 < 60:
+    while (app.dialogs.file_dialog is not None or app.state.loader is not None) and time.time() - t0 < 60:
         app.step()
-    assert app.scene_path == chosen
+    assert app.state.scene_path == chosen
 
 
 def test_built_in_browser_without_a_dialog_program(app, monkeypatch):
     monkeypatch.setenv("PATH", "/nonexistent")
     app.open_dialog()
-    assert app._file_dialog is None and app._browser is not None
+    assert app.dialogs.file_dialog is None and app.dialogs.browser is not None
     app.run_frames(2)
     shot(app, "viewer-browser")
 
 
 def test_record_zoom_video_in_the_background(app, tmp_path):
-    from gbviewer.app.worker import video_available
-
-    if not video_available()[0]:
-        skip_or_fail(video_available()[1])
-    app.set_pane_count(2)
-    app.set_rate(1 / 8)
+    app.state.set_pane_count(2)
+    app.state.set_rate(1 / 8)
     wait(app)
-    job = app.record_video(frames=3, out=tmp_path / "zoom.mp4")
+    job = app.state.record_video(frames=3, out=tmp_path / "zoom.mp4")
     t0 = time.time()
     while not job.finished() and time.time() - t0 < 180:
         app.step()  # the UI keeps running while the video renders
         time.sleep(0.02)
     app.step()
     assert job.error == "" and (tmp_path / "zoom.mp4").stat().st_size > 1000
-    assert any("zoom.mp4" in m[1] for m in app.messages)
-    job = app.record_video(frames=200, out=tmp_path / "cancelled.mp4")
+    assert any("zoom.mp4" in m[1] for m in app.state.messages)
+    job = app.state.record_video(frames=200, out=tmp_path / "cancelled.mp4")
     job.cancel(wait=60)
     assert job.finished() and not (tmp_path / "cancelled.mp4").exists()
 
@@ -435,12 +435,12 @@ def test_gbviewer_command_opens_the_window_and_exits_cleanly(xvfb, tmp_path):
             "orig = window.ViewerApp.step\n"
             "def step(self, poll=True):\n"
             "    orig(self, poll)\n"
-            "    if self.frame_count >= 5 and self.scene is not None:\n"
+            "    if self.frame_count >= 5 and self.state.scene is not None:\n"
             "        glfw.set_window_should_close(self.window, True)\n"
             "window.ViewerApp.step = step\n"
             "from gbviewer.cli import main\n"
             "sys.exit(main([]))\n")
-    env = dict(os.environ, XDG_CONFIG_HOME=str(tmp_path / "cfg"))
+    env = dict(os.environ, XDG_CONFIG_HOME=str(tmp_path / "cfg"), PYTHONPATH=GBVIEWER_ROOT)
     proc = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path, capture_output=True, text=True,
                           timeout=180)
     assert proc.returncode == 0, proc.stderr
@@ -460,14 +460,15 @@ def test_cameras_from_the_command_line(xvfb, tmp_path, monkeypatch):
     a = ViewerApp(None, size=(800, 600), cameras=path)
     try:
         wait(a)
-        assert len(a.cameras) == 1 and a.cam_index == 0
-        assert a.controller.camera(320, 240).t == pytest.approx(cam.t)
+        assert len(a.state.cameras) == 1 and a.state.cam_index == 0
+        assert a.state.controller.camera(320, 240).t == pytest.approx(cam.t)
     finally:
         a.close()
 
 
 def test_no_display_falls_back_to_the_comparison_images(tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    env["PYTHONPATH"] = GBVIEWER_ROOT
     proc = subprocess.run([sys.executable, "-m", "gbviewer", "--width", "64", "--height", "48"], env=env,
                           cwd=tmp_path, capture_output=True, text=True, timeout=180)
     assert proc.returncode == 0, proc.stderr

@@ -1,0 +1,58 @@
+"""Where things go in the window: pane rectangles (a row or a 2x2 grid), the loupe's texture window, the two parts
+of a split pane."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+LAYOUTS = ("row", "grid")
+PANEL_W = 340  # the settings panel on the left; the panes fill the rest of the window
+
+
+@dataclass(frozen=True)
+class Rect:
+    x: int
+    y: int
+    w: int
+    h: int
+
+    def contains(self, px: float, py: float) -> bool:
+        return self.x <= px < self.x + self.w and self.y <= py < self.y + self.h
+
+
+def grid_shape(n: int, layout: str) -> tuple[int, int]:
+    """(rows, cols) for n panes: 'row' puts them side by side, 'grid' 2x2 (for 3 or 4 panes; 1 or 2 stay a row)."""
+    if layout == "grid" and n >= 3:
+        return 2, 2
+    return 1, max(1, n)
+
+
+def pane_rects(x: int, y: int, w: int, h: int, n: int, layout: str = "row", gap: int = 4) -> list[Rect]:
+    """Integer rectangles of n panes filling (x, y, w, h), `gap` pixels apart, row-major."""
+    rows, cols = grid_shape(n, layout)
+    out = []
+    for k in range(n):
+        r, c = divmod(k, cols)
+        x0 = x + (c * (w + gap)) // cols
+        x1 = x + ((c + 1) * (w + gap)) // cols - gap
+        y0 = y + (r * (h + gap)) // rows
+        y1 = y + ((r + 1) * (h + gap)) // rows - gap
+        out.append(Rect(x0, y0, max(1, x1 - x0), max(1, y1 - y0)))
+    return out
+
+
+def loupe_uv(u: float, v: float, pane_w: int, pane_h: int, radius_px: float, zoom: float
+             ) -> tuple[float, float, float, float]:
+    """Texture rectangle (u0, v0, u1, v1) that a loupe of `radius_px` (display pixels, half its side) magnifying
+    `zoom` times shows around the normalised pane position (u, v); kept inside the pane."""
+    half_u = radius_px / zoom / pane_w
+    half_v = radius_px / zoom / pane_h
+    cu = min(max(u, half_u), 1 - half_u) if half_u < 0.5 else 0.5
+    cv = min(max(v, half_v), 1 - half_v) if half_v < 0.5 else 0.5
+    return cu - half_u, cv - half_v, cu + half_u, cv + half_v
+
+
+def split_parts(split_pos: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Horizontal texture ranges (u0, u1) of the left (first mode) and right (second mode) parts of a split pane."""
+    s = min(1.0, max(0.0, split_pos))
+    return (0.0, s), (s, 1.0)

@@ -1,0 +1,203 @@
+"""What is drawn over the panes with the imgui draw lists: labels, preview and error notes, debug-view legends, the
+statistics lines, the split divider, loading and error banners, the magnifier loupe; and the status bar."""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+from imgui_bundle import imgui
+
+from .layout import loupe_uv
+from .panes import frame_stats, pane_fps
+from .rates import format_rate
+from .state import PaneState
+
+if TYPE_CHECKING:
+    from .window import ViewerApp
+
+
+def col(r: int, g: int, b: int, a: int = 255) -> int:
+    """An imgui draw-list colour."""
+    return (a << 24) | (b << 16) | (g << 8) | r
+
+
+WHITE, BLACK_A, YELLOW, RED, GREY, ACCENT = (col(255, 255, 255), col(0, 0, 0, 170), col(255, 205, 60),
+                                               col(255, 90, 80), col(150, 150, 150), col(90, 170, 255))
+LEVEL_COLOURS = {"info": WHITE, "warn": YELLOW, "error": RED}
+
+
+def text(app: ViewerApp, dl, x: float, y: float, s: str, colour: int = WHITE, bg: int = BLACK_A,
+         align_right: bool = False) -> tuple[float, float]:
+    """`s` in the monospace font on a dark box at (x, y) (its right edge at x with `align_right`); its size."""
+    if app.mono is not None:
+        imgui.push_font(app.mono, 15.0)
+    size = imgui.calc_text_size(s)
+    if align_right:
+        x -= size.x + 8
+    dl.add_rect_filled((x, y), (x + size.x + 8, y + size.y + 4), bg, 3.0)
+    dl.add_text((x + 4, y + 2), colour, s)
+    if app.mono is not None:
+        imgui.pop_font()
+    return size.x + 8, size.y + 4
+
+
+def banner(app: ViewerApp, dl, s: str, y: float, colour: int) -> None:
+    """A line centred on the panes (shortened to fit)."""
+    v = app.state.viewport
+    if app.mono is not None:
+        imgui.push_font(app.mono, 15.0)
+    while len(s) > 10 and imgui.calc_text_size(s).x > v.w - 24:
+        s = s[: len(s) - 8] + "..."
+    w = imgui.calc_text_size(s).x + 8
+    if app.mono is not None:
+        imgui.pop_font()
+    text(app, dl, v.x + max(4, (v.w - w) / 2), y, s, colour, col(0, 0, 0, 220))
+
+
+def pane_label(app: ViewerApp, p: PaneState, part: str) -> str:
+    """'A  scalar  x1/4  106x186': pane, mode (as rendered), rate, render size, debug view."""
+    state = app.state
+    ps = state.settings.panes[p.index]
+    shown = p.parts[part]
+    job = shown.job
+    if job is None:
+        return f"{p.name}  {ps.mode if part == 'a' else ps.split_mode}"
+    label = job.settings.label_for(state.scene) if state.scene is not None else job.settings.label
+    rate = format_rate(job.info.get("rate", state.settings.rate))
+    w, h = job.info.get("full_size", (job.camera.width, job.camera.height))
+    name = p.name + ("'" if part == "b" else "")
+    view = f"  [{shown.view}]" if shown.view and shown.view != "color" else ""
+    return f"{name}  {label}  {rate}  {w}x{h}{view}"
+
+
+def stats_lines(p: PaneState, part: str) -> list[str]:
+    """The information overlay of a pane part: timings per stage, fps, visible splats, evaluations per pixel."""
+    st = frame_stats(p.parts[part].frame)
+    tag = "B " if part == "b" else ""
+    return [f"{tag}{st.total_ms:.1f} ms: pre {st.preprocess_ms:.1f} + sort {st.sort_ms:.1f} + blend "
+            f"{st.blend_ms:.1f}  {pane_fps(p, part):.1f} fps",
+            f"{tag}{st.visible:,} splats visible  {st.evals_per_pixel:.0f} evals/px"]
+
+
+def draw_pane_overlays(app: ViewerApp) -> None:
+    state = app.state
+    dl = imgui.get_background_draw_list()
+    v = state.viewport
+    if state.loader is not None:  # over the previous scene, which stays until the new one is ready
+        ld = state.loader
+        size = f", {ld.size / 1e6:.1f} MB" if ld.size else ""
+        y = v.y + v.h / 2 if state.scene is None else v.y + 40
+        banner(app, dl, f"loading {ld.path.name}{size} ... {ld.elapsed:.1f} s", y, WHITE)
+    if state.scene is None:
+        return
+    for p in state.visible:
+        r = p.rect
+        ps = state.settings.panes[p.index]
+        parts = state.parts(p.index)
+        dl.push_clip_rect((r.x, r.y), (r.x + r.w, r.y + r.h), True)
+        y = r.y + 4
+        text(app, dl, r.x + 4, y, pane_label(app, p, "a"))
+        if ps.split:
+            text(app, dl, r.x + r.w - 4, y, pane_label(app, p, "b"), align_right=True)
+            sx = r.x + ps.split_pos * r.w
+            dl.add_line((sx, r.y), (sx, r.y + r.h), col(255, 255, 255, 220), 2.0)
+            dl.add_circle_filled((sx, r.y + r.h / 2), 7, col(255, 255, 255, 230))
+            dl.add_circle((sx, r.y + r.h / 2), 7, col(0, 0, 0, 200), 0, 1.5)
+        y += 26
+        for part in parts:
+            shown = p.parts[part]
+            job = shown.job
+            right = part == "b"
+            xx = r.x + r.w - 4 if right else r.x + 4
+            if job is not None and job.info.get("preview", 1.0) < 1.0:
+                fw, fh = job.info["full_size"]
+                text(app, dl, xx, y, f"moving: preview {job.camera.width}x{job.camera.height} (not {fw}x{fh})",
+                     YELLOW, align_right=right)
+            elif app.worker.busy((p.index, part)) and job is not None:
+                text(app, dl, xx, y, "rendering...", GREY, align_right=right)
+            if shown.error:
+                text(app, dl, r.x + 4, r.y + r.h / 2, shown.error[:120], RED)
+            if shown.legend:
+                text(app, dl, xx, r.y + 56, shown.legend, ACCENT, align_right=right)
+        if state.settings.show_info:
+            lines = [line for part in parts if p.parts[part].frame is not None for line in stats_lines(p, part)]
+            for k, line in enumerate(reversed(lines)):
+                text(app, dl, r.x + 4, r.y + r.h - 24 - 21 * k, line, col(220, 220, 220))
+        if state.hover is not None and state.hover[0] == p.index:
+            dl.add_rect((r.x, r.y), (r.x + r.w, r.y + r.h), col(90, 170, 255, 120), 0.0, 1.0)
+        dl.pop_clip_rect()
+    if state.load_error:
+        banner(app, dl, state.load_error_short or state.load_error, v.y + v.h - 60, RED)
+
+
+def draw_status(app: ViewerApp) -> None:
+    """The bottom bar: rate, render sizes, backend, camera mode, the latest message."""
+    state, s = app.state, app.state.settings
+    io = imgui.get_io()
+    h = imgui.get_frame_height() + 6
+    imgui.set_next_window_pos((0, io.display_size.y - h))
+    imgui.set_next_window_size((io.display_size.x, h))
+    flags = (imgui.WindowFlags_.no_decoration | imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_inputs
+             | imgui.WindowFlags_.no_saved_settings).value
+    imgui.push_style_var(imgui.StyleVar_.window_padding.value, imgui.ImVec2(8, 3))
+    imgui.begin("##status", None, flags)
+    sizes = "  ".join(f"{p.name} {p.render_size[0]}x{p.render_size[1]}" for p in state.visible)
+    backend = app.worker.backend_for(s.backend)
+    simd = next((frame_stats(part.frame).simd for p in state.visible for part in p.parts.values()
+                 if part.frame is not None and frame_stats(part.frame).simd), "")
+    if backend == "cpu" and simd:
+        backend = f"cpu {simd}"  # the blend's SIMD path (GBVIEWER_SIMD forces one)
+    imgui.text(f"rate {format_rate(s.rate)}")
+    imgui.same_line(0, 16)
+    imgui.text_disabled(f"render {sizes}")
+    imgui.same_line(0, 16)
+    imgui.text_disabled(f"{backend} | {'fly' if state.fly else 'orbit'} | up {s.up} | "
+                        f"fov {state.controller.fov_y_deg:.0f}")
+    now = time.perf_counter()
+    recent = [m for m in state.messages if now - m[0] < 8.0]
+    if recent:
+        _, message, level = recent[-1]
+        colour = LEVEL_COLOURS[level]
+        imgui.same_line(0, 24)
+        c = imgui.ImVec4((colour & 255) / 255, ((colour >> 8) & 255) / 255, ((colour >> 16) & 255) / 255, 1)
+        imgui.text_colored(c, message)
+    imgui.end()
+    imgui.pop_style_var()
+
+
+def draw_loupe(app: ViewerApp) -> None:
+    """The magnifier: each visible pane's pixels around the cursor, side by side next to it."""
+    state = app.state
+    if not state.settings.loupe or state.hover is None:
+        return
+    io = imgui.get_io()
+    dl = imgui.get_foreground_draw_list()
+    _, u, v = state.hover
+    n = state.settings.pane_count
+    side = 160 if n <= 2 else 120
+    radius = side / 2
+    zoom = state.settings.loupe_zoom
+    mx, my = io.mouse_pos.x, io.mouse_pos.y
+    total_w = n * (side + 6)
+    x = mx + 24 if mx + 24 + total_w < io.display_size.x else mx - 24 - total_w
+    y = my + 24 if my + 24 + side + 24 < io.display_size.y else my - 24 - side - 24
+    for k, p in enumerate(state.visible):
+        ps = state.settings.panes[p.index]
+        part = "b" if ps.split and u > ps.split_pos else "a"
+        shown = p.parts[part]
+        x0 = x + k * (side + 6)
+        dl.add_rect_filled((x0 - 3, y - 3), (x0 + side + 3, y + side + 22), col(20, 22, 26, 240), 3.0)
+        dl.add_rect((x0 - 2, y - 2), (x0 + side + 2, y + side + 2), col(170, 175, 185), 0.0, 2.0)
+        if shown.texture is not None:
+            u0, v0, u1, v1 = loupe_uv(u, v, p.rect.w, p.rect.h, radius, zoom)
+            app.blit_loupe.add(shown.texture, x0, y, x0 + side, y + side, (u0, v0, u1, v1))
+            cx = x0 + (u - u0) / (u1 - u0) * side  # the cursor: tick marks on the frame (the image covers
+            cy = y + (v - v0) / (v1 - v0) * side  # the inside, it is drawn after the UI)
+            dl.add_line((cx, y - 2), (cx, y - 8), col(255, 80, 80), 2.0)
+            dl.add_line((x0 - 2, cy), (x0 - 8, cy), col(255, 80, 80), 2.0)
+        mode = ps.split_mode if part == "b" else ps.mode
+        label = f"{p.name}{chr(39) if part == 'b' else ''} {mode}"
+        while len(label) > 3 and imgui.calc_text_size(label).x > side - 6:
+            label = label[:-2] + "."
+        dl.add_text((x0 + 3, y + side + 3), WHITE, label)

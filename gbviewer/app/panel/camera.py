@@ -1,0 +1,49 @@
+"""Panel section: reset, fly mode, field of view, up axis, fly speed, training cameras."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from imgui_bundle import imgui
+
+from ...camera import UP_AXES
+from ..camera_control import CameraController
+from ..keys import hint
+
+if TYPE_CHECKING:
+    from ..window import ViewerApp
+
+
+def draw(app: ViewerApp) -> None:
+    state, s = app.state, app.state.settings
+    if imgui.button(f"Reset ({hint('reset_camera')})"):
+        state.reset_camera()
+    imgui.same_line()
+    _, state.fly = imgui.checkbox(f"fly mode ({hint('toggle_fly')})", state.fly)
+    imgui.set_next_item_width(170)
+    ch, fov = imgui.slider_float("field of view", state.controller.fov_y_deg, CameraController.MIN_FOV,
+                                 CameraController.MAX_FOV, "%.0f deg")
+    if ch:
+        state.set_fov(fov)
+    axes = list(UP_AXES)
+    imgui.set_next_item_width(170)
+    ch, k = imgui.combo(f"up axis ({hint('next_up')})", axes.index(s.up), axes)
+    if ch:
+        state.set_up(axes[k])
+    if state.fly:
+        imgui.set_next_item_width(170)
+        _, s.fly_speed = imgui.slider_float("fly speed", s.fly_speed, 0.05, 5.0, "%.2f radii/s",
+                                            imgui.SliderFlags_.logarithmic.value)
+    if state.cameras:
+        if imgui.arrow_button("##prev", imgui.Dir.left):
+            state.step_camera(-1)
+        imgui.same_line()
+        if imgui.arrow_button("##next", imgui.Dir.right):
+            state.step_camera(1)
+        imgui.same_line()
+        cur = state.cameras[state.cam_index].name if state.cam_index >= 0 else "free camera"
+        imgui.text(f"training {state.cam_index + 1}/{len(state.cameras)}: {cur}")
+    else:
+        imgui.text_disabled("no training cameras (cameras.json)")
+    if imgui.small_button("Open cameras.json..."):
+        app.open_dialog()

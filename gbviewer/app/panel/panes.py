@@ -1,0 +1,58 @@
+"""Panel section: the number of panes, row or grid, and per pane its mode, supersampling, view and split."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from imgui_bundle import imgui
+
+from ..settings import MODE_NAMES
+from ..views import VIEW_HELP, VIEWS
+
+if TYPE_CHECKING:
+    from ..window import ViewerApp
+
+
+def draw(app: ViewerApp) -> None:
+    state, s = app.state, app.state.settings
+    for n in range(1, 5):
+        if n > 1:
+            imgui.same_line()
+        if imgui.radio_button(f"{n}##panes", s.pane_count == n):
+            state.set_pane_count(n)
+    imgui.same_line(0, 18)
+    if imgui.radio_button("row", s.layout == "row"):
+        s.layout = "row"
+    imgui.same_line()
+    if imgui.radio_button("2x2", s.layout == "grid"):
+        s.layout = "grid"
+    modes = list(MODE_NAMES)
+    for p in state.visible:
+        ps = s.panes[p.index]
+        imgui.push_id(p.index)
+        imgui.separator_text(f"Pane {p.name}")
+        imgui.set_next_item_width(170)
+        ch, k = imgui.combo("mode", modes.index(ps.mode), modes)
+        if ch:
+            state.set_pane(p.index, mode=modes[k])
+        imgui.set_next_item_width(170)
+        ch, ss = imgui.slider_int("supersample", ps.supersample, 1, 8, "%dx%d" % (ps.supersample, ps.supersample))
+        if ch:
+            state.set_pane(p.index, supersample=ss)
+        imgui.set_next_item_width(170)
+        ch, k = imgui.combo("view", VIEWS.index(ps.view), list(VIEWS))
+        if ch:
+            state.set_pane(p.index, view=VIEWS[k])
+        if imgui.is_item_hovered():
+            imgui.set_tooltip("\n".join(f"{k}: {v}" for k, v in VIEW_HELP.items()))
+        ch, on = imgui.checkbox("split with", ps.split)
+        if ch:
+            state.set_pane(p.index, split=on)
+        imgui.same_line()
+        imgui.begin_disabled(not ps.split)
+        imgui.set_next_item_width(150)
+        ch, k = imgui.combo("##splitmode", modes.index(ps.split_mode), modes)
+        if ch:
+            state.set_pane(p.index, split_mode=modes[k])
+        imgui.end_disabled()
+        imgui.pop_id()

@@ -1,0 +1,172 @@
+"""The panes' renders: which requests go to the render thread this frame (one per pane part whose view changed, at a
+preview resolution while the camera moves), finished frames uploaded to textures, and their images queued for
+drawing. `frame_stats` is the one place the app reads a frame's statistics."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, replace
+
+import moderngl
+import numpy as np
+
+from ..figure import to_uint8
+from ..render import Frame
+from .blit import Blitter
+from .layout import split_parts
+from .rates import preview_factor
+from .state import AppState, PaneState, Shown
+from .views import visualize
+from .worker import RenderJob, RenderResult, RenderWorker
+
+MAX_SAMPLES = 96_000_000  # per render (pixels x supersampling^2): bounds memory and time at x8 with 8x8
+PREVIEW_BUDGET_MS = 60.0  # per UI frame while the camera moves, shared by the panes
+
+
+@dataclass(frozen=True)
+class PaneStats:
+    """The numbers the panes' overlays and the timings table show of a frame."""
+
+    total_ms: float = 0.0
+    preprocess_ms: float = 0.0
+    sort_ms: float = 0.0
+    blend_ms: float = 0.0
+    visible: int = 0
+    evals_per_pixel: float = 0.0
+    simd: str = ""
+    backend: str = ""
+
+
+def frame_stats(frame: Frame) -> PaneStats:
+    st = frame.stats
+    return PaneStats(st.get("total_ms", 0.0), st.get("preprocess_ms", 0.0), st.get("sort_ms", 0.0),
+                      st.get("blend_ms", 0.0), int(st.get("visible", 0)), st.get("evals_per_pixel", 0.0),
+                      st.get("simd", ""), st.get("backend", ""))
+
+
+def pane_fps(p: PaneState, part: str) -> float:
+    """Finished renders per second over the last 2 s while they keep coming, else 1000 / the last total."""
+    rate = p.fps[part].rate()
+    frame = p.parts[part].frame
+    if rate > 0 or frame is None:
+        return rate
+    return 1000.0 / max(1e-3, frame_stats(frame).total_ms)
+
+
+class PaneRenders:
+    """Requests renders for the visible panes and shows what comes back."""
+
+    def __init__(self, state: AppState, worker: RenderWorker, ctx: moderngl.Context) -> None:
+        self.state, self.worker, self.ctx = state, worker, ctx
+
+    def submit(self) -> None:
+        """Send a request for every visible pane part whose view changed since its last request."""
+        s = self.state
+        if s.scene is None:
+            return
+        backend = self.worker.backend_for(s.settings.backend)
+        view_key = s.controller.state()
+        moving = s.moving
+        slots = sum(len(s.parts(p.index)) for p in s.visible)
+        for p in s.visible:
+            ps = s.settings.panes[p.index]
+            for part in s.parts(p.index):
+                w, h = p.render_size
+                cost = p.ms_per_px.get((part, ps.mode if part == "a" else ps.split_mode, ps.supersample, backend))
+                f = preview_factor(w * h, cost, PREVIEW_BUDGET_MS * 2 / max(2, slots), moving)
+                cam = s.pane_camera(p.index, f)
+                settings = s.settings_for(p.index, part)
+                samples = cam.width * cam.height * settings.supersample ** 2
+                if samples > MAX_SAMPLES:
+                    p.parts[part].error = (f"{cam.width}x{cam.height} with {settings.supersample}x"
+                                           f"{settings.supersample} samples is {samples / 1e6:.0f}M samples, over "
+                                           f"the {MAX_SAMPLES // 1_000_000}M limit: lower the rate or supersampling")
+                    p.submitted.pop(part, None)
+                    continue
+                if "M limit: lower" in p.parts[part].error:
+                    p.parts[part].error = ""
+                key = (id(s.scene), view_key, (cam.width, cam.height), settings, backend)
+                if moving and (os.cpu_count() or 1) > 1:  # leave a core to the UI thread while the camera moves
+                    settings = replace(settings, threads=(os.cpu_count() or 2) - 1)
+                if p.submitted.get(part) == key:
+                    continue
+                p.submitted[part] = key
+                self.worker.submit(RenderJob((p.index, part), s.scene, cam, settings, backend,
+                                             {"key": key, "preview": f, "rate": s.settings.rate,
+                                              "full_size": (w, h)}))
+
+    def poll(self) -> None:
+        """Take finished renders; re-colour frames whose pane view changed."""
+        for res in self.worker.results():
+            self._take(res)
+        for p in self.state.visible:
+            view = self.state.settings.panes[p.index].view
+            for shown in p.parts.values():
+                if shown.frame is not None and shown.view != view:
+                    self._upload(shown, shown.frame, view)
+
+    def all_current(self) -> bool:
+        """Whether every visible pane shows its latest request at full resolution."""
+        for p in self.state.visible:
+            for part in self.state.parts(p.index):
+                key = p.submitted.get(part)
+                job = p.parts[part].job
+                if key is None or job is None or job.info.get("key") != key or job.info.get("preview", 1.0) != 1.0:
+                    return False
+        return not self.worker.busy()
+
+    def queue_images(self, blitter: Blitter) -> None:
+        """Each visible pane's image (both sides of a split) into `blitter`, nearest-upscaled to the pane."""
+        if self.state.scene is None:
+            return
+        for p in self.state.visible:
+            r = p.rect
+            ps = self.state.settings.panes[p.index]
+            ranges = split_parts(ps.split_pos) if ps.split else ((0.0, 1.0),)
+            for part, (u0, u1) in zip(self.state.parts(p.index), ranges):
+                shown = p.parts[part]
+                if shown.texture is None or u1 <= u0:
+                    continue
+                blitter.add(shown.texture, r.x + u0 * r.w, r.y, r.x + u1 * r.w, r.y + r.h, (u0, 0.0, u1, 1.0))
+
+    def release(self) -> None:
+        for p in self.state.panes:
+            for s in p.parts.values():
+                if s.texture is not None:
+                    s.texture.release()
+
+    def _take(self, res: RenderResult) -> None:
+        i, part = res.job.slot
+        s = self.state
+        if res.job.scene is not s.scene:
+            return
+        p = s.panes[i]
+        shown = p.parts[part]
+        shown.job = res.job
+        if res.frame is None:
+            shown.error = res.error
+            s.message(f"pane {p.name}: {res.error}", "error")
+            return
+        shown.error = ""
+        total_ms = frame_stats(res.frame).total_ms
+        cam = res.job.camera
+        if res.job.info.get("preview", 1.0) == 1.0 and total_ms:
+            key = (part, res.job.settings.mode.label, res.job.settings.supersample, res.job.backend)
+            p.ms_per_px[key] = total_ms / (cam.width * cam.height)
+        p.fps[part].tick(res.finished)
+        self._upload(shown, res.frame, s.settings.panes[i].view)
+
+    def _upload(self, shown: Shown, frame: Frame, view: str) -> None:
+        rgb, legend = visualize(frame, view)
+        img = np.ascontiguousarray(to_uint8(rgb))
+        h, w = img.shape[:2]
+        tex = shown.texture
+        if tex is None or tex.size != (w, h):
+            if tex is not None:
+                tex.release()
+            tex = self.ctx.texture((w, h), 3, img.tobytes(), alignment=1)
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            tex.repeat_x = tex.repeat_y = False
+        else:
+            tex.write(img.tobytes(), alignment=1)
+        shown.texture, shown.frame, shown.view, shown.legend, shown.image = tex, frame, view, legend, img

@@ -1,0 +1,73 @@
+"""Sampling rates (pixels per unit of scene, relative to the pane): the x1/8 .. x8 steps, the slider, labels, the
+render size of a pane, and the resolution drop while the camera moves."""
+
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+
+RATE_STEPS = (8.0, 4.0, 2.0, 1.0, 0.5, 0.25, 0.125)
+RATE_MIN, RATE_MAX = 0.125, 8.0
+
+
+def clamp_rate(rate: float) -> float:
+    if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
+        return 1.0
+    return float(min(RATE_MAX, max(RATE_MIN, rate)))
+
+
+def format_rate(rate: float) -> str:
+    """x8, x1, x1/8 for the steps; x1/3.7 or x2.5 between them."""
+    f = Fraction(rate).limit_denominator(64)
+    if abs(float(f) - rate) <= 1e-9 * rate and 1 in (f.numerator, f.denominator):
+        return f"x{f.numerator}" if f.denominator == 1 else f"x{f.numerator}/{f.denominator}"
+    return f"x1/{1 / rate:.3g}" if rate < 1 else f"x{rate:.3g}"
+
+
+def step_rate(rate: float, direction: int) -> float:
+    """The next step of RATE_STEPS above (direction > 0, more pixels) or below (direction < 0) `rate`.
+
+    From a continuous value between two steps this goes to the neighbouring step in that direction.
+    """
+    rate = clamp_rate(rate)
+    eps = 1e-9
+    if direction > 0:
+        above = [s for s in RATE_STEPS if s > rate * (1 + eps)]
+        return min(above) if above else RATE_MAX
+    below = [s for s in RATE_STEPS if s < rate * (1 - eps)]
+    return max(below) if below else RATE_MIN
+
+
+def rate_to_slider(rate: float) -> float:
+    """log2 of the rate: the slider runs linearly from -3 (x1/8) to 3 (x8)."""
+    return math.log2(clamp_rate(rate))
+
+
+def slider_to_rate(value: float, snap: float = 0.04) -> float:
+    """Inverse of rate_to_slider; values within `snap` (log2 units) of a step snap onto it."""
+    value = min(3.0, max(-3.0, float(value)))
+    nearest = round(value)
+    if abs(value - nearest) <= snap:
+        value = nearest
+    return clamp_rate(2.0 ** value)
+
+
+def render_size(width: int, height: int, rate: float) -> tuple[int, int]:
+    """The render resolution of a pane of width x height display pixels at `rate` (as Camera.at_sampling_rate)."""
+    return max(1, round(width * rate)), max(1, round(height * rate))
+
+
+# ---- resolution drop while the camera moves ------------------------------------------------------------------------
+
+PREVIEW_FACTORS = (1.0, 0.5, 0.25, 0.125)
+
+
+def preview_factor(pixels: int, ms_per_pixel: float | None, budget_ms: float, moving: bool) -> float:
+    """Fraction of the render resolution (per axis) to use while the camera moves, so that one render takes about
+    `budget_ms`; 1 when still, when nothing was measured yet, or when the full render fits the budget."""
+    if not moving or not ms_per_pixel or ms_per_pixel <= 0 or pixels <= 0:
+        return 1.0
+    for f in PREVIEW_FACTORS:
+        if pixels * f * f * ms_per_pixel <= budget_ms or f == PREVIEW_FACTORS[-1]:
+            return f
+    return PREVIEW_FACTORS[-1]

@@ -1,0 +1,65 @@
+"""The viewer's zoom video, written by gbviewer.video.record_video in a thread."""
+
+from __future__ import annotations
+
+import threading
+import time
+import traceback
+from pathlib import Path
+
+from ..camera import Camera
+from ..errors import GBViewerError
+from ..render import RenderSettings
+from ..scene import Scene
+
+
+class VideoJob:
+    """A zoom video (x1 to x1/8, one column per mode) written by gbviewer.video.record_video in a thread."""
+
+    def __init__(self, scene: Scene, camera: Camera, settings: list[RenderSettings], out: Path, frames: int = 90,
+                 fps: float = 30.0, backend: str = "cpu", start: float = 1.0, end: float = 0.125) -> None:
+        from .. import video
+
+        self.out = Path(out)
+        self.done_frames, self.total = 0, frames
+        self.error = ""
+        self.info = None
+        self.started = time.perf_counter()
+        self.reported = False  # the window said how it went
+        self._cancel = threading.Event()
+        self._finished = threading.Event()
+
+        def progress(done: int, total: int) -> None:
+            self.done_frames, self.total = done, total
+
+        def run() -> None:
+            try:
+                path = video.zoom_path(camera, frames, start, end)
+                self.info = video.record_video(scene, path, settings, self.out, fps=fps, backend=backend,
+                                               progress=progress, cancel=self._cancel)
+            except GBViewerError as exc:
+                self.error = str(exc)
+            except Exception as exc:  # noqa: BLE001 - shown in the window
+                traceback.print_exc()
+                self.error = f"{type(exc).__name__}: {exc}"
+            finally:
+                self._finished.set()
+
+        self._thread = threading.Thread(target=run, name="gbviewer-video", daemon=True)
+        self._thread.start()
+
+    @property
+    def fraction(self) -> float:
+        return self.done_frames / max(1, self.total)
+
+    def finished(self) -> bool:
+        return self._finished.is_set()
+
+    def cancel(self, wait: float = 0.0) -> None:
+        self._cancel.set()
+        if wait:
+            self._thread.join(wait)
+
+    @property
+    def cancelled(self) -> bool:
+        return self._cancel.is_set()

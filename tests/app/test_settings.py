@@ -1,0 +1,52 @@
+"""Settings persistence, bad settings files, recent files, display detection."""
+
+from __future__ import annotations
+
+import json
+
+from gbviewer.app import has_display_env, settings
+from gbviewer.app.settings import AppSettings, PaneSettings
+
+
+def test_settings_round_trip_and_persistence(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "cfg"))
+    assert settings.settings_path() == tmp_path / "cfg" / "gbviewer" / "settings.json"
+    s = AppSettings()
+    s.pane_count, s.layout, s.rate, s.window = 3, "grid", 0.125, (1200, 800)
+    s.panes[2] = PaneSettings("analytic", 4, "alpha", True, "mip", 0.3)
+    s.recent = settings.add_recent([], tmp_path / "a.ply")
+    path = settings.save_settings(s)
+    assert path.exists()
+    back, warning = settings.load_settings()
+    assert warning == "" and back == s.normalised()
+    assert back.panes[2] == PaneSettings("analytic", 4, "alpha", True, "mip", 0.3)
+
+
+def test_bad_settings_fall_back_to_defaults_with_a_warning(tmp_path):
+    p = tmp_path / "settings.json"
+    p.write_text("{not json")
+    s, warning = settings.load_settings(p)
+    assert s == AppSettings() and "unreadable" in warning
+    p.write_text(json.dumps({"pane_count": 99, "rate": -1, "layout": "spiral", "panes": [{"mode": "nope",
+                             "supersample": 40, "view": "x", "extra": 1}], "up": "sideways", "window": "big",
+                             "unknown_key": 1}))
+    s, warning = settings.load_settings(p)
+    assert warning == ""
+    assert s.pane_count == 4 and s.rate == 1.0 and s.layout == "row" and s.up == "-y"
+    assert s.panes[0] == PaneSettings("scalar", 8, "color") and len(s.panes) == 4
+
+
+def test_recent_files_most_recent_first_without_duplicates(tmp_path):
+    r: list[str] = []
+    for name in ["a", "b", "a", "c"]:
+        r = settings.add_recent(r, tmp_path / name)
+    assert [p.rsplit("/", 1)[-1] for p in r] == ["c", "a", "b"]
+    for k in range(20):
+        r = settings.add_recent(r, tmp_path / f"f{k}")
+    assert len(r) == settings.MAX_RECENT
+
+
+def test_display_detection():
+    assert has_display_env({})[0] is False and "DISPLAY" in has_display_env({})[1]
+    assert has_display_env({"DISPLAY": ":1"}) == (True, "")
+    assert has_display_env({"WAYLAND_DISPLAY": "wayland-0"})[0]

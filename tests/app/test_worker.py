@@ -1,0 +1,52 @@
+"""The render thread: latest request per slot, stale requests dropped, errors reported."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+import gbviewer as gb
+from gbviewer.app.worker import RenderJob, RenderWorker
+from gbviewer.render import RenderSettings
+
+
+def test_worker_renders_latest_request_per_slot_and_drops_stale_ones(bundled_scene):
+    w = RenderWorker()
+    try:
+        cam = gb.orbit_camera(bundled_scene, width=64, height=48)
+        for k in range(5):  # five requests for one slot in a burst: at most the first and the last are rendered
+            w.submit(RenderJob(("p", "a"), bundled_scene, cam.at_sampling_rate(1 + k / 10), RenderSettings(), "cpu",
+                               {"k": k}))
+        w.submit(RenderJob(("q", "a"), bundled_scene, cam, RenderSettings("gaussian_blending"), "cpu", {"k": 9}))
+        results, t0 = [], time.time()
+        while (w.busy() or not results) and time.time() - t0 < 60:
+            results += w.results()
+            time.sleep(0.01)
+        results += w.results()
+        ks = [r.job.info["k"] for r in results if r.job.slot == ("p", "a")]
+        assert ks[-1] == 4 and len(ks) <= 2 and w.dropped >= 3
+        assert [r.job.info["k"] for r in results if r.job.slot == ("q", "a")] == [9]
+        last = [r for r in results if r.job.slot == ("p", "a")][-1]
+        ref = gb.render(bundled_scene, last.job.camera)
+        assert np.array_equal(last.frame.rgb, ref.rgb)
+        assert w.backends_ready.wait(30) and w.backends["cpu"] == (True, "")
+    finally:
+        w.stop()
+
+
+def test_worker_reports_errors_without_dying(bundled_scene):
+    w = RenderWorker()
+    try:
+        cam = gb.orbit_camera(bundled_scene, width=32, height=24)
+        w.submit(RenderJob(1, bundled_scene, cam, RenderSettings(), "no-such-backend"))
+        w.submit(RenderJob(2, bundled_scene, cam, RenderSettings(), "cpu"))
+        out, t0 = [], time.time()
+        while len(out) < 2 and time.time() - t0 < 30:
+            out += w.results()
+            time.sleep(0.01)
+        by = {r.job.slot: r for r in out}
+        assert by[1].frame is None and "no-such-backend" in by[1].error
+        assert by[2].frame is not None
+    finally:
+        w.stop()
