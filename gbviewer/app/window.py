@@ -24,7 +24,8 @@ import moderngl  # noqa: E402
 from .. import DEFAULT_SCENE  # noqa: E402
 from ..camera import UP_AXES, load_cameras_json  # noqa: E402
 from ..errors import GBViewerError  # noqa: E402
-from ..figure import atomic_write, to_uint8  # noqa: E402
+from ..figure import to_uint8  # noqa: E402
+from ..io.files import atomic_write  # noqa: E402
 from ..render import BACKENDS, Mode, RenderSettings  # noqa: E402
 from . import logic  # noqa: E402
 from .logic import PANE_NAMES, CameraController, PaneSettings, Rect  # noqa: E402

@@ -240,7 +240,7 @@ def video_available() -> tuple[bool, str]:
         from .. import video
     except ImportError as exc:
         return False, f"gbviewer.video cannot be imported ({exc})"
-    if not hasattr(video, "record_video") or not hasattr(video, "zoom_path"):
+    if not hasattr(video, "record_video"):
         return False, "gbviewer.video has no record_video"
     return True, ""
 
@@ -250,7 +250,8 @@ class VideoJob:
 
     def __init__(self, scene: Scene, camera: Camera, settings: list[RenderSettings], out: Path, frames: int = 90,
                  fps: float = 30.0, backend: str = "cpu", start: float = 1.0, end: float = 0.125) -> None:
-        from .. import video
+        from ..camera_paths import zoom_path
+        from ..video import record_video
 
         self.out = Path(out)
         self.done_frames, self.total = 0, frames
@@ -265,9 +266,9 @@ class VideoJob:
 
         def run() -> None:
             try:
-                path = video.zoom_path(camera, frames, start, end)
-                self.info = video.record_video(scene, path, settings, self.out, fps=fps, backend=backend,
-                                               progress=progress, cancel=self._cancel)
+                path = zoom_path(camera, frames, start, end)
+                self.info = record_video(scene, path, settings, self.out, fps=fps, backend=backend,
+                                         progress=progress, cancel=self._cancel)
             except GBViewerError as exc:
                 self.error = str(exc)
             except Exception as exc:  # noqa: BLE001 - shown in the window
