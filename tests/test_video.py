@@ -21,19 +21,9 @@ from gbviewer import video
 from gbviewer.camera_paths import PathFrame, camera_path, zoom_path
 from gbviewer.cli import main
 from gbviewer.figure import to_uint8, upscale_nearest
+from conftest import OUTPUT_H as H, OUTPUT_W as W
 
-W, H = 96, 64
 MAX_ERR, MEAN_ERR = 16, 2.5  # codec tolerance at crf 0 (see the module docstring)
-
-
-@pytest.fixture(scope="module")
-def scene() -> gb.Scene:
-    return gb.load(gb.DEFAULT_SCENE)
-
-
-@pytest.fixture(scope="module")
-def base(scene) -> gb.Camera:
-    return gb.orbit_camera(scene, 30, 20, width=W, height=H)
 
 
 def decode(path) -> tuple[dict, list[np.ndarray]]:
@@ -43,8 +33,8 @@ def decode(path) -> tuple[dict, list[np.ndarray]]:
     return meta, [np.frombuffer(b, np.uint8).reshape(h, w, 3).copy() for b in gen]
 
 
-def pane_render(scene, pf: PathFrame, settings: gb.RenderSettings) -> np.ndarray:
-    rgb = to_uint8(gb.get_renderer(scene).render(pf.camera, settings).rgb)
+def pane_render(bundled_scene, pf: PathFrame, settings: gb.RenderSettings) -> np.ndarray:
+    rgb = to_uint8(gb.get_renderer(bundled_scene).render(pf.camera, settings).rgb)
     return rgb if rgb.shape[:2] == (pf.height, pf.width) else upscale_nearest(rgb, pf.height, pf.width)
 
 
@@ -54,12 +44,12 @@ def pane(img: np.ndarray, layout, i: int) -> np.ndarray:
 
 
 @pytest.mark.parametrize("kind", ["zoom", "rate"])
-def test_video_frames_size_fps_and_end_frames(scene, base, tmp_path, kind):
+def test_video_frames_size_fps_and_end_frames(bundled_scene, output_view, tmp_path, kind):
     settings = gb.RenderSettings.parse_list("scalar,gaussian_blending")
-    path = camera_path(kind, base, 7, 1.0, 1.0 / 8.0, scene)
+    path = camera_path(kind, output_view, 7, 1.0, 1.0 / 8.0, bundled_scene)
     seen = []
     out = tmp_path / "z.mp4"
-    info = video.record_video(scene, path, settings, out, fps=24, crf=0,
+    info = video.record_video(bundled_scene, path, settings, out, fps=24, crf=0,
                               progress=lambda done, total: seen.append((done, total)))
     assert seen == [(i, 7) for i in range(1, 8)]
     layout = video.video_layout(path[0], len(settings))
@@ -71,12 +61,11 @@ def test_video_frames_size_fps_and_end_frames(scene, base, tmp_path, kind):
     for idx, other in ((0, 1), (-1, -2)):
         for i, s in enumerate(settings):
             got = pane(frames[idx], layout, i).astype(int)
-            err = np.abs(got - pane_render(scene, path[idx], s))
+            err = np.abs(got - pane_render(bundled_scene, path[idx], s))
             assert err.max() <= MAX_ERR and err.mean() <= MEAN_ERR, (kind, idx, s.label, err.max(), err.mean())
-            near = np.abs(got - pane_render(scene, path[other], s))  # the neighbouring frame fails it
+            near = np.abs(got - pane_render(bundled_scene, path[other], s))  # the neighbouring frame fails it
             assert near.max() > MAX_ERR or near.mean() > MEAN_ERR, (near.max(), near.mean())
     assert list(tmp_path.iterdir()) == [out]  # no temporary file left
-
 
 
 class Boom(Exception):
@@ -84,7 +73,7 @@ class Boom(Exception):
 
 
 @pytest.mark.parametrize("how", ["cancel", "exception", "ctrl-c"])
-def test_interruption_leaves_no_file(scene, base, tmp_path, how):
+def test_interruption_leaves_no_file(bundled_scene, output_view, tmp_path, how):
     cancel = threading.Event()
 
     def progress(done, total):
@@ -98,7 +87,7 @@ def test_interruption_leaves_no_file(scene, base, tmp_path, how):
 
     expected = {"cancel": video.Cancelled, "exception": Boom, "ctrl-c": KeyboardInterrupt}[how]
     with pytest.raises(expected):
-        video.record_video(scene, zoom_path(base, 5), [gb.RenderSettings()], tmp_path / "v.mp4",
+        video.record_video(bundled_scene, zoom_path(output_view, 5), [gb.RenderSettings()], tmp_path / "v.mp4",
                            progress=progress, cancel=cancel)
     assert list(tmp_path.iterdir()) == []
 
