@@ -23,12 +23,15 @@ from .scene import Scene
 
 DEFAULT_CRF = 18  # libx264 constant rate factor: 0 lossless, ~18 visually lossless, 23 ffmpeg's default
 
+
 class Cancelled(GBViewerError):
     """`record_video` stopped because its cancel event was set; no output (and no temporary file) is left."""
 
 
 @dataclass(frozen=True)
 class VideoInfo:
+    """What `record_video` wrote."""
+
     path: Path
     frames: int
     width: int
