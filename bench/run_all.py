@@ -29,7 +29,7 @@ import scaling  # noqa: E402
 
 import gbviewer as gb  # noqa: E402
 from gbviewer import bench  # noqa: E402
-from gbviewer.figure import format_rate  # noqa: E402
+from gbviewer.camera import format_rate  # noqa: E402
 from gbviewer.io.files import atomic_write  # noqa: E402
 from gbviewer.render import BACKENDS, RenderSettings  # noqa: E402
 

@@ -5,18 +5,75 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, replace
+from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import CameraError
+from .errors import CameraError, GBViewerError
 
 if TYPE_CHECKING:
     from .scene import Scene
 
 NEAR_PLANE = 0.2  # published 3DGS near cull (KERNELS.md §0.4)
 UP_AXES = {"-y": (0.0, -1.0, 0.0), "+y": (0.0, 1.0, 0.0), "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0)}
+
+
+def format_rate(rate: float) -> str:
+    """x8, x1, x1/8 style label for a sampling rate; rates between simple fractions (a continuous zoom) read
+    x1/3.7 or x2.5."""
+    f = Fraction(rate).limit_denominator(64)
+    if abs(float(f) - rate) <= 1e-9 * rate and 1 in (f.numerator, f.denominator):
+        return f"x{f.numerator}" if f.denominator == 1 else f"x{f.numerator}/{f.denominator}"
+    return f"x1/{1 / rate:.3g}" if rate < 1 else f"x{rate:.3g}"
+
+
+def parse_rate(text: str) -> float:
+    """'1/8', '0.125' or '8' -> float > 0."""
+    try:
+        value = float(Fraction(text.strip()))
+    except (ValueError, ZeroDivisionError):
+        raise GBViewerError(f"sampling rate {text!r}; expected a number like 8, 0.125 or 1/8") from None
+    if not value > 0:
+        raise GBViewerError(f"sampling rate {text!r} must be > 0")
+    return value
+
+
+def parse_rates(text: str) -> list[float]:
+    """Comma-separated sampling rates ('1,1/2,1/8'); at least one."""
+    rates = [parse_rate(r) for r in text.split(",") if r.strip()]
+    if not rates:
+        raise GBViewerError(f"no sampling rate given in {text!r}")
+    return rates
+
+
+def focal_from_fov(fov_y_deg: float, height: float) -> float:
+    """Focal length in pixels that spans `fov_y_deg` degrees over `height` pixels."""
+    return 0.5 * height / math.tan(math.radians(fov_y_deg) / 2)
+
+
+def fov_of(camera: "Camera") -> float:
+    """Vertical field of view of a camera, degrees."""
+    return math.degrees(2 * math.atan(camera.height / (2 * camera.fy)))
+
+
+def frame_box(lo: np.ndarray, hi: np.ndarray, fov_y_deg: float, aspect: float) -> tuple[np.ndarray, float, float]:
+    """Centre and radius of the box lo..hi, and the distance from its centre at which a camera with this vertical
+    field of view and aspect (width / height) sees all of it (the default orbit framing)."""
+    centre = (lo + hi) / 2
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
+    fov = math.radians(fov_y_deg) * min(1.0, aspect)
+    return centre, radius, radius / math.sin(fov / 2) * 0.9
+
+
+def orbit_direction(up: np.ndarray, azimuth_deg: float, elevation_deg: float) -> np.ndarray:
+    """Unit vector from an orbit's centre to its eye: azimuth about the `up` vector, elevation towards it."""
+    a = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 0.0, 1.0])  # (a, b): the azimuth plane
+    a /= np.linalg.norm(a)
+    b = np.cross(up, a)
+    az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
+    return math.cos(el) * (math.cos(az) * a + math.sin(az) * b) + math.sin(el) * up
 
 
 @dataclass(frozen=True)
@@ -102,7 +159,7 @@ class Camera:
         x /= np.linalg.norm(x)
         y = np.cross(z, x)
         R = np.stack([x, y, z])  # rows: camera axes in world
-        f = 0.5 * height / math.tan(math.radians(fov_y_deg) / 2)
+        f = focal_from_fov(fov_y_deg, height)
         return Camera(width, height, f, f, width / 2, height / 2, R, -R @ eye, name=name)
 
 
@@ -122,22 +179,12 @@ def orbit_camera(
     """
     if up not in UP_AXES:
         raise CameraError(f"up axis {up!r}; expected one of {sorted(UP_AXES)}")
-    lo, hi = scene.robust_bounds()
-    centre = (lo + hi) / 2
-    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
-    if distance is None:
-        fov = math.radians(fov_y_deg) * min(1.0, width / height)
-        distance = radius / math.sin(fov / 2) * 0.9
+    centre, _, framing = frame_box(*scene.robust_bounds(), fov_y_deg, width / height)
+    distance = framing if distance is None else distance
     if not (distance > 0 and math.isfinite(distance)):
         raise CameraError(f"orbit distance must be > 0, got {distance}")
     up_v = np.array(UP_AXES[up])
-    # build an orthonormal frame (a, b) perpendicular to up for the azimuth circle
-    a = np.cross(up_v, [1.0, 0.0, 0.0] if abs(up_v[0]) < 0.9 else [0.0, 0.0, 1.0])
-    a /= np.linalg.norm(a)
-    b = np.cross(up_v, a)
-    az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
-    direction = math.cos(el) * (math.cos(az) * a + math.sin(az) * b) + math.sin(el) * up_v
-    eye = centre + distance * direction
+    eye = centre + distance * orbit_direction(up_v, azimuth_deg, elevation_deg)
     return Camera.look_at(eye, centre, up_v, width, height, fov_y_deg, name=f"orbit({azimuth_deg},{elevation_deg})")
 
 

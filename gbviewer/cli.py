@@ -6,13 +6,13 @@ import argparse
 import json
 import os
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
-
 from . import DEFAULT_SCENE
-from .camera import Camera, load_cameras_json, orbit_camera
+from .camera import Camera, format_rate, load_cameras_json, orbit_camera, parse_rate, parse_rates
 from .errors import GBViewerError
-from .figure import compose_grid, format_rate, parse_rate, render_grid, save_image
+from .figure import compose_grid, render_grid, save_image, write_comparison
 from .io import load, write_inria_ply
 from .render import BACKENDS, Mode, RenderSettings, get_renderer
 from .scene import Scene
@@ -94,8 +94,6 @@ def cmd_convert(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".ply":
         raise GBViewerError(f"{out}: output must end in .ply (a standard INRIA 3DGS ply)")
-    if out.exists() and not args.force:
-        raise GBViewerError(f"{out}: exists; pass --force to overwrite")
     scene = load(args.scene)
     write_inria_ply(scene, out, force=args.force)
     print(f"{out}: {scene.num_splats} splats, SH degree {scene.sh_degree}, from {scene.meta.get('format')} "
@@ -107,8 +105,6 @@ def cmd_render(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".npy"):
         raise GBViewerError(f"{out}: output must end in .png or .npy")
-    if out.exists() and not args.force:
-        raise GBViewerError(f"{out}: exists; pass --force to overwrite")
     scene = load(args.scene)
     cam = camera_from_args(scene, args).at_sampling_rate(args.scale)
     settings = RenderSettings(Mode.parse(args.mode), args.supersample, args.background, args.sh_degree)
@@ -131,7 +127,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     a short x1 -> x1/8 zoom video of the same modes."""
     from rich.progress import Progress
 
-    from . import video
+    from .camera_paths import zoom_path
+    from .video import record_video
 
     scene_path = args.scene or DEFAULT_SCENE
     scene = load(scene_path)
@@ -144,13 +141,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     img = compose_grid(cells, cam.width, cam.height)
     path = save_image(out_dir / "comparison.png", img, force=True)
     print(f"wrote {path} ({img.width}x{img.height}): {Path(scene_path).name}, "
-          + ", ".join(f"{c.settings.label} {c.stats['total_ms']:.0f} ms" for c in cells[0]))
+          + ", ".join(f"{c.settings.label} {c.total_ms:.0f} ms" for c in cells[0]))
     small = cam.with_size(max(2, cam.width // 2), max(2, cam.height // 2))  # half size keeps it quick
-    frames = video.zoom_path(small, DEMO_VIDEO_FRAMES)
+    frames = zoom_path(small, DEMO_VIDEO_FRAMES)
     with Progress(transient=True) as progress:
         task = progress.add_task("zoom video", total=len(frames))
-        info = video.record_video(scene, frames, DEMO_SETTINGS, out_dir / "zoom.mp4", fps=12, backend=args.backend,
-                                  force=True, progress=lambda done, total: progress.update(task, completed=done))
+        info = record_video(scene, frames, DEMO_SETTINGS, out_dir / "zoom.mp4", fps=12, backend=args.backend,
+                            force=True, progress=lambda done, total: progress.update(task, completed=done))
     print(f"wrote {info.path} ({len(frames)} frames, x1 -> x1/8, {' | '.join(s.label for s in DEMO_SETTINGS)})")
     return 0
 
@@ -199,8 +196,6 @@ def resolve_bench_options(args: argparse.Namespace) -> argparse.Namespace:
     for key, value in preset.items():
         if getattr(args, key) is None:
             setattr(args, key, value)
-    if args.views < 1 or args.repeat < 1:
-        raise GBViewerError(f"--views and --repeat must be >= 1, got {args.views} and {args.repeat}")
     return args
 
 
@@ -213,53 +208,32 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     simd_given = args.simd is not None
     resolve_bench_options(args)
-    settings = RenderSettings.parse_list(args.modes)
-    rates = [parse_rate(r) for r in args.rates.split(",") if r.strip()]
-    if not rates:
-        raise GBViewerError("--rates: no sampling rate given")
-    unknown = [b for b in args.backends.split(",") if b not in BACKENDS]
-    if unknown:
-        raise GBViewerError(f"unknown backend(s) {unknown}; expected some of {', '.join(BACKENDS)}")
-    backends = [b for b in args.backends.split(",") if BACKENDS[b].available()[0]]
-    for b in set(args.backends.split(",")) - set(backends):
-        print(f"skipping backend {b}: {BACKENDS[b].available()[1]}")
-    if not backends:
-        raise GBViewerError("no backend available")
-    if args.json and Path(args.json).exists() and not args.force:
-        raise GBViewerError(f"{args.json}: exists; pass --force to overwrite")
-    simd, info, exp = None, None, None
-    if "cpu" in backends:
-        simd = bench.parse_simd(args.simd)
-        info = bench.simd_info(simd)
-        exp = info["exp_per_s_per_core"]
-    elif simd_given:
+    backends, unavailable = bench.select_backends(args.backends.split(","))
+    for b, why in unavailable.items():
+        print(f"skipping backend {b}: {why}")
+    if simd_given and "cpu" not in backends:
         raise GBViewerError("--simd chooses the cpu backend's paths; --backends has no cpu")
-    speed, fidelity, oit = [], [], []
-    w, h = args.size
-    with_oit = any(s.mode in (Mode.WSR, Mode.DUPLEX) for s in settings)
-    for path in args.scenes:
-        scene = load(path)
-        name = Path(path).name
-        multiple = max(round(1 / r) if r < 1 else round(r) for r in rates)
-        cams = bench.bench_views(scene, args.views, w, h, args.cameras, args.up, multiple)
-        total = (bench.speed_cost(scene, cams, settings, backends, rates, args.repeat, simd)
-                 + bench.fidelity_cost(scene, cams, settings, rates)
-                 + (bench.oit_cost(scene, cams, settings, args.flicker_frames) if with_oit else 0))
+
+    @contextmanager
+    def bar(name: str, total: float):
         with Progress(*progress_columns(), transient=True) as progress:
             task = progress.add_task(name, total=total)
-            step = lambda units: progress.advance(task, units)  # noqa: E731
-            speed += bench.measure_speed(scene, name, cams, settings, backends, rates, args.repeat, step, simd, exp)
-            fidelity += bench.measure_fidelity(scene, name, cams, settings, rates, backends[0], step)
-            if with_oit:
-                oit += bench.measure_oit(scene, name, cams, settings, backends[0], args.flicker_frames,
-                                         args.flicker_step, args.up, step)
-    bench.print_tables(speed, fidelity, info)
-    if oit:
-        bench.print_oit(oit)
+            yield lambda units: progress.advance(task, units)
+
+    result = bench.run_bench(
+        args.scenes, RenderSettings.parse_list(args.modes), parse_rates(args.rates), backends, views=args.views,
+        size=args.size, repeat=args.repeat, cameras=args.cameras, up=args.up, simd=args.simd,
+        flicker_frames=args.flicker_frames, flicker_step=args.flicker_step,
+        outputs=[Path(args.json)] if args.json else [], force=args.force, progress=bar)
+    bench.print_tables(result.speed, result.fidelity, result.simd)
+    if result.oit:
+        bench.print_oit(result.oit)
     if args.json:
-        print(f"wrote {bench.write_json(Path(args.json), speed, fidelity, args.force, oit=oit, simd=info)}")
+        path = bench.write_json(Path(args.json), result.speed, result.fidelity, args.force, oit=result.oit,
+                                simd=result.simd)
+        print(f"wrote {path}")
     if args.plots:
-        for p in bench.write_plots(Path(args.plots), speed, fidelity, args.force):
+        for p in bench.write_plots(Path(args.plots), result.speed, result.fidelity, args.force):
             print(f"wrote {p}")
     return 0
 
@@ -282,67 +256,39 @@ def cmd_video(args: argparse.Namespace) -> int:
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                TimeRemainingColumn)
 
-    from . import video
+    from .camera_paths import PATHS, camera_path
+    from .video import record_video
 
-    out = Path(args.out)
-    if out.suffix.lower() != ".mp4":
-        raise GBViewerError(f"{out}: output must end in .mp4")
-    if out.exists() and not args.force:
-        raise GBViewerError(f"{out}: exists; pass --force to overwrite")
-    if not (args.fps > 0):
-        raise GBViewerError(f"--fps must be > 0, got {args.fps}")
-    if args.path not in video.PATHS and not args.path.lower().endswith(".json"):
-        raise GBViewerError(f"--path {args.path!r}; expected {', '.join(video.PATHS)} or a keyframes FILE.json")
     settings = RenderSettings.parse_list(args.modes)
     if args.size:
         args.width, args.height = args.size
     elif not (args.width or args.height or args.cameras):
         args.width, args.height = VIDEO_PANE
     scene = load(args.scene)
-    cam = camera_from_args(scene, args)
-    keys = None if args.path in video.PATHS else video.load_keyframes(args.path, cam, scene, args.up)
-    if args.frames:
-        n = args.frames
-    elif args.seconds:
-        n = max(1, round(args.seconds * args.fps))
-    elif keys is not None and keys[0].time is not None:
-        n = round((keys[-1].time - keys[0].time) * args.fps) + 1
-    else:
-        n = round(4 * args.fps)
-    if keys is not None:
-        path = video.keyframe_path(keys, n)
-    else:
-        path = video.camera_path(args.path, cam, n, args.from_rate, args.to_rate, scene, args.up)
+    path = camera_path(args.path, camera_from_args(scene, args), args.frames or None, args.from_rate, args.to_rate,
+                       scene, args.up, fps=args.fps, seconds=args.seconds or None)
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("frames"),
                TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn())
     with Progress(*columns) as progress:
-        task = progress.add_task(f"{out.name}", total=n)
-        info = video.record_video(scene, path, settings, out, fps=args.fps, backend=args.backend, inset=args.inset,
-                                  crf=args.crf, force=args.force,
-                                  progress=lambda done, total: progress.update(task, completed=done))
+        task = progress.add_task(f"{Path(args.out).name}", total=len(path))
+        info = record_video(scene, path, settings, args.out, fps=args.fps, backend=args.backend, inset=args.inset,
+                            crf=args.crf, force=args.force,
+                            progress=lambda done, total: progress.update(task, completed=done))
     print(f"wrote {info.path}: {info.frames} frames of {info.width}x{info.height} at {info.fps:g} fps "
           f"({info.frames / info.fps:.1f} s), {', '.join(s.label for s in settings)}, {args.path} "
-          f"{'' if keys is not None else f'{args.from_rate:g} -> {args.to_rate:g} '}"
+          f"{f'{args.from_rate:g} -> {args.to_rate:g} ' if args.path in PATHS else ''}"
           f"in {info.elapsed_s:.1f} s")
     return 0
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
     """Labelled grid of modes x sampling rates with PSNR under each cell."""
-    from . import video
-
-    out = Path(args.out)
-    if out.suffix.lower() != ".png":
-        raise GBViewerError(f"{out}: output must end in .png")
-    if out.exists() and not args.force:
-        raise GBViewerError(f"{out}: exists; pass --force to overwrite")
     settings = RenderSettings.parse_list(args.modes)
-    rates = [parse_rate(r) for r in args.rates.split(",") if r.strip()]
+    rates = parse_rates(args.rates)
     scene = load(args.scene)
-    cam = camera_from_args(scene, args)
-    cmp = video.compare_figure(scene, cam, settings, rates, args.backend, args.inset)
-    video.write_comparison(out, cmp, force=args.force)
-    print(f"wrote {out} ({cmp.image.width}x{cmp.image.height}): {len(rates)} rates x {len(settings)} modes")
+    cmp = write_comparison(args.out, scene, camera_from_args(scene, args), settings, rates, args.backend, args.inset,
+                           args.force)
+    print(f"wrote {args.out} ({cmp.image.width}x{cmp.image.height}): {len(rates)} rates x {len(settings)} modes")
     for row, prow in zip(cmp.cells, cmp.psnr):
         for cell, p in zip(row, prow):
             if p is not None and p != float("inf"):
@@ -431,7 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N)")
     p.add_argument("--path", default="zoom",
                    help="zoom (focal length), dolly (camera along its axis), rate (same view, rendered at the rate "
-                   "and nearest-upscaled) or a keyframes FILE.json (see gbviewer.video.load_keyframes)")
+                   "and nearest-upscaled) or a keyframes FILE.json (see gbviewer.keyframes.load_keyframes)")
     p.add_argument("--from", dest="from_rate", type=_rate, default=1.0, help="first sampling rate (default 1)")
     p.add_argument("--to", dest="to_rate", type=_rate, default=1.0 / 8.0, help="last sampling rate (default 1/8)")
     length = p.add_mutually_exclusive_group()

@@ -1,19 +1,24 @@
-"""Images for people: 8-bit conversion, nearest upscaling, labels, comparison grids, atomic writes."""
+"""Images for people: 8-bit conversion, nearest upscaling, labels, labelled grids of renders, and the modes x
+rates comparison figure with PSNR under each cell (`compare_figure`); PNG written atomically (`save_image`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from fractions import Fraction
+import math
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from .camera import Camera
+from .camera import Camera, format_rate
 from .errors import GBViewerError
-from .io.files import atomic_write
-from .render import RenderSettings, get_renderer
+from .io.files import atomic_write, refuse_overwrite
+from .metrics import reference_psnr
+from .render import Frame, Mode, RenderSettings, get_renderer
 from .scene import Scene
+
+GAP = 4  # pixels between cells
 
 
 def to_uint8(rgb: np.ndarray) -> np.ndarray:
@@ -26,26 +31,6 @@ def upscale_nearest(img: np.ndarray, height: int, width: int) -> np.ndarray:
     ys = np.minimum(((np.arange(height) + 0.5) * img.shape[0] / height).astype(int), img.shape[0] - 1)
     xs = np.minimum(((np.arange(width) + 0.5) * img.shape[1] / width).astype(int), img.shape[1] - 1)
     return img[ys][:, xs]
-
-
-def format_rate(rate: float) -> str:
-    """x8, x1, x1/8 style label for a sampling rate; rates between simple fractions (a continuous zoom) read
-    x1/3.7 or x2.5."""
-    f = Fraction(rate).limit_denominator(64)
-    if abs(float(f) - rate) <= 1e-9 * rate and 1 in (f.numerator, f.denominator):
-        return f"x{f.numerator}" if f.denominator == 1 else f"x{f.numerator}/{f.denominator}"
-    return f"x1/{1 / rate:.3g}" if rate < 1 else f"x{rate:.3g}"
-
-
-def parse_rate(text: str) -> float:
-    """'1/8', '0.125' or '8' -> float > 0."""
-    try:
-        value = float(Fraction(text.strip()))
-    except (ValueError, ZeroDivisionError):
-        raise GBViewerError(f"sampling rate {text!r}; expected a number like 8, 0.125 or 1/8") from None
-    if not value > 0:
-        raise GBViewerError(f"sampling rate {text!r} must be > 0")
-    return value
 
 
 def _font(size: int) -> ImageFont.ImageFont:
@@ -71,22 +56,29 @@ class Cell:
     settings: RenderSettings
     rate: float
     rgb: np.ndarray  # at the render resolution
-    stats: dict
+    stats: dict  # Frame.stats; read only through the properties below
+
+    @classmethod
+    def of(cls, settings: RenderSettings, rate: float, frame: Frame) -> "Cell":
+        return cls(settings, rate, frame.rgb, frame.stats)
+
+    @property
+    def mode_label(self) -> str:
+        """The mode as the renderer reports it, else the settings' label."""
+        return self.stats.get("mode", self.settings.label)
+
+    @property
+    def total_ms(self) -> float:
+        """The render's wall time."""
+        return self.stats.get("total_ms", 0)
 
 
 def render_grid(scene: Scene, camera: Camera, settings: list[RenderSettings], rates: list[float],
                 backend: str = "cpu") -> list[list[Cell]]:
     """Render every (rate, settings) pair: rows are rates, columns are settings."""
     renderer = get_renderer(scene, backend)
-    rows = []
-    for rate in rates:
-        cam = camera.at_sampling_rate(rate)
-        row = []
-        for s in settings:
-            frame = renderer.render(cam, s)
-            row.append(Cell(s, rate, frame.rgb, frame.stats))
-        rows.append(row)
-    return rows
+    cams = [camera.at_sampling_rate(rate) for rate in rates]
+    return [[Cell.of(s, rate, renderer.render(cam, s)) for s in settings] for rate, cam in zip(rates, cams)]
 
 
 def caption_font_size(height: int) -> int:
@@ -104,7 +96,7 @@ class GridLayout:
     cols: int
     width: int
     height: int
-    gap: int = 4
+    gap: int = GAP
     caption_height: int = 0
     even: bool = False
 
@@ -146,11 +138,10 @@ def draw_inset(tile: Image.Image, box: tuple[float, float, float, float], frac: 
 
 def _default_lines(cell: Cell) -> list[str]:
     h, w = cell.rgb.shape[:2]
-    return [f"{cell.stats.get('mode', cell.settings.label)}  {format_rate(cell.rate)} ({w}x{h})",
-            f"{cell.stats.get('total_ms', 0):.0f} ms"]
+    return [f"{cell.mode_label}  {format_rate(cell.rate)} ({w}x{h})", f"{cell.total_ms:.0f} ms"]
 
 
-def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = 4, captions: str = "overlay",
+def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = GAP, captions: str = "overlay",
                  lines=None, inset: tuple[float, float, float, float] | None = None, even: bool = False,
                  font_size: int | None = None) -> Image.Image:
     """Labelled grid: each cell nearest-upscaled to width x height.
@@ -189,7 +180,7 @@ def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = 4,
             if texts is None:
                 h, w = cell.rgb.shape[:2]
                 draw_label(tile, f"{cell.settings.label}  {format_rate(cell.rate)} ({w}x{h})  "
-                                 f"{cell.stats.get('total_ms', 0):.0f} ms")
+                                 f"{cell.total_ms:.0f} ms")
             else:
                 strip = Image.new("RGB", (width, layout.caption_height), (0, 0, 0))
                 sdraw = ImageDraw.Draw(strip)
@@ -208,3 +199,62 @@ def save_image(path: str | Path, img: Image.Image | np.ndarray, force: bool = Fa
         return atomic_write(path, lambda p: np.save(p, arr), force)
     pil = img if isinstance(img, Image.Image) else Image.fromarray(to_uint8(img))
     return atomic_write(path, lambda p: pil.save(p, format="PNG"), force)
+
+
+@dataclass
+class Comparison:
+    """A comparison figure and what is in it."""
+
+    image: Image.Image
+    cells: list[list[Cell]]  # rows: rates; columns: settings
+    psnr: list[list[float | None]]
+    layout: GridLayout  # layout.origin(row, col): where each cell's nearest-upscaled render is in `image`
+
+
+def compare_figure(scene: Scene, camera: Camera, settings_list: Sequence[RenderSettings], rates: Sequence[float],
+                   backend: str = "cpu", inset: tuple[float, float, float, float] | None = None) -> Comparison:
+    """Grid of modes (columns) x rates (rows) like the paper's figures: each cell rendered at camera
+    .at_sampling_rate(rate), nearest-upscaled to the camera's size, captioned below with mode, rate and size and
+    with its PSNR against the zoom-out reference (`reference_psnr`) and render time. `inset` (x, y, w, h in x1
+    pixels) is magnified into each cell's corner."""
+    settings_list, rates = list(settings_list), list(rates)
+    if not settings_list or not rates:
+        raise GBViewerError("compare: give at least one mode and one rate")
+    cells = render_grid(scene, camera, settings_list, rates, backend)
+    ref_settings = replace(settings_list[0], mode=Mode.SCALAR, supersample=1, debug="none")
+    ref = next((c.rgb for row in cells for c in row if c.rate == 1.0 and c.settings == ref_settings), None)
+    if ref is None and any(r <= 1 for r in rates):
+        ref = get_renderer(scene, backend).render(camera, ref_settings).rgb
+    psnrs = [[reference_psnr(ref, c.rgb, c.rate) if ref is not None else None for c in row] for row in cells]
+    notes = {id(c): p for row, prow in zip(cells, psnrs) for c, p in zip(row, prow)}
+
+    def lines(cell: Cell) -> list[str]:
+        h, w = cell.rgb.shape[:2]
+        p = notes[id(cell)]
+        ms = f"{cell.total_ms:.0f} ms"
+        if p is None:
+            note = f"no reference  {ms}"
+        elif math.isinf(p):
+            note = f"reference  {ms}"
+        else:
+            note = f"PSNR {p:.2f} dB  {ms}"
+        return [f"{cell.mode_label}  {format_rate(cell.rate)} ({w}x{h})", note]
+
+    img = compose_grid(cells, camera.width, camera.height, GAP, captions="below", lines=lines, inset=inset)
+    layout = GridLayout(len(rates), len(settings_list), camera.width, camera.height, GAP,
+                        GridLayout.caption_height_for(2, caption_font_size(camera.height)))
+    assert layout.size == img.size
+    return Comparison(img, cells, psnrs, layout)
+
+
+def write_comparison(out: str | Path, scene: Scene, camera: Camera, settings_list: Sequence[RenderSettings],
+                     rates: Sequence[float], backend: str = "cpu", inset: tuple[float, float, float, float] | None = None,
+                     force: bool = False) -> Comparison:
+    """`compare_figure` written to `out` as PNG, atomically; `out` is checked (.png, not overwritten without `force`)
+    before anything is rendered."""
+    out = refuse_overwrite(out, force)
+    if out.suffix.lower() != ".png":
+        raise GBViewerError(f"{out}: output must end in .png")
+    comparison = compare_figure(scene, camera, settings_list, rates, backend, inset)
+    save_image(out, comparison.image, force)
+    return comparison

@@ -57,3 +57,12 @@ def random_scene(n: int = 100, seed: int = 0, sh_degree: int = 0, spread: float 
 
 def front_camera(width: int = 64, height: int = 48, f: float = 60.0) -> gb.Camera:
     return gb.Camera(width, height, f, f, width / 2, height / 2, np.eye(3), np.zeros(3))
+
+
+OUTPUT_W, OUTPUT_H = 96, 64  # the pane of the output-layer tests (video, figure, camera paths, keyframes)
+
+
+@pytest.fixture(scope="session")
+def output_view(bundled_scene) -> gb.Camera:
+    """The bundled scene from a 30, 20 degree orbit at OUTPUT_W x OUTPUT_H."""
+    return gb.orbit_camera(bundled_scene, 30, 20, width=OUTPUT_W, height=OUTPUT_H)

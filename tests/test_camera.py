@@ -89,3 +89,34 @@ def test_invalid_cameras_raise():
         gb.Camera(10, 10, float("nan"), 1, 0, 0, np.eye(3), np.zeros(3))
     with pytest.raises(gb.CameraError):
         gb.Camera(10, 10, 1, 1, 0, 0, np.eye(3) * 2, np.zeros(3))
+
+
+def test_rate_labels_and_parsing():
+    from gbviewer.camera import format_rate, parse_rate, parse_rates
+
+    assert [format_rate(r) for r in (8, 1, 0.125, 0.27, 2.5)] == ["x8", "x1", "x1/8", "x1/3.7", "x2.5"]
+    assert parse_rate(" 1/8") == parse_rate("0.125") == 0.125 and parse_rates("4,1,,1/2") == [4.0, 1.0, 0.5]
+    for bad in ("0", "-1", "x", "1/0"):
+        with pytest.raises(gb.GBViewerError, match="sampling rate"):
+            parse_rate(bad)
+    with pytest.raises(gb.GBViewerError, match="no sampling rate"):
+        parse_rates(" , ")
+
+
+def test_focal_length_and_field_of_view_agree():
+    from gbviewer.camera import focal_from_fov, fov_of
+
+    cam = gb.Camera.look_at([0, 0, -3], [0, 0, 0], width=64, height=48, fov_y_deg=60)
+    assert cam.fy == pytest.approx(focal_from_fov(60, 48)) and fov_of(cam) == pytest.approx(60)
+
+
+def test_orbit_framing_sees_the_whole_box():
+    from gbviewer.camera import frame_box, orbit_direction
+
+    lo, hi = np.array([-1.0, -2.0, 0.0]), np.array([1.0, 2.0, 4.0])
+    centre, radius, dist = frame_box(lo, hi, 50.0, 4 / 3)
+    assert np.allclose(centre, [0, 0, 2]) and radius == pytest.approx(3.0)
+    assert radius / dist == pytest.approx(np.sin(np.radians(25)) / 0.9)  # the bounding sphere fills 90% of the view
+    up = np.array(gb.camera.UP_AXES["-y"])
+    d = orbit_direction(up, 30.0, 20.0)
+    assert np.linalg.norm(d) == pytest.approx(1) and float(d @ up) == pytest.approx(np.sin(np.radians(20)))

@@ -391,21 +391,6 @@ def test_cli_render_new_modes(tmp_path):
     assert math.isfinite(float(img.mean()))
 
 
-def test_flicker_measure():
-    from gbviewer.bench import flicker
-
-    h, w = 8, 8
-    smooth = [np.full((h, w, 3), 0.1 + 0.01 * t) for t in range(6)]  # constant-speed change: no second difference
-    fl, pops = flicker(smooth)
-    assert fl < 1e-9 and pops == 0
-    popping = [f.copy() for f in smooth]
-    for f in popping[3:]:
-        f[2, 2] += 0.2  # one pixel jumps between frames 2 and 3
-    fl, pops = flicker(popping)
-    assert pops == pytest.approx(2 / (4 * h * w))  # seen at t = 2 and t = 3
-    assert fl == pytest.approx(255 * 0.2 * 2 * 3 / (4 * h * w * 3))
-
-
 def test_cli_bench_order_independent(tmp_path):
     import json
 

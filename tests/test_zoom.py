@@ -3,20 +3,11 @@ x1 render box-downsampled by 8 (the multi-scale Blender construction, DESIGN.md)
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 import gbviewer as gb
 from conftest import shared_scene
-
-
-def box_downsample(img: np.ndarray, k: int) -> np.ndarray:
-    h, w = img.shape[0] // k, img.shape[1] // k
-    return img[: h * k, : w * k].reshape(h, k, w, k, -1).mean(axis=(1, 3))
-
-
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    return float(-10 * np.log10(np.mean((np.clip(a, 0, 1) - np.clip(b, 0, 1)) ** 2)))
+from gbviewer.metrics import box_downsample, psnr
 
 
 @pytest.mark.parametrize("scene_name", ["bundled", "v3dg-donut.fused.ply"])

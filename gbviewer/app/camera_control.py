@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..camera import UP_AXES, Camera
+from ..camera import UP_AXES, Camera, focal_from_fov, fov_of, frame_box, orbit_direction
 
 
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -17,11 +17,6 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     c, s = math.cos(angle), math.sin(angle)
     K = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
     return c * np.eye(3) + s * K + (1 - c) * np.outer(axis, axis)
-
-
-def fov_of(camera: Camera) -> float:
-    """Vertical field of view of a camera, degrees."""
-    return math.degrees(2 * math.atan(camera.height / (2 * camera.fy)))
 
 
 @dataclass
@@ -55,7 +50,7 @@ class CameraController:
 
     def camera(self, width: int, height: int) -> Camera:
         """A centred pinhole camera of width x height pixels with this pose and vertical field of view."""
-        f = 0.5 * height / math.tan(math.radians(self.fov_y_deg) / 2)
+        f = focal_from_fov(self.fov_y_deg, height)
         return Camera(width, height, f, f, width / 2, height / 2, self.R, -self.R @ self.eye)
 
     def frame_bounds(self, lo: np.ndarray, hi: np.ndarray, azimuth_deg: float = 30.0, elevation_deg: float = 20.0,
@@ -63,18 +58,10 @@ class CameraController:
         """Default framing of the box lo..hi (as gbviewer.orbit_camera): orbit around its centre, far enough to see
         all of it."""
         lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-        self.centre = (lo + hi) / 2
-        self.radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
-        fov = math.radians(self.fov_y_deg) * min(1.0, aspect)
-        self.distance = self.radius / math.sin(fov / 2) * 0.9
-        up_v = self.up_vector
-        a = np.cross(up_v, [1.0, 0.0, 0.0] if abs(up_v[0]) < 0.9 else [0.0, 0.0, 1.0])
-        a /= np.linalg.norm(a)
-        b = np.cross(up_v, a)
-        az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
-        direction = math.cos(el) * (math.cos(az) * a + math.sin(az) * b) + math.sin(el) * up_v
+        self.centre, self.radius, self.distance = frame_box(lo, hi, self.fov_y_deg, aspect)
         self.target = self.centre.copy()
-        self._look(self.target + self.distance * direction, self.target)
+        self._look(self.target + self.distance * orbit_direction(self.up_vector, azimuth_deg, elevation_deg),
+                   self.target)
 
     def _look(self, eye: np.ndarray, target: np.ndarray) -> None:
         cam = Camera.look_at(eye, target, self.up_vector, 64, 64, self.fov_y_deg)

@@ -8,9 +8,9 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
+from ..camera import format_rate
 from .layout import loupe_uv
 from .panes import frame_stats, pane_fps
-from .rates import format_rate
 from .state import PaneState
 
 if TYPE_CHECKING:

@@ -4,7 +4,6 @@ render size of a pane, and the resolution drop while the camera moves."""
 from __future__ import annotations
 
 import math
-from fractions import Fraction
 
 RATE_STEPS = (8.0, 4.0, 2.0, 1.0, 0.5, 0.25, 0.125)
 RATE_MIN, RATE_MAX = 0.125, 8.0
@@ -14,14 +13,6 @@ def clamp_rate(rate: float) -> float:
     if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
         return 1.0
     return float(min(RATE_MAX, max(RATE_MIN, rate)))
-
-
-def format_rate(rate: float) -> str:
-    """x8, x1, x1/8 for the steps; x1/3.7 or x2.5 between them."""
-    f = Fraction(rate).limit_denominator(64)
-    if abs(float(f) - rate) <= 1e-9 * rate and 1 in (f.numerator, f.denominator):
-        return f"x{f.numerator}" if f.denominator == 1 else f"x{f.numerator}/{f.denominator}"
-    return f"x1/{1 / rate:.3g}" if rate < 1 else f"x{rate:.3g}"
 
 
 def step_rate(rate: float, direction: int) -> float:

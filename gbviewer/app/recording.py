@@ -18,7 +18,8 @@ class VideoJob:
 
     def __init__(self, scene: Scene, camera: Camera, settings: list[RenderSettings], out: Path, frames: int = 90,
                  fps: float = 30.0, backend: str = "cpu", start: float = 1.0, end: float = 0.125) -> None:
-        from .. import video
+        from ..camera_paths import zoom_path
+        from ..video import record_video
 
         self.out = Path(out)
         self.done_frames, self.total = 0, frames
@@ -34,9 +35,9 @@ class VideoJob:
 
         def run() -> None:
             try:
-                path = video.zoom_path(camera, frames, start, end)
-                self.info = video.record_video(scene, path, settings, self.out, fps=fps, backend=backend,
-                                               progress=progress, cancel=self._cancel)
+                path = zoom_path(camera, frames, start, end)
+                self.info = record_video(scene, path, settings, self.out, fps=fps, backend=backend,
+                                         progress=progress, cancel=self._cancel)
             except GBViewerError as exc:
                 self.error = str(exc)
             except Exception as exc:  # noqa: BLE001 - shown in the window

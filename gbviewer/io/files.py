@@ -16,13 +16,20 @@ def _umask() -> int:
     return mask
 
 
+def refuse_overwrite(path: str | Path, force: bool = False) -> Path:
+    """Raise the error `atomic_write` would for an existing `path` without `force`: call it before long work that
+    ends in writing `path`."""
+    path = Path(path)
+    if path.exists() and not force:
+        raise GBViewerError(f"{path}: exists; pass --force to overwrite")
+    return path
+
+
 def atomic_write(path: str | Path, write: Callable[[Path], object], force: bool = False) -> Path:
     """Call write(tmp) for a temporary file beside `path`, flush it to disk, then move it into place, so readers
     never see a partial file. Without `force` an existing file is refused, including one that appears while
     writing (the final step links rather than renames). The file gets the usual umask permissions."""
-    path = Path(path)
-    if path.exists() and not force:
-        raise GBViewerError(f"{path}: exists; pass --force to overwrite")
+    path = refuse_overwrite(path, force)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, name = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
     os.close(fd)

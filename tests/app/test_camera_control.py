@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.app.camera_control import CameraController, fov_of
+from gbviewer.app.camera_control import CameraController
+from gbviewer.camera import fov_of
 
 
 def framed(up: str = "-y") -> CameraController:

@@ -35,11 +35,6 @@ def test_rate_slider_is_log2_snaps_to_steps_and_clamps():
     assert rates.clamp_rate(float("nan")) == 1.0 and rates.clamp_rate(100) == 8
 
 
-def test_rate_labels():
-    assert [rates.format_rate(r) for r in rates.RATE_STEPS] == ["x8", "x4", "x2", "x1", "x1/2", "x1/4", "x1/8"]
-    assert rates.format_rate(0.27) == "x1/3.7" and rates.format_rate(2.5) == "x2.5"
-
-
 def test_render_size_matches_camera_at_sampling_rate():
     cam = gb.Camera.look_at([0, 0, -3], [0, 0, 0], width=523, height=401)
     for r in (8, 1, 0.3, 1 / 8, 1 / 1000):

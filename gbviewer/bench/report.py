@@ -1,0 +1,206 @@
+"""The benchmark's report: rich tables on the terminal, every number as JSON with the machine description, plots."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+import re
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from ..camera import format_rate
+from ..io.files import atomic_write
+from ..render import BACKENDS
+from .fidelity import FidelityRow
+from .oit import OitRow
+from .simd import SIMD_NAMES, simd_summary
+from .speed import SpeedRow, ratios
+
+
+def _console():
+    """A rich console; into a file or pipe 200 columns wide, so that no number is cut short."""
+    from rich.console import Console
+
+    console = Console()
+    return console if console.is_terminal else Console(width=max(console.width, 200))
+
+
+def print_oit(rows: list[OitRow]) -> None:
+    from rich.table import Table
+
+    t = Table(title="Sorted vs order-independent modes (mean over views; flicker along a slow orbit)")
+    for col in ("scene", "mode", "visible", "cells vis/all", "sort length", "sort MB", "list entries", "preprocess",
+                "sort", "blend", "total ms", "PSNR vs scalar", "flicker", "pops %"):
+        t.add_column(col, justify="left" if col in ("scene", "mode") else "right")
+    for r in rows:
+        cells = f"{r.cells_visible}/{r.cells}" if r.cells else "-"
+        t.add_row(r.scene, r.label, str(r.visible), cells, str(r.sort_length), f"{r.sort_mb:.2f}", str(r.pairs),
+                  f"{r.stages_ms['preprocess_ms']:.1f}", f"{r.stages_ms['sort_ms']:.1f}",
+                  f"{r.stages_ms['blend_ms']:.1f}", f"{r.stages_ms['total_ms']:.1f}",
+                  "inf" if math.isinf(r.psnr_vs_scalar) else f"{r.psnr_vs_scalar:.2f}", f"{r.flicker:.3f}",
+                  f"{100 * r.pops:.3f}")
+    _console().print(t)
+
+
+def machine_description() -> dict:
+    """CPU model, cores, Python, and the GL renderer when a GL backend is registered."""
+    cpu = platform.processor()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    desc = {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()}
+    for name, cls in BACKENDS.items():
+        info = getattr(cls, "describe", None)
+        if info is not None:
+            desc[f"{name}_backend"] = info()
+    return desc
+
+
+def write_json(path: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = False,
+               oit: list[OitRow] | None = None, simd: dict | None = None) -> Path:
+    """Every number: machine, simd (simd_info()), speed, fidelity, ratios, order_independent."""
+    doc = {"machine": machine_description(), "simd": simd, "speed": [asdict(r) for r in speed],
+           "fidelity": [asdict(r) for r in fidelity], "ratios": ratios(speed)}
+    if oit:
+        doc["order_independent"] = [asdict(r) for r in oit]
+    return atomic_write(path, lambda p: p.write_text(json.dumps(doc, indent=2, allow_nan=True)), force)
+
+
+def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = False) -> list[Path]:
+    """PSNR vs sampling rate per mode, and time per mode (one figure per scene), as PNG; existing plots are only
+    replaced with `force`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    for scene in sorted({r.scene for r in speed} | {r.scene for r in fidelity}):
+        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.5))
+        fid = [r for r in fidelity if r.scene == scene]
+        for mode in dict.fromkeys(r.mode for r in fid):
+            pts = sorted((r.rate, r.psnr) for r in fid if r.mode == mode)
+            ax1.plot([p[0] for p in pts], [p[1] for p in pts], "o-", label=mode)
+        ax1.set_xscale("log", base=2)
+        ax1.set_xlabel("sampling rate")
+        ax1.set_ylabel("PSNR (dB)")
+        ax1.set_title(f"{scene}: zoom fidelity")
+        ax1.legend(fontsize=8)
+        sp = [r for r in speed if r.scene == scene and r.rate == 1.0]
+        labels = [f"{r.mode}\n{r.backend}" + (f" {r.simd_requested}" if r.simd_requested else "") for r in sp]
+        bottoms = np.zeros(len(sp))
+        for stage in ("preprocess_ms", "sort_ms", "blend_ms"):
+            vals = np.array([r.stages_ms[stage] for r in sp])
+            ax2.bar(labels, vals, bottom=bottoms, label=stage.removesuffix("_ms"))
+            bottoms += vals
+        ax2.set_ylabel("ms per frame (x1)")
+        ax2.set_title(f"{scene}: time per mode")
+        ax2.legend(fontsize=8)
+        ax2.tick_params(axis="x", labelsize=7)
+        fig.tight_layout()
+        path = out_dir / (re.sub(r"[^A-Za-z0-9._-]+", "_", Path(scene).stem) + ".png")
+        try:
+            atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"), force)
+        finally:
+            plt.close(fig)
+        written.append(path)
+    return written
+
+
+def simd_table(rows: list[SpeedRow]) -> tuple[list[str], list[list[str]]]:
+    """The CPU backend's SIMD paths side by side (rows of the same scene, rate, size and mode measured on more than
+    one path): blend ms per path, each vector path's blend and frame speedup over scalar, blend evaluations per
+    second per core against that path's exp rate, and the largest difference from the scalar path's image."""
+    groups: dict[tuple, dict[str, SpeedRow]] = {}
+    for r in rows:
+        if r.backend == "cpu" and r.simd_requested:
+            groups.setdefault((r.scene, r.rate, r.width, r.height, r.mode), {})[r.simd_requested] = r
+    groups = {k: v for k, v in groups.items() if len(v) > 1}
+    paths = list(dict.fromkeys(p for g in groups.values() for p in g))
+    order = {p: i for i, p in enumerate(SIMD_NAMES)}
+    paths.sort(key=lambda p: order.get(p, len(order)))
+    vector = [p for p in paths if p != "scalar"]
+    header = ["scene", "mode", "rate", "size"] + [f"{p} blend ms" for p in paths]
+    for p in vector:
+        header += [f"{p} blend speedup", f"{p} frame speedup"]
+    header += [f"{p} blend Mevals/s/core (exp)" for p in paths] + [f"{p} max abs diff" for p in vector]
+    out = []
+    for (scene, rate, w, h, mode), g in groups.items():
+        row = [scene, mode, format_rate(rate), f"{w}x{h}"]
+        for p in paths:
+            r = g.get(p)
+            row.append("" if r is None else f"{r.stages_ms['blend_ms']:.1f}"
+                       + (f" (ran {r.simd})" if r.simd and r.simd != p else ""))
+        base = g.get("scalar")
+        for p in vector:
+            r = g.get(p)
+            if r is None or base is None:
+                row += ["", ""]
+            else:
+                row += [f"{base.stages_ms['blend_ms'] / max(r.stages_ms['blend_ms'], 1e-9):.2f}",
+                        f"{base.median_ms / r.median_ms:.2f}"]
+        for p in paths:
+            r = g.get(p)
+            exp = f" ({r.exp_mevals_per_s_per_core:.0f})" if r is not None and r.exp_mevals_per_s_per_core else ""
+            row.append("" if r is None else f"{r.blend_mevals_per_s_per_core:.0f}{exp}")
+        for p in vector:
+            r = g.get(p)
+            row.append("" if r is None or r.simd_max_abs_diff is None else f"{r.simd_max_abs_diff:.2g}")
+        out.append(row)
+    return header, out
+
+
+def print_tables(speed: list[SpeedRow], fidelity: list[FidelityRow], simd: dict | None = None) -> None:
+    """Rich tables on the terminal: speed, SIMD paths, ratios, fidelity; `simd` (simd_info()) heads them."""
+    from rich.table import Table
+
+    console = _console()
+    if simd:
+        console.print(simd_summary(simd), highlight=False)
+    t = Table(title="Speed (median over repeats and views; Mevals/s/core: splat-pixel evaluations per second per "
+                    "core over the frame / the blend stage, exp: that SIMD path's exp evaluations per second on a "
+                    "core)")
+    for col in ("scene", "backend", "simd", "mode", "rate", "size", "total ms", "min-max", "preprocess", "sort",
+                "blend", "evals/px", "Mevals/s/core", "blend Mevals/s/core", "exp M/s/core"):
+        t.add_column(col, justify="right" if col not in ("scene", "backend", "simd", "mode") else "left")
+    for r in speed:
+        t.add_row(r.scene, r.backend, r.simd or "-", r.mode, format_rate(r.rate), f"{r.width}x{r.height}",
+                  f"{r.median_ms:.1f}", f"{r.min_ms:.1f}-{r.max_ms:.1f}", f"{r.stages_ms['preprocess_ms']:.1f}",
+                  f"{r.stages_ms['sort_ms']:.1f}", f"{r.stages_ms['blend_ms']:.1f}", f"{r.evals_per_pixel:.1f}",
+                  f"{r.mevals_per_s_per_core:.1f}", f"{r.blend_mevals_per_s_per_core:.1f}",
+                  "-" if r.exp_mevals_per_s_per_core is None else f"{r.exp_mevals_per_s_per_core:.0f}")
+    console.print(t)
+    header, rows = simd_table(speed)
+    if rows:
+        st = Table(title="SIMD paths of the CPU backend (same run, taking turns render by render; speedup: scalar's "
+                         "ms / the path's; exp: the path's exp evaluations per second on a core; max abs diff: largest "
+                         "rgb difference from the scalar path's image)")
+        for col in header:
+            st.add_column(col, justify="left" if col in ("scene", "mode") else "right")
+        for row in rows:
+            st.add_row(*row)
+        console.print(st)
+    rt = Table(title="Ratios of frame times (same run; the SIMD speedups are in the table above)")
+    for col in ("scene", "backend", "simd", "rate", "size", "ratio", "value"):
+        rt.add_column(col)
+    for r in ratios(speed):
+        if "mode" not in r:
+            rt.add_row(r["scene"], r["backend"], r["simd"] or "-", format_rate(r["rate"]),
+                       f"{r['width']}x{r['height']}", r["ratio"], f"{r['value']:.2f}")
+    console.print(rt)
+    if fidelity:
+        ft = Table(title="Zoom fidelity (mean over views)")
+        for col in ("scene", "kind", "rate", "mode", "simd", "PSNR dB", "SSIM"):
+            ft.add_column(col)
+        for r in sorted(fidelity, key=lambda r: (r.scene, r.kind, -r.rate if r.kind == "zoom-out" else r.rate)):
+            ft.add_row(r.scene, r.kind, format_rate(r.rate), r.mode, r.simd or "-", f"{r.psnr:.2f}", f"{r.ssim:.4f}")
+        console.print(ft)

@@ -1,0 +1,278 @@
+"""Keyframed camera paths: cubic Hermite through the keys (Catmull-Rom for positions, monotone for log rate and
+focal lengths), SQUAD (spherical cubic built from slerps, Shoemake 1987) for rotations; keys from and to JSON."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, replace
+from fractions import Fraction
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .camera import UP_AXES, Camera, focal_from_fov, orbit_camera
+from .cells import rotation_matrices
+from .errors import CameraError, GBViewerError
+from .scene import Scene
+
+
+@dataclass(frozen=True)
+class Keyframe:
+    """A key of a keyframed path: the camera (pose and intrinsics at the pane size), the sampling rate it is
+    rendered at (then nearest-resized to the pane, as in the rate sweep), and its time in seconds (None: keys
+    evenly spaced)."""
+
+    camera: Camera
+    rate: float = 1.0
+    time: float | None = None
+
+
+def quat_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method; w >= 0)."""
+    R = np.asarray(R, np.float64)
+    tr = np.trace(R)
+    if tr > 0:
+        S = math.sqrt(tr + 1.0) * 2
+        q = [0.25 * S, (R[2, 1] - R[1, 2]) / S, (R[0, 2] - R[2, 0]) / S, (R[1, 0] - R[0, 1]) / S]
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        S = math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
+        q = [(R[2, 1] - R[1, 2]) / S, 0.25 * S, (R[0, 1] + R[1, 0]) / S, (R[0, 2] + R[2, 0]) / S]
+    elif R[1, 1] > R[2, 2]:
+        S = math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
+        q = [(R[0, 2] - R[2, 0]) / S, (R[0, 1] + R[1, 0]) / S, 0.25 * S, (R[1, 2] + R[2, 1]) / S]
+    else:
+        S = math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
+        q = [(R[1, 0] - R[0, 1]) / S, (R[0, 2] + R[2, 0]) / S, (R[1, 2] + R[2, 1]) / S, 0.25 * S]
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
+
+def matrix_from_quat(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a quaternion (w, x, y, z), normalised first."""
+    q = np.asarray(q, np.float64)
+    return rotation_matrices((q / np.linalg.norm(q))[None])[0]
+
+
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def _qconj(q: np.ndarray) -> np.ndarray:
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def _qlog(q: np.ndarray) -> np.ndarray:
+    """Log of a unit quaternion: (0, angle/2 * axis)."""
+    v = q[1:]
+    n = np.linalg.norm(v)
+    if n < 1e-12:
+        return np.zeros(4)
+    return np.concatenate([[0.0], v / n * math.atan2(n, q[0])])
+
+
+def _qexp(q: np.ndarray) -> np.ndarray:
+    v = q[1:]
+    n = np.linalg.norm(v)
+    if n < 1e-12:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    return np.concatenate([[math.cos(n)], v / n * math.sin(n)])
+
+
+def slerp(a: np.ndarray, b: np.ndarray, h: float) -> np.ndarray:
+    """Spherical linear interpolation from a (h = 0, returned exactly) to b (h = 1); no hemisphere flip."""
+    d = float(np.clip(np.dot(a, b), -1.0, 1.0))
+    theta = math.acos(d)
+    if theta < 1e-9:
+        return a * (1.0 - h) + b * h
+    s = math.sin(theta)
+    return a * (math.sin((1.0 - h) * theta) / s) + b * (math.sin(h * theta) / s)
+
+
+def _squad_controls(qs: list[np.ndarray]) -> list[np.ndarray]:
+    """Shoemake's inner control quaternions; the ends are their own keys (so two keys give a plain slerp)."""
+    ctrl = [qs[0]]
+    for k in range(1, len(qs) - 1):
+        inv = _qconj(qs[k])
+        ctrl.append(_qmul(qs[k], _qexp(-(_qlog(_qmul(inv, qs[k + 1])) + _qlog(_qmul(inv, qs[k - 1]))) / 4.0)))
+    if len(qs) > 1:
+        ctrl.append(qs[-1])
+    return ctrl
+
+
+def _catmull_rom_tangents(ts: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """dp/dt at the keys: central differences over non-uniform times, one-sided at the ends."""
+    m = np.empty_like(p)
+    if len(ts) == 1:
+        return np.zeros_like(p)
+    m[0] = (p[1] - p[0]) / (ts[1] - ts[0])
+    m[-1] = (p[-1] - p[-2]) / (ts[-1] - ts[-2])
+    for k in range(1, len(ts) - 1):
+        m[k] = (p[k + 1] - p[k - 1]) / (ts[k + 1] - ts[k - 1])
+    return m
+
+
+def _monotone_tangents(ts: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Fritsch-Carlson (PCHIP weights) tangents per column: no overshoot between keys."""
+    m = np.zeros_like(y)
+    if len(ts) == 1:
+        return m
+    h = np.diff(ts)[:, None]
+    d = np.diff(y, axis=0) / h
+    m[0], m[-1] = d[0], d[-1]
+    for k in range(1, len(ts) - 1):
+        w1, w2 = 2 * h[k] + h[k - 1], h[k] + 2 * h[k - 1]
+        same = d[k - 1] * d[k] > 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            m[k] = np.where(same, (w1 + w2) / (w1 / d[k - 1] + w2 / d[k]), 0.0)
+    return m
+
+
+def _segment(ts: np.ndarray, t: float) -> tuple[int, float]:
+    """Segment k with ts[k] <= t <= ts[k + 1] and the fraction h along it (h = 0 exactly at a key)."""
+    k = int(np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2))
+    return k, (t - ts[k]) / (ts[k + 1] - ts[k])
+
+
+def _hermite(ts: np.ndarray, p: np.ndarray, m: np.ndarray, k: int, h: float) -> np.ndarray:
+    dt = ts[k + 1] - ts[k]
+    h2, h3 = h * h, h * h * h
+    return ((2 * h3 - 3 * h2 + 1) * p[k] + (h3 - 2 * h2 + h) * dt * m[k] + (-2 * h3 + 3 * h2) * p[k + 1]
+            + (h3 - h2) * dt * m[k + 1])
+
+
+def key_times(keys: Sequence[Keyframe]) -> np.ndarray:
+    """The keys' times: as given (strictly increasing), or 0, 1, 2, ... when none has one."""
+    given = [k.time for k in keys]
+    if all(t is None for t in given):
+        return np.arange(len(keys), dtype=np.float64)
+    if any(t is None for t in given):
+        raise GBViewerError("keyframes: give a time to every key or to none")
+    ts = np.asarray(given, np.float64)
+    if not np.isfinite(ts).all() or (len(ts) > 1 and not (np.diff(ts) > 0).all()):
+        raise GBViewerError(f"keyframes: times must be finite and strictly increasing, got {given}")
+    return ts
+
+
+def interpolate_keyframes(keys: Sequence[Keyframe], times: Sequence[float]) -> list[Keyframe]:
+    """The path through `keys` at `times` (clamped to the keys' span); at a key's time it is that key (up to
+    rounding). Positions (camera centres): Catmull-Rom cubic; rotations: SQUAD; rate, fx, fy: monotone cubic in
+    log; cx, cy: monotone cubic. Every key must have the same image size."""
+    if not keys:
+        raise GBViewerError("keyframes: none given")
+    w, h = keys[0].camera.width, keys[0].camera.height
+    if any((k.camera.width, k.camera.height) != (w, h) for k in keys):
+        raise GBViewerError("keyframes: every key's camera must have the same image size")
+    for k in keys:
+        if not (k.rate > 0 and math.isfinite(k.rate)):
+            raise GBViewerError(f"keyframes: rate must be finite and > 0, got {k.rate}")
+    ts = key_times(keys)
+    if len(keys) == 1:
+        return [replace(keys[0], time=float(t)) for t in times]
+    pos = np.stack([k.camera.position for k in keys])
+    qs = [quat_from_matrix(k.camera.R) for k in keys]
+    for i in range(1, len(qs)):  # shortest arcs
+        if np.dot(qs[i - 1], qs[i]) < 0:
+            qs[i] = -qs[i]
+    ctrl = _squad_controls(qs)
+    scal = np.stack([[math.log(k.rate), math.log(k.camera.fx), math.log(k.camera.fy), k.camera.cx, k.camera.cy]
+                     for k in keys])
+    m_pos, m_scal = _catmull_rom_tangents(ts, pos), _monotone_tangents(ts, scal)
+    out = []
+    for t in times:
+        t = float(np.clip(t, ts[0], ts[-1]))
+        k, hh = _segment(ts, t)
+        c = _hermite(ts, pos, m_pos, k, hh)
+        q = slerp(slerp(qs[k], qs[k + 1], hh), slerp(ctrl[k], ctrl[k + 1], hh), 2 * hh * (1 - hh))
+        lr, lfx, lfy, cx, cy = _hermite(ts, scal, m_scal, k, hh)
+        R = matrix_from_quat(q)
+        cam = replace(keys[0].camera, R=R, t=-R @ c, fx=math.exp(lfx), fy=math.exp(lfy), cx=cx, cy=cy,
+                      name=f"keyframes@{t:g}")
+        out.append(Keyframe(cam, math.exp(lr), t))
+    return out
+
+
+def _vec(e: dict, name: str, n: int, where: str) -> np.ndarray:
+    try:
+        v = np.asarray(e[name], dtype=np.float64)
+        return v.reshape(n) if n != 9 else v.reshape(3, 3)
+    except (TypeError, ValueError) as exc:
+        raise GBViewerError(f"{where}: {name!r} must be {'a 3x3 matrix' if n == 9 else f'{n} numbers'} ({exc})") \
+            from None
+
+
+def load_keyframes(path: str | Path, base: Camera, scene: Scene | None = None, up: str = "-y") -> list[Keyframe]:
+    """Keyframes from JSON: {"keyframes": [KEY, ...]} or a bare list of KEYs. A KEY gives a pose as one of
+
+      {"R": 3x3, "t": [3]}                    world-to-camera, as gb.Camera (x_cam = R x + t; OpenCV axes)
+      {"rotation": 3x3, "position": [3]}      camera-to-world rotation and centre, as a 3DGS cameras.json entry
+      {"position": [3], "look_at": [3], "up": [3]}   eye, target and world up (default: the --up axis)
+      {"orbit": [azimuth, elevation, distance]}      degrees, scene units (distance <= 0 or null: auto framing)
+
+    and optionally "time" (seconds; give it to all keys or none), "rate" (sampling rate rendered at, default 1:
+    rendered at that rate and shown nearest-upscaled), "fov_y_deg" or "fx", "fy", "cx", "cy" (pixels at the pane
+    size; default: the base camera's intrinsics). The pane size is the base camera's.
+    """
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise GBViewerError(f"{path}: cannot read keyframes: {exc}") from None
+    entries = doc.get("keyframes") if isinstance(doc, dict) else doc
+    if not isinstance(entries, list) or not entries:
+        raise GBViewerError(f"{path}: expected a non-empty list of keyframes (or {{\"keyframes\": [...]}})")
+    keys = []
+    for i, e in enumerate(entries):
+        where = f"{path}: keyframe {i}"
+        if not isinstance(e, dict):
+            raise GBViewerError(f"{where}: expected an object")
+        try:
+            if "R" in e:
+                R, t = _vec(e, "R", 9, where), _vec(e, "t", 3, where)
+            elif "rotation" in e:
+                R = _vec(e, "rotation", 9, where).T
+                t = -R @ _vec(e, "position", 3, where)
+            elif "look_at" in e:
+                u = _vec(e, "up", 3, where) if "up" in e else np.array(UP_AXES[up])
+                c = Camera.look_at(_vec(e, "position", 3, where), _vec(e, "look_at", 3, where), u)
+                R, t = c.R, c.t
+            elif "orbit" in e:
+                if scene is None:
+                    raise GBViewerError(f"{where}: 'orbit' keys need the scene")
+                az, el, dist = (list(e["orbit"]) + [None])[:3]
+                c = orbit_camera(scene, float(az), float(el), float(dist) if dist and float(dist) > 0 else None,
+                                 base.width, base.height, up=up)
+                R, t = c.R, c.t
+            else:
+                raise GBViewerError(f"{where}: no pose; give R and t, rotation and position, position and look_at, "
+                                    "or orbit")
+            intr = dict(fx=base.fx, fy=base.fy, cx=base.cx, cy=base.cy)
+            if "fov_y_deg" in e:
+                f = focal_from_fov(float(e["fov_y_deg"]), base.height)
+                intr = dict(fx=f, fy=f, cx=base.width / 2, cy=base.height / 2)
+            intr.update({k: float(e[k]) for k in ("fx", "fy", "cx", "cy") if k in e})
+            cam = replace(base, R=R, t=t, name=f"key{i}", **intr)
+            rate = float(Fraction(str(e.get("rate", 1))))
+            time_ = float(e["time"]) if e.get("time") is not None else None
+        except CameraError as exc:
+            raise GBViewerError(f"{where}: {exc}") from None
+        except (TypeError, ValueError, ZeroDivisionError) as exc:
+            raise GBViewerError(f"{where}: {exc}") from None
+        keys.append(Keyframe(cam, rate, time_))
+    key_times(keys)
+    return keys
+
+
+def keyframes_to_json(keys: Sequence[Keyframe]) -> dict:
+    """The JSON document `load_keyframes` reads back (world-to-camera R, t and the intrinsics of every key)."""
+    return {"keyframes": [
+        {"R": k.camera.R.tolist(), "t": k.camera.t.tolist(), "fx": k.camera.fx, "fy": k.camera.fy,
+         "cx": k.camera.cx, "cy": k.camera.cy, "rate": k.rate, **({"time": k.time} if k.time is not None else {})}
+        for k in keys]}
+
