@@ -226,7 +226,7 @@ def measure_oit(scene: Scene, name: str, cams: list[Camera], settings: list[Rend
             last = f.stats
             for k in STAGES + ("visible", "sort_length", "sort_bytes", "pairs", "cells", "cells_visible",
                                "cell_misses"):
-                acc.setdefault(k, []).append(f.stats.get(k, 0))
+                acc.setdefault(k, []).append(getattr(f.stats, k) or 0)
             acc.setdefault("psnr", []).append(psnr(f.rgb, ref))
             if progress:
                 progress(2 * render_cost(cam, s, scene.num_splats) + render_cost(cam, wanted[Mode.SCALAR],
@@ -239,7 +239,7 @@ def measure_oit(scene: Scene, name: str, cams: list[Camera], settings: list[Rend
         fl, pops = flicker(frames)
         mean = {k: float(np.mean(v)) for k, v in acc.items()}
         rows.append(OitRow(
-            name, backend, s.spec, last["mode"], c0.width, c0.height, round(mean["visible"]),
+            name, backend, s.spec, last.mode, c0.width, c0.height, round(mean["visible"]),
             round(mean["sort_length"]), mean["sort_bytes"] / 2**20, round(mean["pairs"]), round(mean["cells"]),
             round(mean["cells_visible"]), round(mean["cell_misses"]),
             {k: float(statistics.median(acc[k])) for k in STAGES}, mean["psnr"], fl, pops))
@@ -277,7 +277,7 @@ class SpeedRow:
     views, median per stage, evaluations per pixel (mean over views) and the evaluation rates (all the timed
     renders' evaluations over all their time).
 
-    simd: the path the CPU backend's blend ran (Frame.stats["simd"]; None on other backends), simd_requested: the
+    simd: the path the CPU backend's blend ran (Frame.stats.simd; None on other backends), simd_requested: the
     path set for the measurement (the two differ where a mode has no vector code). mevals_per_s_per_core:
     splat-pixel evaluations per second of frame time per core; blend_mevals_per_s_per_core: the same over the
     blend stage alone, to compare with exp_mevals_per_s_per_core, the exp throughput of one core on that path.
@@ -344,10 +344,10 @@ def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[Re
                                     continue  # first-touch allocations, caches, the new path
                                 a = acc[path]
                                 a["last"] = f.stats
-                                a["totals"].append(f.stats["total_ms"])
-                                a["evals"].append(f.stats["evals_per_pixel"])
+                                a["totals"].append(f.stats.total_ms)
+                                a["evals"].append(f.stats.evals_per_pixel)
                                 for k in STAGES:
-                                    a["stages"][k].append(f.stats[k])
+                                    a["stages"][k].append(getattr(f.stats, k))
                                 images[path] = f.rgb
                         if "scalar" in images:  # the vector paths against the scalar one, same view
                             for path, img in images.items():
@@ -360,10 +360,10 @@ def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[Re
                         med = {k: statistics.median(v) for k, v in a["stages"].items()}
                         # evaluation rates: all the timed renders' evaluations over all their time (views differ)
                         evals = sum(a["evals"]) * c.width * c.height
-                        ran = last["simd"] if cpu else None
+                        ran = last.simd if cpu else None
                         rows.append(SpeedRow(
                             name, backend, s.spec, rate, c.width, c.height, statistics.median(totals), min(totals),
-                            max(totals), med, last["visible"], last["sort_length"], float(np.mean(a["evals"])),
+                            max(totals), med, last.visible, last.sort_length, float(np.mean(a["evals"])),
                             evals / max(sum(totals), 1e-9) / 1e3 / per_core, ran, path,
                             evals / max(sum(a["stages"]["blend_ms"]), 1e-9) / 1e3 / per_core,
                             exp[ran] / 1e6 if exp and ran in exp else None, a["diff"]))
@@ -381,7 +381,7 @@ class FidelityRow:
     kind: str  # "zoom-out" (vs x1 scalar, box-downsampled) or "zoom-in" (downsampled vs x1 of the same mode)
     psnr: float
     ssim: float
-    simd: str | None = None  # the CPU backend's path that rendered it (Frame.stats["simd"]); None on other backends
+    simd: str | None = None  # the CPU backend's path that rendered it (Frame.stats.simd); None on other backends
 
 
 def measure_fidelity(scene: Scene, name: str, cams: list[Camera], settings: list[RenderSettings],
@@ -412,7 +412,7 @@ def measure_fidelity(scene: Scene, name: str, cams: list[Camera], settings: list
                 else:
                     img, ref, kind = box_downsample(img, k), ref_same, "zoom-in"
                 acc.setdefault((s.spec, rate, kind), []).append((psnr(img, ref), ssim(img, ref)))
-                ran[s.spec, rate, kind] = f.stats["simd"] if backend == "cpu" else None
+                ran[s.spec, rate, kind] = f.stats.simd if backend == "cpu" else None
                 if progress:
                     progress(render_cost(c, s, scene.num_splats))
     return [FidelityRow(name, spec, rate, kind, float(np.mean([p for p, _ in v])), float(np.mean([q for _, q in v])),

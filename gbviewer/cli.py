@@ -115,9 +115,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     frame = get_renderer(scene, args.backend).render(cam, settings)
     save_image(out, frame.rgb, force=args.force)
     st = frame.stats
-    print(f"{out}: {cam.width}x{cam.height} {settings.label} on {args.backend}: {st['total_ms']:.1f} ms "
-          f"(preprocess {st['preprocess_ms']:.1f}, sort {st['sort_ms']:.1f}, blend {st['blend_ms']:.1f}), "
-          f"{st['visible']} visible splats, {st['evals_per_pixel']:.1f} evaluations/pixel")
+    print(f"{out}: {cam.width}x{cam.height} {settings.label} on {args.backend}: {st.total_ms:.1f} ms "
+          f"(preprocess {st.preprocess_ms:.1f}, sort {st.sort_ms:.1f}, blend {st.blend_ms:.1f}), "
+          f"{st.visible} visible splats, {st.evals_per_pixel:.1f} evaluations/pixel")
     return 0
 
 
@@ -144,7 +144,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     img = compose_grid(cells, cam.width, cam.height)
     path = save_image(out_dir / "comparison.png", img, force=True)
     print(f"wrote {path} ({img.width}x{img.height}): {Path(scene_path).name}, "
-          + ", ".join(f"{c.settings.label} {c.stats['total_ms']:.0f} ms" for c in cells[0]))
+          + ", ".join(f"{c.settings.label} {c.stats.total_ms:.0f} ms" for c in cells[0]))
     small = cam.with_size(max(2, cam.width // 2), max(2, cam.height // 2))  # half size keeps it quick
     frames = video.zoom_path(small, DEMO_VIDEO_FRAMES)
     with Progress(transient=True) as progress:

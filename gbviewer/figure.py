@@ -12,7 +12,7 @@ from PIL import Image, ImageDraw, ImageFont
 from .camera import Camera
 from .errors import GBViewerError
 from .io.files import atomic_write
-from .render import RenderSettings, get_renderer
+from .render import FrameStats, RenderSettings, get_renderer
 from .scene import Scene
 
 
@@ -71,7 +71,7 @@ class Cell:
     settings: RenderSettings
     rate: float
     rgb: np.ndarray  # at the render resolution
-    stats: dict
+    stats: FrameStats
 
 
 def render_grid(scene: Scene, camera: Camera, settings: list[RenderSettings], rates: list[float],
@@ -146,8 +146,8 @@ def draw_inset(tile: Image.Image, box: tuple[float, float, float, float], frac: 
 
 def _default_lines(cell: Cell) -> list[str]:
     h, w = cell.rgb.shape[:2]
-    return [f"{cell.stats.get('mode', cell.settings.label)}  {format_rate(cell.rate)} ({w}x{h})",
-            f"{cell.stats.get('total_ms', 0):.0f} ms"]
+    return [f"{(cell.stats.mode or cell.settings.label)}  {format_rate(cell.rate)} ({w}x{h})",
+            f"{cell.stats.total_ms:.0f} ms"]
 
 
 def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = 4, captions: str = "overlay",
@@ -189,7 +189,7 @@ def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = 4,
             if texts is None:
                 h, w = cell.rgb.shape[:2]
                 draw_label(tile, f"{cell.settings.label}  {format_rate(cell.rate)} ({w}x{h})  "
-                                 f"{cell.stats.get('total_ms', 0):.0f} ms")
+                                 f"{cell.stats.total_ms:.0f} ms")
             else:
                 strip = Image.new("RGB", (width, layout.caption_height), (0, 0, 0))
                 sdraw = ImageDraw.Draw(strip)

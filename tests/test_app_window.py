@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from conftest import skip_or_fail
+from helpers import skip_or_fail
 from gbviewer.app import logic
 from gbviewer.figure import to_uint8, upscale_nearest
 
@@ -366,7 +366,7 @@ def test_drop_a_file_glsl_backend_and_render_limit(app, tmp_path):
         wait(app)
         for i in range(2):
             shown = app.panes[i].parts["a"]
-            assert shown.job.backend == "glsl" and shown.frame.stats["backend"] == "glsl"
+            assert shown.job.backend == "glsl" and shown.frame.stats.backend == "glsl"
             ref = gb.render(app.scene, shown.job.camera, shown.job.settings.mode)
             assert np.abs(shown.frame.rgb - ref.rgb).max() < 5e-3
     else:

@@ -682,9 +682,9 @@ class ViewerApp:
         shown.job = res.job
         st = res.frame.stats
         cam = res.job.camera
-        if res.job.info.get("preview", 1.0) == 1.0 and st.get("total_ms"):
+        if res.job.info.get("preview", 1.0) == 1.0 and st.total_ms:
             p.ms_per_px[(part, res.job.settings.mode.label, res.job.settings.supersample, res.job.backend)] = \
-                st["total_ms"] / (cam.width * cam.height)
+                st.total_ms / (cam.width * cam.height)
         p.fps[part].tick(res.finished)
         self._upload(shown, res.frame, self.settings.panes[i].view)
 
@@ -1084,9 +1084,9 @@ class ViewerApp:
                     continue
                 st = shown.frame.stats
                 imgui.table_next_row()
-                cells = (p.name + ("'" if part == "b" else ""), f"{st.get('total_ms', 0):.0f}",
-                         f"{st.get('preprocess_ms', 0):.1f}", f"{st.get('sort_ms', 0):.1f}",
-                         f"{st.get('blend_ms', 0):.0f}", f"{self.pane_fps(p, part):.1f}")
+                cells = (p.name + ("'" if part == "b" else ""), f"{st.total_ms:.0f}",
+                         f"{st.preprocess_ms:.1f}", f"{st.sort_ms:.1f}",
+                         f"{st.blend_ms:.0f}", f"{self.pane_fps(p, part):.1f}")
                 for c in cells:
                     imgui.table_next_column()
                     imgui.text(c)
@@ -1100,7 +1100,7 @@ class ViewerApp:
         frame = p.parts[part].frame
         if rate > 0 or frame is None:
             return rate
-        return 1000.0 / max(1e-3, frame.stats.get("total_ms", 0.0))
+        return 1000.0 / max(1e-3, frame.stats.total_ms)
 
     def _text(self, dl, x: float, y: float, text: str, colour: int = WHITE, bg: int = BLACK_A,
               align_right: bool = False) -> tuple[float, float]:
@@ -1182,11 +1182,11 @@ class ViewerApp:
                         continue
                     st = shown.frame.stats
                     tag = "B " if part == "b" else ""
-                    lines.append(f"{tag}{st.get('total_ms', 0):.1f} ms: pre {st.get('preprocess_ms', 0):.1f}"
-                                 f" + sort {st.get('sort_ms', 0):.1f} + blend {st.get('blend_ms', 0):.1f}"
+                    lines.append(f"{tag}{st.total_ms:.1f} ms: pre {st.preprocess_ms:.1f}"
+                                 f" + sort {st.sort_ms:.1f} + blend {st.blend_ms:.1f}"
                                  f"  {self.pane_fps(p, part):.1f} fps")
-                    lines.append(f"{tag}{int(st.get('visible', 0)):,} splats visible"
-                                 f"  {st.get('evals_per_pixel', 0):.0f} evals/px")
+                    lines.append(f"{tag}{int(st.visible):,} splats visible"
+                                 f"  {st.evals_per_pixel:.0f} evals/px")
                 for k, line in enumerate(reversed(lines)):
                     self._text(dl, r.x + 4, r.y + r.h - 24 - 21 * k, line, col(220, 220, 220))
             if self.hover is not None and self.hover[0] == p.index:
@@ -1220,8 +1220,8 @@ class ViewerApp:
         s = self.settings
         sizes = "  ".join(f"{p.name} {p.render_size[0]}x{p.render_size[1]}" for p in self.panes[: s.pane_count])
         backend = s.backend if self.backend_usable(s.backend) else "cpu"
-        simd = next((part.frame.stats["simd"] for p in self.panes[: s.pane_count] for part in p.parts.values()
-                     if part.frame is not None and "simd" in part.frame.stats), None)
+        simd = next((part.frame.stats.simd for p in self.panes[: s.pane_count] for part in p.parts.values()
+                     if part.frame is not None and part.frame.stats.simd is not None), None)
         if backend == "cpu" and simd:
             backend = f"cpu {simd}"  # the blend's SIMD path (GBVIEWER_SIMD forces one)
         imgui.text(f"rate {logic.format_rate(s.rate)}")

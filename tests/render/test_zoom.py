@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from conftest import shared_scene
+from helpers import shared_scene
 
 
 def box_downsample(img: np.ndarray, k: int) -> np.ndarray:
