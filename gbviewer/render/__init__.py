@@ -4,11 +4,9 @@
 from .cpu import CpuRenderer
 from .cuda import CudaRenderer
 from .registry import BACKENDS, create_gl_context, create_renderer, get_renderer, render
-from .types import (DEBUG_OUTPUTS, DEFAULT_ET_GRADE, DEFAULT_SIGMA, ORDER_INDEPENDENT, SORT_ENTRY_BYTES, Frame,
-                    FrameStats, Mode, Renderer, RenderSettings)
+from .types import SORT_ENTRY_BYTES, Frame, FrameStats, Mode, Renderer, RenderSettings
 
 __all__ = [
-    "BACKENDS", "DEBUG_OUTPUTS", "DEFAULT_ET_GRADE", "DEFAULT_SIGMA", "ORDER_INDEPENDENT", "SORT_ENTRY_BYTES",
-    "CpuRenderer", "CudaRenderer", "Frame", "FrameStats", "Mode", "RenderSettings", "Renderer", "create_gl_context",
-    "create_renderer", "get_renderer", "render",
+    "BACKENDS", "SORT_ENTRY_BYTES", "CpuRenderer", "CudaRenderer", "Frame", "FrameStats", "Mode", "RenderSettings",
+    "Renderer", "create_gl_context", "create_renderer", "get_renderer", "render",
 ]

@@ -47,11 +47,6 @@ class CudaRenderer:
         ok, why = _native_cuda.availability()
         return ok, "" if ok else why
 
-    @property
-    def device(self) -> int:
-        """The CUDA device that holds the scene."""
-        return self._impl.device
-
     def upload(self, scene: Scene) -> None:
         with self._lock:
             self._scene = scene

@@ -154,7 +154,7 @@ def test_cuda_empty_frame(mode):
 @needs_gpu
 def test_cuda_renderer_device():
     r = CudaRenderer()
-    assert 0 <= r.device
+    assert 0 <= r._impl.device
     with pytest.raises(gb.BackendUnavailable, match="does not exist"):
         CudaRenderer(device=1 << 20)
 

@@ -13,8 +13,8 @@ import weakref
 import numpy as np
 
 from ...errors import RenderError
-from .gpu import WG, Gpu
 from .context import shader_source
+from .gpu import WG, Gpu
 
 LOOP_PROBE = 1 << 20
 FULL = 2**31 - 1  # a chunk end past any tile list
