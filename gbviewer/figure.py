@@ -146,7 +146,7 @@ def draw_inset(tile: Image.Image, box: tuple[float, float, float, float], frac: 
 
 def _default_lines(cell: Cell) -> list[str]:
     h, w = cell.rgb.shape[:2]
-    return [f"{(cell.stats.mode or cell.settings.label)}  {format_rate(cell.rate)} ({w}x{h})",
+    return [f"{cell.stats.mode or cell.settings.label}  {format_rate(cell.rate)} ({w}x{h})",
             f"{cell.stats.total_ms:.0f} ms"]
 
 

@@ -434,7 +434,7 @@ def _frame_lines(pf: PathFrame) -> Callable[[Cell], list[str]]:
     def lines(cell: Cell) -> list[str]:
         h, w = cell.rgb.shape[:2]
         size = f"  (rendered {w}x{h})" if (w, h) != (pf.width, pf.height) else ""
-        return [(cell.stats.mode or cell.settings.label), f"sampling rate {format_rate(pf.rate)}{size}"]
+        return [cell.stats.mode or cell.settings.label, f"sampling rate {format_rate(pf.rate)}{size}"]
     return lines
 
 
@@ -584,7 +584,7 @@ def compare_figure(scene: Scene, camera: Camera, settings_list: Sequence[RenderS
             note = f"reference  {ms}"
         else:
             note = f"PSNR {p:.2f} dB  {ms}"
-        return [f"{(cell.stats.mode or cell.settings.label)}  {format_rate(cell.rate)} ({w}x{h})", note]
+        return [f"{cell.stats.mode or cell.settings.label}  {format_rate(cell.rate)} ({w}x{h})", note]
 
     img = compose_grid(cells, camera.width, camera.height, GAP, captions="below", lines=lines, inset=inset)
     layout = GridLayout(len(rates), len(settings_list), camera.width, camera.height, GAP,

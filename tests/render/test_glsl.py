@@ -196,7 +196,7 @@ def test_preprocess_is_not_contracted(shader, tmp_path, monkeypatch):
     exe = shutil.which("glslangValidator")
     if exe is None:
         skip_or_fail("glslangValidator (Debian: glslang-tools) is not installed")
-    monkeypatch.setattr(glsl, "SHADER_DIR", SHADERS)  # this checkout's shaders, not the installed copy
+    monkeypatch.setattr(gl_context, "SHADER_DIR", SHADERS)  # this checkout's shaders, not the installed copy
     src = tmp_path / shader
     src.write_text(shader_source(shader, {"GBV_PRECISE_MATH": 1}))
     p = subprocess.run([exe, "-G", "--aml", "-H", str(src), "-o", str(tmp_path / "out.spv")], capture_output=True,
@@ -520,7 +520,7 @@ def test_unavailable_is_clear(monkeypatch):
 
 def test_scene_too_large_is_clear(gl):
     r = GlslRenderer()
-    r.max_block = 4096  # pretend a GPU whose storage buffers hold 4 KiB
+    r.gpu.max_block = 4096  # pretend a GPU whose storage buffers hold 4 KiB
     with pytest.raises(RenderError, match="GL_MAX_SHADER_STORAGE_BLOCK_SIZE"):
         r.upload(random_scene(200))
 

@@ -102,6 +102,15 @@ class GlslRenderer:
             return False, str(exc)
         return True, ""
 
+    @classmethod
+    def describe(cls) -> str:
+        """GL renderer and version of the headless context (for benchmark reports: gbviewer.bench.machine_description)."""
+        try:
+            ctx = standalone_context()
+        except BackendUnavailable as exc:
+            return str(exc)
+        return f"{ctx.info.get('GL_RENDERER', '?')}; OpenGL {ctx.info.get('GL_VERSION', '?')}"
+
     def _make_current(self) -> None:
         """Make the headless context this renderer owns current before it works: another one (an app window's,
         say) may have become current in this thread since. It stays current afterwards, as after its creation

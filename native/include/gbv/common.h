@@ -25,7 +25,7 @@
 
 namespace gbv {
 
-// Blending modes; the integer values are the Python enum's values (gbviewer/render.py).
+// Blending modes; the integer values are the Python enum's values (gbviewer/render/types.py).
 enum Mode : int32_t { SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5 };
 
 constexpr int TILE = 16;                       // BLOCK_X = BLOCK_Y (KERNELS.md §0.4)
