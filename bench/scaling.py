@@ -36,7 +36,8 @@ def measure_point(n: int, width: int, height: int, mode: str, repeat: int) -> di
     settings = gb.RenderSettings(gb.Mode.parse(mode))
     renderer.render(cam, settings)
     frames = [renderer.render(cam, settings).stats for _ in range(repeat)]
-    med = {k: statistics.median(getattr(f, k) for f in frames) for k in ("total_ms", "preprocess_ms", "sort_ms", "blend_ms")}
+    med = {k: statistics.median(getattr(f, k) for f in frames)
+           for k in ("total_ms", "preprocess_ms", "sort_ms", "blend_ms")}
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return {"splats": n, "width": width, "height": height, "mode": mode, **med,
             "sort_length": frames[-1].sort_length, "evals_per_pixel": frames[-1].evals_per_pixel,
