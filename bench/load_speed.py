@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests" / "io"))
 
 import numpy as np  # noqa: E402
-from encoders import (encode_compressed_ply, encode_splat, encode_spz, random_scene, sog_files,  # noqa: E402
+from encoders import (encode_compressed_ply, encode_splat, encode_spz, random_params, sog_files,  # noqa: E402
                       write_sog)
 
 import gbviewer as gb  # noqa: E402
@@ -74,7 +74,7 @@ def main() -> None:
     ap.add_argument("--formats", default=",".join(WRITERS))
     ap.add_argument("--dir", type=Path, help="where to write the files (default: a temporary folder)")
     args = ap.parse_args()
-    scenes = {deg: random_scene(args.n, sh_degree=deg, seed=deg) for deg in (0, 3)}
+    scenes = {deg: random_params(args.n, sh_degree=deg, seed=deg) for deg in (0, 3)}
     with tempfile.TemporaryDirectory() as tmp:
         folder = args.dir or Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)

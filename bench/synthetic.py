@@ -15,8 +15,7 @@ from pathlib import Path
 import numpy as np
 
 import gbviewer as gb
-
-SH_C0 = 0.28209479177387814
+from gbviewer.scene import SH_C0
 
 
 def _frame_quats(normals: np.ndarray) -> np.ndarray:

@@ -7,7 +7,7 @@ from pathlib import Path
 from .camera import Camera, load_cameras_json, orbit_camera
 from .errors import BackendUnavailable, CameraError, GBViewerError, RenderError, SceneFormatError
 from .io import load
-from .render import Frame, Mode, Renderer, RenderSettings, get_renderer, render
+from .render import Frame, FrameStats, Mode, Renderer, RenderSettings, get_renderer, render
 from .scene import Scene
 
 ASSETS = Path(__file__).parent / "assets"  # installed; a source checkout has it at the top level
@@ -16,7 +16,7 @@ if not ASSETS.is_dir():
 DEFAULT_SCENE = ASSETS / "fruit_drops_minimal.ply"
 
 __all__ = [
-    "ASSETS", "DEFAULT_SCENE", "BackendUnavailable", "Camera", "CameraError", "Frame", "GBViewerError", "Mode",
-    "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError", "get_renderer", "load",
+    "ASSETS", "DEFAULT_SCENE", "BackendUnavailable", "Camera", "CameraError", "Frame", "FrameStats", "GBViewerError",
+    "Mode", "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError", "get_renderer", "load",
     "load_cameras_json", "orbit_camera", "render",
 ]

@@ -16,7 +16,7 @@ scene gets cells built once, on first use, by `build_cells`:
   triangle inequality: lambda = max_i (|D^-1 d_i| + 3 |D^-1 L_i|_2), D = diag(e), Sigma_i = L_i L_i^T in the cell
   frame; lambda <= sqrt(3) (the box's circumscribed ellipsoid). scales = lambda e / 2. So a cell's tile rectangle
   covers its splats' up to projection approximations; the renderer counts the splat-tile pairs it misses
-  (Frame.stats["cell_misses"]).
+  (FrameStats.cell_misses).
 """
 
 from __future__ import annotations
@@ -99,6 +99,12 @@ class Cells:
     @property
     def sizes(self) -> np.ndarray:
         return np.diff(self.offsets)
+
+    def cell_of(self, num_splats: int) -> np.ndarray:
+        """Each splat's cell (int32, -1: in none), for a scene of num_splats."""
+        out = np.full(num_splats, -1, np.int32)
+        out[self.members] = np.repeat(np.arange(self.num_cells, dtype=np.int32), self.sizes)
+        return out
 
     def stats(self) -> dict:
         """Cell count, members per cell (mean, min, max), splats per cell ratio, build time, origin."""
@@ -244,7 +250,7 @@ _cache: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 def cells_for(scene, k: int = DEFAULT_CELL_SIZE) -> Cells:
     """The scene's own cells when it has them (trained Duplex-GS), else cells of k splats, built once and cached;
     validated against the scene (every backend takes its cells from here)."""
-    cells = getattr(scene, "cells", None)
+    cells = scene.oit.cells if scene.oit is not None else None
     if cells is None:
         per_scene = _cache.setdefault(scene, {})
         if k not in per_scene:

@@ -111,9 +111,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     frame = get_renderer(scene, args.backend).render(cam, settings)
     save_image(out, frame.rgb, force=args.force)
     st = frame.stats
-    print(f"{out}: {cam.width}x{cam.height} {settings.label} on {args.backend}: {st['total_ms']:.1f} ms "
-          f"(preprocess {st['preprocess_ms']:.1f}, sort {st['sort_ms']:.1f}, blend {st['blend_ms']:.1f}), "
-          f"{st['visible']} visible splats, {st['evals_per_pixel']:.1f} evaluations/pixel")
+    print(f"{out}: {cam.width}x{cam.height} {settings.label} on {args.backend}: {st.total_ms:.1f} ms "
+          f"(preprocess {st.preprocess_ms:.1f}, sort {st.sort_ms:.1f}, blend {st.blend_ms:.1f}), "
+          f"{st.visible} visible splats, {st.evals_per_pixel:.1f} evaluations/pixel")
     return 0
 
 

@@ -15,7 +15,7 @@ from .camera import Camera, format_rate
 from .errors import GBViewerError
 from .io.files import atomic_write, refuse_overwrite
 from .metrics import reference_psnr
-from .render import Frame, Mode, RenderSettings, get_renderer
+from .render import Frame, FrameStats, Mode, RenderSettings, get_renderer
 from .scene import Scene
 
 GAP = 4  # pixels between cells
@@ -56,7 +56,7 @@ class Cell:
     settings: RenderSettings
     rate: float
     rgb: np.ndarray  # at the render resolution
-    stats: dict  # Frame.stats; read only through the properties below
+    stats: FrameStats
 
     @classmethod
     def of(cls, settings: RenderSettings, rate: float, frame: Frame) -> "Cell":
@@ -65,12 +65,12 @@ class Cell:
     @property
     def mode_label(self) -> str:
         """The mode as the renderer reports it, else the settings' label."""
-        return self.stats.get("mode", self.settings.label)
+        return self.stats.mode or self.settings.label
 
     @property
     def total_ms(self) -> float:
         """The render's wall time."""
-        return self.stats.get("total_ms", 0)
+        return self.stats.total_ms
 
 
 def render_grid(scene: Scene, camera: Camera, settings: list[RenderSettings], rates: list[float],

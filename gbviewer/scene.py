@@ -4,13 +4,18 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from .cells import Cells
 from .errors import GBViewerError
 
+if TYPE_CHECKING:
+    from .camera import Camera
+
 SH_COEFFS = {0: 1, 1: 4, 2: 9, 3: 16}
+SH_C0 = 0.28209479177387814  # degree-0 SH basis: colour = 0.5 + SH_C0 * dc
 
 
 def sh_degree_for(num_coeffs: int) -> int:
@@ -21,20 +26,41 @@ def sh_degree_for(num_coeffs: int) -> int:
     raise GBViewerError(f"sh has {num_coeffs} coefficients per channel; expected one of 1, 4, 9, 16")
 
 
+class ViewDecoder(Protocol):
+    """A trained model whose splats depend on the view (Duplex-GS: `gbviewer.io.duplex.DuplexModel`)."""
+
+    def decode(self, camera: Camera) -> Scene:
+        """The splats (and their cells) to render for this camera."""
+        ...
+
+
+@dataclass(frozen=True, eq=False)
+class OitData:
+    """A scene's data for the order-independent modes (wsr, duplex; KERNELS.md §7-8); every field is optional.
+
+    view_weight_sh (N,K): the sort-free view weight v_i as a raw 1-channel SH (f_do_0, f_ro_*; wsr and duplex
+    multiply the opacity by it); sigma (LC-WSR's depth-correction scale) and weight_background: the trained globals
+    (ply `info` rows); et_grade: a trained Duplex-GS E; cells: the scene's own Duplex-GS cells; neural: a trained
+    Duplex-GS model whose splats are decoded per view (the scene's splat arrays then only hold the view-independent
+    centres, for bounds and framing).
+    """
+
+    view_weight_sh: np.ndarray | None = None
+    sigma: float | None = None
+    weight_background: float | None = None
+    et_grade: float | None = None
+    cells: Cells | None = None
+    neural: ViewDecoder | None = None
+
+
 @dataclass(frozen=True, eq=False)
 class Scene:
     """Splats with activated parameters (scales after exp, opacities after sigmoid, unit quaternions).
 
     means (N,3), scales (N,3), quats (N,4) as (w,x,y,z), opacities (N,), sh (N,K,3) with DC first,
     optional filter_3d (N,) (Mip-Splatting's 3D filter, applied by every renderer mode).
-    `meta` holds loader facts (format, version, property names) for `gbviewer info`.
-
-    Optional data of the order-independent modes (KERNELS.md §7-8), None for ordinary scenes:
-    view_weight_sh (N,K) the sort-free view weight v_i as a raw 1-channel SH (f_do_0, f_ro_*; wsr and duplex
-    multiply the opacity by it); wsr_sigma and weight_background, the trained globals (ply `info` rows); et_grade,
-    a trained Duplex-GS E; cells, the scene's own Duplex-GS cells (`gbviewer.cells.Cells`); neural, a trained
-    Duplex-GS model whose splats are decoded per view (`gbviewer.io.duplex.DuplexModel`; the splat arrays then
-    only hold the view-independent centres, for bounds and framing).
+    `meta` holds loader facts (format, version, property names) for `gbviewer info`. `oit`: the data of the
+    order-independent modes (`OitData`), None for ordinary scenes.
     """
 
     means: np.ndarray
@@ -45,12 +71,7 @@ class Scene:
     filter_3d: np.ndarray | None = None
     source: str = "<arrays>"
     meta: dict[str, Any] = field(default_factory=dict)
-    view_weight_sh: np.ndarray | None = None
-    wsr_sigma: float | None = None
-    weight_background: float | None = None
-    et_grade: float | None = None
-    cells: Any = None
-    neural: Any = None
+    oit: OitData | None = None
 
     @property
     def num_splats(self) -> int:
@@ -85,10 +106,11 @@ class Scene:
         wsr_sigma: float | None = None,
         weight_background: float | None = None,
         et_grade: float | None = None,
-        cells: Any = None,
-        neural: Any = None,
+        cells: Cells | None = None,
+        neural: ViewDecoder | None = None,
     ) -> "Scene":
-        """Validate activated arrays, drop non-finite splats (warning once), normalise quaternions."""
+        """Validate activated arrays, drop non-finite splats (warning once), normalise quaternions. The keywords
+        from view_weight_sh on make `Scene.oit` (wsr_sigma is `OitData.sigma`)."""
         arrays = {
             "means": np.asarray(means, dtype=np.float32),
             "scales": np.asarray(scales, dtype=np.float32),
@@ -137,11 +159,8 @@ class Scene:
             if dropped == n:
                 raise GBViewerError(f"{source}: every splat has non-finite values")
             if cells is not None:  # renumber the members, drop the removed splats from their cells
-                cell_of = np.full(n, -1, np.int64)
-                cell_of[cells.members] = np.repeat(np.arange(cells.num_cells), cells.sizes)
-                cell_of = cell_of[finite]
-                cells = type(cells).from_groups(cells.means, cells.scales, cells.quats, cell_of, cells.origin,
-                                                cells.build_ms, cells.info)
+                cells = Cells.from_groups(cells.means, cells.scales, cells.quats, cells.cell_of(n)[finite],
+                                          cells.origin, cells.build_ms, cells.info)
 
         if (arrays["scales"] < 0).any():
             raise GBViewerError(f"{source}: field 'scales': negative values; expected activated scales >= 0")
@@ -160,6 +179,10 @@ class Scene:
         if cells is not None:
             if len(cells.members) and (cells.members.min() < 0 or cells.members.max() >= len(arrays["means"])):
                 raise GBViewerError(f"{source}: field 'cells': member indices outside 0..{len(arrays['means']) - 1}")
-        globals_ = {"wsr_sigma": wsr_sigma, "weight_background": weight_background, "et_grade": et_grade}
+        globals_ = {"sigma": wsr_sigma, "weight_background": weight_background, "et_grade": et_grade}
         globals_ = {k: None if v is None else float(v) for k, v in globals_.items()}
-        return cls(source=source, meta=dict(meta or {}), cells=cells, neural=neural, **globals_, **arrays)
+        vw = arrays.pop("view_weight_sh", None)
+        oit = OitData(vw, cells=cells, neural=neural, **globals_)
+        if vw is None and cells is None and neural is None and all(v is None for v in globals_.values()):
+            oit = None
+        return cls(source=source, meta=dict(meta or {}), oit=oit, **arrays)

@@ -82,7 +82,7 @@ SideMoments window_side_moments(float c, float h) {
     float he_prev = 1.0, he = c, p = h;  // He_{n-1}, He_n, h^n/n! at n = 1
     float s0 = 1.0, s1 = -(p * he) * (1.0 / 3.0), s2 = 1.0 / 3.0;
     // Every term, unlike blend.h (which stops at 6 or 10 for narrower windows; the sums agree to ~1e-7): a loop with
-    // a data-dependent bound is not unrolled and would count towards llvmpipe's loop cap (see glsl.py).
+    // a data-dependent bound is not unrolled and would count towards llvmpipe's loop cap (see gbviewer/render/glsl/limits.py).
     for (int n = 2; n <= GB_SERIES_TERMS; ++n) {
         const float he_next = c * he - float(n - 1) * he_prev;
         he_prev = he;

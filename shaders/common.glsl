@@ -1,8 +1,8 @@
 // GLSL mirror of native/include/gbv/common.h: the same constants with the same names and values, the same
 // structs (Splat2D's storage layout is in splat_storage.glsl), and the float helpers the C++ code takes from
-// <cmath>. tests/test_glsl.py parses both files and fails when a constant differs or is missing.
+// <cmath>. tests/render/test_glsl.py parses both files and fails when a constant differs or is missing.
 
-// Blending modes; the integer values are the Python enum's values (gbviewer/render.py).
+// Blending modes; the integer values are the Python enum's values (gbviewer/render/types.py).
 const int SCALAR = 0;
 const int MIP = 1;
 const int ANALYTIC = 2;

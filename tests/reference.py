@@ -18,8 +18,10 @@ import math
 import numpy as np
 from scipy.special import erf
 
+from gbviewer.camera import NEAR_PLANE
+from gbviewer.scene import SH_C0
+
 TILE = 16
-NEAR = 0.2
 MIN_ALPHA_3DGS = 1.0 / 255.0
 MIN_ALPHA_GB = 1.0 / 256.0
 T_STOP = 1e-4
@@ -35,7 +37,6 @@ WSR_EMPTY = 1e-4
 WSR_TERM_MAX = 64.0  # wsr: alpha and each colour term are capped here (the renderer's int64 fixed-point bound)
 
 # Spherical-harmonics constants of 3DGS (KERNELS.md §0.5).
-SH_C0 = 0.28209479177387814
 SH_C1 = 0.4886025119029199
 SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
 SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
@@ -90,7 +91,7 @@ def camera_params(cam, supersample: int = 1) -> dict:
         cx=float(np.float32(cam.cx)) * n, cy=float(np.float32(cam.cy)) * n,
         R=np.asarray(cam.R, np.float32).astype(np.float64),
         t=np.asarray(cam.t, np.float32).astype(np.float64),
-        near=float(getattr(cam, "near", NEAR)),
+        near=float(getattr(cam, "near", NEAR_PLANE)),
     )
 
 
@@ -167,7 +168,10 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
         campos0 = -R.T @ t
         d0 = means - campos0
         d0 = d0 / np.maximum(np.linalg.norm(d0, axis=1, keepdims=True), 1e-300)
-        vw = getattr(scene, "view_weight_sh", None) if not isinstance(scene, dict) else scene.get("view_weight_sh")
+        if isinstance(scene, dict):
+            vw = scene.get("view_weight_sh")
+        else:
+            vw = scene.oit.view_weight_sh if scene.oit is not None else None
         w = _sh_raw(np.asarray(vw, np.float64), d0) if vw is not None else np.ones(n)
         if oit["depth_correct"]:
             keep &= Z < oit["sigma"]

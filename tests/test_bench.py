@@ -65,7 +65,7 @@ def test_bench_command_end_to_end(tmp_path, capsys):
     assert "--force" in capsys.readouterr().err
 
 
-# --- SIMD paths of the CPU backend: gbviewer._native.simd_paths / simd / set_simd / exp_rate, Frame.stats["simd"]
+# --- SIMD paths of the CPU backend: gbviewer._native.simd_paths / simd / set_simd / exp_rate, Frame.stats.simd
 
 
 def test_native_simd_api_as_the_bench_uses_it(bundled_scene):
@@ -78,7 +78,7 @@ def test_native_simd_api_as_the_bench_uses_it(bundled_scene):
         for p in paths:
             bench.set_simd(p)
             assert bench.current_simd() == p
-            ran = gb.render(bundled_scene, cam, "scalar").stats["simd"]  # what ran: a mode may lack a vector path
+            ran = gb.render(bundled_scene, cam, "scalar").stats.simd  # what ran: a mode may lack a vector path
             assert ran in paths and (ran == "scalar") >= (p == "scalar")
         with pytest.raises(ValueError):
             bench.set_simd("no-such-path")

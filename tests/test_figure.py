@@ -14,7 +14,7 @@ from gbviewer import figure
 from gbviewer.cli import main
 from gbviewer.figure import to_uint8, upscale_nearest
 from gbviewer.metrics import box_downsample, psnr
-from conftest import OUTPUT_H as H, OUTPUT_W as W
+from helpers import OUTPUT_H as H, OUTPUT_W as W
 
 
 def test_compare_cells_equal_the_renders(bundled_scene, output_view):

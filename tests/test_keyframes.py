@@ -12,7 +12,7 @@ import pytest
 import gbviewer as gb
 from gbviewer import keyframes
 from gbviewer.camera_paths import keyframe_path
-from conftest import OUTPUT_H as H, OUTPUT_W as W
+from helpers import OUTPUT_H as H, OUTPUT_W as W
 
 
 def keys_for(bundled_scene) -> list[keyframes.Keyframe]:

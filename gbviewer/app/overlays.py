@@ -10,7 +10,7 @@ from imgui_bundle import imgui
 
 from ..camera import format_rate
 from .layout import loupe_uv
-from .panes import frame_stats, pane_fps
+from .panes import pane_fps
 from .state import PaneState
 
 if TYPE_CHECKING:
@@ -73,7 +73,7 @@ def pane_label(app: ViewerApp, p: PaneState, part: str) -> str:
 
 def stats_lines(p: PaneState, part: str) -> list[str]:
     """The information overlay of a pane part: timings per stage, fps, visible splats, evaluations per pixel."""
-    st = frame_stats(p.parts[part].frame)
+    st = p.parts[part].frame.stats
     tag = "B " if part == "b" else ""
     return [f"{tag}{st.total_ms:.1f} ms: pre {st.preprocess_ms:.1f} + sort {st.sort_ms:.1f} + blend "
             f"{st.blend_ms:.1f}  {pane_fps(p, part):.1f} fps",
@@ -144,8 +144,8 @@ def draw_status(app: ViewerApp) -> None:
     imgui.begin("##status", None, flags)
     sizes = "  ".join(f"{p.name} {p.render_size[0]}x{p.render_size[1]}" for p in state.visible)
     backend = app.worker.backend_for(s.backend)
-    simd = next((frame_stats(part.frame).simd for p in state.visible for part in p.parts.values()
-                 if part.frame is not None and frame_stats(part.frame).simd), "")
+    simd = next((part.frame.stats.simd for p in state.visible for part in p.parts.values()
+                 if part.frame is not None and part.frame.stats.simd), "")
     if backend == "cpu" and simd:
         backend = f"cpu {simd}"  # the blend's SIMD path (GBVIEWER_SIMD forces one)
     imgui.text(f"rate {format_rate(s.rate)}")

@@ -1,11 +1,11 @@
 """The panes' renders: which requests go to the render thread this frame (one per pane part whose view changed, at a
 preview resolution while the camera moves), finished frames uploaded to textures, and their images queued for
-drawing. `frame_stats` is the one place the app reads a frame's statistics."""
+drawing."""
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import moderngl
 import numpy as np
@@ -23,34 +23,13 @@ MAX_SAMPLES = 96_000_000  # per render (pixels x supersampling^2): bounds memory
 PREVIEW_BUDGET_MS = 60.0  # per UI frame while the camera moves, shared by the panes
 
 
-@dataclass(frozen=True)
-class PaneStats:
-    """The numbers the panes' overlays and the timings table show of a frame."""
-
-    total_ms: float = 0.0
-    preprocess_ms: float = 0.0
-    sort_ms: float = 0.0
-    blend_ms: float = 0.0
-    visible: int = 0
-    evals_per_pixel: float = 0.0
-    simd: str = ""
-    backend: str = ""
-
-
-def frame_stats(frame: Frame) -> PaneStats:
-    st = frame.stats
-    return PaneStats(st.get("total_ms", 0.0), st.get("preprocess_ms", 0.0), st.get("sort_ms", 0.0),
-                      st.get("blend_ms", 0.0), int(st.get("visible", 0)), st.get("evals_per_pixel", 0.0),
-                      st.get("simd", ""), st.get("backend", ""))
-
-
 def pane_fps(p: PaneState, part: str) -> float:
     """Finished renders per second over the last 2 s while they keep coming, else 1000 / the last total."""
     rate = p.fps[part].rate()
     frame = p.parts[part].frame
     if rate > 0 or frame is None:
         return rate
-    return 1000.0 / max(1e-3, frame_stats(frame).total_ms)
+    return 1000.0 / max(1e-3, frame.stats.total_ms)
 
 
 class PaneRenders:
@@ -148,7 +127,7 @@ class PaneRenders:
             s.message(f"pane {p.name}: {res.error}", "error")
             return
         shown.error = ""
-        total_ms = frame_stats(res.frame).total_ms
+        total_ms = res.frame.stats.total_ms
         cam = res.job.camera
         if res.job.info.get("preview", 1.0) == 1.0 and total_ms:
             key = (part, res.job.settings.mode.label, res.job.settings.supersample, res.job.backend)

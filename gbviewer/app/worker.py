@@ -13,7 +13,7 @@ from typing import Any, Hashable
 
 from ..camera import Camera
 from ..errors import BackendUnavailable, GBViewerError
-from ..render import BACKENDS, Frame, RenderSettings, get_renderer
+from ..render import BACKENDS, Frame, RenderSettings, create_gl_context, create_renderer, get_renderer
 from ..scene import Scene
 
 
@@ -119,14 +119,12 @@ class RenderWorker:
 
     def _glsl_context_status(self) -> tuple[bool, str]:
         """The glsl backend runs in this thread on a headless context of its own (an OpenGL context is current in
-        one thread only: the process-wide one of gbviewer.glsl may be current in another thread, and the window's
+        one thread only: the glsl backend's process-wide one may be current in another thread, and the window's
         is the UI thread's)."""
-        from .. import glsl
-
         try:
-            self._gl_ctx = glsl._create_standalone()
-        except Exception as exc:  # noqa: BLE001 - glcontext raises plain Exceptions with the driver's message
-            return False, f"no headless OpenGL 4.3 context: {str(exc).strip() or type(exc).__name__}"
+            self._gl_ctx = create_gl_context()
+        except BackendUnavailable as exc:
+            return False, str(exc)
         return BACKENDS["glsl"].check_context(self._gl_ctx)
 
     def _renderer(self, scene: Scene, backend: str):
@@ -138,7 +136,7 @@ class RenderWorker:
         if self._glsl is None or self._glsl[0] is not scene:
             if self._glsl is not None:
                 self._glsl[1].release()
-            renderer = BACKENDS["glsl"](ctx=self._gl_ctx)
+            renderer = create_renderer("glsl", ctx=self._gl_ctx)
             renderer.upload(scene)
             self._glsl = (scene, renderer)
         return self._glsl[1]

@@ -22,7 +22,7 @@ class FidelityRow:
     kind: str  # "zoom-out" (vs x1 scalar, box-downsampled) or "zoom-in" (downsampled vs x1 of the same mode)
     psnr: float
     ssim: float
-    simd: str | None = None  # the CPU backend's path that rendered it (Frame.stats["simd"]); None on other backends
+    simd: str | None = None  # the CPU backend's path that rendered it (Frame.stats.simd); None on other backends
 
 
 def _referenced(rates: list[float]) -> list[float]:
@@ -56,7 +56,7 @@ def measure_fidelity(scene: Scene, name: str, cams: list[Camera], settings: list
                 else:
                     img, ref, kind = box_downsample(img, k), ref_same, "zoom-in"
                 acc.setdefault((s.spec, rate, kind), []).append((psnr(img, ref), ssim(img, ref)))
-                ran[s.spec, rate, kind] = f.stats["simd"] if backend == "cpu" else None
+                ran[s.spec, rate, kind] = f.stats.simd if backend == "cpu" else None
                 if progress:
                     progress(render_cost(c, s, scene.num_splats))
     return [FidelityRow(name, spec, rate, kind, float(np.mean([p for p, _ in v])), float(np.mean([q for _, q in v])),

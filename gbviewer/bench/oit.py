@@ -80,7 +80,7 @@ def measure_oit(scene: Scene, name: str, cams: list[Camera], settings: list[Rend
             last = f.stats
             for k in STAGES + ("visible", "sort_length", "sort_bytes", "pairs", "cells", "cells_visible",
                                "cell_misses"):
-                acc.setdefault(k, []).append(f.stats.get(k, 0))
+                acc.setdefault(k, []).append(getattr(f.stats, k) or 0)
             acc.setdefault("psnr", []).append(psnr(f.rgb, ref))
             if progress:
                 progress(2 * render_cost(cam, s, scene.num_splats) + render_cost(cam, wanted[Mode.SCALAR],
@@ -93,7 +93,7 @@ def measure_oit(scene: Scene, name: str, cams: list[Camera], settings: list[Rend
         fl, pops = flicker(frames)
         mean = {k: float(np.mean(v)) for k, v in acc.items()}
         rows.append(OitRow(
-            name, backend, s.spec, last["mode"], c0.width, c0.height, round(mean["visible"]),
+            name, backend, s.spec, last.mode, c0.width, c0.height, round(mean["visible"]),
             round(mean["sort_length"]), mean["sort_bytes"] / 2**20, round(mean["pairs"]), round(mean["cells"]),
             round(mean["cells_visible"]), round(mean["cell_misses"]),
             {k: float(statistics.median(acc[k])) for k in STAGES}, mean["psnr"], fl, pops))

@@ -30,7 +30,7 @@ class SpeedRow:
     views, median per stage, evaluations per pixel (mean over views) and the evaluation rates (all the timed
     renders' evaluations over all their time).
 
-    simd: the path the CPU backend's blend ran (Frame.stats["simd"]; None on other backends), simd_requested: the
+    simd: the path the CPU backend's blend ran (Frame.stats.simd; None on other backends), simd_requested: the
     path set for the measurement (the two differ where a mode has no vector code). mevals_per_s_per_core:
     splat-pixel evaluations per second of frame time per core; blend_mevals_per_s_per_core: the same over the
     blend stage alone, to compare with exp_mevals_per_s_per_core, the exp throughput of one core on that path.
@@ -97,10 +97,10 @@ def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[Re
                                     continue  # first-touch allocations, caches, the new path
                                 a = acc[path]
                                 a["last"] = f.stats
-                                a["totals"].append(f.stats["total_ms"])
-                                a["evals"].append(f.stats["evals_per_pixel"])
+                                a["totals"].append(f.stats.total_ms)
+                                a["evals"].append(f.stats.evals_per_pixel)
                                 for k in STAGES:
-                                    a["stages"][k].append(f.stats[k])
+                                    a["stages"][k].append(getattr(f.stats, k))
                                 images[path] = f.rgb
                         if "scalar" in images:  # the vector paths against the scalar one, same view
                             for path, img in images.items():
@@ -113,10 +113,10 @@ def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[Re
                         med = {k: statistics.median(v) for k, v in a["stages"].items()}
                         # evaluation rates: all the timed renders' evaluations over all their time (views differ)
                         evals = sum(a["evals"]) * c.width * c.height
-                        ran = last["simd"] if cpu else None
+                        ran = last.simd if cpu else None
                         rows.append(SpeedRow(
                             name, backend, s.spec, rate, c.width, c.height, statistics.median(totals), min(totals),
-                            max(totals), med, last["visible"], last["sort_length"], float(np.mean(a["evals"])),
+                            max(totals), med, last.visible, last.sort_length, float(np.mean(a["evals"])),
                             evals / max(sum(totals), 1e-9) / 1e3 / per_core, ran, path,
                             evals / max(sum(a["stages"]["blend_ms"]), 1e-9) / 1e3 / per_core,
                             exp[ran] / 1e6 if exp and ran in exp else None, a["diff"]))

@@ -19,7 +19,8 @@ import plyfile
 
 from ..errors import SceneFormatError
 from ..scene import Scene
-from .packing import SH_C0, smallest_three
+from ..scene import SH_C0
+from .packing import smallest_three
 
 CHUNK_SIZE = 256
 RANGE_PROPS = ["min_x", "min_y", "min_z", "max_x", "max_y", "max_z",

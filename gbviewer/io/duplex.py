@@ -37,14 +37,14 @@ from pathlib import Path
 import numpy as np
 import plyfile
 
+from ..camera import NEAR_PLANE, Camera
+from ..cells import Cells
 from ..errors import SceneFormatError
-from ..scene import Scene
+from ..scene import SH_C0, Scene
 
-SH_C0 = 0.28209479177387814
 MLP_FILES = {"opacity": "opacity_mlp.pt", "cov": "cov_mlp.pt", "color": "color_mlp.pt"}
 OPTIONAL_FILES = {"feature_bank": "feature_bank_mlp.pt", "appearance": "embedding_appearance.pt"}
 UNITE_FILE = "checkpoints.pth"
-NEAR = 0.2
 
 
 def is_duplex_ply(ply: plyfile.PlyData) -> bool:
@@ -128,7 +128,8 @@ def load_mlps(path: Path, torch) -> dict:
 
 
 class DuplexModel:
-    """Anchors, MLPs and globals of a trained Duplex-GS model; `decode(camera)` gives the per-view splats and cells."""
+    """Anchors, MLPs and globals of a trained Duplex-GS model; `decode(camera)` gives the per-view splats and cells
+    (a `gbviewer.scene.ViewDecoder`)."""
 
     def __init__(self, path: Path, anchors, levels, extra_levels, offsets, feats, anchor_scales, sh_vi, info, mlps,
                  torch):
@@ -191,13 +192,11 @@ class DuplexModel:
             pred = np.log2(self.standard_dist / np.maximum(dist, 1e-30)) + self.extra_levels
         lod = np.clip(np.round(pred), 0, self.num_levels - 1)
         z = self.anchors @ R[2] + t[2]
-        return (self.levels <= lod) & (z > NEAR)
+        return (self.levels <= lod) & (z > NEAR_PLANE)
 
-    def _empty_view(self, camera) -> Scene:
+    def _empty_view(self, camera: Camera) -> Scene:
         """No anchor in this view: one transparent splat in one cell, which every mode and backend culls, so the
         frame is the background (a Scene cannot be empty)."""
-        from ..cells import Cells
-
         centre = (camera.position + 1.0 * camera.R[2]).astype(np.float32)[None]
         cells = Cells(centre, np.ones((1, 3), np.float32), np.array([[1.0, 0, 0, 0]], np.float32),
                       np.array([0, 1], np.int32), np.array([0], np.int32), "duplex-gs anchors (none in view)", 0.0)
@@ -207,10 +206,8 @@ class DuplexModel:
                                  wsr_sigma=self.sigma if self.sigma > 0 else None,
                                  weight_background=self.weight_background, et_grade=self.et_grade, cells=cells)
 
-    def decode(self, camera) -> Scene:
+    def decode(self, camera: Camera) -> Scene:
         """The splats and cells of this view (see the module docstring)."""
-        from ..cells import Cells
-
         torch = self.torch
         campos = camera.position
         keep = self.anchor_mask(campos, camera.R, camera.t)

@@ -8,7 +8,6 @@ import numpy as np
 
 from ..errors import SceneFormatError
 
-SH_C0 = 0.28209479177387814  # colour = 0.5 + SH_C0 * dc
 MAX_SPLATS = 1 << 28  # refuse header counts beyond this before allocating anything
 
 _OTHERS = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])

@@ -13,7 +13,8 @@ import numpy as np
 
 from ..errors import SceneFormatError
 from ..scene import Scene
-from .packing import SH_C0, check_count
+from ..scene import SH_C0
+from .packing import check_count
 
 RECORD = np.dtype([("pos", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4), ("rot", "u1", 4)])
 

@@ -66,25 +66,27 @@ def inria_columns(scene: Scene) -> dict[str, np.ndarray]:
     rest = scene.sh[:, 1:, :].transpose(0, 2, 1).reshape(n, 3 * (k - 1))  # channel-major
     cols.update({f"f_rest_{i}": rest[:, i] for i in range(rest.shape[1])})
     cols["opacity"] = opacity
-    if scene.view_weight_sh is not None:  # sort-free GS layout (KERNELS.md §1.2)
-        cols["f_do_0"] = scene.view_weight_sh[:, 0]
-        cols.update({f"f_ro_{i}": scene.view_weight_sh[:, i + 1] for i in range(scene.view_weight_sh.shape[1] - 1)})
+    oit = scene.oit
+    vw = oit.view_weight_sh if oit is not None else None
+    if vw is not None:  # sort-free GS layout (KERNELS.md §1.2)
+        cols["f_do_0"] = vw[:, 0]
+        cols.update({f"f_ro_{i}": vw[:, i + 1] for i in range(vw.shape[1] - 1)})
     cols.update({f"scale_{i}": scale[:, i] for i in range(3)})
     cols.update({f"rot_{i}": scene.quats[:, i] for i in range(4)})  # unit, so loading keeps them as they are
     if scene.filter_3d is not None:
         cols["filter_3D"] = scene.filter_3d
-    if scene.view_weight_sh is not None:
+    if vw is not None:
         info = np.zeros(n, np.float32)
-        info[0] = scene.weight_background if scene.weight_background is not None else 0.02
+        info[0] = oit.weight_background if oit.weight_background is not None else 0.02
         if n > 1:
-            info[1] = scene.wsr_sigma if scene.wsr_sigma is not None else 10.0
+            info[1] = oit.sigma if oit.sigma is not None else 10.0
         cols["info"] = info
     return cols
 
 
 def write_inria_ply(scene: Scene, path: str | Path, force: bool = False) -> Path:
     """Write `scene` to `path` atomically; refuses to overwrite an existing file unless `force`."""
-    if scene.neural is not None:
+    if scene.oit is not None and scene.oit.neural is not None:
         from ..errors import GBViewerError
 
         raise GBViewerError(f"{scene.source}: a Duplex-GS checkpoint has no fixed splats (its MLPs decode them per "

@@ -20,7 +20,7 @@
 #include "gbv/camera.h"
 #include "gbv/order.h"
 #include "gbv/preprocess.h"
-#include "nb_common.h"
+#include "../bindings/nb_common.h"
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 #include "simd.h"

@@ -5,13 +5,10 @@
 // projected, one sort of (tile, cell depth), each tile's cells expanded to their splats.
 #include <cuda_runtime.h>
 
-#include <GL/gl.h>
-#include <cuda_gl_interop.h>
 #include <thrust/iterator/transform_iterator.h>
 
 #include <algorithm>
 #include <cub/cub.cuh>
-#include <map>
 #include <mutex>
 #include <stdexcept>
 #include <string>
@@ -367,11 +364,6 @@ __global__ void downsample_kernel(int N, int w, int h, const float* rgb, const f
     }
 }
 
-__global__ void pack_rgba_kernel(int n, const float* rgb, const float* alpha, float4* out) {
-    const int i = blockIdx.x * blockDim.x + threadIdx.x;
-    if (i < n) out[i] = make_float4(rgb[i * 3], rgb[i * 3 + 1], rgb[i * 3 + 2], alpha[i]);
-}
-
 int blocks(int64_t n, int per = THREADS) { return (int)((n + per - 1) / per); }
 
 // A 32-bit count read as 64 bits. CUB's scans accumulate in the value type of their input, so a scan over the
@@ -424,16 +416,10 @@ struct Renderer::Impl {
     DeviceBuffer<unsigned long long> counters;
     DeviceBuffer<float> rgb, alpha, window, o_rgb, o_alpha, o_window;
     DeviceBuffer<int32_t> evals, o_evals;
-    DeviceBuffer<float4> rgba;
     Event ev[4];
     HostTotals totals;
-    std::map<unsigned int, cudaGraphicsResource_t> textures;  // GL texture name -> its CUDA registration
 
     explicit Impl(int dev) : device(dev) {}
-    ~Impl() {
-        for (auto& [name, resource] : textures) cudaGraphicsUnregisterResource(resource);
-        cudaGetLastError();
-    }
 
     // The renderer's device, current on the calling thread (the runtime's current device is per thread).
     void use() const { CUDA_CHECK(cudaSetDevice(device)); }
@@ -676,52 +662,6 @@ struct Renderer::Impl {
             launched("downsample_kernel");
         }
     }
-
-    // The texture's CUDA registration, mapped (registered at first use and kept: per-frame registration costs more
-    // than the copy). A registration that no longer maps (the texture was deleted or respecified) is made again once.
-    cudaGraphicsResource_t map_texture(unsigned int texture) {
-        for (int attempt = 0; attempt < 2; ++attempt) {
-            auto it = textures.find(texture);
-            if (it == textures.end()) {
-                cudaGraphicsResource_t resource;
-                CUDA_CHECK(cudaGraphicsGLRegisterImage(&resource, texture, GL_TEXTURE_2D,
-                                                       cudaGraphicsRegisterFlagsWriteDiscard));
-                it = textures.emplace(texture, resource).first;
-            }
-            const cudaError_t e = cudaGraphicsMapResources(1, &it->second);
-            if (e == cudaSuccess) return it->second;
-            cudaGetLastError();
-            cudaGraphicsUnregisterResource(it->second);
-            cudaGetLastError();
-            textures.erase(it);
-            if (attempt == 1) check(e, "cudaGraphicsMapResources (GL texture)");
-        }
-        return nullptr;  // not reached
-    }
-
-    void copy_to_texture(unsigned int texture, int w, int h) {
-        cudaGraphicsResource_t resource = map_texture(texture);
-        cudaArray_t array;
-        cudaError_t e = cudaGraphicsSubResourceGetMappedArray(&array, resource, 0, 0);
-        if (e == cudaSuccess) {
-            cudaChannelFormatDesc desc;
-            cudaExtent extent;
-            unsigned int flags;
-            e = cudaArrayGetInfo(&desc, &extent, &flags, array);
-            if (e == cudaSuccess && (extent.width != (size_t)w || extent.height != (size_t)h)) {
-                cudaGraphicsUnmapResources(1, &resource);
-                throw std::runtime_error("render_to_gl_texture: texture " + std::to_string(texture) + " is " +
-                                         std::to_string(extent.width) + "x" + std::to_string(extent.height) +
-                                         ", the render " + std::to_string(w) + "x" + std::to_string(h));
-            }
-            if (e == cudaSuccess)
-                e = cudaMemcpy2DToArray(array, 0, 0, rgba.ptr, w * sizeof(float4), w * sizeof(float4), h,
-                                        cudaMemcpyDeviceToDevice);
-        }
-        const cudaError_t unmap = cudaGraphicsUnmapResources(1, &resource);
-        if (e == cudaSuccess) e = unmap;
-        check(e, "render_to_gl_texture (copy into the GL texture)");
-    }
 };
 
 std::pair<bool, std::string> availability() {
@@ -739,16 +679,6 @@ std::pair<bool, std::string> availability() {
         return {false, std::string("no usable CUDA device: ") + cudaGetErrorString(e)};
     }
     return usable(device);
-}
-
-std::vector<int> gl_devices() {
-    unsigned int count = 0;
-    int devices[16];
-    if (cudaGLGetDevices(&count, devices, 16, cudaGLDeviceListAll) != cudaSuccess) {
-        cudaGetLastError();
-        return {};
-    }
-    return std::vector<int>(devices, devices + std::min(count, 16u));
 }
 
 Renderer::Renderer(int device) {
@@ -861,37 +791,6 @@ RenderResult Renderer::render(const CameraParams& cam, Mode mode, int supersampl
                               cudaMemcpyDeviceToHost));
     }
     return res;
-}
-
-void Renderer::render_to_gl_texture(unsigned int texture, const CameraParams& cam, Mode mode, int supersample,
-                                    int sh_degree, const float bg[3], const OitParams& oit) {
-    Impl& m = *impl_;
-    std::lock_guard<std::mutex> lock(m.mutex);
-    m.use();
-    const std::vector<int> gl = gl_devices();
-    if (!gl.empty() && std::find(gl.begin(), gl.end(), m.device) == gl.end())
-        throw std::runtime_error("render_to_gl_texture: the current OpenGL context runs on CUDA device " +
-                                 std::to_string(gl[0]) + ", this renderer on device " + std::to_string(m.device) +
-                                 "; create the renderer on the GL device");
-    RenderResult res;
-    m.run(cam, mode, oit, supersample, sh_degree, bg, false, res);
-    const int N = supersample, w = cam.width / N, h = cam.height / N;
-    m.rgba.ensure((size_t)w * h);
-    pack_rgba_kernel<<<blocks((int64_t)w * h), THREADS>>>(w * h, N > 1 ? m.o_rgb.ptr : m.rgb.ptr,
-                                                          N > 1 ? m.o_alpha.ptr : m.alpha.ptr, m.rgba.ptr);
-    launched("pack_rgba_kernel");
-    m.copy_to_texture(texture, w, h);
-}
-
-void Renderer::release_gl_texture(unsigned int texture) {
-    Impl& m = *impl_;
-    std::lock_guard<std::mutex> lock(m.mutex);
-    m.use();
-    const auto it = m.textures.find(texture);
-    if (it == m.textures.end()) return;
-    const cudaError_t e = cudaGraphicsUnregisterResource(it->second);
-    m.textures.erase(it);
-    check(e, "cudaGraphicsUnregisterResource (GL texture)");
 }
 
 }  // namespace gbv::cuda

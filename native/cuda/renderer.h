@@ -24,10 +24,6 @@ struct RenderResult {
 // name of the device a Renderer() uses by default.
 std::pair<bool, std::string> availability();
 
-// The CUDA devices that drive the OpenGL context current on this thread (empty when none is current or the driver
-// cannot tell).
-std::vector<int> gl_devices();
-
 // One renderer owns its device buffers. Every method is serialised by a mutex of the renderer, so threads may share
 // one (the Python binding releases the GIL while it uploads and renders); each call makes the renderer's device
 // current on the calling thread.
@@ -61,16 +57,6 @@ public:
     // Render at cam's resolution (supersample x the output size per axis) and box-average back.
     RenderResult render(const CameraParams& cam, Mode mode, int supersample, int sh_degree, const float bg[3],
                         bool want_window, const OitParams& oit);
-
-    // Render and copy the RGBA result into an OpenGL texture (GL_RGBA32F, output-sized) through CUDA-GL interop,
-    // without a round trip through host memory. The texture stays registered with CUDA (per texture name) until
-    // release_gl_texture: call that before deleting the texture, since GL reuses the names of deleted textures.
-    // Throws when the current GL context runs on another CUDA device than this renderer's.
-    void render_to_gl_texture(unsigned int texture, const CameraParams& cam, Mode mode, int supersample,
-                              int sh_degree, const float bg[3], const OitParams& oit);
-
-    // Drop the CUDA registration of a texture (no-op when it has none); the GL context must be current.
-    void release_gl_texture(unsigned int texture);
 
 private:
     struct Impl;

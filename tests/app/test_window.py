@@ -18,8 +18,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from conftest import skip_or_fail
-from gbviewer.app.panes import frame_stats
+from helpers import skip_or_fail
 from gbviewer.app.rates import render_size
 from gbviewer.app.settings import load_settings, settings_path
 from gbviewer.app.views import decode_png16, visualize
@@ -370,7 +369,7 @@ def test_drop_a_file_glsl_backend_and_render_limit(app, tmp_path):
         wait(app)
         for i in range(2):
             shown = app.state.panes[i].parts["a"]
-            assert shown.job.backend == "glsl" and frame_stats(shown.frame).backend == "glsl"
+            assert shown.job.backend == "glsl" and shown.frame.stats.backend == "glsl"
             ref = gb.render(app.state.scene, shown.job.camera, shown.job.settings.mode)
             assert np.abs(shown.frame.rgb - ref.rgb).max() < 5e-3
     else:

@@ -18,12 +18,13 @@ import numpy as np
 import zstandard
 from PIL import Image
 
-SH_C0 = 0.28209479177387814
+from gbviewer.scene import SH_C0
+
 FLIP_XYZ = np.array([1.0, -1.0, -1.0])
 FLIP_SH = np.array([-1, -1, 1, -1, 1, 1, -1, 1, -1, 1, -1, -1, 1, -1, 1], dtype=np.float64)
 
 
-def random_scene(n: int, sh_degree: int = 0, seed: int = 0) -> dict[str, np.ndarray]:
+def random_params(n: int, sh_degree: int = 0, seed: int = 0) -> dict[str, np.ndarray]:
     """Random activated splat parameters of a plausible range."""
     rng = np.random.default_rng(seed)
     q = rng.normal(size=(n, 4))

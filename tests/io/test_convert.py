@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import plyfile
 import pytest
-from encoders import encode_compressed_ply, encode_splat, encode_spz, random_scene, sog_files, write_sog
+from encoders import encode_compressed_ply, encode_splat, encode_spz, random_params, sog_files, write_sog
 
 import gbviewer as gb
-from conftest import skip_or_fail
+from helpers import skip_or_fail
 from gbviewer.cli import main
 
 SCENES = Path(__file__).resolve().parents[2].parent / "shared" / "scenes"
@@ -62,7 +62,7 @@ def test_round_trip_exact_for_shared_inria(tmp_path, name):
 
 
 def test_written_ply_is_standard(tmp_path):
-    s = random_scene(200, sh_degree=3, seed=1)
+    s = random_params(200, sh_degree=3, seed=1)
     scene = gb.Scene.from_arrays(s["means"], s["scales"], s["quats"], s["opacities"], s["sh"])
     ply = plyfile.PlyData.read(str(gb.io.write_inria_ply(scene, tmp_path / "o.ply")))
     names = [p.name for p in ply["vertex"].properties]
@@ -78,7 +78,7 @@ def test_written_ply_is_standard(tmp_path):
 
 
 def test_convert_cli(tmp_path, capsys):
-    s = random_scene(300, sh_degree=1, seed=2)
+    s = random_params(300, sh_degree=1, seed=2)
     src = tmp_path / "scene.spz"
     src.write_bytes(encode_spz(s, 4))
     out = tmp_path / "out.ply"
@@ -97,7 +97,7 @@ def test_convert_cli(tmp_path, capsys):
 
 
 def test_info_reports_format_and_version(tmp_path, capsys):
-    s = random_scene(300, seed=3)
+    s = random_params(300, seed=3)
     files = {"a.spz": encode_spz(s, 3), "b.ply": encode_compressed_ply(s, color_ranges=False),
              "c.splat": encode_splat(s)}
     for name, data in files.items():

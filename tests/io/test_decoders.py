@@ -11,7 +11,7 @@ import struct
 
 import numpy as np
 import pytest
-from encoders import (SH_C0, encode_compressed_ply, encode_splat, encode_spz, random_scene, sog_files, write_sog)
+from encoders import (SH_C0, encode_compressed_ply, encode_splat, encode_spz, random_params, sog_files, write_sog)
 
 import gbviewer as gb
 
@@ -35,7 +35,7 @@ HALF_BYTE = 0.5 / 255 + 1e-6
 
 
 def test_splat(tmp_path):
-    s = random_scene(500, seed=1)
+    s = random_params(500, seed=1)
     path = tmp_path / "scene.bin"  # no telling extension: detected by content
     path.write_bytes(encode_splat(s))
     scene = gb.load(path)
@@ -47,7 +47,7 @@ def test_splat(tmp_path):
 @pytest.mark.parametrize("version", [1, 2, 3, 4])
 @pytest.mark.parametrize("degree", [0, 1, 2, 3])
 def test_spz(tmp_path, version, degree):
-    s = random_scene(700, sh_degree=degree, seed=version * 10 + degree)
+    s = random_params(700, sh_degree=degree, seed=version * 10 + degree)
     path = tmp_path / "scene.dat"
     path.write_bytes(encode_spz(s, version, antialiased=True))
     scene = gb.load(path)
@@ -67,7 +67,7 @@ def test_spz(tmp_path, version, degree):
 
 
 def test_spz_containers_and_extensions(tmp_path):
-    s = random_scene(300, sh_degree=1, seed=5)
+    s = random_params(300, sh_degree=1, seed=5)
     ext = struct.pack("<II", 0xADBE0002, 12) + struct.pack("<3f", 0.1, 0.2, 0.3)
     ref = None
     for name, data in {"raw_v3": encode_spz(s, 3, gzipped=False), "ext_v3": encode_spz(s, 3, extensions=ext),
@@ -100,7 +100,7 @@ def test_spz_coordinate_convention(tmp_path):
 
 
 def test_spz_degree_4_is_truncated(tmp_path):
-    s = random_scene(50, sh_degree=3, seed=2)
+    s = random_params(50, sh_degree=3, seed=2)
     s4 = dict(s, sh=np.concatenate([s["sh"], np.zeros((50, 9, 3))], axis=1))
     (tmp_path / "d4.spz").write_bytes(encode_spz(s4, 4))
     with pytest.warns(UserWarning, match="degree 4"):
@@ -111,7 +111,7 @@ def test_spz_degree_4_is_truncated(tmp_path):
 @pytest.mark.parametrize("color_ranges", [True, False])
 @pytest.mark.parametrize("degree", [0, 1, 3])
 def test_compressed_ply(tmp_path, color_ranges, degree):
-    s = random_scene(1000, sh_degree=degree, seed=degree)
+    s = random_params(1000, sh_degree=degree, seed=degree)
     path = tmp_path / "c.ply"
     path.write_bytes(encode_compressed_ply(s, color_ranges))
     scene = gb.load(path)
@@ -129,7 +129,7 @@ def test_compressed_ply(tmp_path, color_ranges, degree):
 @pytest.mark.parametrize("form", ["bundled", "folder", "meta.json"])
 def test_sog(tmp_path, form):
     n, degree, palette_size = 900, 2, 40
-    s = random_scene(n, sh_degree=degree, seed=7)
+    s = random_params(n, sh_degree=degree, seed=7)
     rng = np.random.default_rng(8)
     palette = rng.uniform(-0.5, 0.5, (palette_size, (degree + 1) ** 2 - 1, 3))
     labels = rng.integers(0, palette_size, n)

@@ -9,8 +9,7 @@ import pytest
 from plyfile import PlyData, PlyElement
 
 import gbviewer as gb
-
-SH_C0 = 0.28209479177387814
+from gbviewer.scene import SH_C0
 
 
 def write_inria(path, n=5, degree=3, seed=0, extra=(), drop=(), filter_3d=None, values=None):
@@ -73,7 +72,7 @@ def test_filter_3d_is_kept_and_applied(tmp_path):
 
 
 def test_shared_inria_scene_loads():
-    from conftest import shared_scene
+    from helpers import shared_scene
 
     scene = gb.load(shared_scene("fruit_drops_minimal.ply"))
     assert (scene.num_splats, scene.sh_degree) == (4721, 3)

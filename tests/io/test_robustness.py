@@ -9,7 +9,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from encoders import encode_compressed_ply, encode_splat, encode_spz, random_scene, sog_files
+from encoders import encode_compressed_ply, encode_splat, encode_spz, random_params, sog_files
 
 import gbviewer as gb
 from gbviewer.errors import SceneFormatError
@@ -30,8 +30,8 @@ def _sog_zip(s: dict) -> bytes:
 
 @pytest.fixture(scope="module")
 def samples(tmp_path_factory) -> dict[str, bytes]:
-    s = random_scene(300, sh_degree=1, seed=3)
-    s0 = random_scene(300, seed=4)
+    s = random_params(300, sh_degree=1, seed=3)
+    s0 = random_params(300, seed=4)
     return {"inria": _inria(s, tmp_path_factory.mktemp("inria")), "compressed": encode_compressed_ply(s),
             "spz2": encode_spz(s, 2), "spz3raw": encode_spz(s, 3, gzipped=False), "spz4": encode_spz(s, 4),
             "splat": encode_splat(s0), "sog": _sog_zip(s0)}
@@ -124,7 +124,7 @@ def test_count_larger_than_data(samples, tmp_path):
 
 
 def test_sog_missing_image_and_bad_meta(tmp_path):
-    files = sog_files(random_scene(100, seed=9))
+    files = sog_files(random_params(100, seed=9))
     del files["quats.webp"]
     with zipfile.ZipFile(tmp_path / "m.sog", "w") as zf:
         for name, data in files.items():

@@ -11,7 +11,8 @@ import plyfile
 import pytest
 
 import gbviewer as gb
-from conftest import IN_CI
+from helpers import IN_CI
+from gbviewer.scene import SH_C0
 
 SCENES = Path(__file__).resolve().parents[2].parent / "shared" / "scenes"
 needs_scenes = pytest.mark.skipif(not SCENES.is_dir() and not IN_CI, reason=f"{SCENES} absent (shared/ is not beside the repo)")
@@ -82,7 +83,7 @@ def test_biker_spz_matches_compressed_ply():
     assert (np.log(spz.scales)[log_c <= -10] <= -10 + 1 / 32 + 1e-5).all()
 
     assert np.abs(spz.opacities - cply.opacities).max() <= 1 / 255 + 1e-6
-    dc_tol = 0.5 / (0.15 * 255) + per_splat("", "rgb") / (2 * 255 * 0.28209479177387814) + 1e-5
+    dc_tol = 0.5 / (0.15 * 255) + per_splat("", "rgb") / (2 * 255 * SH_C0) + 1e-5
     assert (np.abs(spz.sh[:, 0] - cply.sh[:, 0]) <= dc_tol).all()
 
     # Component error: sum of both half steps for the three stored ones; the rebuilt largest (>= 1/2)

@@ -25,7 +25,7 @@
 
 namespace gbv {
 
-// Blending modes; the integer values are the Python enum's values (gbviewer/render.py).
+// Blending modes; the integer values are the Python enum's values (gbviewer/render/types.py).
 enum Mode : int32_t { SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5 };
 
 constexpr int TILE = 16;                       // BLOCK_X = BLOCK_Y (KERNELS.md §0.4)
@@ -67,7 +67,7 @@ GBV_HD float dot(Vec2 a, Vec2 b) { return a.x * b.x + a.y * b.y; }
 // changes the last bit of a sum, and a near-flat splat's det > 0, opacity >= min_alpha, w > 0 or an integer tile
 // edge can then go the other way. preprocess.h and camera.h route every product that is added or subtracted
 // through this, so the preprocessed splats (every field splat_less compares but log_min_alpha) and the culling
-// decisions are bit-identical on every backend and compiler flag (tests/test_fp_contract.py; the GLSL port
+// decisions are bit-identical on every backend and compiler flag (tests/render/test_fp_contract.py; the GLSL port
 // declares those values `precise`). Device: __fmul_rn, which nvcc never contracts. Host: the product passes
 // through an empty asm statement, which the optimiser cannot see through (g++ ignores #pragma STDC FP_CONTRACT,
 // and optimize attributes are lost when inlined). GBV_UNGUARDED_PRODUCTS (tests only) makes it a plain product.

@@ -18,14 +18,13 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from conftest import skip_or_fail
+from helpers import skip_or_fail
 from gbviewer.errors import SceneFormatError
+from gbviewer.scene import SH_C0
 
 torch = pytest.importorskip("torch", reason="Duplex-GS checkpoints need torch (pip install 'gbviewer[duplex]')")
 nn = torch.nn
 pytestmark = pytest.mark.filterwarnings("ignore:`torch.jit:DeprecationWarning")  # the published format is TorchScript
-
-SH_C0 = 0.28209479177387814
 
 
 def write_anchor_ply(path: Path, anchors, offsets, feats, log_sizes, sh_vi, info, levels=None, extra=None,
@@ -109,10 +108,10 @@ def camera():
 def test_load_and_render_hand_computed(tmp_path, camera):
     path, colours = hand_checkpoint(tmp_path)
     scene = gb.load(path)
-    assert scene.meta["format"] == "duplex-gs" and scene.neural is not None and scene.et_grade == 2.0
-    assert scene.weight_background == pytest.approx(0.25)
-    view = scene.neural.decode(camera)
-    assert view.num_splats == 2 and view.cells.num_cells == 1  # the anchors behind the camera are not decoded
+    assert scene.meta["format"] == "duplex-gs" and scene.oit.neural is not None and scene.oit.et_grade == 2.0
+    assert scene.oit.weight_background == pytest.approx(0.25)
+    view = scene.oit.neural.decode(camera)
+    assert view.num_splats == 2 and view.oit.cells.num_cells == 1  # the anchors behind the camera are not decoded
     np.testing.assert_allclose(view.opacities, [0.48, 0.40], atol=1e-6)
     np.testing.assert_allclose(view.means[:, 2], [3.5, 4.5], atol=1e-6)
     np.testing.assert_allclose(view.scales[0], [0.5 * 2000, 0.5 * 2000, 0.5], rtol=1e-5)  # ratio_max (2-0.5)/3
@@ -122,13 +121,13 @@ def test_load_and_render_hand_computed(tmp_path, camera):
     expect = ((a[:, None] / E * c).sum(0) + bg * wbg) / (a.sum() / E + wbg * T)
     f = gb.render(scene, camera, "duplex", background=tuple(bg))
     assert np.abs(f.rgb - expect).max() < 1e-5
-    assert "decode_ms" in f.stats and f.stats["cells"] == 1 and "K=" not in f.stats["mode"]
+    assert f.stats.decode_ms is not None and f.stats.cells == 1 and "K=" not in f.stats.mode
     scalar = gb.render(scene, camera, "scalar", background=tuple(bg))
     expect_scalar = a[0] * c[0] + (1 - a[0]) * a[1] * c[1] + (1 - a[0]) * (1 - a[1]) * bg
     assert np.abs(scalar.rgb - expect_scalar).max() < 1e-5
     wsr = gb.render(scene, camera, "wsr", background=tuple(bg))
     expect_wsr = ((a[:, None] * c).sum(0) + bg * wbg) / (a.sum() + wbg)
-    assert np.abs(wsr.rgb - expect_wsr).max() < 1e-5 and "approx" not in wsr.stats["mode"]
+    assert np.abs(wsr.rgb - expect_wsr).max() < 1e-5 and "approx" not in wsr.stats.mode
 
 
 def test_view_without_anchors_is_background(tmp_path):
@@ -141,7 +140,7 @@ def test_view_without_anchors_is_background(tmp_path):
     for mode in ("duplex", "wsr", "scalar", "gaussian_blending"):
         f = gb.render(scene, away, mode, background=bg)
         np.testing.assert_allclose(f.rgb, np.broadcast_to(bg, f.rgb.shape), atol=1e-6, err_msg=mode)
-        assert f.stats["visible"] == 0
+        assert f.stats.visible == 0
 
 
 def test_decode_matches_numpy(tmp_path):
@@ -160,9 +159,9 @@ def test_decode_matches_numpy(tmp_path):
             "feature_bank": mlp(3, F, 3, nn.Softmax(dim=1), seed=4)}
     save_mlps(tmp_path, mlps)
     scene = gb.load(tmp_path / "point_cloud.ply")
-    assert scene.weight_background == pytest.approx(0.1)  # relu(-0.3) + 0.1
+    assert scene.oit.weight_background == pytest.approx(0.1)  # relu(-0.3) + 0.1
     cam = gb.Camera(32, 24, 30.0, 30.0, 16.0, 12.0, np.eye(3), np.zeros(3))
-    view = scene.neural.decode(cam)
+    view = scene.oit.neural.decode(cam)
 
     def np_mlp(m, x):
         W0, b0, W2, b2 = (p.detach().numpy().astype(np.float64) for p in m.parameters())
@@ -192,7 +191,7 @@ def test_decode_matches_numpy(tmp_path):
     q = sr[:, 3:] / np.linalg.norm(sr[:, 3:], axis=1, keepdims=True)
     assert np.allclose(np.abs((view.quats * q).sum(1)), 1, atol=1e-5)
     frame = gb.render(scene, cam, "duplex")
-    assert np.isfinite(frame.rgb).all() and frame.stats["cells"] == n
+    assert np.isfinite(frame.rgb).all() and frame.stats.cells == n
 
 
 def test_unite_checkpoint(tmp_path, camera):
@@ -237,7 +236,7 @@ def test_bad_files(tmp_path, monkeypatch):
 
 
 def test_glsl_renders_checkpoint(tmp_path, camera):
-    from gbviewer.glsl import GlslRenderer
+    from gbviewer.render.glsl import GlslRenderer
 
     ok, why = GlslRenderer.available()
     if not ok:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 import gbviewer as gb
-from conftest import shared_scene
+from helpers import shared_scene
 from gbviewer.metrics import box_downsample, psnr
 
 

@@ -7,7 +7,7 @@ the near plane, the depth-correction cut and integer tile edges, so the CPU and 
 `visible` and `sort_length`. native/include/gbv routes every product that is added or subtracted through mul_rn
 (common.h), which no compiler can fuse.
 
-This builds tests/native/preprocess_parity.cpp (make_camera, preprocess_splat in every mode, preprocess_cell) with
+This builds tests/render/native/preprocess_parity.cpp (make_camera, preprocess_splat in every mode, preprocess_cell) with
 g++ twice, -O2 -ffp-contract=off and -O2 -ffp-contract=fast with FMA instructions (-mfma on x86-64), runs both on
 ~100k awkward splats (needles and discs seen edge-on, opacities and view weights at their cuts, depths at the near
 plane and at sigma, screen positions on tile edges) and requires identical bytes: every decision, tile rectangle
@@ -25,17 +25,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import skip_or_fail
+from helpers import skip_or_fail
 
-REPO = Path(__file__).resolve().parents[1]
-SOURCE = REPO / "tests" / "native" / "preprocess_parity.cpp"
+from gbviewer.camera import NEAR_PLANE
+from gbviewer.scene import SH_C0
+
+REPO = Path(__file__).resolve().parents[2]
+SOURCE = Path(__file__).resolve().parent / "native" / "preprocess_parity.cpp"
 RUNS = ["scalar", "mip", "analytic", "gaussian_blending", "wsr", "wsr+depth_correct", "duplex+depth_correct", "cell"]
 RECORD = np.dtype([("valid", "<i4"), ("rect", "<i4", 4), ("fields", "<u4", 12), ("cell", "<i4")])
 CAMERA_BYTES = 4 * (9 + 3 + 3 + 4 + 2 + 1 + 4)  # CameraParams
 
 # camera and globals of the generated scene
-W, H, FX, FY, CX, CY, NEAR, SIGMA = 640, 480, 523.7, 517.3, 333.1, 229.9, 0.2, 7.3
-SH_C0, SH_C1 = 0.28209479177387814, 0.4886025119029199
+W, H, FX, FY, CX, CY, SIGMA = 640, 480, 523.7, 517.3, 333.1, 229.9, 7.3
+SH_C1 = 0.4886025119029199
 SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
 SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154, -0.4570457994644658,
          1.445305721320277, -0.5900435899266435)
@@ -114,7 +117,7 @@ def scene_file(path: Path, per_kind: int = 12_500, seed: int = 18) -> Path:
     eps = 10.0 ** u(-7.0, -2.0)
     scale[kind == 0, 1:] *= eps[kind == 0, None]  # 0: needles (rank-1 2D covariance: det is rounding noise)
     scale[kind == 1, 2] *= eps[kind == 1]  # 1: discs, some edge-on
-    z[kind == 2] = NEAR * (1 + u(-3e-7, 3e-7))[kind == 2]  # 2: at the near plane
+    z[kind == 2] = NEAR_PLANE * (1 + u(-3e-7, 3e-7))[kind == 2]  # 2: at the near plane
     z[kind == 3] = SIGMA * (1 + u(-3e-7, 3e-7))[kind == 3]  # 3: at the depth-correction cut
     # 4: on tile edges: isotropic, 1 px sigma on screen (scalar radius 4), x0 or x1 edge on a multiple of 16 px
     e = kind == 4
@@ -152,7 +155,7 @@ def scene_file(path: Path, per_kind: int = 12_500, seed: int = 18) -> Path:
         fh.write(np.array([n, 16, 16], "<i4").tobytes())
         fh.write(np.concatenate([R.ravel(), t, [FX, FY, CX, CY]]).astype("<f4").tobytes())
         fh.write(np.array([W, H], "<i4").tobytes())
-        fh.write(np.array([NEAR, SIGMA], "<f4").tobytes())
+        fh.write(np.array([NEAR_PLANE, SIGMA], "<f4").tobytes())
         for a in (means, scale, quats, opac, filt, sh, weight):
             fh.write(np.ascontiguousarray(a, "<f4").tobytes())
     return path

@@ -25,10 +25,10 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from conftest import skip_or_fail
 from gbviewer import _native
 from gbviewer.cells import build_cells
-from test_render_reference import BACKGROUND, SCENES, _check_strict, random_scene
+from helpers import random_view, skip_or_fail
+from test_render_reference import BACKGROUND, SCENES, _check_strict
 
 ALL_PATHS = ("scalar", "avx2", "avx512")
 MODES = ("scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex")
@@ -58,7 +58,7 @@ def render(path, scene, cam, mode, supersample=1, **kw):
 def assert_close_to_scalar(vec, ref, what):
     tol, fraction, max_err = TOL, FLIP_FRACTION, FLIP_MAX_ERR
     for name in ("visible", "sort_length", "pairs"):
-        assert vec.stats[name] == ref.stats[name], f"{what}: {name} differs"
+        assert getattr(vec.stats, name) == getattr(ref.stats, name), f"{what}: {name} differs"
     diff = np.maximum(np.abs(vec.rgb - ref.rgb).max(axis=2), np.abs(vec.alpha - ref.alpha))
     flips = diff > tol
     allowed = 2 + fraction * diff.size
@@ -74,10 +74,10 @@ def test_paths_and_stats():
     assert paths[0] == "scalar" and set(paths) <= set(ALL_PATHS) and _native.simd() in paths
     if sys.platform.startswith("linux") and os.uname().machine == "x86_64" and "avx2" in _cpu_flags():
         assert "avx2" in paths, "an AVX2 CPU should get the avx2 path"
-    scene, cam = random_scene(1, n=40)
+    scene, cam = random_view(1, n=40)
     for path in paths:
-        assert render(path, scene, cam, "scalar").stats["simd"] == path
-    assert gb.render(scene, cam).stats["simd"] == _native.simd()
+        assert render(path, scene, cam, "scalar").stats.simd == path
+    assert gb.render(scene, cam).stats.simd == _native.simd()
 
 
 def _cpu_flags() -> set[str]:
@@ -93,7 +93,7 @@ def _cpu_flags() -> set[str]:
 @pytest.mark.parametrize("supersample", [1, 2, 3])
 def test_vector_matches_scalar_random(path, mode, supersample):
     for seed, sh_degree, filter3d in SCENES[:2]:
-        scene, cam = random_scene(seed, n=300, sh_degree=sh_degree, filter3d=filter3d, W=61, H=37)
+        scene, cam = random_view(seed, n=300, sh_degree=sh_degree, filter3d=filter3d, W=61, H=37)
         ref = render("scalar", scene, cam, mode, supersample, debug="window" if mode == "gaussian_blending" else "none")
         vec = render(path, scene, cam, mode, supersample, debug="window" if mode == "gaussian_blending" else "none")
         assert_close_to_scalar(vec, ref, f"{path} {mode} x{supersample} seed {seed}")
@@ -115,7 +115,7 @@ def test_vector_matches_scalar_bundled(path, mode, bundled_scene):
 def test_reference_through_each_path(path, mode):
     """The float64 reference test (strict 1e-4, ties excepted) holds on every path, not only the default one."""
     seed, sh_degree, filter3d = SCENES[1]
-    scene, cam = random_scene(seed, sh_degree=sh_degree, filter3d=filter3d)
+    scene, cam = random_view(seed, sh_degree=sh_degree, filter3d=filter3d)
     with simd(path):
         for supersample in (1, 2):
             frame = gb.render(scene, cam, mode=mode, supersample=supersample, background=BACKGROUND)
@@ -125,7 +125,7 @@ def test_reference_through_each_path(path, mode):
 @pytest.mark.parametrize("path", ALL_PATHS)
 def test_reference_gaussian_blending_each_path(path):
     seed, sh_degree, filter3d = SCENES[0]
-    scene, cam = random_scene(seed, sh_degree=sh_degree, filter3d=filter3d, max_px_sigma=1.5)
+    scene, cam = random_view(seed, sh_degree=sh_degree, filter3d=filter3d, max_px_sigma=1.5)
     with simd(path):
         frame = gb.render(scene, cam, mode="gaussian_blending", background=BACKGROUND)
         _check_strict(frame, scene, cam, "gaussian_blending", 1)
@@ -184,7 +184,7 @@ def _cut_scene(seed):
 
 def _preprocess_cases():
     for seed, sh_degree, filter3d in SCENES[:3]:
-        yield f"random{seed}", random_scene(seed, n=777, sh_degree=sh_degree, filter3d=filter3d, W=61, H=37)
+        yield f"random{seed}", random_view(seed, n=777, sh_degree=sh_degree, filter3d=filter3d, W=61, H=37)
     yield "needles", _needle_scene(5)
     yield "cuts", _cut_scene(7)
 
@@ -200,7 +200,7 @@ def test_preprocess_bitwise(path, mode):
             variants.append({"depth_correct": True})
         if mode == "duplex":
             scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
-                                         scene.filter_3d, view_weight_sh=scene.view_weight_sh,
+                                         scene.filter_3d, view_weight_sh=scene.oit and scene.oit.view_weight_sh,
                                          cells=build_cells(scene, 6))
         for kw in variants + [{"sh_degree": 1}]:
             ref, ref_frame = preprocessed("scalar", scene, cam, mode, **kw)
@@ -216,7 +216,7 @@ def test_preprocess_bitwise(path, mode):
                 pytest.fail(f"{what}: {len(bad)} splats differ (first {bad[:5]}): {decided} decisions, {rects} "
                             f"rectangles, fields {fields}")
             for stat in ("visible", "sort_length", "pairs"):
-                assert vec_frame.stats[stat] == ref_frame.stats[stat], what
+                assert getattr(vec_frame.stats, stat) == getattr(ref_frame.stats, stat), what
 
 
 def _needle_scene(seed):
@@ -342,7 +342,7 @@ out = {"paths": _native.simd_paths()}
 for mode in ("scalar", "gaussian_blending", "wsr", "duplex", "analytic"):
     f = gb.render(scene, cam, mode=mode, supersample=2)
     np.save(f"{sys.argv[1]}/{mode}.npy", f.rgb)
-    out[mode] = f.stats["simd"]
+    out[mode] = f.stats.simd
 print(json.dumps(out))
 """
 

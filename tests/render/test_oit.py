@@ -18,13 +18,14 @@ import math
 
 import numpy as np
 import pytest
+from helpers import random_view
 from reference import reference_render_oit
-from test_render_reference import random_scene
 
 import gbviewer as gb
 from gbviewer.cells import Cells, build_cells, cells_for
-from gbviewer.io import load, write_inria_ply
 from gbviewer.errors import GBViewerError, SceneFormatError
+from gbviewer.io import load, write_inria_ply
+from gbviewer.scene import SH_C0, OitData
 
 TOL = 1e-4
 MAX_TIE_PIXELS = 12  # of 1920 output pixels
@@ -37,6 +38,11 @@ def oit(mode: str, et: float = 4.0, wbg: float | None = None, sigma: float = 10.
     if wbg is None:
         wbg = 1.0 / et if mode == "duplex" else 1.0
     return {"sigma": sigma, "weight_background": wbg, "et_grade": et, "depth_correct": depth_correct}
+
+
+def oit_of(scene: gb.Scene) -> OitData:
+    """The scene's wsr / duplex data (all None for an ordinary scene)."""
+    return scene.oit or OitData()
 
 
 def with_view_weights(scene: gb.Scene, seed: int, sigma: float | None = None) -> gb.Scene:
@@ -62,48 +68,47 @@ def check(frame, ref):
 @pytest.mark.parametrize("supersample", [1, 2])
 @pytest.mark.parametrize("seed, weights, depth_correct", [(31, False, False), (32, True, False), (33, True, True)])
 def test_wsr_matches_reference(seed, weights, depth_correct, supersample):
-    scene, cam = random_scene(seed, n=120, sh_degree=3)
+    scene, cam = random_view(seed, n=120, sh_degree=3)
     if weights:
         scene = with_view_weights(scene, seed, sigma=4.0)
     frame = gb.render(scene, cam, "wsr", supersample, background=BACKGROUND, depth_correct=depth_correct)
-    params = oit("wsr", wbg=scene.weight_background, sigma=scene.wsr_sigma or 10.0, depth_correct=depth_correct)
+    params = oit("wsr", wbg=oit_of(scene).weight_background, sigma=oit_of(scene).sigma or 10.0, depth_correct=depth_correct)
     check(frame, reference_render_oit(scene, cam, "wsr", params, None, supersample, BACKGROUND))
-    assert frame.stats["sort_length"] == 0 and frame.stats["pairs"] > 0
+    assert frame.stats.sort_length == 0 and frame.stats.pairs > 0
 
 
 @pytest.mark.parametrize("supersample", [1, 2])
 @pytest.mark.parametrize("seed, k, et, weights", [(41, 5, 4.0, False), (42, 3, 1.0, True), (43, 8, 2.5, False)])
 def test_duplex_matches_reference(seed, k, et, weights, supersample):
-    scene, cam = random_scene(seed, n=140, sh_degree=3)
+    scene, cam = random_view(seed, n=140, sh_degree=3)
     if weights:
         scene = with_view_weights(scene, seed)
     frame = gb.render(scene, cam, "duplex", supersample, background=BACKGROUND, et_grade=et, cell_size=k)
-    params = oit("duplex", et, wbg=scene.weight_background)
+    params = oit("duplex", et, wbg=oit_of(scene).weight_background)
     ref = reference_render_oit(scene, cam, "duplex", params, cells_for(scene, k), supersample, BACKGROUND)
     check(frame, ref)
     st = frame.stats
-    assert st["cells"] == -(-scene.num_splats // k) and 0 < st["cells_visible"] <= st["cells"]
-    assert st["sort_length"] > 0 and st["pairs"] >= st["sort_length"]
+    assert st.cells == -(-scene.num_splats // k) and 0 < st.cells_visible <= st.cells
+    assert st.sort_length > 0 and st.pairs >= st.sort_length
 
 
 def permuted(scene: gb.Scene, perm: np.ndarray, cells: Cells | None = None) -> gb.Scene:
     """The same splats listed in another order (cells renumbered to follow their splats)."""
-    vw = None if scene.view_weight_sh is None else scene.view_weight_sh[perm]
+    vw = oit_of(scene).view_weight_sh
+    vw = None if vw is None else vw[perm]
     new_cells = None
     if cells is not None:
         inv = np.empty_like(perm)
         inv[perm] = np.arange(len(perm))
-        cell_of = np.full(len(perm), -1)
-        cell_of[cells.members] = np.repeat(np.arange(cells.num_cells), cells.sizes)
-        new_cells = Cells.from_groups(cells.means, cells.scales, cells.quats, cell_of[perm])
+        new_cells = Cells.from_groups(cells.means, cells.scales, cells.quats, cells.cell_of(len(perm))[perm])
     return gb.Scene.from_arrays(scene.means[perm], scene.scales[perm], scene.quats[perm], scene.opacities[perm],
-                                scene.sh[perm], view_weight_sh=vw, weight_background=scene.weight_background,
+                                scene.sh[perm], view_weight_sh=vw, weight_background=oit_of(scene).weight_background,
                                 cells=new_cells)
 
 
 @pytest.mark.parametrize("supersample", [1, 2])
 def test_wsr_bitwise_invariant_to_splat_order(supersample):
-    scene, cam = random_scene(51, n=400, sh_degree=3)
+    scene, cam = random_view(51, n=400, sh_degree=3)
     scene = with_view_weights(scene, 51)
     a = gb.render(scene, cam, "wsr", supersample, background=BACKGROUND)
     for seed in (1, 2, 3):
@@ -114,7 +119,7 @@ def test_wsr_bitwise_invariant_to_splat_order(supersample):
 
 
 def test_duplex_bitwise_invariant_to_order_inside_cells():
-    scene, cam = random_scene(52, n=300, sh_degree=3)
+    scene, cam = random_view(52, n=300, sh_degree=3)
     cells = build_cells(scene, 6)
     scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, cells=cells)
     a = gb.render(scene, cam, "duplex", background=BACKGROUND)
@@ -140,7 +145,7 @@ def flat_cells(layers, E=4.0, wbg=0.25, W=16, H=12):
     means = np.stack([np.zeros(n), np.zeros(n), Z], -1)
     scales = np.stack([1e4 * Z / f, 1e4 * Z / f, np.zeros(n)], -1)
     colours = np.array([c for _, _, _, c in layers], float)
-    sh = ((colours - 0.5) / 0.28209479177387814)[:, None, :]
+    sh = ((colours - 0.5) / SH_C0)[:, None, :]
     m = cell_of.max() + 1
     cz = np.array([Z[cell_of == c].mean() for c in range(m)])
     cells = Cells.from_groups(np.stack([np.zeros(m), np.zeros(m), cz], -1), np.full((m, 3), 1e3),
@@ -189,7 +194,7 @@ def test_wsr_hand_computed():
     c = [(1.0, 0.2, 0.1), (0.1, 0.9, 0.3), (0.2, 0.3, 1.0)]
     scene, cam = flat_cells([(0, 2.0, 0.6, c[0]), (1, 3.0, 0.5, c[1]), (2, 4.0, 0.3, c[2])])
     scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
-                                 view_weight_sh=np.array([[2.0], [1.0], [0.5]]) / 0.28209479177387814,
+                                 view_weight_sh=np.array([[2.0], [1.0], [0.5]]) / SH_C0,
                                  weight_background=0.2)
     frame = gb.render(scene, cam, "wsr", background=BACKGROUND)
     w = np.array([0.6 * 2.0, 0.5 * 1.0, 0.3 * 0.5])  # opacity * v; no clamp, no transmittance
@@ -204,14 +209,14 @@ def test_wsr_huge_view_weights_stay_in_int64():
     c = [(1.0, 0.2, 0.1), (0.1, 0.9, 0.3), (0.2, 0.3, 1.0)]
     scene, cam = flat_cells([(0, 2.0, 0.6, c[0]), (1, 3.0, 0.5, c[1]), (2, 4.0, 0.3, c[2])])
     scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
-                                 view_weight_sh=np.full((3, 1), 1e9 / 0.28209479177387814), weight_background=0.2)
+                                 view_weight_sh=np.full((3, 1), 1e9 / SH_C0), weight_background=0.2)
     frame = gb.render(scene, cam, "wsr", background=BACKGROUND)
     w = np.full(3, 64.0)  # every splat at the cap: equal weights, each keeps its colour
     expect = ((w[:, None] * np.array(c)).sum(0) + 0.2 * np.array(BACKGROUND)) / (w.sum() + 0.2)
     assert np.abs(frame.rgb - expect).max() < 1e-5
     assert np.abs(frame.alpha - (1 - 0.2 / (w.sum() + 0.2))).max() < 1e-6
     # a random scene: still finite, bounded and the float64 reference's (which caps the same way)
-    scene, cam = random_scene(34, n=120, sh_degree=3)
+    scene, cam = random_view(34, n=120, sh_degree=3)
     vw = np.zeros((scene.num_splats, 16))
     vw[:, 0] = np.random.default_rng(34).uniform(1e6, 1e9, scene.num_splats)
     scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
@@ -224,7 +229,7 @@ def test_cells_must_partition_the_splats():
     """Cells are checked where they are made (shapes, offsets, negative members) and against the scene where every
     backend takes them (cells_for: members in range, each splat in at most one cell); the CPU module keeps its own
     check behind that."""
-    scene, cam = random_scene(94, n=12, sh_degree=0)
+    scene, cam = random_view(94, n=12, sh_degree=0)
     g = build_cells(scene, 4)
     geom = (g.means, g.scales, g.quats)
     for offsets, members, what in [([1, 4, 8, 12], g.members, "offsets"), ([0, 8, 4, 12], g.members, "offsets"),
@@ -248,11 +253,11 @@ def test_cells_must_partition_the_splats():
 
     # the native module on its own: the same partition check, and every result key the renderers read
     from gbviewer import _native
-    from gbviewer.render import _camera_args
+    from gbviewer.render.prepare import camera_args
 
     def native(members):
         return _native.render(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None,
-                              *_camera_args(cam), int(gb.Mode.DUPLEX), 1, 3, np.zeros(3, np.float32), False, 0,
+                              *camera_args(cam), int(gb.Mode.DUPLEX), 1, 3, np.zeros(3, np.float32), False, 0,
                               cell_means=g.means, cell_scales=g.scales, cell_quats=g.quats, cell_offsets=g.offsets,
                               cell_members=np.ascontiguousarray(members, np.int32))
 
@@ -299,7 +304,7 @@ def test_one_splat_per_cell_is_3dgs_when_E_1():
     """E = 1, w_bg = 1, black background, singleton cells: sum_k w_k + T_end = 1 (telescoping), so duplex = 3DGS's
     C wherever the transmittance stays above 0.01 (faint splats keep it there; opacity < 0.3 also keeps every alpha
     beyond the 3-sigma radius below 1/255, where duplex's radius test and scalar's plain alpha test agree)."""
-    scene, cam = random_scene(61, n=150, sh_degree=3)
+    scene, cam = random_view(61, n=150, sh_degree=3)
     op = np.minimum(scene.opacities, 0.05)
     # each cell is its splat's ellipsoid at twice the scale: the cell's 2-sigma radius covers the splat's 3 sigma
     one = Cells.from_groups(scene.means, 2 * scene.scales, scene.quats, np.arange(scene.num_splats))
@@ -314,7 +319,7 @@ def test_one_splat_per_cell_is_3dgs_when_E_1():
 def test_cells_cover_members():
     """Built cells: all but one hold exactly K splats; each member's 3-sigma ellipsoid lies inside the cell's
     2-sigma ellipsoid (checked at its centre +- 3 sigma along its axes); few splat tiles fall outside cell rects."""
-    scene, cam = random_scene(71, n=500, sh_degree=0, kinds_p=[0.8, 0.2, 0, 0, 0, 0, 0])
+    scene, cam = random_view(71, n=500, sh_degree=0, kinds_p=[0.8, 0.2, 0, 0, 0, 0, 0])
     cells = build_cells(scene, 5)
     sizes = cells.sizes
     assert (sizes == 5).sum() >= cells.num_cells - 1 and sizes.sum() == scene.num_splats
@@ -332,11 +337,11 @@ def test_cells_cover_members():
                 local = Rc[c].T @ (p - cells.means[c]) / np.maximum(2 * cells.scales[c], 1e-12)
                 assert local @ local <= 1 + 1e-4
     f = gb.render(scene, cam, "duplex")
-    assert f.stats["cell_misses"] <= 0.01 * f.stats["pairs"]
+    assert f.stats.cell_misses <= 0.01 * f.stats.pairs
 
 
 def test_mode_labels_and_settings():
-    scene, cam = random_scene(81, n=30)
+    scene, cam = random_view(81, n=30)
     s = gb.RenderSettings.parse("wsr")
     assert s.mode == gb.Mode.WSR and "approx" in s.label_for(scene)
     assert "approx" not in s.label_for(with_view_weights(scene, 1))
@@ -345,26 +350,26 @@ def test_mode_labels_and_settings():
     with pytest.raises(gb.errors.RenderError):
         gb.RenderSettings("duplex", et_grade=0.0)
     f = gb.render(scene, cam, "duplex")
-    assert "built cells" in f.stats["mode"] and f.stats["sort_bytes"] == 24 * f.stats["sort_length"]
+    assert "built cells" in f.stats.mode and f.stats.sort_bytes == 24 * f.stats.sort_length
 
 
 def test_sort_free_ply_round_trip(tmp_path):
-    scene, cam = random_scene(91, n=60, sh_degree=3)
+    scene, cam = random_view(91, n=60, sh_degree=3)
     scene = with_view_weights(scene, 91, sigma=7.5)
     path = tmp_path / "sortfree.ply"
     write_inria_ply(scene, path)
     loaded = load(path)
     assert loaded.meta["format"] == "sort-free-ply"
-    np.testing.assert_array_equal(loaded.view_weight_sh, scene.view_weight_sh)
-    assert loaded.weight_background == pytest.approx(0.3) and loaded.wsr_sigma == pytest.approx(7.5)
+    np.testing.assert_array_equal(loaded.oit.view_weight_sh, scene.oit.view_weight_sh)
+    assert loaded.oit.weight_background == pytest.approx(0.3) and loaded.oit.sigma == pytest.approx(7.5)
     a = gb.render(loaded, cam, "wsr", depth_correct=True)
     b = gb.render(scene, cam, "wsr", depth_correct=True)
     assert np.abs(a.rgb - b.rgb).max() < 1e-6  # the globals went through float32
-    assert "approx" not in a.stats["mode"]
+    assert "approx" not in a.stats.mode
 
 
 def test_sort_free_ply_errors(tmp_path):
-    scene, _ = random_scene(92, n=10, sh_degree=0)
+    scene, _ = random_view(92, n=10, sh_degree=0)
     scene = with_view_weights(scene, 92, sigma=5.0)
     path = tmp_path / "s.ply"
     write_inria_ply(scene, path)
@@ -409,12 +414,12 @@ def test_cli_bench_order_independent(tmp_path):
 
 def test_cells_follow_dropped_splats():
     """Scene.from_arrays drops non-finite splats; the members of given cells are renumbered with them."""
-    scene, cam = random_scene(93, n=40, sh_degree=0)
+    scene, cam = random_view(93, n=40, sh_degree=0)
     cells = build_cells(scene, 4)
     means = scene.means.copy()
     means[5] = np.nan
     with pytest.warns(UserWarning, match="dropped 1"):
         sc = gb.Scene.from_arrays(means, scene.scales, scene.quats, scene.opacities, scene.sh, cells=cells)
-    assert sc.num_splats == 39 and sc.cells.sizes.sum() == 39 and sc.cells.num_cells == cells.num_cells
-    assert sorted(sc.cells.members) == list(range(39))
+    assert sc.num_splats == 39 and sc.oit.cells.sizes.sum() == 39 and sc.oit.cells.num_cells == cells.num_cells
+    assert sorted(sc.oit.cells.members) == list(range(39))
     assert np.isfinite(gb.render(sc, cam, "duplex").rgb).all()

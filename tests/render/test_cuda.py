@@ -3,7 +3,7 @@ handling run without a GPU; runtime comparisons with the CPU backend run only wh
 skip, saying why, elsewhere).
 
 Exactness on a GPU: `visible` and `sort_length` must equal the CPU's. The preprocess decisions are bit-identical on
-every backend (products rounded through mul_rn, tests/test_fp_contract.py), and duplex orders each cell's splats
+every backend (products rounded through mul_rn, tests/render/test_fp_contract.py), and duplex orders each cell's splats
 canonically on both (gbv/order.h), so the only float differences left are in the blend (fused multiply-adds, device
 expf/logf), bounded per image below.
 """
@@ -18,10 +18,11 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from conftest import front_camera, random_scene, shared_scene
+from helpers import front_camera, random_scene, shared_scene
 from gbviewer.cells import Cells, build_cells
 from gbviewer.errors import RenderError
 from gbviewer.render import CudaRenderer
+from gbviewer.render.prepare import prepare
 from test_render import check_concurrent_renders
 
 MODES = ["scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex"]
@@ -73,8 +74,8 @@ def test_cuda_matches_cpu(mode, supersample, scene_name):
     # Same headers, same float32 math; fused multiply-adds and device expf/erff differ in the last bits, which can
     # flip a 1/255 or early-termination decision on a few pixels.
     assert mean < 1e-4 and frac < 0.002, (mean, worst, frac)
-    assert gpu.stats["visible"] == cpu.stats["visible"]
-    assert gpu.stats["sort_length"] == cpu.stats["sort_length"]
+    assert gpu.stats.visible == cpu.stats.visible
+    assert gpu.stats.sort_length == cpu.stats.sort_length
 
 
 @needs_gpu
@@ -136,7 +137,7 @@ def test_cuda_duplex_order_inside_cells_is_canonical():
     mean, worst, frac = compare(cpu, a)
     assert mean < 1e-4 and frac < 0.002, (mean, worst, frac)
     for key in ("visible", "sort_length", "pairs", "cells_visible", "cell_misses"):
-        assert a.stats[key] == cpu.stats[key], key
+        assert getattr(a.stats, key) == getattr(cpu.stats, key), key
 
 
 @needs_gpu
@@ -145,7 +146,7 @@ def test_cuda_empty_frame(mode):
     """Every splat behind the camera: the background, no evaluations."""
     cam = gb.Camera(32, 32, 30, 30, 16, 16, np.eye(3), [0.0, 0.0, -10.0])
     f = gb.render(random_scene(50), cam, mode, backend="cuda", background=(0.5, 0.25, 1.0))
-    assert f.stats["visible"] == 0 and f.stats["sort_length"] == 0 and f.stats["pairs"] == 0
+    assert f.stats.visible == 0 and f.stats.sort_length == 0 and f.stats.pairs == 0
     np.testing.assert_array_equal(f.rgb, np.broadcast_to(np.float32([0.5, 0.25, 1.0]), (32, 32, 3)))
     assert (f.alpha == 0).all() and (f.debug["evals"] == 0).all()
 
@@ -153,7 +154,7 @@ def test_cuda_empty_frame(mode):
 @needs_gpu
 def test_cuda_renderer_device():
     r = CudaRenderer()
-    assert 0 <= r.device
+    assert 0 <= r._impl.device
     with pytest.raises(gb.BackendUnavailable, match="does not exist"):
         CudaRenderer(device=1 << 20)
 
@@ -258,7 +259,7 @@ class FakeNative:
 
 def fake_renderer(fake: FakeNative) -> CudaRenderer:
     r = object.__new__(CudaRenderer)
-    r._native, r._lock, r._impl = None, threading.Lock(), fake
+    r._lock, r._impl = threading.Lock(), fake
     r._scene = r._uploaded = r._cells = None
     return r
 
@@ -274,13 +275,13 @@ def test_cuda_wrapper_failed_upload_is_retried():
     assert r._uploaded is None
     cam, duplex = front_camera(), gb.RenderSettings("duplex")
     with pytest.raises(RenderError, match="out of device memory"):
-        r._prepare(cam, duplex)  # the scene goes up again; its cells fail
+        r._sync(prepare(r._scene, cam, duplex, "cuda"))  # the scene goes up again; its cells fail
     assert fake.calls == ["upload", "upload", "upload_cells"] and r._uploaded is scene and r._cells is None
-    r._prepare(cam, duplex)
-    r._prepare(cam, duplex)
+    r._sync(prepare(r._scene, cam, duplex, "cuda"))
+    r._sync(prepare(r._scene, cam, duplex, "cuda"))
     assert fake.calls == ["upload", "upload", "upload_cells", "upload_cells"]
 
 
 def test_cuda_wrapper_without_scene():
     with pytest.raises(RenderError, match="upload"):
-        fake_renderer(FakeNative())._prepare(front_camera(), gb.RenderSettings())
+        fake_renderer(FakeNative()).render(front_camera(), gb.RenderSettings())

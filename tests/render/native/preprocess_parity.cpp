@@ -1,4 +1,4 @@
-// tests/test_fp_contract.py builds this twice around native/include/gbv (contraction off, and forced on with FMA
+// tests/render/test_fp_contract.py builds this twice around native/include/gbv (contraction off, and forced on with FMA
 // instructions) and compares the outputs byte for byte. It reads a scene and a camera from argv[1], runs make_camera,
 // then preprocess_splat in every mode (and preprocess_cell on the same ellipsoids) and writes argv[2]: the
 // CameraParams, then per mode and splat one Record.

@@ -11,8 +11,8 @@ import subprocess
 
 import pytest
 
-from conftest import skip_or_fail
-from gbviewer.glsl import SHADER_DIR, shader_source
+from helpers import skip_or_fail
+from gbviewer.render.glsl import SHADER_DIR, shader_source
 from gbviewer.render import Mode
 
 

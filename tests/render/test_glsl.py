@@ -1,4 +1,4 @@
-"""GLSL compute backend (gbviewer/glsl.py, shaders/) against the CPU backend, plus its sort, scan, math and API.
+"""GLSL compute backend (gbviewer/render/glsl/, shaders/) against the CPU backend, plus its sort, scan, math and API.
 
 Tolerances (GLSL vs CPU, same scene, camera and settings): mean absolute rgb difference < 1e-3 and max < 1/255 on
 every pixel except threshold pixels, of which at most THRESHOLD_FRACTION (0.2%) per image are allowed.
@@ -32,18 +32,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import front_camera, random_scene, shared_scene, skip_or_fail
+from helpers import front_camera, random_scene, shared_scene, skip_or_fail
 
 import gbviewer as gb
-import gbviewer.glsl as glsl
 from gbviewer.cli import main
 from gbviewer.errors import BackendUnavailable, RenderError
-from gbviewer.glsl import GlslRenderer
 from gbviewer.render import RenderSettings
+from gbviewer.render.glsl import GlslRenderer, gpu, limits, shader_source, standalone_context
+from gbviewer.render.glsl import context as gl_context
+from gbviewer.render.glsl.sort import radix_sort, scan
 
 pytestmark = pytest.mark.gl
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 NATIVE = REPO / "native" / "include" / "gbv"
 SHADERS = REPO / "shaders"
 
@@ -84,7 +85,7 @@ def compare(scene: gb.Scene, cam: gb.Camera, spec: str, renderer: GlslRenderer |
     assert m["mean"] < MEAN_TOL, where
     assert m["over"] <= THRESHOLD_FRACTION * diff.size, where
     for key in ("visible", "sort_length"):
-        a, b = out.stats[key], ref.stats[key]
+        a, b = getattr(out.stats, key), getattr(ref.stats, key)
         assert abs(a - b) <= COUNT_SLACK * max(b, 1), f"{where}: {key} {a} vs cpu {b}"
     return m
 
@@ -191,13 +192,13 @@ def test_preprocess_is_not_contracted(shader, tmp_path, monkeypatch):
     """The shaders compile (glslangValidator, OpenGL SPIR-V), and in the preprocess functions every multiply whose
     result feeds an add or subtract is `precise` together with that add (SPIR-V NoContraction on both), as the C++
     code routes those products through mul_rn: culling decisions and tile edges must not depend on whether the
-    driver fuses multiply-adds (tests/test_fp_contract.py checks the C++ side bit for bit)."""
+    driver fuses multiply-adds (tests/render/test_fp_contract.py checks the C++ side bit for bit)."""
     exe = shutil.which("glslangValidator")
     if exe is None:
         skip_or_fail("glslangValidator (Debian: glslang-tools) is not installed")
-    monkeypatch.setattr(glsl, "SHADER_DIR", SHADERS)  # this checkout's shaders, not the installed copy
+    monkeypatch.setattr(gl_context, "SHADER_DIR", SHADERS)  # this checkout's shaders, not the installed copy
     src = tmp_path / shader
-    src.write_text(glsl.shader_source(shader, {"GBV_PRECISE_MATH": 1}))
+    src.write_text(shader_source(shader, {"GBV_PRECISE_MATH": 1}))
     p = subprocess.run([exe, "-G", "--aml", "-H", str(src), "-o", str(tmp_path / "out.spv")], capture_output=True,
                        text=True)
     assert p.returncode == 0, p.stdout + p.stderr
@@ -220,7 +221,7 @@ def test_preprocess_is_not_contracted(shader, tmp_path, monkeypatch):
 
 def _eval_glsl(fn: str, xs: np.ndarray) -> np.ndarray:
     """Evaluate the GLSL `float f(float x)` (which may call the shaders' math and blend functions) on xs."""
-    ctx = glsl.standalone_context()
+    ctx = standalone_context()
     src = ("#version 430\n#define GBV_PRECISE_MATH 1\n" + "".join(glsl_text(f) for f in ("common.glsl", "mathf.glsl",
            "blend.glsl")) + fn + """
 layout(local_size_x = 64) in;
@@ -263,10 +264,10 @@ def test_radix_sort_is_stable(gl, n, bits, high):
     r = GlslRenderer()
     rng = np.random.default_rng(n)
     keys = rng.integers(0, high, n, dtype=np.uint64).astype(np.uint32)
-    bufs = [r._ensure(f"t{i}", n * 4) for i in range(4)]
+    bufs = [r.gpu.ensure(f"t{i}", n * 4) for i in range(4)]
     bufs[0].write(keys.tobytes())
     bufs[1].write(np.arange(n, dtype=np.uint32).tobytes())
-    k, v = r._radix_sort(*bufs, n, bits)
+    k, v = radix_sort(r.gpu, *bufs, n, bits)
     order = np.argsort(keys, kind="stable")
     np.testing.assert_array_equal(np.frombuffer(v.read(size=n * 4), np.uint32), order)
     np.testing.assert_array_equal(np.frombuffer(k.read(size=n * 4), np.uint32), keys[order])
@@ -277,19 +278,19 @@ def test_radix_sort_is_stable(gl, n, bits, high):
 def test_exclusive_scan(gl, n):
     r = GlslRenderer()
     data = np.random.default_rng(n).integers(0, 7, n).astype(np.uint32)
-    buf = r._ensure("data", n * 4)
+    buf = r.gpu.ensure("data", n * 4)
     buf.write(data.tobytes())
-    r._ensure("totals", 64).write(np.zeros(16, np.uint32).tobytes())
-    r._scan(buf, n, total_slot=0)
+    r.gpu.ensure("totals", 64).write(np.zeros(16, np.uint32).tobytes())
+    scan(r.gpu, buf, n, total_slot=0)
     expect = np.concatenate([[0], np.cumsum(data, dtype=np.uint64)[:-1]]).astype(np.uint32)
     np.testing.assert_array_equal(np.frombuffer(buf.read(size=n * 4), np.uint32), expect)
-    assert np.frombuffer(r._buffers["totals"].read(size=4), np.uint32)[0] == data.sum()
+    assert np.frombuffer(r.gpu.buffers["totals"].read(size=4), np.uint32)[0] == data.sum()
     r.release()
 
 
 def test_dispatch_over_two_axes(gl, monkeypatch):
     """More than 65535 groups go over x and y (scenes of > 16.7M splats); force that path with a limit of 3."""
-    monkeypatch.setattr(glsl, "MAX_GROUPS", 3)
+    monkeypatch.setattr(gpu, "MAX_GROUPS", 3)
     scene = awkward_scene(6, n=4000)
     r = GlslRenderer()
     r.upload(scene)
@@ -382,8 +383,8 @@ def test_long_tile_lists(gl):
     compare(scene, cam, "scalar")
     out = gb.get_renderer(scene, "glsl").render(cam, RenderSettings.parse("scalar"))
     ref = gb.get_renderer(scene, "cpu").render(cam, RenderSettings.parse("scalar"))
-    assert out.stats["sort_length"] == out.stats["visible"] > 65535
-    assert out.debug["evals"].max() == out.stats["sort_length"]
+    assert out.stats.sort_length == out.stats.visible > 65535
+    assert out.debug["evals"].max() == out.stats.sort_length
     np.testing.assert_array_equal(out.debug["evals"], ref.debug["evals"])
 
 
@@ -393,8 +394,8 @@ def test_blend_split_over_dispatches(gl, monkeypatch, spec):
     """The multi-dispatch blend (groups of render tiles, windows of the lists, state kept in buffers) that drivers
     with a loop cap need, forced here with a cap of 2000 iterations (lists of 768 splats per dispatch)."""
     renderer = GlslRenderer()
-    monkeypatch.setitem(glsl._loop_limits, renderer.ctx, 2000)
-    assert len(glsl.plan_blend(3, 5000, 2000)) == 9 * 7
+    monkeypatch.setitem(limits._loop_limits, renderer.ctx, 2000)
+    assert len(limits.plan_blend(3, 5000, 2000)) == 9 * 7
     scene = awkward_scene(8, n=6000)
     renderer.upload(scene)
     compare(scene, front_camera(48, 32), spec, renderer=renderer)
@@ -440,10 +441,10 @@ def test_debug_planes(gl, bundled):
     out = gb.get_renderer(bundled, "glsl").render(cam, s)
     assert out.debug["window"].shape == (48, 64, 2) and out.debug["evals"].dtype == np.int32
     assert np.abs(out.debug["window"] - ref.debug["window"]).mean() < 1e-3
-    assert abs(out.stats["evaluations"] - ref.stats["evaluations"]) <= 1e-3 * ref.stats["evaluations"]
-    assert out.stats["evals_per_pixel"] == pytest.approx(out.stats["evaluations"] / (cam.width * cam.height))
-    assert {"preprocess_ms", "sort_ms", "blend_ms", "total_ms"} <= set(out.stats)
-    assert out.stats["backend"] == "glsl" and out.stats["mode"] == s.label
+    assert abs(out.stats.evaluations - ref.stats.evaluations) <= 1e-3 * ref.stats.evaluations
+    assert out.stats.evals_per_pixel == pytest.approx(out.stats.evaluations / (cam.width * cam.height))
+    assert out.stats.total_ms > 0 and min(out.stats.preprocess_ms, out.stats.sort_ms, out.stats.blend_ms) >= 0
+    assert out.stats.backend == "glsl" and out.stats.mode == s.label
 
 
 # ---- buffers, scenes, contexts ------------------------------------------------------------------------------------
@@ -474,57 +475,33 @@ def test_empty_frame(gl):
     out = GlslRenderer()
     out.upload(scene)
     f = out.render(cam, RenderSettings(background=(0.5, 0.25, 1.0)))
-    assert f.stats["visible"] == 0 and f.stats["sort_length"] == 0
+    assert f.stats.visible == 0 and f.stats.sort_length == 0
     np.testing.assert_array_equal(f.rgb, np.broadcast_to(np.float32([0.5, 0.25, 1.0]), (32, 32, 3)))
     assert (f.alpha == 0).all() and (f.debug["evals"] == 0).all()
 
 
-def test_existing_context_texture_drawn_directly(gl, bundled):
-    """An app passes its moderngl.Context; the output texture is drawable as is (no CPU round trip)."""
-    ctx = glsl.standalone_context()  # stands in for the app's window context,
+def test_existing_context(gl, bundled):
+    """An app passes its moderngl.Context (kept current in its thread); the renderer works in it."""
+    ctx = standalone_context()  # stands in for the app's window context,
     with ctx:  # which the app keeps current in its thread
         r = GlslRenderer(ctx=ctx)
         r.upload(bundled)
         cam, s = gb.orbit_camera(bundled, width=48, height=40), RenderSettings.parse("gaussian_blending")
-        tex = r.render_texture(cam, s)
-        assert tex.size == (48, 40) and tex.components == 4 and tex.dtype == "f4"
-        assert {"preprocess_ms", "sort_ms", "blend_ms", "total_ms", "visible"} <= set(r.last_stats)
-        prog = ctx.program(
-            vertex_shader="""#version 330
-                out vec2 uv;
-                void main() {
-                    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);  // full-screen triangle
-                    uv = p;
-                    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
-                }""",
-            fragment_shader="""#version 330
-                uniform sampler2D image; in vec2 uv; out vec4 colour;
-                void main() { colour = texture(image, vec2(uv.x, 1.0 - uv.y)); }""",  # row 0 is the image top
-        )
-        target = ctx.texture((48, 40), 4, dtype="f4")
-        fbo = ctx.framebuffer(color_attachments=[target])
-        fbo.use()
-        tex.use(0)
-        prog["image"] = 0
-        vao = ctx.vertex_array(prog, [])
-        vao.render(vertices=3)
-        drawn = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(40, 48, 4)[::-1]  # GL rows: bottom up
-        frame = gb.get_renderer(bundled, "cpu").render(cam, s)
-        assert np.abs(drawn[..., :3] - frame.rgb).mean() < MEAN_TOL
-        assert np.abs(drawn[..., :3] - frame.rgb).max() < MAX_TOL
-        for obj in (vao, fbo, target, prog):
-            obj.release()
+        frame = r.render(cam, s)
+        ref = gb.get_renderer(bundled, "cpu").render(cam, s)
+        assert np.abs(frame.rgb - ref.rgb).mean() < MEAN_TOL
+        assert np.abs(frame.rgb - ref.rgb).max() < MAX_TOL
         r.release()
 
 
 def test_unavailable_is_clear(monkeypatch):
-    monkeypatch.setattr(glsl, "_standalone", {})
-    monkeypatch.setattr(importlib.import_module("gbviewer.render"), "_renderers", {})  # none made while GL was there
+    monkeypatch.setattr(gl_context, "_standalone", {})
+    monkeypatch.setattr(importlib.import_module("gbviewer.render.registry"), "_renderers", {})  # none made while GL was there
 
     def no_egl():
         raise Exception("eglInitialize failed (0x3001)")
 
-    monkeypatch.setattr(glsl, "_create_standalone", no_egl)
+    monkeypatch.setattr(gl_context, "_new_context", no_egl)
     ok, why = GlslRenderer.available()
     assert not ok and "eglInitialize failed" in why and "OpenGL 4.3" in why and "libegl1" in why
     with pytest.raises(BackendUnavailable, match="eglInitialize failed"):
@@ -543,7 +520,7 @@ def test_unavailable_is_clear(monkeypatch):
 
 def test_scene_too_large_is_clear(gl):
     r = GlslRenderer()
-    r.max_block = 4096  # pretend a GPU whose storage buffers hold 4 KiB
+    r.gpu.max_block = 4096  # pretend a GPU whose storage buffers hold 4 KiB
     with pytest.raises(RenderError, match="GL_MAX_SHADER_STORAGE_BLOCK_SIZE"):
         r.upload(random_scene(200))
 
@@ -584,5 +561,5 @@ def test_headless_renderer_survives_another_current_context(gl, bundled):
     finally:
         other.release()
     ref = gb.get_renderer(bundled, "cpu").render(cam, RenderSettings())
-    assert frame.stats["visible"] == ref.stats["visible"] > 0
+    assert frame.stats.visible == ref.stats.visible > 0
     assert np.abs(frame.rgb - ref.rgb).max() < MAX_TOL

@@ -19,13 +19,14 @@ same strict check as the other modes.
 
 from __future__ import annotations
 
-import math
 import warnings
 
 import numpy as np
 import pytest
 
 import gbviewer as gb
+from gbviewer.scene import SH_C0
+from helpers import random_view
 from reference import MODES, reference_render
 
 TOL = 1e-4
@@ -37,68 +38,6 @@ MAX_TIE_PIXELS = 4
 TIE_MAX_ERR = 2e-2
 
 
-def _rotation(rng, max_angle):
-    ax = rng.normal(size=3)
-    ax /= np.linalg.norm(ax)
-    ang = rng.uniform(0, max_angle)
-    K = np.array([[0, -ax[2], ax[1]], [ax[2], 0, -ax[0]], [-ax[1], ax[0], 0]])
-    return np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * K @ K
-
-
-def random_scene(seed, n=160, sh_degree=3, filter3d=False, W=48, H=40, max_px_sigma=None, kinds_p=None):
-    """Random scene with every awkward kind of splat, seen by an off-centre camera (fx != fy, rotated pose).
-
-    Kinds: normal, tiny (sub-pixel), behind (Z <= near, including negative Z), offscreen (far outside the
-    frustum, exercising the Jacobian clamp), degenerate (zero scales and/or zero quaternion), huge (covering
-    the image), nearplane (0.2 < Z < 0.6). `max_px_sigma` caps the projected size (well-conditioned scenes).
-    """
-    rng = np.random.default_rng(seed)
-    fx, fy = 38.0, 43.5
-    cx, cy = 0.45 * W + 1.25, 0.55 * H - 0.75
-    R = _rotation(rng, 0.3)
-    t = rng.normal(scale=0.2, size=3)
-    cam = gb.Camera(W, H, fx, fy, cx, cy, R, t)
-    names = ["normal", "tiny", "behind", "offscreen", "degenerate", "huge", "nearplane"]
-    p = kinds_p or [0.55, 0.15, 0.06, 0.08, 0.06, 0.04, 0.06]
-    kinds = rng.choice(names, size=n, p=p)
-    Zc = rng.uniform(1.0, 6.0, n)
-    Xc = (rng.uniform(-0.1, 1.1, n) * W - cx) / fx * Zc
-    Yc = (rng.uniform(-0.1, 1.1, n) * H - cy) / fy * Zc
-    scales = np.exp(rng.uniform(np.log(0.01), np.log(0.25), (n, 3)))
-    quats = rng.normal(size=(n, 4))
-    op = rng.uniform(0.02, 1.0, n)
-    for i, k in enumerate(kinds):
-        if k == "tiny":
-            scales[i] = np.exp(rng.uniform(np.log(1e-4), np.log(0.01), 3))
-        elif k == "behind":
-            Zc[i] = rng.uniform(-3.0, 0.2)
-        elif k == "nearplane":
-            Zc[i] = rng.uniform(0.2, 0.6)
-        elif k == "offscreen":
-            Xc[i] = rng.choice([-1, 1]) * rng.uniform(1.5, 6.0) * Zc[i]
-        elif k == "degenerate":
-            r = rng.integers(3)
-            if r == 0:
-                scales[i] = 0.0
-            elif r == 1:
-                scales[i, rng.integers(3)] = 0.0
-            if rng.random() < 0.5:
-                quats[i] = 0.0
-        elif k == "huge":
-            scales[i] = rng.uniform(0.5, 4.0, 3)
-            op[i] = rng.uniform(0.02, 0.5)
-    if max_px_sigma is not None:
-        cap = max_px_sigma * np.maximum(Zc, 0.2)[:, None] / max(fx, fy)
-        scales = np.minimum(scales, cap)
-    Pc = np.stack([Xc, Yc, Zc], -1)
-    means = (Pc - t) @ R  # x_world = R^T (x_cam - t)
-    sh = rng.normal(scale=0.25, size=(n, (sh_degree + 1) ** 2, 3))
-    sh[:, 0] = rng.uniform(-1.5, 1.5, (n, 3))
-    f3 = rng.uniform(0.0, 0.05, n) if filter3d else None
-    return gb.Scene.from_arrays(means, scales, quats, op, sh, filter_3d=f3), cam
-
-
-# (seed, sh_degree, filter_3d): SH 0 and 3, filter on and off
 SCENES = [(11, 0, False), (12, 3, False), (13, 0, True), (14, 3, True)]
 
 
@@ -126,7 +65,7 @@ def _check_strict(frame, scene, cam, mode, supersample):
 @pytest.mark.parametrize("mode", ["scalar", "mip", "analytic"])
 @pytest.mark.parametrize("seed,sh_degree,filter3d", SCENES)
 def test_scalar_transmittance_modes_match_reference(mode, supersample, seed, sh_degree, filter3d):
-    scene, cam = random_scene(seed, sh_degree=sh_degree, filter3d=filter3d)
+    scene, cam = random_view(seed, sh_degree=sh_degree, filter3d=filter3d)
     frame = gb.render(scene, cam, mode=mode, supersample=supersample, background=BACKGROUND)
     err, ties, alpha = _check_strict(frame, scene, cam, mode, supersample)
     assert (alpha > 0.05).mean() > 0.5, "scene should cover most of the image"
@@ -136,7 +75,7 @@ def test_scalar_transmittance_modes_match_reference(mode, supersample, seed, sh_
 @pytest.mark.parametrize("seed,sh_degree,filter3d", SCENES)
 def test_gaussian_blending_general_scenes(supersample, seed, sh_degree, filter3d):
     """Every kind of splat, wide ones included: strict, like the other modes (see the module docstring)."""
-    scene, cam = random_scene(seed, sh_degree=sh_degree, filter3d=filter3d)
+    scene, cam = random_view(seed, sh_degree=sh_degree, filter3d=filter3d)
     frame = gb.render(scene, cam, mode="gaussian_blending", supersample=supersample, background=BACKGROUND)
     _check_strict(frame, scene, cam, "gaussian_blending", supersample)
 
@@ -147,7 +86,7 @@ def test_gaussian_blending_well_conditioned(supersample, seed, sh_degree, filter
     """No splat larger than 3 px sigma: the float32 moment update is accurate, every pixel within 1e-4,
     including the final window size (debug plane) at supersample 1."""
     p = [0.6, 0.2, 0.05, 0.05, 0.05, 0.0, 0.05]
-    scene, cam = random_scene(seed, n=200, sh_degree=sh_degree, filter3d=filter3d, max_px_sigma=3.0, kinds_p=p)
+    scene, cam = random_view(seed, n=200, sh_degree=sh_degree, filter3d=filter3d, max_px_sigma=3.0, kinds_p=p)
     frame = gb.render(scene, cam, mode="gaussian_blending", supersample=supersample, background=BACKGROUND,
                       debug="window")
     err, ties, alpha = _check_strict(frame, scene, cam, "gaussian_blending", supersample)
@@ -226,7 +165,7 @@ def _flat_stack(opacities, colors, sigma_px=500.0, W=32, H=24):
     Z = 2.0 + np.arange(n)
     means = np.stack([np.zeros(n), np.zeros(n), Z], -1)
     scales = np.stack([sigma_px * Z / f, 0.8 * sigma_px * Z / f, np.zeros(n)], -1)
-    sh = ((np.asarray(colors, float) - 0.5) / 0.28209479177387814)[:, None, :]
+    sh = ((np.asarray(colors, float) - 0.5) / SH_C0)[:, None, :]
     scene = gb.Scene.from_arrays(means, scales, np.tile([1.0, 0, 0, 0], (n, 1)), opacities, sh)
     return scene, gb.Camera(W, H, f, f, W / 2, H / 2, np.eye(3), np.zeros(3))
 
@@ -287,4 +226,4 @@ def test_binning_box_loses_no_pixel(mode, seed):
     frame = gb.render(scene, cam, mode=mode, background=BACKGROUND)
     _check_strict(frame, scene, cam, mode, 1)
     published = gb.render(scene, cam, mode="analytic")  # analytic keeps the published radius square
-    assert frame.stats["pairs"] < 0.9 * published.stats["pairs"], "the ellipse box should bin to fewer tiles"
+    assert frame.stats.pairs < 0.9 * published.stats.pairs, "the ellipse box should bin to fewer tiles"

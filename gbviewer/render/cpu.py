@@ -1,0 +1,67 @@
+"""The CPU backend: the native C++/OpenMP module gbviewer._native (built from native/cpu)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..camera import Camera
+from ..errors import BackendUnavailable
+from ..scene import Scene
+from .prepare import Prepared, camera_args, native_frame, prepare
+from .types import Frame, RenderSettings
+
+
+def _native_extra(prep: Prepared) -> dict:
+    """Keyword arguments of the native render call for wsr and duplex (globals, view weights, cells)."""
+    if prep.oit is None:
+        return {}
+    extra = dict(prep.oit._asdict(), weight_sh=prep.scene.oit.view_weight_sh if prep.scene.oit else None)
+    cells = prep.cells
+    if cells is not None:
+        extra.update(cell_means=cells.means, cell_scales=cells.scales, cell_quats=cells.quats,
+                     cell_offsets=cells.offsets, cell_members=cells.members)
+    return extra
+
+
+class CpuRenderer:
+    """Native C++/OpenMP backend (gbviewer._native)."""
+
+    name = "cpu"
+
+    def __init__(self) -> None:
+        ok, why = self.available()
+        if not ok:
+            raise BackendUnavailable(f"cpu backend unavailable: {why}")
+        from .. import _native
+
+        self._native = _native
+        self._scene: Scene | None = None
+
+    @classmethod
+    def available(cls) -> tuple[bool, str]:
+        try:
+            from .. import _native  # noqa: F401
+        except ImportError as exc:
+            if "GBVIEWER_SIMD" in str(exc):  # the environment forces a SIMD path this CPU or build lacks
+                return False, str(exc)
+            return False, f"native module not built ({exc}); reinstall with pip install ."
+        return True, ""
+
+    def upload(self, scene: Scene) -> None:
+        if scene is not self._scene:
+            self._native.release_buffers()  # the per-frame buffers the native module keeps for the last scene
+        self._scene = scene
+
+    def render(self, camera: Camera, settings: RenderSettings) -> Frame:
+        t0 = time.perf_counter()
+        prep = prepare(self._scene, camera, settings, self.name)
+        scene = prep.scene
+        out = self._native.render(
+            scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d,
+            *camera_args(camera), int(settings.mode), settings.supersample, settings.sh_degree,
+            np.asarray(settings.background, np.float32), settings.debug == "window", settings.threads,
+            **_native_extra(prep),
+        )
+        return native_frame(out, prep, camera, settings, self.name, t0)

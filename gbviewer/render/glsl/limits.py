@@ -1,0 +1,72 @@
+"""Drivers that cap the loop iterations of one shader invocation, and the split blend that works under the cap.
+
+Mesa's llvmpipe ends every loop of an invocation once it has run 65535 iterations in total, silently, so a 100k-splat
+tile list would be cut short. `loop_limit()` measures the cap once per context; when a frame's longest tile list does
+not fit under it, blend.comp runs as several dispatches (`plan_blend`: groups of render tiles, windows of the lists)
+that keep the per-pixel state in a buffer in between. Without a cap, the plan is one dispatch.
+"""
+
+from __future__ import annotations
+
+import weakref
+
+import numpy as np
+
+from ...errors import RenderError
+from .context import shader_source
+from .gpu import WG, Gpu
+
+LOOP_PROBE = 1 << 20
+FULL = 2**31 - 1  # a chunk end past any tile list
+
+_loop_limits: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def loop_limit(ctx) -> int | None:
+    """Loop iterations one invocation may run on this context (None: no cap up to 2^20), measured once."""
+    if ctx not in _loop_limits:
+        prog = ctx.compute_shader(shader_source("loop_probe.comp"))
+        buf = ctx.buffer(reserve=4)
+        buf.bind_to_storage_buffer(0)
+        prog["n"].value = LOOP_PROBE
+        prog.run(1, 1, 1)
+        ctx.memory_barrier()
+        count = int(np.frombuffer(buf.read(), np.uint32)[0])
+        buf.release()
+        prog.release()
+        _loop_limits[ctx] = None if count >= LOOP_PROBE else count
+    return _loop_limits[ctx]
+
+
+def plan_blend(supersample: int, longest: int, limit: int | None) -> list[tuple[int, int, int, int]]:
+    """Blend dispatches as (subtile_begin, subtile_end, chunk_begin, chunk_end), each within `limit` loop iterations
+    per invocation. A render tile costs one iteration per splat plus two per batch of 256 and a few for the tile;
+    the box sum costs N^2 in all; 1024 iterations are kept in reserve."""
+    tiles = supersample * supersample
+    if limit is None:
+        return [(0, tiles, 0, FULL)]
+    budget = limit - 2 * tiles - 1024
+
+    def cost(n: int) -> int:
+        return n + 2 * -(-n // 256) + 4
+
+    if cost(longest) <= budget:
+        group = max(1, min(tiles, budget // cost(longest)))
+        return [(t, min(t + group, tiles), 0, FULL) for t in range(0, tiles, group)]
+    chunk = 256
+    while cost(chunk + 256) <= budget:
+        chunk += 256
+    if cost(chunk) > budget:
+        raise RenderError(f"glsl backend: the driver allows only {limit} loop iterations per invocation")
+    return [(t, t + 1, c, c + chunk) for t in range(tiles) for c in range(0, longest, chunk)]
+
+
+def blend_plan(gpu: Gpu, supersample: int, ranges, num_tiles: int, pairs: int) -> tuple[list, int]:
+    """The blend dispatches for this frame and its longest tile list (0 when the context has no cap: not measured)."""
+    limit = loop_limit(gpu.ctx)
+    longest = 0
+    if limit is not None and pairs > 0:
+        totals = gpu.buffers["totals"]
+        gpu.run("list_max.comp", -(-num_tiles // WG), (ranges, totals), n=num_tiles)
+        longest = int(np.frombuffer(totals.read(size=4, offset=20), np.uint32)[0])
+    return plan_blend(supersample, longest, limit), longest

@@ -1,0 +1,353 @@
+"""The GLSL compute renderer: the CPU renderer's pipeline in OpenGL 4.3 compute shaders, through moderngl.
+
+Every stage runs on the GPU (shaders/*.comp; the math is shaders/*.glsl, a port of native/include/gbv/*.h with the
+same function names and constants):
+
+1. preprocess.comp: `preprocess_splat` per splat -> Splat2D, tile rectangle, survivor flag; atomics count the
+   tile-splat pairs and the depth range.
+2. scan of the flags, compact.comp: survivors in splat-index order, key = depth bits - min depth bits.
+3. radix sort (radix_count + scan + radix_scatter, 4-bit digits, stable) of the survivors by depth: order (depth,
+   index). Sorting the per-splat depth once and then the pairs by tile is the LSD radix sort of the (tile, depth)
+   keys with its low (depth) digits done before duplication, where they are the same for all of a splat's pairs.
+4. gather_counts + scan + duplicate.comp: one (tile, splat) pair per touched tile, in depth order (one invocation
+   per pair, which finds its splat by binary search).
+5. radix sort of the pairs by tile (stable): every tile's list is ordered by (depth, splat index), exactly as the
+   CPU driver's per-tile std::sort of (depth bits, index) keys.
+6. tile_ranges.comp, then blend.comp: one work group per 16x16 output block; supersampling blends the N x N
+   render tiles of the block and box-averages them in shared memory.
+
+wsr skips the depth sort of step 3: its tile lists are binned by a radix sort of the tile alone and stay in
+splat-index order (stats sort_length 0, as on the CPU), and blend.comp sums the weights in float. duplex replaces
+steps 3-5 with cells.comp (each cell's visible splats, its screen proxy), a depth sort of the visible cells,
+(tile, cell) pairs sorted by tile, and expand.comp / expand_ranges.comp, which turn every tile's cells into the
+list of their splats; blend.comp reads each splat's cell from the scene's cell buffer.
+
+Drivers that cap the loop iterations of one invocation (Mesa's llvmpipe) get the blend split into several dispatches:
+see `limits`. Buffers, programs and dispatch are `gpu.Gpu`; the scan, radix sort and tile binning are in `sort`.
+
+The scene is uploaded once (`upload`); per frame the camera goes up as uniforms, 20 bytes of counters come back
+(visible splats, pairs and depth range: they size the pair buffers and the number of radix passes; 4 more with a
+loop cap: the longest tile list), and `render` reads the image back. Buffers grow (by 1.5x) when a frame needs more
+and are reused otherwise; `allocations` counts (re)allocations.
+
+Contexts: by default a headless EGL context shared by every renderer of the process
+(`moderngl.create_context(standalone=True, backend="egl")`); or pass the app's `moderngl.Context`.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ...camera import Camera
+from ...cells import Cells
+from ...errors import BackendUnavailable, RenderError
+from ...scene import Scene
+from ..prepare import Prepared, frame_stats, prepare
+from ..types import Frame, Mode, RenderSettings
+from .context import check_context, standalone_context
+from .gpu import WG, Gpu
+from .limits import blend_plan
+from .sort import fill, pairs_by_tile, radix_sort, scan
+
+NO_OIT = (0.0, 0.0, 1.0, 0.0)  # the shaders' oit uniform (sigma, w_bg, E, depth_correct) outside wsr and duplex
+
+
+class GlslRenderer:
+    """OpenGL 4.3 compute-shader renderer; see the module docstring.
+
+    `ctx`: a moderngl.Context to render in (the app's window context), or None for the shared headless EGL context.
+    `precise_math`: use the shaders' ~1-ulp expf/logf instead of GLSL exp()/log() (whose accuracy is up to the
+    driver; the built-ins are faster on GPUs with hardware exp2/log2).
+    """
+
+    name = "glsl"
+
+    def __init__(self, ctx=None, precise_math: bool = True) -> None:
+        self._owns_ctx = ctx is None
+        self.ctx = standalone_context() if ctx is None else ctx
+        check_context(self.ctx)
+        self.gpu = Gpu(self.ctx, precise_math)
+        self._scene: Scene | None = None
+        self._uploaded: Scene | None = None
+        self._n = 0
+        self._sh_k = 1
+        self._weight_k = 0
+        self._cells: Cells | None = None
+
+    @property
+    def allocations(self) -> int:
+        """Buffer and texture (re)allocations since creation."""
+        return self.gpu.allocations
+
+    # ---- protocol ------------------------------------------------------------------------------------------------
+
+    @classmethod
+    def available(cls) -> tuple[bool, str]:
+        """Whether the headless context (created here on first use, current in this thread) has OpenGL 4.3."""
+        try:
+            check_context(standalone_context())
+        except BackendUnavailable as exc:
+            return False, str(exc)
+        return True, ""
+
+    @classmethod
+    def check_context(cls, ctx) -> tuple[bool, str]:
+        """(usable, reason) for an app's own context. Unlike available(), this creates no headless context (which
+        would become current in the calling thread)."""
+        try:
+            check_context(ctx)
+        except BackendUnavailable as exc:
+            return False, str(exc)
+        return True, ""
+
+    @classmethod
+    def describe(cls) -> str:
+        """GL renderer and version of the headless context (for benchmark reports: gbviewer.bench.machine_description)."""
+        try:
+            ctx = standalone_context()
+        except BackendUnavailable as exc:
+            return str(exc)
+        return f"{ctx.info.get('GL_RENDERER', '?')}; OpenGL {ctx.info.get('GL_VERSION', '?')}"
+
+    def _make_current(self) -> None:
+        """Make the headless context this renderer owns current before it works: another one (an app window's,
+        say) may have become current in this thread since. It stays current afterwards, as after its creation
+        (leaving a `with ctx:` block would leave no context current: glcontext's EGL exit does not restore the
+        previous one). A context the app passed in is the app's to keep current."""
+        if self._owns_ctx:
+            self.ctx.__enter__()
+
+    def upload(self, scene: Scene) -> None:
+        """Copy the scene to the GPU once (geometry 48 B and SH 12K B per splat); reuses buffers that are big enough.
+        A trained Duplex-GS model is decoded per view instead, and its splats go up with every frame."""
+        self._make_current()
+        self._scene = scene
+        self._uploaded = None
+        self._cells = None
+        if scene.oit is None or scene.oit.neural is None:
+            self._upload_splats(scene)
+
+    def _upload_splats(self, scene: Scene) -> None:
+        n = scene.num_splats
+        f3d = scene.filter_3d if scene.filter_3d is not None else np.zeros(n, np.float32)
+        geom = np.empty((n, 12), np.float32)
+        geom[:, 0:3] = scene.means
+        geom[:, 3] = scene.opacities
+        geom[:, 4:7] = scene.scales
+        geom[:, 7] = f3d
+        geom[:, 8:12] = scene.quats
+        sh = np.ascontiguousarray(scene.sh, np.float32)
+        self.gpu.upload("geom", geom, f"scene {scene.source}: splat geometry")
+        self.gpu.upload("sh", sh, f"scene {scene.source}: SH coefficients")
+        weight_sh = scene.oit.view_weight_sh if scene.oit is not None else None
+        self._weight_k = 0 if weight_sh is None else int(weight_sh.shape[1])
+        if self._weight_k:
+            self.gpu.upload("weight_sh", np.ascontiguousarray(weight_sh, np.float32),
+                            f"scene {scene.source}: view-weight SH")
+        self._n = n
+        self._sh_k = int(scene.sh.shape[1])
+        self._cells = None
+        self._uploaded = scene
+
+    def _upload_cells(self, cells: Cells, n: int) -> None:
+        """Cell ellipsoids (48 B per cell), member lists and each splat's cell (duplex)."""
+        geom = np.zeros((cells.num_cells, 12), np.float32)
+        geom[:, 0:3] = cells.means
+        geom[:, 4:7] = cells.scales
+        geom[:, 8:12] = cells.quats
+        self.gpu.upload("cell_geom", geom, "cell ellipsoids")
+        self.gpu.upload("cell_offsets", cells.offsets, "cell offsets")
+        self.gpu.upload("cell_members", cells.members, "cell members")
+        self.gpu.upload("cell_of", cells.cell_of(n), "splat cells")
+        self._cells = cells
+
+    def _sync(self, prep: Prepared) -> None:
+        """Put the view's splats (a trained Duplex-GS model's, every frame) and duplex cells on the GPU."""
+        if prep.scene is not self._uploaded:
+            self._upload_splats(prep.scene)
+        if prep.cells is not None and prep.cells is not self._cells:
+            self._upload_cells(prep.cells, prep.scene.num_splats)
+
+    def render(self, camera: Camera, settings: RenderSettings) -> Frame:
+        self._make_current()
+        t0 = time.perf_counter()
+        prep = prepare(self._scene, camera, settings, self.name)
+        self._sync(prep)
+        want_window = settings.debug == "window" and settings.mode == Mode.GAUSSIAN_BLENDING
+        counts = self._frame(camera, settings, prep, want_window)
+        W, H = camera.width, camera.height
+        img = np.frombuffer(self.gpu.texture.read(), np.float32).reshape(H, W, 4)
+        evals = np.frombuffer(self.gpu.buffers["evals"].read(size=W * H * 4), np.int32).reshape(H, W).copy()
+        debug = {"evals": evals}
+        if want_window:
+            window = self.gpu.buffers["window"].read(size=W * H * 8)
+            debug["window"] = np.frombuffer(window, np.float32).reshape(H, W, 2).copy()
+        stats = frame_stats(prep, camera, settings, self.name, t0, evaluations=int(evals.sum(dtype=np.int64)),
+                            **counts)
+        return Frame(img[:, :, :3].copy(), img[:, :, 3].copy(), stats, debug)
+
+    def __del__(self) -> None:
+        try:
+            self.release()
+        except Exception:  # noqa: BLE001 - context already gone (interpreter exit)
+            pass
+
+    def release(self) -> None:
+        """Free the GPU buffers and the output texture (also done when the renderer is garbage-collected)."""
+        self.gpu.release()
+        self._uploaded = None
+        self._cells = None
+
+    # ---- pipeline ------------------------------------------------------------------------------------------------
+
+    def _frame(self, camera: Camera, settings: RenderSettings, prep: Prepared, want_window: bool) -> dict:
+        """Preprocess, bin and sort, blend into the output texture; returns the stage times and counts."""
+        gpu = self.gpu
+        mode = settings.mode
+        oit = NO_OIT if prep.oit is None else (*prep.oit[:3], float(prep.oit.depth_correct))
+        n, N = self._n, settings.supersample
+        W, H = camera.width, camera.height
+        RW, RH = W * N, H * N
+        gx, gy = -(-RW // 16), -(-RH // 16)
+        num_tiles = gx * gy
+        max_deg = {1: 0, 4: 1, 9: 2, 16: 3}[self._sh_k]
+        sh_deg = max(0, min(settings.sh_degree, max_deg))
+        f32 = np.float32
+        Nf = f32(N)
+
+        t0 = time.perf_counter()
+        # per-scene buffers (sized by the splat count; allocated on the first frame, grown with the scene)
+        splats = gpu.ensure("splats", n * 64, "preprocessed splats")
+        rects = gpu.ensure("rects", n * 16, "tile rectangles")
+        flags = gpu.ensure("flags", n * 4, "survivor flags")
+        dkeys = [gpu.ensure(f"depth_keys{i}", n * 4, "depth keys") for i in (0, 1)]
+        dvals = [gpu.ensure(f"depth_vals{i}", n * 4, "depth order") for i in (0, 1)]
+        gpu.ensure("pair_counts", n * 4, "pair counts")  # read by _bin_splats
+        totals = gpu.ensure("totals", 64)
+        totals.write(np.array([0, 0, 0xFFFFFFFF, 0, 0, 0, 0, 0xFFFFFFFF, 0, 0, 0, 0, 0, 0, 0, 0],
+                              np.uint32).tobytes())
+
+        cam_uniforms = dict(
+            grid=(gx, gy), cam_R=np.ascontiguousarray(camera.R, f32).reshape(9),
+            cam_t=np.ascontiguousarray(camera.t, f32),
+            cam_f=(float(f32(camera.fx) * Nf), float(f32(camera.fy) * Nf), float(f32(camera.cx) * Nf),
+                   float(f32(camera.cy) * Nf)),
+            cam_size=(RW, RH), cam_near=float(f32(camera.near)),
+        )
+        weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", 16)
+        gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,
+                weight), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k,
+                oit=oit, **cam_uniforms)
+        scan(gpu, flags, n, total_slot=0)
+        gpu.run("compact.comp", -(-n // WG), (splats, rects, flags, totals, dkeys[0], dvals[0]), num_splats=n)
+        visible, pairs, dmin, dmax, overflow = (int(v) for v in np.frombuffer(totals.read(size=20), np.uint32))
+        t1 = time.perf_counter()
+
+        if overflow:
+            raise RenderError(f"glsl backend: more than 2^32 tile-splat pairs at {RW}x{RH}; render a smaller image")
+        counts = {}
+        if mode == Mode.DUPLEX:
+            tvals, ranges, sort_length, pairs, counts["cells_visible"] = self._bin_duplex(prep.cells, cam_uniforms,
+                                                                                          num_tiles)
+        else:
+            tvals, ranges = self._bin_splats(mode, visible, pairs, dmin, dmax, num_tiles, gx)
+            sort_length = 0 if mode == Mode.WSR else pairs
+        plan, longest = blend_plan(gpu, N, ranges, num_tiles, pairs)
+        self.ctx.finish()
+        t2 = time.perf_counter()
+        self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, oit)
+        self.ctx.finish()
+        return dict(preprocess_ms=(t1 - t0) * 1e3, sort_ms=(t2 - t1) * 1e3, blend_ms=(time.perf_counter() - t2) * 1e3,
+                    visible=visible, sort_length=sort_length, pairs=pairs, **counts)
+
+    def _bin_splats(self, mode: Mode, visible: int, pairs: int, dmin: int, dmax: int, num_tiles: int, gx: int):
+        """Tile lists of splats: by (tile, depth, index), or for wsr by (tile, index) with no depth sort."""
+        gpu = self.gpu
+        dkeys = [gpu.buffers[f"depth_keys{i}"] for i in (0, 1)]
+        dvals = [gpu.buffers[f"depth_vals{i}"] for i in (0, 1)]
+        ranges = gpu.ensure("ranges", num_tiles * 8, "tile ranges")
+        fill(gpu, ranges, num_tiles * 2, 0)
+        if visible == 0:
+            return gpu.ensure("tile_vals0", pairs * 4, "tile-splat pairs"), ranges
+        if mode == Mode.WSR:
+            order = dvals[0]  # survivors in splat-index order: binning only
+        else:
+            _, order = radix_sort(gpu, dkeys[0], dvals[0], dkeys[1], dvals[1], visible, (dmax - dmin).bit_length())
+        tvals = pairs_by_tile(gpu, order, gpu.buffers["rects"], gpu.buffers["pair_counts"], visible, pairs, gx,
+                              num_tiles, ranges, "tile-splat pairs")
+        return tvals, ranges
+
+    def _bin_duplex(self, cells: Cells, cam_uniforms: dict, num_tiles: int):
+        """Duplex binning (KERNELS.md §8.3): project the cells with a visible splat, sort them by depth, one pair per
+        (tile, cell), sort the pairs by tile, expand every pair to its cell's visible splats. Returns the splat list,
+        the tile ranges in it, the tile-cell pairs (the sort length), the list length and the visible cells."""
+        gpu = self.gpu
+        m = cells.num_cells
+        gx = cam_uniforms["grid"][0]
+        totals, cell_offsets = gpu.buffers["totals"], gpu.buffers["cell_offsets"]
+        cell_out = gpu.ensure("cell_out", m * 16, "projected cells")
+        cell_rects = gpu.ensure("cell_rects", m * 16, "cell rectangles")
+        cflags = gpu.ensure("cell_flags", m * 4, "cell flags")
+        vis = gpu.ensure("cell_vis", len(cells.members) * 4, "visible cell members")
+        gpu.run("cells.comp", -(-m // WG), (gpu.buffers["cell_geom"], cell_offsets, gpu.buffers["cell_members"],
+                gpu.buffers["rects"], vis, cell_out, cell_rects, cflags, totals), num_cells=m, **cam_uniforms)
+        scan(gpu, cflags, m, total_slot=9)
+        t = np.frombuffer(totals.read(size=48), np.uint32)
+        cell_pairs, cmin, cmax, ncells = (int(t[i]) for i in (6, 7, 8, 9))
+        ckeys = [gpu.ensure(f"cell_keys{i}", m * 4, "cell keys") for i in (0, 1)]
+        cvals = [gpu.ensure(f"cell_vals{i}", m * 4, "cell order") for i in (0, 1)]
+        gpu.run("cell_compact.comp", -(-m // WG), (cell_out, cell_rects, cflags, totals, ckeys[0], cvals[0]),
+                num_cells=m)
+        cell_ranges = gpu.ensure("cell_ranges", num_tiles * 8, "tile ranges of cells")
+        ranges = gpu.ensure("ranges", num_tiles * 8, "tile ranges")
+        fill(gpu, ranges, num_tiles * 2, 0)
+        fill(gpu, cell_ranges, num_tiles * 2, 0)
+        expanded = 0
+        tlist = gpu.ensure("expanded", 16)
+        if ncells > 0 and cell_pairs > 0:
+            _, order = radix_sort(gpu, ckeys[0], cvals[0], ckeys[1], cvals[1], ncells, (cmax - cmin).bit_length())
+            counts = gpu.ensure("cell_pair_counts", ncells * 4, "cell tile counts")
+            tvals = pairs_by_tile(gpu, order, cell_rects, counts, ncells, cell_pairs, gx, num_tiles, cell_ranges,
+                                  "tile-cell pairs")
+            offs = gpu.ensure("expand_offsets", cell_pairs * 4, "expanded list offsets")
+            groups = -(-cell_pairs // WG)
+            gpu.run("expand.comp", groups, (tvals, cell_out, cell_offsets, vis, offs, tlist), n=cell_pairs, mode=0)
+            scan(gpu, offs, cell_pairs, total_slot=10)
+            expanded = int(np.frombuffer(totals.read(size=4, offset=40), np.uint32)[0])
+            tlist = gpu.ensure("expanded", expanded * 4, "expanded tile lists")
+            gpu.run("expand.comp", groups, (tvals, cell_out, cell_offsets, vis, offs, tlist), n=cell_pairs, mode=1)
+            gpu.run("expand_ranges.comp", -(-num_tiles // WG), (cell_ranges, offs, totals, ranges),
+                    num_tiles=num_tiles, n=cell_pairs)
+        return tlist, ranges, cell_pairs, expanded, ncells
+
+    def _blend(self, camera: Camera, settings: RenderSettings, want_window: bool, plan, longest: int, splats, tvals,
+               ranges, oit: tuple) -> None:
+        """blend.comp into the output texture, in the dispatches of `plan` (one unless the driver caps loops)."""
+        gpu = self.gpu
+        N = settings.supersample
+        W, H = camera.width, camera.height
+        RW, RH = W * N, H * N
+        gx, gy = -(-RW // 16), -(-RH // 16)
+        tex = gpu.ensure_texture(W, H)
+        evals = gpu.ensure("evals", W * H * 4, "evaluation counts")
+        window = gpu.ensure("window", W * H * 8 if want_window else 16, "window sizes")
+        bx, by = -(-W // 16), -(-H // 16)
+        split = len(plan) > 1
+        state = gpu.ensure("blend_state", bx * by * 256 * 48 if split else 16, "blend state")
+        accum = gpu.ensure("blend_accum", bx * by * 256 * 32 if split else 16, "blend sums")
+        prog = gpu.program("blend.comp", **{f"BLEND_MODE_{settings.mode.name}": 1, "SUPERSAMPLED": int(N > 1)})
+        gpu.set(prog, out_size=(W, H), supersample=N, grid=(gx, gy), background=tuple(settings.background),
+                  want_window=int(want_window), oit=oit)
+        cell_of = gpu.buffers["cell_of"] if settings.mode == Mode.DUPLEX else gpu.ensure("dummy", 16)
+        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of)):
+            buf.bind_to_storage_buffer(i)
+        tex.bind_to_image(0, read=False, write=True)
+        tiles = N * N
+        for sub0, sub1, c0, c1 in plan:
+            gpu.set(prog, subtile_begin=sub0, subtile_end=sub1, chunk_begin=c0, chunk_end=c1,
+                      load_state=int(c0 > 0), store_state=int(c1 < longest), load_accum=int(sub0 > 0),
+                      store_accum=int(sub1 < tiles))
+            prog.run(bx, by, 1)
+            self.ctx.memory_barrier()

@@ -1,0 +1,112 @@
+"""The per-frame preparation every backend shares: the view's splats (a trained Duplex-GS model decoded for the
+camera), the wsr / duplex globals and cells, the camera as the native modules take it, and the frame's stats."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from ..camera import Camera
+from ..cells import Cells, cells_for
+from ..errors import RenderError
+from ..scene import Scene
+from .types import (DEFAULT_ET_GRADE, DEFAULT_SIGMA, ORDER_INDEPENDENT, SORT_ENTRY_BYTES, Frame, FrameStats, Mode,
+                    RenderSettings)
+
+
+class OitParams(NamedTuple):
+    """The globals of wsr and duplex, in the order the native renderers take them (gbv::OitParams)."""
+
+    sigma: float
+    weight_background: float
+    et_grade: float
+    depth_correct: bool
+
+
+def oit_params(scene: Scene, settings: RenderSettings) -> OitParams:
+    """sigma, weight_background, et_grade, depth_correct for the native call.
+
+    Trained values when the scene has them. Otherwise w_bg is chosen so that a lone faint splat of alpha a gets the
+    coverage alpha blending gives it, to first order in a: wsr's a / (a + w_bg) needs w_bg = 1; duplex's
+    (a/E) / (a/E + w_bg (1 - a/E)) needs w_bg = 1/E.
+    """
+    oit = scene.oit
+    trained_et = oit.et_grade if oit is not None else None
+    et = settings.et_grade if settings.et_grade is not None else (trained_et or DEFAULT_ET_GRADE)
+    wbg = oit.weight_background if oit is not None else None
+    if wbg is None:
+        wbg = 1.0 / et if settings.mode == Mode.DUPLEX else 1.0
+    sigma = (oit.sigma if oit is not None else None) or DEFAULT_SIGMA
+    return OitParams(sigma, float(wbg), float(et), settings.depth_correct)
+
+
+def view_scene(scene: Scene, camera: Camera) -> Scene:
+    """The splats to render for this view: the scene itself, or a trained Duplex-GS model decoded for the camera."""
+    neural = scene.oit.neural if scene.oit is not None else None
+    return neural.decode(camera) if neural is not None else scene
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """What a backend renders this frame: the view's splats, the decode time (trained Duplex-GS models, else None),
+    the wsr / duplex globals (None in the other modes) and the duplex cells (None in the other modes)."""
+
+    scene: Scene
+    decode_ms: float | None
+    oit: OitParams | None
+    cells: Cells | None
+
+
+def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backend: str) -> Prepared:
+    """The frame's inputs for `backend` from its uploaded scene (None: nothing uploaded, an error)."""
+    if scene is None:
+        raise RenderError(f"{backend} renderer: upload(scene) before render()")
+    t0 = time.perf_counter()
+    view = view_scene(scene, camera)
+    decode_ms = (time.perf_counter() - t0) * 1e3 if view is not scene else None
+    oit = oit_params(view, settings) if settings.mode in ORDER_INDEPENDENT else None
+    cells = cells_for(view, settings.cell_size) if settings.mode == Mode.DUPLEX else None
+    return Prepared(view, decode_ms, oit, cells)
+
+
+def camera_args(camera: Camera) -> tuple:
+    """Camera as the native modules take it: R (3x3), t, fx, fy, cx, cy, width, height, near."""
+    return (np.ascontiguousarray(camera.R, np.float32), np.ascontiguousarray(camera.t, np.float32), camera.fx,
+            camera.fy, camera.cx, camera.cy, camera.width, camera.height, camera.near)
+
+
+def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backend: str, t0: float, *,
+                preprocess_ms: float, sort_ms: float, blend_ms: float, visible: int, sort_length: int, pairs: int,
+                evaluations: int, cells_visible: int | None = None, cell_misses: int | None = None,
+                simd: str | None = None) -> FrameStats:
+    """The frame's stats from a backend's counts and stage times; t0: when the render began."""
+    return FrameStats(
+        preprocess_ms=float(preprocess_ms), sort_ms=float(sort_ms), blend_ms=float(blend_ms),
+        total_ms=(time.perf_counter() - t0) * 1e3, visible=int(visible), sort_length=int(sort_length),
+        sort_bytes=int(sort_length) * SORT_ENTRY_BYTES, pairs=int(pairs), evaluations=int(evaluations),
+        evals_per_pixel=int(evaluations) / (camera.width * camera.height), backend=backend,
+        mode=settings.label_for(prep.scene), simd=simd,
+        cells=prep.cells.num_cells if prep.cells is not None else None,
+        cells_visible=None if cells_visible is None else int(cells_visible),
+        cell_misses=None if cell_misses is None else int(cell_misses), decode_ms=prep.decode_ms,
+    )
+
+
+def native_frame(out: dict, prep: Prepared, camera: Camera, settings: RenderSettings, backend: str,
+                 t0: float) -> Frame:
+    """A Frame from a native module's result dict (rgb, alpha, evals, window?, per-stage ms and counts; duplex:
+    cells_visible, cell_misses; the CPU module: simd, the SIMD path its blend ran)."""
+    duplex = settings.mode == Mode.DUPLEX
+    stats = frame_stats(
+        prep, camera, settings, backend, t0, preprocess_ms=out["preprocess_ms"], sort_ms=out["sort_ms"],
+        blend_ms=out["blend_ms"], visible=out["visible"], sort_length=out["sort_length"], pairs=out["pairs"],
+        evaluations=out["evaluations"], cells_visible=out["cells_visible"] if duplex else None,
+        cell_misses=out["cell_misses"] if duplex else None, simd=str(out["simd"]) if "simd" in out else None,
+    )
+    debug = {"evals": out["evals"]}
+    if "window" in out:
+        debug["window"] = out["window"]
+    return Frame(out["rgb"], out["alpha"], stats, debug)

@@ -1,0 +1,192 @@
+"""The render layer's types: Mode, RenderSettings, Frame and its FrameStats, the Renderer protocol, constants.
+
+Imports no backend."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from ..camera import Camera
+from ..errors import RenderError
+from ..scene import Scene
+
+
+class Mode(enum.IntEnum):
+    """Blending modes; values match `gbv::Mode` in native/include/gbv/common.h."""
+
+    SCALAR = 0  # 3DGS: alpha at the pixel centre, +0.3 px^2 dilation
+    MIP = 1  # Mip-Splatting 2D filter (0.1 px^2 with opacity compensation)
+    ANALYTIC = 2  # Analytic-Splatting: alpha integrated over the pixel, scalar transmittance
+    GAUSSIAN_BLENDING = 3  # spatial transmittance window (Gaussian Blending)
+    WSR = 4  # sort-free weighted sum (LC-WSR, Hou et al.): order independent, no sort
+    DUPLEX = 5  # Duplex-GS: cells sorted, weighted sum inside a cell, cell transmittance and early termination
+
+    @classmethod
+    def parse(cls, value: "str | int | Mode") -> "Mode":
+        if isinstance(value, cls):
+            return value
+        if isinstance(value, str):
+            try:
+                return cls[value.strip().upper().replace("-", "_")]
+            except KeyError:
+                names = ", ".join(m.name.lower() for m in cls)
+                raise RenderError(f"unknown mode {value!r}; expected one of {names}") from None
+        try:
+            return cls(int(value))
+        except ValueError:
+            raise RenderError(f"unknown mode {value!r}") from None
+
+    @property
+    def label(self) -> str:
+        return self.name.lower()
+
+
+DEBUG_OUTPUTS = ("none", "window")
+
+ORDER_INDEPENDENT = (Mode.WSR, Mode.DUPLEX)
+DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (KERNELS.md §8.1)
+DEFAULT_SIGMA = 10.0  # sort-free GS's initial sigma, for depth correction on scenes without a trained one
+SORT_ENTRY_BYTES = 24  # per sorted key: 8-byte key + 4-byte value, input and output buffers (CUB SortPairs)
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """How to render: mode, N x N supersampling (1..8), background colour, SH degree cap, debug planes.
+
+    `debug="window"` adds the final Gaussian Blending window size per pixel (H, W, 2) to `Frame.debug`.
+
+    wsr and duplex: `depth_correct` multiplies each splat's weight by LC-WSR's max(0, 1 - z/sigma) (sigma: the
+    scene's trained value, else 10); `et_grade` is Duplex-GS's E (None: the scene's trained value, else 4.0, the
+    published final value); `cell_size` is the number of splats per cell built for scenes without cells.
+    """
+
+    mode: Mode = Mode.SCALAR
+    supersample: int = 1
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    sh_degree: int = 3
+    debug: str = "none"
+    threads: int = 0  # CPU threads, 0 = all
+    depth_correct: bool = False
+    et_grade: float | None = None
+    cell_size: int = 5
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "mode", Mode.parse(self.mode))
+        if not (isinstance(self.supersample, (int, np.integer)) and 1 <= self.supersample <= 8):
+            raise RenderError(f"supersample must be an integer 1..8, got {self.supersample!r}")
+        bg = tuple(float(v) for v in self.background)
+        if len(bg) != 3 or not all(np.isfinite(bg)):
+            raise RenderError(f"background must be three finite numbers, got {self.background!r}")
+        object.__setattr__(self, "background", bg)
+        if self.debug not in DEBUG_OUTPUTS:
+            raise RenderError(f"debug output {self.debug!r}; expected one of {DEBUG_OUTPUTS}")
+        if self.et_grade is not None and not (np.isfinite(self.et_grade) and self.et_grade > 0):
+            raise RenderError(f"et_grade must be a finite number > 0, got {self.et_grade!r}")
+        if not (isinstance(self.cell_size, (int, np.integer)) and self.cell_size >= 1):
+            raise RenderError(f"cell_size must be an integer >= 1, got {self.cell_size!r}")
+        object.__setattr__(self, "depth_correct", bool(self.depth_correct))
+
+    def label_for(self, scene: Scene) -> str:
+        """The label with what the scene makes of the mode: wsr on a scene without trained view weights is an
+        approximation (v = 1); duplex names where its cells come from."""
+        label = self.label
+        oit = scene.oit
+        neural = oit is not None and oit.neural is not None
+        trained = neural or scene.meta.get("view_weights_in_opacity")
+        if self.mode == Mode.WSR and (oit is None or oit.view_weight_sh is None) and not trained:
+            label += " (approx.: v=1)"
+        elif self.mode == Mode.DUPLEX and (oit is None or oit.cells is None) and not neural:
+            label += f" (built cells, K={self.cell_size})"
+        return label
+
+    @property
+    def label(self) -> str:
+        return self.mode.label + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "")
+
+    @property
+    def spec(self) -> str:
+        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', ..."""
+        return self.mode.label + (f":{self.supersample}" if self.supersample > 1 else "")
+
+    @classmethod
+    def parse(cls, spec: str, **kwargs) -> "RenderSettings":
+        """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples."""
+        name, _, n = spec.strip().partition(":")
+        try:
+            supersample = int(n) if n else 1
+        except ValueError:
+            raise RenderError(f"mode {spec!r}: supersampling factor {n!r} is not an integer") from None
+        mode = Mode.SCALAR if name.strip().lower() == "supersample" else Mode.parse(name)
+        return cls(mode, supersample, **kwargs)
+
+    @classmethod
+    def parse_list(cls, specs: str, **kwargs) -> "list[RenderSettings]":
+        """Comma-separated mode specs, e.g. 'scalar,supersample:3,gaussian_blending'."""
+        out = [cls.parse(s, **kwargs) for s in specs.split(",") if s.strip()]
+        if not out:
+            raise RenderError("no modes given")
+        return out
+
+
+@dataclass
+class FrameStats:
+    """What a render measured. Times in ms per stage; visible: splats that survive preprocess; sort_length: keys
+    sorted by depth (tile-splat pairs; 0 for wsr, whose tile lists are only binned; tile-cell pairs for duplex);
+    sort_bytes: sort_length x SORT_ENTRY_BYTES; pairs: tile-list entries blended; evaluations: splat-pixel
+    evaluations, evals_per_pixel their mean; backend; mode: `RenderSettings.label_for` the scene.
+
+    Filled by some backends or modes only (None elsewhere): simd, the SIMD path the cpu backend's blend ran
+    ("scalar", "avx2" or "avx512", chosen by GBVIEWER_SIMD at load or gbviewer._native.set_simd); duplex: cells,
+    cells_visible and cell_misses (splat-tile pairs outside their cell's tiles; not counted by glsl); decode_ms: the
+    MLPs of a trained Duplex-GS model, per view.
+    """
+
+    preprocess_ms: float = 0.0
+    sort_ms: float = 0.0
+    blend_ms: float = 0.0
+    total_ms: float = 0.0
+    visible: int = 0
+    sort_length: int = 0
+    sort_bytes: int = 0
+    pairs: int = 0
+    evaluations: int = 0
+    evals_per_pixel: float = 0.0
+    backend: str = ""
+    mode: str = ""
+    simd: str | None = None
+    cells: int | None = None
+    cells_visible: int | None = None
+    cell_misses: int | None = None
+    decode_ms: float | None = None
+
+
+@dataclass
+class Frame:
+    """A rendered image: rgb (H,W,3) float32, alpha = 1 - final transmittance (H,W), debug planes, stats.
+
+    debug: "evals" (H,W) splats evaluated per output pixel (summed over sub-samples); "window" (H,W,2) when
+    requested.
+    """
+
+    rgb: np.ndarray
+    alpha: np.ndarray
+    stats: FrameStats = field(default_factory=FrameStats)
+    debug: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+class Renderer(Protocol):
+    """What the app, video and bench see of a backend."""
+
+    name: str
+
+    @classmethod
+    def available(cls) -> tuple[bool, str]:
+        """(usable, reason when not)."""
+
+    def upload(self, scene: Scene) -> None: ...
+
+    def render(self, camera: Camera, settings: RenderSettings) -> Frame: ...
