@@ -2,7 +2,7 @@
 
     python bench/load_speed.py [--n 1000000] [--repeat 3] [--formats inria-sh3,spz4,...] [--dir DIR]
 
-Files are written with the test encoders (tests/io/encoders.py) and gbviewer's INRIA writer, then read
+Files are written with the format encoders (tools/encoders.py) and gbviewer's INRIA writer, then read
 with a warm page cache: "raw read" is the best time to read every byte of the file (or the SOG
 folder), "load" the best time of gb.load() to a validated Scene.
 """
@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "tests" / "io"))
+sys.path.insert(0, str(REPO / "tools"))
 
 import numpy as np  # noqa: E402
 from encoders import (encode_compressed_ply, encode_splat, encode_spz, random_params, sog_files,  # noqa: E402

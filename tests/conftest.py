@@ -12,6 +12,8 @@ _SRC = Path(__file__).resolve().parents[1]
 if not any((_SRC / "gbviewer").glob("_native*")):
     sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _SRC]
 
+sys.path.insert(0, str(_SRC / "tools"))  # developer tools the tests share with bench/: encoders, fuzz_loaders
+
 import pytest  # noqa: E402
 
 import gbviewer as gb  # noqa: E402

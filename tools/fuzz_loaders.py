@@ -23,7 +23,6 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 SEEDS = REPO / "tests" / "io" / "fuzz" / "seeds"
 CRASHES = REPO / "tests" / "io" / "fuzz" / "crashes"
-sys.path.insert(0, str(REPO))  # fuzz the working tree (with its compiled module copied in) rather than an install
 
 
 def check_load(path: Path) -> str:
@@ -50,6 +49,7 @@ def main() -> None:
     ap.add_argument("--seconds", type=int, default=600, help="fuzzing time (default 600)")
     ap.add_argument("--corpus", type=Path, help="corpus folder kept between runs (default .fuzz/FORMAT)")
     args, extra = ap.parse_known_args()
+    sys.path.insert(0, str(REPO))  # fuzz the working tree (with its compiled module copied in) rather than an install
     corpus = args.corpus or REPO / ".fuzz" / args.format
     corpus.mkdir(parents=True, exist_ok=True)
     CRASHES.mkdir(parents=True, exist_ok=True)

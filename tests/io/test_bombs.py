@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zstandard
-from encoders import encode_spz, random_scene, sog_files
+from encoders import encode_spz, random_params, sog_files
 from PIL import Image
 
 import gbviewer as gb
@@ -56,7 +56,7 @@ def _png(width: int, height: int) -> bytes:
 
 
 def bombs() -> dict[str, bytes]:
-    s = random_scene(300, seed=1)
+    s = random_params(300, seed=1)
     sog = sog_files(s)
     big_image = dict(sog, **{"sh0.webp": _png(6000, 6000)})  # 36 M pixels for 300 splats: ~1 MB of PNG
     big_meta = dict(sog, **{"meta.json": sog["meta.json"] + b" " * (64 << 20)})  # 64 MB of JSON from ~64 KB
@@ -101,7 +101,7 @@ def test_bomb_peak_memory_stays_near_a_valid_load(files, name, valid):
 
 def test_sog_image_budget_allows_power_of_two_padding(tmp_path):
     """The pixel budget is not so tight that a writer padding every image to a power-of-two texture is refused."""
-    files = sog_files(random_scene(300, seed=2))
+    files = sog_files(random_params(300, seed=2))
     padded = {}
     for name, data in files.items():
         if name.endswith(".webp"):

@@ -3,15 +3,12 @@ own check: a scene with finite values or one clear line, never a traceback or a 
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
+import fuzz_loaders  # tools/, on sys.path through conftest
 import pytest
 
 FUZZ = Path(__file__).parent / "fuzz"
-_spec = importlib.util.spec_from_file_location("fuzz_loaders", FUZZ.parents[2] / "tools" / "fuzz_loaders.py")
-fuzz_loaders = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fuzz_loaders)
 
 SEEDS = sorted((FUZZ / "seeds").glob("*/*"))
 CRASHES = sorted((FUZZ / "crashes").glob("*"))

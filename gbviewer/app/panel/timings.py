@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from ..panes import frame_stats, pane_fps
+from ..panes import pane_fps
 
 if TYPE_CHECKING:
     from ..window import ViewerApp
@@ -25,7 +25,7 @@ def draw(app: ViewerApp) -> None:
             frame = p.parts[part].frame
             if frame is None:
                 continue
-            st = frame_stats(frame)
+            st = frame.stats
             imgui.table_next_row()
             cells = (p.name + ("'" if part == "b" else ""), f"{st.total_ms:.0f}", f"{st.preprocess_ms:.1f}",
                      f"{st.sort_ms:.1f}", f"{st.blend_ms:.0f}", f"{pane_fps(p, part):.1f}")

@@ -1,7 +1,8 @@
 """Small vectorised encoders for every format the loaders read, written from the format descriptions.
 
 Inputs are activated values in the INRIA/COLMAP frame: means (N,3), scales (N,3) > 0, quats (N,4) as
-(w,x,y,z), opacities (N,) in [0,1], sh (N,K,3) with DC first. Used by the decoder tests and bench/.
+(w,x,y,z), opacities (N,) in [0,1], sh (N,K,3) with DC first. Independent of the loaders (the decoder tests hold
+the loaders to them); also used by bench/load_speed.py and for the fuzzing seeds in tests/io/fuzz/seeds.
 """
 
 from __future__ import annotations
