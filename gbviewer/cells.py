@@ -166,7 +166,7 @@ def kd_groups(points: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     return order, np.append(starts, n)
 
 
-def _quat_from_matrix(R: np.ndarray) -> np.ndarray:
+def quats_from_matrices(R: np.ndarray) -> np.ndarray:
     """(M,3,3) rotation matrices -> (M,4) unit quaternions (w,x,y,z) (Shepperd: the largest of w, x, y, z first)."""
     m00, m11, m22 = R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]
     tr = m00 + m11 + m22
@@ -226,7 +226,7 @@ def covering_ellipsoids(means, scales, quats, order: np.ndarray, starts: np.ndar
     widest = np.sqrt(np.maximum(np.linalg.eigvalsh(scaled)[:, -1], 0.0))
     reach = np.linalg.norm(local * inv, axis=1) + COVER_SIGMAS * widest
     lam = np.minimum(np.maximum.reduceat(reach, st), np.sqrt(3.0))
-    return centre, 0.5 * lam[:, None] * half, _quat_from_matrix(U)
+    return centre, 0.5 * lam[:, None] * half, quats_from_matrices(U)
 
 
 def build_cells(scene, k: int = DEFAULT_CELL_SIZE) -> Cells:

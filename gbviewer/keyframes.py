@@ -13,7 +13,7 @@ from typing import Sequence
 import numpy as np
 
 from .camera import UP_AXES, Camera, focal_from_fov, orbit_camera
-from .cells import rotation_matrices
+from .cells import quats_from_matrices, rotation_matrices
 from .errors import CameraError, GBViewerError
 from .scene import Scene
 
@@ -30,25 +30,9 @@ class Keyframe:
 
 
 def quat_from_matrix(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method; w >= 0)."""
-    R = np.asarray(R, np.float64)
-    tr = np.trace(R)
-    if tr > 0:
-        S = math.sqrt(tr + 1.0) * 2
-        q = [0.25 * S, (R[2, 1] - R[1, 2]) / S, (R[0, 2] - R[2, 0]) / S, (R[1, 0] - R[0, 1]) / S]
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        S = math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
-        q = [(R[2, 1] - R[1, 2]) / S, 0.25 * S, (R[0, 1] + R[1, 0]) / S, (R[0, 2] + R[2, 0]) / S]
-    elif R[1, 1] > R[2, 2]:
-        S = math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
-        q = [(R[0, 2] - R[2, 0]) / S, (R[0, 1] + R[1, 0]) / S, 0.25 * S, (R[1, 2] + R[2, 1]) / S]
-    else:
-        S = math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
-        q = [(R[1, 0] - R[0, 1]) / S, (R[0, 2] + R[2, 0]) / S, (R[1, 2] + R[2, 1]) / S, 0.25 * S]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
+    """Unit quaternion (w, x, y, z) of one rotation matrix, with w >= 0."""
+    q = quats_from_matrices(np.asarray(R, np.float64)[None])[0]
     return q if q[0] >= 0 else -q
-
 
 
 def matrix_from_quat(q: np.ndarray) -> np.ndarray:
