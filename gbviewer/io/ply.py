@@ -6,6 +6,7 @@ info[0] = weight_background, info[1] = sigma."""
 
 from __future__ import annotations
 
+import io
 import re
 from pathlib import Path
 from typing import Callable
@@ -18,6 +19,7 @@ from ..scene import Scene
 from ..validate import declared_count
 
 HEADER_MAX_BYTES = 1 << 20
+USED_ELEMENTS = ("vertex", "chunk", "sh")  # what the loaders read; elements after the last of these stay unread
 TYPE_BYTES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
               "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
 
@@ -28,14 +30,24 @@ REST_COUNTS_1 = {0: 0, 3: 1, 8: 2, 15: 3}  # f_ro_* count (1-channel view weight
 
 
 def read_ply(path: Path) -> plyfile.PlyData:
-    """Parse a PLY header and memory-map its data, with typed errors for non-PLY and truncated files."""
+    """Parse a PLY header and read (binary: memory-map) the elements the loaders use, with typed errors for non-PLY
+    and truncated files. Elements after the last used one (a mesh's faces, say) are never read: plyfile would parse
+    their lists row by row into memory. Counts are checked against the file size first (`check_element_counts`)."""
     with open(path, "rb") as fh:
         head = fh.read(5)
     if not (head.startswith(b"ply\n") or head == b"ply\r\n"):
         raise SceneFormatError(path, "not a PLY file (missing 'ply' magic line)")
     check_element_counts(path)
     try:
-        return plyfile.PlyData.read(str(path))
+        with open(path, "rb") as fh:
+            # plyfile's PlyData.read, stopping early: the same header parser and per-element reader it uses
+            ply = plyfile.PlyData._parse_header(fh)
+            stream = io.TextIOWrapper(fh, "ascii") if ply.text else fh
+            used = [i for i, e in enumerate(ply.elements) if e.name in USED_ELEMENTS]
+            ply.elements = ply.elements[: used[-1] + 1] if used else ()
+            for element in ply.elements:
+                element._read(stream, ply.text, ply.byte_order, "c")
+        return ply
     except plyfile.PlyElementParseError as exc:
         raise SceneFormatError(path, f"truncated or malformed data: {exc.message}",
                                field=exc.element.name if exc.element is not None else None) from None

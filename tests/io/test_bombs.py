@@ -138,3 +138,31 @@ def test_ply_declared_counts_are_checked_against_the_bytes_present(tmp_path, see
     with pytest.raises(SceneFormatError, match=f"field '{element}': ") as err:
         gb.load(path)
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("seed", ["sh1.ply", "ascii.ply"])
+def test_ply_elements_after_the_vertices_are_not_read(tmp_path, monkeypatch, seed):
+    """A mesh's faces after the splats (list properties plyfile would parse row by row into memory) are skipped."""
+    import plyfile
+
+    head, body = (SEED_PLY / seed).read_bytes().split(b"end_header\n", 1)
+    binary = b"binary" in head
+    faces = (struct.pack("<Biii", 3, 0, 1, 2) if binary else b"3 0 1 2\n") * 100
+    path = tmp_path / "mesh.ply"
+    path.write_bytes(head + b"element face 100\nproperty list uchar int vertex_indices\nend_header\n" + body + faces)
+    read = []
+    original = plyfile.PlyElement._read
+    monkeypatch.setattr(plyfile.PlyElement, "_read", lambda self, *a, **k: (read.append(self.name),
+                                                                            original(self, *a, **k))[1])
+    scene = gb.load(path)
+    assert scene.num_splats == 12 and read == ["vertex"]
+    np.testing.assert_array_equal(scene.means, gb.load(SEED_PLY / seed).means)
+
+
+def test_ply_without_splat_elements_is_one_line(tmp_path):
+    path = tmp_path / "faces.ply"
+    path.write_bytes(b"ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                     b"3 0 1 2\n")
+    with pytest.raises(SceneFormatError, match="vertex") as err:
+        gb.load(path)
+    assert "\n" not in str(err.value)
