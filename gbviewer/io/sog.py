@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import io
 import zipfile
+import zlib
 from collections.abc import Callable
 from pathlib import Path, PurePosixPath
 
@@ -77,7 +78,7 @@ def _read_member(path: Path, zf: zipfile.ZipFile, name: str, limit: int) -> byte
     try:
         with zf.open(info) as fh:
             data = fh.read(limit + 1)
-    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError, RuntimeError) as exc:
+    except (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, NotImplementedError, RuntimeError) as exc:
         raise SceneFormatError(path, f"cannot read zip member: {exc}", field=name) from None
     if len(data) > limit:
         raise _too_big(path, name, len(data), limit)
