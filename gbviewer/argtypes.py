@@ -72,7 +72,8 @@ class Numbers:
     def __call__(self, text: str) -> tuple:
         items = text.lower().split(self.sep)
         if len(items) != len(self.parts):
-            raise argparse.ArgumentTypeError(f"expected {self.metavar}, got {text!r}")
+            shown = text if len(text) <= 40 else text[:37] + "..."
+            raise argparse.ArgumentTypeError(f"expected {self.metavar}, got {shown!r}")
         try:
             return tuple(p.check(t) for p, t in zip(self.parts, items))
         except InvalidValue as exc:

@@ -456,12 +456,14 @@ def main(argv: list[str] | None = None) -> int:
     (SIGINT, SIGTERM, SIGHUP; SIGPIPE when stdout is closed early)."""
     parser = build_parser()
     argv = _join_signed_values(sys.argv[1:] if argv is None else argv)
-    commands = set(next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices)
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
     first = next((a for a in argv if a != "--debug"), None)
     if first is None or (first not in commands and first not in ("-h", "--help")):
         argv = ["view", *argv] if first is None else [*argv[:argv.index(first)], "view", *argv[argv.index(first):]]
     try:
-        args = parser.parse_args(argv)
+        args, extra = parser.parse_known_args(argv)
+        if extra:  # named by the command's own parser, whose --help lists what it takes
+            commands[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
     except SystemExit as exc:  # --help, or a usage error already printed in one line
         return int(exc.code or 0)
     try:
