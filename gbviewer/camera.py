@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import CameraError, GBViewerError, InvalidValue
+from .errors import CameraError, InvalidValue
 from .validate import real
 
 if TYPE_CHECKING:

@@ -13,16 +13,16 @@ from pathlib import Path
 
 from . import DEFAULT_SCENE
 from .argtypes import BACKGROUND, INSET, MAX_SIDE, ORBIT, SIDE, SIZE, Number, Parser, Rate, count, positive
-from .camera_paths import MAX_FRAMES
 from .camera import Camera, format_rate, load_cameras_json, orbit_camera, parse_rates
+from .camera_paths import MAX_FRAMES, PATHS, camera_path, zoom_path
 from .errors import GBViewerError
-from .io.files import check_writable
 from .figure import compose_grid, render_grid, save_image, write_comparison
 from .io import load, write_inria_ply
+from .io.files import check_writable
 from .render import BACKENDS, Mode, RenderSettings, get_renderer
 from .scene import Scene
 from .validate import integer
-from .video import MAX_FPS, MIN_FPS
+from .video import MAX_FPS, MIN_FPS, record_video
 
 
 def add_camera_args(p: argparse.ArgumentParser) -> None:
@@ -118,7 +118,6 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
-MAX_COUNT = 10_000  # most views, repeats and flicker frames of a benchmark
 DEMO_VIDEO_FRAMES = 36  # 3 s at 12 fps
 DEMO_SETTINGS = [RenderSettings(Mode.SCALAR), RenderSettings(Mode.SCALAR, supersample=3),
                  RenderSettings(Mode.GAUSSIAN_BLENDING)]
@@ -128,9 +127,6 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """The main job without a window: side-by-side comparison of the bundled (or given) scene at x1 and x1/8, and
     a short x1 -> x1/8 zoom video of the same modes."""
     from rich.progress import Progress
-
-    from .camera_paths import zoom_path
-    from .video import record_video
 
     scene_path = args.scene or DEFAULT_SCENE
     out_dir = check_writable(args.out, folder=True)
@@ -168,6 +164,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     return cmd_demo(args)
 
 
+MAX_COUNT = 10_000  # most views, repeats and flicker frames of a benchmark
 BENCH_DEFAULTS = {"modes": "scalar,gaussian_blending,supersample:3", "rates": "1,1/8", "views": 2, "repeat": 2,
                   "simd": None}
 BENCH_FULL = {"modes": "scalar,mip,analytic,gaussian_blending,supersample:3", "rates": "4,2,1,1/2,1/4,1/8",
@@ -242,9 +239,6 @@ def cmd_video(args: argparse.Namespace) -> int:
     """Side-by-side zoom video of several modes (H.264 MP4)."""
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                TimeRemainingColumn)
-
-    from .camera_paths import PATHS, camera_path
-    from .video import record_video
 
     settings = RenderSettings.parse_list(args.modes)
     if args.size:
