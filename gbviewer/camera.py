@@ -11,12 +11,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import CameraError, GBViewerError
+from .errors import CameraError, InvalidValue
+from .validate import real
 
 if TYPE_CHECKING:
     from .scene import Scene
 
 NEAR_PLANE = 0.2  # published 3DGS near cull (KERNELS.md §0.4)
+MIN_RATE, MAX_RATE = 1e-3, 64.0  # sampling rates: x1/1000 (zoomed out) to x64 (supersampled)
 UP_AXES = {"-y": (0.0, -1.0, 0.0), "+y": (0.0, 1.0, 0.0), "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0)}
 
 
@@ -30,21 +32,18 @@ def format_rate(rate: float) -> str:
 
 
 def parse_rate(text: str) -> float:
-    """'1/8', '0.125' or '8' -> float > 0."""
-    try:
-        value = float(Fraction(text.strip()))
-    except (ValueError, ZeroDivisionError):
-        raise GBViewerError(f"sampling rate {text!r}; expected a number like 8, 0.125 or 1/8") from None
-    if not value > 0:
-        raise GBViewerError(f"sampling rate {text!r} must be > 0")
-    return value
+    """'1/8', '0.125' or '8' -> a float in [MIN_RATE, MAX_RATE]; `InvalidValue` naming the text otherwise."""
+    what = f"sampling rate {text.strip()!r}"
+    num, slash, den = text.partition("/")
+    value = real(num, what) / real(den, what, lo=0.0, lo_open=True) if slash else real(num, what)
+    return real(value, what, lo=MIN_RATE, hi=MAX_RATE)
 
 
 def parse_rates(text: str) -> list[float]:
     """Comma-separated sampling rates ('1,1/2,1/8'); at least one."""
     rates = [parse_rate(r) for r in text.split(",") if r.strip()]
     if not rates:
-        raise GBViewerError(f"no sampling rate given in {text!r}")
+        raise InvalidValue(f"no sampling rate given in {text!r}")
     return rates
 
 

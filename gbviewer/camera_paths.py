@@ -6,7 +6,6 @@ Sampling rate s: the content is sampled s times as densely per axis as in the x1
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Sequence
@@ -17,9 +16,11 @@ from .camera import Camera
 from .errors import GBViewerError
 from .keyframes import Keyframe, interpolate_keyframes, key_times, load_keyframes
 from .scene import Scene
+from .validate import integer, real
 
 PATHS = ("zoom", "dolly", "rate")
 DEFAULT_SECONDS = 4.0  # length of a path when neither frames nor seconds are given (and keyframes have no times)
+MAX_FRAMES = 100_000  # default limit of a path's length (`camera_path`'s max_frames, `gbviewer video --max-frames`)
 
 
 @dataclass(frozen=True)
@@ -53,10 +54,9 @@ class PathFrame:
 
 def geometric_rates(start: float, end: float, frames: int) -> list[float]:
     """`frames` rates from `start` to `end` (both included), evenly spaced in log: a steady zoom."""
-    if not (start > 0 and end > 0 and math.isfinite(start) and math.isfinite(end)):
-        raise GBViewerError(f"rates must be finite and > 0, got {start} and {end}")
-    if frames < 1:
-        raise GBViewerError(f"a video needs at least one frame, got {frames}")
+    start = real(start, "first sampling rate", lo=0.0, lo_open=True)
+    end = real(end, "last sampling rate", lo=0.0, lo_open=True)
+    frames = integer(frames, "frames of the video", lo=1)
     if frames == 1:
         return [start]
     return [start * (end / start) ** (i / (frames - 1)) for i in range(frames - 1)] + [end]
@@ -75,8 +75,7 @@ def dolly_path(base: Camera, frames: int, start: float = 1.0, end: float = 1.0 /
     """The camera moves along its optical axis so that things at `focus_depth` (camera z of the base camera)
     appear s times their x1 size: it stands at depth focus_depth / s from them. Nearer and farther things scale
     differently (that is what distinguishes a dolly from a zoom)."""
-    if not (focus_depth > 0 and math.isfinite(focus_depth)):
-        raise GBViewerError(f"dolly: focus depth must be > 0, got {focus_depth}")
+    focus_depth = real(focus_depth, "dolly: focus depth", lo=0.0, lo_open=True)
     out = []
     for s in geometric_rates(start, end, frames):
         t = base.t + np.array([0.0, 0.0, focus_depth * (1.0 / s - 1.0)])
@@ -103,8 +102,7 @@ def scene_focus_depth(scene: Scene, camera: Camera) -> float:
 def keyframe_path(keys: Sequence[Keyframe], frames: int) -> list[PathFrame]:
     """`frames` frames evenly spaced in time from the first key to the last (both included)."""
     ts = key_times(keys)
-    if frames < 1:
-        raise GBViewerError(f"a video needs at least one frame, got {frames}")
+    frames = integer(frames, "frames of the video", lo=1)
     times = [ts[0]] if frames == 1 else [ts[0] + (ts[-1] - ts[0]) * i / (frames - 1) for i in range(frames)]
     if frames > 1:
         times[-1] = ts[-1]
@@ -118,24 +116,26 @@ def keyframe_path(keys: Sequence[Keyframe], frames: int) -> list[PathFrame]:
 
 def camera_path(kind: str | Path, base: Camera, frames: int | None, start: float = 1.0, end: float = 1.0 / 8.0,
                 scene: Scene | None = None, up: str = "-y", *, fps: float = 30.0,
-                seconds: float | None = None) -> list[PathFrame]:
+                seconds: float | None = None, max_frames: int = MAX_FRAMES) -> list[PathFrame]:
     """'zoom', 'dolly' (focus: the scene's centre) or 'rate' from `start` to `end`, or a keyframes JSON file.
 
     Length: `frames`; without it `seconds` x fps, or a keyframes file's timed span x fps (+ 1, both ends), or
-    DEFAULT_SECONDS x fps."""
-    if not (fps > 0 and math.isfinite(fps)):
-        raise GBViewerError(f"fps must be > 0, got {fps}")
+    DEFAULT_SECONDS x fps; more than `max_frames` is an error raised before any frame is made."""
+    fps = real(fps, "fps", lo=0.0, lo_open=True)
     keyed = str(kind) not in PATHS
     if keyed and not (str(kind).lower().endswith(".json") or Path(kind).is_file()):
         raise GBViewerError(f"path {str(kind)!r}; expected zoom, dolly, rate or a keyframes FILE.json")
     keys = load_keyframes(kind, base, scene, up) if keyed else None
+    what = f"frames of the video (at most {max_frames}; --max-frames raises the limit)"
     if frames is None:
         if seconds is not None:
-            frames = max(1, round(seconds * fps))
+            length = max(1.0, real(seconds, "seconds", lo=0.0, lo_open=True) * fps)
         elif keys is not None and keys[0].time is not None:
-            frames = round((keys[-1].time - keys[0].time) * fps) + 1
+            length = (keys[-1].time - keys[0].time) * fps + 1
         else:
-            frames = round(DEFAULT_SECONDS * fps)
+            length = DEFAULT_SECONDS * fps
+        frames = round(real(length, what))
+    frames = integer(frames, what, lo=1, hi=max_frames)
     if keys is not None:
         return keyframe_path(keys, frames)
     if str(kind) == "zoom":

@@ -5,44 +5,34 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 
 from . import DEFAULT_SCENE
-from .camera import Camera, format_rate, load_cameras_json, orbit_camera, parse_rate, parse_rates
+from .argtypes import BACKGROUND, INSET, MAX_SIDE, ORBIT, SIDE, SIZE, Number, Parser, Rate, count, positive
+from .camera import Camera, format_rate, load_cameras_json, orbit_camera, parse_rates
+from .camera_paths import MAX_FRAMES, PATHS, camera_path, zoom_path
 from .errors import GBViewerError
 from .figure import compose_grid, render_grid, save_image, write_comparison
 from .io import load, write_inria_ply
+from .io.files import check_writable
 from .render import BACKENDS, Mode, RenderSettings, get_renderer
 from .scene import Scene
-
-
-def _triple(text: str) -> tuple[float, float, float]:
-    try:
-        vals = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        vals = ()
-    if len(vals) != 3:
-        raise argparse.ArgumentTypeError(f"expected three comma-separated numbers, got {text!r}")
-    return vals  # type: ignore[return-value]
-
-
-def _rate(text: str) -> float:
-    try:
-        return parse_rate(text)
-    except GBViewerError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+from .validate import integer
+from .video import MAX_FPS, MIN_FPS, record_video
 
 
 def add_camera_args(p: argparse.ArgumentParser) -> None:
     """--cameras/--camera, --orbit, --width/--height, --up: shared by the commands that render."""
     p.add_argument("--cameras", type=Path, help="3DGS cameras.json")
-    p.add_argument("--camera", type=int, default=0, help="index into --cameras (default 0)")
-    p.add_argument("--orbit", type=_triple, metavar="AZ,EL,DIST",
-                   help="orbit camera: azimuth and elevation in degrees, distance in scene units (<= 0: auto)")
-    p.add_argument("--width", type=int, help="image width (default 640, or the training camera's)")
-    p.add_argument("--height", type=int, help="image height (default 480, or the training camera's)")
+    p.add_argument("--camera", type=count(lo=0), default=0, help="index into --cameras (default 0)")
+    p.add_argument("--orbit", type=ORBIT, metavar=ORBIT.metavar,
+                   help="orbit camera: azimuth and elevation in degrees, distance in scene units (0: auto)")
+    p.add_argument("--width", type=SIDE, help="image width (default 640, or the training camera's)")
+    p.add_argument("--height", type=SIDE, help="image height (default 480, or the training camera's)")
     p.add_argument("--up", default="-y", choices=["-y", "+y", "+z", "-z"], help="scene up axis for orbit cameras")
 
 
@@ -63,6 +53,13 @@ def camera_from_args(scene: Scene, args: argparse.Namespace) -> Camera:
         az, el, dist = args.orbit
         return orbit_camera(scene, az, el, dist if dist > 0 else None, w, h, up=args.up)
     return orbit_camera(scene, width=w, height=h, up=args.up)
+
+
+def check_render_size(width: int, height: int, rates: list[float], option: str) -> None:
+    """Refuse, before anything is allocated, a render of width x height at the largest of `rates` with a side
+    over MAX_SIDE."""
+    side = max(width, height) * max(rates)
+    integer(round(side), f"{option}: image side rendered at x{max(rates):g}", hi=MAX_SIDE)
 
 
 def cmd_info(args: argparse.Namespace) -> int:
@@ -94,6 +91,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".ply":
         raise GBViewerError(f"{out}: output must end in .ply (a standard INRIA 3DGS ply)")
+    check_writable(out, args.force)
     scene = load(args.scene)
     write_inria_ply(scene, out, force=args.force)
     print(f"{out}: {scene.num_splats} splats, SH degree {scene.sh_degree}, from {scene.meta.get('format')} "
@@ -105,8 +103,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".npy"):
         raise GBViewerError(f"{out}: output must end in .png or .npy")
+    check_writable(out, args.force)
     scene = load(args.scene)
-    cam = camera_from_args(scene, args).at_sampling_rate(args.scale)
+    cam = camera_from_args(scene, args)
+    check_render_size(cam.width, cam.height, [args.scale], "--scale")
+    cam = cam.at_sampling_rate(args.scale)
     settings = RenderSettings(Mode.parse(args.mode), args.supersample, args.background, args.sh_degree)
     frame = get_renderer(scene, args.backend).render(cam, settings)
     save_image(out, frame.rgb, force=args.force)
@@ -127,16 +128,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     a short x1 -> x1/8 zoom video of the same modes."""
     from rich.progress import Progress
 
-    from .camera_paths import zoom_path
-    from .video import record_video
-
     scene_path = args.scene or DEFAULT_SCENE
+    out_dir = check_writable(args.out, folder=True)
     scene = load(scene_path)
     args.cameras = getattr(args, "cameras", None)
     cam = camera_from_args(scene, args)
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         print("no display found: writing the comparison images instead of opening a window")
-    out_dir = Path(args.out)
     cells = render_grid(scene, cam, DEMO_SETTINGS, [1.0, 1.0 / 8.0], args.backend)
     img = compose_grid(cells, cam.width, cam.height)
     path = save_image(out_dir / "comparison.png", img, force=True)
@@ -166,16 +164,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     return cmd_demo(args)
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 640x480, got {text!r}") from None
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"size {text!r} out of range")
-    return w, h
-
-
+MAX_COUNT = 10_000  # most views, repeats and flicker frames of a benchmark
 BENCH_DEFAULTS = {"modes": "scalar,gaussian_blending,supersample:3", "rates": "1,1/8", "views": 2, "repeat": 2,
                   "simd": None}
 BENCH_FULL = {"modes": "scalar,mip,analytic,gaussian_blending,supersample:3", "rates": "4,2,1,1/2,1/4,1/8",
@@ -191,11 +180,12 @@ def progress_columns() -> tuple:
 
 
 def resolve_bench_options(args: argparse.Namespace) -> argparse.Namespace:
-    """Fill --modes, --rates, --views, --repeat and --simd left out from BENCH_FULL (--full) or BENCH_DEFAULTS."""
+    """Fill --modes, --rates (parsed), --views, --repeat and --simd left out from BENCH_FULL (--full) or
+    BENCH_DEFAULTS."""
     preset = BENCH_FULL if args.full else BENCH_DEFAULTS
     for key, value in preset.items():
         if getattr(args, key) is None:
-            setattr(args, key, value)
+            setattr(args, key, parse_rates(value) if key == "rates" else value)
     return args
 
 
@@ -213,6 +203,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         print(f"skipping backend {b}: {why}")
     if simd_given and "cpu" not in backends:
         raise GBViewerError("--simd chooses the cpu backend's paths; --backends has no cpu")
+    check_render_size(*args.size, args.rates, "--rates")
+    outputs = [Path(args.json)] if args.json else []
+    if args.plots:
+        outputs += [bench.plot_path(Path(args.plots), Path(s).name) for s in args.scenes]
 
     @contextmanager
     def bar(name: str, total: float):
@@ -221,10 +215,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
             yield lambda units: progress.advance(task, units)
 
     result = bench.run_bench(
-        args.scenes, RenderSettings.parse_list(args.modes), parse_rates(args.rates), backends, views=args.views,
+        args.scenes, RenderSettings.parse_list(args.modes), args.rates, backends, views=args.views,
         size=args.size, repeat=args.repeat, cameras=args.cameras, up=args.up, simd=args.simd,
         flicker_frames=args.flicker_frames, flicker_step=args.flicker_step,
-        outputs=[Path(args.json)] if args.json else [], force=args.force, progress=bar)
+        outputs=outputs, force=args.force, progress=bar)
     bench.print_tables(result.speed, result.fidelity, result.simd)
     if result.oit:
         bench.print_oit(result.oit)
@@ -238,16 +232,6 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def _box(text: str) -> tuple[float, float, float, float]:
-    try:
-        vals = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        vals = ()
-    if len(vals) != 4 or not (vals[2] > 0 and vals[3] > 0):
-        raise argparse.ArgumentTypeError(f"expected X,Y,W,H (x1 pixels, W and H > 0), got {text!r}")
-    return vals  # type: ignore[return-value]
-
-
 VIDEO_PANE = (480, 360)  # default pane size of `gbviewer video`
 
 
@@ -256,17 +240,18 @@ def cmd_video(args: argparse.Namespace) -> int:
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                TimeRemainingColumn)
 
-    from .camera_paths import PATHS, camera_path
-    from .video import record_video
-
     settings = RenderSettings.parse_list(args.modes)
     if args.size:
         args.width, args.height = args.size
     elif not (args.width or args.height or args.cameras):
         args.width, args.height = VIDEO_PANE
+    check_writable(args.out, args.force)
     scene = load(args.scene)
-    path = camera_path(args.path, camera_from_args(scene, args), args.frames or None, args.from_rate, args.to_rate,
-                       scene, args.up, fps=args.fps, seconds=args.seconds or None)
+    cam = camera_from_args(scene, args)
+    if args.path == "rate":
+        check_render_size(cam.width, cam.height, [args.from_rate, args.to_rate], "--from/--to")
+    path = camera_path(args.path, cam, args.frames, args.from_rate, args.to_rate, scene, args.up, fps=args.fps,
+                       seconds=args.seconds, max_frames=args.max_frames)
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("frames"),
                TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn())
     with Progress(*columns) as progress:
@@ -284,10 +269,12 @@ def cmd_video(args: argparse.Namespace) -> int:
 def cmd_compare(args: argparse.Namespace) -> int:
     """Labelled grid of modes x sampling rates with PSNR under each cell."""
     settings = RenderSettings.parse_list(args.modes)
-    rates = parse_rates(args.rates)
+    rates = args.rates
+    check_writable(args.out, args.force)
     scene = load(args.scene)
-    cmp = write_comparison(args.out, scene, camera_from_args(scene, args), settings, rates, args.backend, args.inset,
-                           args.force)
+    cam = camera_from_args(scene, args)
+    check_render_size(cam.width, cam.height, rates, "--rates")
+    cmp = write_comparison(args.out, scene, cam, settings, rates, args.backend, args.inset, args.force)
     print(f"wrote {args.out} ({cmp.image.width}x{cmp.image.height}): {len(rates)} rates x {len(settings)} modes")
     for row, prow in zip(cmp.cells, cmp.psnr):
         for cell, p in zip(row, prow):
@@ -297,7 +284,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="gbviewer", description=__doc__)
+    parser = Parser(prog="gbviewer", description=__doc__)
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
     sub = parser.add_subparsers(dest="command")
 
@@ -316,11 +303,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene", type=Path)
     add_camera_args(p)
     p.add_argument("--mode", default="scalar", choices=[m.label for m in Mode])
-    p.add_argument("--supersample", type=int, default=1, choices=range(1, 9), metavar="N")
-    p.add_argument("--scale", type=_rate, default=1.0, help="sampling rate: 8, 1, 0.125 or 1/8")
+    p.add_argument("--supersample", type=count(8), default=1, metavar="1..8")
+    p.add_argument("--scale", type=Rate(), default=1.0, help="sampling rate: 8, 1, 0.125 or 1/8")
     p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
-    p.add_argument("--background", type=_triple, default=(0.0, 0.0, 0.0), metavar="R,G,B")
-    p.add_argument("--sh-degree", type=int, default=3, choices=range(0, 4))
+    p.add_argument("--background", type=BACKGROUND, default=(0.0, 0.0, 0.0), metavar=BACKGROUND.metavar,
+                   help="background colour, each in 0..1")
+    p.add_argument("--sh-degree", type=count(3, lo=0), default=3, metavar="0..3")
     p.add_argument("--out", required=True, help="FILE.png or FILE.npy (float32 RGB)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=cmd_render)
@@ -351,23 +339,25 @@ def build_parser() -> argparse.ArgumentParser:
                    "with wsr or duplex the sort length, cells, PSNR vs scalar and flicker are measured too "
                    f"(default {BENCH_DEFAULTS['modes']})")
     p.add_argument("--backends", default="cpu")
-    p.add_argument("--rates", help=f"sampling rates, e.g. 8,4,2,1,1/2,1/4,1/8 (default {BENCH_DEFAULTS['rates']})")
+    p.add_argument("--rates", type=Rate(many=True),
+                   help=f"sampling rates, e.g. 8,4,2,1,1/2,1/4,1/8 (default {BENCH_DEFAULTS['rates']})")
     p.add_argument("--simd", help="the cpu backend's SIMD paths to measure, each in the same run (scalar, avx2, "
                    "avx512; all: every path this CPU runs; current: the one in use, GBVIEWER_SIMD or the best); "
                    "default: scalar and the one in use. Fidelity is measured on the one in use")
-    p.add_argument("--views", type=int, help=f"views per scene (orbit, or spread over --cameras; default "
+    p.add_argument("--views", type=count(MAX_COUNT), help=f"views per scene (orbit, or spread over --cameras; default "
                    f"{BENCH_DEFAULTS['views']})")
     p.add_argument("--cameras", type=Path, help="3DGS cameras.json: use training views")
     p.add_argument("--up", default="-y", choices=["-y", "+y", "+z", "-z"])
-    p.add_argument("--size", type=_size, default=(640, 480), metavar="WxH", help="x1 image size (default 640x480)")
-    p.add_argument("--repeat", type=int, help="timed renders per view and SIMD path, after one warm-up per mode, "
-                   f"rate and path (default {BENCH_DEFAULTS['repeat']})")
+    p.add_argument("--size", type=SIZE, default=(640, 480), metavar="WxH", help="x1 image size (default 640x480)")
+    p.add_argument("--repeat", type=count(MAX_COUNT), help="timed renders per view and SIMD path, after one warm-up "
+                   f"per mode, rate and path (default {BENCH_DEFAULTS['repeat']})")
     p.add_argument("--json", help="write every number and the machine description here")
     p.add_argument("--plots", help="write PNG plots into this folder")
     p.add_argument("--force", action="store_true", help="overwrite existing --json/--plots files")
-    p.add_argument("--flicker-frames", type=int, default=16,
+    p.add_argument("--flicker-frames", type=count(MAX_COUNT), default=16,
                    help="with wsr or duplex among --modes: frames of the slow orbit that measures popping")
-    p.add_argument("--flicker-step", type=float, default=0.1, help="degrees of azimuth between those frames")
+    p.add_argument("--flicker-step", type=positive(360.0), default=0.1,
+                   help="degrees of azimuth between those frames")
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("video", help="side-by-side zoom video of several modes (H.264 MP4)")
@@ -378,16 +368,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--path", default="zoom",
                    help="zoom (focal length), dolly (camera along its axis), rate (same view, rendered at the rate "
                    "and nearest-upscaled) or a keyframes FILE.json (see gbviewer.keyframes.load_keyframes)")
-    p.add_argument("--from", dest="from_rate", type=_rate, default=1.0, help="first sampling rate (default 1)")
-    p.add_argument("--to", dest="to_rate", type=_rate, default=1.0 / 8.0, help="last sampling rate (default 1/8)")
+    p.add_argument("--from", dest="from_rate", type=Rate(), default=1.0, help="first sampling rate (default 1)")
+    p.add_argument("--to", dest="to_rate", type=Rate(), default=1.0 / 8.0, help="last sampling rate (default 1/8)")
     length = p.add_mutually_exclusive_group()
-    length.add_argument("--frames", type=int, help="number of frames")
-    length.add_argument("--seconds", type=float, help="length in seconds (default 4, or the keyframes' span)")
-    p.add_argument("--fps", type=float, default=30.0)
-    p.add_argument("--size", type=_size, metavar="WxH", help="size of each pane (default 480x360)")
+    length.add_argument("--frames", type=count(), help="number of frames")
+    length.add_argument("--seconds", type=positive(), help="length in seconds (default 4, or the keyframes' span)")
+    p.add_argument("--fps", type=Number(lo=MIN_FPS, hi=MAX_FPS), default=30.0,
+                   help=f"frames per second, {MIN_FPS:g}..{MAX_FPS:g} (default 30)")
+    p.add_argument("--max-frames", type=count(), default=MAX_FRAMES,
+                   help=f"refuse videos longer than this many frames (default {MAX_FRAMES})")
+    p.add_argument("--size", type=SIZE, metavar="WxH", help="size of each pane (default 480x360)")
     p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
-    p.add_argument("--inset", type=_box, metavar="X,Y,W,H", help="magnify this region (x1 pixels) in a corner")
-    p.add_argument("--crf", type=int, default=18, choices=range(0, 52), metavar="0..51",
+    p.add_argument("--inset", type=INSET, metavar=INSET.metavar, help="magnify this region (x1 pixels) in a corner")
+    p.add_argument("--crf", type=count(51, lo=0), default=18, metavar="0..51",
                    help="H.264 constant rate factor (0 lossless, 18 default, 23 ffmpeg's default)")
     p.add_argument("--out", required=True, help="FILE.mp4")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
@@ -397,9 +390,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene", type=Path)
     add_camera_args(p)
     p.add_argument("--modes", default="scalar,supersample:3,gaussian_blending")
-    p.add_argument("--rates", default="1,1/2,1/4,1/8", help="sampling rates, e.g. 1,1/2,1/4,1/8")
+    p.add_argument("--rates", type=Rate(many=True), default="1,1/2,1/4,1/8",
+                   help="sampling rates, e.g. 1,1/2,1/4,1/8")
     p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
-    p.add_argument("--inset", type=_box, metavar="X,Y,W,H", help="magnify this region (x1 pixels) in a corner")
+    p.add_argument("--inset", type=INSET, metavar=INSET.metavar, help="magnify this region (x1 pixels) in a corner")
     p.add_argument("--out", required=True, help="FILE.png")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=cmd_compare)
@@ -417,24 +411,72 @@ def _join_signed_values(argv: list[str]) -> list[str]:
     return out
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised like Ctrl-C's KeyboardInterrupt so that every `finally` (temporary files, ffmpeg)
+    runs before the process exits with 128 + the signal's number."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+@contextmanager
+def _signals_interrupt():
+    """While the command runs (in the main thread), SIGTERM and SIGHUP raise `Terminated`."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise Terminated(signum)
+
+    previous = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _quiet_stdout() -> None:
+    """stdout's reader went away (`gbviewer info ... | head -1`): send what is left to /dev/null so that Python's
+    final flush does not complain (the recipe of the `signal` module's documentation)."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; returns the exit status: 0, 2 for bad input (one line on stderr), 128 + N for signal N
+    (SIGINT, SIGTERM, SIGHUP; SIGPIPE when stdout is closed early)."""
     parser = build_parser()
     argv = _join_signed_values(sys.argv[1:] if argv is None else argv)
-    commands = set(next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices)
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
     first = next((a for a in argv if a != "--debug"), None)
     if first is None or (first not in commands and first not in ("-h", "--help")):
         argv = ["view", *argv] if first is None else [*argv[:argv.index(first)], "view", *argv[argv.index(first):]]
-    args = parser.parse_args(argv)
     try:
-        return args.func(args)
+        args, extra = parser.parse_known_args(argv)
+        if extra:  # named by the command's own parser, whose --help lists what it takes
+            commands[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
+    except SystemExit as exc:  # --help, or a usage error already printed in one line
+        return int(exc.code or 0)
+    try:
+        with _signals_interrupt():
+            status = args.func(args)
+            sys.stdout.flush()
+        return status
+    except BrokenPipeError:
+        _quiet_stdout()
+        return 128 + signal.SIGPIPE
     except (GBViewerError, OSError) as exc:
         if args.debug:
             raise
         print(f"gbviewer: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("gbviewer: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        signum = exc.signum if isinstance(exc, Terminated) else signal.SIGINT
+        print(f"gbviewer: interrupted ({signal.Signals(signum).name})", file=sys.stderr)
+        return 128 + signum
 
 
 if __name__ == "__main__":

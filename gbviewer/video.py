@@ -3,7 +3,6 @@ captioned and streamed frame by frame as H.264 MP4 to imageio-ffmpeg's bundled f
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from fractions import Fraction
@@ -20,8 +19,10 @@ from .figure import GAP, Cell, GridLayout, caption_font_size, compose_grid
 from .io.files import atomic_write, refuse_overwrite
 from .render import RenderSettings, get_renderer
 from .scene import Scene
+from .validate import integer, real
 
 DEFAULT_CRF = 18  # libx264 constant rate factor: 0 lossless, ~18 visually lossless, 23 ffmpeg's default
+MIN_FPS, MAX_FPS = 0.1, 1000.0  # frame rates of a video (the encoder's time base is fps to 1/1001)
 
 
 class Cancelled(GBViewerError):
@@ -96,8 +97,8 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
         raise GBViewerError("no modes given")
     if any((pf.width, pf.height) != (frames[0].width, frames[0].height) for pf in frames):
         raise GBViewerError("every frame of the camera path must have the same pane size")
-    if not (fps > 0 and math.isfinite(fps)):
-        raise GBViewerError(f"fps must be > 0, got {fps}")
+    fps = real(fps, "fps", lo=MIN_FPS, hi=MAX_FPS)
+    crf = integer(crf, "crf", lo=0, hi=51)
     renderer = get_renderer(scene, backend)
     size: list[int] = []
     t0 = time.perf_counter()
@@ -117,7 +118,7 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
                     writer = imageio_ffmpeg.write_frames(
                         str(tmp), tuple(size), fps=Fraction(fps).limit_denominator(1001), codec="libx264",
                         pix_fmt_out="yuv420p", quality=None, macro_block_size=1,
-                        output_params=["-crf", str(int(crf)), "-preset", preset, "-movflags", "+faststart"])
+                        output_params=["-crf", str(crf), "-preset", preset, "-movflags", "+faststart"])
                     writer.send(None)
                 writer.send(np.ascontiguousarray(img))
                 if progress is not None:

@@ -12,6 +12,7 @@ import pytest
 
 import gbviewer as gb
 from gbviewer import bench, metrics
+from gbviewer.camera import parse_rates
 from gbviewer.cli import BENCH_DEFAULTS, BENCH_FULL, build_parser, main, resolve_bench_options
 
 
@@ -180,13 +181,13 @@ def test_bench_presets():
     parse = lambda *a: resolve_bench_options(build_parser().parse_args(["bench", "s.ply", *a]))  # noqa: E731
     d = parse()
     assert (d.modes, d.rates, d.views, d.repeat, d.simd, d.size) == (
-        BENCH_DEFAULTS["modes"], BENCH_DEFAULTS["rates"], BENCH_DEFAULTS["views"], BENCH_DEFAULTS["repeat"], None,
+        BENCH_DEFAULTS["modes"], parse_rates(BENCH_DEFAULTS["rates"]), BENCH_DEFAULTS["views"], BENCH_DEFAULTS["repeat"], None,
         (640, 480))
     f = parse("--full")
-    assert (f.modes, f.rates, f.views, f.repeat, f.simd) == tuple(BENCH_FULL[k] for k in
-                                                                   ("modes", "rates", "views", "repeat", "simd"))
+    assert (f.modes, f.views, f.repeat, f.simd) == tuple(BENCH_FULL[k] for k in ("modes", "views", "repeat", "simd"))
+    assert f.rates == parse_rates(BENCH_FULL["rates"])
     e = parse("--full", "--modes", "scalar", "--rates", "1", "--repeat", "1", "--simd", "current")
-    assert (e.modes, e.rates, e.views, e.repeat, e.simd) == ("scalar", "1", BENCH_FULL["views"], 1, "current")
+    assert (e.modes, e.rates, e.views, e.repeat, e.simd) == ("scalar", [1.0], BENCH_FULL["views"], 1, "current")
 
 
 def _run_all():

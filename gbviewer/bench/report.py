@@ -74,6 +74,11 @@ def write_json(path: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], f
     return atomic_write(path, lambda p: p.write_text(json.dumps(doc, indent=2, allow_nan=True)), force)
 
 
+def plot_path(out_dir: Path, scene: str) -> Path:
+    """Where `write_plots` puts the plots of the scene named `scene`."""
+    return out_dir / (re.sub(r"[^A-Za-z0-9._-]+", "_", Path(scene).stem) + ".png")
+
+
 def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = False) -> list[Path]:
     """PSNR vs sampling rate per mode, and time per mode (one figure per scene), as PNG; existing plots are only
     replaced with `force`."""
@@ -107,7 +112,7 @@ def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow
         ax2.legend(fontsize=8)
         ax2.tick_params(axis="x", labelsize=7)
         fig.tight_layout()
-        path = out_dir / (re.sub(r"[^A-Za-z0-9._-]+", "_", Path(scene).stem) + ".png")
+        path = plot_path(out_dir, scene)
         try:
             atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"), force)
         finally:

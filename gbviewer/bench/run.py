@@ -11,9 +11,10 @@ from typing import Callable, Sequence
 from ..camera import Camera, load_cameras_json, orbit_camera
 from ..errors import GBViewerError
 from ..io import load
-from ..io.files import refuse_overwrite
+from ..io.files import check_writable
 from ..render import BACKENDS, Mode, RenderSettings
 from ..scene import Scene
+from ..validate import integer
 from .fidelity import FidelityRow, fidelity_cost, measure_fidelity
 from .oit import OitRow, measure_oit, oit_cost
 from .simd import parse_simd, simd_info
@@ -61,15 +62,14 @@ def run_bench(scenes: Sequence[Path], settings: list[RenderSettings], rates: lis
               outputs: Sequence[Path] = (), force: bool = False, progress: Progress | None = None) -> BenchResult:
     """Speed on every backend (the CPU backend on each SIMD path of `simd`, see parse_simd), fidelity on the first
     backend, and with wsr or duplex among `settings` the order-independent measures, for every scene file.
-    `outputs`: files the caller writes afterwards, refused (without `force`) before anything is measured."""
+    `outputs`: files the caller writes afterwards, checked (`check_writable`) before anything is measured."""
     if not backends:
         raise GBViewerError("no backend available")
     if not rates:
         raise GBViewerError("--rates: no sampling rate given")
-    if views < 1 or repeat < 1:
-        raise GBViewerError(f"--views and --repeat must be >= 1, got {views} and {repeat}")
+    views, repeat = integer(views, "--views", lo=1), integer(repeat, "--repeat", lo=1)
     for out in outputs:
-        refuse_overwrite(out, force)
+        check_writable(out, force)
     result = BenchResult()
     paths, exp = None, None
     if "cpu" in backends:

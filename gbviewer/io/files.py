@@ -25,6 +25,27 @@ def refuse_overwrite(path: str | Path, force: bool = False) -> Path:
     return path
 
 
+def check_writable(path: str | Path, force: bool = False, *, folder: bool = False) -> Path:
+    """Raise now the error that writing `path` (a file; with `folder`, a folder to write files into) would raise
+    after long work: an existing file without `force`, a folder where a file goes or the reverse, a place that
+    cannot be created or may not be written in. Creates nothing; call it before the work."""
+    path = Path(path)
+    if folder and path.exists() and not path.is_dir():
+        raise GBViewerError(f"{path}: exists and is not a folder")
+    if not folder:
+        if path.is_dir():
+            raise GBViewerError(f"{path}: is a folder; expected a file name")
+        refuse_overwrite(path, force)
+    place = path if folder else path.parent
+    while not place.exists() and place != place.parent:
+        place = place.parent  # the nearest existing folder, in which the rest would be created
+    if not place.is_dir():
+        raise GBViewerError(f"{path}: cannot create it, {place} is not a folder")
+    if not os.access(place, os.W_OK | os.X_OK):
+        raise GBViewerError(f"{path}: cannot write in {place} (permission denied)")
+    return path
+
+
 def atomic_write(path: str | Path, write: Callable[[Path], object], force: bool = False) -> Path:
     """Call write(tmp) for a temporary file beside `path`, flush it to disk, then move it into place, so readers
     never see a partial file. Without `force` an existing file is refused, including one that appears while
