@@ -28,7 +28,8 @@ def refuse_overwrite(path: str | Path, force: bool = False) -> Path:
 def check_writable(path: str | Path, force: bool = False, *, folder: bool = False) -> Path:
     """Raise now the error that writing `path` (a file; with `folder`, a folder to write files into) would raise
     after long work: an existing file without `force`, a folder where a file goes or the reverse, a place that
-    cannot be created or may not be written in. Creates nothing; call it before the work."""
+    cannot be created or may not be written in (probed with a temporary file, so read-only mounts count for root
+    too). Leaves nothing behind; call it before the work."""
     path = Path(path)
     if folder and path.exists() and not path.is_dir():
         raise GBViewerError(f"{path}: exists and is not a folder")
@@ -41,8 +42,12 @@ def check_writable(path: str | Path, force: bool = False, *, folder: bool = Fals
         place = place.parent  # the nearest existing folder, in which the rest would be created
     if not place.is_dir():
         raise GBViewerError(f"{path}: cannot create it, {place} is not a folder")
-    if not os.access(place, os.W_OK | os.X_OK):
-        raise GBViewerError(f"{path}: cannot write in {place} (permission denied)")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".gbviewer-probe-", dir=place)
+    except OSError as exc:
+        raise GBViewerError(f"{path}: cannot write in {place} ({exc.strerror or exc})") from None
+    os.close(fd)
+    os.unlink(probe)
     return path
 
 
