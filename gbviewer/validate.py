@@ -72,6 +72,23 @@ def integer(value: object, what: str, *, lo: int | None = None, hi: int | None =
     return n
 
 
+def array(value: object, what: str, shape: tuple[int, ...], *, f32: bool = False) -> np.ndarray:
+    """`value` (nested lists or an array) as a float64 array of exactly `shape` whose entries are finite numbers
+    (float32-representable with f32): a pose, a position, a colour."""
+    expected = f"a {'x'.join(map(str, shape))} matrix" if len(shape) > 1 else f"{shape[0]} numbers"
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        a = None
+    if a is None or a.shape != shape or isinstance(value, (str, bytes)):
+        raise InvalidValue(f"{what}: expected {expected}, got {_describe(value)}")
+    bad = ~np.isfinite(a) | (np.abs(a) > F32_MAX if f32 else False)
+    if bad.any():
+        kind = "finite float32 numbers" if f32 else "finite numbers"
+        raise InvalidValue(f"{what}: expected {kind}, got {a[bad][0]:g}")
+    return a
+
+
 def declared_count(value: object, what: str, *, item_bytes: int, available: int) -> int:
     """A count a file declares, checked against the bytes actually present before anything is allocated:
     `value` items of at least `item_bytes` each must fit in `available` bytes."""
