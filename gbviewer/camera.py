@@ -188,15 +188,16 @@ def orbit_camera(
     if up not in UP_AXES:
         raise CameraError(f"up axis {up!r}; expected one of {sorted(UP_AXES)}")
     centre, radius, framing = frame_box(*scene.robust_bounds(), fov_y_deg, width / height)
-    try:
-        distance = real(framing if distance is None else distance, "orbit distance", lo=0, lo_open=True, f32=True)
-    except InvalidValue as exc:
-        raise CameraError(str(exc)) from None
+    if distance is not None:
+        try:
+            distance = real(distance, "orbit distance", lo=0, lo_open=True, f32=True)
+        except InvalidValue as exc:
+            raise CameraError(str(exc)) from None
     up_v = np.array(UP_AXES[up])
-    eye = centre + distance * orbit_direction(up_v, azimuth_deg, elevation_deg)
+    eye = centre + (framing if distance is None else distance) * orbit_direction(up_v, azimuth_deg, elevation_deg)
     if np.abs(eye).max() > F32_MAX:
-        raise CameraError(f"{scene.source}: the scene ({radius:.3g} across) is too large to frame from a float32 "
-                          "camera position; give a camera")
+        raise CameraError(f"{scene.source}: an orbit camera around this scene ({2 * radius:.3g} across) would sit at "
+                          f"{np.abs(eye).max():.3g}, beyond float32; give a camera")
     return Camera.look_at(eye, centre, up_v, width, height, fov_y_deg, name=f"orbit({azimuth_deg},{elevation_deg})")
 
 
