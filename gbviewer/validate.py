@@ -56,7 +56,10 @@ def integer(value: object, what: str, *, lo: int | None = None, hi: int | None =
         try:
             value = int(text)
         except ValueError:
-            value = real(text, what)
+            try:
+                value = float(text)  # "2.0", "1e3"; "nan", "inf" and "1e400" are refused below
+            except ValueError:
+                raise InvalidValue(f"{what}: expected an integer, got {_describe(value)}") from None
     if isinstance(value, (float, np.floating)):
         x = real(value, what)
         if not x.is_integer():

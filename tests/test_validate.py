@@ -46,6 +46,11 @@ def test_integer_rejects(bad):
         integer(bad, "--views")
 
 
+def test_integer_text_that_is_no_number_says_integer():
+    with pytest.raises(InvalidValue, match="^'width': expected an integer, got 'abc'$"):
+        integer("abc", "'width'")
+
+
 def test_integer_bounds_name_the_option():
     with pytest.raises(InvalidValue, match=r"^--views: expected >= 1, got 0$"):
         integer(0, "--views", lo=1)
