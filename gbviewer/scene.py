@@ -16,7 +16,10 @@ if TYPE_CHECKING:
 
 SH_COEFFS = {0: 1, 1: 4, 2: 9, 3: 16}
 SH_C0 = 0.28209479177387814  # degree-0 SH basis: colour = 0.5 + SH_C0 * dc
-MAX_SCALE = 1e18  # activated scale beyond which a splat's float32 covariance (sums of scale^2) overflows
+# Splats beyond these are dropped like non-finite ones: the renderers' float32 arithmetic overflows on them.
+MAX_SCALE = 1e18  # activated scale: the covariance sums scale^2
+MAX_SH = 1e30  # SH coefficient: a colour sums 16 of them times basis values up to ~3, then blends
+LIMITS = {"scales": MAX_SCALE, "sh": MAX_SH, "view_weight_sh": MAX_SH}
 
 
 def sh_degree_for(num_coeffs: int) -> int:
@@ -111,8 +114,8 @@ class Scene:
         cells: Cells | None = None,
         neural: ViewDecoder | None = None,
     ) -> "Scene":
-        """Validate activated arrays, drop non-finite splats and those with scales over MAX_SCALE (warning once),
-        normalise quaternions. The keywords
+        """Validate activated arrays, drop non-finite splats and those beyond LIMITS (warning once), normalise
+        quaternions. The keywords
         from view_weight_sh on make `Scene.oit` (wsr_sigma is `OitData.sigma`)."""
         arrays = {
             "means": np.asarray(means, dtype=np.float32),
@@ -157,10 +160,15 @@ class Scene:
                 total = arr.sum()
             if not np.isfinite(total):
                 finite &= np.isfinite(arr.reshape(n, -1)).all(axis=1)
-        finite &= ~(np.abs(arrays["scales"]) > MAX_SCALE).any(axis=1)
+        for name, limit in LIMITS.items():
+            arr = arrays.get(name)
+            flat = arr.reshape(-1) if arr is not None else None
+            # fmax / fmin skip NaN (dropped above) and reduce without a temporary the size of the array
+            if flat is not None and max(np.fmax.reduce(flat), -np.fmin.reduce(flat)) > np.float32(limit):
+                finite &= ~(np.abs(arr) > np.float32(limit)).reshape(n, -1).any(axis=1)
         dropped = int(n - finite.sum())
         if dropped:
-            why = f"non-finite values (or scales over {MAX_SCALE:g})"
+            why = f"non-finite values (or scales over {MAX_SCALE:g}, SH over {MAX_SH:g})"
             if dropped == n:
                 raise GBViewerError(f"{source}: every splat has {why}")
             warnings.warn(f"{source}: dropped {dropped} of {n} splats with {why}", stacklevel=2)
