@@ -206,15 +206,12 @@ def load_cameras_json(path: str | Path) -> list[Camera]:
     field is checked: a bad one is a one-line `CameraError` naming the file, the entry and the key."""
     path = Path(path)
     try:
-        return [_camera_entry(e, f"{path}: entry {k}", k) for k, e in enumerate(_non_empty_list(read_json(path), path))]
+        entries = read_json(path)
+        if not isinstance(entries, list) or not entries:
+            raise InvalidValue(f"{path}: expected a non-empty JSON list of cameras")
+        return [_camera_entry(e, f"{path}: entry {k}", k) for k, e in enumerate(entries)]
     except InvalidValue as exc:
         raise CameraError(str(exc)) from None
-
-
-def _non_empty_list(doc: object, path: Path) -> list:
-    if not isinstance(doc, list) or not doc:
-        raise InvalidValue(f"{path}: expected a non-empty JSON list of cameras")
-    return doc
 
 
 def _camera_entry(e: object, where: str, k: int) -> Camera:
