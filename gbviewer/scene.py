@@ -180,12 +180,16 @@ class Scene:
         if (arrays["scales"] < 0).any():
             raise GBViewerError(f"{source}: field 'scales': negative values; expected activated scales >= 0")
         q = np.array(arrays["quats"], dtype=np.float32)  # a contiguous copy, normalised in place
-        q64 = q.astype(np.float64)  # squares of float32 components near 1e38 overflow in float32
-        norm = np.sqrt(np.einsum("ij,ij->i", q64, q64))
+        with np.errstate(over="ignore"):
+            norm = np.sqrt(np.einsum("ij,ij->i", q, q))
+        big = np.isinf(norm)  # components near the float32 maximum, whose squares overflow: scaled down first
+        if big.any():
+            q[big] /= np.abs(q[big]).max(axis=1, keepdims=True)
+            norm[big] = np.sqrt(np.einsum("ij,ij->i", q[big], q[big]))
         fix = np.abs(norm - 1) > 4 * np.finfo(np.float32).eps  # already unit: kept, so loading is idempotent
         if fix.any():
             degenerate = norm < 1e-12
-            q[fix] = q64[fix] / np.maximum(norm[fix], 1e-12)[:, None]
+            q[fix] /= np.maximum(norm[fix], 1e-12)[:, None]
             q[degenerate] = (1.0, 0.0, 0.0, 0.0)
         arrays["quats"] = q
         arrays["opacities"] = np.clip(arrays["opacities"], 0.0, 1.0)
