@@ -12,11 +12,9 @@ import argparse
 from dataclasses import dataclass
 from typing import NoReturn
 
-from .camera import parse_rate, parse_rates
+from .camera import MAX_IMAGE_SIZE as MAX_SIDE, parse_rate, parse_rates  # largest image width or height
 from .errors import GBViewerError, InvalidValue
 from .validate import integer, real
-
-MAX_SIDE = 16384  # largest image width or height, in pixels
 
 
 class Parser(argparse.ArgumentParser):

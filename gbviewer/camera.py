@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, replace
 from fractions import Fraction
@@ -12,13 +11,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import CameraError, InvalidValue
-from .validate import real
+from .validate import F32_MAX, array, field, integer, read_json, real
 
 if TYPE_CHECKING:
     from .scene import Scene
 
 NEAR_PLANE = 0.2  # published 3DGS near cull (KERNELS.md §0.4)
 MIN_RATE, MAX_RATE = 1e-3, 64.0  # sampling rates: x1/1000 (zoomed out) to x64 (supersampled)
+MAX_IMAGE_SIZE = 16384  # pixels per axis of any camera
+ROTATION_TOLERANCE = 1e-3  # |R R^T - I| and |det R - 1| allowed for a rotation read from a file
 UP_AXES = {"-y": (0.0, -1.0, 0.0), "+y": (0.0, 1.0, 0.0), "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0)}
 
 
@@ -31,10 +32,11 @@ def format_rate(rate: float) -> str:
     return f"x1/{1 / rate:.3g}" if rate < 1 else f"x{rate:.3g}"
 
 
-def parse_rate(text: str) -> float:
-    """'1/8', '0.125' or '8' -> a float in [MIN_RATE, MAX_RATE]; `InvalidValue` naming the text otherwise."""
-    what = f"sampling rate {text.strip()!r}"
-    num, slash, den = text.partition("/")
+def parse_rate(text: object, what: str | None = None) -> float:
+    """'1/8', '0.125' or '8' (or a number) -> a float in [MIN_RATE, MAX_RATE]; `InvalidValue` naming `what` (by
+    default the text) otherwise."""
+    what = what or f"sampling rate {str(text).strip()!r:.40}"
+    num, slash, den = str(text).partition("/")
     value = real(num, what) / real(den, what, lo=0.0, lo_open=True) if slash else real(num, what)
     return real(value, what, lo=MIN_RATE, hi=MAX_RATE)
 
@@ -60,6 +62,7 @@ def fov_of(camera: "Camera") -> float:
 def frame_box(lo: np.ndarray, hi: np.ndarray, fov_y_deg: float, aspect: float) -> tuple[np.ndarray, float, float]:
     """Centre and radius of the box lo..hi, and the distance from its centre at which a camera with this vertical
     field of view and aspect (width / height) sees all of it (the default orbit framing)."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)  # float32 bounds near 1e38 overflow in float32
     centre = (lo + hi) / 2
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
     fov = math.radians(fov_y_deg) * min(1.0, aspect)
@@ -94,21 +97,25 @@ class Camera:
     name: str = ""
 
     def __post_init__(self) -> None:
-        R = np.asarray(self.R, dtype=np.float64).reshape(3, 3)
-        t = np.asarray(self.t, dtype=np.float64).reshape(3)
-        object.__setattr__(self, "R", R)
-        object.__setattr__(self, "t", t)
-        object.__setattr__(self, "width", int(self.width))
-        object.__setattr__(self, "height", int(self.height))
-        if not (1 <= self.width <= 16384 and 1 <= self.height <= 16384):
-            raise CameraError(f"camera {self.name!r}: size {self.width}x{self.height}; expected 1..16384 per axis")
-        vals = [self.fx, self.fy, self.cx, self.cy, self.near]
-        if not all(math.isfinite(v) for v in vals) or self.fx <= 0 or self.fy <= 0 or self.near <= 0:
-            raise CameraError(f"camera {self.name!r}: fx, fy, near must be finite and > 0, cx, cy finite; got {vals}")
-        if not (np.isfinite(R).all() and np.isfinite(t).all()):
-            raise CameraError(f"camera {self.name!r}: pose has non-finite values")
-        if abs(np.linalg.det(R) - 1.0) > 1e-3 or np.abs(R @ R.T - np.eye(3)).max() > 1e-3:
-            raise CameraError(f"camera {self.name!r}: R is not a rotation matrix (det {np.linalg.det(R):.4f})")
+        """Every number checked (the renderers take them as float32 and int32): sizes 1..MAX_IMAGE_SIZE, focal
+        lengths and near plane finite and > 0, a rotation R and a float32 translation t."""
+        who = f"camera {self.name!r:.60}"
+        try:
+            checked = {"width": integer(self.width, f"{who}: width", lo=1, hi=MAX_IMAGE_SIZE),
+                       "height": integer(self.height, f"{who}: height", lo=1, hi=MAX_IMAGE_SIZE),
+                       "R": array(self.R, f"{who}: R", (3, 3), f32=True),
+                       "t": array(self.t, f"{who}: t", (3,), f32=True)}
+            for name in ("fx", "fy", "near"):
+                checked[name] = real(getattr(self, name), f"{who}: {name}", lo=0, lo_open=True, f32=True)
+            for name in ("cx", "cy"):
+                checked[name] = real(getattr(self, name), f"{who}: {name}", f32=True)
+        except InvalidValue as exc:
+            raise CameraError(str(exc)) from None
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
+        R = checked["R"]
+        if abs(np.linalg.det(R) - 1) > ROTATION_TOLERANCE or np.abs(R @ R.T - np.eye(3)).max() > ROTATION_TOLERANCE:
+            raise CameraError(f"{who}: R is not a rotation matrix (det {np.linalg.det(R):.4g})")
 
     @property
     def position(self) -> np.ndarray:
@@ -117,8 +124,10 @@ class Camera:
 
     def at_sampling_rate(self, s: float) -> "Camera":
         """The same view with s times as many pixels per axis (s = 1/8 zooms out 8x, s = 8 zooms in)."""
-        if not (s > 0 and math.isfinite(s)):
-            raise CameraError(f"sampling rate must be a finite number > 0, got {s}")
+        try:
+            s = real(s, "sampling rate", lo=0, lo_open=True, hi=MAX_IMAGE_SIZE)
+        except InvalidValue as exc:
+            raise CameraError(str(exc)) from None
         w, h = max(1, round(self.width * s)), max(1, round(self.height * s))
         sx, sy = w / self.width, h / self.height
         return replace(self, width=w, height=h, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy)
@@ -178,38 +187,41 @@ def orbit_camera(
     """
     if up not in UP_AXES:
         raise CameraError(f"up axis {up!r}; expected one of {sorted(UP_AXES)}")
-    centre, _, framing = frame_box(*scene.robust_bounds(), fov_y_deg, width / height)
-    distance = framing if distance is None else distance
-    if not (distance > 0 and math.isfinite(distance)):
-        raise CameraError(f"orbit distance must be > 0, got {distance}")
+    centre, radius, framing = frame_box(*scene.robust_bounds(), fov_y_deg, width / height)
+    if distance is not None:
+        try:
+            distance = real(distance, "orbit distance", lo=0, lo_open=True, f32=True)
+        except InvalidValue as exc:
+            raise CameraError(str(exc)) from None
     up_v = np.array(UP_AXES[up])
-    eye = centre + distance * orbit_direction(up_v, azimuth_deg, elevation_deg)
+    eye = centre + (framing if distance is None else distance) * orbit_direction(up_v, azimuth_deg, elevation_deg)
+    if np.abs(eye).max() > F32_MAX:
+        raise CameraError(f"{scene.source}: an orbit camera around this scene ({2 * radius:.3g} across) would sit at "
+                          f"{np.abs(eye).max():.3g}, beyond float32; give a camera")
     return Camera.look_at(eye, centre, up_v, width, height, fov_y_deg, name=f"orbit({azimuth_deg},{elevation_deg})")
 
 
 def load_cameras_json(path: str | Path) -> list[Camera]:
-    """Cameras from a 3DGS `cameras.json` (camera-to-world rotation rows and centre; fx, fy at full size)."""
+    """Cameras from a 3DGS `cameras.json` (camera-to-world rotation rows and centre; fx, fy at full size). Every
+    field is checked: a bad one is a one-line `CameraError` naming the file, the entry and the key."""
     path = Path(path)
     try:
-        entries = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise CameraError(f"{path}: cannot read cameras.json: {exc}") from None
-    if not isinstance(entries, list) or not entries:
-        raise CameraError(f"{path}: expected a non-empty JSON list of cameras")
-    cams = []
-    for k, e in enumerate(entries):
-        try:
-            w, h = int(e["width"]), int(e["height"])
-            fx, fy = float(e["fx"]), float(e["fy"])
-            rot = np.asarray(e["rotation"], dtype=np.float64).reshape(3, 3)
-            pos = np.asarray(e["position"], dtype=np.float64).reshape(3)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise CameraError(f"{path}: camera {k}: missing or malformed field ({exc!r}); expected "
-                              "width, height, fx, fy, rotation (3x3), position (3)") from None
-        R = rot.T  # stored rotation is camera-to-world
-        name = str(e.get("img_name", e.get("id", k)))
-        try:
-            cams.append(Camera(w, h, fx, fy, w / 2, h / 2, R, -R @ pos, name=name))
-        except CameraError as exc:
-            raise CameraError(f"{path}: camera {k}: {exc}") from None
-    return cams
+        entries = read_json(path)
+        if not isinstance(entries, list) or not entries:
+            raise InvalidValue(f"{path}: expected a non-empty JSON list of cameras")
+        return [_camera_entry(e, f"{path}: entry {k}", k) for k, e in enumerate(entries)]
+    except InvalidValue as exc:
+        raise CameraError(str(exc)) from None
+
+
+def _camera_entry(e: object, where: str, k: int) -> Camera:
+    """One cameras.json entry: width, height, fx, fy, rotation (3x3), position (3), optional img_name or id."""
+    w, h = (integer(field(e, key, where), f"{where}: '{key}'", lo=1, hi=MAX_IMAGE_SIZE) for key in ("width", "height"))
+    fx, fy = (real(field(e, key, where), f"{where}: '{key}'", lo=0, lo_open=True, f32=True) for key in ("fx", "fy"))
+    R = array(field(e, "rotation", where), f"{where}: 'rotation'", (3, 3), f32=True).T  # stored camera-to-world
+    pos = array(field(e, "position", where), f"{where}: 'position'", (3,), f32=True)
+    name = str(e.get("img_name", e.get("id", k)))  # type: ignore[union-attr]  (field() proved e a dict)
+    try:
+        return Camera(w, h, fx, fy, w / 2, h / 2, R, -R @ pos, name=name)
+    except CameraError as exc:
+        raise InvalidValue(f"{where}: {exc}") from None

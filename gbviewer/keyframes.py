@@ -3,19 +3,20 @@ focal lengths), SQUAD (spherical cubic built from slerps, Shoemake 1987) for rot
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, replace
-from fractions import Fraction
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from .camera import UP_AXES, Camera, focal_from_fov, orbit_camera
+from .camera import UP_AXES, Camera, focal_from_fov, orbit_camera, parse_rate
 from .cells import quats_from_matrices, rotation_matrices
-from .errors import CameraError, GBViewerError
+from .errors import CameraError, GBViewerError, InvalidValue
 from .scene import Scene
+from .validate import array, field, read_json, real
+
+MAX_FOV_DEG = 179.0
 
 
 @dataclass(frozen=True)
@@ -182,15 +183,6 @@ def interpolate_keyframes(keys: Sequence[Keyframe], times: Sequence[float]) -> l
     return out
 
 
-def _vec(e: dict, name: str, n: int, where: str) -> np.ndarray:
-    try:
-        v = np.asarray(e[name], dtype=np.float64)
-        return v.reshape(n) if n != 9 else v.reshape(3, 3)
-    except (TypeError, ValueError) as exc:
-        raise GBViewerError(f"{where}: {name!r} must be {'a 3x3 matrix' if n == 9 else f'{n} numbers'} ({exc})") \
-            from None
-
-
 def load_keyframes(path: str | Path, base: Camera, scene: Scene | None = None, up: str = "-y") -> list[Keyframe]:
     """Keyframes from JSON: {"keyframes": [KEY, ...]} or a bare list of KEYs. A KEY gives a pose as one of
 
@@ -201,56 +193,71 @@ def load_keyframes(path: str | Path, base: Camera, scene: Scene | None = None, u
 
     and optionally "time" (seconds; give it to all keys or none), "rate" (sampling rate rendered at, default 1:
     rendered at that rate and shown nearest-upscaled), "fov_y_deg" or "fx", "fy", "cx", "cy" (pixels at the pane
-    size; default: the base camera's intrinsics). The pane size is the base camera's.
+    size; default: the base camera's intrinsics). The pane size is the base camera's. Every value is checked: a
+    bad one is a one-line `InvalidValue` naming the file, the key's index and the field.
     """
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise GBViewerError(f"{path}: cannot read keyframes: {exc}") from None
+    doc = read_json(path)
     entries = doc.get("keyframes") if isinstance(doc, dict) else doc
     if not isinstance(entries, list) or not entries:
-        raise GBViewerError(f"{path}: expected a non-empty list of keyframes (or {{\"keyframes\": [...]}})")
+        raise InvalidValue(f"{path}: expected a non-empty list of keyframes (or {{\"keyframes\": [...]}})")
     keys = []
     for i, e in enumerate(entries):
         where = f"{path}: keyframe {i}"
-        if not isinstance(e, dict):
-            raise GBViewerError(f"{where}: expected an object")
         try:
-            if "R" in e:
-                R, t = _vec(e, "R", 9, where), _vec(e, "t", 3, where)
-            elif "rotation" in e:
-                R = _vec(e, "rotation", 9, where).T
-                t = -R @ _vec(e, "position", 3, where)
-            elif "look_at" in e:
-                u = _vec(e, "up", 3, where) if "up" in e else np.array(UP_AXES[up])
-                c = Camera.look_at(_vec(e, "position", 3, where), _vec(e, "look_at", 3, where), u)
-                R, t = c.R, c.t
-            elif "orbit" in e:
-                if scene is None:
-                    raise GBViewerError(f"{where}: 'orbit' keys need the scene")
-                az, el, dist = (list(e["orbit"]) + [None])[:3]
-                c = orbit_camera(scene, float(az), float(el), float(dist) if dist and float(dist) > 0 else None,
-                                 base.width, base.height, up=up)
-                R, t = c.R, c.t
-            else:
-                raise GBViewerError(f"{where}: no pose; give R and t, rotation and position, position and look_at, "
-                                    "or orbit")
-            intr = dict(fx=base.fx, fy=base.fy, cx=base.cx, cy=base.cy)
-            if "fov_y_deg" in e:
-                f = focal_from_fov(float(e["fov_y_deg"]), base.height)
-                intr = dict(fx=f, fy=f, cx=base.width / 2, cy=base.height / 2)
-            intr.update({k: float(e[k]) for k in ("fx", "fy", "cx", "cy") if k in e})
-            cam = replace(base, R=R, t=t, name=f"key{i}", **intr)
-            rate = float(Fraction(str(e.get("rate", 1))))
-            time_ = float(e["time"]) if e.get("time") is not None else None
+            keys.append(_keyframe(e, where, i, base, scene, up))
         except CameraError as exc:
-            raise GBViewerError(f"{where}: {exc}") from None
-        except (TypeError, ValueError, ZeroDivisionError) as exc:
-            raise GBViewerError(f"{where}: {exc}") from None
-        keys.append(Keyframe(cam, rate, time_))
-    key_times(keys)
+            raise InvalidValue(f"{where}: {exc}") from None
+    try:
+        key_times(keys)
+    except GBViewerError as exc:
+        raise InvalidValue(f"{path}: {exc}") from None
     return keys
+
+
+def _keyframe(e: object, where: str, i: int, base: Camera, scene: Scene | None, up: str) -> Keyframe:
+    """One key of a keyframes file (see `load_keyframes`)."""
+    if not isinstance(e, dict):
+        raise InvalidValue(f"{where}: expected a JSON object, got {type(e).__name__}")
+
+    def vec(name: str, shape: tuple[int, ...]) -> np.ndarray:
+        return array(field(e, name, where), f"{where}: '{name}'", shape, f32=True)
+
+    def num(name: str, **bounds) -> float:
+        return real(e[name], f"{where}: '{name}'", f32=True, **bounds)
+
+    if "R" in e:
+        R, t = vec("R", (3, 3)), vec("t", (3,))
+    elif "rotation" in e:
+        R = vec("rotation", (3, 3)).T
+        t = -R @ vec("position", (3,))
+    elif "look_at" in e:
+        c = Camera.look_at(vec("position", (3,)), vec("look_at", (3,)), vec("up", (3,)) if "up" in e else UP_AXES[up])
+        R, t = c.R, c.t
+    elif "orbit" in e:
+        if scene is None:
+            raise InvalidValue(f"{where}: 'orbit' keys need the scene")
+        orbit = e["orbit"]
+        if not isinstance(orbit, list) or len(orbit) not in (2, 3):
+            raise InvalidValue(f"{where}: 'orbit': expected [azimuth, elevation] or [azimuth, elevation, distance], "
+                               f"got {str(orbit):.40}")
+        az, el = (real(v, f"{where}: 'orbit' {n}", f32=True) for v, n in zip(orbit, ("azimuth", "elevation")))
+        dist = real(orbit[2], f"{where}: 'orbit' distance", f32=True) if len(orbit) == 3 and orbit[2] is not None \
+            else 0.0
+        c = orbit_camera(scene, az, el, dist if dist > 0 else None, base.width, base.height, up=up)
+        R, t = c.R, c.t
+    else:
+        raise InvalidValue(f"{where}: no pose; give R and t, rotation and position, position and look_at, or orbit")
+    intr = dict(fx=base.fx, fy=base.fy, cx=base.cx, cy=base.cy)
+    if "fov_y_deg" in e:
+        f = focal_from_fov(num("fov_y_deg", lo=0, lo_open=True, hi=MAX_FOV_DEG), base.height)
+        intr = dict(fx=f, fy=f, cx=base.width / 2, cy=base.height / 2)
+    intr.update({k: num(k, **({"lo": 0, "lo_open": True} if k in ("fx", "fy") else {}))
+                 for k in ("fx", "fy", "cx", "cy") if k in e})
+    cam = replace(base, R=R, t=t, name=f"key{i}", **intr)
+    rate = parse_rate(e.get("rate", 1), f"{where}: 'rate'")
+    time_ = num("time") if e.get("time") is not None else None
+    return Keyframe(cam, rate, time_)
 
 
 def keyframes_to_json(keys: Sequence[Keyframe]) -> dict:

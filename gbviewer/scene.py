@@ -16,6 +16,10 @@ if TYPE_CHECKING:
 
 SH_COEFFS = {0: 1, 1: 4, 2: 9, 3: 16}
 SH_C0 = 0.28209479177387814  # degree-0 SH basis: colour = 0.5 + SH_C0 * dc
+# Splats beyond these are dropped like non-finite ones: the renderers' float32 arithmetic overflows on them.
+MAX_SCALE = 1e18  # activated scale: the covariance sums scale^2
+MAX_SH = 1e30  # SH coefficient: a colour sums 16 of them times basis values up to ~3, then blends
+LIMITS = {"scales": MAX_SCALE, "sh": MAX_SH, "view_weight_sh": MAX_SH}
 
 
 def sh_degree_for(num_coeffs: int) -> int:
@@ -87,8 +91,9 @@ class Scene:
         return self.means.min(axis=0), self.means.max(axis=0)
 
     def robust_bounds(self, percentile: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds of the central splats (per-axis percentiles), ignoring stray far splats."""
-        lo, hi = np.percentile(self.means, [percentile, 100.0 - percentile], axis=0)
+        """Bounds of the central splats (per-axis percentiles), ignoring stray far splats. Interpolated in float64:
+        float32 differences of coordinates near 1e38 overflow."""
+        lo, hi = np.percentile(self.means.astype(np.float64), [percentile, 100.0 - percentile], axis=0)
         return lo.astype(np.float32), hi.astype(np.float32)
 
     @classmethod
@@ -109,7 +114,8 @@ class Scene:
         cells: Cells | None = None,
         neural: ViewDecoder | None = None,
     ) -> "Scene":
-        """Validate activated arrays, drop non-finite splats (warning once), normalise quaternions. The keywords
+        """Validate activated arrays, drop non-finite splats and those beyond LIMITS (warning once), normalise
+        quaternions. The keywords
         from view_weight_sh on make `Scene.oit` (wsr_sigma is `OitData.sigma`)."""
         arrays = {
             "means": np.asarray(means, dtype=np.float32),
@@ -150,14 +156,23 @@ class Scene:
         for arr in arrays.values():
             # A finite sum proves every element finite (NaN and inf propagate); the per-splat reduction is only
             # needed when it is not (or when a float32 sum of finite values overflowed).
-            if not np.isfinite(arr.sum()):
+            with np.errstate(over="ignore", invalid="ignore"):
+                total = arr.sum()
+            if not np.isfinite(total):
                 finite &= np.isfinite(arr.reshape(n, -1)).all(axis=1)
+        for name, limit in LIMITS.items():
+            arr = arrays.get(name)
+            flat = arr.reshape(-1) if arr is not None else None
+            # fmax / fmin skip NaN (dropped above) and reduce without a temporary the size of the array
+            if flat is not None and max(np.fmax.reduce(flat), -np.fmin.reduce(flat)) > np.float32(limit):
+                finite &= ~(np.abs(arr) > np.float32(limit)).reshape(n, -1).any(axis=1)
         dropped = int(n - finite.sum())
         if dropped:
-            warnings.warn(f"{source}: dropped {dropped} of {n} splats with non-finite values", stacklevel=2)
-            arrays = {k: v[finite] for k, v in arrays.items()}
+            why = f"non-finite values (or scales over {MAX_SCALE:g}, SH over {MAX_SH:g})"
             if dropped == n:
-                raise GBViewerError(f"{source}: every splat has non-finite values")
+                raise GBViewerError(f"{source}: every splat has {why}")
+            warnings.warn(f"{source}: dropped {dropped} of {n} splats with {why}", stacklevel=2)
+            arrays = {k: v[finite] for k, v in arrays.items()}
             if cells is not None:  # renumber the members, drop the removed splats from their cells
                 cells = Cells.from_groups(cells.means, cells.scales, cells.quats, cells.cell_of(n)[finite],
                                           cells.origin, cells.build_ms, cells.info)
@@ -165,7 +180,12 @@ class Scene:
         if (arrays["scales"] < 0).any():
             raise GBViewerError(f"{source}: field 'scales': negative values; expected activated scales >= 0")
         q = np.array(arrays["quats"], dtype=np.float32)  # a contiguous copy, normalised in place
-        norm = np.sqrt(np.einsum("ij,ij->i", q, q))
+        with np.errstate(over="ignore"):
+            norm = np.sqrt(np.einsum("ij,ij->i", q, q))
+        big = np.isinf(norm)  # components near the float32 maximum, whose squares overflow: scaled down first
+        if big.any():
+            q[big] /= np.abs(q[big]).max(axis=1, keepdims=True)
+            norm[big] = np.sqrt(np.einsum("ij,ij->i", q[big], q[big]))
         fix = np.abs(norm - 1) > 4 * np.finfo(np.float32).eps  # already unit: kept, so loading is idempotent
         if fix.any():
             degenerate = norm < 1e-12

@@ -56,7 +56,10 @@ def integer(value: object, what: str, *, lo: int | None = None, hi: int | None =
         try:
             value = int(text)
         except ValueError:
-            value = real(text, what)
+            try:
+                value = float(text)  # "2.0", "1e3"; "nan", "inf" and "1e400" are refused below
+            except ValueError:
+                raise InvalidValue(f"{what}: expected an integer, got {_describe(value)}") from None
     if isinstance(value, (float, np.floating)):
         x = real(value, what)
         if not x.is_integer():
@@ -70,6 +73,23 @@ def integer(value: object, what: str, *, lo: int | None = None, hi: int | None =
     if hi is not None and n > hi:
         raise InvalidValue(f"{what}: expected <= {hi}, got {_describe(n)}")
     return n
+
+
+def array(value: object, what: str, shape: tuple[int, ...], *, f32: bool = False) -> np.ndarray:
+    """`value` (nested lists or an array) as a float64 array of exactly `shape` whose entries are finite numbers
+    (float32-representable with f32): a pose, a position, a colour."""
+    expected = f"a {'x'.join(map(str, shape))} matrix" if len(shape) > 1 else f"{shape[0]} numbers"
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        a = None
+    if a is None or a.shape != shape or isinstance(value, (str, bytes)):
+        raise InvalidValue(f"{what}: expected {expected}, got {_describe(value)}")
+    bad = ~np.isfinite(a) | (np.abs(a) > F32_MAX if f32 else False)
+    if bad.any():
+        kind = "finite float32 numbers" if f32 else "finite numbers"
+        raise InvalidValue(f"{what}: expected {kind}, got {a[bad][0]:g}")
+    return a
 
 
 def declared_count(value: object, what: str, *, item_bytes: int, available: int) -> int:

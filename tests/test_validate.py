@@ -11,7 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from gbviewer.errors import GBViewerError, InvalidValue
-from gbviewer.validate import F32_MAX, declared_count, field, integer, parse_json, read_json, real
+from gbviewer.validate import F32_MAX, array, declared_count, field, integer, parse_json, read_json, real
 
 
 @pytest.mark.parametrize("bad", ["nan", "inf", "-inf", "1e400", float("nan"), float("inf"), "x", "", None, True,
@@ -44,6 +44,11 @@ def test_integer_accepts_integral_values(good, expected):
 def test_integer_rejects(bad):
     with pytest.raises(InvalidValue, match="^--views: expected"):
         integer(bad, "--views")
+
+
+def test_integer_text_that_is_no_number_says_integer():
+    with pytest.raises(InvalidValue, match="^'width': expected an integer, got 'abc'$"):
+        integer("abc", "'width'")
 
 
 def test_integer_bounds_name_the_option():
@@ -88,6 +93,19 @@ def test_parse_json_size_cap_and_field(tmp_path):
     with pytest.raises(InvalidValue, match="expected a JSON object, got list"):
         field([], "fx", "cameras.json entry 0")
     assert issubclass(InvalidValue, GBViewerError)
+
+
+def test_array_checks_shape_and_values():
+    np.testing.assert_array_equal(array([[1, 0, 0], [0, 1, 0], [0, 0, 1]], "R", (3, 3)), np.eye(3))
+    assert array(np.ones(3), "t", (3,), f32=True).dtype == np.float64
+    for bad, match in [([1, 2], "3 numbers, got"), ("123", "3 numbers"), ({"x": 1}, "3 numbers"),
+                       ([1, [2], 3], "3 numbers"), ([1, 2, 10 ** 400], "3 numbers"), ([1, "a", 3], "3 numbers"),
+                       ([1, 2, float("nan")], "finite float32 numbers, got nan"), ([0, 0, 1e39], "finite float32 numbers")]:
+        with pytest.raises(InvalidValue, match=f"^position: expected {match}"):
+            array(bad, "position", (3,), f32=True)
+    with pytest.raises(InvalidValue, match="^R: expected a 3x3 matrix"):
+        array(np.eye(4), "R", (3, 3))
+    assert array([0, 0, 1e39], "p", (3,))[2] == 1e39  # without f32: any finite float64
 
 
 @given(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(), st.text(max_size=50),

@@ -2,8 +2,8 @@
 
     python tools/fuzz_loaders.py FORMAT [--seconds N] [--corpus DIR] [-- libFuzzer options]
 
-FORMAT is one of the seed folders in tests/io/fuzz/seeds (inria, compressed, spz, splat, sog, duplex, ...): its small
-seed files start the corpus, new inputs go to `--corpus` (default .fuzz/FORMAT, kept between runs). An input fails
+FORMAT is one of the seed folders in tests/io/fuzz/seeds (inria, compressed, spz, splat, sog, ..., and the JSON readers
+cameras and keyframes): its small seed files start the corpus, new inputs go to `--corpus` (default .fuzz/FORMAT, kept between runs). An input fails
 when loading it raises anything but a one-line GBViewerError, emits a numpy RuntimeWarning, or returns a scene with
 non-finite values; libFuzzer also flags inputs that take over 10 s or 2 GiB. Failing inputs are written to
 tests/io/fuzz/crashes/ where tests/io/test_fuzz_regressions.py replays them with `check_load` forever after.
@@ -25,21 +25,53 @@ SEEDS = REPO / "tests" / "io" / "fuzz" / "seeds"
 CRASHES = REPO / "tests" / "io" / "fuzz" / "crashes"
 
 
-def check_load(path: Path) -> str:
-    """Load `path` as the CLI would; return 'ok' or 'error', raise AssertionError for anything a user must not see."""
+def _scene_arrays(path: Path) -> list[np.ndarray]:
+    import gbviewer as gb
+
+    scene = gb.load(path)
+    return [getattr(scene, name) for name in ("means", "scales", "quats", "opacities", "sh")]
+
+
+def _camera_arrays(cams: list) -> list[np.ndarray]:
+    return [np.array([c.R.ravel().tolist() + c.t.tolist() + [c.fx, c.fy, c.cx, c.cy] for c in cams], np.float32)]
+
+
+def _cameras(path: Path) -> list[np.ndarray]:
+    import gbviewer as gb
+
+    return _camera_arrays(gb.load_cameras_json(path))
+
+
+def _keyframes(path: Path) -> list[np.ndarray]:
+    import gbviewer as gb
+    from gbviewer.keyframes import load_keyframes
+
+    scene = gb.Scene.from_arrays(np.eye(3), np.full((3, 3), 0.1), np.tile([1.0, 0, 0, 0], (3, 1)), np.ones(3),
+                                 np.zeros((3, 1, 3)))
+    keys = load_keyframes(path, gb.orbit_camera(scene, width=64, height=48), scene)
+    return _camera_arrays([k.camera for k in keys]) + [np.array([k.rate for k in keys], np.float32)]
+
+
+READERS = {"cameras": _cameras, "keyframes": _keyframes}  # every other seed folder is a scene format
+
+
+def check_load(path: Path, kind: str = "scene") -> str:
+    """Read `path` as the CLI would (a scene, or `kind` 'cameras' / 'keyframes'); return 'ok' or 'error', raise
+    AssertionError for anything a user must not see: a traceback, a numpy warning, a message of several lines,
+    non-finite or float32-overflowing values."""
     import gbviewer as gb
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)  # numpy over/invalid warnings reaching the user are bugs
         try:
-            scene = gb.load(path)
+            arrays = READERS.get(kind, _scene_arrays)(path)
         except gb.GBViewerError as exc:
             if "\n" in str(exc) or not str(exc):
                 raise AssertionError(f"error message is not one line: {exc!r}") from None
             return "error"
-    for name in ("means", "scales", "quats", "opacities", "sh"):
-        if not np.isfinite(getattr(scene, name)).all():
-            raise AssertionError(f"loaded scene has non-finite {name}")
+    for a in arrays:
+        if not np.isfinite(a).all():
+            raise AssertionError("read non-finite values")
     return "ok"
 
 
@@ -58,12 +90,13 @@ def main() -> None:
 
     with atheris.instrument_imports(include=["gbviewer"]):
         import gbviewer.io  # noqa: F401  (instrumented for coverage)
+        import gbviewer.keyframes  # noqa: F401
     scratch = Path(tempfile.mkdtemp(prefix="gbv-fuzz-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None))
     target = scratch / "input"
 
     def one_input(data: bytes) -> None:
         target.write_bytes(data)
-        check_load(target)
+        check_load(target, args.format)
 
     flags = [sys.argv[0], str(corpus), str(SEEDS / args.format), f"-max_total_time={args.seconds}", "-timeout=10",
              "-rss_limit_mb=2048", f"-artifact_prefix={CRASHES}/{args.format}-", "-print_final_stats=1", *extra]

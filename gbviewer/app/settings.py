@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import json
-import math
 import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any, Container
 
 from ..camera import UP_AXES
+from ..errors import InvalidValue
 from ..render import Mode
+from ..validate import array, integer, read_json, real
 from .camera_control import CameraController
 from .layout import LAYOUTS
 from .rates import clamp_rate
@@ -19,6 +21,20 @@ MODE_NAMES = tuple(m.label for m in Mode)
 MAX_PANES = 4
 MAX_RECENT = 10
 PANE_NAMES = "ABCD"
+
+
+def _number(value: Any, default: Any, lo: float | None = None, hi: float | None = None, integral: bool = False) -> Any:
+    """A setting's number clamped to [lo, hi], or `default` when it is not a finite number (of the right kind):
+    a hand-edited or corrupt settings file never stops the viewer."""
+    try:
+        x = integer(value, "setting") if integral else real(value, "setting")
+    except InvalidValue:
+        return default
+    return x if lo is None or hi is None else min(hi, max(lo, x))
+
+
+def _choice(value: Any, options: Container[str], default: str) -> str:
+    return value if isinstance(value, str) and value in options else default
 
 
 @dataclass
@@ -31,13 +47,10 @@ class PaneSettings:
     split_pos: float = 0.5
 
     def normalised(self) -> "PaneSettings":
-        mode = self.mode if self.mode in MODE_NAMES else "scalar"
-        split_mode = self.split_mode if self.split_mode in MODE_NAMES else "gaussian_blending"
-        ss = int(self.supersample) if isinstance(self.supersample, (int, float)) else 1
-        pos = float(self.split_pos) if isinstance(self.split_pos, (int, float)) and math.isfinite(self.split_pos) \
-            else 0.5
-        return PaneSettings(mode, min(8, max(1, ss)), self.view if self.view in VIEWS else "color",
-                            bool(self.split), split_mode, min(1.0, max(0.0, pos)))
+        return PaneSettings(_choice(self.mode, MODE_NAMES, "scalar"), _number(self.supersample, 1, 1, 8, integral=True),
+                            _choice(self.view, VIEWS, "color"), bool(self.split),
+                            _choice(self.split_mode, MODE_NAMES, "gaussian_blending"),
+                            _number(self.split_pos, 0.5, 0.0, 1.0))
 
 
 DEFAULT_PANES = [PaneSettings("scalar"), PaneSettings("gaussian_blending"), PaneSettings("scalar", 3),
@@ -68,34 +81,27 @@ class AppSettings:
     def normalised(self) -> "AppSettings":
         s = AppSettings()
         panes = [PaneSettings(**{k: v for k, v in p.items() if k in PaneSettings.__dataclass_fields__})
-                 if isinstance(p, dict) else p for p in (self.panes or [])][:MAX_PANES]
+                 if isinstance(p, dict) else p for p in _listed(self.panes)][:MAX_PANES]
         panes = [p.normalised() for p in panes if isinstance(p, PaneSettings)]
         s.panes = panes + [PaneSettings(d.mode, d.supersample) for d in DEFAULT_PANES[len(panes):]]
-        s.pane_count = min(MAX_PANES, max(1, int(self.pane_count))) if isinstance(self.pane_count, int) else 2
-        s.layout = self.layout if self.layout in LAYOUTS else "row"
-        s.rate = clamp_rate(self.rate)
-        try:
-            w, h = (int(v) for v in self.window)
-            s.window = (min(8192, max(640, w)), min(8192, max(480, h)))
-        except (TypeError, ValueError):
-            pass
+        s.pane_count = _number(self.pane_count, 2, 1, MAX_PANES, integral=True)
+        s.layout = _choice(self.layout, LAYOUTS, "row")
+        s.rate = clamp_rate(_number(self.rate, 1.0))
+        if isinstance(self.window, (list, tuple)) and len(self.window) == 2:
+            s.window = (_number(self.window[0], s.window[0], 640, 8192, integral=True),
+                        _number(self.window[1], s.window[1], 480, 8192, integral=True))
         s.backend = self.backend if isinstance(self.backend, str) else "cpu"
-        if isinstance(self.fov_y_deg, (int, float)) and math.isfinite(self.fov_y_deg):
-            s.fov_y_deg = float(min(CameraController.MAX_FOV, max(CameraController.MIN_FOV, self.fov_y_deg)))
-        s.up = self.up if self.up in UP_AXES else "-y"
+        s.fov_y_deg = float(_number(self.fov_y_deg, s.fov_y_deg, CameraController.MIN_FOV, CameraController.MAX_FOV))
+        s.up = _choice(self.up, UP_AXES, "-y")
         s.loupe = bool(self.loupe)
-        if isinstance(self.loupe_zoom, (int, float)) and math.isfinite(self.loupe_zoom):
-            s.loupe_zoom = float(min(32, max(2, self.loupe_zoom)))
+        s.loupe_zoom = float(_number(self.loupe_zoom, s.loupe_zoom, 2, 32))
         s.show_info = bool(self.show_info)
-        if isinstance(self.fly_speed, (int, float)) and math.isfinite(self.fly_speed):
-            s.fly_speed = float(min(10, max(0.01, self.fly_speed)))
+        s.fly_speed = float(_number(self.fly_speed, s.fly_speed, 0.01, 10))
         try:
-            bg = tuple(float(v) for v in self.background)
-            if len(bg) == 3 and all(math.isfinite(v) for v in bg):
-                s.background = tuple(min(1.0, max(0.0, v)) for v in bg)
-        except (TypeError, ValueError):
+            s.background = tuple(min(1.0, max(0.0, v)) for v in array(self.background, "background", (3,)).tolist())
+        except InvalidValue:
             pass
-        s.recent = [str(p) for p in (self.recent or []) if isinstance(p, str)][:MAX_RECENT]
+        s.recent = [p for p in _listed(self.recent) if isinstance(p, str)][:MAX_RECENT]
         s.screenshot_dir = self.screenshot_dir if isinstance(self.screenshot_dir, str) else ""
         return s
 
@@ -105,12 +111,17 @@ class AppSettings:
         return json.dumps(d, indent=2)
 
     @classmethod
-    def from_json(cls, text: str) -> "AppSettings":
-        d = json.loads(text)
+    def from_doc(cls, d: Any, what: str = "settings") -> "AppSettings":
+        """Settings from a parsed JSON document: any value of a wrong type or range falls back to its default; only
+        a document that is not an object raises (InvalidValue naming `what`)."""
         if not isinstance(d, dict):
-            raise ValueError("settings file is not a JSON object")
+            raise InvalidValue(f"{what}: not a JSON object")
         known = {k: v for k, v in d.items() if k in cls.__dataclass_fields__}
         return cls(**known).normalised()
+
+
+def _listed(value: Any) -> list:
+    return value if isinstance(value, list) else []
 
 
 def config_dir() -> Path:
@@ -134,9 +145,9 @@ def load_settings(path: Path | None = None) -> tuple[AppSettings, str]:
     if not path.exists():
         return AppSettings(), ""
     try:
-        return AppSettings.from_json(path.read_text()), ""
-    except (OSError, UnicodeDecodeError, ValueError, TypeError) as exc:
-        return AppSettings(), f"{path}: unreadable settings ({exc}); using defaults"
+        return AppSettings.from_doc(read_json(path), str(path)), ""
+    except InvalidValue as exc:
+        return AppSettings(), f"{exc}; unreadable settings, using defaults"
 
 
 def save_settings(settings: AppSettings, path: Path | None = None) -> Path:

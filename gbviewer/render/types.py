@@ -11,8 +11,9 @@ from typing import Protocol
 import numpy as np
 
 from ..camera import Camera
-from ..errors import RenderError
+from ..errors import InvalidValue, RenderError
 from ..scene import Scene
+from ..validate import array, integer, real
 
 
 class Mode(enum.IntEnum):
@@ -50,12 +51,16 @@ DEBUG_OUTPUTS = ("none", "window")
 ORDER_INDEPENDENT = (Mode.WSR, Mode.DUPLEX)
 DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (KERNELS.md §8.1)
 DEFAULT_SIGMA = 10.0  # sort-free GS's initial sigma, for depth correction on scenes without a trained one
+MAX_SUPERSAMPLE = 8
+MAX_THREADS = 1024
+MAX_CELL_SIZE = 1 << 20
 SORT_ENTRY_BYTES = 24  # per sorted key: 8-byte key + 4-byte value, input and output buffers (CUB SortPairs)
 
 
 @dataclass(frozen=True)
 class RenderSettings:
-    """How to render: mode, N x N supersampling (1..8), background colour, SH degree cap, debug planes.
+    """How to render: mode, N x N supersampling (1..8), background colour (float32), SH degree cap (0..3), debug
+    planes.
 
     `debug="window"` adds the final Gaussian Blending window size per pixel (H, W, 2) to `Frame.debug`.
 
@@ -75,19 +80,25 @@ class RenderSettings:
     cell_size: int = 5
 
     def __post_init__(self) -> None:
+        """Every number checked through gbviewer.validate (the native renderers take them as int32 and float32);
+        a bad one is a one-line RenderError naming the field."""
         object.__setattr__(self, "mode", Mode.parse(self.mode))
-        if not (isinstance(self.supersample, (int, np.integer)) and 1 <= self.supersample <= 8):
-            raise RenderError(f"supersample must be an integer 1..8, got {self.supersample!r}")
-        bg = tuple(float(v) for v in self.background)
-        if len(bg) != 3 or not all(np.isfinite(bg)):
-            raise RenderError(f"background must be three finite numbers, got {self.background!r}")
-        object.__setattr__(self, "background", bg)
         if self.debug not in DEBUG_OUTPUTS:
             raise RenderError(f"debug output {self.debug!r}; expected one of {DEBUG_OUTPUTS}")
-        if self.et_grade is not None and not (np.isfinite(self.et_grade) and self.et_grade > 0):
-            raise RenderError(f"et_grade must be a finite number > 0, got {self.et_grade!r}")
-        if not (isinstance(self.cell_size, (int, np.integer)) and self.cell_size >= 1):
-            raise RenderError(f"cell_size must be an integer >= 1, got {self.cell_size!r}")
+        try:
+            checked = {
+                "supersample": integer(self.supersample, "supersample", lo=1, hi=MAX_SUPERSAMPLE),
+                "background": tuple(array(self.background, "background", (3,), f32=True).tolist()),
+                "sh_degree": integer(self.sh_degree, "sh_degree", lo=0, hi=3),
+                "threads": integer(self.threads, "threads", lo=0, hi=MAX_THREADS),
+                "et_grade": None if self.et_grade is None else real(self.et_grade, "et_grade", lo=0, lo_open=True,
+                                                                    f32=True),
+                "cell_size": integer(self.cell_size, "cell_size", lo=1, hi=MAX_CELL_SIZE),
+            }
+        except InvalidValue as exc:
+            raise RenderError(str(exc)) from None
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
         object.__setattr__(self, "depth_correct", bool(self.depth_correct))
 
     def label_for(self, scene: Scene) -> str:

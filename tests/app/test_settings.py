@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import json
 
+from hypothesis import given
+from hypothesis import settings as settings_hyp
+from hypothesis import strategies as st
+
 from gbviewer.app import has_display_env, settings
 from gbviewer.app.settings import AppSettings, PaneSettings
 
@@ -50,3 +54,34 @@ def test_display_detection():
     assert has_display_env({})[0] is False and "DISPLAY" in has_display_env({})[1]
     assert has_display_env({"DISPLAY": ":1"}) == (True, "")
     assert has_display_env({"WAYLAND_DISPLAY": "wayland-0"})[0]
+
+
+def test_hostile_settings_values_fall_back_without_stopping_the_viewer(tmp_path):
+    p = tmp_path / "settings.json"
+    big = "9" * 4000  # an integer too large for a float
+    p.write_text(f'{{"rate": {big}, "fov_y_deg": {big}, "background": [{big}, 0, 0], "pane_count": {big}, '
+                 f'"window": [{big}, 1e400], "panes": [{{"split_pos": {big}, "supersample": 1e400, "view": []}}], '
+                 f'"loupe_zoom": "nan", "fly_speed": 1e400, "up": [], "layout": {{}}, "recent": 5}}')
+    s, warning = settings.load_settings(p)
+    assert warning == ""
+    assert (s.rate, s.fov_y_deg, s.background, s.pane_count) == (1.0, 50.0, (0.0, 0.0, 0.0), 4)
+    assert s.window == (8192, 860) and s.panes[0] == PaneSettings() and s.recent == []
+    for text in ("[1, 2]", "[" * 5000, '{"rate": NaN}' * 2, "\xff"):
+        p.write_bytes(text.encode("latin-1"))
+        s, warning = settings.load_settings(p)
+        assert s == AppSettings() and "unreadable settings" in warning and str(p) in warning
+        assert "\n" not in warning
+
+
+@settings_hyp(max_examples=150, deadline=None)
+@given(st.dictionaries(st.sampled_from(sorted(AppSettings.__dataclass_fields__)),
+                       st.recursive(st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=4),
+                                    lambda kids: st.lists(kids, max_size=4) | st.dictionaries(st.text(max_size=3), kids,
+                                                                                               max_size=3),
+                                    max_leaves=12)))
+def test_any_settings_object_normalises_to_valid_settings(doc):
+    s = AppSettings.from_doc(doc)
+    assert 1 <= s.pane_count <= settings.MAX_PANES and len(s.panes) == settings.MAX_PANES
+    assert 0.125 <= s.rate <= 8 and all(0 <= v <= 1 for v in s.background)
+    assert all(1 <= p.supersample <= 8 and 0 <= p.split_pos <= 1 for p in s.panes)
+    assert s == s.normalised()

@@ -16,13 +16,13 @@ CRASHES = sorted((FUZZ / "crashes").glob("*"))
 
 @pytest.mark.parametrize("path", SEEDS, ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_seed_loads(path):
-    assert fuzz_loaders.check_load(path) == "ok"
+    assert fuzz_loaders.check_load(path, path.parent.name) == "ok"
 
 
 @pytest.mark.parametrize("path", CRASHES, ids=lambda p: p.name[:24])
 @pytest.mark.filterwarnings("ignore:.*dropped.*splats:UserWarning")
 def test_former_crash_is_handled(path):
-    assert fuzz_loaders.check_load(path) in ("ok", "error")
+    assert fuzz_loaders.check_load(path, path.name.split("-crash-")[0]) in ("ok", "error")
 
 
 def test_there_is_something_to_replay():
