@@ -60,10 +60,17 @@ class Prepared:
     cells: Cells | None
 
 
+MAX_SAMPLES = 2**31 - 1  # sub-samples of one frame: the native modules and shaders index them with int32
+
+
 def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backend: str) -> Prepared:
     """The frame's inputs for `backend` from its uploaded scene (None: nothing uploaded, an error)."""
     if scene is None:
         raise RenderError(f"{backend} renderer: upload(scene) before render()")
+    samples = camera.width * camera.height * settings.supersample**2
+    if samples > MAX_SAMPLES:
+        raise RenderError(f"{camera.width}x{camera.height} at supersample {settings.supersample}: {samples} samples, "
+                          f"more than the {MAX_SAMPLES} one frame can hold")
     t0 = time.perf_counter()
     view = view_scene(scene, camera)
     decode_ms = (time.perf_counter() - t0) * 1e3 if view is not scene else None

@@ -7,6 +7,7 @@ import threading
 import weakref
 
 import numpy as np
+import pytest
 
 import gbviewer as gb
 from helpers import front_camera, random_scene
@@ -128,3 +129,11 @@ def test_release_buffers():
     r.upload(scene)
     assert len(released) == 3
     np.testing.assert_array_equal(r.render(cam, gb.RenderSettings()).rgb, a.rgb)
+
+
+def test_a_frame_beyond_int32_samples_is_one_line(bundled_scene):
+    """16384 x 16384 at supersample 8 would overflow the native modules' int32 indices: a RenderError, not the
+    binding's ValueError."""
+    cam = gb.orbit_camera(bundled_scene, width=16384, height=16384)
+    with pytest.raises(gb.RenderError, match="^16384x16384 at supersample 8: .* samples, more than"):
+        gb.render(bundled_scene, cam, "scalar", supersample=8)
