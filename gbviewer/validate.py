@@ -106,6 +106,13 @@ def _reject_constant(name: str) -> float:
     raise ValueError(f"{name} is not a finite number")
 
 
+def _finite_float(text: str) -> float:
+    x = float(text)
+    if not math.isfinite(x):
+        raise ValueError(f"{text[:20]} is not a finite number")  # 1e400 would parse as inf
+    return x
+
+
 def _depth(doc: Any, limit: int) -> int:
     """Nesting depth of a parsed JSON document (iterative, so it cannot recurse too deep itself)."""
     deepest, stack = 0, [(doc, 1)]
@@ -126,7 +133,7 @@ def parse_json(text: str | bytes, what: str, *, max_bytes: int = JSON_MAX_BYTES,
     if len(text) > max_bytes:
         raise InvalidValue(f"{what}: {len(text)} bytes of JSON, more than the {max_bytes} allowed")
     try:
-        doc = json.loads(text, parse_constant=_reject_constant)
+        doc = json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float)
     except RecursionError:
         raise InvalidValue(f"{what}: JSON nested deeper than {max_depth} levels") from None
     except (ValueError, UnicodeDecodeError) as exc:
