@@ -114,9 +114,9 @@ def make_bad_files(folder: Path, good: Path) -> list[Path]:
 def good_scenes() -> list[Path]:
     from gbviewer import DEFAULT_SCENE
 
-    shared = sorted(p for p in SHARED_SCENES.glob("*") if p.suffix in SCENE_SUFFIXES) if SHARED_SCENES.is_dir() \
-        else []
-    return [Path(DEFAULT_SCENE)] + shared
+    shared = sorted(SHARED_SCENES.glob("*")) if SHARED_SCENES.is_dir() else []
+    bundled = Path(DEFAULT_SCENE)
+    return [bundled] + [p for p in shared if p.suffix in SCENE_SUFFIXES and p.name != bundled.name]
 
 
 @dataclass
@@ -164,6 +164,8 @@ class Soak:
                                  f"scene kept: {s.scene is scene} (messages before: {before})")
 
     def cycle(self, i: int) -> None:
+        from gbviewer.app.settings import MODE_NAMES
+
         app, s, rng = self.app, self.app.state, self.rng
         if i % 3 == 2:
             self.open_bad(self.bad[(i // 3) % len(self.bad)])
@@ -176,17 +178,20 @@ class Soak:
             s.open(self.good[i % len(self.good)])
         if not self.step_until(lambda: s.loader is None):
             self.problems.append(f"cycle {i}: a scene load did not end")
-        s.set_pane_count(rng.randint(1, 4))
-        s.settings.layout = rng.choice(("row", "grid"))
-        s.set_rate(rng.choice((1 / 8, 1 / 4, 1 / 2)))
-        from gbviewer.app.settings import MODE_NAMES
-
-        for k in range(s.settings.pane_count):
-            s.set_pane(k, mode=rng.choice(MODE_NAMES), split=rng.random() < 0.3, split_mode=rng.choice(MODE_NAMES),
-                       split_pos=rng.random())
-        backend = "glsl" if rng.random() < 0.25 and app.worker.backend_status("glsl")[0] else "cpu"
-        s.settings.backend = backend
-        self.tick(f"backend_{backend}")
+        glsl = rng.random() < 0.1 and app.worker.backend_status("glsl")[0] is True
+        if glsl:  # one small pane: llvmpipe takes seconds a frame, it is here for the switch and back
+            s.set_pane_count(1)
+            s.set_rate(1 / 8)
+            s.set_pane(0, mode=rng.choice(("scalar", "gaussian_blending")), supersample=1, split=False)
+        else:
+            s.set_pane_count(rng.randint(1, 4))
+            s.settings.layout = rng.choice(("row", "grid"))
+            s.set_rate(rng.choice((1 / 8, 1 / 4, 1 / 2)))
+            for k in range(s.settings.pane_count):
+                s.set_pane(k, mode=rng.choice(MODE_NAMES), split=rng.random() < 0.3,
+                           split_mode=rng.choice(MODE_NAMES), split_pos=rng.random())
+        s.settings.backend = "glsl" if glsl else "cpu"
+        self.tick(f"backend_{s.settings.backend}")
         for _ in range(rng.randint(2, 8)):  # camera moves: preview renders in flight
             s.controller.orbit(rng.uniform(-30, 30), rng.uniform(-10, 10))
             s.moved()
@@ -241,10 +246,11 @@ def summarise(samples: list[dict], warmup: int) -> dict:
     return {k: round(v, 2) if isinstance(v, float) else v for k, v in out.items()}
 
 
-def run_soak(cycles: int, sample_every: int = 10, warmup: int = 30, seed: int = 0, trace: bool = True,
-             size: tuple[int, int] = (900, 600)) -> dict:
+def run_soak(cycles: int, sample_every: int = 0, warmup: int = 30, seed: int = 0, trace: bool = True,
+             size: tuple[int, int] = (900, 600), progress: bool = False) -> dict:
     """The soak in the current DISPLAY; the report as a dict (`ok`: alive, one message per bad file, GL objects
-    back to their level after the warm-up)."""
+    back to their level after the warm-up). Samples every `sample_every` cycles, by default once per round of the
+    good scenes (so that every sample is taken with the same scene open)."""
     from gbviewer.app.window import ViewerApp
 
     if trace:
@@ -255,6 +261,7 @@ def run_soak(cycles: int, sample_every: int = 10, warmup: int = 30, seed: int = 
         good = good_scenes()
         app = ViewerApp(good[0], settings_file=tmp / "settings.json", size=size, persist=False)
         soak = Soak(app, good, make_bad_files(tmp / "bad", good[0]), tmp, random.Random(seed))
+        sample_every = sample_every or len(good)
         crash = ""
         try:
             soak.sample(0, started)
@@ -262,6 +269,8 @@ def run_soak(cycles: int, sample_every: int = 10, warmup: int = 30, seed: int = 
                 soak.cycle(i)
                 if i % sample_every == 0 or i == cycles:
                     soak.sample(i, started)
+                    if progress:
+                        print(json.dumps(soak.samples[-1]), file=sys.stderr, flush=True)
         except Exception as exc:  # noqa: BLE001 - the soak reports what killed the app
             import traceback
 
@@ -286,17 +295,19 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cycles", type=int, default=300)
     ap.add_argument("--out", type=Path, default=Path("soak-report.json"))
-    ap.add_argument("--sample", type=int, default=10, help="record memory every N cycles")
+    ap.add_argument("--sample", type=int, default=0,
+                    help="record memory every N cycles (default: once per round of the scenes)")
     ap.add_argument("--warmup", type=int, default=30, help="cycles before the slope is fitted")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-tracemalloc", action="store_true", help="RSS only (tracemalloc slows allocations)")
     args = ap.parse_args(argv)
-    if args.cycles < 1 or args.sample < 1 or args.warmup < 0:
-        ap.error("--cycles and --sample must be at least 1, --warmup not negative")
+    if args.cycles < 1 or args.sample < 0 or args.warmup < 0:
+        ap.error("--cycles must be at least 1, --sample and --warmup not negative")
     if any((REPO / "gbviewer").glob("_native*")):  # this source tree when it is built, else the installed one
         sys.path.insert(0, str(REPO))
     with xvfb_display():
-        report = run_soak(args.cycles, args.sample, args.warmup, args.seed, not args.no_tracemalloc)
+        report = run_soak(args.cycles, args.sample, args.warmup, args.seed, not args.no_tracemalloc,
+                           progress=True)
     args.out.write_text(json.dumps(report, indent=1))
     print(json.dumps({k: v for k, v in report.items() if k != "samples"}, indent=1))
     return 0 if report["ok"] else 1
