@@ -6,9 +6,9 @@ the app never died.
 
 Scenes: ../shared/scenes when present, the bundled scene, and bad files made here (truncated, garbage, missing,
 empty, a directory, a header declaring 2^40 splats). Every `--sample` cycles (after the renders settle) the report
-records RSS (VmRSS), tracemalloc's current Python allocation, the window context's live GL objects, the render
-worker's renderers and the live threads; it gives first/last/max RSS and the linear-fit slope per cycle after the
-warm-up. Exit status 0 when the app stayed alive, every bad file gave one error message and the GL objects came
+records RSS (VmRSS; again after glibc's malloc_trim, which tells memory in use from memory the allocator keeps),
+tracemalloc's current Python allocation, the window context's live GL objects, the render worker's renderers and the
+live threads; it gives first/last/max RSS and the linear-fit slope per cycle after the warm-up. Exit status 0 when the app stayed alive, every bad file gave one error message and the GL objects came
 back to their level after the warm-up.
 """
 
@@ -22,6 +22,7 @@ import json
 import os
 import random
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -90,6 +91,15 @@ def rss_kib() -> int:
         if line.startswith("VmRSS:"):
             return int(line.split()[1])
     return 0
+
+
+def trim_malloc() -> bool:
+    """Hand the C heap's free pages back to the system (glibc's malloc_trim), so that RSS shows what is in use rather
+    than what the allocator keeps for later; False where there is no glibc."""
+    try:
+        return bool(ctypes.CDLL("libc.so.6").malloc_trim(0))
+    except (OSError, AttributeError):
+        return False
 
 
 def make_bad_files(folder: Path, good: Path) -> list[Path]:
@@ -218,8 +228,11 @@ class Soak:
         self.app.wait_rendered(120)
         gc.collect()
         w = self.app.worker
+        rss = rss_kib()
+        trim_malloc()
         self.samples.append({
-            "cycle": i, "seconds": round(time.perf_counter() - started, 2), "rss_kib": rss_kib(),
+            "cycle": i, "seconds": round(time.perf_counter() - started, 2),
+            "rss_kib": rss, "rss_trimmed_kib": rss_kib(),
             "traced_kib": tracemalloc.get_traced_memory()[0] // 1024 if tracemalloc.is_tracing() else None,
             "gl": gl_object_counts(), "glsl_renderers": int(w._glsl is not None), "threads": threading.active_count(),
             "scene": self.app.state.scene_path.name if self.app.state.scene_path else None,
@@ -231,9 +244,13 @@ def summarise(samples: list[dict], warmup: int) -> dict:
     after = [r for r in samples if r["cycle"] >= warmup] or samples
     cycles = np.array([r["cycle"] for r in after], float)
     rss = np.array([r["rss_kib"] for r in after], float)
-    slope = float(np.polyfit(cycles, rss, 1)[0]) if len(after) > 2 else 0.0
+    trimmed = np.array([r["rss_trimmed_kib"] for r in after], float)
+    slope, trimmed_slope = (float(np.polyfit(cycles, y, 1)[0]) if len(after) > 2 else 0.0 for y in (rss, trimmed))
     out = {"rss_first_mib": samples[0]["rss_kib"] / 1024, "rss_last_mib": samples[-1]["rss_kib"] / 1024,
            "rss_max_mib": max(r["rss_kib"] for r in samples) / 1024, "rss_slope_kib_per_cycle": slope,
+           "rss_trimmed_first_mib": samples[0]["rss_trimmed_kib"] / 1024,
+           "rss_trimmed_last_mib": samples[-1]["rss_trimmed_kib"] / 1024,
+           "rss_trimmed_slope_kib_per_cycle": trimmed_slope,
            "rss_after_warmup_min_mib": rss.min() / 1024, "rss_after_warmup_max_mib": rss.max() / 1024,
            "gl_after_warmup": after[0]["gl"], "gl_last": samples[-1]["gl"],
            "gl_max": {k: max(r["gl"][k] for r in samples) for k in samples[0]["gl"]},
@@ -305,6 +322,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--cycles must be at least 1, --sample and --warmup not negative")
     if any((REPO / "gbviewer").glob("_native*")):  # this source tree when it is built, else the installed one
         sys.path.insert(0, str(REPO))
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # stop our Xvfb on the way out
     with xvfb_display():
         report = run_soak(args.cycles, args.sample, args.warmup, args.seed, not args.no_tracemalloc,
                            progress=True)

@@ -17,5 +17,5 @@ def test_short_soak_keeps_the_app_alive_and_its_gl_objects_bounded(xvfb):
     assert report["bad_files_opened"] >= 6 and report["bad_file_messages"] == report["bad_files_opened"]
     s = report["summary"]
     assert all(s["gl_last"][k] <= s["gl_after_warmup"][k] for k in s["gl_last"]), s
-    assert s["rss_max_mib"] < s["rss_first_mib"] + 1024  # a leak of a scene per cycle would pass this; GL would not
+    assert s["rss_max_mib"] < s["rss_first_mib"] + 1024  # generous: RSS follows the open scene and the allocator
     assert report["ok"]
