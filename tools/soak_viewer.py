@@ -8,8 +8,9 @@ Scenes: ../shared/scenes when present, the bundled scene, and bad files made her
 empty, a directory, a header declaring 2^40 splats). Every `--sample` cycles (after the renders settle) the report
 records RSS (VmRSS; again after glibc's malloc_trim, which tells memory in use from memory the allocator keeps),
 tracemalloc's current Python allocation, the window context's live GL objects, the render worker's renderers and the
-live threads; it gives first/last/max RSS and the linear-fit slope per cycle after the warm-up. Exit status 0 when the app stayed alive, every bad file gave one error message and the GL objects came
-back to their level after the warm-up.
+live threads; it gives first/last/max RSS and the linear-fit slope per cycle after the warm-up. Exit status 0 when
+the app stayed alive, every bad file gave one error message and the GL objects came back to their level after the
+warm-up.
 """
 
 from __future__ import annotations
