@@ -33,10 +33,12 @@ def pane_fps(p: PaneState, part: str) -> float:
 
 
 class PaneRenders:
-    """Requests renders for the visible panes and shows what comes back."""
+    """Requests renders for the visible panes and shows what comes back. Owns one texture per pane part, reused
+    across frames and scenes (a new scene's panes start without an image, and no texture outlives its part)."""
 
     def __init__(self, state: AppState, worker: RenderWorker, ctx: moderngl.Context) -> None:
         self.state, self.worker, self.ctx = state, worker, ctx
+        self._textures: dict[tuple[int, str], moderngl.Texture] = {}
 
     def submit(self) -> None:
         """Send a request for every visible pane part whose view changed since its last request."""
@@ -80,9 +82,9 @@ class PaneRenders:
             self._take(res)
         for p in self.state.visible:
             view = self.state.settings.panes[p.index].view
-            for shown in p.parts.values():
+            for part, shown in p.parts.items():
                 if shown.frame is not None and shown.view != view:
-                    self._upload(shown, shown.frame, view)
+                    self._upload((p.index, part), shown, shown.frame, view)
 
     def all_current(self) -> bool:
         """Whether every visible pane shows its latest request at full resolution."""
@@ -109,10 +111,9 @@ class PaneRenders:
                 blitter.add(shown.texture, r.x + u0 * r.w, r.y, r.x + u1 * r.w, r.y + r.h, (u0, 0.0, u1, 1.0))
 
     def release(self) -> None:
-        for p in self.state.panes:
-            for s in p.parts.values():
-                if s.texture is not None:
-                    s.texture.release()
+        for tex in self._textures.values():
+            tex.release()
+        self._textures.clear()
 
     def _take(self, res: RenderResult) -> None:
         i, part = res.job.slot
@@ -133,19 +134,20 @@ class PaneRenders:
             key = (part, res.job.settings.mode.label, res.job.settings.supersample, res.job.backend)
             p.ms_per_px[key] = total_ms / (cam.width * cam.height)
         p.fps[part].tick(res.finished)
-        self._upload(shown, res.frame, s.settings.panes[i].view)
+        self._upload(res.job.slot, shown, res.frame, s.settings.panes[i].view)
 
-    def _upload(self, shown: Shown, frame: Frame, view: str) -> None:
+    def _upload(self, slot: tuple[int, str], shown: Shown, frame: Frame, view: str) -> None:
         rgb, legend = visualize(frame, view)
         img = np.ascontiguousarray(to_uint8(rgb))
         h, w = img.shape[:2]
-        tex = shown.texture
+        tex = self._textures.get(slot)
         if tex is None or tex.size != (w, h):
             if tex is not None:
                 tex.release()
             tex = self.ctx.texture((w, h), 3, img.tobytes(), alignment=1)
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
             tex.repeat_x = tex.repeat_y = False
+            self._textures[slot] = tex
         else:
             tex.write(img.tobytes(), alignment=1)
         shown.texture, shown.frame, shown.view, shown.legend, shown.image = tex, frame, view, legend, img

@@ -134,12 +134,16 @@ class RenderWorker:
         if not ok:
             raise BackendUnavailable(why)
         if self._glsl is None or self._glsl[0] is not scene:
-            if self._glsl is not None:
-                self._glsl[1].release()
+            self._release_glsl()
             renderer = create_renderer("glsl", ctx=self._gl_ctx)
             renderer.upload(scene)
             self._glsl = (scene, renderer)
         return self._glsl[1]
+
+    def _release_glsl(self) -> None:
+        if self._glsl is not None:
+            self._glsl[1].release()
+            self._glsl = None
 
     def _loop(self) -> None:
         self._check_backends()
@@ -159,9 +163,7 @@ class RenderWorker:
                 self._results.append(result)
                 self.rendered += 1
         self._scene = None
-        if self._glsl is not None:
-            self._glsl[1].release()
-            self._glsl = None
+        self._release_glsl()
         if self._gl_ctx is not None:
             self._gl_ctx.release()
             self._gl_ctx = None
@@ -170,6 +172,8 @@ class RenderWorker:
     def _render(self, job: RenderJob) -> RenderResult:
         if job.scene is not self._scene:
             self._scene = job.scene
+            if self._glsl is not None and self._glsl[0] is not job.scene:
+                self._release_glsl()  # else it would keep the previous scene and its GPU buffers while cpu renders
             gc.collect()  # free the previous scene's renderers (and GL buffers) in this thread
         try:
             frame = self._renderer(job.scene, job.backend).render(job.camera, job.settings)

@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from helpers import skip_or_fail
 from gbviewer.app.rates import render_size
 from gbviewer.app.settings import load_settings, settings_path
 from gbviewer.app.views import decode_png16, visualize
@@ -29,36 +28,6 @@ pytestmark = pytest.mark.display
 OUTPUT = Path(__file__).resolve().parents[1] / "output"
 GBVIEWER_ROOT = str(Path(gb.__file__).resolve().parents[1])  # subprocesses import the gbviewer under test
 LABEL_BAND = 60  # pixels at the top of a pane that hold the label and the preview/rendering line
-
-
-@pytest.fixture(scope="module")
-def xvfb():
-    exe = shutil.which("Xvfb")
-    if exe is None:
-        skip_or_fail("Xvfb is not installed (apt-get install xvfb; scripts/setup.sh installs it)")
-    for n in range(91, 120):
-        if not Path(f"/tmp/.X11-unix/X{n}").exists() and not Path(f"/tmp/.X{n}-lock").exists():
-            break
-    proc = subprocess.Popen([exe, f":{n}", "-screen", "0", "1280x800x24", "-nolisten", "tcp", "-noreset"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    t0 = time.time()
-    while not Path(f"/tmp/.X11-unix/X{n}").exists():
-        if proc.poll() is not None or time.time() - t0 > 20:
-            proc.kill()
-            pytest.fail(f"Xvfb :{n} did not start (exit {proc.poll()})")
-        time.sleep(0.05)
-    old = os.environ.get("DISPLAY")
-    os.environ["DISPLAY"] = f":{n}"
-    yield f":{n}"
-    if old is None:
-        os.environ.pop("DISPLAY", None)
-    else:
-        os.environ["DISPLAY"] = old
-    proc.terminate()
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
 
 
 @pytest.fixture
@@ -473,3 +442,49 @@ def test_no_display_falls_back_to_the_comparison_images(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "no display" in proc.stdout
     assert (tmp_path / "out" / "comparison.png").exists()
+
+
+def test_scene_switches_keep_one_texture_per_pane_part(app, tmp_path):
+    """Opening a scene reuses the panes' textures: the window's live GL textures do not grow with scene switches."""
+    from soak_viewer import gl_object_counts
+
+    app.state.set_pane_count(2)
+    app.state.set_pane(0, split=True)
+    app.state.set_rate(1 / 8)
+    wait(app)
+    level = gl_object_counts()
+    for k in range(4):
+        copy = tmp_path / f"scene{k}.ply"  # a new Scene object each time
+        shutil.copy(gb.DEFAULT_SCENE, copy)
+        app.state.open(copy)
+        wait(app)
+        assert app.state.scene_path == copy
+    assert gl_object_counts() == level and len(app.panes._textures) == 3
+
+
+def test_bad_file_and_new_scene_while_a_load_and_renders_are_in_flight(app, tmp_path):
+    app.state.set_pane_count(3)
+    app.state.set_rate(1 / 4)
+    wait(app)
+    scene = app.state.scene
+    good, bad = tmp_path / "good.ply", tmp_path / "bad.ply"
+    shutil.copy(gb.DEFAULT_SCENE, good)
+    bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 1099511627776\nproperty float x\n"
+                    b"end_header\n" + bytes(16))
+    app.state.controller.orbit(40, 5)  # renders in flight
+    app.state.moved()
+    app.step()
+    app.state.open(good)
+    app.state.open(bad)  # replaces the load of good.ply before it finished
+    t0 = time.time()
+    while app.state.loader is not None and time.time() - t0 < 60:
+        app.step()
+    errors = [m for m in app.state.messages if m[2] == "error"]
+    assert len(errors) == 1 and "bad.ply" in errors[0][1] and app.state.scene is scene
+    app.state.controller.orbit(-40, 0)
+    app.state.moved()
+    app.step()
+    app.state.open(good)  # while the panes render the previous scene
+    wait(app)
+    assert app.state.scene_path == good and app.state.scene is not scene
+    assert all(app.state.panes[i].parts["a"].job.scene is app.state.scene for i in range(3))

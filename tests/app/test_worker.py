@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import gc
 import time
+import weakref
 
 import numpy as np
+import pytest
 
 import gbviewer as gb
 from gbviewer.app.worker import RenderJob, RenderWorker
@@ -48,5 +51,34 @@ def test_worker_reports_errors_without_dying(bundled_scene):
         by = {r.job.slot: r for r in out}
         assert by[1].frame is None and "no-such-backend" in by[1].error
         assert by[2].frame is not None
+    finally:
+        w.stop()
+
+
+def _render(w: RenderWorker, scene: gb.Scene, backend: str) -> list:
+    w.submit(RenderJob(1, scene, gb.orbit_camera(scene, width=32, height=24), RenderSettings(), backend))
+    out, t0 = [], time.time()
+    while not out and time.time() - t0 < 60:
+        out += w.results()
+        time.sleep(0.01)
+    assert out and out[0].frame is not None, out
+    return out
+
+
+def test_worker_frees_the_glsl_renderer_of_a_previous_scene(bundled_scene):
+    """After a switch to cpu and another scene, the glsl renderer no longer keeps the first scene (and its GPU
+    buffers) alive."""
+    w = RenderWorker()
+    try:
+        assert w.backends_ready.wait(60)
+        if not w.backends["glsl"][0]:
+            pytest.skip(f"glsl backend unavailable: {w.backends['glsl'][1]}")
+        first = gb.load(gb.DEFAULT_SCENE)
+        _render(w, first, "glsl")
+        gone = weakref.ref(first)
+        del first
+        _render(w, bundled_scene, "cpu")
+        gc.collect()
+        assert gone() is None
     finally:
         w.stop()
