@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .camera import Camera, load_cameras_json, orbit_camera
-from .errors import BackendUnavailable, CameraError, GBViewerError, RenderError, SceneFormatError
+from .errors import BackendUnavailable, CameraError, GBViewerError, RenderCancelled, RenderError, SceneFormatError
 from .io import load
 from .render import Frame, FrameStats, Mode, Renderer, RenderSettings, get_renderer, render
 from .scene import Scene
@@ -17,6 +17,6 @@ DEFAULT_SCENE = ASSETS / "fruit_drops_minimal.ply"
 
 __all__ = [
     "ASSETS", "DEFAULT_SCENE", "BackendUnavailable", "Camera", "CameraError", "Frame", "FrameStats", "GBViewerError",
-    "Mode", "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError", "get_renderer", "load",
-    "load_cameras_json", "orbit_camera", "render",
+    "Mode", "RenderCancelled", "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError",
+    "get_renderer", "load", "load_cameras_json", "orbit_camera", "render",
 ]

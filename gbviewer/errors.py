@@ -29,5 +29,9 @@ class RenderError(GBViewerError):
     """Invalid render settings or a backend that cannot run."""
 
 
+class RenderCancelled(GBViewerError):
+    """A render stopped because its caller set the `cancel` event (the frame is not returned)."""
+
+
 class BackendUnavailable(RenderError):
     """The requested backend cannot run on this machine; the message says why."""

@@ -118,8 +118,8 @@ class PaneRenders:
     def _take(self, res: RenderResult) -> None:
         i, part = res.job.slot
         s = self.state
-        if res.job.scene is not s.scene:
-            return
+        if res.cancelled or res.job.scene is not s.scene:
+            return  # superseded: the newer request of its slot is queued
         p = s.panes[i]
         shown = p.parts[part]
         shown.job = res.job

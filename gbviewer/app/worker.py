@@ -1,5 +1,6 @@
 """The viewer's render thread, off the UI thread: fed per-slot requests (the newest request of a slot replaces an
-older one still waiting: stale requests are dropped). No OpenGL here; the 'glsl' backend makes its own headless
+older one still waiting: stale requests are dropped, and a running render of that slot is cancelled between tiles,
+so the thread never finishes a frame nobody will see). No OpenGL here; the 'glsl' backend makes its own headless
 context current in the render thread (so it never touches the window's)."""
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any, Hashable
 
 from ..camera import Camera
-from ..errors import BackendUnavailable, GBViewerError
+from ..errors import BackendUnavailable, GBViewerError, RenderCancelled
 from ..render import BACKENDS, Frame, RenderSettings, create_gl_context, create_renderer, get_renderer
 from ..scene import Scene
 
@@ -34,6 +35,7 @@ class RenderResult:
     frame: Frame | None
     error: str = ""
     finished: float = 0.0
+    cancelled: bool = False  # superseded while it rendered: no frame, nothing to show
 
 
 class RenderWorker:
@@ -44,6 +46,7 @@ class RenderWorker:
         self._wake = threading.Condition(self._lock)
         self._pending: dict[Hashable, RenderJob] = {}
         self._running: RenderJob | None = None
+        self._cancel_running = threading.Event()  # set when the running job's slot gets a newer request
         self._results: list[RenderResult] = []
         self._served: dict[Hashable, float] = {}
         self._seq = 0
@@ -52,6 +55,7 @@ class RenderWorker:
         self._gl_ctx = None  # this thread's headless context for the glsl backend
         self._glsl: tuple[Scene, Any] | None = None
         self.dropped = 0  # requests replaced before they started
+        self.cancelled = 0  # renders stopped because a newer request of their slot arrived
         self.rendered = 0
         self.backends: dict[str, tuple[bool, str]] = {}  # availability, measured in the render thread
         self.backends_ready = threading.Event()
@@ -66,12 +70,17 @@ class RenderWorker:
             job.seq = self._seq
             if job.slot in self._pending:
                 self.dropped += 1
+            if self._running is not None and self._running.slot == job.slot:
+                self._cancel_running.set()
             self._pending[job.slot] = job
             self._wake.notify()
 
     def cancel(self, slot: Hashable) -> None:
+        """Forget `slot`'s waiting request and stop its running render."""
         with self._lock:
             self._pending.pop(slot, None)
+            if self._running is not None and self._running.slot == slot:
+                self._cancel_running.set()
 
     def results(self) -> list[RenderResult]:
         with self._lock:
@@ -101,6 +110,7 @@ class RenderWorker:
         with self._lock:
             self._stop = True
             self._pending.clear()
+            self._cancel_running.set()
             self._wake.notify()
         self._thread.join(timeout)
 
@@ -156,12 +166,14 @@ class RenderWorker:
                 slot = min(self._pending, key=lambda s: (self._served.get(s, 0.0), self._pending[s].seq))
                 job = self._pending.pop(slot)
                 self._running = job
-            result = self._render(job)
+                self._cancel_running = threading.Event()
+            result = self._render(job, self._cancel_running)
             with self._lock:
                 self._running = None
                 self._served[slot] = time.perf_counter()
                 self._results.append(result)
-                self.rendered += 1
+                self.cancelled += result.cancelled
+                self.rendered += not result.cancelled
         self._scene = None
         self._release_glsl()
         if self._gl_ctx is not None:
@@ -169,15 +181,17 @@ class RenderWorker:
             self._gl_ctx = None
         gc.collect()
 
-    def _render(self, job: RenderJob) -> RenderResult:
+    def _render(self, job: RenderJob, cancel: threading.Event) -> RenderResult:
         if job.scene is not self._scene:
             self._scene = job.scene
             if self._glsl is not None and self._glsl[0] is not job.scene:
                 self._release_glsl()  # else it would keep the previous scene and its GPU buffers while cpu renders
             gc.collect()  # free the previous scene's renderers (and GL buffers) in this thread
         try:
-            frame = self._renderer(job.scene, job.backend).render(job.camera, job.settings)
+            frame = self._renderer(job.scene, job.backend).render(job.camera, job.settings, cancel=cancel)
             return RenderResult(job, frame, "", time.perf_counter())
+        except RenderCancelled:
+            return RenderResult(job, None, "", time.perf_counter(), cancelled=True)
         except GBViewerError as exc:
             return RenderResult(job, None, str(exc), time.perf_counter())
         except Exception as exc:  # noqa: BLE001 - shown in the window, never kills the thread

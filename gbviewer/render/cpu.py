@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -9,6 +10,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import BackendUnavailable
 from ..scene import Scene
+from .control import Progress, RenderControl
 from .prepare import Prepared, camera_args, native_frame, prepare
 from .types import Frame, RenderSettings
 
@@ -54,14 +56,17 @@ class CpuRenderer:
             self._native.release_buffers()  # the per-frame buffers the native module keeps for the last scene
         self._scene = scene
 
-    def render(self, camera: Camera, settings: RenderSettings) -> Frame:
+    def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
+               on_progress: Progress | None = None) -> Frame:
         t0 = time.perf_counter()
         prep = prepare(self._scene, camera, settings, self.name)
         scene = prep.scene
-        out = self._native.render(
-            scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d,
-            *camera_args(camera), int(settings.mode), settings.supersample, settings.sh_degree,
-            np.asarray(settings.background, np.float32), settings.debug == "window", settings.threads,
-            **_native_extra(prep),
-        )
+        with RenderControl(cancel, on_progress) as control:
+            out = self._native.render(
+                scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d,
+                *camera_args(camera), int(settings.mode), settings.supersample, settings.sh_degree,
+                np.asarray(settings.background, np.float32), settings.debug == "window", settings.threads,
+                **_native_extra(prep), control=control.block if control.active else None,
+            )
+        control.check()  # the native render skipped its remaining tiles once the event was set
         return native_frame(out, prep, camera, settings, self.name, t0)

@@ -11,6 +11,7 @@ from ..camera import Camera
 from ..cells import Cells
 from ..errors import BackendUnavailable, RenderError
 from ..scene import Scene
+from .control import Progress, RenderControl
 from .prepare import Prepared, camera_args, native_frame, prepare
 from .types import Frame, RenderSettings
 
@@ -81,15 +82,19 @@ class CudaRenderer:
                 raise RenderError(f"cuda: {exc}") from None
             self._cells = cells
 
-    def render(self, camera: Camera, settings: RenderSettings) -> Frame:
+    def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
+               on_progress: Progress | None = None) -> Frame:
+        """One kernel sequence per frame: `cancel` is checked before and after it, progress is 0 then 1 of 1."""
         t0 = time.perf_counter()
-        with self._lock:
+        with self._lock, RenderControl(cancel, on_progress) as control:
             prep = prepare(self._scene, camera, settings, self.name)
             self._sync(prep)
+            control.step(0, 1)
             try:
                 out = self._impl.render(*camera_args(camera), int(settings.mode), settings.supersample,
                                         settings.sh_degree, np.asarray(settings.background, np.float32),
                                         settings.debug == "window", *(prep.oit or ()))
             except RuntimeError as exc:
                 raise RenderError(f"cuda: {exc}") from None
+            control.step(1, 1)
         return native_frame(out, prep, camera, settings, self.name, t0)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import importlib
 import threading
 import weakref
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 
 from ..camera import Camera
 from ..errors import RenderError
@@ -77,8 +77,12 @@ def render(
     background: tuple[float, float, float] = (0.0, 0.0, 0.0),
     sh_degree: int = 3,
     debug: str = "none",
+    cancel: threading.Event | None = None,
+    on_progress: Callable[[int, int], None] | None = None,
     **options,
 ) -> Frame:
-    """Render `scene` from `camera` in `mode` on `backend`; `options`: depth_correct, et_grade, cell_size, threads."""
+    """Render `scene` from `camera` in `mode` on `backend`; `options`: depth_correct, et_grade, cell_size, threads.
+    `cancel`: a threading.Event; once set, the call raises RenderCancelled within one tile batch. `on_progress`:
+    called as fn(done_tiles, total_tiles) from the render."""
     settings = RenderSettings(Mode.parse(mode), supersample, tuple(background), sh_degree, debug, **options)
-    return get_renderer(scene, backend).render(camera, settings)
+    return get_renderer(scene, backend).render(camera, settings, cancel=cancel, on_progress=on_progress)

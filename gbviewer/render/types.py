@@ -5,6 +5,8 @@ Imports no backend."""
 from __future__ import annotations
 
 import enum
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -200,4 +202,7 @@ class Renderer(Protocol):
 
     def upload(self, scene: Scene) -> None: ...
 
-    def render(self, camera: Camera, settings: RenderSettings) -> Frame: ...
+    def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
+               on_progress: Callable[[int, int], None] | None = None) -> Frame:
+        """The frame; once `cancel` is set it raises RenderCancelled within one tile batch (GPU backends: one
+        dispatch); `on_progress(done, total)` is called from the render as tiles (or dispatches) finish."""

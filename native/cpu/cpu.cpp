@@ -28,6 +28,7 @@
 namespace nb = nanobind;
 using namespace gbv;
 using namespace gbv::nbc;
+using LArr = nb::ndarray<int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;  // writable, shared with Python
 
 namespace {
 
@@ -35,6 +36,19 @@ using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t0) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
+
+// A render's control block, shared with Python (render(..., control=int64[3])): [0] cancel flag (Python sets it),
+// [1] tiles blended so far, [2] tiles in the frame (both written here). Relaxed atomics: only counts and a flag.
+struct Progress {
+    int64_t* ctl = nullptr;
+    bool cancelled() const { return ctl && __atomic_load_n(&ctl[0], __ATOMIC_RELAXED) != 0; }
+    void start(int64_t tiles) const {
+        if (ctl) __atomic_store_n(&ctl[2], tiles, __ATOMIC_RELAXED);
+    }
+    void tile_done() const {
+        if (ctl) __atomic_fetch_add(&ctl[1], 1, __ATOMIC_RELAXED);
+    }
+};
 
 struct SceneView {
     const float *means, *scales, *quats, *opacities, *sh, *filter_3d;
@@ -270,10 +284,12 @@ struct FlushDenormals {
 // path blends its pixels in lane groups.
 void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>& tile_start,
                  const std::vector<uint64_t>& keys, const CameraParams& cam, Mode mode, const OitParams& oit,
-                 const float bg[3], BlendTileFn blend_tile, std::vector<SplatBounds>& boxes, Image& img, Stats& st) {
+                 const float bg[3], BlendTileFn blend_tile, std::vector<SplatBounds>& boxes, Image& img, Stats& st,
+                 const Progress& progress) {
     const int W = cam.width, H = cam.height;
     const int gx = (W + TILE - 1) / TILE;
     const int num_tiles = (int)tile_start.size() - 1;
+    progress.start(num_tiles);
     auto t0 = Clock::now();
     boxes.resize(splats.size());
 #pragma omp parallel for schedule(static)
@@ -294,6 +310,7 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
         std::vector<SplatBounds> bounds;
 #pragma omp for schedule(dynamic, 1)
         for (int t = 0; t < num_tiles; ++t) {
+            if (progress.cancelled()) continue;  // a cancelled frame skips its remaining tiles
             const int64_t begin = tile_start[t], count = tile_start[t + 1] - begin;
             local.resize(count);
             bounds.resize(count);
@@ -311,6 +328,7 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
             job.x1 = std::min(job.x0 + TILE, W);
             job.y1 = std::min(job.y0 + TILE, H);
             blend_tile(job);
+            progress.tile_done();
         }
     }
     st.blend_ms += ms_since(t0);
@@ -367,7 +385,8 @@ constexpr int64_t PREPROCESS_BLOCK = 256;  // splats per call of a path's prepro
 
 // Render one image at the camera's resolution, one sample per pixel.
 void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
-                  const float bg[3], const simd::Path& path, FrameBuffers& buf, Image& img, Stats& st) {
+                  const float bg[3], const simd::Path& path, FrameBuffers& buf, Image& img, Stats& st,
+                  const Progress& progress) {
     const int W = cam.width, H = cam.height;
     const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE;
     const int num_tiles = gx * gy;
@@ -413,7 +432,7 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
         bin_splats(splats, rects, valid, gx, mode != WSR, tile_start, keys, st);
     }
     if (keys.capacity() > 4 * keys.size() + (1u << 20)) keys.shrink_to_fit();  // after a much larger frame
-    blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, path.blend_tile, buf.boxes, img, st);
+    blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, path.blend_tile, buf.boxes, img, st, progress);
 }
 
 // Box-average N x N blocks of `hi` into `lo` (supersampling).
@@ -454,8 +473,10 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
                 int mode, int supersample, int sh_degree, FArr background, bool want_window, int threads,
                 std::optional<FArr> weight_sh, std::optional<FArr> cell_means, std::optional<FArr> cell_scales,
                 std::optional<FArr> cell_quats, std::optional<IArr> cell_offsets, std::optional<IArr> cell_members,
-                float sigma, float weight_background, float et_grade, bool depth_correct) {
+                float sigma, float weight_background, float et_grade, bool depth_correct, std::optional<LArr> control) {
     const int64_t n = check_scene("render", means, scales, quats, opacities, sh, filter_3d);
+    if (control && control->shape(0) != 3) throw std::invalid_argument("render: control must hold 3 int64");
+    const Progress progress{control ? control->data() : nullptr};
     const RenderArgs args = parse_render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, mode,
                                               supersample, background, sigma, weight_background, et_grade,
                                               depth_correct);
@@ -497,19 +518,20 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
         if (threads > 0) omp_set_num_threads(threads);
         out.resize(width, height, window);
         if (N == 1) {
-            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path, *pooled.buf, out, st);
+            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path, *pooled.buf, out, st, progress);
         } else {
             Image hi;
             hi.resize(width * N, height * N, window);
-            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path, *pooled.buf, hi, st);
+            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path, *pooled.buf, hi, st, progress);
             auto t0 = Clock::now();
-            box_downsample(hi, N, out);
+            if (!progress.cancelled()) box_downsample(hi, N, out);
             st.blend_ms += ms_since(t0);
         }
         if (threads > 0) omp_set_num_threads(prev_threads);
     }
     nb::dict d = result_dict(out, st, (size_t)height, (size_t)width);
     d["simd"] = path.name;
+    d["cancelled"] = progress.cancelled();
     return d;
 }
 
@@ -560,5 +582,6 @@ NB_MODULE(_native, m) {
           nb::arg("cell_means").none() = nb::none(), nb::arg("cell_scales").none() = nb::none(),
           nb::arg("cell_quats").none() = nb::none(), nb::arg("cell_offsets").none() = nb::none(),
           nb::arg("cell_members").none() = nb::none(), nb::arg("sigma") = 10.0f,
-          nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false);
+          nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
+          nb::arg("control").none() = nb::none());
 }

@@ -82,3 +82,28 @@ def test_worker_frees_the_glsl_renderer_of_a_previous_scene(bundled_scene):
         assert gone() is None
     finally:
         w.stop()
+
+
+def test_a_newer_request_cancels_the_running_render_of_its_slot(bundled_scene):
+    """A deliberately heavy render is running; a newer request for its slot stops it between tiles (a cancelled
+    result, no frame) and is rendered next; ordering and flags only, no times."""
+    w = RenderWorker()
+    try:
+        heavy = gb.orbit_camera(bundled_scene, width=1600, height=1200)
+        first = RenderJob(("p", "a"), bundled_scene, heavy, RenderSettings("gaussian_blending", supersample=4), "cpu")
+        w.submit(first)
+        t0 = time.time()
+        while w._running is not first and time.time() - t0 < 60:  # until the render thread has started it
+            time.sleep(0.001)
+        second = RenderJob(("p", "a"), bundled_scene, heavy.with_size(64, 48), RenderSettings(), "cpu")
+        w.submit(second)
+        results, t0 = [], time.time()
+        while len(results) < 2 and time.time() - t0 < 120:
+            results += w.results()
+            time.sleep(0.01)
+        assert [r.job for r in results] == [first, second]
+        assert results[0].cancelled and results[0].frame is None and not results[0].error
+        assert not results[1].cancelled and results[1].frame is not None
+        assert w.cancelled == 1 and w.rendered == 1
+    finally:
+        w.stop()

@@ -34,4 +34,5 @@ def draw(app: ViewerApp) -> None:
                 imgui.text(c)
     imgui.end_table()
     imgui.text_disabled("ms per stage; fps = finished renders per second")
-    imgui.text_disabled(f"UI {app.ui_fps.rate():.0f} fps, {app.worker.dropped} stale requests dropped")
+    imgui.text_disabled(f"UI {app.ui_fps.rate():.0f} fps, {app.worker.dropped} stale requests dropped, "
+                        f"{app.worker.cancelled} stale renders stopped")

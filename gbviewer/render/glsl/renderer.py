@@ -36,6 +36,7 @@ Contexts: by default a headless EGL context shared by every renderer of the proc
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -44,6 +45,7 @@ from ...camera import Camera
 from ...cells import Cells
 from ...errors import BackendUnavailable, RenderError
 from ...scene import Scene
+from ..control import Progress, RenderControl
 from ..prepare import Prepared, frame_stats, prepare
 from ..types import Frame, Mode, RenderSettings
 from .context import check_context, standalone_context
@@ -170,13 +172,15 @@ class GlslRenderer:
         if prep.cells is not None and prep.cells is not self._cells:
             self._upload_cells(prep.cells, prep.scene.num_splats)
 
-    def render(self, camera: Camera, settings: RenderSettings) -> Frame:
+    def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
+               on_progress: Progress | None = None) -> Frame:
         self._make_current()
         t0 = time.perf_counter()
         prep = prepare(self._scene, camera, settings, self.name)
         self._sync(prep)
         want_window = settings.debug == "window" and settings.mode == Mode.GAUSSIAN_BLENDING
-        counts = self._frame(camera, settings, prep, want_window)
+        with RenderControl(cancel, on_progress) as control:
+            counts = self._frame(camera, settings, prep, want_window, control)
         W, H = camera.width, camera.height
         img = np.frombuffer(self.gpu.texture.read(), np.float32).reshape(H, W, 4)
         evals = np.frombuffer(self.gpu.buffers["evals"].read(size=W * H * 4), np.int32).reshape(H, W).copy()
@@ -202,8 +206,10 @@ class GlslRenderer:
 
     # ---- pipeline ------------------------------------------------------------------------------------------------
 
-    def _frame(self, camera: Camera, settings: RenderSettings, prep: Prepared, want_window: bool) -> dict:
-        """Preprocess, bin and sort, blend into the output texture; returns the stage times and counts."""
+    def _frame(self, camera: Camera, settings: RenderSettings, prep: Prepared, want_window: bool,
+               control: RenderControl) -> dict:
+        """Preprocess, bin and sort, blend into the output texture (`control` checked between the stages and the
+        blend's dispatches); returns the stage times and counts."""
         gpu = self.gpu
         mode = settings.mode
         oit = NO_OIT if prep.oit is None else (*prep.oit[:3], float(prep.oit.depth_correct))
@@ -257,7 +263,8 @@ class GlslRenderer:
         plan, longest = blend_plan(gpu, N, ranges, num_tiles, pairs)
         self.ctx.finish()
         t2 = time.perf_counter()
-        self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, oit)
+        control.check()
+        self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, oit, control)
         self.ctx.finish()
         return dict(preprocess_ms=(t1 - t0) * 1e3, sort_ms=(t2 - t1) * 1e3, blend_ms=(time.perf_counter() - t2) * 1e3,
                     visible=visible, sort_length=sort_length, pairs=pairs, **counts)
@@ -323,7 +330,7 @@ class GlslRenderer:
         return tlist, ranges, cell_pairs, expanded, ncells
 
     def _blend(self, camera: Camera, settings: RenderSettings, want_window: bool, plan, longest: int, splats, tvals,
-               ranges, oit: tuple) -> None:
+               ranges, oit: tuple, control: RenderControl) -> None:
         """blend.comp into the output texture, in the dispatches of `plan` (one unless the driver caps loops)."""
         gpu = self.gpu
         N = settings.supersample
@@ -345,9 +352,11 @@ class GlslRenderer:
             buf.bind_to_storage_buffer(i)
         tex.bind_to_image(0, read=False, write=True)
         tiles = N * N
-        for sub0, sub1, c0, c1 in plan:
+        for step, (sub0, sub1, c0, c1) in enumerate(plan):
+            control.step(step, len(plan))
             gpu.set(prog, subtile_begin=sub0, subtile_end=sub1, chunk_begin=c0, chunk_end=c1,
                       load_state=int(c0 > 0), store_state=int(c1 < longest), load_accum=int(sub0 > 0),
                       store_accum=int(sub1 < tiles))
             prog.run(bx, by, 1)
             self.ctx.memory_barrier()
+        control.step(len(plan), len(plan))

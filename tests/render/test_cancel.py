@@ -1,0 +1,88 @@
+"""Cancelling a render (`cancel=threading.Event`) and following it (`on_progress(done, total)`), on every backend
+this machine has: the native CPU module skips its remaining tiles once the flag is set, GPU backends stop between
+dispatches, and a render that is followed but not cancelled gives the same frame as one that is not."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+import gbviewer as gb
+from gbviewer.render.glsl import GlslRenderer
+from helpers import front_camera, random_scene
+
+
+@pytest.fixture(scope="module")
+def scene() -> gb.Scene:
+    return random_scene(400, seed=3)
+
+
+def _settings(mode="gaussian_blending", ss=1) -> gb.RenderSettings:
+    return gb.RenderSettings(gb.Mode.parse(mode), ss)
+
+
+def _renderer(backend: str, scene: gb.Scene):
+    if backend == "glsl":
+        ok, why = GlslRenderer.available()
+        if not ok:
+            pytest.skip(f"no OpenGL 4.3 here: {why}")
+    return gb.get_renderer(scene, backend)
+
+
+@pytest.mark.parametrize("backend", ["cpu", pytest.param("glsl", marks=pytest.mark.gl)])
+@pytest.mark.parametrize("ss", [1, 3])
+def test_progress_is_reported_and_the_frame_unchanged(scene, backend, ss):
+    r = _renderer(backend, scene)
+    cam = front_camera(96, 64)
+    plain = r.render(cam, _settings(ss=ss))
+    seen: list[tuple[int, int]] = []
+    followed = r.render(cam, _settings(ss=ss), cancel=threading.Event(), on_progress=lambda d, t: seen.append((d, t)))
+    np.testing.assert_array_equal(followed.rgb, plain.rgb)
+    np.testing.assert_array_equal(followed.alpha, plain.alpha)
+    done, total = seen[-1]
+    assert done == total > 0 and all(t == total and 0 <= d <= total for d, t in seen)
+    if backend == "cpu":  # tiles of the (supersampled) frame
+        assert total == -(-96 * ss // 16) * -(-64 * ss // 16)
+
+
+@pytest.mark.parametrize("backend", ["cpu", pytest.param("glsl", marks=pytest.mark.gl)])
+def test_a_set_event_stops_the_render(scene, backend):
+    r = _renderer(backend, scene)
+    cancel = threading.Event()
+    cancel.set()
+    seen: list[tuple[int, int]] = []
+    with pytest.raises(gb.RenderCancelled):
+        r.render(front_camera(96, 64), _settings(), cancel=cancel, on_progress=lambda d, t: seen.append((d, t)))
+    assert all(d == 0 for d, _ in seen)
+    assert issubclass(gb.RenderCancelled, gb.GBViewerError)
+
+
+def test_event_set_during_the_render_cancels_it(scene):
+    """Set from the progress callback, i.e. while the blend runs: the call raises instead of returning a frame."""
+    cancel = threading.Event()
+    with pytest.raises(gb.RenderCancelled):
+        gb.render(scene, front_camera(320, 240), "gaussian_blending", supersample=2, cancel=cancel,
+                  on_progress=lambda done, total: cancel.set())
+    frame = gb.render(scene, front_camera(320, 240), "gaussian_blending", supersample=2)  # the renderer still works
+    assert np.isfinite(frame.rgb).all() and frame.rgb.max() > 0
+
+
+@pytest.mark.parametrize("ss", [1, 2])
+def test_native_module_skips_every_tile_once_the_flag_is_set(scene, ss):
+    """The control block of the native call itself: with the flag set, no tile is blended (the count stays 0 and
+    the image stays empty), and the result says it was cancelled."""
+    from gbviewer import _native
+    from gbviewer.render.prepare import camera_args
+
+    cam = front_camera(64, 48)
+    block = np.array([1, 0, 0], np.int64)
+    out = _native.render(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None, *camera_args(cam),
+                         int(gb.Mode.SCALAR), ss, 3, np.zeros(3, np.float32), False, 0, control=block)
+    assert out["cancelled"] and block[1] == 0 and block[2] == -(-64 * ss // 16) * -(-48 * ss // 16)
+    assert not out["rgb"].any()
+    block[:] = 0
+    out = _native.render(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None, *camera_args(cam),
+                         int(gb.Mode.SCALAR), ss, 3, np.zeros(3, np.float32), False, 0, control=block)
+    assert not out["cancelled"] and block[1] == block[2] and out["rgb"].any()
