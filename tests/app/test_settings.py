@@ -60,13 +60,13 @@ def test_hostile_settings_values_fall_back_without_stopping_the_viewer(tmp_path)
     p = tmp_path / "settings.json"
     big = "9" * 4000  # an integer too large for a float
     p.write_text(f'{{"rate": {big}, "fov_y_deg": {big}, "background": [{big}, 0, 0], "pane_count": {big}, '
-                 f'"window": [{big}, 1e400], "panes": [{{"split_pos": {big}, "supersample": 1e400, "view": []}}], '
-                 f'"loupe_zoom": "nan", "fly_speed": 1e400, "up": [], "layout": {{}}, "recent": 5}}')
+                 f'"window": [{big}, "x"], "panes": [{{"split_pos": {big}, "supersample": "x", "view": []}}], '
+                 f'"loupe_zoom": "nan", "fly_speed": "1e400", "up": [], "layout": {{}}, "recent": 5}}')
     s, warning = settings.load_settings(p)
     assert warning == ""
     assert (s.rate, s.fov_y_deg, s.background, s.pane_count) == (1.0, 50.0, (0.0, 0.0, 0.0), 4)
     assert s.window == (8192, 860) and s.panes[0] == PaneSettings() and s.recent == []
-    for text in ("[1, 2]", "[" * 5000, '{"rate": NaN}' * 2, "\xff"):
+    for text in ("[1, 2]", "[" * 5000, '{"rate": NaN}' * 2, "\xff", '{"rate": 1e400}'):  # 1e400: beyond double
         p.write_bytes(text.encode("latin-1"))
         s, warning = settings.load_settings(p)
         assert s == AppSettings() and "unreadable settings" in warning and str(p) in warning
