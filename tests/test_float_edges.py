@@ -24,7 +24,7 @@ from gbviewer.io import write_inria_ply
 from gbviewer.render import RenderSettings
 from gbviewer.scene import MAX_SCALE, MAX_SH
 
-ROOT = Path(__file__).resolve().parents[1]
+PACKAGE_ROOT = Path(gb.__file__).resolve().parents[1]  # the gbviewer under test (installed or this tree)
 MODES = ["scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex"]
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -87,9 +87,9 @@ def test_quaternions_near_float32_max_are_normalised():
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
+    env = {"PYTHONPATH": str(PACKAGE_ROOT), "PATH": "/usr/bin:/bin"}
     return subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-m", "gbviewer", *args],
-                          capture_output=True, text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
-                          timeout=120)
+                          capture_output=True, text=True, env=env, timeout=120)
 
 
 def test_cli_info_and_render_of_huge_scenes(tmp_path):
