@@ -23,7 +23,7 @@ from gbviewer.validate import F32_MAX
 from helpers import front_camera, random_scene
 
 HUGE = "HUGE_INT"  # replaced by a 5000-digit integer literal in the JSON text (json.dumps refuses to write one)
-ROOT = Path(__file__).resolve().parents[1]
+PACKAGE_ROOT = Path(gb.__file__).resolve().parents[1]  # the gbviewer under test (installed or this tree)
 
 
 def entry(k: int = 0) -> dict:
@@ -89,7 +89,7 @@ def test_cli_bad_cameras_json_exits_2_with_one_line(tmp_path):
     out = tmp_path / "out.npy"
     proc = subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-m", "gbviewer", "render",
                            str(gb.DEFAULT_SCENE), "--cameras", str(cams), "--out", str(out)], capture_output=True,
-                          text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}, timeout=120)
+                          text=True, env={"PYTHONPATH": str(PACKAGE_ROOT), "PATH": "/usr/bin:/bin"}, timeout=120)
     assert proc.returncode == 2 and not out.exists()
     assert proc.stderr.strip().splitlines() == [f"gbviewer: error: {cams}: entry 0: 'width': expected an integer, "
                                                 "got 'abc'"]
