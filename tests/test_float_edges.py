@@ -89,7 +89,7 @@ def test_quaternions_near_float32_max_are_normalised():
 def run_cli(*args: str) -> subprocess.CompletedProcess:
     env = {"PYTHONPATH": str(PACKAGE_ROOT), "PATH": "/usr/bin:/bin"}
     return subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-m", "gbviewer", *args],
-                          capture_output=True, text=True, env=env, timeout=120)
+                          capture_output=True, text=True, env=env, cwd=PACKAGE_ROOT, timeout=120)  # -m: cwd first
 
 
 def test_cli_info_and_render_of_huge_scenes(tmp_path):

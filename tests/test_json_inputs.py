@@ -89,7 +89,8 @@ def test_cli_bad_cameras_json_exits_2_with_one_line(tmp_path):
     out = tmp_path / "out.npy"
     proc = subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-m", "gbviewer", "render",
                            str(gb.DEFAULT_SCENE), "--cameras", str(cams), "--out", str(out)], capture_output=True,
-                          text=True, env={"PYTHONPATH": str(PACKAGE_ROOT), "PATH": "/usr/bin:/bin"}, timeout=120)
+                          text=True, env={"PYTHONPATH": str(PACKAGE_ROOT), "PATH": "/usr/bin:/bin"}, cwd=PACKAGE_ROOT,
+                          timeout=120)  # -m puts the working folder first on sys.path
     assert proc.returncode == 2 and not out.exists()
     assert proc.stderr.strip().splitlines() == [f"gbviewer: error: {cams}: entry 0: 'width': expected an integer, "
                                                 "got 'abc'"]
