@@ -33,13 +33,13 @@ def read_ply(path: Path) -> plyfile.PlyData:
     """Parse a PLY header and read (binary: memory-map) the elements the loaders use, with typed errors for non-PLY
     and truncated files. Elements after the last used one (a mesh's faces, say) are never read: plyfile would parse
     their lists row by row into memory. Counts are checked against the file size first (`check_element_counts`)."""
-    with open(path, "rb") as fh:
-        head = fh.read(5)
-    if not (head.startswith(b"ply\n") or head == b"ply\r\n"):
-        raise SceneFormatError(path, "not a PLY file (missing 'ply' magic line)")
-    check_element_counts(path)
     try:
         with open(path, "rb") as fh:
+            head = fh.read(HEADER_MAX_BYTES)
+            if not (head.startswith(b"ply\n") or head.startswith(b"ply\r\n")):
+                raise SceneFormatError(path, "not a PLY file (missing 'ply' magic line)")
+            check_element_counts(path, head, fh.seek(0, 2))
+            fh.seek(0)
             # plyfile's PlyData.read, stopping early: the same header parser and per-element reader it uses
             ply = plyfile.PlyData._parse_header(fh)
             stream = io.TextIOWrapper(fh, "ascii") if ply.text else fh
@@ -57,13 +57,10 @@ def read_ply(path: Path) -> plyfile.PlyData:
         raise SceneFormatError(path, f"malformed PLY: {exc}") from None
 
 
-def check_element_counts(path: Path) -> None:
-    """Before plyfile allocates anything: every element count the header declares must fit in the bytes that
-    follow it (binary: count x the smallest row; ASCII: two characters per value), so a small file cannot ask
-    for terabytes or for a count that does not fit an index."""
-    with open(path, "rb") as fh:
-        head = fh.read(HEADER_MAX_BYTES)
-        size = fh.seek(0, 2)
+def check_element_counts(path: Path, head: bytes, size: int) -> None:
+    """Before plyfile allocates anything: every element count the header (in `head`, the first bytes of the
+    `size`-byte file) declares must fit in the bytes that follow it (binary: count x the smallest row; ASCII: two
+    characters per value), so a small file cannot ask for terabytes or for a count that does not fit an index."""
     end = head.find(b"end_header")
     if end < 0:
         return  # no complete header: plyfile reports it
