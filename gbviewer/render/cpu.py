@@ -57,16 +57,18 @@ class CpuRenderer:
         self._scene = scene
 
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
-               on_progress: Progress | None = None) -> Frame:
+               on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
         t0 = time.perf_counter()
+        RenderControl(partial=partial).check_partial(camera.width, camera.height)
         prep = prepare(self._scene, camera, settings, self.name)
         scene = prep.scene
-        with RenderControl(cancel, on_progress) as control:
+        with RenderControl(cancel, on_progress, partial) as control:
             out = self._native.render(
                 scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d,
                 *camera_args(camera), int(settings.mode), settings.supersample, settings.sh_degree,
                 np.asarray(settings.background, np.float32), settings.debug == "window", settings.threads,
                 **_native_extra(prep), control=control.block if control.active else None,
+                partial=partial,
             )
         control.check()  # the native render skipped its remaining tiles once the event was set
         return native_frame(out, prep, camera, settings, self.name, t0)

@@ -83,10 +83,12 @@ class CudaRenderer:
             self._cells = cells
 
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
-               on_progress: Progress | None = None) -> Frame:
-        """One kernel sequence per frame: `cancel` is checked before and after it, progress is 0 then 1 of 1."""
+               on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
+        """One kernel sequence per frame: `cancel` is checked before and after it, progress is 0 then 1 of 1,
+        `partial` receives the frame at the end."""
         t0 = time.perf_counter()
-        with self._lock, RenderControl(cancel, on_progress) as control:
+        with self._lock, RenderControl(cancel, on_progress, partial) as control:
+            control.check_partial(camera.width, camera.height)
             prep = prepare(self._scene, camera, settings, self.name)
             self._sync(prep)
             control.step(0, 1)
@@ -97,4 +99,6 @@ class CudaRenderer:
             except RuntimeError as exc:
                 raise RenderError(f"cuda: {exc}") from None
             control.step(1, 1)
-        return native_frame(out, prep, camera, settings, self.name, t0)
+        frame = native_frame(out, prep, camera, settings, self.name, t0)
+        control.fill_partial(frame.image)
+        return frame

@@ -7,6 +7,8 @@ import threading
 import weakref
 from collections.abc import Callable, Iterator, Mapping
 
+import numpy as np
+
 from ..camera import Camera
 from ..errors import RenderError
 from ..scene import Scene
@@ -79,10 +81,13 @@ def render(
     debug: str = "none",
     cancel: threading.Event | None = None,
     on_progress: Callable[[int, int], None] | None = None,
+    partial: np.ndarray | None = None,
     **options,
 ) -> Frame:
     """Render `scene` from `camera` in `mode` on `backend`; `options`: depth_correct, et_grade, cell_size, threads.
     `cancel`: a threading.Event; once set, the call raises RenderCancelled within one tile batch. `on_progress`:
-    called as fn(done_tiles, total_tiles) from the render."""
+    called as fn(done_tiles, total_tiles) from the render. `partial`: a float32 (height, width, 3) array that receives
+    each tile's pixels as soon as it is blended (centre out), for showing a frame while it refines."""
     settings = RenderSettings(Mode.parse(mode), supersample, tuple(background), sh_degree, debug, **options)
-    return get_renderer(scene, backend).render(camera, settings, cancel=cancel, on_progress=on_progress)
+    return get_renderer(scene, backend).render(camera, settings, cancel=cancel, on_progress=on_progress,
+                                                      partial=partial)

@@ -203,6 +203,8 @@ class Renderer(Protocol):
     def upload(self, scene: Scene) -> None: ...
 
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
-               on_progress: Callable[[int, int], None] | None = None) -> Frame:
+               on_progress: Callable[[int, int], None] | None = None, partial: np.ndarray | None = None) -> Frame:
         """The frame; once `cancel` is set it raises RenderCancelled within one tile batch (GPU backends: one
-        dispatch); `on_progress(done, total)` is called from the render as tiles (or dispatches) finish."""
+        dispatch); `on_progress(done, total)` is called from the render as tiles (or dispatches) finish; `partial`
+        (float32 (height, width, 3)) receives finished tiles as they are blended (GPU backends: the whole frame at
+        the end)."""

@@ -29,6 +29,7 @@ namespace nb = nanobind;
 using namespace gbv;
 using namespace gbv::nbc;
 using LArr = nb::ndarray<int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;  // writable, shared with Python
+using PArr = nb::ndarray<float, nb::ndim<3>, nb::c_contig, nb::device::cpu>;    // a partial frame, written here
 
 namespace {
 
@@ -39,8 +40,11 @@ double ms_since(Clock::time_point t0) {
 
 // A render's control block, shared with Python (render(..., control=int64[3])): [0] cancel flag (Python sets it),
 // [1] tiles blended so far, [2] tiles in the frame (both written here). Relaxed atomics: only counts and a flag.
+// `partial` (render(..., partial=float32[H][W][3]), or null) receives each finished tile's output pixels at once, so
+// the caller can show a frame while it refines.
 struct Progress {
     int64_t* ctl = nullptr;
+    float* partial = nullptr;
     bool cancelled() const { return ctl && __atomic_load_n(&ctl[0], __ATOMIC_RELAXED) != 0; }
     void start(int64_t tiles) const {
         if (ctl) __atomic_store_n(&ctl[2], tiles, __ATOMIC_RELAXED);
@@ -280,15 +284,50 @@ struct FlushDenormals {
 #endif
 };
 
+// Copy a finished tile [x0, x1) x [y0, y1) of `img` (N x N samples per output pixel) into the partial frame
+// (output pixels, RGB). With N > 1 a pixel whose samples straddle tiles gets the mean of this tile's samples; the
+// final frame replaces it.
+void write_partial(const Image& img, int N, int x0, int y0, int x1, int y1, float* partial) {
+    const int out_w = img.width / N;
+    for (int oy = y0 / N; oy <= (y1 - 1) / N; ++oy) {
+        for (int ox = x0 / N; ox <= (x1 - 1) / N; ++ox) {
+            float acc[3] = {0, 0, 0};
+            int count = 0;
+            for (int y = std::max(y0, oy * N); y < std::min(y1, oy * N + N); ++y) {
+                for (int x = std::max(x0, ox * N); x < std::min(x1, ox * N + N); ++x, ++count) {
+                    for (int c = 0; c < 3; ++c) acc[c] += img.rgb[((size_t)y * img.width + x) * 3 + c];
+                }
+            }
+            const float inv = 1.0f / count;  // as box_downsample rounds
+            for (int c = 0; c < 3; ++c) partial[((size_t)oy * out_w + ox) * 3 + c] = acc[c] * inv;
+        }
+    }
+}
+
+// Tiles from the image centre outwards: a refining frame fills in where the eye is first (and the central tiles,
+// usually the busiest, start first, which also balances the dynamic schedule).
+std::vector<int> centre_out_order(int gx, int gy) {
+    std::vector<int> order(gx * gy);
+    std::vector<float> dist(gx * gy);
+    for (int t = 0; t < gx * gy; ++t) {
+        const float dx = (t % gx) + 0.5f - gx * 0.5f, dy = (t / gx) + 0.5f - gy * 0.5f;
+        dist[t] = dx * dx + dy * dy;
+        order[t] = t;
+    }
+    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return dist[a] < dist[b]; });
+    return order;
+}
+
 // Blend: each tile copies its splats (and their boxes) into contiguous per-thread buffers, then the selected SIMD
 // path blends its pixels in lane groups.
 void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>& tile_start,
                  const std::vector<uint64_t>& keys, const CameraParams& cam, Mode mode, const OitParams& oit,
                  const float bg[3], BlendTileFn blend_tile, std::vector<SplatBounds>& boxes, Image& img, Stats& st,
-                 const Progress& progress) {
+                 const Progress& progress, int N) {
     const int W = cam.width, H = cam.height;
     const int gx = (W + TILE - 1) / TILE;
     const int num_tiles = (int)tile_start.size() - 1;
+    const std::vector<int> order = centre_out_order(gx, num_tiles / gx);
     progress.start(num_tiles);
     auto t0 = Clock::now();
     boxes.resize(splats.size());
@@ -309,8 +348,9 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
         std::vector<Splat2D> local;
         std::vector<SplatBounds> bounds;
 #pragma omp for schedule(dynamic, 1)
-        for (int t = 0; t < num_tiles; ++t) {
+        for (int i = 0; i < num_tiles; ++i) {
             if (progress.cancelled()) continue;  // a cancelled frame skips its remaining tiles
+            const int t = order[i];
             const int64_t begin = tile_start[t], count = tile_start[t + 1] - begin;
             local.resize(count);
             bounds.resize(count);
@@ -328,6 +368,7 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
             job.x1 = std::min(job.x0 + TILE, W);
             job.y1 = std::min(job.y0 + TILE, H);
             blend_tile(job);
+            if (progress.partial) write_partial(img, N, job.x0, job.y0, job.x1, job.y1, progress.partial);
             progress.tile_done();
         }
     }
@@ -386,7 +427,7 @@ constexpr int64_t PREPROCESS_BLOCK = 256;  // splats per call of a path's prepro
 // Render one image at the camera's resolution, one sample per pixel.
 void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
                   const float bg[3], const simd::Path& path, FrameBuffers& buf, Image& img, Stats& st,
-                  const Progress& progress) {
+                  const Progress& progress, int N = 1) {
     const int W = cam.width, H = cam.height;
     const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE;
     const int num_tiles = gx * gy;
@@ -432,7 +473,7 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
         bin_splats(splats, rects, valid, gx, mode != WSR, tile_start, keys, st);
     }
     if (keys.capacity() > 4 * keys.size() + (1u << 20)) keys.shrink_to_fit();  // after a much larger frame
-    blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, path.blend_tile, buf.boxes, img, st, progress);
+    blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, path.blend_tile, buf.boxes, img, st, progress, N);
 }
 
 // Box-average N x N blocks of `hi` into `lo` (supersampling).
@@ -473,10 +514,14 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
                 int mode, int supersample, int sh_degree, FArr background, bool want_window, int threads,
                 std::optional<FArr> weight_sh, std::optional<FArr> cell_means, std::optional<FArr> cell_scales,
                 std::optional<FArr> cell_quats, std::optional<IArr> cell_offsets, std::optional<IArr> cell_members,
-                float sigma, float weight_background, float et_grade, bool depth_correct, std::optional<LArr> control) {
+                float sigma, float weight_background, float et_grade, bool depth_correct, std::optional<LArr> control,
+                std::optional<PArr> partial) {
     const int64_t n = check_scene("render", means, scales, quats, opacities, sh, filter_3d);
     if (control && control->shape(0) != 3) throw std::invalid_argument("render: control must hold 3 int64");
-    const Progress progress{control ? control->data() : nullptr};
+    if (partial && (partial->shape(0) != (size_t)height || partial->shape(1) != (size_t)width ||
+                    partial->shape(2) != 3))
+        throw std::invalid_argument("render: partial must be float32 (height, width, 3)");
+    const Progress progress{control ? control->data() : nullptr, partial ? partial->data() : nullptr};
     const RenderArgs args = parse_render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, mode,
                                               supersample, background, sigma, weight_background, et_grade,
                                               depth_correct);
@@ -522,7 +567,7 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
         } else {
             Image hi;
             hi.resize(width * N, height * N, window);
-            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path, *pooled.buf, hi, st, progress);
+            render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path, *pooled.buf, hi, st, progress, N);
             auto t0 = Clock::now();
             if (!progress.cancelled()) box_downsample(hi, N, out);
             st.blend_ms += ms_since(t0);
@@ -583,5 +628,5 @@ NB_MODULE(_native, m) {
           nb::arg("cell_quats").none() = nb::none(), nb::arg("cell_offsets").none() = nb::none(),
           nb::arg("cell_members").none() = nb::none(), nb::arg("sigma") = 10.0f,
           nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
-          nb::arg("control").none() = nb::none());
+          nb::arg("control").none() = nb::none(), nb::arg("partial").none() = nb::none());
 }

@@ -86,3 +86,47 @@ def test_native_module_skips_every_tile_once_the_flag_is_set(scene, ss):
     out = _native.render(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None, *camera_args(cam),
                          int(gb.Mode.SCALAR), ss, 3, np.zeros(3, np.float32), False, 0, control=block)
     assert not out["cancelled"] and block[1] == block[2] and out["rgb"].any()
+
+
+@pytest.mark.parametrize("backend", ["cpu", pytest.param("glsl", marks=pytest.mark.gl)])
+@pytest.mark.parametrize("ss", [1, 2, 3])
+def test_partial_frame_ends_equal_to_the_frame(scene, backend, ss):
+    """`partial` holds the finished frame once the render returns: exactly, except (ss=3 on the CPU) output pixels
+    whose samples straddle two tiles, which hold one tile's share until the frame replaces them."""
+    r = _renderer(backend, scene)
+    cam = front_camera(100, 70)
+    partial = np.full((70, 100, 3), np.nan, np.float32)
+    frame = r.render(cam, _settings(ss=ss), partial=partial)
+    exact = np.ones((70, 100), bool)
+    if backend == "cpu" and 16 % ss:
+        def one_tile(n: int) -> np.ndarray:  # output pixels along an axis whose samples lie in one tile
+            return np.ptp(np.arange(n * ss).reshape(-1, ss) // 16, axis=1) == 0
+        exact = np.outer(one_tile(70), one_tile(100))
+        assert 0.5 < exact.mean() < 1 and np.isfinite(partial).all()
+    np.testing.assert_array_equal(partial[exact], frame.rgb[exact])
+
+
+def test_partial_tiles_of_a_cancelled_render_equal_the_final_tiles(scene):
+    """Cancelled after the first progress report: the tiles written so far are the final frame's, the rest untouched,
+    and they were blended from the centre out."""
+    cam = front_camera(640, 480)
+    final = gb.render(scene, cam, "gaussian_blending", supersample=2)
+    partial = np.full((480, 640, 3), np.nan, np.float32)
+    cancel = threading.Event()
+    with pytest.raises(gb.RenderCancelled):
+        gb.render(scene, cam, "gaussian_blending", supersample=2, cancel=cancel, partial=partial,
+                  on_progress=lambda done, total: cancel.set())
+    filled = np.isfinite(partial).all(axis=2)
+    assert filled.any() and not filled.all()
+    np.testing.assert_array_equal(partial[filled], final.rgb[filled])
+    tiles = filled[::8, ::8]  # one entry per 16x16 tile of the 2x2-supersampled frame (8x8 output pixels)
+    ty, tx = np.mgrid[0:tiles.shape[0], 0:tiles.shape[1]]
+    dist = np.hypot(tx + 0.5 - tiles.shape[1] / 2, ty + 0.5 - tiles.shape[0] / 2)
+    assert dist[tiles].max() <= dist[~tiles].min() + 2.0  # centre out (up to the tiles in flight)
+
+
+def test_a_partial_buffer_of_the_wrong_shape_is_refused(scene):
+    with pytest.raises(gb.RenderError, match=r"partial: expected .*\(48, 64, 3\)"):
+        gb.render(scene, front_camera(64, 48), partial=np.zeros((48, 64, 4), np.float32))
+    with pytest.raises(gb.RenderError, match="partial"):
+        gb.render(scene, front_camera(64, 48), partial=np.zeros((48, 64, 3), np.float64))

@@ -173,13 +173,15 @@ class GlslRenderer:
             self._upload_cells(prep.cells, prep.scene.num_splats)
 
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
-               on_progress: Progress | None = None) -> Frame:
+               on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
+        control = RenderControl(cancel, on_progress, partial)
+        control.check_partial(camera.width, camera.height)
         self._make_current()
         t0 = time.perf_counter()
         prep = prepare(self._scene, camera, settings, self.name)
         self._sync(prep)
         want_window = settings.debug == "window" and settings.mode == Mode.GAUSSIAN_BLENDING
-        with RenderControl(cancel, on_progress) as control:
+        with control:
             counts = self._frame(camera, settings, prep, want_window, control)
         W, H = camera.width, camera.height
         img = np.frombuffer(self.gpu.texture.read(), np.float32).reshape(H, W, 4)
@@ -190,6 +192,7 @@ class GlslRenderer:
             debug["window"] = np.frombuffer(window, np.float32).reshape(H, W, 2).copy()
         stats = frame_stats(prep, camera, settings, self.name, t0, evaluations=int(evals.sum(dtype=np.int64)),
                             **counts)
+        control.fill_partial(img[:, :, :3])
         return Frame(img[:, :, :3].copy(), img[:, :, 3].copy(), stats, debug)
 
     def __del__(self) -> None:
