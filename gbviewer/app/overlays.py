@@ -72,12 +72,19 @@ def pane_label(app: ViewerApp, p: PaneState, part: str) -> str:
 
 
 def stats_lines(p: PaneState, part: str) -> list[str]:
-    """The information overlay of a pane part: timings per stage, fps, visible splats, evaluations per pixel."""
-    st = p.parts[part].frame.stats
+    """The information overlay of a pane part: timings per stage, fps, visible splats, evaluations per pixel, and
+    the pacing of its last requests (ms from the request to the preview, to the first full-resolution tiles, to the
+    final frame)."""
+    shown = p.parts[part]
+    st = shown.frame.stats
     tag = "B " if part == "b" else ""
-    return [f"{tag}{st.total_ms:.1f} ms: pre {st.preprocess_ms:.1f} + sort {st.sort_ms:.1f} + blend "
-            f"{st.blend_ms:.1f}  {pane_fps(p, part):.1f} fps",
-            f"{tag}{st.visible:,} splats visible  {st.evals_per_pixel:.0f} evals/px"]
+    lines = [f"{tag}{st.total_ms:.1f} ms: pre {st.preprocess_ms:.1f} + sort {st.sort_ms:.1f} + blend "
+             f"{st.blend_ms:.1f}  {pane_fps(p, part):.1f} fps",
+             f"{tag}{st.visible:,} splats visible  {st.evals_per_pixel:.0f} evals/px"]
+    if shown.pacing:
+        names = {"preview": "preview", "tiles": "first tiles", "final": "final"}
+        lines.append(tag + "  ".join(f"{names[k]} {v:.0f} ms" for k, v in shown.pacing.items()))
+    return lines
 
 
 def draw_pane_overlays(app: ViewerApp) -> None:
@@ -114,6 +121,9 @@ def draw_pane_overlays(app: ViewerApp) -> None:
                 fw, fh = job.info["full_size"]
                 text(app, dl, xx, y, f"moving: preview {job.camera.width}x{job.camera.height} (not {fw}x{fh})",
                      YELLOW, align_right=right)
+            elif shown.progress is not None:
+                what = "x1 sample shown, refining" if shown.stage == "quick" else "refining"
+                text(app, dl, xx, y, f"{what} {shown.progress:.0%}", YELLOW, align_right=right)
             elif app.worker.busy((p.index, part)) and job is not None:
                 text(app, dl, xx, y, "rendering...", GREY, align_right=right)
             if shown.error:

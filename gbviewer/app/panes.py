@@ -1,6 +1,6 @@
 """The panes' renders: which requests go to the render thread this frame (one per pane part whose view changed, at a
-preview resolution while the camera moves), finished frames uploaded to textures, and their images queued for
-drawing."""
+preview resolution while the camera moves; at full resolution, refining progressively, once it stops), frames
+uploaded to textures as they come (quick stage, finished tiles, final), and their images queued for drawing."""
 
 from __future__ import annotations
 
@@ -10,8 +10,9 @@ from dataclasses import replace
 import moderngl
 import numpy as np
 
+from ..camera import Camera
 from ..figure import to_uint8
-from ..render import Frame
+from ..render import Frame, RenderSettings
 from .blit import Blitter
 from .layout import split_parts
 from .rates import preview_factor
@@ -21,6 +22,7 @@ from .worker import RenderJob, RenderResult, RenderWorker
 
 MAX_SAMPLES = 96_000_000  # per render (pixels x supersampling^2): bounds memory and time at x8 with 8x8
 PREVIEW_BUDGET_MS = 60.0  # per UI frame while the camera moves, shared by the panes
+QUICK_MIN_MS = 150.0  # a still frame expected to take longer shows its x1 sample first (supersampled or zoomed in)
 
 
 def pane_fps(p: PaneState, part: str) -> float:
@@ -72,9 +74,25 @@ class PaneRenders:
                 if p.submitted.get(part) == key:
                     continue
                 p.submitted[part] = key
-                self.worker.submit(RenderJob((p.index, part), s.scene, cam, settings, backend,
-                                             {"key": key, "preview": f, "rate": s.settings.rate,
-                                              "full_size": (w, h)}))
+                shown = p.parts[part]
+                progressive = f == 1.0 and backend == "cpu" and ps.view == "color"
+                est_ms = cost * w * h if cost else None
+                self.worker.submit(RenderJob(
+                    (p.index, part), s.scene, cam, settings, backend,
+                    {"key": key, "preview": f, "rate": s.settings.rate, "full_size": (w, h)},
+                    priority=int(not moving and s.hover is not None and s.hover[0] == p.index),
+                    progressive=progressive,
+                    underlay=shown.frame.rgb if progressive and shown.frame is not None and shown.view == "color"
+                    else None,
+                    quick=self._quick(p.index, settings, est_ms) if progressive else None))
+
+    def _quick(self, i: int, settings: RenderSettings, est_ms: float | None) -> tuple[Camera, RenderSettings] | None:
+        """The x1 sample of a still frame that supersamples or zooms in and is expected to be slow (or not measured
+        yet): one sample per pane pixel, shown while the full frame refines."""
+        rate = self.state.settings.rate
+        if (settings.supersample == 1 and rate <= 1.0) or (est_ms is not None and est_ms < QUICK_MIN_MS):
+            return None
+        return self.state.pane_camera(i, min(1.0, 1.0 / rate)), replace(settings, supersample=1)
 
     def poll(self) -> None:
         """Take finished renders; re-colour frames whose pane view changed."""
@@ -122,6 +140,9 @@ class PaneRenders:
             return  # superseded: the newer request of its slot is queued
         p = s.panes[i]
         shown = p.parts[part]
+        if res.stage != "final":
+            self._take_refining(res, shown)
+            return
         shown.job = res.job
         if res.frame is None:
             shown.error = res.error
@@ -135,10 +156,33 @@ class PaneRenders:
             p.ms_per_px[key] = total_ms / (cam.width * cam.height)
         p.fps[part].tick(res.finished)
         self._upload(res.job.slot, shown, res.frame, s.settings.panes[i].view)
+        preview = res.job.info.get("preview", 1.0) < 1.0
+        shown.stage, shown.progress = ("preview" if preview else "final"), None
+        shown.pacing["preview" if preview else "final"] = (res.finished - res.job.submitted) * 1e3
+
+    def _take_refining(self, res: RenderResult, shown: Shown) -> None:
+        """The quick stage or the tiles so far of the pane part's latest request (older ones are dropped)."""
+        i, part = res.job.slot
+        if res.job.info.get("key") != self.state.panes[i].submitted.get(part):
+            return
+        shown.job = res.job
+        if res.stage == "quick":
+            self._upload(res.job.slot, shown, res.frame, "color")
+            shown.stage, shown.progress = "quick", 0.0
+            return
+        self._write(res.job.slot, shown, np.ascontiguousarray(to_uint8(res.partial)))
+        if shown.stage != "refining":
+            shown.pacing.pop("final", None)
+            shown.pacing["tiles"] = (res.finished - res.job.submitted) * 1e3
+        shown.stage, shown.progress = "refining", res.progress
 
     def _upload(self, slot: tuple[int, str], shown: Shown, frame: Frame, view: str) -> None:
         rgb, legend = visualize(frame, view)
-        img = np.ascontiguousarray(to_uint8(rgb))
+        self._write(slot, shown, np.ascontiguousarray(to_uint8(rgb)))
+        shown.frame, shown.view, shown.legend = frame, view, legend
+
+    def _write(self, slot: tuple[int, str], shown: Shown, img: np.ndarray) -> None:
+        """`img` (uint8 (H, W, 3)) into the part's texture (made or resized as needed)."""
         h, w = img.shape[:2]
         tex = self._textures.get(slot)
         if tex is None or tex.size != (w, h):
@@ -150,4 +194,4 @@ class PaneRenders:
             self._textures[slot] = tex
         else:
             tex.write(img.tobytes(), alignment=1)
-        shown.texture, shown.frame, shown.view, shown.legend, shown.image = tex, frame, view, legend, img
+        shown.texture, shown.image = tex, img

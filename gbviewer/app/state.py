@@ -66,6 +66,9 @@ class Shown:
     legend: str = ""
     image: np.ndarray | None = None  # uint8 (H, W, 3) as uploaded
     error: str = ""
+    progress: float | None = None  # fraction of a refining frame's tiles on screen; None once final
+    stage: str = ""  # what is on screen: "preview", "quick" (x1 sample), "refining", "final"
+    pacing: dict[str, float] = field(default_factory=dict)  # ms from a request to its "preview"/"tiles"/"final"
 
 
 @dataclass

@@ -1,21 +1,31 @@
 """The viewer's render thread, off the UI thread: fed per-slot requests (the newest request of a slot replaces an
 older one still waiting: stale requests are dropped, and a running render of that slot is cancelled between tiles,
-so the thread never finishes a frame nobody will see). No OpenGL here; the 'glsl' backend makes its own headless
-context current in the render thread (so it never touches the window's)."""
+so the thread never finishes a frame nobody will see). A progressive request posts its frame while it refines: its
+quick stage (the x1 sample of a supersampled or zoomed-in pane) first, then the full frame's tiles a few times a
+second. The thread runs at a lower CPU priority than the UI (Linux), so the window keeps its core. No OpenGL here;
+the 'glsl' backend makes its own headless context current in the render thread (so it never touches the window's)."""
 
 from __future__ import annotations
 
 import gc
+import os
+import sys
 import threading
 import time
 import traceback
 from dataclasses import dataclass, field
 from typing import Any, Hashable
 
+import numpy as np
+
 from ..camera import Camera
 from ..errors import BackendUnavailable, GBViewerError, RenderCancelled
 from ..render import BACKENDS, Frame, RenderSettings, create_gl_context, create_renderer, get_renderer
 from ..scene import Scene
+
+
+RENDER_NICE = 10  # added to the render thread's (and its OpenMP threads') niceness: the UI gets a core when it asks
+PARTIAL_INTERVAL_S = 0.1  # how often a refining frame is posted (the first finished tiles at once)
 
 
 @dataclass
@@ -27,6 +37,11 @@ class RenderJob:
     backend: str = "cpu"
     info: dict = field(default_factory=dict)  # what the UI needs to show with the result (rate, preview...)
     seq: int = 0  # set by the worker: submission order
+    priority: int = 0  # among waiting requests, higher first (the pane under the cursor)
+    progressive: bool = False  # post the frame while it refines (tiles as they finish)
+    underlay: np.ndarray | None = None  # float RGB the refining frame starts from (scaled to the job's size)
+    quick: tuple[Camera, RenderSettings] | None = None  # rendered and posted first: a cheap stand-in
+    submitted: float = 0.0  # set by the worker: perf_counter at submission
 
 
 @dataclass
@@ -36,6 +51,17 @@ class RenderResult:
     error: str = ""
     finished: float = 0.0
     cancelled: bool = False  # superseded while it rendered: no frame, nothing to show
+    stage: str = "final"  # "quick" (frame is the quick stage), "partial" (partial holds the tiles so far), "final"
+    partial: np.ndarray | None = None  # float32 (H, W, 3), still being written by the render
+    progress: float = 1.0  # fraction of the frame's tiles done
+
+
+def scaled_nearest(image: np.ndarray, width: int, height: int) -> np.ndarray:
+    """`image` (H, W, 3) resized to (height, width, 3) float32 by nearest neighbour."""
+    h, w = image.shape[:2]
+    ys = np.arange(height) * h // height
+    xs = np.arange(width) * w // width
+    return np.ascontiguousarray(image[ys[:, None], xs[None, :], :3], np.float32)
 
 
 class RenderWorker:
@@ -68,6 +94,7 @@ class RenderWorker:
         with self._lock:
             self._seq += 1
             job.seq = self._seq
+            job.submitted = time.perf_counter()
             if job.slot in self._pending:
                 self.dropped += 1
             if self._running is not None and self._running.slot == job.slot:
@@ -155,7 +182,20 @@ class RenderWorker:
             self._glsl[1].release()
             self._glsl = None
 
+    def _post(self, result: RenderResult) -> None:
+        """Hand a result to the UI; a partial frame replaces the same job's earlier one not yet taken."""
+        with self._lock:
+            if result.stage == "partial":
+                self._results = [r for r in self._results if not (r.job is result.job and r.stage == "partial")]
+            self._results.append(result)
+
     def _loop(self) -> None:
+        if sys.platform.startswith("linux"):  # per thread there (a thread id is a task id); elsewhere the process
+            try:
+                tid = threading.get_native_id()
+                os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + RENDER_NICE))
+            except OSError:
+                pass
         self._check_backends()
         while True:
             with self._lock:
@@ -163,15 +203,16 @@ class RenderWorker:
                     self._wake.wait()
                 if self._stop:
                     break
-                slot = min(self._pending, key=lambda s: (self._served.get(s, 0.0), self._pending[s].seq))
+                slot = min(self._pending, key=lambda s: (-self._pending[s].priority, self._served.get(s, 0.0),
+                                                          self._pending[s].seq))
                 job = self._pending.pop(slot)
                 self._running = job
                 self._cancel_running = threading.Event()
             result = self._render(job, self._cancel_running)
+            self._post(result)
             with self._lock:
                 self._running = None
                 self._served[slot] = time.perf_counter()
-                self._results.append(result)
                 self.cancelled += result.cancelled
                 self.rendered += not result.cancelled
         self._scene = None
@@ -188,7 +229,11 @@ class RenderWorker:
                 self._release_glsl()  # else it would keep the previous scene and its GPU buffers while cpu renders
             gc.collect()  # free the previous scene's renderers (and GL buffers) in this thread
         try:
-            frame = self._renderer(job.scene, job.backend).render(job.camera, job.settings, cancel=cancel)
+            renderer = self._renderer(job.scene, job.backend)
+            if not job.progressive:
+                frame = renderer.render(job.camera, job.settings, cancel=cancel)
+            else:
+                frame = self._refine(renderer, job, cancel)
             return RenderResult(job, frame, "", time.perf_counter())
         except RenderCancelled:
             return RenderResult(job, None, "", time.perf_counter(), cancelled=True)
@@ -197,3 +242,22 @@ class RenderWorker:
         except Exception as exc:  # noqa: BLE001 - shown in the window, never kills the thread
             traceback.print_exc()
             return RenderResult(job, None, f"{type(exc).__name__}: {exc}", time.perf_counter())
+
+    def _refine(self, renderer, job: RenderJob, cancel: threading.Event) -> Frame:
+        """A progressive job: the quick stage, then the frame with its finished tiles posted as they come."""
+        base = job.underlay
+        if job.quick is not None:
+            quick = renderer.render(*job.quick, cancel=cancel)
+            self._post(RenderResult(job, quick, "", time.perf_counter(), stage="quick"))
+            base = quick.rgb
+        w, h = job.camera.width, job.camera.height
+        partial = scaled_nearest(base, w, h) if base is not None else np.zeros((h, w, 3), np.float32)
+        posted = [0.0, 0]  # when, tiles done
+
+        def on_progress(done: int, total: int) -> None:
+            now = time.perf_counter()
+            if done > posted[1] and done < total and (posted[1] == 0 or now - posted[0] >= PARTIAL_INTERVAL_S):
+                posted[:] = [now, done]
+                self._post(RenderResult(job, None, "", now, stage="partial", partial=partial, progress=done / total))
+
+        return renderer.render(job.camera, job.settings, cancel=cancel, on_progress=on_progress, partial=partial)

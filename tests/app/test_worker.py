@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import gc
+import os
+import sys
+import threading
 import time
 import weakref
 
@@ -10,7 +13,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.app.worker import RenderJob, RenderWorker
+from gbviewer.app.worker import RENDER_NICE, RenderJob, RenderWorker
 from gbviewer.render import RenderSettings
 
 
@@ -105,5 +108,82 @@ def test_a_newer_request_cancels_the_running_render_of_its_slot(bundled_scene):
         assert results[0].cancelled and results[0].frame is None and not results[0].error
         assert not results[1].cancelled and results[1].frame is not None
         assert w.cancelled == 1 and w.rendered == 1
+    finally:
+        w.stop()
+
+
+def _collect(w: RenderWorker, until, timeout: float = 120.0) -> list:
+    out, t0 = [], time.time()
+    while not until(out) and time.time() - t0 < timeout:
+        out += w.results()
+        time.sleep(0.005)
+    return out
+
+
+def test_a_progressive_job_posts_its_quick_stage_then_tiles_equal_to_the_final_frame(bundled_scene):
+    """Quick stage first (x1 sample, its own size), then snapshots of the refining frame whose finished tiles (the
+    pixels that left the underlay) equal the final frame's, then the final frame."""
+    w = RenderWorker()
+    snapshots: list[tuple[float, np.ndarray]] = []
+    post = w._post
+
+    def snapshot(result):  # what the UI would upload at that moment
+        if result.stage == "partial":
+            snapshots.append((result.progress, result.partial.copy()))
+        post(result)
+
+    w._post = snapshot
+    try:
+        cam = gb.orbit_camera(bundled_scene, width=640, height=480)
+        settings = RenderSettings("gaussian_blending", supersample=2)
+        quick = (cam.with_size(320, 240), RenderSettings("gaussian_blending"))
+        underlay = np.full((10, 10, 3), np.nan, np.float32)
+        job = RenderJob(1, bundled_scene, cam, settings, "cpu", progressive=True, underlay=underlay, quick=quick)
+        w.submit(job)
+        out = _collect(w, lambda o: any(r.stage == "final" for r in o))
+        stages = [r.stage for r in out]
+        assert stages[0] == "quick" and stages[-1] == "final" and set(stages) <= {"quick", "partial", "final"}
+        assert out[0].frame.rgb.shape == (240, 320, 3)
+        final = out[-1].frame
+        ref = gb.render(bundled_scene, cam, "gaussian_blending", supersample=2)
+        np.testing.assert_array_equal(final.rgb, ref.rgb)
+        assert snapshots and all(0 < p < 1 for p, _ in snapshots)
+        quick_up = out[0].frame.rgb.repeat(2, 0).repeat(2, 1)  # the quick stage, scaled: what is not refined yet
+        for progress, snap in snapshots:
+            done = (snap != quick_up).any(axis=2)
+            np.testing.assert_array_equal(snap[done], final.rgb[done])
+            assert not np.isnan(snap).any()  # the quick stage replaced the underlay
+    finally:
+        w.stop()
+
+
+def test_waiting_requests_of_higher_priority_go_first(bundled_scene):
+    """While one render runs, a priority-1 request submitted after a priority-0 one is rendered before it."""
+    w = RenderWorker()
+    try:
+        heavy = gb.orbit_camera(bundled_scene, width=800, height=600)
+        first = RenderJob("busy", bundled_scene, heavy, RenderSettings("gaussian_blending", supersample=2), "cpu")
+        w.submit(first)
+        t0 = time.time()
+        while w._running is not first and time.time() - t0 < 60:
+            time.sleep(0.001)
+        small = heavy.with_size(32, 24)
+        low = RenderJob("low", bundled_scene, small, RenderSettings(), "cpu")
+        high = RenderJob("high", bundled_scene, small, RenderSettings(), "cpu", priority=1)
+        w.submit(low)
+        w.submit(high)
+        out = _collect(w, lambda o: len(o) >= 3)
+        assert [r.job.slot for r in out] == ["busy", "high", "low"]
+    finally:
+        w.stop()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread niceness is Linux's")
+def test_the_render_thread_runs_below_the_ui_priority(bundled_scene):
+    w = RenderWorker()
+    try:
+        assert w.backends_ready.wait(60)
+        ui = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+        assert os.getpriority(os.PRIO_PROCESS, w._thread.native_id) == min(19, ui + RENDER_NICE)
     finally:
         w.stop()
