@@ -81,6 +81,7 @@ class PaneRenders:
                     (p.index, part), s.scene, cam, settings, backend,
                     {"key": key, "preview": f, "rate": s.settings.rate, "full_size": (w, h)},
                     priority=int(not moving and s.hover is not None and s.hover[0] == p.index),
+                    preview=f < 1.0,
                     progressive=progressive,
                     underlay=shown.frame.rgb if progressive and shown.frame is not None and shown.view == "color"
                     else None,

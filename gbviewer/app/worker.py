@@ -38,6 +38,8 @@ class RenderJob:
     info: dict = field(default_factory=dict)  # what the UI needs to show with the result (rate, preview...)
     seq: int = 0  # set by the worker: submission order
     priority: int = 0  # among waiting requests, higher first (the pane under the cursor)
+    preview: bool = False  # a stand-in while the camera moves: a newer preview of the slot waits for it to finish
+    # (cancelling each would show none); any other newer request of the slot cancels the running render
     progressive: bool = False  # post the frame while it refines (tiles as they finish)
     underlay: np.ndarray | None = None  # float RGB the refining frame starts from (scaled to the job's size)
     quick: tuple[Camera, RenderSettings] | None = None  # rendered and posted first: a cheap stand-in
@@ -97,7 +99,8 @@ class RenderWorker:
             job.submitted = time.perf_counter()
             if job.slot in self._pending:
                 self.dropped += 1
-            if self._running is not None and self._running.slot == job.slot:
+            running = self._running
+            if running is not None and running.slot == job.slot and not (running.preview and job.preview):
                 self._cancel_running.set()
             self._pending[job.slot] = job
             self._wake.notify()

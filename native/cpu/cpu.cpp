@@ -328,7 +328,6 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
     const int gx = (W + TILE - 1) / TILE;
     const int num_tiles = (int)tile_start.size() - 1;
     const std::vector<int> order = centre_out_order(gx, num_tiles / gx);
-    progress.start(num_tiles);
     auto t0 = Clock::now();
     boxes.resize(splats.size());
 #pragma omp parallel for schedule(static)
@@ -432,6 +431,7 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
     const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE;
     const int num_tiles = gx * gy;
     const int64_t n = sc.n;
+    progress.start(num_tiles);
 
     auto t0 = Clock::now();
     // every element of the reused buffers is written before it is read; a much smaller scene releases them
@@ -448,8 +448,11 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
                       splats.data(), rects.data(), valid.data()};
     const int64_t blocks = (n + PREPROCESS_BLOCK - 1) / PREPROCESS_BLOCK;
 #pragma omp parallel for schedule(static)
-    for (int64_t b = 0; b < blocks; ++b)
+    for (int64_t b = 0; b < blocks; ++b) {
+        if (progress.cancelled()) continue;  // a cancelled frame stops here too, not only between tiles
         path.preprocess(job, b * PREPROCESS_BLOCK, std::min(n, (b + 1) * PREPROCESS_BLOCK));
+    }
+    if (progress.cancelled()) return;
     if (g_capture.load(std::memory_order_relaxed)) {
         constexpr size_t rec = 1 + sizeof(Splat2D) + sizeof(TileRect);
         std::lock_guard<std::mutex> lock(g_capture_mutex);
@@ -473,6 +476,7 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
         bin_splats(splats, rects, valid, gx, mode != WSR, tile_start, keys, st);
     }
     if (keys.capacity() > 4 * keys.size() + (1u << 20)) keys.shrink_to_fit();  // after a much larger frame
+    if (progress.cancelled()) return;
     blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, path.blend_tile, buf.boxes, img, st, progress, N);
 }
 

@@ -122,7 +122,8 @@ def _collect(w: RenderWorker, until, timeout: float = 120.0) -> list:
 
 def test_a_progressive_job_posts_its_quick_stage_then_tiles_equal_to_the_final_frame(bundled_scene):
     """Quick stage first (x1 sample, its own size), then snapshots of the refining frame whose finished tiles (the
-    pixels that left the underlay) equal the final frame's, then the final frame."""
+    pixels that left the underlay, but for the tiles being written at that moment) equal the final frame's, then the
+    final frame."""
     w = RenderWorker()
     snapshots: list[tuple[float, np.ndarray]] = []
     post = w._post
@@ -149,9 +150,10 @@ def test_a_progressive_job_posts_its_quick_stage_then_tiles_equal_to_the_final_f
         np.testing.assert_array_equal(final.rgb, ref.rgb)
         assert snapshots and all(0 < p < 1 for p, _ in snapshots)
         quick_up = out[0].frame.rgb.repeat(2, 0).repeat(2, 1)  # the quick stage, scaled: what is not refined yet
-        for progress, snap in snapshots:
+        for progress, snap in snapshots:  # copied while the render went on: tiles in flight may be half done
             done = (snap != quick_up).any(axis=2)
-            np.testing.assert_array_equal(snap[done], final.rgb[done])
+            wrong = (done & (snap != final.rgb).any(axis=2)).reshape(60, 8, 80, 8).any(axis=(1, 3))
+            assert wrong.sum() <= (os.cpu_count() or 1)  # 8x8 output pixels = one 16x16 tile of samples
             assert not np.isnan(snap).any()  # the quick stage replaced the underlay
     finally:
         w.stop()

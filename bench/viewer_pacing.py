@@ -1,0 +1,145 @@
+"""Frame pacing of the real viewer window (issue 14), under an Xvfb server of its own:
+
+    .venv/bin/python bench/viewer_pacing.py [--scene PATH] [--cycles 3] [--json OUT]
+
+Two gaussian_blending panes of about 800x600 each on the CPU backend. Each cycle orbits the camera through the app's
+own hooks (the controller and `moved()`, as a mouse drag does) for --orbit seconds, one step per UI frame, then lets
+it rest until both panes are final. Reported: UI frame time (one `step()`: events, finished renders uploaded, UI,
+requests, draw, swap) median and p95 while orbiting; from the camera stop (the moment the viewer counts the camera
+as still: the last move + MOVING_HOLD_S) to the first full-resolution tiles on screen and to the final frames; and
+how long a stale render kept running after a newer request of its pane cancelled it (submission of the newer
+request -> the render thread's cancelled result). Targets on a 2-core machine: UI p95 <= 33 ms, stale work stops
+within 50 ms, first tiles within 100 ms of the stop.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "tools"))
+
+from soak_viewer import xvfb_display  # noqa: E402
+
+import gbviewer as gb  # noqa: E402
+from gbviewer.app.state import MOVING_HOLD_S  # noqa: E402
+
+TARGETS = {"ui_p95_ms": 33.0, "stale_ms": 50.0, "first_tiles_ms": 100.0}
+WINDOW = (1900, 700)  # two panes of about 800x600 beside the side panel
+
+
+def percentile(values: list[float], q: float) -> float:
+    s = sorted(values)
+    return s[min(len(s) - 1, round(q * (len(s) - 1)))] if s else float("nan")
+
+
+def instrument(worker) -> tuple[dict, list[float]]:
+    """Record when a request cancels a running render of its slot and when that render's result comes back."""
+    asked: dict = {}
+    stale: list[float] = []
+    submit, post = worker.submit, worker._post
+
+    def on_submit(job):
+        running = worker._running
+        if running is not None and running.slot == job.slot and running.seq not in asked:
+            asked[running.seq] = time.perf_counter()
+        submit(job)
+
+    def on_post(result):
+        if result.cancelled and result.job.seq in asked:
+            stale.append((result.finished - asked.pop(result.job.seq)) * 1e3)
+        post(result)
+
+    worker.submit, worker._post = on_submit, on_post
+    return asked, stale
+
+
+def run(scene: str, cycles: int, orbit_s: float, settle_s: float) -> dict:
+    from gbviewer.app.window import ViewerApp
+
+    app = ViewerApp(scene, size=WINDOW, persist=False)
+    s = app.state
+    s.settings.pane_count = 2
+    for ps in s.settings.panes[:2]:
+        ps.mode, ps.split, ps.supersample, ps.view = "gaussian_blending", False, 1, "color"
+    s.settings.backend = "cpu"
+    try:
+        if not app.wait_rendered(300):
+            raise RuntimeError("the first frames never finished")
+        _, stale = instrument(app.worker)
+        sizes = [p.render_size for p in s.visible]
+        frame_ms: list[float] = []
+        first_tiles: list[float] = []
+        finals: list[float] = []
+        def orbit(seconds: float) -> None:  # a steady drag: 4 px per UI frame
+            t_end = time.perf_counter() + seconds
+            while time.perf_counter() < t_end:
+                t0 = time.perf_counter()
+                s.controller.orbit(4.0, 0.5)
+                s.moved()
+                app.step()
+                frame_ms.append((time.perf_counter() - t0) * 1e3)
+
+        def settle(until_final: bool) -> None:
+            """Step until both panes are final (recording the pacing), or until the first full-resolution tiles
+            have been on screen for 0.2 s (the next drag then cancels the refining renders)."""
+            t_stop = s.last_move + MOVING_HOLD_S
+            seen_tiles = None
+            deadline = time.perf_counter() + settle_s
+            while time.perf_counter() < deadline:
+                app.step()
+                now = time.perf_counter()
+                current = [p.parts["a"] for p in s.visible  # showing the request made after the stop
+                           if p.parts["a"].job is not None and p.parts["a"].job.info["key"] == p.submitted.get("a")]
+                if seen_tiles is None and any(sh.stage in ("refining", "final") for sh in current):
+                    seen_tiles = now
+                if not until_final and seen_tiles is not None and now - seen_tiles > 0.2:
+                    return
+                if len(current) == len(s.visible) and all(sh.stage == "final" for sh in current):
+                    first_tiles.append((seen_tiles - t_stop) * 1e3)
+                    finals.append((now - t_stop) * 1e3)
+                    return
+                time.sleep(0.002)
+
+        for _ in range(cycles):
+            orbit(orbit_s)
+            settle(until_final=True)
+            orbit(0.5)
+            settle(until_final=False)
+        orbit(0.5)
+        return {
+            "scene": Path(scene).name, "pane_render_sizes": sizes, "cycles": cycles, "gl_renderer": app.gl_renderer,
+            "ui_frames": len(frame_ms), "ui_median_ms": statistics.median(frame_ms),
+            "ui_p95_ms": percentile(frame_ms, 0.95), "stale_renders": len(stale),
+            "stale_median_ms": statistics.median(stale) if stale else None,
+            "stale_max_ms": max(stale) if stale else None,
+            "first_tiles_ms": first_tiles, "final_ms": finals, "targets": TARGETS,
+        }
+    finally:
+        app.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scene", default=str(gb.DEFAULT_SCENE))
+    ap.add_argument("--cycles", type=int, default=3)
+    ap.add_argument("--orbit", type=float, default=3.0, help="seconds of orbiting per cycle")
+    ap.add_argument("--settle", type=float, default=30.0, help="at most this long for the final frames per cycle")
+    ap.add_argument("--json", type=Path)
+    args = ap.parse_args(argv)
+    with xvfb_display(2000, 800):
+        result = run(args.scene, args.cycles, args.orbit, args.settle)
+    text = json.dumps(result, indent=1)
+    print(text)
+    if args.json:
+        args.json.write_text(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
