@@ -4,7 +4,8 @@
 
 Measures, in one run on this machine: speed per mode/backend/rate and zoom fidelity on the shared scenes (on the
 CPU backend's SIMD path in use: GBVIEWER_SIMD, else the best this CPU runs), every SIMD path of the CPU backend
-against the scalar one at 640x480, the synthetic scaling series (splats and pixels), and loading speed per format.
+against the scalar one at 640x480, the synthetic scaling series (splats and pixels), loading speed per format, and
+the viewer's frame pacing in the real window under Xvfb (bench/viewer_pacing.py, ~1 min).
 Plots go to bench/results/. It prints the time each part took and writes it at the end of RESULTS.md: on 2 cores
 about 15-20 min in all (scenes ~10, of which the SIMD comparison ~1.5 with the scalar path as the slow part;
 scaling to 10M splats ~4; loading ~1), --quick about 2 min."""
@@ -26,6 +27,7 @@ SHARED = REPO.parent / "shared" / "scenes"
 sys.path.insert(0, str(HERE))
 
 import scaling  # noqa: E402
+import viewer_pacing  # noqa: E402
 
 import gbviewer as gb  # noqa: E402
 from gbviewer import bench  # noqa: E402
@@ -156,6 +158,13 @@ def main() -> int:
     load = subprocess.run([sys.executable, str(HERE / "load_speed.py"), "--n", "100000" if args.quick else "1000000"],
                           capture_output=True, text=True)
     times["loading"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    pacing_json = out_dir / "viewer_pacing.json"
+    pacing = subprocess.run([sys.executable, str(HERE / "viewer_pacing.py"), "--json", str(pacing_json)]
+                            + (["--cycles", "1"] if args.quick else []), capture_output=True, text=True)
+    pacing_lines = (viewer_pacing.markdown(json.loads(pacing_json.read_text())) if pacing.returncode == 0
+                    else ["```", (pacing.stderr or pacing.stdout).strip()[-2000:], "```"])
+    times["viewer pacing"] = time.perf_counter() - t0
 
     machine = bench.machine_description()
     w, h = SIMD_SIZE
@@ -207,6 +216,7 @@ def main() -> int:
                          f"{r['blend_ms'] * 1e6 * (machine['cores'] or 1) / max(r['evals_per_pixel'] * r['width'] * r['height'], 1):.1f}",
                          f"{r['peak_rss_mib']:.0f}"] for r in scale["splats"] + scale["pixels"]]), ""]
     lines += ["## Loading speed", "", "```", (load.stdout or load.stderr).strip(), "```", ""]
+    lines += ["## Viewer frame pacing", ""] + pacing_lines + [""]
     lines += ["## Plots", ""] + [f"![{p.stem}](results/{p.name})" for p in plots] + [""]
     times["total"] = time.perf_counter() - started
     lines += ["## Run time", "", ", ".join(f"{k} {v / 60:.1f} min" for k, v in times.items()), ""]
