@@ -11,6 +11,7 @@ from ..camera import Camera
 from ..errors import GBViewerError
 from ..render import RenderSettings
 from ..scene import Scene
+from .worker import lower_priority
 
 
 class VideoJob:
@@ -34,6 +35,7 @@ class VideoJob:
             self.done_frames, self.total = done, total
 
         def run() -> None:
+            lower_priority()  # the window keeps its core while the video renders
             try:
                 path = zoom_path(camera, frames, start, end)
                 self.info = record_video(scene, path, settings, self.out, fps=fps, backend=backend,

@@ -58,6 +58,19 @@ class RenderResult:
     progress: float = 1.0  # fraction of the frame's tiles done
 
 
+def lower_priority(amount: int = RENDER_NICE) -> None:
+    """Raise the calling thread's niceness by `amount` (Linux, where a thread is a task; elsewhere it would renice
+    the whole process, so nothing): the threads it starts later, OpenMP's and Mesa's included, inherit it. For the
+    threads that render or load beside the window."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        tid = threading.get_native_id()
+        os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + amount))
+    except OSError:
+        pass
+
+
 def scaled_nearest(image: np.ndarray, width: int, height: int) -> np.ndarray:
     """`image` (H, W, 3) resized to (height, width, 3) float32 by nearest neighbour."""
     h, w = image.shape[:2]
@@ -193,12 +206,7 @@ class RenderWorker:
             self._results.append(result)
 
     def _loop(self) -> None:
-        if sys.platform.startswith("linux"):  # per thread there (a thread id is a task id); elsewhere the process
-            try:
-                tid = threading.get_native_id()
-                os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + RENDER_NICE))
-            except OSError:
-                pass
+        lower_priority()
         self._check_backends()
         while True:
             with self._lock:
