@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import replace
+from typing import Callable
 
 import moderngl
 import numpy as np
@@ -36,8 +37,10 @@ class PaneRenders:
     """Requests renders for the visible panes and shows what comes back. Owns one texture per pane part, reused
     across frames and scenes (a new scene's panes start without an image, and no texture outlives its part)."""
 
-    def __init__(self, state: AppState, worker: RenderWorker, ctx: moderngl.Context) -> None:
+    def __init__(self, state: AppState, worker: RenderWorker, ctx: moderngl.Context,
+                 colour: Callable[[tuple[int, str], Frame, str], tuple[np.ndarray, str]] | None = None) -> None:
         self.state, self.worker, self.ctx = state, worker, ctx
+        self.colour = colour or (lambda slot, frame, view: visualize(frame, view))  # image and legend of a view
         self._textures: dict[tuple[int, str], moderngl.Texture] = {}
 
     def submit(self) -> None:
@@ -137,7 +140,7 @@ class PaneRenders:
         self._upload(res.job.slot, shown, res.frame, s.settings.panes[i].view)
 
     def _upload(self, slot: tuple[int, str], shown: Shown, frame: Frame, view: str) -> None:
-        rgb, legend = visualize(frame, view)
+        rgb, legend = self.colour(slot, frame, view)
         img = np.ascontiguousarray(to_uint8(rgb))
         h, w = img.shape[:2]
         tex = self._textures.get(slot)
