@@ -15,7 +15,7 @@ import threading
 
 import numpy as np
 
-from .camera import Camera
+from .camera import Camera, format_rate
 from .metrics import box_downsample, psnr, ssim, zoom_out_factor
 from .render import Mode, Renderer, RenderSettings
 
@@ -90,7 +90,7 @@ def reference_settings(kind: str, settings: RenderSettings | None = None) -> Ren
 def reference_note(kind: str, rate: float) -> str:
     """Why a render at `rate` has no reference of `kind` ('' where it has one)."""
     if kind == "box" and zoom_out_factor(rate) is None:
-        return "the box reference needs a rate 1/k (k = 1, 2, 3...): choose dense"
+        return f"no box reference at {format_rate(rate)} (only at 1/k): choose dense"
     return ""
 
 

@@ -101,9 +101,12 @@ class PaneAnalysis:
         s = self.state
         if s.scene is not self._scene:
             self._scene = s.scene
+            self.thread.forget()
             self.latest.clear()
             self._asked.clear()
         for slot, result in self.thread.results():
+            if slot not in self._asked or self._asked[slot][0] is not result.frame:
+                continue  # overtaken by a newer request of its slot, or of the previous scene
             self.latest[slot] = result
             self.recolour(slot)
         if s.scene is None or s.moving:
@@ -178,7 +181,7 @@ class PaneAnalysis:
             return frame.rgb, f"{view}: {self._waiting(a, frame, view)}"
         scale = auto if self.options.auto_scale else self.options.scale
         self.shown_scale[slot] = scale
-        return colour_difference(plane, scale), f"{what}, mean over RGB"
+        return colour_difference(plane, scale), what
 
     def _waiting(self, a: Analysis | None, frame: Frame, view: str) -> str:
         if a is not None and a.frame is frame and a.note:
@@ -198,7 +201,7 @@ class PaneAnalysis:
         if a is None or a.spec.reference is None:
             return f"{spec.reference}: computing...", True
         if a.psnr is None:
-            return f"{a.spec.reference}: {a.note}", a.frame is not shown.frame
+            return a.note, a.frame is not shown.frame
         stale = self.state.moving or a.frame is not shown.frame or a.spec.reference != spec.reference
         return (f"PSNR {a.psnr:.2f} dB  SSIM {a.ssim:.4f} vs {a.spec.reference}" + ("  (stale)" if stale else ""),
                 stale)

@@ -58,6 +58,6 @@ def draw_analysis_overlays(app: ViewerApp) -> None:
             if scale is not None and p.parts[part].view:
                 y += draw_colour_bar(app, dl, x, y, scale, right)
             line = analysis.fidelity_line((p.index, part))
-            if line is not None:
-                text(app, dl, x, y, line[0], GREY if line[1] else WHITE, align_right=right)
+            if line is not None:  # a split's second line one row lower: long lines of both sides would overlap
+                text(app, dl, x, y + 22 * right, line[0], GREY if line[1] else WHITE, align_right=right)
         dl.pop_clip_rect()

@@ -69,7 +69,7 @@ class AnalysisThread:
         self._running: Hashable | None = None
         self._cancel = threading.Event()
         self._results: list[tuple[Hashable, Analysis]] = []
-        self._stop = False
+        self._stop = self._forget = False
         self._renderer = None
         self._scene: Scene | None = None  # the scene uploaded to the renderer, whose references are cached
         self._cache: dict[tuple, np.ndarray | None] = {}
@@ -90,6 +90,15 @@ class AnalysisThread:
             out, self._results = self._results, []
         return out
 
+    def forget(self) -> None:
+        """Drop what is waiting, stop what runs, and free the scene and the cached references (a new scene is
+        open)."""
+        with self._lock:
+            self._pending.clear()
+            self._cancel.set()
+            self._forget = True
+            self._lock.notify()
+
     def busy(self) -> bool:
         with self._lock:
             return bool(self._pending) or self._running is not None
@@ -105,10 +114,15 @@ class AnalysisThread:
     def _loop(self) -> None:
         while True:
             with self._lock:
-                while not self._pending and not self._stop:
+                while not self._pending and not self._stop and not self._forget:
                     self._lock.wait()
                 if self._stop:
                     break
+                if self._forget:
+                    self._forget = False
+                    self._renderer = self._scene = None
+                    self._cache.clear()
+                    continue
                 slot = next(iter(self._pending))
                 req = self._pending.pop(slot)
                 self._running, self._cancel = slot, threading.Event()

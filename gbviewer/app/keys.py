@@ -2,9 +2,9 @@
 
 Each row of SHORTCUTS is one line of the help: its label and text, and the keys that trigger actions. An action is
 the name of a method of `state.AppState`, `window.ViewerApp` or `analysis.PaneAnalysis`, called with the key's
-`args`. Rows without keys
-describe mouse gestures; keys marked `held` act every frame they are down (fly mode), the others once per press
-(or repeatedly, with `repeat`). Key names are the members of `imgui.Key` (kept as text here: no imgui import).
+`args`. Rows without keys describe mouse gestures; keys marked `held` act every frame they are down (fly mode), the
+others once per press (or repeatedly, with `repeat`). Key names are the members of `imgui.Key` (kept as text here:
+no imgui import).
 """
 
 from __future__ import annotations

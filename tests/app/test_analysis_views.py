@@ -121,7 +121,7 @@ def test_difference_view_and_psnr_labels(bundled_scene, output_view):
         rgb, legend = an.visualize((1, "a"), b.frame, "difference")
         scale = analysis.robust_scale(d)
         np.testing.assert_array_equal(rgb, analysis.colour_difference(d, scale))
-        assert an.shown_scale[(1, "a")] == scale and legend == "B - A (scalar), mean over RGB"
+        assert an.shown_scale[(1, "a")] == scale and legend == "B - A (scalar)"
         assert b.view == ""  # the result asked the panes to re-colour it
         an.set_scale(False, 0.02)
         np.testing.assert_array_equal(an.visualize((1, "a"), b.frame, "difference")[0],
@@ -146,7 +146,7 @@ def test_difference_view_and_psnr_labels(bundled_scene, output_view):
         e = analysis.signed_difference(a_rgb, dense)
         rgb, legend = an.visualize((0, "a"), state.panes[0].parts["a"].frame, "error")
         np.testing.assert_array_equal(rgb, analysis.colour_difference(e, 0.02))
-        assert legend == "A - dense reference, mean over RGB"
+        assert legend == "A - dense reference"
         assert an.fidelity_line((0, "a"))[0].startswith(f"PSNR {metrics.psnr(a_rgb, dense):.2f} dB")
         # a new frame on pane B: its label is stale until analysed, and nothing is asked while the camera moves
         b.frame = gb.render(bundled_scene, cam, "mip")
@@ -159,5 +159,14 @@ def test_difference_view_and_psnr_labels(bundled_scene, output_view):
         state.last_move = 0.0
         settle(an)
         assert not an.fidelity_line((1, "a"))[1]
+        # another scene: the results go, the thread lets go of the previous scene and its references
+        state.scene = gb.load(gb.DEFAULT_SCENE)
+        an.update()
+        assert an.latest == {} and an.fidelity_line((0, "a")) == ("dense: computing...", True)
+        t0 = time.perf_counter()
+        while an.thread._scene is not None or an.thread.busy():
+            assert time.perf_counter() - t0 < 10
+            time.sleep(0.01)
+        assert an.thread._cache == {}
     finally:
         an.stop()
