@@ -16,7 +16,7 @@ from .argtypes import BACKGROUND, INSET, MAX_SIDE, ORBIT, SIDE, SIZE, Number, Pa
 from .camera import Camera, format_rate, load_cameras_json, orbit_camera, parse_rates
 from .camera_paths import MAX_FRAMES, PATHS, camera_path, zoom_path
 from .errors import GBViewerError
-from .figure import compose_grid, render_grid, save_image, write_comparison
+from .figure import DIFFS, compose_grid, render_grid, save_image, write_comparison
 from .io import load, write_inria_ply
 from .io.files import check_writable
 from .render import BACKENDS, Mode, RenderSettings, get_renderer
@@ -274,12 +274,18 @@ def cmd_compare(args: argparse.Namespace) -> int:
     scene = load(args.scene)
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, rates, "--rates")
-    cmp = write_comparison(args.out, scene, cam, settings, rates, args.backend, args.inset, args.force)
+    cmp = write_comparison(args.out, scene, cam, settings, rates, args.backend, args.inset, args.force, args.diff)
     print(f"wrote {args.out} ({cmp.image.width}x{cmp.image.height}): {len(rates)} rates x {len(settings)} modes")
     for row, prow in zip(cmp.cells, cmp.psnr):
         for cell, p in zip(row, prow):
             if p is not None and p != float("inf"):
                 print(f"  {cell.settings.label:>20} {format_rate(cell.rate):>6}: PSNR {p:.2f} dB")
+    if cmp.diff is not None:
+        print(f"{cmp.diff.title}; colour bar -{cmp.diff.scale:.3g} .. +{cmp.diff.scale:.3g}")
+        for row, prow, name in zip(cmp.cells, cmp.diff.psnr, cmp.diff.reference):
+            for cell, p in zip(row, prow):
+                if p != float("inf"):
+                    print(f"  {cell.settings.label:>20} {format_rate(cell.rate):>6}: PSNR {p:.2f} dB vs {name}")
     return 0
 
 
@@ -394,6 +400,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sampling rates, e.g. 1,1/2,1/4,1/8")
     p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
     p.add_argument("--inset", type=INSET, metavar=INSET.metavar, help="magnify this region (x1 pixels) in a corner")
+    p.add_argument("--diff", nargs="?", const="first", choices=list(DIFFS),
+                   help="add under each rate a row of signed differences (mean over RGB, colour bar below): to the "
+                        "first mode (--diff, --diff first) or to the dense reference, scalar 8x8 (--diff ref)")
     p.add_argument("--out", required=True, help="FILE.png")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=cmd_compare)

@@ -1,5 +1,6 @@
 """Images for people: 8-bit conversion, nearest upscaling, labels, labelled grids of renders, and the modes x
-rates comparison figure with PSNR under each cell (`compare_figure`); PNG written atomically (`save_image`)."""
+rates comparison figure with PSNR under each cell and, on request, rows of differences with their colour bar
+(`compare_figure`); PNG written atomically (`save_image`)."""
 
 from __future__ import annotations
 
@@ -11,14 +12,18 @@ from typing import Sequence
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from .analysis import (MIN_SCALE, colour_bar, colour_difference, format_scale, reference_image, robust_scale,
+                       signed_difference)
 from .camera import Camera, format_rate
 from .errors import GBViewerError
 from .io.files import atomic_write, refuse_overwrite
-from .metrics import reference_psnr
-from .render import Frame, FrameStats, Mode, RenderSettings, get_renderer
+from .metrics import psnr, reference_psnr
+from .render import Frame, FrameStats, Mode, Renderer, RenderSettings, get_renderer
 from .scene import Scene
 
 GAP = 4  # pixels between cells
+DIFFS = {"first": "each mode minus the first mode at the same rate",
+         "ref": "each mode minus the dense reference (scalar 8x8) at the same rate"}
 
 
 def to_uint8(rgb: np.ndarray) -> np.ndarray:
@@ -202,59 +207,129 @@ def save_image(path: str | Path, img: Image.Image | np.ndarray, force: bool = Fa
 
 
 @dataclass
+class Differences:
+    """The difference rows of a comparison: one row of colour-mapped signed differences per rate (`analysis`), one
+    scale for the whole figure, and each cell's PSNR against the row's reference."""
+
+    kind: str  # a key of DIFFS
+    cells: list[list[Cell]]  # rows: rates; rgb: the colour-mapped difference at the render's resolution
+    psnr: list[list[float]]
+    scale: float
+    reference: list[str]  # per rate: what the row is the difference to
+
+    @property
+    def title(self) -> str:
+        return f"difference (mean over RGB): {DIFFS[self.kind]}"
+
+
+def difference_rows(renderer: Renderer, camera: Camera, cells: list[list[Cell]], kind: str) -> Differences:
+    """Per rate (a row of `cells`), each cell minus the row's first cell ('first') or minus the dense reference at
+    that rate ('ref'), colour-mapped with one scale: the largest of the cells' robust scales (so that no cell clips
+    more than 1 % of its pixels; the first cell's difference to itself left out)."""
+    refs = [row[0].rgb if kind == "first" else
+            reference_image(renderer, camera.at_sampling_rate(row[0].rate), row[0].rate, "dense", row[0].settings)
+            for row in cells]
+    ds = [[signed_difference(c.rgb, ref) for c in row] for row, ref in zip(cells, refs)]
+    scale = max((robust_scale(d) for row in ds for k, d in enumerate(row) if kind == "ref" or k > 0),
+                default=MIN_SCALE)
+    return Differences(kind, [[replace(c, rgb=colour_difference(d, scale)) for c, d in zip(row, drow)]
+                              for row, drow in zip(cells, ds)],
+                       [[psnr(c.rgb, ref) for c in row] for row, ref in zip(cells, refs)], scale,
+                       [row[0].mode_label if kind == "first" else "scalar 8x8" for row in cells])
+
+
+def colour_bar_strip(width: int, title: str, scale: float, font_size: int) -> tuple[Image.Image, tuple]:
+    """A strip `width` wide under a figure: `title`, the colour bar of `colour_difference` at `scale` and its -scale,
+    0, +scale labels; and where the bar is in the strip (x, y, w, h)."""
+    font = _font(font_size)
+    bw, bh = max(2, min(width - 16, 512)), font_size
+    x0, y0 = 8, font_size + 10
+    strip = Image.new("RGB", (width, y0 + bh + font_size + 12), (0, 0, 0))
+    strip.paste(Image.fromarray(to_uint8(colour_bar(bw, bh))), (x0, y0))
+    draw = ImageDraw.Draw(strip)
+    draw.text((x0, 4), title, fill=(255, 255, 255), font=font)
+    for text, x, align in ((f"-{format_scale(scale)}", x0, 0.0), ("0", x0 + bw / 2, 0.5),
+                           (f"+{format_scale(scale)}", x0 + bw, 1.0)):
+        draw.text((x - align * draw.textlength(text, font=font), y0 + bh + 3), text, fill=(255, 255, 255), font=font)
+    return strip, (x0, y0, bw, bh)
+
+
+@dataclass
 class Comparison:
     """A comparison figure and what is in it."""
 
     image: Image.Image
     cells: list[list[Cell]]  # rows: rates; columns: settings
     psnr: list[list[float | None]]
-    layout: GridLayout  # layout.origin(row, col): where each cell's nearest-upscaled render is in `image`
+    layout: GridLayout  # the grid's rows: one per rate, or (with differences) each rate's row then its differences
+    diff: Differences | None = None
+    bar: tuple[int, int, int, int] | None = None  # (x, y, w, h) of the colour bar in `image`, under the grid
+
+    def origin(self, rate: int, col: int, diff: bool = False) -> tuple[int, int]:
+        """(x, y) in `image` of the nearest-upscaled cell of rate `rate` (or of its difference) and column `col`."""
+        return self.layout.origin(2 * rate + diff if self.diff is not None else rate, col)
+
+
+def _psnr_note(p: float | None, reference: str = "") -> str:
+    if p is None:
+        return "no reference"
+    if math.isinf(p):
+        return "the row's reference" if reference else "reference"
+    return f"PSNR {p:.2f} dB" + (f" vs {reference}" if reference else "")
 
 
 def compare_figure(scene: Scene, camera: Camera, settings_list: Sequence[RenderSettings], rates: Sequence[float],
-                   backend: str = "cpu", inset: tuple[float, float, float, float] | None = None) -> Comparison:
+                   backend: str = "cpu", inset: tuple[float, float, float, float] | None = None,
+                   diff: str | None = None) -> Comparison:
     """Grid of modes (columns) x rates (rows) like the paper's figures: each cell rendered at camera
     .at_sampling_rate(rate), nearest-upscaled to the camera's size, captioned below with mode, rate and size and
     with its PSNR against the zoom-out reference (`reference_psnr`) and render time. `inset` (x, y, w, h in x1
-    pixels) is magnified into each cell's corner."""
+    pixels) is magnified into each cell's corner. `diff` ('first' or 'ref', see DIFFS and `difference_rows`) adds
+    under each rate's row the colour-mapped differences with their PSNRs, and the colour bar under the grid."""
     settings_list, rates = list(settings_list), list(rates)
     if not settings_list or not rates:
         raise GBViewerError("compare: give at least one mode and one rate")
+    if diff is not None and diff not in DIFFS:
+        raise GBViewerError(f"compare: difference rows {diff!r}; expected one of {', '.join(DIFFS)}")
     cells = render_grid(scene, camera, settings_list, rates, backend)
     ref_settings = replace(settings_list[0], mode=Mode.SCALAR, supersample=1, debug="none")
     ref = next((c.rgb for row in cells for c in row if c.rate == 1.0 and c.settings == ref_settings), None)
     if ref is None and any(r <= 1 for r in rates):
         ref = get_renderer(scene, backend).render(camera, ref_settings).rgb
     psnrs = [[reference_psnr(ref, c.rgb, c.rate) if ref is not None else None for c in row] for row in cells]
-    notes = {id(c): p for row, prow in zip(cells, psnrs) for c, p in zip(row, prow)}
-
-    def lines(cell: Cell) -> list[str]:
-        h, w = cell.rgb.shape[:2]
-        p = notes[id(cell)]
-        ms = f"{cell.total_ms:.0f} ms"
-        if p is None:
-            note = f"no reference  {ms}"
-        elif math.isinf(p):
-            note = f"reference  {ms}"
-        else:
-            note = f"PSNR {p:.2f} dB  {ms}"
-        return [f"{cell.mode_label}  {format_rate(cell.rate)} ({w}x{h})", note]
-
-    img = compose_grid(cells, camera.width, camera.height, GAP, captions="below", lines=lines, inset=inset)
-    layout = GridLayout(len(rates), len(settings_list), camera.width, camera.height, GAP,
-                        GridLayout.caption_height_for(2, caption_font_size(camera.height)))
+    notes = {id(c): [f"{c.mode_label}  {format_rate(c.rate)} ({c.rgb.shape[1]}x{c.rgb.shape[0]})",
+                     f"{_psnr_note(p)}  {c.total_ms:.0f} ms"] for row, prow in zip(cells, psnrs)
+             for c, p in zip(row, prow)}
+    rows = cells
+    diffs = difference_rows(get_renderer(scene, backend), camera, cells, diff) if diff is not None else None
+    if diffs is not None:
+        rows = [r for pair in zip(cells, diffs.cells) for r in pair]
+        notes.update({id(c): [f"{c.mode_label} - {name}  {format_rate(c.rate)}", _psnr_note(p, name)]
+                      for row, prow, name in zip(diffs.cells, diffs.psnr, diffs.reference) for c, p in zip(row, prow)})
+    img = compose_grid(rows, camera.width, camera.height, GAP, captions="below", lines=lambda c: notes[id(c)],
+                       inset=inset)
+    fs = caption_font_size(camera.height)
+    layout = GridLayout(len(rows), len(settings_list), camera.width, camera.height, GAP,
+                        GridLayout.caption_height_for(2, fs))
     assert layout.size == img.size
-    return Comparison(img, cells, psnrs, layout)
+    bar = None
+    if diffs is not None:
+        strip, (bx, by, bw, bh) = colour_bar_strip(img.width, diffs.title, diffs.scale, fs)
+        out = Image.new("RGB", (img.width, img.height + GAP + strip.height), (40, 40, 40))
+        out.paste(img, (0, 0))
+        out.paste(strip, (0, img.height + GAP))
+        img, bar = out, (bx, img.height + GAP + by, bw, bh)
+    return Comparison(img, cells, psnrs, layout, diffs, bar)
 
 
 def write_comparison(out: str | Path, scene: Scene, camera: Camera, settings_list: Sequence[RenderSettings],
                      rates: Sequence[float], backend: str = "cpu", inset: tuple[float, float, float, float] | None = None,
-                     force: bool = False) -> Comparison:
+                     force: bool = False, diff: str | None = None) -> Comparison:
     """`compare_figure` written to `out` as PNG, atomically; `out` is checked (.png, not overwritten without `force`)
     before anything is rendered."""
     out = refuse_overwrite(out, force)
     if out.suffix.lower() != ".png":
         raise GBViewerError(f"{out}: output must end in .png")
-    comparison = compare_figure(scene, camera, settings_list, rates, backend, inset)
+    comparison = compare_figure(scene, camera, settings_list, rates, backend, inset, diff)
     save_image(out, comparison.image, force)
     return comparison

@@ -21,6 +21,12 @@ def zoom_factor(rate: float) -> int | None:
     return k if k >= 1 and math.isclose(k, 1 / rate if rate < 1 else rate, rel_tol=1e-6) else None
 
 
+def zoom_out_factor(rate: float) -> int | None:
+    """The k of a zoom-out rate 1/k (1 at x1) whose reference is the x1 render box-downsampled by k; None for rates
+    above 1 and rates whose 1/rate is not an integer."""
+    return zoom_factor(rate) if rate <= 1 else None
+
+
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
     """PSNR in dB of images clipped to [0, 1]."""
     mse = float(np.mean((np.clip(a, 0, 1) - np.clip(b, 0, 1)) ** 2))
@@ -30,7 +36,7 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
 def reference_psnr(reference_x1: np.ndarray, rgb: np.ndarray, rate: float) -> float | None:
     """PSNR of a render at rate 1/k against the x1 render box-downsampled by k (the zoom-out reference); None
     where there is none (rates > 1, 1/rate not an integer, sizes that do not divide)."""
-    k = zoom_factor(rate) if rate <= 1 else None
+    k = zoom_out_factor(rate)
     if k is None:
         return None
     ref = box_downsample(reference_x1, k) if k > 1 else reference_x1

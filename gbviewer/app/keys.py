@@ -1,9 +1,10 @@
 """The key map: one table that drives key handling (`input.handle_keys`), the menus' shortcut hints and the F1 help.
 
 Each row of SHORTCUTS is one line of the help: its label and text, and the keys that trigger actions. An action is
-the name of a method of `state.AppState` or `window.ViewerApp`, called with the key's `args`. Rows without keys
-describe mouse gestures; keys marked `held` act every frame they are down (fly mode), the others once per press
-(or repeatedly, with `repeat`). Key names are the members of `imgui.Key` (kept as text here: no imgui import).
+the name of a method of `state.AppState`, `window.ViewerApp` or `analysis.PaneAnalysis`, called with the key's
+`args`. Rows without keys describe mouse gestures; keys marked `held` act every frame they are down (fly mode), the
+others once per press (or repeatedly, with `repeat`). Key names are the members of `imgui.Key` (kept as text here:
+no imgui import).
 """
 
 from __future__ import annotations
@@ -67,6 +68,10 @@ SHORTCUTS = (
     Shortcut("M / Shift+M", "next / previous mode of the pane under the cursor",
              (Key("m", "next_mode", (1,), shift=False), Key("m", "next_mode", (-1,), shift=True))),
     Shortcut("V", "split view in the pane under the cursor (drag the line)", (Key("v", "toggle_split"),)),
+    Shortcut("X / Shift+X", "difference to pane A / error view (difference to the reference) in the pane under the "
+             "cursor", (Key("x", "toggle_difference", shift=False), Key("x", "toggle_error", shift=True))),
+    Shortcut("P / Shift+P", "PSNR / SSIM against the reference on the panes / next reference (box, dense)",
+             (Key("p", "toggle_fidelity", shift=False), Key("p", "next_reference", shift=True))),
     Shortcut("L", "magnifier loupe under the cursor", (Key("l", "toggle_loupe"),)),
     Shortcut("I", "information overlay on the panes", (Key("i", "toggle_info"),)),
     Shortcut("F12", "screenshot of the window (PNG)", (Key("f12", "screenshot_window", shift=False),)),

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import replace
+from typing import Callable
 
 import moderngl
 import numpy as np
@@ -38,8 +39,10 @@ class PaneRenders:
     """Requests renders for the visible panes and shows what comes back. Owns one texture per pane part, reused
     across frames and scenes (a new scene's panes start without an image, and no texture outlives its part)."""
 
-    def __init__(self, state: AppState, worker: RenderWorker, ctx: moderngl.Context) -> None:
+    def __init__(self, state: AppState, worker: RenderWorker, ctx: moderngl.Context,
+                 colour: Callable[[tuple[int, str], Frame, str], tuple[np.ndarray, str]] | None = None) -> None:
         self.state, self.worker, self.ctx = state, worker, ctx
+        self.colour = colour or (lambda slot, frame, view: visualize(frame, view))  # image and legend of a view
         self._textures: dict[tuple[int, str], moderngl.Texture] = {}
 
     def submit(self) -> None:
@@ -178,7 +181,7 @@ class PaneRenders:
         shown.stage, shown.progress = "refining", res.progress
 
     def _upload(self, slot: tuple[int, str], shown: Shown, frame: Frame, view: str) -> None:
-        rgb, legend = visualize(frame, view)
+        rgb, legend = self.colour(slot, frame, view)
         self._write(slot, shown, np.ascontiguousarray(to_uint8(rgb)))
         shown.frame, shown.view, shown.legend = frame, view, legend
 

@@ -24,6 +24,8 @@ import moderngl  # noqa: E402
 from .. import DEFAULT_SCENE  # noqa: E402
 from ..errors import GBViewerError  # noqa: E402
 from . import overlays, screenshots  # noqa: E402
+from .analysis import PaneAnalysis  # noqa: E402
+from .analysis_overlay import draw_analysis_overlays  # noqa: E402
 from .blit import Blitter  # noqa: E402
 from .dialogs import FileDialogs, draw_help  # noqa: E402
 from .input import handle_input  # noqa: E402
@@ -57,7 +59,8 @@ class ViewerApp:
         self.dialogs = FileDialogs(self.state.open)
         self._init_window(visible)
         self.worker = RenderWorker()
-        self.panes = PaneRenders(self.state, self.worker, self.ctx)
+        self.analysis = PaneAnalysis(self.state, self.worker)  # difference and error views, PSNR/SSIM
+        self.panes = PaneRenders(self.state, self.worker, self.ctx, self.analysis.visualize)
         self.state.open(scene_path or DEFAULT_SCENE)
 
     # ---- window and GL ------------------------------------------------------------------------------------------
@@ -169,6 +172,7 @@ class ViewerApp:
         draw_panel(self)
         self.panes.queue_images(self.blit_panes)
         overlays.draw_pane_overlays(self)
+        draw_analysis_overlays(self)
         overlays.draw_status(self)
         overlays.draw_loupe(self)
         self.state.show_help = draw_help(self.state.show_help)
@@ -191,6 +195,7 @@ class ViewerApp:
             if first:
                 self.frame_count = 0
         self.panes.poll()
+        self.analysis.update()
         self.dialogs.poll()
         self.state.poll_video()
 
@@ -216,6 +221,7 @@ class ViewerApp:
         if self.state.video is not None:
             self.state.video.cancel(wait=10.0)
         self.worker.stop()
+        self.analysis.stop()
         self.panes.release()
         self.blit_panes.release()
         self.blit_loupe.release()
@@ -240,8 +246,8 @@ class ViewerApp:
     # ---- actions that need the window (the others are AppState's) -----------------------------------------------
 
     def action(self, name: str) -> Callable:
-        """The method a key-map action names: the window's, else the state's."""
-        return getattr(self, name, None) or getattr(self.state, name)
+        """The method a key-map action names: the window's, else the analysis views' or the state's."""
+        return getattr(self, name, None) or getattr(self.analysis, name, None) or getattr(self.state, name)
 
     def open_dialog(self) -> None:
         """The system's file dialog (or the built-in browser) to open a scene or a cameras.json."""

@@ -7,14 +7,14 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ..layout import PANEL_W
-from . import backend, camera, output, panes, rate, scene, timings
+from . import analysis, backend, camera, output, panes, rate, scene, timings
 
 if TYPE_CHECKING:
     from ..window import ViewerApp
 
 SECTIONS = (("Scene", scene.draw), ("Backend", backend.draw), ("Sampling rate (all panes)", rate.draw),
-            ("Panes", panes.draw), ("Camera", camera.draw), ("Magnifier and output", output.draw),
-            ("Timings", timings.draw))
+            ("Panes", panes.draw), ("Difference and error", analysis.draw), ("Camera", camera.draw),
+            ("Magnifier and output", output.draw), ("Timings", timings.draw))
 
 
 def draw_panel(app: ViewerApp) -> None:

@@ -1,0 +1,194 @@
+"""The analysis thread of the difference and error views (`app/analysis.py` asks, this computes): for one pane
+part's frame, the signed difference to pane A's mode at the same camera and the difference to a reference of
+`gbviewer.analysis` with PSNR and SSIM. The newest request per pane part wins (a waiting older one is dropped, a
+running one is cancelled between tiles); references render on the thread's own CPU renderer and the last few are
+cached (panes of one size share them). No OpenGL here."""
+
+from __future__ import annotations
+
+import threading
+import time
+import traceback
+from dataclasses import dataclass
+from typing import Callable, Hashable
+
+import numpy as np
+
+from ..analysis import (DENSE_SUPERSAMPLE, camera_key, fidelity, reference_image, reference_note, reference_settings,
+                        robust_scale, signed_difference)
+from ..camera import Camera
+from ..errors import GBViewerError, RenderCancelled
+from ..metrics import zoom_out_factor
+from ..render import Frame, RenderSettings, create_renderer
+from ..scene import Scene
+from .panes import MAX_SAMPLES
+
+CACHE_SIZE = 4  # reference renders kept
+
+
+@dataclass(frozen=True)
+class Spec:
+    """What one analysis computes."""
+
+    reference: str | None = None  # 'box' or 'dense': the difference to it, PSNR and SSIM
+    to_pane: RenderSettings | None = None  # pane A's settings: the difference to pane A
+
+
+@dataclass
+class Request:
+    slot: Hashable
+    scene: Scene
+    frame: Frame
+    camera: Camera
+    rate: float
+    settings: RenderSettings
+    spec: Spec
+    pane_a: Frame | None = None  # pane A's frame when it was rendered at `camera` with spec.to_pane
+
+
+@dataclass
+class Analysis:
+    frame: Frame  # the frame analysed
+    spec: Spec
+    error: np.ndarray | None = None  # signed difference to the reference (H, W)
+    error_scale: float = 0.0  # its robust max |d|
+    psnr: float | None = None
+    ssim: float | None = None
+    diff: np.ndarray | None = None  # signed difference to pane A
+    diff_scale: float = 0.0
+    note: str = ""  # why something is missing: no box reference at this rate, over the sample limit, an error
+    seconds: float = 0.0
+
+
+class AnalysisThread:
+    """One thread computing the newest request per slot, the longest-waiting slot first."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Condition()
+        self._pending: dict[Hashable, Request] = {}
+        self._running: Hashable | None = None
+        self._cancel = threading.Event()
+        self._results: list[tuple[Hashable, Analysis]] = []
+        self._stop = self._forget = False
+        self._renderer = None
+        self._scene: Scene | None = None  # the scene uploaded to the renderer, whose references are cached
+        self._cache: dict[tuple, np.ndarray | None] = {}
+        self.computed = 0
+        self._thread = threading.Thread(target=self._loop, name="gbviewer-analysis", daemon=True)
+        self._thread.start()
+
+    def submit(self, req: Request) -> None:
+        with self._lock:
+            self._pending.pop(req.slot, None)
+            self._pending[req.slot] = req
+            if self._running == req.slot:
+                self._cancel.set()
+            self._lock.notify()
+
+    def results(self) -> list[tuple[Hashable, Analysis]]:
+        with self._lock:
+            out, self._results = self._results, []
+        return out
+
+    def forget(self) -> None:
+        """Drop what is waiting, stop what runs, and free the scene and the cached references (a new scene is
+        open)."""
+        with self._lock:
+            self._pending.clear()
+            self._cancel.set()
+            self._forget = True
+            self._lock.notify()
+
+    def busy(self) -> bool:
+        with self._lock:
+            return bool(self._pending) or self._running is not None
+
+    def stop(self, timeout: float = 30.0) -> None:
+        with self._lock:
+            self._stop = True
+            self._pending.clear()
+            self._cancel.set()
+            self._lock.notify()
+        self._thread.join(timeout)
+
+    def _loop(self) -> None:
+        while True:
+            with self._lock:
+                while not self._pending and not self._stop and not self._forget:
+                    self._lock.wait()
+                if self._stop:
+                    break
+                if self._forget:
+                    self._forget = False
+                    self._renderer = self._scene = None
+                    self._cache.clear()
+                    continue
+                slot = next(iter(self._pending))
+                req = self._pending.pop(slot)
+                self._running, self._cancel = slot, threading.Event()
+                cancel = self._cancel
+            result = self._analyse(req, cancel)
+            with self._lock:
+                self._running = None
+                if result is not None:
+                    self._results.append((slot, result))
+                    self.computed += 1
+        self._renderer = self._scene = None
+        self._cache.clear()
+
+    def _cached(self, key: tuple, make: Callable[[], np.ndarray | None]) -> np.ndarray | None:
+        if key not in self._cache:
+            value = make()
+            while len(self._cache) >= CACHE_SIZE:
+                self._cache.pop(next(iter(self._cache)))
+            self._cache[key] = value
+        return self._cache[key]
+
+    def _analyse(self, req: Request, cancel: threading.Event) -> Analysis | None:
+        """The request's analysis; None when it was cancelled (a newer request of its slot is waiting)."""
+        t0 = time.perf_counter()
+        out, spec, rgb = Analysis(req.frame, req.spec), req.spec, req.frame.rgb
+        try:
+            if self._renderer is None:
+                self._renderer = create_renderer("cpu")
+            if self._scene is not req.scene:
+                self._cache.clear()
+                self._renderer.upload(req.scene)
+                self._scene = req.scene
+            cam = camera_key(req.camera)
+            if spec.reference is not None:
+                kind = spec.reference
+                check_samples(req.camera, req.rate, kind)
+                ref = self._cached(("ref", kind, cam, req.rate, reference_settings(kind, req.settings)),
+                                   lambda: reference_image(self._renderer, req.camera, req.rate, kind, req.settings,
+                                                           cancel))
+                if ref is None:
+                    out.note = reference_note(kind, req.rate)
+                else:
+                    out.error = signed_difference(rgb, ref)
+                    out.error_scale = robust_scale(out.error)
+                    out.psnr, out.ssim = fidelity(rgb, ref)
+            if spec.to_pane is not None:
+                a = req.pane_a.rgb if req.pane_a is not None else self._cached(
+                    ("pane", cam, spec.to_pane), lambda: self._renderer.render(req.camera, spec.to_pane,
+                                                                               cancel=cancel).rgb)
+                out.diff = signed_difference(rgb, a)
+                out.diff_scale = robust_scale(out.diff)
+        except RenderCancelled:
+            return None
+        except GBViewerError as exc:
+            out.note = str(exc)
+        except Exception as exc:  # noqa: BLE001 - shown on the pane, never kills the thread
+            traceback.print_exc()
+            out.note = f"{type(exc).__name__}: {exc}"
+        out.seconds = time.perf_counter() - t0
+        return out
+
+
+def check_samples(camera: Camera, rate: float, kind: str) -> None:
+    """Refuse a reference over the panes' sample limit (x8 with a dense reference would be billions)."""
+    k = DENSE_SUPERSAMPLE if kind == "dense" else (zoom_out_factor(rate) or 1)
+    samples = camera.width * camera.height * k * k
+    if samples > MAX_SAMPLES:
+        raise GBViewerError(f"the {kind} reference would take {samples / 1e6:.0f}M samples, over the "
+                            f"{MAX_SAMPLES // 1_000_000}M limit: lower the rate")

@@ -1,0 +1,48 @@
+"""Panel section: the difference and error views (the reference, the colour-map scale, PSNR/SSIM on the panes) and
+every pane part's PSNR/SSIM against the reference."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from imgui_bundle import imgui
+
+from ...analysis import REFERENCES, ROBUST_PERCENTILE
+from ..keys import hint
+
+if TYPE_CHECKING:
+    from ..window import ViewerApp
+
+
+def draw(app: ViewerApp) -> None:
+    state, analysis = app.state, app.analysis
+    o = analysis.options
+    imgui.text_disabled(f"{hint('toggle_difference')}: pane - pane A   {hint('toggle_error')}: pane - reference")
+    kinds = list(REFERENCES)
+    imgui.set_next_item_width(220)
+    ch, k = imgui.combo("reference", kinds.index(o.reference), [f"{n}: {REFERENCES[n]}" for n in kinds])
+    if ch:
+        analysis.set_reference(kinds[k])
+    if imgui.is_item_hovered():
+        imgui.set_tooltip("box: the x1 scalar render box-downsampled by k at rate 1/k (what gbviewer bench uses)\n"
+                          "dense: scalar with 8x8 supersampling at the current rate (any rate, 64x the work)")
+    ch, on = imgui.checkbox(f"PSNR / SSIM on the panes ({hint('toggle_fidelity')})", o.fidelity)
+    if ch:
+        analysis.toggle_fidelity()
+    ch, auto = imgui.checkbox(f"scale: robust max |d| ({ROBUST_PERCENTILE:g}th percentile)", o.auto_scale)
+    if ch:
+        analysis.set_scale(auto)
+    imgui.begin_disabled(o.auto_scale)
+    imgui.set_next_item_width(220)
+    ch, lg = imgui.slider_float("fixed scale", math.log10(o.scale), -3.0, 0.0, f"{o.scale:.3g}")
+    if ch:
+        analysis.set_scale(False, 10 ** lg)
+    imgui.end_disabled()
+    for p in state.visible:
+        for part in state.parts(p.index):
+            line = analysis.fidelity_line((p.index, part))
+            if line is None:
+                continue
+            name = p.name + ("'" if part == "b" else "")
+            (imgui.text_disabled if line[1] else imgui.text)(f"{name}: {line[0]}")
