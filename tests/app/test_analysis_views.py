@@ -92,6 +92,7 @@ def panes_with_frames(scene, camera, rate=0.5) -> AppState:
         shown = state.panes[i].parts["a"]
         shown.frame = gb.get_renderer(scene).render(camera, settings)
         shown.job = RenderJob((i, "a"), scene, camera, settings, info={"preview": 1.0, "rate": rate})
+        shown.stage = "final"
     return state
 
 
