@@ -95,12 +95,13 @@ def rate_path(base: Camera, frames: int, start: float = 1.0, end: float = 1.0 / 
             for s in geometric_rates(start, end, frames)]
 
 
-def scene_focus_depth(scene: Scene, camera: Camera) -> float:
-    """Camera depth of the centre of the scene's robust bounds (the dolly's focus)."""
+def scene_focus_depth(scene: Scene, camera: Camera, what: str = "dolly", hint: str = "use --path zoom") -> float:
+    """Camera depth of the centre of the scene's robust bounds (the dolly's focus); an error naming `what`, with
+    `hint`, when it is not in front of the camera."""
     lo, hi = scene.robust_bounds()
     z = float((camera.R @ ((np.asarray(lo, np.float64) + hi) / 2) + camera.t)[2])
     if not z > camera.near:
-        raise GBViewerError(f"dolly: the scene's centre is not in front of the camera (depth {z:.3g}); use --path zoom")
+        raise GBViewerError(f"{what}: the scene's centre is not in front of the camera (depth {z:.3g}); {hint}")
     return z
 
 
