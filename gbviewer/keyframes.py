@@ -272,9 +272,11 @@ def _keyframe(e: object, where: str, i: int, base: Camera, scene: Scene | None, 
 
 
 def keyframes_to_json(keys: Sequence[Keyframe]) -> dict:
-    """The JSON document `load_keyframes` reads back (world-to-camera R, t and the intrinsics of every key)."""
+    """The JSON document `load_keyframes` reads back (world-to-camera R, t, the intrinsics and projection of every
+    key)."""
     return {"keyframes": [
         {"R": k.camera.R.tolist(), "t": k.camera.t.tolist(), "fx": k.camera.fx, "fy": k.camera.fy,
-         "cx": k.camera.cx, "cy": k.camera.cy, "projection": k.camera.projection, "rate": k.rate, **({"time": k.time} if k.time is not None else {})}
+         "cx": k.camera.cx, "cy": k.camera.cy, "projection": k.camera.projection, "rate": k.rate,
+         **({"time": k.time} if k.time is not None else {})}
         for k in keys]}
 

@@ -39,7 +39,8 @@ def test_matches_reference(mode, supersample, seed, sh_degree, filter3d):
 @pytest.mark.parametrize("supersample", [1, 2])
 @pytest.mark.parametrize("mode", ["wsr", "duplex"])
 def test_order_independent_modes_match_reference(mode, supersample):
-    """wsr (view weights along the forward axis, depth correction on Z) and duplex (cells projected orthographically)."""
+    """wsr (view weights along the forward axis, depth correction on Z) and duplex (cells projected
+    orthographically)."""
     scene, cam = random_view(51, n=140, sh_degree=3, projection="orthographic")
     scene = with_view_weights(scene, 51, sigma=4.0)
     if mode == "wsr":
