@@ -1,4 +1,4 @@
-"""Pinhole cameras (OpenCV axes: x right, y down, z forward) and where they come from."""
+"""Cameras (OpenCV axes: x right, y down, z forward), perspective or orthographic, and where they come from."""
 
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ MIN_RATE, MAX_RATE = 1e-3, 64.0  # sampling rates: x1/1000 (zoomed out) to x64 (
 MAX_IMAGE_SIZE = 16384  # pixels per axis of any camera
 ROTATION_TOLERANCE = 1e-3  # |R R^T - I| and |det R - 1| allowed for a rotation read from a file
 UP_AXES = {"-y": (0.0, -1.0, 0.0), "+y": (0.0, 1.0, 0.0), "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0)}
+PROJECTIONS = ("perspective", "orthographic")  # the index is the native modules' and shaders' projection code
 
 
 def format_rate(rate: float) -> str:
@@ -39,6 +40,13 @@ def parse_rate(text: object, what: str | None = None) -> float:
     num, slash, den = str(text).partition("/")
     value = real(num, what) / real(den, what, lo=0.0, lo_open=True) if slash else real(num, what)
     return real(value, what, lo=MIN_RATE, hi=MAX_RATE)
+
+
+def parse_projection(value: object, what: str) -> str:
+    """'perspective' or 'orthographic'; `InvalidValue` naming `what` otherwise."""
+    if value not in PROJECTIONS:
+        raise InvalidValue(f"{what}: expected perspective or orthographic, got {str(value)!r:.40}")
+    return str(value)
 
 
 def parse_rates(text: str) -> list[float]:
@@ -82,7 +90,11 @@ def orbit_direction(up: np.ndarray, azimuth_deg: float, elevation_deg: float) ->
 class Camera:
     """Intrinsics in pixels and a world-to-camera pose: x_cam = R @ x_world + t.
 
-    Pixel (i, j) covers [j, j+1] x [i, i+1]; a centred 3DGS camera has cx = W/2, cy = H/2.
+    Pixel (i, j) covers [j, j+1] x [i, i+1]; a centred 3DGS camera has cx = W/2, cy = H/2. A perspective (pinhole)
+    camera puts x_cam = (X, Y, Z) at (fx X/Z + cx, fy Y/Z + cy), fx and fy in pixels; an orthographic one at
+    (fx X + cx, fy Y + cy), fx and fy in pixels per world unit, and sees every point along its forward axis (parallel
+    rays: the SH view direction of every splat). Both see only what lies more than `near` in front of the plane
+    z = 0 through `position`, and sort by Z.
     """
 
     width: int
@@ -95,12 +107,15 @@ class Camera:
     t: np.ndarray
     near: float = NEAR_PLANE
     name: str = ""
+    projection: str = "perspective"
 
     def __post_init__(self) -> None:
         """Every number checked (the renderers take them as float32 and int32): sizes 1..MAX_IMAGE_SIZE, focal
-        lengths and near plane finite and > 0, a rotation R and a float32 translation t."""
+        lengths and near plane finite and > 0, a rotation R and a float32 translation t; projection one of
+        PROJECTIONS."""
         who = f"camera {self.name!r:.60}"
         try:
+            parse_projection(self.projection, f"{who}: projection")
             checked = {"width": integer(self.width, f"{who}: width", lo=1, hi=MAX_IMAGE_SIZE),
                        "height": integer(self.height, f"{who}: height", lo=1, hi=MAX_IMAGE_SIZE),
                        "R": array(self.R, f"{who}: R", (3, 3), f32=True),
@@ -119,8 +134,41 @@ class Camera:
 
     @property
     def position(self) -> np.ndarray:
-        """Camera centre in world coordinates."""
+        """Camera centre in world coordinates (orthographic: the centre of its plane z = 0)."""
         return -self.R.T @ self.t
+
+    @property
+    def orthographic(self) -> bool:
+        return self.projection == "orthographic"
+
+    @property
+    def projection_code(self) -> int:
+        """The projection as the native modules and shaders take it (gbv::Projection)."""
+        return PROJECTIONS.index(self.projection)
+
+    def view_rays(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unit directions (N, 3) along which the camera sees the world points (N, 3), and the distances (N,) along
+        them: from the eye (perspective), or along the forward axis from the plane z = 0 (orthographic: parallel
+        rays, the distance is the depth Z)."""
+        points = np.asarray(points, np.float64)
+        if self.orthographic:
+            forward = self.R[2] / np.linalg.norm(self.R[2])
+            return np.tile(forward, (len(points), 1)), points @ self.R[2] + self.t[2]
+        d = points - self.position
+        dist = np.linalg.norm(d, axis=1)
+        return d / np.maximum(dist, 1e-30)[:, None], dist
+
+    def with_projection(self, projection: str, depth: float) -> "Camera":
+        """The same pose and image with `projection`, scaled so that things at camera depth `depth` keep their size
+        on screen: a focal length of f pixels becomes f / depth pixels per unit, and back."""
+        if projection == self.projection:
+            return self
+        try:
+            k = real(depth, "depth at which the projections agree", lo=0, lo_open=True)
+        except InvalidValue as exc:
+            raise CameraError(str(exc)) from None
+        k = 1 / k if projection == "orthographic" else k
+        return replace(self, fx=self.fx * k, fy=self.fy * k, projection=projection)
 
     def at_sampling_rate(self, s: float) -> "Camera":
         """The same view with s times as many pixels per axis (s = 1/8 zooms out 8x, s = 8 zooms in)."""
@@ -180,10 +228,13 @@ def orbit_camera(
     height: int = 480,
     fov_y_deg: float = 50.0,
     up: str = "-y",
+    projection: str = "perspective",
 ) -> Camera:
     """A camera orbiting the scene's robust centre; default distance frames the robust bounds.
 
-    Percentile bounds keep stray far splats from pushing the camera away.
+    Percentile bounds keep stray far splats from pushing the camera away. An orthographic orbit stands at the same
+    eye with f / distance pixels per unit (f: the perspective focal length of `fov_y_deg`), so the plane through
+    the orbit centre, and with it the scene, fills the view as in the perspective orbit.
     """
     if up not in UP_AXES:
         raise CameraError(f"up axis {up!r}; expected one of {sorted(UP_AXES)}")
@@ -194,16 +245,19 @@ def orbit_camera(
         except InvalidValue as exc:
             raise CameraError(str(exc)) from None
     up_v = np.array(UP_AXES[up])
-    eye = centre + (framing if distance is None else distance) * orbit_direction(up_v, azimuth_deg, elevation_deg)
+    distance = framing if distance is None else distance
+    eye = centre + distance * orbit_direction(up_v, azimuth_deg, elevation_deg)
     if np.abs(eye).max() > F32_MAX:
         raise CameraError(f"{scene.source}: an orbit camera around this scene ({2 * radius:.3g} across) would sit at "
                           f"{np.abs(eye).max():.3g}, beyond float32; give a camera")
-    return Camera.look_at(eye, centre, up_v, width, height, fov_y_deg, name=f"orbit({azimuth_deg},{elevation_deg})")
+    cam = Camera.look_at(eye, centre, up_v, width, height, fov_y_deg, name=f"orbit({azimuth_deg},{elevation_deg})")
+    return cam.with_projection(projection, distance)
 
 
 def load_cameras_json(path: str | Path) -> list[Camera]:
-    """Cameras from a 3DGS `cameras.json` (camera-to-world rotation rows and centre; fx, fy at full size). Every
-    field is checked: a bad one is a one-line `CameraError` naming the file, the entry and the key."""
+    """Cameras from a 3DGS `cameras.json` (camera-to-world rotation rows and centre; fx, fy at full size), and
+    gbviewer's optional "projection" per entry ("orthographic": fx, fy in pixels per world unit). Every field is
+    checked: a bad one is a one-line `CameraError` naming the file, the entry and the key."""
     path = Path(path)
     try:
         entries = read_json(path)
@@ -215,13 +269,16 @@ def load_cameras_json(path: str | Path) -> list[Camera]:
 
 
 def _camera_entry(e: object, where: str, k: int) -> Camera:
-    """One cameras.json entry: width, height, fx, fy, rotation (3x3), position (3), optional img_name or id."""
+    """One cameras.json entry: width, height, fx, fy, rotation (3x3), position (3), optional img_name or id and
+    projection."""
     w, h = (integer(field(e, key, where), f"{where}: '{key}'", lo=1, hi=MAX_IMAGE_SIZE) for key in ("width", "height"))
     fx, fy = (real(field(e, key, where), f"{where}: '{key}'", lo=0, lo_open=True, f32=True) for key in ("fx", "fy"))
     R = array(field(e, "rotation", where), f"{where}: 'rotation'", (3, 3), f32=True).T  # stored camera-to-world
     pos = array(field(e, "position", where), f"{where}: 'position'", (3,), f32=True)
     name = str(e.get("img_name", e.get("id", k)))  # type: ignore[union-attr]  (field() proved e a dict)
+    projection = parse_projection(e.get("projection", "perspective"),  # type: ignore[union-attr]
+                                  f"{where}: 'projection'")
     try:
-        return Camera(w, h, fx, fy, w / 2, h / 2, R, -R @ pos, name=name)
+        return Camera(w, h, fx, fy, w / 2, h / 2, R, -R @ pos, name=name, projection=projection)
     except CameraError as exc:
         raise InvalidValue(f"{where}: {exc}") from None

@@ -63,7 +63,8 @@ def geometric_rates(start: float, end: float, frames: int) -> list[float]:
 
 
 def zoom_path(base: Camera, frames: int, start: float = 1.0, end: float = 1.0 / 8.0) -> list[PathFrame]:
-    """The focal length goes from start x to end x the base camera's, geometrically; the pane size stays.
+    """The focal length (orthographic: the pixels per unit) goes from start x to end x the base camera's,
+    geometrically; the pane size stays.
 
     At rate s the content appears s times its x1 size (about the principal point), so it is sampled at rate s."""
     return [PathFrame(replace(base, fx=base.fx * s, fy=base.fy * s), s, base.width, base.height, s,
@@ -74,7 +75,11 @@ def dolly_path(base: Camera, frames: int, start: float = 1.0, end: float = 1.0 /
                focus_depth: float = 1.0) -> list[PathFrame]:
     """The camera moves along its optical axis so that things at `focus_depth` (camera z of the base camera)
     appear s times their x1 size: it stands at depth focus_depth / s from them. Nearer and farther things scale
-    differently (that is what distinguishes a dolly from a zoom)."""
+    differently (that is what distinguishes a dolly from a zoom). An orthographic camera's image does not change
+    with its distance: an error (its zoom scales fx, fy)."""
+    if base.orthographic:
+        raise GBViewerError("dolly: an orthographic camera sees the same image from any distance; use --path zoom "
+                            "(it scales the pixels per unit)")
     focus_depth = real(focus_depth, "dolly: focus depth", lo=0.0, lo_open=True)
     out = []
     for s in geometric_rates(start, end, frames):
@@ -90,12 +95,13 @@ def rate_path(base: Camera, frames: int, start: float = 1.0, end: float = 1.0 / 
             for s in geometric_rates(start, end, frames)]
 
 
-def scene_focus_depth(scene: Scene, camera: Camera) -> float:
-    """Camera depth of the centre of the scene's robust bounds (the dolly's focus)."""
+def scene_focus_depth(scene: Scene, camera: Camera, what: str = "dolly", hint: str = "use --path zoom") -> float:
+    """Camera depth of the centre of the scene's robust bounds (the dolly's focus); an error naming `what`, with
+    `hint`, when it is not in front of the camera."""
     lo, hi = scene.robust_bounds()
     z = float((camera.R @ ((np.asarray(lo, np.float64) + hi) / 2) + camera.t)[2])
     if not z > camera.near:
-        raise GBViewerError(f"dolly: the scene's centre is not in front of the camera (depth {z:.3g}); use --path zoom")
+        raise GBViewerError(f"{what}: the scene's centre is not in front of the camera (depth {z:.3g}); {hint}")
     return z
 
 

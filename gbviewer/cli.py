@@ -13,8 +13,8 @@ from pathlib import Path
 
 from . import DEFAULT_SCENE
 from .argtypes import BACKGROUND, INSET, MAX_SIDE, ORBIT, SIDE, SIZE, Number, Parser, Rate, count, positive
-from .camera import Camera, format_rate, load_cameras_json, orbit_camera, parse_rates
-from .camera_paths import MAX_FRAMES, PATHS, camera_path, zoom_path
+from .camera import PROJECTIONS, Camera, format_rate, load_cameras_json, orbit_camera, parse_rates
+from .camera_paths import MAX_FRAMES, PATHS, camera_path, scene_focus_depth, zoom_path
 from .errors import GBViewerError
 from .figure import DIFFS, compose_grid, render_grid, save_image, write_comparison
 from .io import load, write_inria_ply
@@ -26,7 +26,7 @@ from .video import MAX_FPS, MIN_FPS, record_video
 
 
 def add_camera_args(p: argparse.ArgumentParser) -> None:
-    """--cameras/--camera, --orbit, --width/--height, --up: shared by the commands that render."""
+    """--cameras/--camera, --orbit, --width/--height, --up, --projection: shared by the commands that render."""
     p.add_argument("--cameras", type=Path, help="3DGS cameras.json")
     p.add_argument("--camera", type=count(lo=0), default=0, help="index into --cameras (default 0)")
     p.add_argument("--orbit", type=ORBIT, metavar=ORBIT.metavar,
@@ -34,10 +34,14 @@ def add_camera_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--width", type=SIDE, help="image width (default 640, or the training camera's)")
     p.add_argument("--height", type=SIDE, help="image height (default 480, or the training camera's)")
     p.add_argument("--up", default="-y", choices=["-y", "+y", "+z", "-z"], help="scene up axis for orbit cameras")
+    p.add_argument("--projection", choices=PROJECTIONS,
+                   help="perspective (default: orbits; a --cameras entry keeps its own) or orthographic: an orbit "
+                   "keeps its eye with f / distance pixels per unit, a training camera is converted at the depth of "
+                   "the scene's centre; either way the scene appears at the same size")
 
 
 def camera_from_args(scene: Scene, args: argparse.Namespace) -> Camera:
-    """The camera the arguments describe: a training camera, an orbit, or the default framing."""
+    """The camera the arguments describe: a training camera, an orbit, or the default framing, with --projection."""
     if args.cameras is not None:
         cams = load_cameras_json(args.cameras)
         if not 0 <= args.camera < len(cams):
@@ -47,12 +51,17 @@ def camera_from_args(scene: Scene, args: argparse.Namespace) -> Camera:
             w = args.width or round(cam.width * args.height / cam.height)
             h = args.height or round(cam.height * args.width / cam.width)
             cam = cam.with_size(w, h)
-        return cam
+        if args.projection in (None, cam.projection):
+            return cam
+        depth = scene_focus_depth(scene, cam, f"--projection {args.projection} on camera {args.camera}",
+                                  "give an --orbit")
+        return cam.with_projection(args.projection, depth)
     w, h = args.width or 640, args.height or 480
+    projection = args.projection or "perspective"
     if args.orbit is not None:
         az, el, dist = args.orbit
-        return orbit_camera(scene, az, el, dist if dist > 0 else None, w, h, up=args.up)
-    return orbit_camera(scene, width=w, height=h, up=args.up)
+        return orbit_camera(scene, az, el, dist if dist > 0 else None, w, h, up=args.up, projection=projection)
+    return orbit_camera(scene, width=w, height=h, up=args.up, projection=projection)
 
 
 def check_render_size(width: int, height: int, rates: list[float], option: str) -> None:
@@ -156,7 +165,7 @@ def cmd_view(args: argparse.Namespace) -> int:
 
     if args.scene is not None and not args.scene.exists():
         raise GBViewerError(f"{args.scene}: no such file or folder")
-    opened, why = open_window(args.scene, args.cameras)
+    opened, why = open_window(args.scene, args.cameras, args.projection)
     if opened:
         return 0
     if has_display_env()[0]:  # (without one, demo says so itself)

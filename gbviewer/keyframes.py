@@ -10,7 +10,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .camera import UP_AXES, Camera, focal_from_fov, orbit_camera, parse_rate
+from .camera import UP_AXES, Camera, focal_from_fov, orbit_camera, parse_projection, parse_rate
 from .cells import quats_from_matrices, rotation_matrices
 from .errors import CameraError, GBViewerError, InvalidValue
 from .scene import Scene
@@ -148,12 +148,14 @@ def key_times(keys: Sequence[Keyframe]) -> np.ndarray:
 def interpolate_keyframes(keys: Sequence[Keyframe], times: Sequence[float]) -> list[Keyframe]:
     """The path through `keys` at `times` (clamped to the keys' span); at a key's time it is that key (up to
     rounding). Positions (camera centres): Catmull-Rom cubic; rotations: SQUAD; rate, fx, fy: monotone cubic in
-    log; cx, cy: monotone cubic. Every key must have the same image size."""
+    log; cx, cy: monotone cubic. Every key must have the same image size and projection."""
     if not keys:
         raise GBViewerError("keyframes: none given")
-    w, h = keys[0].camera.width, keys[0].camera.height
-    if any((k.camera.width, k.camera.height) != (w, h) for k in keys):
+    first = keys[0].camera
+    if any((k.camera.width, k.camera.height) != (first.width, first.height) for k in keys):
         raise GBViewerError("keyframes: every key's camera must have the same image size")
+    if any(k.camera.projection != first.projection for k in keys):
+        raise GBViewerError("keyframes: every key's camera must have the same projection")
     for k in keys:
         if not (k.rate > 0 and math.isfinite(k.rate)):
             raise GBViewerError(f"keyframes: rate must be finite and > 0, got {k.rate}")
@@ -193,8 +195,10 @@ def load_keyframes(path: str | Path, base: Camera, scene: Scene | None = None, u
 
     and optionally "time" (seconds; give it to all keys or none), "rate" (sampling rate rendered at, default 1:
     rendered at that rate and shown nearest-upscaled), "fov_y_deg" or "fx", "fy", "cx", "cy" (pixels at the pane
-    size; default: the base camera's intrinsics). The pane size is the base camera's. Every value is checked: a
-    bad one is a one-line `InvalidValue` naming the file, the key's index and the field.
+    size; default: the base camera's intrinsics), "projection" (default: the base camera's; "orthographic": fx, fy
+    are pixels per world unit, and a key that changes the base's projection gives them; no fov_y_deg). The pane size
+    is the base camera's. Every value is checked: a bad one is a one-line `InvalidValue` naming the file, the key's
+    index and the field.
     """
     path = Path(path)
     doc = read_json(path)
@@ -249,21 +253,30 @@ def _keyframe(e: object, where: str, i: int, base: Camera, scene: Scene | None, 
     else:
         raise InvalidValue(f"{where}: no pose; give R and t, rotation and position, position and look_at, or orbit")
     intr = dict(fx=base.fx, fy=base.fy, cx=base.cx, cy=base.cy)
+    projection = parse_projection(e.get("projection", base.projection), f"{where}: 'projection'")
+    if projection != base.projection and not ("fx" in e and "fy" in e):
+        raise InvalidValue(f"{where}: 'projection' {projection} differs from the camera's ({base.projection}); "
+                           f"give 'fx' and 'fy' too")
+    if "fov_y_deg" in e and projection == "orthographic":
+        raise InvalidValue(f"{where}: 'fov_y_deg' has no meaning for an orthographic camera; give 'fx' and 'fy' "
+                           f"(pixels per world unit)")
     if "fov_y_deg" in e:
         f = focal_from_fov(num("fov_y_deg", lo=0, lo_open=True, hi=MAX_FOV_DEG), base.height)
         intr = dict(fx=f, fy=f, cx=base.width / 2, cy=base.height / 2)
     intr.update({k: num(k, **({"lo": 0, "lo_open": True} if k in ("fx", "fy") else {}))
                  for k in ("fx", "fy", "cx", "cy") if k in e})
-    cam = replace(base, R=R, t=t, name=f"key{i}", **intr)
+    cam = replace(base, R=R, t=t, name=f"key{i}", projection=projection, **intr)
     rate = parse_rate(e.get("rate", 1), f"{where}: 'rate'")
     time_ = num("time") if e.get("time") is not None else None
     return Keyframe(cam, rate, time_)
 
 
 def keyframes_to_json(keys: Sequence[Keyframe]) -> dict:
-    """The JSON document `load_keyframes` reads back (world-to-camera R, t and the intrinsics of every key)."""
+    """The JSON document `load_keyframes` reads back (world-to-camera R, t, the intrinsics and projection of every
+    key)."""
     return {"keyframes": [
         {"R": k.camera.R.tolist(), "t": k.camera.t.tolist(), "fx": k.camera.fx, "fy": k.camera.fy,
-         "cx": k.camera.cx, "cy": k.camera.cy, "rate": k.rate, **({"time": k.time} if k.time is not None else {})}
+         "cx": k.camera.cx, "cy": k.camera.cy, "projection": k.camera.projection, "rate": k.rate,
+         **({"time": k.time} if k.time is not None else {})}
         for k in keys]}
 

@@ -2,9 +2,10 @@
 // where the C++ code multiplies through mul_rn: no multiply-add contraction (see common.h).
 
 // R is row-major world-to-camera; the frustum limits follow gsplat's persp_proj, which equals the published
-// 1.3 * tan(fov/2) clamp for a centred principal point (KERNELS.md §3).
+// 1.3 * tan(fov/2) clamp for a centred principal point (KERNELS.md §3); an orthographic camera has no use for them.
+// `projection`: PERSPECTIVE or ORTHOGRAPHIC (fx, fy then in pixels per world unit).
 CameraParams make_camera(float R[9], float t[3], float fx, float fy, float cx, float cy, int width, int height,
-                         float near_plane) {
+                         float near_plane, int projection) {
     precise CameraParams c;
     for (int i = 0; i < 9; ++i) c.R[i] = R[i];
     for (int i = 0; i < 3; ++i) c.t[i] = t[i];
@@ -17,6 +18,7 @@ CameraParams make_camera(float R[9], float t[3], float fx, float fy, float cx, f
     c.width = width;
     c.height = height;
     c.near_plane = near_plane;
+    c.projection = projection;
     precise const float tan_x = 0.5 * float(width) / fx, tan_y = 0.5 * float(height) / fy;
     c.lim_x_pos = (float(width) - cx) / fx + 0.3 * tan_x;
     c.lim_x_neg = cx / fx + 0.3 * tan_x;

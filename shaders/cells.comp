@@ -25,6 +25,7 @@ uniform float cam_t[3];
 uniform vec4 cam_f;
 uniform ivec2 cam_size;
 uniform float cam_near;
+uniform int cam_projection;  // PERSPECTIVE or ORTHOGRAPHIC
 
 float load_sh(uint splat, int coeff, int channel) { return 0.0; }
 float load_weight_sh(uint splat, int coeff) { return 0.0; }
@@ -43,7 +44,7 @@ void main() {
     cell_rects[c] = ivec4(0);
     if (count == 0u) return;
     const CameraParams cam = make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y,
-                                         cam_near);
+                                         cam_near, cam_projection);
     const CellIn in_ = CellIn(cell_geom[3u * c].xyz, cell_geom[3u * c + 1u].xyz, cell_geom[3u * c + 2u]);
     Cell2D cell;
     TileRect r;

@@ -10,6 +10,10 @@ const int GAUSSIAN_BLENDING = 3;
 const int WSR = 4;
 const int DUPLEX = 5;
 
+// Camera projections; the values are the indices of gbviewer.camera.PROJECTIONS.
+const int PERSPECTIVE = 0;
+const int ORTHOGRAPHIC = 1;
+
 const int TILE = 16;                       // BLOCK_X = BLOCK_Y (KERNELS.md §0.4)
 const float DILATION_3DGS = 0.3;           // +0.3 px^2, no compensation (§0.3)
 const float MIP_KERNEL_SIZE = 0.1;         // Mip-Splatting 2D filter (§2)
@@ -41,8 +45,9 @@ int sh_degree_for_coeffs(int k) { return k >= 16 ? 3 : k >= 9 ? 2 : k >= 4 ? 1 :
 
 bool finitef(float v) { return !isnan(v) && !isinf(v); }
 
-// Camera as the kernels see it: world-to-camera rotation (row-major) and translation, pinhole intrinsics with
-// pixel centres at half-integers, and the frustum limits used to clamp the EWA Jacobian.
+// Camera as the kernels see it: world-to-camera rotation (row-major) and translation, intrinsics with pixel centres
+// at half-integers (perspective: fx, fy in pixels, x = fx X/Z + cx; orthographic: fx, fy in pixels per world unit,
+// x = fx X + cx), and the frustum limits used to clamp the perspective EWA Jacobian.
 struct CameraParams {
     float R[9];
     float t[3];
@@ -51,6 +56,7 @@ struct CameraParams {
     int width, height;
     float near_plane;
     float lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos;
+    int projection;  // PERSPECTIVE or ORTHOGRAPHIC
 };
 
 // Per-splat output of preprocess; everything the blend step needs, computed once per frame.

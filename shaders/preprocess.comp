@@ -25,6 +25,7 @@ uniform float cam_t[3];
 uniform vec4 cam_f;  // fx, fy, cx, cy
 uniform ivec2 cam_size;
 uniform float cam_near;
+uniform int cam_projection;  // PERSPECTIVE or ORTHOGRAPHIC
 uniform int weight_k;  // view-weight SH coefficients per splat, 0: none (v = 1)
 uniform vec4 oit;      // sigma, weight_background, et_grade, depth_correct (wsr, duplex)
 
@@ -38,7 +39,7 @@ void main() {
     const uint i = group_index() * 256u + gl_LocalInvocationID.x;
     if (i >= num_splats) return;
     const CameraParams cam = make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y,
-                                         cam_near);
+                                         cam_near, cam_projection);
     const vec4 g0 = geom[3u * i], g1 = geom[3u * i + 1u], g2 = geom[3u * i + 2u];
     const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, g0.w, i, g1.w, weight_k > 0, sh_degree_for_coeffs(weight_k), -1);
     const OitParams params = OitParams(oit.x, oit.y, oit.z, int(oit.w));

@@ -84,13 +84,19 @@ void covariance_3d(vec4 q, vec3 s, precise out float cov[6]) {
 }
 
 // EWA projection of a 3D covariance to screen space (eq. 3): J W Sigma W^T J^T, with the view-space point
-// clamped to 1.3x the frustum for the Jacobian only (computeCov2D). Returns (a, b, c).
+// clamped to 1.3x the frustum for the Jacobian only (computeCov2D). An orthographic camera's projection is linear:
+// J = diag(fx, fy) (no depth terms, nothing to clamp). Returns (a, b, c).
 void project_covariance(CameraParams cam, float cov3[6], vec3 pv, precise out vec3 result) {
-    const float tz = pv[2];
-    precise const float tx = clampf(pv[0] / tz, -cam.lim_x_neg, cam.lim_x_pos) * tz;
-    precise const float ty = clampf(pv[1] / tz, -cam.lim_y_neg, cam.lim_y_pos) * tz;
-    precise const float j00 = cam.fx / tz, j02 = -cam.fx * tx / (tz * tz);
-    precise const float j11 = cam.fy / tz, j12 = -cam.fy * ty / (tz * tz);
+    precise float j00 = cam.fx, j02 = 0.0, j11 = cam.fy, j12 = 0.0;
+    if (cam.projection != ORTHOGRAPHIC) {
+        const float tz = pv[2];
+        precise const float tx = clampf(pv[0] / tz, -cam.lim_x_neg, cam.lim_x_pos) * tz;
+        precise const float ty = clampf(pv[1] / tz, -cam.lim_y_neg, cam.lim_y_pos) * tz;
+        j00 = cam.fx / tz;
+        j02 = -cam.fx * tx / (tz * tz);
+        j11 = cam.fy / tz;
+        j12 = -cam.fy * ty / (tz * tz);
+    }
     // T = J W (2x3), W = cam.R
     precise float T[6];
     for (int c = 0; c < 3; ++c) {
@@ -182,18 +188,23 @@ struct SplatIn {
     int cell;         // the splat's cell (duplex), -1 when none
 };
 
-// View-space position R m + t of a world point; false behind the near plane (z <= 0.2, KERNELS.md §0.4).
+// View-space position R m + t of a world point; false behind the near plane (z <= 0.2, KERNELS.md §0.4). An
+// orthographic camera culls the same way: it sees what lies in front of its image plane (z = 0) by more than the
+// near distance, and sorts by the same view-space z.
 bool view_point(CameraParams cam, vec3 m, precise out vec3 pv) {
     for (int i = 0; i < 3; ++i)
         pv[i] = cam.R[i * 3] * m[0] + cam.R[i * 3 + 1] * m[1] + cam.R[i * 3 + 2] * m[2] + cam.t[i];
     return pv[2] > cam.near_plane;
 }
 
-// Screen position of the view-space point pv and the tiles of the box with half sides h around it (getRect); false
-// when a value is not finite or no tile is touched.
+// Screen position of the view-space point pv (perspective: fx X/Z + cx; orthographic: fx X + cx) and the tiles of
+// the box with half sides h around it (getRect); false when a value is not finite or no tile is touched.
 bool screen_footprint(CameraParams cam, vec3 pv, vec2 h, int grid_x, int grid_y, precise out vec2 xy,
                       out TileRect rect) {
-    xy = vec2(cam.fx * pv[0] / pv[2] + cam.cx, cam.fy * pv[1] / pv[2] + cam.cy);
+    if (cam.projection == ORTHOGRAPHIC)
+        xy = vec2(cam.fx * pv[0] + cam.cx, cam.fy * pv[1] + cam.cy);
+    else
+        xy = vec2(cam.fx * pv[0] / pv[2] + cam.cx, cam.fy * pv[1] / pv[2] + cam.cy);
     rect = TileRect(0, 0, 0, 0);
     if (!finitef(xy.x) || !finitef(xy.y) || !finitef(h.x) || !finitef(h.y)) return false;
     rect = tile_rect(xy, h, grid_x, grid_y);
@@ -208,7 +219,11 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
     const vec3 m = in_.mean;
     precise vec3 pv;
     if (!view_point(cam, m, pv)) return false;
-    precise vec3 dir = vec3(m[0] - cam.campos[0], m[1] - cam.campos[1], m[2] - cam.campos[2]);
+    // SH and view-weight direction: from the eye to the splat; an orthographic camera's rays are parallel, so every
+    // splat is seen along the camera's forward axis (row 2 of R)
+    precise vec3 dir = cam.projection == ORTHOGRAPHIC ? vec3(cam.R[6], cam.R[7], cam.R[8])
+                                                      : vec3(m[0] - cam.campos[0], m[1] - cam.campos[1],
+                                                             m[2] - cam.campos[2]);
     precise const float dn = sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
     dir = dn > 0.0 ? vec3(dir.x / dn, dir.y / dn, dir.z / dn) : vec3(0.0, 0.0, 1.0);
 

@@ -60,8 +60,14 @@ def rotation(rng: np.random.Generator, max_angle: float) -> np.ndarray:
     return np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * K @ K
 
 
-def random_view(seed, n=160, sh_degree=3, filter3d=False, W=48, H=40, max_px_sigma=None, kinds_p=None):
+ORTHO_DEPTH = 3.0  # random_view's orthographic camera has the perspective one's scale at this depth
+
+
+def random_view(seed, n=160, sh_degree=3, filter3d=False, W=48, H=40, max_px_sigma=None, kinds_p=None,
+                projection="perspective"):
     """Random scene with every awkward kind of splat, seen by an off-centre camera (fx != fy, rotated pose).
+    projection="orthographic": the same scene, seen by the same pose as an orthographic camera with the perspective
+    one's scale at depth ORTHO_DEPTH (so the splats spread a little beyond the image where they are deeper).
 
     Kinds: normal, tiny (sub-pixel), behind (Z <= near, including negative Z), offscreen (far outside the
     frustum, exercising the Jacobian clamp), degenerate (zero scales and/or zero quaternion), huge (covering
@@ -103,14 +109,16 @@ def random_view(seed, n=160, sh_degree=3, filter3d=False, W=48, H=40, max_px_sig
             scales[i] = rng.uniform(0.5, 4.0, 3)
             op[i] = rng.uniform(0.02, 0.5)
     if max_px_sigma is not None:
-        cap = max_px_sigma * np.maximum(Zc, 0.2)[:, None] / max(fx, fy)
+        depth = np.maximum(Zc, 0.2) if projection == "perspective" else np.full(n, ORTHO_DEPTH)
+        cap = max_px_sigma * depth[:, None] / max(fx, fy)
         scales = np.minimum(scales, cap)
     Pc = np.stack([Xc, Yc, Zc], -1)
     means = (Pc - t) @ R  # x_world = R^T (x_cam - t)
     sh = rng.normal(scale=0.25, size=(n, (sh_degree + 1) ** 2, 3))
     sh[:, 0] = rng.uniform(-1.5, 1.5, (n, 3))
     f3 = rng.uniform(0.0, 0.05, n) if filter3d else None
-    return gb.Scene.from_arrays(means, scales, quats, op, sh, filter_3d=f3), cam
+    scene = gb.Scene.from_arrays(means, scales, quats, op, sh, filter_3d=f3)
+    return scene, cam.with_projection(projection, ORTHO_DEPTH)
 
 
 # (seed, sh_degree, filter_3d): SH 0 and 3, filter on and off

@@ -7,7 +7,8 @@ sequential front-to-back loop; vectorising over pixels does not change the per-p
 
 Conventions (the ones gbviewer documents):
 - pixel (i, j) covers [j, j+1] x [i, i+1], centre (j + 0.5, i + 0.5);
-- screen position x = fx X/Z + cx, y = fy Y/Z + cy with (X, Y, Z) = R mean + t;
+- screen position x = fx X/Z + cx, y = fy Y/Z + cy with (X, Y, Z) = R mean + t; for an orthographic camera
+  x = fx X + cx, y = fy Y + cy, J = diag(fx, fy), and every SH view direction is the camera's forward axis;
 - the tile rectangle is computed in the published integer-centre convention p = xy - 0.5.
 """
 
@@ -92,7 +93,41 @@ def camera_params(cam, supersample: int = 1) -> dict:
         R=np.asarray(cam.R, np.float32).astype(np.float64),
         t=np.asarray(cam.t, np.float32).astype(np.float64),
         near=float(getattr(cam, "near", NEAR_PLANE)),
+        ortho=getattr(cam, "projection", "perspective") == "orthographic",
     )
+
+
+def project(cp: dict, view: np.ndarray, Sigma: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Screen positions (N,2) and EWA 2D covariances J W Sigma W^T J^T (N,2,2) of view-space points (N,3) with
+    world covariances Sigma (N,3,3); rows not in `keep` are finite garbage. Perspective: J = [[fx/Z, 0, -fx X/Z^2],
+    [0, fy/Z, -fy Y/Z^2]] with X/Z, Y/Z clamped to 1.3x the frustum (J only); orthographic: J = diag(fx, fy)."""
+    W, H, fx, fy, cx, cy, R = (cp[k] for k in ("W", "H", "fx", "fy", "cx", "cy", "R"))
+    X, Y, Z = view.T
+    J = np.zeros((len(view), 2, 3))
+    if cp["ortho"]:
+        J[:, 0, 0], J[:, 1, 1] = fx, fy
+        xy = np.stack([fx * X + cx, fy * Y + cy], -1)
+    else:
+        Zs = np.where(keep, Z, 1.0)  # avoid division warnings for culled points
+        tan_x, tan_y = 0.5 * W / fx, 0.5 * H / fy
+        tx = np.clip(X / Zs, -(cx / fx + 0.3 * tan_x), (W - cx) / fx + 0.3 * tan_x) * Zs
+        ty = np.clip(Y / Zs, -(cy / fy + 0.3 * tan_y), (H - cy) / fy + 0.3 * tan_y) * Zs
+        J[:, 0, 0] = fx / Zs
+        J[:, 0, 2] = -fx * tx / Zs ** 2
+        J[:, 1, 1] = fy / Zs
+        J[:, 1, 2] = -fy * ty / Zs ** 2
+        xy = np.stack([fx * X / Zs + cx, fy * Y / Zs + cy], -1)
+    T = J @ R  # J W
+    return xy, T @ Sigma @ T.transpose(0, 2, 1)
+
+
+def view_dirs(cp: dict, means: np.ndarray) -> np.ndarray:
+    """Unit SH view directions (N,3): from the camera centre to each mean, or the forward axis (orthographic)."""
+    R, t = cp["R"], cp["t"]
+    if cp["ortho"]:
+        return np.tile(R[2] / np.linalg.norm(R[2]), (len(means), 1))
+    d = means - (-R.T @ t)
+    return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
 
 
 def _sh_raw(c: np.ndarray, dirs: np.ndarray) -> np.ndarray:
@@ -122,7 +157,7 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
     (depth_correct) or v * correction <= 0."""
     assert mode in MODES + OIT_MODES, mode
     cp = camera_params(cam, supersample)
-    W, H, fx, fy, cx, cy, R, t = (cp[k] for k in ("W", "H", "fx", "fy", "cx", "cy", "R", "t"))
+    W, H, R, t = (cp[k] for k in ("W", "H", "R", "t"))
     means = np.asarray(_get(scene, "means"), np.float64)
     scales = np.asarray(_get(scene, "scales"), np.float64)
     quats = np.asarray(_get(scene, "quats"), np.float64)
@@ -132,9 +167,8 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
     n = means.shape[0]
 
     view = means @ R.T + t
-    X, Y, Z = view.T
+    Z = view[:, 2]
     keep = Z > cp["near"]
-    Zs = np.where(keep, Z, 1.0)  # avoid division warnings for culled splats
 
     # Mip-Splatting 3D filter (every mode when present)
     if f3d is not None:
@@ -146,33 +180,19 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
     Rq = quat_to_rotmat(quats)
     M = Rq * scales[:, None, :]  # R S
     Sigma = M @ M.transpose(0, 2, 1)
-
-    tan_x, tan_y = 0.5 * W / fx, 0.5 * H / fy
-    lim_xp, lim_xn = (W - cx) / fx + 0.3 * tan_x, cx / fx + 0.3 * tan_x
-    lim_yp, lim_yn = (H - cy) / fy + 0.3 * tan_y, cy / fy + 0.3 * tan_y
-    tx = np.clip(X / Zs, -lim_xn, lim_xp) * Zs
-    ty = np.clip(Y / Zs, -lim_yn, lim_yp) * Zs
-    J = np.zeros((n, 2, 3))
-    J[:, 0, 0] = fx / Zs
-    J[:, 0, 2] = -fx * tx / Zs ** 2
-    J[:, 1, 1] = fy / Zs
-    J[:, 1, 2] = -fy * ty / Zs ** 2
-    T = J @ R  # J W
-    cov = T @ Sigma @ T.transpose(0, 2, 1)
+    xy, cov = project(cp, view, Sigma, keep)
+    dirs = view_dirs(cp, means)
     a, b, c = cov[:, 0, 0].copy(), cov[:, 0, 1].copy(), cov[:, 1, 1].copy()
 
     if mode in ("scalar",) + OIT_MODES:
         a += 0.3
         c += 0.3
     if mode in OIT_MODES:
-        campos0 = -R.T @ t
-        d0 = means - campos0
-        d0 = d0 / np.maximum(np.linalg.norm(d0, axis=1, keepdims=True), 1e-300)
         if isinstance(scene, dict):
             vw = scene.get("view_weight_sh")
         else:
             vw = scene.oit.view_weight_sh if scene.oit is not None else None
-        w = _sh_raw(np.asarray(vw, np.float64), d0) if vw is not None else np.ones(n)
+        w = _sh_raw(np.asarray(vw, np.float64), dirs) if vw is not None else np.ones(n)
         if oit["depth_correct"]:
             keep &= Z < oit["sigma"]
             w = w * (1.0 - Z / oit["sigma"])
@@ -196,8 +216,7 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
     lam_r = mid + np.sqrt(np.maximum(0.1, mid * mid - det))
     radius = np.ceil(kr * np.sqrt(np.maximum(lam_r, 0.0)))
 
-    x = fx * X / Zs + cx
-    y = fy * Y / Zs + cy
+    x, y = xy.T
     gx, gy = math.ceil(W / TILE), math.ceil(H / TILE)
     px, py = x - 0.5, y - 0.5
     with np.errstate(invalid="ignore"):
@@ -214,9 +233,6 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
     v1 = np.stack([np.cos(theta), np.sin(theta)], -1)
     v2 = np.stack([-np.sin(theta), np.cos(theta)], -1)
 
-    campos = -R.T @ t
-    dirs = means - campos
-    dirs = dirs / np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
     color = sh_to_rgb(sh, dirs)
 
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -424,32 +440,21 @@ def render_full_res(scene, cam, mode: str, supersample: int = 1, background=(0.0
 def preprocess_cells(cells, cam, supersample: int = 1) -> dict:
     """Cells as Duplex-GS projects them (KERNELS.md §8.3): near cull, EWA with +0.3, radius ceil(2 sqrt(lambda1))."""
     cp = camera_params(cam, supersample)
-    W, H, fx, fy, cx, cy, R, t = (cp[k] for k in ("W", "H", "fx", "fy", "cx", "cy", "R", "t"))
+    W, H, R, t = (cp[k] for k in ("W", "H", "R", "t"))
     means = np.asarray(cells.means, np.float64)
-    m = len(means)
     view = means @ R.T + t
-    X, Y, Z = view.T
+    Z = view[:, 2]
     keep = Z > cp["near"]
-    Zs = np.where(keep, Z, 1.0)
     Rq = quat_to_rotmat(cells.quats)
     M = Rq * np.asarray(cells.scales, np.float64)[:, None, :]
     Sigma = M @ M.transpose(0, 2, 1)
-    tan_x, tan_y = 0.5 * W / fx, 0.5 * H / fy
-    tx = np.clip(X / Zs, -(cx / fx + 0.3 * tan_x), (W - cx) / fx + 0.3 * tan_x) * Zs
-    ty = np.clip(Y / Zs, -(cy / fy + 0.3 * tan_y), (H - cy) / fy + 0.3 * tan_y) * Zs
-    J = np.zeros((m, 2, 3))
-    J[:, 0, 0] = fx / Zs
-    J[:, 0, 2] = -fx * tx / Zs ** 2
-    J[:, 1, 1] = fy / Zs
-    J[:, 1, 2] = -fy * ty / Zs ** 2
-    T = J @ R
-    cov = T @ Sigma @ T.transpose(0, 2, 1)
+    xy, cov = project(cp, view, Sigma, keep)
     a, b, c = cov[:, 0, 0] + 0.3, cov[:, 0, 1], cov[:, 1, 1] + 0.3
     det = a * c - b * b
     keep &= det > 0
     mid = 0.5 * (a + c)
     radius = np.ceil(2.0 * np.sqrt(mid + np.sqrt(np.maximum(0.1, mid * mid - det))))
-    x, y = fx * X / Zs + cx, fy * Y / Zs + cy
+    x, y = xy.T
     gx, gy = math.ceil(W / TILE), math.ceil(H / TILE)
     with np.errstate(invalid="ignore"):
         x0 = np.clip((x - 0.5 - radius) / TILE, 0, gx).astype(np.int64)

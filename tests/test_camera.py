@@ -120,3 +120,66 @@ def test_orbit_framing_sees_the_whole_box():
     up = np.array(gb.camera.UP_AXES["-y"])
     d = orbit_direction(up, 30.0, 20.0)
     assert np.linalg.norm(d) == pytest.approx(1) and float(d @ up) == pytest.approx(np.sin(np.radians(20)))
+
+
+def project_any(cam: gb.Camera, p: np.ndarray) -> np.ndarray:
+    """Pixel position of world points (N, 3) under either projection."""
+    x = p @ cam.R.T + cam.t
+    z = 1.0 if cam.orthographic else x[:, 2]
+    return np.c_[cam.fx * x[:, 0] / z + cam.cx, cam.fy * x[:, 1] / z + cam.cy]
+
+
+def test_orthographic_camera():
+    """fx, fy in pixels per unit: a point's pixel does not depend on its depth; zoom (sampling rate, size) scales
+    them; with_projection keeps things at the given depth the same size; bad projections are refused."""
+    persp = gb.Camera(640, 480, 500, 510, 320, 240, rot(np.array([1.0, 2, 3]), 0.4), [0.1, -0.2, 3])
+    ortho = persp.with_projection("orthographic", 4.0)
+    assert ortho.orthographic and ortho.projection_code == 1 and (ortho.fx, ortho.fy) == (125.0, 127.5)
+    assert ortho.with_projection("perspective", 4.0) == persp and persp.with_projection("perspective", -1) is persp
+    p_cam = np.array([[0.3, -0.1, 4.0], [0.3, -0.1, 9.0]])
+    p = (p_cam - persp.t) @ persp.R  # world points at depths 4 and 9, same x, y in the camera
+    np.testing.assert_allclose(project_any(ortho, p), project_any(persp, p[:1]).repeat(2, 0), rtol=1e-9)
+    for s in (8, 1 / 8):
+        c = ortho.at_sampling_rate(s)
+        assert c.orthographic
+        np.testing.assert_allclose(project_any(c, p), project_any(ortho, p) * s, rtol=1e-9)
+    assert ortho.with_size(320, 240).fx == 62.5
+    dirs, dist = ortho.view_rays(p)
+    np.testing.assert_allclose(dirs, np.tile(persp.R[2], (2, 1)), atol=1e-12)
+    np.testing.assert_allclose(dist, [4.0, 9.0])
+    dirs, dist = persp.view_rays(p)
+    np.testing.assert_allclose(dirs * dist[:, None], p - persp.position, atol=1e-12)
+    with pytest.raises(gb.CameraError, match="projection: expected perspective or orthographic, got 'fisheye'"):
+        gb.Camera(10, 10, 1, 1, 0, 0, np.eye(3), np.zeros(3), projection="fisheye")
+    with pytest.raises(gb.CameraError, match="depth"):
+        persp.with_projection("orthographic", 0.0)
+
+
+def test_orthographic_orbit_frames_the_scene_like_the_perspective_one(bundled_scene):
+    """The orthographic orbit stands at the same eye with f / distance pixels per unit: the plane through the orbit
+    centre keeps its scale, and the scene's robust box spans about as much of the image as in perspective."""
+    persp = orbit_camera(bundled_scene, 30, 20, width=160, height=120)
+    ortho = orbit_camera(bundled_scene, 30, 20, width=160, height=120, projection="orthographic")
+    lo, hi = bundled_scene.robust_bounds()
+    centre = (np.asarray(lo, np.float64) + hi) / 2
+    distance = float(np.linalg.norm(persp.position - centre))
+    np.testing.assert_allclose(ortho.position, persp.position, atol=1e-9)
+    assert ortho.orthographic and ortho.fy == pytest.approx(persp.fy / distance)
+    corners = np.array(np.meshgrid(*zip(lo, hi))).T.reshape(-1, 3)
+    spans = [np.ptp(project_any(c, corners), axis=0) for c in (persp, ortho)]
+    assert np.all((spans[1] > 0.7 * spans[0]) & (spans[1] < 1.3 * spans[0])), spans
+    alpha = [gb.render(bundled_scene, c, "scalar").alpha for c in (persp, ortho)]
+    coverage = [(a > 0.5).mean() for a in alpha]
+    assert 0.1 < coverage[1] and 0.7 < coverage[1] / coverage[0] < 1.3, coverage
+
+
+def test_cameras_json_projection(tmp_path):
+    entry = {"width": 80, "height": 60, "position": [0, 0, -5], "rotation": np.eye(3).tolist(), "fx": 20.0,
+             "fy": 20.0}
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps([entry, dict(entry, projection="orthographic"), dict(entry, projection="perspective")]))
+    assert [c.projection for c in gb.load_cameras_json(path)] == ["perspective", "orthographic", "perspective"]
+    path.write_text(json.dumps([entry, dict(entry, projection=3)]))
+    with pytest.raises(gb.CameraError, match="cameras.json: entry 1: 'projection': expected perspective or "
+                                             "orthographic, got '3'"):
+        gb.load_cameras_json(path)

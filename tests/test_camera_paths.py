@@ -30,3 +30,20 @@ def test_zoom_and_dolly_scale_the_content(bundled_scene, output_view):
     r = camera_paths.rate_path(output_view, 2, 1.0, 0.25)
     assert (r[-1].camera.width, r[-1].camera.height, r[-1].width) == (24, 16, W)
 
+
+
+def test_orthographic_zoom_scales_the_pixels_per_unit(bundled_scene, output_view):
+    """An orthographic zoom scales fx, fy (pixels per world unit): a point's offset from the principal point scales
+    with the rate whatever its depth; a dolly, which would change nothing, is refused."""
+    ortho = output_view.with_projection("orthographic", 3.0)
+    z = camera_paths.zoom_path(ortho, 3, 1.0, 1.0 / 4.0)
+    for p_cam in ([0.3, -0.2, 1.0], [0.3, -0.2, 7.0]):
+        p_world = ortho.R.T @ (np.array(p_cam) - ortho.t)
+        for pf in z:
+            q = pf.camera.R @ p_world + pf.camera.t
+            assert pf.camera.orthographic
+            assert math.isclose(pf.camera.fx * q[0], pf.rate * ortho.fx * p_cam[0], rel_tol=1e-9)
+    with pytest.raises(gb.GBViewerError, match="orthographic.*--path zoom"):
+        camera_paths.camera_path("dolly", ortho, 3, scene=bundled_scene)
+    r = camera_paths.rate_path(ortho, 2, 1.0, 0.25)
+    assert r[-1].camera.orthographic and math.isclose(r[-1].camera.fx, ortho.fx / 4)

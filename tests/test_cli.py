@@ -49,6 +49,29 @@ def test_render_png_and_npy(tmp_path):
     assert not list(tmp_path.glob(".*"))  # no temporary files left behind
 
 
+def test_render_orthographic(tmp_path):
+    """--projection orthographic: an orbit at the same eye with f / distance pixels per unit (a non-empty image, the
+    library's render); a training camera converted at the depth of the scene's centre; bad values: exit 2, one line."""
+    npy = tmp_path / "o.npy"
+    common = [str(gb.DEFAULT_SCENE), "--width", "64", "--height", "48", "--orbit", "10,20,0"]
+    assert main(["render", *common, "--projection", "orthographic", "--out", str(npy)]) == 0
+    scene = gb.load(gb.DEFAULT_SCENE)
+    cam = gb.orbit_camera(scene, 10, 20, width=64, height=48, projection="orthographic")
+    arr = np.load(npy)
+    assert (arr.max(axis=2) > 0.1).mean() > 0.2
+    np.testing.assert_array_equal(arr, gb.render(scene, cam).rgb)
+    cams = tmp_path / "cameras.json"
+    cams.write_text(json.dumps([{"width": 64, "height": 48, "fx": cam.fx, "fy": cam.fy, "projection":
+                                 "orthographic", "position": cam.position.tolist(), "rotation": cam.R.T.tolist()}]))
+    persp = tmp_path / "p.npy"
+    assert main(["render", str(gb.DEFAULT_SCENE), "--cameras", str(cams), "--projection", "perspective",
+                 "--out", str(persp)]) == 0
+    assert (np.load(persp).max(axis=2) > 0.1).mean() > 0.2
+    proc = run("render", str(gb.DEFAULT_SCENE), "--projection", "fisheye", "--out", "x.png", cwd=tmp_path)
+    assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1
+    assert "--projection: invalid choice: 'fisheye'" in proc.stderr and not (tmp_path / "x.png").exists()
+
+
 def test_render_refuses_to_overwrite(tmp_path, capsys):
     out = tmp_path / "x.png"
     out.write_bytes(b"precious")

@@ -88,3 +88,35 @@ def test_keyframes_json_forms_and_round_trip(bundled_scene, output_view, tmp_pat
     with pytest.raises(gb.GBViewerError, match="increasing"):
         keyframes.load_keyframes(bad, output_view, bundled_scene)
 
+
+
+def test_orthographic_keys_round_trip(bundled_scene, output_view, tmp_path):
+    """A key's projection is read (default: the base camera's), written and read back; a key that switches the
+    projection gives its scale; keys of both projections are not interpolated into one path."""
+    ortho = output_view.with_projection("orthographic", 3.0)
+    f = tmp_path / "keys.json"
+    f.write_text(json.dumps([{"orbit": [30, 20, 0]}, {"orbit": [60, 20, 0], "fx": 9.0, "fy": 9.0}]))
+    keys = keyframes.load_keyframes(f, ortho, bundled_scene)
+    assert [k.camera.projection for k in keys] == ["orthographic"] * 2 and keys[1].camera.fx == 9.0
+    g = tmp_path / "again.json"
+    g.write_text(json.dumps(keyframes.keyframes_to_json(keys)))
+    again = keyframes.load_keyframes(g, output_view, bundled_scene)  # a perspective base: the file says otherwise
+    assert [k.camera.projection for k in again] == ["orthographic"] * 2
+    assert [(k.camera.fx, k.camera.fy) for k in again] == [(k.camera.fx, k.camera.fy) for k in keys]
+    mid = keyframes.interpolate_keyframes(again, [0.5])[0].camera
+    assert mid.orthographic and keys[1].camera.fx < mid.fx < keys[0].camera.fx
+    mixed = [again[0], keyframes.Keyframe(output_view)]
+    with pytest.raises(gb.GBViewerError, match="same projection"):
+        keyframes.interpolate_keyframes(mixed, [0.5])
+
+
+@pytest.mark.parametrize("key, message", [
+    ({"orbit": [0, 0], "projection": "fisheye"}, "keyframe 0: 'projection': expected perspective or orthographic"),
+    ({"orbit": [0, 0], "projection": "orthographic"}, "give 'fx' and 'fy' too"),
+    ({"orbit": [0, 0], "projection": "orthographic", "fx": 5, "fy": 5, "fov_y_deg": 40}, "'fov_y_deg' has no"),
+])
+def test_bad_projection_keys(bundled_scene, output_view, tmp_path, key, message):
+    f = tmp_path / "keys.json"
+    f.write_text(json.dumps([key]))
+    with pytest.raises(gb.GBViewerError, match=message):
+        keyframes.load_keyframes(f, output_view, bundled_scene)

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..camera import UP_AXES, Camera, focal_from_fov, fov_of, frame_box, orbit_direction
+from ..camera import NEAR_PLANE, UP_AXES, Camera, focal_from_fov, fov_of, frame_box, orbit_direction
 
 
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -23,7 +23,8 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 class CameraController:
     """One camera shared by every pane: a world-to-camera rotation R (OpenCV axes, rows x right, y down, z forward),
     an orbit target and the distance to it (the eye is target - distance * forward), a vertical field of view and
-    the scene's up axis. Orbit and mouse look turn about the world up axis and the camera's x axis."""
+    the scene's up axis. Orbit and mouse look turn about the world up axis and the camera's x axis. The projection
+    is perspective or orthographic (see `camera`)."""
 
     target: np.ndarray = field(default_factory=lambda: np.zeros(3))
     distance: float = 3.0
@@ -33,6 +34,7 @@ class CameraController:
     radius: float = 1.0  # scene size: sets pan, fly and dolly limits
     centre: np.ndarray = field(default_factory=lambda: np.zeros(3))
     orbit_speed: float = 0.3  # degrees per pixel
+    projection: str = "perspective"
 
     MIN_FOV, MAX_FOV = 5.0, 120.0
 
@@ -49,9 +51,17 @@ class CameraController:
         return self.target - self.distance * self.R[2]
 
     def camera(self, width: int, height: int) -> Camera:
-        """A centred pinhole camera of width x height pixels with this pose and vertical field of view."""
+        """A centred camera of width x height pixels with this pose and vertical field of view. Orthographic: f /
+        distance pixels per unit (f: the field of view's focal length), so the plane through the target keeps its
+        size when the projection changes and the wheel's dolly zooms; seen from far enough back along the view that
+        the scene's bounding sphere lies in front of the near plane, so zooming in never clips the scene."""
         f = focal_from_fov(self.fov_y_deg, height)
-        return Camera(width, height, f, f, width / 2, height / 2, self.R, -self.R @ self.eye)
+        cam = Camera(width, height, f, f, width / 2, height / 2, self.R, -self.R @ self.eye)
+        if self.projection == "perspective":
+            return cam
+        back = max(self.distance, float(np.linalg.norm(self.target - self.centre)) + self.radius + 2 * NEAR_PLANE)
+        cam = replace(cam, t=-self.R @ (self.target - back * self.R[2]))
+        return cam.with_projection(self.projection, self.distance)
 
     def frame_bounds(self, lo: np.ndarray, hi: np.ndarray, azimuth_deg: float = 30.0, elevation_deg: float = 20.0,
                      aspect: float = 4 / 3) -> None:
@@ -127,14 +137,16 @@ class CameraController:
         self._look(eye, target)
 
     def snap_to(self, camera: Camera) -> None:
-        """Take a (training) camera's pose and vertical field of view; the target stays `distance` ahead."""
+        """Take a (training) camera's pose and vertical field of view (an orthographic camera's: the one that gives
+        its pixels per unit at the target); the target stays `distance` ahead. The projection stays."""
         self.R = camera.R.copy()
-        self.fov_y_deg = float(min(self.MAX_FOV, max(self.MIN_FOV, fov_of(camera))))
         dist = float(np.linalg.norm(self.centre - camera.position))
         self.distance = dist if dist > 1e-6 else self.distance
+        self.fov_y_deg = float(min(self.MAX_FOV, max(self.MIN_FOV, fov_of(camera.with_projection("perspective",
+                                                                                                 self.distance)))))
         self.target = camera.position + self.distance * self.R[2]
 
     def state(self) -> tuple:
         """A hashable summary (changes whenever the rendered view would)."""
         return (tuple(np.round(self.R.ravel(), 12)), tuple(np.round(self.target, 12)), round(self.distance, 12),
-                round(self.fov_y_deg, 9))
+                round(self.fov_y_deg, 9), self.projection)

@@ -60,6 +60,7 @@ SHORTCUTS = (
              (Key("left_bracket", "step_camera", (-1,), repeat=True),
               Key("right_bracket", "step_camera", (1,), repeat=True))),
     Shortcut("U", "next up axis (-y, +y, +z, -z)", (Key("u", "next_up"),)),
+    Shortcut("O", "perspective / orthographic projection", (Key("o", "toggle_projection"),)),
     Shortcut("- =", "sampling rate one step down / up (x1/8 .. x8)",
              (Key("minus", "step_rate", (-1,), repeat=True), Key("equal", "step_rate", (1,), repeat=True))),
     Shortcut("0", "sampling rate x1", (Key("_0", "set_rate", (1.0,)),)),

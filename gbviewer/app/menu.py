@@ -55,6 +55,8 @@ def draw_menu(app: ViewerApp) -> None:
             state.reset_camera()
         if _item("Fly mode", "toggle_fly", selected=state.fly):
             state.toggle_fly()
+        if _item("Orthographic", "toggle_projection", selected=s.projection == "orthographic"):
+            state.toggle_projection()
         if _item("Next training camera", "step_camera", 1, enabled=bool(state.cameras)):
             state.step_camera(1)
         if _item("Previous training camera", "step_camera", -1, enabled=bool(state.cameras)):

@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Container
 
-from ..camera import UP_AXES
+from ..camera import PROJECTIONS, UP_AXES
 from ..errors import InvalidValue
 from ..render import Mode
 from ..validate import array, integer, read_json, real
@@ -70,6 +70,7 @@ class AppSettings:
     backend: str = "cpu"
     fov_y_deg: float = 50.0
     up: str = "-y"
+    projection: str = "perspective"
     loupe: bool = False
     loupe_zoom: float = 8.0
     show_info: bool = True
@@ -93,6 +94,7 @@ class AppSettings:
         s.backend = self.backend if isinstance(self.backend, str) else "cpu"
         s.fov_y_deg = float(_number(self.fov_y_deg, s.fov_y_deg, CameraController.MIN_FOV, CameraController.MAX_FOV))
         s.up = _choice(self.up, UP_AXES, "-y")
+        s.projection = _choice(self.projection, PROJECTIONS, "perspective")
         s.loupe = bool(self.loupe)
         s.loupe_zoom = float(_number(self.loupe_zoom, s.loupe_zoom, 2, 32))
         s.show_info = bool(self.show_info)

@@ -99,7 +99,8 @@ class AppState:
 
     def __init__(self, settings: AppSettings, cameras: str | Path | None = None) -> None:
         self.settings = settings
-        self.controller = CameraController(fov_y_deg=settings.fov_y_deg, up=settings.up)
+        self.controller = CameraController(fov_y_deg=settings.fov_y_deg, up=settings.up,
+                                           projection=settings.projection)
         self.scene: Scene | None = None
         self.scene_path: Path | None = None
         self.cameras: list[Camera] = []
@@ -216,6 +217,12 @@ class AppState:
     def set_fov(self, fov_y_deg: float) -> None:
         self.controller.set_fov(fov_y_deg)
         self.settings.fov_y_deg = self.controller.fov_y_deg
+        self.moved()
+
+    def toggle_projection(self) -> None:
+        """Perspective <-> orthographic; the plane through the target keeps its size on screen."""
+        self.settings.projection = "orthographic" if self.settings.projection == "perspective" else "perspective"
+        self.controller.projection = self.settings.projection
         self.moved()
 
     def toggle_fly(self) -> None:

@@ -12,6 +12,8 @@ Decoding for a camera (`DuplexModel.decode`), as `generate_neural_gaussians`:
 - anchors kept: Octree-GS level of detail (level <= round(log2(standard_dist / distance) + extra_level), clamped to
   the levels present; dist2level 'round') and in front of the near plane (z > 0.2; the published prefilter also
   drops anchors whose tile rectangle is off screen, which the renderer's cell culling does for duplex);
+- view direction and distance of an anchor: from the camera centre (`Camera.view_rays`; an orthographic camera
+  sees every anchor along its forward axis, at its depth);
 - MLP input per anchor: [feature (through the feature bank when present), view direction, (distance), (level)],
   (+ appearance embedding 0 for colour). Which of distance / level each MLP takes follows from its input size; when
   every MLP has exactly one extra input it is taken as the distance (Scaffold-GS's add_*_dist; Octree-GS's
@@ -185,13 +187,13 @@ class DuplexModel:
             raise SceneFormatError(self.path.parent / MLP_FILES["opacity"], "inconsistent MLP input sizes "
                                    f"{self.extra}: the level input is shared by all MLPs")
 
-    def anchor_mask(self, campos: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    def anchor_mask(self, camera: Camera) -> np.ndarray:
         """Anchors of this view: Octree-GS level of detail ('round') and in front of the near plane."""
-        dist = np.linalg.norm(self.anchors - campos, axis=1)
+        dist = camera.view_rays(self.anchors)[1]
         with np.errstate(divide="ignore"):
             pred = np.log2(self.standard_dist / np.maximum(dist, 1e-30)) + self.extra_levels
         lod = np.clip(np.round(pred), 0, self.num_levels - 1)
-        z = self.anchors @ R[2] + t[2]
+        z = self.anchors @ camera.R[2] + camera.t[2]
         return (self.levels <= lod) & (z > NEAR_PLANE)
 
     def _empty_view(self, camera: Camera) -> Scene:
@@ -209,8 +211,7 @@ class DuplexModel:
     def decode(self, camera: Camera) -> Scene:
         """The splats and cells of this view (see the module docstring)."""
         torch = self.torch
-        campos = camera.position
-        keep = self.anchor_mask(campos, camera.R, camera.t)
+        keep = self.anchor_mask(camera)
         idx = np.flatnonzero(keep)
         A, k = len(idx), self.k
         if A == 0:
@@ -218,9 +219,8 @@ class DuplexModel:
         dev = self.device
         f32 = torch.float32
         anchor = self.anchors[idx]
-        ob = anchor - campos
-        dist = np.linalg.norm(ob, axis=1, keepdims=True)
-        view = ob / np.maximum(dist, 1e-30)
+        view, dist = camera.view_rays(anchor)
+        dist = dist[:, None]
         with torch.no_grad():
             feat = torch.as_tensor(self.feats[idx], dtype=f32, device=dev)
             tview = torch.as_tensor(view, dtype=f32, device=dev)

@@ -80,9 +80,9 @@ def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backe
 
 
 def camera_args(camera: Camera) -> tuple:
-    """Camera as the native modules take it: R (3x3), t, fx, fy, cx, cy, width, height, near."""
+    """Camera as the native modules take it: R (3x3), t, fx, fy, cx, cy, width, height, near, projection code."""
     return (np.ascontiguousarray(camera.R, np.float32), np.ascontiguousarray(camera.t, np.float32), camera.fx,
-            camera.fy, camera.cx, camera.cy, camera.width, camera.height, camera.near)
+            camera.fy, camera.cx, camera.cy, camera.width, camera.height, camera.near, camera.projection_code)
 
 
 def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backend: str, t0: float, *,

@@ -58,6 +58,12 @@ inline Mode check_mode(const char* where, int mode) {
     return (Mode)mode;
 }
 
+inline Projection check_projection(const char* where, int projection) {
+    if (projection != PERSPECTIVE && projection != ORTHOGRAPHIC)
+        fail(where, "projection must be 0 (perspective) or 1 (orthographic)");
+    return (Projection)projection;
+}
+
 inline void check_supersample(const char* where, int N) {
     if (N < 1 || N > 8) fail(where, "supersample must be 1..8");
 }
@@ -72,17 +78,18 @@ struct RenderArgs {
     OitParams oit;      // wsr / duplex globals
 };
 
-// The render arguments both modules take (Python: gbviewer.render._camera_args, then mode, supersample, background
-// and the order-independent globals), checked; a bad one throws std::invalid_argument (ValueError) naming `where`.
-// Checks: R 3x3, t and background 3 floats, all finite; width and height >= 1 and at most 2^31 - 1 pixels at N x N
-// samples; fx, fy, near finite and > 0, cx, cy finite; mode known; N in 1..8; for wsr and duplex a finite
-// weight_background >= 0 and, with depth_correct, a finite sigma > 0; for duplex a finite et_grade > 0.
+// The render arguments both modules take (Python: gbviewer.render.prepare.camera_args, then mode, supersample,
+// background and the order-independent globals), checked; a bad one throws std::invalid_argument (ValueError) naming
+// `where`. Checks: R 3x3, t and background 3 floats, all finite; width and height >= 1 and at most 2^31 - 1 pixels at
+// N x N samples; fx, fy, near finite and > 0, cx, cy finite; projection and mode known; N in 1..8; for wsr and duplex
+// a finite weight_background >= 0 and, with depth_correct, a finite sigma > 0; for duplex a finite et_grade > 0.
 inline RenderArgs parse_render_args(const char* where, const FArr& R, const FArr& t, float fx, float fy, float cx,
-                                    float cy, int width, int height, float near_plane, int mode, int supersample,
-                                    const FArr& background, float sigma, float weight_background, float et_grade,
-                                    bool depth_correct) {
+                                    float cy, int width, int height, float near_plane, int projection, int mode,
+                                    int supersample, const FArr& background, float sigma, float weight_background,
+                                    float et_grade, bool depth_correct) {
     check_view(where, R, t, background);
     const Mode md = check_mode(where, mode);
+    const Projection proj = check_projection(where, projection);
     check_supersample(where, supersample);
     auto all_finite = [](const FArr& a) {
         for (size_t i = 0; i < a.size(); ++i)
@@ -105,7 +112,8 @@ inline RenderArgs parse_render_args(const char* where, const FArr& R, const FArr
     }
     if (md == DUPLEX && !(std::isfinite(et_grade) && et_grade > 0)) fail(where, "et_grade must be finite and > 0");
     RenderArgs a;
-    a.cam = make_camera(R.data(), t.data(), fx * N, fy * N, cx * N, cy * N, width * N, height * N, near_plane);
+    a.cam = make_camera(R.data(), t.data(), fx * N, fy * N, cx * N, cy * N, width * N, height * N, near_plane,
+                        proj);
     a.mode = md;
     a.supersample = supersample;
     a.width = width;

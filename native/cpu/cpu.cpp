@@ -515,19 +515,19 @@ void box_downsample(const Image& hi, int N, Image& lo) {
 
 nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, std::optional<FArr> filter_3d,
                 FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height, float near_plane,
-                int mode, int supersample, int sh_degree, FArr background, bool want_window, int threads,
-                std::optional<FArr> weight_sh, std::optional<FArr> cell_means, std::optional<FArr> cell_scales,
-                std::optional<FArr> cell_quats, std::optional<IArr> cell_offsets, std::optional<IArr> cell_members,
-                float sigma, float weight_background, float et_grade, bool depth_correct, std::optional<LArr> control,
-                std::optional<PArr> partial) {
+                int projection, int mode, int supersample, int sh_degree, FArr background, bool want_window,
+                int threads, std::optional<FArr> weight_sh, std::optional<FArr> cell_means,
+                std::optional<FArr> cell_scales, std::optional<FArr> cell_quats, std::optional<IArr> cell_offsets,
+                std::optional<IArr> cell_members, float sigma, float weight_background, float et_grade,
+                bool depth_correct, std::optional<LArr> control, std::optional<PArr> partial) {
     const int64_t n = check_scene("render", means, scales, quats, opacities, sh, filter_3d);
     if (control && control->shape(0) != 3) throw std::invalid_argument("render: control must hold 3 int64");
     if (partial && (partial->shape(0) != (size_t)height || partial->shape(1) != (size_t)width ||
                     partial->shape(2) != 3))
         throw std::invalid_argument("render: partial must be float32 (height, width, 3)");
     const Progress progress{control ? control->data() : nullptr, partial ? partial->data() : nullptr};
-    const RenderArgs args = parse_render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, mode,
-                                              supersample, background, sigma, weight_background, et_grade,
+    const RenderArgs args = parse_render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection,
+                                              mode, supersample, background, sigma, weight_background, et_grade,
                                               depth_correct);
     const int k = (int)sh.shape(1);
     const int sh_deg = std::max(0, std::min(sh_degree, sh_degree_for_coeffs(k)));
@@ -626,7 +626,7 @@ NB_MODULE(_native, m) {
     m.def("render", &render, nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"),
           nb::arg("sh"), nb::arg("filter_3d").none(), nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"),
           nb::arg("cx"), nb::arg("cy"), nb::arg("width"), nb::arg("height"), nb::arg("near_plane"),
-          nb::arg("mode"), nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"),
+          nb::arg("projection"), nb::arg("mode"), nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"),
           nb::arg("want_window"), nb::arg("threads"), nb::arg("weight_sh").none() = nb::none(),
           nb::arg("cell_means").none() = nb::none(), nb::arg("cell_scales").none() = nb::none(),
           nb::arg("cell_quats").none() = nb::none(), nb::arg("cell_offsets").none() = nb::none(),

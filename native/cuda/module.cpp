@@ -22,16 +22,16 @@ NB_MODULE(_native_cuda, m) {
     m.def("availability", &cuda::availability, "(usable, reason or the default device's name)");
     m.def(
         "check_render_args",
-        [](FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height, float near_plane, int mode,
-           int supersample, int sh_degree, FArr background, bool want_window, float sigma, float weight_background,
-           float et_grade, bool depth_correct) {
+        [](FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height, float near_plane,
+           int projection, int mode, int supersample, int sh_degree, FArr background, bool want_window, float sigma,
+           float weight_background, float et_grade, bool depth_correct) {
             (void)sh_degree;
             (void)want_window;
-            parse_render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, mode, supersample,
-                              background, sigma, weight_background, et_grade, depth_correct);
+            parse_render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
+                              supersample, background, sigma, weight_background, et_grade, depth_correct);
         },
         nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"), nb::arg("cx"), nb::arg("cy"), nb::arg("width"),
-        nb::arg("height"), nb::arg("near_plane"), nb::arg("mode"), nb::arg("supersample"), nb::arg("sh_degree"),
+        nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"), nb::arg("supersample"), nb::arg("sh_degree"),
         nb::arg("background"), nb::arg("want_window"), nb::arg("sigma") = 10.0f, nb::arg("weight_background") = 1.0f,
         nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
         "Renderer.render's argument checks, without a device: raises ValueError as render would.");
@@ -69,11 +69,11 @@ NB_MODULE(_native_cuda, m) {
              })
         .def("render",
              [](cuda::Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
-                float near_plane, int mode, int supersample, int sh_degree, FArr background, bool want_window,
-                float sigma, float weight_background, float et_grade, bool depth_correct) {
+                float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
+                bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct) {
                  const RenderArgs a = parse_render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane,
-                                                        mode, supersample, background, sigma, weight_background,
-                                                        et_grade, depth_correct);
+                                                        projection, mode, supersample, background, sigma,
+                                                        weight_background, et_grade, depth_correct);
                  cuda::RenderResult res;
                  {
                      nb::gil_scoped_release release;
@@ -82,7 +82,8 @@ NB_MODULE(_native_cuda, m) {
                  return result_dict(res, res, (size_t)a.height, (size_t)a.width);
              },
              nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"), nb::arg("cx"), nb::arg("cy"),
-             nb::arg("width"), nb::arg("height"), nb::arg("near_plane"), nb::arg("mode"), nb::arg("supersample"),
-             nb::arg("sh_degree"), nb::arg("background"), nb::arg("want_window"), nb::arg("sigma") = 10.0f,
-             nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false);
+             nb::arg("width"), nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"),
+             nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"), nb::arg("want_window"),
+             nb::arg("sigma") = 10.0f, nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f,
+             nb::arg("depth_correct") = false);
 }

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -115,3 +117,45 @@ def test_snap_to_a_training_camera_reproduces_it():
     assert cam.fy == pytest.approx(train.fy)
     c.orbit(10, 5)  # and the controls go on from there
     assert np.isfinite(c.R).all()
+
+
+def project_any(cam: gb.Camera, p) -> np.ndarray:
+    x = cam.R @ np.asarray(p, float) + cam.t
+    z = 1.0 if cam.orthographic else x[2]
+    return np.array([cam.fx * x[0] / z + cam.cx, cam.fy * x[1] / z + cam.cy])
+
+
+def test_orthographic_view_keeps_the_target_plane_and_zooms_with_the_wheel():
+    """Switching the projection keeps the plane through the target at its size on screen; the wheel scales the
+    pixels per unit; the whole scene stays in front of the near plane however far it zooms in; pan still moves the
+    point under the cursor with it."""
+    c = framed()
+    persp = c.camera(640, 480)
+    on_plane = c.target + 0.4 * c.R[0] - 0.3 * c.R[1]
+    c.projection = "orthographic"
+    ortho = c.camera(640, 480)
+    assert ortho.orthographic and ortho.fy == pytest.approx(persp.fy / c.distance)
+    assert project_any(ortho, on_plane) == pytest.approx(project_any(persp, on_plane), abs=1e-9)
+    assert c.state() != replace(c, projection="perspective").state()
+    fx0 = ortho.fx
+    for _ in range(40):
+        c.dolly(1)
+    zoomed = c.camera(640, 480)
+    assert zoomed.fx == pytest.approx(fx0 / 0.9 ** 40)
+    depth = (zoomed.R @ c.centre + zoomed.t)[2]
+    assert depth - c.radius > zoomed.near, "part of the scene's sphere is behind the near plane"
+    assert project_any(zoomed, c.target) == pytest.approx([320, 240], abs=1e-6)
+    point = c.target.copy()
+    c.pan(50, -20, 480)
+    assert project_any(c.camera(640, 480), point) - [320, 240] == pytest.approx([50, -20], abs=1e-6)
+
+
+def test_snap_to_an_orthographic_camera_keeps_its_scale():
+    c = framed()
+    c.projection = "orthographic"
+    train = gb.Camera.look_at([2.0, -1, -3], [0.1, 0, 0], (0, -1, 0), 800, 600, 40.0).with_projection(
+        "orthographic", 3.0)
+    c.snap_to(train)
+    cam = c.camera(800, 600)
+    assert cam.orthographic and cam.R == pytest.approx(train.R) and cam.fy == pytest.approx(train.fy)
+    assert project_any(cam, c.target) == pytest.approx(project_any(train, c.target), abs=1e-6)

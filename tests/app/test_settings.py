@@ -19,11 +19,13 @@ def test_settings_round_trip_and_persistence(tmp_path, monkeypatch):
     s.pane_count, s.layout, s.rate, s.window = 3, "grid", 0.125, (1200, 800)
     s.panes[2] = PaneSettings("analytic", 4, "alpha", True, "mip", 0.3)
     s.recent = settings.add_recent([], tmp_path / "a.ply")
+    s.projection = "orthographic"
     path = settings.save_settings(s)
     assert path.exists()
     back, warning = settings.load_settings()
     assert warning == "" and back == s.normalised()
     assert back.panes[2] == PaneSettings("analytic", 4, "alpha", True, "mip", 0.3)
+    assert back.projection == "orthographic"
 
 
 def test_bad_settings_fall_back_to_defaults_with_a_warning(tmp_path):
@@ -33,10 +35,11 @@ def test_bad_settings_fall_back_to_defaults_with_a_warning(tmp_path):
     assert s == AppSettings() and "unreadable" in warning
     p.write_text(json.dumps({"pane_count": 99, "rate": -1, "layout": "spiral", "panes": [{"mode": "nope",
                              "supersample": 40, "view": "x", "extra": 1}], "up": "sideways", "window": "big",
-                             "unknown_key": 1}))
+                             "unknown_key": 1, "projection": "fisheye"}))
     s, warning = settings.load_settings(p)
     assert warning == ""
     assert s.pane_count == 4 and s.rate == 1.0 and s.layout == "row" and s.up == "-y"
+    assert s.projection == "perspective"
     assert s.panes[0] == PaneSettings("scalar", 8, "color") and len(s.panes) == 4
 
 

@@ -121,6 +121,16 @@ def test_toggles_escape_fly_and_messages():
     assert [m[1] for m in s.messages] == [f"m{k}" for k in range(4, 10)] and s.messages[-1][2] == "warn"
 
 
+def test_projection_toggles_and_reaches_the_panes():
+    s = laid_out(2)
+    s.toggle_projection()
+    assert s.settings.projection == s.controller.projection == "orthographic" and s.moving
+    assert s.pane_camera(0).orthographic and s.pane_camera(1, preview=0.5).orthographic
+    s.toggle_projection()
+    assert s.settings.projection == "perspective" and not s.pane_camera(0).orthographic
+    assert AppState(AppSettings(projection="orthographic")).controller.projection == "orthographic"
+
+
 def test_up_axis_cycles():
     s = AppState(AppSettings())
     seen = [s.settings.up]

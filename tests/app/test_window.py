@@ -324,6 +324,26 @@ def test_keyboard_shortcuts(app, tmp_path):
     assert len(list(tmp_path.glob("*-paneB-*.png"))) == 1
 
 
+def test_orthographic_projection_key(app):
+    """O switches the panes to an orthographic camera (the screenshot is kept: tests/output/viewer-orthographic.png);
+    each pane shows gb.render at its orthographic camera; O again switches back."""
+    from imgui_bundle import imgui
+
+    app.state.set_pane_count(2)
+    wait(app)
+    press(app, imgui.Key.o)
+    assert app.state.settings.projection == "orthographic"
+    wait(app)
+    img = shot(app, "viewer-orthographic")
+    for i in (0, 1):
+        assert app.state.panes[i].parts["a"].job.camera.orthographic
+        got = pane_pixels(img, app.state.panes[i].rect)[LABEL_BAND:]
+        assert agree(got, expected_pane(app, i)[LABEL_BAND:]) > 0.99
+    press(app, imgui.Key.o)
+    wait(app)
+    assert not app.state.panes[0].parts["a"].job.camera.orthographic
+
+
 def test_drop_a_file_glsl_backend_and_render_limit(app, tmp_path):
     dropped = tmp_path / "dropped.ply"
     shutil.copy(gb.DEFAULT_SCENE, dropped)

@@ -143,8 +143,10 @@ def test_view_without_anchors_is_background(tmp_path):
         assert f.stats.visible == 0
 
 
-def test_decode_matches_numpy(tmp_path):
-    """Random MLPs with a distance input (opacity only) and a feature bank; decoded splats against numpy."""
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_decode_matches_numpy(tmp_path, projection):
+    """Random MLPs with a distance input (opacity only) and a feature bank; decoded splats against numpy. An
+    orthographic camera sees every anchor along its forward axis (+z here), at its depth."""
     rng = np.random.default_rng(5)
     F, k, n = 8, 3, 12
     anchors = rng.uniform(-1, 1, (n, 3)) + [0, 0, 5]
@@ -160,14 +162,14 @@ def test_decode_matches_numpy(tmp_path):
     save_mlps(tmp_path, mlps)
     scene = gb.load(tmp_path / "point_cloud.ply")
     assert scene.oit.weight_background == pytest.approx(0.1)  # relu(-0.3) + 0.1
-    cam = gb.Camera(32, 24, 30.0, 30.0, 16.0, 12.0, np.eye(3), np.zeros(3))
+    cam = gb.Camera(32, 24, 30.0, 30.0, 16.0, 12.0, np.eye(3), np.zeros(3), projection=projection)
     view = scene.oit.neural.decode(cam)
 
     def np_mlp(m, x):
         W0, b0, W2, b2 = (p.detach().numpy().astype(np.float64) for p in m.parameters())
         return np.maximum(x @ W0.T + b0, 0) @ W2.T + b2
 
-    ob = anchors - cam.position
+    ob = anchors - cam.position if projection == "perspective" else np.c_[0 * anchors[:, :2], anchors[:, 2]]
     dist = np.linalg.norm(ob, axis=1, keepdims=True)
     view_dir = ob / dist
     w = np_mlp(mlps["feature_bank"], view_dir)

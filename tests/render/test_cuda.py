@@ -79,6 +79,21 @@ def test_cuda_matches_cpu(mode, supersample, scene_name):
 
 
 @needs_gpu
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("supersample", [1, 2])
+def test_cuda_orthographic_matches_cpu(mode, supersample):
+    """An orthographic orbit (and its x1/4 zoom-out) with the tolerances and exact counts above."""
+    scene = gb.load(gb.DEFAULT_SCENE)
+    cam = gb.orbit_camera(scene, 40, 15, width=320, height=240, projection="orthographic")
+    for c in (cam, cam.at_sampling_rate(1 / 4)):
+        cpu = gb.render(scene, c, mode, supersample=supersample, backend="cpu")
+        gpu = gb.render(scene, c, mode, supersample=supersample, backend="cuda")
+        mean, worst, frac = compare(cpu, gpu)
+        assert mean < 1e-4 and frac < 0.002, (mean, worst, frac)
+        assert (gpu.stats.visible, gpu.stats.sort_length) == (cpu.stats.visible, cpu.stats.sort_length)
+
+
+@needs_gpu
 def test_cuda_buffers_grow_for_larger_scenes():
     cam = front_camera(64, 48)
     r = gb.get_renderer(random_scene(20, seed=1), "cuda")
@@ -162,8 +177,9 @@ def test_cuda_renderer_device():
 # ---- without a GPU: argument checks (gbviewer._native_cuda.check_render_args runs Renderer.render's) -------------
 
 GOOD = dict(R=np.eye(3, dtype=np.float32), t=np.zeros(3, np.float32), fx=60.0, fy=60.0, cx=32.0, cy=24.0, width=64,
-            height=48, near_plane=0.2, mode=0, supersample=1, sh_degree=3, background=np.zeros(3, np.float32),
-            want_window=False, sigma=10.0, weight_background=1.0, et_grade=4.0, depth_correct=False)
+            height=48, near_plane=0.2, projection=0, mode=0, supersample=1, sh_degree=3,
+            background=np.zeros(3, np.float32), want_window=False, sigma=10.0, weight_background=1.0, et_grade=4.0,
+            depth_correct=False)
 DUPLEX, WSR = int(gb.Mode.DUPLEX), int(gb.Mode.WSR)
 # (changed arguments, message)
 BAD_ARGS = [
@@ -187,6 +203,8 @@ BAD_ARGS = [
     (dict(fy=float("nan")), "fx, fy and near_plane"),
     (dict(cx=float("inf")), "cx and cy finite"),
     (dict(near_plane=0.0), "fx, fy and near_plane"),
+    (dict(projection=2), "projection must be 0 \\(perspective\\) or 1 \\(orthographic\\)"),
+    (dict(projection=-1), "projection must be"),
     (dict(mode=WSR, weight_background=-0.5), "weight_background"),
     (dict(mode=DUPLEX, weight_background=float("nan")), "weight_background"),
     (dict(mode=WSR, depth_correct=True, sigma=0.0), "sigma must be"),
@@ -203,7 +221,8 @@ def test_cuda_binding_rejects_bad_render_args(changes, message):
 
 @needs_module
 @pytest.mark.parametrize("changes", [dict(mode=0, et_grade=0.0), dict(mode=DUPLEX), dict(mode=WSR, sigma=0.0),
-                                     dict(width=1, height=1, supersample=8), dict(cx=-1e6, cy=1e6)])
+                                     dict(width=1, height=1, supersample=8), dict(cx=-1e6, cy=1e6),
+                                     dict(projection=1)])
 def test_cuda_binding_accepts_unused_or_odd_args(changes):
     """et_grade matters for duplex only, sigma with depth correction only; off-image principal points are fine."""
     _native_cuda.check_render_args(**dict(GOOD, **changes))
@@ -220,8 +239,8 @@ def test_cpu_binding_rejects_bad_render_args(changes, message):
     with pytest.raises(ValueError, match=f"^render: .*{message}"):
         _native.render(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None, args["R"], args["t"],
                        args["fx"], args["fy"], args["cx"], args["cy"], args["width"], args["height"],
-                       args["near_plane"], args["mode"], args["supersample"], args["sh_degree"], args["background"],
-                       args["want_window"], 1, cell_means=cells.means, cell_scales=cells.scales,
+                       args["near_plane"], args["projection"], args["mode"], args["supersample"], args["sh_degree"],
+                       args["background"], args["want_window"], 1, cell_means=cells.means, cell_scales=cells.scales,
                        cell_quats=cells.quats, cell_offsets=cells.offsets, cell_members=cells.members,
                        sigma=args["sigma"], weight_background=args["weight_background"], et_grade=args["et_grade"],
                        depth_correct=args["depth_correct"])

@@ -34,10 +34,11 @@ REPO = Path(__file__).resolve().parents[2]
 SOURCE = Path(__file__).resolve().parent / "native" / "preprocess_parity.cpp"
 RUNS = ["scalar", "mip", "analytic", "gaussian_blending", "wsr", "wsr+depth_correct", "duplex+depth_correct", "cell"]
 RECORD = np.dtype([("valid", "<i4"), ("rect", "<i4", 4), ("fields", "<u4", 12), ("cell", "<i4")])
-CAMERA_BYTES = 4 * (9 + 3 + 3 + 4 + 2 + 1 + 4)  # CameraParams
+CAMERA_BYTES = 4 * (9 + 3 + 3 + 4 + 2 + 1 + 4 + 1)  # CameraParams
 
-# camera and globals of the generated scene
+# camera and globals of the generated scene; the orthographic camera has the perspective one's scale at depth ORTHO_Z
 W, H, FX, FY, CX, CY, SIGMA = 640, 480, 523.7, 517.3, 333.1, 229.9, 7.3
+ORTHO_Z = 5.0
 SH_C1 = 0.4886025119029199
 SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
 SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154, -0.4570457994644658,
@@ -100,8 +101,11 @@ def _sh_basis(d: np.ndarray) -> np.ndarray:
                      SH_C3[4] * x * (4 * zz - xx - yy), SH_C3[5] * z * (xx - yy), SH_C3[6] * x * (xx - 3 * yy)], 1)
 
 
-def scene_file(path: Path, per_kind: int = 12_500, seed: int = 18) -> Path:
-    """Eight kinds of splats, per_kind each, written in preprocess_parity.cpp's input format."""
+def scene_file(path: Path, projection: int = 0, per_kind: int = 12_500, seed: int = 18) -> Path:
+    """Eight kinds of splats, per_kind each, written in preprocess_parity.cpp's input format, for a perspective
+    (projection 0) or orthographic (1) camera."""
+    ortho = projection == 1
+    fx, fy = (FX / ORTHO_Z, FY / ORTHO_Z) if ortho else (FX, FY)
     rng = np.random.default_rng(seed)
     R = _rotation(rng)
     t = rng.normal(0, 2, 3)
@@ -121,11 +125,12 @@ def scene_file(path: Path, per_kind: int = 12_500, seed: int = 18) -> Path:
     z[kind == 3] = SIGMA * (1 + u(-3e-7, 3e-7))[kind == 3]  # 3: at the depth-correction cut
     # 4: on tile edges: isotropic, 1 px sigma on screen (scalar radius 4), x0 or x1 edge on a multiple of 16 px
     e = kind == 4
-    scale[e] = (z[e] / FX)[:, None]
+    depth = np.ones(n) if ortho else z
+    scale[e] = (depth[e] / fx)[:, None]
     r = 4.0
     k = rng.integers(1, W // 16 - 1, n)
     px[e] = np.where(rng.random(n) < 0.5, 16 * k + r + 0.5, 16 * k - r - 15 + 0.5)[e]
-    pv = np.stack([(px - CX) * z / FX, (py - CY) * z / FY, z], 1)
+    pv = np.stack([(px - CX) * depth / fx, (py - CY) * depth / fy, z], 1)
     means = (pv - t) @ R  # R^T (pv - t), rows
     quats = rng.normal(size=(n, 4))
     quats /= np.linalg.norm(quats, axis=1, keepdims=True)
@@ -144,8 +149,7 @@ def scene_file(path: Path, per_kind: int = 12_500, seed: int = 18) -> Path:
     # view weights: random, and for kind 7 summing to ~0 in the view direction (w > 0 is the cut)
     weight = rng.normal(0, 0.5, (n, 16))
     weight[:, 0] = u(0.5, 3.0)
-    campos = -R.T @ t
-    d = means - campos
+    d = np.tile(R[2], (n, 1)) if ortho else means - (-R.T @ t)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     basis = _sh_basis(d)
     v = kind == 7
@@ -153,9 +157,10 @@ def scene_file(path: Path, per_kind: int = 12_500, seed: int = 18) -> Path:
 
     with open(path, "wb") as fh:
         fh.write(np.array([n, 16, 16], "<i4").tobytes())
-        fh.write(np.concatenate([R.ravel(), t, [FX, FY, CX, CY]]).astype("<f4").tobytes())
+        fh.write(np.concatenate([R.ravel(), t, [fx, fy, CX, CY]]).astype("<f4").tobytes())
         fh.write(np.array([W, H], "<i4").tobytes())
         fh.write(np.array([NEAR_PLANE, SIGMA], "<f4").tobytes())
+        fh.write(np.array([projection], "<i4").tobytes())
         for a in (means, scale, quats, opac, filt, sh, weight):
             fh.write(np.ascontiguousarray(a, "<f4").tobytes())
     return path
@@ -182,10 +187,10 @@ def differences(a: np.ndarray, b: np.ndarray) -> dict[str, tuple[int, int, int]]
     return out
 
 
-@pytest.fixture(scope="module")
-def outputs(builds, tmp_path_factory) -> dict[str, tuple[bytes, np.ndarray]]:
+@pytest.fixture(scope="module", params=[0, 1], ids=["perspective", "orthographic"])
+def outputs(request, builds, tmp_path_factory) -> dict[str, tuple[bytes, np.ndarray]]:
     tmp = tmp_path_factory.mktemp("fp_contract_run")
-    inp = scene_file(tmp / "scene.bin")
+    inp = scene_file(tmp / "scene.bin", request.param)
     return {name: run(binary, inp, tmp) for name, binary in builds.items()}
 
 

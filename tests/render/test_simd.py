@@ -187,13 +187,16 @@ def _preprocess_cases():
         yield f"random{seed}", random_view(seed, n=777, sh_degree=sh_degree, filter3d=filter3d, W=61, H=37)
     yield "needles", _needle_scene(5)
     yield "cuts", _cut_scene(7)
+    scene, cam = _cut_scene(7)
+    yield "cuts orthographic", (scene, cam.with_projection("orthographic", 2.0))
 
 
 @pytest.mark.parametrize("path", ["avx2", "avx512"])
 @pytest.mark.parametrize("mode", MODES)
 def test_preprocess_bitwise(path, mode):
     """The vector preprocess gives every splat's Splat2D (every field, bit for bit), tile rectangle and culling decision
-    exactly as the scalar one, in every mode, SH degree, with 3D filters, view weights, depth correction and cells."""
+    exactly as the scalar one, in every mode, SH degree, with 3D filters, view weights, depth correction and cells,
+    for perspective and orthographic cameras."""
     for name, (scene, cam) in _preprocess_cases():
         variants = [{}]
         if mode in ("wsr", "duplex"):

@@ -1,4 +1,4 @@
-"""Panel section: reset, fly mode, field of view, up axis, fly speed, training cameras."""
+"""Panel section: reset, fly mode, projection, field of view, up axis, fly speed, training cameras."""
 
 from __future__ import annotations
 
@@ -20,6 +20,8 @@ def draw(app: ViewerApp) -> None:
         state.reset_camera()
     imgui.same_line()
     _, state.fly = imgui.checkbox(f"fly mode ({hint('toggle_fly')})", state.fly)
+    if imgui.checkbox(f"orthographic ({hint('toggle_projection')})", s.projection == "orthographic")[0]:
+        state.toggle_projection()
     imgui.set_next_item_width(170)
     ch, fov = imgui.slider_float("field of view", state.controller.fov_y_deg, CameraController.MIN_FOV,
                                  CameraController.MAX_FOV, "%.0f deg")

@@ -243,7 +243,7 @@ class GlslRenderer:
             cam_t=np.ascontiguousarray(camera.t, f32),
             cam_f=(float(f32(camera.fx) * Nf), float(f32(camera.fy) * Nf), float(f32(camera.cx) * Nf),
                    float(f32(camera.cy) * Nf)),
-            cam_size=(RW, RH), cam_near=float(f32(camera.near)),
+            cam_size=(RW, RH), cam_near=float(f32(camera.near)), cam_projection=camera.projection_code,
         )
         weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", 16)
         gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,

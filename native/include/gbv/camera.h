@@ -6,9 +6,10 @@
 namespace gbv {
 
 // R is row-major world-to-camera; the frustum limits follow gsplat's persp_proj, which equals the
-// published 1.3 * tan(fov/2) clamp for a centred principal point (KERNELS.md §3).
+// published 1.3 * tan(fov/2) clamp for a centred principal point (KERNELS.md §3); an orthographic camera has no
+// use for them. `projection`: PERSPECTIVE or ORTHOGRAPHIC (fx, fy then in pixels per world unit).
 inline CameraParams make_camera(const float R[9], const float t[3], float fx, float fy, float cx, float cy,
-                                int width, int height, float near_plane) {
+                                int width, int height, float near_plane, Projection projection) {
     CameraParams c;
     for (int i = 0; i < 9; ++i) c.R[i] = R[i];
     for (int i = 0; i < 3; ++i) c.t[i] = t[i];
@@ -21,6 +22,7 @@ inline CameraParams make_camera(const float R[9], const float t[3], float fx, fl
     c.width = width;
     c.height = height;
     c.near_plane = near_plane;
+    c.projection = projection;
     const float tan_x = 0.5f * width / fx, tan_y = 0.5f * height / fy;
     c.lim_x_pos = (width - cx) / fx + mul_rn(0.3f, tan_x);
     c.lim_x_neg = cx / fx + mul_rn(0.3f, tan_x);

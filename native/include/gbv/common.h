@@ -27,6 +27,8 @@ namespace gbv {
 
 // Blending modes; the integer values are the Python enum's values (gbviewer/render/types.py).
 enum Mode : int32_t { SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5 };
+// Camera projections; the values are the indices of gbviewer.camera.PROJECTIONS.
+enum Projection : int32_t { PERSPECTIVE = 0, ORTHOGRAPHIC = 1 };
 
 constexpr int TILE = 16;                       // BLOCK_X = BLOCK_Y (KERNELS.md §0.4)
 constexpr float DILATION_3DGS = 0.3f;          // +0.3 px^2, no compensation (§0.3)
@@ -107,8 +109,9 @@ GBV_HD bool finitef(float v) {
 #endif
 }
 
-// Camera as the kernels see it: world-to-camera rotation (row-major) and translation, pinhole
-// intrinsics with pixel centres at half-integers, and the frustum limits used to clamp the EWA Jacobian.
+// Camera as the kernels see it: world-to-camera rotation (row-major) and translation, intrinsics with pixel centres
+// at half-integers (perspective: fx, fy in pixels, x = fx X/Z + cx; orthographic: fx, fy in pixels per world unit,
+// x = fx X + cx), and the frustum limits used to clamp the perspective EWA Jacobian.
 struct CameraParams {
     float R[9];
     float t[3];
@@ -117,6 +120,7 @@ struct CameraParams {
     int32_t width, height;
     float near_plane;
     float lim_x_neg, lim_x_pos, lim_y_neg, lim_y_pos;
+    int32_t projection;  // PERSPECTIVE or ORTHOGRAPHIC
 };
 
 // Per-splat output of preprocess; everything the blend step needs, computed once per frame.

@@ -103,17 +103,23 @@ GBV_HD void covariance_3d(const typename L::F q[4], const typename L::F s[3], ty
 }
 
 // EWA projection of a 3D covariance to screen space (eq. 3): J W Sigma W^T J^T, with the view-space
-// point clamped to 1.3x the frustum for the Jacobian only (computeCov2D). Returns (a, b, c).
+// point clamped to 1.3x the frustum for the Jacobian only (computeCov2D). An orthographic camera's projection is
+// linear: J = diag(fx, fy) (no depth terms, nothing to clamp). Returns (a, b, c).
 template <class L>
 GBV_HD void project_covariance(const CameraParams& cam, const typename L::F cov3[6], const typename L::F pv[3],
                                typename L::F out[3]) {
     using F = typename L::F;
-    const F tz = pv[2];
-    // clampf(v, lo, hi) = fminf(fmaxf(v, lo), hi)
-    const F tx = L::fmin(L::fmax(pv[0] / tz, L::set(-cam.lim_x_neg)), L::set(cam.lim_x_pos)) * tz;
-    const F ty = L::fmin(L::fmax(pv[1] / tz, L::set(-cam.lim_y_neg)), L::set(cam.lim_y_pos)) * tz;
-    const F j00 = L::set(cam.fx) / tz, j02 = L::set(-cam.fx) * tx / (tz * tz);
-    const F j11 = L::set(cam.fy) / tz, j12 = L::set(-cam.fy) * ty / (tz * tz);
+    F j00 = L::set(cam.fx), j02 = L::set(0.0f), j11 = L::set(cam.fy), j12 = L::set(0.0f);
+    if (cam.projection != ORTHOGRAPHIC) {
+        const F tz = pv[2];
+        // clampf(v, lo, hi) = fminf(fmaxf(v, lo), hi)
+        const F tx = L::fmin(L::fmax(pv[0] / tz, L::set(-cam.lim_x_neg)), L::set(cam.lim_x_pos)) * tz;
+        const F ty = L::fmin(L::fmax(pv[1] / tz, L::set(-cam.lim_y_neg)), L::set(cam.lim_y_pos)) * tz;
+        j00 = L::set(cam.fx) / tz;
+        j02 = L::set(-cam.fx) * tx / (tz * tz);
+        j11 = L::set(cam.fy) / tz;
+        j12 = L::set(-cam.fy) * ty / (tz * tz);
+    }
     const float* W = cam.R;
     // T = J W (2x3)
     F T[6];
@@ -273,7 +279,9 @@ struct Splat2DLanes {
     GBV_HDI float log_min_alpha(float lane_opacity) const { return logf(min_alpha / lane_opacity); }
 };
 
-// View-space position R m + t of a world point; false behind the near plane (z <= 0.2, KERNELS.md §0.4).
+// View-space position R m + t of a world point; false behind the near plane (z <= 0.2, KERNELS.md §0.4). An
+// orthographic camera culls the same way: it sees what lies in front of its image plane (z = 0) by more than the
+// near distance, and sorts by the same view-space z.
 template <class L>
 GBV_HD typename L::M view_point(const CameraParams& cam, const typename L::F m[3], typename L::F pv[3]) {
     const float* R = cam.R;
@@ -283,13 +291,18 @@ GBV_HD typename L::M view_point(const CameraParams& cam, const typename L::F m[3
     return pv[2] > L::set(cam.near_plane);
 }
 
-// Screen position of the view-space point pv and the tiles of the box with half sides h around it (getRect); false
-// when a value is not finite or no tile is touched.
+// Screen position of the view-space point pv (perspective: fx X/Z + cx; orthographic: fx X + cx) and the tiles of
+// the box with half sides h around it (getRect); false when a value is not finite or no tile is touched.
 template <class L>
 GBV_HD typename L::M screen_footprint(const CameraParams& cam, const typename L::F pv[3], const typename L::F h[2],
                                       int grid_x, int grid_y, typename L::F xy[2], TileRectLanes<L>* rect) {
-    xy[0] = L::set(cam.fx) * pv[0] / pv[2] + L::set(cam.cx);
-    xy[1] = L::set(cam.fy) * pv[1] / pv[2] + L::set(cam.cy);
+    if (cam.projection == ORTHOGRAPHIC) {
+        xy[0] = L::mul_rn(L::set(cam.fx), pv[0]) + L::set(cam.cx);
+        xy[1] = L::mul_rn(L::set(cam.fy), pv[1]) + L::set(cam.cy);
+    } else {
+        xy[0] = L::set(cam.fx) * pv[0] / pv[2] + L::set(cam.cx);
+        xy[1] = L::set(cam.fy) * pv[1] / pv[2] + L::set(cam.cy);
+    }
     const typename L::M finite =
         L::and_(L::and_(L::finite(xy[0]), L::finite(xy[1])), L::and_(L::finite(h[0]), L::finite(h[1])));
     if (!L::any(finite)) return finite;
@@ -312,7 +325,12 @@ GBV_HD typename L::M preprocess_splat(const SplatInLanes<L>& in, int sh_deg, con
     F pv[3];
     M ok = view_point<L>(cam, m, pv);
     if (!L::any(ok)) return ok;
-    F dir[3] = {m[0] - L::set(cam.campos[0]), m[1] - L::set(cam.campos[1]), m[2] - L::set(cam.campos[2])};
+    // SH and view-weight direction: from the eye to the splat; an orthographic camera's rays are parallel, so every
+    // splat is seen along the camera's forward axis (row 2 of R)
+    const bool ortho = cam.projection == ORTHOGRAPHIC;
+    F dir[3] = {ortho ? L::set(cam.R[6]) : m[0] - L::set(cam.campos[0]),
+                ortho ? L::set(cam.R[7]) : m[1] - L::set(cam.campos[1]),
+                ortho ? L::set(cam.R[8]) : m[2] - L::set(cam.campos[2])};
     const F dn = L::sqrt(L::mul_rn(dir[0], dir[0]) + L::mul_rn(dir[1], dir[1]) + L::mul_rn(dir[2], dir[2]));
     const M dpos = dn > L::set(0.0f);
     dir[0] = L::select(dpos, dir[0] / dn, L::set(0.0f));

@@ -4,8 +4,8 @@
 // CameraParams, then per mode and splat one Record.
 //
 // Input (little-endian): int32 n, k (SH coefficients per channel), weight_k; float R[9], t[3], fx, fy, cx, cy;
-// int32 width, height; float near, sigma; then float arrays means (n,3), scales (n,3), quats (n,4), opacities (n),
-// filter_3d (n), sh (n,k,3), weight_sh (n,weight_k).
+// int32 width, height; float near, sigma; int32 projection; then float arrays means (n,3), scales (n,3), quats (n,4),
+// opacities (n), filter_3d (n), sh (n,k,3), weight_sh (n,weight_k).
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
@@ -44,7 +44,10 @@ int main(int argc, char** argv) {
     float camf[16];
     int32_t size[2];
     float nears[2];
-    if (!read(in, hdr, 3) || !read(in, camf, 16) || !read(in, size, 2) || !read(in, nears, 2)) return 3;
+    int32_t projection;
+    if (!read(in, hdr, 3) || !read(in, camf, 16) || !read(in, size, 2) || !read(in, nears, 2) ||
+        !read(in, &projection, 1))
+        return 3;
     const int64_t n = hdr[0];
     const int k = hdr[1], wk = hdr[2];
     std::vector<float> means(n * 3), scales(n * 3), quats(n * 4), opac(n), filt(n), sh(n * k * 3), w(n * wk);
@@ -55,7 +58,7 @@ int main(int argc, char** argv) {
     std::fclose(in);
 
     const CameraParams cam = make_camera(camf, camf + 9, camf[12], camf[13], camf[14], camf[15], size[0], size[1],
-                                         nears[0]);
+                                         nears[0], (Projection)projection);
     const int gx = (cam.width + TILE - 1) / TILE, gy = (cam.height + TILE - 1) / TILE;
     struct Run {
         Mode mode;
