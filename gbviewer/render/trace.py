@@ -143,7 +143,7 @@ def from_native(out: dict, settings: RenderSettings, camera: Camera, x: int, y: 
     """A PixelTrace from the CPU module's render(..., trace=(x, y)) result (native/cpu/trace.cpp's columns)."""
     n = settings.supersample
     mode = settings.mode
-    xy, conic = out["xy"] / n, out["conic"] * n * n
+    xy, conic = out["xy"] / n, out["conic"].astype(np.float64) * n * n
     det = conic[:, 0] * conic[:, 2] - conic[:, 1] ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
         cov = np.stack([conic[:, 2], -conic[:, 1], conic[:, 0]], 1) / det[:, None]
