@@ -7,7 +7,8 @@ from pathlib import Path
 from .camera import Camera, load_cameras_json, orbit_camera
 from .errors import BackendUnavailable, CameraError, GBViewerError, RenderCancelled, RenderError, SceneFormatError
 from .io import load
-from .render import Frame, FrameStats, Mode, Renderer, RenderSettings, get_renderer, render
+from .render import (Frame, FrameStats, Mode, PixelTrace, Renderer, RenderSettings, get_renderer, render,
+                     trace_pixel)
 from .scene import Scene
 
 ASSETS = Path(__file__).parent / "assets"  # installed; a source checkout has it at the top level
@@ -17,6 +18,6 @@ DEFAULT_SCENE = ASSETS / "fruit_drops_minimal.ply"
 
 __all__ = [
     "ASSETS", "DEFAULT_SCENE", "BackendUnavailable", "Camera", "CameraError", "Frame", "FrameStats", "GBViewerError",
-    "Mode", "RenderCancelled", "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError",
-    "get_renderer", "load", "load_cameras_json", "orbit_camera", "render",
+    "Mode", "PixelTrace", "RenderCancelled", "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError",
+    "get_renderer", "load", "load_cameras_json", "orbit_camera", "render", "trace_pixel",
 ]

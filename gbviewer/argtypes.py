@@ -105,5 +105,6 @@ SIDE = count(MAX_SIDE)
 SIZE = Numbers((Number(True, 1, MAX_SIDE, name="W"), Number(True, 1, MAX_SIDE, name="H")), sep="x")
 ORBIT = Numbers((Number(f32=True, name="AZ"), Number(f32=True, name="EL"), Number(lo=0.0, f32=True, name="DIST")))
 BACKGROUND = Numbers(tuple(Number(lo=0.0, hi=1.0, name=c) for c in "RGB"))
+PIXEL = Numbers((Number(True, 0, MAX_SIDE - 1, name="X"), Number(True, 0, MAX_SIDE - 1, name="Y")))
 INSET = Numbers((Number(f32=True, name="X"), Number(f32=True, name="Y"),
                  Number(lo=0.0, lo_open=True, f32=True, name="W"), Number(lo=0.0, lo_open=True, f32=True, name="H")))

@@ -9,17 +9,18 @@ import signal
 import sys
 import threading
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 
 from . import DEFAULT_SCENE
-from .argtypes import BACKGROUND, INSET, MAX_SIDE, ORBIT, SIDE, SIZE, Number, Parser, Rate, count, positive
+from .argtypes import BACKGROUND, INSET, MAX_SIDE, ORBIT, PIXEL, SIDE, SIZE, Number, Parser, Rate, count, positive
 from .camera import PROJECTIONS, Camera, format_rate, load_cameras_json, orbit_camera, parse_rates
 from .camera_paths import MAX_FRAMES, PATHS, camera_path, scene_focus_depth, zoom_path
 from .errors import GBViewerError
 from .figure import DIFFS, compose_grid, render_grid, save_image, write_comparison
 from .io import load, write_inria_ply
 from .io.files import check_writable
-from .render import BACKENDS, Mode, RenderSettings, get_renderer
+from .render import BACKENDS, Mode, RenderSettings, get_renderer, trace_pixel
 from .scene import Scene
 from .validate import integer
 from .video import MAX_FPS, MIN_FPS, record_video
@@ -298,6 +299,30 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_trace(args: argparse.Namespace) -> int:
+    """Pixel traces of the CPU kernel, one rich table per mode; --json writes them all."""
+    from .trace_report import print_traces, write_traces
+
+    if args.json:
+        check_writable(args.json, args.force)
+    settings = RenderSettings.parse_list(args.modes, background=args.background)
+    if args.supersample is not None:
+        settings = [s if s.supersample > 1 else replace(s, supersample=args.supersample) for s in settings]
+    scene = load(args.scene)
+    cam = camera_from_args(scene, args)
+    check_render_size(cam.width, cam.height, [args.scale], "--scale")
+    cam = cam.at_sampling_rate(args.scale)
+    x, y = args.pixel
+    if x >= cam.width or y >= cam.height:
+        raise GBViewerError(f"--pixel {x},{y}: outside the {cam.width}x{cam.height} image at --scale "
+                            f"{args.scale:g} (x in 0..{cam.width - 1}, y in 0..{cam.height - 1})")
+    traces = [trace_pixel(scene, cam, x, y, s.mode, s.supersample, s.background) for s in settings]
+    print_traces(traces, args.top)
+    if args.json:
+        print(f"wrote {write_traces(Path(args.json), traces, str(args.scene), args.force)}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="gbviewer", description=__doc__)
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -400,6 +425,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="FILE.mp4")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=cmd_video)
+
+    p = sub.add_parser("trace", help="what the CPU kernel did at one pixel, splat by splat, per mode: top "
+                                     "contributors, rejections, colour and transmittance (tables; --json)")
+    p.add_argument("scene", type=Path)
+    add_camera_args(p)
+    p.add_argument("--pixel", type=PIXEL, required=True, metavar=PIXEL.metavar,
+                   help="the output pixel, from 0 (x right, y down) in the image at --scale")
+    p.add_argument("--modes", default="scalar,gaussian_blending",
+                   help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N)")
+    p.add_argument("--supersample", type=count(8), metavar="1..8", help="N x N samples for the modes given without :N")
+    p.add_argument("--scale", type=Rate(), default=1.0, help="sampling rate: 8, 1, 0.125 or 1/8")
+    p.add_argument("--background", type=BACKGROUND, default=(0.0, 0.0, 0.0), metavar=BACKGROUND.metavar,
+                   help="background colour, each in 0..1")
+    p.add_argument("--top", type=count(MAX_COUNT), default=10, help="contributors shown per mode (default 10)")
+    p.add_argument("--json", help="write every trace here (FILE.json; see gbviewer.PixelTrace.to_json)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --json file")
+    p.set_defaults(func=cmd_trace)
 
     p = sub.add_parser("compare", help="labelled grid of modes x sampling rates with PSNR (PNG)")
     p.add_argument("scene", type=Path)

@@ -275,8 +275,15 @@ def _near(x, thr, rel=TIE_REL):
     return np.abs(x - thr) <= rel * abs(thr)
 
 
-def _blend_scalar_like(pre, idx, pix, mode):
-    """Scalar transmittance (scalar / mip / analytic). Returns C (P,3), T (P,), tie (P,) bool."""
+def _note(added, s, mask):
+    """Append splat s to `added` (when given) if it added to some pixel of `mask`."""
+    if added is not None and mask.any():
+        added.append(int(s))
+
+
+def _blend_scalar_like(pre, idx, pix, mode, added=None):
+    """Scalar transmittance (scalar / mip / analytic). Returns C (P,3), T (P,), tie (P,) bool. `added`: a list that
+    gets each splat some pixel adds (the blend loops of this module all take it; `pixel_contributors` uses it)."""
     P = pix.shape[0]
     C = np.zeros((P, 3))
     T = np.ones(P)
@@ -306,12 +313,13 @@ def _blend_scalar_like(pre, idx, pix, mode):
         stop = ok & (test_T < T_STOP)
         done |= stop
         add = ok & ~stop
+        _note(added, s, add)
         C[add] += pre["color"][s] * (alpha[add] * T[add])[:, None]
         T = np.where(add, test_T, T)
     return C, T, tie
 
 
-def _blend_gb(pre, idx, pix, state=None, return_centre=False):
+def _blend_gb(pre, idx, pix, state=None, return_centre=False, added=None):
     """Gaussian Blending transmittance window (KERNELS.md §6.3).
 
     Returns C (P,3), T (P,), window size (P,2), tie (P,) [, window centre (P,2)]. `state` = (T, centre, size)
@@ -361,6 +369,7 @@ def _blend_gb(pre, idx, pix, state=None, return_centre=False):
             alpha = np.minimum(0.99, o * np.exp(np.minimum(power, 0.0)))
             tie |= f & _near(alpha, MIN_ALPHA_GB)
             f &= (power <= 0) & (alpha >= MIN_ALPHA_GB)
+            _note(added, s, f)
             wgt = Tv * alpha
             C[f] += col * wgt[f][:, None]
             Tv = np.where(f, Tv - wgt, Tv)
@@ -376,6 +385,7 @@ def _blend_gb(pre, idx, pix, state=None, return_centre=False):
             a = np.minimum(0.99, o * I0u * I0v / area)
             tie |= g & _near(a, MIN_ALPHA_GB)
             g &= a >= MIN_ALPHA_GB
+            _note(added, s, g)
             wgt = Tv * a
             I1u = sg1 ** 2 * (_g1(U2) - _g1(U1))
             I1v = sg2 ** 2 * (_g1(V2) - _g1(V1))
@@ -405,6 +415,64 @@ def _blend_gb(pre, idx, pix, state=None, return_centre=False):
     return C, Tv, Twh, tie
 
 
+def _tile_lists(pre, mode: str, cam, supersample: int = 1, cells=None):
+    """The tiles' lists: a function (tx, ty) -> splat indices in blend order, and (duplex) each splat's cell.
+
+    Sorted modes: the kept splats whose rectangle touches the tile, by ascending depth (ties by index). wsr: the same
+    splats in index order (the result does not depend on the order). duplex: cells with at least one kept splat,
+    projected, sorted per tile by (depth, index), each expanded to its kept splats (in member order: the result
+    depends on it only through rounding)."""
+    kept = np.nonzero(pre["keep"])[0]
+
+    def touching(ids, rect, tx, ty):
+        return ids[(rect[:, 0] <= tx) & (tx < rect[:, 1]) & (rect[:, 2] <= ty) & (ty < rect[:, 3])]
+
+    if mode == "duplex":
+        cpre = preprocess_cells(cells, cam, supersample)
+        members = [cells.members[cells.offsets[c]:cells.offsets[c + 1]] for c in range(len(cells.means))]
+        members = [mm[pre["keep"][mm]] for mm in members]
+        ckeep = cpre["keep"] & np.array([len(mm) > 0 for mm in members], bool)
+        cell_of = np.full(len(pre["keep"]), -1)
+        for c, mm in enumerate(members):
+            cell_of[mm] = c
+        corder = np.nonzero(ckeep)[0]
+        corder = corder[np.argsort(cpre["depth"][corder], kind="stable")]
+        crect = cpre["rect"][corder]
+
+        def cell_list(tx, ty):
+            cs = touching(corder, crect, tx, ty)
+            return np.concatenate([members[c] for c in cs]) if len(cs) else np.zeros(0, int)
+
+        return cell_list, cell_of
+    order = kept if mode == "wsr" else kept[np.argsort(pre["depth"][kept], kind="stable")]
+    rect = pre["rect"][order]
+    return (lambda tx, ty: touching(order, rect, tx, ty)), None
+
+
+def pixel_contributors(scene, cam, mode: str, x: int, y: int, supersample: int = 1, oit: dict | None = None,
+                       cells=None) -> list[tuple[list[int], bool]]:
+    """Per sub-sample of output pixel (x, y), row-major: the splats it adds, in blend order, and whether one of its
+    threshold decisions was a tie; by this module's blend loops run on that sample alone."""
+    n = int(supersample)
+    pre = preprocess(scene, cam, mode, n, oit)
+    lists, cell_of = _tile_lists(pre, mode, cam, n, cells)
+    out = []
+    for sy in range(n):
+        for sx in range(n):
+            hx, hy = x * n + sx, y * n + sy
+            sel, pix, added, bg = lists(hx // TILE, hy // TILE), np.array([[hx + 0.5, hy + 0.5]]), [], np.zeros(3)
+            if mode == "gaussian_blending":
+                tie = _blend_gb(pre, sel, pix, added=added)[3]
+            elif mode == "wsr":
+                tie = _blend_wsr(pre, sel, pix, oit["weight_background"], bg, added)[2]
+            elif mode == "duplex":
+                tie = _blend_duplex(pre, sel, cell_of, pix, oit["et_grade"], oit["weight_background"], bg, added)[2]
+            else:
+                tie = _blend_scalar_like(pre, sel, pix, mode, added)[2]
+            out.append((added, bool(tie[0])))
+    return out
+
+
 def render_full_res(scene, cam, mode: str, supersample: int = 1, background=(0.0, 0.0, 0.0)):
     """Render at the (super-sampled) resolution. Returns dict rgb (h,w,3), T (h,w), window (h,w,2),
     tie (h,w) bool, pre (the preprocess output)."""
@@ -416,12 +484,10 @@ def render_full_res(scene, cam, mode: str, supersample: int = 1, background=(0.0
     Tout = np.ones((H, W))
     win = np.ones((H, W, 2))
     ties = np.zeros((H, W), bool)
-    kept = np.nonzero(pre["keep"])[0]
-    order = kept[np.argsort(pre["depth"][kept], kind="stable")]  # ascending depth, ties by index
-    rect = pre["rect"][order]
+    lists, _ = _tile_lists(pre, mode, cam, supersample)
     for ty in range(gy):
         for tx in range(gx):
-            sel = order[(rect[:, 0] <= tx) & (tx < rect[:, 1]) & (rect[:, 2] <= ty) & (ty < rect[:, 3])]
+            sel = lists(tx, ty)
             i0, i1 = ty * TILE, min(H, (ty + 1) * TILE)
             j0, j1 = tx * TILE, min(W, (tx + 1) * TILE)
             ii, jj = np.meshgrid(np.arange(i0, i1), np.arange(j0, j1), indexing="ij")
@@ -465,7 +531,7 @@ def preprocess_cells(cells, cam, supersample: int = 1) -> dict:
     return dict(keep=keep, depth=Z, rect=np.stack([x0, x1, y0, y1], -1))
 
 
-def _blend_wsr(pre, idx, pix, wbg, bg):
+def _blend_wsr(pre, idx, pix, wbg, bg, added=None):
     """LC-WSR (KERNELS.md §7.2) over the splats idx, in any order. Returns rgb (P,3), T' = wbg / total, tie."""
     P = pix.shape[0]
     C = np.zeros((P, 3))
@@ -478,6 +544,7 @@ def _blend_wsr(pre, idx, pix, wbg, bg):
         alpha = pre["opacity"][s] * np.exp(np.minimum(power, 0.0))
         tie |= _near(alpha, MIN_ALPHA_3DGS)
         ok = (power <= 0) & (alpha >= MIN_ALPHA_3DGS)
+        _note(added, s, ok)
         alpha = np.minimum(alpha, WSR_TERM_MAX)
         C[ok] += np.minimum(pre["color"][s] * alpha[ok, None], WSR_TERM_MAX)
         S[ok] += alpha[ok]
@@ -486,7 +553,7 @@ def _blend_wsr(pre, idx, pix, wbg, bg):
     return (C + bg * wbg) / total[:, None], wbg / total, tie
 
 
-def _blend_duplex(pre, idx, cell_of, pix, et, wbg, bg):
+def _blend_duplex(pre, idx, cell_of, pix, et, wbg, bg, added=None):
     """Duplex-GS (KERNELS.md §8.4) over a cell-sorted list idx. Returns rgb (P,3), T' = w_bg / total, tie."""
     P = pix.shape[0]
     C = np.zeros((P, 3))
@@ -511,6 +578,7 @@ def _blend_duplex(pre, idx, cell_of, pix, et, wbg, bg):
         stop = new & (cum < DUPLEX_STOP)
         done |= stop
         ok &= ~stop
+        _note(added, s, ok)
         enter = ok & new
         cur = np.where(enter, cell_of[s], cur)
         Tcell = np.where(enter, cum, Tcell)
@@ -527,41 +595,24 @@ def _blend_duplex(pre, idx, cell_of, pix, et, wbg, bg):
 
 
 def render_oit(scene, cam, mode: str, oit: dict, cells=None, supersample: int = 1, background=(0.0, 0.0, 0.0)):
-    """wsr / duplex at the (super-sampled) resolution; returns dict rgb, T (= w_bg / total, so alpha = 1 - T), tie.
-
-    wsr: each tile's list is every kept splat whose rectangle touches it, in index order (the result does not
-    depend on the order). duplex: cells with at least one kept splat, projected, sorted per tile by (depth, index);
-    each expanded to its kept splats (in member order: the result depends on it only through rounding)."""
+    """wsr / duplex at the (super-sampled) resolution (tile lists: `_tile_lists`); returns dict rgb, T (= w_bg /
+    total, so alpha = 1 - T), tie."""
     pre = preprocess(scene, cam, mode, supersample, oit)
     W, H = pre["W"], pre["H"]
     gx, gy = math.ceil(W / TILE), math.ceil(H / TILE)
     bg = np.asarray(background, np.float64)
     rgb, Tout, ties = np.zeros((H, W, 3)), np.ones((H, W)), np.zeros((H, W), bool)
-    kept = np.nonzero(pre["keep"])[0]
-    if mode == "duplex":
-        cpre = preprocess_cells(cells, cam, supersample)
-        members = [cells.members[cells.offsets[c]:cells.offsets[c + 1]] for c in range(len(cells.means))]
-        members = [mm[pre["keep"][mm]] for mm in members]
-        ckeep = cpre["keep"] & np.array([len(mm) > 0 for mm in members], bool)
-        cell_of = np.full(len(pre["keep"]), -1)
-        for c, mm in enumerate(members):
-            cell_of[mm] = c
-        corder = np.nonzero(ckeep)[0]
-        corder = corder[np.argsort(cpre["depth"][corder], kind="stable")]
+    lists, cell_of = _tile_lists(pre, mode, cam, supersample, cells)
     for ty in range(gy):
         for tx in range(gx):
             i0, i1 = ty * TILE, min(H, (ty + 1) * TILE)
             j0, j1 = tx * TILE, min(W, (tx + 1) * TILE)
             ii, jj = np.meshgrid(np.arange(i0, i1), np.arange(j0, j1), indexing="ij")
             pix = np.stack([jj.ravel() + 0.5, ii.ravel() + 0.5], -1).astype(np.float64)
+            sel = lists(tx, ty)
             if mode == "wsr":
-                r = pre["rect"][kept]
-                sel = kept[(r[:, 0] <= tx) & (tx < r[:, 1]) & (r[:, 2] <= ty) & (ty < r[:, 3])]
                 out, T, tie = _blend_wsr(pre, sel, pix, oit["weight_background"], bg)
             else:
-                r = cpre["rect"][corder]
-                cs = corder[(r[:, 0] <= tx) & (tx < r[:, 1]) & (r[:, 2] <= ty) & (ty < r[:, 3])]
-                sel = np.concatenate([members[c] for c in cs]) if len(cs) else np.zeros(0, int)
                 out, T, tie = _blend_duplex(pre, sel, cell_of, pix, oit["et_grade"], oit["weight_background"], bg)
             rgb[i0:i1, j0:j1] = out.reshape(i1 - i0, j1 - j0, 3)
             Tout[i0:i1, j0:j1] = T.reshape(i1 - i0, j1 - j0)

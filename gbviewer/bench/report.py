@@ -21,7 +21,7 @@ from .simd import SIMD_NAMES, simd_summary
 from .speed import SpeedRow, ratios
 
 
-def _console():
+def wide_console():
     """A rich console; into a file or pipe 200 columns wide, so that no number is cut short."""
     from rich.console import Console
 
@@ -43,7 +43,7 @@ def print_oit(rows: list[OitRow]) -> None:
                   f"{r.stages_ms['blend_ms']:.1f}", f"{r.stages_ms['total_ms']:.1f}",
                   "inf" if math.isinf(r.psnr_vs_scalar) else f"{r.psnr_vs_scalar:.2f}", f"{r.flicker:.3f}",
                   f"{100 * r.pops:.3f}")
-    _console().print(t)
+    wide_console().print(t)
 
 
 def machine_description() -> dict:
@@ -168,7 +168,7 @@ def print_tables(speed: list[SpeedRow], fidelity: list[FidelityRow], simd: dict 
     """Rich tables on the terminal: speed, SIMD paths, ratios, fidelity; `simd` (simd_info()) heads them."""
     from rich.table import Table
 
-    console = _console()
+    console = wide_console()
     if simd:
         console.print(simd_summary(simd), highlight=False)
     t = Table(title="Speed (median over repeats and views; Mevals/s/core: splat-pixel evaluations per second per "

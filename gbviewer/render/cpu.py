@@ -12,6 +12,7 @@ from ..errors import BackendUnavailable
 from ..scene import Scene
 from .control import Progress, RenderControl
 from .prepare import Prepared, camera_args, native_frame, prepare
+from .trace import PixelTrace, from_native
 from .types import Frame, RenderSettings
 
 
@@ -56,19 +57,28 @@ class CpuRenderer:
             self._native.release_buffers()  # the per-frame buffers the native module keeps for the last scene
         self._scene = scene
 
+    def _native_render(self, prep: Prepared, camera: Camera, settings: RenderSettings, **kwargs) -> dict:
+        """The native module's render call for this frame; kwargs: control or trace."""
+        scene = prep.scene
+        return self._native.render(
+            scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d,
+            *camera_args(camera), int(settings.mode), settings.supersample, settings.sh_degree,
+            np.asarray(settings.background, np.float32), settings.debug == "window", settings.threads,
+            **_native_extra(prep), **kwargs,
+        )
+
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
                on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
         t0 = time.perf_counter()
         RenderControl(partial=partial).check_partial(camera.width, camera.height)
         prep = prepare(self._scene, camera, settings, self.name)
-        scene = prep.scene
         with RenderControl(cancel, on_progress, partial) as control:
-            out = self._native.render(
-                scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d,
-                *camera_args(camera), int(settings.mode), settings.supersample, settings.sh_degree,
-                np.asarray(settings.background, np.float32), settings.debug == "window", settings.threads,
-                **_native_extra(prep), control=control.block if control.active else None,
-                partial=partial,
-            )
+            out = self._native_render(prep, camera, settings, control=control.block if control.active else None,
+                                      partial=partial)
         control.check()  # the native render skipped its remaining tiles once the event was set
         return native_frame(out, prep, camera, settings, self.name, t0)
+
+    def trace(self, camera: Camera, settings: RenderSettings, x: int, y: int) -> PixelTrace:
+        """The pixel trace of (x, y) in this frame (gbviewer.render.trace; `trace_pixel` checks the pixel)."""
+        prep = prepare(self._scene, camera, settings, self.name)
+        return from_native(self._native_render(prep, camera, settings, trace=(x, y)), settings, camera, x, y)

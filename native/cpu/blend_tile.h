@@ -2,7 +2,8 @@
 // front to back through the steps of gbv/blend.h for every lane at once, lanes drop out as they terminate, and the
 // group stops when none is left. Instantiated for Lanes1 (scalar path, blend_scalar.cpp) and for Highway's vector
 // lanes (blend_isa.cpp, once per instruction set). The TileJob interface is plain data, so the translation units
-// built for different instruction sets share nothing but these types.
+// built for different instruction sets share nothing but these types. A tracer type (gbv/trace.h) follows the walk:
+// renders use NoTrace; the pixel trace (trace.cpp) runs the Lanes1 instance on a one-pixel rectangle with a recorder.
 #pragma once
 
 #include "gbv/blend.h"
@@ -20,11 +21,11 @@ struct TileJob {
     const SplatBounds* bounds;  // one per list entry
     int n;
     int x0, y0, x1, y1;  // pixel rectangle [x0, x1) x [y0, y1)
-    int width;           // image row stride in pixels
+    int width;           // row stride of the planes in pixels
     Mode mode;
     OitParams oit;
     float bg[3];
-    float *rgb, *alpha, *window;  // image planes; window may be null
+    float *rgb, *alpha, *window;  // image planes, at the rectangle's pixel (x0, y0); window may be null
     int32_t* evals;
 };
 
@@ -56,32 +57,44 @@ struct Out {
 
 // Walk the list for one group: `step(splat, live) -> stopped lanes`. A lane's evals is the list position where it
 // stopped (+1), else n: the same count as one pixel walking the list (skipped entries count as walked).
-template <class L, class Step>
+template <class L, class Tr, class Step>
 void walk(const TileJob& job, const Group<L>& g, Out<L::N>& out, Step step) {
     typename L::M live = g.live;
     for (int i = 0; i < L::N; ++i) out.evals[i] = job.n;
     for (int i = 0; i < job.n; ++i) {
-        if (outside(job.bounds[i], g.xa, g.xb, g.ya, g.yb)) continue;
+        if (outside(job.bounds[i], g.xa, g.xb, g.ya, g.yb)) {
+            GBV_TRACE(Tr, entry(i, SKIP_BOX));
+            continue;
+        }
+        GBV_TRACE(Tr, entry(i, SKIP_NONE));
         const typename L::M stop = step(job.list[i], live);
         const uint32_t bits = L::bits(stop);
         if (!bits) continue;
+        GBV_TRACE(Tr, stopped(stop));
         for (int k = 0; k < L::N; ++k)
             if ((bits >> k) & 1u) out.evals[k] = i + 1;
         live = L::and_not(live, stop);
-        if (!L::any(live)) break;
+        if (!L::any(live)) {
+            GBV_TRACE(Tr, unreached(i + 1, job.n));
+            break;
+        }
     }
 }
 
-template <class L>
+template <class L, class Tr>
 void group_alpha(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     AlphaState<L> st = {L::set(1.0f), {L::set(0.0f), L::set(0.0f), L::set(0.0f)}};
     if (job.mode == ANALYTIC)
-        walk(job, g, out, [&](const Splat2D& s, typename L::M live) {
-            return blend_analytic<L>(s, g.px, g.py, live, st);
+        walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
+            const typename L::M stop = blend_analytic<L, Tr>(s, g.px, g.py, live, st);
+            GBV_TRACE(Tr, after(st));
+            return stop;
         });
     else
-        walk(job, g, out, [&](const Splat2D& s, typename L::M live) {
-            return blend_scalar<L>(s, g.px, g.py, live, st);
+        walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
+            const typename L::M stop = blend_scalar<L, Tr>(s, g.px, g.py, live, st);
+            GBV_TRACE(Tr, after(st));
+            return stop;
         });
     for (int c = 0; c < 3; ++c) L::store(st.C[c], out.C[c]);
     L::store(st.T, out.T);
@@ -103,15 +116,16 @@ void window_box(const WindowState<L>& win, Group<L>& g) {
     g.yb += slack;
 }
 
-template <class L>
+template <class L, class Tr>
 void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out) {
     const typename L::F one = L::set(1.0f), zero = L::set(0.0f);
     WindowState<L> win = {one, g.px, g.py, one, one, {zero, zero, zero}};
     window_box<L>(win, g);
-    walk(job, g, out, [&](const Splat2D& s, typename L::M live) {
+    walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
         typename L::M took = L::none();
-        const typename L::M stop = blend_gaussian<L>(s, live, win, &took);
+        const typename L::M stop = blend_gaussian<L, Tr>(s, live, win, &took);
         if (L::any(took)) window_box<L>(win, g);
+        GBV_TRACE(Tr, after(win));
         return stop;
     });
     for (int c = 0; c < 3; ++c) L::store(win.C[c], out.C[c]);
@@ -120,28 +134,31 @@ void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out) {
     L::store(win.h, out.wy);
 }
 
-template <class L>
+template <class L, class Tr>
 void group_wsr(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     WsrSumsN<L::N> acc = {};
-    walk(job, g, out, [&](const Splat2D& s, typename L::M live) {
-        blend_wsr<L>(s, g.px, g.py, live, acc);
+    walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
+        blend_wsr<L, Tr>(s, g.px, g.py, live, acc);
         return L::none();
     });
     const float inv = 1.0f / WSR_FIXED_SCALE;
     for (int k = 0; k < L::N; ++k) {
         const float C[3] = {(float)acc.C[0][k] * inv, (float)acc.C[1][k] * inv, (float)acc.C[2][k] * inv};
         float rc[3];
-        resolve_weighted(C, (float)acc.S[k] * inv, job.oit.weight_background, 1.0f, rc, &out.T[k]);
+        const float total = resolve_weighted(C, (float)acc.S[k] * inv, job.oit.weight_background, 1.0f, rc, &out.T[k]);
+        GBV_TRACE(Tr, resolved(total));
         for (int c = 0; c < 3; ++c) out.C[c][k] = rc[c];
     }
 }
 
-template <class L>
+template <class L, class Tr>
 void group_duplex(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     const typename L::F one = L::set(1.0f), zero = L::set(0.0f);
     DuplexLanes<L> st = {one, one, L::seti(-1), zero, {zero, zero, zero}};
-    walk(job, g, out, [&](const Splat2D& s, typename L::M live) {
-        return blend_duplex<L>(s, g.px, g.py, live, job.oit.et_grade, st);
+    walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
+        const typename L::M stop = blend_duplex<L, Tr>(s, g.px, g.py, live, job.oit.et_grade, st);
+        GBV_TRACE(Tr, after(st));
+        return stop;
     });
     float T[L::N], S[L::N], C[3][L::N];
     L::store(st.T, T);
@@ -150,7 +167,9 @@ void group_duplex(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     for (int k = 0; k < L::N; ++k) {
         const float Ck[3] = {C[0][k], C[1][k], C[2][k]};
         float rc[3];
-        resolve_weighted(Ck, S[k], T[k] < DUPLEX_T_STOP ? 0.0f : job.oit.weight_background, T[k], rc, &out.T[k]);
+        const float total =
+            resolve_weighted(Ck, S[k], T[k] < DUPLEX_T_STOP ? 0.0f : job.oit.weight_background, T[k], rc, &out.T[k]);
+        GBV_TRACE(Tr, resolved(total));
         for (int c = 0; c < 3; ++c) out.C[c][k] = rc[c];
     }
 }
@@ -159,7 +178,7 @@ void group_duplex(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
 
 // Blend every pixel of the job's tile and write rgb = C + T bg, alpha = 1 - T, evals and (gaussian_blending) the
 // final window size.
-template <class L>
+template <class L, class Tr = NoTrace>
 void blend_tile(const TileJob& job) {
     constexpr int N = L::N;
     float offsets[N];
@@ -177,13 +196,13 @@ void blend_tile(const TileJob& job) {
             g.xb = (float)(x + g.count - 1) + 0.5f;
             g.ya = g.yb = (float)y + 0.5f;
             switch (job.mode) {
-                case GAUSSIAN_BLENDING: tile::group_gaussian<L>(job, g, out); break;
-                case WSR: tile::group_wsr<L>(job, g, out); break;
-                case DUPLEX: tile::group_duplex<L>(job, g, out); break;
-                default: tile::group_alpha<L>(job, g, out); break;
+                case GAUSSIAN_BLENDING: tile::group_gaussian<L, Tr>(job, g, out); break;
+                case WSR: tile::group_wsr<L, Tr>(job, g, out); break;
+                case DUPLEX: tile::group_duplex<L, Tr>(job, g, out); break;
+                default: tile::group_alpha<L, Tr>(job, g, out); break;
             }
             for (int k = 0; k < g.count; ++k) {
-                const size_t p = (size_t)y * job.width + x + k;
+                const size_t p = (size_t)(y - job.y0) * job.width + (x - job.x0) + k;
                 for (int c = 0; c < 3; ++c) job.rgb[p * 3 + c] = out.C[c][k] + out.T[k] * job.bg[c];
                 job.alpha[p] = 1.0f - out.T[k];
                 job.evals[p] = out.evals[k];

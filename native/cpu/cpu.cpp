@@ -17,10 +17,13 @@
 #include <vector>
 
 #include "blend_tile.h"
+#include "image.h"
+#include "trace.h"
 #include "gbv/camera.h"
 #include "gbv/order.h"
 #include "gbv/preprocess.h"
 #include "../bindings/nb_common.h"
+#include <nanobind/stl/array.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 #include "simd.h"
@@ -65,21 +68,6 @@ struct SceneView {
     const int32_t *cell_offsets = nullptr, *cell_members = nullptr;
     int64_t m = 0;
     std::vector<int32_t> cell_of = {};
-};
-
-struct Image {
-    int width = 0, height = 0;
-    std::vector<float> rgb, alpha, window;
-    std::vector<int32_t> evals;
-    void resize(int w, int h, bool with_window) {
-        width = w;
-        height = h;
-        const size_t px = (size_t)w * h;
-        rgb.assign(px * 3, 0.0f);
-        alpha.assign(px, 0.0f);
-        evals.assign(px, 0);
-        window.assign(with_window ? px * 2 : 0, 0.0f);
-    }
 };
 
 struct Stats {
@@ -318,6 +306,13 @@ std::vector<int> centre_out_order(int gx, int gy) {
     return order;
 }
 
+// Every splat's SplatBounds in `mode`.
+void splat_boxes(const std::vector<Splat2D>& splats, Mode mode, std::vector<SplatBounds>& boxes) {
+    boxes.resize(splats.size());
+#pragma omp parallel for schedule(static)
+    for (int64_t i = 0; i < (int64_t)splats.size(); ++i) boxes[i] = splat_bounds(splats[i], mode);
+}
+
 // Blend: each tile copies its splats (and their boxes) into contiguous per-thread buffers, then the selected SIMD
 // path blends its pixels in lane groups.
 void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>& tile_start,
@@ -329,18 +324,12 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
     const int num_tiles = (int)tile_start.size() - 1;
     const std::vector<int> order = centre_out_order(gx, num_tiles / gx);
     auto t0 = Clock::now();
-    boxes.resize(splats.size());
-#pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < (int64_t)splats.size(); ++i) boxes[i] = splat_bounds(splats[i], mode);
-    TileJob frame = {};  // what every tile shares; each tile sets its list and rectangle
+    splat_boxes(splats, mode, boxes);
+    TileJob frame = {};  // what every tile shares; each tile sets its list, rectangle and planes
     frame.width = W;
     frame.mode = mode;
     frame.oit = oit;
     for (int c = 0; c < 3; ++c) frame.bg[c] = bg[c];
-    frame.rgb = img.rgb.data();
-    frame.alpha = img.alpha.data();
-    frame.window = img.window.empty() ? nullptr : img.window.data();
-    frame.evals = img.evals.data();
 #pragma omp parallel
     {
         FlushDenormals ftz;
@@ -366,6 +355,11 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
             job.y0 = (t / gx) * TILE;
             job.x1 = std::min(job.x0 + TILE, W);
             job.y1 = std::min(job.y0 + TILE, H);
+            const size_t origin = (size_t)job.y0 * W + job.x0;
+            job.rgb = img.rgb.data() + origin * 3;
+            job.alpha = img.alpha.data() + origin;
+            job.window = img.window.empty() ? nullptr : img.window.data() + origin * 2;
+            job.evals = img.evals.data() + origin;
             blend_tile(job);
             if (progress.partial) write_partial(img, N, job.x0, job.y0, job.x1, job.y1, progress.partial);
             progress.tile_done();
@@ -423,10 +417,10 @@ std::vector<uint8_t> g_captured;
 
 constexpr int64_t PREPROCESS_BLOCK = 256;  // splats per call of a path's preprocess (a multiple of 16)
 
-// Render one image at the camera's resolution, one sample per pixel.
-void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
-                  const float bg[3], const simd::Path& path, FrameBuffers& buf, Image& img, Stats& st,
-                  const Progress& progress, int N = 1) {
+// Preprocess and bin one image at the camera's resolution into `buf`: its splats and its tiles' lists (stops early
+// once `progress` is cancelled).
+void bin_frame(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
+               const simd::Path& path, FrameBuffers& buf, Stats& st, const Progress& progress) {
     const int W = cam.width, H = cam.height;
     const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE;
     const int num_tiles = gx * gy;
@@ -476,41 +470,29 @@ void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const
         bin_splats(splats, rects, valid, gx, mode != WSR, tile_start, keys, st);
     }
     if (keys.capacity() > 4 * keys.size() + (1u << 20)) keys.shrink_to_fit();  // after a much larger frame
-    if (progress.cancelled()) return;
-    blend_tiles(splats, tile_start, keys, cam, mode, oit, bg, path.blend_tile, buf.boxes, img, st, progress, N);
 }
 
-// Box-average N x N blocks of `hi` into `lo` (supersampling).
-void box_downsample(const Image& hi, int N, Image& lo) {
-    const float inv = 1.0f / (N * N);
-    const bool with_window = !hi.window.empty();
-#pragma omp parallel for schedule(static)
-    for (int y = 0; y < lo.height; ++y) {
-        for (int x = 0; x < lo.width; ++x) {
-            float acc[6] = {0, 0, 0, 0, 0, 0};
-            int32_t ev = 0;
-            for (int sy = 0; sy < N; ++sy) {
-                for (int sx = 0; sx < N; ++sx) {
-                    const size_t q = (size_t)(y * N + sy) * hi.width + (x * N + sx);
-                    for (int c = 0; c < 3; ++c) acc[c] += hi.rgb[q * 3 + c];
-                    acc[3] += hi.alpha[q];
-                    if (with_window) {
-                        acc[4] += hi.window[q * 2];
-                        acc[5] += hi.window[q * 2 + 1];
-                    }
-                    ev += hi.evals[q];
-                }
-            }
-            const size_t p = (size_t)y * lo.width + x;
-            for (int c = 0; c < 3; ++c) lo.rgb[p * 3 + c] = acc[c] * inv;
-            lo.alpha[p] = acc[3] * inv;
-            lo.evals[p] = ev;
-            if (with_window) {
-                lo.window[p * 2] = acc[4] * inv / N;  // in output pixels
-                lo.window[p * 2 + 1] = acc[5] * inv / N;
-            }
-        }
-    }
+// Render one image at the camera's resolution, one sample per pixel.
+void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
+                  const float bg[3], const simd::Path& path, FrameBuffers& buf, Image& img, Stats& st,
+                  const Progress& progress, int N = 1) {
+    bin_frame(sc, cam, mode, oit, sh_deg, path, buf, st, progress);
+    if (progress.cancelled()) return;
+    blend_tiles(buf.splats, buf.tile_start, buf.keys, cam, mode, oit, bg, path.blend_tile, buf.boxes, img, st,
+                progress, N);
+}
+
+// The pixel trace (trace.h) of output pixel (x, y) at N x N samples; `cam` is the sub-sample grid's camera.
+PixelTrace trace_frame_pixel(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit,
+                             int sh_deg, const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y,
+                             int N) {
+    Stats st;
+    bin_frame(sc, cam, mode, oit, sh_deg, path, buf, st, Progress{});
+    splat_boxes(buf.splats, mode, buf.boxes);
+    FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.keys.data(), cam.width,
+                        cam.height, mode, oit, {bg[0], bg[1], bg[2]}};
+    FlushDenormals ftz;
+    return trace_pixel(lists, x, y, N);
 }
 
 nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, std::optional<FArr> filter_3d,
@@ -519,7 +501,8 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
                 int threads, std::optional<FArr> weight_sh, std::optional<FArr> cell_means,
                 std::optional<FArr> cell_scales, std::optional<FArr> cell_quats, std::optional<IArr> cell_offsets,
                 std::optional<IArr> cell_members, float sigma, float weight_background, float et_grade,
-                bool depth_correct, std::optional<LArr> control, std::optional<PArr> partial) {
+                bool depth_correct, std::optional<LArr> control, std::optional<PArr> partial,
+                std::optional<std::array<int, 2>> trace) {
     const int64_t n = check_scene("render", means, scales, quats, opacities, sh, filter_3d);
     if (control && control->shape(0) != 3) throw std::invalid_argument("render: control must hold 3 int64");
     if (partial && (partial->shape(0) != (size_t)height || partial->shape(1) != (size_t)width ||
@@ -557,16 +540,22 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
     const float* bg = args.bg;
     const bool window = want_window && mode == GAUSSIAN_BLENDING;
 
+    if (trace && !((*trace)[0] >= 0 && (*trace)[0] < width && (*trace)[1] >= 0 && (*trace)[1] < height))
+        fail("render", "trace pixel outside the image");
     Image out;
     Stats st;
+    PixelTrace traced;
     const simd::Path& path = simd::current();  // the one this frame runs and reports, whatever set_simd does meanwhile
     {
         nb::gil_scoped_release release;
         PooledBuffers pooled;
         const int prev_threads = omp_get_max_threads();
         if (threads > 0) omp_set_num_threads(threads);
-        out.resize(width, height, window);
-        if (N == 1) {
+        if (!trace) out.resize(width, height, window);
+        if (trace) {
+            traced = trace_frame_pixel(sc, cam, (Mode)mode, oit, sh_deg, bg, path, *pooled.buf, (*trace)[0],
+                                       (*trace)[1], N);
+        } else if (N == 1) {
             render_image(sc, cam, (Mode)mode, oit, sh_deg, bg, path, *pooled.buf, out, st, progress);
         } else {
             Image hi;
@@ -578,6 +567,7 @@ nb::dict render(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, st
         }
         if (threads > 0) omp_set_num_threads(prev_threads);
     }
+    if (trace) return trace_dict(std::move(traced));
     nb::dict d = result_dict(out, st, (size_t)height, (size_t)width);
     d["simd"] = path.name;
     d["cancelled"] = progress.cancelled();
@@ -632,5 +622,7 @@ NB_MODULE(_native, m) {
           nb::arg("cell_quats").none() = nb::none(), nb::arg("cell_offsets").none() = nb::none(),
           nb::arg("cell_members").none() = nb::none(), nb::arg("sigma") = 10.0f,
           nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
-          nb::arg("control").none() = nb::none(), nb::arg("partial").none() = nb::none());
+          nb::arg("control").none() = nb::none(), nb::arg("partial").none() = nb::none(),
+          nb::arg("trace").none() = nb::none(),
+          "Render a frame; with trace = (x, y), instead the pixel trace of that output pixel (trace.h).");
 }

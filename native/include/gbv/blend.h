@@ -9,10 +9,15 @@
 // section keep the signatures CUDA and the GLSL port use.
 //
 // NaN rule (every backend): a NaN Gaussian exponent rejects the splat at that pixel.
+//
+// Every step also has a tracer type parameter Tr (trace.h): renders use NoTrace, whose hooks are discarded at compile
+// time; the CPU's pixel trace uses a recorder and learns, at each of the step's own tests, why a splat was skipped,
+// and its alpha and weight.
 #pragma once
 
 #include "common.h"
 #include "lanes.h"
+#include "trace.h"
 
 namespace gbv {
 
@@ -32,16 +37,20 @@ struct AlphaState {
 
 // Scalar front-to-back compositing of one alpha per lane (3DGS renderCUDA, KERNELS.md §0.7): skip below
 // min_alpha; stop without adding the splat when T(1 - alpha) < 1e-4. Returns the lanes that stopped.
-template <class L>
+template <class L, class Tr = NoTrace>
 GBV_HD typename L::M composite_scalar(typename L::M pass, typename L::F alpha, const float color[3],
                                       AlphaState<L>& st) {
     using F = typename L::F;
     using M = typename L::M;
+    GBV_TRACE(Tr, alpha(pass, alpha));
+    GBV_TRACE(Tr, skip(L::and_(pass, alpha < L::set(MIN_ALPHA_3DGS)), SKIP_ALPHA));
     pass = L::and_not(pass, alpha < L::set(MIN_ALPHA_3DGS));
     const F test_T = st.T * (L::set(1.0f) - alpha);
     const M low = test_T < L::set(T_STOP);
     const M add = L::and_not(pass, low);
+    GBV_TRACE(Tr, skip(L::and_(pass, low), SKIP_STOP));
     const F w = alpha * st.T;
+    GBV_TRACE(Tr, weight(add, w));
     for (int c = 0; c < 3; ++c) st.C[c] = L::select(add, st.C[c] + L::set(color[c]) * w, st.C[c]);
     st.T = L::select(add, test_T, st.T);
     return L::and_(pass, low);
@@ -49,16 +58,18 @@ GBV_HD typename L::M composite_scalar(typename L::M pass, typename L::F alpha, c
 
 // `scalar` and `mip`: alpha at the pixel centre (eq. 5). Offsets whose power is below
 // log_min_alpha = ln((1/255) / opacity) would give alpha < 1/255 and are skipped before the exp.
-template <class L>
+template <class L, class Tr = NoTrace>
 GBV_HD typename L::M blend_scalar(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
                                   AlphaState<L>& st) {
     using F = typename L::F;
     using M = typename L::M;
     const F power = gaussian_power<L>(s, L::set(s.xy.x) - px, L::set(s.xy.y) - py);
     const M pass = L::and_(live, L::and_(power <= L::set(0.0f), power >= L::set(s.log_min_alpha)));
+    GBV_TRACE(Tr, skip(L::and_not(live, power <= L::set(0.0f)), SKIP_POWER));
+    GBV_TRACE(Tr, skip(L::and_not(live, pass), SKIP_CUTOFF));
     if (!L::any(pass)) return L::none();
     const F alpha = L::min(L::set(s.opacity) * L::exp(L::select(pass, power, L::set(0.0f))), L::set(MAX_ALPHA));
-    return composite_scalar<L>(pass, alpha, s.color, st);
+    return composite_scalar<L, Tr>(pass, alpha, s.color, st);
 }
 
 // Analytic-Splatting's logistic approximation of the standard normal CDF (KERNELS.md §4):
@@ -69,7 +80,7 @@ GBV_HD typename L::F approx_cdf(typename L::F x) {
 }
 
 // `analytic`: mean alpha over the unit pixel, separable in the splat's eigen-frame (Analytic-Splatting).
-template <class L>
+template <class L, class Tr = NoTrace>
 GBV_HD typename L::M blend_analytic(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
                                     AlphaState<L>& st) {
     using F = typename L::F;
@@ -80,7 +91,7 @@ GBV_HD typename L::M blend_analytic(const Splat2D& s, typename L::F px, typename
     const F iu = s1 * (approx_cdf<L>((u + h) / s1) - approx_cdf<L>((u - h) / s1));
     const F iv = s2 * (approx_cdf<L>((v + h) / s2) - approx_cdf<L>((v - h) / s2));
     const F alpha = L::min(L::set(s.opacity * TWO_PI) * iu * iv, L::set(MAX_ALPHA));
-    return composite_scalar<L>(live, alpha, s.color, st);
+    return composite_scalar<L, Tr>(live, alpha, s.color, st);
 }
 
 // ---- Gaussian Blending ----------------------------------------------------------------------------------------------
@@ -177,7 +188,7 @@ struct WindowState {
 // than the published float32 form, see window_side_moments): window sides go to the eigen-axis within 45 degrees,
 // a window outside [0.1, 1e6] sigma falls back to scalar alpha at the window centre, and the pixel
 // stops after adding a splat that leaves T < 1e-4. `took`, when given, receives the lanes whose window changed.
-template <class L>
+template <class L, class Tr = NoTrace>
 GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, WindowState<L>& win,
                                     typename L::M* took = nullptr) {
     using F = typename L::F;
@@ -188,6 +199,7 @@ GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, Window
     // bounding circle (radius >= the distance where its value falls below 1/256).
     const F reach = L::set(s.radius) + half * (win.w + win.h);
     M pass = L::and_not(live, dx * dx + dy * dy > reach * reach);
+    GBV_TRACE(Tr, skip(L::and_not(live, pass), SKIP_RADIUS));
     if (!L::any(pass)) return L::none();
     const F u = dx * L::set(s.v1.x) + dy * L::set(s.v1.y);
     const F v = dx * L::set(-s.v1.y) + dy * L::set(s.v1.x);
@@ -201,6 +213,7 @@ GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, Window
     const F gu = L::max(L::abs(u) - half * lu, zero) * is1;
     const F gv = L::max(L::abs(v) - half * lv, zero) * is2;
     pass = L::and_not(pass, L::set(-0.5f) * (gu * gu + gv * gv) < L::set(s.log_min_alpha));
+    GBV_TRACE(Tr, skip(L::and_not(live, pass), SKIP_CUTOFF));
     if (!L::any(pass)) return L::none();
 
     const F U1 = (u - half * lu) * is1, U2 = (u + half * lu) * is1;
@@ -212,12 +225,17 @@ GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, Window
     const M fallback = L::and_not(pass, normal);
     if (L::any(fallback)) {
         // Stability fallback (Appendix B.1): scalar alpha at the window centre, window unchanged.
+        GBV_TRACE(Tr, fallback(fallback));
         const F power = gaussian_power<L>(s, dx, dy);
         const M valid = L::and_(fallback, power <= zero);
+        GBV_TRACE(Tr, skip(L::and_not(fallback, valid), SKIP_POWER));
         const F g = L::select(valid, L::exp(L::select(valid, power, zero)), zero);
         const F alpha = L::min(L::set(s.opacity) * g, L::set(MAX_ALPHA));
+        GBV_TRACE(Tr, alpha(valid, alpha));
         const M take = L::and_not(fallback, alpha < L::set(MIN_ALPHA_GB));
+        GBV_TRACE(Tr, skip(L::and_not(fallback, take), SKIP_ALPHA));
         const F w = win.T * alpha;
+        GBV_TRACE(Tr, weight(take, w));
         for (int c = 0; c < 3; ++c) win.C[c] = L::select(take, win.C[c] + L::set(s.color[c]) * w, win.C[c]);
         win.T = L::select(take, win.T - w, win.T);
         stop = L::and_(take, win.T < L::set(T_STOP));
@@ -234,8 +252,11 @@ GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, Window
     const F inv_area = L::select(inside, L::set(1.0f) / (lu * lv), zero);
     const F o = L::set(s.opacity);
     const F alpha = L::min(o * i0u * i0v * inv_area, L::set(MAX_ALPHA));  // mean alpha over the window
+    GBV_TRACE(Tr, alpha(inside, alpha));
     const M take = L::and_not(inside, alpha < L::set(MIN_ALPHA_GB));
+    GBV_TRACE(Tr, skip(L::and_not(inside, take), SKIP_ALPHA));
     const F weight = win.T * alpha;  // eq. 9
+    GBV_TRACE(Tr, weight(take, weight));
     for (int c = 0; c < 3; ++c) win.C[c] = L::select(take, win.C[c] + L::set(s.color[c]) * weight, win.C[c]);
 
     const F k = win.T * inv_area * o;
@@ -280,16 +301,21 @@ GBV_HD int64_t to_fixed(float x) { return (int64_t)rintf(minf(x, WSR_FIXED_MAX) 
 // C += c alpha, S += alpha; no transmittance and no early termination (never stops a lane). The weight alpha is
 // capped at WSR_FIXED_MAX (the fixed-point bound; only huge trained view weights reach it) before it multiplies
 // the colour, so a capped splat keeps its colour. The fixed-point sums are added lane by lane.
-template <class L>
+template <class L, class Tr = NoTrace>
 GBV_HD void blend_wsr(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
                       WsrSumsN<L::N>& acc) {
     using F = typename L::F;
     using M = typename L::M;
     const F power = gaussian_power<L>(s, L::set(s.xy.x) - px, L::set(s.xy.y) - py);
     M pass = L::and_(live, L::and_(power <= L::set(0.0f), power >= L::set(s.log_min_alpha)));
+    GBV_TRACE(Tr, skip(L::and_not(live, power <= L::set(0.0f)), SKIP_POWER));
+    GBV_TRACE(Tr, skip(L::and_not(live, pass), SKIP_CUTOFF));
     if (!L::any(pass)) return;
     const F alpha = L::min(L::set(s.opacity) * L::exp(L::select(pass, power, L::set(0.0f))), L::set(WSR_FIXED_MAX));
+    GBV_TRACE(Tr, alpha(pass, alpha));
+    GBV_TRACE(Tr, skip(L::and_(pass, alpha < L::set(MIN_ALPHA_3DGS)), SKIP_ALPHA));
     pass = L::and_not(pass, alpha < L::set(MIN_ALPHA_3DGS));
+    GBV_TRACE(Tr, weight(pass, alpha));
     const uint32_t bits = L::bits(pass);
     if (!bits) return;
     float a[L::N], c[3][L::N];
@@ -316,22 +342,28 @@ struct DuplexLanes {
 // entering a new cell the pixel stops when T < 0.01, else T_cell = T. Then alpha /= E, T *= 1 - alpha, and the
 // splat adds with weight alpha T_cell. Inside a cell every weight uses the same T_cell: the cell's sum does not
 // depend on the order of its splats (only the float rounding of T does).
-template <class L>
+template <class L, class Tr = NoTrace>
 GBV_HD typename L::M blend_duplex(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
                                   float et_grade, DuplexLanes<L>& st) {
     using F = typename L::F;
     using M = typename L::M;
     const F dx = L::set(s.xy.x) - px, dy = L::set(s.xy.y) - py;
     const M near = L::and_not(live, dx * dx + dy * dy > L::set(s.radius * s.radius));
+    GBV_TRACE(Tr, skip(L::and_not(live, near), SKIP_RADIUS));
     if (!L::any(near)) return L::none();
     const F power = gaussian_power<L>(s, dx, dy);
     M pass = L::and_(near, L::and_(power <= L::set(0.0f), power >= L::set(s.log_min_alpha)));
+    GBV_TRACE(Tr, skip(L::and_not(near, power <= L::set(0.0f)), SKIP_POWER));
+    GBV_TRACE(Tr, skip(L::and_not(near, pass), SKIP_CUTOFF));
     if (!L::any(pass)) return L::none();
     F alpha = L::min(L::set(s.opacity) * L::exp(L::select(pass, power, L::set(0.0f))), L::set(MAX_ALPHA));
+    GBV_TRACE(Tr, alpha(pass, alpha));
+    GBV_TRACE(Tr, skip(L::and_(pass, alpha < L::set(MIN_ALPHA_3DGS)), SKIP_ALPHA));
     pass = L::and_not(pass, alpha < L::set(MIN_ALPHA_3DGS));
     if (!L::any(pass)) return L::none();
     const M entering = L::and_not(pass, L::eqi(st.cell, L::seti(s.cell)));
     const M stop = L::and_(entering, st.T < L::set(DUPLEX_T_STOP));
+    GBV_TRACE(Tr, skip(stop, SKIP_CELL_STOP));
     const M enter = L::and_not(entering, stop);
     st.cell = L::selecti(enter, L::seti(s.cell), st.cell);
     st.T_cell = L::select(enter, st.T, st.T_cell);
@@ -339,6 +371,7 @@ GBV_HD typename L::M blend_duplex(const Splat2D& s, typename L::F px, typename L
     alpha = alpha / L::set(et_grade);
     st.T = L::select(add, st.T * (L::set(1.0f) - alpha), st.T);
     const F w = alpha * st.T_cell;
+    GBV_TRACE(Tr, weight(add, w));
     for (int c = 0; c < 3; ++c) st.C[c] = L::select(add, st.C[c] + L::set(s.color[c]) * w, st.C[c]);
     st.S = L::select(add, st.S + w, st.S);
     return stop;
@@ -347,12 +380,13 @@ GBV_HD typename L::M blend_duplex(const Splat2D& s, typename L::F px, typename L
 // The published normalisation out = (C + bg w_bg) / (S + w_bg T_bg), written as out = C' + T' bg with
 // C' = C / S_total and T' = w_bg / S_total (the background's share of the weights; Frame.alpha = 1 - T'). wsr:
 // T_bg = 1; duplex: T_bg = the final cummult, and w_bg = 0 once it is below 0.01. A total of exactly 0 becomes
-// 1e-4 (LC-WSR; duplex does the same here instead of dividing by zero).
-GBV_HD void resolve_weighted(const float C[3], float S, float wbg, float T_bg, float out_C[3], float* out_T) {
+// 1e-4 (LC-WSR; duplex does the same here instead of dividing by zero). Returns S_total.
+GBV_HD float resolve_weighted(const float C[3], float S, float wbg, float T_bg, float out_C[3], float* out_T) {
     float total = S + wbg * T_bg;
     if (total == 0.0f) total = WSR_EMPTY_SUM;
     for (int c = 0; c < 3; ++c) out_C[c] = C[c] / total;
     *out_T = wbg / total;
+    return total;
 }
 
 // ---- one pixel (CUDA's per-thread loop; the GLSL port has these names) ----------------------------------------------
