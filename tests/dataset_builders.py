@@ -63,13 +63,14 @@ def save_rgba(path: Path, rgb: np.ndarray, alpha: np.ndarray) -> None:
 def write_colmap(root: Path, views: list[Shot], text: bool = False, model: str | None = None,
                  extra: tuple[float, ...] = ()) -> Path:
     """root/sparse/0 (through pycolmap) and root/images/NAME.png: odd views use a PINHOLE camera, even ones a
-    SIMPLE_PINHOLE (fx = fy); `model` with `extra` parameters replaces the PINHOLE one."""
+    SIMPLE_PINHOLE (fx = fy); `model` with `extra` parameters (after f, cx, cy for SIMPLE_* models, else fx, fy,
+    cx, cy) replaces the PINHOLE one."""
     pycolmap = pytest.importorskip("pycolmap")
     rec = pycolmap.Reconstruction()
     for i, shot in enumerate(views):
         c = shot.camera
         if i % 2 and model is not None:
-            params = [c.fx, c.cx, c.cy, *extra]
+            params = [c.fx, c.cx, c.cy, *extra] if model.startswith("SIMPLE") else [c.fx, c.fy, c.cx, c.cy, *extra]
             cam = pycolmap.Camera(camera_id=i + 1, model=model, width=W, height=H, params=params)
         elif i % 2:
             cam = pycolmap.Camera(camera_id=i + 1, model="PINHOLE", width=W, height=H,

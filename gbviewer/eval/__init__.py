@@ -5,7 +5,7 @@ process pool or on Ray, reported as the paper's tables, JSON and plots.
 For the viewer: `ground_truth(view, rate, background, cache)` is a view's photo at a rate, and
 `camera_for_rate(view.camera, rate)` the camera whose render matches its pixels."""
 
-from .ground_truth import camera_for_rate, default_cache, ground_truth, ground_truths, rate_factor
+from .multiscale import camera_for_rate, default_cache, ground_truth, ground_truths, rate_factor
 from .report import print_tables, plot_paths, to_json, write_json, write_plots
 from .run import EvalResult, SceneEval, run_eval
 from .tasks import ViewResult, ViewTask, evaluate_view

@@ -83,10 +83,15 @@ def write_json(path: Path, result: EvalResult, force: bool = False) -> Path:
     return atomic_write(path, lambda p: p.write_text(json.dumps(doc, indent=1, allow_nan=False)), force)
 
 
+def _labels(result: EvalResult) -> list[str]:
+    """Each scene's name, with its dataset's where one scene is evaluated against several."""
+    names = [s.scene.stem for s in result.scenes]
+    return [n if names.count(n) == 1 else f"{n} vs {s.dataset.name}" for n, s in zip(names, result.scenes)]
+
+
 def plot_paths(out_dir: Path, result: EvalResult) -> list[Path]:
     """Where `write_plots` puts its plots: one per scene, and mean.png for several scenes."""
-    names = [s.scene.name for s in result.scenes] + (["mean"] if len(result.scenes) > 1 else [])
-    return [plot_path(out_dir, n) for n in names]
+    return [plot_path(out_dir, n) for n in _labels(result) + (["mean"] if len(result.scenes) > 1 else [])]
 
 
 def write_plots(out_dir: Path, result: EvalResult, force: bool = False) -> list[Path]:
@@ -97,7 +102,7 @@ def write_plots(out_dir: Path, result: EvalResult, force: bool = False) -> list[
     import matplotlib.pyplot as plt
 
     tables = [s.table() for s in result.scenes]
-    titles = [s.scene.name for s in result.scenes]
+    titles = _labels(result)
     if len(tables) > 1:
         tables, titles = tables + [mean_table(tables)], titles + [f"mean over {len(tables)} scenes"]
     written = []

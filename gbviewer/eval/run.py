@@ -18,7 +18,7 @@ from ..errors import GBViewerError
 from ..io.datasets import View, load_dataset
 from ..io.files import check_writable
 from ..render import RenderSettings
-from .ground_truth import camera_for_rate, rate_factor
+from .multiscale import camera_for_rate, rate_factor
 from .tasks import ViewResult, ViewTask, evaluate_view, finite, run_task
 
 # progress(description, total tasks) -> a context that yields advance(tasks done)
@@ -99,7 +99,7 @@ def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettin
     for rate in rates:
         rate_factor(rate)
     if cache is not None:
-        check_writable(cache, folder=True)
+        cache = check_writable(cache, folder=True).resolve()  # absolute: workers may run elsewhere
     runner = f"ray {ray}" if ray else f"{workers} worker{'s' * (workers > 1)}"
     result = EvalResult([s.spec for s in settings], list(rates), split, background, runner)
     tasks: list[ViewTask] = []

@@ -14,7 +14,7 @@ from ..io.datasets import View
 from ..metrics import psnr, ssim
 from ..render import BACKENDS, RenderSettings, get_renderer
 from ..scene import Scene
-from .ground_truth import camera_for_rate, ground_truths
+from .multiscale import camera_for_rate, ground_truths
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,6 @@ read through pycolmap in a child process whose time and memory are bounded."""
 from __future__ import annotations
 
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -50,10 +49,6 @@ def _stage(model: Path, into: Path) -> int:
     return size
 
 
-def _limit_memory(limit: int) -> None:
-    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
-
-
 def read_colmap(model: Path) -> dict:
     """{"cameras": {id: {model, width, height, params, names}}, "images": [{name, camera, R, t}]} of the posed
     images, from pycolmap in a child process; a malformed model is a one-line `DatasetError`."""
@@ -62,8 +57,8 @@ def read_colmap(model: Path) -> dict:
         size = _stage(model, Path(tmp))
         limit, seconds = BASE_MEMORY + MEMORY_PER_BYTE * size, BASE_SECONDS + size / BYTES_PER_SECOND
         try:
-            out = subprocess.run([sys.executable, str(child), tmp], capture_output=True, timeout=seconds,
-                                 preexec_fn=lambda: _limit_memory(limit), env={**os.environ, "GLOG_minloglevel": "3"})
+            out = subprocess.run([sys.executable, str(child), tmp, str(limit)], capture_output=True, timeout=seconds,
+                                 env={**os.environ, "GLOG_minloglevel": "3"})
         except subprocess.TimeoutExpired:
             raise DatasetError(f"{model}: unreadable COLMAP model (pycolmap still reading after {seconds:.0f} s)")
     if out.returncode != 0 or not out.stdout:
@@ -96,14 +91,15 @@ def load_colmap(root: Path, model: Path, images: str = "images") -> Dataset:
     """The posed images of `model` with photos in root/`images`, split as HOLDOUT says; a camera's intrinsics are
     rescaled where its photo's size differs (images_4 of a full-size model)."""
     doc = read_colmap(model)
+    posed = sorted(doc["images"], key=lambda im: im["name"])
     folder = root / images
-    paths = [folder / im["name"] for im in doc["images"]]
+    paths = [folder / im["name"] for im in posed]
     if not folder.is_dir():
         raise DatasetError(f"{folder}: photo folder missing (choose another with --images)")
     missing_photos(paths, f"{folder} for {model}")
-    split = holdout_splits([im["name"] for im in doc["images"]])
+    split = holdout_splits([im["name"] for im in posed])
     views = []
-    for im, path in sorted(zip(doc["images"], paths), key=lambda pair: pair[0]["name"]):
+    for im, path in zip(posed, paths):
         cam = doc["cameras"].get(im["camera"])
         where = f"{model}: image {im['name']!r}"
         if cam is None:

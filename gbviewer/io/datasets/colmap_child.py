@@ -1,10 +1,12 @@
-"""Run as a script by `colmap.read_colmap` in a child process: read a COLMAP model with pycolmap and print its
-cameras and posed images as JSON (floats written exactly). pycolmap's readers can loop forever or abort on a
-malformed file, so the parent bounds this process's time and memory. Imports nothing of gbviewer."""
+"""Run as a script by `colmap.read_colmap` in a child process: `colmap_child.py FOLDER MAX_BYTES` reads the COLMAP
+model in FOLDER with pycolmap and prints its cameras and posed images as JSON (floats written exactly). pycolmap's
+readers can loop forever or abort on a malformed file: the parent bounds this process's time, and it limits its
+own address space to MAX_BYTES (a malformed count fails to allocate). Imports nothing of gbviewer."""
 
 from __future__ import annotations
 
 import json
+import resource
 import sys
 
 
@@ -28,6 +30,7 @@ def describe(folder: str) -> dict:
 
 
 if __name__ == "__main__":
+    resource.setrlimit(resource.RLIMIT_AS, (int(sys.argv[2]), int(sys.argv[2])))
     try:
         doc = describe(sys.argv[1])
     except Exception as exc:  # pycolmap raises ValueError, IndexError, MemoryError, ... for bad files

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -11,19 +12,32 @@ from ...camera import MAX_IMAGE_SIZE, Camera
 from ...errors import DatasetError
 
 PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".JPG", ".JPEG", ".PNG")  # tried for a name given without one
+PIXELS_PER_BYTE = 4096  # beyond what PNG (deflate: < 1032:1) or JPEG can compress: a header claiming more is false
+
+
+def _open(path: Path) -> Image.Image:
+    """Image.open without Pillow's decompression-bomb warning: `photo_size` bounds the pixels itself (Pillow's
+    error above twice its warning limit stays)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        return Image.open(path)
 
 
 def photo_size(path: Path) -> tuple[int, int]:
-    """(width, height) from the image header, each 1..MAX_IMAGE_SIZE; nothing is decoded."""
+    """(width, height) from the image header, each 1..MAX_IMAGE_SIZE and together no more pixels than the file's
+    bytes can encode; nothing is decoded."""
     try:
-        with Image.open(path) as im:
+        with _open(path) as im:
             w, h = im.size
+        size = path.stat().st_size
     except FileNotFoundError:
         raise DatasetError(f"{path}: photo missing") from None
     except (OSError, ValueError, Image.DecompressionBombError) as exc:
         raise DatasetError(f"{path}: cannot read the photo ({exc})") from None
     if not (1 <= w <= MAX_IMAGE_SIZE and 1 <= h <= MAX_IMAGE_SIZE):
         raise DatasetError(f"{path}: photo is {w}x{h}; expected sides of 1..{MAX_IMAGE_SIZE} pixels")
+    if w * h > PIXELS_PER_BYTE * size:
+        raise DatasetError(f"{path}: header claims {w}x{h} pixels in {size} bytes; not a real photo")
     return w, h
 
 
@@ -32,7 +46,7 @@ def read_photo(path: Path) -> np.ndarray:
     palette entry), (H, W, 3) RGB otherwise. Sides are checked from the header before decoding."""
     photo_size(path)
     try:
-        with Image.open(path) as im:
+        with _open(path) as im:
             alpha = "A" in im.getbands() or "transparency" in im.info
             pixels = np.asarray(im.convert("RGBA" if alpha else "RGB"))
     except (OSError, ValueError, Image.DecompressionBombError) as exc:
