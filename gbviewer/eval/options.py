@@ -16,6 +16,7 @@ MAX_WORKERS = 1024
 
 
 def add_eval_args(p: argparse.ArgumentParser) -> None:
+    """The arguments of `gbviewer eval` (every number through argtypes)."""
     p.add_argument("scenes", nargs="+", metavar="SCENE", help="a scene file (with --data), SCENE:DATASET, or a "
                    "folder of scene files (with --data: a folder holding a dataset named as each scene)")
     p.add_argument("--data", type=Path, help="the dataset: a COLMAP capture (sparse/0 and images/), a Blender "

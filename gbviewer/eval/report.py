@@ -25,10 +25,12 @@ def averages(table: Table, modes: list[str], rates: list[float]) -> dict[str, di
 
 
 def _fmt(x: float | None, digits: int) -> str:
+    """A table cell: the number, or n/a."""
     return "n/a" if x is None else f"{x:.{digits}f}"
 
 
 def _print_table(title: str, table: Table, result: EvalResult) -> None:
+    """The paper's layout: a row per mode; PSNR per rate and average, SSIM likewise, render ms at the top rate."""
     from rich.table import Table as RichTable
 
     rates, modes = result.rates, result.modes
@@ -61,6 +63,7 @@ def print_tables(result: EvalResult) -> None:
 
 
 def _rows(table: Table, result: EvalResult) -> dict:
+    """A table and its averages as JSON rows."""
     return {"table": [{"mode": m, "rate": r, "rate_label": format_rate(r), **v} for (m, r), v in table.items()],
             "average": [{"mode": m, **v} for m, v in averages(table, result.modes, result.rates).items()]}
 
@@ -79,6 +82,7 @@ def to_json(result: EvalResult) -> dict:
 
 
 def write_json(path: Path, result: EvalResult, force: bool = False) -> Path:
+    """`to_json` written atomically (an existing file only with `force`)."""
     doc = to_json(result)
     return atomic_write(path, lambda p: p.write_text(json.dumps(doc, indent=1, allow_nan=False)), force)
 

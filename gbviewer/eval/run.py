@@ -65,6 +65,7 @@ def mean(values: Sequence[float | None]) -> float | None:
 
 
 def _in_process(tasks: list[ViewTask], advance: Callable[[int], None]) -> list[ViewResult]:
+    """The tasks one after another in this process."""
     out = []
     for task in tasks:
         out.append(evaluate_view(task))

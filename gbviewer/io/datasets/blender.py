@@ -19,6 +19,7 @@ GL_TO_CV = np.diag([1.0, -1.0, -1.0])  # flips y and z: OpenGL camera axes to Op
 
 
 def is_blender(root: Path) -> bool:
+    """Whether `root` holds a transforms_train.json or transforms_test.json."""
     return any((root / name).is_file() for name in SPLIT_FILES.values())
 
 
@@ -31,6 +32,7 @@ def blender_camera(c2w: np.ndarray, angle_x: float, width: int, height: int, nam
 
 
 def _views(root: Path, split: str, path: Path) -> list[View]:
+    """The views of one transforms file, each at its photo's size."""
     try:
         doc = read_json(path)
         angle = real(field(doc, "camera_angle_x", str(path)), f"{path}: 'camera_angle_x'", lo=0.0, lo_open=True,
