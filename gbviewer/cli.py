@@ -242,8 +242,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     pairs = scene_pairs(args.scenes, args.data)
     if args.json:
         check_writable(args.json, args.force)
-    if args.plots:
-        check_writable(args.plots, folder=True)
+    for path in evaluation.plot_paths(args.plots, pairs) if args.plots else []:
+        check_writable(path, args.force)
     result = evaluation.run_eval(
         pairs, RenderSettings.parse_list(args.modes), args.rates, split=args.split, background=args.background,
         images=args.images, backend=args.backend, workers=args.workers, ray=args.ray, threads=args.threads,

@@ -223,3 +223,14 @@ def test_cli_errors_are_one_line(args, message, capsys, tmp_path):
     status = cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(tmp_path), *args, "--cache", str(tmp_path / "c")])
     err = capsys.readouterr().err
     assert status == 2 and len(err.splitlines()) == 1 and message in err, err
+
+
+def test_existing_outputs_are_refused_before_the_work(tmp_path, capsys, monkeypatch):
+    (tmp_path / "p").mkdir()
+    (tmp_path / "p" / "fruit_drops_minimal.png").write_bytes(b"mine")
+    monkeypatch.setattr(ev, "run_eval", lambda *a, **k: pytest.fail("evaluated despite an existing output"))
+    status = cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(tmp_path), "--plots", str(tmp_path / "p")])
+    err = capsys.readouterr().err
+    assert status == 2 and err.splitlines() == [f"gbviewer: error: {tmp_path / 'p' / 'fruit_drops_minimal.png'}: "
+                                                "exists; pass --force to overwrite"]
+    assert (tmp_path / "p" / "fruit_drops_minimal.png").read_bytes() == b"mine"

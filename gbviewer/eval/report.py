@@ -87,15 +87,15 @@ def write_json(path: Path, result: EvalResult, force: bool = False) -> Path:
     return atomic_write(path, lambda p: p.write_text(json.dumps(doc, indent=1, allow_nan=False)), force)
 
 
-def _labels(result: EvalResult) -> list[str]:
+def _labels(pairs: list[tuple[Path, Path]]) -> list[str]:
     """Each scene's name, with its dataset's where one scene is evaluated against several."""
-    names = [s.scene.stem for s in result.scenes]
-    return [n if names.count(n) == 1 else f"{n} vs {s.dataset.name}" for n, s in zip(names, result.scenes)]
+    names = [Path(scene).stem for scene, _ in pairs]
+    return [n if names.count(n) == 1 else f"{n} vs {Path(data).resolve().name}" for n, (_, data) in zip(names, pairs)]
 
 
-def plot_paths(out_dir: Path, result: EvalResult) -> list[Path]:
-    """Where `write_plots` puts its plots: one per scene, and mean.png for several scenes."""
-    return [plot_path(out_dir, n) for n in _labels(result) + (["mean"] if len(result.scenes) > 1 else [])]
+def plot_paths(out_dir: Path, pairs: list[tuple[Path, Path]]) -> list[Path]:
+    """Where `write_plots` puts the plots of these (scene, dataset) pairs: one per scene, and mean.png for several."""
+    return [plot_path(out_dir, n) for n in _labels(pairs) + (["mean"] if len(pairs) > 1 else [])]
 
 
 def write_plots(out_dir: Path, result: EvalResult, force: bool = False) -> list[Path]:
@@ -105,12 +105,13 @@ def write_plots(out_dir: Path, result: EvalResult, force: bool = False) -> list[
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    pairs = [(s.scene, s.dataset) for s in result.scenes]
     tables = [s.table() for s in result.scenes]
-    titles = _labels(result)
+    titles = _labels(pairs)
     if len(tables) > 1:
         tables, titles = tables + [mean_table(tables)], titles + [f"mean over {len(tables)} scenes"]
     written = []
-    for table, title, path in zip(tables, titles, plot_paths(out_dir, result)):
+    for table, title, path in zip(tables, titles, plot_paths(out_dir, pairs)):
         fig, axes = plt.subplots(1, 2, figsize=(11, 4))
         for ax, metric in zip(axes, ("psnr", "ssim")):
             for m in result.modes:

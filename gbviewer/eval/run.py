@@ -27,7 +27,8 @@ Progress = Callable[[str, int], AbstractContextManager[Callable[[int], None]]]
 
 @dataclass
 class SceneEval:
-    """One scene against its dataset: the views of the split and each one's measures, in dataset order."""
+    """One scene against its dataset (the folder or cameras.json given): the views of the split and each one's
+    measures, in dataset order."""
 
     scene: Path
     dataset: Path
@@ -96,7 +97,7 @@ def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettin
     """Evaluate each (scene file, dataset) pair: every view of `split` in every mode of `settings` at every rate
     1/k against the photos box-downsampled by k. workers > 1: a local process pool; `ray`: a Ray cluster's
     address (local: a Ray instance started here) instead. threads: CPU threads per render (default: the cores
-    shared among the workers; on Ray 0, all the task's node has). cache: folder of box-downsampled photos."""
+    shared among the workers; on Ray as `cluster.run_on_ray` chooses). cache: folder of box-downsampled photos."""
     for rate in rates:
         rate_factor(rate)
     if cache is not None:
@@ -110,12 +111,13 @@ def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettin
         scene = Path(scene).resolve()
         if not scene.exists():
             raise GBViewerError(f"{scene}: no such scene file")
-        dataset = load_dataset(Path(data).resolve(), images)
+        data = Path(data).resolve()
+        dataset = load_dataset(data, images)
         views = dataset.split(split)
         for view in views:
             for rate in rates:
                 camera_for_rate(view.camera, rate)
-        result.scenes.append(SceneEval(scene, dataset.root, dataset.format, views, []))
+        result.scenes.append(SceneEval(scene, data, dataset.format, views, []))
         tasks += [ViewTask(str(scene), i, j, v, tuple(settings), tuple(rates), background, backend, threads,
                            str(cache) if cache is not None else None) for j, v in enumerate(views)]
     t0 = time.perf_counter()

@@ -20,7 +20,8 @@ MODEL_FILES = {".bin": ("cameras", "images", "rigs", "frames"), ".txt": ("camera
 EMPTY_POINTS = {".bin": b"\0" * 8, ".txt": b""}  # points3D is never read: it is large and unneeded here
 PINHOLE = {"PINHOLE", "SIMPLE_PINHOLE"}
 RADIAL = {"SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV"}  # pinhole when every distortion term is 0
-BASE_MEMORY = 1 << 30  # the child's address space: pycolmap itself, plus MEMORY_PER_BYTE per byte of the model
+BASE_MEMORY = 4 << 30  # the child's address space: pycolmap itself, plus MEMORY_PER_BYTE per byte of the model
+SINGLE_THREADED = {"GLOG_minloglevel": "3", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}  # no per-core pools
 MEMORY_PER_BYTE = 32
 BASE_SECONDS, BYTES_PER_SECOND = 30.0, 5e6
 
@@ -58,7 +59,7 @@ def read_colmap(model: Path) -> dict:
         limit, seconds = BASE_MEMORY + MEMORY_PER_BYTE * size, BASE_SECONDS + size / BYTES_PER_SECOND
         try:
             out = subprocess.run([sys.executable, str(child), tmp, str(limit)], capture_output=True, timeout=seconds,
-                                 env={**os.environ, "GLOG_minloglevel": "3"})
+                                 env={**os.environ, **SINGLE_THREADED})
         except subprocess.TimeoutExpired:
             raise DatasetError(f"{model}: unreadable COLMAP model (pycolmap still reading after {seconds:.0f} s)")
     if out.returncode != 0 or not out.stdout:
