@@ -1,4 +1,4 @@
-"""The `gbviewer` command line: info, render, demo (the main job)."""
+"""The `gbviewer` command line: info, render, demo (the main job), bench, eval, video, compare."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from .argtypes import BACKGROUND, INSET, MAX_SIDE, ORBIT, PIXEL, SIDE, SIZE, Num
 from .camera import PROJECTIONS, Camera, format_rate, load_cameras_json, orbit_camera, parse_rates
 from .camera_paths import MAX_FRAMES, PATHS, camera_path, scene_focus_depth, zoom_path
 from .errors import GBViewerError
+from .eval.options import add_eval_args, scene_pairs
 from .figure import DIFFS, compose_grid, render_grid, save_image, write_comparison
 from .io import load, write_inria_ply
 from .io.files import check_writable
@@ -199,11 +200,19 @@ def resolve_bench_options(args: argparse.Namespace) -> argparse.Namespace:
     return args
 
 
+@contextmanager
+def progress_bar(name: str, total: float):
+    """A transient progress bar (percentage, elapsed, ETA) of `total` units; yields advance(units)."""
+    from rich.progress import Progress
+
+    with Progress(*progress_columns(), transient=True) as progress:
+        task = progress.add_task(name, total=total)
+        yield lambda units: progress.advance(task, units)
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     """Speed (per SIMD path of the CPU backend) and zoom fidelity per scene, mode, backend and rate; tables, JSON,
     plots."""
-    from rich.progress import Progress
-
     from . import bench
 
     simd_given = args.simd is not None
@@ -218,17 +227,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.plots:
         outputs += [bench.plot_path(Path(args.plots), Path(s).name) for s in args.scenes]
 
-    @contextmanager
-    def bar(name: str, total: float):
-        with Progress(*progress_columns(), transient=True) as progress:
-            task = progress.add_task(name, total=total)
-            yield lambda units: progress.advance(task, units)
-
     result = bench.run_bench(
         args.scenes, RenderSettings.parse_list(args.modes), args.rates, backends, views=args.views,
         size=args.size, repeat=args.repeat, cameras=args.cameras, up=args.up, simd=args.simd,
         flicker_frames=args.flicker_frames, flicker_step=args.flicker_step,
-        outputs=outputs, force=args.force, progress=bar)
+        outputs=outputs, force=args.force, progress=progress_bar)
     bench.print_tables(result.speed, result.fidelity, result.simd)
     if result.oit:
         bench.print_oit(result.oit)
@@ -239,6 +242,28 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.plots:
         for p in bench.write_plots(Path(args.plots), result.speed, result.fidelity, args.force):
             print(f"wrote {p}")
+    return 0
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    """PSNR and SSIM of every mode at every rate against the training photos (the paper's tables)."""
+    from . import eval as evaluation
+
+    pairs = scene_pairs(args.scenes, args.data)
+    if args.json:
+        check_writable(args.json, args.force)
+    for path in evaluation.plot_paths(args.plots, pairs) if args.plots else []:
+        check_writable(path, args.force)
+    result = evaluation.run_eval(
+        pairs, RenderSettings.parse_list(args.modes), args.rates, split=args.split, background=args.background,
+        images=args.images, backend=args.backend, workers=args.workers, ray=args.ray, threads=args.threads,
+        cache=args.cache or evaluation.default_cache(), progress=progress_bar)
+    evaluation.print_tables(result)
+    if args.json:
+        print(f"wrote {evaluation.write_json(args.json, result, args.force)}")
+    if args.plots:
+        for path in evaluation.write_plots(args.plots, result, args.force):
+            print(f"wrote {path}")
     return 0
 
 
@@ -399,6 +424,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--flicker-step", type=positive(360.0), default=0.1,
                    help="degrees of azimuth between those frames")
     p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser("eval", help="PSNR and SSIM of every mode and sampling rate against a scene's training "
+                                    "photos (COLMAP, Blender or cameras.json datasets), the paper's tables")
+    add_eval_args(p)
+    p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("video", help="side-by-side zoom video of several modes (H.264 MP4)")
     p.add_argument("scene", type=Path)

@@ -25,6 +25,11 @@ class CameraError(GBViewerError):
     """A camera (or cameras.json entry) is invalid."""
 
 
+class DatasetError(GBViewerError):
+    """A training dataset (COLMAP, Blender transforms, cameras.json with photos) cannot be used: missing photos,
+    an unsupported camera model, an unreadable model file, an empty split."""
+
+
 class RenderError(GBViewerError):
     """Invalid render settings or a backend that cannot run."""
 

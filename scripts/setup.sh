@@ -30,4 +30,4 @@ pip_install() {
 }
 pip_install --upgrade pip
 echo "setup: building and installing gbviewer and its native CPU module (about a minute)"
-pip_install ".[test,duplex]"  # duplex: torch for Duplex-GS checkpoints (and their tests)
+pip_install ".[test,duplex,ray]"  # duplex: torch for Duplex-GS checkpoints; ray: gbviewer eval --ray (and their tests)

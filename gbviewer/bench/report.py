@@ -25,8 +25,8 @@ def wide_console():
     """A rich console; into a file or pipe 200 columns wide, so that no number is cut short."""
     from rich.console import Console
 
-    console = Console()
-    return console if console.is_terminal else Console(width=max(console.width, 200))
+    term = Console()
+    return term if term.is_terminal else Console(width=max(term.width, 200))
 
 
 def print_oit(rows: list[OitRow]) -> None:
@@ -168,9 +168,9 @@ def print_tables(speed: list[SpeedRow], fidelity: list[FidelityRow], simd: dict 
     """Rich tables on the terminal: speed, SIMD paths, ratios, fidelity; `simd` (simd_info()) heads them."""
     from rich.table import Table
 
-    console = wide_console()
+    out = wide_console()
     if simd:
-        console.print(simd_summary(simd), highlight=False)
+        out.print(simd_summary(simd), highlight=False)
     t = Table(title="Speed (median over repeats and views; Mevals/s/core: splat-pixel evaluations per second per "
                     "core over the frame / the blend stage, exp: that SIMD path's exp evaluations per second on a "
                     "core)")
@@ -183,7 +183,7 @@ def print_tables(speed: list[SpeedRow], fidelity: list[FidelityRow], simd: dict 
                   f"{r.stages_ms['sort_ms']:.1f}", f"{r.stages_ms['blend_ms']:.1f}", f"{r.evals_per_pixel:.1f}",
                   f"{r.mevals_per_s_per_core:.1f}", f"{r.blend_mevals_per_s_per_core:.1f}",
                   "-" if r.exp_mevals_per_s_per_core is None else f"{r.exp_mevals_per_s_per_core:.0f}")
-    console.print(t)
+    out.print(t)
     header, rows = simd_table(speed)
     if rows:
         st = Table(title="SIMD paths of the CPU backend (same run, taking turns render by render; speedup: scalar's "
@@ -193,7 +193,7 @@ def print_tables(speed: list[SpeedRow], fidelity: list[FidelityRow], simd: dict 
             st.add_column(col, justify="left" if col in ("scene", "mode") else "right")
         for row in rows:
             st.add_row(*row)
-        console.print(st)
+        out.print(st)
     rt = Table(title="Ratios of frame times (same run; the SIMD speedups are in the table above)")
     for col in ("scene", "backend", "simd", "rate", "size", "ratio", "value"):
         rt.add_column(col)
@@ -201,11 +201,11 @@ def print_tables(speed: list[SpeedRow], fidelity: list[FidelityRow], simd: dict 
         if "mode" not in r:
             rt.add_row(r["scene"], r["backend"], r["simd"] or "-", format_rate(r["rate"]),
                        f"{r['width']}x{r['height']}", r["ratio"], f"{r['value']:.2f}")
-    console.print(rt)
+    out.print(rt)
     if fidelity:
         ft = Table(title="Zoom fidelity (mean over views)")
         for col in ("scene", "kind", "rate", "mode", "simd", "PSNR dB", "SSIM"):
             ft.add_column(col)
         for r in sorted(fidelity, key=lambda r: (r.scene, r.kind, -r.rate if r.kind == "zoom-out" else r.rate)):
             ft.add_row(r.scene, r.kind, format_rate(r.rate), r.mode, r.simd or "-", f"{r.psnr:.2f}", f"{r.ssim:.4f}")
-        console.print(ft)
+        out.print(ft)

@@ -1,0 +1,47 @@
+"""The evaluation's tasks on a Ray cluster (the optional `ray` extra): one Ray task per scene view, each worker
+process keeping its scenes loaded (`tasks._scene`), results gathered as they finish. Every node needs gbviewer
+installed and the scenes, photos and cache folder at the same paths (a shared file system)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+from typing import Callable
+
+from ..errors import GBViewerError
+from .tasks import ViewResult, ViewTask, run_task
+
+TASK_CPUS = 4  # CPUs (render threads) per Ray task unless --threads says: a node runs cores / 4 tasks at once
+
+
+def run_on_ray(tasks: list[ViewTask], address: str, advance: Callable[[int], None]) -> list[ViewResult]:
+    """Run `tasks` on the Ray cluster at `address` (host:port, ray://host:port or auto; local: start a Ray
+    instance in this process for the run). Where the cluster has GPUs and the backend is auto or cuda, each task
+    takes one GPU and renders with CUDA; else it takes the tasks' `threads` CPUs (0: TASK_CPUS, at most the
+    smallest node's count) and renders with as many threads."""
+    try:
+        import ray
+    except ImportError:
+        raise GBViewerError("--ray needs the optional ray package: pip install 'gbviewer[ray]'") from None
+    try:
+        ray.init(address=None if address == "local" else address, include_dashboard=False,
+                 logging_level=logging.WARNING, configure_logging=True)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        raise GBViewerError(f"--ray {address}: cannot connect ({' '.join(str(exc).split())[:200]})") from None
+    try:
+        gpus = ray.cluster_resources().get("GPU", 0) > 0 and bool(tasks) and tasks[0].backend in ("auto", "cuda")
+        smallest = min((n["Resources"].get("CPU", 1) for n in ray.nodes() if n["Alive"]), default=1)
+        cpus = (tasks[0].threads if tasks else 0) or max(1, min(TASK_CPUS, int(smallest)))
+        remote = ray.remote(run_task).options(**({"num_gpus": 1, "num_cpus": 1} if gpus else {"num_cpus": cpus}))
+        refs = [remote.remote(replace(t, threads=cpus)) for t in tasks]
+        pending = list(refs)
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            advance(len(done))
+        try:
+            return ray.get(refs)
+        except ray.exceptions.RayTaskError as exc:
+            cause = exc.cause if isinstance(exc.cause, GBViewerError) else None
+            raise GBViewerError(str(cause) if cause else f"a Ray task failed: {str(exc).splitlines()[0]}") from None
+    finally:
+        ray.shutdown()
