@@ -5,7 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from .camera import Camera, load_cameras_json, orbit_camera
-from .errors import BackendUnavailable, CameraError, GBViewerError, RenderCancelled, RenderError, SceneFormatError
+from .errors import (BackendUnavailable, CameraError, Cancelled, GBViewerError, LoadCancelled, RenderCancelled,
+                     RenderError, SceneFormatError)
 from .io import load
 from .render import Frame, FrameStats, Mode, Renderer, RenderSettings, get_renderer, render
 from .scene import Scene
@@ -16,7 +17,7 @@ if not ASSETS.is_dir():
 DEFAULT_SCENE = ASSETS / "fruit_drops_minimal.ply"
 
 __all__ = [
-    "ASSETS", "DEFAULT_SCENE", "BackendUnavailable", "Camera", "CameraError", "Frame", "FrameStats", "GBViewerError",
-    "Mode", "RenderCancelled", "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError",
+    "ASSETS", "DEFAULT_SCENE", "BackendUnavailable", "Camera", "CameraError", "Cancelled", "Frame", "FrameStats",
+    "GBViewerError", "LoadCancelled", "Mode", "RenderCancelled", "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError",
     "get_renderer", "load", "load_cameras_json", "orbit_camera", "render",
 ]
