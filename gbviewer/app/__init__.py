@@ -18,8 +18,10 @@ def has_display_env(env: dict | None = None) -> tuple[bool, str]:
     return True, ""
 
 
-def open_window(scene: str | Path | None = None, cameras: str | Path | None = None) -> "tuple[bool, str]":
-    """Open the viewer and run it until closed: (True, '') or (False, why no window could be opened)."""
+def open_window(scene: str | Path | None = None, cameras: str | Path | None = None,
+                backend: str | None = None) -> "tuple[bool, str]":
+    """Open the viewer and run it until closed: (True, '') or (False, why no window could be opened). `backend`:
+    select it as the panel would (None: the saved one)."""
     ok, why = has_display_env()
     if not ok:
         return False, why
@@ -30,7 +32,7 @@ def open_window(scene: str | Path | None = None, cameras: str | Path | None = No
     from ..errors import GBViewerError
 
     try:
-        app = ViewerApp(scene, cameras=cameras)
+        app = ViewerApp(scene, cameras=cameras, backend=backend)
     except GBViewerError as exc:
         return False, str(exc)
     app.run()

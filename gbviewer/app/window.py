@@ -40,12 +40,14 @@ class ViewerApp:
 
     def __init__(self, scene_path: str | Path | None = None, settings_file: Path | None = None,
                  size: tuple[int, int] | None = None, visible: bool = True, persist: bool = True,
-                 cameras: str | Path | None = None) -> None:
+                 cameras: str | Path | None = None, backend: str | None = None) -> None:
         self.settings_file = settings_file
         self.persist = persist
         settings, warning = load_settings(settings_file)
         if size:
             settings.window = size
+        if backend:
+            settings.backend = backend
         self.state = AppState(settings, cameras)
         if warning:
             self.state.message(warning, "error")

@@ -23,8 +23,8 @@ SOFTWARE_GL = re.compile(r"llvmpipe|softpipe|swrast|lavapipe|swiftshader|softwar
 
 @dataclass(frozen=True)
 class BackendChoice:
-    """The backend `auto` renders on and why (e.g. 'CUDA unavailable — no CUDA device found; OpenGL is llvmpipe
-    (LLVM 15.0.6, 256 bits), a software rasterizer')."""
+    """The backend `auto` renders on and why (e.g. 'CUDA unavailable (no CUDA device found); OpenGL is llvmpipe
+    (LLVM 15.0.6, 256 bits), a software rasterizer slower than the CPU backend')."""
 
     name: str
     reason: str
@@ -69,7 +69,7 @@ def probe_gl() -> GlProbe:
         try:
             ctx = create_context()
         except BackendUnavailable as exc:
-            found.append(GlProbe(error=str(exc).removeprefix("glsl backend unavailable: ")))
+            found.append(GlProbe(error=str(exc)))
             return
         except Exception as exc:  # noqa: BLE001 - no display, no EGL, a driver's own exception
             found.append(GlProbe(error=f"no OpenGL context: {type(exc).__name__}: {exc}"))
@@ -90,12 +90,13 @@ def decide(cuda: tuple[bool, str], gl: GlProbe | None) -> BackendChoice:
     ok, why = cuda
     if ok:
         return BackendChoice("cuda", "a CUDA device is usable")
-    no_cuda = f"CUDA unavailable — {why.removeprefix('cuda backend unavailable: ')}"
+    no_cuda = f"CUDA unavailable ({why.removeprefix('cuda backend unavailable: ')})"
     if gl is None or gl.error:
-        return BackendChoice("cpu", f"{no_cuda}; {gl.error if gl else 'OpenGL not probed'}")
+        why_not = gl.error.removeprefix("glsl backend unavailable: ") if gl else "OpenGL not probed"
+        return BackendChoice("cpu", f"{no_cuda}; {why_not}")
     if gl.software:
-        return BackendChoice("cpu", f"{no_cuda}; OpenGL is {gl.renderer}, a software rasterizer (slower than the "
-                                    "CPU backend)")
+        return BackendChoice("cpu", f"{no_cuda}; OpenGL is {gl.renderer}, a software rasterizer slower than the "
+                                    "CPU backend")
     if gl.version < GL_REQUIRED:
         return BackendChoice("cpu", f"{no_cuda}; OpenGL {gl.version / 100:.1f} on {gl.renderer} has no compute "
                                     f"shaders ({GL_REQUIRED / 100:.1f} needed)")
