@@ -5,10 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from .camera import Camera, load_cameras_json, orbit_camera
-from .errors import BackendUnavailable, CameraError, GBViewerError, RenderCancelled, RenderError, SceneFormatError
+from .errors import (BackendUnavailable, CameraError, Cancelled, GBViewerError, LoadCancelled, RenderCancelled,
+                     RenderError, SceneFormatError)
 from .io import load
-from .render import (Frame, FrameStats, Mode, PixelTrace, Renderer, RenderSettings, get_renderer, render,
-                     trace_pixel)
+from .render import (BackendChoice, Frame, FrameStats, Mode, PixelTrace, Renderer, RenderSettings, choose_backend,
+                     get_renderer, render, trace_pixel)
 from .scene import Scene
 
 ASSETS = Path(__file__).parent / "assets"  # installed; a source checkout has it at the top level
@@ -17,7 +18,8 @@ if not ASSETS.is_dir():
 DEFAULT_SCENE = ASSETS / "fruit_drops_minimal.ply"
 
 __all__ = [
-    "ASSETS", "DEFAULT_SCENE", "BackendUnavailable", "Camera", "CameraError", "Frame", "FrameStats", "GBViewerError",
-    "Mode", "PixelTrace", "RenderCancelled", "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError",
-    "get_renderer", "load", "load_cameras_json", "orbit_camera", "render", "trace_pixel",
+    "ASSETS", "DEFAULT_SCENE", "BackendChoice", "BackendUnavailable", "Camera", "CameraError", "Cancelled", "Frame",
+    "FrameStats", "GBViewerError", "LoadCancelled", "Mode", "PixelTrace", "RenderCancelled", "RenderError",
+    "RenderSettings", "Renderer", "Scene", "SceneFormatError", "choose_backend", "get_renderer", "load",
+    "load_cameras_json", "orbit_camera", "render", "trace_pixel",
 ]

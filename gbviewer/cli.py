@@ -21,7 +21,7 @@ from .eval.options import add_eval_args, scene_pairs
 from .figure import DIFFS, compose_grid, render_grid, save_image, write_comparison
 from .io import load, write_inria_ply
 from .io.files import check_writable
-from .render import BACKENDS, Mode, RenderSettings, get_renderer, trace_pixel
+from .render import AUTO, BACKEND_NAMES, Mode, RenderSettings, choose_backend, get_renderer, trace_pixel
 from .scene import Scene
 from .validate import integer
 from .video import MAX_FPS, MIN_FPS, record_video
@@ -40,6 +40,13 @@ def add_camera_args(p: argparse.ArgumentParser) -> None:
                    help="perspective (default: orbits; a --cameras entry keeps its own) or orthographic: an orbit "
                    "keeps its eye with f / distance pixels per unit, a training camera is converted at the depth of "
                    "the scene's centre; either way the scene appears at the same size")
+
+
+def add_backend_arg(p: argparse.ArgumentParser, default: str | None = AUTO, text: str = "") -> None:
+    """--backend: cpu, glsl, cuda or auto."""
+    p.add_argument("--backend", default=default, choices=list(BACKEND_NAMES),
+                   help=text or "auto (default): CUDA where a device is usable, else GLSL on a hardware OpenGL 4.3 "
+                   "driver, else cpu; the choice and why go to stderr")
 
 
 def camera_from_args(scene: Scene, args: argparse.Namespace) -> Camera:
@@ -64,6 +71,15 @@ def camera_from_args(scene: Scene, args: argparse.Namespace) -> Camera:
         az, el, dist = args.orbit
         return orbit_camera(scene, az, el, dist if dist > 0 else None, w, h, up=args.up, projection=projection)
     return orbit_camera(scene, width=w, height=h, up=args.up, projection=projection)
+
+
+def backend_of(args: argparse.Namespace) -> str:
+    """The backend --backend names; for auto (the default) the one `choose_backend()` picks, said once on stderr."""
+    if args.backend in (None, AUTO):
+        picked = choose_backend()
+        print(f"gbviewer: backend {picked}", file=sys.stderr)
+        args.backend = picked.name
+    return args.backend
 
 
 def check_render_size(width: int, height: int, rates: list[float], option: str) -> None:
@@ -120,7 +136,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     check_render_size(cam.width, cam.height, [args.scale], "--scale")
     cam = cam.at_sampling_rate(args.scale)
     settings = RenderSettings(Mode.parse(args.mode), args.supersample, args.background, args.sh_degree)
-    frame = get_renderer(scene, args.backend).render(cam, settings)
+    frame = get_renderer(scene, backend_of(args)).render(cam, settings)
     save_image(out, frame.rgb, force=args.force)
     st = frame.stats
     print(f"{out}: {cam.width}x{cam.height} {settings.label} on {args.backend}: {st.total_ms:.1f} ms "
@@ -146,7 +162,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     cam = camera_from_args(scene, args)
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         print("no display found: writing the comparison images instead of opening a window")
-    cells = render_grid(scene, cam, DEMO_SETTINGS, [1.0, 1.0 / 8.0], args.backend)
+    cells = render_grid(scene, cam, DEMO_SETTINGS, [1.0, 1.0 / 8.0], backend_of(args))
     img = compose_grid(cells, cam.width, cam.height)
     path = save_image(out_dir / "comparison.png", img, force=True)
     print(f"wrote {path} ({img.width}x{img.height}): {Path(scene_path).name}, "
@@ -167,7 +183,7 @@ def cmd_view(args: argparse.Namespace) -> int:
 
     if args.scene is not None and not args.scene.exists():
         raise GBViewerError(f"{args.scene}: no such file or folder")
-    opened, why = open_window(args.scene, args.cameras, args.projection)
+    opened, why = open_window(args.scene, args.cameras, projection=args.projection, backend=args.backend)
     if opened:
         return 0
     if has_display_env()[0]:  # (without one, demo says so itself)
@@ -289,9 +305,10 @@ def cmd_video(args: argparse.Namespace) -> int:
                        seconds=args.seconds, max_frames=args.max_frames)
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("frames"),
                TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn())
+    backend = backend_of(args)
     with Progress(*columns) as progress:
         task = progress.add_task(f"{Path(args.out).name}", total=len(path))
-        info = record_video(scene, path, settings, args.out, fps=args.fps, backend=args.backend, inset=args.inset,
+        info = record_video(scene, path, settings, args.out, fps=args.fps, backend=backend, inset=args.inset,
                             crf=args.crf, force=args.force,
                             progress=lambda done, total: progress.update(task, completed=done))
     print(f"wrote {info.path}: {info.frames} frames of {info.width}x{info.height} at {info.fps:g} fps "
@@ -309,7 +326,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     scene = load(args.scene)
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, rates, "--rates")
-    cmp = write_comparison(args.out, scene, cam, settings, rates, args.backend, args.inset, args.force, args.diff)
+    cmp = write_comparison(args.out, scene, cam, settings, rates, backend_of(args), args.inset, args.force,
+                           args.diff)
     print(f"wrote {args.out} ({cmp.image.width}x{cmp.image.height}): {len(rates)} rates x {len(settings)} modes")
     for row, prow in zip(cmp.cells, cmp.psnr):
         for cell, p in zip(row, prow):
@@ -370,7 +388,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mode", default="scalar", choices=[m.label for m in Mode])
     p.add_argument("--supersample", type=count(8), default=1, metavar="1..8")
     p.add_argument("--scale", type=Rate(), default=1.0, help="sampling rate: 8, 1, 0.125 or 1/8")
-    p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
+    add_backend_arg(p)
     p.add_argument("--background", type=BACKGROUND, default=(0.0, 0.0, 0.0), metavar=BACKGROUND.metavar,
                    help="background colour, each in 0..1")
     p.add_argument("--sh-degree", type=count(3, lo=0), default=3, metavar="0..3")
@@ -382,14 +400,15 @@ def build_parser() -> argparse.ArgumentParser:
                                     "write the comparison images like demo")
     p.add_argument("scene", type=Path, nargs="?")
     add_camera_args(p)
-    p.add_argument("--backend", default="cpu", choices=list(BACKENDS), help="backend of the no-display fallback")
+    add_backend_arg(p, None, "the viewer's backend, as its panel sets it (default: the one it saved, auto at first), "
+                    "and that of the no-display fallback (default auto)")
     p.add_argument("--out", default="out", help="output folder of the no-display fallback (default ./out)")
     p.set_defaults(func=cmd_view)
 
     p = sub.add_parser("demo", help="write the side-by-side comparison of the bundled scene to a folder")
     p.add_argument("scene", type=Path, nargs="?")
     add_camera_args(p)
-    p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
+    add_backend_arg(p)
     p.add_argument("--out", default="out", help="output folder (default ./out)")
     p.set_defaults(func=cmd_demo)
 
@@ -448,7 +467,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-frames", type=count(), default=MAX_FRAMES,
                    help=f"refuse videos longer than this many frames (default {MAX_FRAMES})")
     p.add_argument("--size", type=SIZE, metavar="WxH", help="size of each pane (default 480x360)")
-    p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
+    add_backend_arg(p)
     p.add_argument("--inset", type=INSET, metavar=INSET.metavar, help="magnify this region (x1 pixels) in a corner")
     p.add_argument("--crf", type=count(51, lo=0), default=18, metavar="0..51",
                    help="H.264 constant rate factor (0 lossless, 18 default, 23 ffmpeg's default)")
@@ -479,7 +498,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--modes", default="scalar,supersample:3,gaussian_blending")
     p.add_argument("--rates", type=Rate(many=True), default="1,1/2,1/4,1/8",
                    help="sampling rates, e.g. 1,1/2,1/4,1/8")
-    p.add_argument("--backend", default="cpu", choices=list(BACKENDS))
+    add_backend_arg(p)
     p.add_argument("--inset", type=INSET, metavar=INSET.metavar, help="magnify this region (x1 pixels) in a corner")
     p.add_argument("--diff", nargs="?", const="first", choices=list(DIFFS),
                    help="add under each rate a row of signed differences (mean over RGB, colour bar below): to the "

@@ -34,8 +34,16 @@ class RenderError(GBViewerError):
     """Invalid render settings or a backend that cannot run."""
 
 
-class RenderCancelled(GBViewerError):
+class Cancelled(GBViewerError):
+    """Work stopped because its caller set the `cancel` event (a threading.Event); nothing is returned."""
+
+
+class RenderCancelled(Cancelled):
     """A render stopped because its caller set the `cancel` event (the frame is not returned)."""
+
+
+class LoadCancelled(Cancelled):
+    """A scene load stopped because its caller set the `cancel` event (no scene is returned)."""
 
 
 class BackendUnavailable(RenderError):

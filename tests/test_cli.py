@@ -45,7 +45,7 @@ def test_render_png_and_npy(tmp_path):
     assert arr.shape == (24, 32, 3) and arr.dtype == np.float32
     scene = gb.load(gb.DEFAULT_SCENE)
     cam = gb.orbit_camera(scene, 10, 20, width=64, height=48).at_sampling_rate(0.5)
-    np.testing.assert_array_equal(arr, gb.render(scene, cam, "gaussian_blending").rgb)
+    np.testing.assert_array_equal(arr, gb.render(scene, cam, "gaussian_blending", backend="auto").rgb)
     assert not list(tmp_path.glob(".*"))  # no temporary files left behind
 
 
@@ -70,6 +70,31 @@ def test_render_orthographic(tmp_path):
     proc = run("render", str(gb.DEFAULT_SCENE), "--projection", "fisheye", "--out", "x.png", cwd=tmp_path)
     assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1
     assert "--projection: invalid choice: 'fisheye'" in proc.stderr and not (tmp_path / "x.png").exists()
+
+
+def test_backend_defaults_to_auto_and_says_its_choice_once(tmp_path):
+    """--backend auto (the default) renders on choose_backend()'s pick and says it on stderr, in one line; an
+    explicit backend says nothing."""
+    picked = gb.choose_backend()
+    common = [str(gb.DEFAULT_SCENE), "--width", "32", "--height", "24", "--out"]
+    proc = run("render", *common, "a.png", cwd=tmp_path)
+    assert proc.returncode == 0 and proc.stderr == f"gbviewer: backend {picked}\n"
+    assert f"on {picked.name}:" in proc.stdout
+    proc = run("render", *common, "b.png", "--backend", "cpu", cwd=tmp_path)
+    assert proc.returncode == 0 and proc.stderr == "" and "on cpu:" in proc.stdout
+    parser = cli.build_parser()
+    for command in ("render", "demo", "video", "compare", "view"):
+        args = parser.parse_args([command, "s.ply", "--out", "x"] if command != "demo" else [command])
+        assert args.backend == (None if command == "view" else "auto")  # view: the viewer's saved choice
+        assert parser.parse_args([*([command, "s.ply", "--out", "x"]), "--backend", "glsl"]).backend == "glsl"
+
+
+def test_view_passes_an_explicit_backend_to_the_viewer(monkeypatch):
+    opened = []
+    monkeypatch.setattr("gbviewer.app.open_window",
+                        lambda scene, cameras, projection=None, backend=None: opened.append(backend) or (True, ""))
+    assert main([str(gb.DEFAULT_SCENE), "--backend", "cpu"]) == 0 and main([]) == 0
+    assert opened == ["cpu", None]
 
 
 def test_render_refuses_to_overwrite(tmp_path, capsys):

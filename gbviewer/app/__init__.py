@@ -20,9 +20,10 @@ def has_display_env(env: dict | None = None) -> tuple[bool, str]:
 
 
 def open_window(scene: str | Path | None = None, cameras: str | Path | None = None,
-                projection: str | None = None) -> "tuple[bool, str]":
+                projection: str | None = None, backend: str | None = None) -> "tuple[bool, str]":
     """Open the viewer and run it until closed: (True, '') or (False, why no window could be opened). `projection`:
-    the camera's at the start (default: the saved settings')."""
+    the camera's at the start (default: the saved settings'); `backend`: select it as the panel would (None: the saved
+    one)."""
     ok, why = has_display_env()
     if not ok:
         return False, why
@@ -33,7 +34,7 @@ def open_window(scene: str | Path | None = None, cameras: str | Path | None = No
     from ..errors import GBViewerError
 
     try:
-        app = ViewerApp(scene, cameras=cameras, projection=projection)
+        app = ViewerApp(scene, cameras=cameras, projection=projection, backend=backend)
     except GBViewerError as exc:
         return False, str(exc)
     app.run()

@@ -78,7 +78,7 @@ SHORTCUTS = (
     Shortcut("F12", "screenshot of the window (PNG)", (Key("f12", "screenshot_window", shift=False),)),
     Shortcut("Shift+F12", "screenshot of the pane under the cursor (16-bit PNG at render resolution)",
              (Key("f12", "screenshot_hovered_pane", shift=True),)),
-    Shortcut("Esc", "close help, leave fly mode", (Key("escape", "escape", ctrl=None),)),
+    Shortcut("Esc", "close help, leave fly mode; else cancel a scene load", (Key("escape", "escape", ctrl=None),)),
     Shortcut("Ctrl+Q", "quit", (Key("q", "quit", ctrl=True),)),
 )
 

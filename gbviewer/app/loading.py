@@ -1,4 +1,5 @@
-"""Scene loading off the UI thread (and the training cameras of a cameras.json beside the scene)."""
+"""Scene loading off the UI thread (and the training cameras of a cameras.json beside the scene), with the load's
+progress for a determinate bar, and cancellation."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from ..camera import Camera, load_cameras_json
-from ..errors import GBViewerError
+from ..errors import GBViewerError, LoadCancelled
 from ..scene import Scene
 
 
@@ -23,21 +24,22 @@ class LoadResult:
     cameras_error: str = ""
     error: str = ""
     seconds: float = 0.0
+    cancelled: bool = False  # stopped by `SceneLoader.cancel()`: no scene, no error
 
 
 class SceneLoader:
-    """Loads one scene (and a cameras.json beside it) in a thread; `poll()` returns the result once."""
+    """Loads one scene (and a cameras.json beside it) in a thread; `poll()` returns the result once. `progress`
+    is the load's latest (done, total, unit) report (None before the first), `cancel()` stops it within a chunk."""
 
     def __init__(self, path: str | Path, load_fn: Any = None) -> None:
         from ..io import load
 
         self.path = Path(path).expanduser()
         self.started = time.perf_counter()
-        try:
-            self.size = self.path.stat().st_size if self.path.is_file() else 0
-        except OSError:
-            self.size = 0
         self._load = load_fn or load
+        self.progress: tuple[int, int, str] | None = None
+        self._first: dict[str, tuple[float, int]] = {}  # unit -> (time, done) of its first report: the rate
+        self._cancel = threading.Event()
         self._result: LoadResult | None = None
         self._done = threading.Event()
         self._thread = threading.Thread(target=self._run, name="gbviewer-load", daemon=True)
@@ -47,10 +49,37 @@ class SceneLoader:
     def elapsed(self) -> float:
         return time.perf_counter() - self.started
 
+    def _report(self, done: int, total: int, unit: str) -> None:
+        self._first.setdefault(unit, (time.perf_counter(), done))
+        self.progress = (done, total, unit)
+
+    def cancel(self) -> None:
+        self._cancel.set()
+
+    @property
+    def fraction(self) -> float | None:
+        """How far the current phase (reading, then decoding) is, 0..1; None before the load reports."""
+        p = self.progress
+        return None if p is None or p[1] <= 0 else min(1.0, p[0] / p[1])
+
+    def describe(self) -> str:
+        """'reading 40% (12.3 / 30.1 MB, 85 MB/s)', 'decoding 40% (1,200,000 / 3,000,000 splats)' or 'opening'."""
+        p = self.progress  # one report: the load thread replaces it
+        if p is None or p[1] <= 0:
+            return "opening"
+        done, total, unit = p
+        pct = f"{100 * min(1.0, done / total):.0f}%"
+        if unit != "bytes":
+            return f"decoding {pct} ({done:,} / {total:,} {unit})"
+        t0, done0 = self._first[unit]
+        dt = time.perf_counter() - t0
+        rate = f", {(done - done0) / dt / 1e6:.0f} MB/s" if dt > 0.2 and done > done0 else ""
+        return f"reading {pct} ({done / 1e6:.1f} / {total / 1e6:.1f} MB{rate})"
+
     def _run(self) -> None:
         res = LoadResult(self.path)
         try:
-            res.scene = self._load(self.path)
+            res.scene = self._load(self.path, progress=self._report, cancel=self._cancel)
             side = self.path.parent / "cameras.json" if not self.path.is_dir() else self.path / "cameras.json"
             if side.is_file():
                 res.cameras_path = side
@@ -58,6 +87,8 @@ class SceneLoader:
                     res.cameras = load_cameras_json(side)
                 except GBViewerError as exc:
                     res.cameras_error = str(exc)
+        except LoadCancelled:
+            res.cancelled = True
         except GBViewerError as exc:
             res.error = str(exc)
         except (OSError, MemoryError) as exc:

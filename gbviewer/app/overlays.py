@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ..camera import format_rate
+from ..render import AUTO
 from .layout import loupe_uv
 from .panes import pane_fps
 from .state import PaneState
@@ -93,9 +94,8 @@ def draw_pane_overlays(app: ViewerApp) -> None:
     v = state.viewport
     if state.loader is not None:  # over the previous scene, which stays until the new one is ready
         ld = state.loader
-        size = f", {ld.size / 1e6:.1f} MB" if ld.size else ""
         y = v.y + v.h / 2 if state.scene is None else v.y + 40
-        banner(app, dl, f"loading {ld.path.name}{size} ... {ld.elapsed:.1f} s", y, WHITE)
+        banner(app, dl, f"loading {ld.path.name}: {ld.describe()}, {ld.elapsed:.1f} s (Esc cancels)", y, WHITE)
     if state.scene is None:
         return
     for p in state.visible:
@@ -158,6 +158,8 @@ def draw_status(app: ViewerApp) -> None:
                  if part.frame is not None and part.frame.stats.simd), "")
     if backend == "cpu" and simd:
         backend = f"cpu {simd}"  # the blend's SIMD path (GBVIEWER_SIMD forces one)
+    if s.backend == AUTO:
+        backend += " (auto)"
     imgui.text(f"rate {format_rate(s.rate)}")
     imgui.same_line(0, 16)
     imgui.text_disabled(f"render {sizes}")

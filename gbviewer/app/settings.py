@@ -10,7 +10,7 @@ from typing import Any, Container
 
 from ..camera import PROJECTIONS, UP_AXES
 from ..errors import InvalidValue
-from ..render import Mode
+from ..render import AUTO, BACKEND_NAMES, Mode
 from ..validate import array, integer, read_json, real
 from .camera_control import CameraController
 from .layout import LAYOUTS
@@ -20,6 +20,7 @@ from .views import VIEWS
 MODE_NAMES = tuple(m.label for m in Mode)
 MAX_PANES = 4
 MAX_RECENT = 10
+VERSION = 2  # of the settings file; 2: backend "auto"
 PANE_NAMES = "ABCD"
 
 
@@ -67,7 +68,7 @@ class AppSettings:
     layout: str = "row"
     rate: float = 1.0
     window: tuple[int, int] = (1400, 860)
-    backend: str = "cpu"
+    backend: str = AUTO  # or cpu, glsl, cuda
     fov_y_deg: float = 50.0
     up: str = "-y"
     projection: str = "perspective"
@@ -91,7 +92,7 @@ class AppSettings:
         if isinstance(self.window, (list, tuple)) and len(self.window) == 2:
             s.window = (_number(self.window[0], s.window[0], 640, 8192, integral=True),
                         _number(self.window[1], s.window[1], 480, 8192, integral=True))
-        s.backend = self.backend if isinstance(self.backend, str) else "cpu"
+        s.backend = _choice(self.backend, BACKEND_NAMES, AUTO)
         s.fov_y_deg = float(_number(self.fov_y_deg, s.fov_y_deg, CameraController.MIN_FOV, CameraController.MAX_FOV))
         s.up = _choice(self.up, UP_AXES, "-y")
         s.projection = _choice(self.projection, PROJECTIONS, "perspective")
@@ -109,7 +110,7 @@ class AppSettings:
 
     def to_json(self) -> str:
         d = asdict(self)
-        d["version"] = 1
+        d["version"] = VERSION
         return json.dumps(d, indent=2)
 
     @classmethod
@@ -119,6 +120,8 @@ class AppSettings:
         if not isinstance(d, dict):
             raise InvalidValue(f"{what}: not a JSON object")
         known = {k: v for k, v in d.items() if k in cls.__dataclass_fields__}
+        if d.get("version") == 1 and known.get("backend") == "cpu":
+            known["backend"] = AUTO  # version 1 saved its default, cpu, whatever the machine had: pick again
         return cls(**known).normalised()
 
 

@@ -135,7 +135,16 @@ class AppState:
             self.open_cameras(path)
             return
         self.load_error = self.load_error_short = ""
+        if self.loader is not None:
+            self.loader.cancel()  # the newest request wins; the older load stops within a chunk
         self.loader = SceneLoader(path)
+
+    def cancel_load(self) -> None:
+        """Stop the scene load in progress (within a chunk of it) and keep the current scene."""
+        if self.loader is not None:
+            self.loader.cancel()
+            self.message(f"cancelled loading {self.loader.path.name}: kept the current scene", "warn")
+            self.loader = None
 
     def open_cameras(self, path: str | Path) -> None:
         try:
@@ -154,6 +163,8 @@ class AppState:
             return None
         res = self.loader.poll()
         self.loader = None
+        if res.cancelled:
+            return None
         if res.error:
             self.load_error = res.error
             self.load_error_short = res.error.replace(str(res.path), res.path.name)
@@ -286,6 +297,9 @@ class AppState:
         self.show_help = not self.show_help
 
     def escape(self) -> None:
+        """Close the help and leave fly mode; with neither to do, cancel a scene load."""
+        if not (self.show_help or self.fly):
+            self.cancel_load()
         self.show_help = self.fly = False
 
     # ---- geometry and render requests ---------------------------------------------------------------------------

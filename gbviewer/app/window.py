@@ -42,7 +42,8 @@ class ViewerApp:
 
     def __init__(self, scene_path: str | Path | None = None, settings_file: Path | None = None,
                  size: tuple[int, int] | None = None, visible: bool = True, persist: bool = True,
-                 cameras: str | Path | None = None, projection: str | None = None) -> None:
+                 cameras: str | Path | None = None, projection: str | None = None,
+                 backend: str | None = None) -> None:
         self.settings_file = settings_file
         self.persist = persist
         settings, warning = load_settings(settings_file)
@@ -50,6 +51,8 @@ class ViewerApp:
             settings.window = size
         if projection:
             settings.projection = projection
+        if backend:
+            settings.backend = backend
         self.state = AppState(settings, cameras)
         if warning:
             self.state.message(warning, "error")

@@ -20,7 +20,9 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import BackendUnavailable, GBViewerError, RenderCancelled
-from ..render import BACKENDS, Frame, RenderSettings, create_gl_context, create_renderer, get_renderer
+from ..render import (AUTO, BACKENDS, BackendChoice, Frame, RenderSettings, create_gl_context, create_renderer,
+                      get_renderer)
+from ..render.choice import GlProbe, decide
 from ..scene import Scene
 
 
@@ -99,6 +101,7 @@ class RenderWorker:
         self.cancelled = 0  # renders stopped because a newer request of their slot arrived
         self.rendered = 0
         self.backends: dict[str, tuple[bool, str]] = {}  # availability, measured in the render thread
+        self.auto: BackendChoice | None = None  # what "auto" renders on, decided from those measures
         self.backends_ready = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="gbviewer-render", daemon=True)
         self._thread.start()
@@ -138,7 +141,9 @@ class RenderWorker:
             return slot in self._pending or (self._running is not None and self._running.slot == slot)
 
     def backend_status(self, name: str) -> tuple[bool | None, str]:
-        """(usable, reason); None while the render thread is still probing."""
+        """(usable, reason); None while the render thread is still probing. "auto": (True, its choice)."""
+        if name == AUTO:
+            return (None, "checking...") if self.auto is None else (True, str(self.auto))
         if name not in BACKENDS:
             return False, "not part of this installation"
         if not self.backends_ready.is_set():
@@ -146,7 +151,9 @@ class RenderWorker:
         return self.backends.get(name, (False, "unknown"))
 
     def backend_for(self, name: str) -> str:
-        """The backend a request for `name` renders on: `name` where usable, else cpu."""
+        """The backend a request for `name` renders on: `name` (for auto, its choice) where usable, else cpu."""
+        if name == AUTO:
+            name = self.auto.name if self.auto is not None else "cpu"
         return name if self.backend_status(name)[0] is True else "cpu"
 
     def stop(self, timeout: float = 30.0) -> None:
@@ -168,6 +175,8 @@ class RenderWorker:
                     self.backends[name] = tuple(cls.available())  # type: ignore[assignment]
             except Exception as exc:  # noqa: BLE001 - a backend's probe must not take the viewer down
                 self.backends[name] = (False, f"{type(exc).__name__}: {exc}")
+        cuda = self.backends.get("cuda", (False, "not part of this installation"))
+        self.auto = decide(cuda, GlProbe.of(self._gl_ctx, self.backends.get("glsl", (False, ""))[1]))
         self.backends_ready.set()
 
     def _glsl_context_status(self) -> tuple[bool, str]:

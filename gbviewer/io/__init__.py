@@ -1,20 +1,23 @@
-"""Scene loading: `load(path)` detects the format by content and returns a validated `Scene`."""
+"""Scene loading: `load(path)` detects the format by content and returns a validated `Scene`; `progress` reports the
+bytes read and the splats decoded, `cancel` stops it (see `progress`)."""
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import numpy as np
 
 from ..camera import load_cameras_json
-from ..errors import GBViewerError, SceneFormatError
+from ..errors import GBViewerError, LoadCancelled, SceneFormatError
 from ..scene import Scene
 from .compressed_ply import is_compressed_ply, load_compressed_ply
 from .duplex import is_duplex_ply, load_duplex
 from .ply import load_inria_ply, read_ply
+from .progress import LoadProgress, Progress
 from .sog import ZIP_MAGIC, load_sog
 from .splat import load_splat, looks_like_splat
-from .spz import GZIP_MAGIC, MAGIC as SPZ_MAGIC, load_spz
+from .spz import GZIP_MAGIC, MAGIC as SPZ_MAGIC, read_spz
 from .write import write_inria_ply
 
 __all__ = ["load", "load_cameras_json", "write_inria_ply"]
@@ -22,35 +25,41 @@ __all__ = ["load", "load_cameras_json", "write_inria_ply"]
 FORMATS = ("INRIA (incl. sort-free GS), Duplex-GS or compressed .ply, .spz, .sog (zip, folder or meta.json) or .splat")
 
 
-def load(path: str | Path) -> Scene:
-    """Load a splat scene file or SOG folder; the format comes from the content, not the extension."""
+def load(path: str | Path, progress: Progress | None = None, cancel: threading.Event | None = None) -> Scene:
+    """Load a splat scene file or SOG folder; the format comes from the content, not the extension.
+
+    `progress`: called as fn(done, total, unit) with unit "bytes" (read from the file), then "splats" (decoded),
+    at most about a hundred times per unit, done rising to total. `cancel`: a threading.Event; once it is set the
+    load raises LoadCancelled within one chunk (at most a hundredth of the file or 65536 splats)."""
     path = Path(path)
+    reporter = LoadProgress(progress, cancel)
     try:
+        reporter.check()
         with np.errstate(all="ignore"):  # overflow in decoding is data: Scene drops non-finite splats with a warning
-            return _load(path)
-    except SceneFormatError:
+            return _load(path, reporter)
+    except (SceneFormatError, LoadCancelled):
         raise
     except GBViewerError as exc:  # Scene validation of decoded data, e.g. every splat non-finite
         raise SceneFormatError(path, str(exc).removeprefix(f"{path}: ")) from None
 
 
-def _load(path: Path) -> Scene:
+def _load(path: Path, progress: LoadProgress) -> Scene:
     if path.is_dir():
-        return load_sog(path)
+        return load_sog(path, progress)
     if not path.is_file():
         raise SceneFormatError(path, "no such file" if not path.exists() else "not a regular file")
     with open(path, "rb") as fh:
         head = fh.read(16)
     if head.startswith(b"ply"):
-        ply = read_ply(path)
+        ply = read_ply(path, progress)
         if is_compressed_ply(ply):
-            return load_compressed_ply(path, ply)
-        return load_duplex(path, ply) if is_duplex_ply(ply) else load_inria_ply(path, ply)
+            return load_compressed_ply(path, ply, progress)
+        return load_duplex(path, ply) if is_duplex_ply(ply) else load_inria_ply(path, ply, progress)
     if head.startswith(ZIP_MAGIC) or head.lstrip().startswith(b"{"):
-        return load_sog(path)
-    data = path.read_bytes()
+        return load_sog(path, progress)
     if head.startswith(SPZ_MAGIC) or head.startswith(GZIP_MAGIC):
-        return load_spz(path, data)
+        return read_spz(path, progress)
+    data = progress.read_file(path)
     if looks_like_splat(data):
-        return load_splat(path, data)
+        return load_splat(path, data, progress)
     raise SceneFormatError(path, f"unrecognised scene format; expected {FORMATS}")

@@ -12,6 +12,7 @@ Optional element `sh` (uint8 f_rest_*, INRIA channel-major order): ((v + 0.5) / 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from ..errors import SceneFormatError
 from ..scene import Scene
 from ..scene import SH_C0
 from .packing import smallest_three
+from .progress import LoadProgress, decode_in_chunks
 
 CHUNK_SIZE = 256
 RANGE_PROPS = ["min_x", "min_y", "min_z", "max_x", "max_y", "max_z",
@@ -53,14 +55,9 @@ def _fractions(packed: np.ndarray) -> np.ndarray:
     return ((packed[:, None] >> shifts) & masks).astype(np.float32) / masks.astype(np.float32)
 
 
-def _lerp(lo: np.ndarray, hi: np.ndarray, t: np.ndarray, n: int) -> np.ndarray:
-    """Per-chunk (C, 3) ranges expanded to splats and interpolated at t (N, 3)."""
-    lo, hi = np.repeat(lo, CHUNK_SIZE, axis=0)[:n], np.repeat(hi, CHUNK_SIZE, axis=0)[:n]
-    return lo + (hi - lo) * t
-
-
-def load_compressed_ply(path: Path, ply: plyfile.PlyData) -> Scene:
-    """Decode a compressed `.ply` (12- or 18-property chunks, optional SH) into a Scene."""
+def load_compressed_ply(path: Path, ply: plyfile.PlyData, progress: LoadProgress | None = None) -> Scene:
+    """Decode a compressed `.ply` (12- or 18-property chunks, optional SH) into a Scene; `progress`: splats
+    decoded."""
     chunk, vertex = ply["chunk"], ply["vertex"]
     n = vertex.count
     if n == 0:
@@ -71,27 +68,37 @@ def load_compressed_ply(path: Path, ply: plyfile.PlyData) -> Scene:
     has_color = "min_r" in chunk.data.dtype.names
     ranges = np.stack(_columns(path, chunk, RANGE_PROPS + (COLOR_PROPS if has_color else []), "<f4"), axis=1)
     ranges = ranges.astype(np.float32)
-    pos, rot, scl, col = (c.astype(np.uint32) for c in _columns(path, vertex, PACKED_PROPS, "<u4"))
+    pos, rot, scl, col = _columns(path, vertex, PACKED_PROPS, "<u4")
+    rest = _sh_rest(path, ply["sh"], n) if "sh" in ply else None
 
-    means = _lerp(ranges[:, 0:3], ranges[:, 3:6], _fractions(pos), n)
-    scales = np.exp(_lerp(ranges[:, 6:9], ranges[:, 9:12], _fractions(scl), n))
-    comps = ((rot[:, None] >> np.array([20, 10, 0], np.uint32)) & 1023).astype(np.float32)
-    quats = smallest_three((comps / np.float32(1023) - np.float32(0.5)) * np.float32(math.sqrt(2)),
-                           (rot >> 30).astype(np.intp))
-    rgba = ((col[:, None] >> np.array([24, 16, 8, 0], np.uint32)) & 255).astype(np.float32) / np.float32(255)
-    rgb = _lerp(ranges[:, 12:15], ranges[:, 15:18], rgba[:, :3], n) if has_color else rgba[:, :3]
-    dc = (rgb - np.float32(0.5)) / np.float32(SH_C0)
+    def decode(rows: slice) -> tuple:
+        r = ranges[np.arange(rows.start, rows.stop) // CHUNK_SIZE]  # each splat's chunk ranges
 
-    sh = dc[:, None, :]
-    if "sh" in ply:
-        sh = np.concatenate([sh, _sh_rest(path, ply["sh"], n)], axis=1)
+        def lerp(lo: int, t: np.ndarray) -> np.ndarray:
+            return r[:, lo:lo + 3] + (r[:, lo + 3:lo + 6] - r[:, lo:lo + 3]) * t
+
+        means = lerp(0, _fractions(pos[rows].astype(np.uint32)))
+        scales = np.exp(lerp(6, _fractions(scl[rows].astype(np.uint32))))
+        packed = rot[rows].astype(np.uint32)
+        comps = ((packed[:, None] >> np.array([20, 10, 0], np.uint32)) & 1023).astype(np.float32)
+        quats = smallest_three((comps / np.float32(1023) - np.float32(0.5)) * np.float32(math.sqrt(2)),
+                               (packed >> 30).astype(np.intp))
+        rgba = ((col[rows].astype(np.uint32)[:, None] >> np.array([24, 16, 8, 0], np.uint32)) & 255).astype(
+            np.float32) / np.float32(255)
+        rgb = lerp(12, rgba[:, :3]) if has_color else rgba[:, :3]
+        sh = ((rgb - np.float32(0.5)) / np.float32(SH_C0))[:, None, :]
+        if rest is not None:
+            sh = np.concatenate([sh, rest(rows)], axis=1)
+        return means, scales, quats, rgba[:, 3], sh
+
+    means, scales, quats, opacities, sh = decode_in_chunks(n, decode, progress or LoadProgress())
     names = [p.name for e in ply.elements for p in e.properties]
     meta = {"format": "compressed-ply", "version": f"{len(ranges[0])}-property chunks", "properties": names}
-    return Scene.from_arrays(means, scales, quats, rgba[:, 3], sh, source=str(path), meta=meta)
+    return Scene.from_arrays(means, scales, quats, opacities, sh, source=str(path), meta=meta)
 
 
-def _sh_rest(path: Path, element: plyfile.PlyElement, n: int) -> np.ndarray:
-    """The `sh` element's uint8 f_rest_* as (N, K-1, 3) coefficients."""
+def _sh_rest(path: Path, element: plyfile.PlyElement, n: int) -> Callable[[slice], np.ndarray]:
+    """The `sh` element's uint8 f_rest_*: rows -> (rows, K-1, 3) coefficients."""
     k3 = len(element.properties)
     if k3 not in SH_COUNTS or element.count != n:
         raise SceneFormatError(path, f"{k3} properties x {element.count} rows; expected 9, 24 or 45 f_rest_* "
@@ -104,4 +111,4 @@ def _sh_rest(path: Path, element: plyfile.PlyElement, n: int) -> np.ndarray:
         cols = np.stack(columns, axis=1)
     lut = ((np.arange(256, dtype=np.float32) + 0.5) / 256 - 0.5) * 8
     lut[0], lut[255] = -4.0, 4.0
-    return lut[cols].reshape(n, 3, k3 // 3).transpose(0, 2, 1)
+    return lambda rows: lut[cols[rows]].reshape(-1, 3, k3 // 3).transpose(0, 2, 1)

@@ -17,6 +17,7 @@ import plyfile
 from ..errors import InvalidValue, SceneFormatError
 from ..scene import Scene
 from ..validate import declared_count
+from .progress import LoadProgress, decode_in_chunks
 
 HEADER_MAX_BYTES = 1 << 20
 USED_ELEMENTS = ("vertex", "chunk", "sh")  # what the loaders read; elements after the last of these stay unread
@@ -29,24 +30,35 @@ REST_COUNTS = {0: 0, 9: 1, 24: 2, 45: 3}  # f_rest_* count -> SH degree
 REST_COUNTS_1 = {0: 0, 3: 1, 8: 2, 15: 3}  # f_ro_* count (1-channel view weight) -> SH degree
 
 
-def read_ply(path: Path) -> plyfile.PlyData:
+def read_ply(path: Path, progress: LoadProgress | None = None) -> plyfile.PlyData:
     """Parse a PLY header and read (binary: memory-map) the elements the loaders use, with typed errors for non-PLY
     and truncated files. Elements after the last used one (a mesh's faces, say) are never read: plyfile would parse
-    their lists row by row into memory. Counts are checked against the file size first (`check_element_counts`)."""
+    their lists row by row into memory. Counts are checked against the file size first (`check_element_counts`).
+    `progress`: file bytes read (a mapped element is paged in chunk by chunk, so that its bytes are read here)."""
+    progress = progress or LoadProgress()
     try:
         with open(path, "rb") as fh:
             head = fh.read(HEADER_MAX_BYTES)
             if not (head.startswith(b"ply\n") or head.startswith(b"ply\r\n")):
                 raise SceneFormatError(path, "not a PLY file (missing 'ply' magic line)")
-            check_element_counts(path, head, fh.seek(0, 2))
+            size = fh.seek(0, 2)
+            check_element_counts(path, head, size)
             fh.seek(0)
+            progress.report(0, size, "bytes")
             # plyfile's PlyData.read, stopping early: the same header parser and per-element reader it uses
             ply = plyfile.PlyData._parse_header(fh)
             stream = io.TextIOWrapper(fh, "ascii") if ply.text else fh
             used = [i for i, e in enumerate(ply.elements) if e.name in USED_ELEMENTS]
             ply.elements = ply.elements[: used[-1] + 1] if used else ()
+            counted = progress.counted(stream, fh.tell(), size)
             for element in ply.elements:
-                element._read(stream, ply.text, ply.byte_order, "c")
+                begin = fh.tell()
+                rows = ply.text or any(isinstance(p, plyfile.PlyListProperty) for p in element.properties)
+                element._read(counted if rows else stream, ply.text, ply.byte_order, "c")
+                if not rows:  # memory-mapped by plyfile
+                    progress.page_in(fh, begin, fh.tell(), size)
+                    counted.pos = fh.tell()
+            progress.report(size, size, "bytes")
         return ply
     except plyfile.PlyElementParseError as exc:
         raise SceneFormatError(path, f"truncated or malformed data: {exc.message}",
@@ -82,8 +94,9 @@ def check_element_counts(path: Path, head: bytes, size: int) -> None:
             raise SceneFormatError(path, str(exc).removeprefix(f"element '{name}': "), field=name) from None
 
 
-def vertex_columns(path: Path, ply: plyfile.PlyData, names: list[str]) -> Callable[[list[str]], np.ndarray]:
-    """Check that each named vertex property is a scalar number; return `columns(names) -> (N, len) float32`.
+def vertex_columns(path: Path, ply: plyfile.PlyData, names: list[str]) -> Callable[..., np.ndarray]:
+    """Check that each named vertex property is a scalar number; return `columns(names, rows=all) -> (rows, len)
+    float32`.
 
     For the usual all-float32 layout, consecutive properties come back as a strided view of the memory-mapped
     data, so each byte is copied once, by whoever makes the final array."""
@@ -100,14 +113,15 @@ def vertex_columns(path: Path, ply: plyfile.PlyData, names: list[str]) -> Callab
         flat = np.asarray(data).view("<f4").reshape(len(data), len(all_names))
         pos = {n: i for i, n in enumerate(all_names)}
 
-        def columns(wanted: list[str]) -> np.ndarray:
+        def columns(wanted: list[str], rows: slice = slice(None)) -> np.ndarray:
             idx = [pos[n] for n in wanted]
             if idx == list(range(idx[0], idx[0] + len(idx))):
-                return flat[:, idx[0]:idx[0] + len(idx)]
-            return np.take(flat, idx, axis=1)
+                return flat[rows, idx[0]:idx[0] + len(idx)]
+            return np.take(flat[rows], idx, axis=1)
 
         return columns
-    return lambda wanted: np.stack([np.asarray(data[n], dtype=np.float32) for n in wanted], axis=1)
+    return lambda wanted, rows=slice(None): np.stack([np.asarray(data[n][rows], dtype=np.float32) for n in wanted],
+                                                     axis=1)
 
 
 def activate_opacity(raw: np.ndarray) -> np.ndarray:
@@ -122,8 +136,9 @@ def activate_scales(raw: np.ndarray) -> np.ndarray:
         return np.exp(raw)
 
 
-def load_inria_ply(path: Path, ply: plyfile.PlyData) -> Scene:
-    """Load an INRIA-layout splat PLY: exp scales, sigmoid opacity, normalised (w,x,y,z) quaternions."""
+def load_inria_ply(path: Path, ply: plyfile.PlyData, progress: LoadProgress | None = None) -> Scene:
+    """Load an INRIA-layout splat PLY: exp scales, sigmoid opacity, normalised (w,x,y,z) quaternions. `progress`:
+    splats decoded."""
     if "vertex" not in ply:
         raise SceneFormatError(path, "no 'vertex' element", field="vertex")
     names = list(ply["vertex"].data.dtype.names or ())
@@ -151,22 +166,13 @@ def load_inria_ply(path: Path, ply: plyfile.PlyData) -> Scene:
                                    "weight_background and sigma", field="info")
         weight_cols = ["f_do_0"] + [f"f_ro_{i}" for i in ro_idx] + ["info"]
     columns = vertex_columns(path, ply, REQUIRED + rest + (["filter_3D"] if has_filter else []) + weight_cols)
-    means = columns(["x", "y", "z"])
-    n = means.shape[0]
+    n = ply["vertex"].count
     k = (degree + 1) ** 2
-    sh = np.empty((n, k, 3), dtype=np.float32)
-    sh[:, 0, :] = columns(["f_dc_0", "f_dc_1", "f_dc_2"])
-    if k > 1:  # f_rest is channel-major: all R coefficients, then G, then B
-        sh[:, 1:, :] = columns(rest).reshape(n, 3, k - 1).transpose(0, 2, 1)
-    opacities = activate_opacity(columns(["opacity"])[:, 0])
-    scales = activate_scales(columns(["scale_0", "scale_1", "scale_2"]))
-    quats = columns(["rot_0", "rot_1", "rot_2", "rot_3"])
-    filter_3d = columns(["filter_3D"])[:, 0] if has_filter else None
     meta = {"format": "inria-ply", "version": None, "properties": names, "sh_degree": degree,
             "filter_3D": has_filter}
     extra: dict = {}
     if sort_free:
-        info = columns(["info"])[:, 0]
+        info = columns(["info"], slice(0, 2))[:, 0]
         if n < 2:
             raise SceneFormatError(path, f"sort-free layout with {n} vertex; the info column needs 2 rows "
                                    "(weight_background, sigma)", field="info")
@@ -174,6 +180,22 @@ def load_inria_ply(path: Path, ply: plyfile.PlyData) -> Scene:
         if not (np.isfinite(wbg) and wbg >= 0 and np.isfinite(sigma) and sigma > 0):
             raise SceneFormatError(path, f"info rows 0, 1 (weight_background, sigma) = {wbg}, {sigma}; expected "
                                    "weight_background >= 0 and sigma > 0", field="info")
-        extra = {"view_weight_sh": columns(weight_cols[:-1]), "weight_background": wbg, "wsr_sigma": sigma}
+        extra = {"weight_background": wbg, "wsr_sigma": sigma}
         meta.update(format="sort-free-ply", sort_free=True)
+
+    sh = np.empty((n, k, 3), dtype=np.float32)  # filled in place: the largest array, not copied again
+
+    def decode(rows: slice) -> tuple:
+        sh[rows, 0, :] = columns(["f_dc_0", "f_dc_1", "f_dc_2"], rows)
+        if k > 1:  # f_rest is channel-major: all R coefficients, then G, then B
+            sh[rows, 1:, :] = columns(rest, rows).reshape(-1, 3, k - 1).transpose(0, 2, 1)
+        return (columns(["x", "y", "z"], rows), activate_scales(columns(["scale_0", "scale_1", "scale_2"], rows)),
+                columns(["rot_0", "rot_1", "rot_2", "rot_3"], rows), activate_opacity(columns(["opacity"], rows)[:, 0]),
+                columns(["filter_3D"], rows)[:, 0] if has_filter else None,
+                columns(weight_cols[:-1], rows) if sort_free else None)
+
+    means, scales, quats, opacities, filter_3d, view_weight_sh = decode_in_chunks(n, decode,
+                                                                                  progress or LoadProgress())
+    if sort_free:
+        extra["view_weight_sh"] = view_weight_sh
     return Scene.from_arrays(means, scales, quats, opacities, sh, filter_3d, source=str(path), meta=meta, **extra)

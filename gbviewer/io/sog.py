@@ -24,6 +24,7 @@ from ..errors import InvalidValue, SceneFormatError
 from ..scene import Scene
 from ..validate import parse_json
 from .packing import MAX_SPLATS, smallest_three
+from .progress import LoadProgress
 
 ZIP_MAGIC = b"PK"
 META_MAX_BYTES = 4 << 20  # meta.json: codebooks of 256 numbers and file names; real ones are ~10 KB
@@ -33,20 +34,25 @@ SH_COEFFS = {1: 3, 2: 8, 3: 15}
 
 
 Reader = Callable[[str, int], bytes]  # (member name, byte limit) -> its bytes
+Sizer = Callable[[str], int]  # member name -> its stored size (0 when absent)
 
 
-def load_sog(path: Path) -> Scene:
-    """Load a bundled `.sog` zip, a folder holding `meta.json`, or a `meta.json` file with its images."""
-    if path.is_dir():
-        return _load(path, lambda name, limit: _read_file(path, name, limit), bundled=False)
-    with open(path, "rb") as fh:
-        is_zip = fh.read(2) == ZIP_MAGIC
+def load_sog(path: Path, progress: LoadProgress | None = None) -> Scene:
+    """Load a bundled `.sog` zip, a folder holding `meta.json`, or a `meta.json` file with its images. `progress`:
+    the stored bytes of the images, reported as each is read and decoded."""
+    progress = progress or LoadProgress()
+    is_zip = False
+    if not path.is_dir():
+        with open(path, "rb") as fh:
+            is_zip = fh.read(2) == ZIP_MAGIC
     if not is_zip:
-        return _load(path, lambda name, limit: _read_file(path.parent, name, limit), bundled=False,
-                     meta_name=path.name)
+        folder, meta_name = (path, "meta.json") if path.is_dir() else (path.parent, path.name)
+        return _load(path, lambda name, limit: _read_file(folder, name, limit), lambda name: _file_size(folder / name),
+                     False, progress, meta_name)
     try:
         with zipfile.ZipFile(path) as zf:
-            return _load(path, lambda name, limit: _read_member(path, zf, name, limit), bundled=True)
+            return _load(path, lambda name, limit: _read_member(path, zf, name, limit),
+                         lambda name: _member_size(zf, name), True, progress)
     except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, NotImplementedError, RuntimeError,
             ValueError) as exc:  # ValueError: member names that are not valid UTF-8, among others
         raise SceneFormatError(path, f"corrupt .sog zip: {exc}", field="zip") from None
@@ -54,6 +60,20 @@ def load_sog(path: Path) -> Scene:
 
 def _too_big(where: Path, name: str, size: int, limit: int) -> SceneFormatError:
     return SceneFormatError(where, f"{size} bytes or more; at most {limit} expected for this splat count", field=name)
+
+
+def _file_size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except OSError:
+        return 0  # missing: reading it says so
+
+
+def _member_size(zf: zipfile.ZipFile, name: str) -> int:
+    try:
+        return zf.getinfo(name).compress_size
+    except KeyError:
+        return 0  # missing: reading it says so
 
 
 def _read_file(folder: Path, name: str, limit: int) -> bytes:
@@ -85,13 +105,14 @@ def _read_member(path: Path, zf: zipfile.ZipFile, name: str, limit: int) -> byte
     return data
 
 
-def _load(where: Path, read: Reader, bundled: bool, meta_name: str = "meta.json") -> Scene:
+def _load(where: Path, read: Reader, size: Sizer, bundled: bool, progress: LoadProgress,
+          meta_name: str = "meta.json") -> Scene:
     try:
         meta = parse_json(read(meta_name, META_MAX_BYTES), meta_name)
     except InvalidValue as exc:
         raise SceneFormatError(where, str(exc).removeprefix(f"{meta_name}: "), field=meta_name) from None
     try:
-        return _decode(where, read, meta, bundled)
+        return _decode(where, _Images(where, read, size, meta, progress), meta, bundled)
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise SceneFormatError(where, f"malformed meta.json: {type(exc).__name__}: {exc}", field="meta.json") from None
 
@@ -103,14 +124,8 @@ def _codebook(where: Path, section: dict, name: str) -> np.ndarray:
     return book
 
 
-def _decode(where: Path, read: Reader, meta: dict, bundled: bool) -> Scene:
-    if not isinstance(meta, dict) or meta.get("version") != 2:
-        version = meta.get("version") if isinstance(meta, dict) else None
-        raise SceneFormatError(where, f"SOG meta version {version!r}; supported: 2", field="version")
-    n = meta["count"]
-    if not isinstance(n, int) or not 0 < n <= MAX_SPLATS:
-        raise SceneFormatError(where, f"count {n!r}; expected 1..{MAX_SPLATS}", field="count")
-    images = _Images(where, read, n)
+def _decode(where: Path, images: _Images, meta: dict, bundled: bool) -> Scene:
+    n = images.count
 
     lo, hi = images.get(meta["means"]["files"][0]), images.get(meta["means"]["files"][1])
     mins = np.asarray(meta["means"]["mins"], dtype=np.float64).reshape(3)
@@ -133,6 +148,7 @@ def _decode(where: Path, read: Reader, meta: dict, bundled: bool) -> Scene:
     if meta.get("shN"):
         sh = np.concatenate([sh, _sh_rest(where, images, meta["shN"], n)], axis=1)
 
+    images.done()
     info = {"format": "sog", "version": 2, "bundled": bundled, "antialiased": bool(meta.get("antialias", False)),
             "properties": sorted(k for k in meta if isinstance(meta[k], dict) and "files" in meta[k])}
     return Scene.from_arrays(means, scales, quats, opacities, sh, source=str(where), meta=info)
@@ -160,10 +176,25 @@ def _sh_rest(where: Path, images: "_Images", shn: dict, n: int) -> np.ndarray:
 
 class _Images:
     """Decodes the per-splat images, checking they share one size that holds every splat and that neither their
-    bytes nor their pixels exceed what that many splats can need (checked from the header, before decoding)."""
+    bytes nor their pixels exceed what that many splats can need (checked from the header, before decoding); the
+    stored bytes of each image are reported once it is decoded."""
 
-    def __init__(self, where: Path, read: Reader, count: int):
-        self.where, self.read, self.count, self.size = where, read, count, None
+    def __init__(self, where: Path, read: Reader, stored: Sizer, meta: dict, progress: LoadProgress):
+        if not isinstance(meta, dict) or meta.get("version") != 2:
+            version = meta.get("version") if isinstance(meta, dict) else None
+            raise SceneFormatError(where, f"SOG meta version {version!r}; supported: 2", field="version")
+        n = meta["count"]
+        if not isinstance(n, int) or not 0 < n <= MAX_SPLATS:
+            raise SceneFormatError(where, f"count {n!r}; expected 1..{MAX_SPLATS}", field="count")
+        self.where, self.read, self.count, self.size = where, read, n, None
+        sections = [meta.get(key) for key in ("means", "quats", "scales", "sh0", "shN")]
+        lists = [sec["files"] for sec in sections if isinstance(sec, dict) and isinstance(sec.get("files"), list)]
+        self.stored = {name: stored(name) for files in lists for name in files if isinstance(name, str)}
+        self.total, self.read_bytes, self.progress = sum(self.stored.values()), 0, progress
+        progress.report(0, self.total, "bytes")
+
+    def done(self) -> None:
+        self.progress.report(self.total, self.total, "bytes")
 
     def decode(self, name: str, needed: int | None = None) -> tuple[np.ndarray, tuple[int, int]]:
         """RGBA pixels of image `name`, which must hold `needed` pixels (the splat count by default)."""
@@ -181,6 +212,8 @@ class _Images:
                 rgba = np.asarray(im.convert("RGBA"))
         except (OSError, ValueError, Image.DecompressionBombError) as exc:
             raise SceneFormatError(self.where, f"cannot decode image: {exc}", field=name) from None
+        self.read_bytes += self.stored.pop(name, 0)
+        self.progress.report(min(self.read_bytes, self.total), self.total, "bytes")
         return rgba.reshape(-1, 4), (rgba.shape[1], rgba.shape[0])
 
     def get(self, name: str) -> np.ndarray:

@@ -15,6 +15,7 @@ from ..errors import SceneFormatError
 from ..scene import Scene
 from ..scene import SH_C0
 from .packing import check_count
+from .progress import LoadProgress, decode_in_chunks
 
 RECORD = np.dtype([("pos", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4), ("rot", "u1", 4)])
 
@@ -29,8 +30,8 @@ def looks_like_splat(data: bytes | memoryview) -> bool:
                     and (head["scale"] >= 0).all() and (np.abs(head["pos"]) < 1e7).all())
 
 
-def load_splat(path: Path, data: bytes | memoryview) -> Scene:
-    """Decode a `.splat` buffer into a Scene."""
+def load_splat(path: Path, data: bytes | memoryview, progress: LoadProgress | None = None) -> Scene:
+    """Decode a `.splat` buffer into a Scene; `progress`: splats decoded."""
     if len(data) % RECORD.itemsize:
         raise SceneFormatError(path, f"size {len(data)} is not a multiple of the {RECORD.itemsize}-byte record "
                                "(truncated?)", field="record")
@@ -39,8 +40,14 @@ def load_splat(path: Path, data: bytes | memoryview) -> Scene:
     rec = np.frombuffer(data, dtype=RECORD, count=n)
     if (rec["scale"] < 0).any():
         raise SceneFormatError(path, "negative scale; .splat stores linear scales >= 0", field="scale")
-    rgba = rec["rgba"].astype(np.float32) * np.float32(1 / 255)
-    dc = (rgba[:, :3] - np.float32(0.5)) / np.float32(SH_C0)
-    quats = (rec["rot"].astype(np.float32) - np.float32(128)) / np.float32(128)
+
+    def decode(rows: slice) -> tuple:
+        r = rec[rows]
+        rgba = r["rgba"].astype(np.float32) * np.float32(1 / 255)
+        dc = (rgba[:, :3] - np.float32(0.5)) / np.float32(SH_C0)
+        quats = (r["rot"].astype(np.float32) - np.float32(128)) / np.float32(128)
+        return r["pos"], r["scale"], quats, rgba[:, 3], dc[:, None, :]
+
+    means, scales, quats, opacities, sh = decode_in_chunks(n, decode, progress or LoadProgress())
     meta = {"format": "splat", "version": None, "properties": ["position", "scale", "rgba", "rotation"]}
-    return Scene.from_arrays(rec["pos"], rec["scale"], quats, rgba[:, 3], dc[:, None, :], source=str(path), meta=meta)
+    return Scene.from_arrays(means, scales, quats, opacities, sh, source=str(path), meta=meta)

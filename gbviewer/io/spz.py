@@ -14,9 +14,11 @@ the SH coefficients that are odd in y or z.
 
 from __future__ import annotations
 
+import itertools
 import struct
 import warnings
 import zlib
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +27,7 @@ import zstandard
 from ..errors import SceneFormatError
 from ..scene import Scene
 from .packing import MAX_SPLATS, smallest_three
+from .progress import LoadProgress, decode_in_chunks
 
 MAGIC = b"NGSP"
 GZIP_MAGIC = b"\x1f\x8b"
@@ -65,37 +68,70 @@ def _check_header(path: Path, version: int, n: int, sh_degree: int, known: range
         raise SceneFormatError(path, f"splat count {n}; expected 1..{MAX_SPLATS}", field="numPoints")
 
 
-def load_spz(path: Path, data: bytes) -> Scene:
-    """Decode any supported `.spz` buffer (gzip legacy, raw legacy or NGSP v4) into a Scene."""
+def read_spz(path: Path, progress: LoadProgress) -> Scene:
+    """An `.spz` file: a gzip one is read and inflated in one pass (progress: its bytes), the others read whole."""
+    with open(path, "rb") as fh:
+        size = fh.seek(0, 2) - fh.seek(0)
+        if fh.read(2) != GZIP_MAGIC:
+            fh.seek(0)
+            return load_spz(path, progress.read(fh, size), progress)
+        fh.seek(0)
+        payload = _gunzip(path, progress.pieces(fh, size), size)
+    progress.report(size, size, "bytes")
+    return _load_legacy(path, payload, "gzip", progress)
+
+
+def load_spz(path: Path, data: bytes | bytearray, progress: LoadProgress | None = None) -> Scene:
+    """Decode any supported `.spz` buffer (gzip legacy, raw legacy or NGSP v4) into a Scene; `progress`: splats
+    decoded."""
+    progress = progress or LoadProgress()
     if data[:2] == GZIP_MAGIC:
-        return _load_legacy(path, _gunzip(path, data), "gzip")
+        return _load_legacy(path, _gunzip(path, [data], len(data)), "gzip", progress)
     if len(data) >= 8 and data[:4] == MAGIC and struct.unpack_from("<I", data, 4)[0] >= 4:
-        return _load_ngsp(path, data)
-    return _load_legacy(path, data, "raw")
+        return _load_ngsp(path, data, progress)
+    return _load_legacy(path, data, "raw", progress)
 
 
-def _gunzip(path: Path, data: bytes) -> bytes:
-    """Inflate the legacy stream, stopping once the header's count of attribute bytes is reached."""
+def _gunzip(path: Path, pieces: Iterable[bytes], compressed: int) -> bytes:
+    """Inflate the legacy stream, given in `pieces` (`compressed` bytes in all), stopping once the header's count
+    of attribute bytes is reached."""
     d = zlib.decompressobj(16 + zlib.MAX_WBITS)
+    out = bytearray()
+    limit = 0  # the output wanted: the header until it is read, then the header and its attribute bytes
     try:
-        head = d.decompress(data, LEGACY_HEADER.size)
-        if len(head) < LEGACY_HEADER.size:
-            raise SceneFormatError(path, "gzip stream ends inside the 16-byte header", field="header")
-        magic, version, n, sh_degree, _, _, _ = LEGACY_HEADER.unpack(head)
-        if magic != MAGIC:
-            raise SceneFormatError(path, f"gzip data does not start with NGSP (got {magic!r})", field="magic")
-        _check_header(path, version, n, sh_degree, range(1, 4))
-        _check_ratio(path, sum(_sizes(version, n, sh_degree).values()), len(data))
-        limit = sum(_sizes(version, n, sh_degree).values()) + MAX_EXTENSION_BYTES
-        payload = head + d.decompress(d.unconsumed_tail, limit)
+        for piece in itertools.chain(pieces, [b""]):  # b"": what zlib still holds once the input is all given
+            while not d.eof:
+                want = limit or LEGACY_HEADER.size
+                out += d.decompress(piece, want - len(out))
+                piece = d.unconsumed_tail
+                if len(out) == want:
+                    if limit:
+                        return bytes(out)
+                    limit = _gzip_limit(path, out, compressed)
+                elif not piece:
+                    break  # all of this piece inflated: the next one
     except zlib.error as exc:
         raise SceneFormatError(path, f"corrupt gzip stream: {exc}", field="gzip") from None
-    if not d.eof and not d.unconsumed_tail:
+    if not limit:
+        raise SceneFormatError(path, "gzip stream ends inside the 16-byte header", field="header")
+    if not d.eof:
         raise SceneFormatError(path, "truncated gzip stream (no end-of-stream marker)", field="gzip")
-    return payload
+    return bytes(out)
 
 
-def _load_legacy(path: Path, payload: bytes, container: str) -> Scene:
+def _gzip_limit(path: Path, head: bytes | bytearray, compressed: int) -> int:
+    """Payload bytes to inflate at most, from the legacy header (refused before inflating more when it is corrupt
+    or claims more than `compressed` bytes can hold)."""
+    magic, version, n, sh_degree, _, _, _ = LEGACY_HEADER.unpack_from(head)
+    if magic != MAGIC:
+        raise SceneFormatError(path, f"gzip data does not start with NGSP (got {magic!r})", field="magic")
+    _check_header(path, version, n, sh_degree, range(1, 4))
+    declared = sum(_sizes(version, n, sh_degree).values())
+    _check_ratio(path, declared, compressed)
+    return LEGACY_HEADER.size + declared + MAX_EXTENSION_BYTES
+
+
+def _load_legacy(path: Path, payload: bytes | bytearray, container: str, progress: LoadProgress) -> Scene:
     if len(payload) < LEGACY_HEADER.size:
         raise SceneFormatError(path, f"{len(payload)} bytes; the spz header needs 16", field="header")
     magic, version, n, sh_degree, frac_bits, flags, _ = LEGACY_HEADER.unpack_from(payload)
@@ -113,10 +149,10 @@ def _load_legacy(path: Path, payload: bytes, container: str) -> Scene:
                                    f"({len(payload) - offset} of {size} bytes)", field=name)
         streams[name] = memoryview(payload)[offset:offset + size]
         offset += size
-    return _decode(path, version, n, sh_degree, frac_bits, flags, streams)
+    return _decode(path, version, n, sh_degree, frac_bits, flags, streams, progress)
 
 
-def _load_ngsp(path: Path, data: bytes) -> Scene:
+def _load_ngsp(path: Path, data: bytes | bytearray, progress: LoadProgress) -> Scene:
     if len(data) < NGSP_HEADER.size:
         raise SceneFormatError(path, f"{len(data)} bytes; the NGSP header needs {NGSP_HEADER.size}", field="header")
     _, version, n, sh_degree, frac_bits, flags, num_streams, toc = NGSP_HEADER.unpack_from(data)
@@ -141,6 +177,7 @@ def _load_ngsp(path: Path, data: bytes) -> Scene:
         if start + compressed > len(data):
             raise SceneFormatError(path, f"truncated: needs {compressed} compressed bytes at {start}, the file "
                                    f"has {len(data) - start}", field=where)
+        progress.check()
         frame = memoryview(data)[start:start + compressed]
         try:
             declared = zstandard.get_frame_parameters(frame).content_size
@@ -154,7 +191,7 @@ def _load_ngsp(path: Path, data: bytes) -> Scene:
         streams[name] = out
         start += compressed
     streams.setdefault("sh", b"")
-    return _decode(path, version, n, sh_degree, frac_bits, flags, streams)
+    return _decode(path, version, n, sh_degree, frac_bits, flags, streams, progress)
 
 
 def _check_extensions(path: Path, data: bytes, end: int) -> None:
@@ -168,37 +205,45 @@ def _check_extensions(path: Path, data: bytes, end: int) -> None:
             raise SceneFormatError(path, "extension record payload overruns the TOC", field="extensions")
 
 
-def _decode(path: Path, version: int, n: int, sh_degree: int, frac_bits: int, flags: int,
-            streams: dict) -> Scene:
-    """Vectorised decode of the attribute arrays, then RUB -> RDF."""
-    if version == 1:
-        means = np.frombuffer(streams["positions"], "<f2").reshape(n, 3).astype(np.float32)
-    else:
-        b = np.frombuffer(streams["positions"], np.uint8).reshape(n, 3, 3).astype(np.int32)
-        fixed = b[..., 0] | (b[..., 1] << 8) | (b[..., 2] << 16)
-        means = np.ldexp(((fixed ^ 0x800000) - 0x800000).astype(np.float32), -frac_bits)
-    opacities = np.frombuffer(streams["alphas"], np.uint8) * np.float32(1 / 255)
-    colors = np.frombuffer(streams["colors"], np.uint8).reshape(n, 3).astype(np.float32)
-    dc = (colors * np.float32(1 / 255) - np.float32(0.5)) / np.float32(COLOR_SCALE)
-    scales = np.exp(np.frombuffer(streams["scales"], np.uint8).reshape(n, 3) / np.float32(16) - np.float32(10))
-    if version >= 3:
-        comp = np.frombuffer(streams["rotations"], "<u4")
-        shifts = np.array([20, 10, 0], dtype=np.uint32)  # the lowest-index component is packed highest
-        fields = (comp[:, None] >> shifts) & 0x3FF
-        others = (fields & 0x1FF).astype(np.float32) * np.float32(np.sqrt(0.5) / 511)
-        others = np.where(fields & 0x200, -others, others)
-        xyzw = smallest_three(others, (comp >> 30).astype(np.intp))
-    else:
-        xyz = np.frombuffer(streams["rotations"], np.uint8).reshape(n, 3) / np.float32(127.5) - np.float32(1)
-        w = np.sqrt(np.maximum(0.0, 1.0 - np.einsum("ij,ij->i", xyz, xyz)))
-        xyzw = np.concatenate([xyz, w[:, None]], axis=1)
-    quats = np.concatenate([xyzw[:, 3:], xyzw[:, :3] * FLIP_XYZ], axis=1)
+def _decode(path: Path, version: int, n: int, sh_degree: int, frac_bits: int, flags: int, streams: dict,
+            progress: LoadProgress) -> Scene:
+    """Vectorised decode of the attribute arrays, then RUB -> RDF; chunks of splats, reported."""
     dim = SH_DIM[sh_degree]
-    rest = (np.frombuffer(streams["sh"], np.uint8).reshape(n, dim, 3) - np.float32(128)) / np.float32(128)
     if dim > 15:
-        warnings.warn(f"{path}: SH degree 4 is beyond what gbviewer renders; dropping band 4", stacklevel=3)
-        rest = rest[:, :15]
-    sh = np.concatenate([dc[:, None, :], rest * FLIP_SH[:rest.shape[1], None]], axis=1)
+        warnings.warn(f"{path}: SH degree 4 is beyond what gbviewer renders; dropping band 4", stacklevel=4)
+    pos = np.frombuffer(streams["positions"], "<f2" if version == 1 else np.uint8).reshape(n, 3, -1)
+    alphas = np.frombuffer(streams["alphas"], np.uint8)
+    colors = np.frombuffer(streams["colors"], np.uint8).reshape(n, 3)
+    log_scales = np.frombuffer(streams["scales"], np.uint8).reshape(n, 3)
+    rotations = np.frombuffer(streams["rotations"], "<u4" if version >= 3 else np.uint8).reshape(n, -1)
+    rest_bytes = np.frombuffer(streams["sh"], np.uint8).reshape(n, dim, 3)[:, :15]
+
+    def decode(rows: slice) -> tuple:
+        if version == 1:
+            means = pos[rows, :, 0].astype(np.float32)
+        else:
+            b = pos[rows].astype(np.int32)
+            fixed = b[..., 0] | (b[..., 1] << 8) | (b[..., 2] << 16)
+            means = np.ldexp(((fixed ^ 0x800000) - 0x800000).astype(np.float32), -frac_bits)
+        dc = (colors[rows].astype(np.float32) * np.float32(1 / 255) - np.float32(0.5)) / np.float32(COLOR_SCALE)
+        scales = np.exp(log_scales[rows] / np.float32(16) - np.float32(10))
+        if version >= 3:
+            comp = rotations[rows, 0]
+            shifts = np.array([20, 10, 0], dtype=np.uint32)  # the lowest-index component is packed highest
+            fields = (comp[:, None] >> shifts) & 0x3FF
+            others = (fields & 0x1FF).astype(np.float32) * np.float32(np.sqrt(0.5) / 511)
+            others = np.where(fields & 0x200, -others, others)
+            xyzw = smallest_three(others, (comp >> 30).astype(np.intp))
+        else:
+            xyz = rotations[rows] / np.float32(127.5) - np.float32(1)
+            w = np.sqrt(np.maximum(0.0, 1.0 - np.einsum("ij,ij->i", xyz, xyz)))
+            xyzw = np.concatenate([xyz, w[:, None]], axis=1)
+        quats = np.concatenate([xyzw[:, 3:], xyzw[:, :3] * FLIP_XYZ], axis=1)
+        rest = (rest_bytes[rows] - np.float32(128)) / np.float32(128)
+        sh = np.concatenate([dc[:, None, :], rest * FLIP_SH[:rest.shape[1], None]], axis=1)
+        return means * FLIP_XYZ, scales, quats, alphas[rows] * np.float32(1 / 255), sh
+
+    means, scales, quats, opacities, sh = decode_in_chunks(n, decode, progress)
     meta = {"format": "spz", "version": version, "properties": list(streams), "sh_degree_stored": sh_degree,
             "fractional_bits": frac_bits, "antialiased": bool(flags & ANTIALIASED_FLAG)}
-    return Scene.from_arrays(means * FLIP_XYZ, scales, quats, opacities, sh, source=str(path), meta=meta)
+    return Scene.from_arrays(means, scales, quats, opacities, sh, source=str(path), meta=meta)

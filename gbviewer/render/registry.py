@@ -1,4 +1,5 @@
-"""The backends by name, imported on first use, and the process's shared renderers (`get_renderer`, `render`)."""
+"""The backends by name, imported on first use, and the process's shared renderers (`get_renderer`, `render`).
+`backend="auto"` is the backend `choice.choose_backend()` picks for this machine."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import RenderError
 from ..scene import Scene
+from .choice import AUTO, choose_backend
 from .types import Frame, Mode, Renderer, RenderSettings
 
 _MODULES = {"cpu": ("cpu", "CpuRenderer"), "cuda": ("cuda", "CudaRenderer"), "glsl": ("glsl", "GlslRenderer")}
@@ -34,14 +36,23 @@ class _Backends(Mapping[str, type]):
 
 
 BACKENDS: Mapping[str, type] = _Backends()
+BACKEND_NAMES = (AUTO, *_MODULES)  # what `backend=` takes
+
+
+def resolve_backend(backend: str) -> str:
+    """The backend a request for `backend` runs on: itself, or for "auto" the one `choose_backend()` picks."""
+    if backend == AUTO:
+        return choose_backend().name
+    if backend not in BACKENDS:
+        raise RenderError(f"unknown backend {backend!r}; expected one of {', '.join(BACKEND_NAMES)}")
+    return backend
 
 
 def create_renderer(backend: str, **options) -> Renderer:
-    """A new renderer of `backend`, the caller's own (not shared through `get_renderer`). options: the backend's,
-    e.g. `ctx` for glsl: render in that OpenGL context (the app's render thread passes its own)."""
-    if backend not in BACKENDS:
-        raise RenderError(f"unknown backend {backend!r}; expected one of {', '.join(BACKENDS)}")
-    return BACKENDS[backend](**options)
+    """A new renderer of `backend` ("auto": the best here), the caller's own (not shared through `get_renderer`).
+    options: the backend's, e.g. `ctx` for glsl: render in that OpenGL context (the app's render thread passes its
+    own)."""
+    return BACKENDS[resolve_backend(backend)](**options)
 
 
 def create_gl_context():
@@ -57,10 +68,9 @@ _renderers_lock = threading.Lock()
 
 
 def get_renderer(scene: Scene, backend: str = "cpu") -> Renderer:
-    """The process's renderer of `backend` with `scene` uploaded. One renderer per backend, uploading only when the
-    scene changes: it keeps the last scene alive, never every scene it has seen."""
-    if backend not in BACKENDS:
-        raise RenderError(f"unknown backend {backend!r}; expected one of {', '.join(BACKENDS)}")
+    """The process's renderer of `backend` ("auto": the best here) with `scene` uploaded. One renderer per backend,
+    uploading only when the scene changes: it keeps the last scene alive, never every scene it has seen."""
+    backend = resolve_backend(backend)
     with _renderers_lock:
         entry = _renderers.get(backend)
         renderer = entry[0] if entry is not None else BACKENDS[backend]()
@@ -84,7 +94,8 @@ def render(
     partial: np.ndarray | None = None,
     **options,
 ) -> Frame:
-    """Render `scene` from `camera` in `mode` on `backend`; `options`: depth_correct, et_grade, cell_size, threads.
+    """Render `scene` from `camera` in `mode` on `backend` (cpu, glsl, cuda, or auto: `choose_backend()`'s pick);
+    `options`: depth_correct, et_grade, cell_size, threads.
     `cancel`: a threading.Event; once set, the call raises RenderCancelled within one tile batch. `on_progress`:
     called as fn(done_tiles, total_tiles) from the render. `partial`: a float32 (height, width, 3) array that receives
     each tile's pixels as soon as it is blended (centre out), for showing a frame while it refines."""

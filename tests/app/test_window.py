@@ -59,7 +59,7 @@ def expected_pane(app, i: int, part: str = "a", view: str = "color") -> np.ndarr
     """gb.render at the pane's render camera, nearest-upscaled to the pane."""
     p = app.state.panes[i]
     job = p.parts[part].job
-    frame = gb.render(app.state.scene, job.camera, job.settings.mode, job.settings.supersample,
+    frame = gb.render(app.state.scene, job.camera, job.settings.mode, job.settings.supersample, job.backend,
                       debug=job.settings.debug)
     rgb, _ = visualize(frame, view)
     return upscale_nearest(to_uint8(rgb), p.rect.h, p.rect.w)

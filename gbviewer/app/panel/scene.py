@@ -20,10 +20,14 @@ def draw(app: ViewerApp) -> None:
         imgui.text_disabled(f"{state.scene.num_splats:,} splats, SH degree {state.scene.sh_degree}, "
                             f"{state.scene.meta.get('format', '?')}")
     if state.loader is not None:
-        t = state.loader.elapsed
-        size = f" ({state.loader.size / 1e6:.1f} MB)" if state.loader.size else ""
-        imgui.text(f"Loading {state.loader.path.name}{size}")
-        imgui.progress_bar(-1.0 * t, (PANEL_W - 24, 0), f"{t:.1f} s")
+        ld = state.loader
+        imgui.text(f"Loading {ld.path.name}")
+        fraction = ld.fraction  # None until the load reports: a bar that moves with the time instead
+        imgui.progress_bar(-1.0 * ld.elapsed if fraction is None else fraction, (PANEL_W - 24, 0), ld.describe())
+        if imgui.small_button("Cancel"):
+            state.cancel_load()
+        imgui.same_line()
+        imgui.text_disabled(f"{ld.elapsed:.1f} s (Esc cancels)")
     if state.load_error:
         imgui.push_text_wrap_pos(PANEL_W - 16)
         imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.4, 1.0), state.load_error)
