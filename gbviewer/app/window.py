@@ -23,6 +23,7 @@ import moderngl  # noqa: E402
 
 from .. import DEFAULT_SCENE  # noqa: E402
 from ..errors import GBViewerError  # noqa: E402
+from ..render.glsl.context import release_current  # noqa: E402
 from . import overlays, screenshots  # noqa: E402
 from .analysis import PaneAnalysis  # noqa: E402
 from .analysis_overlay import draw_analysis_overlays  # noqa: E402
@@ -87,6 +88,7 @@ class ViewerApp:
             _, _, mw, mh = glfw.get_monitor_workarea(monitor)
             if mw > 0 and mh > 0:
                 w, h = min(w, mw), min(h, mh)
+        release_current()  # glfw makes the window's GLX context current: X error if an EGL one is (gb.render on glsl)
         self.window = glfw.create_window(w, h, "gbviewer", None, None)
         if not self.window:
             glfw.terminate()

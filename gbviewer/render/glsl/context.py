@@ -65,15 +65,27 @@ _standalone: dict[str, object] = {}
 
 
 def standalone_context():
-    """The process-wide headless context (created on first use); raises BackendUnavailable with the reason."""
+    """The process-wide headless context (created on first use), made current in the calling thread; raises
+    BackendUnavailable with the reason."""
     if "ctx" not in _standalone and "error" not in _standalone:
         try:
             _standalone["ctx"] = create_context()
         except BackendUnavailable as exc:
             _standalone["error"] = exc
     if "ctx" in _standalone:
-        return _standalone["ctx"]
+        ctx = _standalone["ctx"]
+        ctx.__enter__()
+        return ctx
     raise BackendUnavailable(str(_standalone["error"]))
+
+
+def release_current() -> None:
+    """Leave no headless context current in the calling thread: a window's GLX context cannot become current in a
+    thread where an EGL one is (X error BadAccess, which ends the process). The glsl renderer makes its context
+    current again before it works."""
+    ctx = _standalone.get("ctx")
+    if ctx is not None:
+        ctx.__exit__(None, None, None)
 
 
 def check_context(ctx) -> None:
