@@ -1,6 +1,7 @@
 """The desktop viewer (`gbviewer [SCENE]`). `window` (glfw + imgui-bundle + moderngl; imported only when a window is
 opened) composes `state` (scene, panes, settings and the actions on them), `keys` (the key map), `panes` (render
-requests and textures), `input`, `menu`, `panel/` (one module per section), `overlays`, `dialogs` and `screenshots`.
+requests and textures), `display` (frames drawn from GPU memory or copied through host memory), `input`, `menu`,
+`panel/` (one module per section), `overlays`, `dialogs` and `screenshots`.
 Without a window: `camera_control`, `rates`, `layout`, `views`, `settings`, and the threads in `worker` (renders),
 `loading` (scenes) and `recording` (zoom videos)."""
 

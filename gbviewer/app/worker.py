@@ -196,7 +196,10 @@ class RenderWorker:
             return "copy", self._shared.why if self._shared is not None else "no window"
         if name == "glsl":
             return "gpu", "rendered into a texture of a context shared with the window"
-        ok, why = BACKENDS[name].gl_interop()  # cuda, with the shared context current in this thread
+        try:
+            ok, why = BACKENDS[name].gl_interop()  # cuda, with the shared context current in this thread
+        except Exception as exc:  # noqa: BLE001 - as a backend's probe
+            ok, why = False, f"{type(exc).__name__}: {exc}"
         return ("gpu", "written into the window's texture through CUDA-GL interop") if ok else ("copy", why)
 
     def _glsl_context_status(self) -> tuple[bool, str]:
