@@ -4,11 +4,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# libhwy-dev: Google Highway headers for the vectorised CPU blend; libegl1,
+# libhwy-dev: Google Highway headers for the vectorised CPU blend; libgl-dev: GL headers for the CUDA backend's
+# CUDA-GL interop (the viewer's GPU display path); libegl1,
 # libegl-mesa0, libgl1-mesa-dri: headless OpenGL 4.5 (Mesa llvmpipe through EGL) for the glsl backend and its tests;
 # glslang-tools: the Khronos reference GLSL front end the tests hold every shader variant to (and whose SPIR-V shows
 # the preprocess's `precise`); qemu-user: the tests run the built module on an emulated CPU without AVX.
-APT_PACKAGES=(build-essential cmake python3-venv python3-dev libhwy-dev libegl1 libegl-mesa0 libgl1-mesa-dri
+APT_PACKAGES=(build-essential cmake python3-venv python3-dev libhwy-dev libgl-dev libegl1 libegl-mesa0 libgl1-mesa-dri
   glslang-tools qemu-user xvfb xauth libglfw3 libxrandr2 libxinerama1 libxcursor1 libxi6)  # xvfb..libxi6: the viewer window, tested under Xvfb
 if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
   missing=()

@@ -1,9 +1,10 @@
 """The desktop viewer (`gbviewer [SCENE]`). `window` (glfw + imgui-bundle + moderngl; imported only when a window is
 opened) composes `state` (scene, panes, settings and the actions on them), `keys` (the key map), `panes` (render
-requests and textures), `input`, `menu`, `panel/` (one module per section), `overlays`, `analysis_overlay`,
-`dialogs` and `screenshots`. Without a window: `camera_control`, `rates`, `layout`, `views`, `settings`, `analysis`
-(the difference and error views), and the threads in `worker` (renders), `analysis_worker` (differences, references,
-PSNR/SSIM), `loading` (scenes) and `recording` (zoom videos)."""
+requests and textures), `display` (frames drawn from GPU memory or copied through host memory), `input`, `menu`,
+`panel/` (one module per section), `overlays`, `analysis_overlay`, `dialogs` and `screenshots`. Without a window:
+`camera_control`, `rates`, `layout`, `views`, `settings`, `analysis` (the difference and error views), and the threads
+in `worker` (renders), `analysis_worker` (differences, references, PSNR/SSIM), `loading` (scenes) and `recording`
+(zoom videos)."""
 
 from __future__ import annotations
 

@@ -164,7 +164,8 @@ def draw_status(app: ViewerApp) -> None:
     imgui.same_line(0, 16)
     imgui.text_disabled(f"render {sizes}")
     imgui.same_line(0, 16)
-    imgui.text_disabled(f"{backend} | {'fly' if state.fly else 'orbit'} | up {s.up} | "
+    imgui.text_disabled(f"{backend} | display {app.worker.display_path(app.worker.backend_for(s.backend))[0]} | "
+                        f"{'fly' if state.fly else 'orbit'} | up {s.up} | "
                         f"fov {state.controller.fov_y_deg:.0f}{' ortho' if s.projection == 'orthographic' else ''}")
     now = time.perf_counter()
     recent = [m for m in state.messages if now - m[0] < 8.0]

@@ -1,6 +1,7 @@
 """The panes' renders: which requests go to the render thread this frame (one per pane part whose view changed, at a
 preview resolution while the camera moves; at full resolution, refining progressively, once it stops), frames
-uploaded to textures as they come (quick stage, finished tiles, final), and their images queued for drawing."""
+uploaded to textures as they come (quick stage, finished tiles, final) or, on the GPU display path, drawn from the
+display texture they were rendered into (`display`), and their images queued for drawing."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from ..camera import Camera
 from ..figure import to_uint8
 from ..render import Frame, RenderSettings
 from .blit import Blitter
+from .display import GpuFrame
 from .layout import split_parts
 from .rates import preview_factor
 from .state import AppState, PaneState, Shown
@@ -71,7 +73,8 @@ class PaneRenders:
                     continue
                 if "M limit: lower" in p.parts[part].error:
                     p.parts[part].error = ""
-                key = (id(s.scene), view_key, (cam.width, cam.height), settings, backend)
+                display = "gpu" if ps.view == "color" and self.worker.display_path(backend)[0] == "gpu" else "copy"
+                key = (id(s.scene), view_key, (cam.width, cam.height), settings, backend, display)
                 if moving and (os.cpu_count() or 1) > 1:  # leave a core to the UI thread while the camera moves
                     settings = replace(settings, threads=(os.cpu_count() or 2) - 1)
                 if p.submitted.get(part) == key:
@@ -88,7 +91,8 @@ class PaneRenders:
                     progressive=progressive,
                     underlay=shown.frame.rgb if progressive and shown.frame is not None and shown.view == "color"
                     else None,
-                    quick=self._quick(p.index, settings, est_ms) if progressive else None))
+                    quick=self._quick(p.index, settings, est_ms) if progressive else None,
+                    display=display))
 
     def _quick(self, i: int, settings: RenderSettings, est_ms: float | None) -> tuple[Camera, RenderSettings] | None:
         """The x1 sample of a still frame that supersamples or zooms in and is expected to be slow (or not measured
@@ -99,14 +103,16 @@ class PaneRenders:
         return self.state.pane_camera(i, min(1.0, 1.0 / rate)), replace(settings, supersample=1)
 
     def poll(self) -> None:
-        """Take finished renders; re-colour frames whose pane view changed."""
+        """Take finished renders; re-colour frames whose pane view changed (a GPU frame's pane asks for a copy-path
+        render instead: its texture holds colour only); hand the display textures of dropped frames back."""
         for res in self.worker.results():
             self._take(res)
         for p in self.state.visible:
             view = self.state.settings.panes[p.index].view
             for part, shown in p.parts.items():
-                if shown.frame is not None and shown.view != view:
+                if shown.frame is not None and shown.view != view and not isinstance(shown.frame, GpuFrame):
                     self._upload((p.index, part), shown, shown.frame, view)
+        self.worker.return_textures()
 
     def all_current(self) -> bool:
         """Whether every visible pane shows its latest request at full resolution."""
@@ -181,6 +187,10 @@ class PaneRenders:
         shown.stage, shown.progress = "refining", res.progress
 
     def _upload(self, slot: tuple[int, str], shown: Shown, frame: Frame, view: str) -> None:
+        if isinstance(frame, GpuFrame):  # drawn from the texture it was rendered into, in colour
+            shown.texture, shown.image = frame.texture(self.ctx), None
+            shown.frame, shown.view, shown.legend = frame, "color", ""
+            return
         rgb, legend = self.colour(slot, frame, view)
         self._write(slot, shown, np.ascontiguousarray(to_uint8(rgb)))
         shown.frame, shown.view, shown.legend = frame, view, legend

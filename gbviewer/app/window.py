@@ -29,6 +29,7 @@ from .analysis import PaneAnalysis  # noqa: E402
 from .analysis_overlay import draw_analysis_overlays  # noqa: E402
 from .blit import Blitter  # noqa: E402
 from .dialogs import FileDialogs, draw_help  # noqa: E402
+from .display import SharedContext, requested_path  # noqa: E402
 from .input import handle_input  # noqa: E402
 from .menu import draw_menu  # noqa: E402
 from .panel import draw_panel  # noqa: E402
@@ -64,7 +65,7 @@ class ViewerApp:
         self._pending_screenshot: Path | None = None
         self.dialogs = FileDialogs(self.state.open)
         self._init_window(visible)
-        self.worker = RenderWorker()
+        self.worker = RenderWorker(self.shared)
         self.analysis = PaneAnalysis(self.state, self.worker)  # difference and error views, PSNR/SSIM
         self.panes = PaneRenders(self.state, self.worker, self.ctx, self.analysis.visualize)
         self.state.open(scene_path or DEFAULT_SCENE)
@@ -116,6 +117,10 @@ class ViewerApp:
         imgui.backends.opengl3_init("#version 330")
         glfw.set_drop_callback(self.window, self._on_drop)
         self.gl_renderer = self.ctx.info.get("GL_RENDERER", "?")
+        request, warning = requested_path()
+        if warning:
+            self.state.message(warning, "error")
+        self.shared = SharedContext.open(self.window, self.gl_renderer, request)  # the GPU display path's context
         self.blit_panes = Blitter(self.ctx)  # drawn under the UI
         self.blit_loupe = Blitter(self.ctx)  # drawn over it
 
@@ -232,6 +237,7 @@ class ViewerApp:
         self.panes.release()
         self.blit_panes.release()
         self.blit_loupe.release()
+        self.shared.close()
         imgui.backends.opengl3_shutdown()
         imgui.backends.glfw_shutdown()
         imgui.destroy_context()

@@ -2,8 +2,10 @@
 older one still waiting: stale requests are dropped, and a running render of that slot is cancelled between tiles,
 so the thread never finishes a frame nobody will see). A progressive request posts its frame while it refines: its
 quick stage (the x1 sample of a supersampled or zoomed-in pane) first, then the full frame's tiles a few times a
-second. The thread runs at a lower CPU priority than the UI (Linux), so the window keeps its core. No OpenGL here;
-the 'glsl' backend makes its own headless context current in the render thread (so it never touches the window's)."""
+second. The thread runs at a lower CPU priority than the UI (Linux), so the window keeps its core. OpenGL: the
+'glsl' backend renders on a context current in the render thread only: its own headless one (the copy path), or on
+the GPU display path the context it shares with the window (`display`), where GPU backends render into display
+textures the window draws."""
 
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ from ..render import (AUTO, BACKENDS, BackendChoice, Frame, RenderSettings, crea
                       get_renderer)
 from ..render.choice import GlProbe, decide
 from ..scene import Scene
+from .display import DisplayTextures, SharedContext
 
 
 RENDER_NICE = 10  # added to the render thread's (and its OpenMP threads') niceness: the UI gets a core when it asks
@@ -45,6 +48,7 @@ class RenderJob:
     progressive: bool = False  # post the frame while it refines (tiles as they finish)
     underlay: np.ndarray | None = None  # float RGB the refining frame starts from (scaled to the job's size)
     quick: tuple[Camera, RenderSettings] | None = None  # rendered and posted first: a cheap stand-in
+    display: str = "copy"  # "gpu": into a display texture (a GpuFrame) where the backend's display path is gpu
     submitted: float = 0.0  # set by the worker: perf_counter at submission
 
 
@@ -84,7 +88,8 @@ def scaled_nearest(image: np.ndarray, width: int, height: int) -> np.ndarray:
 class RenderWorker:
     """One thread rendering the latest request per slot, least recently served slot first."""
 
-    def __init__(self) -> None:
+    def __init__(self, shared: SharedContext | None = None) -> None:
+        self._shared = shared
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._pending: dict[Hashable, RenderJob] = {}
@@ -97,6 +102,11 @@ class RenderWorker:
         self._scene: Scene | None = None  # the scene whose renderers the thread holds (freed in this thread)
         self._gl_ctx = None  # this thread's headless context for the glsl backend
         self._glsl: tuple[Scene, Any] | None = None
+        self._display_ctx = None  # the context shared with the window (GPU display path), current in this thread
+        self._last_display = "copy"  # the display of the latest job: free display textures are kept while "gpu"
+        self._returns = False  # the UI handed display textures back
+        self.textures = DisplayTextures()
+        self.display: dict[str, tuple[str, str]] = {}  # backend -> ("gpu" | "copy", why), set with `backends`
         self.dropped = 0  # requests replaced before they started
         self.cancelled = 0  # renders stopped because a newer request of their slot arrived
         self.rendered = 0
@@ -150,6 +160,19 @@ class RenderWorker:
             return None, "checking..."
         return self.backends.get(name, (False, "unknown"))
 
+    def display_path(self, name: str) -> tuple[str, str]:
+        """("gpu" | "copy", why) for frames of backend `name`; copy while the render thread is still probing."""
+        if not self.backends_ready.is_set():
+            return "copy", "checking..."
+        return self.display.get(name, ("copy", "not part of this installation"))
+
+    def return_textures(self) -> None:
+        """UI thread, once per frame: hand the display textures of dropped frames back to the render thread."""
+        if self.textures.fence_retired():
+            with self._lock:
+                self._returns = True
+                self._wake.notify()
+
     def backend_for(self, name: str) -> str:
         """The backend a request for `name` renders on: `name` (for auto, its choice) where usable, else cpu."""
         if name == AUTO:
@@ -167,6 +190,11 @@ class RenderWorker:
     # ---- render thread -----------------------------------------------------------------------------------------
 
     def _check_backends(self) -> None:
+        if self._shared is not None and self._shared.window is not None:
+            try:
+                self._display_ctx = self._shared.make_current()
+            except Exception as exc:  # noqa: BLE001 - glcontext raises plain Exceptions with the driver's message
+                self._shared.why = f"the context shared with the window cannot be used here: {exc}"
         for name, cls in BACKENDS.items():
             try:
                 if name == "glsl":
@@ -177,12 +205,32 @@ class RenderWorker:
                 self.backends[name] = (False, f"{type(exc).__name__}: {exc}")
         cuda = self.backends.get("cuda", (False, "not part of this installation"))
         self.auto = decide(cuda, GlProbe.of(self._gl_ctx, self.backends.get("glsl", (False, ""))[1]))
+        self.display = {name: self._display_status(name) for name in BACKENDS}
         self.backends_ready.set()
+
+    def _display_status(self, name: str) -> tuple[str, str]:
+        """Whether backend `name`'s frames take the GPU display path (see `display`), and why (not)."""
+        if not self.backends.get(name, (False,))[0]:
+            return "copy", "backend unavailable"
+        if name == "cpu":
+            return "copy", "the cpu backend renders into host memory"
+        if self._display_ctx is None:
+            return "copy", self._shared.why if self._shared is not None else "no window"
+        if name == "glsl":
+            return "gpu", "rendered into a texture of a context shared with the window"
+        try:
+            ok, why = BACKENDS[name].gl_interop()  # cuda, with the shared context current in this thread
+        except Exception as exc:  # noqa: BLE001 - as a backend's probe
+            ok, why = False, f"{type(exc).__name__}: {exc}"
+        return ("gpu", "written into the window's texture through CUDA-GL interop") if ok else ("copy", why)
 
     def _glsl_context_status(self) -> tuple[bool, str]:
         """The glsl backend runs in this thread on a headless context of its own (an OpenGL context is current in
         one thread only: the glsl backend's process-wide one may be current in another thread, and the window's
-        is the UI thread's)."""
+        is the UI thread's); on the GPU display path, on the context shared with the window (OpenGL 4.3)."""
+        if self._display_ctx is not None:
+            self._gl_ctx = self._display_ctx
+            return BACKENDS["glsl"].check_context(self._gl_ctx)
         try:
             self._gl_ctx = create_gl_context()
         except BackendUnavailable as exc:
@@ -219,15 +267,24 @@ class RenderWorker:
         self._check_backends()
         while True:
             with self._lock:
-                while not self._pending and not self._stop:
+                while not self._pending and not self._stop and not self._returns:
                     self._wake.wait()
                 if self._stop:
                     break
-                slot = min(self._pending, key=lambda s: (-self._pending[s].priority, self._served.get(s, 0.0),
-                                                          self._pending[s].seq))
-                job = self._pending.pop(slot)
-                self._running = job
-                self._cancel_running = threading.Event()
+                self._returns = False
+                job = None
+                if self._pending:
+                    slot = min(self._pending, key=lambda s: (-self._pending[s].priority, self._served.get(s, 0.0),
+                                                              self._pending[s].seq))
+                    job = self._pending.pop(slot)
+                    self._running = job
+                    self._cancel_running = threading.Event()
+            if job is not None:
+                self._last_display = job.display
+            if self._display_ctx is not None:
+                self.textures.recycle(keep=self._last_display == "gpu")
+            if job is None:
+                continue
             result = self._render(job, self._cancel_running)
             self._post(result)
             with self._lock:
@@ -237,9 +294,13 @@ class RenderWorker:
                 self.rendered += not result.cancelled
         self._scene = None
         self._release_glsl()
-        if self._gl_ctx is not None:
-            self._gl_ctx.release()
-            self._gl_ctx = None
+        if self._display_ctx is not None:
+            self.textures.release_all()
+        for ctx in {id(c): c for c in (self._gl_ctx, self._display_ctx) if c is not None}.values():
+            ctx.release()
+        self._gl_ctx = self._display_ctx = None
+        if self._shared is not None and self._shared.window is not None:
+            self._shared.done_current()
         gc.collect()
 
     def _render(self, job: RenderJob, cancel: threading.Event) -> RenderResult:
@@ -250,7 +311,9 @@ class RenderWorker:
             gc.collect()  # free the previous scene's renderers (and GL buffers) in this thread
         try:
             renderer = self._renderer(job.scene, job.backend)
-            if not job.progressive:
+            if job.display == "gpu" and self.display_path(job.backend)[0] == "gpu":
+                frame = self._render_to_texture(renderer, job, cancel)
+            elif not job.progressive:
                 frame = renderer.render(job.camera, job.settings, cancel=cancel)
             else:
                 frame = self._refine(renderer, job, cancel)
@@ -262,6 +325,18 @@ class RenderWorker:
         except Exception as exc:  # noqa: BLE001 - shown in the window, never kills the thread
             traceback.print_exc()
             return RenderResult(job, None, f"{type(exc).__name__}: {exc}", time.perf_counter())
+
+    def _render_to_texture(self, renderer, job: RenderJob, cancel: threading.Event) -> Frame:
+        """A GPU display path job: the frame stays in a display texture (a GpuFrame)."""
+        tex = self.textures.acquire(self._display_ctx, job.camera.width, job.camera.height)
+        if hasattr(renderer, "release_texture"):  # cuda: its registration of a texture goes before the texture
+            self.textures.on_delete = renderer.release_texture
+        try:
+            stats = renderer.render_to_texture(tex, job.camera, job.settings, cancel=cancel)
+        except BaseException:
+            self.textures.discard(tex)
+            raise
+        return self.textures.frame(tex, stats)
 
     def _refine(self, renderer, job: RenderJob, cancel: threading.Event) -> Frame:
         """A progressive job: the quick stage, then the frame with its finished tiles posted as they come."""

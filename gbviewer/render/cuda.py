@@ -12,8 +12,8 @@ from ..cells import Cells
 from ..errors import BackendUnavailable, RenderError
 from ..scene import Scene
 from .control import Progress, RenderControl
-from .prepare import Prepared, camera_args, native_frame, prepare
-from .types import Frame, RenderSettings
+from .prepare import Prepared, camera_args, check_display_texture, native_frame, native_stats, prepare
+from .types import Frame, FrameStats, RenderSettings
 
 
 class CudaRenderer:
@@ -82,23 +82,64 @@ class CudaRenderer:
                 raise RenderError(f"cuda: {exc}") from None
             self._cells = cells
 
+    @classmethod
+    def gl_interop(cls) -> tuple[bool, str]:
+        """Whether `render_to_texture` can write into textures of the OpenGL context current in this thread (it
+        must run on a CUDA device); (usable, reason)."""
+        ok, why = cls.available()
+        if not ok:
+            return False, why
+        from .. import _native_cuda
+
+        if not _native_cuda.gl_devices():
+            return False, "the OpenGL context current here does not run on a CUDA device (no CUDA-GL interop)"
+        return True, ""
+
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
                on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
         """One kernel sequence per frame: `cancel` is checked before and after it, progress is 0 then 1 of 1,
         `partial` receives the frame at the end."""
+        control = RenderControl(cancel, on_progress, partial)
+        control.check_partial(camera.width, camera.height)
+        out, prep, t0 = self._run(camera, settings, control, "render", extra=(settings.debug == "window",))
+        frame = native_frame(out, prep, camera, settings, self.name, t0)
+        control.fill_partial(frame.rgb)
+        return frame
+
+    def render_to_texture(self, texture, camera: Camera, settings: RenderSettings, *,
+                          cancel: threading.Event | None = None, on_progress: Progress | None = None) -> FrameStats:
+        """Render into `texture` (a moderngl RGBA32F texture of the camera's size whose context, or one sharing
+        objects with it, is current in this thread and runs on this renderer's device) through CUDA-GL interop:
+        rgb and alpha as `render`'s Frame, row 0 the image's top; the pixels never leave the device (the
+        evaluation counts are summed there), only the stats come back. No debug planes. The copy has finished when
+        it returns. The texture stays registered with CUDA: `release_texture(texture.glo)` before deleting it."""
+        check_display_texture(texture, camera, self.name)
+        out, prep, t0 = self._run(camera, settings, RenderControl(cancel, on_progress), "render_to_gl_texture",
+                                  lead=(texture.glo,))
+        return native_stats(out, prep, camera, settings, self.name, t0)
+
+    def release_texture(self, glo: int) -> None:
+        """Forget the CUDA registration of GL texture `glo` (no-op without one); its context must be current."""
+        try:
+            self._impl.release_gl_texture(int(glo))
+        except RuntimeError as exc:
+            raise RenderError(f"cuda: {exc}") from None
+
+    def _run(self, camera: Camera, settings: RenderSettings, control: RenderControl, method: str, lead: tuple = (),
+             extra: tuple = ()) -> tuple:
+        """The native renderer's `method(*lead, camera args, mode, ..., background, *extra, oit globals)` under the
+        lock, `control` checked before and after it; its result dict, the frame's inputs and the start time."""
         t0 = time.perf_counter()
-        with self._lock, RenderControl(cancel, on_progress, partial) as control:
-            control.check_partial(camera.width, camera.height)
+        with self._lock, control:
             prep = prepare(self._scene, camera, settings, self.name)
             self._sync(prep)
             control.step(0, 1)
             try:
-                out = self._impl.render(*camera_args(camera), int(settings.mode), settings.supersample,
-                                        settings.sh_degree, np.asarray(settings.background, np.float32),
-                                        settings.debug == "window", *(prep.oit or ()))
+                out = getattr(self._impl, method)(*lead, *camera_args(camera), int(settings.mode),
+                                                  settings.supersample, settings.sh_degree,
+                                                  np.asarray(settings.background, np.float32), *extra,
+                                                  *(prep.oit or ()))
             except RuntimeError as exc:
                 raise RenderError(f"cuda: {exc}") from None
             control.step(1, 1)
-        frame = native_frame(out, prep, camera, settings, self.name, t0)
-        control.fill_partial(frame.image)
-        return frame
+        return out, prep, t0

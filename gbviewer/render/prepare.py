@@ -102,18 +102,32 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
     )
 
 
-def native_frame(out: dict, prep: Prepared, camera: Camera, settings: RenderSettings, backend: str,
-                 t0: float) -> Frame:
-    """A Frame from a native module's result dict (rgb, alpha, evals, window?, per-stage ms and counts; duplex:
-    cells_visible, cell_misses; the CPU module: simd, the SIMD path its blend ran)."""
+def native_stats(out: dict, prep: Prepared, camera: Camera, settings: RenderSettings, backend: str,
+                 t0: float) -> FrameStats:
+    """The stats of a native module's result dict (per-stage ms and counts, evaluations; duplex: cells_visible,
+    cell_misses; the CPU module: simd, the SIMD path its blend ran)."""
     duplex = settings.mode == Mode.DUPLEX
-    stats = frame_stats(
+    return frame_stats(
         prep, camera, settings, backend, t0, preprocess_ms=out["preprocess_ms"], sort_ms=out["sort_ms"],
         blend_ms=out["blend_ms"], visible=out["visible"], sort_length=out["sort_length"], pairs=out["pairs"],
         evaluations=out["evaluations"], cells_visible=out["cells_visible"] if duplex else None,
         cell_misses=out["cell_misses"] if duplex else None, simd=str(out["simd"]) if "simd" in out else None,
     )
+
+
+def native_frame(out: dict, prep: Prepared, camera: Camera, settings: RenderSettings, backend: str,
+                 t0: float) -> Frame:
+    """A Frame from a native module's result dict: rgb, alpha, evals, window? and `native_stats`' fields."""
     debug = {"evals": out["evals"]}
     if "window" in out:
         debug["window"] = out["window"]
-    return Frame(out["rgb"], out["alpha"], stats, debug)
+    return Frame(out["rgb"], out["alpha"], native_stats(out, prep, camera, settings, backend, t0), debug)
+
+
+def check_display_texture(texture, camera: Camera, backend: str) -> None:
+    """Refuse a `render_to_texture` target the frame does not fit: a moderngl RGBA32F texture of the camera's size."""
+    size = getattr(texture, "size", None)
+    kind = (getattr(texture, "components", None), getattr(texture, "dtype", None))
+    if size != (camera.width, camera.height) or kind != (4, "f4"):
+        raise RenderError(f"{backend} render_to_texture: expected an RGBA32F (4 components, 'f4') texture of "
+                          f"{camera.width}x{camera.height}, got {size} with components/dtype {kind}")

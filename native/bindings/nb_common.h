@@ -161,18 +161,10 @@ inline std::vector<int32_t> partition_cell_of(const char* where, const int32_t* 
     return cell_of;
 }
 
-// The dict a render returns (gbviewer.render._frame reads it): rgb (H,W,3), alpha, evals (H,W), window (H,W,2)
-// when rendered, per-stage ms, counts, and evaluations = the sum of evals. `img` has the vectors rgb, alpha, evals,
-// window (moved out), `st` the stats fields.
-template <class Img, class Stats>
-nb::dict result_dict(Img& img, const Stats& st, size_t H, size_t W) {
-    int64_t evaluations = 0;
-    for (int32_t e : img.evals) evaluations += e;
+// A render's stats as a dict: per-stage ms, counts, and `evaluations` (the sum of the evaluation counts).
+template <class Stats>
+nb::dict stats_dict(const Stats& st, int64_t evaluations) {
     nb::dict d;
-    d["rgb"] = to_numpy(std::move(img.rgb), {H, W, 3});
-    d["alpha"] = to_numpy(std::move(img.alpha), {H, W});
-    d["evals"] = to_numpy(std::move(img.evals), {H, W});
-    if (!img.window.empty()) d["window"] = to_numpy(std::move(img.window), {H, W, 2});
     d["preprocess_ms"] = st.preprocess_ms;
     d["sort_ms"] = st.sort_ms;
     d["blend_ms"] = st.blend_ms;
@@ -182,6 +174,21 @@ nb::dict result_dict(Img& img, const Stats& st, size_t H, size_t W) {
     d["cells_visible"] = st.cells_visible;
     d["cell_misses"] = st.cell_misses;
     d["evaluations"] = evaluations;
+    return d;
+}
+
+// The dict a render returns (gbviewer.render.prepare.native_frame reads it): rgb (H,W,3), alpha, evals (H,W),
+// window (H,W,2) when rendered, and stats_dict's fields with evaluations = the sum of evals. `img` has the vectors
+// rgb, alpha, evals, window (moved out), `st` the stats fields.
+template <class Img, class Stats>
+nb::dict result_dict(Img& img, const Stats& st, size_t H, size_t W) {
+    int64_t evaluations = 0;
+    for (int32_t e : img.evals) evaluations += e;
+    nb::dict d = stats_dict(st, evaluations);
+    d["rgb"] = to_numpy(std::move(img.rgb), {H, W, 3});
+    d["alpha"] = to_numpy(std::move(img.alpha), {H, W});
+    d["evals"] = to_numpy(std::move(img.evals), {H, W});
+    if (!img.window.empty()) d["window"] = to_numpy(std::move(img.window), {H, W, 2});
     return d;
 }
 

@@ -20,6 +20,8 @@ NB_MODULE(_native_cuda, m) {
     m.doc() = "gbviewer CUDA renderer (same kernel headers as the CPU module). One Renderer may be shared by "
               "threads: its calls are serialised, and uploads and renders release the GIL.";
     m.def("availability", &cuda::availability, "(usable, reason or the default device's name)");
+    m.def("gl_devices", &cuda::gl_devices,
+          "CUDA devices that drive the OpenGL context current on this thread ([] when none or unknown).");
     m.def(
         "check_render_args",
         [](FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height, float near_plane,
@@ -85,5 +87,33 @@ NB_MODULE(_native_cuda, m) {
              nb::arg("width"), nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"),
              nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"), nb::arg("want_window"),
              nb::arg("sigma") = 10.0f, nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f,
-             nb::arg("depth_correct") = false);
+             nb::arg("depth_correct") = false)
+        .def("render_to_gl_texture",
+             [](cuda::Renderer& r, unsigned int texture, FArr R, FArr t, float fx, float fy, float cx, float cy,
+                int width, int height, float near_plane, int projection, int mode, int supersample, int sh_degree,
+                FArr background, float sigma, float weight_background, float et_grade, bool depth_correct) {
+                 const RenderArgs a = parse_render_args("render_to_gl_texture", R, t, fx, fy, cx, cy, width, height,
+                                                        near_plane, projection, mode, supersample, background, sigma,
+                                                        weight_background, et_grade, depth_correct);
+                 cuda::RenderResult res;
+                 {
+                     nb::gil_scoped_release release;
+                     res = r.render_to_gl_texture(texture, a.cam, a.mode, a.supersample, sh_degree, a.bg, a.oit);
+                 }
+                 return stats_dict(res, res.evaluations);
+             },
+             nb::arg("texture"), nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"), nb::arg("cx"),
+             nb::arg("cy"), nb::arg("width"), nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"),
+             nb::arg("mode"), nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"), nb::arg("sigma") = 10.0f,
+             nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
+             "Render into an existing GL_RGBA32F texture of the output size (its GL context, or one sharing it, "
+             "current on this thread); returns the stats (as render's dict, without the image planes). The texture "
+             "stays registered with CUDA until release_gl_texture(texture): call that before deleting it.")
+        .def(
+            "release_gl_texture",
+            [](cuda::Renderer& r, unsigned int texture) {
+                nb::gil_scoped_release release;
+                r.release_gl_texture(texture);
+            },
+            nb::arg("texture"), "Drop the texture's CUDA registration (its GL context must be current).");
 }

@@ -3,12 +3,14 @@
 // early termination when every pixel of the block is done), box-average for supersampling. Duplex: each cell's
 // visible splats in the CPU's canonical order (a segmented sort by depth, equal depths by splat_less), cells
 // projected, one sort of (tile, cell depth), each tile's cells expanded to their splats.
+#include <cuda_gl_interop.h>  // includes GL/gl.h (Debian/Ubuntu: libgl-dev)
 #include <cuda_runtime.h>
 
 #include <thrust/iterator/transform_iterator.h>
 
 #include <algorithm>
 #include <cub/cub.cuh>
+#include <map>
 #include <mutex>
 #include <stdexcept>
 #include <string>
@@ -372,6 +374,17 @@ struct WidenU64 {
     __host__ __device__ uint64_t operator()(uint32_t x) const { return x; }
 };
 
+// A 32-bit evaluation count read as 64 bits: their sum over a frame can pass 2^31.
+struct WidenI64 {
+    __host__ __device__ int64_t operator()(int32_t x) const { return x; }
+};
+
+// RGBA of n pixels for a GL_RGBA32F texture.
+__global__ void pack_rgba_kernel(int64_t n, const float* rgb, const float* alpha, float4* out) {
+    const int64_t i = (int64_t)blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < n) out[i] = make_float4(rgb[i * 3], rgb[i * 3 + 1], rgb[i * 3 + 2], alpha[i]);
+}
+
 // The device's name if it can run the kernels (sm_75 or newer), else a reason.
 std::pair<bool, std::string> usable(int device) {
     cudaDeviceProp prop;
@@ -416,10 +429,19 @@ struct Renderer::Impl {
     DeviceBuffer<unsigned long long> counters;
     DeviceBuffer<float> rgb, alpha, window, o_rgb, o_alpha, o_window;
     DeviceBuffer<int32_t> evals, o_evals;
+    DeviceBuffer<float4> rgba;  // render_to_gl_texture's packed image
+    DeviceBuffer<int64_t> evals_total;
     Event ev[4];
     HostTotals totals;
+    std::map<unsigned int, cudaGraphicsResource_t> textures;  // GL texture name -> its CUDA registration
 
     explicit Impl(int dev) : device(dev) {}
+    Impl(const Impl&) = delete;
+    Impl& operator=(const Impl&) = delete;
+    ~Impl() {
+        for (auto& [name, resource] : textures) cudaGraphicsUnregisterResource(resource);
+        cudaGetLastError();
+    }
 
     // The renderer's device, current on the calling thread (the runtime's current device is per thread).
     void use() const { CUDA_CHECK(cudaSetDevice(device)); }
@@ -441,6 +463,72 @@ struct Renderer::Impl {
         temp.ensure(temp_bytes);
         CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.ptr, temp_bytes, in, ends, count));
         launched(what);
+    }
+
+    // The sum of `count` evaluation counts (64-bit accumulation), copied to the host.
+    int64_t sum_evals(const int32_t* counts, int64_t count) {
+        const auto in = thrust::make_transform_iterator(counts, WidenI64{});
+        evals_total.ensure(1);
+        size_t temp_bytes = 0;
+        CUDA_CHECK(cub::DeviceReduce::Sum(nullptr, temp_bytes, in, evals_total.ptr, count));
+        temp.ensure(temp_bytes);
+        CUDA_CHECK(cub::DeviceReduce::Sum(temp.ptr, temp_bytes, in, evals_total.ptr, count));
+        launched("cub::DeviceReduce::Sum (evaluations)");
+        int64_t total = 0;
+        CUDA_CHECK(cudaMemcpy(&total, evals_total.ptr, sizeof(total), cudaMemcpyDeviceToHost));
+        return total;
+    }
+
+    // The texture's CUDA registration, mapped (registered at first use and kept: per-frame registration costs more
+    // than the copy). A registration that no longer maps (the texture was deleted or respecified) is made again once.
+    cudaGraphicsResource_t map_texture(unsigned int texture) {
+        for (int attempt = 0; attempt < 2; ++attempt) {
+            auto it = textures.find(texture);
+            if (it == textures.end()) {
+                cudaGraphicsResource_t resource;
+                CUDA_CHECK(cudaGraphicsGLRegisterImage(&resource, texture, GL_TEXTURE_2D,
+                                                       cudaGraphicsRegisterFlagsWriteDiscard));
+                it = textures.emplace(texture, resource).first;
+            }
+            const cudaError_t e = cudaGraphicsMapResources(1, &it->second);
+            if (e == cudaSuccess) return it->second;
+            cudaGetLastError();
+            cudaGraphicsUnregisterResource(it->second);
+            cudaGetLastError();
+            textures.erase(it);
+            if (attempt == 1) check(e, "cudaGraphicsMapResources (GL texture)");
+        }
+        return nullptr;  // not reached
+    }
+
+    // rgba (w x h) into the texture's level 0, finished before the texture is unmapped (GL in another context may
+    // sample it as soon as this returns).
+    void copy_to_texture(unsigned int texture, int w, int h) {
+        cudaGraphicsResource_t resource = map_texture(texture);
+        cudaArray_t array;
+        cudaError_t e = cudaGraphicsSubResourceGetMappedArray(&array, resource, 0, 0);
+        if (e == cudaSuccess) {
+            cudaChannelFormatDesc desc;
+            cudaExtent extent;
+            unsigned int flags;
+            e = cudaArrayGetInfo(&desc, &extent, &flags, array);
+            if (e == cudaSuccess && (extent.width != (size_t)w || extent.height != (size_t)h ||
+                                     desc.x != 32 || desc.y != 32 || desc.z != 32 || desc.w != 32 ||
+                                     desc.f != cudaChannelFormatKindFloat)) {
+                cudaGraphicsUnmapResources(1, &resource);
+                throw std::runtime_error("render_to_gl_texture: texture " + std::to_string(texture) + " is " +
+                                         std::to_string(extent.width) + "x" + std::to_string(extent.height) +
+                                         " (RGBA32F expected), the render " + std::to_string(w) + "x" +
+                                         std::to_string(h));
+            }
+            if (e == cudaSuccess)
+                e = cudaMemcpy2DToArray(array, 0, 0, rgba.ptr, w * sizeof(float4), w * sizeof(float4), h,
+                                        cudaMemcpyDeviceToDevice);
+            if (e == cudaSuccess) e = cudaStreamSynchronize(0);
+        }
+        const cudaError_t unmap = cudaGraphicsUnmapResources(1, &resource);
+        if (e == cudaSuccess) e = unmap;
+        check(e, "render_to_gl_texture (copy into the GL texture)");
     }
 
     // Sort (keys, values) by bits [begin_bit, end_bit) of the 64-bit keys (stable).
@@ -681,6 +769,16 @@ std::pair<bool, std::string> availability() {
     return usable(device);
 }
 
+std::vector<int> gl_devices() {
+    unsigned int count = 0;
+    int devices[16];
+    if (cudaGLGetDevices(&count, devices, 16, cudaGLDeviceListAll) != cudaSuccess) {
+        cudaGetLastError();
+        return {};
+    }
+    return std::vector<int>(devices, devices + std::min(count, 16u));
+}
+
 Renderer::Renderer(int device) {
     const auto [ok, why] = availability();
     if (!ok) throw std::runtime_error(why);
@@ -697,7 +795,7 @@ Renderer::Renderer(int device) {
 }
 
 Renderer::~Renderer() {
-    cudaSetDevice(impl_->device);  // frees and unregistrations on the renderer's device
+    cudaSetDevice(impl_->device);  // frees and texture unregistrations on the renderer's device
     impl_.reset();
 }
 
@@ -791,6 +889,43 @@ RenderResult Renderer::render(const CameraParams& cam, Mode mode, int supersampl
                               cudaMemcpyDeviceToHost));
     }
     return res;
+}
+
+RenderResult Renderer::render_to_gl_texture(unsigned int texture, const CameraParams& cam, Mode mode, int supersample,
+                                            int sh_degree, const float bg[3], const OitParams& oit) {
+    Impl& m = *impl_;
+    std::lock_guard<std::mutex> lock(m.mutex);
+    m.use();
+    const std::vector<int> gl = gl_devices();
+    if (gl.empty())
+        throw std::runtime_error("render_to_gl_texture: the OpenGL context current on this thread does not run on a "
+                                 "CUDA device (or none is current)");
+    if (std::find(gl.begin(), gl.end(), m.device) == gl.end())
+        throw std::runtime_error("render_to_gl_texture: the current OpenGL context runs on CUDA device " +
+                                 std::to_string(gl[0]) + ", this renderer on device " + std::to_string(m.device) +
+                                 "; create the renderer on the GL device");
+    RenderResult res;
+    m.run(cam, mode, oit, supersample, sh_degree, bg, false, res);
+    const int N = supersample, w = cam.width / N, h = cam.height / N;
+    const int64_t px = (int64_t)w * h;
+    m.rgba.ensure(std::max<int64_t>(px, 1));
+    pack_rgba_kernel<<<blocks(px), THREADS>>>(px, N > 1 ? m.o_rgb.ptr : m.rgb.ptr, N > 1 ? m.o_alpha.ptr : m.alpha.ptr,
+                                              m.rgba.ptr);
+    launched("pack_rgba_kernel");
+    res.evaluations = m.sum_evals(N > 1 ? m.o_evals.ptr : m.evals.ptr, px);
+    m.copy_to_texture(texture, w, h);
+    return res;
+}
+
+void Renderer::release_gl_texture(unsigned int texture) {
+    Impl& m = *impl_;
+    std::lock_guard<std::mutex> lock(m.mutex);
+    m.use();
+    const auto it = m.textures.find(texture);
+    if (it == m.textures.end()) return;
+    const cudaError_t e = cudaGraphicsUnregisterResource(it->second);
+    m.textures.erase(it);
+    check(e, "cudaGraphicsUnregisterResource (GL texture)");
 }
 
 }  // namespace gbv::cuda

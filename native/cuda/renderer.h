@@ -18,11 +18,16 @@ struct RenderResult {
     double preprocess_ms = 0, sort_ms = 0, blend_ms = 0;
     int64_t visible = 0, sort_length = 0, pairs = 0;
     int64_t cells_visible = 0, cell_misses = 0;  // duplex, as the CPU module defines them (0 otherwise)
+    int64_t evaluations = 0;  // render_to_gl_texture: the sum of the evaluation counts (render: see `evals`)
 };
 
 // (usable, reason): false with the CUDA runtime's explanation when there is no device or driver; true with the
 // name of the device a Renderer() uses by default.
 std::pair<bool, std::string> availability();
+
+// The CUDA devices that drive the OpenGL context current on this thread (empty when none is current, it runs on
+// another vendor's driver or the driver cannot tell).
+std::vector<int> gl_devices();
 
 // One renderer owns its device buffers. Every method is serialised by a mutex of the renderer, so threads may share
 // one (the Python binding releases the GIL while it uploads and renders); each call makes the renderer's device
@@ -57,6 +62,18 @@ public:
     // Render at cam's resolution (supersample x the output size per axis) and box-average back.
     RenderResult render(const CameraParams& cam, Mode mode, int supersample, int sh_degree, const float bg[3],
                         bool want_window, const OitParams& oit);
+
+    // Render and write RGBA (rgb, alpha) into an OpenGL texture (GL_RGBA32F, the output size, row 0 the image top)
+    // through CUDA-GL interop, without a round trip through host memory; returns the stats (rgb/alpha/evals empty,
+    // `evaluations` summed on the device). The texture's GL context (or one sharing it) must be current on this
+    // thread. The texture stays registered with CUDA (per texture name) until release_gl_texture: call that before
+    // deleting it, since GL reuses the names of deleted textures. Throws when the current GL context runs on
+    // another CUDA device than this renderer's. The copy has finished when it returns.
+    RenderResult render_to_gl_texture(unsigned int texture, const CameraParams& cam, Mode mode, int supersample,
+                                      int sh_degree, const float bg[3], const OitParams& oit);
+
+    // Drop the CUDA registration of a texture (no-op when it has none); its GL context must be current.
+    void release_gl_texture(unsigned int texture);
 
 private:
     struct Impl;

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ...render import AUTO, BACKEND_NAMES
+from ..display import describe
 from ..layout import PANEL_W
 
 if TYPE_CHECKING:
@@ -34,3 +35,7 @@ def draw(app: ViewerApp) -> None:
             imgui.pop_text_wrap_pos()
     if app.worker.backend_status(s.backend)[0] is False:
         imgui.text_colored(imgui.ImVec4(1, 0.8, 0.25, 1), f"{s.backend} unavailable: rendering on cpu")
+    path, why = app.worker.display_path(app.worker.backend_for(s.backend))
+    imgui.text_disabled(f"display: {path}, {describe(path)}")
+    if imgui.is_item_hovered():
+        imgui.set_tooltip(why)

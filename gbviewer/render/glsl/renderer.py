@@ -27,7 +27,8 @@ see `limits`. Buffers, programs and dispatch are `gpu.Gpu`; the scan, radix sort
 
 The scene is uploaded once (`upload`); per frame the camera goes up as uniforms, 20 bytes of counters come back
 (visible splats, pairs and depth range: they size the pair buffers and the number of radix passes; 4 more with a
-loop cap: the longest tile list), and `render` reads the image back. Buffers grow (by 1.5x) when a frame needs more
+loop cap: the longest tile list), and `render` reads the image back; `render_to_texture` leaves it in a texture of the
+caller's (the viewer draws it from there). Buffers grow (by 1.5x) when a frame needs more
 and are reused otherwise; `allocations` counts (re)allocations.
 
 Contexts: by default a headless EGL context shared by every renderer of the process
@@ -46,12 +47,12 @@ from ...cells import Cells
 from ...errors import BackendUnavailable, RenderError
 from ...scene import Scene
 from ..control import Progress, RenderControl
-from ..prepare import Prepared, frame_stats, prepare
-from ..types import Frame, Mode, RenderSettings
+from ..prepare import Prepared, check_display_texture, frame_stats, prepare
+from ..types import Frame, FrameStats, Mode, RenderSettings
 from .context import check_context, standalone_context
 from .gpu import WG, Gpu
 from .limits import blend_plan
-from .sort import fill, pairs_by_tile, radix_sort, scan
+from .sort import SCAN_BLOCK, fill, pairs_by_tile, radix_sort, scan
 
 NO_OIT = (0.0, 0.0, 1.0, 0.0)  # the shaders' oit uniform (sigma, w_bg, E, depth_correct) outside wsr and duplex
 
@@ -176,13 +177,8 @@ class GlslRenderer:
                on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
         control = RenderControl(cancel, on_progress, partial)
         control.check_partial(camera.width, camera.height)
-        self._make_current()
-        t0 = time.perf_counter()
-        prep = prepare(self._scene, camera, settings, self.name)
-        self._sync(prep)
         want_window = settings.debug == "window" and settings.mode == Mode.GAUSSIAN_BLENDING
-        with control:
-            counts = self._frame(camera, settings, prep, want_window, control)
+        prep, counts, t0 = self._run(camera, settings, control, want_window)
         W, H = camera.width, camera.height
         img = np.frombuffer(self.gpu.texture.read(), np.float32).reshape(H, W, 4)
         evals = np.frombuffer(self.gpu.buffers["evals"].read(size=W * H * 4), np.int32).reshape(H, W).copy()
@@ -194,6 +190,38 @@ class GlslRenderer:
                             **counts)
         control.fill_partial(img[:, :, :3])
         return Frame(img[:, :, :3].copy(), img[:, :, 3].copy(), stats, debug)
+
+    def render_to_texture(self, texture, camera: Camera, settings: RenderSettings, *,
+                          cancel: threading.Event | None = None, on_progress: Progress | None = None) -> FrameStats:
+        """Render into `texture` (a moderngl RGBA32F texture of the camera's size, of this renderer's context or
+        one sharing objects with it): rgb and alpha as `render`'s Frame, row 0 the image's top. The pixels stay on
+        the GPU; what comes back is the stats (the evaluation counts summed per 1024 pixels on the GPU, 1/1024 of
+        the image). No debug planes. The GL work is finished when it returns (another context may sample the
+        texture once it binds it)."""
+        check_display_texture(texture, camera, self.name)
+        prep, counts, t0 = self._run(camera, settings, RenderControl(cancel, on_progress), False, texture)
+        evaluations = self._sum_evals(camera.width * camera.height)
+        return frame_stats(prep, camera, settings, self.name, t0, evaluations=evaluations, **counts)
+
+    def _run(self, camera: Camera, settings: RenderSettings, control: RenderControl, want_window: bool,
+             target=None) -> tuple[Prepared, dict, float]:
+        """One frame into `target` (None: the renderer's own output texture); its inputs, counts and start time."""
+        self._make_current()
+        t0 = time.perf_counter()
+        prep = prepare(self._scene, camera, settings, self.name)
+        self._sync(prep)
+        with control:
+            counts = self._frame(camera, settings, prep, want_window, control, target)
+        return prep, counts, t0
+
+    def _sum_evals(self, n: int) -> int:
+        """The sum of the frame's evaluation counts: scan_blocks.comp's per-block totals (it scans the counts in
+        place: the evals buffer holds prefix sums afterwards), added up here in 64 bits."""
+        blocks = -(-n // SCAN_BLOCK)
+        sums = self.gpu.ensure("evals_sums", blocks * 4, "evaluation sums")
+        self.gpu.run("scan_blocks.comp", blocks, (self.gpu.buffers["evals"], sums, self.gpu.buffers["totals"]), n=n,
+                     num_blocks=blocks, total_slot=-1)
+        return int(np.frombuffer(sums.read(size=blocks * 4), np.uint32).sum(dtype=np.int64))
 
     def __del__(self) -> None:
         try:
@@ -210,9 +238,9 @@ class GlslRenderer:
     # ---- pipeline ------------------------------------------------------------------------------------------------
 
     def _frame(self, camera: Camera, settings: RenderSettings, prep: Prepared, want_window: bool,
-               control: RenderControl) -> dict:
-        """Preprocess, bin and sort, blend into the output texture (`control` checked between the stages and the
-        blend's dispatches); returns the stage times and counts."""
+               control: RenderControl, target=None) -> dict:
+        """Preprocess, bin and sort, blend into `target` or the output texture (`control` checked between the stages
+        and the blend's dispatches); returns the stage times and counts."""
         gpu = self.gpu
         mode = settings.mode
         oit = NO_OIT if prep.oit is None else (*prep.oit[:3], float(prep.oit.depth_correct))
@@ -267,7 +295,7 @@ class GlslRenderer:
         self.ctx.finish()
         t2 = time.perf_counter()
         control.check()
-        self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, oit, control)
+        self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, oit, control, target)
         self.ctx.finish()
         return dict(preprocess_ms=(t1 - t0) * 1e3, sort_ms=(t2 - t1) * 1e3, blend_ms=(time.perf_counter() - t2) * 1e3,
                     visible=visible, sort_length=sort_length, pairs=pairs, **counts)
@@ -333,14 +361,15 @@ class GlslRenderer:
         return tlist, ranges, cell_pairs, expanded, ncells
 
     def _blend(self, camera: Camera, settings: RenderSettings, want_window: bool, plan, longest: int, splats, tvals,
-               ranges, oit: tuple, control: RenderControl) -> None:
-        """blend.comp into the output texture, in the dispatches of `plan` (one unless the driver caps loops)."""
+               ranges, oit: tuple, control: RenderControl, target=None) -> None:
+        """blend.comp into `target` or the output texture, in the dispatches of `plan` (one unless the driver caps
+        loops)."""
         gpu = self.gpu
         N = settings.supersample
         W, H = camera.width, camera.height
         RW, RH = W * N, H * N
         gx, gy = -(-RW // 16), -(-RH // 16)
-        tex = gpu.ensure_texture(W, H)
+        tex = gpu.ensure_texture(W, H) if target is None else target
         evals = gpu.ensure("evals", W * H * 4, "evaluation counts")
         window = gpu.ensure("window", W * H * 8 if want_window else 16, "window sizes")
         bx, by = -(-W // 16), -(-H // 16)
