@@ -56,10 +56,12 @@ def pane_pixels(img: np.ndarray, rect) -> np.ndarray:
 
 
 def expected_pane(app, i: int, part: str = "a", view: str = "color") -> np.ndarray:
-    """gb.render at the pane's render camera, nearest-upscaled to the pane."""
+    """gb.render at the pane's render camera on the CPU (whatever the pane rendered on: the backends agree far within
+    one level, and a glsl render here, in the thread of the window's context, would need the headless context made
+    current beside it), nearest-upscaled to the pane."""
     p = app.state.panes[i]
     job = p.parts[part].job
-    frame = gb.render(app.state.scene, job.camera, job.settings.mode, job.settings.supersample, job.backend,
+    frame = gb.render(app.state.scene, job.camera, job.settings.mode, job.settings.supersample, "cpu",
                       debug=job.settings.debug)
     rgb, _ = visualize(frame, view)
     return upscale_nearest(to_uint8(rgb), p.rect.h, p.rect.w)
