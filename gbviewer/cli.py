@@ -17,7 +17,7 @@ from .argtypes import BACKGROUND, INSET, MAX_SIDE, ORBIT, PIXEL, SIDE, SIZE, Num
 from .camera import PROJECTIONS, Camera, format_rate, load_cameras_json, orbit_camera, parse_rates
 from .camera_paths import MAX_FRAMES, PATHS, camera_path, scene_focus_depth, zoom_path
 from .errors import GBViewerError
-from .eval.options import add_eval_args, scene_pairs
+from .eval.options import add_dataset_args, add_eval_args, scene_pairs
 from .figure import DIFFS, compose_grid, render_grid, save_image, write_comparison
 from .io import load, write_inria_ply
 from .io.files import check_writable
@@ -178,12 +178,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    """`gbviewer [SCENE]`: the desktop viewer; without a display, say so and write the comparison instead."""
+    """`gbviewer [SCENE] [--data DATASET]`: the desktop viewer (with the dataset's photos); without a display, say so
+    and write the comparison instead."""
     from .app import has_display_env, open_window
 
-    if args.scene is not None and not args.scene.exists():
-        raise GBViewerError(f"{args.scene}: no such file or folder")
-    opened, why = open_window(args.scene, args.cameras, projection=args.projection, backend=args.backend)
+    for path, what in ((args.scene, ""), (args.data, "--data ")):
+        if path is not None and not path.exists():
+            raise GBViewerError(f"{what}{path}: no such file or folder")
+    opened, why = open_window(args.scene, args.cameras, projection=args.projection, backend=args.backend,
+                              data=args.data, images=args.images)
     if opened:
         return 0
     if has_display_env()[0]:  # (without one, demo says so itself)
@@ -402,6 +405,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_camera_args(p)
     add_backend_arg(p, None, "the viewer's backend, as its panel sets it (default: the one it saved, auto at first), "
                     "and that of the no-display fallback (default auto)")
+    add_dataset_args(p)
     p.add_argument("--out", default="out", help="output folder of the no-display fallback (default ./out)")
     p.set_defaults(func=cmd_view)
 

@@ -2,9 +2,10 @@
 opened) composes `state` (scene, panes, settings and the actions on them), `keys` (the key map), `panes` (render
 requests and textures), `display` (frames drawn from GPU memory or copied through host memory), `input`, `menu`,
 `panel/` (one module per section), `overlays`, `analysis_overlay`, `dialogs` and `screenshots`. Without a window:
-`camera_control`, `rates`, `layout`, `views`, `settings`, `analysis` (the difference and error views), and the threads
-in `worker` (renders), `analysis_worker` (differences, references, PSNR/SSIM), `loading` (scenes) and `recording`
-(zoom videos)."""
+`camera_control`, `rates`, `layout`, `views`, `settings`, `analysis` (the difference, error and photo views),
+`dataset` (the training dataset's views, the snapped one), and the threads in `worker` (renders), `analysis_worker`
+(differences, references, photos, PSNR/SSIM), `loading` (scenes), `dataset` (datasets) and `recording` (zoom
+videos)."""
 
 from __future__ import annotations
 
@@ -21,10 +22,11 @@ def has_display_env(env: dict | None = None) -> tuple[bool, str]:
 
 
 def open_window(scene: str | Path | None = None, cameras: str | Path | None = None,
-                projection: str | None = None, backend: str | None = None) -> "tuple[bool, str]":
+                projection: str | None = None, backend: str | None = None, data: str | Path | None = None,
+                images: str = "images") -> "tuple[bool, str]":
     """Open the viewer and run it until closed: (True, '') or (False, why no window could be opened). `projection`:
     the camera's at the start (default: the saved settings'); `backend`: select it as the panel would (None: the saved
-    one)."""
+    one); `data`: a training dataset to open beside the scene, its photos in the folder `images`."""
     ok, why = has_display_env()
     if not ok:
         return False, why
@@ -35,7 +37,7 @@ def open_window(scene: str | Path | None = None, cameras: str | Path | None = No
     from ..errors import GBViewerError
 
     try:
-        app = ViewerApp(scene, cameras=cameras, projection=projection, backend=backend)
+        app = ViewerApp(scene, cameras=cameras, projection=projection, backend=backend, data=data, images=images)
     except GBViewerError as exc:
         return False, str(exc)
     app.run()

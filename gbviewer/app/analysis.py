@@ -3,10 +3,12 @@
 `PaneAnalysis` (UI side, no imgui) looks after each UI frame at every visible pane part's newest full-resolution
 frame and asks `analysis_worker.AnalysisThread` for what it needs: for the 'difference' view, the signed difference
 to pane A (pane A's mode rendered at this pane's camera, or pane A's own frame where it is at the same camera); for
-the 'error' view and the PSNR/SSIM labels, the difference to the chosen reference of `gbviewer.analysis` ('box' or
-'dense') with PSNR and SSIM. Nothing is asked while the camera moves: the labels keep their last values, marked
-stale, and a pane in one of these views shows its plain render, saying why, until the analysis of its frame is in
-(`visualize`, which `panes.PaneRenders` calls for every upload).
+the 'error' view and the PSNR/SSIM labels, the difference to the chosen reference ('box' or 'dense' of
+`gbviewer.analysis`, or 'photo': the snapped dataset view's photo at the rate, asked only for frames rendered at that
+view's camera) with PSNR and SSIM; for the 'photo' view, that photo, shown instead of the render. Nothing is asked
+while the camera moves: the labels keep their last values, marked stale, and a pane in one of these views shows its
+plain render, saying why, until the analysis of its frame is in (`visualize`, which `panes.PaneRenders` calls for
+every upload). Snapping to a dataset view turns the labels on against the photo.
 """
 
 from __future__ import annotations
@@ -16,21 +18,24 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..analysis import REFERENCES, camera_key, colour_difference
+from ..camera import format_rate
+from ..io.datasets import View
 from ..render import Frame
 from ..scene import Scene
-from .analysis_worker import Analysis, AnalysisThread, Request, Spec
+from .analysis_worker import PHOTO, Analysis, AnalysisThread, Request, Spec
 from .settings import PANE_NAMES
 from .state import AppState, Shown
 from .views import visualize as visualize_view
 from .worker import RenderWorker
 
-ANALYSIS_VIEWS = ("difference", "error")
+ANALYSIS_VIEWS = ("difference", "error", PHOTO)
+REFERENCE_KINDS = {**REFERENCES, PHOTO: "the dataset view's photo"}
 Slot = tuple[int, str]  # (pane index, part)
 
 
 @dataclass
 class AnalysisOptions:
-    reference: str = "box"  # of the error view and the PSNR/SSIM labels: a key of analysis.REFERENCES
+    reference: str = "box"  # of the error view and the PSNR/SSIM labels: a key of REFERENCE_KINDS
     fidelity: bool = False  # PSNR/SSIM labels on every pane
     auto_scale: bool = True  # colour-map scale: each image's robust max |d| (else `scale` for all)
     scale: float = 0.05
@@ -43,6 +48,11 @@ def is_final(shown: Shown, scene: Scene | None) -> bool:
             and shown.stage == "final")
 
 
+def shows_photo(shown: Shown) -> bool:
+    """Whether a pane part shows its photo (its legend, 'photo v00  x1/4  32x25', then is its label)."""
+    return shown.view == PHOTO and shown.legend.startswith(f"{PHOTO} ")
+
+
 class PaneAnalysis:
     """The difference and error views' state, requests and results; the actions of their keys."""
 
@@ -53,7 +63,9 @@ class PaneAnalysis:
         self.latest: dict[Slot, Analysis] = {}
         self.shown_scale: dict[Slot, float] = {}  # the colour-map scale of what a pane part shows now
         self._asked: dict[Slot, tuple[Frame, Spec]] = {}
+        self._told: dict[Slot, tuple[Frame, str]] = {}  # the frame whose pane says why it has no photo, and why
         self._scene: Scene | None = None
+        self._snaps = 0  # the dataset snaps seen (each turns the labels on against the photo)
 
     # ---- actions (keys.py) -------------------------------------------------------------------------------------
 
@@ -69,12 +81,12 @@ class PaneAnalysis:
         self.options.fidelity = not self.options.fidelity
 
     def next_reference(self) -> None:
-        kinds = list(REFERENCES)
+        kinds = list(REFERENCE_KINDS)
         self.set_reference(kinds[(kinds.index(self.options.reference) + 1) % len(kinds)])
 
     def set_reference(self, kind: str) -> None:
         self.options.reference = kind
-        self.state.message(f"reference: {REFERENCES[kind]}")
+        self.state.message(f"reference: {REFERENCE_KINDS[kind]}")
         self.recolour()
 
     def set_scale(self, auto: bool, scale: float | None = None) -> None:
@@ -92,6 +104,8 @@ class PaneAnalysis:
     def spec(self, i: int, part: str) -> Spec:
         """What pane i's part needs computed."""
         view = self.state.settings.panes[i].view
+        if view == PHOTO:
+            return Spec(PHOTO)
         reference = self.options.reference if view == "error" or self.options.fidelity else None
         to_pane = replace(self.state.settings_for(0, "a"), debug="none") if view == "difference" else None
         return Spec(reference, to_pane)
@@ -105,6 +119,11 @@ class PaneAnalysis:
             self.thread.forget()
             self.latest.clear()
             self._asked.clear()
+            self._told.clear()
+        if s.dataset.snaps != self._snaps:
+            self._snaps = s.dataset.snaps
+            self.options.reference, self.options.fidelity = PHOTO, True
+            self.recolour()
         for slot, result in self.thread.results():
             if slot not in self._asked or self._asked[slot][0] is not result.frame:
                 continue  # overtaken by a newer request of its slot, or of the previous scene
@@ -122,6 +141,13 @@ class PaneAnalysis:
                 asked = self._asked.get(slot)
                 if asked is not None and asked[0] is shown.frame and asked[1] == spec:
                     continue
+                photo, note = self._photo(slot) if spec.reference == PHOTO else (None, "")
+                if note:  # not at a dataset view's camera: nothing to ask; the label and the pane say why
+                    told = self._told.get(slot)
+                    if told is None or told[0] is not shown.frame or told[1] != note:
+                        self._told[slot] = (shown.frame, note)
+                        self.recolour(slot)
+                    continue
                 same_a = None
                 if spec.to_pane is not None:
                     if (is_final(pane_a, s.scene) and replace(pane_a.job.settings, debug="none") == spec.to_pane
@@ -135,7 +161,7 @@ class PaneAnalysis:
                 self._asked[slot] = (shown.frame, spec)
                 self.thread.submit(Request(slot, s.scene, shown.frame, shown.job.camera,
                                            shown.job.info.get("rate", s.settings.rate), shown.job.settings, spec,
-                                           same_a))
+                                           same_a, photo))
                 self.recolour(slot)
 
     def recolour(self, slot: Slot | None = None) -> None:
@@ -153,7 +179,8 @@ class PaneAnalysis:
         for p in self.state.visible:
             for part in self.state.parts(p.index):
                 spec, shown = self.spec(p.index, part), p.parts[part]
-                if spec.reference is None and spec.to_pane is None:
+                if (spec.reference is None and spec.to_pane is None) or (spec.reference == PHOTO
+                                                                         and self._photo((p.index, part))[1]):
                     continue
                 a = self.latest.get((p.index, part))
                 if a is None or a.frame is not shown.frame or a.spec != spec:
@@ -167,14 +194,20 @@ class PaneAnalysis:
 
     def visualize(self, slot: Slot, frame: Frame, view: str) -> tuple[np.ndarray, str]:
         """The image (H, W, 3 in [0, 1]) and legend pane part `slot` shows of `frame` in `view`: the colour-mapped
-        difference once its analysis is in, until then the plain render and why (`views.visualize` for the other
-        views)."""
+        difference, or the photo, once its analysis is in, until then the plain render and why (`views.visualize`
+        for the other views)."""
         self.shown_scale.pop(slot, None)
         if view not in ANALYSIS_VIEWS:
             return visualize_view(frame, view)
         a, spec = self.latest.get(slot), self.spec(*slot)
         name = PANE_NAMES[slot[0]] + ("'" if slot[1] == "b" else "")
         fresh = a is not None and a.frame is frame
+        if view == PHOTO:
+            if not fresh or a.photo is None:
+                return frame.rgb, f"{PHOTO}: {self._waiting(slot, a, frame, view)}"
+            job = self.state.panes[slot[0]].parts[slot[1]].job
+            rate = format_rate(job.info.get("rate", self.state.settings.rate) if job else self.state.settings.rate)
+            return a.photo, f"{PHOTO} {a.photo_name}  {rate}  {a.photo.shape[1]}x{a.photo.shape[0]}"
         if view == "difference":
             plane, auto = (a.diff, a.diff_scale) if fresh and a.spec.to_pane == spec.to_pane else (None, 0.0)
             what = f"{name} - A ({spec.to_pane.label})"
@@ -182,24 +215,29 @@ class PaneAnalysis:
             plane, auto = (a.error, a.error_scale) if fresh and a.spec.reference == spec.reference else (None, 0.0)
             what = f"{name} - {spec.reference} reference"
         if plane is None:
-            return frame.rgb, f"{view}: {self._waiting(a, frame, view)}"
+            return frame.rgb, f"{view}: {self._waiting(slot, a, frame, view)}"
         scale = auto if self.options.auto_scale else self.options.scale
         self.shown_scale[slot] = scale
         return colour_difference(plane, scale), what
 
-    def _waiting(self, a: Analysis | None, frame: Frame, view: str) -> str:
+    def _waiting(self, slot: Slot, a: Analysis | None, frame: Frame, view: str) -> str:
         if a is not None and a.frame is frame and a.note:
             return a.note
         if self.state.moving:
             return "when the camera stops"
+        if self.spec(*slot).reference == PHOTO and self._photo(slot)[1]:
+            return self._photo(slot)[1]
         return "computing..." if view == "difference" else f"computing ({self.options.reference} reference)..."
 
     def fidelity_line(self, slot: Slot) -> tuple[str, bool] | None:
         """The PSNR/SSIM label of a pane part and whether it is stale (the camera moves, a newer frame or another
-        reference is on the pane); None where there is nothing to show."""
+        reference is on the pane, the camera left the photo's view); None where there is nothing to show (the photo
+        pane has no label of its own)."""
         spec = self.spec(*slot)
-        if spec.reference is None:
+        if spec.reference is None or self.state.settings.panes[slot[0]].view == PHOTO:
             return None
+        if spec.reference == PHOTO and not self.state.moving and self._photo(slot)[1]:
+            return f"{PHOTO}: {self._photo(slot)[1]}", True
         a = self.latest.get(slot)
         shown = self.state.panes[slot[0]].parts[slot[1]]
         if a is None or a.spec.reference is None:
@@ -209,3 +247,11 @@ class PaneAnalysis:
         stale = self.state.moving or a.frame is not shown.frame or a.spec.reference != spec.reference
         return (f"PSNR {a.psnr:.2f} dB  SSIM {a.ssim:.4f} vs {a.spec.reference}" + ("  (stale)" if stale else ""),
                 stale)
+
+    def _photo(self, slot: Slot) -> tuple[View | None, str]:
+        """The dataset view whose photo is the 'photo' reference of the frame pane part `slot` shows (rendered at
+        that photo's camera and rate), or None and why not."""
+        job = self.state.panes[slot[0]].parts[slot[1]].job
+        if job is None:
+            return None, "no render yet"
+        return self.state.dataset.photo_for(job.camera, job.info.get("rate", self.state.settings.rate))

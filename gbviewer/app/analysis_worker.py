@@ -1,8 +1,9 @@
 """The analysis thread of the difference and error views (`app/analysis.py` asks, this computes): for one pane
-part's frame, the signed difference to pane A's mode at the same camera and the difference to a reference of
-`gbviewer.analysis` with PSNR and SSIM. The newest request per pane part wins (a waiting older one is dropped, a
-running one is cancelled between tiles); references render on the thread's own CPU renderer and the last few are
-cached (panes of one size share them). No OpenGL here."""
+part's frame, the signed difference to pane A's mode at the same camera and the difference to a reference with PSNR
+and SSIM: 'box' or 'dense' of `gbviewer.analysis`, or 'photo', a dataset view's photo at the rate
+(`eval.ground_truth`, box-downsampled files cached on disk too). The newest request per pane part wins (a waiting
+older one is dropped, a running one is cancelled between tiles); references render on the thread's own CPU renderer
+and the last few are cached (panes of one size share them). No OpenGL here."""
 
 from __future__ import annotations
 
@@ -18,19 +19,22 @@ from ..analysis import (DENSE_SUPERSAMPLE, camera_key, fidelity, reference_image
                         robust_scale, signed_difference)
 from ..camera import Camera
 from ..errors import GBViewerError, RenderCancelled
+from ..eval import default_cache, ground_truth
+from ..io.datasets import View
 from ..metrics import zoom_out_factor
 from ..render import Frame, RenderSettings, create_renderer
 from ..scene import Scene
 from .panes import MAX_SAMPLES
 
-CACHE_SIZE = 4  # reference renders kept
+CACHE_SIZE = 4  # reference renders (and photos) kept
+PHOTO = "photo"  # the reference kind of a dataset view's photo
 
 
 @dataclass(frozen=True)
 class Spec:
     """What one analysis computes."""
 
-    reference: str | None = None  # 'box' or 'dense': the difference to it, PSNR and SSIM
+    reference: str | None = None  # 'box', 'dense' or PHOTO: the difference to it, PSNR and SSIM
     to_pane: RenderSettings | None = None  # pane A's settings: the difference to pane A
 
 
@@ -44,6 +48,7 @@ class Request:
     settings: RenderSettings
     spec: Spec
     pane_a: Frame | None = None  # pane A's frame when it was rendered at `camera` with spec.to_pane
+    photo: View | None = None  # for the PHOTO reference: the view whose photo at `rate` has `camera`'s pixels
 
 
 @dataclass
@@ -57,6 +62,8 @@ class Analysis:
     diff: np.ndarray | None = None  # signed difference to pane A
     diff_scale: float = 0.0
     note: str = ""  # why something is missing: no box reference at this rate, over the sample limit, an error
+    photo: np.ndarray | None = None  # the PHOTO reference (H, W, 3): what the photo pane shows
+    photo_name: str = ""  # its view's name
     seconds: float = 0.0
 
 
@@ -156,14 +163,22 @@ class AnalysisThread:
                 self._renderer.upload(req.scene)
                 self._scene = req.scene
             cam = camera_key(req.camera)
-            if spec.reference is not None:
+            if spec.reference == PHOTO:
+                ref = out.photo = self._cached(("photo", req.photo.image, req.rate, req.settings.background),
+                                               lambda: photo_truth(req.photo, req.rate, req.settings.background))
+                out.photo_name = req.photo.name
+                if ref.shape != rgb.shape:
+                    raise GBViewerError(f"the photo at this rate is {ref.shape[1]}x{ref.shape[0]}, the render "
+                                        f"{rgb.shape[1]}x{rgb.shape[0]}")
+            elif spec.reference is not None:
                 kind = spec.reference
                 check_samples(req.camera, req.rate, kind)
                 ref = self._cached(("ref", kind, cam, req.rate, reference_settings(kind, req.settings)),
                                    lambda: reference_image(self._renderer, req.camera, req.rate, kind, req.settings,
                                                            cancel))
+            if spec.reference is not None:
                 if ref is None:
-                    out.note = reference_note(kind, req.rate)
+                    out.note = reference_note(spec.reference, req.rate)
                 else:
                     out.error = signed_difference(rgb, ref)
                     out.error_scale = robust_scale(out.error)
@@ -183,6 +198,15 @@ class AnalysisThread:
             out.note = f"{type(exc).__name__}: {exc}"
         out.seconds = time.perf_counter() - t0
         return out
+
+
+def photo_truth(view: View, rate: float, background: tuple[float, float, float]) -> np.ndarray:
+    """The view's photo at `rate` on `background` (`eval.ground_truth`), its box-downsampled levels read from and
+    written to the user's cache folder; computed without it where that folder cannot be written."""
+    try:
+        return ground_truth(view, rate, background, default_cache())
+    except OSError:
+        return ground_truth(view, rate, background)
 
 
 def check_samples(camera: Camera, rate: float, kind: str) -> None:

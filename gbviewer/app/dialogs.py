@@ -1,5 +1,5 @@
-"""Dialogs: the system's file dialog (through zenity, kdialog... via portable-file-dialogs) or a built-in file
-browser where none exists, and the F1 help window listing `keys.SHORTCUTS`."""
+"""Dialogs: the system's file and folder dialogs (through zenity, kdialog... via portable-file-dialogs) or a built-in
+file browser where none exists, and the F1 help window listing `keys.SHORTCUTS`."""
 
 from __future__ import annotations
 
@@ -16,12 +16,14 @@ DIALOG_PROGRAMS = ("zenity", "kdialog", "qarma", "matedialog", "yad")
 
 
 class FileDialogs:
-    """Asks for a scene or cameras.json to open and hands the choice to `open_fn`, never blocking the UI."""
+    """Asks for a scene or cameras.json to open and hands the choice to `open_fn` (or for a folder, handed to the
+    function `open_folder` names), never blocking the UI."""
 
     def __init__(self, open_fn: Callable[[Path | str], None]) -> None:
         self.open_fn = open_fn
         self.file_dialog = None  # portable_file_dialogs.open_file while it is shown
-        self.browser: dict | None = None  # the built-in browser's folder and filter while it is shown
+        self.folder_dialog: tuple | None = None  # (portable_file_dialogs.select_folder, its function) while shown
+        self.browser: dict | None = None  # the built-in browser's folder, filter and (choosing folders) function
 
     def open(self, start: Path) -> None:
         """The system's file dialog when a dialog program exists, else the built-in browser, starting in `start`."""
@@ -33,20 +35,35 @@ class FileDialogs:
         else:
             self.browser = {"dir": Path(start), "filter": ""}
 
+    def open_folder(self, start: Path, title: str, pick: Callable[[Path], None]) -> None:
+        """The system's folder dialog (or the built-in browser, choosing a folder) starting in `start`; the folder
+        chosen goes to `pick`."""
+        if any(shutil.which(p) for p in DIALOG_PROGRAMS):
+            from imgui_bundle import portable_file_dialogs as pfd
+
+            self.folder_dialog = (pfd.select_folder(title, str(start)), pick)
+        else:
+            self.browser = {"dir": Path(start), "filter": "", "pick": pick, "title": title}
+
     def close(self) -> None:
         self.browser = None
 
     def poll(self) -> None:
-        """Open what the system dialog returned, once it has."""
+        """Open what the system dialogs returned, once they have."""
         if self.file_dialog is not None and self.file_dialog.ready(0):
             result = self.file_dialog.result()
             self.file_dialog = None
             for p in result or []:
                 self.open_fn(p)
+        if self.folder_dialog is not None and self.folder_dialog[0].ready(0):
+            (dialog, pick), self.folder_dialog = self.folder_dialog, None
+            if dialog.result():
+                pick(Path(dialog.result()))
 
     def _choose(self, path: Path) -> None:
+        pick = self.browser.get("pick") or self.open_fn
         self.browser = None
-        self.open_fn(path)
+        pick(path)
 
     def draw_browser(self) -> None:
         """A small built-in file browser, for machines without a system file dialog program."""
@@ -57,7 +74,9 @@ class FileDialogs:
         imgui.set_next_window_pos((io.display_size.x / 2, io.display_size.y / 2), imgui.Cond_.appearing.value,
                                   (0.5, 0.5))
         imgui.set_next_window_size((620, 460), imgui.Cond_.appearing.value)
-        opened, keep = imgui.begin("Open a scene or cameras.json", True, imgui.WindowFlags_.no_collapse.value)
+        folders = b.get("pick") is not None  # choosing a folder
+        opened, keep = imgui.begin(b.get("title", "Open a scene or cameras.json"), True,
+                                   imgui.WindowFlags_.no_collapse.value)
         if opened:
             d: Path = b["dir"]
             if imgui.button("Up"):
@@ -69,7 +88,7 @@ class FileDialogs:
                 t = Path(typed).expanduser()
                 if t.is_dir():
                     b["dir"] = t
-                elif t.exists():
+                elif t.exists() and not folders:
                     self._choose(t)
             imgui.begin_child("files", (0, -32))
             try:
@@ -81,16 +100,19 @@ class FileDialogs:
                 if e.name.startswith("."):
                     continue
                 is_dir = e.is_dir()
-                if not is_dir and e.suffix.lower() not in SCENE_EXTS:
+                if not is_dir and (folders or e.suffix.lower() not in SCENE_EXTS):
                     continue
                 if imgui.selectable(f"[{e.name}]" if is_dir else e.name, False)[0]:
-                    if is_dir and not (e / "meta.json").exists():  # a folder to enter, not a SOG scene
+                    if is_dir and (folders or not (e / "meta.json").exists()):  # a folder to enter, not a SOG scene
                         b["dir"] = e
                     else:
                         self._choose(e)
                         break
             imgui.end_child()
-            imgui.text_disabled("click a file to open it; a folder with meta.json opens as a SOG scene")
+            if not folders:
+                imgui.text_disabled("click a file to open it; a folder with meta.json opens as a SOG scene")
+            elif imgui.button(f"Open {d.name or d}"):
+                self._choose(d)
         imgui.end()
         if not keep:
             self.browser = None

@@ -56,7 +56,7 @@ SHORTCUTS = (
              (Key("q", "fly_move", (0, 0, -1), held=True), Key("e", "fly_move", (0, 0, 1), held=True))),
     Shortcut("Shift", "fly 4x faster"),
     Shortcut("R", "reset the camera to the default framing", (Key("r", "reset_camera"),)),
-    Shortcut("[ ]", "previous / next training camera",
+    Shortcut("[ ]", "previous / next dataset view of the listed split (Dataset panel), else training camera",
              (Key("left_bracket", "step_camera", (-1,), repeat=True),
               Key("right_bracket", "step_camera", (1,), repeat=True))),
     Shortcut("U", "next up axis (-y, +y, +z, -z)", (Key("u", "next_up"),)),
@@ -71,7 +71,7 @@ SHORTCUTS = (
     Shortcut("V", "split view in the pane under the cursor (drag the line)", (Key("v", "toggle_split"),)),
     Shortcut("X / Shift+X", "difference to pane A / error view (difference to the reference) in the pane under the "
              "cursor", (Key("x", "toggle_difference", shift=False), Key("x", "toggle_error", shift=True))),
-    Shortcut("P / Shift+P", "PSNR / SSIM against the reference on the panes / next reference (box, dense)",
+    Shortcut("P / Shift+P", "PSNR / SSIM against the reference on the panes / next reference (box, dense, photo)",
              (Key("p", "toggle_fidelity", shift=False), Key("p", "next_reference", shift=True))),
     Shortcut("L", "magnifier loupe under the cursor", (Key("l", "toggle_loupe"),)),
     Shortcut("I", "information overlay on the panes", (Key("i", "toggle_info"),)),

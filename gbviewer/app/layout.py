@@ -1,5 +1,5 @@
-"""Where things go in the window: pane rectangles (a row or a 2x2 grid), the loupe's texture window, the two parts
-of a split pane."""
+"""Where things go in the window: pane rectangles (a row or a 2x2 grid, letterboxed to a photo's aspect), the loupe's
+texture window, the two parts of a split pane."""
 
 from __future__ import annotations
 
@@ -39,6 +39,12 @@ def pane_rects(x: int, y: int, w: int, h: int, n: int, layout: str = "row", gap:
         y1 = y + ((r + 1) * (h + gap)) // rows - gap
         out.append(Rect(x0, y0, max(1, x1 - x0), max(1, y1 - y0)))
     return out
+
+
+def fit_aspect(r: Rect, aspect: float) -> Rect:
+    """The largest rectangle of `aspect` (width / height) centred in `r` (a pane letterboxed to a photo's shape)."""
+    w, h = min(r.w, max(1, round(r.h * aspect))), min(r.h, max(1, round(r.w / aspect)))
+    return Rect(r.x + (r.w - w) // 2, r.y + (r.h - h) // 2, w, h)
 
 
 def loupe_uv(u: float, v: float, pane_w: int, pane_h: int, radius_px: float, zoom: float

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from .keys import hint, label
+from .panel.dataset import open_dataset_dialog
 
 if TYPE_CHECKING:
     from .window import ViewerApp
@@ -24,6 +25,8 @@ def draw_menu(app: ViewerApp) -> None:
     if imgui.begin_menu("File"):
         if _item("Open scene or cameras.json...", "open_dialog"):
             app.open_dialog()
+        if imgui.menu_item("Open dataset...", "", False)[0]:
+            open_dataset_dialog(app)
         if imgui.begin_menu("Open recent", bool(s.recent)):
             for r in s.recent:
                 if imgui.menu_item(r, "", False, Path(r).exists())[0]:
@@ -57,9 +60,10 @@ def draw_menu(app: ViewerApp) -> None:
             state.toggle_fly()
         if _item("Orthographic", "toggle_projection", selected=s.projection == "orthographic"):
             state.toggle_projection()
-        if _item("Next training camera", "step_camera", 1, enabled=bool(state.cameras)):
+        views = bool(state.cameras) or state.dataset.dataset is not None
+        if _item("Next training camera or dataset view", "step_camera", 1, enabled=views):
             state.step_camera(1)
-        if _item("Previous training camera", "step_camera", -1, enabled=bool(state.cameras)):
+        if _item("Previous training camera or dataset view", "step_camera", -1, enabled=views):
             state.step_camera(-1)
         imgui.end_menu()
     if imgui.begin_menu("Help"):

@@ -10,6 +10,7 @@ from imgui_bundle import imgui
 
 from ..camera import format_rate
 from ..render import AUTO
+from .analysis import shows_photo
 from .layout import loupe_uv
 from .panes import pane_fps
 from .state import PaneState
@@ -57,7 +58,8 @@ def banner(app: ViewerApp, dl, s: str, y: float, colour: int) -> None:
 
 
 def pane_label(app: ViewerApp, p: PaneState, part: str) -> str:
-    """'A  scalar  x1/4  106x186': pane, mode (as rendered), rate, render size, debug view."""
+    """'A  scalar  x1/4  106x186': pane, mode (as rendered), rate, render size, debug view; showing the photo:
+    'A  photo v00  x1/4  32x25'."""
     state = app.state
     ps = state.settings.panes[p.index]
     shown = p.parts[part]
@@ -68,6 +70,8 @@ def pane_label(app: ViewerApp, p: PaneState, part: str) -> str:
     rate = format_rate(job.info.get("rate", state.settings.rate))
     w, h = job.info.get("full_size", (job.camera.width, job.camera.height))
     name = p.name + ("'" if part == "b" else "")
+    if shows_photo(shown):
+        return f"{name}  {shown.legend}"
     view = f"  [{shown.view}]" if shown.view and shown.view != "color" else ""
     return f"{name}  {label}  {rate}  {w}x{h}{view}"
 
@@ -128,7 +132,7 @@ def draw_pane_overlays(app: ViewerApp) -> None:
                 text(app, dl, xx, y, "rendering...", GREY, align_right=right)
             if shown.error:
                 text(app, dl, r.x + 4, r.y + r.h / 2, shown.error[:120], RED)
-            if shown.legend:
+            if shown.legend and not shows_photo(shown):  # (the photo's legend is its label)
                 text(app, dl, xx, r.y + 56, shown.legend, ACCENT, align_right=right)
         if state.settings.show_info:
             lines = [line for part in parts if p.parts[part].frame is not None for line in stats_lines(p, part)]

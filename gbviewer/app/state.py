@@ -16,7 +16,8 @@ from ..errors import GBViewerError
 from ..render import Frame, Mode, RenderSettings
 from ..scene import Scene
 from .camera_control import CameraController
-from .layout import PANEL_W, Rect, pane_rects
+from .dataset import DatasetViews
+from .layout import PANEL_W, Rect, fit_aspect, pane_rects
 from .loading import SceneLoader
 from .rates import clamp_rate, render_size, step_rate
 from .recording import VideoJob
@@ -106,6 +107,7 @@ class AppState:
         self.cameras: list[Camera] = []
         self.cameras_path: Path | None = None
         self.cam_index = -1
+        self.dataset = DatasetViews(self.message)  # the training photos, their views, the snapped one
         self.loader: SceneLoader | None = None
         self.load_error = self.load_error_short = ""
         self.fly = False
@@ -202,12 +204,38 @@ class AppState:
         self.moved()
 
     def step_camera(self, direction: int) -> None:
-        """Snap to the next (direction 1) or previous (-1) training camera."""
+        """Snap to the next (direction 1) or previous (-1) view: of the dataset's listed views when a dataset is
+        open, else of the training cameras."""
+        if self.dataset.dataset is not None:
+            index = self.dataset.next_index(direction)
+            if index is None:
+                named = f" named with '{self.dataset.name_filter}'" if self.dataset.name_filter.strip() else ""
+                self.message(f"no {self.dataset.split} views{named} in the dataset", "warn")
+            else:
+                self.snap_view(index)
+            return
         if not self.cameras:
             self.message("no training cameras: open a cameras.json (or put one next to the scene)", "warn")
             return
         self.cam_index = (self.cam_index + direction) % len(self.cameras)
-        cam = self.cameras[self.cam_index]
+        self._snap(self.cameras[self.cam_index])
+
+    def snap_view(self, index: int) -> None:
+        """Snap to the dataset's view `index` (perspective, as photos are): while the camera stays, every pane
+        renders the photo's camera at the rate, letterboxed to the photo's aspect (`photo_camera`)."""
+        self.settings.projection = self.controller.projection = "perspective"
+        self.cam_index = -1
+        self._snap(self.dataset.dataset.views[index].camera)
+        view = self.dataset.snapped_to(index, self.controller.state())
+        self._size_panes()
+        self.message(f"{view.split} view {view.name} ({view.camera.width}x{view.camera.height} photo)")
+
+    def photo_camera(self) -> Camera | None:
+        """While snapped to a dataset view: the camera every pane renders (the photo's at the rate); else None."""
+        return self.dataset.camera(self.controller.state(), self.settings.rate)
+
+    def _snap(self, cam: Camera) -> None:
+        """Take `cam`'s pose and field of view, orbiting about the scene's centre."""
         if self.scene is not None:
             lo, hi = self.scene.robust_bounds()
             self.controller.centre = (np.asarray(lo, np.float64) + hi) / 2
@@ -256,6 +284,7 @@ class AppState:
 
     def set_rate(self, rate: float) -> None:
         self.settings.rate = clamp_rate(rate)
+        self._size_panes()
 
     def step_rate(self, direction: int) -> None:
         self.set_rate(step_rate(self.settings.rate, direction))
@@ -317,15 +346,29 @@ class AppState:
         self.scale = scale
         self.viewport = v = Rect(PANEL_W, int(top), max(1, int(width) - PANEL_W), max(1, int(height - top - bottom)))
         rects = pane_rects(v.x + 4, v.y + 4, v.w - 8, v.h - 8, self.settings.pane_count, self.settings.layout)
+        photo = self.photo_camera()
         for p, r in zip(self.panes, rects):
-            p.rect = r
-            p.render_size = render_size(round(r.w * scale[0]), round(r.h * scale[1]), self.settings.rate)
+            p.rect = r if photo is None else fit_aspect(r, photo.width / photo.height)
+        self._size_panes()
+
+    def _size_panes(self) -> None:
+        """Each pane's render size at the current rate (the photo's while snapped to a dataset view); also after a
+        change of rate or a snap between two layouts, so that the requests of that frame say the size they have."""
+        photo = self.photo_camera()
+        for p in self.panes:
+            p.render_size = ((photo.width, photo.height) if photo is not None else
+                             render_size(round(p.rect.w * self.scale[0]), round(p.rect.h * self.scale[1]),
+                                         self.settings.rate))
 
     def pane_at(self, x: float, y: float) -> int | None:
         return next((p.index for p in self.visible if p.rect.contains(x, y)), None)
 
     def pane_camera(self, i: int, preview: float = 1.0) -> Camera:
-        """The camera pane i renders with at the current rate (x `preview` while moving)."""
+        """The camera pane i renders with at the current rate (x `preview` while moving); snapped to a dataset view,
+        the photo's."""
+        photo = self.photo_camera()
+        if photo is not None:
+            return photo if preview == 1.0 else photo.at_sampling_rate(preview)
         r = self.panes[i].rect
         base = self.controller.camera(round(r.w * self.scale[0]), round(r.h * self.scale[1]))
         return base.at_sampling_rate(self.settings.rate * preview)

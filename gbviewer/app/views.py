@@ -1,6 +1,6 @@
 """What a pane shows of a frame (colour or a debug plane: alpha, transmittance, Gaussian Blending's window size,
-evaluations per pixel, false-coloured with viridis) and the 16-bit PNG of a pane's render. The difference and error
-views need more than the frame: `analysis.PaneAnalysis` colours them (here they show the frame's colour)."""
+evaluations per pixel, false-coloured with viridis) and the 16-bit PNG of a pane's render. The difference, error and
+photo views need more than the frame: `analysis.PaneAnalysis` makes them (here they show the frame's colour)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import zlib
 
 import numpy as np
 
-VIEWS = ("color", "alpha", "transmittance", "window", "evals", "difference", "error")
+VIEWS = ("color", "alpha", "transmittance", "window", "evals", "difference", "error", "photo")
 VIEW_HELP = {
     "color": "the image",
     "alpha": "accumulated alpha (1 - final transmittance), black 0 to white 1",
@@ -17,7 +17,9 @@ VIEW_HELP = {
     "window": "Gaussian Blending's final window size per pixel (sqrt(w*h), output pixels), viridis 0..max",
     "evals": "splats evaluated per pixel, viridis 0..max",
     "difference": "this pane minus pane A (mean over RGB; blue: darker, red: brighter), colour bar in the pane",
-    "error": "this pane minus the reference chosen in 'Difference and error' (box-downsampled x1 or dense 8x8)",
+    "error": "this pane minus the reference chosen in 'Difference and error' (box-downsampled x1, dense 8x8 or the "
+             "photo)",
+    "photo": "the snapped dataset view's photo at the rate (box-downsampled, alpha-aware) instead of the render",
 }
 
 _VIRIDIS = np.array([[0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.530], [0.207, 0.372, 0.553],

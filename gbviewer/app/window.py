@@ -40,12 +40,13 @@ from .worker import RenderWorker  # noqa: E402
 
 
 class ViewerApp:
-    """The viewer window. `ViewerApp(path).run()` is `gbviewer [SCENE]`."""
+    """The viewer window. `ViewerApp(path).run()` is `gbviewer [SCENE]`; `data`, `images`: a training dataset
+    opened beside it (`gbviewer SCENE --data DATASET --images images_4`)."""
 
     def __init__(self, scene_path: str | Path | None = None, settings_file: Path | None = None,
                  size: tuple[int, int] | None = None, visible: bool = True, persist: bool = True,
                  cameras: str | Path | None = None, projection: str | None = None,
-                 backend: str | None = None) -> None:
+                 backend: str | None = None, data: str | Path | None = None, images: str = "images") -> None:
         self.settings_file = settings_file
         self.persist = persist
         settings, warning = load_settings(settings_file)
@@ -69,6 +70,8 @@ class ViewerApp:
         self.analysis = PaneAnalysis(self.state, self.worker)  # difference and error views, PSNR/SSIM
         self.panes = PaneRenders(self.state, self.worker, self.ctx, self.analysis.visualize)
         self.state.open(scene_path or DEFAULT_SCENE)
+        if data is not None:
+            self.state.dataset.open(data, images)  # its views and photos (app/dataset.py)
 
     # ---- window and GL ------------------------------------------------------------------------------------------
 
@@ -206,6 +209,7 @@ class ViewerApp:
             glfw.set_window_title(self.window, f"gbviewer - {opened.name}")
             if first:
                 self.frame_count = 0
+        self.state.dataset.poll()
         self.panes.poll()
         self.analysis.update()
         self.dialogs.poll()

@@ -15,14 +15,19 @@ SCENE_SUFFIXES = (".ply", ".splat", ".spz", ".sog")
 MAX_WORKERS = 1024
 
 
-def add_eval_args(p: argparse.ArgumentParser) -> None:
-    """The arguments of `gbviewer eval` (every number through argtypes)."""
-    p.add_argument("scenes", nargs="+", metavar="SCENE", help="a scene file (with --data), SCENE:DATASET, or a "
-                   "folder of scene files (with --data: a folder holding a dataset named as each scene)")
+def add_dataset_args(p: argparse.ArgumentParser) -> None:
+    """--data and --images: a scene's training dataset (`gbviewer eval`, and the viewer's photo pane)."""
     p.add_argument("--data", type=Path, help="the dataset: a COLMAP capture (sparse/0 and images/), a Blender "
                    "folder (transforms_train/test.json) or a 3DGS cameras.json (with its photos in --images)")
     p.add_argument("--images", default="images", help="photo folder of a COLMAP capture or a cameras.json, beside "
                    "it (default images; images_4 for quarter-size photos: x1 is the photos' resolution)")
+
+
+def add_eval_args(p: argparse.ArgumentParser) -> None:
+    """The arguments of `gbviewer eval` (every number through argtypes)."""
+    p.add_argument("scenes", nargs="+", metavar="SCENE", help="a scene file (with --data), SCENE:DATASET, or a "
+                   "folder of scene files (with --data: a folder holding a dataset named as each scene)")
+    add_dataset_args(p)
     p.add_argument("--modes", default="scalar,mip,analytic,gaussian_blending",
                    help="comma-separated MODE or MODE:N (N x N supersampling)")
     p.add_argument("--rates", type=Rate(many=True), default="1,1/2,1/4,1/8",

@@ -1,4 +1,5 @@
-"""Fixtures of the viewer tests: an Xvfb server (Mesa llvmpipe) for the tests that open the real window."""
+"""Fixtures of the viewer tests: an Xvfb server (Mesa llvmpipe) for the tests that open the real window, and a small
+synthetic training dataset for the photo pane."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ import shutil
 
 import pytest
 
+from dataset_builders import shots, write_colmap
 from helpers import skip_or_fail
 from soak_viewer import xvfb_display
 
@@ -17,3 +19,10 @@ def xvfb():
         skip_or_fail("Xvfb is not installed (apt-get install xvfb; scripts/setup.sh installs it)")
     with xvfb_display() as display:
         yield display
+
+
+@pytest.fixture(scope="session")
+def capture(bundled_scene, tmp_path_factory):
+    """A COLMAP capture of the bundled scene (tests/dataset_builders.py): 9 photos of 130x100, v00 and v08 test."""
+    pytest.importorskip("pycolmap")
+    return write_colmap(tmp_path_factory.mktemp("capture"), shots(bundled_scene))

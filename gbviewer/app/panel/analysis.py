@@ -8,7 +8,8 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from ...analysis import REFERENCES, ROBUST_PERCENTILE
+from ...analysis import ROBUST_PERCENTILE
+from ..analysis import REFERENCE_KINDS
 from ..keys import hint
 
 if TYPE_CHECKING:
@@ -19,14 +20,16 @@ def draw(app: ViewerApp) -> None:
     state, analysis = app.state, app.analysis
     o = analysis.options
     imgui.text_disabled(f"{hint('toggle_difference')}: pane - pane A   {hint('toggle_error')}: pane - reference")
-    kinds = list(REFERENCES)
+    kinds = list(REFERENCE_KINDS)
     imgui.set_next_item_width(220)
-    ch, k = imgui.combo("reference", kinds.index(o.reference), [f"{n}: {REFERENCES[n]}" for n in kinds])
+    ch, k = imgui.combo("reference", kinds.index(o.reference), [f"{n}: {REFERENCE_KINDS[n]}" for n in kinds])
     if ch:
         analysis.set_reference(kinds[k])
     if imgui.is_item_hovered():
         imgui.set_tooltip("box: the x1 scalar render box-downsampled by k at rate 1/k (what gbviewer bench uses)\n"
-                          "dense: scalar with 8x8 supersampling at the current rate (any rate, 64x the work)")
+                          "dense: scalar with 8x8 supersampling at the current rate (any rate, 64x the work)\n"
+                          "photo: the snapped dataset view's photo box-downsampled to the rate (x1/k; snapping to a "
+                          "view chooses it)")
     ch, on = imgui.checkbox(f"PSNR / SSIM on the panes ({hint('toggle_fidelity')})", o.fidelity)
     if ch:
         analysis.toggle_fidelity()

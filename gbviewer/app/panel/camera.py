@@ -36,7 +36,9 @@ def draw(app: ViewerApp) -> None:
         imgui.set_next_item_width(170)
         _, s.fly_speed = imgui.slider_float("fly speed", s.fly_speed, 0.05, 5.0, "%.2f radii/s",
                                             imgui.SliderFlags_.logarithmic.value)
-    if state.cameras:
+    if state.dataset.dataset is not None:
+        imgui.text_disabled(f"{hint('step_camera', -1)} {hint('step_camera', 1)} step the dataset's views (Dataset)")
+    elif state.cameras:
         if imgui.arrow_button("##prev", imgui.Dir.left):
             state.step_camera(-1)
         imgui.same_line()
