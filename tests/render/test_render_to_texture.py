@@ -134,8 +134,8 @@ def test_cuda_wrapper_passes_the_texture_and_the_render_arguments(bundled_scene,
     class Native(FakeNative):
         def render_to_gl_texture(self, texture, *args):
             self._call("render_to_gl_texture")
-            assert texture == 7 and len(args) == (17 if spec == "duplex" else 13)  # + the oit globals
-            _native_cuda.check_render_args(*args[:13], False, *args[13:])
+            assert texture == 7 and len(args) == (18 if spec == "duplex" else 14)  # + the oit globals
+            _native_cuda.check_render_args(*args[:14], False, *args[14:])
             return dict(preprocess_ms=1.0, sort_ms=2.0, blend_ms=3.0, visible=5, sort_length=6, pairs=7,
                         evaluations=96, cells_visible=2, cell_misses=1)
 
