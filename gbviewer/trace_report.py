@@ -1,5 +1,6 @@
 """Pixel traces for people and files: `gbviewer trace`'s rich tables (one per mode: the top contributors, the
-rejections counted by reason, the colour and transmittance) and its JSON file."""
+rejections counted by reason, the colour and transmittance) and its JSON file; the viewer's CSV of them (one row
+per step)."""
 
 from __future__ import annotations
 
@@ -80,3 +81,40 @@ def write_traces(path: Path, traces: list[PixelTrace], scene: str, force: bool =
     gives)."""
     doc = {"scene": scene, "traces": [t.to_dict() for t in traces]}
     return atomic_write(path, lambda p: p.write_text(json.dumps(doc)), force)
+
+
+# TraceStep fields holding tuples: one CSV column per element, named field_suffix
+_SPLIT = {"color": ("r", "g", "b"), "mean": ("x", "y"), "conic": ("a", "b", "c"), "covariance": ("xx", "xy", "yy"),
+          "window_center": ("x", "y"), "window_size": ("w", "h")}
+CSV_COLUMNS = ("pane", "mode", "x", "y", "supersample") + tuple(
+    f"{f}_{s}" if f in _SPLIT else f for f in TraceStep._fields for s in _SPLIT.get(f, ("",)))
+
+
+def csv_rows(traces: list[tuple[str, PixelTrace]]) -> list[list]:
+    """One row per step of every (pane, trace), CSV_COLUMNS in order: the pane's name, the trace's mode, pixel and
+    supersampling, then the step's fields (tuples split into one column each; "" where a field does not apply)."""
+    rows = []
+    for pane, trace in traces:
+        head = [pane, trace.mode, trace.x, trace.y, trace.supersample]
+        for step in trace.steps:
+            row = list(head)
+            for f, v in zip(TraceStep._fields, step):
+                if f in _SPLIT:
+                    row += [""] * len(_SPLIT[f]) if v is None else list(v)
+                else:
+                    row.append("" if v is None else v)
+            rows.append(row)
+    return rows
+
+
+def write_traces_csv(path: Path, traces: list[tuple[str, PixelTrace]], force: bool = False) -> Path:
+    """The steps of every (pane, trace) as CSV (`csv_rows` under a CSV_COLUMNS header)."""
+    import csv
+
+    def write(p: Path) -> None:
+        with open(p, "w", newline="") as fh:
+            out = csv.writer(fh)
+            out.writerow(CSV_COLUMNS)
+            out.writerows(csv_rows(traces))
+
+    return atomic_write(path, write, force)

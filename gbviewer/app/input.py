@@ -1,4 +1,5 @@
-"""Mouse and keyboard: the camera gestures and the split divider on the panes, and the keys of `keys.KEYS`."""
+"""Mouse and keyboard: the camera gestures, the split divider and Ctrl+click (pin a pixel) on the panes, and the keys of
+`keys.KEYS`."""
 
 from __future__ import annotations
 
@@ -31,6 +32,8 @@ def handle_mouse(app: ViewerApp) -> None:
         state.hover = (over, (mx - r.x) / r.w, (my - r.y) / r.h)
     elif not io.want_capture_mouse:
         state.hover = None
+    if over is not None and io.key_ctrl and imgui.is_mouse_clicked(0):  # Ctrl+click: inspect this pixel
+        app.inspector.pin_at(*state.hover)
     panes = state.settings.panes
     if state.dragging_split is not None:
         if imgui.is_mouse_down(0):

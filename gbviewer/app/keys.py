@@ -1,10 +1,10 @@
 """The key map: one table that drives key handling (`input.handle_keys`), the menus' shortcut hints and the F1 help.
 
 Each row of SHORTCUTS is one line of the help: its label and text, and the keys that trigger actions. An action is
-the name of a method of `state.AppState`, `window.ViewerApp` or `analysis.PaneAnalysis`, called with the key's
-`args`. Rows without keys describe mouse gestures; keys marked `held` act every frame they are down (fly mode), the
-others once per press (or repeatedly, with `repeat`). Key names are the members of `imgui.Key` (kept as text here:
-no imgui import).
+the name of a method of `state.AppState`, `window.ViewerApp`, `analysis.PaneAnalysis` or `inspector.Inspector`,
+called with the key's `args`. Rows without keys describe mouse gestures; keys marked `held` act every frame they are
+down (fly mode), the others once per press (or repeatedly, with `repeat`). Key names are the members of `imgui.Key`
+(kept as text here: no imgui import).
 """
 
 from __future__ import annotations
@@ -74,11 +74,14 @@ SHORTCUTS = (
     Shortcut("P / Shift+P", "PSNR / SSIM against the reference on the panes / next reference (box, dense, photo)",
              (Key("p", "toggle_fidelity", shift=False), Key("p", "next_reference", shift=True))),
     Shortcut("L", "magnifier loupe under the cursor", (Key("l", "toggle_loupe"),)),
+    Shortcut("T / Ctrl+click", "pin the pixel under the cursor in every pane and inspect its traces (T again or Esc "
+             "unpins)", (Key("t", "toggle_pin"),)),
     Shortcut("I", "information overlay on the panes", (Key("i", "toggle_info"),)),
     Shortcut("F12", "screenshot of the window (PNG)", (Key("f12", "screenshot_window", shift=False),)),
     Shortcut("Shift+F12", "screenshot of the pane under the cursor (16-bit PNG at render resolution)",
              (Key("f12", "screenshot_hovered_pane", shift=True),)),
-    Shortcut("Esc", "close help, leave fly mode; else cancel a scene load", (Key("escape", "escape", ctrl=None),)),
+    Shortcut("Esc", "close help, leave fly mode, unpin the inspected pixel; else cancel a scene load",
+             (Key("escape", "escape", ctrl=None),)),
     Shortcut("Ctrl+Q", "quit", (Key("q", "quit", ctrl=True),)),
 )
 

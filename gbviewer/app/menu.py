@@ -52,6 +52,8 @@ def draw_menu(app: ViewerApp) -> None:
             state.toggle_loupe()
         if _item("Information overlay", "toggle_info", selected=s.show_info):
             state.toggle_info()
+        if _item("Pixel inspector", "toggle_pin", selected=app.inspector.pin is not None):
+            app.inspector.toggle_pin()
         imgui.end_menu()
     if imgui.begin_menu("Camera"):
         if _item("Reset", "reset_camera"):

@@ -20,14 +20,14 @@ def shot_dir(state: AppState) -> Path:
     return Path(state.settings.screenshot_dir or Path.cwd() / "screenshots").expanduser()
 
 
-def shot_name(state: AppState, what: str) -> Path:
-    """A new file in the screenshot folder: <scene>-<what>-<date>-<time>[-k].png."""
+def shot_name(state: AppState, what: str, suffix: str = ".png") -> Path:
+    """A new file in the screenshot folder: <scene>-<what>-<date>-<time>[-k]<suffix>."""
     stem = state.scene_path.stem if state.scene_path else "gbviewer"
     base = shot_dir(state) / f"{stem}-{what}-{time.strftime('%Y%m%d-%H%M%S')}"
-    path, k = base.with_suffix(".png"), 1
+    path, k = base.parent / f"{base.name}{suffix}", 1
     while path.exists():
         k += 1
-        path = base.parent / f"{base.name}-{k}.png"
+        path = base.parent / f"{base.name}-{k}{suffix}"
     return path
 
 

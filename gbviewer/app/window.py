@@ -31,6 +31,8 @@ from .blit import Blitter  # noqa: E402
 from .dialogs import FileDialogs, draw_help  # noqa: E402
 from .display import SharedContext, requested_path  # noqa: E402
 from .input import handle_input  # noqa: E402
+from .inspector import Inspector  # noqa: E402
+from .inspector_view import draw_inspector  # noqa: E402
 from .menu import draw_menu  # noqa: E402
 from .panel import draw_panel  # noqa: E402
 from .panes import PaneRenders  # noqa: E402
@@ -69,6 +71,7 @@ class ViewerApp:
         self.worker = RenderWorker(self.shared)
         self.analysis = PaneAnalysis(self.state, self.worker)  # difference and error views, PSNR/SSIM
         self.panes = PaneRenders(self.state, self.worker, self.ctx, self.analysis.visualize)
+        self.inspector = Inspector(self.state)  # the pinned pixel's traces
         self.state.open(scene_path or DEFAULT_SCENE)
         if data is not None:
             self.state.dataset.open(data, images)  # its views and photos (app/dataset.py)
@@ -185,6 +188,7 @@ class ViewerApp:
         handle_input(self)
         draw_menu(self)
         draw_panel(self)
+        draw_inspector(self)
         self.panes.queue_images(self.blit_panes)
         overlays.draw_pane_overlays(self)
         draw_analysis_overlays(self)
@@ -212,6 +216,7 @@ class ViewerApp:
         self.state.dataset.poll()
         self.panes.poll()
         self.analysis.update()
+        self.inspector.update()
         self.dialogs.poll()
         self.state.poll_video()
 
@@ -238,6 +243,7 @@ class ViewerApp:
             self.state.video.cancel(wait=10.0)
         self.worker.stop()
         self.analysis.stop()
+        self.inspector.stop()
         self.panes.release()
         self.blit_panes.release()
         self.blit_loupe.release()
@@ -263,17 +269,20 @@ class ViewerApp:
     # ---- actions that need the window (the others are AppState's) -----------------------------------------------
 
     def action(self, name: str) -> Callable:
-        """The method a key-map action names: the window's, else the analysis views' or the state's."""
-        return getattr(self, name, None) or getattr(self.analysis, name, None) or getattr(self.state, name)
+        """The method a key-map action names: the window's, else the analysis views', the inspector's or the
+        state's."""
+        return (getattr(self, name, None) or getattr(self.analysis, name, None) or getattr(self.inspector, name, None)
+                or getattr(self.state, name))
 
     def open_dialog(self) -> None:
         """The system's file dialog (or the built-in browser) to open a scene or a cameras.json."""
         self.dialogs.open(self.state.scene_path.parent if self.state.scene_path else Path.cwd())
 
     def escape(self) -> None:
-        """Close the help and the built-in browser, leave fly mode."""
+        """Close the help and the built-in browser, leave fly mode, unpin the inspected pixel."""
         self.state.escape()
         self.dialogs.close()
+        self.inspector.unpin()
 
     def quit(self) -> None:
         glfw.set_window_should_close(self.window, True)

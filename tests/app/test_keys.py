@@ -9,6 +9,7 @@ import pytest
 
 from gbviewer.app import keys
 from gbviewer.app.analysis import PaneAnalysis
+from gbviewer.app.inspector import Inspector
 from gbviewer.app.state import AppState
 
 APP = Path(keys.__file__).resolve().parent
@@ -26,7 +27,8 @@ def window_actions() -> set[str]:
 def test_every_key_names_an_action_that_takes_its_args():
     windowed = window_actions()
     for k in keys.KEYS:
-        method = getattr(AppState, k.action, None) or getattr(PaneAnalysis, k.action, None)
+        method = (getattr(AppState, k.action, None) or getattr(PaneAnalysis, k.action, None)
+                  or getattr(Inspector, k.action, None))
         if method is None:
             assert k.action in windowed, f"{k.key}: no action {k.action!r}"
             continue

@@ -1,0 +1,279 @@
+"""The pixel inspector drawn with imgui (`inspector.Inspector` holds its state): the pinned pixel outlined on every
+pane, and the Inspector window with the traces of the pane parts side by side (or one alone): per pane the rendered
+colour and T, the list entries and rejections by reason, a drawing of the pixel square with the splats' ellipses at
+their cut-off (gaussian_blending: the transmittance window after each step) stepped through with a slider, and a
+table of the steps (largest weight first, or in blend order); buttons export the traces as JSON and CSV."""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_left
+from typing import TYPE_CHECKING
+
+from imgui_bundle import imgui
+
+from ..render import PixelTrace, TraceStep
+from .inspector import Entry, Inspector, pixel_box, render_pixel
+from .keys import hint
+from .overlays import GREY, WHITE, YELLOW, col
+
+if TYPE_CHECKING:
+    from .window import ViewerApp
+
+MARK_MIN = 7.0  # display pixels: the outline of a smaller render pixel (zoomed in) is drawn this big around it
+CANVAS_MAX = 300.0
+TOP_DRAWN = 8  # contributors drawn in their colour (the others faintly)
+WINDOW_COLOUR, PATH_COLOUR, BLACK = col(80, 230, 255), col(80, 230, 255, 140), col(0, 0, 0, 200)
+
+
+def draw_inspector(app: ViewerApp) -> None:
+    """The pin's marks on the panes and, while a pixel is pinned, the Inspector window (its close box unpins)."""
+    insp = app.inspector
+    draw_pin_marks(app)
+    if insp.pin is None:
+        return
+    (x, y), (w, h) = placement(app)
+    imgui.set_next_window_pos((x, y), imgui.Cond_.appearing.value)
+    imgui.set_next_window_size((w, h), imgui.Cond_.appearing.value)
+    expanded, keep = imgui.begin("Inspector", True)
+    if expanded:
+        _contents(app, insp)
+    imgui.end()
+    if not keep:
+        insp.unpin()
+
+
+def placement(app: ViewerApp) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Where the Inspector window opens: over the panes, above or below the pinned pixels (where there is more
+    room; over the lower half when neither side has 40% of the panes' height)."""
+    v, pin = app.state.viewport, app.inspector.pin
+    ys = [p.rect.y + pin[1] * p.rect.h for p in app.state.visible]
+    below, above = v.y + v.h - max(ys) - 24, min(ys) - 24 - v.y
+    if max(below, above) < 0.4 * v.h:
+        return (v.x + 8, v.y + v.h * 0.45), (v.w - 16, v.h * 0.55 - 8)
+    top = max(ys) + 16 if below >= above else v.y + 8
+    return (v.x + 8, top), (v.w - 16, max(below, above))
+
+
+def draw_pin_marks(app: ViewerApp) -> None:
+    """An outline around the pinned render pixel of every visible pane (at its render size at the current rate)."""
+    state, pin = app.state, app.inspector.pin
+    if pin is None or state.scene is None:
+        return
+    dl = imgui.get_background_draw_list()
+    for p in state.visible:
+        r = p.rect
+        w, h = p.render_size
+        x0, y0, x1, y1 = pixel_box(r, *render_pixel(*pin, w, h), w, h)
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        hx, hy = max(x1 - x0, MARK_MIN) / 2 + 1.5, max(y1 - y0, MARK_MIN) / 2 + 1.5  # just outside the pixel
+        dl.push_clip_rect((r.x, r.y), (r.x + r.w, r.y + r.h), True)
+        dl.add_rect((cx - hx - 1, cy - hy - 1), (cx + hx + 1, cy + hy + 1), BLACK, 0.0, 1.5)
+        dl.add_rect((cx - hx, cy - hy), (cx + hx, cy + hy), YELLOW, 0.0, 1.5)
+        dl.pop_clip_rect()
+
+
+def _contents(app: ViewerApp, insp: Inspector) -> None:
+    o = insp.options
+    entries = insp.entries()
+    names = {e.slot: f"{e.name} {e.trace.mode if e.trace is not None else ''}".strip() for e in entries}
+    if o.alone not in names:
+        o.alone = None
+    imgui.set_next_item_width(240)
+    if imgui.begin_combo("##alone", "panes side by side" if o.alone is None else f"pane {names[o.alone]}"):
+        if imgui.selectable("panes side by side", o.alone is None)[0]:
+            o.alone = None
+        for slot, name in names.items():
+            if imgui.selectable(f"pane {name}", o.alone == slot)[0]:
+                o.alone = slot
+        imgui.end_combo()
+    imgui.same_line()
+    o.show_all = imgui.checkbox("all list entries", o.show_all)[1]
+    if imgui.is_item_hovered():
+        imgui.set_tooltip("also the entries skipped by the splat's box (outside_box), never evaluated")
+    imgui.same_line()
+    o.by_weight = imgui.checkbox("largest weight first", o.by_weight)[1]
+    if imgui.button("Export JSON"):
+        insp.export_json()
+    imgui.same_line()
+    if imgui.button("Export CSV"):
+        insp.export_csv()
+    imgui.same_line()
+    if imgui.button(f"Unpin ({hint('toggle_pin')})"):
+        insp.unpin()
+        return
+    imgui.same_line(0, 16)
+    imgui.text_disabled("Ctrl+click a pane to pin another pixel")
+    shown = [e for e in entries if o.alone is None or e.slot == o.alone]
+    gap = imgui.get_style().item_spacing.x
+    width = (imgui.get_content_region_avail().x - gap * (len(shown) - 1)) / max(1, len(shown))
+    for k, e in enumerate(shown):
+        if k:
+            imgui.same_line()
+        imgui.begin_child(f"##trace{e.slot}", (width, 0), imgui.ChildFlags_.borders.value)
+        _entry(app, insp, e)
+        imgui.end_child()
+
+
+def _entry(app: ViewerApp, insp: Inspector, e: Entry) -> None:
+    t = e.trace
+    if t is None:
+        why = e.result.error if e.result is not None else (
+            "tracing..." if e.pixel is not None else "waiting for the pane's final frame")
+        imgui.text(f"{e.name}  {app.state.settings_for(*e.slot).label}")
+        imgui.text_disabled(why)
+        return
+    imgui.text(f"{e.name}  {t.mode}")
+    imgui.same_line()
+    imgui.text_disabled(f"pixel ({t.x}, {t.y}) of {t.width}x{t.height}"
+                        + (f", {t.supersample}x{t.supersample} samples" if t.supersample > 1 else "")
+                        + ("  (stale)" if e.stale else ""))
+    steps = insp.steps(t)
+    blend = insp.order(t, by_weight=False)
+    pos = min(bisect_left(blend, insp.options.step.get(e.slot, 0)), max(0, len(blend) - 1))  # the nearest shown
+    if blend:  # the drawing on the left, the numbers and the slider on its right, the table below
+        avail = imgui.get_content_region_avail()
+        _canvas(insp, t, steps, blend, pos, max(120.0, min(CANVAS_MAX, avail.x * 0.42, avail.y - 110)))
+        imgui.same_line()
+    imgui.begin_group()
+    r, g, b = (min(1.0, max(0.0, c)) for c in t.color)
+    imgui.color_button("##colour", imgui.ImVec4(r, g, b, 1.0), imgui.ColorEditFlags_.no_tooltip.value, (22, 22))
+    imgui.same_line()
+    imgui.text_wrapped(f"RGB {t.color[0]:.4f} {t.color[1]:.4f} {t.color[2]:.4f}   T {t.transmittance:.4g}")
+    added = sum(1 for s in steps if not s.rejected)
+    rejected = sorted(t.rejected_counts().items(), key=lambda kv: -kv[1])
+    imgui.text_wrapped(f"{len(steps)} list entries, {added} added; rejected: "
+                       + (", ".join(f"{why} {n}" for why, n in rejected) or "none"))
+    if e.result is not None and e.result.request.backend != "cpu":
+        imgui.text_disabled(f"traced on the CPU kernel (the pane renders on {e.result.request.backend})")
+    if blend:
+        imgui.set_next_item_width(-1)
+        changed, value = imgui.slider_int("##step", pos + 1, 1, len(blend), f"step %d of {len(blend)} (blend order)")
+        if changed:
+            pos = value - 1
+            insp.options.step[e.slot] = blend[pos]
+        imgui.text_wrapped(_describe(steps[blend[pos]], blend[pos]))
+    else:
+        imgui.text_disabled("no list entries here (all list entries shows the skipped ones)")
+    imgui.end_group()
+    if blend:
+        _table(insp, e, t, steps, blend, pos)
+
+
+def _describe(s: TraceStep, k: int) -> str:
+    what = s.rejected or ("added" + (" (fallback)" if s.fallback else "") + (", stops the pixel" if s.stopped else ""))
+    line = (f"#{k + 1} splat {s.index}  depth {s.depth:.4g}  {what}  alpha {s.alpha:.4f}  weight {s.weight:.4f}  "
+            f"T {s.T_before:.4f} -> {s.T_after:.4f}")
+    if s.window_center is not None:
+        line += (f"  window after: centre {s.window_center[0]:.3f}, {s.window_center[1]:.3f}  size "
+                 f"{s.window_size[0]:.3f} x {s.window_size[1]:.3f}")
+    if s.cell is not None:
+        line += f"  cell {s.cell}  T_cell {s.T_cell:.4f}"
+    return line
+
+
+def _canvas(insp: Inspector, t: PixelTrace, steps: tuple, blend: list[int], pos: int, side: float) -> None:
+    """The pixel square and a margin around it (options.margin), enlarged to `side` display pixels: the added
+    splats' ellipses at their cut-off (the TOP_DRAWN largest weights in their colour, the others faint, the current
+    step's in yellow with its centre), the sample positions, and for gaussian_blending the window after the current
+    step and the path of its centre."""
+    p0 = imgui.get_cursor_screen_pos()
+    imgui.invisible_button("##canvas", (side, side))
+    if imgui.is_item_hovered():
+        insp.zoom(imgui.get_io().mouse_wheel)
+        imgui.set_tooltip(f"{1 + 2 * insp.options.margin:.3g} pixels across; the wheel zooms")
+    dl = imgui.get_window_draw_list()
+    margin = insp.options.margin
+    scale = side / (1 + 2 * margin)
+    ox, oy = t.x - margin, t.y - margin
+
+    def at(x: float, y: float) -> tuple[float, float]:
+        return p0.x + (x - ox) * scale, p0.y + (y - oy) * scale
+
+    dl.push_clip_rect(p0, (p0.x + side, p0.y + side), True)
+    dl.add_rect_filled(p0, (p0.x + side, p0.y + side), col(16, 17, 20))
+    r, g, b = (round(min(1.0, max(0.0, c)) * 255) for c in t.color)
+    dl.add_rect_filled(at(t.x, t.y), at(t.x + 1, t.y + 1), col(r, g, b, 90))
+    n = math.ceil(margin)
+    if n <= 8:  # the pixel grid around the pinned pixel
+        for k in range(-n, n + 2):
+            dl.add_line(at(t.x + k, oy), at(t.x + k, oy + 1 + 2 * margin), col(70, 72, 80))
+            dl.add_line(at(ox, t.y + k), at(ox + 1 + 2 * margin, t.y + k), col(70, 72, 80))
+    dl.add_rect(at(t.x, t.y), at(t.x + 1, t.y + 1), WHITE, 0.0, 2.0)
+    current = blend[pos]
+    top = set(insp.order(t, by_weight=True)[:TOP_DRAWN])
+    for k in sorted(blend, key=lambda k: (k == current, k in top)):  # the current step's on top
+        s = steps[k]
+        if s.rejected and k != current:
+            continue
+        pts = insp.ellipse(t, k)
+        if pts is None:
+            continue
+        sr, sg, sb = (round(min(1.0, max(0.0, c)) * 255) for c in s.color)
+        colour, width = ((YELLOW, 3.0) if k == current else (col(sr, sg, sb, 210), 1.5) if k in top
+                         else (col(sr, sg, sb, 45), 1.0))
+        dl.add_polyline([imgui.ImVec2(*at(*p)) for p in pts], col=colour, thickness=width,
+                        flags=imgui.ImDrawFlags_.closed.value)
+    s = steps[current]
+    mx, my = at(*s.mean)  # its centre; out of view: a ring on the edge towards it
+    inside = p0.x <= mx <= p0.x + side and p0.y <= my <= p0.y + side
+    if inside:
+        dl.add_circle_filled((mx, my), 4.0, YELLOW)
+    elif math.isfinite(mx) and math.isfinite(my):
+        dl.add_circle((min(max(mx, p0.x + 6), p0.x + side - 6), min(max(my, p0.y + 6), p0.y + side - 6)), 5.0,
+                      YELLOW, 0, 2.0)
+    if s.window_center is not None:  # the window's centre, pixel to now (this sample), and the window now
+        path = [at(*t.samples[s.sample].position)] + [at(*steps[k].window_center) for k in blend[:pos + 1]
+                                                     if steps[k].sample == s.sample]
+        if len(path) > 1:
+            dl.add_polyline([imgui.ImVec2(*q) for q in path], col=PATH_COLOUR, thickness=1.5, flags=0)
+        (cx, cy), (w, h) = s.window_center, s.window_size
+        dl.add_rect(at(cx - w / 2, cy - h / 2), at(cx + w / 2, cy + h / 2), WINDOW_COLOUR, 0.0, 2.0)
+    for sample in t.samples:
+        dl.add_circle_filled(at(*sample.position), 2.5, WHITE if sample is t.samples[s.sample] else GREY)
+    dl.pop_clip_rect()
+
+
+def _table(insp: Inspector, e: Entry, t: PixelTrace, steps: tuple, blend: list[int], pos: int) -> None:
+    """Every shown step, one row each (clicking one moves the slider to it), scrolled with a clipper."""
+    window, duplex = steps[0].window_center is not None, steps[0].cell is not None
+    cols = ["#"] + (["sample"] if t.supersample > 1 else []) + ["splat", "depth", "alpha", "weight", "T before",
+                                                                 "T after"]
+    cols += ["window centre", "window size"] if window else []
+    cols += ["cell", "T_cell"] if duplex else []
+    cols += ["note"]  # why it was rejected, or "fallback" (gaussian_blending's scalar alpha)
+    rows = insp.order(t, insp.options.by_weight)
+    flags = (imgui.TableFlags_.scroll_y | imgui.TableFlags_.scroll_x | imgui.TableFlags_.row_bg
+             | imgui.TableFlags_.borders_inner_v
+             | imgui.TableFlags_.sizing_fixed_fit | imgui.TableFlags_.resizable).value
+    height = max(90.0, imgui.get_content_region_avail().y)
+    if not imgui.begin_table("##steps", len(cols), flags, (0, height)):
+        return
+    imgui.table_setup_scroll_freeze(0, 1)
+    for c in cols:
+        imgui.table_setup_column(c)
+    imgui.table_headers_row()
+    clipper = imgui.ListClipper()
+    clipper.begin(len(rows))
+    span = (imgui.SelectableFlags_.span_all_columns | imgui.SelectableFlags_.allow_overlap).value
+    while clipper.step():
+        for k in rows[clipper.display_start:clipper.display_end]:
+            s = steps[k]
+            imgui.table_next_row()
+            imgui.table_next_column()
+            if imgui.selectable(f"{k + 1}##{k}", k == blend[pos], span)[0]:
+                insp.options.step[e.slot] = k
+            cells = ([str(s.sample)] if t.supersample > 1 else []) + [
+                str(s.index), f"{s.depth:.4g}", f"{s.alpha:.4f}", f"{s.weight:.4f}", f"{s.T_before:.4f}",
+                f"{s.T_after:.4f}"]
+            if window:
+                cells += [f"{s.window_center[0]:.3f}, {s.window_center[1]:.3f}",
+                          f"{s.window_size[0]:.3f} x {s.window_size[1]:.3f}"]
+            if duplex:
+                cells += [str(s.cell), f"{s.T_cell:.4f}"]
+            cells.append(s.rejected or ("fallback" if s.fallback else ""))
+            for c in cells:
+                imgui.table_next_column()
+                imgui.text(c)
+    clipper.end()
+    imgui.end_table()
