@@ -92,7 +92,7 @@ def test_backend_defaults_to_auto_and_says_its_choice_once(tmp_path):
 def test_view_passes_an_explicit_backend_to_the_viewer(monkeypatch):
     opened = []
     monkeypatch.setattr("gbviewer.app.open_window",
-                        lambda scene, cameras, projection=None, backend=None: opened.append(backend) or (True, ""))
+                        lambda scene, cameras, backend=None, **_: opened.append(backend) or (True, ""))
     assert main([str(gb.DEFAULT_SCENE), "--backend", "cpu"]) == 0 and main([]) == 0
     assert opened == ["cpu", None]
 
