@@ -40,6 +40,8 @@ from .settings import load_settings, save_settings  # noqa: E402
 from .state import AppState, RateMeter  # noqa: E402
 from .worker import RenderWorker  # noqa: E402
 
+WAITING_FPS = 30  # UI frames a second while renders refine or a load runs (tiles are posted every 0.1 s)
+
 
 class ViewerApp:
     """The viewer window. `ViewerApp(path).run()` is `gbviewer [SCENE]`; `data`, `images`: a training dataset
@@ -68,7 +70,7 @@ class ViewerApp:
         self._pending_screenshot: Path | None = None
         self.dialogs = FileDialogs(self.state.open)
         self._init_window(visible)
-        self.worker = RenderWorker(self.shared)
+        self.worker = RenderWorker(self.shared, on_result=glfw.post_empty_event)  # a result wakes the event loop
         self.analysis = PaneAnalysis(self.state, self.worker)  # difference and error views, PSNR/SSIM
         self.panes = PaneRenders(self.state, self.worker, self.ctx, self.analysis.visualize)
         self.inspector = Inspector(self.state)  # the pinned pixel's traces
@@ -139,16 +141,23 @@ class ViewerApp:
     def run(self) -> None:
         try:
             while not glfw.window_should_close(self.window) and not self.closed:
-                s = self.state
-                busy = (s.moving or s.loader is not None or self.worker.busy() or s.fly
-                        or (s.video is not None and not s.video.finished()))
-                if busy:
-                    glfw.poll_events()
-                else:
-                    glfw.wait_events_timeout(0.1)
+                self.wait_for_events()
                 self.step(poll=False)
         finally:
             self.close()
+
+    def wait_for_events(self) -> None:
+        """Pace the frame loop: no wait while the camera moves (or flies); while only work in the background goes
+        on (renders refining, a load, a video), at most WAITING_FPS frames a second, so that the UI does not take
+        the cores the renders need (their threads run at a lower priority); idle, wake on events or every 0.1 s.
+        Any event ends a wait at once."""
+        s = self.state
+        if s.moving or s.fly:
+            glfw.poll_events()
+        elif s.loader is not None or self.worker.busy() or (s.video is not None and not s.video.finished()):
+            glfw.wait_events_timeout(1.0 / WAITING_FPS)
+        else:
+            glfw.wait_events_timeout(0.1)
 
     def run_frames(self, n: int) -> None:
         for _ in range(n):

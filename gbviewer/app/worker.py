@@ -16,7 +16,7 @@ import threading
 import time
 import traceback
 from dataclasses import dataclass, field
-from typing import Any, Hashable
+from typing import Any, Callable, Hashable
 
 import numpy as np
 
@@ -88,8 +88,11 @@ def scaled_nearest(image: np.ndarray, width: int, height: int) -> np.ndarray:
 class RenderWorker:
     """One thread rendering the latest request per slot, least recently served slot first."""
 
-    def __init__(self, shared: SharedContext | None = None) -> None:
+    def __init__(self, shared: SharedContext | None = None, on_result: Callable[[], None] | None = None) -> None:
+        """`on_result`: called from the render thread after each result is posted (the window wakes its event
+        loop with it, so a frame or its first tiles are drawn at once)."""
         self._shared = shared
+        self._on_result = on_result
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._pending: dict[Hashable, RenderJob] = {}
@@ -261,6 +264,8 @@ class RenderWorker:
             if result.stage == "partial":
                 self._results = [r for r in self._results if not (r.job is result.job and r.stage == "partial")]
             self._results.append(result)
+        if self._on_result is not None:
+            self._on_result()
 
     def _loop(self) -> None:
         lower_priority()
