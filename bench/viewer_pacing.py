@@ -76,6 +76,7 @@ def run(scene: str, cycles: int, orbit_s: float, settle_s: float) -> dict:
         sizes = [p.render_size for p in s.visible]
         frame_ms: list[float] = []
         first_tiles: list[float] = []
+        breakdown: list[dict] = []  # where the time to the first tiles went, per cycle
         finals: list[float] = []
         def orbit(seconds: float) -> None:  # a steady drag: 4 px per UI frame
             t_end = time.perf_counter() + seconds
@@ -100,6 +101,11 @@ def run(scene: str, cycles: int, orbit_s: float, settle_s: float) -> dict:
                            if p.parts["a"].job is not None and p.parts["a"].job.info["key"] == p.submitted.get("a")]
                 if seen_tiles is None and any(sh.stage in ("refining", "final") for sh in current):
                     seen_tiles = now
+                    first = next(sh for sh in current if sh.stage in ("refining", "final"))
+                    posted = first.pacing.get("tiles", first.pacing.get("final", 0.0))  # request -> posted
+                    breakdown.append({"stop_to_request_ms": (first.job.submitted - t_stop) * 1e3,
+                                      "request_to_posted_ms": posted,
+                                      "posted_to_shown_ms": (now - first.job.submitted) * 1e3 - posted})
                 if not until_final and seen_tiles is not None and now - seen_tiles > 0.2:
                     return
                 if len(current) == len(s.visible) and all(sh.stage == "final" for sh in current):
@@ -119,7 +125,7 @@ def run(scene: str, cycles: int, orbit_s: float, settle_s: float) -> dict:
             "ui_p95_ms": percentile(frame_ms, 0.95), "stale_renders": len(stale),
             "stale_median_ms": statistics.median(stale) if stale else None,
             "stale_max_ms": max(stale) if stale else None,
-            "first_tiles_ms": first_tiles, "final_ms": finals, "targets": TARGETS,
+            "first_tiles_ms": first_tiles, "first_tiles_breakdown": breakdown, "final_ms": finals, "targets": TARGETS,
         }
     finally:
         app.close()
@@ -147,6 +153,14 @@ def markdown(r: dict) -> list[str]:
         shown = "-" if value is None else f"{value:.0f}"
         lines.append(f"| {name} | {shown} | {'' if target is None else f'<= {target:.0f}'} | "
                      f"{'' if target is None else verdict(value, target)} |")
+    parts = r.get("first_tiles_breakdown") or []
+    if parts:
+        med = {k: statistics.median(p[k] for p in parts) for k in parts[0]}
+        lines += ["", f"Where the time to the first tiles goes (medians over {len(parts)} stops): camera stop -> the "
+                  f"full-resolution request {med['stop_to_request_ms']:.0f} ms (the UI frame that notices the stop), "
+                  f"request -> first tiles posted by the render thread {med['request_to_posted_ms']:.0f} ms (the "
+                  f"stale preview stopping, preparation, preprocess, sort and the first centre tiles), posted -> on "
+                  f"screen {med['posted_to_shown_ms']:.0f} ms (upload and draw)."]
     return lines
 
 

@@ -64,6 +64,7 @@ class ViewerApp:
         if warning:
             self.state.message(warning, "error")
         self.frame_count = 0
+        self._submitted_moving = False
         self.ui_fps = RateMeter()
         self.closed = False
         self.last_screenshot: Path | None = None
@@ -152,7 +153,7 @@ class ViewerApp:
         the cores the renders need (their threads run at a lower priority); idle, wake on events or every 0.1 s.
         Any event ends a wait at once."""
         s = self.state
-        if s.moving or s.fly:
+        if s.moving or s.fly or self._submitted_moving:  # (the camera just stopped: ask for full frames at once)
             glfw.poll_events()
         elif s.loader is not None or self.worker.busy() or (s.video is not None and not s.video.finished()):
             glfw.wait_events_timeout(1.0 / WAITING_FPS)
@@ -209,6 +210,7 @@ class ViewerApp:
             imgui.pop_font()
         imgui.render()
         self.panes.submit()
+        self._submitted_moving = self.state.moving  # the requests of this frame were previews
         self._draw(scale)
         glfw.swap_buffers(self.window)
         self.frame_count += 1
