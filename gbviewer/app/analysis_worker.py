@@ -22,9 +22,10 @@ from ..errors import GBViewerError, RenderCancelled
 from ..eval import default_cache, ground_truth
 from ..io.datasets import View
 from ..metrics import zoom_out_factor
-from ..render import Frame, RenderSettings, create_renderer
+from ..render import Frame, RenderSettings
 from ..scene import Scene
 from .panes import MAX_SAMPLES
+from .slot_thread import SlotThread
 
 CACHE_SIZE = 4  # reference renders (and photos) kept
 PHOTO = "photo"  # the reference kind of a dataset view's photo
@@ -67,81 +68,23 @@ class Analysis:
     seconds: float = 0.0
 
 
-class AnalysisThread:
-    """One thread computing the newest request per slot, the longest-waiting slot first."""
+class AnalysisThread(SlotThread):
+    """One thread computing the newest request per slot, the longest-waiting slot first (a newer request of the
+    running slot cancels it); results are (slot, Analysis)."""
+
+    NAME = "gbviewer-analysis"
 
     def __init__(self) -> None:
-        self._lock = threading.Condition()
-        self._pending: dict[Hashable, Request] = {}
-        self._running: Hashable | None = None
-        self._cancel = threading.Event()
-        self._results: list[tuple[Hashable, Analysis]] = []
-        self._stop = self._forget = False
-        self._renderer = None
-        self._scene: Scene | None = None  # the scene uploaded to the renderer, whose references are cached
-        self._cache: dict[tuple, np.ndarray | None] = {}
-        self.computed = 0
-        self._thread = threading.Thread(target=self._loop, name="gbviewer-analysis", daemon=True)
-        self._thread.start()
+        self._cache: dict[tuple, np.ndarray | None] = {}  # references of the uploaded scene
+        super().__init__()
 
-    def submit(self, req: Request) -> None:
-        with self._lock:
-            self._pending.pop(req.slot, None)
-            self._pending[req.slot] = req
-            if self._running == req.slot:
-                self._cancel.set()
-            self._lock.notify()
-
-    def results(self) -> list[tuple[Hashable, Analysis]]:
-        with self._lock:
-            out, self._results = self._results, []
-        return out
-
-    def forget(self) -> None:
-        """Drop what is waiting, stop what runs, and free the scene and the cached references (a new scene is
-        open)."""
-        with self._lock:
-            self._pending.clear()
-            self._cancel.set()
-            self._forget = True
-            self._lock.notify()
-
-    def busy(self) -> bool:
-        with self._lock:
-            return bool(self._pending) or self._running is not None
-
-    def stop(self, timeout: float = 30.0) -> None:
-        with self._lock:
-            self._stop = True
-            self._pending.clear()
-            self._cancel.set()
-            self._lock.notify()
-        self._thread.join(timeout)
-
-    def _loop(self) -> None:
-        while True:
-            with self._lock:
-                while not self._pending and not self._stop and not self._forget:
-                    self._lock.wait()
-                if self._stop:
-                    break
-                if self._forget:
-                    self._forget = False
-                    self._renderer = self._scene = None
-                    self._cache.clear()
-                    continue
-                slot = next(iter(self._pending))
-                req = self._pending.pop(slot)
-                self._running, self._cancel = slot, threading.Event()
-                cancel = self._cancel
-            result = self._analyse(req, cancel)
-            with self._lock:
-                self._running = None
-                if result is not None:
-                    self._results.append((slot, result))
-                    self.computed += 1
-        self._renderer = self._scene = None
+    def _release(self) -> None:
+        super()._release()
         self._cache.clear()
+
+    def _work(self, req: Request, cancel: threading.Event) -> tuple[Hashable, Analysis] | None:
+        result = self._analyse(req, cancel)
+        return None if result is None else (req.slot, result)
 
     def _cached(self, key: tuple, make: Callable[[], np.ndarray | None]) -> np.ndarray | None:
         if key not in self._cache:
@@ -156,12 +99,7 @@ class AnalysisThread:
         t0 = time.perf_counter()
         out, spec, rgb = Analysis(req.frame, req.spec), req.spec, req.frame.rgb
         try:
-            if self._renderer is None:
-                self._renderer = create_renderer("cpu")
-            if self._scene is not req.scene:
-                self._cache.clear()
-                self._renderer.upload(req.scene)
-                self._scene = req.scene
+            self._renderer_for(req.scene)
             cam = camera_key(req.camera)
             if spec.reference == PHOTO:
                 ref = out.photo = self._cached(("photo", req.photo.image, req.rate, req.settings.background),

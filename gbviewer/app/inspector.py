@@ -21,13 +21,14 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import GBViewerError
-from ..render import Frame, PixelTrace, RenderSettings, create_renderer
+from ..render import Frame, PixelTrace, RenderSettings
 from ..scene import Scene
 from ..trace_report import write_traces, write_traces_csv
 from .analysis import is_final
 from .layout import Rect
 from .screenshots import shot_name
 from .settings import PANE_NAMES
+from .slot_thread import SlotThread
 from .state import AppState
 
 Slot = tuple[int, str]  # (pane index, part)
@@ -94,93 +95,31 @@ class TraceResult:
     seconds: float = 0.0
 
 
-class TraceThread:
-    """One thread tracing the newest request per slot, the longest-waiting slot first; `trace` computes one (by
-    default the thread's own CPU renderer's `trace`)."""
+class TraceThread(SlotThread):
+    """One thread tracing the newest request per slot, the longest-waiting slot first (a running trace finishes: it
+    is not cancellable); `trace` computes one (by default the thread's own CPU renderer's `trace`)."""
+
+    NAME = "gbviewer-trace"
+    CANCELS_RUNNING = False
 
     def __init__(self, trace: Callable[[TraceRequest], PixelTrace] | None = None) -> None:
         self._trace = trace or self._trace_cpu
-        self._lock = threading.Condition()
-        self._pending: dict[Hashable, TraceRequest] = {}
-        self._running: TraceRequest | None = None
-        self._results: list[TraceResult] = []
-        self._stop = self._forget = False
-        self._renderer = None
-        self._scene: Scene | None = None
-        self.traced = 0
-        self._thread = threading.Thread(target=self._loop, name="gbviewer-trace", daemon=True)
-        self._thread.start()
+        super().__init__()
 
-    def submit(self, req: TraceRequest) -> None:
-        """Queue `req`, replacing its slot's waiting request (a running trace finishes: it is not cancellable)."""
-        with self._lock:
-            self._pending.pop(req.slot, None)
-            self._pending[req.slot] = req
-            self._lock.notify()
-
-    def results(self) -> list[TraceResult]:
-        with self._lock:
-            out, self._results = self._results, []
-        return out
-
-    def busy(self) -> bool:
-        with self._lock:
-            return bool(self._pending) or self._running is not None
-
-    def clear(self) -> None:
-        """Drop what is waiting."""
-        with self._lock:
-            self._pending.clear()
-
-    def forget(self) -> None:
-        """Drop what is waiting and free the scene the renderer holds (a new scene is open)."""
-        with self._lock:
-            self._pending.clear()
-            self._forget = True
-            self._lock.notify()
-
-    def stop(self, timeout: float = 30.0) -> None:
-        with self._lock:
-            self._stop = True
-            self._pending.clear()
-            self._lock.notify()
-        self._thread.join(timeout)
-
-    def _loop(self) -> None:
-        while True:
-            with self._lock:
-                while not self._pending and not self._stop and not self._forget:
-                    self._lock.wait()
-                if self._stop:
-                    break
-                if self._forget:
-                    self._forget = False
-                    self._renderer = self._scene = None
-                    continue
-                req = self._pending.pop(next(iter(self._pending)))
-                self._running = req
-            t0 = time.perf_counter()
-            try:
-                result = TraceResult(req, self._trace(req))
-            except GBViewerError as exc:
-                result = TraceResult(req, None, str(exc))
-            except Exception as exc:  # noqa: BLE001 - shown in the inspector, never kills the thread
-                traceback.print_exc()
-                result = TraceResult(req, None, f"{type(exc).__name__}: {exc}")
-            result.seconds = time.perf_counter() - t0
-            with self._lock:
-                self._running = None
-                self._results.append(result)
-                self.traced += 1
-        self._renderer = self._scene = None
+    def _work(self, req: TraceRequest, cancel: threading.Event) -> TraceResult:
+        t0 = time.perf_counter()
+        try:
+            result = TraceResult(req, self._trace(req))
+        except GBViewerError as exc:
+            result = TraceResult(req, None, str(exc))
+        except Exception as exc:  # noqa: BLE001 - shown in the inspector, never kills the thread
+            traceback.print_exc()
+            result = TraceResult(req, None, f"{type(exc).__name__}: {exc}")
+        result.seconds = time.perf_counter() - t0
+        return result
 
     def _trace_cpu(self, req: TraceRequest) -> PixelTrace:
-        if self._renderer is None:
-            self._renderer = create_renderer("cpu")
-        if self._scene is not req.scene:
-            self._renderer.upload(req.scene)
-            self._scene = req.scene
-        return self._renderer.trace(req.camera, req.settings, req.x, req.y)
+        return self._renderer_for(req.scene).trace(req.camera, req.settings, req.x, req.y)
 
 
 # ---- the UI side ---------------------------------------------------------------------------------------------------

@@ -74,7 +74,7 @@ def test_a_newer_request_replaces_the_waiting_one_and_cancels_the_running_one(th
         thread.submit(Request("x", bundled_scene, f, small, 0.25, s, Spec("dense")))
     thread.submit(Request("big", bundled_scene, big_frames[1], big, 1.0, s, Spec("dense")))  # cancels the first
     got = wait_results(thread, 2)
-    assert thread.computed == 2 and not thread.busy()
+    assert thread.done == 2 and not thread.busy()
     assert {slot: a.frame for slot, a in got} == {"x": frames[2], "big": big_frames[1]}
 
 
@@ -152,11 +152,11 @@ def test_difference_view_and_psnr_labels(bundled_scene, output_view):
         # a new frame on pane B: its label is stale until analysed, and nothing is asked while the camera moves
         b.frame = gb.render(bundled_scene, cam, "mip")
         state.moved()
-        computed = an.thread.computed
+        computed = an.thread.done
         an.update()
         assert an.fidelity_line((1, "a"))[1] and "(stale)" in an.fidelity_line((1, "a"))[0]
         assert "camera stops" in an.visualize((1, "a"), b.frame, "difference")[1]
-        assert not an.thread.busy() and an.thread.computed == computed
+        assert not an.thread.busy() and an.thread.done == computed
         state.last_move = 0.0
         settle(an)
         assert not an.fidelity_line((1, "a"))[1]

@@ -128,7 +128,7 @@ def test_the_newest_request_per_pane_part_wins():
         results = []
         wait_until(lambda: results.extend(t.results()) or len(results) == 3)
         assert calls == [reqs[0], reqs[3], reqs[4]] and [res.request for res in results] == calls
-        assert not t.busy() and t.traced == 3 and t.results() == []
+        assert not t.busy() and t.done == 3 and t.results() == []
     finally:
         release.set()
         t.stop()
