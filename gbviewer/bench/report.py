@@ -113,12 +113,19 @@ def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow
         ax2.tick_params(axis="x", labelsize=7)
         fig.tight_layout()
         path = plot_path(out_dir, scene)
-        try:
-            atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"), force)
-        finally:
-            plt.close(fig)
+        save_figure(fig, path, force)
         written.append(path)
     return written
+
+
+def save_figure(fig, path: Path, force: bool) -> None:
+    """A matplotlib figure as a PNG, written atomically (refusing to overwrite unless `force`), then closed."""
+    import matplotlib.pyplot as plt
+
+    try:
+        atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"), force)
+    finally:
+        plt.close(fig)
 
 
 def simd_table(rows: list[SpeedRow]) -> tuple[list[str], list[list[str]]]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ..bench.report import machine_description, plot_path, wide_console
+from ..bench.report import machine_description, plot_path, save_figure, wide_console
 from ..camera import format_rate
 from ..io.files import atomic_write
 from .run import EvalResult, mean
@@ -124,9 +124,6 @@ def write_plots(out_dir: Path, result: EvalResult, force: bool = False) -> list[
             ax.set_title(f"{title}: {metric.upper()} against the photos")
             ax.legend(fontsize=8)
         fig.tight_layout()
-        try:
-            atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"), force)
-        finally:
-            plt.close(fig)
+        save_figure(fig, path, force)
         written.append(path)
     return written
