@@ -70,9 +70,10 @@ class CpuRenderer:
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
                on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
         t0 = time.perf_counter()
-        RenderControl(partial=partial).check_partial(camera.width, camera.height)
+        control = RenderControl(cancel, on_progress, partial)
+        control.check_partial(camera.width, camera.height)
         prep = prepare(self._scene, camera, settings, self.name)
-        with RenderControl(cancel, on_progress, partial) as control:
+        with control:
             out = self._native_render(prep, camera, settings, control=control.block if control.active else None,
                                       partial=partial)
         control.check()  # the native render skipped its remaining tiles once the event was set
