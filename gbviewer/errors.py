@@ -48,3 +48,8 @@ class LoadCancelled(Cancelled):
 
 class BackendUnavailable(RenderError):
     """The requested backend cannot run on this machine; the message says why."""
+
+
+class BackendFailed(RenderError):
+    """A backend that was usable stopped working (a lost device, a failed kernel launch, a watchdog timeout): the
+    renderer is marked unusable with this reason (`Renderer.usable()`), and callers move to another backend."""
