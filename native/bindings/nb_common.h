@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "gbv/args.h"
 #include "gbv/camera.h"
 #include "gbv/common.h"
 
@@ -67,16 +68,6 @@ inline Projection check_projection(const char* where, int projection) {
 inline void check_supersample(const char* where, int N) {
     if (N < 1 || N > 8) fail(where, "supersample must be 1..8");
 }
-
-// The per-frame arguments of a render call, checked.
-struct RenderArgs {
-    CameraParams cam;   // at supersample x the output size: supersampling renders there and box-averages
-    Mode mode;
-    int supersample;    // N, 1..8
-    int width, height;  // output size
-    float bg[3];
-    OitParams oit;      // wsr / duplex globals
-};
 
 // The render arguments both modules take (Python: gbviewer.render.prepare.camera_args, then mode, supersample,
 // background and the order-independent globals), checked; a bad one throws std::invalid_argument (ValueError) naming
