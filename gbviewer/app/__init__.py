@@ -1,9 +1,9 @@
 """The desktop viewer (`gbviewer [SCENE]`). `window` (glfw + imgui-bundle + moderngl; imported only when a window is
 opened) composes `state` (scene, panes, settings and the actions on them), `keys` (the key map), `panes` (render
 requests and textures), `display` (frames drawn from GPU memory or copied through host memory), `input`, `menu`,
-`panel/` (one module per section), `overlays`, `analysis_overlay`, `dialogs` and `screenshots`. Without a window:
-`camera_control`, `rates`, `layout`, `views`, `settings`, `analysis` (the difference, error and photo views),
-`dataset` (the training dataset's views, the snapped one), and the threads in `worker` (renders), `analysis_worker`
+`panel/` (one module per section), `overlays`, `difference_overlay`, `dialogs` and `screenshots`. Without a window:
+`camera_control`, `rates`, `layout`, `views`, `settings`, `difference_views` (the difference, error and photo views),
+`dataset` (the training dataset's views, the snapped one), and the threads in `worker` (renders), `difference_thread`
 (differences, references, photos, PSNR/SSIM), `loading` (scenes), `dataset` (datasets) and `recording` (zoom
 videos)."""
 

@@ -24,7 +24,7 @@ from ..errors import GBViewerError
 from ..render import Frame, PixelTrace, RenderSettings
 from ..scene import Scene
 from ..trace_report import write_traces, write_traces_csv
-from .analysis import is_final
+from .difference_views import is_final
 from .layout import Rect
 from .screenshots import shot_name
 from .settings import PANE_NAMES

@@ -10,7 +10,7 @@ from imgui_bundle import imgui
 
 from ..camera import format_rate
 from ..render import AUTO
-from .analysis import shows_photo
+from .difference_views import shows_photo
 from .layout import loupe_uv
 from .panes import pane_fps
 from .state import PaneState

@@ -25,8 +25,8 @@ from .. import DEFAULT_SCENE  # noqa: E402
 from ..errors import GBViewerError  # noqa: E402
 from ..render.glsl.context import release_current  # noqa: E402
 from . import overlays, screenshots  # noqa: E402
-from .analysis import PaneAnalysis  # noqa: E402
-from .analysis_overlay import draw_analysis_overlays  # noqa: E402
+from .difference_views import PaneAnalysis  # noqa: E402
+from .difference_overlay import draw_analysis_overlays  # noqa: E402
 from .blit import Blitter  # noqa: E402
 from .dialogs import FileDialogs, draw_help  # noqa: E402
 from .display import SharedContext, requested_path  # noqa: E402

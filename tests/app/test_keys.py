@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from gbviewer.app import keys
-from gbviewer.app.analysis import PaneAnalysis
+from gbviewer.app.difference_views import PaneAnalysis
 from gbviewer.app.inspector import Inspector
 from gbviewer.app.state import AppState
 

@@ -16,10 +16,10 @@ import pytest
 import gbviewer as gb
 from gbviewer import metrics
 from gbviewer.app import overlays
-from gbviewer.app.analysis_overlay import TOP
+from gbviewer.app.difference_overlay import TOP
 from gbviewer.eval import camera_for_rate, ground_truth
 from gbviewer.figure import to_uint8, upscale_nearest
-from test_analysis_window import wait_analysed
+from test_difference_window import wait_analysed
 from test_window import GBVIEWER_ROOT, LABEL_BAND, agree, pane_pixels, press, shot, wait
 
 pytestmark = pytest.mark.display

@@ -7,13 +7,13 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ..layout import PANEL_W
-from . import analysis, backend, camera, dataset, output, panes, rate, scene, timings
+from . import backend, camera, dataset, differences, output, panes, rate, scene, timings
 
 if TYPE_CHECKING:
     from ..window import ViewerApp
 
 SECTIONS = (("Scene", scene.draw), ("Dataset", dataset.draw), ("Backend", backend.draw), ("Sampling rate (all panes)", rate.draw),
-            ("Panes", panes.draw), ("Difference and error", analysis.draw), ("Camera", camera.draw),
+            ("Panes", panes.draw), ("Difference and error", differences.draw), ("Camera", camera.draw),
             ("Magnifier and output", output.draw), ("Timings", timings.draw))
 
 

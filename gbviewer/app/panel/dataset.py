@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ...io.datasets import SPLITS
-from ..analysis_worker import PHOTO
+from ..difference_thread import PHOTO
 from ..keys import hint
 from ..layout import PANEL_W
 

@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from ...analysis import ROBUST_PERCENTILE
-from ..analysis import REFERENCE_KINDS
+from ...differences import ROBUST_PERCENTILE
+from ..difference_views import REFERENCE_KINDS
 from ..keys import hint
 
 if TYPE_CHECKING:
