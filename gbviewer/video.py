@@ -15,6 +15,7 @@ from PIL import Image
 from .camera import Camera, format_rate
 from .camera_paths import PathFrame
 from .errors import GBViewerError
+from .extras import require
 from .figure import GAP, Cell, GridLayout, caption_font_size, compose_grid
 from .io.files import atomic_write, refuse_overwrite
 from .render import RenderSettings, get_renderer
@@ -84,8 +85,7 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
     or cancel leaves neither. Refuses to overwrite an existing `out` unless `force`.
     Returns a VideoInfo (path, frame count, frame size, fps, wall time).
     """
-    import imageio_ffmpeg
-
+    imageio_ffmpeg = require("video", "imageio_ffmpeg", "an MP4 video")
     out = Path(out)
     if out.suffix.lower() != ".mp4":
         raise GBViewerError(f"{out}: output must end in .mp4")

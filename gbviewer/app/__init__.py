@@ -30,11 +30,12 @@ def open_window(scene: str | Path | None = None, cameras: str | Path | None = No
     ok, why = has_display_env()
     if not ok:
         return False, why
-    try:
-        from .window import ViewerApp
-    except ImportError as exc:  # glfw, imgui-bundle or moderngl missing
-        return False, f"the window needs glfw, imgui-bundle and moderngl ({exc})"
     from ..errors import GBViewerError
+    from ..extras import require
+
+    for module in ("imgui_bundle", "glfw", "skimage"):  # imgui_bundle first: it points pyGLFW at its own libglfw
+        require("viewer", module, "the viewer")
+    from .window import ViewerApp
 
     try:
         app = ViewerApp(scene, cameras=cameras, projection=projection, backend=backend, data=data, images=images)

@@ -8,6 +8,7 @@ from pathlib import Path
 from ..argtypes import SIZE, Rate, count, positive
 from ..camera import parse_rates
 from ..errors import GBViewerError
+from ..extras import require
 from ..render import RenderSettings
 from .options import MAX_COUNT, check_render_size, progress_bar
 
@@ -33,6 +34,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     plots."""
     from .. import bench
 
+    if args.plots:
+        require("eval", "matplotlib", "--plots", load=False)
     simd_given = args.simd is not None
     resolve_bench_options(args)
     backends, unavailable = bench.select_backends(args.backends.split(","))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..eval.options import add_eval_args, scene_pairs
+from ..extras import require
 from ..io.files import check_writable
 from ..render import RenderSettings
 from .options import progress_bar
@@ -14,6 +15,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
     """PSNR and SSIM of every mode at every rate against the training photos (the paper's tables)."""
     from .. import eval as evaluation
 
+    require("eval", "skimage", "gbviewer eval (SSIM)", load=False)
+    if args.plots:
+        require("eval", "matplotlib", "--plots", load=False)
     pairs = scene_pairs(args.scenes, args.data)
     if args.json:
         check_writable(args.json, args.force)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from ..argtypes import INSET, SIZE, Number, Rate, count, positive
 from ..camera_paths import MAX_FRAMES, PATHS, camera_path
+from ..extras import require
 from ..io import load
 from ..io.files import check_writable
 from ..render import RenderSettings
@@ -21,6 +22,7 @@ def cmd_video(args: argparse.Namespace) -> int:
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                TimeRemainingColumn)
 
+    require("video", "imageio_ffmpeg", "an MP4 video", load=False)
     settings = RenderSettings.parse_list(args.modes)
     if args.size:
         args.width, args.height = args.size

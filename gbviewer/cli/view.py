@@ -10,6 +10,7 @@ from .. import DEFAULT_SCENE
 from ..camera_paths import zoom_path
 from ..errors import GBViewerError
 from ..eval.options import add_dataset_args
+from ..extras import require
 from ..figure import compose_grid, render_grid, save_image
 from ..io import load
 from ..io.files import check_writable
@@ -28,6 +29,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     a short x1 -> x1/8 zoom video of the same modes."""
     from rich.progress import Progress
 
+    require("video", "imageio_ffmpeg", "the demo's zoom video", load=False)
     scene_path = args.scene or DEFAULT_SCENE
     out_dir = check_writable(args.out, folder=True)
     scene = load(scene_path)
