@@ -28,7 +28,6 @@ def resolve_bench_options(args: argparse.Namespace) -> argparse.Namespace:
     return args
 
 
-
 def cmd_bench(args: argparse.Namespace) -> int:
     """Speed (per SIMD path of the CPU backend) and zoom fidelity per scene, mode, backend and rate; tables, JSON,
     plots."""
@@ -64,7 +63,6 @@ def cmd_bench(args: argparse.Namespace) -> int:
         for p in bench.write_plots(Path(args.plots), result.speed, result.fidelity, args.force):
             print(f"wrote {p}")
     return 0
-
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

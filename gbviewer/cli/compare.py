@@ -38,7 +38,6 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("compare", help="labelled grid of modes x sampling rates with PSNR (PNG)")
     p.add_argument("scene", type=Path)

@@ -36,7 +36,6 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("eval", help="PSNR and SSIM of every mode and sampling rate against a scene's training "
                                     "photos (COLMAP, Blender or cameras.json datasets), the paper's tables")

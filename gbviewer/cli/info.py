@@ -48,7 +48,6 @@ def cmd_convert(args: argparse.Namespace) -> int:
     return 0
 
 
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("info", help="describe a scene file")
     p.add_argument("scene", type=Path)

@@ -33,7 +33,6 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="render one image")
     p.add_argument("scene", type=Path)

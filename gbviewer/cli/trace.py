@@ -38,7 +38,6 @@ def cmd_trace(args: argparse.Namespace) -> int:
     return 0
 
 
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("trace", help="what the CPU kernel did at one pixel, splat by splat, per mode: top "
                                      "contributors, rejections, colour and transmittance (tables; --json)")

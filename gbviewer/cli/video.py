@@ -50,7 +50,6 @@ def cmd_video(args: argparse.Namespace) -> int:
     return 0
 
 
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("video", help="side-by-side zoom video of several modes (H.264 MP4)")
     p.add_argument("scene", type=Path)

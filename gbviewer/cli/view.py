@@ -69,7 +69,6 @@ def cmd_view(args: argparse.Namespace) -> int:
     return cmd_demo(args)
 
 
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("view", help="open the desktop viewer (what `gbviewer [SCENE]` runs); without a display, "
                                     "write the comparison images like demo")
