@@ -24,7 +24,8 @@ from ..render import Frame
 from ..scene import Scene
 from .difference_thread import PHOTO, Analysis, AnalysisThread, Request, Spec
 from .settings import PANE_NAMES
-from .state import AppState, Shown
+from .pane_state import Shown
+from .state import AppState
 from .views import visualize as visualize_view
 from .worker import RenderWorker
 

@@ -13,7 +13,7 @@ from ..render import AUTO
 from .difference_views import shows_photo
 from .layout import loupe_uv
 from .panes import pane_fps
-from .state import PaneState
+from .pane_state import PaneState
 
 if TYPE_CHECKING:
     from .window import ViewerApp
@@ -130,8 +130,8 @@ def draw_pane_overlays(app: ViewerApp) -> None:
                 text(app, dl, xx, y, f"{what} {shown.progress:.0%}", YELLOW, align_right=right)
             elif app.worker.busy((p.index, part)) and job is not None:
                 text(app, dl, xx, y, "rendering...", GREY, align_right=right)
-            if shown.error:
-                text(app, dl, r.x + 4, r.y + r.h / 2, shown.error[:120], RED)
+            if shown.error is not None:
+                text(app, dl, r.x + 4, r.y + r.h / 2, shown.error.text[:120], RED)
             if shown.legend and not shows_photo(shown):  # (the photo's legend is its label)
                 text(app, dl, xx, r.y + 56, shown.legend, ACCENT, align_right=right)
         if state.settings.show_info:
