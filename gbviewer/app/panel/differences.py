@@ -13,11 +13,11 @@ from ..difference_views import REFERENCE_KINDS
 from ..keys import hint
 
 if TYPE_CHECKING:
-    from ..window import ViewerApp
+    from ..difference_views import PaneAnalysis
+    from ..state import AppState
 
 
-def draw(app: ViewerApp) -> None:
-    state, analysis = app.state, app.analysis
+def draw(state: AppState, analysis: PaneAnalysis) -> None:
     o = analysis.options
     imgui.text_disabled(f"{hint('toggle_difference')}: pane - pane A   {hint('toggle_error')}: pane - reference")
     kinds = list(REFERENCE_KINDS)
