@@ -13,7 +13,7 @@ import gbviewer as gb
 from gbviewer import differences, metrics
 from gbviewer.app.difference_overlay import TOP
 from gbviewer.figure import to_uint8, upscale_nearest
-from test_window import LABEL_BAND, agree, app, expected_pane, pane_pixels, press, shot, wait  # noqa: F401 (app)
+from window_helpers import LABEL_BAND, agree, expected_pane, pane_pixels, press, shot, wait
 
 pytestmark = pytest.mark.display
 
