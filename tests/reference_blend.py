@@ -8,8 +8,8 @@ import math
 import numpy as np
 from scipy.special import erf
 
-from reference_preprocess import (DUPLEX_STOP, GB_EXTENT, GB_MAX_UV, GB_MIN_UV, GB_MIN_VAR, MIN_ALPHA_3DGS, MIN_ALPHA_GB,
-                                  T_STOP, WSR_EMPTY, WSR_TERM_MAX)
+from reference_preprocess import (DUPLEX_STOP, GB_EXTENT, GB_MAX_UV, GB_MIN_UV, GB_MIN_VAR, MIN_ALPHA_3DGS,
+                                  MIN_ALPHA_GB, T_STOP, WSR_EMPTY, WSR_TERM_MAX)
 
 
 def _phi_tilde(x):
