@@ -21,7 +21,7 @@ from .eval.options import add_dataset_args, add_eval_args, scene_pairs
 from .figure import DIFFS, compose_grid, render_grid, save_image, write_comparison
 from .io import load, write_inria_ply
 from .io.files import check_writable
-from .render import AUTO, BACKEND_NAMES, Mode, RenderSettings, choose_backend, get_renderer, trace_pixel
+from .render import AUTO, BACKEND_NAMES, BACKENDS, Mode, RenderSettings, choose_backend, get_renderer, trace_pixel
 from .scene import Scene
 from .validate import integer
 from .video import MAX_FPS, MIN_FPS, record_video
@@ -239,8 +239,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     backends, unavailable = bench.select_backends(args.backends.split(","))
     for b, why in unavailable.items():
         print(f"skipping backend {b}: {why}")
-    if simd_given and "cpu" not in backends:
-        raise GBViewerError("--simd chooses the cpu backend's paths; --backends has no cpu")
+    if simd_given and not any(BACKENDS[b].capabilities.simd for b in backends):
+        raise GBViewerError("--simd chooses the SIMD paths of the cpu backend; --backends has no backend with them")
     check_render_size(*args.size, args.rates, "--rates")
     outputs = [Path(args.json)] if args.json else []
     if args.plots:

@@ -39,6 +39,11 @@ BACKENDS: Mapping[str, type] = _Backends()
 BACKEND_NAMES = (AUTO, *_MODULES)  # what `backend=` takes
 
 
+def capable(flag: str) -> list[str]:
+    """The backends whose `capabilities` has `flag` (a field of `Capabilities`, e.g. "trace"), in registry order."""
+    return [name for name, cls in BACKENDS.items() if getattr(cls.capabilities, flag)]
+
+
 def resolve_backend(backend: str) -> str:
     """The backend a request for `backend` runs on: itself, or for "auto" the one `choose_backend()` picks."""
     if backend == AUTO:
