@@ -71,8 +71,8 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
     composed and piped to ffmpeg (imageio-ffmpeg's bundled one: libx264, yuv420p, constant quality `crf`) one at a
     time, so memory does not grow with the length; the CPU backend uses every core for each frame.
 
-    Safe to call from a background thread with the cpu backend (the native renderer keeps no state between calls
-    and releases the GIL; a GL backend's context belongs to the thread that made it):
+    Safe to call from a background thread with a backend that needs no GL context (`Capabilities.gl_context`: a
+    GL backend's context belongs to the thread that made it; the cpu renderer releases the GIL):
       progress(done, total) is called after each frame is encoded (from the calling thread);
       cancel: anything with is_set() (a threading.Event), checked before each render; when set, ffmpeg is stopped,
       the partial file removed and `VideoCancelled` (a `gbviewer.Cancelled`) raised.

@@ -74,10 +74,13 @@ _renderers_lock = threading.Lock()
 
 def get_renderer(scene: Scene, backend: str = "cpu") -> Renderer:
     """The process's renderer of `backend` ("auto": the best here) with `scene` uploaded. One renderer per backend,
-    uploading only when the scene changes: it keeps the last scene alive, never every scene it has seen."""
+    uploading only when the scene changes: it keeps the last scene alive, never every scene it has seen. One that
+    stopped working (`usable()` False) is replaced by a new one."""
     backend = resolve_backend(backend)
     with _renderers_lock:
         entry = _renderers.get(backend)
+        if entry is not None and not entry[0].usable()[0]:
+            entry = None
         renderer = entry[0] if entry is not None else BACKENDS[backend]()
         if entry is None or entry[1]() is not scene:
             renderer.upload(scene)
