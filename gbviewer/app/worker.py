@@ -12,7 +12,6 @@ that render into GL textures write the display textures the window draws. A back
 
 from __future__ import annotations
 
-import contextlib
 import gc
 import threading
 import time
@@ -25,7 +24,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import BackendFailed, BackendUnavailable, GBViewerError, RenderCancelled, RenderError
-from ..render import AUTO, BACKENDS, BackendChoice, Frame, Renderer, RenderSettings, create_gl_context
+from ..render import AUTO, BACKENDS, BackendChoice, Capabilities, Frame, Renderer, RenderSettings, create_gl_context
 from ..render.choice import FALLBACK, decide_measured
 from ..scene import Scene
 from .display import DisplayTextures, SharedContext
@@ -72,6 +71,14 @@ def scaled_nearest(image: np.ndarray, width: int, height: int) -> np.ndarray:
     ys = np.arange(height) * h // height
     xs = np.arange(width) * w // width
     return np.ascontiguousarray(image[ys[:, None], xs[None, :], :3], np.float32)
+
+
+def free(renderer: Renderer) -> None:
+    """`renderer.release()`; a renderer that cannot free its buffers (a lost device) must not stop the thread."""
+    try:
+        renderer.release()
+    except Exception:  # noqa: BLE001 - reported, the thread goes on
+        traceback.print_exc()
 
 
 @dataclass(frozen=True)
@@ -129,7 +136,7 @@ class RenderWorker(SlotThread):
             return None, "checking..."
         return self.backends.get(name, (False, "unknown"))
 
-    def capabilities(self, name: str):
+    def capabilities(self, name: str) -> Capabilities:
         """What backend `name` can do (`Capabilities`)."""
         return self._classes[name].capabilities
 
@@ -225,7 +232,7 @@ class RenderWorker(SlotThread):
     def _release(self) -> None:
         """Free every renderer (and with them the scene and its GPU buffers), in this thread."""
         for renderer in self._renderers.values():
-            renderer.release()
+            free(renderer)
         self._renderers.clear()
         super()._release()
         gc.collect()
@@ -237,8 +244,7 @@ class RenderWorker(SlotThread):
         self.failed[name] = str(exc) if ok else why
         self.backends[name] = (False, f"stopped working: {self.failed[name]}")
         if renderer is not None:
-            with contextlib.suppress(Exception):  # a broken device may refuse even to free its buffers
-                renderer.release()
+            free(renderer)
         self._decide()
 
     def _post(self, result: RenderResult) -> None:

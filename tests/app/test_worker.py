@@ -19,7 +19,8 @@ from gbviewer.app.panes import PaneRenders
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
 from gbviewer.app.worker import RENDER_NICE, RenderJob, RenderPolicy, RenderWorker
-from gbviewer.render import BACKENDS, CpuRenderer, RenderSettings, create_gl_context
+from gbviewer.render import BACKENDS, CpuRenderer, RenderSettings
+from gbviewer.render.glsl.context import standalone_context
 
 
 def test_worker_renders_latest_request_per_slot_and_drops_stale_ones(bundled_scene):
@@ -222,7 +223,7 @@ def test_a_backend_that_stops_working_is_reported_and_its_pane_renders_on_the_ne
     while state.poll_loader() is None:
         assert time.time() - t0 < 30 and state.loader is not None, state.load_error
         time.sleep(0.01)
-    ctx = create_gl_context()  # the panes' textures
+    ctx = standalone_context()  # the panes' textures (the process's headless context: a window may follow)
     panes = PaneRenders(state, w, ctx)
     pane = state.panes[0]
 
@@ -256,7 +257,6 @@ def test_a_backend_that_stops_working_is_reported_and_its_pane_renders_on_the_ne
     finally:
         panes.release()
         w.stop()
-        ctx.release()
 
 
 def test_previews_of_a_slot_do_not_cancel_each_other_but_a_full_request_cancels_a_preview():

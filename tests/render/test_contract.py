@@ -14,6 +14,7 @@ import gbviewer as gb
 from gbviewer.bench import SIMD_NAMES
 from gbviewer.errors import BackendFailed, RenderCancelled, RenderError
 from gbviewer.render import BACKENDS, Capabilities, Renderer, RenderSettings, capable, create_gl_context
+from gbviewer.render.glsl.context import standalone_context
 
 GB = RenderSettings("gaussian_blending")
 TILED = RenderSettings("gaussian_blending", supersample=2)  # at 320x240: 1200 tiles, progress and partial between
@@ -198,30 +199,27 @@ def test_gl_texture_holds_the_frame(name, bundled_scene):
     """A backend that renders into GL textures writes what `render` returns; one that needs a GL context takes
     one and says whether it will do."""
     backend = runnable(name)
-    caps = backend.capabilities
-    ctx = create_gl_context()
-    try:
-        if caps.gl_context:
-            assert backend.check_context(ctx) == (True, "")
-            r = backend(ctx=ctx)
-        else:
-            ok, why = backend.gl_interop()
-            if not ok:
-                pytest.skip(f"{backend.name} cannot write this context's textures: {why}")
-            r = backend()
-        r.upload(bundled_scene)
-        cam = view(bundled_scene, 97, 61)
-        tex = ctx.texture((97, 61), 4, dtype="f4")
-        stats = r.render_to_texture(tex, cam, GB)
-        frame = r.render(cam, GB)
-        img = np.frombuffer(tex.read(), np.float32).reshape(61, 97, 4)
-        np.testing.assert_array_equal(img[:, :, :3], frame.rgb)
-        assert stats.visible == frame.stats.visible and stats.backend == backend.name
-        r.release_texture(tex.glo)
-        tex.release()
-        r.release()
-    finally:
-        ctx.release()
+    ctx = standalone_context()  # the process's headless context, current in this thread (never released)
+    if backend.capabilities.gl_context:
+        assert backend.check_context(ctx) == (True, "")
+        r = backend(ctx=ctx)
+    else:
+        ok, why = backend.gl_interop()
+        if not ok:
+            pytest.skip(f"{name} cannot write this context's textures: {why}")
+        r = backend()
+    r.upload(bundled_scene)
+    cam = view(bundled_scene, 97, 61)
+    tex = ctx.texture((97, 61), 4, dtype="f4")
+    stats = r.render_to_texture(tex, cam, GB)
+    frame = r.render(cam, GB)
+    img = np.frombuffer(tex.read(), np.float32).reshape(61, 97, 4)
+    np.testing.assert_array_equal(img[:, :, :3], frame.rgb)
+    np.testing.assert_array_equal(img[:, :, 3], frame.alpha)
+    assert stats.visible == frame.stats.visible and stats.backend == name
+    r.release_texture(tex.glo)
+    tex.release()
+    r.release()
 
 
 def test_trace_and_simd_where_promised(renderer, bundled_scene):
