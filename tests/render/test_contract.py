@@ -13,7 +13,7 @@ import pytest
 import gbviewer as gb
 from gbviewer.bench import SIMD_NAMES
 from gbviewer.errors import BackendFailed, RenderCancelled, RenderError
-from gbviewer.render import BACKENDS, Capabilities, Renderer, RenderSettings, capable, create_gl_context
+from gbviewer.render import BACKENDS, Capabilities, Renderer, RenderSettings, capable, create_gl_context, get_renderer
 from gbviewer.render.glsl.context import standalone_context
 
 GB = RenderSettings("gaussian_blending")
@@ -237,3 +237,12 @@ def test_usable_until_failed(renderer, bundled_scene):
     err = renderer.failed("device lost")
     assert isinstance(err, BackendFailed) and "device lost" in str(err) and renderer.name in str(err)
     assert renderer.usable() == (False, "device lost")
+
+
+def test_the_shared_renderer_that_stopped_working_is_replaced(backend, bundled_scene):
+    first = get_renderer(bundled_scene, backend.name)
+    assert get_renderer(bundled_scene, backend.name) is first
+    first.failed("device lost")
+    second = get_renderer(bundled_scene, backend.name)
+    assert second is not first and second.usable() == (True, "")
+    assert second.render(view(bundled_scene), GB).rgb.std() > 0.01
