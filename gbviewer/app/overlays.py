@@ -160,8 +160,8 @@ def draw_status(app: ViewerApp) -> None:
     backend = app.worker.backend_for(s.backend)
     simd = next((part.frame.stats.simd for p in state.visible for part in p.parts.values()
                  if part.frame is not None and part.frame.stats.simd), "")
-    if backend == "cpu" and simd:
-        backend = f"cpu {simd}"  # the blend's SIMD path (GBVIEWER_SIMD forces one)
+    if app.worker.capabilities(backend).simd and simd:
+        backend = f"{backend} {simd}"  # the blend's SIMD path (GBVIEWER_SIMD forces one)
     if s.backend == AUTO:
         backend += " (auto)"
     imgui.text(f"rate {format_rate(s.rate)}")

@@ -84,7 +84,7 @@ class PaneRenders:
                     continue
                 p.submitted[part] = key
                 shown = p.parts[part]
-                progressive = f == 1.0 and backend == "cpu" and ps.view == "color"
+                progressive = f == 1.0 and self.worker.capabilities(backend).progressive and ps.view == "color"
                 est_ms = cost * w * h if cost else None
                 self.worker.submit(RenderJob(
                     (p.index, part), s.scene, cam, settings, backend,
@@ -155,6 +155,11 @@ class PaneRenders:
         shown = p.parts[part]
         if res.stage != "final":
             self._take_refining(res, shown)
+            return
+        if res.failed:  # the next request of this part goes to the backend auto picks now
+            p.submitted.pop(part, None)
+            s.message(f"{res.job.backend} {res.error}; rendering on {self.worker.backend_for(res.job.backend)}",
+                      "error")
             return
         shown.job = res.job
         if res.frame is None:

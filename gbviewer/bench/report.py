@@ -135,7 +135,7 @@ def simd_table(rows: list[SpeedRow]) -> tuple[list[str], list[list[str]]]:
     second per core against that path's exp rate, and the largest difference from the scalar path's image."""
     groups: dict[tuple, dict[str, SpeedRow]] = {}
     for r in rows:
-        if r.backend == "cpu" and r.simd_requested:
+        if r.simd_requested:  # set on backends with SIMD paths only
             groups.setdefault((r.scene, r.rate, r.width, r.height, r.mode), {})[r.simd_requested] = r
     groups = {k: v for k, v in groups.items() if len(v) > 1}
     paths = list(dict.fromkeys(p for g in groups.values() for p in g))

@@ -9,7 +9,7 @@ from ..argtypes import SIZE, Rate, count, positive
 from ..camera import parse_rates
 from ..errors import GBViewerError
 from ..extras import require
-from ..render import RenderSettings
+from ..render import BACKENDS, RenderSettings
 from .options import MAX_COUNT, check_render_size, progress_bar
 
 BENCH_DEFAULTS = {"modes": "scalar,gaussian_blending,supersample:3", "rates": "1,1/8", "views": 2, "repeat": 2,
@@ -40,8 +40,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     backends, unavailable = bench.select_backends(args.backends.split(","))
     for b, why in unavailable.items():
         print(f"skipping backend {b}: {why}")
-    if simd_given and "cpu" not in backends:
-        raise GBViewerError("--simd chooses the cpu backend's paths; --backends has no cpu")
+    if simd_given and not any(BACKENDS[b].capabilities.simd for b in backends):
+        raise GBViewerError("--simd chooses the SIMD paths of the cpu backend; --backends has no backend with them")
     check_render_size(*args.size, args.rates, "--rates")
     outputs = [Path(args.json)] if args.json else []
     if args.plots:

@@ -13,16 +13,17 @@ from ..errors import BackendUnavailable, RenderError
 from ..scene import Scene
 from .control import Progress, RenderControl
 from .prepare import Prepared, camera_args, check_display_texture, native_frame, native_stats, prepare
-from .types import Frame, FrameStats, RenderSettings
+from .types import Capabilities, Frame, FrameStats, Renderer, RenderSettings
 
 
-class CudaRenderer:
+class CudaRenderer(Renderer):
     """Native CUDA backend: the scene stays on the device (a trained Duplex-GS model's view is uploaded per frame).
 
     Threads may share one renderer: uploads and renders are serialised (a lock here around the scene and cells on
     the device, and a mutex in the native renderer around its buffers)."""
 
     name = "cuda"
+    capabilities = Capabilities(gl_texture=True)
 
     def __init__(self, device: int = -1) -> None:
         ok, why = self.available()
@@ -55,6 +56,11 @@ class CudaRenderer:
             self._cells = None
             if scene.oit is None or scene.oit.neural is None:
                 self._upload(scene)
+
+    def release(self) -> None:
+        """Forget the scene (its device buffers are reused by the next upload and freed with the renderer)."""
+        with self._lock:
+            self._scene = self._uploaded = self._cells = None
 
     def _upload(self, scene: Scene) -> None:
         # Forget what is on the device first: a failed upload (out of device memory) leaves no scene there.

@@ -35,7 +35,8 @@ def draw(state: AppState, worker: RenderWorker) -> None:
                 imgui.text_disabled(why if len(why) < 140 else why[:137] + "...")
             imgui.pop_text_wrap_pos()
     if worker.backend_status(s.backend)[0] is False:
-        imgui.text_colored(imgui.ImVec4(1, 0.8, 0.25, 1), f"{s.backend} unavailable: rendering on cpu")
+        imgui.text_colored(imgui.ImVec4(1, 0.8, 0.25, 1),
+                           f"{s.backend} unavailable: rendering on {worker.backend_for(s.backend)}")
     path, why = worker.display_path(worker.backend_for(s.backend))
     imgui.text_disabled(f"display: {path}, {describe(path)}")
     if imgui.is_item_hovered():
