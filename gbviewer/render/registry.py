@@ -110,8 +110,8 @@ class SharedRenderer:
             self._slot.bind(scene)
 
 
-_slots: dict[str, _Slot] = {}
-_slots_lock = threading.Lock()
+_renderers: dict[str, _Slot] = {}
+_renderers_lock = threading.Lock()
 
 
 def get_renderer(scene: Scene, backend: str = "cpu") -> SharedRenderer:
@@ -119,10 +119,10 @@ def get_renderer(scene: Scene, backend: str = "cpu") -> SharedRenderer:
     from any thread). One renderer per backend, uploading only when the scene changes: it keeps the last scene
     alive, never every scene it has seen."""
     backend = resolve_backend(backend)
-    with _slots_lock:
-        slot = _slots.get(backend)
+    with _renderers_lock:
+        slot = _renderers.get(backend)
         if slot is None:
-            slot = _slots[backend] = _Slot(BACKENDS[backend]())
+            slot = _renderers[backend] = _Slot(BACKENDS[backend]())
     with slot.lock:
         slot.bind(scene)
         if slot.bound is None or slot.bound._scene is not scene:

@@ -125,8 +125,9 @@ def test_cancel_at_the_first_report_leaves_nothing_behind(files, kind, small_chu
     assert isinstance(gb.LoadCancelled("x"), gb.Cancelled) and isinstance(gb.RenderCancelled("x"), gb.Cancelled)
 
 
-def test_cancel_set_before_the_load_reports_nothing(files):
-    cancel = threading.Event()
+@pytest.mark.parametrize("kind", ["event", "token"])
+def test_cancel_set_before_the_load_reports_nothing(files, kind):
+    cancel = gb.CancelToken() if kind == "token" else threading.Event()
     cancel.set()
     calls = []
     with pytest.raises(gb.LoadCancelled):
