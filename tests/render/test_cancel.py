@@ -186,3 +186,25 @@ def test_a_raising_progress_callback_ends_the_render_with_one_error(scene, backe
     with pytest.raises(gb.RenderCancelled):
         r.render(cam, _settings(), cancel=cancel)
     np.testing.assert_array_equal(r.render(cam, _settings()).rgb, plain.rgb)
+
+
+class SetOnSecondLook(threading.Event):
+    """An Event that reads as set from its second is_set() on (the first is the render's check before any work)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.looks = 0
+
+    def is_set(self) -> bool:
+        self.looks += 1
+        return self.looks > 1 or super().is_set()
+
+
+def test_a_plain_event_is_bridged_by_the_rendering_thread(scene):
+    """Without on_progress, a threading.Event is still seen mid-frame: the native loop's report (on the calling
+    thread) copies it into the render's flag, and the frame stops with RenderCancelled."""
+    event = SetOnSecondLook()
+    partial = np.full((480, 640, 3), np.nan, np.float32)
+    with pytest.raises(gb.RenderCancelled):  # 10800 tiles: many report intervals (5 ms) long
+        gb.render(scene, front_camera(640, 480), "gaussian_blending", supersample=3, cancel=event, partial=partial)
+    assert event.looks >= 2 and not np.isfinite(partial).all()  # stopped before the last tile
