@@ -71,7 +71,7 @@ def check_concurrent_renders(backend: str, scene: gb.Scene, threads: int = 2, ro
 
 
 def test_concurrent_renders_cpu():
-    """Two Python threads rendering with one CPU renderer at once (the native render releases the GIL)."""
+    """Two Python threads sharing the process's CPU renderer (its frames are serialised, each on every core)."""
     check_concurrent_renders("cpu", random_scene(400, seed=5, sh_degree=1))
 
 
