@@ -11,6 +11,7 @@ backend (centre out), in one go at the end of a GPU frame.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 
 import numpy as np
@@ -82,3 +83,24 @@ class RenderControl:
         self._forward()
         if self.flag[0]:
             raise RenderCancelled("render cancelled")
+
+
+class FrameLock:
+    """The lock one renderer's frames run under. A frame started on the thread that holds it (an on_progress that
+    renders with the same renderer) would wait for itself forever: it raises a RenderError instead."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._owner: int | None = None
+
+    def __enter__(self) -> FrameLock:
+        if self._owner == threading.get_ident():
+            raise RenderError("a frame was started from inside a frame of the same renderer (its on_progress?): "
+                              "render there with a renderer of its own (gbviewer.render.create_renderer)")
+        self._lock.acquire()
+        self._owner = threading.get_ident()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._owner = None
+        self._lock.release()

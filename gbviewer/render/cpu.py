@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
@@ -12,7 +11,7 @@ from ..cancel import Cancellable
 from ..cells import Cells
 from ..errors import BackendUnavailable
 from ..scene import Scene
-from .control import Progress, RenderControl
+from .control import FrameLock, Progress, RenderControl
 from .prepare import Prepared, camera_args, native_frame, prepare
 from .trace import PixelTrace, from_native
 from .types import Frame, RenderSettings
@@ -34,7 +33,7 @@ class CpuRenderer:
         from .. import _native
 
         self._impl = _native.Renderer()
-        self._lock = threading.Lock()
+        self._lock = FrameLock()
         self._scene: Scene | None = None
         self._uploaded: Scene | None = None
         self._cells: Cells | None = None

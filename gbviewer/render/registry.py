@@ -15,6 +15,7 @@ from ..cancel import Cancellable
 from ..errors import RenderError
 from ..scene import Scene
 from .choice import AUTO, choose_backend
+from .control import FrameLock
 from .types import Frame, Mode, Renderer, RenderSettings
 
 _MODULES = {"cpu": ("cpu", "CpuRenderer"), "cuda": ("cuda", "CudaRenderer"), "glsl": ("glsl", "GlslRenderer")}
@@ -68,7 +69,7 @@ class _Slot:
     """The process's renderer of one backend, the lock its frames run under and the scene uploaded to it."""
 
     def __init__(self, renderer: Renderer) -> None:
-        self.renderer, self.lock = renderer, threading.Lock()
+        self.renderer, self.lock = renderer, FrameLock()
         self.uploaded: weakref.ref[Scene] | None = None
         self.bound: SharedRenderer | None = None  # the last one handed out (keeps its scene alive)
 

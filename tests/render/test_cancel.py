@@ -208,3 +208,25 @@ def test_a_plain_event_is_bridged_by_the_rendering_thread(scene):
     with pytest.raises(gb.RenderCancelled):  # 10800 tiles: many report intervals (5 ms) long
         gb.render(scene, front_camera(640, 480), "gaussian_blending", supersample=3, cancel=event, partial=partial)
     assert event.looks >= 2 and not np.isfinite(partial).all()  # stopped before the last tile
+
+
+def test_rendering_from_inside_on_progress_with_the_same_renderer_is_an_error_not_a_hang(scene):
+    """on_progress that renders with the renderer already rendering (here the process's one, through gb.render)
+    would wait for itself: that inner call raises, and the outer one ends with the CallbackError it caused. With a
+    renderer of its own the callback may render."""
+    cam = front_camera(320, 240)
+
+    def nested(done: int, total: int) -> None:
+        gb.render(scene, front_camera(16, 16))
+
+    with pytest.raises(gb.CallbackError, match="on_progress raised RenderError: a frame was started from inside"):
+        gb.render(scene, cam, on_progress=nested)
+    from gbviewer.render import create_renderer
+
+    own = create_renderer("cpu")
+    own.upload(scene)
+    inner: list[gb.Frame] = []
+    frame = gb.render(scene, cam, on_progress=lambda d, t: inner.append(own.render(front_camera(16, 16),
+                                                                                      gb.RenderSettings())))
+    np.testing.assert_array_equal(frame.rgb, gb.render(scene, cam).rgb)
+    assert inner and all(np.array_equal(f.rgb, inner[0].rgb) for f in inner)
