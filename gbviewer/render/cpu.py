@@ -86,10 +86,10 @@ class CpuRenderer:
         t0 = time.perf_counter()
         control = RenderControl(cancel, on_progress, partial)
         control.check_partial(camera.width, camera.height)
+        control.check()  # before any work (a trained model's decode included)
         with self._lock:
             prep = prepare(self._scene, camera, settings, self.name)
             self._sync(prep)
-            control.check()
             out = self._impl.render(*self._frame_args(camera, settings), settings.debug == "window",
                                     *(prep.oit or ()), threads=settings.threads, cancel=control.flag,
                                     on_progress=control.hook, partial=partial)
