@@ -179,7 +179,7 @@ def main() -> int:
     lines += [f"## SIMD paths of the CPU backend ({w}x{h} at x1)", "",
               "Every path measured in the same run, taking turns render by render. Speedup: the scalar path's ms / "
               "the path's. Mevals/s/core: splat-pixel evaluations per second per core in the blend stage; exp: "
-              "that path's exp evaluations per second on one core (`gbviewer._native.exp_rate`). max abs diff: the "
+              "that path's exp evaluations per second on one core (`gbviewer._native.testing.exp_rate`). max abs diff: the "
               "largest rgb difference from the scalar path's image.", ""]
     header, rows = bench.simd_table(simd)
     exp_rate = info["exp_per_s_per_core"]

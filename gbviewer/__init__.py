@@ -5,8 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from .camera import Camera, load_cameras_json, orbit_camera
-from .errors import (BackendUnavailable, CameraError, Cancelled, GBViewerError, LoadCancelled, RenderCancelled,
-                     RenderError, SceneFormatError)
+from .cancel import CancelToken
+from .errors import (BackendUnavailable, CallbackError, CameraError, Cancelled, GBViewerError, LoadCancelled,
+                     RenderCancelled, RenderError, SceneFormatError, VideoCancelled)
 from .io import load
 from .render import (BackendChoice, Frame, FrameStats, Mode, PixelTrace, Renderer, RenderSettings, choose_backend,
                      get_renderer, render, trace_pixel)
@@ -18,8 +19,8 @@ if not ASSETS.is_dir():
 DEFAULT_SCENE = ASSETS / "fruit_drops_minimal.ply"
 
 __all__ = [
-    "ASSETS", "DEFAULT_SCENE", "BackendChoice", "BackendUnavailable", "Camera", "CameraError", "Cancelled", "Frame",
-    "FrameStats", "GBViewerError", "LoadCancelled", "Mode", "PixelTrace", "RenderCancelled", "RenderError",
-    "RenderSettings", "Renderer", "Scene", "SceneFormatError", "choose_backend", "get_renderer", "load",
-    "load_cameras_json", "orbit_camera", "render", "trace_pixel",
+    "ASSETS", "DEFAULT_SCENE", "BackendChoice", "BackendUnavailable", "CallbackError", "Camera", "CameraError",
+    "CancelToken", "Cancelled", "Frame", "FrameStats", "GBViewerError", "LoadCancelled", "Mode", "PixelTrace",
+    "RenderCancelled", "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError", "VideoCancelled",
+    "choose_backend", "get_renderer", "load", "load_cameras_json", "orbit_camera", "render", "trace_pixel",
 ]

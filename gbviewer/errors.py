@@ -35,7 +35,8 @@ class RenderError(GBViewerError):
 
 
 class Cancelled(GBViewerError):
-    """Work stopped because its caller set the `cancel` event (a threading.Event); nothing is returned."""
+    """Work stopped because its caller set its `cancel` (a gbviewer.CancelToken or threading.Event); nothing is
+    returned."""
 
 
 class RenderCancelled(Cancelled):
@@ -47,7 +48,12 @@ class LoadCancelled(Cancelled):
 
 
 class VideoCancelled(Cancelled):
-    """`record_video` stopped because its caller set the `cancel` event (no output, no temporary file is left)."""
+    """`record_video` stopped because its caller set its `cancel`; no output (and no temporary file) is left."""
+
+
+class CallbackError(GBViewerError):
+    """A caller's callback (a render's `on_progress`, a load's `progress`) raised: the work was cancelled, and the
+    callback's exception is this one's `__cause__`."""
 
 
 class BackendUnavailable(RenderError):

@@ -75,8 +75,8 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
     Safe to call from a background thread with a backend that needs no GL context (`Capabilities.gl_context`: a
     GL backend's context belongs to the thread that made it; the cpu renderer releases the GIL):
       progress(done, total) is called after each frame is encoded (from the calling thread);
-      cancel: anything with is_set() (a threading.Event), checked before each render; when set, ffmpeg is stopped,
-      the partial file removed and `VideoCancelled` (a `gbviewer.Cancelled`) raised.
+      cancel: a gbviewer.CancelToken, threading.Event or anything with is_set(), checked before each render; when
+      set, ffmpeg is stopped, the partial file removed and VideoCancelled (a gbviewer.Cancelled) raised.
     The video is written to a temporary file beside `out` and renamed onto it at the end: an exception, Ctrl-C
     or cancel leaves neither. Refuses to overwrite an existing `out` unless `force`.
     Returns a VideoInfo (path, frame count, frame size, fps, wall time).

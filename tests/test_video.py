@@ -72,20 +72,20 @@ class Boom(Exception):
     pass
 
 
-@pytest.mark.parametrize("how", ["cancel", "exception", "ctrl-c"])
+@pytest.mark.parametrize("how", ["cancel", "token", "exception", "ctrl-c"])
 def test_interruption_leaves_no_file(bundled_scene, output_view, tmp_path, how):
-    cancel = threading.Event()
+    cancel = gb.CancelToken() if how == "token" else threading.Event()
 
     def progress(done, total):
         if done == 2:
-            if how == "cancel":
+            if how in ("cancel", "token"):
                 cancel.set()
             elif how == "exception":
                 raise Boom()
             else:
                 raise KeyboardInterrupt
 
-    expected = {"cancel": gb.Cancelled, "exception": Boom, "ctrl-c": KeyboardInterrupt}[how]
+    expected = {"exception": Boom, "ctrl-c": KeyboardInterrupt}.get(how, gb.VideoCancelled)
     with pytest.raises(expected):
         video.record_video(bundled_scene, zoom_path(output_view, 5), [gb.RenderSettings()], tmp_path / "v.mp4",
                            progress=progress, cancel=cancel)

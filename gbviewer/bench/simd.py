@@ -1,5 +1,5 @@
 """The CPU backend's SIMD paths as the benchmark measures them: which this CPU runs, the one in use, switching,
-the exp throughput per path (gbviewer._native.simd_paths / simd / set_simd / exp_rate)."""
+the exp throughput per path (gbviewer._native.simd_paths / simd, testing.set_simd / exp_rate)."""
 
 from __future__ import annotations
 
@@ -12,11 +12,11 @@ EXP_RATE_N = 1 << 22  # exp evaluations per exp_rate call
 
 
 def _native():
-    """The CPU module, with its SIMD API (simd_paths, simd, set_simd, exp_rate)."""
+    """The CPU module, with its SIMD API (simd_paths, simd; testing.set_simd, testing.exp_rate)."""
     from .. import _native
 
-    if not hasattr(_native, "set_simd"):
-        raise GBViewerError(f"{_native.__file__} predates the SIMD paths (no set_simd/simd_paths/exp_rate): rebuild "
+    if not hasattr(_native, "testing"):
+        raise GBViewerError(f"{_native.__file__} predates the renderer class (no _native.testing): rebuild "
                             "it (pip install .)")
     return _native
 
@@ -33,8 +33,8 @@ def current_simd() -> str:
 
 
 def set_simd(path: str) -> None:
-    """Switch the CPU backend's path for later renders in this process (gbviewer._native.set_simd)."""
-    _native().set_simd(path)
+    """Switch the CPU backend's path for later renders in this process (gbviewer._native.testing.set_simd)."""
+    _native().testing.set_simd(path)
 
 
 def parse_simd(text: str | None) -> list[str]:
@@ -66,9 +66,9 @@ def parse_simd(text: str | None) -> list[str]:
 
 
 def exp_rates(paths: list[str] | None = None, n: int = EXP_RATE_N, tries: int = 3) -> dict[str, float]:
-    """exp evaluations per second on one core for each SIMD path (gbviewer._native.exp_rate(path, n); the best of
-    `tries`): the limit the blend's evaluation rate per core is measured against."""
-    return {p: max(float(_native().exp_rate(p, n)) for _ in range(tries)) for p in (paths or simd_paths())}
+    """exp evaluations per second on one core for each SIMD path (gbviewer._native.testing.exp_rate(path, n); the
+    best of `tries`): the limit the blend's evaluation rate per core is measured against."""
+    return {p: max(float(_native().testing.exp_rate(p, n)) for _ in range(tries)) for p in (paths or simd_paths())}
 
 
 def simd_info(measured: list[str]) -> dict:

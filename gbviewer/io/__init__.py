@@ -3,13 +3,13 @@ bytes read and the splats decoded, `cancel` stops it (see `progress`)."""
 
 from __future__ import annotations
 
-import threading
 from pathlib import Path
 
 import numpy as np
 
 from ..camera import load_cameras_json
-from ..errors import GBViewerError, LoadCancelled, SceneFormatError
+from ..cancel import Cancellable
+from ..errors import CallbackError, GBViewerError, LoadCancelled, SceneFormatError
 from ..scene import Scene
 from .compressed_ply import is_compressed_ply, load_compressed_ply
 from .duplex import is_duplex_ply, load_duplex
@@ -25,19 +25,20 @@ __all__ = ["load", "load_cameras_json", "write_inria_ply"]
 FORMATS = ("INRIA (incl. sort-free GS), Duplex-GS or compressed .ply, .spz, .sog (zip, folder or meta.json) or .splat")
 
 
-def load(path: str | Path, progress: Progress | None = None, cancel: threading.Event | None = None) -> Scene:
+def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable | None = None) -> Scene:
     """Load a splat scene file or SOG folder; the format comes from the content, not the extension.
 
     `progress`: called as fn(done, total, unit) with unit "bytes" (read from the file), then "splats" (decoded),
-    at most about a hundred times per unit, done rising to total. `cancel`: a threading.Event; once it is set the
-    load raises LoadCancelled within one chunk (at most a hundredth of the file or 65536 splats)."""
+    at most about a hundred times per unit, done rising to total; an exception it raises ends the load with a
+    CallbackError chained to it. `cancel`: a gbviewer.CancelToken (or threading.Event); once it is set the load
+    raises LoadCancelled within one chunk (at most a hundredth of the file or 65536 splats)."""
     path = Path(path)
     reporter = LoadProgress(progress, cancel)
     try:
         reporter.check()
         with np.errstate(all="ignore"):  # overflow in decoding is data: Scene drops non-finite splats with a warning
             return _load(path, reporter)
-    except (SceneFormatError, LoadCancelled):
+    except (SceneFormatError, LoadCancelled, CallbackError):
         raise
     except GBViewerError as exc:  # Scene validation of decoded data, e.g. every splat non-finite
         raise SceneFormatError(path, str(exc).removeprefix(f"{path}: ")) from None

@@ -4,18 +4,20 @@ A load goes through up to two phases, each with its unit: "bytes" (the file read
 format is one compressed stream) and then "splats" (decoded into the Scene's arrays). `fn(done, total, unit)` is
 called at the start of a phase (done 0), after each chunk, and at its end (done == total): done never decreases
 within a unit, and a phase reports at most REPORTS + 2 times. Chunks are at least MIN_BYTES / MIN_SPLATS long, so a
-small file is one chunk. Once `cancel` (a threading.Event) is set, the load raises LoadCancelled at the next chunk.
+small file is one chunk. Once `cancel` (a gbviewer.CancelToken, a threading.Event or anything with is_set()) is
+set, the load raises LoadCancelled at the next chunk. An exception `fn` raises ends the load with a CallbackError
+(chained to it), never blamed on the file.
 """
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import LoadCancelled
+from ..cancel import Cancellable
+from ..errors import CallbackError, LoadCancelled
 
 Progress = Callable[[int, int, str], None]
 REPORTS = 100  # chunks per phase at most
@@ -26,7 +28,7 @@ MIN_SPLATS = 1 << 16  # smallest chunk of a decode
 class LoadProgress:
     """Reports a load's phases to the caller's `fn` and raises LoadCancelled once `cancel` is set."""
 
-    def __init__(self, fn: Progress | None = None, cancel: threading.Event | None = None) -> None:
+    def __init__(self, fn: Progress | None = None, cancel: Cancellable | None = None) -> None:
         self.fn, self.cancel = fn, cancel
         self._last: dict[str, int] = {}
 
@@ -40,7 +42,10 @@ class LoadProgress:
         last = self._last.get(unit, -1)
         if self.fn is not None and done > last and (done in (0, total) or done - last >= -(-total // REPORTS)):
             self._last[unit] = done
-            self.fn(done, total, unit)
+            try:
+                self.fn(done, total, unit)
+            except Exception as exc:
+                raise CallbackError(f"progress raised {type(exc).__name__}: {exc}; the load was cancelled") from exc
         self.check()
 
     def chunks(self, total: int, unit: str, minimum: int) -> Iterator[tuple[int, int]]:

@@ -1,10 +1,12 @@
-"""Cancelling a render and following its progress: `gb.render(..., cancel=event, on_progress=fn, partial=array)`.
+"""Cancelling a render and following its progress: `gb.render(..., cancel=token, on_progress=fn, partial=array)`.
 
-A `RenderControl` holds the int64[3] block the native CPU module polls between tiles ([0] cancel flag, [1] tiles
-blended, [2] tiles in the frame) and, while a render runs, a thread that copies the caller's `threading.Event`
-into it and calls `on_progress(done, total)`; GPU backends check it between their dispatches instead. `partial`, a
-float32 (height, width, 3) array, receives the frame's pixels as they are made: tile by tile on the CPU backend
-(centre out), in one go at the end of a GPU frame.
+A `RenderControl` wraps one render's `cancel` (a gbviewer.CancelToken, whose flag the native CPU loop reads directly,
+or a threading.Event, copied into a flag of the render's own by `report`), its `on_progress(done, total)` and its
+`partial` frame. Progress is reported from the render's own thread: the native CPU module calls `report` between
+tiles (at most every 5 ms) and at the end; GPU backends call `step` between their dispatches. A callback that raises
+ends the render with one CallbackError (the render cancelled, the callback's exception chained as its cause).
+`partial`, a float32 (height, width, 3) array, receives the frame's pixels as they are made: tile by tile on the CPU
+backend (centre out), in one go at the end of a GPU frame.
 """
 
 from __future__ import annotations
@@ -14,53 +16,52 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import RenderCancelled, RenderError
+from ..cancel import CancelToken, Cancellable
+from ..errors import CallbackError, RenderCancelled, RenderError
 
-POLL_S = 0.005  # how often the event is forwarded and progress reported
 Progress = Callable[[int, int], None]
 
 
 class RenderControl:
-    """Context manager around one render; `check()` raises RenderCancelled once the event is set."""
+    """One render's cancel flag, progress and partial frame; `check()` raises RenderCancelled once cancelled."""
 
-    def __init__(self, cancel: threading.Event | None = None, on_progress: Progress | None = None,
+    def __init__(self, cancel: Cancellable | None = None, on_progress: Progress | None = None,
                  partial: np.ndarray | None = None) -> None:
         self.cancel, self.on_progress, self.partial = cancel, on_progress, partial
-        self.block = np.zeros(3, np.int64)
-        self._done = threading.Event()
-        self._thread: threading.Thread | None = None
+        token = isinstance(cancel, CancelToken)
+        self.flag = cancel.flag if token else np.zeros(1, np.int64)  # what the native loop reads
+        self._bridged = cancel is not None and not token  # an Event: copied into self.flag by report()
 
     @property
-    def active(self) -> bool:
-        return self.cancel is not None or self.on_progress is not None
+    def hook(self) -> Progress | None:
+        """The native render's on_progress: `report` where there is a callback or an Event to forward, else None."""
+        return self.report if self.on_progress is not None or self._bridged else None
 
     def __enter__(self) -> RenderControl:
         self.check()
-        if self.active:
-            self._thread = threading.Thread(target=self._watch, name="gbviewer-render-control", daemon=True)
-            self._thread.start()
         return self
 
-    def __exit__(self, kind, *exc) -> None:
-        self._done.set()
-        if self._thread is not None:
-            self._thread.join()
-        if kind is None and self.on_progress is not None and self.block[2]:
-            self.on_progress(int(self.block[1]), int(self.block[2]))  # the last count, in the render's thread
+    def __exit__(self, *exc) -> None:
+        return None
+
+    def report(self, done: int, total: int) -> None:
+        """Progress from the render's thread: the caller's on_progress (an exception it raises becomes a
+        CallbackError, which stops the render), then an Event's state copied into the flag."""
+        if self.on_progress is not None:
+            try:
+                self.on_progress(done, total)
+            except Exception as exc:
+                raise CallbackError(f"on_progress raised {type(exc).__name__}: {exc}; the render was cancelled") \
+                    from exc
+        self._forward()
 
     def _forward(self) -> None:
-        if self.cancel is not None and self.cancel.is_set():
-            self.block[0] = 1
-
-    def _watch(self) -> None:
-        while not self._done.wait(POLL_S):
-            self._forward()
-            if self.on_progress is not None and self.block[2]:
-                self.on_progress(int(self.block[1]), int(self.block[2]))
+        if self._bridged and self.cancel.is_set():
+            self.flag[0] = 1
 
     def step(self, done: int, total: int) -> None:
-        """For backends without the native block (GPU dispatches): record progress, then `check()`."""
-        self.block[1], self.block[2] = done, total
+        """For backends without the native loop (GPU dispatches): report progress, then `check()`."""
+        self.report(done, total)
         self.check()
 
     def check_partial(self, width: int, height: int) -> None:
@@ -78,7 +79,28 @@ class RenderControl:
             self.partial[...] = image
 
     def check(self) -> None:
-        """Raise RenderCancelled if the caller's event is set."""
+        """Raise RenderCancelled if the render's cancel is set."""
         self._forward()
-        if self.block[0]:
+        if self.flag[0]:
             raise RenderCancelled("render cancelled")
+
+
+class FrameLock:
+    """The lock one renderer's frames run under. A frame started on the thread that holds it (an on_progress that
+    renders with the same renderer) would wait for itself forever: it raises a RenderError instead."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._owner: int | None = None
+
+    def __enter__(self) -> FrameLock:
+        if self._owner == threading.get_ident():
+            raise RenderError("a frame was started from inside a frame of the same renderer (its on_progress?): "
+                              "render there with a renderer of its own (gbviewer.render.create_renderer)")
+        self._lock.acquire()
+        self._owner = threading.get_ident()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._owner = None
+        self._lock.release()

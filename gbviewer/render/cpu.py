@@ -1,35 +1,28 @@
-"""The CPU backend: the native C++/OpenMP module gbviewer._native (built from native/cpu)."""
+"""The CPU backend: the native C++/OpenMP renderer gbviewer._native.Renderer (built from native/cpu)."""
 
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
 
 from ..camera import Camera
+from ..cancel import Cancellable
+from ..cells import Cells
 from ..errors import BackendUnavailable
 from ..scene import Scene
-from .control import Progress, RenderControl
+from .control import FrameLock, Progress, RenderControl
 from .prepare import Prepared, camera_args, native_frame, prepare
 from .trace import PixelTrace, from_native
 from .types import Capabilities, Frame, Renderer, RenderSettings
 
 
-def _native_extra(prep: Prepared) -> dict:
-    """Keyword arguments of the native render call for wsr and duplex (globals, view weights, cells)."""
-    if prep.oit is None:
-        return {}
-    extra = dict(prep.oit._asdict(), weight_sh=prep.scene.oit.view_weight_sh if prep.scene.oit else None)
-    cells = prep.cells
-    if cells is not None:
-        extra.update(cell_means=cells.means, cell_scales=cells.scales, cell_quats=cells.quats,
-                     cell_offsets=cells.offsets, cell_members=cells.members)
-    return extra
-
-
 class CpuRenderer(Renderer):
-    """Native C++/OpenMP backend (gbviewer._native)."""
+    """Native C++/OpenMP backend: the scene is uploaded once (the native renderer references its arrays); a trained
+    Duplex-GS model's view is uploaded per frame, duplex cells when they change.
+
+    Threads may share one renderer: frames are serialised (a lock here around the uploaded scene and cells, and a
+    mutex in the native renderer around its buffers); each frame runs on every core."""
 
     name = "cpu"
     capabilities = Capabilities(progressive=True, trace=True, simd=True, host=True)
@@ -40,8 +33,11 @@ class CpuRenderer(Renderer):
             raise BackendUnavailable(f"cpu backend unavailable: {why}")
         from .. import _native
 
-        self._native = _native
+        self._impl = _native.Renderer()
+        self._lock = FrameLock()
         self._scene: Scene | None = None
+        self._uploaded: Scene | None = None
+        self._cells: Cells | None = None
 
     @classmethod
     def available(cls) -> tuple[bool, str]:
@@ -54,37 +50,62 @@ class CpuRenderer(Renderer):
         return True, ""
 
     def upload(self, scene: Scene) -> None:
-        if scene is not self._scene:
-            self._native.release_buffers()  # the per-frame buffers the native module keeps for the last scene
-        self._scene = scene
+        with self._lock:
+            if scene is self._scene:
+                return
+            self._impl.release_buffers()  # sized for the last scene
+            self._scene, self._uploaded, self._cells = scene, None, None
+            if scene.oit is None or scene.oit.neural is None:
+                self._upload(scene)
 
     def release(self) -> None:
-        self._native.release_buffers()
-        self._scene = None
+        with self._lock:
+            self._impl.release_buffers()
+            self._scene = self._uploaded = self._cells = None
 
-    def _native_render(self, prep: Prepared, camera: Camera, settings: RenderSettings, **kwargs) -> dict:
-        """The native module's render call for this frame; kwargs: control or trace."""
-        scene = prep.scene
-        return self._native.render(
-            scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d,
-            *camera_args(camera), int(settings.mode), settings.supersample, settings.sh_degree,
-            np.asarray(settings.background, np.float32), settings.debug == "window", settings.threads,
-            **_native_extra(prep), **kwargs,
-        )
+    def _upload(self, scene: Scene) -> None:
+        self._uploaded = self._cells = None
+        self._impl.upload(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d)
+        if scene.oit is not None and scene.oit.view_weight_sh is not None:
+            self._impl.upload_weights(scene.oit.view_weight_sh)
+        self._uploaded = scene
 
-    def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
+    def _sync(self, prep: Prepared) -> None:
+        """Upload the view's splats and duplex cells where they are not yet. Called with the lock held."""
+        scene, cells = prep.scene, prep.cells
+        if scene is not self._uploaded:
+            self._upload(scene)
+        if cells is not None and cells is not self._cells:
+            self._cells = None
+            self._impl.upload_cells(cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
+                                    cells.cell_of(scene.num_splats))
+            self._cells = cells
+
+    @staticmethod
+    def _frame_args(camera: Camera, settings: RenderSettings) -> tuple:
+        """The native call's camera, mode, supersampling, SH cap, background; the oit globals follow."""
+        return (*camera_args(camera), int(settings.mode), settings.supersample, settings.sh_degree,
+                np.asarray(settings.background, np.float32))
+
+    def render(self, camera: Camera, settings: RenderSettings, *, cancel: Cancellable | None = None,
                on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
         t0 = time.perf_counter()
         control = RenderControl(cancel, on_progress, partial)
         control.check_partial(camera.width, camera.height)
-        prep = prepare(self._scene, camera, settings, self.name)
-        with control:
-            out = self._native_render(prep, camera, settings, control=control.block if control.active else None,
-                                      partial=partial)
-        control.check()  # the native render skipped its remaining tiles once the event was set
+        control.check()  # before any work (a trained model's decode included)
+        with self._lock:
+            prep = prepare(self._scene, camera, settings, self.name)
+            self._sync(prep)
+            out = self._impl.render(*self._frame_args(camera, settings), settings.debug == "window",
+                                    *(prep.oit or ()), threads=settings.threads, cancel=control.flag,
+                                    on_progress=control.hook, partial=partial)
+        control.check()  # the native render skipped its remaining tiles once the flag was set
         return native_frame(out, prep, camera, settings, self.name, t0)
 
     def trace(self, camera: Camera, settings: RenderSettings, x: int, y: int) -> PixelTrace:
         """The pixel trace of (x, y) in this frame (gbviewer.render.trace; `trace_pixel` checks the pixel)."""
-        prep = prepare(self._scene, camera, settings, self.name)
-        return from_native(self._native_render(prep, camera, settings, trace=(x, y)), settings, camera, x, y)
+        with self._lock:
+            prep = prepare(self._scene, camera, settings, self.name)
+            self._sync(prep)
+            out = self._impl.trace(*self._frame_args(camera, settings), *(prep.oit or ()), x=x, y=y)
+        return from_native(out, settings, camera, x, y)

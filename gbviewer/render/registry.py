@@ -11,9 +11,11 @@ from collections.abc import Callable, Iterator, Mapping
 import numpy as np
 
 from ..camera import Camera
+from ..cancel import Cancellable
 from ..errors import RenderError
 from ..scene import Scene
 from .choice import AUTO, choose_backend
+from .control import FrameLock
 from .types import Frame, Mode, Renderer, RenderSettings
 
 _MODULES = {"cpu": ("cpu", "CpuRenderer"), "cuda": ("cuda", "CudaRenderer"), "glsl": ("glsl", "GlslRenderer")}
@@ -68,24 +70,70 @@ def create_gl_context():
     return create_context()
 
 
-_renderers: dict[str, tuple[Renderer, "weakref.ref[Scene]"]] = {}
+class _Slot:
+    """The process's renderer of one backend, the lock its frames run under and the scene uploaded to it."""
+
+    def __init__(self, renderer: Renderer) -> None:
+        self.renderer, self.lock = renderer, FrameLock()
+        self.uploaded: weakref.ref[Scene] | None = None
+        self.bound: SharedRenderer | None = None  # the last one handed out (keeps its scene alive)
+
+    def bind(self, scene: Scene) -> None:
+        """Upload `scene` unless it is the one uploaded. Called with the lock held."""
+        if self.uploaded is None or self.uploaded() is not scene:
+            self.uploaded = None
+            self.renderer.upload(scene)
+            self.uploaded = weakref.ref(scene)
+
+
+class SharedRenderer:
+    """The process's renderer of a backend, bound to one scene: what `get_renderer` returns. Its frames (render,
+    render_to_texture, trace) and uploads run under the backend's lock with its own scene uploaded first, so threads
+    that render different scenes through `get_renderer` or `render` each get their own scene's frames (one frame at
+    a time per backend). Everything else is the renderer's (name, available, release_texture, ...)."""
+
+    _SCENE_CALLS = frozenset({"render", "render_to_texture", "trace"})
+
+    def __init__(self, slot: _Slot, scene: Scene) -> None:
+        self._slot, self._scene = slot, scene
+
+    def __getattr__(self, name: str):
+        attr = getattr(self._slot.renderer, name)
+        if name not in self._SCENE_CALLS:
+            return attr
+
+        def call(*args, **kwargs):
+            with self._slot.lock:
+                self._slot.bind(self._scene)
+                return attr(*args, **kwargs)
+
+        return call
+
+    def upload(self, scene: Scene) -> None:
+        """Bind this handle to `scene` (uploaded now, and again before a frame wherever another scene came since)."""
+        with self._slot.lock:
+            self._scene = scene
+            self._slot.bind(scene)
+
+
+_renderers: dict[str, _Slot] = {}
 _renderers_lock = threading.Lock()
 
 
-def get_renderer(scene: Scene, backend: str = "cpu") -> Renderer:
-    """The process's renderer of `backend` ("auto": the best here) with `scene` uploaded. One renderer per backend,
-    uploading only when the scene changes: it keeps the last scene alive, never every scene it has seen. One that
-    stopped working (`usable()` False) is replaced by a new one."""
+def get_renderer(scene: Scene, backend: str = "cpu") -> SharedRenderer:
+    """The process's renderer of `backend` ("auto": the best here) bound to `scene` (see SharedRenderer: safe to use
+    from any thread). One renderer per backend, uploading only when the scene changes: it keeps the last scene
+    alive, never every scene it has seen. One that stopped working (`usable()` False) is replaced by a new one."""
     backend = resolve_backend(backend)
     with _renderers_lock:
-        entry = _renderers.get(backend)
-        if entry is not None and not entry[0].usable()[0]:
-            entry = None
-        renderer = entry[0] if entry is not None else BACKENDS[backend]()
-        if entry is None or entry[1]() is not scene:
-            renderer.upload(scene)
-            _renderers[backend] = (renderer, weakref.ref(scene))
-        return renderer
+        slot = _renderers.get(backend)
+        if slot is None or not slot.renderer.usable()[0]:
+            slot = _renderers[backend] = _Slot(BACKENDS[backend]())
+    with slot.lock:
+        slot.bind(scene)
+        if slot.bound is None or slot.bound._scene is not scene:
+            slot.bound = SharedRenderer(slot, scene)
+        return slot.bound
 
 
 def render(
@@ -97,16 +145,18 @@ def render(
     background: tuple[float, float, float] = (0.0, 0.0, 0.0),
     sh_degree: int = 3,
     debug: str = "none",
-    cancel: threading.Event | None = None,
+    cancel: Cancellable | None = None,
     on_progress: Callable[[int, int], None] | None = None,
     partial: np.ndarray | None = None,
     **options,
 ) -> Frame:
     """Render `scene` from `camera` in `mode` on `backend` (cpu, glsl, cuda, or auto: `choose_backend()`'s pick);
     `options`: depth_correct, et_grade, cell_size, threads.
-    `cancel`: a threading.Event; once set, the call raises RenderCancelled within one tile batch. `on_progress`:
-    called as fn(done_tiles, total_tiles) from the render. `partial`: a float32 (height, width, 3) array that receives
-    each tile's pixels as soon as it is blended (centre out), for showing a frame while it refines."""
+    `cancel`: a gbviewer.CancelToken (or a threading.Event); once set, the call raises RenderCancelled within one
+    tile batch. `on_progress`: called as fn(done_tiles, total_tiles) from the rendering thread (an exception it raises
+    cancels the render: CallbackError, chained to it). `partial`: a float32 (height, width, 3) array that receives
+    each tile's pixels as soon as it is blended (centre out), for showing a frame while it refines. Safe from any
+    thread, with any scenes (each call renders its own scene)."""
     settings = RenderSettings(Mode.parse(mode), supersample, tuple(background), sh_degree, debug, **options)
     return get_renderer(scene, backend).render(camera, settings, cancel=cancel, on_progress=on_progress,
                                                       partial=partial)

@@ -140,7 +140,7 @@ def _rows(a: np.ndarray) -> list[tuple]:
 
 
 def from_native(out: dict, settings: RenderSettings, camera: Camera, x: int, y: int) -> PixelTrace:
-    """A PixelTrace from the CPU module's render(..., trace=(x, y)) result (native/cpu/trace.cpp's columns)."""
+    """A PixelTrace from the CPU module's Renderer.trace(..., x=x, y=y) result (native/cpu/trace.cpp's columns)."""
     n = settings.supersample
     mode = settings.mode
     xy, conic = out["xy"] / n, out["conic"].astype(np.float64) * n * n

@@ -155,7 +155,7 @@ class FrameStats:
     evaluations, evals_per_pixel their mean; backend; mode: `RenderSettings.label_for` the scene.
 
     Filled by some backends or modes only (None elsewhere): simd, the SIMD path the cpu backend's blend ran
-    ("scalar", "avx2" or "avx512", chosen by GBVIEWER_SIMD at load or gbviewer._native.set_simd); duplex: cells,
+    ("scalar", "avx2" or "avx512", chosen by GBVIEWER_SIMD at load or gbviewer._native.testing.set_simd); duplex: cells,
     cells_visible and cell_misses (splat-tile pairs outside their cell's tiles; not counted by glsl); decode_ms: the
     MLPs of a trained Duplex-GS model, per view.
     """

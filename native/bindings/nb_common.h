@@ -1,4 +1,4 @@
-// nanobind helpers shared by the CPU module (cpu/cpu.cpp) and the CUDA module (cuda/module.cpp): argument checks
+// nanobind helpers shared by the CPU module (cpu/bindings.cpp) and the CUDA module (cuda/module.cpp): argument checks
 // that throw std::invalid_argument (Python ValueError), numpy arrays that own a vector, the result dict.
 #pragma once
 

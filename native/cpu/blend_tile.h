@@ -11,7 +11,7 @@
 namespace gbv {
 
 // Box of pixel centres a splat can change in its mode: outside it the splat is skipped without evaluating it (an
-// exact test, with margin for float rounding; see splat_bounds in cpu.cpp). Infinite where no such box is known.
+// exact test, with margin for float rounding; see splat_bounds in frame.cpp). Infinite where no such box is known.
 struct SplatBounds {
     float x0, x1, y0, y1;
 };

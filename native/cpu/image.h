@@ -1,5 +1,5 @@
 // An image's planes on the CPU (rgb, alpha, evals, the gaussian_blending window) and the box average that
-// supersampling ends with: shared by the render (cpu.cpp) and the pixel trace (trace.cpp).
+// supersampling ends with: shared by the render (frame.cpp, renderer.cpp) and the pixel trace (trace.cpp).
 #pragma once
 
 #include <cstdint>

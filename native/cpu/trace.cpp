@@ -4,6 +4,8 @@
 
 #include <nanobind/ndarray.h>
 
+#include "trace_dict.h"
+
 #include "../bindings/nb_common.h"
 
 namespace gbv {

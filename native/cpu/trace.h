@@ -3,8 +3,6 @@
 // rectangle of its tile's list, with a recorder as the tracer (gbv/trace.h): one record per list entry.
 #pragma once
 
-#include <nanobind/nanobind.h>
-
 #include <vector>
 
 #include "blend_tile.h"
@@ -12,7 +10,7 @@
 
 namespace gbv {
 
-// What a frame's binning leaves for its blend (cpu.cpp): the splats and their boxes by splat id, the tile lists
+// What a frame's binning leaves for its blend (frame.cpp): the splats and their boxes by splat id, the tile lists
 // (tile t: keys[tile_start[t] .. tile_start[t + 1]), splat id in the low 32 bits), at the frame's size (the
 // sub-sample grid when supersampling).
 struct FrameLists {
@@ -49,8 +47,5 @@ struct PixelTrace {
 
 // Trace output pixel (x, y) of a frame whose lists are at N x its size. Run with flush-to-zero like the render.
 PixelTrace trace_pixel(const FrameLists& frame, int x, int y, int N);
-
-// The trace as numpy columns (gbviewer.render.trace reads them).
-nanobind::dict trace_dict(PixelTrace&& trace);
 
 }  // namespace gbv

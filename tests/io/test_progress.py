@@ -3,6 +3,7 @@ a bounded number of them, the same scene as a load without them, and cancellatio
 
 from __future__ import annotations
 
+import gc
 import os
 import threading
 
@@ -124,13 +125,35 @@ def test_cancel_at_the_first_report_leaves_nothing_behind(files, kind, small_chu
     assert isinstance(gb.LoadCancelled("x"), gb.Cancelled) and isinstance(gb.RenderCancelled("x"), gb.Cancelled)
 
 
-def test_cancel_set_before_the_load_reports_nothing(files):
-    cancel = threading.Event()
+@pytest.mark.parametrize("kind", ["event", "token"])
+def test_cancel_set_before_the_load_reports_nothing(files, kind):
+    cancel = gb.CancelToken() if kind == "token" else threading.Event()
     cancel.set()
     calls = []
     with pytest.raises(gb.LoadCancelled):
         gb.load(files["inria"], progress=lambda *c: calls.append(c), cancel=cancel)
     assert calls == []
+
+
+@pytest.mark.parametrize("kind, unit", [(k, u) for k in KINDS for u in ("bytes", "splats")
+                                        if u == "bytes" or k in SPLATS_REPORTED])
+@pytest.mark.parametrize("error", [ValueError, OSError, KeyError, gb.GBViewerError])
+def test_a_raising_progress_callback_is_not_blamed_on_the_file(files, kind, unit, error, small_chunks):
+    """A progress callback that raises (midway, in either phase, with exceptions the loaders catch from the file):
+    one CallbackError chained to it, not a SceneFormatError; nothing left open; the file still loads."""
+    fds = _open_fds()
+
+    def progress(done, total, u):
+        if u == unit and done >= total // 2:
+            raise error("from the callback")
+
+    with pytest.raises(gb.CallbackError, match="^progress raised .*from the callback.*load was cancelled") as info:
+        gb.load(files[kind], progress=progress)
+    assert type(info.value.__cause__) is error and not isinstance(info.value, gb.SceneFormatError)
+    del info  # its traceback holds the loader's frames (and their files) alive
+    gc.collect()
+    assert _open_fds() == fds
+    same_scene(gb.load(files[kind]), gb.load(files[kind], cancel=gb.CancelToken()))
 
 
 @pytest.mark.parametrize("kind, unit", [(k, u) for k in ("inria", "ascii", "spz-gzip", "spz-zstd", "splat", "sog-zip")

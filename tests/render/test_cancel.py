@@ -71,21 +71,22 @@ def test_event_set_during_the_render_cancels_it(scene):
 
 @pytest.mark.parametrize("ss", [1, 2])
 def test_native_module_skips_every_tile_once_the_flag_is_set(scene, ss):
-    """The control block of the native call itself: with the flag set, no tile is blended (the count stays 0 and
-    the image stays empty), and the result says it was cancelled."""
+    """The cancel flag of the native call itself: with it set, no tile is blended (no progress past 0 is reported
+    and the image stays empty), and the result says it was cancelled."""
     from gbviewer import _native
     from gbviewer.render.prepare import camera_args
 
     cam = front_camera(64, 48)
-    block = np.array([1, 0, 0], np.int64)
-    out = _native.render(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None, *camera_args(cam),
-                         int(gb.Mode.SCALAR), ss, 3, np.zeros(3, np.float32), False, 0, control=block)
-    assert out["cancelled"] and block[1] == 0 and block[2] == -(-64 * ss // 16) * -(-48 * ss // 16)
-    assert not out["rgb"].any()
-    block[:] = 0
-    out = _native.render(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None, *camera_args(cam),
-                         int(gb.Mode.SCALAR), ss, 3, np.zeros(3, np.float32), False, 0, control=block)
-    assert not out["cancelled"] and block[1] == block[2] and out["rgb"].any()
+    r = _native.Renderer()
+    r.upload(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None)
+    flag = np.array([1], np.int64)
+    seen: list[tuple[int, int]] = []
+    args = (*camera_args(cam), int(gb.Mode.SCALAR), ss, 3, np.zeros(3, np.float32), False)
+    out = r.render(*args, cancel=flag, on_progress=lambda d, t: seen.append((d, t)))
+    assert out["cancelled"] and all(d == 0 for d, _ in seen) and not out["rgb"].any()
+    flag[0] = 0
+    out = r.render(*args, cancel=flag, on_progress=lambda d, t: seen.append((d, t)))
+    assert not out["cancelled"] and seen[-1] == (-(-64 * ss // 16) * -(-48 * ss // 16),) * 2 and out["rgb"].any()
 
 
 @pytest.mark.parametrize("backend", ["cpu", pytest.param("glsl", marks=pytest.mark.gl)])
@@ -130,3 +131,102 @@ def test_a_partial_buffer_of_the_wrong_shape_is_refused(scene):
         gb.render(scene, front_camera(64, 48), partial=np.zeros((48, 64, 4), np.float32))
     with pytest.raises(gb.RenderError, match="partial"):
         gb.render(scene, front_camera(64, 48), partial=np.zeros((48, 64, 3), np.float64))
+
+
+def test_a_cancel_token_set_during_the_render_cancels_it(scene):
+    """gb.CancelToken: the native loop reads its flag directly (no helper thread); set from another thread while
+    the frame is being blended, the call raises RenderCancelled, and the renderer still works afterwards."""
+    token = gb.CancelToken()
+    started = threading.Event()
+
+    def setter() -> None:
+        started.wait(60)
+        token.set()
+
+    helper = threading.Thread(target=setter)
+    helper.start()
+    with pytest.raises(gb.RenderCancelled):
+        gb.render(scene, front_camera(640, 480), "gaussian_blending", supersample=3, cancel=token,
+                  on_progress=lambda done, total: started.set())
+    helper.join()
+    assert token.is_set() and token.wait(0)
+    token.clear()
+    assert not token.is_set() and not token.wait(0.01)
+    frame = gb.render(scene, front_camera(96, 64), cancel=token)
+    np.testing.assert_array_equal(frame.rgb, gb.render(scene, front_camera(96, 64)).rgb)
+
+
+def test_no_helper_thread_runs_during_a_render(scene):
+    """Progress is reported from the rendering thread itself, and no thread is started for the render."""
+    before = set(threading.enumerate())
+    seen: list[tuple[threading.Thread, set[threading.Thread]]] = []
+    gb.render(scene, front_camera(320, 240), "gaussian_blending", supersample=2, cancel=threading.Event(),
+              on_progress=lambda done, total: seen.append((threading.current_thread(), set(threading.enumerate()))))
+    assert seen and all(t is threading.current_thread() and during <= before for t, during in seen)
+
+
+@pytest.mark.parametrize("backend", ["cpu", pytest.param("glsl", marks=pytest.mark.gl)])
+def test_a_raising_progress_callback_ends_the_render_with_one_error(scene, backend):
+    """on_progress raising: the call ends with CallbackError chained to the callback's exception, no tile is blended
+    after it, and the renderer (and a later cancel) still works."""
+    r = _renderer(backend, scene)
+    cam = front_camera(320, 240)
+    plain = r.render(cam, _settings())
+    calls: list[int] = []
+
+    def boom(done: int, total: int) -> None:
+        calls.append(done)
+        raise ZeroDivisionError("boom")
+
+    with pytest.raises(gb.CallbackError, match="on_progress raised ZeroDivisionError: boom") as info:
+        r.render(cam, _settings(ss=2), on_progress=boom)
+    assert isinstance(info.value.__cause__, ZeroDivisionError) and len(calls) == 1
+    cancel = gb.CancelToken()
+    cancel.set()
+    with pytest.raises(gb.RenderCancelled):
+        r.render(cam, _settings(), cancel=cancel)
+    np.testing.assert_array_equal(r.render(cam, _settings()).rgb, plain.rgb)
+
+
+class SetOnSecondLook(threading.Event):
+    """An Event that reads as set from its second is_set() on (the first is the render's check before any work)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.looks = 0
+
+    def is_set(self) -> bool:
+        self.looks += 1
+        return self.looks > 1 or super().is_set()
+
+
+def test_a_plain_event_is_bridged_by_the_rendering_thread(scene):
+    """Without on_progress, a threading.Event is still seen mid-frame: the native loop's report (on the calling
+    thread) copies it into the render's flag, and the frame stops with RenderCancelled."""
+    event = SetOnSecondLook()
+    partial = np.full((480, 640, 3), np.nan, np.float32)
+    with pytest.raises(gb.RenderCancelled):  # 10800 tiles: many report intervals (5 ms) long
+        gb.render(scene, front_camera(640, 480), "gaussian_blending", supersample=3, cancel=event, partial=partial)
+    assert event.looks >= 2 and not np.isfinite(partial).all()  # stopped before the last tile
+
+
+def test_rendering_from_inside_on_progress_with_the_same_renderer_is_an_error_not_a_hang(scene):
+    """on_progress that renders with the renderer already rendering (here the process's one, through gb.render)
+    would wait for itself: that inner call raises, and the outer one ends with the CallbackError it caused. With a
+    renderer of its own the callback may render."""
+    cam = front_camera(320, 240)
+
+    def nested(done: int, total: int) -> None:
+        gb.render(scene, front_camera(16, 16))
+
+    with pytest.raises(gb.CallbackError, match="on_progress raised RenderError: a frame was started from inside"):
+        gb.render(scene, cam, on_progress=nested)
+    from gbviewer.render import create_renderer
+
+    own = create_renderer("cpu")
+    own.upload(scene)
+    inner: list[gb.Frame] = []
+    frame = gb.render(scene, cam, on_progress=lambda d, t: inner.append(own.render(front_camera(16, 16),
+                                                                                      gb.RenderSettings())))
+    np.testing.assert_array_equal(frame.rgb, gb.render(scene, cam).rgb)
+    assert inner and all(np.array_equal(f.rgb, inner[0].rgb) for f in inner)

@@ -236,14 +236,11 @@ def test_cpu_binding_rejects_bad_render_args(changes, message):
     scene = random_scene(12, seed=3)
     cells = build_cells(scene, 4)
     args = dict(GOOD, **changes)
+    r = _native.Renderer()
+    r.upload(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None)
+    r.upload_cells(cells.means, cells.scales, cells.quats, cells.offsets, cells.members, cells.cell_of(12))
     with pytest.raises(ValueError, match=f"^render: .*{message}"):
-        _native.render(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None, args["R"], args["t"],
-                       args["fx"], args["fy"], args["cx"], args["cy"], args["width"], args["height"],
-                       args["near_plane"], args["projection"], args["mode"], args["supersample"], args["sh_degree"],
-                       args["background"], args["want_window"], 1, cell_means=cells.means, cell_scales=cells.scales,
-                       cell_quats=cells.quats, cell_offsets=cells.offsets, cell_members=cells.members,
-                       sigma=args["sigma"], weight_background=args["weight_background"], et_grade=args["et_grade"],
-                       depth_correct=args["depth_correct"])
+        r.render(**args)
 
 
 # ---- without a GPU: the Python wrapper's state after failures and its lock, on a stand-in native renderer -------

@@ -47,10 +47,10 @@ def test_cells_must_partition_the_splats():
     from gbviewer.render.prepare import camera_args
 
     def native(members):
-        return _native.render(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None,
-                              *camera_args(cam), int(gb.Mode.DUPLEX), 1, 3, np.zeros(3, np.float32), False, 0,
-                              cell_means=g.means, cell_scales=g.scales, cell_quats=g.quats, cell_offsets=g.offsets,
-                              cell_members=np.ascontiguousarray(members, np.int32))
+        r = _native.Renderer()
+        r.upload(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None)
+        r.upload_cells(g.means, g.scales, g.quats, g.offsets, np.ascontiguousarray(members, np.int32), g.cell_of(12))
+        return r.render(*camera_args(cam), int(gb.Mode.DUPLEX), 1, 3, np.zeros(3, np.float32), False)
 
     with pytest.raises(ValueError, match="partition"):
         native(repeated.members)

@@ -71,7 +71,7 @@ def check_concurrent_renders(backend: str, scene: gb.Scene, threads: int = 2, ro
 
 
 def test_concurrent_renders_cpu():
-    """Two Python threads rendering with one CPU renderer at once (the native render releases the GIL)."""
+    """Two Python threads sharing the process's CPU renderer (its frames are serialised, each on every core)."""
     check_concurrent_renders("cpu", random_scene(400, seed=5, sh_degree=1))
 
 
@@ -103,32 +103,75 @@ def test_tile_list_that_does_not_fit_is_a_memory_error(tmp_path):
 
 
 def test_release_buffers():
-    """The CPU renderer frees the native per-frame buffers when its scene changes (not when the same scene comes
-    again); renders after a release are unchanged."""
-    from gbviewer import _native
+    """The CPU renderer keeps its native per-frame buffers between frames of a scene (uploading the same scene again
+    keeps them) and frees them when another scene is uploaded; frames after that are unchanged."""
     from gbviewer.render import CpuRenderer
-
-    released = []
-
-    class Spy:  # the native module, counting release_buffers calls
-        def __getattr__(self, name):
-            return getattr(_native, name)
-
-        def release_buffers(self):
-            released.append(1)
-            _native.release_buffers()
 
     scene, cam = random_scene(200, seed=4), front_camera()
     r = CpuRenderer()
-    r._native = Spy()
     r.upload(scene)
     a = r.render(cam, gb.RenderSettings())
+    kept = r._impl.buffer_bytes
+    assert kept > 0
     r.upload(scene)
-    assert len(released) == 1, "uploading the same scene again keeps the buffers"
+    assert r._impl.buffer_bytes == kept
     r.upload(random_scene(10, seed=5))
+    assert r._impl.buffer_bytes == 0
     r.upload(scene)
-    assert len(released) == 3
     np.testing.assert_array_equal(r.render(cam, gb.RenderSettings()).rgb, a.rgb)
+
+
+def test_renders_of_two_scenes_from_many_threads_get_their_own_scene():
+    """gb.render, a handle from gb.get_renderer kept across calls, and gb.trace_pixel, from several threads with two
+    scenes and a tiny switch interval: every frame (and trace) is its own scene's, bit for bit (the process's
+    renderer is shared; each call uploads its own scene under the backend's lock when another one is uploaded)."""
+    import sys
+
+    cam = front_camera(32, 24)
+    scenes = [random_scene(60, seed=21), random_scene(50, seed=22, sh_degree=1)]
+    modes = ["scalar", "duplex"]
+    refs = {(i, m): gb.render(s, cam, m) for i, s in enumerate(scenes) for m in modes}
+    traces = {i: gb.trace_pixel(s, cam, 16, 12).to_json() for i, s in enumerate(scenes)}
+    assert not np.array_equal(refs[0, "scalar"].rgb, refs[1, "scalar"].rgb) and traces[0] != traces[1]
+    threads = 4
+    barrier = threading.Barrier(threads)
+    wrong: list[str] = []
+    errors: list[BaseException] = []
+
+    def work(t: int) -> None:
+        try:
+            own = t % 2
+            handle = gb.get_renderer(scenes[own])
+            barrier.wait()
+            for k in range(120):
+                m = modes[(k // 3) % 2]
+                if k % 3 == 0:
+                    i = (t + k) % 2
+                    frame = gb.render(scenes[i], cam, m)
+                elif k % 12 == 1:
+                    i = (t + k) % 2
+                    if gb.trace_pixel(scenes[i], cam, 16, 12).to_json() != traces[i]:
+                        wrong.append(f"thread {t}: trace {k} of scene {i}")
+                    continue
+                else:
+                    i, frame = own, handle.render(cam, gb.RenderSettings.parse(m))
+                if not (np.array_equal(frame.rgb, refs[i, m].rgb) and np.array_equal(frame.alpha, refs[i, m].alpha)):
+                    wrong.append(f"thread {t}: frame {k} ({m}) of scene {i}")
+        except BaseException as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    workers = [threading.Thread(target=work, args=(t,)) for t in range(threads)]
+    before = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)
+    try:
+        for w in workers:
+            w.start()
+        for w in workers:
+            w.join(timeout=300)
+    finally:
+        sys.setswitchinterval(before)
+    assert not errors, errors
+    assert not wrong, f"{len(wrong)} of {threads * 120} calls: {wrong[:5]}"
 
 
 def test_a_frame_beyond_int32_samples_is_one_line(bundled_scene):

@@ -43,11 +43,11 @@ def simd(path: str):
     if path not in _native.simd_paths():
         pytest.skip(f"this CPU/build has no {path} path (it has {', '.join(_native.simd_paths())})")
     before = _native.simd()
-    _native.set_simd(path)
+    _native.testing.set_simd(path)
     try:
         yield
     finally:
-        _native.set_simd(before)
+        _native.testing.set_simd(before)
 
 
 def render(path, scene, cam, mode, supersample=1, **kw):
@@ -140,12 +140,12 @@ PREPROCESS_RECORD = np.dtype([("valid", "u1"), ("splat", SPLAT2D), ("rect", "<i4
 
 def preprocessed(path, scene, cam, mode, **kw):
     """The preprocess output of a render on `path`, as PREPROCESS_RECORD per splat, and the frame."""
-    _native.set_capture_preprocess(True)
+    _native.testing.set_capture_preprocess(True)
     try:
         frame = render(path, scene, cam, mode, **kw)
-        rec = np.frombuffer(_native.captured_preprocess(), PREPROCESS_RECORD)
+        rec = np.frombuffer(_native.testing.captured_preprocess(), PREPROCESS_RECORD)
     finally:
-        _native.set_capture_preprocess(False)
+        _native.testing.set_capture_preprocess(False)
     assert len(rec) == scene.num_splats
     return rec, frame
 
@@ -258,11 +258,11 @@ def test_pixel_boxes_change_no_pixel(path, mode, make_scene):
     scene, cam = make_scene(5)
     for c in (cam, cam.at_sampling_rate(1 / 2), cam.at_sampling_rate(1 / 4)):
         on = render(path, scene, c, mode, supersample=2)
-        _native.set_pixel_boxes(False)
+        _native.testing.set_pixel_boxes(False)
         try:
             off = render(path, scene, c, mode, supersample=2)
         finally:
-            _native.set_pixel_boxes(True)
+            _native.testing.set_pixel_boxes(True)
         np.testing.assert_array_equal(on.rgb, off.rgb)
         np.testing.assert_array_equal(on.alpha, off.alpha)
         np.testing.assert_array_equal(on.debug["evals"], off.debug["evals"])
@@ -327,11 +327,11 @@ def test_env_var_rejects_unknown_or_unsupported(value):
 
 def test_set_simd_and_exp_rate():
     with pytest.raises(ValueError, match="available here"):
-        _native.set_simd("neon")
+        _native.testing.set_simd("neon")
     with pytest.raises(ValueError):
-        _native.exp_rate("neon", 1000)
+        _native.testing.exp_rate("neon", 1000)
     for path in _native.simd_paths():
-        assert _native.exp_rate(path, 100_000) > 0
+        assert _native.testing.exp_rate(path, 100_000) > 0
 
 
 _EMULATED = r"""

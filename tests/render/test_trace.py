@@ -157,11 +157,11 @@ def test_figure3_background_splat_gets_more_weight_under_gaussian_blending():
 def test_pixel_boxes_only_skip_what_the_steps_reject(bundled_scene, zoomed_out):
     """With the pixel boxes off every entry is evaluated: no "outside_box" records, the same colour."""
     with_boxes = gb.trace_pixel(bundled_scene, zoomed_out, 40, 30, "scalar")
-    _native.set_pixel_boxes(False)
+    _native.testing.set_pixel_boxes(False)
     try:
         without = gb.trace_pixel(bundled_scene, zoomed_out, 40, 30, "scalar")
     finally:
-        _native.set_pixel_boxes(True)
+        _native.testing.set_pixel_boxes(True)
     assert with_boxes.rejected_counts().get("outside_box", 0) > 0 and "outside_box" not in without.rejected_counts()
     assert without.color == with_boxes.color
     assert [s.index for s in without.steps if not s.rejected] == [s.index for s in with_boxes.steps if not s.rejected]

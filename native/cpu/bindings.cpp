@@ -1,0 +1,216 @@
+// nanobind module gbviewer._native: the CPU Renderer (renderer.h) behind the same call shape as the CUDA module,
+// the SIMD path queries, and the test switches in _native.testing.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/optional.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+
+#include <algorithm>
+#include <memory>
+#include <stdexcept>
+#include <tuple>
+
+#include "../bindings/nb_common.h"
+#include "frame.h"
+#include "renderer.h"
+#include "simd.h"
+#include "testing.h"
+#include "trace_dict.h"
+
+namespace nb = nanobind;
+using namespace gbv;
+using namespace gbv::nbc;
+using cpu::Renderer;
+using LArr = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;  // the caller's cancel flag
+using PArr = nb::ndarray<float, nb::ndim<3>, nb::c_contig, nb::device::cpu>;          // a partial frame, written here
+
+namespace {
+
+// An owner for Renderer::upload*: holds the arrays (references to the caller's numpy arrays, or the converted copies
+// nanobind made) until the renderer lets go of them, from whichever thread that is.
+template <class... A>
+std::shared_ptr<const void> hold(A... arrays) {
+    using Held = std::tuple<A...>;
+    return std::shared_ptr<const void>(new Held(std::move(arrays)...), [](const void* p) {
+        nb::gil_scoped_acquire gil;
+        delete static_cast<const Held*>(p);
+    });
+}
+
+// The RenderArgs of a call (parse_render_args' checks) with the SH degree cap and the window plane.
+RenderArgs args_of(const char* where, const FArr& R, const FArr& t, float fx, float fy, float cx, float cy, int width,
+                   int height, float near_plane, int projection, int mode, int supersample, int sh_degree,
+                   const FArr& background, bool want_window, float sigma, float weight_background, float et_grade,
+                   bool depth_correct) {
+    RenderArgs a = parse_render_args(where, R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
+                                     supersample, background, sigma, weight_background, et_grade, depth_correct);
+    a.sh_degree = sh_degree;
+    a.want_window = want_window;
+    return a;
+}
+
+nb::dict render(Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
+                float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
+                bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct,
+                int threads, std::optional<LArr> cancel, std::optional<nb::callable> on_progress,
+                std::optional<PArr> partial) {
+    const RenderArgs a = args_of("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
+                                 supersample, sh_degree, background, want_window, sigma, weight_background, et_grade,
+                                 depth_correct);
+    if (cancel && cancel->shape(0) < 1) throw std::invalid_argument("render: cancel must hold at least one int64");
+    if (partial && (partial->shape(0) != (size_t)height || partial->shape(1) != (size_t)width ||
+                    partial->shape(2) != 3))
+        throw std::invalid_argument("render: partial must be float32 (height, width, 3)");
+    cpu::Control c;
+    c.cancel = cancel ? cancel->data() : nullptr;
+    c.partial = partial ? partial->data() : nullptr;
+    c.threads = threads;
+    if (on_progress) {
+        // With the GIL, on this (the calling) thread; an exception stops the frame and is raised when it returns.
+        c.report = [&on_progress](int64_t done, int64_t total) {
+            nb::gil_scoped_acquire gil;
+            try {
+                (*on_progress)(done, total);
+                return true;
+            } catch (nb::python_error& e) {
+                e.restore();
+                return false;
+            }
+        };
+    }
+    cpu::RenderResult res;
+    {
+        nb::gil_scoped_release release;
+        res = r.render(a, c);
+    }
+    if (res.stopped && PyErr_Occurred()) throw nb::python_error();
+    nb::dict d = result_dict(res.image, res.stats, (size_t)height, (size_t)width);
+    d["simd"] = res.simd;
+    d["cancelled"] = res.cancelled;
+    return d;
+}
+
+// Exp evaluations per second on one core through a SIMD path's exp (the benchmark's reference rate).
+double exp_rate(const std::string& path, int64_t n) {
+    for (const simd::Path* p : simd::supported()) {
+        if (path != p->name) continue;
+        nb::gil_scoped_release release;
+        cpu::FlushDenormals ftz;
+        const cpu::Clock::time_point t0 = cpu::Clock::now();
+        volatile float sink = p->exp_sum(n);
+        (void)sink;
+        return (double)n / (cpu::ms_since(t0) * 1e-3);
+    }
+    simd::select(path);  // throws the error naming the available paths
+    return 0.0;
+}
+
+void bind_testing(nb::module_& m) {
+    nb::module_ t = m.def_submodule("testing", "Test and benchmark switches of the CPU renderer (process-wide).");
+    t.def("set_pixel_boxes", [](bool on) { cpu::testing::pixel_boxes.store(on); }, nb::arg("on"),
+          "Skip lane groups outside a splat's pixel box (default) or evaluate every list entry.");
+    t.def("set_capture_preprocess", [](bool on) { cpu::testing::capture.store(on); }, nb::arg("on"),
+          "Keep the next renders' preprocess output for captured_preprocess().");
+    t.def("captured_preprocess", [] {
+        const std::vector<uint8_t> v = cpu::testing::captured_preprocess();
+        return nb::bytes(reinterpret_cast<const char*>(v.data()), v.size());
+    }, "The last captured frame's preprocess: per splat the valid byte, then its Splat2D and TileRect (zeros when culled).");
+    t.def("set_simd", [](const std::string& name) { simd::select(name); }, nb::arg("name"),
+          "Use this SIMD path for later renders (scalar, avx2, avx512).");
+    t.def("exp_rate", &exp_rate, nb::arg("path"), nb::arg("n"),
+          "Exp evaluations per second on one core through the path's vector exp.");
+}
+
+}  // namespace
+
+NB_MODULE(_native, m) {
+    m.doc() = "gbviewer CPU renderer (C++17, OpenMP; blend vectorised with Google Highway, chosen at run time). One "
+              "Renderer may be shared by threads: its calls are serialised, and renders release the GIL.";
+    simd::init_from_env();
+    m.def("simd", [] { return std::string(simd::current().name); }, "The SIMD path renders use.");
+    m.def("simd_paths", [] {
+        std::vector<std::string> names;
+        for (const simd::Path* p : simd::supported()) names.push_back(p->name);
+        return names;
+    }, "SIMD paths this CPU and build can run, best last.");
+    bind_testing(m);
+    nb::class_<Renderer>(m, "Renderer")
+        .def(nb::init<>())
+        .def("upload",
+             [](Renderer& r, FArr means, FArr scales, FArr quats, FArr opacities, FArr sh,
+                std::optional<FArr> filter_3d) {
+                 const int64_t n = check_scene("upload", means, scales, quats, opacities, sh, filter_3d);
+                 const float* f3d = filter_3d ? filter_3d->data() : nullptr;
+                 std::shared_ptr<const void> owner = hold(means, scales, quats, opacities, sh, filter_3d);
+                 nb::gil_scoped_release release;
+                 r.upload(means.data(), scales.data(), quats.data(), opacities.data(), sh.data(), f3d, n,
+                          (int)sh.shape(1), std::move(owner));
+             },
+             nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"),
+             nb::arg("filter_3d").none(),
+             "The scene (activated parameters, gbviewer.Scene's arrays), referenced until the next upload: keep "
+             "them unchanged meanwhile. Forgets the view weights and cells.")
+        .def_prop_ro("num_splats", &Renderer::num_splats)
+        .def("upload_weights",
+             [](Renderer& r, FArr weight_sh) {
+                 const int k = check_weight_sh("upload_weights", weight_sh, r.num_splats());
+                 std::shared_ptr<const void> owner = hold(weight_sh);
+                 nb::gil_scoped_release release;
+                 r.upload_weights(weight_sh.data(), (int64_t)weight_sh.shape(0), k, std::move(owner));
+             },
+             nb::arg("weight_sh"), "The uploaded scene's sort-free view-weight SH (N, K), for wsr and duplex.")
+        .def("upload_cells",
+             [](Renderer& r, FArr means, FArr scales, FArr quats, IArr offsets, IArr members, IArr cell_of) {
+                 const int64_t m = check_cell_arrays("upload_cells", means, scales, quats, offsets);
+                 const int64_t n = r.num_splats();
+                 const std::vector<int32_t> expect =
+                     partition_cell_of("upload_cells", offsets.data(), members.data(), m, (int64_t)members.size(), n);
+                 if (cell_of.size() != (size_t)n || !std::equal(expect.begin(), expect.end(), cell_of.data()))
+                     throw std::invalid_argument("upload_cells: cell_of must give each of the scene's splats its cell "
+                                                 "in the partition (-1: none)");
+                 std::shared_ptr<const void> owner = hold(means, scales, quats, offsets, members);
+                 nb::gil_scoped_release release;
+                 r.upload_cells(means.data(), scales.data(), quats.data(), offsets.data(), members.data(),
+                                expect.data(), m, (int64_t)members.size(), std::move(owner));
+             },
+             nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("offsets"), nb::arg("members"),
+             nb::arg("cell_of"), "Duplex cells of the uploaded scene (checked to be a partition of its splats).")
+        .def("render", &render, nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"), nb::arg("cx"),
+             nb::arg("cy"), nb::arg("width"), nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"),
+             nb::arg("mode"), nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"),
+             nb::arg("want_window"), nb::arg("sigma") = 10.0f, nb::arg("weight_background") = 1.0f,
+             nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false, nb::arg("threads") = 0,
+             nb::arg("cancel").none() = nb::none(), nb::arg("on_progress").none() = nb::none(),
+             nb::arg("partial").none() = nb::none(),
+             "Render a frame of the uploaded scene. cancel: int64 array whose [0] stops the frame once nonzero (read "
+             "by every worker); on_progress(done, total): called on this thread between tiles, at most every 5 ms, "
+             "and at the end (an exception it raises stops the frame and is raised here); partial: float32 "
+             "(height, width, 3) receiving each finished tile.")
+        .def(
+            "trace",
+            [](Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
+               float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
+               float sigma, float weight_background, float et_grade, bool depth_correct, int x, int y) {
+                const RenderArgs a = args_of("trace", R, t, fx, fy, cx, cy, width, height, near_plane, projection,
+                                             mode, supersample, sh_degree, background, false, sigma,
+                                             weight_background, et_grade, depth_correct);
+                PixelTrace traced;
+                {
+                    nb::gil_scoped_release release;
+                    traced = r.trace(a, x, y);
+                }
+                return trace_dict(std::move(traced));
+            },
+            nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"), nb::arg("cx"), nb::arg("cy"),
+            nb::arg("width"), nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"),
+            nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"), nb::arg("sigma") = 10.0f,
+            nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
+            nb::arg("x") = 0, nb::arg("y") = 0, "The pixel trace (trace.h) of output pixel (x, y) of this frame.")
+        .def("release_buffers", &Renderer::release_buffers, nb::call_guard<nb::gil_scoped_release>(),
+             "Free the per-frame buffers kept for the next frame.")
+        .def_prop_ro("buffer_bytes", [](const Renderer& r) {
+            nb::gil_scoped_release release;  // waits for a running render, whose report may take the GIL
+            return r.buffer_bytes();
+        }, "Bytes of the per-frame buffers kept.");
+}

@@ -1,0 +1,160 @@
+// Binning (frame.h): each tile's list of splats, depth-sorted; for duplex, of cells expanded to their splats.
+#include <algorithm>
+#include <cstring>
+
+#include "frame.h"
+#include "gbv/order.h"
+#include "gbv/preprocess.h"
+
+namespace gbv::cpu {
+
+// Binning of splats, in parallel: each of up to BIN_THREADS threads counts the tiles of its static range of splats, a
+// prefix sum over (tile, range) gives every range its slots in every tile, and each range writes its (depth bits,
+// splat id) keys there. The ranges are in splat order, so each tile's list is in splat order as a sequential pass
+// would leave it; then (when `sort`) each tile's list is sorted by depth; wsr keeps the splat order. The key buffer
+// is sized between the two parallel passes (an allocation failure is a MemoryError, not an abort inside OpenMP).
+constexpr int BIN_THREADS = 8;  // bounds the counts buffer (ranges x tiles) on many-core machines
+
+void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>& rects,
+                const std::vector<uint8_t>& valid, int gx, bool sort, std::vector<int64_t>& tile_start,
+                std::vector<uint64_t>& keys, Stats& st) {
+    const int num_tiles = (int)tile_start.size() - 1;
+    const int64_t n = (int64_t)splats.size();
+    auto t0 = Clock::now();
+    const int ranges = std::max(1, std::min(omp_get_max_threads(), BIN_THREADS));
+    std::vector<int64_t> slots((size_t)ranges * num_tiles, 0);  // [range][tile]: counts, then write cursors
+    int64_t visible = 0;
+#pragma omp parallel for num_threads(ranges) schedule(static, 1) reduction(+ : visible)
+    for (int k = 0; k < ranges; ++k) {
+        int64_t* count = slots.data() + (size_t)k * num_tiles;
+        for (int64_t i = n * k / ranges; i < n * (k + 1) / ranges; ++i) {
+            if (!valid[i]) continue;
+            ++visible;
+            const TileRect& r = rects[i];
+            for (int ty = r.y0; ty < r.y1; ++ty)
+                for (int tx = r.x0; tx < r.x1; ++tx) ++count[ty * gx + tx];
+        }
+    }
+    int64_t total = 0;
+    for (int t = 0; t < num_tiles; ++t) {
+        tile_start[t] = total;
+        for (int k = 0; k < ranges; ++k) {
+            const int64_t c = slots[(size_t)k * num_tiles + t];
+            slots[(size_t)k * num_tiles + t] = total;
+            total += c;
+        }
+    }
+    tile_start[num_tiles] = total;
+    keys.resize(total);
+#pragma omp parallel for num_threads(ranges) schedule(static, 1)
+    for (int k = 0; k < ranges; ++k) {
+        int64_t* cursor = slots.data() + (size_t)k * num_tiles;
+        for (int64_t i = n * k / ranges; i < n * (k + 1) / ranges; ++i) {
+            if (!valid[i]) continue;
+            uint32_t depth_bits;
+            std::memcpy(&depth_bits, &splats[i].depth, 4);  // depth > near > 0: bits sort as floats
+            const uint64_t key = ((uint64_t)depth_bits << 32) | (uint32_t)i;
+            const TileRect& r = rects[i];
+            for (int ty = r.y0; ty < r.y1; ++ty)
+                for (int tx = r.x0; tx < r.x1; ++tx) keys[cursor[ty * gx + tx]++] = key;
+        }
+    }
+    if (sort) {
+#pragma omp parallel for schedule(dynamic, 4)
+        for (int t = 0; t < num_tiles; ++t)
+            std::sort(keys.begin() + tile_start[t], keys.begin() + tile_start[t + 1]);
+        st.sort_length += total;
+    }
+    st.sort_ms += ms_since(t0);
+    st.visible += visible;
+    st.pairs += total;
+}
+
+// Duplex binning (KERNELS.md §8.3): each cell with at least one visible splat is projected as an ellipsoid; one
+// depth sort of the (tile, cell depth, cell index) keys orders each tile's cells front to back; each tile's list
+// is then its cells expanded to their visible splats, which follow a canonical order inside the cell
+// (splat_less) so that the image does not depend on how the scene orders a cell's splats.
+void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<Splat2D>& splats,
+                const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
+                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st) {
+    const int num_tiles = gx * gy;
+    const int64_t m = sc.m;
+    auto t0 = Clock::now();
+    // visible members of each cell, canonically ordered; then the cell's screen proxy
+    std::vector<int64_t> vis_start(m + 1, 0);
+    for (int64_t c = 0; c < m; ++c) {
+        int64_t cnt = 0;
+        for (int32_t j = sc.cell_offsets[c]; j < sc.cell_offsets[c + 1]; ++j) cnt += valid[sc.cell_members[j]];
+        vis_start[c + 1] = vis_start[c] + cnt;
+    }
+    std::vector<int32_t> vis(vis_start[m]);
+    std::vector<Cell2D> cells(m);
+    std::vector<TileRect> crects(m);
+    std::vector<uint8_t> cvalid(m, 0);
+#pragma omp parallel for schedule(static)
+    for (int64_t c = 0; c < m; ++c) {
+        int64_t o = vis_start[c];
+        for (int32_t j = sc.cell_offsets[c]; j < sc.cell_offsets[c + 1]; ++j)
+            if (valid[sc.cell_members[j]]) vis[o++] = sc.cell_members[j];
+        if (o == vis_start[c]) continue;
+        std::sort(vis.begin() + vis_start[c], vis.begin() + o,
+                  [&](int32_t a, int32_t b) { return splat_less(splats[a], splats[b]); });
+        CellIn in{sc.cell_means + 3 * c, sc.cell_scales + 3 * c, sc.cell_quats + 4 * c};
+        cvalid[c] = preprocess_cell(in, cam, gx, gy, &cells[c], &crects[c]);
+    }
+    st.preprocess_ms += ms_since(t0);
+
+    t0 = Clock::now();
+    std::vector<int64_t> cell_tile_start(num_tiles + 1, 0);
+    int64_t visible_cells = 0, misses = 0;
+    for (int64_t c = 0; c < m; ++c) {
+        if (!cvalid[c]) continue;
+        ++visible_cells;
+        const TileRect& r = crects[c];
+        const int64_t members = vis_start[c + 1] - vis_start[c];
+        for (int ty = r.y0; ty < r.y1; ++ty)
+            for (int tx = r.x0; tx < r.x1; ++tx) {
+                ++cell_tile_start[ty * gx + tx + 1];
+                tile_start[ty * gx + tx + 1] += members;
+            }
+        for (int64_t j = vis_start[c]; j < vis_start[c + 1]; ++j) misses += tiles_outside(rects[vis[j]], r);
+    }
+    for (int t = 0; t < num_tiles; ++t) {
+        cell_tile_start[t + 1] += cell_tile_start[t];
+        tile_start[t + 1] += tile_start[t];
+    }
+    const int64_t cell_pairs = cell_tile_start[num_tiles];
+    std::vector<uint64_t> ckeys(cell_pairs);
+    {
+        std::vector<int64_t> cursor(cell_tile_start.begin(), cell_tile_start.end() - 1);
+        for (int64_t c = 0; c < m; ++c) {
+            if (!cvalid[c]) continue;
+            uint32_t depth_bits;
+            std::memcpy(&depth_bits, &cells[c].depth, 4);
+            const uint64_t key = ((uint64_t)depth_bits << 32) | (uint32_t)c;
+            const TileRect& r = crects[c];
+            for (int ty = r.y0; ty < r.y1; ++ty)
+                for (int tx = r.x0; tx < r.x1; ++tx) ckeys[cursor[ty * gx + tx]++] = key;
+        }
+    }
+    keys.resize(tile_start[num_tiles]);
+#pragma omp parallel for schedule(dynamic, 4)
+    for (int t = 0; t < num_tiles; ++t) {
+        std::sort(ckeys.begin() + cell_tile_start[t], ckeys.begin() + cell_tile_start[t + 1]);
+        int64_t o = tile_start[t];
+        for (int64_t k = cell_tile_start[t]; k < cell_tile_start[t + 1]; ++k) {
+            const uint32_t c = (uint32_t)ckeys[k];
+            for (int64_t j = vis_start[c]; j < vis_start[c + 1]; ++j) keys[o++] = (uint32_t)vis[j];
+        }
+    }
+    st.sort_ms += ms_since(t0);
+    int64_t visible = 0;  // splats that survive preprocess, as in the other modes
+    for (uint8_t v : valid) visible += v;
+    st.visible += visible;
+    st.cells_visible += visible_cells;
+    st.cell_misses += misses;
+    st.sort_length += cell_pairs;
+    st.pairs += tile_start[num_tiles];
+}
+
+}  // namespace gbv::cpu

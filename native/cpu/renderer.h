@@ -1,0 +1,92 @@
+// CPU renderer: the same shape as the CUDA one (native/cuda/renderer.h), plain C++ (the nanobind module is
+// bindings.cpp). Upload a scene once, then render frames of it with a RenderArgs (gbv/args.h) each; trace one pixel.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <vector>
+
+#include "gbv/args.h"
+#include "image.h"
+#include "trace.h"
+
+namespace gbv::cpu {
+
+// What a frame measured. sort_length: keys ordered by depth (tile-splat pairs; 0 for wsr, whose tile lists are only
+// binned; tile-cell pairs for duplex); pairs: entries of the tile lists that the blend walks. duplex: visible cells,
+// and tile-splat pairs of the splats' own rectangles outside their cell's rectangle (pixels there miss the splat).
+struct Stats {
+    double preprocess_ms = 0, sort_ms = 0, blend_ms = 0;
+    int64_t visible = 0, sort_length = 0, pairs = 0;
+    int64_t cells_visible = 0, cell_misses = 0;
+};
+
+// How one render runs and what it tells its caller; every field optional.
+struct Control {
+    // The caller's cancel flag (nonzero: stop), read by every worker thread between blocks of splats and tiles.
+    const int64_t* cancel = nullptr;
+    // float32 (height, width, 3) output pixels: each finished tile is written there at once (a refining frame).
+    float* partial = nullptr;
+    // report(tiles done, tiles in the frame), called on the thread that called render (OpenMP's master thread)
+    // between blocks and tiles, at most every report_ms, and once at the end of a frame that was not cancelled.
+    // Returning false stops the frame as a cancel does (RenderResult::stopped).
+    std::function<bool(int64_t, int64_t)> report;
+    double report_ms = 5.0;
+    int threads = 0;  // OpenMP threads, 0 = the runtime's default
+};
+
+struct RenderResult {
+    Image image;       // output size: rgb, alpha, evals, window (gaussian_blending with want_window)
+    Stats stats;
+    const char* simd;  // the SIMD path the frame ran
+    bool cancelled = false;  // stopped by the cancel flag or by report: the image is incomplete
+    bool stopped = false;    // stopped because report returned false
+};
+
+// One renderer owns its per-frame buffers. Every method is serialised by a mutex of the renderer (threads may share
+// one); the scene stays the caller's: upload references its arrays (no copy) and keeps `owner` until the next upload
+// or the renderer's end, so the arrays must stay unchanged while uploaded.
+class Renderer {
+public:
+    Renderer();
+    ~Renderer();
+    Renderer(const Renderer&) = delete;
+    Renderer& operator=(const Renderer&) = delete;
+
+    // The scene (activated parameters, as gbviewer.Scene); k = SH coefficients per channel; n may be 0. Forgets the
+    // previous scene, view weights and cells (not the per-frame buffers: a trained model's views, uploaded per frame,
+    // reuse them; a frame of a much smaller scene drops them).
+    void upload(const float* means, const float* scales, const float* quats, const float* opacities, const float* sh,
+                const float* filter_3d, int64_t n, int k, std::shared_ptr<const void> owner);
+
+    // Splats of the uploaded scene (0 before the first upload).
+    int64_t num_splats() const;
+
+    // The sort-free view-weight SH of the uploaded scene (n, weight_k), for wsr and duplex.
+    void upload_weights(const float* weight_sh, int64_t n, int weight_k, std::shared_ptr<const void> owner);
+
+    // Duplex cells of the uploaded scene: cell c holds members[offsets[c] .. offsets[c+1]); cell_of[i] per splat
+    // (num_splats() entries, copied). The caller checks that this is a partition: the driver indexes with it.
+    void upload_cells(const float* means, const float* scales, const float* quats, const int32_t* offsets,
+                      const int32_t* members, const int32_t* cell_of, int64_t num_cells, int64_t num_members,
+                      std::shared_ptr<const void> owner);
+
+    // Render at args.cam's resolution (supersample x the output size per axis) and box-average back. Throws
+    // std::invalid_argument for duplex without cells.
+    RenderResult render(const RenderArgs& args, const Control& control = {});
+
+    // The trace (trace.h) of output pixel (x, y) of the frame `args` renders; (x, y) inside the output image.
+    PixelTrace trace(const RenderArgs& args, int x, int y);
+
+    // Free the per-frame buffers kept for the next frame (gbviewer's CpuRenderer does when its scene changes), and
+    // their size in bytes.
+    void release_buffers();
+    size_t buffer_bytes() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace gbv::cpu

@@ -1,0 +1,24 @@
+// Test switches of the CPU driver (gbviewer._native.testing): process-wide, off the render path unless a test sets
+// them.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <mutex>
+#include <vector>
+
+#include "gbv/common.h"
+
+namespace gbv::cpu::testing {
+
+// Skip lane groups outside a splat's pixel box (the default) or evaluate every list entry (to show the boxes change
+// no pixel).
+extern std::atomic<bool> pixel_boxes;
+
+// Keep a copy of the last frame's preprocess output (per splat: the valid flag, then the Splat2D and TileRect bytes
+// when valid, zeros when culled), so tests can compare the SIMD paths' preprocess bit for bit.
+extern std::atomic<bool> capture;
+void record_preprocess(const Splat2D* splats, const TileRect* rects, const uint8_t* valid, int64_t n);
+std::vector<uint8_t> captured_preprocess();
+
+}  // namespace gbv::cpu::testing
