@@ -18,14 +18,10 @@ from gbviewer.render.glsl import GlslRenderer, limits
 pytestmark = pytest.mark.gl
 
 
-@pytest.fixture(scope="module")
-def bundled():
-    return gb.load(gb.DEFAULT_SCENE)
-
-
 @pytest.mark.parametrize("spec", MODES)
-def test_bundled_scene(gl, bundled, spec):
-    compare(bundled, gb.orbit_camera(bundled, 30, 20, width=128, height=96), spec, background=(0.2, 0.3, 0.4))
+def test_bundled_scene(gl, bundled_scene, spec):
+    cam = gb.orbit_camera(bundled_scene, 30, 20, width=128, height=96)
+    compare(bundled_scene, cam, spec, background=(0.2, 0.3, 0.4))
 
 
 SHARED = ["v3dg-donut.fused.ply", "angel.compressed.ply", "biker.spz"]
@@ -58,10 +54,10 @@ def test_random_scenes(gl, seed, filter3d, spec):
 
 
 @pytest.mark.parametrize("spec", MODES)
-def test_orthographic_cameras(gl, bundled, spec):
+def test_orthographic_cameras(gl, bundled_scene, spec):
     """Orthographic cameras: the bundled scene's orthographic orbit, and the awkward scene seen orthographically."""
-    compare(bundled, gb.orbit_camera(bundled, 30, 20, width=128, height=96, projection="orthographic"), spec,
-            background=(0.2, 0.3, 0.4))
+    cam = gb.orbit_camera(bundled_scene, 30, 20, width=128, height=96, projection="orthographic")
+    compare(bundled_scene, cam, spec, background=(0.2, 0.3, 0.4))
     compare(awkward_scene(4), front_camera(64, 48).with_projection("orthographic", 4.0), spec)
 
 
@@ -148,11 +144,11 @@ def test_wsr_huge_view_weights(gl):
         assert m["max"] < 1e-3, (spec, m)
 
 
-def test_debug_planes(gl, bundled):
-    cam = gb.orbit_camera(bundled, width=64, height=48)
+def test_debug_planes(gl, bundled_scene):
+    cam = gb.orbit_camera(bundled_scene, width=64, height=48)
     s = RenderSettings.parse("gaussian_blending:2", debug="window")
-    ref = gb.get_renderer(bundled, "cpu").render(cam, s)
-    out = gb.get_renderer(bundled, "glsl").render(cam, s)
+    ref = gb.get_renderer(bundled_scene, "cpu").render(cam, s)
+    out = gb.get_renderer(bundled_scene, "glsl").render(cam, s)
     assert out.debug["window"].shape == (48, 64, 2) and out.debug["evals"].dtype == np.int32
     assert np.abs(out.debug["window"] - ref.debug["window"]).mean() < 1e-3
     assert abs(out.stats.evaluations - ref.stats.evaluations) <= 1e-3 * ref.stats.evaluations

@@ -23,11 +23,6 @@ from gbviewer.render.glsl.sort import radix_sort, scan
 pytestmark = pytest.mark.gl
 
 
-@pytest.fixture(scope="module")
-def bundled():
-    return gb.load(gb.DEFAULT_SCENE)
-
-
 @pytest.mark.parametrize("n, bits, high", [(1, 4, 3), (5, 8, 4), (2049, 12, 100), (100_000, 32, 2**32),
                                            (70_000, 8, 7)])
 def test_radix_sort_is_stable(gl, n, bits, high):
@@ -102,15 +97,15 @@ def test_empty_frame(gl):
     assert (f.alpha == 0).all() and (f.debug["evals"] == 0).all()
 
 
-def test_existing_context(gl, bundled):
+def test_existing_context(gl, bundled_scene):
     """An app passes its moderngl.Context (kept current in its thread); the renderer works in it."""
     ctx = standalone_context()  # stands in for the app's window context,
     with ctx:  # which the app keeps current in its thread
         r = GlslRenderer(ctx=ctx)
-        r.upload(bundled)
-        cam, s = gb.orbit_camera(bundled, width=48, height=40), RenderSettings.parse("gaussian_blending")
+        r.upload(bundled_scene)
+        cam, s = gb.orbit_camera(bundled_scene, width=48, height=40), RenderSettings.parse("gaussian_blending")
         frame = r.render(cam, s)
-        ref = gb.get_renderer(bundled, "cpu").render(cam, s)
+        ref = gb.get_renderer(bundled_scene, "cpu").render(cam, s)
         assert np.abs(frame.rgb - ref.rgb).mean() < MEAN_TOL
         assert np.abs(frame.rgb - ref.rgb).max() < MAX_TOL
         r.release()
@@ -118,7 +113,8 @@ def test_existing_context(gl, bundled):
 
 def test_unavailable_is_clear(monkeypatch):
     monkeypatch.setattr(gl_context, "_standalone", {})
-    monkeypatch.setattr(importlib.import_module("gbviewer.render.registry"), "_renderers", {})  # none made while GL was there
+    registry = importlib.import_module("gbviewer.render.registry")
+    monkeypatch.setattr(registry, "_renderers", {})  # none made while GL was there
 
     def no_egl():
         raise Exception("eglInitialize failed (0x3001)")
@@ -169,19 +165,19 @@ def test_cli_bench_cpu_and_glsl(gl, tmp_path, capsys):
     assert any(r["backend"] == "glsl" and r["ratio"] == "gaussian_blending / scalar" for r in doc["ratios"])
 
 
-def test_headless_renderer_survives_another_current_context(gl, bundled):
+def test_headless_renderer_survives_another_current_context(gl, bundled_scene):
     """Another context made current in this thread (an app window, say) must not receive the renderer's work."""
     import moderngl
 
-    cam = gb.orbit_camera(bundled, width=48, height=40)
+    cam = gb.orbit_camera(bundled_scene, width=48, height=40)
     r = GlslRenderer()
-    r.upload(bundled)
+    r.upload(bundled_scene)
     other = moderngl.create_context(standalone=True, backend="egl")  # current from here on
     try:
         frame = r.render(cam, RenderSettings())
         other.clear(0.0, 0.0, 0.0)  # the other context still works
     finally:
         other.release()
-    ref = gb.get_renderer(bundled, "cpu").render(cam, RenderSettings())
+    ref = gb.get_renderer(bundled_scene, "cpu").render(cam, RenderSettings())
     assert frame.stats.visible == ref.stats.visible > 0
     assert np.abs(frame.rgb - ref.rgb).max() < MAX_TOL
