@@ -19,14 +19,28 @@
 #include "blend.glsl"
 #include "kernel.glsl"
 
+#if defined(BLEND_MODE_SCALAR)
+const int MODE = SCALAR;
+#elif defined(BLEND_MODE_MIP)
+const int MODE = MIP;
+#elif defined(BLEND_MODE_ANALYTIC)
+const int MODE = ANALYTIC;
+#elif defined(BLEND_MODE_GAUSSIAN_BLENDING)
+const int MODE = GAUSSIAN_BLENDING;
+#elif defined(BLEND_MODE_WSR)
+const int MODE = WSR;
+#elif defined(BLEND_MODE_DUPLEX)
+const int MODE = DUPLEX;
+#endif
+
 layout(local_size_x = 16, local_size_y = 16) in;
 layout(std430, binding = 0) readonly buffer Splats { vec4 splats[]; };
 layout(std430, binding = 1) readonly buffer TileVals { uint tile_vals[]; };  // splat ids, sorted by (tile, depth)
 layout(std430, binding = 2) readonly buffer Ranges { uvec2 ranges[]; };
 layout(std430, binding = 3) writeonly buffer EvalsOut { int evals_out[]; };
 layout(std430, binding = 4) writeonly buffer WindowOut { vec2 window_out[]; };
-layout(std430, binding = 5) buffer State { vec4 state[]; };  // 3 per invocation: C, T; window xy, wh; evals, done
-layout(std430, binding = 6) buffer Accum { vec4 accum[]; };  // 2 per invocation: rgba sum; window sum, evals sum
+layout(std430, binding = 5) buffer State { vec4 state[]; };  // BLEND_STATE_VEC4S per invocation
+layout(std430, binding = 6) buffer Accum { vec4 accum[]; };  // BLEND_ACCUM_VEC4S per invocation
 layout(std430, binding = 7) readonly buffer CellOf { int cell_of[]; };  // duplex: each splat's cell
 layout(rgba32f, binding = 0) uniform writeonly image2D out_image;  // rgb, alpha = 1 - T; row 0 = image top
 
@@ -43,7 +57,7 @@ uniform int load_state;
 uniform int store_state;
 uniform int load_accum;
 uniform int store_accum;
-uniform vec4 oit;  // sigma, weight_background, et_grade, depth_correct
+uniform vec4 oit;  // OitParams: components OIT_* (interface.glsl)
 
 shared Splat2D batch[256];
 shared int done_count;
@@ -66,9 +80,9 @@ void main() {
     vec2 acc_window = vec2(0.0);
     int acc_evals = 0;
     if (load_accum != 0) {
-        acc = accum[2u * slot];
-        acc_window = accum[2u * slot + 1u].xy;
-        acc_evals = floatBitsToInt(accum[2u * slot + 1u].z);
+        acc = accum[BLEND_ACCUM_VEC4S * slot];
+        acc_window = accum[BLEND_ACCUM_VEC4S * slot + 1u].xy;
+        acc_evals = floatBitsToInt(accum[BLEND_ACCUM_VEC4S * slot + 1u].z);
     }
 
     for (int sub = subtile_begin; sub < subtile_end; ++sub) {
@@ -92,7 +106,8 @@ void main() {
         vec3 C = vec3(0.0);
         int evals = 0;
         if (load_state != 0) {
-            const vec4 s0 = state[3u * slot], s1 = state[3u * slot + 1u], s2 = state[3u * slot + 2u];
+            const uint at = BLEND_STATE_VEC4S * slot;
+            const vec4 s0 = state[at], s1 = state[at + 1u], s2 = state[at + 2u];
             C = s0.xyz;
 #if defined(BLEND_MODE_GAUSSIAN_BLENDING)
             win = TransmittanceWindow(s0.w, s1.xy, s1.zw);
@@ -119,8 +134,8 @@ void main() {
             const bool all_done = done_count == 256;
             if (!all_done && start + lid < end) {
                 const uint s = tile_vals[range.x + uint(start + lid)];
-                batch[lid] = unpack_splat(splats[4u * s], splats[4u * s + 1u], splats[4u * s + 2u],
-                                          splats[4u * s + 3u]);
+                const uint at = SPLAT_VEC4S * s;
+                batch[lid] = unpack_splat(splats[at], splats[at + 1u], splats[at + 2u], splats[at + 3u]);
 #if defined(BLEND_MODE_DUPLEX)
                 batch[lid].cell = cell_of[s];
 #endif
@@ -137,7 +152,7 @@ void main() {
 #elif defined(BLEND_MODE_WSR)
                     const bool finished = blend_wsr(batch[j], pix, acc_wsr);
 #elif defined(BLEND_MODE_DUPLEX)
-                    const bool finished = blend_duplex(batch[j], pix, oit.z, dst);
+                    const bool finished = blend_duplex(batch[j], pix, oit[OIT_ET_GRADE], dst);
 #elif defined(BLEND_MODE_ANALYTIC)
                     const bool finished = blend_analytic(batch[j], pix, T, C);
 #else
@@ -171,21 +186,24 @@ void main() {
         const vec2 wxy = pix;
 #endif
         if (store_state != 0) {  // more of this tile's list follows in a later dispatch
-            state[3u * slot] = vec4(C, T_final);
+            const uint at = BLEND_STATE_VEC4S * slot;
+            state[at] = vec4(C, T_final);
 #if defined(BLEND_MODE_DUPLEX)
-            state[3u * slot + 1u] = vec4(wxy, intBitsToFloat(dst.cell), 0.0);
+            state[at + 1u] = vec4(wxy, intBitsToFloat(dst.cell), 0.0);
 #else
-            state[3u * slot + 1u] = vec4(wxy, wh);
+            state[at + 1u] = vec4(wxy, wh);
 #endif
-            state[3u * slot + 2u] = vec4(intBitsToFloat(evals), done ? 1.0 : 0.0, 0.0, 0.0);
+            state[at + 2u] = vec4(intBitsToFloat(evals), done ? 1.0 : 0.0, 0.0, 0.0);
             continue;  // store_state is uniform, and the driver then gives this dispatch one render tile
         }
 #if defined(BLEND_MODE_WSR)
-        resolve_weighted(acc_wsr.C, acc_wsr.S, oit.y, 1.0, C, T_final);
+        const PixelSums sums = PixelSums(acc_wsr.C, 1.0, acc_wsr.S);
 #elif defined(BLEND_MODE_DUPLEX)
-        resolve_weighted(dst.C, dst.S, dst.T < DUPLEX_T_STOP ? 0.0 : oit.y, dst.T, C, T_final);
+        const PixelSums sums = PixelSums(dst.C, dst.T, dst.S);
+#else
+        const PixelSums sums = PixelSums(C, T_final, 0.0);
 #endif
-        const vec4 rgba = vec4(C + T_final * background, 1.0 - T_final);
+        const vec4 rgba = resolve_pixel(MODE, sums, oit[OIT_WEIGHT_BACKGROUND], background);
 #if SUPERSAMPLED
         sample_rgba[lid] = rgba;
         sample_evals[lid] = evals;
@@ -213,8 +231,8 @@ void main() {
     }
     if (store_state != 0 || !inside) return;
     if (store_accum != 0) {  // more render tiles of this block follow in a later dispatch
-        accum[2u * slot] = acc;
-        accum[2u * slot + 1u] = vec4(acc_window, intBitsToFloat(acc_evals), 0.0);
+        accum[BLEND_ACCUM_VEC4S * slot] = acc;
+        accum[BLEND_ACCUM_VEC4S * slot + 1u] = vec4(acc_window, intBitsToFloat(acc_evals), 0.0);
         return;
     }
 #if SUPERSAMPLED

@@ -1,9 +1,7 @@
 // GLSL port of native/include/gbv/camera.h: the kernels' CameraParams from the Python-side camera values. `precise`
 // where the C++ code multiplies through mul_rn: no multiply-add contraction (see common.h).
 
-// R is row-major world-to-camera; the frustum limits follow gsplat's persp_proj, which equals the published
-// 1.3 * tan(fov/2) clamp for a centred principal point (KERNELS.md §3); an orthographic camera has no use for them.
-// `projection`: PERSPECTIVE or ORTHOGRAPHIC (fx, fy then in pixels per world unit).
+// port of camera.h: make_camera (the camera's values as arrays and scalars)
 CameraParams make_camera(float R[9], float t[3], float fx, float fy, float cx, float cy, int width, int height,
                          float near_plane, int projection) {
     precise CameraParams c;

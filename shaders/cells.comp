@@ -45,7 +45,8 @@ void main() {
     if (count == 0u) return;
     const CameraParams cam = make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y,
                                          cam_near, cam_projection);
-    const CellIn in_ = CellIn(cell_geom[3u * c].xyz, cell_geom[3u * c + 1u].xyz, cell_geom[3u * c + 2u]);
+    const CellIn in_ = CellIn(cell_geom[CELL_GEOM_VEC4S * c].xyz, cell_geom[CELL_GEOM_VEC4S * c + 1u].xyz,
+                              cell_geom[CELL_GEOM_VEC4S * c + 2u]);
     Cell2D cell;
     TileRect r;
     if (!preprocess_cell(in_, cam, grid.x, grid.y, cell, r)) return;

@@ -18,6 +18,6 @@ void main() {
     const ivec4 r = rects[i];
     if (r.z <= r.x) return;
     const uint p = pos[i];
-    keys[p] = floatBitsToUint(splats[4u * i].z) - totals[TOTAL_DEPTH_MIN];
+    keys[p] = floatBitsToUint(splats[SPLAT_VEC4S * i].z) - totals[TOTAL_DEPTH_MIN];
     vals[p] = i;
 }

@@ -1,7 +1,9 @@
 #include "common.glsl"
+#include "interface.glsl"
 
 // Helpers shared by the compute kernels (*.comp): flat work-group index of a 2D dispatch, and the storage layout
-// of Splat2D in the per-frame splat buffer (4 vec4 per splat, indexed like the scene).
+// of Splat2D in the per-frame splat buffer (SPLAT_VEC4S vec4 per splat, indexed like the scene). The counter slots
+// and record sizes are interface.glsl's.
 
 // The driver spreads large 1D dispatches over x and y (at most 65535 groups per axis); kernels that see an index
 // past their work return before any barrier, for the whole group at once.
@@ -34,17 +36,3 @@ Splat2D unpack_splat(vec4 p0, vec4 p1, vec4 p2, vec4 p3) {
     s.cell = -1;
     return s;
 }
-
-// Slots of the small per-frame counter buffer (read back once per frame).
-const int TOTAL_VISIBLE = 0;    // splats that survive preprocess (written by the scan of their flags)
-const int TOTAL_PAIRS = 1;      // tile-splat pairs (sum of the tile rectangles' areas)
-const int TOTAL_DEPTH_MIN = 2;  // min / max bits of the visible depths (positive floats order as uints)
-const int TOTAL_DEPTH_MAX = 3;
-const int TOTAL_OVERFLOW = 4;   // set when TOTAL_PAIRS wrapped past 2^32
-const int TOTAL_MAX_LIST = 5;   // longest tile list (list_max.comp)
-const int TOTAL_CELL_PAIRS = 6;      // duplex: tile-cell pairs
-const int TOTAL_CELL_DEPTH_MIN = 7;  // duplex: min / max bits of the visible cells' depths
-const int TOTAL_CELL_DEPTH_MAX = 8;
-const int TOTAL_CELLS = 9;           // duplex: visible cells (scan of their flags)
-const int TOTAL_EXPANDED = 10;       // duplex: entries of the expanded tile lists (splats)
-const int TOTAL_CELL_SPLATS = 11;    // duplex: visible splats of the visible cells

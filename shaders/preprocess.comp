@@ -27,7 +27,7 @@ uniform ivec2 cam_size;
 uniform float cam_near;
 uniform int cam_projection;  // PERSPECTIVE or ORTHOGRAPHIC
 uniform int weight_k;  // view-weight SH coefficients per splat, 0: none (v = 1)
-uniform vec4 oit;      // sigma, weight_background, et_grade, depth_correct (wsr, duplex)
+uniform vec4 oit;      // OitParams (wsr, duplex): components OIT_* (interface.glsl)
 
 float load_sh(uint splat, int coeff, int channel) {
     return sh_data[splat * uint(3 * sh_k) + uint(coeff * 3 + channel)];
@@ -40,9 +40,10 @@ void main() {
     if (i >= num_splats) return;
     const CameraParams cam = make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y,
                                          cam_near, cam_projection);
-    const vec4 g0 = geom[3u * i], g1 = geom[3u * i + 1u], g2 = geom[3u * i + 2u];
+    const vec4 g0 = geom[GEOM_VEC4S * i], g1 = geom[GEOM_VEC4S * i + 1u], g2 = geom[GEOM_VEC4S * i + 2u];
     const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, g0.w, i, g1.w, weight_k > 0, sh_degree_for_coeffs(weight_k), -1);
-    const OitParams params = OitParams(oit.x, oit.y, oit.z, int(oit.w));
+    const OitParams params = OitParams(oit[OIT_SIGMA], oit[OIT_WEIGHT_BACKGROUND], oit[OIT_ET_GRADE],
+                                        int(oit[OIT_DEPTH_CORRECT]));
     Splat2D s;
     TileRect r;
     const bool valid = preprocess_splat(in_, sh_deg, cam, mode, params, grid.x, grid.y, s, r);
@@ -54,10 +55,10 @@ void main() {
     rects[i] = ivec4(r.x0, r.y0, r.x1, r.y1);
     vec4 p0, p1, p2, p3;
     pack_splat(s, p0, p1, p2, p3);
-    splats[4u * i] = p0;
-    splats[4u * i + 1u] = p1;
-    splats[4u * i + 2u] = p2;
-    splats[4u * i + 3u] = p3;
+    splats[SPLAT_VEC4S * i] = p0;
+    splats[SPLAT_VEC4S * i + 1u] = p1;
+    splats[SPLAT_VEC4S * i + 2u] = p2;
+    splats[SPLAT_VEC4S * i + 3u] = p3;
     const uint area = uint((r.x1 - r.x0) * (r.y1 - r.y0));
     const uint before = atomicAdd(totals[TOTAL_PAIRS], area);
     if (before + area < before) atomicOr(totals[TOTAL_OVERFLOW], 1u);

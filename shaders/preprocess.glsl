@@ -1,13 +1,13 @@
-// GLSL port of native/include/gbv/preprocess.h, function by function with the same names and constants.
-// Per-splat preprocess: cull, covariance, EWA projection, per-mode 2D filter, eigen-decomposition, colour from
-// SH, tile rectangle (KERNELS.md §0, §2, §4, §6.2). Needs common.glsl, mathf.glsl and, from the including kernel,
+// GLSL port of the one-splat preprocess of native/include/gbv/preprocess.h, sh.h and footprint.h, function by
+// function with the same names and constants; each function's C++ original (named in its comment) documents it, and
+// the comments here say only where the port differs. Needs common.glsl, mathf.glsl and, from the including kernel,
 // `float load_sh(uint splat, int coeff, int channel)` (the scene's SH, coefficient-major, DC first).
 // Values whose C++ products go through mul_rn are `precise` here (function outputs, locals): no multiply-add
 // contraction, so culling decisions and tile rectangles do not depend on the driver's choice to fuse (common.h).
 
 const float SH_C0 = 0.28209479177387814;
 const float SH_C1 = 0.4886025119029199;
-// Scalars rather than arrays, as in preprocess.h (where nvcc needs them).
+// Scalars rather than arrays, as in sh.h (where nvcc needs them).
 const float SH_C2_0 = 1.0925484305920792, SH_C2_1 = -1.0925484305920792, SH_C2_2 = 0.31539156525252005,
             SH_C2_3 = -1.0925484305920792, SH_C2_4 = 0.5462742152960396;
 const float SH_C3_0 = -0.5900435899266435, SH_C3_1 = 2.890611442640554, SH_C3_2 = -0.4570457994644658,
@@ -17,8 +17,7 @@ const float SH_C3_0 = -0.5900435899266435, SH_C3_1 = 2.890611442640554, SH_C3_2 
 float load_sh(uint splat, int coeff, int channel);
 float load_weight_sh(uint splat, int coeff);  // the scene's view-weight SH (wsr, duplex); only read when present
 
-// Real SH basis of degree `deg` (0..3) at the unit direction `dir`, in the 3DGS order and signs; returns the number
-// of coefficients used, (deg + 1)^2.
+// port of sh.h: sh_basis
 int sh_basis(int deg, vec3 dir, precise out float basis[16]) {
     const float x = dir.x, y = dir.y, z = dir.z;
     basis[0] = SH_C0;
@@ -44,8 +43,7 @@ int sh_basis(int deg, vec3 dir, precise out float basis[16]) {
     return 16;
 }
 
-// View-dependent colour from SH coefficients (DC first), as computeColorFromSH: +0.5 offset, clamped at 0 from
-// below only. `splat` selects the coefficients (C++: a pointer to them).
+// port of sh.h: sh_to_rgb (`splat` selects the coefficients (C++: a pointer to them))
 void sh_to_rgb(uint splat, int deg, vec3 dir, out vec3 result) {
     float basis[16];
     const int k = sh_basis(deg, dir, basis);
@@ -56,7 +54,7 @@ void sh_to_rgb(uint splat, int deg, vec3 dir, out vec3 result) {
     }
 }
 
-// Sort-free GS's view-dependent weight v_i (KERNELS.md §7.3): the raw sum of a 1-channel SH (no +0.5, no clamp).
+// port of sh.h: sh_to_weight
 float sh_to_weight(uint splat, int deg, vec3 dir) {
     float basis[16];
     const int k = sh_basis(deg, dir, basis);
@@ -65,8 +63,7 @@ float sh_to_weight(uint splat, int deg, vec3 dir) {
     return v;
 }
 
-// 3D covariance Sigma = R S S^T R^T (upper triangle: xx, xy, xz, yy, yz, zz) from a unit (w,x,y,z) quaternion and
-// per-axis scales (eq. 1).
+// port of preprocess.h: covariance_3d
 void covariance_3d(vec4 q, vec3 s, precise out float cov[6]) {
     const float r = q[0], x = q[1], y = q[2], z = q[3];
     precise const float R[9] = float[](1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - r * z), 2.0 * (x * z + r * y),
@@ -83,9 +80,7 @@ void covariance_3d(vec4 q, vec3 s, precise out float cov[6]) {
     cov[5] = M[6] * M[6] + M[7] * M[7] + M[8] * M[8];
 }
 
-// EWA projection of a 3D covariance to screen space (eq. 3): J W Sigma W^T J^T, with the view-space point
-// clamped to 1.3x the frustum for the Jacobian only (computeCov2D). An orthographic camera's projection is linear:
-// J = diag(fx, fy) (no depth terms, nothing to clamp). Returns (a, b, c).
+// port of preprocess.h: project_covariance
 void project_covariance(CameraParams cam, float cov3[6], vec3 pv, precise out vec3 result) {
     precise float j00 = cam.fx, j02 = 0.0, j11 = cam.fy, j12 = 0.0;
     if (cam.projection != ORTHOGRAPHIC) {
@@ -113,9 +108,7 @@ void project_covariance(CameraParams cam, float cov3[6], vec3 pv, precise out ve
     result[2] = TS[3] * T[3] + TS[4] * T[4] + TS[5] * T[5];
 }
 
-// Eigen-decomposition of a 2x2 covariance (a, b, c): sigma = sqrt(eigenvalues) and the unit major eigenvector.
-// lambda2 = det / lambda1 equals mid - sqrt(mid^2 - det) exactly and avoids cancellation; the eigenvector is
-// taken from whichever of its two formulas is better conditioned, so isotropic splats get a valid axis.
+// port of footprint.h: eigen_2d
 void eigen_2d(float a, float b, float c, float det, out float sigma1, out float sigma2, out vec2 v1) {
     const float mid = 0.5 * (a + c);
     const float root = sqrt(max(0.0, mid * mid - det));
@@ -130,15 +123,14 @@ void eigen_2d(float a, float b, float c, float det, out float sigma1, out float 
     v1 = n > 1e-30 ? (1.0 / sqrt(n)) * e : vec2(1.0, 0.0);
 }
 
-// Screen-space bounding radius in pixels: ceil(k * sqrt(max eigenvalue)) with the published max(0.1, mid^2 - det)
-// floor.
+// port of footprint.h: splat_radius
 float splat_radius(float a, float c, float det, float sigmas) {
     precise const float mid = 0.5 * (a + c);
     precise const float lmax = mid + sqrt(max(0.1, mid * mid - det));
     return ceil(sigmas * sqrt(lmax));
 }
 
-// ln(x) for x >= 1, from above, by basic operations only (port of preprocess.h: x = m 2^e, ln m <= t - t^2/2 + t^3/3).
+// port of footprint.h: log_upper
 float log_upper(float x) {
     int e;
     const float m = 2.0 * frexp(x, e);  // x = m 2^(e - 1)
@@ -148,9 +140,7 @@ float log_upper(float x) {
     return v;
 }
 
-// Half sides of the screen box that binning gives a splat: the box of its cut-off ellipse (scalar, mip, wsr, duplex),
-// widened for rounding, plus getRect's one pixel, capped by the radius; the radius for gaussian_blending and analytic
-// (port of preprocess.h).
+// port of footprint.h: cutoff_half_sides
 vec2 cutoff_half_sides(int mode, vec3 cov, float det, float opacity, float min_alpha, float r) {
     if (mode == GAUSSIAN_BLENDING || mode == ANALYTIC) return vec2(r, r);
     precise const float r2 = 2.0 * log_upper(opacity / min_alpha) + 1e-6;
@@ -162,8 +152,7 @@ vec2 cutoff_half_sides(int mode, vec3 cov, float det, float opacity, float min_a
     return vec2(minf(hx, r), minf(hy, r));
 }
 
-// Tiles touched by a splat at xy with half sides h (getRect, which has h = (r, r)), in the published integer-centre
-// pixel convention (our xy minus 0.5). Empty when x1 <= x0 or y1 <= y0.
+// port of footprint.h: tile_rect
 TileRect tile_rect(vec2 xy, vec2 h, int grid_x, int grid_y) {
     const float px = xy.x - 0.5, py = xy.y - 0.5;
     const float gx = float(grid_x), gy = float(grid_y);
@@ -175,7 +164,7 @@ TileRect tile_rect(vec2 xy, vec2 h, int grid_x, int grid_y) {
     return t;
 }
 
-// Inputs of one splat (activated parameters, see gbviewer.Scene); `index` locates its SH coefficients.
+// port of preprocess.h: SplatIn (`index` locates its SH coefficients)
 struct SplatIn {
     vec3 mean;
     vec3 scale;
@@ -188,17 +177,14 @@ struct SplatIn {
     int cell;         // the splat's cell (duplex), -1 when none
 };
 
-// View-space position R m + t of a world point; false behind the near plane (z <= 0.2, KERNELS.md §0.4). An
-// orthographic camera culls the same way: it sees what lies in front of its image plane (z = 0) by more than the
-// near distance, and sorts by the same view-space z.
+// port of preprocess.h: view_point
 bool view_point(CameraParams cam, vec3 m, precise out vec3 pv) {
     for (int i = 0; i < 3; ++i)
         pv[i] = cam.R[i * 3] * m[0] + cam.R[i * 3 + 1] * m[1] + cam.R[i * 3 + 2] * m[2] + cam.t[i];
     return pv[2] > cam.near_plane;
 }
 
-// Screen position of the view-space point pv (perspective: fx X/Z + cx; orthographic: fx X + cx) and the tiles of
-// the box with half sides h around it (getRect); false when a value is not finite or no tile is touched.
+// port of preprocess.h: screen_footprint
 bool screen_footprint(CameraParams cam, vec3 pv, vec2 h, int grid_x, int grid_y, precise out vec2 xy,
                       out TileRect rect) {
     if (cam.projection == ORTHOGRAPHIC)
@@ -211,8 +197,7 @@ bool screen_footprint(CameraParams cam, vec3 pv, vec2 h, int grid_x, int grid_y,
     return rect.x1 > rect.x0 && rect.y1 > rect.y0;
 }
 
-// Preprocess one splat for `mode`; returns false when it is culled (behind the near plane, degenerate, invisible,
-// or touching no tile). wsr and duplex fold the view weight and the optional depth correction into the opacity.
+// port of preprocess.h: preprocess_splat
 bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitParams oit, int grid_x, int grid_y,
                       out Splat2D result, out TileRect rect) {
     rect = TileRect(0, 0, 0, 0);
@@ -303,22 +288,21 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
     return true;
 }
 
-// A Duplex-GS cell: an ellipsoid (centre, scales, unit (w,x,y,z) rotation) that covers its splats.
+// port of preprocess.h: CellIn
 struct CellIn {
     vec3 mean;
     vec3 scale;
     vec4 quat;
 };
 
-// Screen-space proxy of a cell: position, view-space depth (the sort key) and radius.
+// port of preprocess.h: Cell2D
 struct Cell2D {
     vec2 xy;
     float depth;
     float radius;
 };
 
-// Project a cell as Duplex-GS's preprocessCUDA_anchor does (KERNELS.md §8.3): near cull, EWA projection with the
-// +0.3 dilation, radius ceil(2 sqrt(lambda1)), tile rectangle; false when culled.
+// port of preprocess.h: preprocess_cell
 bool preprocess_cell(CellIn in_, CameraParams cam, int grid_x, int grid_y, out Cell2D result, out TileRect rect) {
     rect = TileRect(0, 0, 0, 0);
     const vec3 m = in_.mean;

@@ -51,7 +51,7 @@ static inline bool outside(const SplatBounds& b, float xa, float xb, float ya, f
 // Per-lane outputs of a group before they are written to the image.
 template <int N>
 struct Out {
-    float C[3][N], T[N], wx[N], wy[N];
+    float C[3][N], T[N], S[N], wx[N], wy[N];  // PixelSums per lane (S: wsr, duplex), window sides
     int32_t evals[N];
 };
 
@@ -141,13 +141,12 @@ void group_wsr(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
         blend_wsr<L, Tr>(s, g.px, g.py, live, acc);
         return L::none();
     });
-    const float inv = 1.0f / WSR_FIXED_SCALE;
     for (int k = 0; k < L::N; ++k) {
-        const float C[3] = {(float)acc.C[0][k] * inv, (float)acc.C[1][k] * inv, (float)acc.C[2][k] * inv};
-        float rc[3];
-        const float total = resolve_weighted(C, (float)acc.S[k] * inv, job.oit.weight_background, 1.0f, rc, &out.T[k]);
-        GBV_TRACE(Tr, resolved(total));
-        for (int c = 0; c < 3; ++c) out.C[c][k] = rc[c];
+        const int64_t C[3] = {acc.C[0][k], acc.C[1][k], acc.C[2][k]};
+        const PixelSums sums = wsr_pixel_sums(C, acc.S[k]);
+        for (int c = 0; c < 3; ++c) out.C[c][k] = sums.C[c];
+        out.T[k] = sums.T;
+        out.S[k] = sums.S;
     }
 }
 
@@ -160,31 +159,22 @@ void group_duplex(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
         GBV_TRACE(Tr, after(st));
         return stop;
     });
-    float T[L::N], S[L::N], C[3][L::N];
-    L::store(st.T, T);
-    L::store(st.S, S);
-    for (int c = 0; c < 3; ++c) L::store(st.C[c], C[c]);
-    for (int k = 0; k < L::N; ++k) {
-        const float Ck[3] = {C[0][k], C[1][k], C[2][k]};
-        float rc[3];
-        const float total =
-            resolve_weighted(Ck, S[k], T[k] < DUPLEX_T_STOP ? 0.0f : job.oit.weight_background, T[k], rc, &out.T[k]);
-        GBV_TRACE(Tr, resolved(total));
-        for (int c = 0; c < 3; ++c) out.C[c][k] = rc[c];
-    }
+    L::store(st.T, out.T);
+    L::store(st.S, out.S);
+    for (int c = 0; c < 3; ++c) L::store(st.C[c], out.C[c]);
 }
 
 }  // namespace tile
 
-// Blend every pixel of the job's tile and write rgb = C + T bg, alpha = 1 - T, evals and (gaussian_blending) the
-// final window size.
+// Blend every pixel of the job's tile and write its finished colour and alpha (resolve_pixel), evals and
+// (gaussian_blending) the final window size.
 template <class L, class Tr = NoTrace>
 void blend_tile(const TileJob& job) {
     constexpr int N = L::N;
     float offsets[N];
     for (int k = 0; k < N; ++k) offsets[k] = (float)k + 0.5f;
     const typename L::F lane_offset = L::load(offsets);
-    tile::Out<N> out;
+    tile::Out<N> out = {};  // S stays 0 where the mode has no weight sum
     for (int y = job.y0; y < job.y1; ++y) {
         for (int x = job.x0; x < job.x1; x += N) {
             tile::Group<L> g;
@@ -203,8 +193,10 @@ void blend_tile(const TileJob& job) {
             }
             for (int k = 0; k < g.count; ++k) {
                 const size_t p = (size_t)(y - job.y0) * job.width + (x - job.x0) + k;
-                for (int c = 0; c < 3; ++c) job.rgb[p * 3 + c] = out.C[c][k] + out.T[k] * job.bg[c];
-                job.alpha[p] = 1.0f - out.T[k];
+                const PixelSums sums = {{out.C[0][k], out.C[1][k], out.C[2][k]}, out.T[k], out.S[k]};
+                const float total =
+                    resolve_pixel(job.mode, sums, job.oit.weight_background, job.bg, job.rgb + p * 3, job.alpha + p);
+                GBV_TRACE(Tr, resolved(total));
                 job.evals[p] = out.evals[k];
                 if (job.window) {
                     job.window[p * 2] = out.wx[k];

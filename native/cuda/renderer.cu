@@ -315,19 +315,12 @@ __global__ void __launch_bounds__(BLOCK)
         }
     }
     if (!inside) return;
-    if (M == GAUSSIAN_BLENDING) T = win.T;
-    if (M == WSR) {
-        const float inv = 1.0f / WSR_FIXED_SCALE;
-        const float Cw[3] = {(float)wsr.C[0] * inv, (float)wsr.C[1] * inv, (float)wsr.C[2] * inv};
-        resolve_weighted(Cw, (float)wsr.S * inv, oit.weight_background, 1.0f, C, &T);
-    } else if (M == DUPLEX) {
-        resolve_weighted(dst.C, dst.S, dst.T < DUPLEX_T_STOP ? 0.0f : oit.weight_background, dst.T, C, &T);
-    }
+    PixelSums sums = {{C[0], C[1], C[2]}, M == GAUSSIAN_BLENDING ? win.T : T, 0.0f};
+    if (M == WSR) sums = wsr_pixel_sums(wsr.C, wsr.S);
+    if (M == DUPLEX) sums = {{dst.C[0], dst.C[1], dst.C[2]}, dst.T, dst.S};
     const size_t p = (size_t)y * W + x;
-    rgb[p * 3] = C[0] + T * bg.x;
-    rgb[p * 3 + 1] = C[1] + T * bg.y;
-    rgb[p * 3 + 2] = C[2] + T * bg.z;
-    alpha[p] = 1.0f - T;
+    const float bgc[3] = {bg.x, bg.y, bg.z};
+    resolve_pixel((Mode)M, sums, oit.weight_background, bgc, rgb + p * 3, alpha + p);
     evals[p] = ev;
     if (window) {
         window[p * 2] = win.wh.x;

@@ -1,5 +1,6 @@
-"""The GLSL compute backend (OpenGL 4.3 through moderngl): `renderer` (the pipeline), `context` (contexts, shader
-sources), `gpu` (buffers and programs), `sort` (scan, radix sort, tile binning), `limits` (drivers that cap loops)."""
+"""The GLSL compute backend (OpenGL 4.3 through moderngl): `renderer` (the pipeline), `binning` (tile lists),
+`interface` (counter slots and record sizes, read from shaders/interface.glsl), `context` (contexts, shader sources),
+`gpu` (buffers and programs), `sort` (scan, radix sort, pair sort), `limits` (drivers that cap loops)."""
 
 from .context import SHADER_DIR, shader_source, standalone_context
 from .renderer import GlslRenderer

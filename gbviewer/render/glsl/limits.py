@@ -13,6 +13,7 @@ import weakref
 import numpy as np
 
 from ...errors import RenderError
+from . import interface as gi
 from .context import shader_source
 from .gpu import WG, Gpu
 
@@ -66,7 +67,6 @@ def blend_plan(gpu: Gpu, supersample: int, ranges, num_tiles: int, pairs: int) -
     limit = loop_limit(gpu.ctx)
     longest = 0
     if limit is not None and pairs > 0:
-        totals = gpu.buffers["totals"]
-        gpu.run("list_max.comp", -(-num_tiles // WG), (ranges, totals), n=num_tiles)
-        longest = int(np.frombuffer(totals.read(size=4, offset=20), np.uint32)[0])
+        gpu.run("list_max.comp", -(-num_tiles // WG), (ranges, gpu.buffers["totals"]), n=num_tiles)
+        longest = int(np.frombuffer(gpu.buffers["totals"].read(size=gi.TOTALS_BYTES), np.uint32)[gi.TOTAL_MAX_LIST])
     return plan_blend(supersample, longest, limit), longest

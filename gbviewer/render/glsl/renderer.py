@@ -23,11 +23,13 @@ steps 3-5 with cells.comp (each cell's visible splats, its screen proxy), a dept
 list of their splats; blend.comp reads each splat's cell from the scene's cell buffer.
 
 Drivers that cap the loop iterations of one invocation (Mesa's llvmpipe) get the blend split into several dispatches:
-see `limits`. Buffers, programs and dispatch are `gpu.Gpu`; the scan, radix sort and tile binning are in `sort`.
+see `limits`. Buffers, programs and dispatch are `gpu.Gpu`; the scan, radix sort and pair sort are in `sort`, the tile
+lists of steps 3-5 in `binning`. Counter slots, record sizes and the `oit` uniform's layout are the shaders' own
+(shaders/interface.glsl, read by `interface`).
 
-The scene is uploaded once (`upload`); per frame the camera goes up as uniforms, 20 bytes of counters come back
-(visible splats, pairs and depth range: they size the pair buffers and the number of radix passes; 4 more with a
-loop cap: the longest tile list), and `render` reads the image back; `render_to_texture` leaves it in a texture of the
+The scene is uploaded once (`upload`); per frame the camera goes up as uniforms, the counter buffer comes back
+(visible splats, pairs and depth range: they size the pair buffers and the number of radix passes; with a loop cap
+also the longest tile list), and `render` reads the image back; `render_to_texture` leaves it in a texture of the
 caller's (the viewer draws it from there). Buffers grow (by 1.5x) when a frame needs more
 and are reused otherwise; `allocations` counts (re)allocations.
 
@@ -49,12 +51,15 @@ from ...scene import Scene
 from ..control import Progress, RenderControl
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
 from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
+from . import interface as gi
+from .binning import bin_duplex, bin_splats, read_totals
 from .context import check_context, standalone_context
 from .gpu import WG, Gpu
 from .limits import blend_plan
-from .sort import SCAN_BLOCK, fill, pairs_by_tile, radix_sort, scan
+from .sort import SCAN_BLOCK, scan
 
-NO_OIT = (0.0, 0.0, 1.0, 0.0)  # the shaders' oit uniform (sigma, w_bg, E, depth_correct) outside wsr and duplex
+NO_OIT = gi.oit_uniform(0.0, 0.0, 1.0, False)  # the shaders' oit uniform outside wsr and duplex
+WORD, VEC4 = gi.WORD_BYTES, gi.VEC4_BYTES
 
 
 class GlslRenderer(Renderer):
@@ -136,12 +141,7 @@ class GlslRenderer(Renderer):
     def _upload_splats(self, scene: Scene) -> None:
         n = scene.num_splats
         f3d = scene.filter_3d if scene.filter_3d is not None else np.zeros(n, np.float32)
-        geom = np.empty((n, 12), np.float32)
-        geom[:, 0:3] = scene.means
-        geom[:, 3] = scene.opacities
-        geom[:, 4:7] = scene.scales
-        geom[:, 7] = f3d
-        geom[:, 8:12] = scene.quats
+        geom = gi.records(gi.GEOM_VEC4S, scene.means, scene.opacities, scene.scales, f3d, scene.quats)
         sh = np.ascontiguousarray(scene.sh, np.float32)
         self.gpu.upload("geom", geom, f"scene {scene.source}: splat geometry")
         self.gpu.upload("sh", sh, f"scene {scene.source}: SH coefficients")
@@ -157,10 +157,8 @@ class GlslRenderer(Renderer):
 
     def _upload_cells(self, cells: Cells, n: int) -> None:
         """Cell ellipsoids (48 B per cell), member lists and each splat's cell (duplex)."""
-        geom = np.zeros((cells.num_cells, 12), np.float32)
-        geom[:, 0:3] = cells.means
-        geom[:, 4:7] = cells.scales
-        geom[:, 8:12] = cells.quats
+        pad = np.zeros(cells.num_cells, np.float32)
+        geom = gi.records(gi.CELL_GEOM_VEC4S, cells.means, pad, cells.scales, pad, cells.quats)
         self.gpu.upload("cell_geom", geom, "cell ellipsoids")
         self.gpu.upload("cell_offsets", cells.offsets, "cell offsets")
         self.gpu.upload("cell_members", cells.members, "cell members")
@@ -182,11 +180,11 @@ class GlslRenderer(Renderer):
         prep, counts, t0 = self._run(camera, settings, control, want_window)
         W, H = camera.width, camera.height
         img = np.frombuffer(self.gpu.texture.read(), np.float32).reshape(H, W, 4)
-        evals = np.frombuffer(self.gpu.buffers["evals"].read(size=W * H * 4), np.int32).reshape(H, W).copy()
+        evals = np.frombuffer(self.gpu.buffers["evals"].read(size=W * H * WORD), np.int32).reshape(H, W).copy()
         debug = {"evals": evals}
         if want_window:
-            window = self.gpu.buffers["window"].read(size=W * H * 8)
-            debug["window"] = np.frombuffer(window, np.float32).reshape(H, W, 2).copy()
+            window = self.gpu.buffers["window"].read(size=W * H * gi.WINDOW_WORDS * WORD)
+            debug["window"] = np.frombuffer(window, np.float32).reshape(H, W, gi.WINDOW_WORDS).copy()
         stats = frame_stats(prep, camera, settings, self.name, t0, evaluations=int(evals.sum(dtype=np.int64)),
                             **counts)
         control.fill_partial(img[:, :, :3])
@@ -219,10 +217,10 @@ class GlslRenderer(Renderer):
         """The sum of the frame's evaluation counts: scan_blocks.comp's per-block totals (it scans the counts in
         place: the evals buffer holds prefix sums afterwards), added up here in 64 bits."""
         blocks = -(-n // SCAN_BLOCK)
-        sums = self.gpu.ensure("evals_sums", blocks * 4, "evaluation sums")
+        sums = self.gpu.ensure("evals_sums", blocks * WORD, "evaluation sums")
         self.gpu.run("scan_blocks.comp", blocks, (self.gpu.buffers["evals"], sums, self.gpu.buffers["totals"]), n=n,
-                     num_blocks=blocks, total_slot=-1)
-        return int(np.frombuffer(sums.read(size=blocks * 4), np.uint32).sum(dtype=np.int64))
+                     num_blocks=blocks, total_slot=gi.NO_TOTAL)
+        return int(np.frombuffer(sums.read(size=blocks * WORD), np.uint32).sum(dtype=np.int64))
 
     def __del__(self) -> None:
         try:
@@ -244,11 +242,11 @@ class GlslRenderer(Renderer):
         and the blend's dispatches); returns the stage times and counts."""
         gpu = self.gpu
         mode = settings.mode
-        oit = NO_OIT if prep.oit is None else (*prep.oit[:3], float(prep.oit.depth_correct))
+        oit = NO_OIT if prep.oit is None else gi.oit_uniform(*prep.oit[:3], prep.oit.depth_correct)
         n, N = self._n, settings.supersample
         W, H = camera.width, camera.height
         RW, RH = W * N, H * N
-        gx, gy = -(-RW // 16), -(-RH // 16)
+        gx, gy = -(-RW // gi.TILE), -(-RH // gi.TILE)
         num_tiles = gx * gy
         max_deg = {1: 0, 4: 1, 9: 2, 16: 3}[self._sh_k]
         sh_deg = max(0, min(settings.sh_degree, max_deg))
@@ -257,15 +255,14 @@ class GlslRenderer(Renderer):
 
         t0 = time.perf_counter()
         # per-scene buffers (sized by the splat count; allocated on the first frame, grown with the scene)
-        splats = gpu.ensure("splats", n * 64, "preprocessed splats")
-        rects = gpu.ensure("rects", n * 16, "tile rectangles")
-        flags = gpu.ensure("flags", n * 4, "survivor flags")
-        dkeys = [gpu.ensure(f"depth_keys{i}", n * 4, "depth keys") for i in (0, 1)]
-        dvals = [gpu.ensure(f"depth_vals{i}", n * 4, "depth order") for i in (0, 1)]
-        gpu.ensure("pair_counts", n * 4, "pair counts")  # read by _bin_splats
-        totals = gpu.ensure("totals", 64)
-        totals.write(np.array([0, 0, 0xFFFFFFFF, 0, 0, 0, 0, 0xFFFFFFFF, 0, 0, 0, 0, 0, 0, 0, 0],
-                              np.uint32).tobytes())
+        splats = gpu.ensure("splats", n * gi.SPLAT_VEC4S * VEC4, "preprocessed splats")
+        rects = gpu.ensure("rects", n * gi.RECT_WORDS * WORD, "tile rectangles")
+        flags = gpu.ensure("flags", n * WORD, "survivor flags")
+        dkeys = [gpu.ensure(f"depth_keys{i}", n * WORD, "depth keys") for i in (0, 1)]
+        dvals = [gpu.ensure(f"depth_vals{i}", n * WORD, "depth order") for i in (0, 1)]
+        gpu.ensure("pair_counts", n * WORD, "pair counts")  # read by bin_splats
+        totals = gpu.ensure("totals", gi.TOTALS_BYTES)
+        totals.write(gi.totals_init().tobytes())
 
         cam_uniforms = dict(
             grid=(gx, gy), cam_R=np.ascontiguousarray(camera.R, f32).reshape(9),
@@ -274,23 +271,25 @@ class GlslRenderer(Renderer):
                    float(f32(camera.cy) * Nf)),
             cam_size=(RW, RH), cam_near=float(f32(camera.near)), cam_projection=camera.projection_code,
         )
-        weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", 16)
+        weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", VEC4)
         gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,
                 weight), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k,
                 oit=oit, **cam_uniforms)
-        scan(gpu, flags, n, total_slot=0)
+        scan(gpu, flags, n, total_slot=gi.TOTAL_VISIBLE)
         gpu.run("compact.comp", -(-n // WG), (splats, rects, flags, totals, dkeys[0], dvals[0]), num_splats=n)
-        visible, pairs, dmin, dmax, overflow = (int(v) for v in np.frombuffer(totals.read(size=20), np.uint32))
+        t = read_totals(gpu)
+        slots = (gi.TOTAL_VISIBLE, gi.TOTAL_PAIRS, gi.TOTAL_DEPTH_MIN, gi.TOTAL_DEPTH_MAX, gi.TOTAL_OVERFLOW)
+        visible, pairs, dmin, dmax, overflow = (int(t[i]) for i in slots)
         t1 = time.perf_counter()
 
         if overflow:
             raise RenderError(f"glsl backend: more than 2^32 tile-splat pairs at {RW}x{RH}; render a smaller image")
         counts = {}
         if mode == Mode.DUPLEX:
-            tvals, ranges, sort_length, pairs, counts["cells_visible"] = self._bin_duplex(prep.cells, cam_uniforms,
-                                                                                          num_tiles)
+            tvals, ranges, sort_length, pairs, counts["cells_visible"] = bin_duplex(gpu, prep.cells, cam_uniforms,
+                                                                                    num_tiles)
         else:
-            tvals, ranges = self._bin_splats(mode, visible, pairs, dmin, dmax, num_tiles, gx)
+            tvals, ranges = bin_splats(gpu, mode, visible, pairs, dmin, dmax, num_tiles, gx)
             sort_length = 0 if mode == Mode.WSR else pairs
         plan, longest = blend_plan(gpu, N, ranges, num_tiles, pairs)
         self.ctx.finish()
@@ -301,66 +300,6 @@ class GlslRenderer(Renderer):
         return dict(preprocess_ms=(t1 - t0) * 1e3, sort_ms=(t2 - t1) * 1e3, blend_ms=(time.perf_counter() - t2) * 1e3,
                     visible=visible, sort_length=sort_length, pairs=pairs, **counts)
 
-    def _bin_splats(self, mode: Mode, visible: int, pairs: int, dmin: int, dmax: int, num_tiles: int, gx: int):
-        """Tile lists of splats: by (tile, depth, index), or for wsr by (tile, index) with no depth sort."""
-        gpu = self.gpu
-        dkeys = [gpu.buffers[f"depth_keys{i}"] for i in (0, 1)]
-        dvals = [gpu.buffers[f"depth_vals{i}"] for i in (0, 1)]
-        ranges = gpu.ensure("ranges", num_tiles * 8, "tile ranges")
-        fill(gpu, ranges, num_tiles * 2, 0)
-        if visible == 0:
-            return gpu.ensure("tile_vals0", pairs * 4, "tile-splat pairs"), ranges
-        if mode == Mode.WSR:
-            order = dvals[0]  # survivors in splat-index order: binning only
-        else:
-            _, order = radix_sort(gpu, dkeys[0], dvals[0], dkeys[1], dvals[1], visible, (dmax - dmin).bit_length())
-        tvals = pairs_by_tile(gpu, order, gpu.buffers["rects"], gpu.buffers["pair_counts"], visible, pairs, gx,
-                              num_tiles, ranges, "tile-splat pairs")
-        return tvals, ranges
-
-    def _bin_duplex(self, cells: Cells, cam_uniforms: dict, num_tiles: int):
-        """Duplex binning (KERNELS.md §8.3): project the cells with a visible splat, sort them by depth, one pair per
-        (tile, cell), sort the pairs by tile, expand every pair to its cell's visible splats. Returns the splat list,
-        the tile ranges in it, the tile-cell pairs (the sort length), the list length and the visible cells."""
-        gpu = self.gpu
-        m = cells.num_cells
-        gx = cam_uniforms["grid"][0]
-        totals, cell_offsets = gpu.buffers["totals"], gpu.buffers["cell_offsets"]
-        cell_out = gpu.ensure("cell_out", m * 16, "projected cells")
-        cell_rects = gpu.ensure("cell_rects", m * 16, "cell rectangles")
-        cflags = gpu.ensure("cell_flags", m * 4, "cell flags")
-        vis = gpu.ensure("cell_vis", len(cells.members) * 4, "visible cell members")
-        gpu.run("cells.comp", -(-m // WG), (gpu.buffers["cell_geom"], cell_offsets, gpu.buffers["cell_members"],
-                gpu.buffers["rects"], vis, cell_out, cell_rects, cflags, totals), num_cells=m, **cam_uniforms)
-        scan(gpu, cflags, m, total_slot=9)
-        t = np.frombuffer(totals.read(size=48), np.uint32)
-        cell_pairs, cmin, cmax, ncells = (int(t[i]) for i in (6, 7, 8, 9))
-        ckeys = [gpu.ensure(f"cell_keys{i}", m * 4, "cell keys") for i in (0, 1)]
-        cvals = [gpu.ensure(f"cell_vals{i}", m * 4, "cell order") for i in (0, 1)]
-        gpu.run("cell_compact.comp", -(-m // WG), (cell_out, cell_rects, cflags, totals, ckeys[0], cvals[0]),
-                num_cells=m)
-        cell_ranges = gpu.ensure("cell_ranges", num_tiles * 8, "tile ranges of cells")
-        ranges = gpu.ensure("ranges", num_tiles * 8, "tile ranges")
-        fill(gpu, ranges, num_tiles * 2, 0)
-        fill(gpu, cell_ranges, num_tiles * 2, 0)
-        expanded = 0
-        tlist = gpu.ensure("expanded", 16)
-        if ncells > 0 and cell_pairs > 0:
-            _, order = radix_sort(gpu, ckeys[0], cvals[0], ckeys[1], cvals[1], ncells, (cmax - cmin).bit_length())
-            counts = gpu.ensure("cell_pair_counts", ncells * 4, "cell tile counts")
-            tvals = pairs_by_tile(gpu, order, cell_rects, counts, ncells, cell_pairs, gx, num_tiles, cell_ranges,
-                                  "tile-cell pairs")
-            offs = gpu.ensure("expand_offsets", cell_pairs * 4, "expanded list offsets")
-            groups = -(-cell_pairs // WG)
-            gpu.run("expand.comp", groups, (tvals, cell_out, cell_offsets, vis, offs, tlist), n=cell_pairs, mode=0)
-            scan(gpu, offs, cell_pairs, total_slot=10)
-            expanded = int(np.frombuffer(totals.read(size=4, offset=40), np.uint32)[0])
-            tlist = gpu.ensure("expanded", expanded * 4, "expanded tile lists")
-            gpu.run("expand.comp", groups, (tvals, cell_out, cell_offsets, vis, offs, tlist), n=cell_pairs, mode=1)
-            gpu.run("expand_ranges.comp", -(-num_tiles // WG), (cell_ranges, offs, totals, ranges),
-                    num_tiles=num_tiles, n=cell_pairs)
-        return tlist, ranges, cell_pairs, expanded, ncells
-
     def _blend(self, camera: Camera, settings: RenderSettings, want_window: bool, plan, longest: int, splats, tvals,
                ranges, oit: tuple, control: RenderControl, target=None) -> None:
         """blend.comp into `target` or the output texture, in the dispatches of `plan` (one unless the driver caps
@@ -369,18 +308,18 @@ class GlslRenderer(Renderer):
         N = settings.supersample
         W, H = camera.width, camera.height
         RW, RH = W * N, H * N
-        gx, gy = -(-RW // 16), -(-RH // 16)
+        gx, gy = -(-RW // gi.TILE), -(-RH // gi.TILE)
         tex = gpu.ensure_texture(W, H) if target is None else target
-        evals = gpu.ensure("evals", W * H * 4, "evaluation counts")
-        window = gpu.ensure("window", W * H * 8 if want_window else 16, "window sizes")
-        bx, by = -(-W // 16), -(-H // 16)
-        split = len(plan) > 1
-        state = gpu.ensure("blend_state", bx * by * 256 * 48 if split else 16, "blend state")
-        accum = gpu.ensure("blend_accum", bx * by * 256 * 32 if split else 16, "blend sums")
+        evals = gpu.ensure("evals", W * H * WORD, "evaluation counts")
+        window = gpu.ensure("window", W * H * gi.WINDOW_WORDS * WORD if want_window else VEC4, "window sizes")
+        bx, by = -(-W // gi.TILE), -(-H // gi.TILE)
+        invocations = bx * by * gi.TILE * gi.TILE if len(plan) > 1 else 0  # state kept between dispatches
+        state = gpu.ensure("blend_state", invocations * gi.BLEND_STATE_VEC4S * VEC4, "blend state")
+        accum = gpu.ensure("blend_accum", invocations * gi.BLEND_ACCUM_VEC4S * VEC4, "blend sums")
         prog = gpu.program("blend.comp", **{f"BLEND_MODE_{settings.mode.name}": 1, "SUPERSAMPLED": int(N > 1)})
         gpu.set(prog, out_size=(W, H), supersample=N, grid=(gx, gy), background=tuple(settings.background),
                   want_window=int(want_window), oit=oit)
-        cell_of = gpu.buffers["cell_of"] if settings.mode == Mode.DUPLEX else gpu.ensure("dummy", 16)
+        cell_of = gpu.buffers["cell_of"] if settings.mode == Mode.DUPLEX else gpu.ensure("dummy", VEC4)
         for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of)):
             buf.bind_to_storage_buffer(i)
         tex.bind_to_image(0, read=False, write=True)

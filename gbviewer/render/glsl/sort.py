@@ -3,6 +3,7 @@ gather_counts, duplicate, tile_ranges, fill)."""
 
 from __future__ import annotations
 
+from . import interface as gi
 from .gpu import WG, Gpu
 
 SCAN_BLOCK = 1024  # elements per scan_blocks group
@@ -10,13 +11,14 @@ RADIX_BLOCK = 2048  # keys per radix group (256 threads x 8)
 RADIX_BITS = 4
 
 
-def scan(gpu: Gpu, buf, n: int, total_slot: int = -1, level: int = 0) -> None:
-    """Exclusive prefix sum of uint buf[0..n) in place; the total goes to totals[total_slot] when >= 0."""
+def scan(gpu: Gpu, buf, n: int, total_slot: int = gi.NO_TOTAL, level: int = 0) -> None:
+    """Exclusive prefix sum of uint buf[0..n) in place; the total goes to counter slot `total_slot` (interface.TOTAL_*)
+    unless it is NO_TOTAL."""
     if n <= 0:
         return
     blocks = -(-n // SCAN_BLOCK)
-    sums = gpu.ensure(f"scan_sums{level}", blocks * 4)
-    gpu.run("scan_blocks.comp", blocks, (buf, sums, gpu.ensure("totals", 64)), n=n, num_blocks=blocks,
+    sums = gpu.ensure(f"scan_sums{level}", blocks * gi.WORD_BYTES)
+    gpu.run("scan_blocks.comp", blocks, (buf, sums, gpu.ensure("totals", gi.TOTALS_BYTES)), n=n, num_blocks=blocks,
             total_slot=total_slot)
     if blocks > 1:
         scan(gpu, sums, blocks, total_slot, level + 1)
@@ -29,11 +31,11 @@ def radix_sort(gpu: Gpu, keys, vals, keys_tmp, vals_tmp, n: int, bits: int):
     if n <= 1 or passes == 0:
         return keys, vals
     blocks = -(-n // RADIX_BLOCK)
-    counts = gpu.ensure("radix_counts", 16 * blocks * 4)
+    counts = gpu.ensure("radix_counts", (1 << RADIX_BITS) * blocks * gi.WORD_BYTES)
     for p in range(passes):
         shift = p * RADIX_BITS
         gpu.run("radix_count.comp", blocks, (keys, counts), n=n, shift=shift, num_blocks=blocks)
-        scan(gpu, counts, 16 * blocks)
+        scan(gpu, counts, (1 << RADIX_BITS) * blocks)
         gpu.run("radix_scatter.comp", blocks, (keys, vals, keys_tmp, vals_tmp, counts), n=n, shift=shift,
                 num_blocks=blocks)
         keys, vals, keys_tmp, vals_tmp = keys_tmp, vals_tmp, keys, vals
@@ -49,7 +51,7 @@ def pairs_by_tile(gpu: Gpu, order, rects, counts, n: int, pairs: int, gx: int, n
     """One (tile, item) pair for every tile each of the n ordered items touches (`rects`), stably radix-sorted by
     tile, so every tile keeps the items' order; writes each tile's [start, end) into `ranges` and returns the items
     in tile order."""
-    keys0, vals0, keys1, vals1 = (gpu.ensure(f"tile_{k}{i}", pairs * 4, what) for i in (0, 1)
+    keys0, vals0, keys1, vals1 = (gpu.ensure(f"tile_{k}{i}", pairs * gi.WORD_BYTES, what) for i in (0, 1)
                                   for k in ("keys", "vals"))
     gpu.run("gather_counts.comp", -(-n // WG), (order, rects, counts), n=n)
     scan(gpu, counts, n)

@@ -3,18 +3,11 @@
 #pragma once
 
 #include "common.h"
+#include "footprint.h"
 #include "lanes.h"
+#include "sh.h"
 
 namespace gbv {
-
-constexpr float SH_C0 = 0.28209479177387814f;
-constexpr float SH_C1 = 0.4886025119029199f;
-// Scalars rather than arrays: nvcc cannot read namespace-scope constexpr arrays in device code.
-constexpr float SH_C2_0 = 1.0925484305920792f, SH_C2_1 = -1.0925484305920792f, SH_C2_2 = 0.31539156525252005f,
-                SH_C2_3 = -1.0925484305920792f, SH_C2_4 = 0.5462742152960396f;
-constexpr float SH_C3_0 = -0.5900435899266435f, SH_C3_1 = 2.890611442640554f, SH_C3_2 = -0.4570457994644658f,
-                SH_C3_3 = 0.3731763325901154f, SH_C3_4 = -0.4570457994644658f, SH_C3_5 = 1.445305721320277f,
-                SH_C3_6 = -0.5900435899266435f;
 
 // Every step is written once, as a template over a lane type L (lanes.h) like blend.h's: L::F holds one float per
 // splat lane, L::M one flag per lane, so the same source compiles to the one-splat functions (Lanes1: CUDA, the GLSL
@@ -22,61 +15,8 @@ constexpr float SH_C3_0 = -0.5900435899266435f, SH_C3_1 = 2.890611442640554f, SH
 // 16 splats at once). Culling is a lane mask; a lane culled early computes on and is dropped at the end, and the work
 // stops when no lane is left. Every lane type computes the same IEEE operations in the same order (its mul_rn,
 // fmin/fmax, frexp and ceil are libm's, bit for bit), so the vector preprocess is bit-identical to the scalar one.
-// The one-splat wrappers keep the signatures CUDA and the GLSL port use.
-
-// Real SH basis of degree `deg` (0..3) at the unit direction `dir`, in the 3DGS order and signs; returns the
-// number of coefficients used, (deg + 1)^2.
-template <class L>
-GBV_HD int sh_basis(int deg, const typename L::F dir[3], typename L::F basis[16]) {
-    using F = typename L::F;
-    const F x = dir[0], y = dir[1], z = dir[2];
-    basis[0] = L::set(SH_C0);
-    if (deg < 1) return 1;
-    basis[1] = L::set(-SH_C1) * y;
-    basis[2] = L::set(SH_C1) * z;
-    basis[3] = L::set(-SH_C1) * x;
-    if (deg < 2) return 4;
-    const F xx = L::mul_rn(x, x), yy = L::mul_rn(y, y), zz = L::mul_rn(z, z), xy = x * y, yz = y * z, xz = x * z;
-    const F two = L::set(2.0f), three = L::set(3.0f), four = L::set(4.0f);
-    basis[4] = L::set(SH_C2_0) * xy;
-    basis[5] = L::set(SH_C2_1) * yz;
-    basis[6] = L::set(SH_C2_2) * (L::mul_rn(two, zz) - xx - yy);
-    basis[7] = L::set(SH_C2_3) * xz;
-    basis[8] = L::set(SH_C2_4) * (xx - yy);
-    if (deg < 3) return 9;
-    basis[9] = L::set(SH_C3_0) * y * (L::mul_rn(three, xx) - yy);
-    basis[10] = L::set(SH_C3_1) * xy * z;
-    basis[11] = L::set(SH_C3_2) * y * (L::mul_rn(four, zz) - xx - yy);
-    basis[12] = L::set(SH_C3_3) * z * (L::mul_rn(two, zz) - L::mul_rn(three, xx) - L::mul_rn(three, yy));
-    basis[13] = L::set(SH_C3_4) * x * (L::mul_rn(four, zz) - xx - yy);
-    basis[14] = L::set(SH_C3_5) * z * (xx - yy);
-    basis[15] = L::set(SH_C3_6) * x * (xx - L::mul_rn(three, yy));
-    return 16;
-}
-
-// View-dependent colour from SH coefficients sh[K][3] (DC first), as computeColorFromSH:
-// +0.5 offset, clamped at 0 from below only.
-template <class L>
-GBV_HD void sh_to_rgb(const typename L::F* sh, int deg, const typename L::F dir[3], typename L::F out[3]) {
-    typename L::F basis[16];
-    const int k = sh_basis<L>(deg, dir, basis);
-    for (int c = 0; c < 3; ++c) {
-        typename L::F v = L::set(0.5f);
-        for (int i = 0; i < k; ++i) v = v + L::mul_rn(basis[i], sh[i * 3 + c]);
-        out[c] = L::fmax(v, L::set(0.0f));
-    }
-}
-
-// Sort-free GS's view-dependent weight v_i (KERNELS.md §7.3): a 1-channel SH w[K] (f_do_0, f_ro_*), the raw
-// sum: no +0.5, no clamp (non-positive weights are culled by the caller).
-template <class L>
-GBV_HD typename L::F sh_to_weight(const typename L::F* w, int deg, const typename L::F dir[3]) {
-    typename L::F basis[16];
-    const int k = sh_basis<L>(deg, dir, basis);
-    typename L::F v = L::set(0.0f);
-    for (int i = 0; i < k; ++i) v = v + L::mul_rn(basis[i], w[i]);
-    return v;
-}
+// The one-splat wrappers keep the signatures CUDA and the GLSL port use. SH evaluation is sh.h, the 2D footprint
+// (eigen-decomposition, radius, cutoff box, tile rectangle) footprint.h.
 
 // 3D covariance Sigma = R S S^T R^T (upper triangle: xx, xy, xz, yy, yz, zz) from a unit (w,x,y,z)
 // quaternion and per-axis scales (eq. 1).
@@ -136,116 +76,6 @@ GBV_HD void project_covariance(const CameraParams& cam, const typename L::F cov3
     out[0] = L::mul_rn(TS[0], T[0]) + L::mul_rn(TS[1], T[1]) + L::mul_rn(TS[2], T[2]);
     out[1] = L::mul_rn(TS[0], T[3]) + L::mul_rn(TS[1], T[4]) + L::mul_rn(TS[2], T[5]);
     out[2] = L::mul_rn(TS[3], T[3]) + L::mul_rn(TS[4], T[4]) + L::mul_rn(TS[5], T[5]);
-}
-
-// Eigen-decomposition of a 2x2 covariance (a, b, c): sigma = sqrt(eigenvalues) and the unit major
-// eigenvector. lambda2 = det / lambda1 equals mid - sqrt(mid^2 - det) exactly and avoids cancellation;
-// the eigenvector is taken from whichever of its two formulas is better conditioned, so isotropic
-// splats get a valid axis instead of normalize(0, 0).
-template <class L>
-GBV_HD void eigen_2d(typename L::F a, typename L::F b, typename L::F c, typename L::F det, typename L::F* sigma1,
-                     typename L::F* sigma2, typename L::F v1[2]) {
-    using F = typename L::F;
-    const F mid = L::set(0.5f) * (a + c);
-    const F root = L::sqrt(L::fmax(L::set(0.0f), mid * mid - det));
-    const F l1 = mid + root;
-    const F l2 = det / l1;
-    *sigma1 = L::sqrt(l1);
-    *sigma2 = L::sqrt(l2);
-    const F e1x = b, e1y = l1 - a, e2x = l1 - c, e2y = b;
-    const F n1 = e1x * e1x + e1y * e1y, n2 = e2x * e2x + e2y * e2y;  // dot(e, e)
-    const typename L::M first = n1 >= n2;
-    const F ex = L::select(first, e1x, e2x), ey = L::select(first, e1y, e2y);
-    const F n = L::fmax(n1, n2);
-    const typename L::M ok = n > L::set(1e-30f);
-    const F k = L::set(1.0f) / L::sqrt(n);
-    v1[0] = L::select(ok, k * ex, L::set(1.0f));
-    v1[1] = L::select(ok, k * ey, L::set(0.0f));
-}
-
-// Screen-space bounding radius in pixels: ceil(k * sqrt(max eigenvalue)) with the published
-// max(0.1, mid^2 - det) floor.
-template <class L>
-GBV_HD typename L::F splat_radius(typename L::F a, typename L::F c, typename L::F det, float sigmas) {
-    using F = typename L::F;
-    const F mid = L::mul_rn(L::set(0.5f), a + c);
-    const F lmax = mid + L::sqrt(L::fmax(L::set(0.1f), L::mul_rn(mid, mid) - det));
-    return L::ceil(L::set(sigmas) * L::sqrt(lmax));
-}
-
-// ln(x) for x >= 1, from above, by basic float operations only, so that every backend computes the same value (logf
-// differs in its last bit between libm, CUDA and GLSL): x = m 2^e with m in [1, 2) (exact), ln m <= t - t^2/2 + t^3/3
-// with t = m - 1 (the alternating series cut after a positive term; at most 0.14 above).
-template <class L>
-GBV_HD typename L::F log_upper(typename L::F x) {
-    using F = typename L::F;
-    typename L::I e;
-    const F m = L::set(2.0f) * L::frexp(x, &e);  // x = m 2^(e - 1)
-    const F t = m - L::set(1.0f), t2 = L::mul_rn(t, t);
-    return L::mul_rn(L::to_float(e - L::seti(1)), L::set(0.69314720f)) + t - L::mul_rn(L::set(0.5f), t2) +
-           L::mul_rn(L::mul_rn(t2, t), L::set(0.33333334f));
-}
-
-// Half sides (x, y) of the screen box that binning gives a splat. scalar, mip, wsr and duplex skip a pixel where
-// power < ln(min_alpha / opacity), i.e. outside the ellipse d^T Sigma^-1 d <= r2 = 2 ln(opacity / min_alpha), whose
-// bounding box has half sides sqrt(r2 Sigma_xx) and sqrt(r2 Sigma_yy): widened for the blend's float rounding
-// (relative 1e-5 + 1e-6 lambda1^2 / det, plus 0.02 px), rounded up to whole pixels, plus one pixel (getRect's upper
-// edge takes a tile only when the box reaches 1 px into it: tight to the pixel, it would drop the tile's first row or
-// column), and capped by the radius r (the published square): no tile a pixel could take the splat in is dropped.
-// gaussian_blending (its windows move: the published 3.33 sigma square) and analytic (alpha integrated over the
-// pixel): the radius.
-template <class L>
-GBV_HD void cutoff_half_sides(Mode mode, const typename L::F cov[3], typename L::F det, typename L::F opacity,
-                              float min_alpha, typename L::F r, typename L::F h[2]) {
-    using F = typename L::F;
-    if (mode == GAUSSIAN_BLENDING || mode == ANALYTIC) {
-        h[0] = h[1] = r;
-        return;
-    }
-    // + 1e-6: the blend's threshold is logf(min_alpha / opacity), from the other quotient (up to ~2e-7 apart)
-    const F r2 = L::mul_rn(L::set(2.0f), log_upper<L>(opacity / L::set(min_alpha))) + L::set(1e-6f);
-    const F mid = L::mul_rn(L::set(0.5f), cov[0] + cov[2]);
-    const F l1 = mid + L::sqrt(L::fmax(L::set(0.0f), L::mul_rn(mid, mid) - det));
-    const F grow = L::set(1.00001f) + L::mul_rn(L::set(1e-6f), L::mul_rn(l1, l1) / det);
-    const F hx = L::ceil(L::mul_rn(L::sqrt(r2 * cov[0]), grow) + L::set(0.02f)) + L::set(1.0f);
-    const F hy = L::ceil(L::mul_rn(L::sqrt(r2 * cov[2]), grow) + L::set(0.02f)) + L::set(1.0f);
-    h[0] = L::min(hx, r);  // minf: a NaN side becomes r
-    h[1] = L::min(hy, r);
-}
-
-// Tile rectangles [x0, x1) x [y0, y1) of L::N splats, one per lane.
-template <class L>
-struct TileRectLanes {
-    typename L::I x0, y0, x1, y1;
-};
-
-// Tiles touched by a splat at xy with half sides h (getRect, which has h = (r, r)), in the published integer-centre
-// pixel convention (our xy minus 0.5). Empty when x1 <= x0 or y1 <= y0.
-template <class L>
-GBV_HD TileRectLanes<L> tile_rect(const typename L::F xy[2], const typename L::F h[2], int grid_x, int grid_y) {
-    using F = typename L::F;
-    const F px = xy[0] - L::set(0.5f), py = xy[1] - L::set(0.5f);
-    const F zero = L::set(0.0f), gx = L::set((float)grid_x), gy = L::set((float)grid_y), tile = L::set((float)TILE);
-    const F edge = L::set((float)TILE), one = L::set(1.0f);
-    TileRectLanes<L> t;  // (int)clampf(v, 0, g): truncation of a value in [0, g]
-    t.x0 = L::to_int(L::fmin(L::fmax((px - h[0]) / tile, zero), gx));
-    t.y0 = L::to_int(L::fmin(L::fmax((py - h[1]) / tile, zero), gy));
-    t.x1 = L::to_int(L::fmin(L::fmax((px + h[0] + edge - one) / tile, zero), gx));
-    t.y1 = L::to_int(L::fmin(L::fmax((py + h[1] + edge - one) / tile, zero), gy));
-    return t;
-}
-
-GBV_HD TileRect tile_rect(Vec2 xy, Vec2 h, int grid_x, int grid_y) {
-    const float p[2] = {xy.x, xy.y}, hh[2] = {h.x, h.y};
-    const TileRectLanes<Lanes1> t = tile_rect<Lanes1>(p, hh, grid_x, grid_y);
-    return TileRect{t.x0, t.y0, t.x1, t.y1};
-}
-
-// Tiles of rectangle q outside rectangle r: duplex's cell_misses statistic counts a splat's tiles outside its cell's.
-GBV_HD int64_t tiles_outside(const TileRect& q, const TileRect& r) {
-    const int ix = (q.x1 < r.x1 ? q.x1 : r.x1) - (q.x0 > r.x0 ? q.x0 : r.x0);
-    const int iy = (q.y1 < r.y1 ? q.y1 : r.y1) - (q.y0 > r.y0 ? q.y0 : r.y0);
-    return (int64_t)(q.x1 - q.x0) * (q.y1 - q.y0) - (ix > 0 && iy > 0 ? (int64_t)ix * iy : 0);
 }
 
 // Inputs of one splat (activated parameters, see gbviewer.Scene).

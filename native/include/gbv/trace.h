@@ -36,8 +36,8 @@ enum Skip : int32_t {
 // the lanes concerned): from the blend steps skip(mask, why), alpha(mask, value), weight(mask, value),
 // fallback(mask); from the tile walk entry(i, why) for list entry i (why: SKIP_BOX when skipped before evaluation,
 // else SKIP_NONE), stopped(mask) for the lanes that stopped at it, after(state) with the pixel state after it,
-// unreached(i, n) for the entries i..n-1 after the pixel stopped, and (wsr, duplex) resolved(total) with the sum of
-// weights the pixel's sums were divided by (resolve_weighted).
+// unreached(i, n) for the entries i..n-1 after the pixel stopped, and resolved(total) with the sum of weights the
+// pixel's sums were divided by (resolve_pixel: wsr and duplex; 1 in the other modes).
 struct NoTrace {
     static constexpr bool records = false;
 };
