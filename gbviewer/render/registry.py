@@ -69,10 +69,14 @@ _renderers_lock = threading.Lock()
 
 def get_renderer(scene: Scene, backend: str = "cpu") -> Renderer:
     """The process's renderer of `backend` ("auto": the best here) with `scene` uploaded. One renderer per backend,
-    uploading only when the scene changes: it keeps the last scene alive, never every scene it has seen."""
+    uploading only when the scene changes: it keeps the last scene alive, never every scene it has seen. A renderer
+    that stopped working (`usable()` False: BackendFailed) is dropped and a new one made."""
     backend = resolve_backend(backend)
     with _renderers_lock:
         entry = _renderers.get(backend)
+        if entry is not None and not getattr(entry[0], "usable", lambda: (True, ""))()[0]:
+            del _renderers[backend]
+            entry = None
         renderer = entry[0] if entry is not None else BACKENDS[backend]()
         if entry is None or entry[1]() is not scene:
             renderer.upload(scene)
