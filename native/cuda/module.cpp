@@ -80,11 +80,6 @@ NB_MODULE(_native_cuda, m) {
                  r.upload(means.data(), scales.data(), quats.data(), opacities.data(), sh.data(),
                           filter_3d ? filter_3d->data() : nullptr, n, (int)sh.shape(1));
              })
-        .def("num_splats",
-             [](const cuda::Renderer& r) {
-                 nb::gil_scoped_release release;
-                 return r.scene().n;
-             })
         .def("upload_weights",
              [](cuda::Renderer& r, FArr weight_sh) {
                  nb::gil_scoped_release release;  // the checks read the arrays only (the caller holds them)

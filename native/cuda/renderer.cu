@@ -144,7 +144,8 @@ RenderResult Renderer::render(const RenderArgs& a) {
         get(res.rgb, ss ? s.o_rgb.ptr : s.rgb.ptr, px * 3);
         get(res.alpha, ss ? s.o_alpha.ptr : s.alpha.ptr, px);
         get(res.evals, ss ? s.o_evals.ptr : s.evals.ptr, px);
-        if (a.want_window && a.mode == GAUSSIAN_BLENDING) get(res.window, ss ? s.o_window.ptr : s.window.ptr, px * 2);
+        if (a.want_window && a.mode == GAUSSIAN_BLENDING)
+            get(res.window, ss ? s.o_window.ptr : s.window.ptr, px * 2);
         return res;
     });
 }
