@@ -69,7 +69,7 @@ build() {
   local nvcc
   nvcc=$(command -v nvcc || ls /usr/local/cuda/bin/nvcc 2>/dev/null || true)
   for tool in cmake c++; do
-    command -v "$tool" >/dev/null 2>&1 || { echo "failed: no $tool on this machine: the modules cannot be built"; return; }
+    command -v "$tool" >/dev/null 2>&1 || { echo "failed: no $tool here: the modules cannot be built"; return; }
   done
   [ -n "$nvcc" ] || { echo "failed: no nvcc (CUDA toolkit) on this machine: the CUDA module cannot be built"; return; }
   local nbdir
@@ -87,13 +87,15 @@ build() {
   cp "$bdir"/_native*.so "$REPO/gbviewer/"
   local spills
   spills=$(grep -c "spill\|Local memory" "$OUT/build.log")
-  echo "ok: built in $(( $(date +%s) - START )) s with $("$nvcc" --version | tail -1); ptxas spill/lmem warnings: $spills"
+  echo "ok: built in $(( $(date +%s) - START )) s, $("$nvcc" --version | tail -1); ptxas spill/lmem warnings: $spills"
 }
 build > "$BUILD_LOG"
 echo "gpu_session: build: $(cat "$BUILD_LOG")"
 
 # The tests look for the shared scenes beside the checkout (../shared); a copied checkout may hold them inside.
-if [ -d "$REPO/shared/scenes" ] && [ ! -e "$REPO/../shared" ]; then ln -s "$REPO/shared" "$REPO/../shared" 2>/dev/null; fi
+if [ -d "$REPO/shared/scenes" ] && [ ! -e "$REPO/../shared" ]; then
+  ln -s "$REPO/shared" "$REPO/../shared" 2>/dev/null
+fi
 
 if ! "$PY" -c "import numpy" 2>/dev/null; then
   fallback_report "$PY lacks numpy (missing: $missing) and no GBV_WHEELHOUSE to install it from"

@@ -150,7 +150,12 @@ class CudaRenderer:
             self._textures.forget(glo)
 
     def _release(self, glo: int) -> None:
-        self._call("release_gl_texture", int(glo))
+        """Drop the native registration of `glo`; also after a device failure (the native renderer then forgets it
+        without calling CUDA), so that the viewer can still delete its textures."""
+        try:
+            self._impl.release_gl_texture(int(glo))
+        except RuntimeError as exc:
+            raise RenderError(f"cuda: {exc}") from None
 
     def _run(self, camera: Camera, settings: RenderSettings, control: RenderControl, method: str, lead: tuple = (),
              extra: tuple = ()) -> tuple:

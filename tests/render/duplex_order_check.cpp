@@ -69,7 +69,8 @@ int main() {
             }
             int64_t rank = 0;
             for (int64_t i = a; i < b; ++i)
-                if (i != j && (splat_less(splats[vals[i]], splats[s]) || (i < j && !splat_less(splats[s], splats[vals[i]]))))
+                if (i != j && (splat_less(splats[vals[i]], splats[s]) ||
+                               (i < j && !splat_less(splats[s], splats[vals[i]]))))
                     ++rank;
             old_vis[a + rank] = s;
         }
@@ -97,7 +98,8 @@ int main() {
             std::vector<uint32_t> v;
             for (int j = offsets[c]; j < offsets[c + 1]; ++j)
                 if (visible[members[j]]) v.push_back((uint32_t)members[j]);
-            std::stable_sort(v.begin(), v.end(), [&](uint32_t a, uint32_t b) { return splat_less(splats[a], splats[b]); });
+            std::stable_sort(v.begin(), v.end(),
+                             [&](uint32_t a, uint32_t b) { return splat_less(splats[a], splats[b]); });
             ref.insert(ref.end(), v.begin(), v.end());
             for (int j = offsets[c]; j < offsets[c + 1]; ++j)
                 if (!visible[members[j]]) ref.push_back(0);  // placeholders: compared below by position

@@ -59,6 +59,8 @@ def test_failed_device_makes_the_renderer_unusable(method):
         with pytest.raises(BackendFailed, match="timed out"):
             again()
     assert fake.calls == calls
+    r.release_texture(3)  # the viewer still deletes its textures: the native side forgets the registration
+    assert fake.calls == [*calls, "release 3"]
 
 
 def test_registry_drops_a_renderer_that_stopped_working(monkeypatch):
