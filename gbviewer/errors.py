@@ -46,6 +46,10 @@ class LoadCancelled(Cancelled):
     """A scene load stopped because its caller set the `cancel` event (no scene is returned)."""
 
 
+class VideoCancelled(Cancelled):
+    """`record_video` stopped because its caller set the `cancel` event (no output, no temporary file is left)."""
+
+
 class BackendUnavailable(RenderError):
     """The requested backend cannot run on this machine; the message says why."""
 

@@ -12,7 +12,7 @@ from typing import Sequence
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from .analysis import (MIN_SCALE, colour_bar, colour_difference, format_scale, reference_image, robust_scale,
+from .differences import (MIN_SCALE, colour_bar, colour_difference, format_scale, reference_image, robust_scale,
                        signed_difference)
 from .camera import Camera, format_rate
 from .errors import GBViewerError
@@ -208,7 +208,7 @@ def save_image(path: str | Path, img: Image.Image | np.ndarray, force: bool = Fa
 
 @dataclass
 class Differences:
-    """The difference rows of a comparison: one row of colour-mapped signed differences per rate (`analysis`), one
+    """The difference rows of a comparison: one row of colour-mapped signed differences per rate (`differences`), one
     scale for the whole figure, and each cell's PSNR against the row's reference."""
 
     kind: str  # a key of DIFFS

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from .extras import require
+
 POP_THRESHOLD = 4.0 / 255.0  # a visible jump of one frame (see `flicker`)
 
 
@@ -64,8 +66,7 @@ def reference_psnr(reference_x1: np.ndarray, rgb: np.ndarray, rate: float) -> fl
 def ssim(a: np.ndarray, b: np.ndarray) -> float:
     """SSIM (scikit-image, Gaussian-weighted as in Wang et al.) of RGB images clipped to [0, 1]; NaN for images
     smaller than its 11 x 11 window."""
-    from skimage.metrics import structural_similarity
-
+    structural_similarity = require("eval", "skimage.metrics", "SSIM").structural_similarity
     a, b = np.clip(a, 0, 1).astype(np.float64), np.clip(b, 0, 1).astype(np.float64)
     if min(a.shape[:2]) < 11:  # the 11x11 Gaussian window (sigma 1.5) must fit
         return float("nan")

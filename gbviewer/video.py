@@ -14,7 +14,8 @@ from PIL import Image
 
 from .camera import Camera, format_rate
 from .camera_paths import PathFrame
-from .errors import GBViewerError
+from .errors import GBViewerError, VideoCancelled
+from .extras import require
 from .figure import GAP, Cell, GridLayout, caption_font_size, compose_grid
 from .io.files import atomic_write, refuse_overwrite
 from .render import RenderSettings, get_renderer
@@ -23,10 +24,6 @@ from .validate import integer, real
 
 DEFAULT_CRF = 18  # libx264 constant rate factor: 0 lossless, ~18 visually lossless, 23 ffmpeg's default
 MIN_FPS, MAX_FPS = 0.1, 1000.0  # frame rates of a video (the encoder's time base is fps to 1/1001)
-
-
-class Cancelled(GBViewerError):
-    """`record_video` stopped because its cancel event was set; no output (and no temporary file) is left."""
 
 
 @dataclass(frozen=True)
@@ -75,17 +72,16 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
     composed and piped to ffmpeg (imageio-ffmpeg's bundled one: libx264, yuv420p, constant quality `crf`) one at a
     time, so memory does not grow with the length; the CPU backend uses every core for each frame.
 
-    Safe to call from a background thread with the cpu backend (the native renderer keeps no state between calls
-    and releases the GIL; a GL backend's context belongs to the thread that made it):
+    Safe to call from a background thread with a backend that needs no GL context (`Capabilities.gl_context`: a
+    GL backend's context belongs to the thread that made it; the cpu renderer releases the GIL):
       progress(done, total) is called after each frame is encoded (from the calling thread);
       cancel: anything with is_set() (a threading.Event), checked before each render; when set, ffmpeg is stopped,
-      the partial file removed and `Cancelled` raised.
+      the partial file removed and `VideoCancelled` (a `gbviewer.Cancelled`) raised.
     The video is written to a temporary file beside `out` and renamed onto it at the end: an exception, Ctrl-C
     or cancel leaves neither. Refuses to overwrite an existing `out` unless `force`.
     Returns a VideoInfo (path, frame count, frame size, fps, wall time).
     """
-    import imageio_ffmpeg
-
+    imageio_ffmpeg = require("video", "imageio_ffmpeg", "an MP4 video")
     out = Path(out)
     if out.suffix.lower() != ".mp4":
         raise GBViewerError(f"{out}: output must end in .mp4")
@@ -110,7 +106,7 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
                 cells = []
                 for s in settings_list:
                     if cancel is not None and cancel.is_set():
-                        raise Cancelled("video cancelled; nothing written")
+                        raise VideoCancelled("video cancelled; nothing written")
                     cells.append(Cell.of(s, pf.rate, renderer.render(pf.camera, s)))
                 img = np.asarray(compose_video_frame(cells, pf, inset))
                 if writer is None:

@@ -31,4 +31,6 @@ pip_install() {
 }
 pip_install --upgrade pip
 echo "setup: building and installing gbviewer and its native CPU module (about a minute)"
-pip_install ".[test,duplex,ray]"  # duplex: torch for Duplex-GS checkpoints; ray: gbviewer eval --ray (and their tests)
+# dev: the viewer, video and eval extras and the test tools; duplex: torch for Duplex-GS checkpoints; ray: gbviewer
+# eval --ray (and their tests)
+pip_install ".[dev,duplex,ray]"

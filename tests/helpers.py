@@ -122,3 +122,12 @@ def random_view(seed, n=160, sh_degree=3, filter3d=False, W=48, H=40, max_px_sig
 
 
 # (seed, sh_degree, filter_3d): SH 0 and 3, filter on and off
+
+
+def patch_commands(monkeypatch, name: str, value) -> None:
+    """Replace `name` (e.g. `load`) in every `gbviewer.cli` subcommand module that imports it."""
+    from gbviewer import cli
+
+    for module in cli.COMMANDS:
+        if hasattr(module, name):
+            monkeypatch.setattr(module, name, value)

@@ -13,7 +13,8 @@ import pytest
 import gbviewer as gb
 from gbviewer import bench, metrics
 from gbviewer.camera import parse_rates
-from gbviewer.cli import BENCH_DEFAULTS, BENCH_FULL, build_parser, main, resolve_bench_options
+from gbviewer.cli import build_parser, main
+from gbviewer.cli.bench import BENCH_DEFAULTS, BENCH_FULL, resolve_bench_options
 
 
 def test_bench_sizes_align_with_every_zoom_factor(bundled_scene):

@@ -18,6 +18,7 @@ import gbviewer as gb
 from gbviewer import cli
 from gbviewer.cli import main
 from gbviewer.io.files import check_writable
+from helpers import patch_commands
 
 GBVIEWER = [sys.executable, "-m", "gbviewer"]
 ENV = dict(os.environ, PYTHONPATH=str(Path(gb.__file__).resolve().parents[1]))  # the gbviewer under test
@@ -127,7 +128,7 @@ def test_bad_input_one_line_exit_2(tmp_path, args, message):
 def test_demo_writes_comparison_and_zoom_video(tmp_path):
     import imageio_ffmpeg
 
-    from gbviewer.cli import DEMO_VIDEO_FRAMES
+    from gbviewer.cli.view import DEMO_VIDEO_FRAMES
 
     proc = run("demo", "--width", "96", "--height", "64", "--out", "out", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
@@ -212,7 +213,7 @@ def test_unwritable_outputs_fail_before_the_work(argv, tmp_path, capsys, monkeyp
     file.write_text("x")
     plots.mkdir()
     (plots / (gb.DEFAULT_SCENE.stem + ".png")).write_text("old plot")
-    monkeypatch.setattr(cli, "load", lambda *a: pytest.fail("loaded a scene"))
+    patch_commands(monkeypatch, "load", lambda *a: pytest.fail("loaded a scene"))
     monkeypatch.setattr("gbviewer.bench.run.load", lambda *a: pytest.fail("benchmarked"))
     argv = [a.format(scene=gb.DEFAULT_SCENE, file=file, plots=plots) for a in argv]
     assert main(argv) == 2

@@ -10,10 +10,12 @@ import math
 import pytest
 from hypothesis import given, settings, strategies as st
 
+import gbviewer as gb
 from gbviewer import argtypes, cli
 from gbviewer.argtypes import Number, Numbers, Rate
 from gbviewer.camera import MAX_RATE, MIN_RATE
 from gbviewer.validate import F32_MAX
+from helpers import patch_commands
 
 NUMERIC = (Number, Numbers, Rate)
 NON_FINITE = ("nan", "inf", "-inf", "1e400", "-1e400")
@@ -78,7 +80,7 @@ def test_the_enumeration_covers_the_sizes_counts_and_rates():
 
 @pytest.mark.parametrize("cmd, opt, value", CASES, ids=[f"{c} {o}={v}" for c, o, v in CASES])
 def test_bad_number_one_line_exit_2(cmd, opt, value, capsys, monkeypatch):
-    monkeypatch.setattr(cli, "load", lambda *a: pytest.fail("loaded a scene despite a bad option"))
+    patch_commands(monkeypatch, "load", lambda *a: pytest.fail("loaded a scene despite a bad option"))
     assert cli.main([cmd, f"{opt}={value}"]) == 2
     out, err = capsys.readouterr()
     assert out == "" and len(err.splitlines()) == 1, err
@@ -152,8 +154,8 @@ def test_factories_return_checked_values_or_one_line_errors(data):
 
 
 def test_rendered_size_is_bounded_before_rendering(tmp_path, capsys, monkeypatch):
-    scene, out = str(cli.DEFAULT_SCENE), str(tmp_path / "x.png")
-    monkeypatch.setattr(cli, "get_renderer", lambda *a: pytest.fail("rendered an oversized image"))
+    scene, out = str(gb.DEFAULT_SCENE), str(tmp_path / "x.png")
+    monkeypatch.setattr(cli.render, "get_renderer", lambda *a: pytest.fail("rendered an oversized image"))
     assert cli.main(["render", scene, "--width", "640", "--scale", "64", "--out", out]) == 2
     assert capsys.readouterr().err == (f"gbviewer: error: --scale: image side rendered at x64: expected <= "
                                        f"{argtypes.MAX_SIDE}, got 40960\n")

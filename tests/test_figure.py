@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 import gbviewer as gb
-from gbviewer import analysis, figure
+from gbviewer import differences, figure
 from gbviewer.cli import main
 from gbviewer.figure import to_uint8, upscale_nearest
 from gbviewer.metrics import box_downsample, psnr
@@ -83,21 +83,21 @@ def test_compare_diff_rows_show_the_colour_mapped_differences_and_the_colour_bar
         for c, rgb in enumerate(rgbs):
             x, y = cmp.origin(r, c)  # the renders, as without --diff
             np.testing.assert_array_equal(img[y:y + H, x:x + W], upscale_nearest(to_uint8(rgb), H, W))
-            d = analysis.signed_difference(rgb, ref)
+            d = differences.signed_difference(rgb, ref)
             ds.append((r, c, d))
             assert cmp.diff.psnr[r][c] == psnr(rgb, ref)
-    scale = max(analysis.robust_scale(d) for r, c, d in ds if kind == "ref" or c > 0)
+    scale = max(differences.robust_scale(d) for r, c, d in ds if kind == "ref" or c > 0)
     assert cmp.diff.scale == scale
     for r, c, d in ds:
         x, y = cmp.origin(r, c, diff=True)
-        expected = upscale_nearest(to_uint8(analysis.colour_difference(d, scale)), H, W)
+        expected = upscale_nearest(to_uint8(differences.colour_difference(d, scale)), H, W)
         np.testing.assert_array_equal(img[y:y + H, x:x + W], expected)
         if kind == "first" and c == 0:
             assert cmp.diff.psnr[r][c] == math.inf
-            assert (expected == to_uint8(analysis.DIVERGING[5])).all()  # zero everywhere
+            assert (expected == to_uint8(differences.DIVERGING[5])).all()  # zero everywhere
     bx, by, bw, bh = cmp.bar
     assert by > grid_h
-    np.testing.assert_array_equal(img[by:by + bh, bx:bx + bw], to_uint8(analysis.colour_bar(bw, bh)))
+    np.testing.assert_array_equal(img[by:by + bh, bx:bx + bw], to_uint8(differences.colour_bar(bw, bh)))
     with pytest.raises(gb.GBViewerError, match="expected one of first, ref"):
         figure.compare_figure(bundled_scene, output_view, settings, rates, diff="second")
 

@@ -85,7 +85,7 @@ def test_interruption_leaves_no_file(bundled_scene, output_view, tmp_path, how):
             else:
                 raise KeyboardInterrupt
 
-    expected = {"cancel": video.Cancelled, "exception": Boom, "ctrl-c": KeyboardInterrupt}[how]
+    expected = {"cancel": gb.Cancelled, "exception": Boom, "ctrl-c": KeyboardInterrupt}[how]
     with pytest.raises(expected):
         video.record_video(bundled_scene, zoom_path(output_view, 5), [gb.RenderSettings()], tmp_path / "v.mp4",
                            progress=progress, cancel=cancel)

@@ -1,9 +1,9 @@
 """The desktop viewer (`gbviewer [SCENE]`). `window` (glfw + imgui-bundle + moderngl; imported only when a window is
 opened) composes `state` (scene, panes, settings and the actions on them), `keys` (the key map), `panes` (render
 requests and textures), `display` (frames drawn from GPU memory or copied through host memory), `input`, `menu`,
-`panel/` (one module per section), `overlays`, `analysis_overlay`, `dialogs` and `screenshots`. Without a window:
-`camera_control`, `rates`, `layout`, `views`, `settings`, `analysis` (the difference, error and photo views),
-`dataset` (the training dataset's views, the snapped one), and the threads in `worker` (renders), `analysis_worker`
+`panel/` (one module per section), `overlays`, `difference_overlay`, `dialogs` and `screenshots`. Without a window:
+`camera_control`, `rates`, `layout`, `views`, `settings`, `difference_views` (the difference, error and photo views),
+`dataset` (the training dataset's views, the snapped one), and the threads in `worker` (renders), `difference_thread`
 (differences, references, photos, PSNR/SSIM), `loading` (scenes), `dataset` (datasets) and `recording` (zoom
 videos)."""
 
@@ -30,11 +30,12 @@ def open_window(scene: str | Path | None = None, cameras: str | Path | None = No
     ok, why = has_display_env()
     if not ok:
         return False, why
-    try:
-        from .window import ViewerApp
-    except ImportError as exc:  # glfw, imgui-bundle or moderngl missing
-        return False, f"the window needs glfw, imgui-bundle and moderngl ({exc})"
     from ..errors import GBViewerError
+    from ..extras import require
+
+    for module in ("imgui_bundle", "glfw", "skimage"):  # imgui_bundle first: it points pyGLFW at its own libglfw
+        require("viewer", module, "the viewer")
+    from .window import ViewerApp
 
     try:
         app = ViewerApp(scene, cameras=cameras, projection=projection, backend=backend, data=data, images=images)

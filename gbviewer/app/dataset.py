@@ -11,7 +11,7 @@ import traceback
 from pathlib import Path
 from typing import Callable
 
-from ..analysis import camera_key
+from ..differences import camera_key
 from ..camera import Camera, format_rate
 from ..errors import GBViewerError
 from ..eval import camera_for_rate

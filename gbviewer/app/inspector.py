@@ -21,14 +21,15 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import GBViewerError
-from ..render import Frame, PixelTrace, RenderSettings
+from ..render import Frame, PixelTrace, RenderSettings, capable
+from ..render.choice import FALLBACK
 from ..scene import Scene
 from ..trace_report import write_traces, write_traces_csv
-from .analysis import is_final
+from .difference_views import is_final
 from .layout import Rect
 from .screenshots import shot_name
 from .settings import PANE_NAMES
-from .slot_thread import SlotThread
+from .slot_thread import SlotPolicy, SlotThread
 from .state import AppState
 
 Slot = tuple[int, str]  # (pane index, part)
@@ -84,7 +85,7 @@ class TraceRequest:
     settings: RenderSettings
     x: int
     y: int
-    backend: str = "cpu"  # the frame's (the trace is always the CPU kernel's)
+    backend: str = FALLBACK  # the frame's (the trace is the tracing backend's: `TraceThread.backend`)
 
 
 @dataclass
@@ -97,14 +98,15 @@ class TraceResult:
 
 class TraceThread(SlotThread):
     """One thread tracing the newest request per slot, the longest-waiting slot first (a running trace finishes: it
-    is not cancellable); `trace` computes one (by default the thread's own CPU renderer's `trace`)."""
+    is not cancellable); `trace` computes one (by default the thread's own renderer's `trace`, of the first backend
+    whose capabilities include tracing: `backend`)."""
 
     NAME = "gbviewer-trace"
-    CANCELS_RUNNING = False
 
     def __init__(self, trace: Callable[[TraceRequest], PixelTrace] | None = None) -> None:
-        self._trace = trace or self._trace_cpu
-        super().__init__()
+        self._trace = trace or self._trace_own
+        self.backend = capable("trace")[0]
+        super().__init__(SlotPolicy(cancel_running=False), backend=self.backend)
 
     def _work(self, req: TraceRequest, cancel: threading.Event) -> TraceResult:
         t0 = time.perf_counter()
@@ -118,7 +120,7 @@ class TraceThread(SlotThread):
         result.seconds = time.perf_counter() - t0
         return result
 
-    def _trace_cpu(self, req: TraceRequest) -> PixelTrace:
+    def _trace_own(self, req: TraceRequest) -> PixelTrace:
         return self._renderer_for(req.scene).trace(req.camera, req.settings, req.x, req.y)
 
 

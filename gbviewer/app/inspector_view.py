@@ -144,8 +144,9 @@ def _entry(app: ViewerApp, insp: Inspector, e: Entry) -> None:
     rejected = sorted(t.rejected_counts().items(), key=lambda kv: -kv[1])
     imgui.text_wrapped(f"{len(steps)} list entries, {added} added; rejected: "
                        + (", ".join(f"{why} {n}" for why, n in rejected) or "none"))
-    if e.result is not None and e.result.request.backend != "cpu":
-        imgui.text_disabled(f"traced on the CPU kernel (the pane renders on {e.result.request.backend})")
+    if e.result is not None and e.result.request.backend != insp.thread.backend:
+        imgui.text_disabled(f"traced on the {insp.thread.backend} kernel (the pane renders on "
+                            f"{e.result.request.backend})")
     if blend:
         imgui.set_next_item_width(-1)
         changed, value = imgui.slider_int("##step", pos + 1, 1, len(blend), f"step %d of {len(blend)} (blend order)")

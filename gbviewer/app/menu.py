@@ -26,7 +26,7 @@ def draw_menu(app: ViewerApp) -> None:
         if _item("Open scene or cameras.json...", "open_dialog"):
             app.open_dialog()
         if imgui.menu_item("Open dataset...", "", False)[0]:
-            open_dataset_dialog(app)
+            open_dataset_dialog(app.state, app.dialogs)
         if imgui.begin_menu("Open recent", bool(s.recent)):
             for r in s.recent:
                 if imgui.menu_item(r, "", False, Path(r).exists())[0]:

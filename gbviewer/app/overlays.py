@@ -10,10 +10,10 @@ from imgui_bundle import imgui
 
 from ..camera import format_rate
 from ..render import AUTO
-from .analysis import shows_photo
+from .difference_views import shows_photo
 from .layout import loupe_uv
 from .panes import pane_fps
-from .state import PaneState
+from .pane_state import PaneState
 
 if TYPE_CHECKING:
     from .window import ViewerApp
@@ -130,8 +130,8 @@ def draw_pane_overlays(app: ViewerApp) -> None:
                 text(app, dl, xx, y, f"{what} {shown.progress:.0%}", YELLOW, align_right=right)
             elif app.worker.busy((p.index, part)) and job is not None:
                 text(app, dl, xx, y, "rendering...", GREY, align_right=right)
-            if shown.error:
-                text(app, dl, r.x + 4, r.y + r.h / 2, shown.error[:120], RED)
+            if shown.error is not None:
+                text(app, dl, r.x + 4, r.y + r.h / 2, shown.error.text[:120], RED)
             if shown.legend and not shows_photo(shown):  # (the photo's legend is its label)
                 text(app, dl, xx, r.y + 56, shown.legend, ACCENT, align_right=right)
         if state.settings.show_info:
@@ -160,8 +160,8 @@ def draw_status(app: ViewerApp) -> None:
     backend = app.worker.backend_for(s.backend)
     simd = next((part.frame.stats.simd for p in state.visible for part in p.parts.values()
                  if part.frame is not None and part.frame.stats.simd), "")
-    if backend == "cpu" and simd:
-        backend = f"cpu {simd}"  # the blend's SIMD path (GBVIEWER_SIMD forces one)
+    if app.worker.capabilities(backend).simd and simd:
+        backend = f"{backend} {simd}"  # the blend's SIMD path (GBVIEWER_SIMD forces one)
     if s.backend == AUTO:
         backend += " (auto)"
     imgui.text(f"rate {format_rate(s.rate)}")

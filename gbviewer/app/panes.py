@@ -19,7 +19,8 @@ from .blit import Blitter
 from .display import GpuFrame
 from .layout import split_parts
 from .rates import preview_factor
-from .state import AppState, PaneState, Shown
+from .pane_state import PaneError, PaneState, Shown
+from .state import AppState
 from .views import visualize
 from .worker import RenderJob, RenderResult, RenderWorker
 
@@ -66,13 +67,15 @@ class PaneRenders:
                 settings = s.settings_for(p.index, part)
                 samples = cam.width * cam.height * settings.supersample ** 2
                 if samples > MAX_SAMPLES:
-                    p.parts[part].error = (f"{cam.width}x{cam.height} with {settings.supersample}x"
-                                           f"{settings.supersample} samples is {samples / 1e6:.0f}M samples, over "
-                                           f"the {MAX_SAMPLES // 1_000_000}M limit: lower the rate or supersampling")
+                    p.parts[part].error = PaneError("too_large", f"{cam.width}x{cam.height} with "
+                                                    f"{settings.supersample}x{settings.supersample} samples is "
+                                                    f"{samples / 1e6:.0f}M samples, over the "
+                                                    f"{MAX_SAMPLES // 1_000_000}M limit: lower the rate or "
+                                                    "supersampling")
                     p.submitted.pop(part, None)
                     continue
-                if "M limit: lower" in p.parts[part].error:
-                    p.parts[part].error = ""
+                if p.parts[part].error is not None and p.parts[part].error.kind == "too_large":
+                    p.parts[part].error = None
                 display = "gpu" if ps.view == "color" and self.worker.display_path(backend)[0] == "gpu" else "copy"
                 key = (id(s.scene), view_key, (cam.width, cam.height), settings, backend, display)
                 if moving and (os.cpu_count() or 1) > 1:  # leave a core to the UI thread while the camera moves
@@ -81,7 +84,7 @@ class PaneRenders:
                     continue
                 p.submitted[part] = key
                 shown = p.parts[part]
-                progressive = f == 1.0 and backend == "cpu" and ps.view == "color"
+                progressive = f == 1.0 and self.worker.capabilities(backend).progressive and ps.view == "color"
                 est_ms = cost * w * h if cost else None
                 self.worker.submit(RenderJob(
                     (p.index, part), s.scene, cam, settings, backend,
@@ -153,12 +156,17 @@ class PaneRenders:
         if res.stage != "final":
             self._take_refining(res, shown)
             return
+        if res.failed:  # the next request of this part goes to the backend auto picks now
+            p.submitted.pop(part, None)
+            s.message(f"{res.job.backend} {res.error}; rendering on {self.worker.backend_for(res.job.backend)}",
+                      "error")
+            return
         shown.job = res.job
         if res.frame is None:
-            shown.error = res.error
+            shown.error = PaneError("render", res.error)
             s.message(f"pane {p.name}: {res.error}", "error")
             return
-        shown.error = ""
+        shown.error = None
         total_ms = res.frame.stats.total_ms
         cam = res.job.camera
         if res.job.info.get("preview", 1.0) == 1.0 and total_ms:

@@ -11,7 +11,7 @@ from ..camera import Camera
 from ..errors import GBViewerError
 from ..render import RenderSettings
 from ..scene import Scene
-from .worker import lower_priority
+from .slot_thread import lower_priority
 
 
 class VideoJob:

@@ -1,53 +1,113 @@
-"""A background thread that works on the newest request per slot, with a CPU renderer of its own: the analysis
-(differences, references, PSNR) and the inspector's traces run on one each, beside the render thread."""
+"""The viewer's background threads: each works on the newest request per slot (a newer request of a slot replaces
+the one still waiting), in the order and with the cancelling its `SlotPolicy` gives. The render thread
+(`worker.RenderWorker`), the analysis (`analysis_worker`) and the inspector's traces (`inspector.TraceThread`) are
+one each."""
 
 from __future__ import annotations
 
+import os
+import sys
 import threading
-from typing import Any, Hashable
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Hashable
 
 from ..render import create_renderer
+from ..render.choice import FALLBACK
 from ..scene import Scene
 
 
+RENDER_NICE = 10  # added to a render thread's (and its OpenMP threads') niceness: the UI gets a core when it asks
+
+
+def lower_priority(amount: int = RENDER_NICE) -> None:
+    """Raise the calling thread's niceness by `amount` (Linux, where a thread is a task; elsewhere it would renice
+    the whole process, so nothing): the threads it starts later, OpenMP's and Mesa's included, inherit it. For the
+    threads that render or load beside the window."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        tid = threading.get_native_id()
+        os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + amount))
+    except OSError:
+        pass
+
+
+@dataclass(frozen=True)
+class SlotPolicy:
+    """Which waiting slot goes next: the one whose request has waited longest. `cancel_running`: a newer request of
+    the running slot sets the running one's cancel event (else the running one finishes)."""
+
+    cancel_running: bool = True
+
+    def rank(self, request: Any, seq: int, served: float) -> tuple:
+        """The waiting request with the smallest rank goes next; `seq`: its submission number, `served`: when its
+        slot last finished (perf_counter, 0 never)."""
+        return (seq,)
+
+    def cancels(self, running: Any, newer: Any) -> bool:
+        """Whether `newer`, of the running request's slot, stops `running`."""
+        return self.cancel_running
+
+
 class SlotThread:
-    """One thread on the newest request per slot (`request.slot`), the longest-waiting slot first. A subclass
-    defines `_work(request, cancel)`: the result to hand out, or None (cancelled: a newer request of its slot came,
-    when `CANCELS_RUNNING`); `_renderer_for(scene)` gives it the thread's CPU renderer with `scene` uploaded."""
+    """One thread on the newest request per slot (`request.slot`), ordered by `policy`. A subclass defines
+    `_work(request, cancel) -> result or None` (None: nothing to hand out, e.g. cancelled); `_renderer_for(scene)`
+    gives it a renderer of `backend` of its own with `scene` uploaded. `nice`: added to the thread's niceness.
+    `on_result`: called from the thread after a result is handed out."""
 
     NAME = "gbviewer-slots"
-    CANCELS_RUNNING = True  # a newer request of the running slot sets the running one's cancel event
 
-    def __init__(self) -> None:
+    def __init__(self, policy: SlotPolicy = SlotPolicy(), backend: str = FALLBACK, nice: int = 0,
+                 on_result: Callable[[], None] | None = None) -> None:
+        self.policy, self._backend, self._nice, self._on_result = policy, backend, nice, on_result
         self._lock = threading.Condition()
-        self._pending: dict[Hashable, Any] = {}
-        self._running: Hashable | None = None
-        self._cancel = threading.Event()
+        self._pending: dict[Hashable, tuple[int, Any]] = {}  # slot -> (seq, request)
+        self._running: Any = None  # the request being worked on
+        self._cancel = threading.Event()  # the running request's
         self._results: list = []
-        self._stop = self._forget = False
+        self._served: dict[Hashable, float] = {}
+        self._seq = 0
+        self._stop = False
+        self._wakes: set[str] = set()  # why the thread was woken without a request ("forget", a subclass's own)
         self._renderer = None
         self._scene: Scene | None = None  # the scene uploaded to the renderer
         self.done = 0  # results handed out
+        self.dropped = 0  # requests replaced before they started
         self._thread = threading.Thread(target=self._loop, name=self.NAME, daemon=True)
         self._thread.start()
 
+    # ---- caller's side -----------------------------------------------------------------------------------------
+
     def submit(self, request) -> None:
-        """Queue `request`, replacing its slot's waiting one."""
+        """Queue `request`, replacing its slot's waiting one; cancel its slot's running one where the policy says."""
         with self._lock:
-            self._pending.pop(request.slot, None)
-            self._pending[request.slot] = request
-            if self.CANCELS_RUNNING and self._running == request.slot:
+            self._seq += 1
+            self.dropped += request.slot in self._pending
+            self._pending[request.slot] = (self._seq, request)
+            running = self._running
+            if running is not None and running.slot == request.slot and self.policy.cancels(running, request):
                 self._cancel.set()
             self._lock.notify()
+
+    def cancel(self, slot: Hashable) -> None:
+        """Forget `slot`'s waiting request and stop its running one."""
+        with self._lock:
+            self._pending.pop(slot, None)
+            if self._running is not None and self._running.slot == slot:
+                self._cancel.set()
 
     def results(self) -> list:
         with self._lock:
             out, self._results = self._results, []
         return out
 
-    def busy(self) -> bool:
+    def busy(self, slot: Hashable | None = None) -> bool:
+        """Whether `slot` (or any slot) has a request waiting or being worked on."""
         with self._lock:
-            return bool(self._pending) or self._running is not None
+            if slot is None:
+                return bool(self._pending) or self._running is not None
+            return slot in self._pending or (self._running is not None and self._running.slot == slot)
 
     def clear(self) -> None:
         """Drop what is waiting."""
@@ -59,8 +119,7 @@ class SlotThread:
         with self._lock:
             self._pending.clear()
             self._cancel.set()
-            self._forget = True
-            self._lock.notify()
+        self._wake("forget")
 
     def stop(self, timeout: float = 30.0) -> None:
         with self._lock:
@@ -70,8 +129,24 @@ class SlotThread:
             self._lock.notify()
         self._thread.join(timeout)
 
+    def _wake(self, why: str) -> None:
+        """Run one round of the loop without a request (`_between` gets `why`)."""
+        with self._lock:
+            self._wakes.add(why)
+            self._lock.notify()
+
+    # ---- the thread --------------------------------------------------------------------------------------------
+
     def _work(self, request, cancel: threading.Event):
         raise NotImplementedError
+
+    def _start(self) -> None:
+        """First thing in the thread."""
+
+    def _between(self, wakes: set[str], request) -> None:
+        """Each round, before `request` (None: woken for `wakes` alone) is worked on."""
+        if "forget" in wakes:
+            self._release()
 
     def _release(self) -> None:
         """Free the renderer and the scene (and, in a subclass, what it keeps for that scene)."""
@@ -80,30 +155,48 @@ class SlotThread:
     def _renderer_for(self, scene: Scene):
         if self._scene is not scene:
             self._release()
-            self._renderer = create_renderer("cpu")
+            self._renderer = create_renderer(self._backend)
             self._renderer.upload(scene)
             self._scene = scene
         return self._renderer
 
+    def _next(self):
+        """The waiting request the policy ranks first (taken off the queue), with a fresh cancel event."""
+        def rank(slot: Hashable) -> tuple:
+            seq, request = self._pending[slot]
+            return self.policy.rank(request, seq, self._served.get(slot, 0.0))
+
+        request = self._pending.pop(min(self._pending, key=rank))[1]
+        self._running, self._cancel = request, threading.Event()
+        return request
+
     def _loop(self) -> None:
+        if self._nice:
+            lower_priority(self._nice)
+        self._start()
         while True:
             with self._lock:
-                while not self._pending and not self._stop and not self._forget:
+                while not self._pending and not self._stop and not self._wakes:
                     self._lock.wait()
                 if self._stop:
                     break
-                if self._forget:
-                    self._forget = False
-                    self._release()
-                    continue
-                slot = next(iter(self._pending))
-                request = self._pending.pop(slot)
-                self._running, self._cancel = slot, threading.Event()
+                wakes, self._wakes = self._wakes, set()
+                request = self._next() if self._pending else None
                 cancel = self._cancel
+            self._between(wakes, request)
+            if request is None:
+                continue
             result = self._work(request, cancel)
             with self._lock:
                 self._running = None
+                self._served[request.slot] = time.perf_counter()
                 if result is not None:
                     self._results.append(result)
                     self.done += 1
+            if result is not None and self._on_result is not None:
+                self._on_result()
+        self._finish()
+
+    def _finish(self) -> None:
+        """Last thing in the thread."""
         self._release()

@@ -4,28 +4,25 @@ all of it is unit-tested without a window (tests/app/test_state.py); `window.Vie
 from __future__ import annotations
 
 import time
-from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Literal
 
-import numpy as np
-
-from ..camera import UP_AXES, Camera, load_cameras_json
+from ..camera import Camera, load_cameras_json
 from ..errors import GBViewerError
-from ..render import Frame, Mode, RenderSettings
+from ..render import Mode, RenderSettings
 from ..scene import Scene
+from .camera_actions import CameraActions
 from .camera_control import CameraController
 from .dataset import DatasetViews
 from .layout import PANEL_W, Rect, fit_aspect, pane_rects
 from .loading import SceneLoader
+from .pane_state import PaneState
 from .rates import clamp_rate, render_size, step_rate
 from .recording import VideoJob
 from .screenshots import shot_name
-from .settings import MAX_PANES, MODE_NAMES, PANE_NAMES, AppSettings, PaneSettings, add_recent
-from .worker import RenderJob
+from .settings import MAX_PANES, MODE_NAMES, AppSettings, PaneSettings, add_recent
 
-MOVING_HOLD_S = 0.25  # the camera counts as moving this long after the last change
 VIDEO_PANE_W = 480
 Level = Literal["info", "warn", "error"]  # of a status-bar message
 
@@ -35,68 +32,8 @@ def is_cameras_file(path: str | Path) -> bool:
     return Path(path).suffix.lower() == ".json"
 
 
-class RateMeter:
-    """Events per second over the last `span` seconds."""
-
-    def __init__(self, span: float = 2.0) -> None:
-        self.span = span
-        self.times: deque[float] = deque()
-
-    def tick(self, t: float | None = None) -> None:
-        t = time.perf_counter() if t is None else t
-        self.times.append(t)
-        while self.times and self.times[0] < t - self.span:
-            self.times.popleft()
-
-    def rate(self, now: float | None = None) -> float:
-        now = time.perf_counter() if now is None else now
-        ts = [t for t in self.times if t >= now - self.span]
-        if len(ts) < 2:
-            return 0.0
-        return (len(ts) - 1) / max(1e-9, ts[-1] - ts[0])
-
-
-@dataclass
-class Shown:
-    """What one pane part (its whole image, or one side of a split) shows: the last finished frame."""
-
-    texture: object = None
-    frame: Frame | None = None
-    job: RenderJob | None = None
-    view: str = ""
-    legend: str = ""
-    image: np.ndarray | None = None  # uint8 (H, W, 3) as uploaded
-    error: str = ""
-    progress: float | None = None  # fraction of a refining frame's tiles on screen; None once final
-    stage: str = ""  # what is on screen: "preview", "quick" (x1 sample), "refining", "final"
-    pacing: dict[str, float] = field(default_factory=dict)  # ms from a request to its "preview"/"tiles"/"final"
-
-
-@dataclass
-class PaneState:
-    """One pane: where it is, its render size, what it shows and the requests it has in flight."""
-
-    index: int
-    parts: dict[str, Shown] = field(default_factory=lambda: {"a": Shown(), "b": Shown()})
-    submitted: dict = field(default_factory=dict)  # part -> key of the last request
-    fps: dict[str, RateMeter] = field(default_factory=lambda: {"a": RateMeter(), "b": RateMeter()})
-    ms_per_px: dict = field(default_factory=dict)  # (part, mode, supersample, backend) -> cost of a full render
-    rect: Rect = Rect(0, 0, 1, 1)
-    render_size: tuple[int, int] = (1, 1)  # at the current rate, without a preview drop
-
-    @property
-    def name(self) -> str:
-        return PANE_NAMES[self.index]
-
-    def forget(self) -> None:
-        """Drop what belongs to the previous scene: its frames, requests and measured costs."""
-        self.parts = {"a": Shown(), "b": Shown()}
-        self.submitted.clear()
-        self.ms_per_px.clear()
-
-
-class AppState:
-    """Scene, cameras, panes and their settings, and the actions on them."""
+class AppState(CameraActions):
+    """Scene, cameras, panes and their settings, and the actions on them (the camera's in `CameraActions`)."""
 
     def __init__(self, settings: AppSettings, cameras: str | Path | None = None) -> None:
         self.settings = settings
@@ -189,96 +126,6 @@ class AppState:
             self.reset_camera()
             self.open_cameras(path)
         return res.path
-
-    # ---- camera -------------------------------------------------------------------------------------------------
-
-    def reset_camera(self) -> None:
-        if self.scene is None:
-            return
-        lo, hi = self.scene.robust_bounds()
-        r = self.panes[0].rect
-        self.controller.up = self.settings.up
-        self.controller.fov_y_deg = self.settings.fov_y_deg
-        self.controller.frame_bounds(lo, hi, aspect=r.w / max(1, r.h) if r.w > 1 else 4 / 3)
-        self.cam_index = -1
-        self.moved()
-
-    def step_camera(self, direction: int) -> None:
-        """Snap to the next (direction 1) or previous (-1) view: of the dataset's listed views when a dataset is
-        open, else of the training cameras."""
-        if self.dataset.dataset is not None:
-            index = self.dataset.next_index(direction)
-            if index is None:
-                named = f" named with '{self.dataset.name_filter}'" if self.dataset.name_filter.strip() else ""
-                self.message(f"no {self.dataset.split} views{named} in the dataset", "warn")
-            else:
-                self.snap_view(index)
-            return
-        if not self.cameras:
-            self.message("no training cameras: open a cameras.json (or put one next to the scene)", "warn")
-            return
-        self.cam_index = (self.cam_index + direction) % len(self.cameras)
-        self._snap(self.cameras[self.cam_index])
-
-    def snap_view(self, index: int) -> None:
-        """Snap to the dataset's view `index` (perspective, as photos are): while the camera stays, every pane
-        renders the photo's camera at the rate, letterboxed to the photo's aspect (`photo_camera`)."""
-        self.settings.projection = self.controller.projection = "perspective"
-        self.cam_index = -1
-        self._snap(self.dataset.dataset.views[index].camera)
-        view = self.dataset.snapped_to(index, self.controller.state())
-        self._size_panes()
-        self.message(f"{view.split} view {view.name} ({view.camera.width}x{view.camera.height} photo)")
-
-    def photo_camera(self) -> Camera | None:
-        """While snapped to a dataset view: the camera every pane renders (the photo's at the rate); else None."""
-        return self.dataset.camera(self.controller.state(), self.settings.rate)
-
-    def _snap(self, cam: Camera) -> None:
-        """Take `cam`'s pose and field of view, orbiting about the scene's centre."""
-        if self.scene is not None:
-            lo, hi = self.scene.robust_bounds()
-            self.controller.centre = (np.asarray(lo, np.float64) + hi) / 2
-            self.controller.radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
-        self.controller.snap_to(cam)
-        self.settings.fov_y_deg = self.controller.fov_y_deg
-        self.moved()
-
-    def set_up(self, up: str) -> None:
-        self.settings.up = up
-        self.controller.set_up(up)
-        self.moved()
-
-    def next_up(self) -> None:
-        axes = list(UP_AXES)
-        self.set_up(axes[(axes.index(self.settings.up) + 1) % len(axes)])
-
-    def set_fov(self, fov_y_deg: float) -> None:
-        self.controller.set_fov(fov_y_deg)
-        self.settings.fov_y_deg = self.controller.fov_y_deg
-        self.moved()
-
-    def toggle_projection(self) -> None:
-        """Perspective <-> orthographic; the plane through the target keeps its size on screen."""
-        self.settings.projection = "orthographic" if self.settings.projection == "perspective" else "perspective"
-        self.controller.projection = self.settings.projection
-        self.moved()
-
-    def toggle_fly(self) -> None:
-        self.fly = not self.fly
-
-    def fly_move(self, forward: float, right: float, upward: float, dt: float, fast: bool = False) -> None:
-        """Fly mode's WASD/QE for `dt` seconds (4x faster with `fast`)."""
-        if self.fly and (forward or right or upward):
-            self.controller.fly(forward, right, upward, dt, self.settings.fly_speed * (4 if fast else 1))
-            self.moved()
-
-    def moved(self) -> None:
-        self.last_move = time.perf_counter()
-
-    @property
-    def moving(self) -> bool:
-        return time.perf_counter() - self.last_move < MOVING_HOLD_S
 
     # ---- rate, panes, overlays ----------------------------------------------------------------------------------
 

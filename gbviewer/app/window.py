@@ -25,19 +25,21 @@ from .. import DEFAULT_SCENE  # noqa: E402
 from ..errors import GBViewerError  # noqa: E402
 from ..render.glsl.context import release_current  # noqa: E402
 from . import overlays, screenshots  # noqa: E402
-from .analysis import PaneAnalysis  # noqa: E402
-from .analysis_overlay import draw_analysis_overlays  # noqa: E402
+from .difference_views import PaneAnalysis  # noqa: E402
+from .difference_overlay import draw_analysis_overlays  # noqa: E402
 from .blit import Blitter  # noqa: E402
 from .dialogs import FileDialogs, draw_help  # noqa: E402
 from .display import SharedContext, requested_path  # noqa: E402
 from .input import handle_input  # noqa: E402
+from .keys import action_table  # noqa: E402
 from .inspector import Inspector  # noqa: E402
 from .inspector_view import draw_inspector  # noqa: E402
 from .menu import draw_menu  # noqa: E402
 from .panel import draw_panel  # noqa: E402
 from .panes import PaneRenders  # noqa: E402
 from .settings import load_settings, save_settings  # noqa: E402
-from .state import AppState, RateMeter  # noqa: E402
+from .pane_state import RateMeter  # noqa: E402
+from .state import AppState  # noqa: E402
 from .worker import RenderWorker  # noqa: E402
 
 WAITING_FPS = 30  # UI frames a second while renders refine or a load runs (tiles are posted every 0.1 s)
@@ -75,6 +77,8 @@ class ViewerApp:
         self.analysis = PaneAnalysis(self.state, self.worker)  # difference and error views, PSNR/SSIM
         self.panes = PaneRenders(self.state, self.worker, self.ctx, self.analysis.visualize)
         self.inspector = Inspector(self.state)  # the pinned pixel's traces
+        self.actions = action_table({"window": self, "state": self.state, "analysis": self.analysis,
+                                     "inspector": self.inspector})
         self.state.open(scene_path or DEFAULT_SCENE)
         if data is not None:
             self.state.dataset.open(data, images)  # its views and photos (app/dataset.py)
@@ -280,10 +284,8 @@ class ViewerApp:
     # ---- actions that need the window (the others are AppState's) -----------------------------------------------
 
     def action(self, name: str) -> Callable:
-        """The method a key-map action names: the window's, else the analysis views', the inspector's or the
-        state's."""
-        return (getattr(self, name, None) or getattr(self.analysis, name, None) or getattr(self.inspector, name, None)
-                or getattr(self.state, name))
+        """The method a key-map action names (`keys.action_table`, built once)."""
+        return self.actions[name]
 
     def open_dialog(self) -> None:
         """The system's file dialog (or the built-in browser) to open a scene or a cameras.json."""

@@ -1,35 +1,36 @@
-"""The viewer's render thread, off the UI thread: fed per-slot requests (the newest request of a slot replaces an
-older one still waiting: stale requests are dropped, and a running render of that slot is cancelled between tiles,
-so the thread never finishes a frame nobody will see). A progressive request posts its frame while it refines: its
-quick stage (the x1 sample of a supersampled or zoomed-in pane) first, then the full frame's tiles a few times a
-second. The thread runs at a lower CPU priority than the UI (Linux), so the window keeps its core. OpenGL: the
-'glsl' backend renders on a context current in the render thread only: its own headless one (the copy path), or on
-the GPU display path the context it shares with the window (`display`), where GPU backends render into display
-textures the window draws."""
+"""The viewer's render thread, off the UI thread: a `SlotThread` fed per-slot requests (the newest request of a slot
+replaces an older one still waiting: stale requests are dropped, and a running render of that slot is cancelled
+between tiles, so the thread never finishes a frame nobody will see). A progressive request posts its frame while it
+refines: its quick stage (the x1 sample of a supersampled or zoomed-in pane) first, then the full frame's tiles a
+few times a second. The thread runs at a lower CPU priority than the UI (Linux), so the window keeps its core.
+
+It holds one renderer per backend for the current scene and asks each backend's `Capabilities`, never its name.
+OpenGL: a backend that renders in a GL context does so on one current in the render thread only: its own headless
+one (the copy path), or on the GPU display path the context it shares with the window (`display`), where backends
+that render into GL textures write the display textures the window draws. A backend that stops working
+(BackendFailed) is marked unusable with its reason and requests for it render on what `auto` picks next."""
 
 from __future__ import annotations
 
 import gc
-import os
-import sys
 import threading
 import time
 import traceback
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Callable, Hashable
+from typing import Callable, Hashable
 
 import numpy as np
 
 from ..camera import Camera
-from ..errors import BackendUnavailable, GBViewerError, RenderCancelled
-from ..render import (AUTO, BACKENDS, BackendChoice, Frame, RenderSettings, create_gl_context, create_renderer,
-                      get_renderer)
-from ..render.choice import GlProbe, decide
+from ..errors import BackendFailed, BackendUnavailable, GBViewerError, RenderCancelled, RenderError
+from ..render import AUTO, BACKENDS, BackendChoice, Capabilities, Frame, Renderer, RenderSettings, create_gl_context
+from ..render.choice import FALLBACK, decide_measured
 from ..scene import Scene
 from .display import DisplayTextures, SharedContext
+from .slot_thread import RENDER_NICE, SlotPolicy, SlotThread
 
 
-RENDER_NICE = 10  # added to the render thread's (and its OpenMP threads') niceness: the UI gets a core when it asks
 PARTIAL_INTERVAL_S = 0.1  # how often a refining frame is posted (the first finished tiles at once)
 
 
@@ -39,9 +40,8 @@ class RenderJob:
     scene: Scene
     camera: Camera
     settings: RenderSettings
-    backend: str = "cpu"
+    backend: str = FALLBACK
     info: dict = field(default_factory=dict)  # what the UI needs to show with the result (rate, preview...)
-    seq: int = 0  # set by the worker: submission order
     priority: int = 0  # among waiting requests, higher first (the pane under the cursor)
     preview: bool = False  # a stand-in while the camera moves: a newer preview of the slot waits for it to finish
     # (cancelling each would show none); any other newer request of the slot cancels the running render
@@ -62,19 +62,7 @@ class RenderResult:
     stage: str = "final"  # "quick" (frame is the quick stage), "partial" (partial holds the tiles so far), "final"
     partial: np.ndarray | None = None  # float32 (H, W, 3), still being written by the render
     progress: float = 1.0  # fraction of the frame's tiles done
-
-
-def lower_priority(amount: int = RENDER_NICE) -> None:
-    """Raise the calling thread's niceness by `amount` (Linux, where a thread is a task; elsewhere it would renice
-    the whole process, so nothing): the threads it starts later, OpenMP's and Mesa's included, inherit it. For the
-    threads that render or load beside the window."""
-    if not sys.platform.startswith("linux"):
-        return
-    try:
-        tid = threading.get_native_id()
-        os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + amount))
-    except OSError:
-        pass
+    failed: bool = False  # the job's backend stopped working (error says why): its slot renders on another next
 
 
 def scaled_nearest(image: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -85,83 +73,72 @@ def scaled_nearest(image: np.ndarray, width: int, height: int) -> np.ndarray:
     return np.ascontiguousarray(image[ys[:, None], xs[None, :], :3], np.float32)
 
 
-class RenderWorker:
-    """One thread rendering the latest request per slot, least recently served slot first."""
+def free(renderer: Renderer) -> None:
+    """`renderer.release()`; a renderer that cannot free its buffers (a lost device) must not stop the thread."""
+    try:
+        renderer.release()
+    except Exception:  # noqa: BLE001 - reported, the thread goes on
+        traceback.print_exc()
 
-    def __init__(self, shared: SharedContext | None = None, on_result: Callable[[], None] | None = None) -> None:
+
+@dataclass(frozen=True)
+class RenderPolicy(SlotPolicy):
+    """Higher priority first (the pane under the cursor), then the least recently served slot, then submission
+    order. A newer preview of a slot waits for its running preview (cancelling each while the camera moves would
+    show none); any other newer request of the slot cancels the running render."""
+
+    def rank(self, job: RenderJob, seq: int, served: float) -> tuple:
+        return (-job.priority, served, seq)
+
+    def cancels(self, running: RenderJob, newer: RenderJob) -> bool:
+        return not (running.preview and newer.preview)
+
+
+class RenderWorker(SlotThread):
+    """One thread rendering the latest request per slot (`RenderPolicy`). `backends`: name -> renderer class (the
+    registry's; tests pass their own)."""
+
+    NAME = "gbviewer-render"
+
+    def __init__(self, shared: SharedContext | None = None, on_result: Callable[[], None] | None = None,
+                 backends: Mapping[str, type[Renderer]] = BACKENDS) -> None:
         """`on_result`: called from the render thread after each result is posted (the window wakes its event
         loop with it, so a frame or its first tiles are drawn at once)."""
         self._shared = shared
-        self._on_result = on_result
-        self._lock = threading.Lock()
-        self._wake = threading.Condition(self._lock)
-        self._pending: dict[Hashable, RenderJob] = {}
-        self._running: RenderJob | None = None
-        self._cancel_running = threading.Event()  # set when the running job's slot gets a newer request
-        self._results: list[RenderResult] = []
-        self._served: dict[Hashable, float] = {}
-        self._seq = 0
-        self._stop = False
-        self._scene: Scene | None = None  # the scene whose renderers the thread holds (freed in this thread)
-        self._gl_ctx = None  # this thread's headless context for the glsl backend
-        self._glsl: tuple[Scene, Any] | None = None
+        self._classes = backends
+        self._renderers: dict[str, Renderer] = {}  # this thread's, with `_scene` uploaded
+        self._gl_ctx = None  # the context this thread's GL-context backends render in
         self._display_ctx = None  # the context shared with the window (GPU display path), current in this thread
         self._last_display = "copy"  # the display of the latest job: free display textures are kept while "gpu"
-        self._returns = False  # the UI handed display textures back
         self.textures = DisplayTextures()
         self.display: dict[str, tuple[str, str]] = {}  # backend -> ("gpu" | "copy", why), set with `backends`
-        self.dropped = 0  # requests replaced before they started
         self.cancelled = 0  # renders stopped because a newer request of their slot arrived
         self.rendered = 0
         self.backends: dict[str, tuple[bool, str]] = {}  # availability, measured in the render thread
+        self.failed: dict[str, str] = {}  # backends that stopped working here, and why
         self.auto: BackendChoice | None = None  # what "auto" renders on, decided from those measures
         self.backends_ready = threading.Event()
-        self._thread = threading.Thread(target=self._loop, name="gbviewer-render", daemon=True)
-        self._thread.start()
+        super().__init__(RenderPolicy(), nice=RENDER_NICE, on_result=on_result)
 
     # ---- UI side -----------------------------------------------------------------------------------------------
 
     def submit(self, job: RenderJob) -> None:
-        with self._lock:
-            self._seq += 1
-            job.seq = self._seq
-            job.submitted = time.perf_counter()
-            if job.slot in self._pending:
-                self.dropped += 1
-            running = self._running
-            if running is not None and running.slot == job.slot and not (running.preview and job.preview):
-                self._cancel_running.set()
-            self._pending[job.slot] = job
-            self._wake.notify()
-
-    def cancel(self, slot: Hashable) -> None:
-        """Forget `slot`'s waiting request and stop its running render."""
-        with self._lock:
-            self._pending.pop(slot, None)
-            if self._running is not None and self._running.slot == slot:
-                self._cancel_running.set()
-
-    def results(self) -> list[RenderResult]:
-        with self._lock:
-            out, self._results = self._results, []
-        return out
-
-    def busy(self, slot: Hashable | None = None) -> bool:
-        """Whether `slot` (or any slot) has a request waiting or rendering."""
-        with self._lock:
-            if slot is None:
-                return bool(self._pending) or self._running is not None
-            return slot in self._pending or (self._running is not None and self._running.slot == slot)
+        job.submitted = time.perf_counter()
+        super().submit(job)
 
     def backend_status(self, name: str) -> tuple[bool | None, str]:
         """(usable, reason); None while the render thread is still probing. "auto": (True, its choice)."""
         if name == AUTO:
             return (None, "checking...") if self.auto is None else (True, str(self.auto))
-        if name not in BACKENDS:
+        if name not in self._classes:
             return False, "not part of this installation"
         if not self.backends_ready.is_set():
             return None, "checking..."
         return self.backends.get(name, (False, "unknown"))
+
+    def capabilities(self, name: str) -> Capabilities:
+        """What backend `name` can do (`Capabilities`)."""
+        return self._classes[name].capabilities
 
     def display_path(self, name: str) -> tuple[str, str]:
         """("gpu" | "copy", why) for frames of backend `name`; copy while the render thread is still probing."""
@@ -172,94 +149,107 @@ class RenderWorker:
     def return_textures(self) -> None:
         """UI thread, once per frame: hand the display textures of dropped frames back to the render thread."""
         if self.textures.fence_retired():
-            with self._lock:
-                self._returns = True
-                self._wake.notify()
+            self._wake("returns")
 
     def backend_for(self, name: str) -> str:
-        """The backend a request for `name` renders on: `name` (for auto, its choice) where usable, else cpu."""
-        if name == AUTO:
-            name = self.auto.name if self.auto is not None else "cpu"
-        return name if self.backend_status(name)[0] is True else "cpu"
-
-    def stop(self, timeout: float = 30.0) -> None:
-        with self._lock:
-            self._stop = True
-            self._pending.clear()
-            self._cancel_running.set()
-            self._wake.notify()
-        self._thread.join(timeout)
+        """The backend a request for `name` renders on: `name` (for auto, its choice) where usable, else what auto
+        picks (which passes over the backends that stopped working), else the fallback."""
+        pick = self.auto.name if self.auto is not None else FALLBACK
+        for candidate in (pick if name == AUTO else name, pick):
+            if self.backend_status(candidate)[0] is True:
+                return candidate
+        return FALLBACK
 
     # ---- render thread -----------------------------------------------------------------------------------------
 
-    def _check_backends(self) -> None:
+    def _start(self) -> None:
         if self._shared is not None and self._shared.window is not None:
             try:
                 self._display_ctx = self._shared.make_current()
             except Exception as exc:  # noqa: BLE001 - glcontext raises plain Exceptions with the driver's message
                 self._shared.why = f"the context shared with the window cannot be used here: {exc}"
-        for name, cls in BACKENDS.items():
+        gl_why = self._open_gl_context() if any(c.capabilities.gl_context for c in self._classes.values()) else ""
+        for name, cls in self._classes.items():
             try:
-                if name == "glsl":
-                    self.backends[name] = self._glsl_context_status()
-                else:
+                if not cls.capabilities.gl_context:
                     self.backends[name] = tuple(cls.available())  # type: ignore[assignment]
+                else:
+                    self.backends[name] = cls.check_context(self._gl_ctx) if self._gl_ctx else (False, gl_why)
             except Exception as exc:  # noqa: BLE001 - a backend's probe must not take the viewer down
                 self.backends[name] = (False, f"{type(exc).__name__}: {exc}")
-        cuda = self.backends.get("cuda", (False, "not part of this installation"))
-        self.auto = decide(cuda, GlProbe.of(self._gl_ctx, self.backends.get("glsl", (False, ""))[1]))
-        self.display = {name: self._display_status(name) for name in BACKENDS}
+        self._decide()
         self.backends_ready.set()
 
-    def _display_status(self, name: str) -> tuple[str, str]:
-        """Whether backend `name`'s frames take the GPU display path (see `display`), and why (not)."""
-        if not self.backends.get(name, (False,))[0]:
-            return "copy", "backend unavailable"
-        if name == "cpu":
-            return "copy", "the cpu backend renders into host memory"
-        if self._display_ctx is None:
-            return "copy", self._shared.why if self._shared is not None else "no window"
-        if name == "glsl":
-            return "gpu", "rendered into a texture of a context shared with the window"
-        try:
-            ok, why = BACKENDS[name].gl_interop()  # cuda, with the shared context current in this thread
-        except Exception as exc:  # noqa: BLE001 - as a backend's probe
-            ok, why = False, f"{type(exc).__name__}: {exc}"
-        return ("gpu", "written into the window's texture through CUDA-GL interop") if ok else ("copy", why)
-
-    def _glsl_context_status(self) -> tuple[bool, str]:
-        """The glsl backend runs in this thread on a headless context of its own (an OpenGL context is current in
-        one thread only: the glsl backend's process-wide one may be current in another thread, and the window's
-        is the UI thread's); on the GPU display path, on the context shared with the window (OpenGL 4.3)."""
+    def _open_gl_context(self) -> str:
+        """The context GL-context backends render in: on the GPU display path the one shared with the window (with
+        OpenGL 4.3), else a headless one of this thread's own (a context is current in one thread only: a
+        process-wide one may be current in another thread, the window's is the UI thread's); why not, if none."""
         if self._display_ctx is not None:
             self._gl_ctx = self._display_ctx
-            return BACKENDS["glsl"].check_context(self._gl_ctx)
+            return ""
         try:
             self._gl_ctx = create_gl_context()
         except BackendUnavailable as exc:
-            return False, str(exc)
-        return BACKENDS["glsl"].check_context(self._gl_ctx)
+            return str(exc)
+        return ""
 
-    def _renderer(self, scene: Scene, backend: str):
-        if backend != "glsl" or "glsl" not in BACKENDS:
-            return get_renderer(scene, backend)
-        ok, why = self.backends.get("glsl", (False, "not checked"))
-        if not ok:
-            raise BackendUnavailable(why)
-        if self._glsl is None or self._glsl[0] is not scene:
-            self._release_glsl()
-            renderer = create_renderer("glsl", ctx=self._gl_ctx)
-            renderer.upload(scene)
-            self._glsl = (scene, renderer)
-        return self._glsl[1]
+    def _decide(self) -> None:
+        """auto's pick and every backend's display path from what was measured (and what failed since)."""
+        self.auto = decide_measured(self.backends, self._gl_ctx, self.failed)
+        self.display = {name: self._display_status(name) for name in self._classes}
 
-    def _release_glsl(self) -> None:
-        if self._glsl is not None:
-            self._glsl[1].release()
-            self._glsl = None
+    def _display_status(self, name: str) -> tuple[str, str]:
+        """Whether backend `name`'s frames take the GPU display path (see `display`), and why (not)."""
+        cls = self._classes[name]
+        if not self.backends.get(name, (False,))[0]:
+            return "copy", "backend unavailable"
+        if not cls.capabilities.gl_texture:
+            return "copy", f"the {name} backend renders into host memory"
+        if self._display_ctx is None:
+            return "copy", self._shared.why if self._shared is not None else "no window"
+        if cls.capabilities.gl_context:
+            return "gpu", "rendered into a texture of a context shared with the window"
+        try:
+            ok, why = cls.gl_interop()  # with the shared context current in this thread
+        except Exception as exc:  # noqa: BLE001 - as a backend's probe
+            ok, why = False, f"{type(exc).__name__}: {exc}"
+        return ("gpu", f"written into the window's texture through {name}-GL interop") if ok else ("copy", why)
+
+    def _renderer_of(self, name: str) -> Renderer:
+        """This thread's renderer of backend `name` with the current scene uploaded (made on first use)."""
+        if name not in self._renderers:
+            if name not in self._classes:
+                raise RenderError(f"unknown backend {name!r}; expected one of {', '.join(self._classes)}")
+            ok, why = self.backends.get(name, (False, "not checked"))
+            if not ok:
+                raise (BackendFailed if name in self.failed else BackendUnavailable)(why)
+            cls = self._classes[name]
+            renderer = cls(ctx=self._gl_ctx) if cls.capabilities.gl_context else cls()
+            renderer.upload(self._scene)
+            self._renderers[name] = renderer
+        return self._renderers[name]
+
+    def _release(self) -> None:
+        """Free every renderer (and with them the scene and its GPU buffers), in this thread."""
+        for renderer in self._renderers.values():
+            free(renderer)
+        self._renderers.clear()
+        super()._release()
+        gc.collect()
+
+    def _failed(self, name: str, exc: BackendFailed) -> None:
+        """Backend `name` stopped working: unusable from now on (with its renderer's reason), auto picks again."""
+        renderer = self._renderers.pop(name, None)
+        ok, why = renderer.usable() if renderer is not None else (True, "")
+        self.failed[name] = str(exc) if ok else why
+        self.backends[name] = (False, f"stopped working: {self.failed[name]}")
+        if renderer is not None:
+            free(renderer)
+        self._decide()
 
     def _post(self, result: RenderResult) -> None:
-        """Hand a result to the UI; a partial frame replaces the same job's earlier one not yet taken."""
+        """Hand an intermediate result to the UI now; a partial frame replaces the same job's earlier one not yet
+        taken."""
         with self._lock:
             if result.stage == "partial":
                 self._results = [r for r in self._results if not (r.job is result.job and r.stage == "partial")]
@@ -267,38 +257,14 @@ class RenderWorker:
         if self._on_result is not None:
             self._on_result()
 
-    def _loop(self) -> None:
-        lower_priority()
-        self._check_backends()
-        while True:
-            with self._lock:
-                while not self._pending and not self._stop and not self._returns:
-                    self._wake.wait()
-                if self._stop:
-                    break
-                self._returns = False
-                job = None
-                if self._pending:
-                    slot = min(self._pending, key=lambda s: (-self._pending[s].priority, self._served.get(s, 0.0),
-                                                              self._pending[s].seq))
-                    job = self._pending.pop(slot)
-                    self._running = job
-                    self._cancel_running = threading.Event()
-            if job is not None:
-                self._last_display = job.display
-            if self._display_ctx is not None:
-                self.textures.recycle(keep=self._last_display == "gpu")
-            if job is None:
-                continue
-            result = self._render(job, self._cancel_running)
-            self._post(result)
-            with self._lock:
-                self._running = None
-                self._served[slot] = time.perf_counter()
-                self.cancelled += result.cancelled
-                self.rendered += not result.cancelled
-        self._scene = None
-        self._release_glsl()
+    def _between(self, wakes: set[str], job: RenderJob | None) -> None:
+        if job is not None:
+            self._last_display = job.display
+        if self._display_ctx is not None:
+            self.textures.recycle(keep=self._last_display == "gpu")
+
+    def _finish(self) -> None:
+        self._release()
         if self._display_ctx is not None:
             self.textures.release_all()
         for ctx in {id(c): c for c in (self._gl_ctx, self._display_ctx) if c is not None}.values():
@@ -308,14 +274,18 @@ class RenderWorker:
             self._shared.done_current()
         gc.collect()
 
+    def _work(self, job: RenderJob, cancel: threading.Event) -> RenderResult:
+        result = self._render(job, cancel)
+        self.cancelled += result.cancelled
+        self.rendered += not result.cancelled
+        return result
+
     def _render(self, job: RenderJob, cancel: threading.Event) -> RenderResult:
         if job.scene is not self._scene:
+            self._release()  # the previous scene's renderers and GPU buffers, freed in this thread
             self._scene = job.scene
-            if self._glsl is not None and self._glsl[0] is not job.scene:
-                self._release_glsl()  # else it would keep the previous scene and its GPU buffers while cpu renders
-            gc.collect()  # free the previous scene's renderers (and GL buffers) in this thread
         try:
-            renderer = self._renderer(job.scene, job.backend)
+            renderer = self._renderer_of(job.backend)
             if job.display == "gpu" and self.display_path(job.backend)[0] == "gpu":
                 frame = self._render_to_texture(renderer, job, cancel)
             elif not job.progressive:
@@ -325,6 +295,10 @@ class RenderWorker:
             return RenderResult(job, frame, "", time.perf_counter())
         except RenderCancelled:
             return RenderResult(job, None, "", time.perf_counter(), cancelled=True)
+        except BackendFailed as exc:
+            if job.backend not in self.failed:
+                self._failed(job.backend, exc)
+            return RenderResult(job, None, self.backends[job.backend][1], time.perf_counter(), failed=True)
         except GBViewerError as exc:
             return RenderResult(job, None, str(exc), time.perf_counter())
         except Exception as exc:  # noqa: BLE001 - shown in the window, never kills the thread
@@ -334,8 +308,7 @@ class RenderWorker:
     def _render_to_texture(self, renderer, job: RenderJob, cancel: threading.Event) -> Frame:
         """A GPU display path job: the frame stays in a display texture (a GpuFrame)."""
         tex = self.textures.acquire(self._display_ctx, job.camera.width, job.camera.height)
-        if hasattr(renderer, "release_texture"):  # cuda: its registration of a texture goes before the texture
-            self.textures.on_delete = renderer.release_texture
+        self.textures.on_delete = renderer.release_texture  # what the renderer keeps for a texture goes first
         try:
             stats = renderer.render_to_texture(tex, job.camera, job.settings, cancel=cancel)
         except BaseException:

@@ -56,7 +56,7 @@ def measure_fidelity(scene: Scene, name: str, cams: list[Camera], settings: list
                 else:
                     img, ref, kind = box_downsample(img, k), ref_same, "zoom-in"
                 acc.setdefault((s.spec, rate, kind), []).append((psnr(img, ref), ssim(img, ref)))
-                ran[s.spec, rate, kind] = f.stats.simd if backend == "cpu" else None
+                ran[s.spec, rate, kind] = f.stats.simd
                 if progress:
                     progress(render_cost(c, s, scene.num_splats))
     return [FidelityRow(name, spec, rate, kind, float(np.mean([p for p, _ in v])), float(np.mean([q for _, q in v])),

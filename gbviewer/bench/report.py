@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import format_rate
+from ..extras import require
 from ..io.files import atomic_write
 from ..render import BACKENDS
 from .fidelity import FidelityRow
@@ -82,11 +83,7 @@ def plot_path(out_dir: Path, scene: str) -> Path:
 def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = False) -> list[Path]:
     """PSNR vs sampling rate per mode, and time per mode (one figure per scene), as PNG; existing plots are only
     replaced with `force`."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for scene in sorted({r.scene for r in speed} | {r.scene for r in fidelity}):
@@ -118,14 +115,18 @@ def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow
     return written
 
 
+def pyplot():
+    """matplotlib.pyplot on its Agg backend (the [eval] extra)."""
+    require("eval", "matplotlib", "plots").use("Agg")
+    return require("eval", "matplotlib.pyplot", "plots")
+
+
 def save_figure(fig, path: Path, force: bool) -> None:
     """A matplotlib figure as a PNG, written atomically (refusing to overwrite unless `force`), then closed."""
-    import matplotlib.pyplot as plt
-
     try:
         atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"), force)
     finally:
-        plt.close(fig)
+        pyplot().close(fig)
 
 
 def simd_table(rows: list[SpeedRow]) -> tuple[list[str], list[list[str]]]:
@@ -134,7 +135,7 @@ def simd_table(rows: list[SpeedRow]) -> tuple[list[str], list[list[str]]]:
     second per core against that path's exp rate, and the largest difference from the scalar path's image."""
     groups: dict[tuple, dict[str, SpeedRow]] = {}
     for r in rows:
-        if r.backend == "cpu" and r.simd_requested:
+        if r.simd_requested:  # set on backends with SIMD paths only
             groups.setdefault((r.scene, r.rate, r.width, r.height, r.mode), {})[r.simd_requested] = r
     groups = {k: v for k, v in groups.items() if len(v) > 1}
     paths = list(dict.fromkeys(p for g in groups.values() for p in g))

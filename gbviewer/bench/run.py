@@ -72,7 +72,7 @@ def run_bench(scenes: Sequence[Path], settings: list[RenderSettings], rates: lis
         check_writable(out, force)
     result = BenchResult()
     paths, exp = None, None
-    if "cpu" in backends:
+    if any(BACKENDS[b].capabilities.simd for b in backends):
         paths = parse_simd(simd)
         result.simd = simd_info(paths)
         exp = result.simd["exp_per_s_per_core"]

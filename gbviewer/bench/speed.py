@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera import Camera
-from ..render import Mode, RenderSettings, get_renderer
+from ..render import BACKENDS, Mode, RenderSettings, get_renderer
 from ..scene import Scene
 from .simd import current_simd, set_simd
 
@@ -72,10 +72,10 @@ def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[Re
     cores = os.cpu_count() or 1
     for backend in backends:
         renderer = get_renderer(scene, backend)
-        cpu = backend == "cpu"
-        before = active = current_simd() if cpu else None
-        paths: list[str | None] = list(dict.fromkeys(simd)) if cpu and simd else [before]
-        per_core = cores if cpu else 1
+        caps = BACKENDS[backend].capabilities
+        before = active = current_simd() if caps.simd else None
+        paths: list[str | None] = list(dict.fromkeys(simd)) if caps.simd and simd else [before]
+        per_core = cores if caps.host else 1
         try:
             for rate in rates:
                 for s in settings:
@@ -113,7 +113,7 @@ def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[Re
                         med = {k: statistics.median(v) for k, v in a["stages"].items()}
                         # evaluation rates: all the timed renders' evaluations over all their time (views differ)
                         evals = sum(a["evals"]) * c.width * c.height
-                        ran = last.simd if cpu else None
+                        ran = last.simd if caps.simd else None
                         rows.append(SpeedRow(
                             name, backend, s.spec, rate, c.width, c.height, statistics.median(totals), min(totals),
                             max(totals), med, last.visible, last.sort_length, float(np.mean(a["evals"])),
@@ -121,7 +121,7 @@ def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[Re
                             evals / max(sum(a["stages"]["blend_ms"]), 1e-9) / 1e3 / per_core,
                             exp[ran] / 1e6 if exp and ran in exp else None, a["diff"]))
         finally:
-            if cpu and current_simd() != before:
+            if caps.simd and current_simd() != before:
                 set_simd(before)
     return rows
 
@@ -132,7 +132,8 @@ def speed_cost(scene: Scene, cams: list[Camera], settings: list[RenderSettings],
     """The render_cost units measure_speed reports."""
     per_backend = sum(render_cost(cam.at_sampling_rate(rate), s, scene.num_splats) * (repeat + (i == 0))
                       for rate in rates for s in settings for i, cam in enumerate(cams))
-    return sum(per_backend * (len(dict.fromkeys(simd)) if b == "cpu" and simd else 1) for b in backends)
+    return sum(per_backend * (len(dict.fromkeys(simd)) if BACKENDS[b].capabilities.simd and simd else 1)
+               for b in backends)
 
 
 def ratios(rows: list[SpeedRow]) -> list[dict]:

@@ -9,6 +9,7 @@ from dataclasses import replace
 from typing import Callable
 
 from ..errors import GBViewerError
+from ..extras import require
 from .tasks import ViewResult, ViewTask, run_task
 
 TASK_CPUS = 4  # CPUs (render threads) per Ray task unless --threads says: a node runs cores / 4 tasks at once
@@ -19,10 +20,7 @@ def run_on_ray(tasks: list[ViewTask], address: str, advance: Callable[[int], Non
     instance in this process for the run). Where the cluster has GPUs and the backend is auto or cuda, each task
     takes one GPU and renders with CUDA; else it takes the tasks' `threads` CPUs (0: TASK_CPUS, at most the
     smallest node's count) and renders with as many threads."""
-    try:
-        import ray
-    except ImportError:
-        raise GBViewerError("--ray needs the optional ray package: pip install 'gbviewer[ray]'") from None
+    ray = require("ray", "ray", "--ray")
     try:
         ray.init(address=None if address == "local" else address, include_dashboard=False,
                  logging_level=logging.WARNING, configure_logging=True)

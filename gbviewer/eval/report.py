@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ..bench.report import machine_description, plot_path, save_figure, wide_console
+from ..bench.report import machine_description, plot_path, pyplot, save_figure, wide_console
 from ..camera import format_rate
 from ..io.files import atomic_write
 from .run import EvalResult, mean
@@ -100,11 +100,7 @@ def plot_paths(out_dir: Path, pairs: list[tuple[Path, Path]]) -> list[Path]:
 
 def write_plots(out_dir: Path, result: EvalResult, force: bool = False) -> list[Path]:
     """PSNR and SSIM against the sampling rate, one line per mode, per scene (and for the mean)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     pairs = [(s.scene, s.dataset) for s in result.scenes]
     tables = [s.table() for s in result.scenes]
     titles = _labels(pairs)

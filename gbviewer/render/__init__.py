@@ -5,12 +5,14 @@ one here (`choice`: `backend="auto"`) and the pixel trace of the CPU kernel (`tr
 from .choice import AUTO, BackendChoice, choose_backend
 from .cpu import CpuRenderer
 from .cuda import CudaRenderer
-from .registry import BACKEND_NAMES, BACKENDS, create_gl_context, create_renderer, get_renderer, render, resolve_backend
+from .registry import (BACKEND_NAMES, BACKENDS, capable, create_gl_context, create_renderer, get_renderer, render,
+                       resolve_backend)
 from .trace import PixelTrace, SampleTrace, TraceStep, trace_pixel
-from .types import SORT_ENTRY_BYTES, Frame, FrameStats, Mode, Renderer, RenderSettings
+from .types import SORT_ENTRY_BYTES, Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
 
 __all__ = [
-    "AUTO", "BACKENDS", "BACKEND_NAMES", "SORT_ENTRY_BYTES", "BackendChoice", "CpuRenderer", "CudaRenderer", "Frame",
-    "FrameStats", "Mode", "PixelTrace", "RenderSettings", "Renderer", "SampleTrace", "TraceStep", "choose_backend",
-    "create_gl_context", "create_renderer", "get_renderer", "render", "resolve_backend", "trace_pixel",
+    "AUTO", "BACKENDS", "BACKEND_NAMES", "SORT_ENTRY_BYTES", "BackendChoice", "Capabilities", "CpuRenderer",
+    "CudaRenderer", "Frame", "FrameStats", "Mode", "PixelTrace", "RenderSettings", "Renderer", "SampleTrace",
+    "TraceStep", "capable", "choose_backend", "create_gl_context", "create_renderer", "get_renderer", "render",
+    "resolve_backend", "trace_pixel",
 ]

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 import threading
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from ..errors import BackendUnavailable
@@ -17,6 +18,7 @@ from .cuda import CudaRenderer
 from .glsl.context import GL_REQUIRED, create_context
 
 AUTO = "auto"
+FALLBACK = "cpu"  # what auto picks where nothing faster is usable, and what runs where a pick cannot
 GL_PROBE_TIMEOUT_S = 20.0  # a driver that hangs while creating a context counts as no OpenGL
 SOFTWARE_GL = re.compile(r"llvmpipe|softpipe|swrast|lavapipe|swiftshader|software|basic render|gdi generic", re.I)
 
@@ -85,22 +87,34 @@ def probe_gl() -> GlProbe:
     return found[0] if found else GlProbe(error=f"no OpenGL context within {GL_PROBE_TIMEOUT_S:g} s")
 
 
-def decide(cuda: tuple[bool, str], gl: GlProbe | None) -> BackendChoice:
-    """The choice from the probes' results (`gl` None: not probed, as CUDA is usable)."""
-    ok, why = cuda
+def decide(cuda: tuple[bool, str], gl: GlProbe | None, failed: Mapping[str, str] | None = None) -> BackendChoice:
+    """The choice from the probes' results (`gl` None: not probed, as CUDA is usable). `failed`: backends that
+    stopped working in this process (name -> why, `Renderer.usable()`), passed over for the next one."""
+    failed = failed or {}
+    if "glsl" in failed:
+        gl = GlProbe(error=f"glsl stopped working ({failed['glsl']})")
+    ok, why = (False, f"stopped working: {failed['cuda']}") if "cuda" in failed else cuda
     if ok:
         return BackendChoice("cuda", "a CUDA device is usable")
     no_cuda = f"CUDA unavailable ({why.removeprefix('cuda backend unavailable: ')})"
     if gl is None or gl.error:
         why_not = gl.error.removeprefix("glsl backend unavailable: ") if gl else "OpenGL not probed"
-        return BackendChoice("cpu", f"{no_cuda}; {why_not}")
+        return BackendChoice(FALLBACK, f"{no_cuda}; {why_not}")
     if gl.software:
-        return BackendChoice("cpu", f"{no_cuda}; OpenGL is {gl.renderer}, a software rasterizer slower than the "
+        return BackendChoice(FALLBACK, f"{no_cuda}; OpenGL is {gl.renderer}, a software rasterizer slower than the "
                                     "CPU backend")
     if gl.version < GL_REQUIRED:
-        return BackendChoice("cpu", f"{no_cuda}; OpenGL {gl.version / 100:.1f} on {gl.renderer} has no compute "
+        return BackendChoice(FALLBACK, f"{no_cuda}; OpenGL {gl.version / 100:.1f} on {gl.renderer} has no compute "
                                     f"shaders ({GL_REQUIRED / 100:.1f} needed)")
     return BackendChoice("glsl", f"{no_cuda}; OpenGL {gl.version / 100:.1f} on {gl.renderer}")
+
+
+def decide_measured(status: Mapping[str, tuple[bool, str]], ctx, failed: Mapping[str, str] | None = None
+                    ) -> BackendChoice:
+    """The choice from backends probed elsewhere: `status` name -> (usable, why) and `ctx` the OpenGL context
+    they were probed in (None: none could be made), as the viewer's render thread measures them."""
+    missing = (False, "not part of this installation")
+    return decide(status.get("cuda", missing), GlProbe.of(ctx, status.get("glsl", missing)[1]), failed)
 
 
 _choice: list[BackendChoice] = []

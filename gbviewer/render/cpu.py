@@ -13,7 +13,7 @@ from ..scene import Scene
 from .control import Progress, RenderControl
 from .prepare import Prepared, camera_args, native_frame, prepare
 from .trace import PixelTrace, from_native
-from .types import Frame, RenderSettings
+from .types import Capabilities, Frame, Renderer, RenderSettings
 
 
 def _native_extra(prep: Prepared) -> dict:
@@ -28,10 +28,11 @@ def _native_extra(prep: Prepared) -> dict:
     return extra
 
 
-class CpuRenderer:
+class CpuRenderer(Renderer):
     """Native C++/OpenMP backend (gbviewer._native)."""
 
     name = "cpu"
+    capabilities = Capabilities(progressive=True, trace=True, simd=True, host=True)
 
     def __init__(self) -> None:
         ok, why = self.available()
@@ -56,6 +57,10 @@ class CpuRenderer:
         if scene is not self._scene:
             self._native.release_buffers()  # the per-frame buffers the native module keeps for the last scene
         self._scene = scene
+
+    def release(self) -> None:
+        self._native.release_buffers()
+        self._scene = None
 
     def _native_render(self, prep: Prepared, camera: Camera, settings: RenderSettings, **kwargs) -> dict:
         """The native module's render call for this frame; kwargs: control or trace."""

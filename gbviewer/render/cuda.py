@@ -14,20 +14,22 @@ from ..scene import Scene
 from .control import Progress, RenderControl
 from .cuda_textures import TextureRegistrations
 from .prepare import Prepared, camera_args, check_display_texture, native_frame, native_stats, prepare
-from .types import Frame, FrameStats, RenderSettings
+from .types import Capabilities, Frame, FrameStats, Renderer, RenderSettings
 
 
-class CudaRenderer:
+class CudaRenderer(Renderer):
     """Native CUDA backend: the scene stays on the device (a trained Duplex-GS model's view is uploaded per frame).
 
     Threads may share one renderer: uploads and renders are serialised (a lock here around the scene and cells on
     the device, and a mutex in the native renderer around its buffers).
 
     A CUDA error that leaves the device unusable (a fault in a kernel, a watchdog timeout, the device lost) raises
-    BackendFailed and marks the renderer unusable (`usable()`): every later call raises BackendFailed with that
-    reason, `gbviewer.render.get_renderer` drops it, and `available()` says no for the rest of the process."""
+    BackendFailed and marks the renderer unusable (`Renderer.failed`, `usable()`): every later call raises
+    BackendFailed with that reason, `get_renderer` replaces it, and `available()` says no for the rest of the
+    process."""
 
     name = "cuda"
+    capabilities = Capabilities(gl_texture=True)
 
     def __init__(self, device: int = -1) -> None:
         ok, why = self.available()
@@ -47,26 +49,21 @@ class CudaRenderer:
         self._lock = threading.Lock()
         self._impl = impl
         self._device_failed = device_failed
-        self._failed = ""
+        self._failure = None
         self._scene: Scene | None = None
         self._uploaded: Scene | None = None
         self._cells: Cells | None = None
         self._textures = TextureRegistrations(self._release)
 
-    def usable(self) -> tuple[bool, str]:
-        """(True, "") while the renderer works; (False, the reason) once its device failed."""
-        return (not self._failed, self._failed)
-
     def _call(self, method: str, *args):
         """The native renderer's `method(*args)`: RuntimeError -> RenderError, DeviceFailed -> BackendFailed (and
         the renderer unusable from then on)."""
-        if self._failed:
-            raise BackendFailed(self._failed)
+        if self._failure is not None:
+            raise BackendFailed(f"{self.name} backend stopped working: {self._failure}")
         try:
             return getattr(self._impl, method)(*args)
         except self._device_failed as exc:
-            self._failed = f"cuda: {exc}".splitlines()[0]
-            raise BackendFailed(self._failed) from None
+            raise self.failed(str(exc).splitlines()[0]) from None
         except RuntimeError as exc:
             raise RenderError(f"cuda: {exc}") from None
 
@@ -86,6 +83,11 @@ class CudaRenderer:
             self._cells = None
             if scene.oit is None or scene.oit.neural is None:
                 self._upload(scene)
+
+    def release(self) -> None:
+        """Forget the scene (its device buffers are reused by the next upload and freed with the renderer)."""
+        with self._lock:
+            self._scene = self._uploaded = self._cells = None
 
     def _upload(self, scene: Scene) -> None:
         # Forget what is on the device first: a failed upload (out of device memory) leaves no scene there.

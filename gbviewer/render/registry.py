@@ -39,6 +39,11 @@ BACKENDS: Mapping[str, type] = _Backends()
 BACKEND_NAMES = (AUTO, *_MODULES)  # what `backend=` takes
 
 
+def capable(flag: str) -> list[str]:
+    """The backends whose `capabilities` has `flag` (a field of `Capabilities`, e.g. "trace"), in registry order."""
+    return [name for name, cls in BACKENDS.items() if getattr(cls.capabilities, flag)]
+
+
 def resolve_backend(backend: str) -> str:
     """The backend a request for `backend` runs on: itself, or for "auto" the one `choose_backend()` picks."""
     if backend == AUTO:
@@ -69,13 +74,12 @@ _renderers_lock = threading.Lock()
 
 def get_renderer(scene: Scene, backend: str = "cpu") -> Renderer:
     """The process's renderer of `backend` ("auto": the best here) with `scene` uploaded. One renderer per backend,
-    uploading only when the scene changes: it keeps the last scene alive, never every scene it has seen. A renderer
-    that stopped working (`usable()` False: BackendFailed) is dropped and a new one made."""
+    uploading only when the scene changes: it keeps the last scene alive, never every scene it has seen. One that
+    stopped working (`usable()` False) is replaced by a new one."""
     backend = resolve_backend(backend)
     with _renderers_lock:
         entry = _renderers.get(backend)
-        if entry is not None and not getattr(entry[0], "usable", lambda: (True, ""))()[0]:
-            del _renderers[backend]
+        if entry is not None and not entry[0].usable()[0]:
             entry = None
         renderer = entry[0] if entry is not None else BACKENDS[backend]()
         if entry is None or entry[1]() is not scene:

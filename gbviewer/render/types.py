@@ -1,19 +1,21 @@
-"""The render layer's types: Mode, RenderSettings, Frame and its FrameStats, the Renderer protocol, constants.
+"""The render layer's types: Mode, RenderSettings, Frame and its FrameStats, the Renderer contract and its
+Capabilities, constants.
 
 Imports no backend."""
 
 from __future__ import annotations
 
+import abc
 import enum
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import ClassVar
 
 import numpy as np
 
 from ..camera import Camera
-from ..errors import InvalidValue, RenderError
+from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, integer, real
 
@@ -191,20 +193,78 @@ class Frame:
     debug: dict[str, np.ndarray] = field(default_factory=dict)
 
 
-class Renderer(Protocol):
-    """What the app, video and bench see of a backend."""
+@dataclass(frozen=True)
+class Capabilities:
+    """What a backend does beyond `upload` and `render`: the app, video and bench ask these, never the backend's
+    name. Each flag names the methods it promises.
 
-    name: str
+    progressive: `partial` receives each tile as it is blended and `on_progress` counts tiles (else the whole frame
+    arrives at the end, progress 0 then 1 of 1): worth showing while it refines.
+    gl_texture: `render_to_texture(texture, camera, settings, cancel=, on_progress=) -> FrameStats` into a moderngl
+    RGBA32F texture; `release_texture(glo)` before such a texture is deleted.
+    gl_context: renders in an OpenGL context: the constructor takes `ctx=` (a moderngl context, current in the
+    calling thread, which the renderer then belongs to), `check_context(ctx) -> (usable, why)` says whether one will
+    do. Without it `gl_interop() -> (usable, why)` says whether `render_to_texture` can write into the textures of
+    the context current in this thread, and a renderer may be used from any thread, from several at once.
+    shared_stage: renders of one camera share the per-camera stage (preprocess, binning) across settings.
+    trace: `trace(camera, settings, x, y) -> PixelTrace` (gbviewer.render.trace).
+    simd: `FrameStats.simd` names the blend's SIMD path, switched process-wide by gbviewer.bench.simd.
+    host: renders on the host's CPU cores (`RenderSettings.threads` of them): rates per core mean something.
+    """
+
+    progressive: bool = False
+    gl_texture: bool = False
+    gl_context: bool = False
+    shared_stage: bool = False
+    trace: bool = False
+    simd: bool = False
+    host: bool = False
+
+
+class Renderer(abc.ABC):
+    """What the app, video and bench see of a backend. A backend subclasses it, states its `capabilities` and
+    is named once in `registry`."""
+
+    name: ClassVar[str]
+    capabilities: ClassVar[Capabilities] = Capabilities()
+    _failure: str | None = None  # set by `failed`: why this renderer stopped working
 
     @classmethod
+    @abc.abstractmethod
     def available(cls) -> tuple[bool, str]:
-        """(usable, reason when not)."""
+        """(usable on this machine, reason when not)."""
 
-    def upload(self, scene: Scene) -> None: ...
+    @abc.abstractmethod
+    def upload(self, scene: Scene) -> None:
+        """Make `scene` the one later renders draw."""
 
+    @abc.abstractmethod
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
                on_progress: Callable[[int, int], None] | None = None, partial: np.ndarray | None = None) -> Frame:
         """The frame; once `cancel` is set it raises RenderCancelled within one tile batch (GPU backends: one
         dispatch); `on_progress(done, total)` is called from the render as tiles (or dispatches) finish; `partial`
-        (float32 (height, width, 3)) receives finished tiles as they are blended (GPU backends: the whole frame at
-        the end)."""
+        (float32 (height, width, 3)) receives finished tiles as they are blended (`capabilities.progressive`; else
+        the whole frame at the end). A renderer that stopped working raises BackendFailed (see `failed`)."""
+
+    @abc.abstractmethod
+    def release(self) -> None:
+        """Free what the renderer holds for its scene (buffers, device memory); `upload` again before the next
+        render. Calling it twice is harmless."""
+
+    def usable(self) -> tuple[bool, str]:
+        """(whether this renderer still renders, why not): False once it raised BackendFailed."""
+        return (False, self._failure) if self._failure is not None else (True, "")
+
+    def failed(self, reason: str) -> BackendFailed:
+        """Mark this renderer unusable for `reason` (a lost device, a failed launch); the error to raise."""
+        self._failure = reason
+        return BackendFailed(f"{self.name} backend stopped working: {reason}")
+
+    @classmethod
+    def gl_interop(cls) -> tuple[bool, str]:
+        """With `capabilities.gl_texture` and without gl_context: whether `render_to_texture` can write into the
+        textures of the OpenGL context current in this thread."""
+        return False, f"the {cls.name} backend cannot write OpenGL textures"
+
+    def release_texture(self, glo: int) -> None:
+        """Forget what the renderer keeps for GL texture `glo` before the texture is deleted (nothing by default)."""

@@ -26,3 +26,15 @@ def capture(bundled_scene, tmp_path_factory):
     """A COLMAP capture of the bundled scene (tests/dataset_builders.py): 9 photos of 130x100, v00 and v08 test."""
     pytest.importorskip("pycolmap")
     return write_colmap(tmp_path_factory.mktemp("capture"), shots(bundled_scene))
+
+
+@pytest.fixture
+def app(xvfb, tmp_path, monkeypatch):
+    """The viewer window (1040x700) on the bundled scene, with its settings in tmp_path; closed after the test."""
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+    from gbviewer.app.window import ViewerApp
+
+    a = ViewerApp(None, size=(1040, 700))
+    a.state.settings.show_info = False  # comparisons need the image without the stats lines; one test turns it on
+    yield a
+    a.close()

@@ -16,15 +16,15 @@ import numpy as np
 
 import gbviewer as gb
 from gbviewer import metrics
-from gbviewer.analysis import camera_key
+from gbviewer.differences import camera_key
 from gbviewer.app import dataset as app_dataset
-from gbviewer.app.analysis import PaneAnalysis
+from gbviewer.app.difference_views import PaneAnalysis
 from gbviewer.app.layout import Rect, fit_aspect
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
 from gbviewer.app.worker import RenderJob
 from gbviewer.eval import camera_for_rate, ground_truth
-from test_analysis_views import settle
+from test_difference_views import settle
 from test_state import laid_out, loaded
 
 RATE = 0.25

@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 from helpers import skip_or_fail
-from test_window import LABEL_BAND, agree, expected_pane, pane_pixels, shot, wait
+from window_helpers import LABEL_BAND, agree, expected_pane, pane_pixels, shot, wait
 
 import gbviewer as gb
 from gbviewer.app.display import MAX_FREE, GpuFrame, is_software, requested_path

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from gbviewer.figure import to_uint8
-from test_window import LABEL_BAND, app, pane_pixels, press, shot, wait  # noqa: F401 (app)
+from window_helpers import LABEL_BAND, press, shot, wait
 
 pytestmark = pytest.mark.display
 TOL = 1e-5

@@ -1,14 +1,17 @@
-"""The key map: every key has an action, and the help, the menus and the panel's hints all come from the table."""
+"""The key map: every key has an action on its one owner (resolved once, duplicates refused), and the help, the
+menus and the panel's hints all come from the table."""
 
 from __future__ import annotations
 
 import inspect
+import re
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
 from gbviewer.app import keys
-from gbviewer.app.analysis import PaneAnalysis
+from gbviewer.app.difference_views import PaneAnalysis
 from gbviewer.app.inspector import Inspector
 from gbviewer.app.state import AppState
 
@@ -24,27 +27,48 @@ def window_actions() -> set[str]:
     return {f.name for f in cls.body if isinstance(f, ast.FunctionDef) and not f.name.startswith("_")}
 
 
-def test_every_key_names_an_action_that_takes_its_args():
+OWNER_CLASSES = {"state": AppState, "analysis": PaneAnalysis, "inspector": Inspector}  # and "window": ViewerApp
+
+
+def test_every_key_names_an_action_of_its_owner_that_takes_its_args():
     windowed = window_actions()
     for k in keys.KEYS:
-        method = (getattr(AppState, k.action, None) or getattr(PaneAnalysis, k.action, None)
-                  or getattr(Inspector, k.action, None))
-        if method is None:
-            assert k.action in windowed, f"{k.key}: no action {k.action!r}"
+        if k.on == "window":
+            assert k.action in windowed, f"{k.key}: ViewerApp has no action {k.action!r}"
             continue
+        method = getattr(OWNER_CLASSES[k.on], k.action, None)
+        assert callable(method), f"{k.key}: {k.on} has no action {k.action!r}"
         params = list(inspect.signature(method).parameters.values())[1:]
         extra = (1, 2) if k.held else (0, 0)  # held keys also get the frame time and Shift
         required = [p for p in params if p.default is inspect.Parameter.empty]
         assert len(required) <= len(k.args) + extra[1] <= len(params), f"{k.key}: {k.action}{k.args}"
 
 
-def test_keys_are_unique_per_modifier_combination():
-    seen = set()
-    for k in keys.KEYS:
-        for shift in ((False, True) if k.shift is None else (k.shift,)):
-            for ctrl in ((False, True) if k.ctrl is None else (k.ctrl,)):
-                assert (k.key, shift, ctrl) not in seen, f"{k.key} is bound twice"
-                seen.add((k.key, shift, ctrl))
+def owners(missing: str = "") -> dict[str, SimpleNamespace]:
+    """Stand-ins for the four owners, each with a method per action of its keys (but `missing`)."""
+    return {o: SimpleNamespace(**{k.action: (lambda *a, o=o: o) for k in keys.KEYS
+                                  if k.on == o and k.action != missing}) for o in keys.OWNERS}
+
+
+def test_the_action_table_resolves_each_action_on_its_one_owner():
+    table = keys.action_table(owners())
+    assert set(table) == {k.action for k in keys.KEYS}
+    assert table["escape"]() == "window" and table["toggle_pin"]() == "inspector"  # AppState has escape too
+    assert table["toggle_error"]() == "analysis" and table["reset_camera"]() == "state"
+    with pytest.raises(ValueError, match="has no action 'toggle_fly'"):
+        keys.action_table(owners(missing="toggle_fly"))
+
+
+@pytest.mark.parametrize("extra, message", [
+    (keys.Key("f1", "toggle_info"), "key F1 is bound to toggle_help and toggle_info"),  # F1 with any Ctrl
+    (keys.Key("m", "toggle_info", shift=None), "key M is bound to next_mode and toggle_info"),
+    (keys.Key("f2", "escape"), "action 'escape' is on both window and state"),
+    (keys.Key("f2", "toggle_loupe", on="panel"), "toggle_loupe on 'panel', not one of"),
+])
+def test_a_duplicate_binding_or_action_name_fails(extra, message):
+    keys.check_bindings()  # the real table passes
+    with pytest.raises(ValueError, match=re.escape(message)):
+        keys.action_table(owners(), keys.KEYS + (extra,))
 
 
 def test_each_help_row_names_its_keys():

@@ -16,11 +16,11 @@ import pytest
 import gbviewer as gb
 from gbviewer import metrics
 from gbviewer.app import overlays
-from gbviewer.app.analysis_overlay import TOP
+from gbviewer.app.difference_overlay import TOP
 from gbviewer.eval import camera_for_rate, ground_truth
 from gbviewer.figure import to_uint8, upscale_nearest
-from test_analysis_window import wait_analysed
-from test_window import GBVIEWER_ROOT, LABEL_BAND, agree, pane_pixels, press, shot, wait
+from test_difference_window import wait_analysed
+from window_helpers import GBVIEWER_ROOT, LABEL_BAND, agree, pane_pixels, press, shot, wait
 
 pytestmark = pytest.mark.display
 RATE = 0.25
@@ -130,14 +130,14 @@ def test_open_dataset_through_the_folder_dialog_and_the_built_in_browser(photo_a
     while ds.loader is not None:  # the dataset of the command line
         app.step()
     ds.dataset = None
-    open_dataset_dialog(app)
+    open_dataset_dialog(app.state, app.dialogs)
     assert app.dialogs.folder_dialog is not None
     t0 = time.perf_counter()
     while (app.dialogs.folder_dialog is not None or ds.loader is not None) and time.perf_counter() - t0 < 60:
         app.step()
     assert ds.dataset is not None and ds.dataset.root == capture
     monkeypatch.setenv("PATH", "/nonexistent")
-    open_dataset_dialog(app)
+    open_dataset_dialog(app.state, app.dialogs)
     b = app.dialogs.browser
     assert app.dialogs.folder_dialog is None and b is not None and b["dir"] == capture.parent
     app.run_frames(2)

@@ -11,7 +11,8 @@ import pytest
 import gbviewer as gb
 from gbviewer.app.layout import PANEL_W
 from gbviewer.app.settings import MODE_NAMES, AppSettings
-from gbviewer.app.state import AppState, RateMeter, is_cameras_file
+from gbviewer.app.pane_state import RateMeter
+from gbviewer.app.state import AppState, is_cameras_file
 from gbviewer.render import Mode
 
 

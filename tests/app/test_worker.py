@@ -1,4 +1,5 @@
-"""The render thread: latest request per slot, stale requests dropped, errors reported."""
+"""The render thread: latest request per slot, stale requests dropped, errors reported, a backend that stops
+working replaced by the next pick; the slot policies of the render and trace threads."""
 
 from __future__ import annotations
 
@@ -13,8 +14,13 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.app.worker import RENDER_NICE, RenderJob, RenderWorker
-from gbviewer.render import RenderSettings
+from gbviewer.app.inspector import TraceRequest, TraceThread
+from gbviewer.app.panes import PaneRenders
+from gbviewer.app.settings import AppSettings
+from gbviewer.app.state import AppState
+from gbviewer.app.worker import RENDER_NICE, RenderJob, RenderPolicy, RenderWorker
+from gbviewer.render import BACKENDS, CpuRenderer, RenderSettings
+from gbviewer.render.glsl.context import standalone_context
 
 
 def test_worker_renders_latest_request_per_slot_and_drops_stale_ones(bundled_scene):
@@ -189,3 +195,104 @@ def test_the_render_thread_runs_below_the_ui_priority(bundled_scene):
         assert os.getpriority(os.PRIO_PROCESS, w._thread.native_id) == min(19, ui + RENDER_NICE)
     finally:
         w.stop()
+
+
+class Flaky(CpuRenderer):
+    """A fake backend: the CPU's frames until its second render, which loses the device (BackendFailed)."""
+
+    name = "flaky"
+    renders = 0  # over every instance
+
+    def render(self, camera, settings, **kwargs):
+        type(self).renders += 1
+        if type(self).renders == 2:
+            raise self.failed("device lost")
+        return super().render(camera, settings, **kwargs)
+
+
+def test_a_backend_that_stops_working_is_reported_and_its_pane_renders_on_the_next_pick(bundled_scene):
+    """The second render of the flaky backend fails: the viewer says so in one line, the backend is unusable with
+    its reason, auto picks past it, the pane renders on that pick and the render thread lives on."""
+    Flaky.renders = 0
+    w = RenderWorker(backends={"flaky": Flaky, "cpu": CpuRenderer})
+    state = AppState(AppSettings())
+    state.set_pane_count(1)
+    state.layout(640, 480, 20, 26, (1.0, 1.0))
+    state.open(gb.DEFAULT_SCENE)
+    t0 = time.time()
+    while state.poll_loader() is None:
+        assert time.time() - t0 < 30 and state.loader is not None, state.load_error
+        time.sleep(0.01)
+    ctx = standalone_context()  # the panes' textures (the process's headless context: a window may follow)
+    panes = PaneRenders(state, w, ctx)
+    pane = state.panes[0]
+
+    def render_once() -> None:
+        pane.submitted.clear()  # the view is unchanged: ask again
+        panes.submit()
+        t0 = time.time()
+        while w.busy() and time.time() - t0 < 60:
+            time.sleep(0.01)
+        panes.poll()
+
+    try:
+        assert w.backends_ready.wait(30) and w.backend_status("flaky") == (True, "")
+        state.settings.backend = "flaky"
+        render_once()
+        assert pane.parts["a"].job.backend == "flaky" and pane.parts["a"].frame is not None
+        render_once()  # the device is lost
+        assert w.failed == {"flaky": "device lost"} and w.backends["flaky"] == (False, "stopped working: device lost")
+        assert w.backend_for("flaky") == w.backend_for("auto") == "cpu" and w.auto.name == "cpu"
+        assert [m[1] for m in state.messages if m[2] == "error"] == [
+            "flaky stopped working: device lost; rendering on cpu"]
+        render_once()  # on the next pick, by the same render thread
+        shown = pane.parts["a"]
+        assert shown.job.backend == "cpu" and shown.error == "" and w._thread.is_alive()
+        np.testing.assert_array_equal(shown.frame.rgb, gb.render(state.scene, shown.job.camera,
+                                                                 shown.job.settings.mode,
+                                                                 shown.job.settings.supersample).rgb)
+        w.submit(RenderJob(9, state.scene, shown.job.camera, RenderSettings(), "flaky"))  # asked for by name
+        out = _collect(w, lambda o: bool(o))
+        assert out[0].failed and out[0].frame is None and Flaky.renders == 2  # no new renderer was made
+    finally:
+        panes.release()
+        w.stop()
+
+
+def test_previews_of_a_slot_do_not_cancel_each_other_but_a_full_request_cancels_a_preview():
+    """The render policy: a newer preview of the running preview's slot waits; a full-resolution request (or a
+    request of another slot) does not cancel wrongly. Ordering by priority, then least recently served."""
+    policy = RenderPolicy()
+    preview = RenderJob(1, None, None, None, preview=True)
+    assert not policy.cancels(preview, RenderJob(1, None, None, None, preview=True))
+    assert policy.cancels(preview, RenderJob(1, None, None, None))
+    assert policy.cancels(RenderJob(1, None, None, None), RenderJob(1, None, None, None, preview=True))
+    hover = RenderJob(2, None, None, None, priority=1)
+    assert policy.rank(hover, 9, 5.0) < policy.rank(preview, 1, 0.0)  # priority first
+    assert policy.rank(preview, 9, 1.0) < policy.rank(preview, 1, 2.0)  # then the least recently served slot
+
+
+def test_the_trace_thread_lets_a_running_request_finish_and_traces_on_a_tracing_backend():
+    gate, started = threading.Event(), threading.Event()
+
+    def trace(req):
+        started.set()
+        gate.wait(30)
+        return req.x
+
+    t = TraceThread(trace)
+    try:
+        assert BACKENDS[t.backend].capabilities.trace
+        first = TraceRequest("s", None, None, None, None, 1, 0)
+        t.submit(first)
+        assert started.wait(30)
+        t.submit(TraceRequest("s", None, None, None, None, 2, 0))
+        assert not t._cancel.is_set()  # not cancellable: it finishes
+        gate.set()
+        t0 = time.time()
+        while (t.busy() or t.done < 2) and time.time() - t0 < 30:
+            time.sleep(0.01)
+        assert [r.trace for r in t.results()] == [1, 2]
+    finally:
+        gate.set()
+        t.stop()

@@ -15,7 +15,7 @@ import pytest
 from scipy.special import erf
 
 import gbviewer as gb
-from reference import SH_C0, preprocess
+from reference_preprocess import SH_C0, preprocess
 
 F = 100.0  # focal length in pixels
 WHITE_DC = 0.5 / SH_C0  # SH DC coefficient that evaluates to colour 1.0

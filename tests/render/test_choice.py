@@ -132,3 +132,13 @@ def test_probe_gl_leaves_the_callers_context_alone():
     buf = ctx.buffer(b"\x01\x02\x03\x04")
     assert buf.read() == b"\x01\x02\x03\x04"
     buf.release()
+
+
+def test_auto_passes_over_a_backend_that_stopped_working():
+    """A backend that raised BackendFailed is passed over: auto picks what it would pick without it."""
+    gl = GlProbe("NVIDIA GeForce RTX 4090/PCIe/SSE2", 460)
+    assert decide((True, ""), gl).name == "cuda"
+    lost = decide((True, ""), gl, {"cuda": "an illegal memory access"})
+    assert lost.name == "glsl" and "stopped working: an illegal memory access" in lost.reason
+    both = decide((True, ""), gl, {"cuda": "lost", "glsl": "context lost"})
+    assert both.name == "cpu" and "glsl stopped working (context lost)" in both.reason

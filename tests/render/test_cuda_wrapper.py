@@ -49,11 +49,12 @@ def test_failed_device_makes_the_renderer_unusable(method):
     fake = FakeNative(device_fails={method})
     r = fake_renderer(fake)
     scene = random_scene(20, seed=1)
-    with pytest.raises(BackendFailed, match="^cuda: CUDA device 0 failed: .*timed out") as info:
+    stopped = "^cuda backend stopped working: CUDA device 0 failed: .*timed out"
+    with pytest.raises(BackendFailed, match=stopped) as info:
         r.upload(scene)
         r.render(front_camera(), gb.RenderSettings())
     assert isinstance(info.value, RenderError) and "\n" not in str(info.value)
-    assert r.usable() == (False, f"cuda: {TIMEOUT}")
+    assert r.usable() == (False, TIMEOUT)
     calls = list(fake.calls)
     for again in (lambda: r.render(front_camera(), gb.RenderSettings()), lambda: r.upload(scene)):
         with pytest.raises(BackendFailed, match="timed out"):
@@ -81,12 +82,13 @@ def test_registry_drops_a_renderer_that_stopped_working(monkeypatch):
 def test_cli_says_a_failed_device_in_one_line(monkeypatch, tmp_path, capsys):
     """`gbviewer render` on a renderer whose device fails: exit status 2, one line on stderr, no image written."""
     broken = fake_renderer(FakeNative(device_fails={"render"}))
-    monkeypatch.setattr("gbviewer.cli.get_renderer", lambda scene, backend: (broken.upload(scene), broken)[1])
+    monkeypatch.setattr("gbviewer.cli.render.get_renderer", lambda scene, backend: (broken.upload(scene), broken)[1])
     out = tmp_path / "a.png"
     assert main(["render", str(gb.DEFAULT_SCENE), "--width", "32", "--height", "24", "--backend", "cpu", "--out",
                  str(out)]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and err.startswith("gbviewer: error: cuda: CUDA device 0 failed:"), err
+    assert err.count("\n") == 1, err
+    assert err.startswith("gbviewer: error: cuda backend stopped working: CUDA device 0 failed:"), err
     assert not out.exists() and not list(tmp_path.iterdir())
 
 

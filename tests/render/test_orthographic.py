@@ -10,7 +10,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from helpers import front_camera, random_scene, random_view
-from reference import MODES, quat_to_rotmat, reference_render_oit
+from reference import MODES, reference_render_oit
+from reference_preprocess import quat_to_rotmat
 from test_oit import check, oit, oit_of, with_view_weights
 from test_render_reference import BACKGROUND, SCENES, _check_strict
 from test_simd import preprocessed

@@ -31,7 +31,7 @@ from reference import MODES, reference_render
 
 TOL = 1e-4
 BACKGROUND = (0.1, 0.5, 0.9)
-# Threshold ties (see reference.TIE_REL): an alpha within 3e-5 (relative) of 1/255 or a transmittance that
+# Threshold ties (see reference_blend.TIE_REL): an alpha within 3e-5 (relative) of 1/255 or a transmittance that
 # close to 1e-4 may be decided either way by float32. Such pixels are excluded from the strict check, counted, and
 # their error bounded by what one flipped decision can cost (an alpha of ~1/255 times a colour of <= ~2).
 MAX_TIE_PIXELS = 4

@@ -2,19 +2,27 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from functools import partial
+from typing import TYPE_CHECKING, Callable
 
 from imgui_bundle import imgui
 
 from ..layout import PANEL_W
-from . import analysis, backend, camera, dataset, output, panes, rate, scene, timings
+from . import backend, camera, dataset, differences, output, panes, rate, scene, timings
 
 if TYPE_CHECKING:
     from ..window import ViewerApp
 
-SECTIONS = (("Scene", scene.draw), ("Dataset", dataset.draw), ("Backend", backend.draw), ("Sampling rate (all panes)", rate.draw),
-            ("Panes", panes.draw), ("Difference and error", analysis.draw), ("Camera", camera.draw),
-            ("Magnifier and output", output.draw), ("Timings", timings.draw))
+
+def sections(app: ViewerApp) -> tuple[tuple[str, Callable[[], None]], ...]:
+    """The sections top to bottom, each drawer given the state and only the services it uses."""
+    s = app.state
+    return (("Scene", partial(scene.draw, s, app.open_dialog)), ("Dataset", partial(dataset.draw, s, app.dialogs)),
+            ("Backend", partial(backend.draw, s, app.worker)), ("Sampling rate (all panes)", partial(rate.draw, s)),
+            ("Panes", partial(panes.draw, s)), ("Difference and error", partial(differences.draw, s, app.analysis)),
+            ("Camera", partial(camera.draw, s, app.open_dialog)),
+            ("Magnifier and output", partial(output.draw, s, app.screenshot_window, app.screenshot_pane)),
+            ("Timings", partial(timings.draw, s, app.worker, app.ui_fps)))
 
 
 def draw_panel(app: ViewerApp) -> None:
@@ -24,8 +32,8 @@ def draw_panel(app: ViewerApp) -> None:
     flags = (imgui.WindowFlags_.no_title_bar | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_move
              | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_bring_to_front_on_focus).value
     imgui.begin("##panel", None, flags)
-    for title, draw in SECTIONS:
+    for title, draw in sections(app):
         imgui.spacing()
         if imgui.collapsing_header(title, imgui.TreeNodeFlags_.default_open.value):
-            draw(app)
+            draw()
     imgui.end()

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from imgui_bundle import imgui
 
@@ -11,11 +11,11 @@ from ..camera_control import CameraController
 from ..keys import hint
 
 if TYPE_CHECKING:
-    from ..window import ViewerApp
+    from ..state import AppState
 
 
-def draw(app: ViewerApp) -> None:
-    state, s = app.state, app.state.settings
+def draw(state: AppState, open_dialog: Callable[[], None]) -> None:
+    s = state.settings
     if imgui.button(f"Reset ({hint('reset_camera')})"):
         state.reset_camera()
     imgui.same_line()
@@ -50,4 +50,4 @@ def draw(app: ViewerApp) -> None:
     else:
         imgui.text_disabled("no training cameras (cameras.json)")
     if imgui.small_button("Open cameras.json..."):
-        app.open_dialog()
+        open_dialog()

@@ -9,30 +9,29 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ...io.datasets import SPLITS
-from ..analysis_worker import PHOTO
+from ..difference_thread import PHOTO
 from ..keys import hint
 from ..layout import PANEL_W
 
 if TYPE_CHECKING:
-    from ..window import ViewerApp
+    from ..dialogs import FileDialogs
+    from ..state import AppState
 
 LIST_H = 150  # pixels of the views list
 
 
-def open_dataset_dialog(app: ViewerApp) -> None:
+def open_dataset_dialog(state: AppState, dialogs: FileDialogs) -> None:
     """The system's folder dialog (or the built-in browser) to open a dataset folder beside the scene."""
-    state = app.state
     start = state.dataset.dataset.root.parent if state.dataset.dataset is not None else (
         state.scene_path.parent if state.scene_path else Path.cwd())
-    app.dialogs.open_folder(start, "Open a dataset folder (COLMAP, Blender or cameras.json)",
-                            state.dataset.open)
+    dialogs.open_folder(start, "Open a dataset folder (COLMAP, Blender or cameras.json)",
+                        state.dataset.open)
 
 
-def draw(app: ViewerApp) -> None:
-    state = app.state
+def draw(state: AppState, dialogs: FileDialogs) -> None:
     ds = state.dataset
     if imgui.button("Open dataset..."):
-        open_dataset_dialog(app)
+        open_dataset_dialog(state, dialogs)
     imgui.same_line()
     imgui.set_next_item_width(110)
     _, ds.images = imgui.input_text("photos", ds.images)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from imgui_bundle import imgui
 
@@ -11,31 +11,30 @@ from ..layout import PANEL_W
 from ..screenshots import shot_dir
 
 if TYPE_CHECKING:
-    from ..window import ViewerApp
+    from ..state import AppState
 
 
-def draw(app: ViewerApp) -> None:
-    state, s = app.state, app.state.settings
+def draw(state: AppState, screenshot_window: Callable[[], object], screenshot_pane: Callable[[int], object]) -> None:
+    s = state.settings
     _, s.loupe = imgui.checkbox(f"loupe ({hint('toggle_loupe')})", s.loupe)
     imgui.same_line()
     imgui.set_next_item_width(120)
     _, s.loupe_zoom = imgui.slider_float("zoom", s.loupe_zoom, 2.0, 32.0, "x%.0f")
     if imgui.button(f"Screenshot window ({hint('screenshot_window')})"):
-        app.screenshot_window()
+        screenshot_window()
     for p in state.visible:
         if p.index:
             imgui.same_line(0, 4)
         if imgui.button(p.name):
-            app.screenshot_pane(p.index)
+            screenshot_pane(p.index)
         if imgui.is_item_hovered():
             imgui.set_tooltip(f"pane {p.name}: 16-bit PNG at its render resolution")
     imgui.text_disabled(f"into {shot_dir(state)}")
-    draw_video(app)
+    draw_video(state)
 
 
-def draw_video(app: ViewerApp) -> None:
+def draw_video(state: AppState) -> None:
     """Record zoom video (and its frame count), or its progress and Cancel while it runs."""
-    state = app.state
     v = state.video
     if v is not None and not v.finished():
         imgui.progress_bar(v.fraction, (PANEL_W - 100, 0), f"video {v.done_frames}/{v.total}")

@@ -10,11 +10,11 @@ from ..settings import MODE_NAMES
 from ..views import VIEW_HELP, VIEWS
 
 if TYPE_CHECKING:
-    from ..window import ViewerApp
+    from ..state import AppState
 
 
-def draw(app: ViewerApp) -> None:
-    state, s = app.state, app.state.settings
+def draw(state: AppState) -> None:
+    s = state.settings
     for n in range(1, 5):
         if n > 1:
             imgui.same_line()

@@ -11,11 +11,11 @@ from ..layout import PANEL_W
 from ..rates import RATE_STEPS, rate_to_slider, slider_to_rate
 
 if TYPE_CHECKING:
-    from ..window import ViewerApp
+    from ..state import AppState
 
 
-def draw(app: ViewerApp) -> None:
-    state, s = app.state, app.state.settings
+def draw(state: AppState) -> None:
+    s = state.settings
     for k, r in enumerate(RATE_STEPS):
         if k:
             imgui.same_line(0, 3)

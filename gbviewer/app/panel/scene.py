@@ -3,18 +3,17 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from imgui_bundle import imgui
 
 from ..layout import PANEL_W
 
 if TYPE_CHECKING:
-    from ..window import ViewerApp
+    from ..state import AppState
 
 
-def draw(app: ViewerApp) -> None:
-    state = app.state
+def draw(state: AppState, open_dialog: Callable[[], None]) -> None:
     if state.scene is not None:
         imgui.text(state.scene_path.name if state.scene_path else "?")
         imgui.text_disabled(f"{state.scene.num_splats:,} splats, SH degree {state.scene.sh_degree}, "
@@ -35,7 +34,7 @@ def draw(app: ViewerApp) -> None:
         if imgui.small_button("dismiss"):
             state.load_error = ""
     if imgui.button("Open..."):
-        app.open_dialog()
+        open_dialog()
     imgui.same_line()
     if imgui.begin_combo("##recent", "Recent files"):
         recent = state.settings.recent

@@ -9,11 +9,12 @@ from imgui_bundle import imgui
 from ..panes import pane_fps
 
 if TYPE_CHECKING:
-    from ..window import ViewerApp
+    from ..pane_state import RateMeter
+    from ..state import AppState
+    from ..worker import RenderWorker
 
 
-def draw(app: ViewerApp) -> None:
-    state = app.state
+def draw(state: AppState, worker: RenderWorker, ui_fps: RateMeter) -> None:
     flags = (imgui.TableFlags_.borders_inner_h | imgui.TableFlags_.row_bg | imgui.TableFlags_.sizing_fixed_fit).value
     if not imgui.begin_table("stats", 6, flags):
         return
@@ -34,5 +35,5 @@ def draw(app: ViewerApp) -> None:
                 imgui.text(c)
     imgui.end_table()
     imgui.text_disabled("ms per stage; fps = finished renders per second")
-    imgui.text_disabled(f"UI {app.ui_fps.rate():.0f} fps, {app.worker.dropped} stale requests dropped, "
-                        f"{app.worker.cancelled} stale renders stopped")
+    imgui.text_disabled(f"UI {ui_fps.rate():.0f} fps, {worker.dropped} stale requests dropped, "
+                        f"{worker.cancelled} stale renders stopped")

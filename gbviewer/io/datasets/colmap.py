@@ -12,6 +12,7 @@ from pathlib import Path
 
 from ...camera import Camera
 from ...errors import CameraError, DatasetError, InvalidValue
+from ...extras import require
 from ...validate import array, parse_json, real
 from .dataset import Dataset, View, holdout_splits
 from .photos import fit_to_photo, missing_photos
@@ -53,6 +54,7 @@ def _stage(model: Path, into: Path) -> int:
 def read_colmap(model: Path) -> dict:
     """{"cameras": {id: {model, width, height, params, names}}, "images": [{name, camera, R, t}]} of the posed
     images, from pycolmap in a child process; a malformed model is a one-line `DatasetError`."""
+    require("eval", "pycolmap", f"{model}: a COLMAP model", load=False)
     child = Path(__file__).with_name("colmap_child.py")
     with tempfile.TemporaryDirectory(prefix="gbviewer-colmap-") as tmp:
         size = _stage(model, Path(tmp))
@@ -70,8 +72,7 @@ def read_colmap(model: Path) -> dict:
     except InvalidValue as exc:
         raise DatasetError(str(exc)) from None
     if "error" in doc:
-        hint = "; pip install pycolmap" if "No module named 'pycolmap'" in doc["error"] else ""
-        raise DatasetError(f"{model}: unreadable COLMAP model ({doc['error'][:200]}{hint})")
+        raise DatasetError(f"{model}: unreadable COLMAP model ({doc['error'][:200]})")
     return doc
 
 

@@ -48,7 +48,7 @@ from ...errors import BackendUnavailable, RenderError
 from ...scene import Scene
 from ..control import Progress, RenderControl
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
-from ..types import Frame, FrameStats, Mode, RenderSettings
+from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
 from .context import check_context, standalone_context
 from .gpu import WG, Gpu
 from .limits import blend_plan
@@ -57,7 +57,7 @@ from .sort import SCAN_BLOCK, fill, pairs_by_tile, radix_sort, scan
 NO_OIT = (0.0, 0.0, 1.0, 0.0)  # the shaders' oit uniform (sigma, w_bg, E, depth_correct) outside wsr and duplex
 
 
-class GlslRenderer:
+class GlslRenderer(Renderer):
     """OpenGL 4.3 compute-shader renderer; see the module docstring.
 
     `ctx`: a moderngl.Context to render in (the app's window context), or None for the shared headless EGL context.
@@ -66,6 +66,7 @@ class GlslRenderer:
     """
 
     name = "glsl"
+    capabilities = Capabilities(gl_texture=True, gl_context=True)
 
     def __init__(self, ctx=None, precise_math: bool = True) -> None:
         self._owns_ctx = ctx is None
@@ -232,7 +233,7 @@ class GlslRenderer:
     def release(self) -> None:
         """Free the GPU buffers and the output texture (also done when the renderer is garbage-collected)."""
         self.gpu.release()
-        self._uploaded = None
+        self._scene = self._uploaded = None
         self._cells = None
 
     # ---- pipeline ------------------------------------------------------------------------------------------------

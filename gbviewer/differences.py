@@ -6,7 +6,7 @@ a robust default scale, and the references a render at sampling rate s is measur
   x1 pixels inside the rendered pixel); none for rates above 1 or where 1/s is not an integer;
 - 'dense': scalar with 8x8 supersampling at the render's own camera (any rate).
 
-Used by the viewer's difference and error views (`app/analysis.py`) and by `gbviewer compare --diff`.
+Used by the viewer's difference and error views (`app/difference_views.py`) and by `gbviewer compare --diff`.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from ..analysis import DIVERGING, format_scale
+from ..differences import DIVERGING, format_scale
 from .overlays import GREY, WHITE, col, text
 
 if TYPE_CHECKING:

@@ -1,10 +1,10 @@
 """Difference and error views and live PSNR/SSIM per pane, computed off the UI thread.
 
 `PaneAnalysis` (UI side, no imgui) looks after each UI frame at every visible pane part's newest full-resolution
-frame and asks `analysis_worker.AnalysisThread` for what it needs: for the 'difference' view, the signed difference
+frame and asks `difference_thread.AnalysisThread` for what it needs: for the 'difference' view, the signed difference
 to pane A (pane A's mode rendered at this pane's camera, or pane A's own frame where it is at the same camera); for
 the 'error' view and the PSNR/SSIM labels, the difference to the chosen reference ('box' or 'dense' of
-`gbviewer.analysis`, or 'photo': the snapped dataset view's photo at the rate, asked only for frames rendered at that
+`gbviewer.differences`, or 'photo': the snapped dataset view's photo at the rate, asked only for frames rendered at that
 view's camera) with PSNR and SSIM; for the 'photo' view, that photo, shown instead of the render. Nothing is asked
 while the camera moves: the labels keep their last values, marked stale, and a pane in one of these views shows its
 plain render, saying why, until the analysis of its frame is in (`visualize`, which `panes.PaneRenders` calls for
@@ -17,14 +17,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..analysis import REFERENCES, camera_key, colour_difference
+from ..differences import REFERENCES, camera_key, colour_difference
 from ..camera import format_rate
 from ..io.datasets import View
 from ..render import Frame
 from ..scene import Scene
-from .analysis_worker import PHOTO, Analysis, AnalysisThread, Request, Spec
+from .difference_thread import PHOTO, Analysis, AnalysisThread, Request, Spec
 from .settings import PANE_NAMES
-from .state import AppState, Shown
+from .pane_state import Shown
+from .state import AppState
 from .views import visualize as visualize_view
 from .worker import RenderWorker
 

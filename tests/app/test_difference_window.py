@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer import analysis, metrics
-from gbviewer.app.analysis_overlay import TOP
+from gbviewer import differences, metrics
+from gbviewer.app.difference_overlay import TOP
 from gbviewer.figure import to_uint8, upscale_nearest
-from test_window import LABEL_BAND, agree, app, expected_pane, pane_pixels, press, shot, wait  # noqa: F401 (app)
+from window_helpers import LABEL_BAND, agree, expected_pane, pane_pixels, press, shot, wait
 
 pytestmark = pytest.mark.display
 
@@ -49,10 +49,10 @@ def test_difference_and_error_views_and_psnr_labels(app):
     wait_analysed(app)
     img = shot(app, "viewer-analysis-difference")
     a_rgb, b_rgb = (state.panes[i].parts["a"].frame.rgb for i in range(2))
-    d = analysis.signed_difference(b_rgb, a_rgb)
-    scale = analysis.robust_scale(d)
+    d = differences.signed_difference(b_rgb, a_rgb)
+    scale = differences.robust_scale(d)
     assert app.analysis.shown_scale[(1, "a")] == scale
-    expected = upscale_nearest(to_uint8(analysis.colour_difference(d, scale)), b.rect.h, b.rect.w)
+    expected = upscale_nearest(to_uint8(differences.colour_difference(d, scale)), b.rect.h, b.rect.w)
     got = pane_pixels(img, b.rect)
     below = TOP + 44  # under the label, legend and colour bar
     assert agree(got[below:], expected[below:]) > 0.995
@@ -85,7 +85,8 @@ def test_difference_and_error_views_and_psnr_labels(app):
     wait_analysed(app)
     img = shot(app, "viewer-analysis-error")
     e = app.analysis.latest[(1, "a")].error
-    expected = upscale_nearest(to_uint8(analysis.colour_difference(e, analysis.robust_scale(e))), b.rect.h, b.rect.w)
+    coloured = differences.colour_difference(e, differences.robust_scale(e))
+    expected = upscale_nearest(to_uint8(coloured), b.rect.h, b.rect.w)
     below = TOP + 44 + 26
     assert agree(pane_pixels(img, b.rect)[below:], expected[below:]) > 0.995
 

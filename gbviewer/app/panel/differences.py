@@ -8,16 +8,16 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from ...analysis import ROBUST_PERCENTILE
-from ..analysis import REFERENCE_KINDS
+from ...differences import ROBUST_PERCENTILE
+from ..difference_views import REFERENCE_KINDS
 from ..keys import hint
 
 if TYPE_CHECKING:
-    from ..window import ViewerApp
+    from ..difference_views import PaneAnalysis
+    from ..state import AppState
 
 
-def draw(app: ViewerApp) -> None:
-    state, analysis = app.state, app.analysis
+def draw(state: AppState, analysis: PaneAnalysis) -> None:
     o = analysis.options
     imgui.text_disabled(f"{hint('toggle_difference')}: pane - pane A   {hint('toggle_error')}: pane - reference")
     kinds = list(REFERENCE_KINDS)

@@ -1,6 +1,6 @@
-"""The analysis thread of the difference and error views (`app/analysis.py` asks, this computes): for one pane
+"""The analysis thread of the difference and error views (`app/difference_views.py` asks, this computes): for one pane
 part's frame, the signed difference to pane A's mode at the same camera and the difference to a reference with PSNR
-and SSIM: 'box' or 'dense' of `gbviewer.analysis`, or 'photo', a dataset view's photo at the rate
+and SSIM: 'box' or 'dense' of `gbviewer.differences`, or 'photo', a dataset view's photo at the rate
 (`eval.ground_truth`, box-downsampled files cached on disk too). The newest request per pane part wins (a waiting
 older one is dropped, a running one is cancelled between tiles); references render on the thread's own CPU renderer
 and the last few are cached (panes of one size share them). No OpenGL here."""
@@ -15,7 +15,7 @@ from typing import Callable, Hashable
 
 import numpy as np
 
-from ..analysis import (DENSE_SUPERSAMPLE, camera_key, fidelity, reference_image, reference_note, reference_settings,
+from ..differences import (DENSE_SUPERSAMPLE, camera_key, fidelity, reference_image, reference_note, reference_settings,
                         robust_scale, signed_difference)
 from ..camera import Camera
 from ..errors import GBViewerError, RenderCancelled

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer import analysis, metrics
-from gbviewer.app.analysis import PaneAnalysis
-from gbviewer.app.analysis_worker import AnalysisThread, Request, Spec
+from gbviewer import differences, metrics
+from gbviewer.app.difference_views import PaneAnalysis
+from gbviewer.app.difference_thread import AnalysisThread, Request, Spec
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
 from gbviewer.app.worker import RenderJob
@@ -43,9 +43,9 @@ def test_thread_computes_references_differences_and_psnr(thread, bundled_scene, 
     dense = gb.render(bundled_scene, cam, "scalar", supersample=8).rgb
     assert slot == "x" and a.frame is frame and a.note == ""
     assert a.psnr == metrics.psnr(frame.rgb, dense) and a.ssim == metrics.ssim(frame.rgb, dense)
-    np.testing.assert_array_equal(a.error, analysis.signed_difference(frame.rgb, dense))
-    assert a.error_scale == analysis.robust_scale(a.error)
-    np.testing.assert_array_equal(a.diff, analysis.signed_difference(frame.rgb, gb.render(bundled_scene, cam).rgb))
+    np.testing.assert_array_equal(a.error, differences.signed_difference(frame.rgb, dense))
+    assert a.error_scale == differences.robust_scale(a.error)
+    np.testing.assert_array_equal(a.diff, differences.signed_difference(frame.rgb, gb.render(bundled_scene, cam).rgb))
     # the box reference at x1/2: the x1 render box-downsampled; none at x2 (and it says why)
     thread.submit(Request("x", bundled_scene, frame, cam, 0.5, gbs, Spec("box")))
     (_, a), = wait_results(thread)
@@ -118,15 +118,15 @@ def test_difference_view_and_psnr_labels(bundled_scene, output_view):
         rgb, legend = an.visualize((1, "a"), b.frame, "difference")  # before the thread answered: the render
         assert rgb is b.frame.rgb and "computing" in legend
         settle(an)
-        d = analysis.signed_difference(b_rgb, a_rgb)
+        d = differences.signed_difference(b_rgb, a_rgb)
         rgb, legend = an.visualize((1, "a"), b.frame, "difference")
-        scale = analysis.robust_scale(d)
-        np.testing.assert_array_equal(rgb, analysis.colour_difference(d, scale))
+        scale = differences.robust_scale(d)
+        np.testing.assert_array_equal(rgb, differences.colour_difference(d, scale))
         assert an.shown_scale[(1, "a")] == scale and legend == "B - A (scalar)"
         assert b.view == ""  # the result asked the panes to re-colour it
         an.set_scale(False, 0.02)
         np.testing.assert_array_equal(an.visualize((1, "a"), b.frame, "difference")[0],
-                                      analysis.colour_difference(d, 0.02))
+                                      differences.colour_difference(d, 0.02))
         assert an.fidelity_line((1, "a")) is None  # labels off, no error view
         # PSNR / SSIM labels against the box reference: x1 scalar box-downsampled
         an.toggle_fidelity()
@@ -144,9 +144,9 @@ def test_difference_view_and_psnr_labels(bundled_scene, output_view):
         assert an.options.reference == "dense" and an.fidelity_line((0, "a"))[1]  # stale: another reference
         settle(an)
         dense = gb.render(bundled_scene, cam, "scalar", supersample=8).rgb
-        e = analysis.signed_difference(a_rgb, dense)
+        e = differences.signed_difference(a_rgb, dense)
         rgb, legend = an.visualize((0, "a"), state.panes[0].parts["a"].frame, "error")
-        np.testing.assert_array_equal(rgb, analysis.colour_difference(e, 0.02))
+        np.testing.assert_array_equal(rgb, differences.colour_difference(e, 0.02))
         assert legend == "A - dense reference"
         assert an.fidelity_line((0, "a"))[0].startswith(f"PSNR {metrics.psnr(a_rgb, dense):.2f} dB")
         # a new frame on pane B: its label is stale until analysed, and nothing is asked while the camera moves

@@ -1,0 +1,61 @@
+"""`gbviewer info` and `gbviewer convert`: describe a scene file, write it as an INRIA .ply."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from ..errors import GBViewerError
+from ..io import load, write_inria_ply
+from ..io.files import check_writable
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    scene = load(args.scene)
+    lo, hi = scene.bounds
+    rlo, rhi = scene.robust_bounds()
+    info = {
+        "file": str(args.scene),
+        "format": scene.meta.get("format"),
+        "version": scene.meta.get("version"),
+        "splats": scene.num_splats,
+        "sh_degree": scene.sh_degree,
+        "filter_3D": scene.filter_3d is not None,
+        "bounds": [lo.tolist(), hi.tolist()],
+        "robust_bounds_2_98": [rlo.tolist(), rhi.tolist()],
+        "properties": scene.meta.get("properties", []),
+    }
+    if args.json:
+        print(json.dumps(info, indent=2))
+    else:
+        for key, val in info.items():
+            if key == "properties":
+                val = ", ".join(val) if len(val) <= 20 else ", ".join(val[:18]) + f", ... ({len(val)} in all)"
+            print(f"{key:>20}: {val}")
+    return 0
+
+
+def cmd_convert(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    if out.suffix.lower() != ".ply":
+        raise GBViewerError(f"{out}: output must end in .ply (a standard INRIA 3DGS ply)")
+    check_writable(out, args.force)
+    scene = load(args.scene)
+    write_inria_ply(scene, out, force=args.force)
+    print(f"{out}: {scene.num_splats} splats, SH degree {scene.sh_degree}, from {scene.meta.get('format')} "
+          f"(version {scene.meta.get('version')})")
+    return 0
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("info", help="describe a scene file")
+    p.add_argument("scene", type=Path)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("convert", help="write any supported scene as a standard INRIA 3DGS .ply")
+    p.add_argument("scene", type=Path)
+    p.add_argument("out", type=Path, help="OUT.ply")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=cmd_convert)

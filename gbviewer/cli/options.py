@@ -1,0 +1,99 @@
+"""What several subcommands share: camera and backend options, the camera they describe, the render-size check,
+progress bars."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+
+from ..argtypes import MAX_SIDE, ORBIT, SIDE, count
+from ..camera import PROJECTIONS, Camera, load_cameras_json, orbit_camera
+from ..camera_paths import scene_focus_depth
+from ..errors import GBViewerError
+from ..render import AUTO, BACKEND_NAMES, choose_backend
+from ..scene import Scene
+from ..validate import integer
+
+MAX_COUNT = 10_000  # most views, repeats and flicker frames of a benchmark
+
+
+def add_camera_args(p: argparse.ArgumentParser) -> None:
+    """--cameras/--camera, --orbit, --width/--height, --up, --projection: shared by the commands that render."""
+    p.add_argument("--cameras", type=Path, help="3DGS cameras.json")
+    p.add_argument("--camera", type=count(lo=0), default=0, help="index into --cameras (default 0)")
+    p.add_argument("--orbit", type=ORBIT, metavar=ORBIT.metavar,
+                   help="orbit camera: azimuth and elevation in degrees, distance in scene units (0: auto)")
+    p.add_argument("--width", type=SIDE, help="image width (default 640, or the training camera's)")
+    p.add_argument("--height", type=SIDE, help="image height (default 480, or the training camera's)")
+    p.add_argument("--up", default="-y", choices=["-y", "+y", "+z", "-z"], help="scene up axis for orbit cameras")
+    p.add_argument("--projection", choices=PROJECTIONS,
+                   help="perspective (default: orbits; a --cameras entry keeps its own) or orthographic: an orbit "
+                   "keeps its eye with f / distance pixels per unit, a training camera is converted at the depth of "
+                   "the scene's centre; either way the scene appears at the same size")
+
+
+def add_backend_arg(p: argparse.ArgumentParser, default: str | None = AUTO, text: str = "") -> None:
+    """--backend: cpu, glsl, cuda or auto."""
+    p.add_argument("--backend", default=default, choices=list(BACKEND_NAMES),
+                   help=text or "auto (default): CUDA where a device is usable, else GLSL on a hardware OpenGL 4.3 "
+                   "driver, else cpu; the choice and why go to stderr")
+
+
+def camera_from_args(scene: Scene, args: argparse.Namespace) -> Camera:
+    """The camera the arguments describe: a training camera, an orbit, or the default framing, with --projection."""
+    if args.cameras is not None:
+        cams = load_cameras_json(args.cameras)
+        if not 0 <= args.camera < len(cams):
+            raise GBViewerError(f"{args.cameras}: camera {args.camera} out of range (0..{len(cams) - 1})")
+        cam = cams[args.camera]
+        if args.width or args.height:
+            w = args.width or round(cam.width * args.height / cam.height)
+            h = args.height or round(cam.height * args.width / cam.width)
+            cam = cam.with_size(w, h)
+        if args.projection in (None, cam.projection):
+            return cam
+        depth = scene_focus_depth(scene, cam, f"--projection {args.projection} on camera {args.camera}",
+                                  "give an --orbit")
+        return cam.with_projection(args.projection, depth)
+    w, h = args.width or 640, args.height or 480
+    projection = args.projection or "perspective"
+    if args.orbit is not None:
+        az, el, dist = args.orbit
+        return orbit_camera(scene, az, el, dist if dist > 0 else None, w, h, up=args.up, projection=projection)
+    return orbit_camera(scene, width=w, height=h, up=args.up, projection=projection)
+
+
+def backend_of(args: argparse.Namespace) -> str:
+    """The backend --backend names; for auto (the default) the one `choose_backend()` picks, said once on stderr."""
+    if args.backend in (None, AUTO):
+        picked = choose_backend()
+        print(f"gbviewer: backend {picked}", file=sys.stderr)
+        args.backend = picked.name
+    return args.backend
+
+
+def check_render_size(width: int, height: int, rates: list[float], option: str) -> None:
+    """Refuse, before anything is allocated, a render of width x height at the largest of `rates` with a side
+    over MAX_SIDE."""
+    side = max(width, height) * max(rates)
+    integer(round(side), f"{option}: image side rendered at x{max(rates):g}", hi=MAX_SIDE)
+
+
+def progress_columns() -> tuple:
+    """A rich progress bar with percentage, elapsed time and ETA."""
+    from rich.progress import BarColumn, TaskProgressColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    return (TextColumn("{task.description}"), BarColumn(), TaskProgressColumn(), TimeElapsedColumn(),
+            TextColumn("eta"), TimeRemainingColumn())
+
+
+@contextmanager
+def progress_bar(name: str, total: float):
+    """A transient progress bar (percentage, elapsed, ETA) of `total` units; yields advance(units)."""
+    from rich.progress import Progress
+
+    with Progress(*progress_columns(), transient=True) as progress:
+        task = progress.add_task(name, total=total)
+        yield lambda units: progress.advance(task, units)

@@ -1,0 +1,49 @@
+"""`gbviewer render`: one image."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..argtypes import BACKGROUND, Rate, count
+from ..errors import GBViewerError
+from ..figure import save_image
+from ..io import load
+from ..io.files import check_writable
+from ..render import Mode, RenderSettings, get_renderer
+from .options import add_backend_arg, add_camera_args, backend_of, camera_from_args, check_render_size
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    if out.suffix.lower() not in (".png", ".npy"):
+        raise GBViewerError(f"{out}: output must end in .png or .npy")
+    check_writable(out, args.force)
+    scene = load(args.scene)
+    cam = camera_from_args(scene, args)
+    check_render_size(cam.width, cam.height, [args.scale], "--scale")
+    cam = cam.at_sampling_rate(args.scale)
+    settings = RenderSettings(Mode.parse(args.mode), args.supersample, args.background, args.sh_degree)
+    frame = get_renderer(scene, backend_of(args)).render(cam, settings)
+    save_image(out, frame.rgb, force=args.force)
+    st = frame.stats
+    print(f"{out}: {cam.width}x{cam.height} {settings.label} on {args.backend}: {st.total_ms:.1f} ms "
+          f"(preprocess {st.preprocess_ms:.1f}, sort {st.sort_ms:.1f}, blend {st.blend_ms:.1f}), "
+          f"{st.visible} visible splats, {st.evals_per_pixel:.1f} evaluations/pixel")
+    return 0
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("render", help="render one image")
+    p.add_argument("scene", type=Path)
+    add_camera_args(p)
+    p.add_argument("--mode", default="scalar", choices=[m.label for m in Mode])
+    p.add_argument("--supersample", type=count(8), default=1, metavar="1..8")
+    p.add_argument("--scale", type=Rate(), default=1.0, help="sampling rate: 8, 1, 0.125 or 1/8")
+    add_backend_arg(p)
+    p.add_argument("--background", type=BACKGROUND, default=(0.0, 0.0, 0.0), metavar=BACKGROUND.metavar,
+                   help="background colour, each in 0..1")
+    p.add_argument("--sh-degree", type=count(3, lo=0), default=3, metavar="0..3")
+    p.add_argument("--out", required=True, help="FILE.png or FILE.npy (float32 RGB)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=cmd_render)

@@ -1,0 +1,78 @@
+"""`gbviewer video`: side-by-side zoom videos."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..argtypes import INSET, SIZE, Number, Rate, count, positive
+from ..camera_paths import MAX_FRAMES, PATHS, camera_path
+from ..extras import require
+from ..io import load
+from ..io.files import check_writable
+from ..render import RenderSettings
+from ..video import MAX_FPS, MIN_FPS, record_video
+from .options import add_backend_arg, add_camera_args, backend_of, camera_from_args, check_render_size
+
+VIDEO_PANE = (480, 360)  # default pane size of `gbviewer video`
+
+
+def cmd_video(args: argparse.Namespace) -> int:
+    """Side-by-side zoom video of several modes (H.264 MP4)."""
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                               TimeRemainingColumn)
+
+    require("video", "imageio_ffmpeg", "an MP4 video", load=False)
+    settings = RenderSettings.parse_list(args.modes)
+    if args.size:
+        args.width, args.height = args.size
+    elif not (args.width or args.height or args.cameras):
+        args.width, args.height = VIDEO_PANE
+    check_writable(args.out, args.force)
+    scene = load(args.scene)
+    cam = camera_from_args(scene, args)
+    if args.path == "rate":
+        check_render_size(cam.width, cam.height, [args.from_rate, args.to_rate], "--from/--to")
+    path = camera_path(args.path, cam, args.frames, args.from_rate, args.to_rate, scene, args.up, fps=args.fps,
+                       seconds=args.seconds, max_frames=args.max_frames)
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("frames"),
+               TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn())
+    backend = backend_of(args)
+    with Progress(*columns) as progress:
+        task = progress.add_task(f"{Path(args.out).name}", total=len(path))
+        info = record_video(scene, path, settings, args.out, fps=args.fps, backend=backend, inset=args.inset,
+                            crf=args.crf, force=args.force,
+                            progress=lambda done, total: progress.update(task, completed=done))
+    print(f"wrote {info.path}: {info.frames} frames of {info.width}x{info.height} at {info.fps:g} fps "
+          f"({info.frames / info.fps:.1f} s), {', '.join(s.label for s in settings)}, {args.path} "
+          f"{f'{args.from_rate:g} -> {args.to_rate:g} ' if args.path in PATHS else ''}"
+          f"in {info.elapsed_s:.1f} s")
+    return 0
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("video", help="side-by-side zoom video of several modes (H.264 MP4)")
+    p.add_argument("scene", type=Path)
+    add_camera_args(p)
+    p.add_argument("--modes", default="scalar,supersample:3,gaussian_blending",
+                   help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N)")
+    p.add_argument("--path", default="zoom",
+                   help="zoom (focal length), dolly (camera along its axis), rate (same view, rendered at the rate "
+                   "and nearest-upscaled) or a keyframes FILE.json (see gbviewer.keyframes.load_keyframes)")
+    p.add_argument("--from", dest="from_rate", type=Rate(), default=1.0, help="first sampling rate (default 1)")
+    p.add_argument("--to", dest="to_rate", type=Rate(), default=1.0 / 8.0, help="last sampling rate (default 1/8)")
+    length = p.add_mutually_exclusive_group()
+    length.add_argument("--frames", type=count(), help="number of frames")
+    length.add_argument("--seconds", type=positive(), help="length in seconds (default 4, or the keyframes' span)")
+    p.add_argument("--fps", type=Number(lo=MIN_FPS, hi=MAX_FPS), default=30.0,
+                   help=f"frames per second, {MIN_FPS:g}..{MAX_FPS:g} (default 30)")
+    p.add_argument("--max-frames", type=count(), default=MAX_FRAMES,
+                   help=f"refuse videos longer than this many frames (default {MAX_FRAMES})")
+    p.add_argument("--size", type=SIZE, metavar="WxH", help="size of each pane (default 480x360)")
+    add_backend_arg(p)
+    p.add_argument("--inset", type=INSET, metavar=INSET.metavar, help="magnify this region (x1 pixels) in a corner")
+    p.add_argument("--crf", type=count(51, lo=0), default=18, metavar="0..51",
+                   help="H.264 constant rate factor (0 lossless, 18 default, 23 ffmpeg's default)")
+    p.add_argument("--out", required=True, help="FILE.mp4")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=cmd_video)
