@@ -1,7 +1,7 @@
 """The CUDA backend's Python wrapper without a GPU, on a stand-in native renderer (cuda_fakes): state after failed
-uploads, a failed device (BackendFailed, usable(), the registry dropping the renderer, the CLI's one line), the
-texture registrations (a GL name reused by another texture), the GL finish after interop, and which GL device
-interop accepts."""
+uploads, a failed device (BackendFailed, usable(), the CLI's one line; the registry's replacement is tested by
+tests/render/test_contract.py), the texture registrations (a GL name reused by another texture), the GL finish
+after interop, and which GL device interop accepts."""
 
 from __future__ import annotations
 
@@ -13,7 +13,6 @@ from cuda_fakes import TIMEOUT, FakeNative, fake_renderer
 from helpers import front_camera, random_scene
 from gbviewer.cli import main
 from gbviewer.errors import BackendFailed, RenderError
-from gbviewer.render import registry
 from gbviewer.render.cuda import interop_status
 from gbviewer.render.cuda_textures import TextureRegistrations
 from gbviewer.render.prepare import prepare
@@ -62,21 +61,6 @@ def test_failed_device_makes_the_renderer_unusable(method):
     assert fake.calls == calls
     r.release_texture(3)  # the viewer still deletes its textures: the native side forgets the registration
     assert fake.calls == [*calls, "release 3"]
-
-
-def test_registry_drops_a_renderer_that_stopped_working(monkeypatch):
-    """get_renderer replaces the process's renderer of a backend once its usable() is False."""
-    scene = random_scene(20, seed=2)
-    broken = fake_renderer(FakeNative(device_fails={"render"}))
-    broken.upload(scene)
-    with pytest.raises(BackendFailed):
-        broken.render(front_camera(), gb.RenderSettings())
-    monkeypatch.setitem(registry._renderers, "cpu", (broken, lambda: scene))
-    fresh = gb.get_renderer(scene, "cpu")
-    assert fresh is not broken and fresh.name == "cpu" and registry._renderers["cpu"][0] is fresh
-    healthy = fake_renderer(FakeNative())
-    monkeypatch.setitem(registry._renderers, "cpu", (healthy, lambda: scene))
-    assert gb.get_renderer(scene, "cpu") is healthy  # a working one stays
 
 
 def test_cli_says_a_failed_device_in_one_line(monkeypatch, tmp_path, capsys):
