@@ -27,7 +27,7 @@ sys.path.insert(0, str(HERE.parent / "tools"))
 from soak_viewer import xvfb_display  # noqa: E402
 
 import gbviewer as gb  # noqa: E402
-from gbviewer.app.state import MOVING_HOLD_S  # noqa: E402
+from gbviewer.app.camera_actions import MOVING_HOLD_S  # noqa: E402
 
 TARGETS = {"ui_p95_ms": 33.0, "stale_ms": 50.0, "first_tiles_ms": 100.0}
 DEFAULT_SCENE = HERE.parents[1] / "shared" / "scenes" / "guitar.compressed.ply"  # the slow case

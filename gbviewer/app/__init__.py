@@ -33,8 +33,9 @@ def open_window(scene: str | Path | None = None, cameras: str | Path | None = No
     from ..errors import GBViewerError
     from ..extras import require
 
-    for module in ("imgui_bundle", "glfw", "skimage"):  # imgui_bundle first: it points pyGLFW at its own libglfw
+    for module in ("imgui_bundle", "glfw"):  # imgui_bundle first: it points pyGLFW at its own libglfw
         require("viewer", module, "the viewer")
+    require("viewer", "skimage", "the viewer", load=False)  # (imported at the first SSIM)
     from .window import ViewerApp
 
     try:
