@@ -5,6 +5,7 @@
 #
 #   bash bench/gpu_session.sh OUT_DIR [SCENES_DIR] [--no-gpu]
 #
+# SCENES_DIR: default ./shared/scenes, else ../shared/scenes, else the bundled scene alone (the report says which).
 # --no-gpu (and any machine without a usable CUDA device): checks only that the pieces' files exist and reports
 # each GPU piece as "no GPU" (tests/bench/test_gpu_session.py runs it so in CI). Environment: PYTHON (default: the
 # checkout's .venv, else python3), GBV_WHEELHOUSE (a folder of wheels to install missing Python packages from,
