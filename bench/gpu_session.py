@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+if any((REPO / "gbviewer").glob("_native*")):  # the checkout's build (gpu_session.sh's), else the installed package
+    sys.path.insert(0, str(REPO))
 
 import gbviewer as gb  # noqa: E402
 from gbviewer.render import CudaRenderer, RenderSettings  # noqa: E402

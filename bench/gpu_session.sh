@@ -102,9 +102,8 @@ if ! "$PY" -c "import numpy" 2>/dev/null; then
   fallback_report "$PY lacks numpy (missing: $missing) and no GBV_WHEELHOUSE to install it from"
   exit 1
 fi
-PYTHONPATH="$REPO${PYTHONPATH:+:$PYTHONPATH}" timeout $((DEADLINE - $(date +%s) + 5)) \
-  "$PY" "$REPO/bench/gpu_session.py" "$OUT" ${SCENES:+--scenes "$SCENES"} $NO_GPU --deadline "$DEADLINE" \
-  --build-log "$BUILD_LOG"
+timeout $((DEADLINE - $(date +%s) + 5)) "$PY" "$REPO/bench/gpu_session.py" "$OUT" ${SCENES:+--scenes "$SCENES"} \
+  $NO_GPU --deadline "$DEADLINE" --build-log "$BUILD_LOG"
 status=$?
 [ -s "$OUT/report.txt" ] || fallback_report "bench/gpu_session.py exited $status without a report"
 cat "$OUT/report.txt"

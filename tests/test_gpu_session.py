@@ -50,7 +50,7 @@ def test_cuda_check_finds_its_test_files():
     """bench/cuda_check.py imports the session's list (its own once pointed at a moved file); without a device it
     stops with one line."""
     proc = subprocess.run([sys.executable, str(REPO / "bench" / "cuda_check.py")], capture_output=True, text=True,
-                          timeout=60, env=dict(os.environ, PYTHONPATH=str(REPO)))
+                          timeout=60)
     from gbviewer.render import CudaRenderer
 
     if not CudaRenderer.available()[0]:
