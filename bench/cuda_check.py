@@ -1,9 +1,10 @@
-"""Run on a machine with an NVIDIA GPU: CUDA-vs-CPU agreement for every mode, then the speed table.
+"""Run on a machine with an NVIDIA GPU: the CUDA test files, then the CPU/CUDA speed table.
 
     bash scripts/setup.sh            # builds gbviewer._native_cuda when nvcc is on PATH
     .venv/bin/python bench/cuda_check.py [SCENE ...]
 
-Exits non-zero when the CUDA backend is unavailable or disagrees with the CPU backend."""
+bench/gpu_session.sh is the fuller session (CUDA vs CPU on every mode and scene, GLSL on the GPU's driver, the
+display path, timings, one report). Exits non-zero when the CUDA backend is unavailable or a test fails."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from pathlib import Path
 
 import gbviewer as gb
 from gbviewer.render import CudaRenderer
+from gpu_session import CUDA_TEST_FILES
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -25,7 +27,7 @@ def main(argv: list[str]) -> int:
     from gbviewer._native_cuda import availability
 
     print(f"CUDA device: {availability()[1]}")
-    tests = subprocess.run([sys.executable, "-m", "pytest", "-q", str(REPO / "tests" / "test_cuda.py")], cwd=REPO)
+    tests = subprocess.run([sys.executable, "-m", "pytest", "-q", *CUDA_TEST_FILES], cwd=REPO)
     if tests.returncode != 0:
         return tests.returncode
     scenes = argv or [str(gb.DEFAULT_SCENE)]

@@ -9,9 +9,10 @@ import numpy as np
 
 from ..camera import Camera
 from ..cells import Cells
-from ..errors import BackendUnavailable, RenderError
+from ..errors import BackendFailed, BackendUnavailable, RenderError
 from ..scene import Scene
 from .control import Progress, RenderControl
+from .cuda_textures import TextureRegistrations
 from .prepare import Prepared, camera_args, check_display_texture, native_frame, native_stats, prepare
 from .types import Capabilities, Frame, FrameStats, Renderer, RenderSettings
 
@@ -20,7 +21,12 @@ class CudaRenderer(Renderer):
     """Native CUDA backend: the scene stays on the device (a trained Duplex-GS model's view is uploaded per frame).
 
     Threads may share one renderer: uploads and renders are serialised (a lock here around the scene and cells on
-    the device, and a mutex in the native renderer around its buffers)."""
+    the device, and a mutex in the native renderer around its buffers).
+
+    A CUDA error that leaves the device unusable (a fault in a kernel, a watchdog timeout, the device lost) raises
+    BackendFailed and marks the renderer unusable (`Renderer.failed`, `usable()`): every later call raises
+    BackendFailed with that reason, `get_renderer` replaces it, and `available()` says no for the rest of the
+    process."""
 
     name = "cuda"
     capabilities = Capabilities(gl_texture=True)
@@ -31,14 +37,35 @@ class CudaRenderer(Renderer):
             raise BackendUnavailable(f"cuda backend unavailable: {why}")
         from .. import _native_cuda
 
+        try:
+            impl = _native_cuda.Renderer(device)
+        except RuntimeError as exc:
+            raise BackendUnavailable(f"cuda backend unavailable: {exc}") from None
+        self._attach(impl, _native_cuda.DeviceFailed)
+
+    def _attach(self, impl, device_failed: type[Exception]) -> None:
+        """The wrapper's state around the native renderer `impl`, whose `device_failed` errors mean its device
+        failed (the tests attach a stand-in)."""
         self._lock = threading.Lock()
+        self._impl = impl
+        self._device_failed = device_failed
+        self._failure = None
         self._scene: Scene | None = None
         self._uploaded: Scene | None = None
         self._cells: Cells | None = None
+        self._textures = TextureRegistrations(self._release)
+
+    def _call(self, method: str, *args):
+        """The native renderer's `method(*args)`: RuntimeError -> RenderError, DeviceFailed -> BackendFailed (and
+        the renderer unusable from then on)."""
+        if self._failure is not None:
+            raise BackendFailed(f"{self.name} backend stopped working: {self._failure}")
         try:
-            self._impl = _native_cuda.Renderer(device)
+            return getattr(self._impl, method)(*args)
+        except self._device_failed as exc:
+            raise self.failed(str(exc).splitlines()[0]) from None
         except RuntimeError as exc:
-            raise BackendUnavailable(f"cuda backend unavailable: {exc}") from None
+            raise RenderError(f"cuda: {exc}") from None
 
     @classmethod
     def available(cls) -> tuple[bool, str]:
@@ -66,12 +93,9 @@ class CudaRenderer(Renderer):
         # Forget what is on the device first: a failed upload (out of device memory) leaves no scene there.
         self._uploaded = None
         self._cells = None
-        try:
-            self._impl.upload(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d)
-            if scene.oit is not None and scene.oit.view_weight_sh is not None:
-                self._impl.upload_weights(np.ascontiguousarray(scene.oit.view_weight_sh, np.float32))
-        except RuntimeError as exc:
-            raise RenderError(f"cuda: {exc}") from None
+        self._call("upload", scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d)
+        if scene.oit is not None and scene.oit.view_weight_sh is not None:
+            self._call("upload_weights", np.ascontiguousarray(scene.oit.view_weight_sh, np.float32))
         self._uploaded = scene
 
     def _sync(self, prep: Prepared) -> None:
@@ -81,25 +105,21 @@ class CudaRenderer(Renderer):
             self._upload(scene)
         if cells is not None and cells is not self._cells:
             self._cells = None
-            try:
-                self._impl.upload_cells(cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
-                                        cells.cell_of(scene.num_splats))
-            except RuntimeError as exc:
-                raise RenderError(f"cuda: {exc}") from None
+            self._call("upload_cells", cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
+                       cells.cell_of(scene.num_splats))
             self._cells = cells
 
     @classmethod
     def gl_interop(cls) -> tuple[bool, str]:
-        """Whether `render_to_texture` can write into textures of the OpenGL context current in this thread (it
-        must run on a CUDA device); (usable, reason)."""
+        """Whether `render_to_texture` of a renderer made here with the default device (the process-wide one of
+        `get_renderer`) can write into textures of the OpenGL context current in this thread: that context must
+        run on the renderer's CUDA device; (usable, reason)."""
         ok, why = cls.available()
         if not ok:
             return False, why
         from .. import _native_cuda
 
-        if not _native_cuda.gl_devices():
-            return False, "the OpenGL context current here does not run on a CUDA device (no CUDA-GL interop)"
-        return True, ""
+        return interop_status(_native_cuda.gl_devices(), _native_cuda.default_device())
 
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
                on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
@@ -120,12 +140,20 @@ class CudaRenderer(Renderer):
         evaluation counts are summed there), only the stats come back. No debug planes. The copy has finished when
         it returns. The texture stays registered with CUDA: `release_texture(texture.glo)` before deleting it."""
         check_display_texture(texture, camera, self.name)
-        out, prep, t0 = self._run(camera, settings, RenderControl(cancel, on_progress), "render_to_gl_texture",
-                                  lead=(texture.glo,))
+        control = RenderControl(cancel, on_progress)
+        out, prep, t0 = self._run(camera, settings, control, "render_to_gl_texture", lead=(texture,),
+                                  extra=(False,))
+        texture.ctx.finish()  # the CUDA writes are done; the unmap reaches GL before the UI context samples it
         return native_stats(out, prep, camera, settings, self.name, t0)
 
     def release_texture(self, glo: int) -> None:
         """Forget the CUDA registration of GL texture `glo` (no-op without one); its context must be current."""
+        with self._lock:
+            self._textures.forget(glo)
+
+    def _release(self, glo: int) -> None:
+        """Drop the native registration of `glo`; also after a device failure (the native renderer then forgets it
+        without calling CUDA), so that the viewer can still delete its textures."""
         try:
             self._impl.release_gl_texture(int(glo))
         except RuntimeError as exc:
@@ -133,19 +161,28 @@ class CudaRenderer(Renderer):
 
     def _run(self, camera: Camera, settings: RenderSettings, control: RenderControl, method: str, lead: tuple = (),
              extra: tuple = ()) -> tuple:
-        """The native renderer's `method(*lead, camera args, mode, ..., background, *extra, oit globals)` under the
-        lock, `control` checked before and after it; its result dict, the frame's inputs and the start time."""
+        """The native renderer's `method(*lead, camera args, mode, ..., background, want_window, oit globals)` under
+        the lock (a texture in `lead` passed by its GL name, its registration claimed), `control` checked before and
+        after it; its result dict, the frame's inputs and the start time."""
         t0 = time.perf_counter()
         with self._lock, control:
             prep = prepare(self._scene, camera, settings, self.name)
             self._sync(prep)
             control.step(0, 1)
-            try:
-                out = getattr(self._impl, method)(*lead, *camera_args(camera), int(settings.mode),
-                                                  settings.supersample, settings.sh_degree,
-                                                  np.asarray(settings.background, np.float32), *extra,
-                                                  *(prep.oit or ()))
-            except RuntimeError as exc:
-                raise RenderError(f"cuda: {exc}") from None
+            lead = tuple(self._textures.claim(x) for x in lead)
+            out = self._call(method, *lead, *camera_args(camera), int(settings.mode), settings.supersample,
+                             settings.sh_degree, np.asarray(settings.background, np.float32), *extra,
+                             *(prep.oit or ()))
             control.step(1, 1)
         return out, prep, t0
+
+
+def interop_status(gl_devices: list[int], device: int) -> tuple[bool, str]:
+    """(usable, reason) of CUDA-GL interop for a renderer on CUDA `device` and a GL context on `gl_devices`: the
+    same device, else the copy path (a texture of a context on another GPU cannot be written)."""
+    if not gl_devices:
+        return False, "the OpenGL context current here does not run on a CUDA device (no CUDA-GL interop)"
+    if device not in gl_devices:
+        return False, (f"the OpenGL context runs on CUDA device {', '.join(map(str, gl_devices))}, the cuda renderer "
+                       f"on device {device}: frames are copied")
+    return True, ""

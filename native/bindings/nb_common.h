@@ -45,6 +45,7 @@ inline int64_t check_scene(const char* where, const FArr& means, const FArr& sca
         (filter_3d && filter_3d->size() != (size_t)n))
         fail(where, "array shapes do not match (N,3) means/scales, (N,4) quats, (N,) opacities, (N,K,3) sh, "
                     "(N,) filter_3d");
+    if (sh.shape(1) < 1) fail(where, "sh must hold K >= 1 coefficients per splat (N,K,3), the DC term first");
     return n;
 }
 

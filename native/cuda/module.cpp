@@ -16,30 +16,61 @@ namespace nb = nanobind;
 using namespace gbv;
 using namespace gbv::nbc;
 
+namespace {
+
+// Renderer.render's and render_to_gl_texture's arguments as a RenderArgs (parse_render_args, then the SH degree
+// cap and the window plane).
+RenderArgs render_args(const char* where, FArr R, FArr t, float fx, float fy, float cx, float cy, int width,
+                       int height, float near_plane, int projection, int mode, int supersample, int sh_degree,
+                       FArr background, bool want_window, float sigma, float weight_background, float et_grade,
+                       bool depth_correct) {
+    RenderArgs a = parse_render_args(where, R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
+                                     supersample, background, sigma, weight_background, et_grade, depth_correct);
+    a.sh_degree = sh_degree;
+    a.want_window = want_window;
+    return a;
+}
+
+// The keyword names after `R` of render_args' arguments (the renderer methods and check_render_args share them).
+#define GBV_RENDER_ARGS                                                                                            \
+    nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"), nb::arg("cx"), nb::arg("cy"), nb::arg("width"),     \
+        nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"), nb::arg("supersample"), \
+        nb::arg("sh_degree"), nb::arg("background"), nb::arg("want_window") = false, nb::arg("sigma") = 10.0f,    \
+        nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false
+
+}  // namespace
+
 NB_MODULE(_native_cuda, m) {
     m.doc() = "gbviewer CUDA renderer (same kernel headers as the CPU module). One Renderer may be shared by "
-              "threads: its calls are serialised, and uploads and renders release the GIL.";
+              "threads: its calls are serialised, and every call releases the GIL before it waits for the renderer.";
+    nb::exception<cuda::DeviceFailed>(m, "DeviceFailed", PyExc_RuntimeError);
     m.def("availability", &cuda::availability, "(usable, reason or the default device's name)");
+    m.def("default_device", &cuda::default_device,
+          "The device Renderer() uses on this thread (the runtime's current device); -1 without a usable runtime.");
     m.def("gl_devices", &cuda::gl_devices,
           "CUDA devices that drive the OpenGL context current on this thread ([] when none or unknown).");
+    m.def("error_info", &cuda::error_info, nb::arg("code"),
+          "(CUDA's name of error `code`, whether it raises DeviceFailed without asking the device); no device needed.");
+    m.def("grown_capacity", &cuda::grown_capacity, nb::arg("capacity"), nb::arg("n"),
+          "Elements a device buffer of `capacity` allocates for a request of n (the growth policy, for tests).");
     m.def(
         "check_render_args",
         [](FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height, float near_plane,
            int projection, int mode, int supersample, int sh_degree, FArr background, bool want_window, float sigma,
            float weight_background, float et_grade, bool depth_correct) {
-            (void)sh_degree;
-            (void)want_window;
-            parse_render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
-                              supersample, background, sigma, weight_background, et_grade, depth_correct);
+            render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode, supersample,
+                        sh_degree, background, want_window, sigma, weight_background, et_grade, depth_correct);
         },
-        nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"), nb::arg("cx"), nb::arg("cy"), nb::arg("width"),
-        nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"), nb::arg("supersample"), nb::arg("sh_degree"),
-        nb::arg("background"), nb::arg("want_window"), nb::arg("sigma") = 10.0f, nb::arg("weight_background") = 1.0f,
-        nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
-        "Renderer.render's argument checks, without a device: raises ValueError as render would.");
+        GBV_RENDER_ARGS, "Renderer.render's argument checks, without a device: raises ValueError as render would.");
+    m.def(
+        "check_scene",
+        [](FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, std::optional<FArr> filter_3d) {
+            return check_scene("upload", means, scales, quats, opacities, sh, filter_3d);
+        },
+        nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"),
+        nb::arg("filter_3d").none(), "Renderer.upload's array checks, without a device; returns N.");
     nb::class_<cuda::Renderer>(m, "Renderer")
-        .def(nb::init<int>(), nb::arg("device") = -1,
-             "device < 0: the runtime's current device (0 unless the thread selected another)")
+        .def(nb::init<int>(), nb::arg("device") = -1, "device < 0: default_device()")
         .def_prop_ro("device", &cuda::Renderer::device)
         .def("upload",
              [](cuda::Renderer& r, FArr means, FArr scales, FArr quats, FArr opacities, FArr sh,
@@ -51,64 +82,61 @@ NB_MODULE(_native_cuda, m) {
              })
         .def("upload_weights",
              [](cuda::Renderer& r, FArr weight_sh) {
-                 const int64_t n = r.num_splats();
-                 const int k = check_weight_sh("upload_weights", weight_sh, n);
-                 nb::gil_scoped_release release;
-                 r.upload_weights(weight_sh.data(), n, k);
+                 nb::gil_scoped_release release;  // the checks read the arrays only (the caller holds them)
+                 const cuda::Renderer::SceneInfo scene = r.scene();
+                 const int k = check_weight_sh("upload_weights", weight_sh, scene.n);
+                 r.upload_weights(weight_sh.data(), scene.n, k, scene.generation);
              })
         .def("upload_cells",
              [](cuda::Renderer& r, FArr means, FArr scales, FArr quats, IArr offsets, IArr members, IArr cell_of) {
+                 nb::gil_scoped_release release;
                  const int64_t m = check_cell_arrays("upload_cells", means, scales, quats, offsets);
-                 const int64_t n = r.num_splats();
+                 // checked against the scene uploaded now; upload_cells refuses if another replaces it meanwhile
+                 const cuda::Renderer::SceneInfo scene = r.scene();
+                 const int64_t n = scene.n;
                  const std::vector<int32_t> expect =
                      partition_cell_of("upload_cells", offsets.data(), members.data(), m, (int64_t)members.size(), n);
                  if (cell_of.size() != (size_t)n || !std::equal(expect.begin(), expect.end(), cell_of.data()))
                      throw std::invalid_argument("upload_cells: cell_of must give each of the scene's splats its cell "
                                                  "in the partition (-1: none)");
-                 nb::gil_scoped_release release;
                  r.upload_cells(means.data(), scales.data(), quats.data(), offsets.data(), members.data(),
-                                cell_of.data(), m, (int64_t)members.size());
+                                cell_of.data(), m, (int64_t)members.size(), scene.generation);
              })
         .def("render",
              [](cuda::Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                 float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                 bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct) {
-                 const RenderArgs a = parse_render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane,
-                                                        projection, mode, supersample, background, sigma,
-                                                        weight_background, et_grade, depth_correct);
+                 const RenderArgs a = render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane,
+                                                  projection, mode, supersample, sh_degree, background, want_window,
+                                                  sigma, weight_background, et_grade, depth_correct);
                  cuda::RenderResult res;
                  {
                      nb::gil_scoped_release release;
-                     res = r.render(a.cam, a.mode, a.supersample, sh_degree, a.bg, want_window, a.oit);
+                     res = r.render(a);
                  }
                  return result_dict(res, res, (size_t)a.height, (size_t)a.width);
              },
-             nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"), nb::arg("cx"), nb::arg("cy"),
-             nb::arg("width"), nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"),
-             nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"), nb::arg("want_window"),
-             nb::arg("sigma") = 10.0f, nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f,
-             nb::arg("depth_correct") = false)
+             GBV_RENDER_ARGS)
         .def("render_to_gl_texture",
              [](cuda::Renderer& r, unsigned int texture, FArr R, FArr t, float fx, float fy, float cx, float cy,
                 int width, int height, float near_plane, int projection, int mode, int supersample, int sh_degree,
-                FArr background, float sigma, float weight_background, float et_grade, bool depth_correct) {
-                 const RenderArgs a = parse_render_args("render_to_gl_texture", R, t, fx, fy, cx, cy, width, height,
-                                                        near_plane, projection, mode, supersample, background, sigma,
-                                                        weight_background, et_grade, depth_correct);
+                FArr background, bool want_window, float sigma, float weight_background, float et_grade,
+                bool depth_correct) {
+                 const RenderArgs a = render_args("render_to_gl_texture", R, t, fx, fy, cx, cy, width, height,
+                                                  near_plane, projection, mode, supersample, sh_degree, background,
+                                                  want_window, sigma, weight_background, et_grade, depth_correct);
                  cuda::RenderResult res;
                  {
                      nb::gil_scoped_release release;
-                     res = r.render_to_gl_texture(texture, a.cam, a.mode, a.supersample, sh_degree, a.bg, a.oit);
+                     res = r.render_to_gl_texture(texture, a);
                  }
                  return stats_dict(res, res.evaluations);
              },
-             nb::arg("texture"), nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"), nb::arg("cx"),
-             nb::arg("cy"), nb::arg("width"), nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"),
-             nb::arg("mode"), nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"), nb::arg("sigma") = 10.0f,
-             nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
+             nb::arg("texture"), GBV_RENDER_ARGS,
              "Render into an existing GL_RGBA32F texture of the output size (its GL context, or one sharing it, "
-             "current on this thread); returns the stats (as render's dict, without the image planes). The texture "
-             "stays registered with CUDA until release_gl_texture(texture): call that before deleting it.")
+             "current on this thread); returns the stats (as render's dict, without the image planes; want_window "
+             "is ignored). The texture stays registered with CUDA until release_gl_texture(texture): call that "
+             "before deleting it.")
         .def(
             "release_gl_texture",
             [](cuda::Renderer& r, unsigned int texture) {

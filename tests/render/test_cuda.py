@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import importlib
 import shutil
-import threading
 
 import numpy as np
 import pytest
@@ -20,9 +19,7 @@ import pytest
 import gbviewer as gb
 from helpers import front_camera, random_scene, shared_scene
 from gbviewer.cells import Cells, build_cells
-from gbviewer.errors import RenderError
 from gbviewer.render import CudaRenderer
-from gbviewer.render.prepare import prepare
 from test_render import check_concurrent_renders
 
 MODES = ["scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex"]
@@ -241,63 +238,3 @@ def test_cpu_binding_rejects_bad_render_args(changes, message):
     r.upload_cells(cells.means, cells.scales, cells.quats, cells.offsets, cells.members, cells.cell_of(12))
     with pytest.raises(ValueError, match=f"^render: .*{message}"):
         r.render(**args)
-
-
-# ---- without a GPU: the Python wrapper's state after failures and its lock, on a stand-in native renderer -------
-
-class FakeNative:
-    """Stands in for gbviewer._native_cuda.Renderer: records calls, fails the uploads it is told to."""
-
-    def __init__(self, fail: set[str] = frozenset()):
-        self.fail, self.calls, self.device = set(fail), [], 0
-        self.busy = threading.Lock()
-
-    def _call(self, name):
-        if not self.busy.acquire(blocking=False):
-            raise AssertionError(f"{name} entered while another call was running")
-        try:
-            self.calls.append(name)
-            if name in self.fail:
-                self.fail.discard(name)
-                raise RuntimeError("CUDA out of device memory: could not allocate 1 MiB")
-        finally:
-            self.busy.release()
-
-    def upload(self, *args):
-        self._call("upload")
-
-    def upload_weights(self, *args):
-        self._call("upload_weights")
-
-    def upload_cells(self, *args):
-        self._call("upload_cells")
-
-
-def fake_renderer(fake: FakeNative) -> CudaRenderer:
-    r = object.__new__(CudaRenderer)
-    r._lock, r._impl = threading.Lock(), fake
-    r._scene = r._uploaded = r._cells = None
-    return r
-
-
-def test_cuda_wrapper_failed_upload_is_retried():
-    """After an upload fails (out of device memory) the wrapper does not think the scene is on the device: the next
-    frame uploads it again; the same for duplex cells."""
-    scene = random_scene(30, seed=4)
-    fake = FakeNative(fail={"upload", "upload_cells"})
-    r = fake_renderer(fake)
-    with pytest.raises(RenderError, match="out of device memory"):
-        r.upload(scene)
-    assert r._uploaded is None
-    cam, duplex = front_camera(), gb.RenderSettings("duplex")
-    with pytest.raises(RenderError, match="out of device memory"):
-        r._sync(prepare(r._scene, cam, duplex, "cuda"))  # the scene goes up again; its cells fail
-    assert fake.calls == ["upload", "upload", "upload_cells"] and r._uploaded is scene and r._cells is None
-    r._sync(prepare(r._scene, cam, duplex, "cuda"))
-    r._sync(prepare(r._scene, cam, duplex, "cuda"))
-    assert fake.calls == ["upload", "upload", "upload_cells", "upload_cells"]
-
-
-def test_cuda_wrapper_without_scene():
-    with pytest.raises(RenderError, match="upload"):
-        fake_renderer(FakeNative()).render(front_camera(), gb.RenderSettings())

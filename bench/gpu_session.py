@@ -1,0 +1,304 @@
+"""Everything only a GPU can check, in one run (bench/gpu_session.sh builds the modules, then runs this):
+
+    python bench/gpu_session.py OUT_DIR [--scenes DIR] [--no-gpu] [--deadline EPOCH_SECONDS] [--build-log FILE]
+
+Pieces: the CUDA test files; CUDA vs CPU images for every mode and supersample 1-3 on the shared scenes (the
+tolerances of tests/render/test_cuda.py); the GLSL backend on the machine's EGL driver vs CPU (test_glsl.py's
+tolerances); CUDA-GL interop and the GLSL display path under a headless EGL context; timings (ms per mode at
+1920x1080 per shared scene and on a 6 M-splat synthetic scene) next to the paper's GB/3DGS time ratio. Each piece
+is one line of OUT_DIR/report.txt (and an entry of report.json): ok, failed, "no GPU: why" or "skipped: why".
+A piece that runs past the deadline is cut short and says so."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+if any((REPO / "gbviewer").glob("_native*")):  # the checkout's build (gpu_session.sh's), else the installed package
+    sys.path.insert(0, str(REPO))
+
+import gbviewer as gb  # noqa: E402
+from gbviewer.render import CudaRenderer, RenderSettings  # noqa: E402
+
+# The test files only a GPU runs in full (bench/cuda_check.py runs them too); tests/bench/test_gpu_session.py checks
+# that they exist.
+CUDA_TEST_FILES = ("tests/render/test_cuda.py", "tests/render/test_cuda_gpu.py", "tests/render/test_cuda_native.py",
+                   "tests/render/test_cuda_wrapper.py", "tests/render/test_render_to_texture.py",
+                   "tests/render/test_duplex_order.py")
+GLSL_TEST_FILES = ("tests/render/test_glsl.py",)
+MODES = ("scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex")
+CUDA_TOL = dict(mean=1e-4, frac=0.002, counts="exact")  # tests/render/test_cuda.py
+GLSL_TOL = dict(mean=1e-3, frac=0.002, counts=1e-4)  # tests/render/test_glsl.py (counts: relative slack)
+# Gaussian Blending paper, Table 5 (multi-scale Blender, x1): 3DGS 131.80 FPS, Gaussian Blending-30K 123.08 FPS
+PAPER_GB_OVER_3DGS = 131.80 / 123.08
+LARGE_SPLATS = 6_000_000
+SIZE = (1920, 1080)
+
+
+def default_scenes() -> Path:
+    for d in (REPO / "shared" / "scenes", REPO.parent / "shared" / "scenes"):
+        if d.is_dir():
+            return d
+    return REPO.parent / "shared" / "scenes"
+
+
+class Session:
+    """The report being written: pieces in order, each {name, status, detail, data}; written after every piece."""
+
+    def __init__(self, out: Path, deadline: float) -> None:
+        self.out, self.deadline, self.pieces = out, deadline, []
+        out.mkdir(parents=True, exist_ok=True)
+
+    def left(self) -> float:
+        return self.deadline - time.time()
+
+    def add(self, name: str, status: str, detail: str, data: object = None) -> None:
+        self.pieces.append(dict(name=name, status=status, detail=" ".join(detail.split()), data=data))
+        self.write()
+
+    def write(self) -> None:
+        report = dict(machine=machine(), pieces=self.pieces)
+        lines = [f"{p['name']}: {p['status']}" + (f" - {p['detail']}" if p["detail"] else "") for p in self.pieces]
+        for p in self.pieces:
+            if isinstance(p["data"], list) and p["data"] and isinstance(p["data"][0], dict):
+                lines += ["", f"## {p['name']}", *table(p["data"])]
+        for name, text in (("report.json", json.dumps(report, indent=1, default=str)), ("report.txt",
+                                                                                         "\n".join(lines) + "\n")):
+            tmp = self.out / f".{name}.tmp"
+            tmp.write_text(text)
+            os.replace(tmp, self.out / name)
+
+
+def table(rows: list[dict]) -> list[str]:
+    keys = list(rows[0])
+    fmt = lambda v: f"{v:.3g}" if isinstance(v, float) else str(v)  # noqa: E731
+    return [" | ".join(keys), " | ".join("---" for _ in keys), *(" | ".join(fmt(r.get(k, "")) for k in keys)
+                                                               for r in rows)]
+
+
+def machine() -> dict:
+    smi = run_quiet(["nvidia-smi", "--query-gpu=name,driver_version,memory.total", "--format=csv,noheader"])
+    return dict(python=platform.python_version(), host=platform.node(), gpu=smi or "nvidia-smi: none",
+                cuda=CudaRenderer.available())
+
+
+def run_quiet(cmd: list[str]) -> str:
+    try:
+        return subprocess.run(cmd, capture_output=True, text=True, timeout=20).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return ""
+
+
+def check_paths(s: Session, scenes_dir: Path) -> list[Path]:
+    """The files this session runs exist (the rot bench/cuda_check.py once had); returns the scenes."""
+    missing = [f for f in (*CUDA_TEST_FILES, *GLSL_TEST_FILES) if not (REPO / f).is_file()]
+    found = lambda d: sorted(p for p in d.glob("*") if p.suffix in (".ply", ".splat", ".spz", ".sog"))  # noqa: E731
+    scenes, where = found(scenes_dir), f"{scenes_dir}"
+    if not scenes:
+        scenes, where = found(gb.DEFAULT_SCENE.parent), f"the bundled scene only ({scenes_dir} has none)"
+    s.add("paths", "missing: " + ", ".join(missing) if missing else "ok",
+          f"{len(CUDA_TEST_FILES) + len(GLSL_TEST_FILES)} test files, {len(scenes)} scenes: {where}")
+    return scenes
+
+
+def pytest_piece(s: Session, name: str, files: tuple[str, ...], budget: float) -> None:
+    """Run the test files; the piece lists per file passed/failed/skipped and the failing tests."""
+    xml = s.out / f"{name.replace(' ', '_')}.xml"
+    cmd = [sys.executable, "-m", "pytest", "-q", "-rfEs", "-p", "no:cacheprovider", f"--junitxml={xml}", *files]
+    try:
+        proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=max(budget, 10))
+        (s.out / f"{name.replace(' ', '_')}.log").write_text(proc.stdout + proc.stderr)
+    except subprocess.TimeoutExpired:
+        s.add(name, "failed", f"pytest ran past its {budget:.0f} s budget")
+        return
+    if not xml.exists():
+        s.add(name, "failed", f"pytest exit {proc.returncode}: {(proc.stdout + proc.stderr).strip()[-300:]}")
+        return
+    rows, failing = {}, []
+    for case in ET.parse(xml).getroot().iter("testcase"):
+        f = case.get("file") or case.get("classname", "?").replace(".", "/") + ".py"
+        kind = "failed" if case.find("failure") is not None or case.find("error") is not None else (
+            "skipped" if case.find("skipped") is not None else "passed")
+        rows.setdefault(f, dict(file=f, passed=0, failed=0, skipped=0))[kind] += 1
+        if kind == "failed":
+            failing.append(f"{case.get('classname')}::{case.get('name')}")
+    total = {k: sum(r[k] for r in rows.values()) for k in ("passed", "failed", "skipped")}
+    s.add(name, "ok" if proc.returncode == 0 else "failed",
+          f"{total['passed']} passed, {total['failed']} failed, {total['skipped']} skipped"
+          + (f"; failing: {', '.join(failing[:8])}" if failing else ""), list(rows.values()))
+
+
+def diff(a: gb.Frame, b: gb.Frame) -> dict:
+    d = np.abs(a.rgb - b.rgb).max(axis=2)
+    return dict(mean=float(d.mean()), max=float(d.max()), frac=float((d > 1 / 255).mean()),
+                visible=(a.stats.visible, b.stats.visible), sort_length=(a.stats.sort_length, b.stats.sort_length))
+
+
+def within(m: dict, tol: dict) -> bool:
+    counts = all(x == y if tol["counts"] == "exact" else abs(x - y) <= tol["counts"] * max(y, 1)
+                 for x, y in (m["visible"], m["sort_length"]))
+    return m["mean"] < tol["mean"] and m["frac"] < tol["frac"] and counts
+
+
+def compare_piece(s: Session, name: str, scenes: list[Path], make, tol: dict, supersamples, budget_end: float):
+    """Every mode x supersample on every scene, backend `make()` against the CPU."""
+    rows, bad, cut = [], 0, ""
+    other = make()
+    for path in scenes:
+        if time.time() > budget_end:
+            cut = f"; time budget spent before {path.name} and the scenes after it"
+            break
+        scene = gb.load(path)
+        other.upload(scene)
+        cam = gb.orbit_camera(scene, 40, 15, width=320, height=240)
+        for mode in MODES:
+            for ss in supersamples:
+                settings = RenderSettings(gb.Mode.parse(mode), ss)
+                try:
+                    m = diff(other.render(cam, settings), gb.render(scene, cam, mode, supersample=ss, backend="cpu"))
+                except gb.GBViewerError as exc:
+                    m = dict(mean=float("nan"), max=float("nan"), frac=float("nan"), visible=(0, 1),
+                             sort_length=(0, 1), error=str(exc))
+                ok = within(m, tol)
+                bad += not ok
+                rows.append(dict(scene=path.name, mode=mode, ss=ss, mean=m["mean"], max=m["max"], frac=m["frac"],
+                                 visible=f"{m['visible'][0]}/{m['visible'][1]}",
+                                 sort=f"{m['sort_length'][0]}/{m['sort_length'][1]}", ok=ok))
+    s.add(name, "ok" if not bad and not cut else "failed",
+          f"{len(rows)} comparisons, {bad} outside mean < {tol['mean']}, >1/255 < {tol['frac']}, counts "
+          f"{tol['counts']}{cut}", rows)
+
+
+def interop_piece(s: Session, scene_path: Path) -> None:
+    """CUDA-GL interop and the GLSL display path on the process's headless EGL context: a texture written by
+    render_to_texture holds render()'s frame exactly."""
+    from gbviewer.render.glsl import GlslRenderer, standalone_context
+
+    try:
+        ctx = standalone_context()
+    except gb.BackendUnavailable as exc:
+        s.add("display path + interop", "failed", f"no headless EGL context: {exc}")
+        return
+    gl = ctx.info.get("GL_RENDERER", "?")
+    scene = gb.load(scene_path)
+    cam = gb.orbit_camera(scene, 30, 10, width=97, height=61)
+    rows = []
+    ok_interop, why = CudaRenderer.gl_interop()
+    backends = [("glsl", lambda: GlslRenderer(ctx=ctx))] + ([("cuda", CudaRenderer)] if ok_interop else [])
+    for name, make in backends:
+        r = make()
+        r.upload(scene)
+        for spec in ("scalar", "gaussian_blending:2", "duplex"):
+            settings = RenderSettings.parse(spec)
+            tex = ctx.texture((97, 61), 4, dtype="f4")
+            try:
+                r.render_to_texture(tex, cam, settings)
+                img = np.frombuffer(tex.read(), np.float32).reshape(61, 97, 4)
+                frame = r.render(cam, settings)
+                same = bool(np.array_equal(img[:, :, :3], frame.rgb) and np.array_equal(img[:, :, 3], frame.alpha))
+                rows.append(dict(backend=name, spec=spec, same=same, error=""))
+            except gb.GBViewerError as exc:
+                rows.append(dict(backend=name, spec=spec, same=False, error=str(exc)))
+            finally:
+                if hasattr(r, "release_texture"):
+                    r.release_texture(tex.glo)
+                tex.release()
+    good = all(r["same"] for r in rows) and ok_interop
+    s.add("display path + interop", "ok" if good else "failed",
+          f"EGL on {gl}; cuda interop: {'yes' if ok_interop else why}; "
+          f"{sum(r['same'] for r in rows)}/{len(rows)} textures equal render()", rows)
+
+
+def time_scene(r, scene: gb.Scene, label: str, repeat: int = 5, modes: tuple[str, ...] = MODES) -> list[dict]:
+    r.upload(scene)
+    cam = gb.orbit_camera(scene, 30, 10, width=SIZE[0], height=SIZE[1])
+    rows = []
+    for mode in modes:
+        settings = RenderSettings(gb.Mode.parse(mode))
+        r.render(cam, settings)  # warm-up: buffers sized, cells built
+        wall, gpu = [], []
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            f = r.render(cam, settings)
+            wall.append((time.perf_counter() - t0) * 1e3)
+            gpu.append(f.stats.preprocess_ms + f.stats.sort_ms + f.stats.blend_ms)
+        rows.append(dict(scene=label, splats=scene.num_splats, mode=mode, wall_ms=float(np.median(wall)),
+                         gpu_ms=float(np.median(gpu))))
+    by = {row["mode"]: row["gpu_ms"] for row in rows}
+    for row in rows:
+        row["gb_over_3dgs"] = by["gaussian_blending"] / by["scalar"] if row["mode"] == "gaussian_blending" else ""
+    return rows
+
+
+def timing_piece(s: Session, scenes: list[Path], budget_end: float) -> None:
+    r = CudaRenderer()
+    rows, cut = [], ""
+    for path in scenes:
+        if time.time() > budget_end:
+            cut = f"; time budget spent before {path.name}"
+            break
+        rows += time_scene(r, gb.load(path), path.name)
+    large = ""
+    if not cut and time.time() < budget_end - 60:
+        sys.path.insert(0, str(REPO / "bench"))
+        from synthetic import make_scene
+
+        rows += time_scene(r, make_scene(LARGE_SPLATS), f"synthetic {LARGE_SPLATS // 10**6} M", repeat=3,
+                           modes=MODES[:-1])
+        large = "; duplex not timed on it (its cells would be built on the CPU first)"
+    else:
+        large = "; the 6 M-splat scene not timed (time budget)"
+    ratios = [row["gb_over_3dgs"] for row in rows if row["gb_over_3dgs"] != ""]
+    s.add("timings", "ok" if rows and not cut else "failed",
+          f"ms per mode at {SIZE[0]}x{SIZE[1]} (median; gpu_ms = device events); GB/3DGS time ratio "
+          f"{min(ratios, default=float('nan')):.2f}..{max(ratios, default=float('nan')):.2f} here, "
+          f"{PAPER_GB_OVER_3DGS:.2f} in the paper (Table 5: 131.80 vs 123.08 FPS); no tiled-scene builder exists in "
+          f"the repository: bench/synthetic.py's scene of {LARGE_SPLATS:,} splats stands in{cut}{large}", rows)
+
+
+def main(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--scenes", type=Path, default=None)
+    ap.add_argument("--no-gpu", action="store_true", help="report every GPU piece as not run (CI)")
+    ap.add_argument("--deadline", type=float, default=time.time() + 420)
+    ap.add_argument("--build-log", type=Path, default=None, help="the build's one-line summary (gpu_session.sh)")
+    args = ap.parse_args(argv)
+    s = Session(args.out, args.deadline)
+    if args.build_log is not None and args.build_log.exists():
+        status, _, detail = args.build_log.read_text().strip().partition(": ")
+        s.add("build", status, detail)
+    scenes = check_paths(s, args.scenes or default_scenes())
+    ok, why = CudaRenderer.available()
+    no_gpu = "no GPU: --no-gpu given" if args.no_gpu else f"not run: the cuda backend is unavailable: {why}"
+    gpu = ok and not args.no_gpu
+    pieces = ("cuda tests", "cuda vs cpu", "glsl on the EGL driver", "glsl vs cpu", "display path + interop",
+              "timings")
+    if not gpu:
+        for name in pieces:
+            s.add(name, no_gpu, "")
+        return 0
+    # each piece gets a share of the time left when it starts (what one does not use goes to the next)
+    pytest_piece(s, "cuda tests", CUDA_TEST_FILES, 0.3 * s.left())
+    compare_piece(s, "cuda vs cpu", scenes, CudaRenderer, CUDA_TOL, (1, 2, 3), time.time() + 0.35 * s.left())
+    pytest_piece(s, "glsl on the EGL driver", GLSL_TEST_FILES, 0.3 * s.left())
+    from gbviewer.render.glsl import GlslRenderer
+
+    compare_piece(s, "glsl vs cpu", scenes, GlslRenderer, GLSL_TOL, (1,), time.time() + 0.3 * s.left())
+    interop_piece(s, scenes[0] if scenes else gb.DEFAULT_SCENE)
+    timing_piece(s, scenes, s.deadline - 15)
+    return 0 if all(p["status"] == "ok" for p in s.pieces) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,224 @@
+// The frame (State::run) and its splat steps: preprocess (one thread per splat), tile keys and a CUB radix sort of
+// (tile, depth), tile ranges; the CUB scans, sorts and sums the other steps share.
+#include <thrust/iterator/transform_iterator.h>
+
+#include <algorithm>
+#include <cub/cub.cuh>
+
+#include "gbv/order.h"
+#include "state.h"
+
+namespace gbv::cuda {
+using namespace detail;
+namespace {
+
+__global__ void __launch_bounds__(THREADS)
+    preprocess_kernel(int64_t n, const float* means, const float* scales, const float* quats,
+                      const float* opacities, const float* sh, const float* filter_3d, int k, int sh_deg,
+                      const float* weight_sh, int weight_k, const int32_t* cell_of, OitParams oit, CameraParams cam,
+                      Mode mode, int gx, int gy, Splat2D* splats, TileRect* rects, uint32_t* touched,
+                      unsigned long long* visible) {
+    const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
+    bool valid = false;
+    if (i < n) {
+        SplatIn in{means + 3 * i, scales + 3 * i, quats + 4 * i, opacities[i], sh + (size_t)k * 3 * i,
+                   filter_3d ? filter_3d[i] : 0.0f, weight_sh ? weight_sh + (size_t)weight_k * i : nullptr,
+                   sh_degree_for_coeffs(weight_k), cell_of ? cell_of[i] : -1};
+        TileRect r;
+        uint32_t count = 0;
+        if (preprocess_splat(in, sh_deg, cam, mode, oit, gx, gy, &splats[i], &r)) {
+            count = (uint32_t)((r.x1 - r.x0) * (r.y1 - r.y0));
+            rects[i] = r;
+            valid = true;
+        }
+        touched[i] = count;
+    }
+    const int block_visible = __syncthreads_count(valid);
+    if (threadIdx.x == 0 && block_visible) atomicAdd(visible, (unsigned long long)block_visible);
+}
+
+// One key per touched tile of each splat (Splat2D) or cell (Cell2D): tile id in the high 32 bits, depth bits
+// (positive floats sort as uints) below; value = the item's index. Keys are written in item order and the radix
+// sort is stable, so equal depths keep index order (as the CPU). wsr (by_depth false): the key is the tile alone,
+// so the stable sort keeps splat-index order inside a tile. ends: inclusive scan of `touched`.
+template <class Item>
+__global__ void duplicate_kernel(int64_t n, const Item* items, const TileRect* rects, const uint32_t* touched,
+                                 const uint64_t* ends, int gx, bool by_depth, uint64_t* keys, uint32_t* values) {
+    const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
+    if (i >= n || touched[i] == 0) return;
+    uint64_t off = ends[i] - touched[i];
+    const uint32_t depth_bits = by_depth ? float_bits(items[i].depth) : 0u;
+    const TileRect r = rects[i];
+    for (int ty = r.y0; ty < r.y1; ++ty)
+        for (int tx = r.x0; tx < r.x1; ++tx) {
+            keys[off] = ((uint64_t)(ty * gx + tx) << 32) | depth_bits;
+            values[off] = (uint32_t)i;
+            ++off;
+        }
+}
+
+__global__ void ranges_kernel(int64_t total, const uint64_t* keys, uint2* ranges) {
+    const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
+    if (i >= total) return;
+    const uint32_t tile = (uint32_t)(keys[i] >> 32);
+    if (i == 0) {
+        ranges[tile].x = 0;
+    } else {
+        const uint32_t prev = (uint32_t)(keys[i - 1] >> 32);
+        if (tile != prev) {
+            ranges[prev].y = (uint32_t)i;
+            ranges[tile].x = (uint32_t)i;
+        }
+    }
+    if (i == total - 1) ranges[tile].y = (uint32_t)total;
+}
+
+// A 32-bit count read as 64 bits. CUB's scans accumulate in the value type of their input, so a scan over the
+// uint32 counts themselves wraps at 2^32 (and the wrapped total can pass the 2^31 guards).
+struct WidenU64 {
+    __host__ __device__ uint64_t operator()(uint32_t x) const { return x; }
+};
+
+// A 32-bit evaluation count read as 64 bits: their sum over a frame can pass 2^31.
+struct WidenI64 {
+    __host__ __device__ int64_t operator()(int32_t x) const { return x; }
+};
+
+template <class Item>
+void sorted_tile_lists(State& s, int64_t count, const Item* items, const TileRect* item_rects,
+                       const uint32_t* item_touched, const uint64_t* ends, int gx, int bits, bool by_depth,
+                       uint64_t total, uint2* out_ranges) {
+    s.keys_in.ensure(total);
+    s.keys_out.ensure(total);
+    s.values_in.ensure(total);
+    s.values_out.ensure(total);
+    duplicate_kernel<Item><<<blocks(count), THREADS>>>(count, items, item_rects, item_touched, ends, gx, by_depth,
+                                                       s.keys_in.ptr, s.values_in.ptr);
+    launched("duplicate_kernel");
+    s.sort_pairs((int64_t)total, by_depth ? 0 : 32, 32 + bits);
+    ranges_kernel<<<blocks(total), THREADS>>>((int64_t)total, s.keys_out.ptr, out_ranges);
+    launched("ranges_kernel");
+}
+
+}  // namespace
+
+void State::forget_scene() {
+    has_scene = has_cells = false;
+    n = m = num_members = 0;
+    k = 1;
+    weight_k = 0;
+    has_filter = false;
+}
+
+// An int count: CUB's scan kernel with 64-bit offsets spills registers on sm_90.
+void State::inclusive_sum(const uint32_t* counts, uint64_t* ends, int count, const char* what) {
+    const auto in = thrust::make_transform_iterator(counts, WidenU64{});
+    size_t temp_bytes = 0;
+    CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, in, ends, count));
+    temp.ensure(temp_bytes);
+    CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.ptr, temp_bytes, in, ends, count));
+    launched(what);
+}
+
+int64_t State::sum_evals(const int32_t* counts, int64_t count) {
+    const auto in = thrust::make_transform_iterator(counts, WidenI64{});
+    evals_total.ensure(1);
+    size_t temp_bytes = 0;
+    CUDA_CHECK(cub::DeviceReduce::Sum(nullptr, temp_bytes, in, evals_total.ptr, count));
+    temp.ensure(temp_bytes);
+    CUDA_CHECK(cub::DeviceReduce::Sum(temp.ptr, temp_bytes, in, evals_total.ptr, count));
+    launched("cub::DeviceReduce::Sum (evaluations)");
+    int64_t total = 0;
+    CUDA_CHECK(cudaMemcpy(&total, evals_total.ptr, sizeof(total), cudaMemcpyDeviceToHost));
+    return total;
+}
+
+void State::sort_pairs(int64_t count, int begin_bit, int end_bit) {
+    size_t temp_bytes = 0;
+    CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, keys_in.ptr, keys_out.ptr, values_in.ptr,
+                                               values_out.ptr, (int)count, begin_bit, end_bit));
+    temp.ensure(temp_bytes);
+    CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp.ptr, temp_bytes, keys_in.ptr, keys_out.ptr, values_in.ptr,
+                                               values_out.ptr, (int)count, begin_bit, end_bit));
+    launched("cub::DeviceRadixSort::SortPairs");
+}
+
+void State::tile_lists(int64_t count, const Splat2D* items, const TileRect* item_rects, const uint32_t* item_touched,
+                       const uint64_t* ends, int gx, int bits, bool by_depth, uint64_t total, uint2* out_ranges) {
+    sorted_tile_lists(*this, count, items, item_rects, item_touched, ends, gx, bits, by_depth, total, out_ranges);
+}
+
+void State::tile_lists(int64_t count, const Cell2D* items, const TileRect* item_rects, const uint32_t* item_touched,
+                       const uint64_t* ends, int gx, int bits, bool by_depth, uint64_t total, uint2* out_ranges) {
+    sorted_tile_lists(*this, count, items, item_rects, item_touched, ends, gx, bits, by_depth, total, out_ranges);
+}
+
+void State::run(const RenderArgs& a, RenderResult& res) {
+    if (!has_scene) throw std::runtime_error("CUDA renderer: no scene uploaded (or its upload failed)");
+    if (a.mode == DUPLEX && !has_cells) throw std::runtime_error("CUDA renderer: duplex needs cells (upload_cells)");
+    const CameraParams& cam = a.cam;
+    const int W = cam.width, H = cam.height;
+    const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE, num_tiles = gx * gy;
+    const int sh_deg = std::max(0, std::min(a.sh_degree, sh_degree_for_coeffs(k)));  // no reads past k coeffs
+    splats.ensure(std::max<int64_t>(n, 1));
+    rects.ensure(std::max<int64_t>(n, 1));
+    touched.ensure(std::max<int64_t>(n, 1));
+    offsets.ensure(std::max<int64_t>(n, 1));
+    counters.ensure(NUM_COUNTERS);
+    ranges.ensure(num_tiles);
+    CUDA_CHECK(cudaMemsetAsync(counters.ptr, 0, NUM_COUNTERS * sizeof(unsigned long long)));
+    CUDA_CHECK(cudaMemsetAsync(ranges.ptr, 0, sizeof(uint2) * num_tiles));
+
+    CUDA_CHECK(cudaEventRecord(ev[0].e));
+    if (n > 0) {
+        preprocess_kernel<<<blocks(n), THREADS>>>(n, means.ptr, scales.ptr, quats.ptr, opacities.ptr, sh.ptr,
+                                                  has_filter ? filter_3d.ptr : nullptr, k, sh_deg,
+                                                  weight_k ? weight_sh.ptr : nullptr, weight_k,
+                                                  a.mode == DUPLEX ? cell_of.ptr : nullptr, a.oit, cam, a.mode, gx,
+                                                  gy, splats.ptr, rects.ptr, touched.ptr, counters.ptr + VISIBLE);
+        launched("preprocess_kernel");
+    }
+    CUDA_CHECK(cudaEventRecord(ev[1].e));
+
+    int bits = 0;
+    while ((1 << bits) < num_tiles) ++bits;
+    uint64_t total = 0, sort_length = 0;
+    if (a.mode == DUPLEX) {
+        bin_duplex(cam, gx, gy, num_tiles, bits, total, sort_length);
+    } else {
+        bin_splats(a.mode, gx, bits, total);
+        sort_length = a.mode == WSR ? 0 : total;
+    }
+    CUDA_CHECK(cudaEventRecord(ev[2].e));
+    blend(a, gx, gy, a.mode == DUPLEX ? list.ptr : values_out.ptr);
+    CUDA_CHECK(cudaEventRecord(ev[3].e));
+    CUDA_CHECK(cudaMemcpyAsync(totals.p, counters.ptr, NUM_COUNTERS * sizeof(unsigned long long),
+                               cudaMemcpyDeviceToHost));
+    CUDA_CHECK(cudaEventSynchronize(ev[3].e));
+    CUDA_CHECK(cudaStreamSynchronize(0));
+    float ms[3];
+    for (int i = 0; i < 3; ++i) CUDA_CHECK(cudaEventElapsedTime(&ms[i], ev[i].e, ev[i + 1].e));
+    res.preprocess_ms = ms[0];
+    res.sort_ms = ms[1];
+    res.blend_ms = ms[2];
+    res.visible = (int64_t)totals.p[VISIBLE];
+    res.cells_visible = (int64_t)totals.p[CELLS_VISIBLE];
+    res.cell_misses = (int64_t)totals.p[CELL_MISSES];
+    res.sort_length = (int64_t)sort_length;
+    res.pairs = (int64_t)total;
+}
+
+// One wait: the number of pairs, to size the key buffers.
+void State::bin_splats(Mode mode, int gx, int bits, uint64_t& total) {
+    total = 0;
+    if (n == 0) return;
+    inclusive_sum(touched.ptr, offsets.ptr, (int)n, "cub::DeviceScan::InclusiveSum (tile-splat pairs)");
+    CUDA_CHECK(cudaMemcpyAsync(totals.p, offsets.ptr + (n - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
+    CUDA_CHECK(cudaStreamSynchronize(0));
+    total = totals.p[0];
+    if (total >= (1ull << 31)) throw std::runtime_error("CUDA renderer: more than 2^31 tile-splat pairs");
+    if (total == 0) return;
+    tile_lists(n, splats.ptr, rects.ptr, touched.ptr, offsets.ptr, gx, bits, mode != WSR, total, ranges.ptr);
+}
+
+}  // namespace gbv::cuda

@@ -1,0 +1,113 @@
+// A renderer's device state and the frame steps that use it (nvcc only), one file per concern:
+// binning.cu (preprocess, tile lists of splats, CUB scans and sorts, the frame), duplex.cu (cells and their
+// canonical order), blend.cu (the blend and box-average kernels), interop.cu (CUDA-GL textures), renderer.cu (the
+// class: locking, uploads, results).
+#pragma once
+
+#include <cuda_gl_interop.h>  // includes GL/gl.h (Debian/Ubuntu: libgl-dev)
+#include <cuda_runtime.h>
+
+#include <cstdint>
+#include <map>
+#include <mutex>
+
+#include "buffers.h"
+#include "gbv/args.h"
+#include "gbv/common.h"
+#include "gbv/preprocess.h"
+#include "renderer.h"
+
+namespace gbv::cuda {
+
+namespace detail {
+constexpr int THREADS = 256;  // threads per block of the one-dimensional kernels
+inline int blocks(int64_t n, int per = THREADS) { return (int)((n + per - 1) / per); }
+
+// Device counters of a frame: visible splats, visible cells, tile-splat pairs outside their cell's tiles, expanded
+// tile-list entries, member slots in runs of equal depth (duplex).
+enum Counter { VISIBLE = 0, CELLS_VISIBLE = 1, CELL_MISSES = 2, EXPANDED = 3, RUN_SLOTS = 4, NUM_COUNTERS = 5 };
+}  // namespace detail
+
+struct State {
+    template <typename T>
+    using Buf = detail::DeviceBuffer<T>;
+
+    const int device;
+    std::mutex mutex;  // one upload or render at a time: they share every buffer below
+    std::string failed;  // the DeviceFailed reason once one was thrown: every later call throws it again
+    bool has_scene = false, has_cells = false;  // false until an upload succeeds (buffers may be freed before)
+    uint64_t generation = 0;  // of the uploaded scene (Renderer::scene)
+    int64_t n = 0;
+    int k = 1;
+    Buf<float> means, scales, quats, opacities, sh, filter_3d, weight_sh;
+    bool has_filter = false;
+    int weight_k = 0;
+    // duplex cells (upload_cells) and their per-frame state
+    int64_t m = 0, num_members = 0;
+    Buf<float> cmeans, cscales, cquats;
+    Buf<int32_t> coffsets, cmembers, cell_of;
+    Buf<uint32_t> mkeys_in, mkeys_out, mvalues_in, mvalues_out, vis, vis_count, cell_touched, pair_counts, list;
+    // member slots in runs of equal depth and their sort (duplex.cu: sort_runs)
+    Buf<unsigned char> run_flags;
+    Buf<uint32_t> run_slots, run_heads, run_keys[2], run_perm[2];
+    Buf<uint64_t> run_numbers;
+    Buf<uint64_t> cell_offsets, pair_ends;
+    Buf<Cell2D> cells;
+    Buf<TileRect> crects;
+    Buf<uint2> cell_ranges;
+    // per frame
+    Buf<Splat2D> splats;
+    Buf<TileRect> rects;
+    Buf<uint32_t> touched, values_in, values_out;
+    Buf<uint64_t> offsets, keys_in, keys_out;
+    Buf<uint2> ranges;
+    Buf<unsigned char> temp;
+    Buf<unsigned long long> counters;
+    Buf<float> rgb, alpha, window, o_rgb, o_alpha, o_window;
+    Buf<int32_t> evals, o_evals;
+    Buf<float4> rgba;  // render_to_gl_texture's packed image
+    Buf<int64_t> evals_total;
+    detail::Event ev[4];
+    detail::HostTotals totals;
+    std::map<unsigned int, cudaGraphicsResource_t> textures;  // GL texture name -> its CUDA registration
+
+    explicit State(int dev) : device(dev) {}
+    State(const State&) = delete;
+    State& operator=(const State&) = delete;
+    ~State();  // interop.cu: registrations are dropped only where a GL context is current
+
+    void forget_scene();
+
+    // binning.cu
+    // Inclusive prefix sum of count > 0 32-bit counts, accumulated in 64 bits, into ends (no wait).
+    void inclusive_sum(const uint32_t* counts, uint64_t* ends, int count, const char* what);
+    // The sum of `count` evaluation counts (64-bit accumulation), copied to the host.
+    int64_t sum_evals(const int32_t* counts, int64_t count);
+    // Sort (keys_in, values_in) into (keys_out, values_out) by bits [begin_bit, end_bit) of the keys (stable).
+    void sort_pairs(int64_t count, int begin_bit, int end_bit);
+    // Render into the device output buffers (o_* when supersampling, else the full-resolution ones).
+    void run(const RenderArgs& a, RenderResult& res);
+    void bin_splats(Mode mode, int gx, int bits, uint64_t& total);
+    // The sorted tile lists of `count` items (splats or cells) that touch `total` tiles: keys (tile, depth bits;
+    // tile alone without by_depth) into keys_in, values (item indices) into values_in, sorted into keys_out and
+    // values_out, tile ranges into `out_ranges`. ends: inclusive scan of `touched`.
+    void tile_lists(int64_t count, const Splat2D* items, const TileRect* item_rects, const uint32_t* item_touched,
+                    const uint64_t* ends, int gx, int bits, bool by_depth, uint64_t total, uint2* out_ranges);
+    void tile_lists(int64_t count, const Cell2D* items, const TileRect* item_rects, const uint32_t* item_touched,
+                    const uint64_t* ends, int gx, int bits, bool by_depth, uint64_t total, uint2* out_ranges);
+
+    // duplex.cu
+    void bin_duplex(const CameraParams& cam, int gx, int gy, int num_tiles, int bits, uint64_t& total,
+                    uint64_t& sort_length);
+
+    // blend.cu
+    void blend(const RenderArgs& a, int gx, int gy, const uint32_t* tile_values);
+    void pack_rgba(int64_t px, const float* rgb, const float* alpha);
+
+    // interop.cu
+    // rgba (w x h) into the texture's level 0, finished and unmapped when it returns.
+    void copy_to_texture(unsigned int texture, int w, int h);
+    void release_texture(unsigned int texture);
+};
+
+}  // namespace gbv::cuda

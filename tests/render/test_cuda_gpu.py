@@ -1,0 +1,106 @@
+"""CUDA fixes that only a GPU can run (they skip elsewhere, saying why; bench/gpu_session.sh runs them): images
+taller than CUDA's grid rows, uploads of other scenes racing cell uploads, a large cell of splats at one depth
+(the canonical order's former quadratic case), and the caller's current device left alone."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+import gbviewer as gb
+from gbviewer.cells import Cells, build_cells
+from gbviewer.render import CudaRenderer
+from helpers import front_camera, random_scene
+
+CUDA_OK, CUDA_WHY = CudaRenderer.available()
+pytestmark = pytest.mark.skipif(not CUDA_OK, reason=f"no CUDA runtime here: {CUDA_WHY}")
+
+
+def close(a: gb.Frame, b: gb.Frame) -> None:
+    d = np.abs(a.rgb - b.rgb).max(axis=2)
+    assert d.mean() < 1e-4 and (d > 1 / 255).mean() < 0.002, (d.mean(), d.max())
+    assert (a.stats.visible, a.stats.sort_length) == (b.stats.visible, b.stats.sort_length)
+
+
+@pytest.mark.parametrize("supersample", [1, 2])
+def test_cuda_renders_images_taller_than_the_grid_rows(supersample):
+    """1,050,000 rows (65,625 tile rows, past the 65,535 a grid's y dimension holds) render as on the CPU."""
+    height = 1_050_000 // supersample
+    cam = gb.Camera(2, height, 60, 60, 1, height / 2, np.eye(3), np.zeros(3))
+    scene = random_scene(300, seed=7, spread=0.05)
+    close(gb.render(scene, cam, "scalar", supersample=supersample, backend="cuda"),
+          gb.render(scene, cam, "scalar", supersample=supersample, backend="cpu"))
+
+
+def test_cuda_cell_uploads_racing_scene_uploads():
+    """Two threads upload scenes of other sizes and their cells into one renderer: a cell upload checked against
+    a scene that another thread replaced meanwhile is refused (never copied past an array); the last consistent
+    upload renders as the CPU."""
+    from gbviewer import _native_cuda
+
+    native = _native_cuda.Renderer()
+    scenes = [random_scene(n, seed=n) for n in (50, 3000)]
+    cells = [build_cells(s, 8) for s in scenes]
+    refused, errors = [0], []
+
+    def work(i: int) -> None:
+        s, c = scenes[i], cells[i]
+        try:
+            for _ in range(40):
+                native.upload(s.means, s.scales, s.quats, s.opacities, s.sh, None)
+                try:
+                    native.upload_cells(c.means, c.scales, c.quats, c.offsets, c.members, c.cell_of(s.num_splats))
+                except (RuntimeError, ValueError) as exc:
+                    assert "another scene" in str(exc) or "partition" in str(exc) or "cell_of" in str(exc), exc
+                    refused[0] += 1
+        except BaseException as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert not errors, errors
+    scene = gb.Scene.from_arrays(scenes[1].means, scenes[1].scales, scenes[1].quats, scenes[1].opacities,
+                                 scenes[1].sh, cells=cells[1])
+    close(gb.render(scene, front_camera(), "duplex", backend="cuda"),
+          gb.render(scene, front_camera(), "duplex", backend="cpu"))
+
+
+def test_cuda_duplex_large_cell_at_one_depth():
+    """20,000 camera-facing splats at one depth in one cell (one run of equal depth, which the former kernel ranked
+    in O(run^2)): the image does not depend on the members' order and matches the CPU's, counts exactly."""
+    n = 20_000
+    rng = np.random.default_rng(9)
+    means = np.stack([rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), np.full(n, 3.0)], 1)
+    scales = np.stack([np.full(n, 0.02), np.full(n, 0.02), np.full(n, 1e-4)], 1)
+    quats = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    sh = rng.normal(0, 0.5, (n, 1, 3))
+    base = gb.Scene.from_arrays(means, scales, quats, rng.uniform(0.2, 0.9, n), sh)
+    members = np.arange(n, dtype=np.int32)
+    one = lambda m: Cells(np.float32([[0, 0, 3]]), np.float32([[1, 1, 0.01]]),  # noqa: E731
+                          np.float32([[1, 0, 0, 0]]), np.int32([0, n]), m)
+    cam = front_camera(128, 96)
+    frames = []
+    for m in (members, rng.permutation(members).astype(np.int32)):
+        scene = gb.Scene.from_arrays(base.means, base.scales, base.quats, base.opacities, base.sh, cells=one(m))
+        frames.append(gb.render(scene, cam, "duplex", backend="cuda"))
+    assert np.array_equal(frames[0].rgb, frames[1].rgb)
+    close(frames[0], gb.render(scene, cam, "duplex", backend="cpu"))
+
+
+def test_cuda_renderer_leaves_the_callers_device_current():
+    """A renderer on another device than the thread's current one restores the thread's device after each call."""
+    from gbviewer import _native_cuda
+
+    try:
+        native = _native_cuda.Renderer(1)
+    except RuntimeError as exc:
+        pytest.skip(f"one CUDA device only: {exc}")
+    before = _native_cuda.default_device()
+    s = random_scene(20)
+    native.upload(s.means, s.scales, s.quats, s.opacities, s.sh, None)
+    assert native.device == 1 and _native_cuda.default_device() == before
