@@ -235,7 +235,7 @@ class Soak:
             "cycle": i, "seconds": round(time.perf_counter() - started, 2),
             "rss_kib": rss, "rss_trimmed_kib": rss_kib(),
             "traced_kib": tracemalloc.get_traced_memory()[0] // 1024 if tracemalloc.is_tracing() else None,
-            "gl": gl_object_counts(), "glsl_renderers": int(w._glsl is not None), "threads": threading.active_count(),
+            "gl": gl_object_counts(), "renderers": len(w._renderers), "threads": threading.active_count(),
             "scene": self.app.state.scene_path.name if self.app.state.scene_path else None,
         })
 
