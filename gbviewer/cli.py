@@ -21,6 +21,7 @@ from .eval.options import add_dataset_args, add_eval_args, scene_pairs
 from .figure import DIFFS, compose_grid, render_grid, save_image, write_comparison
 from .io import load, write_inria_ply
 from .io.files import check_writable
+from .io.outputs import refuse_collisions, refuse_inputs
 from .render import AUTO, BACKEND_NAMES, Mode, RenderSettings, choose_backend, get_renderer, trace_pixel
 from .scene import Scene
 from .validate import integer
@@ -118,7 +119,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".ply":
         raise GBViewerError(f"{out}: output must end in .ply (a standard INRIA 3DGS ply)")
-    check_writable(out, args.force)
+    check_writable(out, args.force, inputs=[args.scene])
     scene = load(args.scene)
     write_inria_ply(scene, out, force=args.force)
     print(f"{out}: {scene.num_splats} splats, SH degree {scene.sh_degree}, from {scene.meta.get('format')} "
@@ -130,7 +131,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".npy"):
         raise GBViewerError(f"{out}: output must end in .png or .npy")
-    check_writable(out, args.force)
+    check_writable(out, args.force, inputs=[args.scene, args.cameras])
     scene = load(args.scene)
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, [args.scale], "--scale")
@@ -146,6 +147,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 DEMO_VIDEO_FRAMES = 36  # 3 s at 12 fps
+DEMO_FILES = ("comparison.png", "zoom.mp4")  # what demo writes into --out
 DEMO_SETTINGS = [RenderSettings(Mode.SCALAR), RenderSettings(Mode.SCALAR, supersample=3),
                  RenderSettings(Mode.GAUSSIAN_BLENDING)]
 
@@ -156,23 +158,24 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from rich.progress import Progress
 
     scene_path = args.scene or DEFAULT_SCENE
-    out_dir = check_writable(args.out, folder=True)
+    out_dir, force, args.cameras = Path(args.out), getattr(args, "force", False), getattr(args, "cameras", None)
+    for name in DEMO_FILES:
+        check_writable(out_dir / name, force, inputs=[scene_path, args.cameras])
     scene = load(scene_path)
-    args.cameras = getattr(args, "cameras", None)
     cam = camera_from_args(scene, args)
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         print("no display found: writing the comparison images instead of opening a window")
     cells = render_grid(scene, cam, DEMO_SETTINGS, [1.0, 1.0 / 8.0], backend_of(args))
     img = compose_grid(cells, cam.width, cam.height)
-    path = save_image(out_dir / "comparison.png", img, force=True)
+    path = save_image(out_dir / DEMO_FILES[0], img, force=force)
     print(f"wrote {path} ({img.width}x{img.height}): {Path(scene_path).name}, "
           + ", ".join(f"{c.settings.label} {c.total_ms:.0f} ms" for c in cells[0]))
     small = cam.with_size(max(2, cam.width // 2), max(2, cam.height // 2))  # half size keeps it quick
     frames = zoom_path(small, DEMO_VIDEO_FRAMES)
     with Progress(transient=True) as progress:
         task = progress.add_task("zoom video", total=len(frames))
-        info = record_video(scene, frames, DEMO_SETTINGS, out_dir / "zoom.mp4", fps=12, backend=args.backend,
-                            force=True, progress=lambda done, total: progress.update(task, completed=done))
+        info = record_video(scene, frames, DEMO_SETTINGS, out_dir / DEMO_FILES[1], fps=12, backend=args.backend,
+                            force=force, progress=lambda done, total: progress.update(task, completed=done))
     print(f"wrote {info.path} ({len(frames)} frames, x1 -> x1/8, {' | '.join(s.label for s in DEMO_SETTINGS)})")
     return 0
 
@@ -245,6 +248,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     outputs = [Path(args.json)] if args.json else []
     if args.plots:
         outputs += [bench.plot_path(Path(args.plots), Path(s).name) for s in args.scenes]
+    refuse_collisions(outputs)
+    refuse_inputs(outputs, [*args.scenes, args.cameras])
 
     result = bench.run_bench(
         args.scenes, RenderSettings.parse_list(args.modes), args.rates, backends, views=args.views,
@@ -269,10 +274,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from . import eval as evaluation
 
     pairs = scene_pairs(args.scenes, args.data)
-    if args.json:
-        check_writable(args.json, args.force)
-    for path in evaluation.plot_paths(args.plots, pairs) if args.plots else []:
-        check_writable(path, args.force)
+    outputs = [args.json] * bool(args.json) + (evaluation.plot_paths(args.plots, pairs) if args.plots else [])
+    refuse_collisions(outputs)
+    for path in outputs:
+        check_writable(path, args.force, inputs=[p for pair in pairs for p in pair])
     result = evaluation.run_eval(
         pairs, RenderSettings.parse_list(args.modes), args.rates, split=args.split, background=args.background,
         images=args.images, backend=args.backend, workers=args.workers, ray=args.ray, threads=args.threads,
@@ -299,7 +304,7 @@ def cmd_video(args: argparse.Namespace) -> int:
         args.width, args.height = args.size
     elif not (args.width or args.height or args.cameras):
         args.width, args.height = VIDEO_PANE
-    check_writable(args.out, args.force)
+    check_writable(args.out, args.force, inputs=[args.scene, args.cameras, None if args.path in PATHS else args.path])
     scene = load(args.scene)
     cam = camera_from_args(scene, args)
     if args.path == "rate":
@@ -325,7 +330,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     """Labelled grid of modes x sampling rates with PSNR under each cell."""
     settings = RenderSettings.parse_list(args.modes)
     rates = args.rates
-    check_writable(args.out, args.force)
+    check_writable(args.out, args.force, inputs=[args.scene, args.cameras])
     scene = load(args.scene)
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, rates, "--rates")
@@ -350,7 +355,7 @@ def cmd_trace(args: argparse.Namespace) -> int:
     from .trace_report import print_traces, write_traces
 
     if args.json:
-        check_writable(args.json, args.force)
+        check_writable(args.json, args.force, inputs=[args.scene, args.cameras])
     settings = RenderSettings.parse_list(args.modes, background=args.background)
     if args.supersample is not None:
         settings = [s if s.supersample > 1 else replace(s, supersample=args.supersample) for s in settings]
@@ -407,13 +412,15 @@ def build_parser() -> argparse.ArgumentParser:
                     "and that of the no-display fallback (default auto)")
     add_dataset_args(p)
     p.add_argument("--out", default="out", help="output folder of the no-display fallback (default ./out)")
+    p.add_argument("--force", action="store_true", help="overwrite the no-display fallback's existing files")
     p.set_defaults(func=cmd_view)
 
     p = sub.add_parser("demo", help="write the side-by-side comparison of the bundled scene to a folder")
     p.add_argument("scene", type=Path, nargs="?")
     add_camera_args(p)
     add_backend_arg(p)
-    p.add_argument("--out", default="out", help="output folder (default ./out)")
+    p.add_argument("--out", default="out", help=f"output folder (default ./out) for {' and '.join(DEMO_FILES)}")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files")
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("bench", help="speed (per SIMD path of the CPU backend) and zoom fidelity per mode, backend "
