@@ -23,6 +23,7 @@ from .io import load, write_inria_ply
 from .io.files import check_writable
 from .io.outputs import refuse_collisions, refuse_inputs
 from .render import AUTO, BACKEND_NAMES, Mode, RenderSettings, choose_backend, get_renderer, trace_pixel
+from .render.budget import BUDGET_ENV
 from .scene import Scene
 from .validate import integer
 from .video import MAX_FPS, MIN_FPS, record_video
@@ -592,6 +593,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.debug:
             raise
         print(f"gbviewer: error: {exc}", file=sys.stderr)
+        return 2
+    except MemoryError as exc:  # beyond the estimate render.budget refuses before a frame (e.g. long tile lists)
+        if args.debug:
+            raise
+        print(f"gbviewer: error: out of memory ({exc or 'MemoryError'}); render smaller, or see {BUDGET_ENV}",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
         signum = exc.signum if isinstance(exc, Terminated) else signal.SIGINT

@@ -157,3 +157,13 @@ def test_a_frame_beyond_the_memory_budget_is_refused_before_allocating(work, cap
     with pytest.raises(RenderError, match="available memory|address-space limit"):
         check_frame_memory(gb.Camera(16384, 16384, 8, 8, 4, 4, np.eye(3), np.zeros(3)),
                            RenderSettings(supersample=8), 20)
+
+
+def test_memory_running_out_after_the_estimate_is_one_line(work, capsys, monkeypatch):
+    def bad_alloc(*args, **kwargs):
+        raise MemoryError("std::bad_alloc")
+
+    monkeypatch.setattr(cli, "get_renderer", bad_alloc)
+    refused(["render", "scene.ply", "--out", "x.png", "--backend", "cpu"], capsys,
+            f"out of memory (std::bad_alloc); render smaller, or see {BUDGET_ENV}")
+    assert not (work / "x.png").exists()

@@ -130,3 +130,13 @@ def test_colmap_reads_under_an_address_space_limit_below_its_own(tmp_path):
     out = subprocess.run([sys.executable, "-c", READ, str(root), str(limit)], capture_output=True, text=True,
                          timeout=120, env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
     assert out.returncode == 0 and out.stdout.strip() == "2", out.stderr
+
+
+def test_blender_frames_sharing_a_photo(tmp_path):
+    import json
+
+    frames = [{"file_path": "./test/a", "transform_matrix": np.eye(4).tolist()}] * 2
+    (tmp_path / "transforms_test.json").write_text(json.dumps({"camera_angle_x": 0.7, "frames": frames}))
+    (tmp_path / "test").mkdir()
+    Image.new("RGBA", (8, 6)).save(tmp_path / "test" / "a.png")
+    one_line(tmp_path, "'a.png' is the photo of two frames (test and test)")

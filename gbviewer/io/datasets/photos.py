@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import errno
 import os
+import struct
 import warnings
 from pathlib import Path
 
@@ -24,6 +25,8 @@ PIXELS_PER_BYTE = 4096  # beyond what PNG (deflate: < 1032:1) or JPEG can compre
 MAGIC = {"PNG": b"\x89PNG\r\n\x1a\n", "JPEG": b"\xff\xd8\xff"}  # the photo formats a dataset may hold
 MAX_DECODED_BYTES = 4 << 30  # decoded pixels plus their float32 copy, per photo
 MAX_JPEG_SCANS = 100  # libjpeg-turbo's advice against scan bombs (djpeg -maxscan); real progressive JPEGs have ~10
+# what Pillow raises for a malformed file: OSError, SyntaxError (a broken PNG chunk), EOFError, struct.error, ...
+DECODE_ERRORS = (OSError, ValueError, SyntaxError, EOFError, struct.error, IndexError, Image.DecompressionBombError)
 SOS = b"\xff\xda"  # JPEG start of scan: entropy-coded data stuffs 0xff with 0x00, so only markers hold this pair
 
 
@@ -72,7 +75,7 @@ def photo_size(path: Path) -> tuple[int, int]:
         scans = _scans(path) if kind == "JPEG" else 0
     except FileNotFoundError:
         raise DatasetError(f"{path}: photo missing") from None
-    except (OSError, ValueError, Image.DecompressionBombError) as exc:
+    except DECODE_ERRORS as exc:
         raise DatasetError(f"{path}: cannot read the photo ({exc})") from None
     if not (1 <= w <= MAX_IMAGE_SIZE and 1 <= h <= MAX_IMAGE_SIZE):
         raise DatasetError(f"{path}: photo is {w}x{h}; expected sides of 1..{MAX_IMAGE_SIZE} pixels")
@@ -95,7 +98,7 @@ def read_photo(path: Path) -> np.ndarray:
         with _open(path) as im:
             alpha = "A" in im.getbands() or "transparency" in im.info
             pixels = np.asarray(im.convert("RGBA" if alpha else "RGB"))
-    except (OSError, ValueError, Image.DecompressionBombError) as exc:
+    except DECODE_ERRORS as exc:
         raise DatasetError(f"{path}: cannot decode the photo ({exc})") from None
     return pixels.astype(np.float32) / np.float32(255)
 
