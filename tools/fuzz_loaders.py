@@ -92,7 +92,10 @@ def main() -> None:
 
     import atheris
 
-    with atheris.instrument_imports(include=["gbviewer"]):
+    with atheris.instrument_imports(include=["gbviewer", "PIL"]):  # PIL: which of its errors reach us
+        import PIL.JpegImagePlugin  # noqa: F401
+        import PIL.PngImagePlugin  # noqa: F401
+
         import gbviewer.io  # noqa: F401  (instrumented for coverage)
         import gbviewer.keyframes  # noqa: F401
         import gbviewer.cli  # noqa: F401

@@ -12,15 +12,18 @@ command lines, each read from the one input file the fuzzer writes.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import io
 import shutil
 import struct
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
 PHOTOS = ("a", "b", "c", "d")
+_SCRATCH: Path | None = None
 
 
 class ReachedWork(Exception):
@@ -36,8 +39,13 @@ def _photos(folder: Path, suffix: str = ".png", mode: str = "RGB") -> None:
 
 
 def _fresh(path: Path) -> Path:
-    """An empty dataset folder beside the fuzzer's input."""
-    root = path.parent / f"{path.name}.dataset"
+    """An empty folder for the dataset or command made of `path`, in this process's scratch folder (removed at
+    exit), never beside the input: seeds and crashes are replayed where they are kept."""
+    global _SCRATCH
+    if _SCRATCH is None:
+        _SCRATCH = Path(tempfile.mkdtemp(prefix="gbv-fuzz-targets-"))
+        atexit.register(shutil.rmtree, _SCRATCH, ignore_errors=True)
+    root = _SCRATCH / path.name
     shutil.rmtree(root, ignore_errors=True)
     root.mkdir()
     return root

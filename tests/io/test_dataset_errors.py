@@ -140,3 +140,9 @@ def test_blender_frames_sharing_a_photo(tmp_path):
     (tmp_path / "test").mkdir()
     Image.new("RGBA", (8, 6)).save(tmp_path / "test" / "a.png")
     one_line(tmp_path, "'a.png' is the photo of two frames (test and test)")
+
+
+@pytest.mark.parametrize("name", ["/etc/hostname", "../a.png"])
+def test_photo_names_outside_the_photo_folder(tmp_path, name):
+    one_line(colmap_text(tmp_path, [(POSE, "1", name)], photo_names=[]), f"photo name {name!r}",
+             "expected a path inside this folder")

@@ -17,7 +17,7 @@ from ...camera import Camera
 from ...errors import CameraError, DatasetError, InvalidValue
 from ...validate import array, real
 from .dataset import Dataset, View, holdout_splits
-from .photos import fit_to_photo, missing_photos
+from .photos import fit_to_photo, missing_photos, photo_path
 
 MODEL_FILES = {".bin": ("cameras", "images", "rigs", "frames"), ".txt": ("cameras", "images", "rigs", "frames")}
 EMPTY_POINTS = {".bin": b"\0" * 8, ".txt": b""}  # points3D is never read: it is large and unneeded here
@@ -105,7 +105,7 @@ def load_colmap(root: Path, model: Path, images: str = "images") -> Dataset:
         if a["name"] == b["name"]:
             raise DatasetError(f"{model}: two images are named {a['name']!r:.300}; expected one image per photo")
     folder = root / images
-    paths = [folder / im["name"] for im in posed]
+    paths = [photo_path(folder, im["name"]) for im in posed]
     if not folder.is_dir():
         raise DatasetError(f"{folder}: photo folder missing (choose another with --images)")
     missing_photos(paths, f"{folder} for {model}")

@@ -106,7 +106,7 @@ def read_photo(path: Path) -> np.ndarray:
 def find_photo(folder: Path, name: str) -> Path:
     """`folder/name`, or with one of PHOTO_SUFFIXES added when `name` has none that exists (3DGS cameras.json and
     Blender transforms name photos without their extension)."""
-    path = folder / name
+    path = photo_path(folder, name)
     if is_photo_file(path):
         return path
     for suffix in PHOTO_SUFFIXES:
@@ -114,6 +114,15 @@ def find_photo(folder: Path, name: str) -> Path:
         if is_photo_file(candidate):
             return candidate
     return path
+
+
+def photo_path(folder: Path, name: str) -> Path:
+    """`folder/name` for a relative `name` that stays in `folder` (subfolders allowed); an absolute name or one with
+    `..` (a dataset pointing at files elsewhere) is a `DatasetError`."""
+    rel = Path(name)
+    if rel.is_absolute() or ".." in rel.parts or "\0" in name or not name.strip():
+        raise DatasetError(f"{folder}: photo name {name!r:.200}; expected a path inside this folder")
+    return folder / rel
 
 
 def is_photo_file(path: Path) -> bool:
