@@ -3,6 +3,7 @@ command lines, each read from the one input file the fuzzer writes.
 
 - colmap_bin: u32 length L, then L bytes of cameras.bin, then images.bin (a model of 8x6 photos a.png, b.png, ...)
 - colmap_txt: cameras.txt, a NUL byte, images.txt
+- colmap_doc: the JSON the pycolmap child prints (`colmap.read_colmap`'s result), for `load_colmap`'s checks
 - blender: transforms_test.json beside test/a.png ... (8x6 RGBA)
 - cameras_dataset: a 3DGS cameras.json beside images/a.png ...
 - photo: the bytes of one photo (read_photo)
@@ -84,6 +85,55 @@ def colmap_txt(path: Path) -> list[np.ndarray]:
     return _load(root)
 
 
+def colmap_doc(path: Path) -> list[np.ndarray]:
+    """The checks `load_colmap` applies to what the pycolmap child prints (the child's JSON as the input; fast: no
+    child process)."""
+    from gbviewer.io.datasets import colmap
+
+    root = _fresh(path)
+    (root / "sparse" / "0").mkdir(parents=True)
+    (root / "sparse" / "0" / "cameras.txt").write_text("")
+    _photos(root / "images")
+    real = colmap.read_colmap
+    colmap.read_colmap = lambda model: _child_doc(path, real)
+    try:
+        return _load(root)
+    finally:
+        colmap.read_colmap = real
+
+
+def _child_doc(path: Path, read_colmap) -> dict:
+    """The input parsed as read_colmap parses the child's output (NaN and Infinity kept)."""
+    import json
+
+    from gbviewer.errors import DatasetError
+
+    try:
+        doc = json.loads(path.read_bytes())
+        if not _shaped(doc):
+            raise ValueError("not shaped as the child prints")
+    except (ValueError, RecursionError, TypeError, KeyError, AttributeError) as exc:
+        raise DatasetError(f"not the child's output ({str(exc)[:60]})") from None
+    return doc
+
+
+def _shaped(doc) -> bool:
+    """Whether `doc` has the keys and types the child always prints (pycolmap's values in them are the target):
+    cameras {id: model, width, height, params, names with cx, cy and f or fx, fy}, images [name, camera, q, R, t]."""
+    def numbers(v, n):
+        return isinstance(v, list) and len(v) == n and all(type(x) in (int, float) for x in v)
+
+    cams_ok = isinstance(doc["cameras"], dict) and all(
+        isinstance(c["model"], str) and type(c["width"]) is int and type(c["height"]) is int
+        and numbers(c["params"], len(c["names"])) and all(isinstance(n, str) for n in c["names"])
+        and {"cx", "cy"} <= set(c["names"]) and ("f" in c["names"] or {"fx", "fy"} <= set(c["names"]))
+        for c in doc["cameras"].values())
+    return cams_ok and isinstance(doc["images"], list) and all(
+        isinstance(im["name"], str) and isinstance(im["camera"], str) and numbers(im["q"], 4) and numbers(im["t"], 3)
+        and isinstance(im["R"], list) and len(im["R"]) == 3 and all(numbers(r, 3) for r in im["R"])
+        for im in doc["images"])
+
+
 def blender(path: Path) -> list[np.ndarray]:
     root = _fresh(path)
     shutil.copyfile(path, root / "transforms_test.json")
@@ -152,4 +202,4 @@ def trace_args(path: Path) -> list[np.ndarray]:
     return _run_cli(["trace", "tiny.ply", *_argv(path)], root)
 
 
-READERS = {f.__name__: f for f in (colmap_bin, colmap_txt, blender, cameras_dataset, photo, eval_args, trace_args)}
+READERS = {f.__name__: f for f in (colmap_bin, colmap_txt, colmap_doc, blender, cameras_dataset, photo, eval_args, trace_args)}
