@@ -25,11 +25,11 @@ CAMERA = "1 PINHOLE 8 6 10 10 4 3\n"
 POSE = "1 0 0 0 0 0 5"  # qw qx qy qz tx ty tz
 
 
-def colmap_text(root, images: list[tuple[str, str, str]], photo_names=None):
+def colmap_text(root, images: list[tuple[str, str, str]], photo_names=None, camera=CAMERA):
     """root/sparse/0 as text with one PINHOLE camera 1 and images (pose, camera id, name); 8x6 PNGs."""
     model = root / "sparse" / "0"
     model.mkdir(parents=True)
-    (model / "cameras.txt").write_text(CAMERA)
+    (model / "cameras.txt").write_text(camera)
     (model / "images.txt").write_text("".join(f"{k + 1} {pose} {cam} {name}\n\n"
                                               for k, (pose, cam, name) in enumerate(images)))
     (root / "images").mkdir()
@@ -146,3 +146,8 @@ def test_blender_frames_sharing_a_photo(tmp_path):
 def test_photo_names_outside_the_photo_folder(tmp_path, name):
     one_line(colmap_text(tmp_path, [(POSE, "1", name)], photo_names=[]), f"photo name {name!r}",
              "expected a path inside this folder")
+
+
+def test_an_invalid_camera_names_the_model_and_the_image(tmp_path):
+    one_line(colmap_text(tmp_path, [(POSE, "1", "a.png")], camera="1 PINHOLE 0 6 10 10 4 3\n"),
+             str(tmp_path / "sparse" / "0"), "image 'a.png': camera 1: width: expected >= 1, got 0")

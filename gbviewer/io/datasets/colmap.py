@@ -124,9 +124,13 @@ def load_colmap(root: Path, model: Path, images: str = "images") -> Dataset:
             R, t = array(im["R"], f"{where}: R", (3, 3)), array(im["t"], f"{where}: translation", (3,))
             intrinsics = pinhole(cam, f"{where}: camera {im['camera']}")
             fx, fy, cx, cy = (real(v, f"{where}: intrinsics") for v in intrinsics)
-            camera = Camera(cam["width"], cam["height"], fx, fy, cx, cy, R, t, name=im["name"])
-        except (InvalidValue, CameraError) as exc:
+        except InvalidValue as exc:
             raise DatasetError(str(exc)) from None
+        try:
+            camera = Camera(cam["width"], cam["height"], fx, fy, cx, cy, R, t, name=im["name"])
+        except CameraError as exc:
+            why = str(exc).removeprefix(f"camera {im['name']!r:.60}: ")
+            raise DatasetError(f"{where}: camera {im['camera']}: {why}") from None
         views.append(View(im["name"], fit_to_photo(camera, path), path, split[im["name"]]))
     return Dataset(root, "colmap", tuple(views))
 
