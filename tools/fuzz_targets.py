@@ -202,4 +202,5 @@ def trace_args(path: Path) -> list[np.ndarray]:
     return _run_cli(["trace", "tiny.ply", *_argv(path)], root)
 
 
-READERS = {f.__name__: f for f in (colmap_bin, colmap_txt, colmap_doc, blender, cameras_dataset, photo, eval_args, trace_args)}
+READERS = {f.__name__: f for f in (colmap_bin, colmap_txt, colmap_doc, blender, cameras_dataset, photo, eval_args,
+                                    trace_args)}
