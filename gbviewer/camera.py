@@ -178,7 +178,11 @@ class Camera:
             raise CameraError(str(exc)) from None
         w, h = max(1, round(self.width * s)), max(1, round(self.height * s))
         sx, sy = w / self.width, h / self.height
-        return replace(self, width=w, height=h, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy)
+        try:
+            return replace(self, width=w, height=h, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx,
+                           cy=self.cy * sy)
+        except CameraError as exc:
+            raise CameraError(f"{exc} at sampling rate {format_rate(s)}") from None
 
     def with_size(self, width: int, height: int) -> "Camera":
         """Same pose and field of view at another resolution."""

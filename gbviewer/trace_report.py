@@ -4,13 +4,13 @@ per step)."""
 
 from __future__ import annotations
 
-import json
 from collections import Counter
 from pathlib import Path
 
 from .bench.report import wide_console
 from .io.files import atomic_write
 from .render import PixelTrace, TraceStep
+from .validate import dumps_json
 
 
 def _rgb(c: tuple[float, float, float]) -> str:
@@ -78,9 +78,9 @@ def print_traces(traces: list[PixelTrace], top: int) -> None:
 
 def write_traces(path: Path, traces: list[PixelTrace], scene: str, force: bool = False) -> Path:
     """Every trace as JSON: {"scene": scene, "traces": [PixelTrace.to_dict(), ...]} (each what PixelTrace.to_json
-    gives)."""
+    gives: strict JSON, a non-finite number written null)."""
     doc = {"scene": scene, "traces": [t.to_dict() for t in traces]}
-    return atomic_write(path, lambda p: p.write_text(json.dumps(doc)), force)
+    return atomic_write(path, lambda p: p.write_text(dumps_json(doc)), force)
 
 
 # TraceStep fields holding tuples: one CSV column per element, named field_suffix

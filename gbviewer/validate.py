@@ -17,6 +17,7 @@ import numpy as np
 from .errors import InvalidValue
 
 F32_MAX = float(np.finfo(np.float32).max)
+F32_TINY = float(np.finfo(np.float32).tiny)  # the smallest normal float32: a positive value below it underflows
 JSON_MAX_BYTES = 64 << 20
 JSON_MAX_DEPTH = 32
 
@@ -28,7 +29,8 @@ def _describe(value: object) -> str:
 
 def real(value: object, what: str, *, lo: float | None = None, hi: float | None = None, lo_open: bool = False,
          f32: bool = False) -> float:
-    """`value` as a finite float in [lo, hi] ((lo, hi] with lo_open); with f32 it must also fit a float32."""
+    """`value` as a finite float in [lo, hi] ((lo, hi] with lo_open); with f32 it must also fit a float32, and a
+    value that must be > 0 must stay so as a normal float32 (a focal length of 1e-45 would become 0 or subnormal)."""
     if isinstance(value, bool):
         raise InvalidValue(f"{what}: expected a number, got {_describe(value)}")
     try:
@@ -40,6 +42,9 @@ def real(value: object, what: str, *, lo: float | None = None, hi: float | None 
         raise InvalidValue(f"{what}: expected {kind}, got {_describe(value)}")
     if lo is not None and (x <= lo if lo_open else x < lo):
         raise InvalidValue(f"{what}: expected {'>' if lo_open else '>='} {lo:g}, got {x:g}")
+    if f32 and lo_open and lo == 0 and x < F32_TINY:
+        raise InvalidValue(f"{what}: expected >= {F32_TINY:.4g} (a positive float32 that does not underflow), got "
+                           f"{x:g}")
     if hi is not None and x > hi:
         raise InvalidValue(f"{what}: expected <= {hi:g}, got {x:g}")
     return x
@@ -141,6 +146,23 @@ def parse_json(text: str | bytes, what: str, *, max_bytes: int = JSON_MAX_BYTES,
     if _depth(doc, max_depth) > max_depth:
         raise InvalidValue(f"{what}: JSON nested deeper than {max_depth} levels")
     return doc
+
+
+def finite_json(doc: Any) -> Any:
+    """`doc` with every non-finite float (NaN, +-Infinity: a value that over- or underflowed, or is undefined) as
+    None, so that it serialises as strict JSON's null; tuples become lists."""
+    if isinstance(doc, (float, np.floating)):
+        return float(doc) if math.isfinite(doc) else None
+    if isinstance(doc, dict):
+        return {k: finite_json(v) for k, v in doc.items()}
+    if isinstance(doc, (list, tuple)):
+        return [finite_json(v) for v in doc]
+    return doc
+
+
+def dumps_json(doc: Any, indent: int | None = None) -> str:
+    """Strict JSON of `doc`: only finite numbers, each non-finite one written null (`finite_json`)."""
+    return json.dumps(finite_json(doc), indent=indent, allow_nan=False)
 
 
 def read_json(path: str | Path, *, max_bytes: int = JSON_MAX_BYTES, max_depth: int = JSON_MAX_DEPTH) -> Any:

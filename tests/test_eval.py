@@ -229,7 +229,8 @@ def test_existing_outputs_are_refused_before_the_work(tmp_path, capsys, monkeypa
     (tmp_path / "p").mkdir()
     (tmp_path / "p" / "fruit_drops_minimal.png").write_bytes(b"mine")
     monkeypatch.setattr(ev, "run_eval", lambda *a, **k: pytest.fail("evaluated despite an existing output"))
-    status = cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(tmp_path), "--plots", str(tmp_path / "p")])
+    status = cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(tmp_path / "data"), "--plots",
+                       str(tmp_path / "p")])  # (a file inside the dataset folder would be refused as an input)
     err = capsys.readouterr().err
     assert status == 2 and err.splitlines() == [f"gbviewer: error: {tmp_path / 'p' / 'fruit_drops_minimal.png'}: "
                                                 "exists; pass --force to overwrite"]

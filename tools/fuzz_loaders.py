@@ -2,16 +2,19 @@
 
     python tools/fuzz_loaders.py FORMAT [--seconds N] [--corpus DIR] [-- libFuzzer options]
 
-FORMAT is one of the seed folders in tests/io/fuzz/seeds (inria, compressed, spz, splat, sog, ..., and the JSON readers
-cameras and keyframes): its small seed files start the corpus, new inputs go to `--corpus` (default .fuzz/FORMAT, kept between runs). An input fails
-when loading it raises anything but a one-line GBViewerError, emits a numpy RuntimeWarning, or returns a scene with
-non-finite values; libFuzzer also flags inputs that take over 10 s or 2 GiB. Failing inputs are written to
-tests/io/fuzz/crashes/ where tests/io/test_fuzz_regressions.py replays them with `check_load` forever after.
+FORMAT is one of the seed folders in tests/io/fuzz/seeds (inria, compressed, spz, splat, sog, ..., the JSON readers
+cameras and keyframes, and the datasets and command lines of tools/fuzz_targets.py): its small seed files start the
+corpus, new inputs go to `--corpus` (default .fuzz/FORMAT, kept between runs). An input fails when loading it raises
+anything but a one-line GBViewerError, emits a numpy RuntimeWarning, or returns a scene with non-finite values;
+libFuzzer also flags inputs that take over 10 s (60 s for the targets of a child process or the CLI) or 2 GiB.
+Failing inputs are written to tests/io/fuzz/crashes/ where tests/io/test_fuzz_regressions.py replays them with
+`check_load` forever after.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import os
 import sys
 import tempfile
@@ -19,6 +22,8 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+
+import fuzz_targets
 
 REPO = Path(__file__).resolve().parents[1]
 SEEDS = REPO / "tests" / "io" / "fuzz" / "seeds"
@@ -52,7 +57,8 @@ def _keyframes(path: Path) -> list[np.ndarray]:
     return _camera_arrays([k.camera for k in keys]) + [np.array([k.rate for k in keys], np.float32)]
 
 
-READERS = {"cameras": _cameras, "keyframes": _keyframes}  # every other seed folder is a scene format
+READERS = {"cameras": _cameras, "keyframes": _keyframes, **fuzz_targets.READERS}  # the others: scene formats
+SLOW = set(fuzz_targets.READERS) - {"photo"}  # a child process per COLMAP input (30 s deadline), or the CLI
 
 
 def check_load(path: Path, kind: str = "scene") -> str:
@@ -88,17 +94,27 @@ def main() -> None:
 
     import atheris
 
-    with atheris.instrument_imports(include=["gbviewer"]):
+    with atheris.instrument_imports(include=["gbviewer", "PIL"]):  # PIL: which of its errors reach us
+        import PIL.JpegImagePlugin  # noqa: F401
+        import PIL.PngImagePlugin  # noqa: F401
+
         import gbviewer.io  # noqa: F401  (instrumented for coverage)
         import gbviewer.keyframes  # noqa: F401
+        import gbviewer.cli  # noqa: F401
+        import gbviewer.io.datasets  # noqa: F401
     scratch = Path(tempfile.mkdtemp(prefix="gbv-fuzz-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None))
     target = scratch / "input"
 
     def one_input(data: bytes) -> None:
         target.write_bytes(data)
-        check_load(target, args.format)
+        try:
+            check_load(target, args.format)
+        except Exception:  # saved here too: atheris does not always write the artifact of a Python exception
+            (CRASHES / f"{args.format}-crash-{hashlib.sha1(data).hexdigest()}").write_bytes(data)
+            raise
 
-    flags = [sys.argv[0], str(corpus), str(SEEDS / args.format), f"-max_total_time={args.seconds}", "-timeout=10",
+    flags = [sys.argv[0], str(corpus), str(SEEDS / args.format), f"-max_total_time={args.seconds}",
+             f"-timeout={60 if args.format in SLOW else 10}",
              "-rss_limit_mb=2048", f"-artifact_prefix={CRASHES}/{args.format}-", "-print_final_stats=1", *extra]
     atheris.Setup(flags, one_input)
     atheris.Fuzz()

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import platform
@@ -16,6 +15,7 @@ from ..camera import format_rate
 from ..extras import require
 from ..io.files import atomic_write
 from ..render import BACKENDS
+from ..validate import dumps_json
 from .fidelity import FidelityRow
 from .oit import OitRow
 from .simd import SIMD_NAMES, simd_summary
@@ -72,7 +72,7 @@ def write_json(path: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], f
            "fidelity": [asdict(r) for r in fidelity], "ratios": ratios(speed)}
     if oit:
         doc["order_independent"] = [asdict(r) for r in oit]
-    return atomic_write(path, lambda p: p.write_text(json.dumps(doc, indent=2, allow_nan=True)), force)
+    return atomic_write(path, lambda p: p.write_text(dumps_json(doc, indent=2)), force)
 
 
 def plot_path(out_dir: Path, scene: str) -> Path:

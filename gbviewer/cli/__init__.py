@@ -11,6 +11,7 @@ from contextlib import contextmanager
 
 from ..argtypes import Parser
 from ..errors import GBViewerError
+from ..render.budget import BUDGET_ENV
 from . import bench, compare, info, render, trace, video, view
 from . import eval as evaluation
 
@@ -98,6 +99,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.debug:
             raise
         print(f"gbviewer: error: {exc}", file=sys.stderr)
+        return 2
+    except MemoryError as exc:  # beyond the estimate render.budget refuses before a frame (e.g. long tile lists)
+        if args.debug:
+            raise
+        print(f"gbviewer: error: out of memory ({exc or 'MemoryError'}); render smaller, or see {BUDGET_ENV}",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
         signum = exc.signum if isinstance(exc, Terminated) else signal.SIGINT

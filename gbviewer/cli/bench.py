@@ -10,6 +10,7 @@ from ..camera import parse_rates
 from ..errors import GBViewerError
 from ..extras import require
 from ..render import BACKENDS, RenderSettings
+from ..io.outputs import refuse_collisions, refuse_inputs
 from .options import MAX_COUNT, check_render_size, progress_bar
 
 BENCH_DEFAULTS = {"modes": "scalar,gaussian_blending,supersample:3", "rates": "1,1/8", "views": 2, "repeat": 2,
@@ -46,6 +47,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     outputs = [Path(args.json)] if args.json else []
     if args.plots:
         outputs += [bench.plot_path(Path(args.plots), Path(s).name) for s in args.scenes]
+    refuse_collisions(outputs)
+    refuse_inputs(outputs, [*args.scenes, args.cameras])
 
     result = bench.run_bench(
         args.scenes, RenderSettings.parse_list(args.modes), args.rates, backends, views=args.views,

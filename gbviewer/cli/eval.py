@@ -7,6 +7,7 @@ import argparse
 from ..eval.options import add_eval_args, scene_pairs
 from ..extras import require
 from ..io.files import check_writable
+from ..io.outputs import refuse_collisions
 from ..render import RenderSettings
 from .options import progress_bar
 
@@ -19,10 +20,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.plots:
         require("eval", "matplotlib", "--plots", load=False)
     pairs = scene_pairs(args.scenes, args.data)
-    if args.json:
-        check_writable(args.json, args.force)
-    for path in evaluation.plot_paths(args.plots, pairs) if args.plots else []:
-        check_writable(path, args.force)
+    outputs = [args.json] * bool(args.json) + (evaluation.plot_paths(args.plots, pairs) if args.plots else [])
+    refuse_collisions(outputs)
+    for path in outputs:
+        check_writable(path, args.force, inputs=[p for pair in pairs for p in pair])
     result = evaluation.run_eval(
         pairs, RenderSettings.parse_list(args.modes), args.rates, split=args.split, background=args.background,
         images=args.images, backend=args.backend, workers=args.workers, ray=args.ray, threads=args.threads,

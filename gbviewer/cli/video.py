@@ -28,7 +28,7 @@ def cmd_video(args: argparse.Namespace) -> int:
         args.width, args.height = args.size
     elif not (args.width or args.height or args.cameras):
         args.width, args.height = VIDEO_PANE
-    check_writable(args.out, args.force)
+    check_writable(args.out, args.force, inputs=[args.scene, args.cameras, None if args.path in PATHS else args.path])
     scene = load(args.scene)
     cam = camera_from_args(scene, args)
     if args.path == "rate":

@@ -20,6 +20,7 @@ from .options import add_backend_arg, add_camera_args, backend_of, camera_from_a
 
 
 DEMO_VIDEO_FRAMES = 36  # 3 s at 12 fps
+DEMO_FILES = ("comparison.png", "zoom.mp4")  # what demo writes into --out
 DEMO_SETTINGS = [RenderSettings(Mode.SCALAR), RenderSettings(Mode.SCALAR, supersample=3),
                  RenderSettings(Mode.GAUSSIAN_BLENDING)]
 
@@ -31,23 +32,24 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     require("video", "imageio_ffmpeg", "the demo's zoom video", load=False)
     scene_path = args.scene or DEFAULT_SCENE
-    out_dir = check_writable(args.out, folder=True)
+    out_dir, force, args.cameras = Path(args.out), getattr(args, "force", False), getattr(args, "cameras", None)
+    for name in DEMO_FILES:
+        check_writable(out_dir / name, force, inputs=[scene_path, args.cameras])
     scene = load(scene_path)
-    args.cameras = getattr(args, "cameras", None)
     cam = camera_from_args(scene, args)
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         print("no display found: writing the comparison images instead of opening a window")
     cells = render_grid(scene, cam, DEMO_SETTINGS, [1.0, 1.0 / 8.0], backend_of(args))
     img = compose_grid(cells, cam.width, cam.height)
-    path = save_image(out_dir / "comparison.png", img, force=True)
+    path = save_image(out_dir / DEMO_FILES[0], img, force=force)
     print(f"wrote {path} ({img.width}x{img.height}): {Path(scene_path).name}, "
           + ", ".join(f"{c.settings.label} {c.total_ms:.0f} ms" for c in cells[0]))
     small = cam.with_size(max(2, cam.width // 2), max(2, cam.height // 2))  # half size keeps it quick
     frames = zoom_path(small, DEMO_VIDEO_FRAMES)
     with Progress(transient=True) as progress:
         task = progress.add_task("zoom video", total=len(frames))
-        info = record_video(scene, frames, DEMO_SETTINGS, out_dir / "zoom.mp4", fps=12, backend=args.backend,
-                            force=True, progress=lambda done, total: progress.update(task, completed=done))
+        info = record_video(scene, frames, DEMO_SETTINGS, out_dir / DEMO_FILES[1], fps=12, backend=args.backend,
+                            force=force, progress=lambda done, total: progress.update(task, completed=done))
     print(f"wrote {info.path} ({len(frames)} frames, x1 -> x1/8, {' | '.join(s.label for s in DEMO_SETTINGS)})")
     return 0
 
@@ -78,11 +80,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                     "and that of the no-display fallback (default auto)")
     add_dataset_args(p)
     p.add_argument("--out", default="out", help="output folder of the no-display fallback (default ./out)")
+    p.add_argument("--force", action="store_true", help="overwrite the no-display fallback's existing files")
     p.set_defaults(func=cmd_view)
 
     p = sub.add_parser("demo", help="write the side-by-side comparison of the bundled scene to a folder")
     p.add_argument("scene", type=Path, nargs="?")
     add_camera_args(p)
     add_backend_arg(p)
-    p.add_argument("--out", default="out", help="output folder (default ./out)")
+    p.add_argument("--out", default="out", help=f"output folder (default ./out) for {' and '.join(DEMO_FILES)}")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files")
     p.set_defaults(func=cmd_demo)

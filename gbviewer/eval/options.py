@@ -65,6 +65,8 @@ def scene_pairs(scenes: list[str], data: Path | None) -> list[tuple[Path, Path]]
         path = Path(arg)
         if not path.exists() and ":" in arg:
             scene, _, dataset = arg.rpartition(":")
+            if not scene.strip() or not dataset.strip():
+                raise GBViewerError(f"{arg}: expected SCENE:DATASET with both parts (no such file either)")
             pairs.append((Path(scene), Path(dataset)))
         elif data is None:
             raise GBViewerError(f"{arg}: which dataset? give --data DATASET or {arg}:DATASET")

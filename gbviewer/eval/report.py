@@ -3,12 +3,12 @@ the mean over scenes on the terminal, every view's numbers as JSON, plots."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from ..bench.report import machine_description, plot_path, pyplot, save_figure, wide_console
 from ..camera import format_rate
 from ..io.files import atomic_write
+from ..validate import dumps_json
 from .run import EvalResult, mean
 
 Table = dict[tuple[str, float], dict[str, float | None]]  # (mode, rate) -> psnr, ssim, render_ms
@@ -84,7 +84,7 @@ def to_json(result: EvalResult) -> dict:
 def write_json(path: Path, result: EvalResult, force: bool = False) -> Path:
     """`to_json` written atomically (an existing file only with `force`)."""
     doc = to_json(result)
-    return atomic_write(path, lambda p: p.write_text(json.dumps(doc, indent=1, allow_nan=False)), force)
+    return atomic_write(path, lambda p: p.write_text(dumps_json(doc, indent=1)), force)
 
 
 def _labels(pairs: list[tuple[Path, Path]]) -> list[str]:

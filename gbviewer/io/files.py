@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import os
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from ..errors import GBViewerError
+from .outputs import PathLike, refuse_inputs
 
 
 def _umask() -> int:
@@ -25,12 +26,15 @@ def refuse_overwrite(path: str | Path, force: bool = False) -> Path:
     return path
 
 
-def check_writable(path: str | Path, force: bool = False, *, folder: bool = False) -> Path:
+def check_writable(path: str | Path, force: bool = False, *, folder: bool = False,
+                   inputs: Iterable[PathLike | None] = ()) -> Path:
     """Raise now the error that writing `path` (a file; with `folder`, a folder to write files into) would raise
     after long work: an existing file without `force`, a folder where a file goes or the reverse, a place that
     cannot be created or may not be written in (probed with a temporary file, so read-only mounts count for root
-    too). Leaves nothing behind; call it before the work."""
+    too), and, with or without `force`, a file that is one of the command's `inputs` (`refuse_inputs`). Leaves
+    nothing behind; call it before the work."""
     path = Path(path)
+    refuse_inputs([path], inputs)
     if folder and path.exists() and not path.is_dir():
         raise GBViewerError(f"{path}: exists and is not a folder")
     if not folder:

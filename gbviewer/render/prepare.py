@@ -13,6 +13,7 @@ from ..camera import Camera
 from ..cells import Cells, cells_for
 from ..errors import RenderError
 from ..scene import Scene
+from .budget import check_frame_memory
 from .types import (DEFAULT_ET_GRADE, DEFAULT_SIGMA, ORDER_INDEPENDENT, SORT_ENTRY_BYTES, Frame, FrameStats, Mode,
                     RenderSettings)
 
@@ -71,6 +72,7 @@ def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backe
     if samples > MAX_SAMPLES:
         raise RenderError(f"{camera.width}x{camera.height} at supersample {settings.supersample}: {samples} samples, "
                           f"more than the {MAX_SAMPLES} one frame can hold")
+    check_frame_memory(camera, settings, scene.num_splats)
     t0 = time.perf_counter()
     view = view_scene(scene, camera)
     decode_ms = (time.perf_counter() - t0) * 1e3 if view is not scene else None

@@ -7,7 +7,6 @@ tracer (native/cpu/trace.cpp). Nothing here recomputes the blend.
 
 from __future__ import annotations
 
-import json
 from collections import Counter
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -17,7 +16,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import InvalidValue, RenderError
 from ..scene import Scene
-from ..validate import integer
+from ..validate import dumps_json, integer
 from .registry import get_renderer
 from .types import Mode, RenderSettings
 
@@ -131,8 +130,9 @@ class PixelTrace:
         return {**fields, "samples": samples}
 
     def to_json(self, indent: int | None = None) -> str:
-        """The trace as JSON (what `gbviewer trace --json` writes, one per mode)."""
-        return json.dumps(self.to_dict(), indent=indent)
+        """The trace as strict JSON (what `gbviewer trace --json` writes, one per mode): a number that is not
+        finite (a footprint or weight that over- or underflowed for a far or tiny-focal camera) is null."""
+        return dumps_json(self.to_dict(), indent=indent)
 
 
 def _rows(a: np.ndarray) -> list[tuple]:
@@ -144,8 +144,8 @@ def from_native(out: dict, settings: RenderSettings, camera: Camera, x: int, y: 
     n = settings.supersample
     mode = settings.mode
     xy, conic = out["xy"] / n, out["conic"].astype(np.float64) * n * n
-    det = conic[:, 0] * conic[:, 2] - conic[:, 1] ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # non-finite entries: null in JSON
+        det = conic[:, 0] * conic[:, 2] - conic[:, 1] ** 2
         cov = np.stack([conic[:, 2], -conic[:, 1], conic[:, 0]], 1) / det[:, None]
     cutoff = np.sqrt(np.maximum(-2.0 * out["log_min_alpha"].astype(np.float64), 0.0))
     totals = out["sample_total"].astype(np.float64)

@@ -165,7 +165,7 @@ def truncate_name(model):
 @pytest.mark.parametrize("damage, expect", [
     (lambda d: (d / "cameras.bin").write_bytes(b"not a camera file" * 3), "Camera model does not exist"),
     (lambda d: (d / "images.bin").write_bytes(struct.pack("<Q", 1) + b"\0" * 60 + struct.pack("<Q", 1 << 40)),
-     "unreadable COLMAP model"),
+     "an image refers to camera 0, which the model's cameras file does not define"),
     (truncate_name, "still reading after"),
     (lambda d: (d / "images.bin").unlink(), "images.bin missing"),
 ])

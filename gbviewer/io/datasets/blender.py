@@ -65,4 +65,10 @@ def load_blender(root: Path) -> Dataset:
     """The views of transforms_train.json and transforms_test.json (either may be absent, not both)."""
     views = [v for split, name in SPLIT_FILES.items() if (root / name).is_file()
              for v in _views(root, split, root / name)]
+    seen: dict[Path, View] = {}
+    for v in views:
+        if v.image in seen:
+            raise DatasetError(f"{root}: {v.image.name!r:.300} is the photo of two frames ({seen[v.image].split} and "
+                               f"{v.split}); expected one frame per photo")
+        seen[v.image] = v
     return Dataset(root, "blender", tuple(views))

@@ -3,19 +3,22 @@ read through pycolmap in a child process whose time and memory are bounded."""
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
 
 from ...camera import Camera
 from ...errors import CameraError, DatasetError, InvalidValue
 from ...extras import require
-from ...validate import array, parse_json, real
+from ...validate import array, real
 from .dataset import Dataset, View, holdout_splits
-from .photos import fit_to_photo, missing_photos
+from .photos import fit_to_photo, missing_photos, photo_path
 
 MODEL_FILES = {".bin": ("cameras", "images", "rigs", "frames"), ".txt": ("cameras", "images", "rigs", "frames")}
 EMPTY_POINTS = {".bin": b"\0" * 8, ".txt": b""}  # points3D is never read: it is large and unneeded here
@@ -24,6 +27,7 @@ RADIAL = {"SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV"}  # pinhole when ev
 BASE_MEMORY = 4 << 30  # the child's address space: pycolmap itself, plus MEMORY_PER_BYTE per byte of the model
 SINGLE_THREADED = {"GLOG_minloglevel": "3", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}  # no per-core pools
 MEMORY_PER_BYTE = 32
+MIN_QUATERNION_NORM = 1e-6  # COLMAP normalises a pose's quaternion; one this short has no direction to keep
 BASE_SECONDS, BYTES_PER_SECOND = 30.0, 5e6
 
 
@@ -67,11 +71,15 @@ def read_colmap(model: Path) -> dict:
     if out.returncode != 0 or not out.stdout:
         why = (out.stderr.decode(errors="replace").strip().splitlines() or [f"exit status {out.returncode}"])[-1]
         raise DatasetError(f"{model}: unreadable COLMAP model (pycolmap: {why[:200]})")
-    try:
-        doc = parse_json(out.stdout, f"{model}: pycolmap's output")
-    except InvalidValue as exc:
-        raise DatasetError(str(exc)) from None
+    try:  # the child's own output: NaN and Infinity kept, for `load_colmap` to name the image that has them
+        doc = json.loads(out.stdout)
+    except ValueError as exc:
+        raise DatasetError(f"{model}: unreadable COLMAP model (pycolmap's output: {str(exc)[:100]})") from None
     if "error" in doc:
+        rig = re.search(r"Rig with ID (\d+) does not exist", doc["error"])
+        if rig and not any((model / f"rigs{s}").is_file() for s in MODEL_FILES):  # a trivial rig per camera
+            raise DatasetError(f"{model}: an image refers to camera {rig[1]}, which the model's cameras file does "
+                               "not define")
         raise DatasetError(f"{model}: unreadable COLMAP model ({doc['error'][:200]})")
     return doc
 
@@ -94,8 +102,11 @@ def load_colmap(root: Path, model: Path, images: str = "images") -> Dataset:
     rescaled where its photo's size differs (images_4 of a full-size model)."""
     doc = read_colmap(model)
     posed = sorted(doc["images"], key=lambda im: im["name"])
+    for a, b in zip(posed, posed[1:]):
+        if a["name"] == b["name"]:
+            raise DatasetError(f"{model}: two images are named {a['name']!r:.300}; expected one image per photo")
     folder = root / images
-    paths = [folder / im["name"] for im in posed]
+    paths = [photo_path(folder, im["name"]) for im in posed]
     if not folder.is_dir():
         raise DatasetError(f"{folder}: photo folder missing (choose another with --images)")
     missing_photos(paths, f"{folder} for {model}")
@@ -107,12 +118,20 @@ def load_colmap(root: Path, model: Path, images: str = "images") -> Dataset:
         if cam is None:
             raise DatasetError(f"{where}: camera {im['camera']} missing")
         try:
-            R, t = array(im["R"], f"{where}: R", (3, 3)), array(im["t"], f"{where}: t", (3,))
+            q = array(im["q"], f"{where}: rotation quaternion", (4,))
+            if np.linalg.norm(q) < MIN_QUATERNION_NORM:
+                raise InvalidValue(f"{where}: rotation quaternion is zero ({' '.join(f'{v:g}' for v in q)}); "
+                                   "expected a unit quaternion")
+            R, t = array(im["R"], f"{where}: R", (3, 3)), array(im["t"], f"{where}: translation", (3,))
             intrinsics = pinhole(cam, f"{where}: camera {im['camera']}")
             fx, fy, cx, cy = (real(v, f"{where}: intrinsics") for v in intrinsics)
-            camera = Camera(cam["width"], cam["height"], fx, fy, cx, cy, R, t, name=im["name"])
-        except (InvalidValue, CameraError) as exc:
+        except InvalidValue as exc:
             raise DatasetError(str(exc)) from None
+        try:
+            camera = Camera(cam["width"], cam["height"], fx, fy, cx, cy, R, t, name=im["name"])
+        except CameraError as exc:
+            why = str(exc).removeprefix(f"camera {im['name']!r:.60}: ")
+            raise DatasetError(f"{where}: camera {im['camera']}: {why}") from None
         views.append(View(im["name"], fit_to_photo(camera, path), path, split[im["name"]]))
     return Dataset(root, "colmap", tuple(views))
 

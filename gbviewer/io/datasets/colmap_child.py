@@ -1,7 +1,8 @@
 """Run as a script by `colmap.read_colmap` in a child process: `colmap_child.py FOLDER MAX_BYTES` reads the COLMAP
-model in FOLDER with pycolmap and prints its cameras and posed images as JSON (floats written exactly). pycolmap's
-readers can loop forever or abort on a malformed file: the parent bounds this process's time, and it limits its
-own address space to MAX_BYTES (a malformed count fails to allocate). Imports nothing of gbviewer."""
+model in FOLDER with pycolmap and prints its cameras and posed images as JSON (floats written exactly; NaN and
+Infinity as Python writes them, for the parent to name). pycolmap's readers can loop forever or abort on a
+malformed file: the parent bounds this process's time, and it limits its own address space to MAX_BYTES, or keeps
+the lower limit it was started under (a malformed count fails to allocate). Imports nothing of gbviewer."""
 
 from __future__ import annotations
 
@@ -24,13 +25,21 @@ def describe(folder: str) -> dict:
         if not image.has_pose:
             continue
         pose = image.cam_from_world()
-        images.append({"name": image.name, "camera": str(image.camera_id),
+        images.append({"name": image.name, "camera": str(image.camera_id), "q": [float(v) for v in pose.rotation.quat],
                        "R": pose.rotation.matrix().tolist(), "t": pose.translation.tolist()})
     return {"cameras": cameras, "images": images}
 
 
+def limit_memory(limit: int) -> None:
+    """At most `limit` bytes of address space, never more than the limit already in force (which cannot be
+    raised)."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    current = min(v for v in (soft, hard, limit) if v != resource.RLIM_INFINITY)
+    resource.setrlimit(resource.RLIMIT_AS, (current, current))
+
+
 if __name__ == "__main__":
-    resource.setrlimit(resource.RLIMIT_AS, (int(sys.argv[2]), int(sys.argv[2])))
+    limit_memory(int(sys.argv[2]))
     try:
         doc = describe(sys.argv[1])
     except Exception as exc:  # pycolmap raises ValueError, IndexError, MemoryError, ... for bad files

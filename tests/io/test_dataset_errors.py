@@ -1,0 +1,153 @@
+"""Dataset errors that name the real problem, on hand-written COLMAP text models of 8x6 photos: duplicate image
+names, an undefined camera, a zero quaternion, a non-finite pose, an over-long photo name, photos that are not PNG
+or JPEG by content, decode budgets, SCENE:/:DATASET; and the COLMAP reader under an address-space limit below its
+own. Each is one line (exit status 2 from the command line) and writes nothing."""
+
+from __future__ import annotations
+
+import io
+import os
+import resource
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from gbviewer import cli
+from gbviewer.errors import DatasetError
+from gbviewer.io.datasets import load_dataset, photos, read_photo
+
+pycolmap = pytest.importorskip("pycolmap")
+
+CAMERA = "1 PINHOLE 8 6 10 10 4 3\n"
+POSE = "1 0 0 0 0 0 5"  # qw qx qy qz tx ty tz
+
+
+def colmap_text(root, images: list[tuple[str, str, str]], photo_names=None, camera=CAMERA):
+    """root/sparse/0 as text with one PINHOLE camera 1 and images (pose, camera id, name); 8x6 PNGs."""
+    model = root / "sparse" / "0"
+    model.mkdir(parents=True)
+    (model / "cameras.txt").write_text(camera)
+    (model / "images.txt").write_text("".join(f"{k + 1} {pose} {cam} {name}\n\n"
+                                              for k, (pose, cam, name) in enumerate(images)))
+    (root / "images").mkdir()
+    for name in photo_names if photo_names is not None else {n for _, _, n in images}:
+        Image.new("RGB", (8, 6)).save(root / "images" / name, format="PNG")
+    return root
+
+
+def one_line(root, *expect):
+    with pytest.raises(DatasetError) as exc:
+        load_dataset(root)
+    text = str(exc.value)
+    assert "\n" not in text and all(e in text for e in expect), text
+
+
+def test_duplicate_image_names(tmp_path):
+    one_line(colmap_text(tmp_path, [(POSE, "1", "a.png"), (POSE, "1", "a.png")]), "two images are named 'a.png'")
+
+
+def test_missing_camera(tmp_path):
+    one_line(colmap_text(tmp_path, [(POSE, "1", "a.png"), (POSE, "7", "b.png")]),
+             "an image refers to camera 7, which the model's cameras file does not define")
+
+
+def test_zero_quaternion(tmp_path):
+    one_line(colmap_text(tmp_path, [("0 0 0 0 0 0 5", "1", "a.png")]), "image 'a.png': rotation quaternion is zero")
+
+
+def test_non_finite_pose(tmp_path):
+    rec = pycolmap.Reconstruction()
+    rec.add_camera_with_trivial_rig(pycolmap.Camera(camera_id=1, model="PINHOLE", width=8, height=6,
+                                                    params=[10, 10, 4, 3]))
+    image = pycolmap.Image(image_id=1, name="a.png", camera_id=1)
+    rec.add_image_with_trivial_frame(image, pycolmap.Rigid3d(pycolmap.Rotation3d(np.eye(3)), [0, np.nan, 5]))
+    (tmp_path / "sparse" / "0").mkdir(parents=True)
+    rec.write_binary(str(tmp_path / "sparse" / "0"))
+    (tmp_path / "images").mkdir()
+    Image.new("RGB", (8, 6)).save(tmp_path / "images" / "a.png")
+    one_line(tmp_path, "image 'a.png': translation: expected finite numbers, got nan")
+
+
+def test_photo_name_longer_than_a_file_name(tmp_path):
+    one_line(colmap_text(tmp_path, [(POSE, "1", "n" * 300 + ".png")], photo_names=[]), "photo name of 304 bytes",
+             "at most 255 bytes")
+
+
+@pytest.mark.parametrize("fmt", ["BMP", "TIFF", "GIF"])
+def test_photos_other_than_png_or_jpeg_are_refused_by_content(tmp_path, fmt):
+    Image.new("RGB", (8, 6)).save(tmp_path / "a.png", format=fmt)  # named .png, holding another format
+    with pytest.raises(DatasetError, match="a.png: not a PNG or JPEG photo \\(it starts with"):
+        photos.photo_size(tmp_path / "a.png")
+
+
+def test_a_jpeg_named_png_is_read_by_its_content(tmp_path):
+    Image.new("RGB", (8, 6), (255, 0, 0)).save(tmp_path / "a.png", format="JPEG", quality=100)
+    assert read_photo(tmp_path / "a.png").shape == (6, 8, 3)
+
+
+def test_decode_budgets_are_checked_from_the_header(tmp_path, monkeypatch):
+    path = tmp_path / "p.jpg"
+    Image.new("RGB", (64, 48), (10, 200, 30)).save(path, format="JPEG", progressive=True)
+    scans = path.read_bytes().count(photos.SOS)
+    assert scans > 3 and read_photo(path).shape == (48, 64, 3)
+    monkeypatch.setattr(photos, "MAX_JPEG_SCANS", 3)
+    with pytest.raises(DatasetError, match=f"JPEG of {scans} scans; at most 3"):
+        read_photo(path)
+    buf = io.BytesIO()
+    Image.new("I;16", (64, 48)).save(buf, format="PNG")  # 16-bit grey: 2 bytes per pixel, then float32 RGBA
+    (tmp_path / "p16.png").write_bytes(buf.getvalue())
+    monkeypatch.setattr(photos, "MAX_DECODED_BYTES", 64 * 48 * 18 - 1)
+    with pytest.raises(DatasetError, match="a 64x48 photo decodes to"):
+        read_photo(tmp_path / "p16.png")
+
+
+@pytest.mark.parametrize("arg", ["scene.ply:", ":data", ":"])
+def test_scene_dataset_pairs_need_both_parts(tmp_path, monkeypatch, capsys, arg):
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["eval", arg]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err == f"gbviewer: error: {arg}: expected SCENE:DATASET with both parts (no such file " \
+                                 "either)\n"
+
+
+READ = """
+import resource, sys
+resource.setrlimit(resource.RLIMIT_AS, (int(sys.argv[2]), int(sys.argv[2])))
+from gbviewer.io.datasets import load_dataset
+print(len(load_dataset(sys.argv[1]).views))
+"""
+
+
+def test_colmap_reads_under_an_address_space_limit_below_its_own(tmp_path):
+    """ulimit -v 3 GiB: the reading child keeps that limit instead of failing to raise it to its own 4 GiB."""
+    root = colmap_text(tmp_path, [(POSE, "1", "a.png"), (POSE, "1", "b.png")])
+    limit = 3 << 30
+    soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+    assert soft == resource.RLIM_INFINITY or soft > limit, "the test needs room above its limit"
+    out = subprocess.run([sys.executable, "-c", READ, str(root), str(limit)], capture_output=True, text=True,
+                         timeout=120, env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert out.returncode == 0 and out.stdout.strip() == "2", out.stderr
+
+
+def test_blender_frames_sharing_a_photo(tmp_path):
+    import json
+
+    frames = [{"file_path": "./test/a", "transform_matrix": np.eye(4).tolist()}] * 2
+    (tmp_path / "transforms_test.json").write_text(json.dumps({"camera_angle_x": 0.7, "frames": frames}))
+    (tmp_path / "test").mkdir()
+    Image.new("RGBA", (8, 6)).save(tmp_path / "test" / "a.png")
+    one_line(tmp_path, "'a.png' is the photo of two frames (test and test)")
+
+
+@pytest.mark.parametrize("name", ["/etc/hostname", "../a.png"])
+def test_photo_names_outside_the_photo_folder(tmp_path, name):
+    one_line(colmap_text(tmp_path, [(POSE, "1", name)], photo_names=[]), f"photo name {name!r}",
+             "expected a path inside this folder")
+
+
+def test_an_invalid_camera_names_the_model_and_the_image(tmp_path):
+    one_line(colmap_text(tmp_path, [(POSE, "1", "a.png")], camera="1 PINHOLE 0 6 10 10 4 3\n"),
+             str(tmp_path / "sparse" / "0"), "image 'a.png': camera 1: width: expected >= 1, got 0")
