@@ -22,6 +22,7 @@ from ..camera import format_rate
 from ..io.datasets import View
 from ..render import Frame
 from ..scene import Scene
+from .background import format_rgb
 from .difference_thread import PHOTO, Analysis, AnalysisThread, Request, Spec
 from .settings import PANE_NAMES
 from .pane_state import Shown
@@ -246,8 +247,10 @@ class PaneAnalysis:
         if a.psnr is None:
             return a.note, a.frame is not shown.frame
         stale = self.state.moving or a.frame is not shown.frame or a.spec.reference != spec.reference
-        return (f"PSNR {a.psnr:.2f} dB  SSIM {a.ssim:.4f} vs {a.spec.reference}" + ("  (stale)" if stale else ""),
-                stale)
+        against = a.spec.reference
+        if against == PHOTO and shown.job is not None:  # the photo's backdrop and the render's background matter
+            against += f" (bg {format_rgb(shown.job.settings.background)})"
+        return f"PSNR {a.psnr:.2f} dB  SSIM {a.ssim:.4f} vs {against}" + ("  (stale)" if stale else ""), stale
 
     def _photo(self, slot: Slot) -> tuple[View | None, str]:
         """The dataset view whose photo is the 'photo' reference of the frame pane part `slot` shows (rendered at

@@ -47,12 +47,14 @@ WAITING_FPS = 30  # UI frames a second while renders refine or a load runs (tile
 
 class ViewerApp:
     """The viewer window. `ViewerApp(path).run()` is `gbviewer [SCENE]`; `data`, `images`: a training dataset
-    opened beside it (`gbviewer SCENE --data DATASET --images images_4`)."""
+    opened beside it (`gbviewer SCENE --data DATASET --images images_4`); `background`: the panes' colour (saved;
+    None: the saved one, or a dataset's photos' backdrop)."""
 
     def __init__(self, scene_path: str | Path | None = None, settings_file: Path | None = None,
                  size: tuple[int, int] | None = None, visible: bool = True, persist: bool = True,
                  cameras: str | Path | None = None, projection: str | None = None,
-                 backend: str | None = None, data: str | Path | None = None, images: str = "images") -> None:
+                 backend: str | None = None, data: str | Path | None = None, images: str = "images",
+                 background: tuple[float, float, float] | None = None) -> None:
         self.settings_file = settings_file
         self.persist = persist
         settings, warning = load_settings(settings_file)
@@ -62,7 +64,7 @@ class ViewerApp:
             settings.projection = projection
         if backend:
             settings.backend = backend
-        self.state = AppState(settings, cameras)
+        self.state = AppState(settings, cameras, background)
         if warning:
             self.state.message(warning, "error")
         self.frame_count = 0
@@ -228,7 +230,7 @@ class ViewerApp:
             glfw.set_window_title(self.window, f"gbviewer - {opened.name}")
             if first:
                 self.frame_count = 0
-        self.state.dataset.poll()
+        self.state.poll_dataset()
         self.panes.poll()
         self.analysis.update()
         self.inspector.update()

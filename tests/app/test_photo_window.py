@@ -85,9 +85,9 @@ def test_photo_pane_beside_scalar_and_gaussian_blending(photo_app):
         assert (p.parts["a"].job.camera.width, p.parts["a"].job.camera.height) == (32, 25)
         assert overlays.pane_label(app, p, "a") == f"{p.name}  {mode}  x1/4  32x25"
         assert abs(p.rect.w / p.rect.h - 32 / 25) < 0.02
-        psnr = metrics.psnr(gb.render(state.scene, cam, mode).rgb, gt)
-        text, stale = app.analysis.fidelity_line((i, "a"))
-        assert not stale and text.startswith(f"PSNR {psnr:.2f} dB") and text.endswith("vs photo")
+        psnr = metrics.psnr(gb.render(state.scene, cam, mode, background=state.background).rgb, gt)
+        text, stale = app.analysis.fidelity_line((i, "a"))  # on the photos' backdrop: black, as their borders
+        assert not stale and text.startswith(f"PSNR {psnr:.2f} dB") and text.endswith("vs photo (bg 0.00 0.00 0.00)")
         label = pane_pixels(img, p.rect)[TOP:TOP + 20, 4:200]  # white text on its dark box
         assert (label.min(axis=2) > 200).sum() > 30
     assert app.analysis.fidelity_line((0, "a")) is None
