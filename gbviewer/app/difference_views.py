@@ -106,11 +106,15 @@ class PaneAnalysis:
     def spec(self, i: int, part: str) -> Spec:
         """What pane i's part needs computed."""
         view = self.state.settings.panes[i].view
-        if view == PHOTO:
-            return Spec(PHOTO)
+        if view == PHOTO or (view == "difference" and self.a_shows_photo()):
+            return Spec(PHOTO)  # (the difference to pane A showing the photo is the difference to the photo)
         reference = self.options.reference if view == "error" or self.options.fidelity else None
         to_pane = replace(self.state.settings_for(0, "a"), debug="none") if view == "difference" else None
         return Spec(reference, to_pane)
+
+    def a_shows_photo(self) -> bool:
+        """Whether pane A's view is the photo (its difference views then compare with the photo)."""
+        return self.state.settings.panes[0].view == PHOTO
 
     def update(self) -> None:
         """Once per UI frame, after the panes took their frames: finished analyses in (their panes re-coloured),
@@ -210,7 +214,10 @@ class PaneAnalysis:
             job = self.state.panes[slot[0]].parts[slot[1]].job
             rate = format_rate(job.info.get("rate", self.state.settings.rate) if job else self.state.settings.rate)
             return a.photo, f"{PHOTO} {a.photo_name}  {rate}  {a.photo.shape[1]}x{a.photo.shape[0]}"
-        if view == "difference":
+        if view == "difference" and spec.reference == PHOTO:
+            plane, auto = (a.error, a.error_scale) if fresh and a.spec == spec else (None, 0.0)
+            what = f"{name} - A (photo {a.photo_name})" if a is not None else ""
+        elif view == "difference":
             plane, auto = (a.diff, a.diff_scale) if fresh and a.spec.to_pane == spec.to_pane else (None, 0.0)
             what = f"{name} - A ({spec.to_pane.label})"
         else:

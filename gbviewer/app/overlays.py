@@ -77,12 +77,14 @@ def pane_label(app: ViewerApp, p: PaneState, part: str) -> str:
 
 
 def stats_lines(p: PaneState, part: str) -> list[str]:
-    """The information overlay of a pane part: timings per stage, fps, visible splats, evaluations per pixel, and
+    """The information overlay of a pane part (none while it shows the photo): timings per stage, fps, visible splats, evaluations per pixel, and
     the pacing of its last requests (ms from the request to the preview, to the first full-resolution tiles, to the
     final frame)."""
     shown = p.parts[part]
+    if shows_photo(shown):
+        return []  # (no render on screen: its timings would describe something else)
     st = shown.frame.stats
-    tag = "B " if part == "b" else ""
+    tag = f"{p.name}' " if part == "b" else ""
     lines = [f"{tag}{st.total_ms:.1f} ms: pre {st.preprocess_ms:.1f} + sort {st.sort_ms:.1f} + blend "
              f"{st.blend_ms:.1f}  {pane_fps(p, part):.1f} fps",
              f"{tag}{st.visible:,} splats visible  {st.evals_per_pixel:.0f} evals/px"]

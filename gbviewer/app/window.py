@@ -309,8 +309,9 @@ class ViewerApp:
         return path
 
     def screenshot_pane(self, i: int, path: str | Path | None = None, part: str = "a") -> Path | None:
-        """The pane's last render at its render resolution, 16 bits per channel (full precision)."""
-        return screenshots.save_pane(self.state, i, path, part)
+        """What the pane shows (its render, or the photo, a difference...) at its render resolution, 16 bits per
+        channel (full precision)."""
+        return screenshots.save_pane(self.state, i, path, part, self.analysis.visualize)
 
     def screenshot_hovered_pane(self) -> None:
         if self.state.hover is not None:

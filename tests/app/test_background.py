@@ -2,7 +2,8 @@
 photos (the median border colour) is the default for opaque photos, so that PSNR against photos of a grey backdrop
 compares like with like; `--background` overrides it; Close dataset, a new scene dropping the dataset (kept aside
 when the scene fits its cameras), `[ ]` snapping back to the view left, `R` restoring the default field of view, and
-no jump in framing when the camera leaves a letterboxed view."""
+no jump in framing when the camera leaves a letterboxed view; pane A's photo view is what other panes' differences,
+its info lines and its screenshot use."""
 
 from __future__ import annotations
 
@@ -18,6 +19,10 @@ from gbviewer import metrics
 from gbviewer.app.background import FIXED, PHOTOS, border, estimate_backdrop
 from gbviewer.app.dataset import bounds_fit_cameras
 from gbviewer.app.difference_views import PaneAnalysis
+from gbviewer.app.overlays import stats_lines
+from gbviewer.app.screenshots import save_pane
+from gbviewer.app.views import encode_png16
+from gbviewer.differences import signed_difference
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
 from gbviewer.eval import camera_for_rate, ground_truth
@@ -141,3 +146,29 @@ def test_snap_back_default_fov_and_no_jump_leaving_a_letterboxed_view(grey_captu
     assert state.dataset.view.name == "v00"  # at the view: the next one
     state.reset_camera()  # R: the default field of view, not the photo's
     assert state.controller.fov_y_deg == default_fov == state.settings.fov_y_deg
+
+
+def test_pane_a_showing_the_photo_is_what_differences_and_screenshots_use(grey_capture, tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    state = opened(grey_capture)
+    state.set_rate(RATE)
+    state.set_pane(0, view="photo")
+    state.set_pane(1, mode="scalar", supersample=1, view="difference")
+    an = PaneAnalysis(state)
+    try:
+        state.step_camera(1)
+        view = state.dataset.view
+        render_panes(state)
+        settle(an)
+        gt = ground_truth(view, RATE)
+        b = state.panes[1].parts["a"]
+        plane, legend = an.visualize((1, "a"), b.frame, "difference")
+        assert legend == "B - A (photo v00)"  # against the photo pane A shows, not A's render
+        np.testing.assert_array_equal(an.latest[(1, "a")].error, signed_difference(b.frame.rgb, gt))
+        a = state.panes[0].parts["a"]
+        a.view, a.legend = "photo", an.visualize((0, "a"), a.frame, "photo")[1]
+        assert stats_lines(state.panes[0], "a") == []  # no render timings over the photo
+        path = save_pane(state, 0, tmp_path / "a.png", colour=an.visualize)  # what is on screen: the photo
+        assert path.read_bytes() == encode_png16(gt) != encode_png16(a.frame.rgb)
+    finally:
+        an.stop()
