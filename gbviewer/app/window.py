@@ -39,6 +39,7 @@ from .panel import draw_panel  # noqa: E402
 from .panes import PaneRenders  # noqa: E402
 from .settings import load_settings, save_settings  # noqa: E402
 from .pane_state import RateMeter  # noqa: E402
+from .pane_text import Item  # noqa: E402
 from .state import AppState  # noqa: E402
 from .worker import RenderWorker  # noqa: E402
 
@@ -73,6 +74,8 @@ class ViewerApp:
         self.closed = False
         self.last_screenshot: Path | None = None
         self._pending_screenshot: Path | None = None
+        self.placed: list[Item] = []  # the texts the overlays placed over the panes this frame (pane_text)
+        self.part_tops: dict[tuple[int, str], float] = {}  # each pane part's y below its label and message lines
         self.dialogs = FileDialogs(self.state.open)
         self._init_window(visible)
         self.worker = RenderWorker(self.shared, on_result=glfw.post_empty_event)  # a result wakes the event loop
