@@ -37,7 +37,7 @@ from .inspector_view import draw_inspector  # noqa: E402
 from .menu import draw_menu  # noqa: E402
 from .panel import draw_panel  # noqa: E402
 from .panes import PaneRenders  # noqa: E402
-from .settings import load_settings, save_settings  # noqa: E402
+from .settings import AppSettings, load_settings, save_settings  # noqa: E402
 from .pane_state import RateMeter  # noqa: E402
 from .pane_text import Item  # noqa: E402
 from .state import AppState  # noqa: E402
@@ -103,10 +103,11 @@ class ViewerApp:
         glfw.window_hint(glfw.VISIBLE, visible)
         w, h = self.state.settings.window
         monitor = glfw.get_primary_monitor()
-        if monitor:  # fit the screen (a saved size may come from a bigger one)
-            _, _, mw, mh = glfw.get_monitor_workarea(monitor)
+        mx = my = 0
+        if monitor:  # the screen's work area at first; a saved size fitted to it (it may come from a bigger one)
+            mx, my, mw, mh = glfw.get_monitor_workarea(monitor)
             if mw > 0 and mh > 0:
-                w, h = min(w, mw), min(h, mh)
+                w, h = (mw, mh) if (w, h) == AppSettings().window else (min(w, mw), min(h, mh))
         release_current()  # glfw makes the window's GLX context current: X error if an EGL one is (gb.render on glsl)
         self.window = glfw.create_window(w, h, "gbviewer", None, None)
         if not self.window:
@@ -114,6 +115,8 @@ class ViewerApp:
             _, desc = glfw.get_error()
             desc = desc.decode(errors="replace") if isinstance(desc, bytes) else str(desc or "")
             raise GBViewerError(f"glfw could not create an OpenGL 3.3 window ({desc})")
+        if monitor:
+            glfw.set_window_pos(self.window, mx, my)
         glfw.make_context_current(self.window)
         glfw.swap_interval(1)
         self.ctx = moderngl.create_context()
