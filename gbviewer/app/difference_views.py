@@ -126,6 +126,9 @@ class PaneAnalysis:
             self.latest.clear()
             self._asked.clear()
             self._told.clear()
+        if self.options.reference == PHOTO and s.dataset.dataset is None:  # the dataset was closed
+            self.options.reference = "box"
+            self.recolour()
         if s.dataset.snaps != self._snaps:
             self._snaps = s.dataset.snaps
             self.options.reference, self.options.fidelity = PHOTO, True
