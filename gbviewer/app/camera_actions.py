@@ -3,12 +3,14 @@ view, projection, fly mode, and whether the camera is moving."""
 
 from __future__ import annotations
 
+import math
 import time
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from ..camera import UP_AXES, Camera
+from .layout import Rect, fit_aspect
 from ..scene import Scene
 from .camera_control import CameraController
 from .dataset import DatasetViews
@@ -31,10 +33,12 @@ class CameraActions:
     dataset: DatasetViews
     panes: list[PaneState]
     last_move: float
+    pane_areas: list[Rect]
     message: Callable[..., None]  # (text, level)
     _size_panes: Callable[[], None]
 
     def reset_camera(self) -> None:
+        """Frame the scene at the default field of view (the panel's; a snap does not change it)."""
         if self.scene is None:
             return
         lo, hi = self.scene.robust_bounds()
@@ -47,8 +51,12 @@ class CameraActions:
 
     def step_camera(self, direction: int) -> None:
         """Snap to the next (direction 1) or previous (-1) view: of the dataset's listed views when a dataset is
-        open, else of the training cameras."""
+        open, else of the training cameras. After the camera left a dataset view, either key snaps back to it."""
         if self.dataset.dataset is not None:
+            view = self.dataset.view
+            if view is not None and self.dataset.snapped(self.controller.state()) is None:
+                self.snap_view(self.dataset.index)
+                return
             index = self.dataset.next_index(direction)
             if index is None:
                 named = f" named with '{self.dataset.name_filter}'" if self.dataset.name_filter.strip() else ""
@@ -67,7 +75,13 @@ class CameraActions:
         renders the photo's camera at the rate, letterboxed to the photo's aspect (`photo_camera`)."""
         self.settings.projection = self.controller.projection = "perspective"
         self.cam_index = -1
-        self._snap(self.dataset.dataset.views[index].camera)
+        cam = self.dataset.dataset.views[index].camera
+        self._snap(cam)
+        if self.pane_areas:  # the same scale on screen as the letterboxed photo: leaving the view does not jump
+            area = self.pane_areas[0]
+            box = fit_aspect(area, cam.width / cam.height)
+            f = cam.fy * box.h / cam.height  # the photo's focal length in window units
+            self.controller.set_fov(math.degrees(2 * math.atan(area.h / 2 / f)))
         view = self.dataset.snapped_to(index, self.controller.state())
         self._size_panes()
         self.message(f"{view.split} view {view.name} ({view.camera.width}x{view.camera.height} photo)")
@@ -83,7 +97,6 @@ class CameraActions:
             self.controller.centre = (np.asarray(lo, np.float64) + hi) / 2
             self.controller.radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
         self.controller.snap_to(cam)
-        self.settings.fov_y_deg = self.controller.fov_y_deg
         self.moved()
 
     def set_up(self, up: str) -> None:

@@ -11,22 +11,27 @@ import traceback
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from ..differences import camera_key
 from ..camera import Camera, format_rate
 from ..errors import GBViewerError
 from ..eval import camera_for_rate
 from ..io.datasets import SPLITS, Dataset, View, load_dataset
+from .background import Backdrop, estimate_backdrop
 
 Message = Callable[[str, str], None]  # (text, level): AppState.message
 
 
 class DatasetLoader:
-    """Loads one dataset in a thread (a COLMAP model is read by pycolmap in a child process: it may take seconds)."""
+    """Loads one dataset in a thread (a COLMAP model is read by pycolmap in a child process: it may take seconds),
+    and estimates the backdrop of its photos there (`background.estimate_backdrop`)."""
 
     def __init__(self, path: str | Path, images: str = "images", load_fn: Callable | None = None) -> None:
         self.path, self.images = Path(path).expanduser(), images
         self.started = time.perf_counter()
         self.dataset: Dataset | None = None
+        self.backdrop: Backdrop | None = None
         self.error = ""
         self._load = load_fn or load_dataset
         self._done = threading.Event()
@@ -39,6 +44,7 @@ class DatasetLoader:
     def _run(self) -> None:
         try:
             self.dataset = self._load(self.path, self.images)
+            self.backdrop = estimate_backdrop(self.dataset.views)
         except GBViewerError as exc:
             self.error = str(exc)
         except OSError as exc:
@@ -58,6 +64,8 @@ class DatasetViews:
     def __init__(self, message: Message) -> None:
         self.message = message
         self.dataset: Dataset | None = None
+        self.backdrop: Backdrop | None = None  # what the open dataset's photos' borders say
+        self.set_aside: tuple[Dataset, Backdrop | None] | None = None  # dropped with its scene, kept on "keep"
         self.loader: DatasetLoader | None = None
         self.error = ""  # of the last failed load (the dataset open before it stays)
         self.images = "images"  # the photo folder of a capture or a cameras.json (images_4: quarter size)
@@ -86,11 +94,38 @@ class DatasetViews:
             self.error = ld.error
             self.message(f"dataset not opened: {ld.error}", "error")
             return None
-        self.dataset, self.index, self.snap_key = ld.dataset, -1, None
+        self.dataset, self.backdrop, self.index, self.snap_key = ld.dataset, ld.backdrop, -1, None
+        self.set_aside = None
         test = sum(v.split == "test" for v in ld.dataset.views)
         self.message(f"dataset {ld.path.name}: {len(ld.dataset.views)} views ({test} test, {ld.dataset.format}) in "
                      f"{ld.elapsed:.1f} s; [ ] step through the {self.split} views", "info")
         return ld.dataset
+
+    def close(self) -> Dataset | None:
+        """Drop the open dataset (and the snapped view); the dataset that was open, or None."""
+        d, self.dataset, self.backdrop, self.index, self.snap_key = self.dataset, None, None, -1, None
+        self.set_aside = None
+        return d
+
+    def drop_for_new_scene(self, fits: bool) -> None:
+        """Another scene opened: the dataset goes; kept aside for `keep` when the scene's bounds `fit` its
+        cameras (said in the status bar either way)."""
+        d, b = self.dataset, self.backdrop
+        if d is None:
+            return
+        self.close()
+        if fits:
+            self.set_aside = (d, b)
+            self.message(f"closed dataset {d.root.name} with the previous scene; the new scene fits its cameras: "
+                         "'Keep dataset' in the panel reopens it", "warn")
+        else:
+            self.message(f"closed dataset {d.root.name}: it belongs to the previous scene", "info")
+
+    def keep(self) -> None:
+        """Reopen the dataset the last scene change set aside."""
+        if self.set_aside is not None:
+            (self.dataset, self.backdrop), self.set_aside = self.set_aside, None
+            self.index, self.snap_key = -1, None
 
     # ---- the list and the snapped view --------------------------------------------------------------------------
 
@@ -159,3 +194,21 @@ class DatasetViews:
         if camera_key(want) != camera_key(camera):
             return None, f"the camera left {view.name} ([ ] to snap back)"
         return view, ""
+
+
+def bounds_fit_cameras(lo: np.ndarray, hi: np.ndarray, cameras: list[Camera]) -> bool:
+    """Whether a scene with robust bounds [lo, hi] is plausibly the one the cameras photographed: its centre lies
+    in front of at least half of them and inside their images (a camera over a hundred times the scene's size
+    away from its centre does not count: another scene's units or place)."""
+    if not cameras:
+        return False
+    centre = (np.asarray(lo, np.float64) + np.asarray(hi, np.float64)) / 2
+    size = max(float(np.linalg.norm(np.asarray(hi, np.float64) - lo)), 1e-9)
+    seen = 0
+    for c in cameras:
+        x = c.R.astype(np.float64) @ centre + c.t
+        if x[2] <= 0 or np.linalg.norm(c.position - centre) > 100 * size:
+            continue
+        u, v = c.fx * x[0] / x[2] + c.cx, c.fy * x[1] / x[2] + c.cy
+        seen += 0 <= u <= c.width and 0 <= v <= c.height
+    return 2 * seen >= len(cameras)

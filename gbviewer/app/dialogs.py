@@ -123,7 +123,8 @@ def draw_help(shown: bool) -> bool:
     if not shown:
         return False
     io = imgui.get_io()
-    w, h = 720, 44 + 25 * len(SHORTCUTS)
+    w = min(720, io.display_size.x - 24)  # fits the window; long actions wrap, a short window scrolls
+    h = min(44 + 25 * len(SHORTCUTS), io.display_size.y - 24)
     imgui.set_next_window_pos((io.display_size.x / 2, io.display_size.y / 2), 0, (0.5, 0.5))
     imgui.set_next_window_size((w, h))
     imgui.set_next_window_bg_alpha(0.98)
@@ -138,7 +139,7 @@ def draw_help(shown: bool) -> bool:
             imgui.table_next_column()
             imgui.text_colored(imgui.ImVec4(0.5, 0.75, 1.0, 1.0), s.label)
             imgui.table_next_column()
-            imgui.text(s.text)
+            imgui.text_wrapped(s.text)
         imgui.end_table()
     imgui.end()
     return keep

@@ -1,6 +1,6 @@
 """What the difference and error views draw over the panes: the colour bar of a colour-mapped difference with its
--scale, 0, +scale labels, and each pane part's PSNR/SSIM against the chosen reference (grey while stale), below the
-pane label and legend that `overlays` draws."""
+-scale, 0, +scale labels, below the label and message lines that `overlays` draws (the PSNR/SSIM line is a pane
+part's message there)."""
 
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ..differences import DIVERGING, format_scale
-from .overlays import GREY, WHITE, col, text
+from .overlays import WHITE, col, part_box
+from .pane_text import PAD
 
 if TYPE_CHECKING:
     from .window import ViewerApp
 
-TOP = 82  # below the label (y + 4), the preview / rendering line (+30) and the legend (+56)
 BAR_W, BAR_H = 160, 10
 
 
@@ -23,9 +23,8 @@ def knot_colours() -> list[int]:
     return [col(*(round(float(c) * 255) for c in rgb)) for rgb in DIVERGING]
 
 
-def draw_colour_bar(app: ViewerApp, dl, x: float, y: float, scale: float, right: bool = False) -> float:
-    """The colour bar at (x, y) (its right edge at x with `right`) and its labels; the height used."""
-    x0 = x - BAR_W - 8 if right else x
+def draw_colour_bar(app: ViewerApp, dl, x0: float, y: float, scale: float) -> float:
+    """The colour bar at (x0, y) and its labels; the height used."""
     dl.add_rect_filled((x0, y), (x0 + BAR_W + 8, y + BAR_H + 26), col(0, 0, 0, 170), 3.0)
     colours = knot_colours()
     seg = BAR_W / (len(colours) - 1)
@@ -44,20 +43,19 @@ def draw_colour_bar(app: ViewerApp, dl, x: float, y: float, scale: float, right:
 
 
 def draw_analysis_overlays(app: ViewerApp) -> None:
+    """Each colour-mapped pane part's colour bar, under its label and message lines (`overlays` placed them and
+    left `app.part_tops`), where its box has room."""
     state, analysis = app.state, app.analysis
     if state.scene is None:
         return
     dl = imgui.get_background_draw_list()
     for p in state.visible:
-        r = p.rect
-        dl.push_clip_rect((r.x, r.y), (r.x + r.w, r.y + r.h), True)
+        ps = state.settings.panes[p.index]
         for part in state.parts(p.index):
-            right = part == "b"
-            x, y = (r.x + r.w - 4 if right else r.x + 4), r.y + TOP
             scale = analysis.shown_scale.get((p.index, part))
-            if scale is not None and p.parts[part].view:
-                y += draw_colour_bar(app, dl, x, y, scale, right)
-            line = analysis.fidelity_line((p.index, part))
-            if line is not None:  # a split's second line one row lower: long lines of both sides would overlap
-                text(app, dl, x, y + 22 * right, line[0], GREY if line[1] else WHITE, align_right=right)
-        dl.pop_clip_rect()
+            top = app.part_tops.get((p.index, part))
+            box = part_box(p.rect, ps.split, ps.split_pos, part)
+            if scale is None or not p.parts[part].view or top is None:
+                continue
+            if box.w >= BAR_W + 16 and top + BAR_H + 30 <= box.y + box.h:
+                draw_colour_bar(app, dl, box.x + PAD, top, scale)

@@ -22,6 +22,7 @@ from ..camera import format_rate
 from ..io.datasets import View
 from ..render import Frame
 from ..scene import Scene
+from .background import format_rgb
 from .difference_thread import PHOTO, Analysis, AnalysisThread, Request, Spec
 from .settings import PANE_NAMES
 from .pane_state import Shown
@@ -105,11 +106,15 @@ class PaneAnalysis:
     def spec(self, i: int, part: str) -> Spec:
         """What pane i's part needs computed."""
         view = self.state.settings.panes[i].view
-        if view == PHOTO:
-            return Spec(PHOTO)
+        if view == PHOTO or (view == "difference" and self.a_shows_photo()):
+            return Spec(PHOTO)  # (the difference to pane A showing the photo is the difference to the photo)
         reference = self.options.reference if view == "error" or self.options.fidelity else None
         to_pane = replace(self.state.settings_for(0, "a"), debug="none") if view == "difference" else None
         return Spec(reference, to_pane)
+
+    def a_shows_photo(self) -> bool:
+        """Whether pane A's view is the photo (its difference views then compare with the photo)."""
+        return self.state.settings.panes[0].view == PHOTO
 
     def update(self) -> None:
         """Once per UI frame, after the panes took their frames: finished analyses in (their panes re-coloured),
@@ -121,6 +126,9 @@ class PaneAnalysis:
             self.latest.clear()
             self._asked.clear()
             self._told.clear()
+        if self.options.reference == PHOTO and s.dataset.dataset is None:  # the dataset was closed
+            self.options.reference = "box"
+            self.recolour()
         if s.dataset.snaps != self._snaps:
             self._snaps = s.dataset.snaps
             self.options.reference, self.options.fidelity = PHOTO, True
@@ -209,7 +217,10 @@ class PaneAnalysis:
             job = self.state.panes[slot[0]].parts[slot[1]].job
             rate = format_rate(job.info.get("rate", self.state.settings.rate) if job else self.state.settings.rate)
             return a.photo, f"{PHOTO} {a.photo_name}  {rate}  {a.photo.shape[1]}x{a.photo.shape[0]}"
-        if view == "difference":
+        if view == "difference" and spec.reference == PHOTO:
+            plane, auto = (a.error, a.error_scale) if fresh and a.spec == spec else (None, 0.0)
+            what = f"{name} - A (photo {a.photo_name})" if a is not None else ""
+        elif view == "difference":
             plane, auto = (a.diff, a.diff_scale) if fresh and a.spec.to_pane == spec.to_pane else (None, 0.0)
             what = f"{name} - A ({spec.to_pane.label})"
         else:
@@ -246,8 +257,10 @@ class PaneAnalysis:
         if a.psnr is None:
             return a.note, a.frame is not shown.frame
         stale = self.state.moving or a.frame is not shown.frame or a.spec.reference != spec.reference
-        return (f"PSNR {a.psnr:.2f} dB  SSIM {a.ssim:.4f} vs {a.spec.reference}" + ("  (stale)" if stale else ""),
-                stale)
+        against = a.spec.reference
+        if against == PHOTO and shown.job is not None:  # the photo's backdrop and the render's background matter
+            against += f" (bg {format_rgb(shown.job.settings.background)})"
+        return f"PSNR {a.psnr:.2f} dB  SSIM {a.ssim:.4f} vs {against}" + ("  (stale)" if stale else ""), stale
 
     def _photo(self, slot: Slot) -> tuple[View | None, str]:
         """The dataset view whose photo is the 'photo' reference of the frame pane part `slot` shows (rendered at

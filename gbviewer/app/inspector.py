@@ -128,7 +128,8 @@ class TraceThread(SlotThread):
 
 @dataclass
 class InspectorOptions:
-    show_all: bool = False  # every list entry in the table and the slider (else not the "outside_box" ones)
+    show_all: bool = False  # every list entry in the table and the slider (else: the table without the "outside_box"
+    #                         ones, the slider only the steps that added to the pixel)
     by_weight: bool = True  # the table's order: largest weight first (else blend order)
     alone: Slot | None = None  # the pane part drawn alone (None: side by side)
     margin: float = MARGIN  # output pixels drawn around the pinned one (the mouse wheel zooms)
@@ -289,6 +290,14 @@ class Inspector:
                 rows.sort(key=lambda k: -steps[k].weight)
             self._cache[key] = rows
         return self._cache[key]
+
+    def slider_steps(self, trace: PixelTrace) -> list[int]:
+        """The steps the slider goes through, in blend order: those that added to the pixel (with
+        `options.show_all`, every list entry); every shown one where none added."""
+        blend = self.order(trace, by_weight=False)
+        steps = self.steps(trace)
+        added = [k for k in blend if self.options.show_all or not steps[k].rejected]
+        return added or blend
 
     def ellipse(self, trace: PixelTrace, k: int) -> np.ndarray | None:
         """Step k's splat at its cut-off (`ellipse_points`, output pixels; kept until the traces change)."""

@@ -26,6 +26,9 @@ TOP_DRAWN = 8  # contributors drawn in their colour (the others faintly)
 WINDOW_COLOUR, PATH_COLOUR, BLACK = col(80, 230, 255), col(80, 230, 255, 140), col(0, 0, 0, 200)
 
 
+MIN_COLUMN_W = 320  # narrower trace columns stack into rows (the window scrolls)
+
+
 def draw_inspector(app: ViewerApp) -> None:
     """The pin's marks on the panes and, while a pixel is pinned, the Inspector window (its close box unpins)."""
     insp = app.inspector
@@ -105,14 +108,19 @@ def _contents(app: ViewerApp, insp: Inspector) -> None:
     imgui.same_line(0, 16)
     imgui.text_disabled("Ctrl+click a pane to pin another pixel")
     shown = [e for e in entries if o.alone is None or e.slot == o.alone]
-    gap = imgui.get_style().item_spacing.x
-    width = (imgui.get_content_region_avail().x - gap * (len(shown) - 1)) / max(1, len(shown))
+    gap, avail = imgui.get_style().item_spacing.x, imgui.get_content_region_avail()
+    cols = max(1, min(len(shown), int((avail.x + gap) // (MIN_COLUMN_W + gap))))  # stacked rows when narrow
+    rows = -(-len(shown) // cols)
+    width = (avail.x - gap * (cols - 1)) / cols
+    height = 0 if rows == 1 else max(260.0, (avail.y - gap * (rows - 1)) / rows)
+    imgui.begin_child("##traces", (0, 0))
     for k, e in enumerate(shown):
-        if k:
+        if k % cols:
             imgui.same_line()
-        imgui.begin_child(f"##trace{e.slot}", (width, 0), imgui.ChildFlags_.borders.value)
+        imgui.begin_child(f"##trace{e.slot}", (width, height), imgui.ChildFlags_.borders.value)
         _entry(app, insp, e)
         imgui.end_child()
+    imgui.end_child()
 
 
 def _entry(app: ViewerApp, insp: Inspector, e: Entry) -> None:
@@ -124,12 +132,13 @@ def _entry(app: ViewerApp, insp: Inspector, e: Entry) -> None:
         imgui.text_disabled(why)
         return
     imgui.text(f"{e.name}  {t.mode}")
-    imgui.same_line()
-    imgui.text_disabled(f"pixel ({t.x}, {t.y}) of {t.width}x{t.height}"
-                        + (f", {t.supersample}x{t.supersample} samples" if t.supersample > 1 else "")
-                        + ("  (stale)" if e.stale else ""))
+    imgui.push_style_color(imgui.Col_.text.value, imgui.get_style().color_(imgui.Col_.text_disabled.value))
+    imgui.text_wrapped(f"pixel ({t.x}, {t.y}) of {t.width}x{t.height}"
+                       + (f", {t.supersample}x{t.supersample} samples" if t.supersample > 1 else "")
+                       + ("  (stale)" if e.stale else ""))
+    imgui.pop_style_color()
     steps = insp.steps(t)
-    blend = insp.order(t, by_weight=False)
+    blend = insp.slider_steps(t)
     pos = min(bisect_left(blend, insp.options.step.get(e.slot, 0)), max(0, len(blend) - 1))  # the nearest shown
     if blend:  # the drawing on the left, the numbers and the slider on its right, the table below
         avail = imgui.get_content_region_avail()
@@ -149,7 +158,10 @@ def _entry(app: ViewerApp, insp: Inspector, e: Entry) -> None:
                             f"{e.result.request.backend})")
     if blend:
         imgui.set_next_item_width(-1)
-        changed, value = imgui.slider_int("##step", pos + 1, 1, len(blend), f"step %d of {len(blend)} (blend order)")
+        changed, value = imgui.slider_int("##step", pos + 1, 1, len(blend), f"step %d/{len(blend)}: #{blend[pos] + 1}")
+        if imgui.is_item_hovered():
+            imgui.set_tooltip("the steps in blend order: those that added to the pixel (all list entries: every "
+                              "one); #: the entry's number in the list, as in the table")
         if changed:
             pos = value - 1
             insp.options.step[e.slot] = blend[pos]

@@ -59,8 +59,9 @@ SHORTCUTS = (
     Shortcut("Q E", "fly down / up (fly mode)",
              (Key("q", "fly_move", (0, 0, -1), held=True), Key("e", "fly_move", (0, 0, 1), held=True))),
     Shortcut("Shift", "fly 4x faster"),
-    Shortcut("R", "reset the camera to the default framing", (Key("r", "reset_camera"),)),
-    Shortcut("[ ]", "previous / next dataset view of the listed split (Dataset panel), else training camera",
+    Shortcut("R", "reset the camera to the default framing and field of view", (Key("r", "reset_camera"),)),
+    Shortcut("[ ]", "previous / next dataset view of the listed split (Dataset panel; after leaving a view: back "
+             "to it), else training camera",
              (Key("left_bracket", "step_camera", (-1,), repeat=True),
               Key("right_bracket", "step_camera", (1,), repeat=True))),
     Shortcut("U", "next up axis (-y, +y, +z, -z)", (Key("u", "next_up"),)),

@@ -1,17 +1,19 @@
-"""What is drawn over the panes with the imgui draw lists: labels, preview and error notes, debug-view legends, the
-statistics lines, the split divider, loading and error banners, the magnifier loupe; and the status bar."""
+"""What is drawn over the panes with the imgui draw lists: each pane part's label (with its view's legend), its one
+message line (error, preview, refining or PSNR), its statistics lines (`pane_text` places them), the split divider,
+loading and error banners (wrapped), the magnifier loupe; and the status bar."""
 
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from imgui_bundle import imgui
 
 from ..camera import format_rate
 from ..render import AUTO
 from .difference_views import shows_photo
-from .layout import loupe_uv
+from .layout import Rect, loupe_uv
+from .pane_text import PAD, Item, lay_out_banner, lay_out_part
 from .panes import pane_fps
 from .pane_state import PaneState
 
@@ -29,32 +31,45 @@ WHITE, BLACK_A, YELLOW, RED, GREY, ACCENT = (col(255, 255, 255), col(0, 0, 0, 17
 LEVEL_COLOURS = {"info": WHITE, "warn": YELLOW, "error": RED}
 
 
-def text(app: ViewerApp, dl, x: float, y: float, s: str, colour: int = WHITE, bg: int = BLACK_A,
-         align_right: bool = False) -> tuple[float, float]:
-    """`s` in the monospace font on a dark box at (x, y) (its right edge at x with `align_right`); its size."""
-    if app.mono is not None:
-        imgui.push_font(app.mono, 15.0)
-    size = imgui.calc_text_size(s)
-    if align_right:
-        x -= size.x + 8
-    dl.add_rect_filled((x, y), (x + size.x + 8, y + size.y + 4), bg, 3.0)
-    dl.add_text((x + 4, y + 2), colour, s)
-    if app.mono is not None:
-        imgui.pop_font()
-    return size.x + 8, size.y + 4
+def measure(app: ViewerApp) -> Callable[[str], tuple[float, float]]:
+    """The size of a text in the overlays' font (push it first: `mono`)."""
+    def size(s: str) -> tuple[float, float]:
+        v = imgui.calc_text_size(s)
+        return v.x, v.y
+    return size
+
+
+class mono:
+    """`with mono(app):` the overlays' monospace font."""
+
+    def __init__(self, app: ViewerApp) -> None:
+        self.font = app.mono
+
+    def __enter__(self) -> None:
+        if self.font is not None:
+            imgui.push_font(self.font, 15.0)
+
+    def __exit__(self, *exc) -> None:
+        if self.font is not None:
+            imgui.pop_font()
+
+
+def draw_item(app: ViewerApp, dl, item: Item, bg: int = BLACK_A) -> None:
+    """A placed text on its dark box (the font pushed), recorded in app.placed; its full text as the tooltip when
+    it was elided and the cursor is on it."""
+    dl.add_rect_filled((item.x, item.y), (item.x + item.w, item.y + item.h), bg, 3.0)
+    dl.add_text((item.x + PAD, item.y + PAD / 2), item.colour, item.text)
+    app.placed.append(item)
+    m = imgui.get_io().mouse_pos
+    if item.elided and item.x <= m.x < item.x + item.w and item.y <= m.y < item.y + item.h:
+        imgui.set_tooltip(item.full)
 
 
 def banner(app: ViewerApp, dl, s: str, y: float, colour: int) -> None:
-    """A line centred on the panes (shortened to fit)."""
-    v = app.state.viewport
-    if app.mono is not None:
-        imgui.push_font(app.mono, 15.0)
-    while len(s) > 10 and imgui.calc_text_size(s).x > v.w - 24:
-        s = s[: len(s) - 8] + "..."
-    w = imgui.calc_text_size(s).x + 8
-    if app.mono is not None:
-        imgui.pop_font()
-    text(app, dl, v.x + max(4, (v.w - w) / 2), y, s, colour, col(0, 0, 0, 220))
+    """Text centred on the panes from y down, wrapped to their width."""
+    with mono(app):
+        for item in lay_out_banner(app.state.viewport, s, y, colour, measure(app)):
+            draw_item(app, dl, item, col(0, 0, 0, 220))
 
 
 def pane_label(app: ViewerApp, p: PaneState, part: str) -> str:
@@ -77,12 +92,14 @@ def pane_label(app: ViewerApp, p: PaneState, part: str) -> str:
 
 
 def stats_lines(p: PaneState, part: str) -> list[str]:
-    """The information overlay of a pane part: timings per stage, fps, visible splats, evaluations per pixel, and
-    the pacing of its last requests (ms from the request to the preview, to the first full-resolution tiles, to the
-    final frame)."""
+    """The information overlay of a pane part (none while it shows the photo): timings per stage, fps, visible
+    splats, evaluations per pixel, and the pacing of its last requests (ms from the request to the preview, to the
+    first full-resolution tiles, to the final frame)."""
     shown = p.parts[part]
+    if shows_photo(shown):
+        return []  # (no render on screen: its timings would describe something else)
     st = shown.frame.stats
-    tag = "B " if part == "b" else ""
+    tag = f"{p.name}' " if part == "b" else ""
     lines = [f"{tag}{st.total_ms:.1f} ms: pre {st.preprocess_ms:.1f} + sort {st.sort_ms:.1f} + blend "
              f"{st.blend_ms:.1f}  {pane_fps(p, part):.1f} fps",
              f"{tag}{st.visible:,} splats visible  {st.evals_per_pixel:.0f} evals/px"]
@@ -92,57 +109,72 @@ def stats_lines(p: PaneState, part: str) -> list[str]:
     return lines
 
 
+def part_box(r: Rect, split: bool, split_pos: float, part: str) -> Rect:
+    """The box of a pane part: the whole pane, or its half of a split (left of the divider for 'a')."""
+    if not split:
+        return r
+    sx = r.x + min(1.0, max(0.0, split_pos)) * r.w
+    return Rect(r.x, r.y, sx - r.x, r.h) if part == "a" else Rect(sx, r.y, r.x + r.w - sx, r.h)
+
+
+def message(app: ViewerApp, p: PaneState, part: str) -> tuple[str, int] | None:
+    """A pane part's one message line: its error, else its preview or refining state, else its PSNR/SSIM line."""
+    shown, job = p.parts[part], p.parts[part].job
+    if shown.error is not None:
+        return shown.error.text, RED
+    if job is not None and job.info.get("preview", 1.0) < 1.0:
+        fw, fh = job.info["full_size"]
+        return f"moving: preview {job.camera.width}x{job.camera.height} (not {fw}x{fh})", YELLOW
+    if shown.progress is not None:
+        return f"{'x1 sample shown, refining' if shown.stage == 'quick' else 'refining'} {shown.progress:.0%}", YELLOW
+    line = app.analysis.fidelity_line((p.index, part))
+    if line is not None:
+        return line[0], GREY if line[1] else WHITE
+    if app.worker.busy((p.index, part)) and job is not None:
+        return "rendering...", GREY
+    return None
+
+
 def draw_pane_overlays(app: ViewerApp) -> None:
+    """Each pane part's label (with its view's legend), one message line and, with the info overlay, its statistics,
+    laid out by `pane_text.lay_out_part` inside the part's box; the split divider; the load banners."""
     state = app.state
     dl = imgui.get_background_draw_list()
     v = state.viewport
+    app.placed, app.part_tops = [], {}
     if state.loader is not None:  # over the previous scene, which stays until the new one is ready
         ld = state.loader
         y = v.y + v.h / 2 if state.scene is None else v.y + 40
         banner(app, dl, f"loading {ld.path.name}: {ld.describe()}, {ld.elapsed:.1f} s (Esc cancels)", y, WHITE)
     if state.scene is None:
         return
-    for p in state.visible:
-        r = p.rect
-        ps = state.settings.panes[p.index]
-        parts = state.parts(p.index)
-        dl.push_clip_rect((r.x, r.y), (r.x + r.w, r.y + r.h), True)
-        y = r.y + 4
-        text(app, dl, r.x + 4, y, pane_label(app, p, "a"))
-        if ps.split:
-            text(app, dl, r.x + r.w - 4, y, pane_label(app, p, "b"), align_right=True)
-            sx = r.x + ps.split_pos * r.w
-            dl.add_line((sx, r.y), (sx, r.y + r.h), col(255, 255, 255, 220), 2.0)
-            dl.add_circle_filled((sx, r.y + r.h / 2), 7, col(255, 255, 255, 230))
-            dl.add_circle((sx, r.y + r.h / 2), 7, col(0, 0, 0, 200), 0, 1.5)
-        y += 26
-        for part in parts:
-            shown = p.parts[part]
-            job = shown.job
-            right = part == "b"
-            xx = r.x + r.w - 4 if right else r.x + 4
-            if job is not None and job.info.get("preview", 1.0) < 1.0:
-                fw, fh = job.info["full_size"]
-                text(app, dl, xx, y, f"moving: preview {job.camera.width}x{job.camera.height} (not {fw}x{fh})",
-                     YELLOW, align_right=right)
-            elif shown.progress is not None:
-                what = "x1 sample shown, refining" if shown.stage == "quick" else "refining"
-                text(app, dl, xx, y, f"{what} {shown.progress:.0%}", YELLOW, align_right=right)
-            elif app.worker.busy((p.index, part)) and job is not None:
-                text(app, dl, xx, y, "rendering...", GREY, align_right=right)
-            if shown.error is not None:
-                text(app, dl, r.x + 4, r.y + r.h / 2, shown.error.text[:120], RED)
-            if shown.legend and not shows_photo(shown):  # (the photo's legend is its label)
-                text(app, dl, xx, r.y + 56, shown.legend, ACCENT, align_right=right)
-        if state.settings.show_info:
-            lines = [line for part in parts if p.parts[part].frame is not None for line in stats_lines(p, part)]
-            for k, line in enumerate(reversed(lines)):
-                text(app, dl, r.x + 4, r.y + r.h - 24 - 21 * k, line, col(220, 220, 220))
-        if state.hover is not None and state.hover[0] == p.index:
-            dl.add_rect((r.x, r.y), (r.x + r.w, r.y + r.h), col(90, 170, 255, 120), 0.0, 1.0)
-        dl.pop_clip_rect()
+    with mono(app):
+        for p in state.visible:
+            r = p.rect
+            ps = state.settings.panes[p.index]
+            dl.push_clip_rect((r.x, r.y), (r.x + r.w, r.y + r.h), True)
+            if ps.split:
+                sx = r.x + ps.split_pos * r.w
+                dl.add_line((sx, r.y), (sx, r.y + r.h), col(255, 255, 255, 220), 2.0)
+                dl.add_circle_filled((sx, r.y + r.h / 2), 7, col(255, 255, 255, 230))
+                dl.add_circle((sx, r.y + r.h / 2), 7, col(0, 0, 0, 200), 0, 1.5)
+            for part in state.parts(p.index):
+                shown = p.parts[part]
+                label = pane_label(app, p, part)
+                if shown.legend and not shows_photo(shown):  # (the photo's legend is its label)
+                    label = f"{label}  {shown.legend}"
+                info = ([(line, col(220, 220, 220)) for line in stats_lines(p, part)]
+                        if state.settings.show_info and shown.frame is not None else [])
+                box = part_box(r, ps.split, ps.split_pos, part)
+                items, below = lay_out_part(box, (label, WHITE), message(app, p, part), info, measure(app))
+                for item in items:
+                    draw_item(app, dl, item)
+                app.part_tops[(p.index, part)] = below
+            if state.hover is not None and state.hover[0] == p.index:
+                dl.add_rect((r.x, r.y), (r.x + r.w, r.y + r.h), col(90, 170, 255, 120), 0.0, 1.0)
+            dl.pop_clip_rect()
     if state.load_error:
-        banner(app, dl, state.load_error_short or state.load_error, v.y + v.h - 60, RED)
+        banner(app, dl, state.load_error_short or state.load_error, v.y + v.h - 90, RED)
 
 
 def draw_status(app: ViewerApp) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -13,7 +13,10 @@ from .settings import PANE_NAMES
 from .views import encode_png16, visualize
 
 if TYPE_CHECKING:
+    from ..render import Frame
     from .state import AppState
+
+Colour = Callable[[tuple[int, str], "Frame", str], tuple[np.ndarray, str]]  # slot, frame, view -> image, legend
 
 
 def shot_dir(state: AppState) -> Path:
@@ -51,13 +54,16 @@ def save_window(state: AppState, img: np.ndarray, path: Path) -> bool:
     return True
 
 
-def save_pane(state: AppState, i: int, path: str | Path | None = None, part: str = "a") -> Path | None:
-    """The pane's last render at its render resolution, 16 bits per channel (full precision)."""
+def save_pane(state: AppState, i: int, path: str | Path | None = None, part: str = "a",
+              colour: Colour | None = None) -> Path | None:
+    """What the pane part shows (its render, a debug view, a difference or the photo: `colour`, the window's
+    `PaneAnalysis.visualize`; default the plain views) at its render resolution, 16 bits per channel."""
     shown = state.panes[i].parts[part]
     if shown.frame is None:
         state.message(f"pane {PANE_NAMES[i]} has no image yet", "warn")
         return None
-    rgb, _ = visualize(shown.frame, shown.view or "color")
+    view = shown.view or "color"
+    rgb, _ = colour((i, part), shown.frame, view) if colour is not None else visualize(shown.frame, view)
     path = Path(path) if path else shot_name(state, f"pane{PANE_NAMES[i]}")
     data = encode_png16(rgb)
     try:

@@ -74,7 +74,7 @@ class AppSettings:
     projection: str = "perspective"
     loupe: bool = False
     loupe_zoom: float = 8.0
-    show_info: bool = True
+    show_info: bool = False  # the info overlay (I)
     fly_speed: float = 0.5
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     recent: list[str] = field(default_factory=list)

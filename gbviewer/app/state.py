@@ -12,9 +12,10 @@ from ..camera import Camera, load_cameras_json
 from ..errors import GBViewerError
 from ..render import Mode, RenderSettings
 from ..scene import Scene
+from .background import FIXED, PHOTOS, RGB, format_rgb
 from .camera_actions import CameraActions
 from .camera_control import CameraController
-from .dataset import DatasetViews
+from .dataset import DatasetViews, bounds_fit_cameras
 from .layout import PANEL_W, Rect, fit_aspect, pane_rects
 from .loading import SceneLoader
 from .pane_state import PaneState
@@ -35,8 +36,13 @@ def is_cameras_file(path: str | Path) -> bool:
 class AppState(CameraActions):
     """Scene, cameras, panes and their settings, and the actions on them (the camera's in `CameraActions`)."""
 
-    def __init__(self, settings: AppSettings, cameras: str | Path | None = None) -> None:
+    def __init__(self, settings: AppSettings, cameras: str | Path | None = None,
+                 background: RGB | None = None) -> None:
         self.settings = settings
+        if background is not None:
+            settings.background = tuple(background)
+        self.background_source = FIXED  # or PHOTOS: the open dataset's backdrop (`background`)
+        self.background_given = background is not None  # on the command line: a dataset's photos do not override it
         self.controller = CameraController(fov_y_deg=settings.fov_y_deg, up=settings.up,
                                            projection=settings.projection)
         self.scene: Scene | None = None
@@ -52,6 +58,7 @@ class AppState(CameraActions):
         self.last_move = 0.0
         self.messages: list[tuple[float, str, Level]] = []  # (time, text, level)
         self.panes = [PaneState(i) for i in range(MAX_PANES)]
+        self.pane_areas: list[Rect] = []  # each pane's rect before letterboxing to a snapped photo
         self.viewport = Rect(PANEL_W, 0, 1, 1)
         self.scale = (1.0, 1.0)  # framebuffer pixels per window coordinate
         self.hover: tuple[int, float, float] | None = None  # pane, u, v under the cursor
@@ -109,6 +116,11 @@ class AppState(CameraActions):
             self.load_error_short = res.error.replace(str(res.path), res.path.name)
             self.message(f"could not open {res.path.name}: kept the current scene", "error")
             return None
+        if self.scene is not None:  # another scene: the dataset of the previous one goes (kept aside if it fits)
+            lo, hi = res.scene.robust_bounds()
+            ds = self.dataset.dataset
+            self.dataset.drop_for_new_scene(ds is not None and bounds_fit_cameras(lo, hi, [v.camera for v in ds.views]))
+            self.background_source = FIXED
         self.scene, self.scene_path = res.scene, res.path
         self.load_error = ""
         self.settings.recent = add_recent(self.settings.recent, res.path)
@@ -126,6 +138,52 @@ class AppState(CameraActions):
             self.reset_camera()
             self.open_cameras(path)
         return res.path
+
+    # ---- the dataset and the background -------------------------------------------------------------------------
+
+    def poll_dataset(self) -> None:
+        """Take a finished dataset load; its photos' backdrop becomes the background when they are opaque (unless
+        the command line gave one)."""
+        if self.dataset.poll() is not None:
+            b = self.dataset.backdrop
+            if b is not None and b.opaque and not self.background_given:
+                self.background_source = PHOTOS
+                self.message(f"background from the photos: {b.describe()}")
+
+    def close_dataset(self) -> None:
+        d = self.dataset.close()
+        self.background_source = FIXED
+        if d is not None:
+            self.message(f"closed dataset {d.root.name}")
+        self._size_panes()
+
+    def keep_dataset(self) -> None:
+        """Reopen the dataset set aside by the last scene change (the new scene fits its cameras)."""
+        self.dataset.keep()
+        if self.dataset.dataset is not None:
+            self.message(f"kept dataset {self.dataset.dataset.root.name} for {self.scene_path.name}")
+
+    @property
+    def background(self) -> RGB:
+        """The colour the panes render on: the photos' backdrop (source PHOTOS, a dataset open), else the user's."""
+        b = self.dataset.backdrop
+        if self.background_source == PHOTOS and b is not None:
+            return b.colour
+        return tuple(self.settings.background)
+
+    def set_background(self, rgb: RGB) -> None:
+        """A fixed colour (saved in the settings)."""
+        self.settings.background = tuple(min(1.0, max(0.0, float(c))) for c in rgb)
+        self.background_source = FIXED
+
+    def use_photo_background(self) -> None:
+        if self.dataset.backdrop is not None:
+            self.background_source = PHOTOS
+
+    def background_note(self) -> str:
+        """The background in a few words: 'bg 0.80 0.80 0.80 (photos)'."""
+        src = " (photos)" if self.background_source == PHOTOS and self.dataset.backdrop is not None else ""
+        return f"bg {format_rgb(self.background)}{src}"
 
     # ---- rate, panes, overlays ----------------------------------------------------------------------------------
 
@@ -193,6 +251,7 @@ class AppState(CameraActions):
         self.scale = scale
         self.viewport = v = Rect(PANEL_W, int(top), max(1, int(width) - PANEL_W), max(1, int(height - top - bottom)))
         rects = pane_rects(v.x + 4, v.y + 4, v.w - 8, v.h - 8, self.settings.pane_count, self.settings.layout)
+        self.pane_areas = rects
         photo = self.photo_camera()
         for p, r in zip(self.panes, rects):
             p.rect = r if photo is None else fit_aspect(r, photo.width / photo.height)
@@ -225,7 +284,7 @@ class AppState(CameraActions):
         ps: PaneSettings = self.settings.panes[i]
         mode = Mode.parse(ps.split_mode if part == "b" else ps.mode)
         debug = "window" if ps.view == "window" and mode == Mode.GAUSSIAN_BLENDING else "none"
-        return RenderSettings(mode, ps.supersample, self.settings.background, debug=debug)
+        return RenderSettings(mode, ps.supersample, self.background, debug=debug)
 
     # ---- zoom video ---------------------------------------------------------------------------------------------
 

@@ -37,8 +37,9 @@ from .inspector_view import draw_inspector  # noqa: E402
 from .menu import draw_menu  # noqa: E402
 from .panel import draw_panel  # noqa: E402
 from .panes import PaneRenders  # noqa: E402
-from .settings import load_settings, save_settings  # noqa: E402
+from .settings import AppSettings, load_settings, save_settings  # noqa: E402
 from .pane_state import RateMeter  # noqa: E402
+from .pane_text import Item  # noqa: E402
 from .state import AppState  # noqa: E402
 from .worker import RenderWorker  # noqa: E402
 
@@ -47,12 +48,14 @@ WAITING_FPS = 30  # UI frames a second while renders refine or a load runs (tile
 
 class ViewerApp:
     """The viewer window. `ViewerApp(path).run()` is `gbviewer [SCENE]`; `data`, `images`: a training dataset
-    opened beside it (`gbviewer SCENE --data DATASET --images images_4`)."""
+    opened beside it (`gbviewer SCENE --data DATASET --images images_4`); `background`: the panes' colour (saved;
+    None: the saved one, or a dataset's photos' backdrop)."""
 
     def __init__(self, scene_path: str | Path | None = None, settings_file: Path | None = None,
                  size: tuple[int, int] | None = None, visible: bool = True, persist: bool = True,
                  cameras: str | Path | None = None, projection: str | None = None,
-                 backend: str | None = None, data: str | Path | None = None, images: str = "images") -> None:
+                 backend: str | None = None, data: str | Path | None = None, images: str = "images",
+                 background: tuple[float, float, float] | None = None) -> None:
         self.settings_file = settings_file
         self.persist = persist
         settings, warning = load_settings(settings_file)
@@ -62,7 +65,7 @@ class ViewerApp:
             settings.projection = projection
         if backend:
             settings.backend = backend
-        self.state = AppState(settings, cameras)
+        self.state = AppState(settings, cameras, background)
         if warning:
             self.state.message(warning, "error")
         self.frame_count = 0
@@ -71,6 +74,8 @@ class ViewerApp:
         self.closed = False
         self.last_screenshot: Path | None = None
         self._pending_screenshot: Path | None = None
+        self.placed: list[Item] = []  # the texts the overlays placed over the panes this frame (pane_text)
+        self.part_tops: dict[tuple[int, str], float] = {}  # each pane part's y below its label and message lines
         self.dialogs = FileDialogs(self.state.open)
         self._init_window(visible)
         self.worker = RenderWorker(self.shared, on_result=glfw.post_empty_event)  # a result wakes the event loop
@@ -98,10 +103,11 @@ class ViewerApp:
         glfw.window_hint(glfw.VISIBLE, visible)
         w, h = self.state.settings.window
         monitor = glfw.get_primary_monitor()
-        if monitor:  # fit the screen (a saved size may come from a bigger one)
-            _, _, mw, mh = glfw.get_monitor_workarea(monitor)
+        mx = my = 0
+        if monitor:  # the screen's work area at first; a saved size fitted to it (it may come from a bigger one)
+            mx, my, mw, mh = glfw.get_monitor_workarea(monitor)
             if mw > 0 and mh > 0:
-                w, h = min(w, mw), min(h, mh)
+                w, h = (mw, mh) if (w, h) == AppSettings().window else (min(w, mw), min(h, mh))
         release_current()  # glfw makes the window's GLX context current: X error if an EGL one is (gb.render on glsl)
         self.window = glfw.create_window(w, h, "gbviewer", None, None)
         if not self.window:
@@ -109,6 +115,8 @@ class ViewerApp:
             _, desc = glfw.get_error()
             desc = desc.decode(errors="replace") if isinstance(desc, bytes) else str(desc or "")
             raise GBViewerError(f"glfw could not create an OpenGL 3.3 window ({desc})")
+        if monitor:
+            glfw.set_window_pos(self.window, mx, my)
         glfw.make_context_current(self.window)
         glfw.swap_interval(1)
         self.ctx = moderngl.create_context()
@@ -228,7 +236,7 @@ class ViewerApp:
             glfw.set_window_title(self.window, f"gbviewer - {opened.name}")
             if first:
                 self.frame_count = 0
-        self.state.dataset.poll()
+        self.state.poll_dataset()
         self.panes.poll()
         self.analysis.update()
         self.inspector.update()
@@ -307,8 +315,9 @@ class ViewerApp:
         return path
 
     def screenshot_pane(self, i: int, path: str | Path | None = None, part: str = "a") -> Path | None:
-        """The pane's last render at its render resolution, 16 bits per channel (full precision)."""
-        return screenshots.save_pane(self.state, i, path, part)
+        """What the pane shows (its render, or the photo, a difference...) at its render resolution, 16 bits per
+        channel (full precision)."""
+        return screenshots.save_pane(self.state, i, path, part, self.analysis.visualize)
 
     def screenshot_hovered_pane(self) -> None:
         if self.state.hover is not None:

@@ -11,6 +11,7 @@ from ..camera_paths import zoom_path
 from ..errors import GBViewerError
 from ..eval.options import add_dataset_args
 from ..extras import require
+from ..argtypes import BACKGROUND
 from ..figure import compose_grid, render_grid, save_image
 from ..io import load
 from ..io.files import check_writable
@@ -63,7 +64,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         if path is not None and not path.exists():
             raise GBViewerError(f"{what}{path}: no such file or folder")
     opened, why = open_window(args.scene, args.cameras, projection=args.projection, backend=args.backend,
-                              data=args.data, images=args.images)
+                              data=args.data, images=args.images, background=args.background)
     if opened:
         return 0
     if has_display_env()[0]:  # (without one, demo says so itself)
@@ -79,6 +80,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_backend_arg(p, None, "the viewer's backend, as its panel sets it (default: the one it saved, auto at first), "
                     "and that of the no-display fallback (default auto)")
     add_dataset_args(p)
+    p.add_argument("--background", type=BACKGROUND, metavar=BACKGROUND.metavar,
+                   help="the panes' background, saved (default: the saved one, black at first; with --data of "
+                   "opaque photos, their backdrop: the median colour of their borders)")
     p.add_argument("--out", default="out", help="output folder of the no-display fallback (default ./out)")
     p.add_argument("--force", action="store_true", help="overwrite the no-display fallback's existing files")
     p.set_defaults(func=cmd_view)

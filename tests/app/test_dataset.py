@@ -162,7 +162,7 @@ def test_photo_view_and_psnr_against_the_photo(capture, tmp_path, monkeypatch):
             p = metrics.psnr(gb.render(state.scene, cam, mode).rgb, gt)
             assert an.latest[(i, "a")].psnr == p
             text, stale = an.fidelity_line((i, "a"))
-            assert text.startswith(f"PSNR {p:.2f} dB") and text.endswith("vs photo") and not stale
+            assert text.startswith(f"PSNR {p:.2f} dB") and text.endswith("vs photo (bg 0.00 0.00 0.00)") and not stale
         assert list((tmp_path / "cache").rglob("*.npy"))  # the x1/4 photo is cached outside the dataset
         assert not list(capture.rglob("*.npy"))
         # the camera leaves the view: the labels go stale, then say why there is no photo

@@ -11,7 +11,7 @@ import pytest
 
 import gbviewer as gb
 from gbviewer import differences, metrics
-from gbviewer.app.difference_overlay import TOP
+from gbviewer.app.difference_overlay import BAR_H
 from gbviewer.figure import to_uint8, upscale_nearest
 from window_helpers import LABEL_BAND, agree, expected_pane, pane_pixels, press, shot, wait
 
@@ -54,12 +54,13 @@ def test_difference_and_error_views_and_psnr_labels(app):
     assert app.analysis.shown_scale[(1, "a")] == scale
     expected = upscale_nearest(to_uint8(differences.colour_difference(d, scale)), b.rect.h, b.rect.w)
     got = pane_pixels(img, b.rect)
-    below = TOP + 44  # under the label, legend and colour bar
+    top = round(app.part_tops[(1, "a")] - b.rect.y)  # under the label and message lines: the colour bar
+    below = top + BAR_H + 30
     assert agree(got[below:], expected[below:]) > 0.995
     assert agree(got[below:], expected_pane(app, 1)[below:]) < 0.5  # not the plain render
     assert agree(pane_pixels(img, state.panes[0].rect)[LABEL_BAND:],
                  pane_pixels(before, state.panes[0].rect)[LABEL_BAND:]) > 0.995  # pane A unchanged
-    bar = got[TOP + 4:TOP + 14, 8:8 + 160]  # the colour bar: dark in the middle, light at both ends
+    bar = got[top + 4:top + 14, 8:8 + 160]  # the colour bar: dark in the middle, light at both ends
     assert bar[:, :8].mean() > 100 and bar[:, -8:].mean() > 100 and bar[:, 76:84].mean() < 60
     assert "B - A (scalar)" in b.parts["a"].legend
 
@@ -75,8 +76,9 @@ def test_difference_and_error_views_and_psnr_labels(app):
         p = metrics.psnr(rgb, metrics.box_downsample(x1, 4))
         text, stale = app.analysis.fidelity_line((i, "a"))
         assert not stale and text.startswith(f"PSNR {p:.2f} dB") and app.analysis.latest[(i, "a")].psnr == p
-    label = slice(TOP, TOP + 20)  # pane A's label line is drawn where there was none
     ra = state.panes[0].rect
+    line = next(i for i in app.placed if i.role == "message" and i.full.startswith("PSNR") and i.x < ra.x + ra.w)
+    label = slice(round(line.y - ra.y), round(line.y + line.h - ra.y))  # pane A's PSNR line, where there was none
     assert np.abs(pane_pixels(img, ra)[label].astype(int) - pane_pixels(no_labels, ra)[label]).mean() > 3
 
     # Shift+X over pane B: the error view against the reference
@@ -87,7 +89,7 @@ def test_difference_and_error_views_and_psnr_labels(app):
     e = app.analysis.latest[(1, "a")].error
     coloured = differences.colour_difference(e, differences.robust_scale(e))
     expected = upscale_nearest(to_uint8(coloured), b.rect.h, b.rect.w)
-    below = TOP + 44 + 26
+    below = round(app.part_tops[(1, "a")] - b.rect.y) + BAR_H + 30
     assert agree(pane_pixels(img, b.rect)[below:], expected[below:]) > 0.995
 
     # moving the camera: the labels go stale, the panes show their renders again until the camera stops

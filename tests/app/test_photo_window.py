@@ -16,7 +16,6 @@ import pytest
 import gbviewer as gb
 from gbviewer import metrics
 from gbviewer.app import overlays
-from gbviewer.app.difference_overlay import TOP
 from gbviewer.eval import camera_for_rate, ground_truth
 from gbviewer.figure import to_uint8, upscale_nearest
 from test_difference_window import wait_analysed
@@ -85,10 +84,11 @@ def test_photo_pane_beside_scalar_and_gaussian_blending(photo_app):
         assert (p.parts["a"].job.camera.width, p.parts["a"].job.camera.height) == (32, 25)
         assert overlays.pane_label(app, p, "a") == f"{p.name}  {mode}  x1/4  32x25"
         assert abs(p.rect.w / p.rect.h - 32 / 25) < 0.02
-        psnr = metrics.psnr(gb.render(state.scene, cam, mode).rgb, gt)
-        text, stale = app.analysis.fidelity_line((i, "a"))
-        assert not stale and text.startswith(f"PSNR {psnr:.2f} dB") and text.endswith("vs photo")
-        label = pane_pixels(img, p.rect)[TOP:TOP + 20, 4:200]  # white text on its dark box
+        psnr = metrics.psnr(gb.render(state.scene, cam, mode, background=state.background).rgb, gt)
+        text, stale = app.analysis.fidelity_line((i, "a"))  # on the photos' backdrop: black, as their borders
+        assert not stale and text.startswith(f"PSNR {psnr:.2f} dB") and text.endswith("vs photo (bg 0.00 0.00 0.00)")
+        line = next(i for i in app.placed if i.full == text)  # the pane's message line: white text on its dark box
+        label = img[round(line.y):round(line.y + line.h), round(line.x):round(line.x + line.w)]
         assert (label.min(axis=2) > 200).sum() > 30
     assert app.analysis.fidelity_line((0, "a")) is None
 

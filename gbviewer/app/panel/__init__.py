@@ -8,20 +8,23 @@ from typing import TYPE_CHECKING, Callable
 from imgui_bundle import imgui
 
 from ..layout import PANEL_W
-from . import backend, camera, dataset, differences, output, panes, rate, scene, timings
+from . import background, backend, camera, dataset, differences, output, panes, rate, scene, timings
 
 if TYPE_CHECKING:
     from ..window import ViewerApp
 
 
 def sections(app: ViewerApp) -> tuple[tuple[str, Callable[[], None]], ...]:
-    """The sections top to bottom, each drawer given the state and only the services it uses."""
+    """The sections top to bottom, in the order a user needs them (scene, panes, rate, views, dataset), each drawer
+    given the state and only the services it uses."""
     s = app.state
-    return (("Scene", partial(scene.draw, s, app.open_dialog)), ("Dataset", partial(dataset.draw, s, app.dialogs)),
-            ("Backend", partial(backend.draw, s, app.worker)), ("Sampling rate (all panes)", partial(rate.draw, s)),
-            ("Panes", partial(panes.draw, s)), ("Difference and error", partial(differences.draw, s, app.analysis)),
+    return (("Scene", partial(scene.draw, s, app.open_dialog)), ("Panes", partial(panes.draw, s)),
+            ("Sampling rate (all panes)", partial(rate.draw, s)),
+            ("Difference and error", partial(differences.draw, s, app.analysis)),
+            ("Dataset", partial(dataset.draw, s, app.dialogs)), ("Background", partial(background.draw, s)),
             ("Camera", partial(camera.draw, s, app.open_dialog)),
             ("Magnifier and output", partial(output.draw, s, app.screenshot_window, app.screenshot_pane)),
+            ("Backend", partial(backend.draw, s, app.worker)),
             ("Timings", partial(timings.draw, s, app.worker, app.ui_fps)))
 
 

@@ -1,5 +1,5 @@
-"""Panel section: the render backends, greyed out with the reason where one is not usable here, and auto with the
-one it picked and why."""
+"""Panel section: the render backends on one line, greyed out where one is not usable here (the reason in its
+tooltip), and what renders (auto's pick) and the display path, each one line with its reason in a tooltip."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ from imgui_bundle import imgui
 
 from ...render import AUTO, BACKEND_NAMES
 from ..display import describe
-from ..layout import PANEL_W
 
 if TYPE_CHECKING:
     from ..state import AppState
@@ -17,27 +16,31 @@ if TYPE_CHECKING:
 
 
 def draw(state: AppState, worker: RenderWorker) -> None:
+    """The backends on one line (an unusable one greyed out, its reason the tooltip), then one line each for what
+    renders and the display path (their reasons in tooltips)."""
     s = state.settings
-    for name in BACKEND_NAMES:
+    for k, name in enumerate(BACKEND_NAMES):
         ok, why = worker.backend_status(name)
+        if k:
+            imgui.same_line()
         imgui.begin_disabled(ok is not True)
         if imgui.radio_button(name, s.backend == name) and ok:
             s.backend = name
         imgui.end_disabled()
-        picked = worker.auto if name == AUTO else None
-        if ok is not True or picked is not None:
-            imgui.same_line()
-            imgui.push_text_wrap_pos(PANEL_W - 16)
-            if picked is not None:
-                imgui.text(f"renders on {picked.name}")
-                imgui.text_disabled(picked.reason)
-            else:
-                imgui.text_disabled(why if len(why) < 140 else why[:137] + "...")
-            imgui.pop_text_wrap_pos()
+        if ok is not True and imgui.is_item_hovered(imgui.HoveredFlags_.allow_when_disabled.value):
+            imgui.set_tooltip(f"{name}: {why}")
+    used = worker.backend_for(s.backend)
+    picked = worker.auto if s.backend == AUTO else None
     if worker.backend_status(s.backend)[0] is False:
-        imgui.text_colored(imgui.ImVec4(1, 0.8, 0.25, 1),
-                           f"{s.backend} unavailable: rendering on {worker.backend_for(s.backend)}")
-    path, why = worker.display_path(worker.backend_for(s.backend))
-    imgui.text_disabled(f"display: {path}, {describe(path)}")
+        imgui.text_colored(imgui.ImVec4(1, 0.8, 0.25, 1), f"{s.backend} unavailable: rendering on {used}")
+        reason = worker.backend_status(s.backend)[1]
+    else:
+        imgui.text(f"renders on {picked.name if picked is not None else used}")
+        reason = picked.reason if picked is not None else f"{used}, as chosen"
     if imgui.is_item_hovered():
-        imgui.set_tooltip(why)
+        imgui.set_tooltip(reason)
+    path, why = worker.display_path(used)
+    imgui.same_line()
+    imgui.text_disabled(f"| display {path}")
+    if imgui.is_item_hovered():
+        imgui.set_tooltip(f"{describe(path)}: {why}")

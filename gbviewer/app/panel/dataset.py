@@ -1,5 +1,6 @@
-"""Panel section: the training dataset (Open dataset..., its photo folder), its views listed by split and name (a
-click snaps the camera to one), the snapped view, and pane A showing the photo."""
+"""Panel section: the training dataset (Open dataset..., its photo folder, Close dataset, Keep dataset after a scene
+change), its views listed by split and name (a click snaps the camera to one), the snapped view, and pane A showing
+the photo."""
 
 from __future__ import annotations
 
@@ -46,10 +47,20 @@ def draw(state: AppState, dialogs: FileDialogs) -> None:
         imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.4, 1.0), ds.error)
         imgui.pop_text_wrap_pos()
     if ds.dataset is None:
-        imgui.text_disabled("no dataset (gbviewer SCENE --data DATASET)")
+        if ds.set_aside is not None:
+            if imgui.button(f"Keep dataset {ds.set_aside[0].root.name}"):
+                state.keep_dataset()
+            if imgui.is_item_hovered():
+                imgui.set_tooltip("closed with the previous scene; this scene's bounds fit its cameras: reopen it")
+        else:
+            imgui.text_disabled("no dataset (gbviewer SCENE --data DATASET)")
         return
     d = ds.dataset
     test = sum(v.split == "test" for v in d.views)
+    if imgui.small_button("Close dataset"):
+        state.close_dataset()
+        return
+    imgui.same_line()
     imgui.text(f"{d.root.name}: {d.format}, {len(d.views)} views, {test} test")
     for split in SPLITS:
         if split != SPLITS[0]:

@@ -48,4 +48,8 @@ def draw(state: AppState, analysis: PaneAnalysis) -> None:
             if line is None:
                 continue
             name = p.name + ("'" if part == "b" else "")
-            (imgui.text_disabled if line[1] else imgui.text)(f"{name}: {line[0]}")
+            if line[1]:
+                imgui.push_style_color(imgui.Col_.text.value, imgui.get_style().color_(imgui.Col_.text_disabled.value))
+            imgui.text_wrapped(f"{name}: {line[0]}")
+            if line[1]:
+                imgui.pop_style_color()
