@@ -163,7 +163,7 @@ def test_memory_running_out_after_the_estimate_is_one_line(work, capsys, monkeyp
     def bad_alloc(*args, **kwargs):
         raise MemoryError("std::bad_alloc")
 
-    monkeypatch.setattr(cli, "get_renderer", bad_alloc)
+    monkeypatch.setattr(cli.render, "get_renderer", bad_alloc)
     refused(["render", "scene.ply", "--out", "x.png", "--backend", "cpu"], capsys,
             f"out of memory (std::bad_alloc); render smaller, or see {BUDGET_ENV}")
     assert not (work / "x.png").exists()
