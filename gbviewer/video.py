@@ -14,7 +14,7 @@ from PIL import Image
 
 from .camera import Camera, format_rate
 from .camera_paths import PathFrame
-from .errors import GBViewerError, VideoCancelled
+from .errors import GBViewerError, RenderCancelled, VideoCancelled
 from .extras import require
 from .figure import GAP, Cell, GridLayout, caption_font_size, compose_grid
 from .io.files import atomic_write, refuse_overwrite
@@ -58,6 +58,14 @@ def video_layout(pf: PathFrame, n_modes: int) -> GridLayout:
     """Where `compose_video_frame` puts the panes (GridLayout.origin(0, i) is pane i's top-left pixel)."""
     return GridLayout(1, n_modes, pf.width, pf.height, GAP, GridLayout.caption_height_for(2, caption_font_size(
         pf.height)), even=True)
+
+
+def render_or_stop(renderer, camera: Camera, settings: RenderSettings, cancel):
+    """One cell's frame; a cancel set during it (the token reaches the native loop) stops the video at once."""
+    try:
+        return renderer.render(camera, settings, cancel=cancel)
+    except RenderCancelled:
+        raise VideoCancelled("video cancelled; nothing written") from None
 
 
 def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settings_list: Sequence[RenderSettings],
@@ -107,7 +115,7 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
                 for s in settings_list:
                     if cancel is not None and cancel.is_set():
                         raise VideoCancelled("video cancelled; nothing written")
-                    cells.append(Cell.of(s, pf.rate, renderer.render(pf.camera, s)))
+                    cells.append(Cell.of(s, pf.rate, render_or_stop(renderer, pf.camera, s, cancel)))
                 img = np.asarray(compose_video_frame(cells, pf, inset))
                 if writer is None:
                     size[:] = [img.shape[1], img.shape[0]]

@@ -12,6 +12,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable, Hashable
 
+from ..cancel import CancelToken
 from ..render import create_renderer
 from ..render.choice import FALLBACK
 from ..scene import Scene
@@ -64,7 +65,7 @@ class SlotThread:
         self._lock = threading.Condition()
         self._pending: dict[Hashable, tuple[int, Any]] = {}  # slot -> (seq, request)
         self._running: Any = None  # the request being worked on
-        self._cancel = threading.Event()  # the running request's
+        self._cancel = CancelToken()  # the running request's: the native loop reads its flag directly
         self._results: list = []
         self._served: dict[Hashable, float] = {}
         self._seq = 0
@@ -167,7 +168,7 @@ class SlotThread:
             return self.policy.rank(request, seq, self._served.get(slot, 0.0))
 
         request = self._pending.pop(min(self._pending, key=rank))[1]
-        self._running, self._cancel = request, threading.Event()
+        self._running, self._cancel = request, CancelToken()
         return request
 
     def _loop(self) -> None:

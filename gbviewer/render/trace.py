@@ -17,7 +17,7 @@ from ..camera import Camera
 from ..errors import InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import dumps_json, integer
-from .registry import get_renderer
+from .registry import capable, get_renderer
 from .types import Mode, RenderSettings
 
 # Why a list entry added nothing (gbv::Skip in native/include/gbv/trace.h, by value); "" when it added.
@@ -193,12 +193,12 @@ def check_pixel(camera: Camera, x: object, y: object) -> tuple[int, int]:
 def trace_pixel(scene: Scene, camera: Camera, x: int, y: int, mode: str | Mode = "scalar", supersample: int = 1,
                 background: tuple[float, float, float] = (0.0, 0.0, 0.0), sh_degree: int = 3,
                 **options) -> PixelTrace:
-    """The trace of pixel (x, y) of `camera`'s image rendered in `mode` with N x N `supersample`, by the CPU backend's
-    kernel (the GLSL and CUDA backends are held to it by their tests); `options` as `gbviewer.render`'s
-    (depth_correct, et_grade, cell_size)."""
+    """The trace of pixel (x, y) of `camera`'s image rendered in `mode` with N x N `supersample`, by the kernel of the
+    first backend that traces pixels (`Capabilities.trace`: the CPU backend; the others are held to it by their
+    tests); `options` as `gbviewer.render`'s (depth_correct, et_grade, cell_size)."""
     settings = RenderSettings(Mode.parse(mode), supersample, tuple(background), sh_degree, **options)
     xi, yi = check_pixel(camera, x, y)
-    return get_renderer(scene, "cpu").trace(camera, settings, xi, yi)
+    return get_renderer(scene, capable("trace")[0]).trace(camera, settings, xi, yi)
 
 
 __all__ = ["SKIP_REASONS", "PixelTrace", "SampleTrace", "TraceStep", "check_pixel",
