@@ -65,8 +65,10 @@ def test_cpu_refuses_sh_without_coefficients():
     from gbviewer.render.prepare import camera_args
 
     with pytest.raises(ValueError, match="sh must hold K >= 1 coefficients"):
-        _native.render(*sh_without_coefficients(), None, *camera_args(cam), 0, 1, 3, np.zeros(3, np.float32),
-                       False, 1)
+        _native.Renderer().upload(*sh_without_coefficients(), None)
+    r = _native.Renderer()  # a scene with coefficients renders (the check refuses only K = 0)
+    r.upload(*sh_without_coefficients()[:4], np.zeros((5, 1, 3), np.float32), None)
+    assert r.render(*camera_args(cam), 0, 1, 3, np.zeros(3, np.float32), False)["rgb"].shape == (8, 8, 3)
 
 
 @needs_module

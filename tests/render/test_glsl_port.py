@@ -85,6 +85,10 @@ NOT_PORTED = {
     "float_bits": "GLSL built-in floatBitsToUint",
     "splat_less": "the GLSL duplex keeps each cell's member order (cells.comp), which differs from the CPU's canonical "
                   "order only by float rounding, within the tolerances above",
+    "splat_key": "the field-by-field key of splat_less (same reason)",
+    "in_depth_run": "CUDA's linear canonical order of equal-depth runs (splat_less's order; not used by GLSL, as above)",
+    "same_depth_run": "CUDA's linear canonical order (as in_depth_run)",
+    "run_pass_key": "CUDA's linear canonical order (as in_depth_run)",
     "mul_rn": "GLSL declares the values that C++ multiplies through it `precise` (test_preprocess_is_not_contracted)",
     "to_fixed": "GLSL 4.30 core has no 64-bit integers: the wsr sums stay in float there (blend.glsl)",
     "wsr_pixel_sums": "converts the fixed-point wsr sums, which GLSL keeps in float (blend.glsl)",
