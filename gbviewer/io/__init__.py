@@ -13,7 +13,7 @@ from ..errors import GBViewerError, LoadCancelled, SceneFormatError
 from ..scene import Scene
 from .compressed_ply import is_compressed_ply, load_compressed_ply
 from .duplex import is_duplex_ply, load_duplex
-from .ply import load_inria_ply, read_ply
+from .ply import load_inria_ply, load_streamed_ply, read_ply
 from .progress import LoadProgress, Progress
 from .sog import ZIP_MAGIC, load_sog
 from .splat import load_splat, looks_like_splat
@@ -51,6 +51,9 @@ def _load(path: Path, progress: LoadProgress) -> Scene:
     with open(path, "rb") as fh:
         head = fh.read(16)
     if head.startswith(b"ply"):
+        streamed = load_streamed_ply(path, progress)
+        if streamed is not None:
+            return streamed
         ply = read_ply(path, progress)
         if is_compressed_ply(ply):
             return load_compressed_ply(path, ply, progress)
