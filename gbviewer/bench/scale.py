@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import resource
 import subprocess
 import sys
 import threading
@@ -30,20 +29,23 @@ def scene_bytes(scene: Scene) -> int:
     return sum(a.nbytes for a in arrays if a is not None)
 
 
-def _rss() -> int:
+def rss_bytes() -> int:
     """Resident bytes of this process now."""
     with open("/proc/self/statm") as fh:
         return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
-def _peak() -> int:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+def peak_rss_bytes() -> int:
+    """The most resident bytes this process has had: VmHWM, of this process image alone (ru_maxrss is not: Linux
+    hands the parent's peak at fork on to the child, across exec)."""
+    with open("/proc/self/status") as fh:
+        return next(int(line.split()[1]) * 1024 for line in fh if line.startswith("VmHWM:"))
 
 
 def child_measure(kind: str, path: str, options: str = "{}") -> dict:
     """In a fresh process: "raw" reads the file into one numpy array, "load" runs gb.load(path, **options); the
     time, resident bytes before and after, and the peak (ru_maxrss: the process's whole life)."""
-    before = _rss()
+    before = rss_bytes()
     t = time.perf_counter()
     if kind == "raw":
         with open(path, "rb") as fh:
@@ -54,7 +56,7 @@ def child_measure(kind: str, path: str, options: str = "{}") -> dict:
         scene = load(path, **json.loads(options))
         arrays = scene_bytes(scene)
     seconds = time.perf_counter() - t
-    return {"seconds": seconds, "rss_before": before, "rss_after": _rss(), "peak_rss": _peak(), "arrays": arrays}
+    return {"seconds": seconds, "rss_before": before, "rss_after": rss_bytes(), "peak_rss": peak_rss_bytes(), "arrays": arrays}
 
 
 def measure_in_child(kind: str, path: Path, options: dict | None = None) -> dict:
