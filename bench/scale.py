@@ -1,7 +1,7 @@
 """Scale benchmark: a shared capture tiled to ~1 M and ~6.1 M splats (built once into the user cache folder, reused
 while its record matches), then load against a raw read, peak RSS, stage times, two-pane time and cancel latency.
 
-    nice python bench/scale.py [--sizes 1m,6m] [--repeat 1] [--json out.json] [--sh-dtype float16]
+    nice python bench/scale.py [--sizes 1m,6m] [--repeat 1] [--json out.json]
     python bench/scale.py --build-only        # just build (or check) the tiled scenes; prints their paths
 """
 
@@ -25,7 +25,6 @@ def main() -> None:
     ap.add_argument("--modes", default="scalar,gaussian_blending")
     ap.add_argument("--rates", default="1,0.125")
     ap.add_argument("--cancel-at", default="50,300,1000", help="ms after the start of a render to set its event")
-    ap.add_argument("--sh-dtype", help="gb.load's sh_dtype for the loads and renders")
     ap.add_argument("--build-only", action="store_true")
     ap.add_argument("--verify", action="store_true", help="rehash a cached scene before reusing it")
     ap.add_argument("--json", type=Path, help="write the results here")
@@ -40,11 +39,10 @@ def main() -> None:
             print(f"{s}: {p}")
         return
     print(f"cpu count {os.cpu_count()}, load average {os.getloadavg()[0]:.1f}")
-    options = {"sh_dtype": args.sh_dtype} if args.sh_dtype else None
     results = []
     for s, p in paths.items():
         r = run_scale(p, args.repeat, args.modes.split(","), [float(x) for x in args.rates.split(",")],
-                      [float(x) for x in args.cancel_at.split(",")], load_options=options)
+                      [float(x) for x in args.cancel_at.split(",")])
         r["load_average"] = os.getloadavg()[0]
         print_scale(r)
         results.append(r)

@@ -42,9 +42,9 @@ def peak_rss_bytes() -> int:
         return next(int(line.split()[1]) * 1024 for line in fh if line.startswith("VmHWM:"))
 
 
-def child_measure(kind: str, path: str, options: str = "{}") -> dict:
-    """In a fresh process: "raw" reads the file into one numpy array, "load" runs gb.load(path, **options); the
-    time, resident bytes before and after, and the peak (ru_maxrss: the process's whole life)."""
+def child_measure(kind: str, path: str) -> dict:
+    """In a fresh process: "raw" reads the file into one numpy array, "load" runs gb.load(path); the time, resident
+    bytes before and after, and the peak (`peak_rss_bytes`: the process's whole life)."""
     before = rss_bytes()
     t = time.perf_counter()
     if kind == "raw":
@@ -53,25 +53,25 @@ def child_measure(kind: str, path: str, options: str = "{}") -> dict:
             fh.readinto(buf)
         arrays = buf.nbytes
     else:
-        scene = load(path, **json.loads(options))
+        scene = load(path)
         arrays = scene_bytes(scene)
     seconds = time.perf_counter() - t
     return {"seconds": seconds, "rss_before": before, "rss_after": rss_bytes(), "peak_rss": peak_rss_bytes(), "arrays": arrays}
 
 
-def measure_in_child(kind: str, path: Path, options: dict | None = None) -> dict:
+def measure_in_child(kind: str, path: Path) -> dict:
     """`child_measure` in a new interpreter (so that its peak RSS is the measured step's alone)."""
     code = "import json,sys; from gbviewer.bench.scale import child_measure as m; print(json.dumps(m(*sys.argv[1:])))"
-    out = subprocess.run([sys.executable, "-c", code, kind, str(path), json.dumps(options or {})],
+    out = subprocess.run([sys.executable, "-c", code, kind, str(path)],
                          check=True, capture_output=True, text=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def measure_load(path: Path, repeat: int, options: dict | None = None) -> dict:
+def measure_load(path: Path, repeat: int) -> dict:
     """Best of `repeat` raw reads and loads (warm page cache: one raw read first), with the load's memory."""
     measure_in_child("raw", path)
     raw = min((measure_in_child("raw", path) for _ in range(repeat)), key=lambda r: r["seconds"])
-    loads = [measure_in_child("load", path, options) for _ in range(repeat)]
+    loads = [measure_in_child("load", path) for _ in range(repeat)]
     best = min(loads, key=lambda r: r["seconds"])
     above = max(r["peak_rss"] - r["rss_before"] for r in loads)
     return {"raw_s": raw["seconds"], "load_s": best["seconds"], "load_over_raw": best["seconds"] / raw["seconds"],
@@ -144,12 +144,12 @@ def measure_cancel(scene: Scene, cam: Camera, mode: str, moments_ms: list[float]
 
 
 def run_scale(path: Path, repeat: int, modes: list[str], rates: list[float], moments_ms: list[float],
-              width: int = 1280, height: int = 720, load_options: dict | None = None, log=print) -> dict:
+              width: int = 1280, height: int = 720, log=print) -> dict:
     """Every measurement of the scale benchmark on the tiled scene at `path`."""
     log(f"{path.name}: load")
     result: dict = {"file": str(path), "file_bytes": path.stat().st_size,
-                    "load": measure_load(path, repeat, load_options)}
-    scene = load(path, **(load_options or {}))
+                    "load": measure_load(path, repeat)}
+    scene = load(path)
     result["splats"] = scene.num_splats
     cam = scale_camera(scene, width, height)
     log(f"{path.name}: stages")
