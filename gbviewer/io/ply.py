@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 import plyfile
 
-from ..errors import InvalidValue, SceneFormatError
+from ..errors import GBViewerError, InvalidValue, SceneFormatError
 from ..scene import Scene
 from ..validate import declared_count
 from . import progress as load_progress
@@ -137,6 +137,17 @@ def table_columns(path: Path, data: np.ndarray, names: list[str]) -> Callable[..
                                                      axis=1)
 
 
+def check_sh_range(sh: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """`sh`, once checked to fit `dtype`: float16 storage (`gb.load(..., sh_dtype="float16")`) refuses coefficients
+    beyond its largest finite value rather than turning them into infinities."""
+    if np.dtype(dtype) == np.float16 and sh.size:
+        big = max(float(np.fmax.reduce(sh, axis=None)), -float(np.fmin.reduce(sh, axis=None)))
+        if big > float(np.finfo(np.float16).max):
+            raise GBViewerError(f"field 'sh': coefficients up to {big:.3g}, beyond float16's range (65504); load "
+                                "with sh_dtype='float32'")
+    return sh
+
+
 def activate_opacity(raw: np.ndarray) -> np.ndarray:
     """sigmoid in float32 (the writer inverts exactly this)."""
     with np.errstate(over="ignore"):
@@ -195,11 +206,11 @@ class InriaArrays:
     """The Scene's final arrays of an INRIA load, allocated once: `fill` copies raw columns into them a row range
     at a time (no array of the whole file besides them), `activate` applies exp and sigmoid in place."""
 
-    def __init__(self, layout: InriaLayout, n: int) -> None:
+    def __init__(self, layout: InriaLayout, n: int, sh_dtype: str = "float32") -> None:
         self.layout, self.n, k = layout, n, (layout.degree + 1) ** 2
         self.means, self.scales = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32)
         self.quats, self.opacities = np.empty((n, 4), np.float32), np.empty(n, np.float32)
-        self.sh = np.empty((n, k, 3), np.float32)
+        self.sh = np.empty((n, k, 3), sh_dtype)
         self.filter_3d = np.empty(n, np.float32) if layout.has_filter else None
         self.weights = np.empty((n, len(layout.weight_cols) - 1), np.float32) if layout.weight_cols else None
         self.info = np.zeros(min(n, 2), np.float32)
@@ -207,9 +218,10 @@ class InriaArrays:
     def fill(self, columns: Callable[[list[str]], np.ndarray], rows: slice) -> None:
         """Copy rows `rows` from `columns(names)`, the raw float32 columns of just those rows."""
         k = self.sh.shape[1]
-        self.sh[rows, 0, :] = columns(["f_dc_0", "f_dc_1", "f_dc_2"])
+        self.sh[rows, 0, :] = check_sh_range(columns(["f_dc_0", "f_dc_1", "f_dc_2"]), self.sh.dtype)
         if k > 1:  # f_rest is channel-major: all R coefficients, then G, then B
-            self.sh[rows, 1:, :] = columns(self.layout.rest).reshape(-1, 3, k - 1).transpose(0, 2, 1)
+            rest = check_sh_range(columns(self.layout.rest), self.sh.dtype)
+            self.sh[rows, 1:, :] = rest.reshape(-1, 3, k - 1).transpose(0, 2, 1)
         self.means[rows] = columns(["x", "y", "z"])
         self.scales[rows] = columns(["scale_0", "scale_1", "scale_2"])
         self.quats[rows] = columns(["rot_0", "rot_1", "rot_2", "rot_3"])
@@ -273,11 +285,12 @@ def _streamable(ply: plyfile.PlyData) -> bool:
             and "chunk" not in {e.name for e in ply.elements} and "f_anchor_feat_0" not in names)
 
 
-def load_streamed_ply(path: Path, progress: LoadProgress | None = None) -> Scene | None:
+def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype: str = "float32") -> Scene | None:
     """Load a binary INRIA `.ply` by streaming its vertex rows in chunks of about a hundredth of the file straight
     into the Scene's arrays (`InriaArrays`): no mapping or copy of the whole file, so the load costs about a read of
     it and its memory is the arrays' plus one chunk. None when the file is not such a PLY (`read_ply` and the
-    other loaders take it). `progress`: bytes read (and copied into the arrays), then splats activated."""
+    other loaders take it). `progress`: bytes read (and copied into the arrays), then splats activated. `sh_dtype`
+    "float16": the SH is stored as float16 as it is read (see `check_sh_range`)."""
     progress = progress or LoadProgress()
     with open(path, "rb") as fh:
         size = _checked_header(path, fh)
@@ -294,7 +307,7 @@ def load_streamed_ply(path: Path, progress: LoadProgress | None = None) -> Scene
         table_columns(path, np.empty(0, row), layout.wanted)  # the checks of each column's type
         if size - start < n * row.itemsize:
             raise SceneFormatError(path, TRUNCATED, field="vertex")
-        out = InriaArrays(layout, n)
+        out = InriaArrays(layout, n, sh_dtype)
         progress.report(0, size, "bytes")
         ranges = load_progress.row_ranges(n, row.itemsize)
         buf = np.empty((ranges[0][1] - ranges[0][0]) * row.itemsize, np.uint8)

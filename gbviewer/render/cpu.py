@@ -42,6 +42,7 @@ class CpuRenderer(Renderer):
 
         self._native = _native
         self._scene: Scene | None = None
+        self._sh: np.ndarray | None = None
 
     @classmethod
     def available(cls) -> tuple[bool, str]:
@@ -57,16 +58,18 @@ class CpuRenderer(Renderer):
         if scene is not self._scene:
             self._native.release_buffers()  # the per-frame buffers the native module keeps for the last scene
         self._scene = scene
+        self._sh = np.ascontiguousarray(scene.sh, np.float32)  # the native module reads float32 (float16: a copy)
 
     def release(self) -> None:
         self._native.release_buffers()
-        self._scene = None
+        self._scene = self._sh = None
 
     def _native_render(self, prep: Prepared, camera: Camera, settings: RenderSettings, **kwargs) -> dict:
         """The native module's render call for this frame; kwargs: control or trace."""
         scene = prep.scene
         return self._native.render(
-            scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d,
+            scene.means, scene.scales, scene.quats, scene.opacities, self._sh if scene is self._scene else scene.sh,
+            scene.filter_3d,
             *camera_args(camera), int(settings.mode), settings.supersample, settings.sh_degree,
             np.asarray(settings.background, np.float32), settings.debug == "window", settings.threads,
             **_native_extra(prep), **kwargs,

@@ -67,7 +67,8 @@ class CudaRenderer(Renderer):
         self._uploaded = None
         self._cells = None
         try:
-            self._impl.upload(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d)
+            self._impl.upload(scene.means, scene.scales, scene.quats, scene.opacities,
+                              np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d)
             if scene.oit is not None and scene.oit.view_weight_sh is not None:
                 self._impl.upload_weights(np.ascontiguousarray(scene.oit.view_weight_sh, np.float32))
         except RuntimeError as exc:
