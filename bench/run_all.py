@@ -136,6 +136,16 @@ def target_header(short: bool = False, in_use: str | None = None) -> list[str]:
             f"GB ms at {w}x{h}, {in_use} (median over the shared scenes <= {GB_MS_TARGET:g})"]
 
 
+def kept_section(path: Path, heading: str) -> list[str]:
+    """The lines of the section `heading` of the markdown file `path` (up to the next "## "), or none."""
+    lines = path.read_text().splitlines() if path.exists() else []
+    if heading not in lines:
+        return []
+    start = lines.index(heading)
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
+    return lines[start:end]
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="two scenes, one view, small scaling series")
@@ -217,6 +227,7 @@ def main() -> int:
                          f"{r['peak_rss_mib']:.0f}"] for r in scale["splats"] + scale["pixels"]]), ""]
     lines += ["## Loading speed", "", "```", (load.stdout or load.stderr).strip(), "```", ""]
     lines += ["## Viewer frame pacing", ""] + pacing_lines + [""]
+    lines += kept_section(HERE / "RESULTS.md", "## Scale")  # bench/scale.py's, run on its own (minutes per scene)
     lines += ["## Plots", ""] + [f"![{p.stem}](results/{p.name})" for p in plots] + [""]
     times["total"] = time.perf_counter() - started
     lines += ["## Run time", "", ", ".join(f"{k} {v / 60:.1f} min" for k, v in times.items()), ""]

@@ -61,7 +61,8 @@ class OitData:
 class Scene:
     """Splats with activated parameters (scales after exp, opacities after sigmoid, unit quaternions).
 
-    means (N,3), scales (N,3), quats (N,4) as (w,x,y,z), opacities (N,), sh (N,K,3) with DC first,
+    means (N,3), scales (N,3), quats (N,4) as (w,x,y,z), opacities (N,), sh (N,K,3) with DC first (float32, or
+    float16 when given so: `gb.load(path, sh_dtype="float16")`; the renderers convert it at upload),
     optional filter_3d (N,) (Mip-Splatting's 3D filter, applied by every renderer mode).
     `meta` holds loader facts (format, version, property names) for `gbviewer info`. `oit`: the data of the
     order-independent modes (`OitData`), None for ordinary scenes.
@@ -122,7 +123,7 @@ class Scene:
             "scales": np.asarray(scales, dtype=np.float32),
             "quats": np.asarray(quats, dtype=np.float32),
             "opacities": np.asarray(opacities, dtype=np.float32).reshape(-1),
-            "sh": np.asarray(sh, dtype=np.float32),
+            "sh": np.asarray(sh, dtype=np.float16 if np.asarray(sh).dtype == np.float16 else np.float32),
         }
         if filter_3d is not None:
             arrays["filter_3d"] = np.asarray(filter_3d, dtype=np.float32).reshape(-1)
@@ -157,7 +158,7 @@ class Scene:
             # A finite sum proves every element finite (NaN and inf propagate); the per-splat reduction is only
             # needed when it is not (or when a float32 sum of finite values overflowed).
             with np.errstate(over="ignore", invalid="ignore"):
-                total = arr.sum()
+                total = arr.sum(dtype=np.float32)  # float16 SH: summed in float32
             if not np.isfinite(total):
                 finite &= np.isfinite(arr.reshape(n, -1)).all(axis=1)
         for name, limit in LIMITS.items():

@@ -3,6 +3,7 @@ bytes read and the splats decoded, `cancel` stops it (see `progress`)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ from ..errors import CallbackError, GBViewerError, LoadCancelled, SceneFormatErr
 from ..scene import Scene
 from .compressed_ply import is_compressed_ply, load_compressed_ply
 from .duplex import is_duplex_ply, load_duplex
-from .ply import load_inria_ply, read_ply
+from .ply import check_sh_range, load_inria_ply, load_streamed_ply, read_ply
 from .progress import LoadProgress, Progress
 from .sog import ZIP_MAGIC, load_sog
 from .splat import load_splat, looks_like_splat
@@ -22,29 +23,38 @@ from .write import write_inria_ply
 
 __all__ = ["load", "load_cameras_json", "write_inria_ply"]
 
+SH_DTYPES = ("float32", "float16")
 FORMATS = ("INRIA (incl. sort-free GS), Duplex-GS or compressed .ply, .spz, .sog (zip, folder or meta.json) or .splat")
 
 
-def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable | None = None) -> Scene:
+def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable | None = None,
+         sh_dtype: str = "float32") -> Scene:
     """Load a splat scene file or SOG folder; the format comes from the content, not the extension.
 
     `progress`: called as fn(done, total, unit) with unit "bytes" (read from the file), then "splats" (decoded),
     at most about a hundred times per unit, done rising to total; an exception it raises ends the load with a
     CallbackError chained to it. `cancel`: a gbviewer.CancelToken (or threading.Event); once it is set the load
-    raises LoadCancelled within one chunk (at most a hundredth of the file or 65536 splats)."""
+    raises LoadCancelled within one chunk (at most a hundredth of the file or 65536 splats). `sh_dtype`:
+    "float16" stores the SH coefficients as float16 (half their memory, rounded to nearest; an error where one is
+    beyond float16's range); the renderers convert them to float32 at upload."""
     path = Path(path)
+    if sh_dtype not in SH_DTYPES:
+        raise GBViewerError(f"sh_dtype {sh_dtype!r}; expected one of {', '.join(SH_DTYPES)}")
     reporter = LoadProgress(progress, cancel)
     try:
         reporter.check()
         with np.errstate(all="ignore"):  # overflow in decoding is data: Scene drops non-finite splats with a warning
-            return _load(path, reporter)
+            scene = _load(path, reporter, sh_dtype)
+            if scene.sh.dtype != sh_dtype:  # formats decoded in float32: converted once whole
+                scene = replace(scene, sh=check_sh_range(scene.sh, np.dtype(sh_dtype)).astype(sh_dtype))
+            return scene
     except (SceneFormatError, LoadCancelled, CallbackError):
         raise
     except GBViewerError as exc:  # Scene validation of decoded data, e.g. every splat non-finite
         raise SceneFormatError(path, str(exc).removeprefix(f"{path}: ")) from None
 
 
-def _load(path: Path, progress: LoadProgress) -> Scene:
+def _load(path: Path, progress: LoadProgress, sh_dtype: str) -> Scene:
     if path.is_dir():
         return load_sog(path, progress)
     if not path.is_file():
@@ -52,6 +62,9 @@ def _load(path: Path, progress: LoadProgress) -> Scene:
     with open(path, "rb") as fh:
         head = fh.read(16)
     if head.startswith(b"ply"):
+        streamed = load_streamed_ply(path, progress, sh_dtype)
+        if streamed is not None:
+            return streamed
         ply = read_ply(path, progress)
         if is_compressed_ply(ply):
             return load_compressed_ply(path, ply, progress)

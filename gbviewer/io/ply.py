@@ -8,18 +8,21 @@ from __future__ import annotations
 
 import io
 import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 import plyfile
 
-from ..errors import InvalidValue, SceneFormatError
+from ..errors import GBViewerError, InvalidValue, SceneFormatError
 from ..scene import Scene
 from ..validate import declared_count
-from .progress import LoadProgress, decode_in_chunks
+from . import progress as load_progress
+from .progress import LoadProgress
 
 HEADER_MAX_BYTES = 1 << 20
+TRUNCATED = "truncated or malformed data: early end-of-file"
 USED_ELEMENTS = ("vertex", "chunk", "sh")  # what the loaders read; elements after the last of these stay unread
 TYPE_BYTES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
               "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
@@ -30,6 +33,17 @@ REST_COUNTS = {0: 0, 9: 1, 24: 2, 45: 3}  # f_rest_* count -> SH degree
 REST_COUNTS_1 = {0: 0, 3: 1, 8: 2, 15: 3}  # f_ro_* count (1-channel view weight) -> SH degree
 
 
+def _checked_header(path: Path, fh) -> int:
+    """Check the magic line and the element counts of the PLY open as `fh`; returns the file size, `fh` at 0."""
+    head = fh.read(HEADER_MAX_BYTES)
+    if not (head.startswith(b"ply\n") or head.startswith(b"ply\r\n")):
+        raise SceneFormatError(path, "not a PLY file (missing 'ply' magic line)")
+    size = fh.seek(0, 2)
+    check_element_counts(path, head, size)
+    fh.seek(0)
+    return size
+
+
 def read_ply(path: Path, progress: LoadProgress | None = None) -> plyfile.PlyData:
     """Parse a PLY header and read (binary: memory-map) the elements the loaders use, with typed errors for non-PLY
     and truncated files. Elements after the last used one (a mesh's faces, say) are never read: plyfile would parse
@@ -38,12 +52,7 @@ def read_ply(path: Path, progress: LoadProgress | None = None) -> plyfile.PlyDat
     progress = progress or LoadProgress()
     try:
         with open(path, "rb") as fh:
-            head = fh.read(HEADER_MAX_BYTES)
-            if not (head.startswith(b"ply\n") or head.startswith(b"ply\r\n")):
-                raise SceneFormatError(path, "not a PLY file (missing 'ply' magic line)")
-            size = fh.seek(0, 2)
-            check_element_counts(path, head, size)
-            fh.seek(0)
+            size = _checked_header(path, fh)
             progress.report(0, size, "bytes")
             # plyfile's PlyData.read, stopping early: the same header parser and per-element reader it uses
             ply = plyfile.PlyData._parse_header(fh)
@@ -96,11 +105,15 @@ def check_element_counts(path: Path, head: bytes, size: int) -> None:
 
 def vertex_columns(path: Path, ply: plyfile.PlyData, names: list[str]) -> Callable[..., np.ndarray]:
     """Check that each named vertex property is a scalar number; return `columns(names, rows=all) -> (rows, len)
-    float32`.
+    float32` (see `table_columns`)."""
+    return table_columns(path, ply["vertex"].data, names)
 
-    For the usual all-float32 layout, consecutive properties come back as a strided view of the memory-mapped
-    data, so each byte is copied once, by whoever makes the final array."""
-    data = ply["vertex"].data
+
+def table_columns(path: Path, data: np.ndarray, names: list[str]) -> Callable[..., np.ndarray]:
+    """`vertex_columns` of a structured array of vertex rows.
+
+    For the usual all-float32 layout, consecutive properties come back as a strided view of the data (memory-mapped
+    or a chunk read from the file), so each byte is copied once, by whoever makes the final array."""
     fields = data.dtype.fields or {}
     for name in names:
         if name not in fields:
@@ -124,6 +137,17 @@ def vertex_columns(path: Path, ply: plyfile.PlyData, names: list[str]) -> Callab
                                                      axis=1)
 
 
+def check_sh_range(sh: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """`sh`, once checked to fit `dtype`: float16 storage (`gb.load(..., sh_dtype="float16")`) refuses coefficients
+    beyond its largest finite value rather than turning them into infinities."""
+    if np.dtype(dtype) == np.float16 and sh.size:
+        big = max(float(np.fmax.reduce(sh, axis=None)), -float(np.fmin.reduce(sh, axis=None)))
+        if big > float(np.finfo(np.float16).max):
+            raise GBViewerError(f"field 'sh': coefficients up to {big:.3g}, beyond float16's range (65504); load "
+                                "with sh_dtype='float32'")
+    return sh
+
+
 def activate_opacity(raw: np.ndarray) -> np.ndarray:
     """sigmoid in float32 (the writer inverts exactly this)."""
     with np.errstate(over="ignore"):
@@ -136,26 +160,35 @@ def activate_scales(raw: np.ndarray) -> np.ndarray:
         return np.exp(raw)
 
 
-def load_inria_ply(path: Path, ply: plyfile.PlyData, progress: LoadProgress | None = None) -> Scene:
-    """Load an INRIA-layout splat PLY: exp scales, sigmoid opacity, normalised (w,x,y,z) quaternions. `progress`:
-    splats decoded."""
-    if "vertex" not in ply:
-        raise SceneFormatError(path, "no 'vertex' element", field="vertex")
-    names = list(ply["vertex"].data.dtype.names or ())
-    if ply["vertex"].count == 0:
+@dataclass(frozen=True)
+class InriaLayout:
+    """What an INRIA vertex table holds (checked by `inria_layout`): its properties, SH degree and f_rest columns, a
+    filter_3D column, and for the sort-free layout its view-weight columns (f_do_0, f_ro_*) and `info`."""
+
+    names: list[str]
+    degree: int
+    rest: list[str]
+    has_filter: bool
+    weight_cols: list[str]
+
+    @property
+    def wanted(self) -> list[str]:
+        return REQUIRED + self.rest + (["filter_3D"] if self.has_filter else []) + self.weight_cols
+
+
+def inria_layout(path: Path, names: list[str], n: int) -> InriaLayout:
+    """The layout of an `n`-row INRIA vertex table with properties `names`, or a SceneFormatError saying what is
+    wrong with it (no rows, f_rest_* or f_ro_* counts, a sort-free table without `info`)."""
+    if n == 0:
         raise SceneFormatError(path, "zero splats", field="vertex")
     rest_idx = sorted(int(m.group(1)) for n in names if (m := re.fullmatch(r"f_rest_(\d+)", n)))
     if len(rest_idx) not in REST_COUNTS or rest_idx != list(range(len(rest_idx))):
         raise SceneFormatError(
             path, f"{len(rest_idx)} f_rest_* properties (indices {rest_idx[:3]}...); expected f_rest_0.. with "
             "0, 9, 24 or 45 of them (SH degree 0-3)", field="f_rest")
-    degree = REST_COUNTS[len(rest_idx)]
-    has_filter = "filter_3D" in names
-    rest = [f"f_rest_{i}" for i in rest_idx]
     ro_idx = sorted(int(m.group(1)) for n in names if (m := re.fullmatch(r"f_ro_(\d+)", n)))
-    sort_free = "f_do_0" in names or bool(ro_idx)
     weight_cols: list[str] = []
-    if sort_free:
+    if "f_do_0" in names or ro_idx:
         if "f_do_0" not in names or len(ro_idx) not in REST_COUNTS_1 or ro_idx != list(range(len(ro_idx))):
             raise SceneFormatError(
                 path, f"sort-free view weight: f_do_0 {'present' if 'f_do_0' in names else 'missing'} and "
@@ -165,37 +198,128 @@ def load_inria_ply(path: Path, ply: plyfile.PlyData, progress: LoadProgress | No
             raise SceneFormatError(path, "sort-free layout (f_do_0) without the 'info' column that holds "
                                    "weight_background and sigma", field="info")
         weight_cols = ["f_do_0"] + [f"f_ro_{i}" for i in ro_idx] + ["info"]
-    columns = vertex_columns(path, ply, REQUIRED + rest + (["filter_3D"] if has_filter else []) + weight_cols)
-    n = ply["vertex"].count
-    k = (degree + 1) ** 2
-    meta = {"format": "inria-ply", "version": None, "properties": names, "sh_degree": degree,
-            "filter_3D": has_filter}
-    extra: dict = {}
-    if sort_free:
-        info = columns(["info"], slice(0, 2))[:, 0]
-        if n < 2:
-            raise SceneFormatError(path, f"sort-free layout with {n} vertex; the info column needs 2 rows "
-                                   "(weight_background, sigma)", field="info")
-        wbg, sigma = float(info[0]), float(info[1])
-        if not (np.isfinite(wbg) and wbg >= 0 and np.isfinite(sigma) and sigma > 0):
-            raise SceneFormatError(path, f"info rows 0, 1 (weight_background, sigma) = {wbg}, {sigma}; expected "
-                                   "weight_background >= 0 and sigma > 0", field="info")
-        extra = {"weight_background": wbg, "wsr_sigma": sigma}
-        meta.update(format="sort-free-ply", sort_free=True)
+    return InriaLayout(names, REST_COUNTS[len(rest_idx)], [f"f_rest_{i}" for i in rest_idx], "filter_3D" in names,
+                       weight_cols)
 
-    sh = np.empty((n, k, 3), dtype=np.float32)  # filled in place: the largest array, not copied again
 
-    def decode(rows: slice) -> tuple:
-        sh[rows, 0, :] = columns(["f_dc_0", "f_dc_1", "f_dc_2"], rows)
+class InriaArrays:
+    """The Scene's final arrays of an INRIA load, allocated once: `fill` copies raw columns into them a row range
+    at a time (no array of the whole file besides them), `activate` applies exp and sigmoid in place."""
+
+    def __init__(self, layout: InriaLayout, n: int, sh_dtype: str = "float32") -> None:
+        self.layout, self.n, k = layout, n, (layout.degree + 1) ** 2
+        self.means, self.scales = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32)
+        self.quats, self.opacities = np.empty((n, 4), np.float32), np.empty(n, np.float32)
+        self.sh = np.empty((n, k, 3), sh_dtype)
+        self.filter_3d = np.empty(n, np.float32) if layout.has_filter else None
+        self.weights = np.empty((n, len(layout.weight_cols) - 1), np.float32) if layout.weight_cols else None
+        self.info = np.zeros(min(n, 2), np.float32)
+
+    def fill(self, columns: Callable[[list[str]], np.ndarray], rows: slice) -> None:
+        """Copy rows `rows` from `columns(names)`, the raw float32 columns of just those rows."""
+        k = self.sh.shape[1]
+        self.sh[rows, 0, :] = check_sh_range(columns(["f_dc_0", "f_dc_1", "f_dc_2"]), self.sh.dtype)
         if k > 1:  # f_rest is channel-major: all R coefficients, then G, then B
-            sh[rows, 1:, :] = columns(rest, rows).reshape(-1, 3, k - 1).transpose(0, 2, 1)
-        return (columns(["x", "y", "z"], rows), activate_scales(columns(["scale_0", "scale_1", "scale_2"], rows)),
-                columns(["rot_0", "rot_1", "rot_2", "rot_3"], rows), activate_opacity(columns(["opacity"], rows)[:, 0]),
-                columns(["filter_3D"], rows)[:, 0] if has_filter else None,
-                columns(weight_cols[:-1], rows) if sort_free else None)
+            rest = check_sh_range(columns(self.layout.rest), self.sh.dtype)
+            self.sh[rows, 1:, :] = rest.reshape(-1, 3, k - 1).transpose(0, 2, 1)
+        self.means[rows] = columns(["x", "y", "z"])
+        self.scales[rows] = columns(["scale_0", "scale_1", "scale_2"])
+        self.quats[rows] = columns(["rot_0", "rot_1", "rot_2", "rot_3"])
+        self.opacities[rows] = columns(["opacity"])[:, 0]
+        if self.filter_3d is not None:
+            self.filter_3d[rows] = columns(["filter_3D"])[:, 0]
+        if self.weights is not None:
+            self.weights[rows] = columns(self.layout.weight_cols[:-1])
+            if rows.start < len(self.info):
+                head = columns(["info"])[: len(self.info) - rows.start, 0]
+                self.info[rows.start:rows.start + len(head)] = head
 
-    means, scales, quats, opacities, filter_3d, view_weight_sh = decode_in_chunks(n, decode,
-                                                                                  progress or LoadProgress())
-    if sort_free:
-        extra["view_weight_sh"] = view_weight_sh
-    return Scene.from_arrays(means, scales, quats, opacities, sh, filter_3d, source=str(path), meta=meta, **extra)
+    def activate(self, rows: slice) -> None:
+        """exp of the scales, sigmoid of the opacities of rows `rows`, in place."""
+        self.scales[rows] = activate_scales(self.scales[rows])
+        self.opacities[rows] = activate_opacity(self.opacities[rows])
+
+    def scene(self, path: Path) -> Scene:
+        """The validated Scene of the filled, activated arrays."""
+        layout, n = self.layout, self.n
+        meta = {"format": "inria-ply", "version": None, "properties": layout.names, "sh_degree": layout.degree,
+                "filter_3D": layout.has_filter}
+        extra: dict = {}
+        if self.weights is not None:
+            if n < 2:
+                raise SceneFormatError(path, f"sort-free layout with {n} vertex; the info column needs 2 rows "
+                                       "(weight_background, sigma)", field="info")
+            wbg, sigma = float(self.info[0]), float(self.info[1])
+            if not (np.isfinite(wbg) and wbg >= 0 and np.isfinite(sigma) and sigma > 0):
+                raise SceneFormatError(path, f"info rows 0, 1 (weight_background, sigma) = {wbg}, {sigma}; expected "
+                                       "weight_background >= 0 and sigma > 0", field="info")
+            extra = {"weight_background": wbg, "wsr_sigma": sigma, "view_weight_sh": self.weights}
+            meta.update(format="sort-free-ply", sort_free=True)
+        return Scene.from_arrays(self.means, self.scales, self.quats, self.opacities, self.sh, self.filter_3d,
+                                 source=str(path), meta=meta, **extra)
+
+
+def load_inria_ply(path: Path, ply: plyfile.PlyData, progress: LoadProgress | None = None) -> Scene:
+    """Load an INRIA-layout splat PLY read by `read_ply` (ASCII, or binary that `load_streamed_ply` leaves): exp
+    scales, sigmoid opacity, normalised (w,x,y,z) quaternions. `progress`: splats decoded."""
+    if "vertex" not in ply:
+        raise SceneFormatError(path, "no 'vertex' element", field="vertex")
+    n = ply["vertex"].count
+    layout = inria_layout(path, list(ply["vertex"].data.dtype.names or ()), n)
+    columns = vertex_columns(path, ply, layout.wanted)
+    out = InriaArrays(layout, n)
+    for begin, end in (progress or LoadProgress()).chunks(n, "splats", load_progress.MIN_SPLATS):
+        rows = slice(begin, end)
+        out.fill(lambda wanted: columns(wanted, rows), rows)
+        out.activate(rows)
+    return out.scene(path)
+
+
+def _streamable(ply: plyfile.PlyData) -> bool:
+    """A binary PLY whose first element is a vertex table of scalar properties that only the INRIA loader reads
+    (no compressed-ply `chunk` element, no Duplex-GS anchors)."""
+    if ply.text or not len(ply.elements) or ply.elements[0].name != "vertex":
+        return False
+    names = {p.name for p in ply.elements[0].properties}
+    return (not any(isinstance(p, plyfile.PlyListProperty) for p in ply.elements[0].properties)
+            and "chunk" not in {e.name for e in ply.elements} and "f_anchor_feat_0" not in names)
+
+
+def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype: str = "float32") -> Scene | None:
+    """Load a binary INRIA `.ply` by streaming its vertex rows in chunks of about a hundredth of the file straight
+    into the Scene's arrays (`InriaArrays`): no mapping or copy of the whole file, so the load costs about a read of
+    it and its memory is the arrays' plus one chunk. None when the file is not such a PLY (`read_ply` and the
+    other loaders take it). `progress`: bytes read (and copied into the arrays), then splats activated. `sh_dtype`
+    "float16": the SH is stored as float16 as it is read (see `check_sh_range`)."""
+    progress = progress or LoadProgress()
+    with open(path, "rb") as fh:
+        size = _checked_header(path, fh)
+        try:
+            ply = plyfile.PlyData._parse_header(fh)
+            if not _streamable(ply):
+                return None
+            element = ply.elements[0]
+            row = np.dtype([(p.name, p.dtype(ply.byte_order)) for p in element.properties])
+        except (plyfile.PlyParseError, ValueError, UnicodeDecodeError, TypeError):
+            return None  # read_ply reports what is wrong with it
+        start, n = fh.tell(), element.count
+        layout = inria_layout(path, list(row.names), n)
+        table_columns(path, np.empty(0, row), layout.wanted)  # the checks of each column's type
+        if size - start < n * row.itemsize:
+            raise SceneFormatError(path, TRUNCATED, field="vertex")
+        out = InriaArrays(layout, n, sh_dtype)
+        progress.report(0, size, "bytes")
+        ranges = load_progress.row_ranges(n, row.itemsize)
+        buf = np.empty((ranges[0][1] - ranges[0][0]) * row.itemsize, np.uint8)
+        fh.seek(start)
+        for begin, end in ranges:
+            chunk = buf[: (end - begin) * row.itemsize]
+            if fh.readinto(chunk) != chunk.size:
+                raise SceneFormatError(path, TRUNCATED, field="vertex")
+            out.fill(table_columns(path, chunk.view(row), layout.wanted), slice(begin, end))
+            progress.report(start + end * row.itemsize, size, "bytes")
+        del buf, chunk
+        progress.report(size, size, "bytes")
+    for begin, end in progress.chunks(n, "splats", load_progress.MIN_SPLATS):
+        out.activate(slice(begin, end))
+    return out.scene(path)

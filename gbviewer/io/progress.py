@@ -132,6 +132,12 @@ def _ranges(total: int, minimum: int) -> Iterator[tuple[int, int]]:
         yield begin, min(total, begin + step)
 
 
+def row_ranges(rows: int, row_bytes: int) -> list[tuple[int, int]]:
+    """(begin, end) ranges of a table of `rows` rows of `row_bytes` bytes, each about a read chunk of bytes."""
+    step = max(1, _step(rows * row_bytes, MIN_BYTES) // max(1, row_bytes))
+    return [(begin, min(rows, begin + step)) for begin in range(0, rows, step)]
+
+
 def decode_in_chunks(n: int, decode: Callable[[slice], tuple], progress: LoadProgress) -> tuple:
     """decode(rows) for consecutive row slices of 0..n, reported as splats; its outputs (arrays of n rows, or
     None) joined. A single chunk's outputs are returned as they are."""

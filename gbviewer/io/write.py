@@ -84,6 +84,12 @@ def inria_columns(scene: Scene) -> dict[str, np.ndarray]:
     return cols
 
 
+def ply_header(n: int, names: list[str]) -> bytes:
+    """The header of a binary little-endian PLY with `n` vertices of float32 properties `names`."""
+    return (f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\n"
+            + "".join(f"property float {name}\n" for name in names) + "end_header\n").encode("ascii")
+
+
 def write_inria_ply(scene: Scene, path: str | Path, force: bool = False) -> Path:
     """Write `scene` to `path` atomically; refuses to overwrite an existing file unless `force`."""
     if scene.oit is not None and scene.oit.neural is not None:
@@ -92,8 +98,7 @@ def write_inria_ply(scene: Scene, path: str | Path, force: bool = False) -> Path
         raise GBViewerError(f"{scene.source}: a Duplex-GS checkpoint has no fixed splats (its MLPs decode them per "
                             "view), so it cannot be written as an INRIA ply")
     cols = inria_columns(scene)
-    header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {scene.num_splats}\n"
-              + "".join(f"property float {name}\n" for name in cols) + "end_header\n").encode("ascii")
+    header = ply_header(scene.num_splats, list(cols))
     body = np.stack(list(cols.values()), axis=1).astype("<f4")
 
     def write(tmp: Path) -> None:

@@ -65,7 +65,8 @@ class CpuRenderer(Renderer):
 
     def _upload(self, scene: Scene) -> None:
         self._uploaded = self._cells = None
-        self._impl.upload(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d)
+        self._impl.upload(scene.means, scene.scales, scene.quats, scene.opacities,
+                          np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d)  # float16 SH: a float32 copy
         if scene.oit is not None and scene.oit.view_weight_sh is not None:
             self._impl.upload_weights(scene.oit.view_weight_sh)
         self._uploaded = scene

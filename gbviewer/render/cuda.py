@@ -93,7 +93,8 @@ class CudaRenderer(Renderer):
         # Forget what is on the device first: a failed upload (out of device memory) leaves no scene there.
         self._uploaded = None
         self._cells = None
-        self._call("upload", scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d)
+        self._call("upload", scene.means, scene.scales, scene.quats, scene.opacities,
+                   np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d)
         if scene.oit is not None and scene.oit.view_weight_sh is not None:
             self._call("upload_weights", np.ascontiguousarray(scene.oit.view_weight_sh, np.float32))
         self._uploaded = scene

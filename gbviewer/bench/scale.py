@@ -1,0 +1,182 @@
+"""The scale benchmark (`bench/scale.py`): on a tiled real-size scene (`scale_scene`), load time next to a raw read
+of the same file and peak RSS (each in a fresh child process), per-stage times per mode and sampling rate, the
+two-pane time (two modes of one camera, one after the other) and cancel latency. All ratios come from one run."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..camera import Camera, orbit_camera
+from ..errors import RenderCancelled
+from ..io import load
+from ..render import Mode, RenderSettings, get_renderer
+from ..scene import Scene
+
+
+def scene_bytes(scene: Scene) -> int:
+    """Bytes of the scene's splat arrays."""
+    arrays = [scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d]
+    if scene.oit is not None and scene.oit.view_weight_sh is not None:
+        arrays.append(scene.oit.view_weight_sh)
+    return sum(a.nbytes for a in arrays if a is not None)
+
+
+def rss_bytes() -> int:
+    """Resident bytes of this process now."""
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+def peak_rss_bytes() -> int:
+    """The most resident bytes this process has had: VmHWM, of this process image alone (ru_maxrss is not: Linux
+    hands the parent's peak at fork on to the child, across exec)."""
+    with open("/proc/self/status") as fh:
+        return next(int(line.split()[1]) * 1024 for line in fh if line.startswith("VmHWM:"))
+
+
+def child_measure(kind: str, path: str) -> dict:
+    """In a fresh process: "raw" reads the file into one numpy array, "load" runs gb.load(path); the time, resident
+    bytes before and after, and the peak (`peak_rss_bytes`: the process's whole life)."""
+    before = rss_bytes()
+    t = time.perf_counter()
+    if kind == "raw":
+        with open(path, "rb") as fh:
+            buf = np.empty(os.fstat(fh.fileno()).st_size, np.uint8)
+            fh.readinto(buf)
+        arrays = buf.nbytes
+    else:
+        scene = load(path)
+        arrays = scene_bytes(scene)
+    seconds = time.perf_counter() - t
+    return {"seconds": seconds, "rss_before": before, "rss_after": rss_bytes(), "peak_rss": peak_rss_bytes(), "arrays": arrays}
+
+
+def measure_in_child(kind: str, path: Path) -> dict:
+    """`child_measure` in a new interpreter (so that its peak RSS is the measured step's alone)."""
+    code = "import json,sys; from gbviewer.bench.scale import child_measure as m; print(json.dumps(m(*sys.argv[1:])))"
+    out = subprocess.run([sys.executable, "-c", code, kind, str(path)],
+                         check=True, capture_output=True, text=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def measure_load(path: Path, repeat: int) -> dict:
+    """Best of `repeat` raw reads and loads (warm page cache: one raw read first), with the load's memory."""
+    measure_in_child("raw", path)
+    raw = min((measure_in_child("raw", path) for _ in range(repeat)), key=lambda r: r["seconds"])
+    loads = [measure_in_child("load", path) for _ in range(repeat)]
+    best = min(loads, key=lambda r: r["seconds"])
+    above = max(r["peak_rss"] - r["rss_before"] for r in loads)
+    return {"raw_s": raw["seconds"], "load_s": best["seconds"], "load_over_raw": best["seconds"] / raw["seconds"],
+            "arrays_bytes": best["arrays"], "baseline_rss": best["rss_before"], "peak_rss_above_baseline": above,
+            "peak_over_arrays": above / best["arrays"],
+            "after_over_arrays": (best["rss_after"] - best["rss_before"]) / best["arrays"]}
+
+
+def scale_camera(scene: Scene, width: int = 1280, height: int = 720) -> Camera:
+    """The benchmark's view: the orbit camera framing the whole tiled scene."""
+    return orbit_camera(scene, 30.0, 35.0, width=width, height=height)
+
+
+def _stages(frame) -> dict:
+    s = frame.stats
+    return {"preprocess_ms": s.preprocess_ms, "sort_ms": s.sort_ms, "blend_ms": s.blend_ms, "total_ms": s.total_ms,
+            "visible": s.visible, "sort_length": s.sort_length, "evals_per_pixel": s.evals_per_pixel}
+
+
+def measure_stages(scene: Scene, cam: Camera, modes: list[str], rates: list[float], repeat: int) -> list[dict]:
+    """Per mode and rate: the stage times of the fastest of `repeat` frames (FrameStats)."""
+    renderer = get_renderer(scene, "cpu")
+    rows = []
+    for mode in modes:
+        for rate in rates:
+            view = cam.at_sampling_rate(rate)
+            frames = [renderer.render(view, RenderSettings(mode=Mode.parse(mode))) for _ in range(repeat)]
+            best = min(frames, key=lambda f: f.stats.total_ms)
+            rows.append({"mode": mode, "rate": rate, "width": view.width, "height": view.height, **_stages(best)})
+    return rows
+
+
+def measure_two_pane(scene: Scene, cam: Camera, modes: tuple[str, str]) -> dict:
+    """Two panes of one camera: the two modes rendered one after the other; wall time of each and of both."""
+    renderer = get_renderer(scene, "cpu")
+    panes = []
+    t0 = time.perf_counter()
+    for mode in modes:
+        t = time.perf_counter()
+        frame = renderer.render(cam, RenderSettings(mode=Mode.parse(mode)))
+        panes.append({"mode": mode, "wall_ms": (time.perf_counter() - t) * 1e3, **_stages(frame)})
+    return {"panes": panes, "total_ms": (time.perf_counter() - t0) * 1e3}
+
+
+def measure_cancel(scene: Scene, cam: Camera, mode: str, moments_ms: list[float]) -> list[dict]:
+    """For each moment: a render whose cancel event is set that many ms after it starts; the time from the event
+    to RenderCancelled (None with finished=True where the frame completed first)."""
+    renderer = get_renderer(scene, "cpu")
+    rows = []
+    for at in moments_ms:
+        event = threading.Event()
+        stamp: list[float] = []
+
+        def fire(ev: threading.Event = event, st: list = stamp) -> None:
+            st.append(time.perf_counter())
+            ev.set()
+
+        timer = threading.Timer(at / 1e3, fire)
+        t0 = time.perf_counter()
+        timer.start()
+        try:
+            renderer.render(cam, RenderSettings(mode=Mode.parse(mode)), cancel=event)
+            latency, finished = None, True
+        except RenderCancelled:
+            latency, finished = (time.perf_counter() - stamp[0]) * 1e3, False
+        timer.cancel()
+        rows.append({"mode": mode, "set_at_ms": at, "latency_ms": latency, "finished": finished,
+                     "render_ms": (time.perf_counter() - t0) * 1e3})
+    return rows
+
+
+def run_scale(path: Path, repeat: int, modes: list[str], rates: list[float], moments_ms: list[float],
+              width: int = 1280, height: int = 720, log=print) -> dict:
+    """Every measurement of the scale benchmark on the tiled scene at `path`."""
+    log(f"{path.name}: load")
+    result: dict = {"file": str(path), "file_bytes": path.stat().st_size,
+                    "load": measure_load(path, repeat)}
+    scene = load(path)
+    result["splats"] = scene.num_splats
+    cam = scale_camera(scene, width, height)
+    log(f"{path.name}: stages")
+    result["stages"] = measure_stages(scene, cam, modes, rates, repeat)
+    log(f"{path.name}: two panes, cancel")
+    result["two_pane"] = measure_two_pane(scene, cam, (modes[0], modes[-1]))
+    result["cancel"] = measure_cancel(scene, cam, modes[-1], moments_ms)
+    return result
+
+
+def print_scale(r: dict) -> None:
+    """The tables of one `run_scale` result."""
+    ld = r["load"]
+    print(f"\n{Path(r['file']).name}: {r['splats']:,} splats, {r['file_bytes'] / 1e9:.2f} GB")
+    print(f"  raw read {ld['raw_s']:.2f} s | load {ld['load_s']:.2f} s | load/raw {ld['load_over_raw']:.2f}")
+    print(f"  splat arrays {ld['arrays_bytes'] / 2**30:.2f} GiB | peak RSS above baseline "
+          f"{ld['peak_rss_above_baseline'] / 2**30:.2f} GiB ({ld['peak_over_arrays']:.2f}x arrays) | after load "
+          f"{ld['after_over_arrays']:.2f}x | baseline {ld['baseline_rss'] / 2**20:.0f} MiB")
+    print(f"  {'mode':<18}{'rate':>6}{'size':>11}{'pre ms':>9}{'sort ms':>9}{'blend ms':>10}{'total ms':>10}"
+          f"{'sorted':>12}{'evals/px':>10}")
+    for s in r["stages"]:
+        print(f"  {s['mode']:<18}{s['rate']:>6g}{s['width']:>6}x{s['height']:<4}{s['preprocess_ms']:>9.0f}"
+              f"{s['sort_ms']:>9.0f}{s['blend_ms']:>10.0f}{s['total_ms']:>10.0f}{s['sort_length']:>12,}"
+              f"{s['evals_per_pixel']:>10.0f}")
+    tp = r["two_pane"]
+    panes = " + ".join(f"{p['mode']} {p['wall_ms']:.0f}" for p in tp["panes"])
+    print(f"  two panes, one camera: {panes} = {tp['total_ms']:.0f} ms")
+    for c in r["cancel"]:
+        got = "finished first" if c["finished"] else f"RenderCancelled {c['latency_ms']:.0f} ms after the event"
+        print(f"  cancel {c['mode']} at {c['set_at_ms']:.0f} ms: {got}")

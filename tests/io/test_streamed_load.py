@@ -1,0 +1,163 @@
+"""The streamed INRIA `.ply` loader (`gbviewer.io.ply.load_streamed_ply`): the same arrays, bit for bit, as an
+independent whole-file decode with plyfile and as the memory-mapped path (`read_ply` + `load_inria_ply`), on every
+vertex layout, the fuzz seeds and the shared scenes, in one chunk or a hundred."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import plyfile
+import pytest
+from helpers import shared_scene
+
+import gbviewer as gb
+from gbviewer.io import progress as load_progress
+from gbviewer.io.ply import load_inria_ply, load_streamed_ply, read_ply
+from gbviewer.io.write import ply_header
+
+SEEDS = Path(__file__).parent / "fuzz" / "seeds"
+BASE = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+TAIL = ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+
+
+def raw_ply(path: Path, n: int, degree: int = 3, seed: int = 0, extra: tuple = (), dtypes: dict | None = None,
+            byte_order: str = "<", shuffle: bool = False, sort_free: int | None = None, faces: int = 0) -> Path:
+    """An INRIA vertex table of random raw values: SH `degree`, `extra` columns (filter_3D, ...), `dtypes` per
+    column (default float32), shuffled columns, the sort-free columns of view-weight degree `sort_free`, and
+    `faces` mesh faces after the vertices."""
+    rng = np.random.default_rng(seed)
+    names = BASE + [f"f_rest_{i}" for i in range(3 * ((degree + 1) ** 2 - 1))] + TAIL + list(extra)
+    if sort_free is not None:
+        names += ["f_do_0"] + [f"f_ro_{i}" for i in range((sort_free + 1) ** 2 - 1)] + ["info"]
+    if shuffle:
+        names = list(rng.permutation(names))
+    dtypes = dtypes or {}
+    dt = np.dtype([(nm, byte_order + dtypes.get(nm, "f4")) for nm in names])
+    data = np.empty(n, dt)
+    for nm in names:
+        data[nm] = rng.normal(0, 2, n) if not nm.startswith("rot") else rng.normal(0, 1, n)
+    if sort_free is not None:
+        data["info"][:2] = (0.05, 8.0)
+    elements = [plyfile.PlyElement.describe(data, "vertex")]
+    if faces:
+        tri = np.empty(faces, [("vertex_indices", "i4", (3,))])
+        tri["vertex_indices"] = rng.integers(0, n, (faces, 3))
+        elements.append(plyfile.PlyElement.describe(tri, "face"))
+    plyfile.PlyData(elements, byte_order=byte_order).write(str(path))
+    return path
+
+
+def reference(path: Path) -> gb.Scene:
+    """An independent decode: plyfile reads the whole file into memory, INRIA activations in one go."""
+    v = plyfile.PlyData.read(str(path), mmap=False)["vertex"].data
+    names = v.dtype.names
+    col = lambda *cols: np.stack([np.asarray(v[c], np.float32) for c in cols], axis=1)  # noqa: E731
+    rest = sorted((c for c in names if c.startswith("f_rest_")), key=lambda c: int(c[7:]))
+    k = len(rest) // 3 + 1
+    sh = np.empty((len(v), k, 3), np.float32)
+    sh[:, 0] = col("f_dc_0", "f_dc_1", "f_dc_2")
+    if rest:
+        sh[:, 1:] = col(*rest).reshape(-1, 3, k - 1).transpose(0, 2, 1)
+    with np.errstate(over="ignore"):
+        scales = np.exp(col("scale_0", "scale_1", "scale_2"))
+        opac = 1.0 / (1.0 + np.exp(-col("opacity")[:, 0]))
+    extra = {}
+    if "f_do_0" in names:
+        ro = sorted((c for c in names if c.startswith("f_ro_")), key=lambda c: int(c[5:]))
+        info = np.asarray(v["info"], np.float32)
+        extra = {"view_weight_sh": col("f_do_0", *ro), "weight_background": float(info[0]),
+                 "wsr_sigma": float(info[1])}
+    filt = col("filter_3D")[:, 0] if "filter_3D" in names else None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return gb.Scene.from_arrays(col("x", "y", "z"), scales, col("rot_0", "rot_1", "rot_2", "rot_3"), opac, sh,
+                                    filt, **extra)
+
+
+def arrays(scene: gb.Scene) -> dict[str, np.ndarray | None]:
+    out = {n: getattr(scene, n) for n in ("means", "scales", "quats", "opacities", "sh", "filter_3d")}
+    out["view_weight_sh"] = scene.oit.view_weight_sh if scene.oit is not None else None
+    return out
+
+
+def assert_same(a: gb.Scene, b: gb.Scene) -> None:
+    for (name, x), y in zip(arrays(a).items(), arrays(b).values()):
+        assert (x is None) == (y is None), name
+        if x is not None:
+            assert x.dtype == y.dtype == np.float32 and x.flags.c_contiguous, name
+            np.testing.assert_array_equal(x, y, err_msg=name, strict=True)
+    if a.oit is not None:
+        assert (a.oit.sigma, a.oit.weight_background) == (b.oit.sigma, b.oit.weight_background)
+
+
+def mapped(path: Path) -> gb.Scene:
+    """Today's memory-mapped path, which ASCII files and other layouts still take."""
+    return load_inria_ply(path, read_ply(path))
+
+
+def load_quietly(path: Path) -> gb.Scene:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # random raw values: a few overflow and are dropped, on every path alike
+        return gb.load(path)
+
+
+LAYOUTS = {
+    "sh3": {}, "sh0": {"degree": 0}, "sh1": {"degree": 1}, "sh2": {"degree": 2},
+    "filter": {"extra": ("filter_3D",)}, "shuffled": {"shuffle": True, "extra": ("filter_3D",)},
+    "big-endian": {"byte_order": ">"}, "mixed-types": {"dtypes": {"x": "f8", "nx": "u1", "scale_1": "f8",
+                                                                   "f_rest_4": "i2", "opacity": "f8"}},
+    "sort-free": {"sort_free": 2}, "sort-free-sh0": {"sort_free": 0, "degree": 1},
+    "faces-after": {"faces": 50},
+}
+
+
+@pytest.fixture(params=[False, True], ids=["default-chunks", "tiny-chunks"])
+def chunks(request, monkeypatch):
+    if request.param:  # a chunk per hundredth of the file: many row ranges, one of them possibly a single row
+        monkeypatch.setattr(load_progress, "MIN_BYTES", 1)
+        monkeypatch.setattr(load_progress, "MIN_SPLATS", 1)
+    return request.param
+
+
+@pytest.mark.parametrize("layout, n", [(lay, n) for lay in LAYOUTS for n in (1, 2, 7, 3001)
+                                       if n > 1 or "sort_free" not in LAYOUTS[lay]])  # sort-free needs 2 rows
+def test_streamed_equals_reference_and_mapped_path(tmp_path, layout, n, chunks):
+    path = raw_ply(tmp_path / "s.ply", n, seed=n, **LAYOUTS[layout])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        streamed = load_streamed_ply(path)
+        assert streamed is not None  # every binary vertex-first table is streamed
+        assert_same(streamed, reference(path))
+        assert_same(streamed, mapped(path))
+        assert_same(load_quietly(path), streamed)
+    assert streamed.meta["properties"] == list(plyfile.PlyData.read(str(path))["vertex"].data.dtype.names)
+
+
+@pytest.mark.parametrize("seed", sorted(p.name for p in (SEEDS / "inria").iterdir()))
+def test_fuzz_seeds_load_as_before(seed, chunks):
+    path = SEEDS / "inria" / seed
+    scene = gb.load(path)
+    assert_same(scene, reference(path))
+    assert_same(scene, mapped(path))
+    assert (load_streamed_ply(path) is None) == (seed == "ascii.ply")  # ASCII: the row-by-row path
+
+
+def test_other_ply_formats_are_not_streamed():
+    assert load_streamed_ply(SEEDS / "compressed" / "sh1.ply") is None
+
+
+@pytest.mark.parametrize("name", ["fruit_drops_minimal.ply", "v3dg-donut.fused.ply"])
+def test_shared_inria_scenes_load_as_before(name):
+    path = shared_scene(name)
+    assert_same(gb.load(path), mapped(path))
+    assert_same(gb.load(path), reference(path))
+
+
+def test_a_few_missing_bytes_are_truncated(tmp_path):
+    """Fewer bytes missing than the header check's slack: the streamed read itself says so."""
+    path = tmp_path / "t.ply"
+    path.write_bytes(ply_header(10, BASE + TAIL) + np.zeros((10, len(BASE + TAIL)), "<f4").tobytes()[:-5])
+    with pytest.raises(gb.SceneFormatError, match="truncated"):
+        gb.load(path)
