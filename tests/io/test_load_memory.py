@@ -69,9 +69,6 @@ def test_peak_during_a_load_is_close_to_the_arrays_and_dropping_the_scene_frees_
 
 
 @pytest.mark.skipif(not CpuRenderer.available()[0], reason="the cpu backend's native module is not built")
-@pytest.mark.xfail(strict=True, reason="the native per-frame buffers, freed by release_buffers, stay in glibc's "
-                   "per-thread arenas (~11 MB for 200k splats, once: malloc_trim(0) gives them back); for the "
-                   "render-side work")
 def test_closing_a_rendered_scene_gives_its_memory_back(tmp_path):
     m = _measure(tmp_path, render=True)
     assert m["after"] - m["before"] <= 0.1 * m["before"], m  # back to within 10% of before (or below)
