@@ -12,12 +12,12 @@ from ..cells import Cells
 from ..errors import BackendUnavailable
 from ..scene import Scene
 from .control import FrameLock, Progress, RenderControl
-from .prepare import Prepared, camera_args, native_frame, prepare
+from .prepare import NativeUploads, camera_args, native_frame, prepare
 from .trace import PixelTrace, from_native
 from .types import Capabilities, Frame, Renderer, RenderSettings
 
 
-class CpuRenderer(Renderer):
+class CpuRenderer(NativeUploads, Renderer):
     """Native C++/OpenMP backend: the scene is uploaded once (the native renderer references its arrays); a trained
     Duplex-GS model's view is uploaded per frame, duplex cells when they change.
 
@@ -62,25 +62,6 @@ class CpuRenderer(Renderer):
         with self._lock:
             self._impl.release_buffers()
             self._scene = self._uploaded = self._cells = None
-
-    def _upload(self, scene: Scene) -> None:
-        self._uploaded = self._cells = None
-        self._impl.upload(scene.means, scene.scales, scene.quats, scene.opacities,
-                          np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d)  # float16 SH: a float32 copy
-        if scene.oit is not None and scene.oit.view_weight_sh is not None:
-            self._impl.upload_weights(scene.oit.view_weight_sh)
-        self._uploaded = scene
-
-    def _sync(self, prep: Prepared) -> None:
-        """Upload the view's splats and duplex cells where they are not yet. Called with the lock held."""
-        scene, cells = prep.scene, prep.cells
-        if scene is not self._uploaded:
-            self._upload(scene)
-        if cells is not None and cells is not self._cells:
-            self._cells = None
-            self._impl.upload_cells(cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
-                                    cells.cell_of(scene.num_splats))
-            self._cells = cells
 
     @staticmethod
     def _frame_args(camera: Camera, settings: RenderSettings) -> tuple:

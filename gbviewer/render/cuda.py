@@ -13,11 +13,11 @@ from ..errors import BackendFailed, BackendUnavailable, RenderError
 from ..scene import Scene
 from .control import Progress, RenderControl
 from .cuda_textures import TextureRegistrations
-from .prepare import Prepared, camera_args, check_display_texture, native_frame, native_stats, prepare
+from .prepare import NativeUploads, camera_args, check_display_texture, native_frame, native_stats, prepare
 from .types import Capabilities, Frame, FrameStats, Renderer, RenderSettings
 
 
-class CudaRenderer(Renderer):
+class CudaRenderer(NativeUploads, Renderer):
     """Native CUDA backend: the scene stays on the device (a trained Duplex-GS model's view is uploaded per frame).
 
     Threads may share one renderer: uploads and renders are serialised (a lock here around the scene and cells on
@@ -55,7 +55,7 @@ class CudaRenderer(Renderer):
         self._cells: Cells | None = None
         self._textures = TextureRegistrations(self._release)
 
-    def _call(self, method: str, *args):
+    def _native(self, method: str, *args):
         """The native renderer's `method(*args)`: RuntimeError -> RenderError, DeviceFailed -> BackendFailed (and
         the renderer unusable from then on)."""
         if self._failure is not None:
@@ -88,27 +88,6 @@ class CudaRenderer(Renderer):
         """Forget the scene (its device buffers are reused by the next upload and freed with the renderer)."""
         with self._lock:
             self._scene = self._uploaded = self._cells = None
-
-    def _upload(self, scene: Scene) -> None:
-        # Forget what is on the device first: a failed upload (out of device memory) leaves no scene there.
-        self._uploaded = None
-        self._cells = None
-        self._call("upload", scene.means, scene.scales, scene.quats, scene.opacities,
-                   np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d)
-        if scene.oit is not None and scene.oit.view_weight_sh is not None:
-            self._call("upload_weights", np.ascontiguousarray(scene.oit.view_weight_sh, np.float32))
-        self._uploaded = scene
-
-    def _sync(self, prep: Prepared) -> None:
-        """Put the view's splats and duplex cells on the device where they are not yet. Called with the lock held."""
-        scene, cells = prep.scene, prep.cells
-        if scene is not self._uploaded:
-            self._upload(scene)
-        if cells is not None and cells is not self._cells:
-            self._cells = None
-            self._call("upload_cells", cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
-                       cells.cell_of(scene.num_splats))
-            self._cells = cells
 
     @classmethod
     def gl_interop(cls) -> tuple[bool, str]:
@@ -171,7 +150,7 @@ class CudaRenderer(Renderer):
             self._sync(prep)
             control.step(0, 1)
             lead = tuple(self._textures.claim(x) for x in lead)
-            out = self._call(method, *lead, *camera_args(camera), int(settings.mode), settings.supersample,
+            out = self._native(method, *lead, *camera_args(camera), int(settings.mode), settings.supersample,
                              settings.sh_degree, np.asarray(settings.background, np.float32), *extra,
                              *(prep.oit or ()))
             control.step(1, 1)

@@ -81,6 +81,37 @@ def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backe
     return Prepared(view, decode_ms, oit, cells)
 
 
+class NativeUploads:
+    """What the native renderers (CPU, CUDA) share: the scene and duplex cells uploaded to `self._impl` once, and
+    again only where the frame's differ; `_native(method, *args)` calls it. Called with the renderer's lock held."""
+
+    _uploaded: Scene | None = None
+    _cells: Cells | None = None
+
+    def _native(self, method: str, *args):
+        return getattr(self._impl, method)(*args)
+
+    def _upload(self, scene: Scene) -> None:
+        """Forget what is uploaded first: a failed upload (out of memory) leaves no scene there."""
+        self._uploaded = self._cells = None
+        self._native("upload", scene.means, scene.scales, scene.quats, scene.opacities,
+                     np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d)  # float16 SH: a float32 copy
+        if scene.oit is not None and scene.oit.view_weight_sh is not None:
+            self._native("upload_weights", np.ascontiguousarray(scene.oit.view_weight_sh, np.float32))
+        self._uploaded = scene
+
+    def _sync(self, prep: Prepared) -> None:
+        """Upload the view's splats and duplex cells where they are not yet."""
+        scene, cells = prep.scene, prep.cells
+        if scene is not self._uploaded:
+            self._upload(scene)
+        if cells is not None and cells is not self._cells:
+            self._cells = None
+            self._native("upload_cells", cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
+                         cells.cell_of(scene.num_splats))
+            self._cells = cells
+
+
 def camera_args(camera: Camera) -> tuple:
     """Camera as the native modules take it: R (3x3), t, fx, fy, cx, cy, width, height, near, projection code."""
     return (np.ascontiguousarray(camera.R, np.float32), np.ascontiguousarray(camera.t, np.float32), camera.fx,

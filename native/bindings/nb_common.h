@@ -115,6 +115,18 @@ inline RenderArgs parse_render_args(const char* where, const FArr& R, const FArr
     return a;
 }
 
+// A render call's RenderArgs: parse_render_args' checks, then the SH degree cap and the window plane.
+inline RenderArgs render_args(const char* where, const FArr& R, const FArr& t, float fx, float fy, float cx, float cy,
+                              int width, int height, float near_plane, int projection, int mode, int supersample,
+                              int sh_degree, const FArr& background, bool want_window, float sigma,
+                              float weight_background, float et_grade, bool depth_correct) {
+    RenderArgs a = parse_render_args(where, R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
+                                     supersample, background, sigma, weight_background, et_grade, depth_correct);
+    a.sh_degree = sh_degree;
+    a.want_window = want_window;
+    return a;
+}
+
 // The sort-free view-weight SH of N splats; returns its K.
 inline int check_weight_sh(const char* where, const FArr& weight_sh, int64_t n) {
     const int wk = weight_sh.ndim() == 2 ? (int)weight_sh.shape(1) : -1;

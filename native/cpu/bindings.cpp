@@ -38,24 +38,12 @@ std::shared_ptr<const void> hold(A... arrays) {
     });
 }
 
-// The RenderArgs of a call (parse_render_args' checks) with the SH degree cap and the window plane.
-RenderArgs args_of(const char* where, const FArr& R, const FArr& t, float fx, float fy, float cx, float cy, int width,
-                   int height, float near_plane, int projection, int mode, int supersample, int sh_degree,
-                   const FArr& background, bool want_window, float sigma, float weight_background, float et_grade,
-                   bool depth_correct) {
-    RenderArgs a = parse_render_args(where, R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
-                                     supersample, background, sigma, weight_background, et_grade, depth_correct);
-    a.sh_degree = sh_degree;
-    a.want_window = want_window;
-    return a;
-}
-
 nb::dict render(Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                 float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                 bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct,
                 int threads, std::optional<LArr> cancel, std::optional<nb::callable> on_progress,
                 std::optional<PArr> partial) {
-    const RenderArgs a = args_of("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
+    const RenderArgs a = render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
                                  supersample, sh_degree, background, want_window, sigma, weight_background, et_grade,
                                  depth_correct);
     if (cancel && cancel->shape(0) < 1) throw std::invalid_argument("render: cancel must hold at least one int64");
@@ -192,7 +180,7 @@ NB_MODULE(_native, m) {
             [](Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                float sigma, float weight_background, float et_grade, bool depth_correct, int x, int y) {
-                const RenderArgs a = args_of("trace", R, t, fx, fy, cx, cy, width, height, near_plane, projection,
+                const RenderArgs a = render_args("trace", R, t, fx, fy, cx, cy, width, height, near_plane, projection,
                                              mode, supersample, sh_degree, background, false, sigma,
                                              weight_background, et_grade, depth_correct);
                 PixelTrace traced;

@@ -18,19 +18,6 @@ using namespace gbv::nbc;
 
 namespace {
 
-// Renderer.render's and render_to_gl_texture's arguments as a RenderArgs (parse_render_args, then the SH degree
-// cap and the window plane).
-RenderArgs render_args(const char* where, FArr R, FArr t, float fx, float fy, float cx, float cy, int width,
-                       int height, float near_plane, int projection, int mode, int supersample, int sh_degree,
-                       FArr background, bool want_window, float sigma, float weight_background, float et_grade,
-                       bool depth_correct) {
-    RenderArgs a = parse_render_args(where, R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
-                                     supersample, background, sigma, weight_background, et_grade, depth_correct);
-    a.sh_degree = sh_degree;
-    a.want_window = want_window;
-    return a;
-}
-
 // The keyword names after `R` of render_args' arguments (the renderer methods and check_render_args share them).
 #define GBV_RENDER_ARGS                                                                                            \
     nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"), nb::arg("cx"), nb::arg("cy"), nb::arg("width"),     \
