@@ -10,7 +10,7 @@ from .errors import (BackendUnavailable, CallbackError, CameraError, Cancelled, 
                      RenderCancelled, RenderError, SceneFormatError, VideoCancelled)
 from .io import load
 from .render import (BackendChoice, Frame, FrameStats, Mode, PixelTrace, Renderer, RenderSettings, choose_backend,
-                     get_renderer, render, trace_pixel)
+                     build_info, get_renderer, render, trace_pixel)
 from .scene import Scene
 
 ASSETS = Path(__file__).parent / "assets"  # installed; a source checkout has it at the top level
@@ -22,5 +22,6 @@ __all__ = [
     "ASSETS", "DEFAULT_SCENE", "BackendChoice", "BackendUnavailable", "CallbackError", "Camera", "CameraError",
     "CancelToken", "Cancelled", "Frame", "FrameStats", "GBViewerError", "LoadCancelled", "Mode", "PixelTrace",
     "RenderCancelled", "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError", "VideoCancelled",
-    "choose_backend", "get_renderer", "load", "load_cameras_json", "orbit_camera", "render", "trace_pixel",
+    "build_info", "choose_backend", "get_renderer", "load", "load_cameras_json", "orbit_camera", "render",
+    "trace_pixel",
 ]

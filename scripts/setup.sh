@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Set up gbviewer on a fresh Debian-like machine: system packages (when root), a venv in .venv, the package
-# with its native module and test dependencies. Safe to run again; it only installs what is missing.
+# Set up gbviewer on a fresh Debian-like machine: system packages (when root with apt-get), a venv in .venv, the
+# package with its native module and test dependencies. Safe to run again; it only installs what is missing.
+# Without root (or apt-get), scripts/check_system.sh says in one line per missing piece which package provides it;
+# the setup stops only when the build cannot succeed (GBVIEWER_SCALAR_ONLY=1 builds without Highway, on purpose).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -18,9 +20,15 @@ if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     echo "setup: installing system packages: ${missing[*]}"
     apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
   fi
+else
+  echo "setup: not root or no apt-get: installing no system packages, checking what is there"
+fi
+PY=${PYTHON:-python3}
+if ! PYTHON="$PY" "$BASH" scripts/check_system.sh; then  # this same bash
+  echo "setup: stopped: install what is missing above (or ask an administrator to) and run this again" >&2
+  exit 1
 fi
 
-PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 pip_install() {
   if ! .venv/bin/python -m pip install -q "$@" > .venv/pip.log 2>&1; then

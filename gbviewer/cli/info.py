@@ -1,4 +1,5 @@
-"""`gbviewer info` and `gbviewer convert`: describe a scene file, write it as an INRIA .ply."""
+"""`gbviewer info` and `gbviewer convert`: describe a scene file and how the native modules were built (alone
+without a scene), write a scene as an INRIA .ply."""
 
 from __future__ import annotations
 
@@ -9,9 +10,14 @@ from pathlib import Path
 from ..errors import GBViewerError
 from ..io import load, write_inria_ply
 from ..io.files import check_writable
+from ..render import build_info, compiler_line, simd_line
 
 
 def cmd_info(args: argparse.Namespace) -> int:
+    build = build_info()
+    if args.scene is None:
+        print(json.dumps(build, indent=2) if args.json else f"{simd_line(build)}\n{compiler_line(build)}".rstrip())
+        return 0
     scene = load(args.scene)
     lo, hi = scene.bounds
     rlo, rhi = scene.robust_bounds()
@@ -25,6 +31,7 @@ def cmd_info(args: argparse.Namespace) -> int:
         "bounds": [lo.tolist(), hi.tolist()],
         "robust_bounds_2_98": [rlo.tolist(), rhi.tolist()],
         "properties": scene.meta.get("properties", []),
+        "build": build,
     }
     if args.json:
         print(json.dumps(info, indent=2))
@@ -32,6 +39,8 @@ def cmd_info(args: argparse.Namespace) -> int:
         for key, val in info.items():
             if key == "properties":
                 val = ", ".join(val) if len(val) <= 20 else ", ".join(val[:18]) + f", ... ({len(val)} in all)"
+            elif key == "build":
+                val = simd_line(val)
             print(f"{key:>20}: {val}")
     return 0
 
@@ -49,8 +58,9 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("info", help="describe a scene file")
-    p.add_argument("scene", type=Path)
+    p = sub.add_parser("info", help="describe a scene file and this build (SIMD paths, OpenMP, compiler; alone "
+                                     "without a scene)")
+    p.add_argument("scene", type=Path, nargs="?")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_info)
 

@@ -1,7 +1,9 @@
 """Rendering: the types every backend shares (`types`), the per-frame preparation (`prepare`), the backends
 (`cpu`, `cuda`, `glsl/`), the registry that creates them by name (`get_renderer`, `render`), the choice of the best
-one here (`choice`: `backend="auto"`) and the pixel trace of the CPU kernel (`trace`)."""
+one here (`choice`: `backend="auto"`), the pixel trace of the CPU kernel (`trace`) and how the native modules were
+built (`build_info`)."""
 
+from .build_info import build_info, compiler_line, simd_line
 from .choice import AUTO, BackendChoice, choose_backend
 from .cpu import CpuRenderer
 from .cuda import CudaRenderer
@@ -13,6 +15,6 @@ from .types import SORT_ENTRY_BYTES, Capabilities, Frame, FrameStats, Mode, Rend
 __all__ = [
     "AUTO", "BACKENDS", "BACKEND_NAMES", "SORT_ENTRY_BYTES", "BackendChoice", "Capabilities", "CpuRenderer",
     "CudaRenderer", "Frame", "FrameStats", "Mode", "PixelTrace", "RenderSettings", "Renderer", "SampleTrace",
-    "TraceStep", "capable", "choose_backend", "create_gl_context", "create_renderer", "get_renderer", "render",
-    "resolve_backend", "trace_pixel",
+    "TraceStep", "build_info", "capable", "choose_backend", "compiler_line", "create_gl_context", "create_renderer",
+    "get_renderer", "render", "resolve_backend", "simd_line", "trace_pixel",
 ]

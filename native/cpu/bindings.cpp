@@ -122,6 +122,42 @@ NB_MODULE(_native, m) {
         for (const simd::Path* p : simd::supported()) names.push_back(p->name);
         return names;
     }, "SIMD paths this CPU and build can run, best last.");
+    m.def("build_info", [] {
+        nb::dict d;
+        std::vector<std::string> built{"scalar"};
+#ifdef GBV_HAVE_AVX2
+        built.push_back("avx2");
+#endif
+#ifdef GBV_HAVE_AVX512
+        built.push_back("avx512");
+#endif
+        d["simd_built"] = built;
+        std::vector<std::string> usable;
+        for (const simd::Path* p : simd::supported()) usable.push_back(p->name);
+        d["simd_usable"] = usable;
+        d["simd_selected"] = std::string(simd::current().name);
+#ifdef GBV_SCALAR_ONLY
+        d["scalar_only"] = true;
+#else
+        d["scalar_only"] = false;
+#endif
+#ifdef _OPENMP
+        d["openmp"] = std::string(GBV_BUILD_OPENMP) + " (_OPENMP " + std::to_string(_OPENMP) + ")";
+#else
+        d["openmp"] = nb::none();
+#endif
+#ifdef GBV_BUILD_CUDA
+        d["cuda_module_built"] = true;
+#else
+        d["cuda_module_built"] = false;
+#endif
+        d["compiler"] = GBV_BUILD_COMPILER;
+        d["build_type"] = GBV_BUILD_TYPE;
+        d["flags"] = GBV_BUILD_FLAGS;
+        d["isa_flags"] = GBV_BUILD_ISA_FLAGS;
+        return d;
+    }, "How this module was built: SIMD paths built, usable here and selected; scalar-only switch; OpenMP version "
+       "(None without); whether the CUDA module was built alongside; compiler, build type and compile flags.");
     bind_testing(m);
     nb::class_<Renderer>(m, "Renderer")
         .def(nb::init<>())

@@ -1,5 +1,6 @@
 """Panel section: the render backends on one line, greyed out where one is not usable here (the reason in its
-tooltip), and what renders (auto's pick) and the display path, each one line with its reason in a tooltip."""
+tooltip), what renders (auto's pick) and the display path, each one line with its reason in a tooltip, and the CPU
+module's SIMD path (how it was built in the tooltip)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from ...render import AUTO, BACKEND_NAMES
+from ...render import AUTO, BACKEND_NAMES, build_info, compiler_line, simd_line
 from ..display import describe
 
 if TYPE_CHECKING:
@@ -17,7 +18,7 @@ if TYPE_CHECKING:
 
 def draw(state: AppState, worker: RenderWorker) -> None:
     """The backends on one line (an unusable one greyed out, its reason the tooltip), then one line each for what
-    renders and the display path (their reasons in tooltips)."""
+    renders and the display path (their reasons in tooltips), then the CPU module's SIMD line."""
     s = state.settings
     for k, name in enumerate(BACKEND_NAMES):
         ok, why = worker.backend_status(name)
@@ -44,3 +45,10 @@ def draw(state: AppState, worker: RenderWorker) -> None:
     imgui.text_disabled(f"| display {path}")
     if imgui.is_item_hovered():
         imgui.set_tooltip(f"{describe(path)}: {why}")
+    info = build_info()
+    if info["cpu_module"] and not info["scalar_only"] and info["simd_selected"] != "scalar":
+        imgui.text_disabled(simd_line(info))
+    else:  # scalar by build, by choice (GBVIEWER_SIMD) or no module: said in the warning colour
+        imgui.text_colored(imgui.ImVec4(1, 0.8, 0.25, 1), simd_line(info))
+    if imgui.is_item_hovered():
+        imgui.set_tooltip(compiler_line(info) or info.get("reason", ""))

@@ -1,0 +1,99 @@
+"""scripts/setup.sh without root (issue 26): scripts/check_system.sh, run as an unprivileged user, names the Debian
+package of each missing piece on one line, stops only for what the build needs, and lets GBVIEWER_SCALAR_ONLY=1
+go on without Highway; setup.sh stops before creating its venv when the build cannot succeed. Nothing is
+installed: the checks only read, and missing tools are simulated with a PATH that lacks them."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CHECK = ROOT / "scripts" / "check_system.sh"
+BASH = shutil.which("bash") or "/bin/bash"
+SETPRIV = shutil.which("setpriv")
+# The system's Python (the one a setup starts from; a pyenv or venv under /root is out of the unprivileged user's reach)
+SYS_PY = shutil.which("python3", path="/usr/local/bin:/usr/bin:/bin")
+
+
+def as_nobody(cmd: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
+    """Run cmd as uid/gid 65534 (nobody) when we are root, else as ourselves (already unprivileged)."""
+    root = os.geteuid() == 0
+    if root and SETPRIV is None:
+        pytest.skip("running as root without setpriv (util-linux) to drop to an unprivileged user")
+    if SYS_PY is None:
+        pytest.skip("no system python3 in /usr/local/bin, /usr/bin or /bin")
+    drop = [SETPRIV, "--reuid=65534", "--regid=65534", "--clear-groups"] if root else []
+    return subprocess.run([*drop, *cmd], capture_output=True, text=True, env=env, timeout=60)
+
+
+@pytest.fixture
+def bin_dir(tmp_path_factory) -> Path:
+    """An empty folder the unprivileged user can read, for a PATH of chosen tools."""
+    d = tmp_path_factory.mktemp("bin")
+    for p in (d, *list(d.parents)[:-1]):  # pytest's base folder is private to us: open the way down to d
+        if p.stat().st_uid == os.geteuid():
+            p.chmod(p.stat().st_mode | 0o055)
+    return d
+
+
+def lines(proc: subprocess.CompletedProcess) -> list[str]:
+    return (proc.stdout + proc.stderr).splitlines()
+
+
+def test_every_line_names_a_package_and_the_status_follows_them():
+    proc = as_nobody([BASH, str(CHECK)], {"PATH": os.environ["PATH"], "PYTHON": SYS_PY})
+    out = lines(proc)
+    assert all(ln.startswith("setup: ") and "apt-get install " in ln for ln in out), out
+    assert proc.returncode == (1 if any(ln.endswith("(the build needs it)") for ln in out) else 0), out
+
+
+def test_missing_tools_are_named_with_their_packages(bin_dir):
+    (bin_dir / "python3").symlink_to(SYS_PY)
+    proc = as_nobody([BASH, str(CHECK)], {"PATH": str(bin_dir)})
+    out = lines(proc)
+    assert proc.returncode == 1
+    for tool, pkg in [("a C++ compiler (c++)", "build-essential"), ("cmake", "cmake"), ("Xvfb", "xvfb xauth"),
+                      ("glslangValidator", "glslang-tools"), ("qemu-x86_64", "qemu-user")]:
+        assert sum(ln.startswith(f"setup: missing {tool}: apt-get install {pkg} (") for ln in out) == 1, (tool, out)
+    assert not any("Highway" in ln for ln in out)  # no compiler: the headers are looked for in /usr/include
+
+
+def fake_compiler(bin_dir: Path) -> dict[str, str]:
+    """A PATH whose c++ finds no header (so Highway counts as missing), everything else as installed."""
+    (bin_dir / "c++").write_text("#!/bin/sh\nexit 1\n")
+    (bin_dir / "c++").chmod(0o755)
+    return {"PATH": f"{bin_dir}:{os.environ['PATH']}", "PYTHON": SYS_PY}
+
+
+def test_missing_highway_stops_unless_scalar_only(bin_dir):
+    env = fake_compiler(bin_dir)
+    out = lines(as_nobody([BASH, str(CHECK)], env))
+    hwy = [ln for ln in out if "Highway" in ln]
+    assert hwy == ["setup: missing Google Highway's headers (hwy/highway.h; the CPU module's vector paths): "
+                   "apt-get install libhwy-dev, or set GBVIEWER_SCALAR_ONLY=1 for a slower scalar-only build "
+                   "(the build needs it)"], out
+    proc = as_nobody([BASH, str(CHECK)], {**env, "GBVIEWER_SCALAR_ONLY": "1"})
+    out = lines(proc)
+    hwy = [ln for ln in out if "Highway" in ln]
+    assert len(hwy) == 1 and hwy[0].startswith("setup: WARNING: ") and "scalar-only" in hwy[0], out
+    assert proc.returncode == (1 if any(ln.endswith("(the build needs it)") for ln in out) else 0), out
+
+
+def test_setup_without_root_stops_before_the_venv(bin_dir, tmp_path_factory):
+    work = tmp_path_factory.mktemp("checkout")
+    shutil.copytree(ROOT / "scripts", work / "scripts")
+    work.chmod(0o777)  # so that a setup which went on could write (it must not get there)
+    (bin_dir / "python3").symlink_to(SYS_PY)
+    for tool in ("id", "dirname"):  # what setup.sh itself runs; no cmake, no compiler
+        (bin_dir / tool).symlink_to(shutil.which(tool))
+    proc = as_nobody([BASH, str(work / "scripts" / "setup.sh")], {"PATH": str(bin_dir)})
+    out = lines(proc)
+    assert proc.returncode == 1 and not (work / ".venv").exists(), out
+    assert out[0] == "setup: not root or no apt-get: installing no system packages, checking what is there"
+    assert "setup: missing cmake: apt-get install cmake (the build needs it)" in out
+    assert out[-1].startswith("setup: stopped: install what is missing above"), out
