@@ -108,8 +108,9 @@ def _contents(app: ViewerApp, insp: Inspector) -> None:
     gap, avail = imgui.get_style().item_spacing.x, imgui.get_content_region_avail()
     cols = max(1, min(len(shown), int((avail.x + gap) // (MIN_COLUMN_W + gap))))  # stacked rows when narrow
     rows = -(-len(shown) // cols)
-    width = (avail.x - gap * (cols - 1)) / cols
     height = 0 if rows == 1 else max(260.0, (avail.y - gap * (rows - 1)) / rows)
+    bar = imgui.get_style().scrollbar_size if rows * height + gap * (rows - 1) > avail.y else 0.0  # scrolls down
+    width = (avail.x - bar - gap * (cols - 1)) / cols
     imgui.begin_child("##traces", (0, 0))
     for k, e in enumerate(shown):
         if k % cols:
