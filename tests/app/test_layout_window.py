@@ -2,7 +2,8 @@
 (1-4 panes, a split, 2x2 with the info overlay, the photo view, the inspector docked beside one pane and below three
 and 2x2, the F1 help, a long error), one window reused across them. In each state no two texts placed over the
 panes overlap and each lies inside its pane part, and, from imgui's own draw data, no glyph of any window (panel,
-status bar, inspector, help) is cut by its clip rectangle at the sides; the docked inspector never scrolls sideways. A screenshot of each state goes to $GBVIEWER_LAYOUT_SHOTS/layout (default tmp/layout)."""
+status bar, inspector, help) is cut by its clip rectangle at the sides; the docked inspector never scrolls
+sideways. A screenshot of each state goes to $GBVIEWER_LAYOUT_SHOTS/layout (default tmp/layout)."""
 
 from __future__ import annotations
 
