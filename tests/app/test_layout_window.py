@@ -1,9 +1,9 @@
 """The layout test: the real window under Xvfb at 1280x720, 1600x900 and 1920x1080, in the states a new user meets
 (1-4 panes, a split, 2x2 with the info overlay, the photo view, the inspector docked beside one pane and below three
-and 2x2, the F1 help, a long error), one window reused across them. In each state no two texts placed over the
-panes overlap and each lies inside its pane part, and, from imgui's own draw data, no glyph of any window (panel,
-status bar, inspector, help) is cut by its clip rectangle at the sides; the docked inspector never scrolls
-sideways. A screenshot of each state goes to $GBVIEWER_LAYOUT_SHOTS/layout (default tmp/layout)."""
+and 2x2, fly mode's hint, the F1 help, a long error), one window reused across them. In each state no two texts
+placed over the panes overlap and each lies inside its pane part, and, from imgui's own draw data, no glyph of any
+window (panel, status bar, inspector, help) is cut by its clip rectangle at the sides; the docked inspector never
+scrolls sideways. A screenshot of each state goes to $GBVIEWER_LAYOUT_SHOTS/layout (default tmp/layout)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from gbviewer.app.overlays import part_box
+from gbviewer.app.keys import hint
+from gbviewer.app.overlays import FLY_HINT, part_box
 from helpers import skip_or_fail
 from soak_viewer import xvfb_display
 from window_helpers import press
@@ -159,6 +160,11 @@ def test_layout_at_three_screen_sizes(big_xvfb, capture, tmp_path, monkeypatch):
             s.settings.layout = "row"
             s.set_pane_count(3)
             press(app, imgui.Key.t)
+            s.toggle_fly()  # one line under pane A's label says the fly keys
+            check(app, f"{tag}-fly", out)
+            assert [i.full for i in app.placed if i.full.startswith("fly mode:")] == [
+                FLY_HINT.format(hint("toggle_fly"))]
+            s.toggle_fly()
             s.show_help = True
             check(app, f"{tag}-help", out)
             s.show_help = False
