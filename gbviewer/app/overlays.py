@@ -30,7 +30,7 @@ def col(r: int, g: int, b: int, a: int = 255) -> int:
 WHITE, BLACK_A, YELLOW, RED, GREY, ACCENT = (col(255, 255, 255), col(0, 0, 0, 170), col(255, 205, 60),
                                                col(255, 90, 80), col(150, 150, 150), col(90, 170, 255))
 LEVEL_COLOURS = {"info": WHITE, "warn": YELLOW, "error": RED}
-FLY_HINT = "fly mode: W A S D Q E move, drag looks, Shift 4x, {} leaves"
+FLY_HINT = "fly: WASD QE move, drag looks, {} ends"
 
 
 def measure(app: ViewerApp) -> Callable[[str], tuple[float, float]]:

@@ -162,7 +162,7 @@ def test_layout_at_three_screen_sizes(big_xvfb, capture, tmp_path, monkeypatch):
             press(app, imgui.Key.t)
             s.toggle_fly()  # one line under pane A's label says the fly keys
             check(app, f"{tag}-fly", out)
-            assert [i.full for i in app.placed if i.full.startswith("fly mode:")] == [
+            assert [i.full for i in app.placed if i.full.startswith("fly:")] == [
                 FLY_HINT.format(hint("toggle_fly"))]
             s.toggle_fly()
             s.show_help = True
