@@ -52,6 +52,17 @@ def snap(u: float, n: int) -> float:
     return (min(n - 1, max(0, math.floor(u * n))) + 0.5) / n
 
 
+def remap(pin: tuple[float, float], old: Camera, new: Camera) -> tuple[float, float]:
+    """Pane-relative `pin` on `old`'s image moved to where the same point of the image plane (the same scene point,
+    for the same pose) lies on `new`'s image: the panes changed shape, not the view."""
+    x, y = (pin[0] * old.width - old.cx) / old.fx, (pin[1] * old.height - old.cy) / old.fy
+    return (x * new.fx + new.cx) / new.width, (y * new.fy + new.cy) / new.height
+
+
+def same_pose(a: Camera, b: Camera) -> bool:
+    return a.projection == b.projection and np.array_equal(a.R, b.R) and np.array_equal(a.t, b.t)
+
+
 def pixel_box(rect: Rect, x: int, y: int, width: int, height: int) -> tuple[float, float, float, float]:
     """Where pixel (x, y) of a width x height render is drawn in a pane at `rect`: (x0, y0, x1, y1)."""
     sx, sy = rect.w / width, rect.h / height
@@ -160,6 +171,7 @@ class Inspector:
         self.thread = thread or TraceThread()
         self.options = InspectorOptions()
         self.pin: tuple[float, float] | None = None  # pane-relative (u, v)
+        self._pinned_on: Camera | None = None  # the camera of pane A the pin is a position on (`follow`)
         self.results: dict[Slot, TraceResult] = {}
         self._asked: dict[Slot, TraceRequest] = {}
         self._scene: Scene | None = None
@@ -180,13 +192,25 @@ class Inspector:
         """Pin pane-relative (u, v) of pane i, moved to the centre of the display pixel there."""
         r, (sx, sy) = self.state.panes[i].rect, self.state.scale
         self.pin = (snap(u, max(1, round(r.w * sx))), snap(v, max(1, round(r.h * sy))))
+        self._pinned_on = self.state.pane_camera(0)
+
+    def follow(self) -> None:
+        """After each layout: where the panes changed shape under the same view (the docked inspector opened or
+        closed, the window resized), the pin moves to keep the same point of the scene (`remap`)."""
+        if self.pin is None:
+            return
+        cam = self.state.pane_camera(0)
+        old, self._pinned_on = self._pinned_on, cam
+        if old is not None and same_pose(old, cam) and (old.width, old.height, old.fx, old.fy, old.cx, old.cy) != (
+                cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy):
+            self.pin = remap(self.pin, old, cam)
 
     def zoom(self, wheel: float) -> None:
         """The drawing's margin around the pixel, 1.25x smaller per wheel step up (zoom in), bounded."""
         self.options.margin = min(MARGIN_MAX, max(MARGIN_MIN, self.options.margin * 1.25 ** -wheel))
 
     def unpin(self) -> None:
-        self.pin = None
+        self.pin = self._pinned_on = None
         self.results.clear()
         self._asked.clear()
         self._cache.clear()

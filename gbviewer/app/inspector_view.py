@@ -12,8 +12,9 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from ..render import PixelTrace, TraceStep
+from ..render import PixelTrace
 from .inspector import Entry, Inspector, pixel_box, render_pixel
+from .inspector_table import describe, draw_table
 from .keys import hint
 from .overlays import GREY, WHITE, YELLOW, col
 
@@ -29,33 +30,30 @@ WINDOW_COLOUR, PATH_COLOUR, BLACK = col(80, 230, 255), col(80, 230, 255, 140), c
 MIN_COLUMN_W = 320  # narrower trace columns stack into rows (the window scrolls)
 
 
+def dock_side(app: ViewerApp) -> str | None:
+    """Where the Inspector docks while a pixel is pinned: right of a single pane (its traces stack in rows), below
+    two or more (one trace column per pane part where the width allows, else stacked rows); None unpinned."""
+    if app.inspector.pin is None or app.state.scene is None:
+        return None
+    return "right" if app.state.settings.pane_count == 1 else "below"
+
+
 def draw_inspector(app: ViewerApp) -> None:
-    """The pin's marks on the panes and, while a pixel is pinned, the Inspector window (its close box unpins)."""
-    insp = app.inspector
+    """The pin's marks on the panes and, while a pixel is pinned, the Inspector window docked in the area the
+    panes made room for (`AppState.dock_rect`; its close box unpins)."""
+    insp, dock = app.inspector, app.state.dock_rect
     draw_pin_marks(app)
-    if insp.pin is None:
+    if insp.pin is None or dock is None:
         return
-    (x, y), (w, h) = placement(app)
-    imgui.set_next_window_pos((x, y), imgui.Cond_.appearing.value)
-    imgui.set_next_window_size((w, h), imgui.Cond_.appearing.value)
-    expanded, keep = imgui.begin("Inspector", True)
+    imgui.set_next_window_pos((dock.x + 4, dock.y + 2))
+    imgui.set_next_window_size((dock.w - 8, dock.h - 4))
+    flags = (imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse).value
+    expanded, keep = imgui.begin("Inspector", True, flags)
     if expanded:
         _contents(app, insp)
     imgui.end()
     if not keep:
         insp.unpin()
-
-
-def placement(app: ViewerApp) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Where the Inspector window opens: over the panes, above or below the pinned pixels (where there is more
-    room; over the lower half when neither side has 40% of the panes' height)."""
-    v, pin = app.state.viewport, app.inspector.pin
-    ys = [p.rect.y + pin[1] * p.rect.h for p in app.state.visible]
-    below, above = v.y + v.h - max(ys) - 24, min(ys) - 24 - v.y
-    if max(below, above) < 0.4 * v.h:
-        return (v.x + 8, v.y + v.h * 0.45), (v.w - 16, v.h * 0.55 - 8)
-    top = max(ys) + 16 if below >= above else v.y + 8
-    return (v.x + 8, top), (v.w - 16, max(below, above))
 
 
 def draw_pin_marks(app: ViewerApp) -> None:
@@ -82,7 +80,8 @@ def _contents(app: ViewerApp, insp: Inspector) -> None:
     names = {e.slot: f"{e.name} {e.trace.mode if e.trace is not None else ''}".strip() for e in entries}
     if o.alone not in names:
         o.alone = None
-    imgui.set_next_item_width(240)
+    right = imgui.get_cursor_screen_pos().x + imgui.get_content_region_avail().x
+    imgui.set_next_item_width(min(240.0, imgui.get_content_region_avail().x))
     if imgui.begin_combo("##alone", "panes side by side" if o.alone is None else f"pane {names[o.alone]}"):
         if imgui.selectable("panes side by side", o.alone is None)[0]:
             o.alone = None
@@ -90,29 +89,28 @@ def _contents(app: ViewerApp, insp: Inspector) -> None:
             if imgui.selectable(f"pane {name}", o.alone == slot)[0]:
                 o.alone = slot
         imgui.end_combo()
-    imgui.same_line()
+    _flow(right, "all list entries", box=True)
     o.show_all = imgui.checkbox("all list entries", o.show_all)[1]
     if imgui.is_item_hovered():
         imgui.set_tooltip("also the entries skipped by the splat's box (outside_box), never evaluated")
-    imgui.same_line()
+    _flow(right, "largest weight first", box=True)
     o.by_weight = imgui.checkbox("largest weight first", o.by_weight)[1]
-    if imgui.button("Export JSON"):
-        insp.export_json()
-    imgui.same_line()
-    if imgui.button("Export CSV"):
-        insp.export_csv()
-    imgui.same_line()
-    if imgui.button(f"Unpin ({hint('toggle_pin')})"):
-        insp.unpin()
-        return
-    imgui.same_line(0, 16)
+    for k, label in enumerate(("Export JSON", "Export CSV", f"Unpin ({hint('toggle_pin')})")):
+        if k:
+            _flow(right, label)
+        if imgui.button(label):
+            (insp.export_json, insp.export_csv, insp.unpin)[k]()
+            if k == 2:
+                return
+    _flow(right, "Ctrl+click a pane to pin another pixel", plain=True)
     imgui.text_disabled("Ctrl+click a pane to pin another pixel")
     shown = [e for e in entries if o.alone is None or e.slot == o.alone]
     gap, avail = imgui.get_style().item_spacing.x, imgui.get_content_region_avail()
     cols = max(1, min(len(shown), int((avail.x + gap) // (MIN_COLUMN_W + gap))))  # stacked rows when narrow
     rows = -(-len(shown) // cols)
-    width = (avail.x - gap * (cols - 1)) / cols
     height = 0 if rows == 1 else max(260.0, (avail.y - gap * (rows - 1)) / rows)
+    bar = imgui.get_style().scrollbar_size if rows * height + gap * (rows - 1) > avail.y else 0.0  # scrolls down
+    width = (avail.x - bar - gap * (cols - 1)) / cols
     imgui.begin_child("##traces", (0, 0))
     for k, e in enumerate(shown):
         if k % cols:
@@ -121,6 +119,17 @@ def _contents(app: ViewerApp, insp: Inspector) -> None:
         _entry(app, insp, e)
         imgui.end_child()
     imgui.end_child()
+
+
+def _flow(right: float, label: str, box: bool = False, plain: bool = False) -> None:
+    """Put the next item (a button, a checkbox with `box`, text with `plain`, labelled `label`) on the same line
+    as the last when it fits before `right`, else on the next line."""
+    style = imgui.get_style()
+    w = imgui.calc_text_size(label).x + (0 if plain else 2 * style.frame_padding.x)
+    if box:
+        w += imgui.get_frame_height() + style.item_inner_spacing.x - 2 * style.frame_padding.x
+    if imgui.get_item_rect_max().x + style.item_spacing.x + w <= right:
+        imgui.same_line()
 
 
 def _entry(app: ViewerApp, insp: Inspector, e: Entry) -> None:
@@ -165,24 +174,12 @@ def _entry(app: ViewerApp, insp: Inspector, e: Entry) -> None:
         if changed:
             pos = value - 1
             insp.options.step[e.slot] = blend[pos]
-        imgui.text_wrapped(_describe(steps[blend[pos]], blend[pos]))
+        imgui.text_wrapped(describe(steps[blend[pos]], blend[pos]))
     else:
         imgui.text_disabled("no list entries here (all list entries shows the skipped ones)")
     imgui.end_group()
     if blend:
-        _table(insp, e, t, steps, blend, pos)
-
-
-def _describe(s: TraceStep, k: int) -> str:
-    what = s.rejected or ("added" + (" (fallback)" if s.fallback else "") + (", stops the pixel" if s.stopped else ""))
-    line = (f"#{k + 1} splat {s.index}  depth {s.depth:.4g}  {what}  alpha {s.alpha:.4f}  weight {s.weight:.4f}  "
-            f"T {s.T_before:.4f} -> {s.T_after:.4f}")
-    if s.window_center is not None:
-        line += (f"  window after: centre {s.window_center[0]:.3f}, {s.window_center[1]:.3f}  size "
-                 f"{s.window_size[0]:.3f} x {s.window_size[1]:.3f}")
-    if s.cell is not None:
-        line += f"  cell {s.cell}  T_cell {s.T_cell:.4f}"
-    return line
+        draw_table(insp, e, t, steps, blend[pos])
 
 
 def _canvas(insp: Inspector, t: PixelTrace, steps: tuple, blend: list[int], pos: int, side: float) -> None:
@@ -245,48 +242,3 @@ def _canvas(insp: Inspector, t: PixelTrace, steps: tuple, blend: list[int], pos:
     for sample in t.samples:
         dl.add_circle_filled(at(*sample.position), 2.5, WHITE if sample is t.samples[s.sample] else GREY)
     dl.pop_clip_rect()
-
-
-def _table(insp: Inspector, e: Entry, t: PixelTrace, steps: tuple, blend: list[int], pos: int) -> None:
-    """Every shown step, one row each (clicking one moves the slider to it), scrolled with a clipper."""
-    window, duplex = steps[0].window_center is not None, steps[0].cell is not None
-    cols = ["#"] + (["sample"] if t.supersample > 1 else []) + ["splat", "depth", "alpha", "weight", "T before",
-                                                                 "T after"]
-    cols += ["window centre", "window size"] if window else []
-    cols += ["cell", "T_cell"] if duplex else []
-    cols += ["note"]  # why it was rejected, or "fallback" (gaussian_blending's scalar alpha)
-    rows = insp.order(t, insp.options.by_weight)
-    flags = (imgui.TableFlags_.scroll_y | imgui.TableFlags_.scroll_x | imgui.TableFlags_.row_bg
-             | imgui.TableFlags_.borders_inner_v
-             | imgui.TableFlags_.sizing_fixed_fit | imgui.TableFlags_.resizable).value
-    height = max(90.0, imgui.get_content_region_avail().y)
-    if not imgui.begin_table("##steps", len(cols), flags, (0, height)):
-        return
-    imgui.table_setup_scroll_freeze(0, 1)
-    for c in cols:
-        imgui.table_setup_column(c)
-    imgui.table_headers_row()
-    clipper = imgui.ListClipper()
-    clipper.begin(len(rows))
-    span = (imgui.SelectableFlags_.span_all_columns | imgui.SelectableFlags_.allow_overlap).value
-    while clipper.step():
-        for k in rows[clipper.display_start:clipper.display_end]:
-            s = steps[k]
-            imgui.table_next_row()
-            imgui.table_next_column()
-            if imgui.selectable(f"{k + 1}##{k}", k == blend[pos], span)[0]:
-                insp.options.step[e.slot] = k
-            cells = ([str(s.sample)] if t.supersample > 1 else []) + [
-                str(s.index), f"{s.depth:.4g}", f"{s.alpha:.4f}", f"{s.weight:.4f}", f"{s.T_before:.4f}",
-                f"{s.T_after:.4f}"]
-            if window:
-                cells += [f"{s.window_center[0]:.3f}, {s.window_center[1]:.3f}",
-                          f"{s.window_size[0]:.3f} x {s.window_size[1]:.3f}"]
-            if duplex:
-                cells += [str(s.cell), f"{s.T_cell:.4f}"]
-            cells.append(s.rejected or ("fallback" if s.fallback else ""))
-            for c in cells:
-                imgui.table_next_column()
-                imgui.text(c)
-    clipper.end()
-    imgui.end_table()

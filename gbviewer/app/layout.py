@@ -62,3 +62,18 @@ def split_parts(split_pos: float) -> tuple[tuple[float, float], tuple[float, flo
     """Horizontal texture ranges (u0, u1) of the left (first mode) and right (second mode) parts of a split pane."""
     s = min(1.0, max(0.0, split_pos))
     return (0.0, s), (s, 1.0)
+
+
+DOCK_BELOW, DOCK_RIGHT, DOCK_RIGHT_MIN = 0.45, 0.36, 360  # the docked inspector's share of the panes' area
+
+
+def dock_split(v: Rect, side: str | None) -> tuple[Rect, Rect | None]:
+    """The panes' area and the docked inspector's (None undocked) when the inspector takes the lower part of the
+    viewport `v` ('below') or its right part ('right')."""
+    if side == "below":
+        h = int(v.h * DOCK_BELOW)
+        return Rect(v.x, v.y, v.w, max(1, v.h - h)), Rect(v.x, v.y + v.h - h, v.w, h)
+    if side == "right":
+        w = min(v.w // 2, max(DOCK_RIGHT_MIN, int(v.w * DOCK_RIGHT)))
+        return Rect(v.x, v.y, max(1, v.w - w), v.h), Rect(v.x + v.w - w, v.y, w, v.h)
+    return v, None

@@ -12,6 +12,7 @@ from imgui_bundle import imgui
 from ..camera import format_rate
 from ..render import AUTO
 from .difference_views import shows_photo
+from .keys import hint
 from .layout import Rect, loupe_uv
 from .pane_text import PAD, Item, lay_out_banner, lay_out_part
 from .panes import pane_fps
@@ -29,6 +30,7 @@ def col(r: int, g: int, b: int, a: int = 255) -> int:
 WHITE, BLACK_A, YELLOW, RED, GREY, ACCENT = (col(255, 255, 255), col(0, 0, 0, 170), col(255, 205, 60),
                                                col(255, 90, 80), col(150, 150, 150), col(90, 170, 255))
 LEVEL_COLOURS = {"info": WHITE, "warn": YELLOW, "error": RED}
+FLY_HINT = "fly: WASD QE move, drag looks, {} ends"
 
 
 def measure(app: ViewerApp) -> Callable[[str], tuple[float, float]]:
@@ -118,10 +120,13 @@ def part_box(r: Rect, split: bool, split_pos: float, part: str) -> Rect:
 
 
 def message(app: ViewerApp, p: PaneState, part: str) -> tuple[str, int] | None:
-    """A pane part's one message line: its error, else its preview or refining state, else its PSNR/SSIM line."""
+    """A pane part's one message line: its error, else (the first pane, in fly mode) the fly keys, else its preview
+    or refining state, else its PSNR/SSIM line."""
     shown, job = p.parts[part], p.parts[part].job
     if shown.error is not None:
         return shown.error.text, RED
+    if app.state.fly and p.index == 0 and part == "a":
+        return FLY_HINT.format(hint("toggle_fly")), ACCENT
     if job is not None and job.info.get("preview", 1.0) < 1.0:
         fw, fh = job.info["full_size"]
         return f"moving: preview {job.camera.width}x{job.camera.height} (not {fw}x{fh})", YELLOW

@@ -16,7 +16,7 @@ from .background import FIXED, PHOTOS, RGB, format_rgb
 from .camera_actions import CameraActions
 from .camera_control import CameraController
 from .dataset import DatasetViews, bounds_fit_cameras
-from .layout import PANEL_W, Rect, fit_aspect, pane_rects
+from .layout import PANEL_W, Rect, dock_split, fit_aspect, pane_rects
 from .loading import SceneLoader
 from .pane_state import PaneState
 from .rates import clamp_rate, render_size, step_rate
@@ -58,6 +58,7 @@ class AppState(CameraActions):
         self.last_move = 0.0
         self.messages: list[tuple[float, str, Level]] = []  # (time, text, level)
         self.panes = [PaneState(i) for i in range(MAX_PANES)]
+        self.dock_rect: Rect | None = None  # the docked inspector's area (layout)
         self.pane_areas: list[Rect] = []  # each pane's rect before letterboxing to a snapped photo
         self.viewport = Rect(PANEL_W, 0, 1, 1)
         self.scale = (1.0, 1.0)  # framebuffer pixels per window coordinate
@@ -246,10 +247,12 @@ class AppState(CameraActions):
         return self.panes[: self.settings.pane_count]
 
     def layout(self, width: float, height: float, top: float, bottom: float,
-               scale: tuple[float, float] = (1.0, 1.0)) -> None:
-        """Place the panes in a window of width x height (minus the menu bar `top` and the status bar `bottom`)."""
+               scale: tuple[float, float] = (1.0, 1.0), dock: str | None = None) -> None:
+        """Place the panes in a window of width x height (minus the menu bar `top` and the status bar `bottom`),
+        beside the docked inspector (`dock`: 'below', 'right' or None; its area: `dock_rect`)."""
         self.scale = scale
-        self.viewport = v = Rect(PANEL_W, int(top), max(1, int(width) - PANEL_W), max(1, int(height - top - bottom)))
+        self.viewport = Rect(PANEL_W, int(top), max(1, int(width) - PANEL_W), max(1, int(height - top - bottom)))
+        v, self.dock_rect = dock_split(self.viewport, dock)
         rects = pane_rects(v.x + 4, v.y + 4, v.w - 8, v.h - 8, self.settings.pane_count, self.settings.layout)
         self.pane_areas = rects
         photo = self.photo_camera()

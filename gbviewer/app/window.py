@@ -33,7 +33,7 @@ from .display import SharedContext, requested_path  # noqa: E402
 from .input import handle_input  # noqa: E402
 from .keys import action_table  # noqa: E402
 from .inspector import Inspector  # noqa: E402
-from .inspector_view import draw_inspector  # noqa: E402
+from .inspector_view import dock_side, draw_inspector  # noqa: E402
 from .menu import draw_menu  # noqa: E402
 from .panel import draw_panel  # noqa: E402
 from .panes import PaneRenders  # noqa: E402
@@ -203,7 +203,8 @@ class ViewerApp:
         io = imgui.get_io()
         scale = (io.display_framebuffer_scale.x or 1.0, io.display_framebuffer_scale.y or 1.0)
         self.state.layout(io.display_size.x, io.display_size.y, imgui.get_frame_height(),
-                          imgui.get_frame_height() + 6, scale)
+                          imgui.get_frame_height() + 6, scale, dock_side(self))
+        self.inspector.follow()
         if self.state.needs_reset:
             self.state.needs_reset = False
             self.state.reset_camera()

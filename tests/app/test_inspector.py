@@ -91,6 +91,47 @@ def test_a_pin_maps_to_the_render_pixel_drawn_under_it(idle_thread, panes, layou
                     assert up[int(v * fh), int(u * fw)] == y * cam.width + x
 
 
+def ray(cam: gb.Camera, u: float, v: float) -> np.ndarray:
+    """The image-plane direction of pane-relative (u, v) of `cam`'s image."""
+    return np.array([(u * cam.width - cam.cx) / cam.fx, (v * cam.height - cam.cy) / cam.fy])
+
+
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+@pytest.mark.parametrize("panes,layout,dock", [(1, "row", "right"), (2, "row", "below"), (4, "grid", "below")])
+def test_the_docked_inspector_shrinks_the_panes_and_the_pin_keeps_its_scene_point(idle_thread, panes, layout, dock,
+                                                                                   projection):
+    state = AppState(AppSettings())
+    state.scene = object()
+    state.set_pane_count(panes)
+    state.settings.layout = layout
+    state.controller.projection = projection
+    state.set_rate(1 / 4)
+    insp = Inspector(state, idle_thread)
+    state.layout(1600, 900, 22, 28)
+    assert state.dock_rect is None
+    insp.pin_at(0, 0.3, 0.7)
+    before, pin = state.pane_camera(0), insp.pin
+    state.layout(1600, 900, 22, 28, dock=dock)
+    insp.follow()
+    d, v = state.dock_rect, state.viewport
+    assert d is not None and v.x <= d.x and d.x + d.w <= v.x + v.w and v.y <= d.y and d.y + d.h <= v.y + v.h
+    assert (d.w == v.w) == (dock == "below") and (d.h == v.h) == (dock == "right")
+    for p in state.visible:  # the panes make room
+        assert not (p.rect.x < d.x + d.w and d.x < p.rect.x + p.rect.w and p.rect.y < d.y + d.h
+                    and d.y < p.rect.y + p.rect.h)
+    after = state.pane_camera(0)
+    assert (after.width, after.height) != (before.width, before.height) and insp.pin != pin
+    np.testing.assert_allclose(ray(after, *insp.pin), ray(before, *pin), rtol=0, atol=1e-12)
+    state.layout(1600, 900, 22, 28)  # undocked again: back where it was
+    insp.follow()
+    np.testing.assert_allclose(insp.pin, pin, rtol=0, atol=1e-12)
+    pin = insp.pin
+    state.controller.orbit(40, 10)  # another view: the pin stays where it is on the pane
+    state.layout(1600, 900, 22, 28, dock=dock)
+    insp.follow()
+    assert insp.pin == pin
+
+
 def test_snap_render_pixel_and_ellipse_points(bundled_scene, zoomed_out):
     assert snap(0.0, 10) == 0.05 and snap(0.999, 10) == 0.95 and snap(1.0, 10) == 0.95
     assert render_pixel(0.5, 0.99, 8, 4) == (4, 3) and render_pixel(1.0, 1.0, 8, 4) == (7, 3)

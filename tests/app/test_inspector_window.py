@@ -1,6 +1,7 @@
 """The pixel inspector in the real window (Xvfb, Mesa llvmpipe): Ctrl+click pins a pixel at x1/8 where scalar and
-gaussian_blending differ, the Inspector window opens with one trace per pane, each the colour of the pixel the pane
-shows; T unpins and closes it. Screenshots are kept in tests/output/ (viewer-inspector-*.png)."""
+gaussian_blending differ, the Inspector docks below the panes (which shrink and render again: the pin stays on the
+same scene point) with one trace per pane, each the colour of the pixel the pane shows; T unpins and closes it.
+Screenshots are kept in tests/output/ (viewer-inspector-*.png)."""
 
 from __future__ import annotations
 
@@ -79,23 +80,34 @@ def test_pin_a_pixel_at_x1_8_and_inspect_it(app):
     r = state.panes[0].rect
     before = shot(app, "viewer-inspector-before")
     assert inspector_rect(app) is None
+    cam = state.panes[0].parts["a"].job.camera
     ctrl_click(app, r.x + (x + 0.5) / w * r.w, r.y + (y + 0.5) / h * r.h)
     assert app.inspector.pin is not None
     wait_traced(app)
     img = shot(app, "viewer-inspector-x1_8")
     box = inspector_rect(app)
     assert box is not None
+    # docked below the panes: they shrank to make room, and were rendered again at their new size
+    assert state.dock_rect is not None and box[1] >= max(p.rect.y + p.rect.h for p in state.visible)
+    a, b = (state.panes[i].parts["a"].frame for i in range(2))
+    new = state.panes[0].parts["a"].job.camera
+    assert (new.width, new.height) != (cam.width, cam.height)
+    h, w = a.rgb.shape[:2]
     entries = app.inspector.entries()
     assert [e.name for e in entries] == ["A", "B"]
+    X, Y = entries[0].pixel
+    # the pinned pixel is the same point of the scene: its ray is the clicked pixel's within a pixel of either size
+    ray = lambda c, px, py: np.array([(px + 0.5 - c.cx) / c.fx, (py + 0.5 - c.cy) / c.fy])  # noqa: E731
+    assert np.abs(ray(new, X, Y) - ray(cam, x, y)).max() <= 0.5 / new.fx + 0.5 / cam.fx + 1e-9
     for e, frame in zip(entries, (a, b)):
-        assert e.pixel == (x, y) and e.trace.mode == ("scalar", "gaussian_blending")[e.slot[0]]
-        np.testing.assert_allclose(e.trace.color, frame.rgb[y, x], atol=TOL, rtol=0)
-        assert abs(e.trace.transmittance - (1 - frame.alpha[y, x])) <= TOL
+        assert e.pixel == (X, Y) and e.trace.mode == ("scalar", "gaussian_blending")[e.slot[0]]
+        np.testing.assert_allclose(e.trace.color, frame.rgb[Y, X], atol=TOL, rtol=0)
+        assert abs(e.trace.transmittance - (1 - frame.alpha[Y, X])) <= TOL
         # the pixel itself is on screen as rendered (the outline is drawn around it, the window elsewhere)
         p = state.panes[e.slot[0]].rect
-        cx, cy = int(p.x + (x + 0.5) / w * p.w), int(p.y + (y + 0.5) / h * p.h)
+        cx, cy = int(p.x + (X + 0.5) / w * p.w), int(p.y + (Y + 0.5) / h * p.h)
         assert not (box[0] <= cx <= box[2] and box[1] <= cy <= box[3])
-        assert np.abs(img[cy, cx].astype(int) - to_uint8(frame.rgb[y, x]).astype(int)).max() <= 1
+        assert np.abs(img[cy, cx].astype(int) - to_uint8(frame.rgb[Y, X]).astype(int)).max() <= 1
         above = img[cy - int(p.h / h) - 3:cy, cx].astype(int)  # up from its centre: the yellow outline
         assert ((above[:, 0] > 200) & (above[:, 1] > 160) & (above[:, 2] < 120)).any(), above
     bx0, by0, bx1, by1 = (int(v) for v in box)  # the window is drawn where the panes were

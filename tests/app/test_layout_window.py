@@ -1,8 +1,9 @@
 """The layout test: the real window under Xvfb at 1280x720, 1600x900 and 1920x1080, in the states a new user meets
-(1-4 panes, a split, 2x2 with the info overlay, the photo view, the inspector, the F1 help, a long error), one window
-reused across them. In each state no two texts placed over the panes overlap and each lies inside its pane part,
-and, from imgui's own draw data, no glyph of any window (panel, status bar, inspector, help) is cut by its clip
-rectangle at the sides. A screenshot of each state goes to $GBVIEWER_LAYOUT_SHOTS/layout (default tmp/layout)."""
+(1-4 panes, a split, 2x2 with the info overlay, the photo view, the inspector docked beside one pane and below three
+and 2x2, fly mode's hint, the F1 help, a long error), one window reused across them. In each state no two texts
+placed over the panes overlap and each lies inside its pane part, and, from imgui's own draw data, no glyph of any
+window (panel, status bar, inspector, help) is cut by its clip rectangle at the sides; the docked inspector never
+scrolls sideways. A screenshot of each state goes to $GBVIEWER_LAYOUT_SHOTS/layout (default tmp/layout)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from gbviewer.app.overlays import part_box
+from gbviewer.app.keys import hint
+from gbviewer.app.overlays import FLY_HINT, part_box
 from helpers import skip_or_fail
 from soak_viewer import xvfb_display
 from window_helpers import press
@@ -33,8 +35,8 @@ def big_xvfb():
 
 
 def scrolled_sideways() -> list[tuple[float, float, float, float]]:
-    """(x0, y0, x1, y1) of the windows that scroll horizontally (the Inspector's steps table): what they cut at
-    their sides is a scroll away."""
+    """(x0, y0, x1, y1) of the windows that scroll horizontally (the Inspector's steps table in a column too narrow
+    for its first columns): what they cut at their sides is a scroll away."""
     from imgui_bundle import imgui
 
     out = []
@@ -67,8 +69,9 @@ def cut_glyphs(draw_data) -> list[tuple[float, float, float, float, float]]:
     return cut
 
 
-def check(app, name: str, out: Path) -> None:
-    """Draw the state, save its screenshot, and check the placed texts and the draw data."""
+def check(app, name: str, out: Path, sideways: bool = True) -> None:
+    """Draw the state, save its screenshot, and check the placed texts and the draw data (without `sideways`, also
+    that no window scrolls sideways: the Inspector's steps table fits)."""
     from imgui_bundle import imgui
 
     app.run_frames(3)
@@ -82,6 +85,9 @@ def check(app, name: str, out: Path) -> None:
     for item in placed:
         home = [b for b in boxes if b.contains(item.x, item.y)] or [app.state.viewport]
         assert item.inside(home[0]) or item.inside(app.state.viewport), f"{name}: {item.full!r} outside its box"
+    wide = [(w.name, w.scroll_max.x) for w in imgui.get_current_context().windows
+            if w.active and w.scroll_max.x > 0 and w.name.startswith("Inspector")]
+    assert sideways or not wide, f"{name}: the Inspector scrolls sideways: {wide}"
     cut = cut_glyphs(imgui.get_draw_data())
     assert not cut, f"{name}: {len(cut)} glyphs cut at a window's side, e.g. {cut[:3]}"
 
@@ -141,12 +147,24 @@ def test_layout_at_three_screen_sizes(big_xvfb, capture, tmp_path, monkeypatch):
             imgui.get_io().add_mouse_pos_event(b.x + b.w / 2, b.y + b.h / 2)
             app.step()
             press(app, imgui.Key.t)
-            for _ in range(100):
-                app.step()
-                if app.inspector.pin is not None and app.inspector.current():
-                    break
-            check(app, f"{tag}-inspector", out)
+            for n, layout, name in ((3, "row", "inspector"), (1, "row", "inspector-1"), (4, "grid", "inspector-2x2")):
+                s.set_pane_count(n)
+                s.settings.layout = layout
+                for _ in range(200):
+                    app.step()
+                    if app.inspector.pin is not None and app.inspector.current():
+                        break
+                assert s.dock_rect is not None and all(p.rect.y + p.rect.h <= s.dock_rect.y or
+                                                       p.rect.x + p.rect.w <= s.dock_rect.x for p in s.visible)
+                check(app, f"{tag}-{name}", out, sideways=False)
+            s.settings.layout = "row"
+            s.set_pane_count(3)
             press(app, imgui.Key.t)
+            s.toggle_fly()  # one line under pane A's label says the fly keys
+            check(app, f"{tag}-fly", out)
+            assert [i.full for i in app.placed if i.full.startswith("fly:")] == [
+                FLY_HINT.format(hint("toggle_fly"))]
+            s.toggle_fly()
             s.show_help = True
             check(app, f"{tag}-help", out)
             s.show_help = False
