@@ -185,6 +185,9 @@ def test_unreadable_sparse_model(tmp_path, views, monkeypatch, damage, expect):
     ('{"camera_angle_x": 0.7, "frames": [{"file_path": "./a"}]}', "frame 0: missing 'transform_matrix'"),
     ('{"camera_angle_x": 0.7, "frames": [{"file_path": "./a", "transform_matrix": [[1]]}]}', "a 4x4 matrix"),
     ('{"camera_angle_x": "wide", "frames": []}', "expected a number"),
+    ('{"camera_angle_x": 0.7, "frames": [{"file_path": "./a", "transform_matrix": '
+     '[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 1, 1]]}]}',
+     "frame 0: 'transform_matrix': expected a bottom row"),
 ])
 def test_bad_transforms(tmp_path, text, expect):
     (tmp_path / "transforms_test.json").write_text(text)
