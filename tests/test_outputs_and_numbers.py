@@ -164,6 +164,19 @@ def test_a_frame_beyond_the_memory_budget_is_refused_before_allocating(work, cap
                            RenderSettings(supersample=8), 20)
 
 
+@pytest.mark.parametrize("name, expect", [
+    ("a" * 296 + ".png", "--out aaaa"), ("a" * 246 + ".png", "file name of 250 bytes; expected at most 245"),
+    ("d" * 256 + "/x.png", "folder name of 256 bytes; expected at most 255")])
+def test_an_output_name_over_the_limit_is_one_line(work, capsys, name, expect):
+    """Not the raw '[Errno 36] File name too long': the option and the limit (the temporary file must fit too)."""
+    err = refused(["render", "scene.ply", "--out", name, "--backend", "cpu"], capsys, "--out ", expect)
+    assert "Errno" not in err
+    assert sorted(p.name for p in work.iterdir()) == ["cameras.json", "scene.ply"]
+    ok = "a" * 241 + ".png"  # at the limit: it and its temporary file are written
+    assert cli.main(["render", "scene.ply", "--out", ok, "--width", "8", "--height", "8", "--backend", "cpu"]) == 0
+    assert (work / ok).is_file()
+
+
 def test_memory_running_out_after_the_estimate_is_one_line(work, capsys, monkeypatch):
     def bad_alloc(*args, **kwargs):
         raise MemoryError("std::bad_alloc")

@@ -19,7 +19,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     """Labelled grid of modes x sampling rates with PSNR under each cell."""
     settings = RenderSettings.parse_list(args.modes)
     rates = args.rates
-    check_writable(args.out, args.force, inputs=[args.scene, args.cameras])
+    check_writable(args.out, args.force, inputs=[args.scene, args.cameras], option="--out")
     scene = load(args.scene)
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, rates, "--rates")

@@ -33,7 +33,8 @@ def cmd_video(args: argparse.Namespace) -> int:
     if args.path not in PATHS and not Path(args.path).is_file():
         raise GBViewerError(f"--path {args.path}: expected zoom, dolly, rate or a keyframes FILE.json, got "
                             f"{'a folder' if Path(args.path).is_dir() else 'no such file'}")
-    check_writable(args.out, args.force, inputs=[args.scene, args.cameras, None if args.path in PATHS else args.path])
+    check_writable(args.out, args.force, inputs=[args.scene, args.cameras, None if args.path in PATHS else args.path],
+                   option="--out")
     scene = load(args.scene)
     cam = camera_from_args(scene, args)
     check_inset(args.inset, cam.width, cam.height)

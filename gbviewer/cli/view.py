@@ -36,7 +36,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     scene_path = args.scene or DEFAULT_SCENE
     out_dir, force, args.cameras = Path(args.out), getattr(args, "force", False), getattr(args, "cameras", None)
     for name in DEMO_FILES:
-        check_writable(out_dir / name, force, inputs=[scene_path, args.cameras])
+        check_writable(out_dir / name, force, inputs=[scene_path, args.cameras], option="--out")
     scene = load(scene_path)
     cam = camera_from_args(scene, args)
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
