@@ -23,6 +23,15 @@ class Cancellable(Protocol):
     def is_set(self) -> bool: ...
 
 
+def cancel_problem(cancel: object) -> str | None:
+    """None where `cancel` is None or Cancellable (with a callable is_set), else the one-line reason, naming
+    `cancel` (the caller raises its own error with it)."""
+    if cancel is None or (isinstance(cancel, Cancellable) and callable(cancel.is_set)):
+        return None
+    return (f"cancel: expected a gbviewer.CancelToken, a threading.Event or an object with an is_set() method (or "
+            f"None), got {type(cancel).__name__}")
+
+
 class CancelToken:
     """A cancel flag shared with the native renderer (see the module docstring); threading.Event's interface."""
 

@@ -17,6 +17,11 @@ from .scene import Scene
 from .validate import array, field, read_json, real
 
 MAX_FOV_DEG = 179.0
+POSES = {"R": ("R", "t"), "rotation": ("rotation", "position"), "look_at": ("position", "look_at", "up"),
+         "orbit": ("orbit",)}
+INTRINSICS = ("fx", "fy", "cx", "cy")
+FIELDS = frozenset({f for fs in POSES.values() for f in fs} | set(INTRINSICS)
+                   | {"time", "rate", "fov_y_deg", "projection"})
 
 
 @dataclass(frozen=True)
@@ -198,7 +203,8 @@ def load_keyframes(path: str | Path, base: Camera, scene: Scene | None = None, u
     size; default: the base camera's intrinsics), "projection" (default: the base camera's; "orthographic": fx, fy
     are pixels per world unit, and a key that changes the base's projection gives them; no fov_y_deg). The pane size
     is the base camera's. Every value is checked: a bad one is a one-line `InvalidValue` naming the file, the key's
-    index and the field.
+    index and the field, and so is an unknown field, a key with two poses (or a field of another pose), fov_y_deg
+    with fx/fy/cx/cy, or keys of different projections.
     """
     path = Path(path)
     doc = read_json(path)
@@ -212,6 +218,10 @@ def load_keyframes(path: str | Path, base: Camera, scene: Scene | None = None, u
             keys.append(_keyframe(e, where, i, base, scene, up))
         except CameraError as exc:
             raise InvalidValue(f"{where}: {exc}") from None
+    for i, k in enumerate(keys):
+        if k.camera.projection != keys[0].camera.projection:
+            raise InvalidValue(f"{path}: keyframe {i}: 'projection' {k.camera.projection} differs from keyframe 0's "
+                               f"({keys[0].camera.projection}); all keys share one projection")
     try:
         key_times(keys)
     except GBViewerError as exc:
@@ -228,8 +238,9 @@ def _keyframe(e: object, where: str, i: int, base: Camera, scene: Scene | None, 
         return array(field(e, name, where), f"{where}: '{name}'", shape, f32=True)
 
     def num(name: str, **bounds) -> float:
-        return real(e[name], f"{where}: '{name}'", f32=True, **bounds)
+        return _number(e[name], f"{where}: '{name}'", **bounds)
 
+    _check_fields(e, where)
     if "R" in e:
         R, t = vec("R", (3, 3)), vec("t", (3,))
     elif "rotation" in e:
@@ -245,8 +256,8 @@ def _keyframe(e: object, where: str, i: int, base: Camera, scene: Scene | None, 
         if not isinstance(orbit, list) or len(orbit) not in (2, 3):
             raise InvalidValue(f"{where}: 'orbit': expected [azimuth, elevation] or [azimuth, elevation, distance], "
                                f"got {str(orbit):.40}")
-        az, el = (real(v, f"{where}: 'orbit' {n}", f32=True) for v, n in zip(orbit, ("azimuth", "elevation")))
-        dist = real(orbit[2], f"{where}: 'orbit' distance", f32=True) if len(orbit) == 3 and orbit[2] is not None \
+        az, el = (_number(v, f"{where}: 'orbit' {n}") for v, n in zip(orbit, ("azimuth", "elevation")))
+        dist = _number(orbit[2], f"{where}: 'orbit' distance") if len(orbit) == 3 and orbit[2] is not None \
             else 0.0
         c = orbit_camera(scene, az, el, dist if dist > 0 else None, base.width, base.height, up=up)
         R, t = c.R, c.t
@@ -260,6 +271,9 @@ def _keyframe(e: object, where: str, i: int, base: Camera, scene: Scene | None, 
     if "fov_y_deg" in e and projection == "orthographic":
         raise InvalidValue(f"{where}: 'fov_y_deg' has no meaning for an orthographic camera; give 'fx' and 'fy' "
                            f"(pixels per world unit)")
+    given = [k for k in INTRINSICS if k in e]
+    if "fov_y_deg" in e and given:
+        raise InvalidValue(f"{where}: 'fov_y_deg' and '{given[0]}' both set the intrinsics; give one or the other")
     if "fov_y_deg" in e:
         f = focal_from_fov(num("fov_y_deg", lo=0, lo_open=True, hi=MAX_FOV_DEG), base.height)
         intr = dict(fx=f, fy=f, cx=base.width / 2, cy=base.height / 2)
@@ -269,6 +283,27 @@ def _keyframe(e: object, where: str, i: int, base: Camera, scene: Scene | None, 
     rate = parse_rate(e.get("rate", 1), f"{where}: 'rate'")
     time_ = num("time") if e.get("time") is not None else None
     return Keyframe(cam, rate, time_)
+
+
+def _check_fields(e: dict, where: str) -> None:
+    """Refuse an unknown field, two poses in one key, or a pose's field given with another pose."""
+    unknown = sorted(str(k) for k in e if k not in FIELDS)
+    if unknown:
+        raise InvalidValue(f"{where}: unknown field {unknown[0]!r:.40} (expected {', '.join(sorted(FIELDS))})")
+    poses = [p for p in POSES if p in e]
+    if len(poses) > 1:
+        raise InvalidValue(f"{where}: '{poses[0]}' and '{poses[1]}' are two poses; give one")
+    stray = [f for fs in POSES.values() for f in fs if f in e and (not poses or f not in POSES[poses[0]])]
+    if poses and stray:
+        raise InvalidValue(f"{where}: '{stray[0]}' does not belong to a '{poses[0]}' pose "
+                           f"(that takes {', '.join(POSES[poses[0]])})")
+
+
+def _number(value: object, what: str, **bounds) -> float:
+    """A JSON number (not a string of one: `real` would parse it) as a finite float32 in the bounds."""
+    if isinstance(value, str):
+        raise InvalidValue(f"{what}: expected a JSON number, got the string {value!r:.40}")
+    return real(value, what, f32=True, **bounds)
 
 
 def keyframes_to_json(keys: Sequence[Keyframe]) -> dict:

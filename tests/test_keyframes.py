@@ -12,6 +12,7 @@ import pytest
 import gbviewer as gb
 from gbviewer import keyframes
 from gbviewer.camera_paths import keyframe_path
+from gbviewer.errors import InvalidValue
 from helpers import OUTPUT_H as H, OUTPUT_W as W
 
 
@@ -120,3 +121,25 @@ def test_bad_projection_keys(bundled_scene, output_view, tmp_path, key, message)
     f.write_text(json.dumps([key]))
     with pytest.raises(gb.GBViewerError, match=message):
         keyframes.load_keyframes(f, output_view, bundled_scene)
+
+
+@pytest.mark.parametrize("keys, message", [
+    ([{"orbit": [0, 0], "rat": 2}], "keyframe 0: unknown field 'rat'"),
+    ([{"orbit": [0, 0]}, {"orbit": [0, 0], "position": [0, 0, 1], "look_at": [0, 0, 0]}],
+     "keyframe 1: 'look_at' and 'orbit' are two poses"),
+    ([{"orbit": [0, 0], "position": [0, 0, 1]}], "keyframe 0: 'position' does not belong to a 'orbit' pose"),
+    ([{"R": np.eye(3).tolist(), "t": [0, 0, 3], "up": [0, 1, 0]}], "keyframe 0: 'up' does not belong"),
+    ([{"orbit": [0, 0], "fov_y_deg": 40, "fx": 50}], "keyframe 0: 'fov_y_deg' and 'fx' both set"),
+    ([{"orbit": [0, 0], "time": "0"}], "keyframe 0: 'time': expected a JSON number, got the string '0'"),
+    ([{"orbit": ["30", 0]}], "keyframe 0: 'orbit' azimuth: expected a JSON number"),
+    ([{"orbit": [0, 0]}, {"orbit": [9, 0], "projection": "orthographic", "fx": 5, "fy": 5}],
+     "keyframe 1: 'projection' orthographic differs from keyframe 0's"),
+])
+def test_keyframe_mistakes_are_refused(bundled_scene, output_view, tmp_path, keys, message):
+    """A typo, a second pose, two ways of giving the intrinsics, a number as text or mixed projections: one line
+    naming the file, the key and the field (not a silently ignored field)."""
+    f = tmp_path / "keys.json"
+    f.write_text(json.dumps(keys))
+    with pytest.raises(InvalidValue, match=message) as info:
+        keyframes.load_keyframes(f, output_view, bundled_scene)
+    assert str(info.value).startswith(f"{f}: ") and "\n" not in str(info.value)

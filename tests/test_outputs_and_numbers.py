@@ -17,7 +17,7 @@ from gbviewer import cli
 from gbviewer.errors import RenderError
 from gbviewer.io import write_inria_ply
 from gbviewer.render import RenderSettings
-from gbviewer.render.budget import BUDGET_ENV, check_frame_memory
+from gbviewer.render.budget import BUDGET_ENV, check_frame_memory, memory_budget
 from helpers import random_scene
 
 
@@ -148,15 +148,33 @@ def test_a_frame_beyond_the_memory_budget_is_refused_before_allocating(work, cap
     refused(["render", "scene.ply", "--width", "1024", "--height", "1024", "--supersample", "8", "--out", "x.png",
              "--backend", "cpu"], capsys, "needs at least 1.", f"0.0977 GiB budget ({BUDGET_ENV})", f"set {BUDGET_ENV}")
     assert not (work / "x.png").exists()
-    monkeypatch.setenv(BUDGET_ENV, "lots")
-    with pytest.raises(RenderError, match=f"{BUDGET_ENV}: expected an integer"):
-        check_frame_memory(gb.Camera(8, 8, 8, 8, 4, 4, np.eye(3), np.zeros(3)), RenderSettings(), 1)
+    for bad in ("lots", "1e3", "   ", "0.1", "0K", "-1G", "1.5X", "1.5GG", "1,5G"):
+        monkeypatch.setenv(BUDGET_ENV, bad)
+        with pytest.raises(RenderError, match=f"{BUDGET_ENV}: expected bytes >= 1, as a decimal number") as exc:
+            memory_budget()
+        assert repr(bad) in str(exc.value) and "\n" not in str(exc.value)
+    for good, value in (("1000", 1000), ("1.5G", 3 << 29), (" 2k ", 2048), (".5M", 1 << 19), ("3 T", 3 << 40)):
+        monkeypatch.setenv(BUDGET_ENV, good)
+        assert memory_budget() == (value, BUDGET_ENV)
     monkeypatch.setenv(BUDGET_ENV, "64G")
     check_frame_memory(gb.Camera(1024, 1024, 8, 8, 4, 4, np.eye(3), np.zeros(3)), RenderSettings(supersample=8), 20)
     monkeypatch.delenv(BUDGET_ENV)
     with pytest.raises(RenderError, match="available memory|address-space limit"):
         check_frame_memory(gb.Camera(16384, 16384, 8, 8, 4, 4, np.eye(3), np.zeros(3)),
                            RenderSettings(supersample=8), 20)
+
+
+@pytest.mark.parametrize("name, expect", [
+    ("a" * 296 + ".png", "--out aaaa"), ("a" * 246 + ".png", "file name of 250 bytes; expected at most 245"),
+    ("d" * 256 + "/x.png", "folder name of 256 bytes; expected at most 255")])
+def test_an_output_name_over_the_limit_is_one_line(work, capsys, name, expect):
+    """Not the raw '[Errno 36] File name too long': the option and the limit (the temporary file must fit too)."""
+    err = refused(["render", "scene.ply", "--out", name, "--backend", "cpu"], capsys, "--out ", expect)
+    assert "Errno" not in err
+    assert sorted(p.name for p in work.iterdir()) == ["cameras.json", "scene.ply"]
+    ok = "a" * 241 + ".png"  # at the limit: it and its temporary file are written
+    assert cli.main(["render", "scene.ply", "--out", ok, "--width", "8", "--height", "8", "--backend", "cpu"]) == 0
+    assert (work / ok).is_file()
 
 
 def test_memory_running_out_after_the_estimate_is_one_line(work, capsys, monkeypatch):

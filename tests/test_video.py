@@ -110,3 +110,21 @@ def test_cli_video_even_size_and_refusal(tmp_path, capsys):
     assert main(args[:i] + ["--seconds", "0.3"] + args[i + 2:] + ["--force"]) == 0
     assert imageio_ffmpeg.count_frames_and_secs(str(out))[0] == 3
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.mp4"]
+
+
+@pytest.mark.parametrize("extra, line", [
+    (["--path", "{tmp}"], "--path {tmp}: expected zoom, dolly, rate or a keyframes FILE.json, got a folder"),
+    (["--path", "{tmp}/none.json"], "--path {tmp}/none.json: expected zoom, dolly, rate or a keyframes FILE.json, "
+                                    "got no such file"),
+    (["--inset", "1000,1000,5,5"], "--inset 1000,1000,5,5: expected a region inside the 96x64 x1 image"),
+    (["--inset", "90,10,8,8"], "--inset 90,10,8,8: expected a region inside the 96x64 x1 image"),
+    (["--inset=-1,0,8,8"], "--inset -1,0,8,8: expected a region inside"),
+])
+def test_cli_video_bad_path_or_inset_is_one_line(tmp_path, capsys, extra, line):
+    """A folder as --path is not "an output inside the input"; an inset off the image is not silently dropped."""
+    out = tmp_path / "v.mp4"
+    args = ["video", str(gb.DEFAULT_SCENE), "--modes", "scalar", "--size", "96x64", "--frames", "2", "--out", str(out)]
+    assert main(args + [a.format(tmp=tmp_path) for a in extra]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith(f"gbviewer: error: {line.format(tmp=tmp_path)}"), err
+    assert not out.exists()

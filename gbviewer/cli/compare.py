@@ -11,17 +11,19 @@ from ..figure import DIFFS, write_comparison
 from ..io import load
 from ..io.files import check_writable
 from ..render import RenderSettings
-from .options import add_backend_arg, add_camera_args, backend_of, camera_from_args, check_render_size
+from .options import (add_backend_arg, add_camera_args, backend_of, camera_from_args, check_inset,
+                      check_render_size)
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
     """Labelled grid of modes x sampling rates with PSNR under each cell."""
     settings = RenderSettings.parse_list(args.modes)
     rates = args.rates
-    check_writable(args.out, args.force, inputs=[args.scene, args.cameras])
+    check_writable(args.out, args.force, inputs=[args.scene, args.cameras], option="--out")
     scene = load(args.scene)
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, rates, "--rates")
+    check_inset(args.inset, cam.width, cam.height)
     cmp = write_comparison(args.out, scene, cam, settings, rates, backend_of(args), args.inset, args.force,
                            args.diff)
     print(f"wrote {args.out} ({cmp.image.width}x{cmp.image.height}): {len(rates)} rates x {len(settings)} modes")

@@ -49,7 +49,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".ply":
         raise GBViewerError(f"{out}: output must end in .ply (a standard INRIA 3DGS ply)")
-    check_writable(out, args.force, inputs=[args.scene])
+    check_writable(out, args.force, inputs=[args.scene], option="--out")
     scene = load(args.scene)
     write_inria_ply(scene, out, force=args.force)
     print(f"{out}: {scene.num_splats} splats, SH degree {scene.sh_degree}, from {scene.meta.get('format')} "

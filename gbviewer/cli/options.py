@@ -81,6 +81,15 @@ def check_render_size(width: int, height: int, rates: list[float], option: str) 
     integer(round(side), f"{option}: image side rendered at x{max(rates):g}", hi=MAX_SIDE)
 
 
+def check_inset(inset: tuple[float, float, float, float] | None, width: int, height: int) -> None:
+    """Refuse an --inset region X,Y,W,H that does not lie inside the width x height (x1) image."""
+    if inset is not None:
+        x, y, w, h = inset
+        if x < 0 or y < 0 or x + w > width or y + h > height:
+            raise GBViewerError(f"--inset {x:g},{y:g},{w:g},{h:g}: expected a region inside the {width}x{height} "
+                                f"x1 image (X >= 0, Y >= 0, X+W <= {width}, Y+H <= {height})")
+
+
 def progress_columns() -> tuple:
     """A rich progress bar with percentage, elapsed time and ETA."""
     from rich.progress import BarColumn, TaskProgressColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn

@@ -18,7 +18,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".npy"):
         raise GBViewerError(f"{out}: output must end in .png or .npy")
-    check_writable(out, args.force, inputs=[args.scene, args.cameras])
+    check_writable(out, args.force, inputs=[args.scene, args.cameras], option="--out")
     scene = load(args.scene)
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, [args.scale], "--scale")

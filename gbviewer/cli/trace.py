@@ -19,7 +19,7 @@ def cmd_trace(args: argparse.Namespace) -> int:
     from ..trace_report import print_traces, write_traces
 
     if args.json:
-        check_writable(args.json, args.force, inputs=[args.scene, args.cameras])
+        check_writable(args.json, args.force, inputs=[args.scene, args.cameras], option="--json")
     settings = RenderSettings.parse_list(args.modes, background=args.background)
     if args.supersample is not None:
         settings = [s if s.supersample > 1 else replace(s, supersample=args.supersample) for s in settings]

@@ -7,12 +7,14 @@ from pathlib import Path
 
 from ..argtypes import INSET, SIZE, Number, Rate, count, positive
 from ..camera_paths import MAX_FRAMES, PATHS, camera_path
+from ..errors import GBViewerError
 from ..extras import require
 from ..io import load
 from ..io.files import check_writable
 from ..render import RenderSettings
 from ..video import MAX_FPS, MIN_FPS, record_video
-from .options import add_backend_arg, add_camera_args, backend_of, camera_from_args, check_render_size
+from .options import (add_backend_arg, add_camera_args, backend_of, camera_from_args, check_inset,
+                      check_render_size)
 
 VIDEO_PANE = (480, 360)  # default pane size of `gbviewer video`
 
@@ -28,9 +30,14 @@ def cmd_video(args: argparse.Namespace) -> int:
         args.width, args.height = args.size
     elif not (args.width or args.height or args.cameras):
         args.width, args.height = VIDEO_PANE
-    check_writable(args.out, args.force, inputs=[args.scene, args.cameras, None if args.path in PATHS else args.path])
+    if args.path not in PATHS and not Path(args.path).is_file():
+        raise GBViewerError(f"--path {args.path}: expected zoom, dolly, rate or a keyframes FILE.json, got "
+                            f"{'a folder' if Path(args.path).is_dir() else 'no such file'}")
+    check_writable(args.out, args.force, inputs=[args.scene, args.cameras, None if args.path in PATHS else args.path],
+                   option="--out")
     scene = load(args.scene)
     cam = camera_from_args(scene, args)
+    check_inset(args.inset, cam.width, cam.height)
     if args.path == "rate":
         check_render_size(cam.width, cam.height, [args.from_rate, args.to_rate], "--from/--to")
     path = camera_path(args.path, cam, args.frames, args.from_rate, args.to_rate, scene, args.up, fps=args.fps,

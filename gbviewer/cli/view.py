@@ -14,6 +14,7 @@ from ..extras import require
 from ..argtypes import BACKGROUND
 from ..figure import compose_grid, render_grid, save_image
 from ..io import load
+from ..io.datasets import load_dataset
 from ..io.files import check_writable
 from ..render import Mode, RenderSettings
 from ..video import record_video
@@ -35,7 +36,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     scene_path = args.scene or DEFAULT_SCENE
     out_dir, force, args.cameras = Path(args.out), getattr(args, "force", False), getattr(args, "cameras", None)
     for name in DEMO_FILES:
-        check_writable(out_dir / name, force, inputs=[scene_path, args.cameras])
+        check_writable(out_dir / name, force, inputs=[scene_path, args.cameras], option="--out")
     scene = load(scene_path)
     cam = camera_from_args(scene, args)
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
@@ -67,6 +68,10 @@ def cmd_view(args: argparse.Namespace) -> int:
                               data=args.data, images=args.images, background=args.background)
     if opened:
         return 0
+    if args.data is not None:  # checked as the viewer would, before anything is written
+        dataset = load_dataset(args.data, args.images)
+        print(f"--data {args.data}: {len(dataset.views)} views read; the no-display fallback does not use the "
+              f"dataset's photos")
     if has_display_env()[0]:  # (without one, demo says so itself)
         print(f"cannot open the viewer window: {why}; writing the comparison images instead")
     return cmd_demo(args)

@@ -11,6 +11,10 @@ from ..errors import GBViewerError
 from .outputs import PathLike, refuse_inputs
 
 
+NAME_MAX = 255  # bytes of one file or folder name (Linux, macOS and Windows file systems)
+TEMP_EXTRA = 10  # what atomic_write's temporary name adds to the file's: ".NAME-12345678" ("." "-" 8 letters)
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
@@ -26,14 +30,27 @@ def refuse_overwrite(path: str | Path, force: bool = False) -> Path:
     return path
 
 
+def check_name_lengths(path: Path, folder: bool, option: str) -> None:
+    """Refuse a folder name over NAME_MAX bytes or a file name over NAME_MAX - TEMP_EXTRA (its temporary file must
+    fit too), naming `option` (e.g. '--out') when given."""
+    parts = path.parts
+    for i, part in enumerate(parts):
+        limit = NAME_MAX - (0 if folder or i < len(parts) - 1 else TEMP_EXTRA)
+        if len(os.fsencode(part)) > limit:
+            what = "folder" if folder or i < len(parts) - 1 else "file"
+            raise GBViewerError(f"{option + ' ' if option else ''}{part[:40]}...: {what} name of "
+                                f"{len(os.fsencode(part))} bytes; expected at most {limit}")
+
+
 def check_writable(path: str | Path, force: bool = False, *, folder: bool = False,
-                   inputs: Iterable[PathLike | None] = ()) -> Path:
+                   inputs: Iterable[PathLike | None] = (), option: str = "") -> Path:
     """Raise now the error that writing `path` (a file; with `folder`, a folder to write files into) would raise
     after long work: an existing file without `force`, a folder where a file goes or the reverse, a place that
     cannot be created or may not be written in (probed with a temporary file, so read-only mounts count for root
     too), and, with or without `force`, a file that is one of the command's `inputs` (`refuse_inputs`). Leaves
-    nothing behind; call it before the work."""
+    nothing behind; call it before the work. `option`: the option that gave `path`, named in a name-length error."""
     path = Path(path)
+    check_name_lengths(path, folder, option)
     refuse_inputs([path], inputs)
     if folder and path.exists() and not path.is_dir():
         raise GBViewerError(f"{path}: exists and is not a folder")

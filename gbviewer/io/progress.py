@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cancel import Cancellable
-from ..errors import CallbackError, LoadCancelled
+from ..cancel import Cancellable, cancel_problem
+from ..errors import CallbackError, InvalidValue, LoadCancelled
 
 Progress = Callable[[int, int, str], None]
 REPORTS = 100  # chunks per phase at most
@@ -29,6 +29,8 @@ class LoadProgress:
     """Reports a load's phases to the caller's `fn` and raises LoadCancelled once `cancel` is set."""
 
     def __init__(self, fn: Progress | None = None, cancel: Cancellable | None = None) -> None:
+        if why := cancel_problem(cancel):
+            raise InvalidValue(why)
         self.fn, self.cancel = fn, cancel
         self._last: dict[str, int] = {}
 

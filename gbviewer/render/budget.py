@@ -5,11 +5,11 @@ allows)."""
 from __future__ import annotations
 
 import os
+import re
 import resource
 
 from ..camera import Camera
-from ..errors import InvalidValue, RenderError
-from ..validate import integer
+from ..errors import RenderError
 from .types import RenderSettings
 
 BUDGET_ENV = "GBVIEWER_MEMORY_BUDGET"  # bytes, or with a K, M, G or T suffix (powers of 1024)
@@ -20,6 +20,7 @@ SPLAT_BYTES = 160  # per splat: its projected footprint, tile rectangle and at l
 TILE = 16  # pixels per tile side (gbv::TILE)
 TILE_BYTES = 8 * 65  # per tile: its list start and the binning counters of up to 64 ranges
 SUFFIXES = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+BUDGET_RE = re.compile(r"(\d{1,20}(?:\.\d{1,20})?|\.\d{1,20})\s*([KMGT]?)", re.IGNORECASE)
 
 
 def frame_bytes(camera: Camera, settings: RenderSettings, splats: int) -> int:
@@ -56,16 +57,17 @@ def _available() -> tuple[int, str]:
 
 
 def memory_budget() -> tuple[int, str]:
-    """(bytes, what they are): GBVIEWER_MEMORY_BUDGET when set, else what the machine has available now."""
-    text = os.environ.get(BUDGET_ENV, "").strip()
+    """(bytes, what they are): GBVIEWER_MEMORY_BUDGET when set (and not empty), else what the machine has
+    available now."""
+    text = os.environ.get(BUDGET_ENV, "")
     if not text:
         return _available()
-    scale = SUFFIXES.get(text[-1:].upper(), 1)
-    try:
-        value = integer(text[:-1] if scale > 1 else text, BUDGET_ENV, lo=1)
-    except InvalidValue as exc:
-        raise RenderError(f"{exc} (bytes, or with a K, M, G or T suffix)") from None
-    return value * scale, BUDGET_ENV
+    match = BUDGET_RE.fullmatch(text.strip())
+    value = float(match[1]) * SUFFIXES.get(match[2].upper(), 1) if match else 0.0
+    if value < 1:
+        raise RenderError(f"{BUDGET_ENV}: expected bytes >= 1, as a decimal number with an optional K, M, G or T "
+                          f"suffix (powers of 1024; 1.5G), got {text!r:.40}")
+    return int(value), BUDGET_ENV
 
 
 def _gib(n: int) -> str:

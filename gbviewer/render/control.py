@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..cancel import CancelToken, Cancellable
+from ..cancel import CancelToken, Cancellable, cancel_problem
 from ..errors import CallbackError, RenderCancelled, RenderError
 
 Progress = Callable[[int, int], None]
@@ -27,6 +27,8 @@ class RenderControl:
 
     def __init__(self, cancel: Cancellable | None = None, on_progress: Progress | None = None,
                  partial: np.ndarray | None = None) -> None:
+        if why := cancel_problem(cancel):
+            raise RenderError(why)
         self.cancel, self.on_progress, self.partial = cancel, on_progress, partial
         token = isinstance(cancel, CancelToken)
         self.flag = cancel.flag if token else np.zeros(1, np.int64)  # what the native loop reads

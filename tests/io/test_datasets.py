@@ -185,6 +185,9 @@ def test_unreadable_sparse_model(tmp_path, views, monkeypatch, damage, expect):
     ('{"camera_angle_x": 0.7, "frames": [{"file_path": "./a"}]}', "frame 0: missing 'transform_matrix'"),
     ('{"camera_angle_x": 0.7, "frames": [{"file_path": "./a", "transform_matrix": [[1]]}]}', "a 4x4 matrix"),
     ('{"camera_angle_x": "wide", "frames": []}', "expected a number"),
+    ('{"camera_angle_x": 0.7, "frames": [{"file_path": "./a", "transform_matrix": '
+     '[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 1, 1]]}]}',
+     "frame 0: 'transform_matrix': expected a bottom row"),
 ])
 def test_bad_transforms(tmp_path, text, expect):
     (tmp_path / "transforms_test.json").write_text(text)
@@ -220,3 +223,24 @@ def test_cli_bad_dataset_is_one_line_exit_2(tmp_path, views, centred, capsys, ki
     out, err = capsys.readouterr()
     assert status == 2 and out == ""
     assert len(err.splitlines()) == 1 and err.startswith("gbviewer: error: ") and str(data) in err, err
+
+
+def test_no_display_view_checks_the_dataset(tmp_path, centred, capsys, monkeypatch):
+    """Without a display `gbviewer SCENE --data D` falls back to demo: a bad D is still one line and exit 2 with
+    nothing written; a good one is read and the fallback says it does not use its photos."""
+    from gbviewer.cli import view
+
+    for name in ("DISPLAY", "WAYLAND_DISPLAY"):
+        monkeypatch.delenv(name, raising=False)
+    demos = []
+    monkeypatch.setattr(view, "cmd_demo", lambda args: demos.append(args.data) or 0)
+    out_dir = tmp_path / "out"
+    (tmp_path / "bad").mkdir()
+    command = ["view", str(gb.DEFAULT_SCENE), "--out", str(out_dir), "--data"]
+    assert cli.main([*command, str(tmp_path / "bad")]) == 2
+    out, err = capsys.readouterr()
+    assert len(err.splitlines()) == 1 and "not a dataset" in err and str(tmp_path / "bad") in err, err
+    assert demos == [] and not out_dir.exists()
+    good = write_blender(tmp_path / "good", centred)
+    assert cli.main([*command, str(good)]) == 0
+    assert demos == [good] and "does not use the dataset's photos" in capsys.readouterr().out

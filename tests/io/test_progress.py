@@ -135,6 +135,15 @@ def test_cancel_set_before_the_load_reports_nothing(files, kind):
     assert calls == []
 
 
+@pytest.mark.parametrize("cancel", [object(), True, lambda: False])
+def test_a_cancel_without_is_set_is_refused(files, cancel):
+    """One line naming `cancel` and what it takes (not an AttributeError, not blamed on the file)."""
+    with pytest.raises(gb.GBViewerError, match=r"^cancel: expected a gbviewer.CancelToken, a threading.Event or an "
+                                               r"object with an is_set\(\) method") as exc:
+        gb.load(files["inria"], cancel=cancel)
+    assert not isinstance(exc.value, gb.SceneFormatError)
+
+
 @pytest.mark.parametrize("kind, unit", [(k, u) for k in KINDS for u in ("bytes", "splats")
                                         if u == "bytes" or k in SPLATS_REPORTED])
 @pytest.mark.parametrize("error", [ValueError, OSError, KeyError, gb.GBViewerError])

@@ -133,6 +133,18 @@ def test_a_partial_buffer_of_the_wrong_shape_is_refused(scene):
         gb.render(scene, front_camera(64, 48), partial=np.zeros((48, 64, 3), np.float64))
 
 
+class _NotCallable:
+    is_set = True
+
+
+@pytest.mark.parametrize("cancel", [object(), True, lambda: False, "stop", _NotCallable()])
+def test_a_cancel_without_is_set_is_refused(scene, cancel):
+    """Not a raw AttributeError from inside the render: one RenderError naming `cancel` and what it takes."""
+    with pytest.raises(gb.RenderError, match=r"^cancel: expected a gbviewer.CancelToken, a threading.Event or an "
+                                             r"object with an is_set\(\) method \(or None\), got \w+$"):
+        gb.render(scene, front_camera(64, 48), "scalar", cancel=cancel)
+
+
 def test_a_cancel_token_set_during_the_render_cancels_it(scene):
     """gb.CancelToken: the native loop reads its flag directly (no helper thread); set from another thread while
     the frame is being blended, the call raises RenderCancelled, and the renderer still works afterwards."""

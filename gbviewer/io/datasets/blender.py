@@ -47,6 +47,9 @@ def _views(root: Path, split: str, path: Path) -> list[View]:
             if not isinstance(name, str) or not name.strip():
                 raise InvalidValue(f"{where}: 'file_path': expected a relative path")
             c2w = array(field(frame, "transform_matrix", where), f"{where}: 'transform_matrix'", (4, 4))
+            if not np.array_equal(c2w[3], [0, 0, 0, 1]):
+                raise InvalidValue(f"{where}: 'transform_matrix': expected a bottom row [0, 0, 0, 1] (a rigid "
+                                   f"camera-to-world pose), got {np.round(c2w[3], 6).tolist()}")
             entries.append((name.removeprefix("./"), c2w, where))
     except InvalidValue as exc:
         raise DatasetError(str(exc)) from None
