@@ -7,6 +7,7 @@ its info lines and its screenshot use."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from dataclasses import replace
@@ -68,6 +69,19 @@ def test_the_backdrop_is_the_median_border_colour(grey_capture):
     assert b.describe().startswith("0.60 0.60 0.60, the median border colour of 8 opaque photos")
 
 
+@contextlib.contextmanager
+def snapped(state):
+    """The panes snapped to the dataset's second view and rendered, with their analysis settled: (analysis, view)."""
+    an = PaneAnalysis(state)
+    try:
+        state.step_camera(1)
+        render_panes(state)
+        settle(an)
+        yield an, state.dataset.view
+    finally:
+        an.stop()
+
+
 def test_psnr_against_a_grey_backdrop_uses_it(grey_capture, tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     state = opened(grey_capture)
@@ -76,12 +90,7 @@ def test_psnr_against_a_grey_backdrop_uses_it(grey_capture, tmp_path, monkeypatc
     assert state.settings_for(1, "a").background == bg and state.settings.background == (0.0, 0.0, 0.0)
     state.set_rate(RATE)
     state.set_pane(1, mode="scalar", supersample=1)
-    an = PaneAnalysis(state)
-    try:
-        state.step_camera(1)
-        view = state.dataset.view
-        render_panes(state)
-        settle(an)
+    with snapped(state) as (an, view):
         cam, gt = camera_for_rate(view.camera, RATE), ground_truth(view, RATE)
         on_grey = metrics.psnr(gb.render(state.scene, cam, "scalar", background=bg).rgb, gt)
         on_black = metrics.psnr(gb.render(state.scene, cam, "scalar").rgb, gt)
@@ -93,8 +102,6 @@ def test_psnr_against_a_grey_backdrop_uses_it(grey_capture, tmp_path, monkeypatc
         render_panes(state)
         settle(an)
         assert an.latest[(1, "a")].psnr == on_black
-    finally:
-        an.stop()
 
 
 def test_a_given_background_is_kept_with_opaque_photos(grey_capture):
@@ -154,12 +161,7 @@ def test_pane_a_showing_the_photo_is_what_differences_and_screenshots_use(grey_c
     state.set_rate(RATE)
     state.set_pane(0, view="photo")
     state.set_pane(1, mode="scalar", supersample=1, view="difference")
-    an = PaneAnalysis(state)
-    try:
-        state.step_camera(1)
-        view = state.dataset.view
-        render_panes(state)
-        settle(an)
+    with snapped(state) as (an, view):
         gt = ground_truth(view, RATE)
         b = state.panes[1].parts["a"]
         plane, legend = an.visualize((1, "a"), b.frame, "difference")
@@ -170,5 +172,3 @@ def test_pane_a_showing_the_photo_is_what_differences_and_screenshots_use(grey_c
         assert stats_lines(state.panes[0], "a") == []  # no render timings over the photo
         path = save_pane(state, 0, tmp_path / "a.png", colour=an.visualize)  # what is on screen: the photo
         assert path.read_bytes() == encode_png16(gt) != encode_png16(a.frame.rgb)
-    finally:
-        an.stop()
