@@ -4,6 +4,7 @@ process pool and a local Ray instance."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -18,6 +19,7 @@ import gbviewer as gb
 from gbviewer import cli
 from gbviewer import eval as ev
 from gbviewer.eval import multiscale as gt_module
+from gbviewer.eval.memory import view_bytes
 from gbviewer.eval.options import scene_pairs
 from gbviewer.io.datasets import load_dataset, read_photo
 from gbviewer.metrics import box_downsample, composite, premultiplied_box_downsample, psnr, ssim
@@ -235,3 +237,24 @@ def test_existing_outputs_are_refused_before_the_work(tmp_path, capsys, monkeypa
     assert status == 2 and err.splitlines() == [f"gbviewer: error: {tmp_path / 'p' / 'fruit_drops_minimal.png'}: "
                                                 "exists; pass --force to overwrite"]
     assert (tmp_path / "p" / "fruit_drops_minimal.png").read_bytes() == b"mine"
+
+
+def test_a_huge_photo_is_refused_before_the_work(blender, capture, tmp_path, capsys, monkeypatch):
+    """The view's whole need (photo decode, ground truths, SSIM, renders) is estimated from the camera before any
+    photo is decoded: an 8000x6000 photo needs far more than its render buffers (it used > 9 GB unchecked), and a
+    budget below a small view's need refuses it in one line naming the photo, the budget and how to raise it."""
+    view = load_dataset(blender).views[0]
+    huge = type(view)(view.name, dataclasses.replace(view.camera, width=8000, height=6000), view.image, view.split)
+    scalar = RenderSettings.parse_list("scalar")
+    assert view_bytes(huge, scalar, [1.0]) > 9 << 30 > view_bytes(view, scalar, [1.0, 1 / 2]) * 1000
+    assert view_bytes(view, RenderSettings.parse_list("scalar,scalar:3"), [1.0]) > view_bytes(view, scalar, [1.0])
+    monkeypatch.setattr(gt_module, "read_photo", lambda path: pytest.fail("decoded a photo beyond the budget"))
+    monkeypatch.setenv("GBVIEWER_MEMORY_BUDGET", "1M")
+    for data, hint in ((blender, False), (capture, True)):
+        status = cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(data), "--rates", "1", "--modes", "scalar",
+                           "--cache", str(tmp_path / "c"), "--json", str(tmp_path / "out.json")])
+        err = capsys.readouterr().err
+        assert status == 2 and len(err.splitlines()) == 1, err
+        assert f"x{H} photo needs about" in err and "0.000977 GiB budget (GBVIEWER_MEMORY_BUDGET)" in err, err
+        assert ".png:" in err and ("--images images_4" in err) == hint, err
+        assert not (tmp_path / "out.json").exists()

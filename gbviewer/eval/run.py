@@ -18,7 +18,8 @@ from ..errors import GBViewerError
 from ..io.datasets import View, load_dataset
 from ..io.files import check_writable
 from ..render import RenderSettings
-from .multiscale import camera_for_rate, rate_factor
+from .memory import check_view_memory
+from .multiscale import rate_factor
 from .tasks import ViewResult, ViewTask, evaluate_view, finite, run_task
 
 # progress(description, total tasks) -> a context that yields advance(tasks done)
@@ -115,8 +116,7 @@ def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettin
         dataset = load_dataset(data, images)
         views = dataset.split(split)
         for view in views:
-            for rate in rates:
-                camera_for_rate(view.camera, rate)
+            check_view_memory(view, settings, rates, dataset.format, 1 if ray else min(workers, len(views)))
         result.scenes.append(SceneEval(scene, data, dataset.format, views, []))
         tasks += [ViewTask(str(scene), i, j, v, tuple(settings), tuple(rates), background, backend, threads,
                            str(cache) if cache is not None else None) for j, v in enumerate(views)]
