@@ -258,3 +258,22 @@ def test_a_huge_photo_is_refused_before_the_work(blender, capture, tmp_path, cap
         assert f"x{H} photo needs about" in err and "0.000977 GiB budget (GBVIEWER_MEMORY_BUDGET)" in err, err
         assert ".png:" in err and ("--images images_4" in err) == hint, err
         assert not (tmp_path / "out.json").exists()
+
+
+@pytest.mark.parametrize("address, message", [
+    ("256.1.1.1:1", "256.1.1.1 is not a valid IPv4 address"),
+    ("127.0.0.1:1", "nothing accepts a connection at 127.0.0.1 port 1 within 5 s"),
+    ("ray://127.0.0.1:1", "nothing accepts a connection at 127.0.0.1 port 1"),
+    ("127.0.0.1", "expected host:port"),
+    ("127.0.0.1:0", "expected host:port (port 1..65535)"),
+    ("127.0.0.1:http", "expected host:port"),
+])
+def test_a_wrong_ray_address_is_one_line_before_ray(address, message, capsys, tmp_path, monkeypatch):
+    """The address is checked (syntax, the host, a TCP connect with a 5 s timeout) before the datasets and before
+    ray.init, which retried for minutes with 20 lines of warnings. (.invalid never resolves: RFC 6761.)"""
+    monkeypatch.setattr("gbviewer.eval.cluster.require", lambda *a, **k: pytest.fail("ray.init with a bad address"))
+    status = cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(tmp_path / "none"), "--ray", address,
+                       "--cache", str(tmp_path / "c")])
+    err = capsys.readouterr().err
+    assert status == 2 and len(err.splitlines()) == 1 and err.startswith(f"gbviewer: error: --ray {address}: "), err
+    assert message in err, err

@@ -101,6 +101,10 @@ def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettin
     shared among the workers; on Ray as `cluster.run_on_ray` chooses). cache: folder of box-downsampled photos."""
     for rate in rates:
         rate_factor(rate)
+    if ray:
+        from .cluster import check_address
+
+        check_address(ray)  # before the datasets: a wrong address is one line, not minutes of Ray retries
     if cache is not None:
         cache = check_writable(cache, folder=True).resolve()  # absolute: workers may run elsewhere
     runner = f"ray {ray}" if ray else f"{workers} worker{'s' * (workers > 1)}"
