@@ -17,6 +17,7 @@ from PIL import Image
 
 import gbviewer as gb
 from gbviewer import cli
+from gbviewer.camera import parse_rates
 from gbviewer import eval as ev
 from gbviewer.eval import multiscale as gt_module
 from gbviewer.eval.memory import view_bytes
@@ -162,8 +163,11 @@ def test_scene_pairs(tmp_path):
         (tmp_path / "scenes" / name).write_bytes(b"")
     assert scene_pairs([str(tmp_path / "scenes")], tmp_path / "data") == [
         (tmp_path / "scenes" / "a.spz", tmp_path / "data" / "a"), (tmp_path / "scenes" / "b.ply", tmp_path / "data" / "b")]
-    assert scene_pairs(["x.ply:/d/x", "y.ply"], Path("/d/y")) == [(Path("x.ply"), Path("/d/x")),
-                                                                  (Path("y.ply"), Path("/d/y"))]
+    assert scene_pairs(["x.ply:/d/x", "z.ply:/d/z"], None) == [(Path("x.ply"), Path("/d/x")),
+                                                               (Path("z.ply"), Path("/d/z"))]
+    assert scene_pairs(["y.ply"], Path("/d/y")) == [(Path("y.ply"), Path("/d/y"))]
+    with pytest.raises(gb.GBViewerError, match=r"^x.ply:/d/x: SCENE:DATASET names its dataset; --data /d/y too"):
+        scene_pairs(["y.ply", "x.ply:/d/x"], Path("/d/y"))  # --data was silently ignored for x.ply
     with pytest.raises(gb.GBViewerError, match="give --data DATASET or y.ply:DATASET"):
         scene_pairs(["y.ply"], None)
 
@@ -277,3 +281,34 @@ def test_a_wrong_ray_address_is_one_line_before_ray(address, message, capsys, tm
     err = capsys.readouterr().err
     assert status == 2 and len(err.splitlines()) == 1 and err.startswith(f"gbviewer: error: --ray {address}: "), err
     assert message in err, err
+
+
+def test_repeated_or_empty_rates_and_modes_are_refused():
+    """A repeated rate (1/2 and 0.5 are one) would count twice in the average, a repeated mode (SCALAR, scalar:1
+    and supersample:1 are scalar) is the same work twice; an empty item is a typo."""
+    assert parse_rates("1, 1/2,1/8") == [1.0, 0.5, 0.125]
+    assert [s.spec for s in RenderSettings.parse_list("scalar,scalar:2,supersample:3")] == ["scalar", "scalar:2",
+                                                                                          "scalar:3"]
+    for text, message in (("1,1/2,1/2", "'1/2' repeats '1/2'"), ("1,0.5,1/2", "'1/2' repeats '0.5'"),
+                          ("1,,1/2", "empty item in '1,,1/2'"), ("1,", "empty item"), ("", "empty item")):
+        with pytest.raises(gb.GBViewerError, match=f"^rates: {message}"):
+            parse_rates(text)
+    for text, message in (("scalar,scalar,SCALAR", "'scalar' repeats 'scalar'"), ("SCALAR,scalar:1", "'scalar:1' repeats 'SCALAR'"),
+                          ("supersample:2,scalar:2", "'scalar:2' repeats 'supersample:2'"),
+                          ("scalar,", "empty item in 'scalar,'"), (" ", "empty item")):
+        with pytest.raises(gb.GBViewerError, match=f"^--modes: {message}"):
+            RenderSettings.parse_list(text)
+
+
+@pytest.mark.parametrize("command, args, message", [
+    ("eval", ["--data", "nowhere", "--rates", "1,1/2,1/2"], "argument --rates: '1/2' repeats '1/2'"),
+    ("eval", ["--data", "nowhere", "--rates", "1,,1/2"], "argument --rates: empty item in '1,,1/2'"),
+    ("eval", ["--data", "nowhere", "--modes", "scalar,scalar,SCALAR"], "--modes: 'scalar' repeats 'scalar'"),
+    ("eval", ["--data", "nowhere", "--modes", "scalar,"], "--modes: empty item in 'scalar,'"),
+    ("trace", ["--pixel", "1,1", "--modes", "scalar,scalar"], "--modes: 'scalar' repeats 'scalar'"),
+    ("bench", ["--modes", "mip,,scalar"], "--modes: empty item in 'mip,,scalar'"),
+])
+def test_repeated_or_empty_items_are_one_cli_line(command, args, message, capsys, tmp_path):
+    status = cli.main([command, str(gb.DEFAULT_SCENE), *args])
+    err = capsys.readouterr().err
+    assert status == 2 and len(err.splitlines()) == 1 and message in err, err
