@@ -315,16 +315,17 @@ def test_repeated_or_empty_items_are_one_cli_line(command, args, message, capsys
 
 
 def test_a_cache_in_the_dataset_is_refused(blender, capture, tmp_path, capsys):
-    """--cache the dataset folder, inside it, or (a cameras.json) the folder beside it: one line, nothing written."""
+    """--cache the dataset folder, inside it, or (a cameras.json) in its photo folder: one line, nothing written.
+    Beside a cameras.json (a 3DGS output folder) is not in the dataset."""
     cameras = tmp_path / "set" / "cameras.json"
     cameras.parent.mkdir()
     cameras.write_text("[]")
     for data, cache in ((blender, blender), (blender, blender / "sub" / "cache"), (capture, capture / "images"),
-                        (cameras, cameras.parent / "c")):
+                        (cameras, cameras.parent / "images" / "c")):
         before = sorted(data.parent.rglob("*"))
         status = cli.main(["eval", f"{gb.DEFAULT_SCENE}:{data}", "--rates", "1,1/2", "--modes", "scalar",
                            "--cache", str(cache)])
         err = capsys.readouterr().err
         assert status == 2 and len(err.splitlines()) == 1, err
-        assert f"--cache {cache}: is inside the dataset {data if data.is_dir() else data.parent}" in err, err
+        assert f"--cache {cache}: is inside the dataset {data if data.is_dir() else data.parent / 'images'}" in err
         assert sorted(data.parent.rglob("*")) == before

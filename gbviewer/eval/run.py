@@ -91,12 +91,12 @@ def _pool(tasks: list[ViewTask], workers: int, advance: Callable[[int], None]) -
     return out
 
 
-def _refuse_cache_in_datasets(cache: Path, datasets: Sequence[Path]) -> None:
-    """A one-line error when the cache folder is a dataset's folder (a cameras.json: the folder beside it) or
-    inside one: downsampled photos are never written into a dataset."""
+def _refuse_cache_in_datasets(cache: Path, datasets: Sequence[Path], images: str) -> None:
+    """A one-line error when the cache folder is a dataset's folder (a cameras.json's: its photo folder `images`
+    beside it) or inside one: downsampled photos are never written into a dataset."""
     where = cache.resolve()
     for data in datasets:
-        root = data.resolve() if data.is_dir() else data.resolve().parent
+        root = data.resolve() if data.is_dir() else data.resolve().parent / images
         if where == root or root in where.parents:
             raise GBViewerError(f"--cache {cache}: is inside the dataset {root}; the downsampled photos never go "
                                 "into a dataset (give a folder outside it)")
@@ -117,7 +117,7 @@ def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettin
 
         check_address(ray)  # before the datasets: a wrong address is one line, not minutes of Ray retries
     if cache is not None:
-        _refuse_cache_in_datasets(Path(cache), [Path(data) for _, data in pairs])
+        _refuse_cache_in_datasets(Path(cache), [Path(data) for _, data in pairs], images)
         cache = check_writable(cache, folder=True).resolve()  # absolute: workers may run elsewhere
     runner = f"ray {ray}" if ray else f"{workers} worker{'s' * (workers > 1)}"
     result = EvalResult([s.spec for s in settings], list(rates), split, background, runner)
