@@ -329,3 +329,22 @@ def test_a_cache_in_the_dataset_is_refused(blender, capture, tmp_path, capsys):
         assert status == 2 and len(err.splitlines()) == 1, err
         assert f"--cache {cache}: is inside the dataset {data if data.is_dir() else data.parent / 'images'}" in err
         assert sorted(data.parent.rglob("*")) == before
+
+
+def test_an_8000x6000_photo_is_refused_under_an_8g_budget(tmp_path, capsys, monkeypatch):
+    """The tester's case: an all-zero 8000x6000 PNG (grey, tens of KB) took > 9 GB and > 70 s; now refused in
+    one line before it is decoded, naming the photo, its size, the estimate and the budget."""
+    (tmp_path / "images").mkdir()
+    Image.new("L", (8000, 6000)).save(tmp_path / "images" / "a.png", compress_level=1)
+    cams = [{"id": 0, "img_name": "a", "width": 800, "height": 600, "position": [0, 0, 0],
+             "rotation": np.eye(3).tolist(), "fx": 700.0, "fy": 700.0}]
+    (tmp_path / "cameras.json").write_text(json.dumps(cams))
+    monkeypatch.setattr(gt_module, "read_photo", lambda path: pytest.fail("decoded the photo"))
+    monkeypatch.setenv("GBVIEWER_MEMORY_BUDGET", "8G")
+    status = cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(tmp_path / "cameras.json"), "--rates", "1",
+                       "--modes", "scalar", "--split", "all", "--cache", str(tmp_path / "c")])
+    err = capsys.readouterr().err
+    assert status == 2 and len(err.splitlines()) == 1, err
+    assert f"{tmp_path / 'images' / 'a.png'}: the 8000x6000 photo needs about 1" in err, err
+    assert "more than the 8 GiB budget (GBVIEWER_MEMORY_BUDGET); set GBVIEWER_MEMORY_BUDGET" in err
+    assert "--images images_4" in err
