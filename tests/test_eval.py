@@ -293,7 +293,8 @@ def test_repeated_or_empty_rates_and_modes_are_refused():
                           ("1,,1/2", "empty item in '1,,1/2'"), ("1,", "empty item"), ("", "empty item")):
         with pytest.raises(gb.GBViewerError, match=f"^rates: {message}"):
             parse_rates(text)
-    for text, message in (("scalar,scalar,SCALAR", "'scalar' repeats 'scalar'"), ("SCALAR,scalar:1", "'scalar:1' repeats 'SCALAR'"),
+    for text, message in (("scalar,scalar,SCALAR", "'scalar' repeats 'scalar'"),
+                          ("SCALAR,scalar:1", "'scalar:1' repeats 'SCALAR'"),
                           ("supersample:2,scalar:2", "'scalar:2' repeats 'supersample:2'"),
                           ("scalar,", "empty item in 'scalar,'"), (" ", "empty item")):
         with pytest.raises(gb.GBViewerError, match=f"^--modes: {message}"):
