@@ -88,7 +88,7 @@ class Rate:
         try:
             return parse_rates(text) if self.many else parse_rate(text)
         except InvalidValue as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
+            raise argparse.ArgumentTypeError(str(exc).removeprefix("rates: ")) from None
 
 
 def count(hi: int | None = None, lo: int = 1) -> Number:

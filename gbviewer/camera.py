@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import CameraError, InvalidValue
-from .validate import F32_MAX, array, field, integer, read_json, real
+from .validate import F32_MAX, array, distinct_items, field, integer, read_json, real
 
 if TYPE_CHECKING:
     from .scene import Scene
@@ -50,11 +50,9 @@ def parse_projection(value: object, what: str) -> str:
 
 
 def parse_rates(text: str) -> list[float]:
-    """Comma-separated sampling rates ('1,1/2,1/8'); at least one."""
-    rates = [parse_rate(r) for r in text.split(",") if r.strip()]
-    if not rates:
-        raise InvalidValue(f"no sampling rate given in {text!r}")
-    return rates
+    """Comma-separated sampling rates ('1,1/2,1/8'); at least one, each once (1/2 and 0.5 are the same), none
+    empty."""
+    return distinct_items(text, "rates", parse_rate)
 
 
 def focal_from_fov(fov_y_deg: float, height: float) -> float:

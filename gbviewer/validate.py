@@ -10,11 +10,13 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, TypeVar
 
 import numpy as np
 
 from .errors import InvalidValue
+
+T = TypeVar("T")
 
 F32_MAX = float(np.finfo(np.float32).max)
 F32_TINY = float(np.finfo(np.float32).tiny)  # the smallest normal float32: a positive value below it underflows
@@ -78,6 +80,24 @@ def integer(value: object, what: str, *, lo: int | None = None, hi: int | None =
     if hi is not None and n > hi:
         raise InvalidValue(f"{what}: expected <= {hi}, got {_describe(n)}")
     return n
+
+
+def distinct_items(text: str, what: str, parse: Callable[[str], T], key: Callable[[T], Any] = lambda v: v) -> list[T]:
+    """Comma-separated `text` parsed item by item: at least one, no empty item, no two with the same `key` (the
+    same rate twice biases an average, the same mode twice is the same work twice); `InvalidValue` naming `what`."""
+    items = text.split(",")
+    if any(not item.strip() for item in items):
+        raise InvalidValue(f"{what}: empty item in {text!r:.80} (expected comma-separated values, none empty)")
+    out: list[T] = []
+    seen: dict[Any, str] = {}
+    for item in items:
+        value = parse(item)
+        k = key(value)
+        if k in seen:
+            raise InvalidValue(f"{what}: {item.strip()!r:.40} repeats {seen[k]!r:.40} in {text!r:.80} (give each once)")
+        seen[k] = item.strip()
+        out.append(value)
+    return out
 
 
 def array(value: object, what: str, shape: tuple[int, ...], *, f32: bool = False) -> np.ndarray:

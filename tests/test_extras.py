@@ -97,7 +97,7 @@ def test_missing_extra_is_one_line_and_a_gbviewer_error():
 def test_pyproject_extras_hold_the_packages_require_names():
     import tomllib
 
-    project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
+    project = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())["project"]
     pip_name = {"glfw": "glfw", "imgui_bundle": "imgui-bundle", "skimage": "scikit-image", "matplotlib": "matplotlib",
                 "pycolmap": "pycolmap", "imageio_ffmpeg": "imageio-ffmpeg", "ray": "ray", "torch": "torch"}
     core = " ".join(project["dependencies"])

@@ -59,7 +59,8 @@ def _folder_scenes(folder: Path) -> list[Path]:
 
 def scene_pairs(scenes: list[str], data: Path | None) -> list[tuple[Path, Path]]:
     """(scene, dataset) for each SCENE argument: SCENE with --data, SCENE:DATASET, or each scene of a folder with
-    the dataset named as it (its file name without the suffix) in --data."""
+    the dataset named as it (its file name without the suffix) in --data; SCENE:DATASET with --data is refused
+    (which dataset?)."""
     pairs: list[tuple[Path, Path]] = []
     for arg in scenes:
         path = Path(arg)
@@ -67,6 +68,9 @@ def scene_pairs(scenes: list[str], data: Path | None) -> list[tuple[Path, Path]]
             scene, _, dataset = arg.rpartition(":")
             if not scene.strip() or not dataset.strip():
                 raise GBViewerError(f"{arg}: expected SCENE:DATASET with both parts (no such file either)")
+            if data is not None:
+                raise GBViewerError(f"{arg}: SCENE:DATASET names its dataset; --data {data} too is ambiguous "
+                                    "(give one of them)")
             pairs.append((Path(scene), Path(dataset)))
         elif data is None:
             raise GBViewerError(f"{arg}: which dataset? give --data DATASET or {arg}:DATASET")

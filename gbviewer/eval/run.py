@@ -18,7 +18,8 @@ from ..errors import GBViewerError
 from ..io.datasets import View, load_dataset
 from ..io.files import check_writable
 from ..render import RenderSettings
-from .multiscale import camera_for_rate, rate_factor
+from .memory import check_view_memory
+from .multiscale import rate_factor
 from .tasks import ViewResult, ViewTask, evaluate_view, finite, run_task
 
 # progress(description, total tasks) -> a context that yields advance(tasks done)
@@ -90,6 +91,17 @@ def _pool(tasks: list[ViewTask], workers: int, advance: Callable[[int], None]) -
     return out
 
 
+def _refuse_cache_in_datasets(cache: Path, datasets: Sequence[Path], images: str) -> None:
+    """A one-line error when the cache folder is a dataset's folder (a cameras.json's: its photo folder `images`
+    beside it) or inside one: downsampled photos are never written into a dataset."""
+    where = cache.resolve()
+    for data in datasets:
+        root = data.resolve() if data.is_dir() else data.resolve().parent / images
+        if where == root or root in where.parents:
+            raise GBViewerError(f"--cache {cache}: is inside the dataset {root}; the downsampled photos never go "
+                                "into a dataset (give a folder outside it)")
+
+
 def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettings], rates: Sequence[float], *,
              split: str = "test", background: tuple[float, float, float] = (0.0, 0.0, 0.0), images: str = "images",
              backend: str = "auto", workers: int = 1, ray: str | None = None, threads: int | None = None,
@@ -100,7 +112,12 @@ def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettin
     shared among the workers; on Ray as `cluster.run_on_ray` chooses). cache: folder of box-downsampled photos."""
     for rate in rates:
         rate_factor(rate)
+    if ray:
+        from .cluster import check_address
+
+        check_address(ray)  # before the datasets: a wrong address is one line, not minutes of Ray retries
     if cache is not None:
+        _refuse_cache_in_datasets(Path(cache), [Path(data) for _, data in pairs], images)
         cache = check_writable(cache, folder=True).resolve()  # absolute: workers may run elsewhere
     runner = f"ray {ray}" if ray else f"{workers} worker{'s' * (workers > 1)}"
     result = EvalResult([s.spec for s in settings], list(rates), split, background, runner)
@@ -115,8 +132,7 @@ def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettin
         dataset = load_dataset(data, images)
         views = dataset.split(split)
         for view in views:
-            for rate in rates:
-                camera_for_rate(view.camera, rate)
+            check_view_memory(view, settings, rates, dataset.format, 1 if ray else min(workers, len(views)))
         result.scenes.append(SceneEval(scene, data, dataset.format, views, []))
         tasks += [ViewTask(str(scene), i, j, v, tuple(settings), tuple(rates), background, backend, threads,
                            str(cache) if cache is not None else None) for j, v in enumerate(views)]

@@ -17,7 +17,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
-from ..validate import array, integer, real
+from ..validate import array, distinct_items, integer, real
 
 
 class Mode(enum.IntEnum):
@@ -140,11 +140,12 @@ class RenderSettings:
 
     @classmethod
     def parse_list(cls, specs: str, **kwargs) -> "list[RenderSettings]":
-        """Comma-separated mode specs, e.g. 'scalar,supersample:3,gaussian_blending'."""
-        out = [cls.parse(s, **kwargs) for s in specs.split(",") if s.strip()]
-        if not out:
-            raise RenderError("no modes given")
-        return out
+        """Comma-separated mode specs, e.g. 'scalar,supersample:3,gaussian_blending': at least one, each once
+        (SCALAR, scalar:1 and supersample:1 are scalar), none empty."""
+        try:
+            return distinct_items(specs, "--modes", lambda s: cls.parse(s, **kwargs), key=lambda s: s.spec)
+        except InvalidValue as exc:
+            raise RenderError(str(exc)) from None
 
 
 @dataclass

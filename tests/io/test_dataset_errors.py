@@ -151,3 +151,31 @@ def test_photo_names_outside_the_photo_folder(tmp_path, name):
 def test_an_invalid_camera_names_the_model_and_the_image(tmp_path):
     one_line(colmap_text(tmp_path, [(POSE, "1", "a.png")], camera="1 PINHOLE 0 6 10 10 4 3\n"),
              str(tmp_path / "sparse" / "0"), "image 'a.png': camera 1: width: expected >= 1, got 0")
+
+
+@pytest.mark.parametrize("images, camera, expect", [
+    ([("1 0 0 0 nan 0 5", "1", "a.png")], CAMERA, "images.txt line 1: expected finite numbers, got 'nan' (item 6)"),
+    ([(POSE, "1", "a.png"), ("1 0 0 0 0 x 5", "1", "b.png")], CAMERA, "images.txt line 3: expected finite numbers"),
+    ([("1 0 0 0 0 0 inf", "1", "a.png")], CAMERA, "images.txt line 1: expected finite numbers, got 'inf'"),
+    ([(POSE, "1.5", "a.png")], CAMERA, "images.txt line 1: expected an integer, got '1.5' (item 9)"),
+    ([("1 0 0 0 0 0", "1", "a.png")], CAMERA, "images.txt line 1: expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID"),
+    ([(POSE, "1", "a.png")], "1 FANCY 8 6 10 10 4 3\n", "cameras.txt line 1: unknown camera model 'FANCY'; "
+     "supported: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV"),
+    ([(POSE, "1", "a.png")], "# c\n1 PINHOLE 8 6 10 nan 4 3\n", "cameras.txt line 2: PINHOLE parameters: expected "
+     "finite numbers, got 'nan'"),
+    ([(POSE, "1", "a.png")], "1 PINHOLE 8 6 10 10 4\n", "cameras.txt line 1: PINHOLE has 4 parameters, got 3"),
+    ([(POSE, "1", "a.png")], "1 PINHOLE 8.5 6 10 10 4 3\n", "cameras.txt line 1: expected an integer, got '8.5'"),
+])
+def test_a_malformed_text_model_names_the_file_and_line(tmp_path, images, camera, expect):
+    """Checked before pycolmap, whose messages were its own internals ('[reconstruction_io_text.cc:189] Check
+    failed: line_stream >> ...')."""
+    one_line(colmap_text(tmp_path, images, camera=camera), str(tmp_path / "sparse" / "0"), expect)
+
+
+def test_points_lines_are_counted_and_comments_skipped(tmp_path):
+    root = colmap_text(tmp_path, [(POSE, "1", "a.png")])
+    images = root / "sparse" / "0" / "images.txt"
+    images.write_text(f"# header\n\n1 {POSE} 1 a.png\n1.5 2.5 -1 3 4 -1\n")
+    assert [v.name for v in load_dataset(root).views] == ["a.png"]
+    images.write_text(f"1 {POSE} 1 a.png\n1.5 2.5\n")
+    one_line(root, "images.txt line 2: expected X Y POINT3D_ID triples (the image line's points), got 2 items")

@@ -56,7 +56,7 @@ def _file(path, n: int, seed: int):
 def _measure(tmp_path, render: bool) -> dict:
     big, small = _file(tmp_path / "big.ply", N, 1), _file(tmp_path / "small.ply", 1000, 2)
     out = subprocess.run([sys.executable, "-c", CHILD, str(big), str(small), "1" if render else "0"],
-                         check=True, capture_output=True, text=True)
+                         check=True, capture_output=True, text=True, cwd=tmp_path)  # not the checkout's gbviewer
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 

@@ -17,6 +17,7 @@ from ...camera import Camera
 from ...errors import CameraError, DatasetError, InvalidValue
 from ...extras import require
 from ...validate import array, real
+from .colmap_text import check_text_model
 from .dataset import Dataset, View, holdout_splits
 from .photos import fit_to_photo, missing_photos, photo_path
 
@@ -40,9 +41,11 @@ def model_folder(root: Path) -> Path | None:
 
 
 def _stage(model: Path, into: Path) -> int:
-    """Links to the model's files in `into` with an empty points3D (binary preferred, as COLMAP does); returns
-    their size in bytes."""
+    """Links to the model's files in `into` with an empty points3D (binary preferred, as COLMAP does; a text model
+    checked line by line first, `check_text_model`); returns their size in bytes."""
     suffix = ".bin" if (model / "cameras.bin").is_file() else ".txt"
+    if suffix == ".txt" and (model / "cameras.txt").is_file() and (model / "images.txt").is_file():
+        check_text_model(model)
     size = 0
     for name in MODEL_FILES[suffix]:
         src = model / f"{name}{suffix}"
