@@ -161,9 +161,9 @@ KEYS = [{"time": 0, "orbit": [30, 20, 0]}, {"time": 1, "position": [0.5, -0.5, 2
     (2, {"cx": [1]}, "keyframe 2: 'cx': expected a number"),
     (2, {"R": (2 * np.eye(3)).tolist()}, "keyframe 2: camera 'key2': R is not a rotation matrix"),
     (0, {"orbit": [30]}, "keyframe 0: 'orbit': expected \\[azimuth, elevation\\]"),
-    (0, {"orbit": [30, "up", 1]}, "keyframe 0: 'orbit' elevation: expected a number"),
+    (0, {"orbit": [30, "up", 1]}, "keyframe 0: 'orbit' elevation: expected a JSON number"),
     (0, {"orbit": [30, 20, 1e39]}, "keyframe 0: 'orbit' distance: expected a finite float32"),
-    (3, {"time": "soon"}, "keyframe 3: 'time': expected a number"),
+    (3, {"time": "soon"}, "keyframe 3: 'time': expected a JSON number"),
     (3, {"time": 0.5}, "times must be finite and strictly increasing"),
     (3, {"rotation": None}, "keyframe 3: 'rotation': expected a 3x3 matrix"),
 ])

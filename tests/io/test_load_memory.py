@@ -1,7 +1,8 @@
 """Memory of a load, measured in a child process (so that nothing else this test run did counts): the peak during
 a streamed INRIA load stays within 1.25x the scene's arrays, and dropping the scene (after rendering it and
 releasing the renderer) gives the memory back, to within 10% of the resident size before (taken after a first
-load and drop of the same file, which leaves the interpreter's one-time growth of a large load behind)."""
+load and drop of the same file, which leaves the interpreter's one-time growth of a large load behind), once glibc
+has returned its free lists (malloc_trim; without it about 8 MB of a 47 MB scene stays in them)."""
 
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from gbviewer.render.cpu import CpuRenderer
 
 N = 200_000  # 47 MB of SH-degree-3 splat arrays: well above the interpreter's own noise
 CHILD = r"""
-import gc, json, sys
+import ctypes, gc, json, sys
 import gbviewer as gb
 from gbviewer.bench.scale import peak_rss_bytes, rss_bytes, scene_bytes
 from gbviewer.camera import orbit_camera
@@ -40,7 +41,10 @@ peak, loaded, arrays = peak_rss_bytes(), rss_bytes(), scene_bytes(scene)
 use(scene)
 del scene
 gc.collect()
-print(json.dumps({"before": before, "peak": peak, "loaded": loaded, "arrays": arrays, "after": rss_bytes()}))
+after = rss_bytes()
+ctypes.CDLL("libc.so.6").malloc_trim(0)  # glibc's free lists back to the system: what stays is memory in use
+print(json.dumps({"before": before, "peak": peak, "loaded": loaded, "arrays": arrays, "after": after,
+                  "in_use": rss_bytes()}))
 """
 
 
@@ -65,10 +69,10 @@ def test_peak_during_a_load_is_close_to_the_arrays_and_dropping_the_scene_frees_
     assert m["arrays"] == N * (3 + 3 + 4 + 1 + 48) * 4
     assert m["loaded"] - m["before"] >= 0.9 * m["arrays"]  # the measurement sees the arrays
     assert m["peak"] - m["before"] <= 1.25 * m["arrays"], m
-    assert m["after"] - m["before"] <= 0.1 * m["before"], m  # back to within 10% of before (or below)
+    assert m["in_use"] - m["before"] <= 0.1 * m["before"], m  # back to within 10% of before (or below)
 
 
 @pytest.mark.skipif(not CpuRenderer.available()[0], reason="the cpu backend's native module is not built")
 def test_closing_a_rendered_scene_gives_its_memory_back(tmp_path):
     m = _measure(tmp_path, render=True)
-    assert m["after"] - m["before"] <= 0.1 * m["before"], m  # back to within 10% of before (or below)
+    assert m["in_use"] - m["before"] <= 0.1 * m["before"], m  # back to within 10% of before (or below)
