@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 import os
+import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
 
@@ -18,6 +20,27 @@ IN_CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
 
 
 OUTPUT_W, OUTPUT_H = 96, 64  # the pane of the output-layer tests (video, figure, camera paths, keyframes)
+
+
+def run_threads(work: Callable[[int], None], n: int, timeout: float = 300.0) -> None:
+    """Run work(0) .. work(n - 1) in n threads at once; every thread must end within `timeout` s without raising
+    (the first exception of a thread is re-raised here, the others listed)."""
+    errors: list[BaseException] = []
+
+    def run(k: int) -> None:
+        try:
+            work(k)
+        except BaseException as exc:  # noqa: BLE001 - reported by the calling thread
+            errors.append(exc)
+
+    threads = [threading.Thread(target=run, args=(k,), daemon=True) for k in range(n)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout)
+    assert not any(t.is_alive() for t in threads), f"a thread still runs after {timeout} s"
+    if errors:
+        raise AssertionError(f"{len(errors)} of {n} threads raised: {errors}") from errors[0]
 
 
 def skip_or_fail(reason: str) -> NoReturn:

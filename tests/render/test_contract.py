@@ -15,6 +15,7 @@ from gbviewer.bench import SIMD_NAMES
 from gbviewer.errors import BackendFailed, RenderCancelled, RenderError
 from gbviewer.render import BACKENDS, Capabilities, Renderer, RenderSettings, capable, create_gl_context, get_renderer
 from gbviewer.render.glsl.context import standalone_context
+from helpers import run_threads
 
 GB = RenderSettings("gaussian_blending")
 TILED = RenderSettings("gaussian_blending", supersample=2)  # at 320x240: 1200 tiles, progress and partial between
@@ -164,31 +165,22 @@ def test_two_threads_render_at_once(backend, renderer, bundled_scene):
     cams = [view(bundled_scene, azimuth=a) for a in (0.0, 120.0)]
     expected = [renderer.render(c, GB).rgb for c in cams]
     got: dict[tuple[int, int], np.ndarray] = {}
-    errors: list[BaseException] = []
     start = threading.Barrier(2)
 
     def work(k: int) -> None:
-        try:
-            ctx = create_gl_context() if backend.capabilities.gl_context else None
-            own = backend(ctx=ctx) if ctx is not None else renderer
-            if ctx is not None:
-                own.upload(bundled_scene)
-            start.wait()
-            for j in range(len(cams)):  # the threads in opposite orders
-                i = (j + k) % len(cams)
-                got[k, i] = own.render(cams[i], GB).rgb
-            if ctx is not None:
-                own.release()
-                ctx.release()
-        except BaseException as exc:  # noqa: BLE001 - reported by the main thread
-            errors.append(exc)
+        ctx = create_gl_context() if backend.capabilities.gl_context else None
+        own = backend(ctx=ctx) if ctx is not None else renderer
+        if ctx is not None:
+            own.upload(bundled_scene)
+        start.wait()
+        for j in range(len(cams)):  # the threads in opposite orders
+            i = (j + k) % len(cams)
+            got[k, i] = own.render(cams[i], GB).rgb
+        if ctx is not None:
+            own.release()
+            ctx.release()
 
-    threads = [threading.Thread(target=work, args=(k,)) for k in range(2)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(300)
-    assert not errors, errors
+    run_threads(work, 2)
     assert len(got) == 2 * len(cams)  # every thread rendered every view
     for (_, j), rgb in got.items():
         np.testing.assert_array_equal(rgb, expected[j])

@@ -4,7 +4,6 @@ taller than CUDA's grid rows, uploads of other scenes racing cell uploads, a lar
 
 from __future__ import annotations
 
-import threading
 
 import numpy as np
 import pytest
@@ -12,7 +11,7 @@ import pytest
 import gbviewer as gb
 from gbviewer.cells import Cells, build_cells
 from gbviewer.render import CudaRenderer
-from helpers import front_camera, random_scene
+from helpers import front_camera, random_scene, run_threads
 
 CUDA_OK, CUDA_WHY = CudaRenderer.available()
 pytestmark = pytest.mark.skipif(not CUDA_OK, reason=f"no CUDA runtime here: {CUDA_WHY}")
@@ -43,27 +42,17 @@ def test_cuda_cell_uploads_racing_scene_uploads():
     native = _native_cuda.Renderer()
     scenes = [random_scene(n, seed=n) for n in (50, 3000)]
     cells = [build_cells(s, 8) for s in scenes]
-    refused, errors = [0], []
 
     def work(i: int) -> None:
         s, c = scenes[i], cells[i]
-        try:
-            for _ in range(40):
-                native.upload(s.means, s.scales, s.quats, s.opacities, s.sh, None)
-                try:
-                    native.upload_cells(c.means, c.scales, c.quats, c.offsets, c.members, c.cell_of(s.num_splats))
-                except (RuntimeError, ValueError) as exc:
-                    assert "another scene" in str(exc) or "partition" in str(exc) or "cell_of" in str(exc), exc
-                    refused[0] += 1
-        except BaseException as exc:  # noqa: BLE001 - reported below
-            errors.append(exc)
+        for _ in range(40):
+            native.upload(s.means, s.scales, s.quats, s.opacities, s.sh, None)
+            try:
+                native.upload_cells(c.means, c.scales, c.quats, c.offsets, c.members, c.cell_of(s.num_splats))
+            except (RuntimeError, ValueError) as exc:
+                assert "another scene" in str(exc) or "partition" in str(exc) or "cell_of" in str(exc), exc
 
-    threads = [threading.Thread(target=work, args=(i,)) for i in range(2)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(120)
-    assert not errors, errors
+    run_threads(work, 2, timeout=120)
     scene = gb.Scene.from_arrays(scenes[1].means, scenes[1].scales, scenes[1].quats, scenes[1].opacities,
                                  scenes[1].sh, cells=cells[1])
     close(gb.render(scene, front_camera(), "duplex", backend="cuda"),

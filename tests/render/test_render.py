@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from helpers import front_camera, random_scene
+from helpers import front_camera, random_scene, run_threads
 
 
 def test_get_renderer_reuses_and_releases_scenes():
@@ -42,24 +42,15 @@ def check_concurrent_renders(backend: str, scene: gb.Scene, threads: int = 2, ro
     alone = [renderer.render(cam, settings) for cam, settings in jobs]
     barrier = threading.Barrier(threads)
     results: list[tuple[int, gb.Frame]] = []
-    errors: list[BaseException] = []
 
     def work(t: int) -> None:
-        try:
-            order = [(j + t * len(jobs) // threads) % len(jobs) for j in range(len(jobs))]
-            barrier.wait()
-            for _ in range(rounds):
-                for j in order:
-                    results.append((j, renderer.render(*jobs[j])))
-        except BaseException as exc:  # noqa: BLE001 - reported below
-            errors.append(exc)
+        order = [(j + t * len(jobs) // threads) % len(jobs) for j in range(len(jobs))]
+        barrier.wait()
+        for _ in range(rounds):
+            for j in order:
+                results.append((j, renderer.render(*jobs[j])))
 
-    workers = [threading.Thread(target=work, args=(t,)) for t in range(threads)]
-    for w in workers:
-        w.start()
-    for w in workers:
-        w.join(timeout=300)
-    assert not errors, errors
+    run_threads(work, threads)
     assert len(results) == threads * rounds * len(jobs)
     for j, frame in results:
         ref = alone[j]
@@ -136,41 +127,32 @@ def test_renders_of_two_scenes_from_many_threads_get_their_own_scene():
     threads = 4
     barrier = threading.Barrier(threads)
     wrong: list[str] = []
-    errors: list[BaseException] = []
 
     def work(t: int) -> None:
-        try:
-            own = t % 2
-            handle = gb.get_renderer(scenes[own])
-            barrier.wait()
-            for k in range(120):
-                m = modes[(k // 3) % 2]
-                if k % 3 == 0:
-                    i = (t + k) % 2
-                    frame = gb.render(scenes[i], cam, m)
-                elif k % 12 == 1:
-                    i = (t + k) % 2
-                    if gb.trace_pixel(scenes[i], cam, 16, 12).to_json() != traces[i]:
-                        wrong.append(f"thread {t}: trace {k} of scene {i}")
-                    continue
-                else:
-                    i, frame = own, handle.render(cam, gb.RenderSettings.parse(m))
-                if not (np.array_equal(frame.rgb, refs[i, m].rgb) and np.array_equal(frame.alpha, refs[i, m].alpha)):
-                    wrong.append(f"thread {t}: frame {k} ({m}) of scene {i}")
-        except BaseException as exc:  # noqa: BLE001 - reported below
-            errors.append(exc)
+        own = t % 2
+        handle = gb.get_renderer(scenes[own])
+        barrier.wait()
+        for k in range(120):
+            m = modes[(k // 3) % 2]
+            if k % 3 == 0:
+                i = (t + k) % 2
+                frame = gb.render(scenes[i], cam, m)
+            elif k % 12 == 1:
+                i = (t + k) % 2
+                if gb.trace_pixel(scenes[i], cam, 16, 12).to_json() != traces[i]:
+                    wrong.append(f"thread {t}: trace {k} of scene {i}")
+                continue
+            else:
+                i, frame = own, handle.render(cam, gb.RenderSettings.parse(m))
+            if not (np.array_equal(frame.rgb, refs[i, m].rgb) and np.array_equal(frame.alpha, refs[i, m].alpha)):
+                wrong.append(f"thread {t}: frame {k} ({m}) of scene {i}")
 
-    workers = [threading.Thread(target=work, args=(t,)) for t in range(threads)]
     before = sys.getswitchinterval()
     sys.setswitchinterval(1e-6)
     try:
-        for w in workers:
-            w.start()
-        for w in workers:
-            w.join(timeout=300)
+        run_threads(work, threads)
     finally:
         sys.setswitchinterval(before)
-    assert not errors, errors
     assert not wrong, f"{len(wrong)} of {threads * 120} calls: {wrong[:5]}"
 
 
