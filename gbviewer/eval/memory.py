@@ -8,7 +8,7 @@ from typing import Sequence
 from ..errors import GBViewerError
 from ..io.datasets import View
 from ..render import RenderSettings
-from ..render.budget import BUDGET_ENV, frame_bytes, memory_budget
+from ..render.budget import BUDGET_ENV, frame_bytes, gib, memory_budget
 from .multiscale import camera_for_rate, rate_factor
 
 DECODE_BYTES = 40  # per photo pixel: the decoded RGBA bytes (PIL and numpy) and its float32 copy and quotient
@@ -34,7 +34,6 @@ def check_view_memory(view: View, settings: Sequence[RenderSettings], rates: Seq
     need = view_bytes(view, settings, rates) * processes
     budget, source = memory_budget()
     if need > budget:
-        gib = lambda n: f"{n / (1 << 30):.3g} GiB"  # noqa: E731
         smaller = "" if fmt == "blender" else " or evaluate downsampled photos (e.g. --images images_4)"
         each = f" ({processes} workers at once)" if processes > 1 else ""
         raise GBViewerError(f"{view.image}: the {view.camera.width}x{view.camera.height} photo needs about "

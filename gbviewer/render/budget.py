@@ -10,7 +10,7 @@ import resource
 
 from ..camera import Camera
 from ..errors import RenderError
-from .types import RenderSettings
+from .types import Mode, RenderSettings
 
 BUDGET_ENV = "GBVIEWER_MEMORY_BUDGET"  # bytes, or with a K, M, G or T suffix (powers of 1024)
 SAMPLE_BYTES = 20  # per rendered sample: RGB and alpha (float32), evaluations (int32)
@@ -30,7 +30,7 @@ def frame_bytes(camera: Camera, settings: RenderSettings, splats: int) -> int:
     n = settings.supersample
     samples = camera.width * camera.height * n * n
     tiles = -(-camera.width * n // TILE) * -(-camera.height * n // TILE)
-    window = WINDOW_BYTES if settings.mode.name == "GAUSSIAN_BLENDING" else 0
+    window = WINDOW_BYTES if settings.mode == Mode.GAUSSIAN_BLENDING else 0
     return (samples * (SAMPLE_BYTES + window) + camera.width * camera.height * PIXEL_BYTES + tiles * TILE_BYTES
             + splats * SPLAT_BYTES)
 
@@ -70,7 +70,8 @@ def memory_budget() -> tuple[int, str]:
     return int(value), BUDGET_ENV
 
 
-def _gib(n: int) -> str:
+def gib(n: int) -> str:
+    """n bytes in GiB, three significant digits."""
     return f"{n / (1 << 30):.3g} GiB"
 
 
@@ -80,5 +81,5 @@ def check_frame_memory(camera: Camera, settings: RenderSettings, splats: int) ->
     budget, source = memory_budget()
     if need > budget:
         raise RenderError(f"{camera.width}x{camera.height} at supersample {settings.supersample} needs at least "
-                          f"{_gib(need)} for its buffers, more than the {_gib(budget)} budget ({source}); render "
+                          f"{gib(need)} for its buffers, more than the {gib(budget)} budget ({source}); render "
                           f"smaller or set {BUDGET_ENV} (e.g. {BUDGET_ENV}=64G) to raise it")
