@@ -11,11 +11,11 @@ Used by the viewer's difference and error views (`app/difference_views.py`) and 
 
 from __future__ import annotations
 
-import threading
 
 import numpy as np
 
 from .camera import Camera, format_rate
+from .cancel import Cancellable
 from .metrics import box_downsample, psnr, ssim, zoom_out_factor
 from .render import Mode, Renderer, RenderSettings
 
@@ -95,7 +95,7 @@ def reference_note(kind: str, rate: float) -> str:
 
 
 def reference_image(renderer: Renderer, camera: Camera, rate: float, kind: str,
-                    settings: RenderSettings | None = None, cancel: threading.Event | None = None
+                    settings: RenderSettings | None = None, cancel: Cancellable | None = None
                     ) -> np.ndarray | None:
     """The reference (H, W, 3) of a render at `camera`, the view at sampling rate `rate` (see the module's doc);
     None where `kind` has none at that rate (`reference_note` says why)."""

@@ -7,7 +7,6 @@ and the last few are cached (panes of one size share them). No OpenGL here."""
 
 from __future__ import annotations
 
-import threading
 import time
 import traceback
 from dataclasses import dataclass
@@ -18,6 +17,7 @@ import numpy as np
 from ..differences import (DENSE_SUPERSAMPLE, camera_key, fidelity, reference_image, reference_note, reference_settings,
                         robust_scale, signed_difference)
 from ..camera import Camera
+from ..cancel import CancelToken
 from ..errors import GBViewerError, RenderCancelled
 from ..eval import default_cache, ground_truth
 from ..io.datasets import View
@@ -82,7 +82,7 @@ class AnalysisThread(SlotThread):
         super()._release()
         self._cache.clear()
 
-    def _work(self, req: Request, cancel: threading.Event) -> tuple[Hashable, Analysis] | None:
+    def _work(self, req: Request, cancel: CancelToken) -> tuple[Hashable, Analysis] | None:
         result = self._analyse(req, cancel)
         return None if result is None else (req.slot, result)
 
@@ -94,7 +94,7 @@ class AnalysisThread(SlotThread):
             self._cache[key] = value
         return self._cache[key]
 
-    def _analyse(self, req: Request, cancel: threading.Event) -> Analysis | None:
+    def _analyse(self, req: Request, cancel: CancelToken) -> Analysis | None:
         """The request's analysis; None when it was cancelled (a newer request of its slot is waiting)."""
         t0 = time.perf_counter()
         out, spec, rgb = Analysis(req.frame, req.spec), req.spec, req.frame.rgb

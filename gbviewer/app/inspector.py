@@ -10,7 +10,6 @@ off the UI thread, the newest request per pane part wins, and a pane whose frame
 from __future__ import annotations
 
 import math
-import threading
 import time
 import traceback
 from dataclasses import dataclass, field, replace
@@ -20,6 +19,7 @@ from typing import Any, Callable, Hashable
 import numpy as np
 
 from ..camera import Camera
+from ..cancel import CancelToken
 from ..errors import GBViewerError
 from ..render import Frame, PixelTrace, RenderSettings, capable
 from ..render.choice import FALLBACK
@@ -119,7 +119,7 @@ class TraceThread(SlotThread):
         self.backend = capable("trace")[0]
         super().__init__(SlotPolicy(cancel_running=False), backend=self.backend)
 
-    def _work(self, req: TraceRequest, cancel: threading.Event) -> TraceResult:
+    def _work(self, req: TraceRequest, cancel: CancelToken) -> TraceResult:
         t0 = time.perf_counter()
         try:
             result = TraceResult(req, self._trace(req))

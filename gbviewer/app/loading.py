@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from ..camera import Camera, load_cameras_json
+from ..cancel import CancelToken
 from ..errors import GBViewerError, LoadCancelled
 from ..scene import Scene
 
@@ -39,7 +40,7 @@ class SceneLoader:
         self._load = load_fn or load
         self.progress: tuple[int, int, str] | None = None
         self._first: dict[str, tuple[float, int]] = {}  # unit -> (time, done) of its first report: the rate
-        self._cancel = threading.Event()
+        self._cancel = CancelToken()
         self._result: LoadResult | None = None
         self._done = threading.Event()
         self._thread = threading.Thread(target=self._run, name="gbviewer-load", daemon=True)

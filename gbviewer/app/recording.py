@@ -8,6 +8,7 @@ import traceback
 from pathlib import Path
 
 from ..camera import Camera
+from ..cancel import CancelToken
 from ..errors import GBViewerError
 from ..render import RenderSettings
 from ..scene import Scene
@@ -28,7 +29,7 @@ class VideoJob:
         self.info = None
         self.started = time.perf_counter()
         self.reported = False  # the window said how it went
-        self._cancel = threading.Event()
+        self._cancel = CancelToken()
         self._finished = threading.Event()
 
         def progress(done: int, total: int) -> None:

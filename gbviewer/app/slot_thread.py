@@ -138,7 +138,7 @@ class SlotThread:
 
     # ---- the thread --------------------------------------------------------------------------------------------
 
-    def _work(self, request, cancel: threading.Event):
+    def _work(self, request, cancel: CancelToken):
         raise NotImplementedError
 
     def _start(self) -> None:

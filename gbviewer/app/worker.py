@@ -23,6 +23,7 @@ from typing import Callable, Hashable
 import numpy as np
 
 from ..camera import Camera
+from ..cancel import CancelToken
 from ..errors import BackendFailed, BackendUnavailable, GBViewerError, RenderCancelled, RenderError
 from ..render import AUTO, BACKENDS, BackendChoice, Capabilities, Frame, Renderer, RenderSettings, create_gl_context
 from ..render.choice import FALLBACK, decide_measured
@@ -274,13 +275,13 @@ class RenderWorker(SlotThread):
             self._shared.done_current()
         gc.collect()
 
-    def _work(self, job: RenderJob, cancel: threading.Event) -> RenderResult:
+    def _work(self, job: RenderJob, cancel: CancelToken) -> RenderResult:
         result = self._render(job, cancel)
         self.cancelled += result.cancelled
         self.rendered += not result.cancelled
         return result
 
-    def _render(self, job: RenderJob, cancel: threading.Event) -> RenderResult:
+    def _render(self, job: RenderJob, cancel: CancelToken) -> RenderResult:
         if job.scene is not self._scene:
             self._release()  # the previous scene's renderers and GPU buffers, freed in this thread
             self._scene = job.scene
@@ -305,7 +306,7 @@ class RenderWorker(SlotThread):
             traceback.print_exc()
             return RenderResult(job, None, f"{type(exc).__name__}: {exc}", time.perf_counter())
 
-    def _render_to_texture(self, renderer, job: RenderJob, cancel: threading.Event) -> Frame:
+    def _render_to_texture(self, renderer, job: RenderJob, cancel: CancelToken) -> Frame:
         """A GPU display path job: the frame stays in a display texture (a GpuFrame)."""
         tex = self.textures.acquire(self._display_ctx, job.camera.width, job.camera.height)
         self.textures.on_delete = renderer.release_texture  # what the renderer keeps for a texture goes first
@@ -316,7 +317,7 @@ class RenderWorker(SlotThread):
             raise
         return self.textures.frame(tex, stats)
 
-    def _refine(self, renderer, job: RenderJob, cancel: threading.Event) -> Frame:
+    def _refine(self, renderer, job: RenderJob, cancel: CancelToken) -> Frame:
         """A progressive job: the quick stage, then the frame with its finished tiles posted as they come."""
         base = job.underlay
         if job.quick is not None:

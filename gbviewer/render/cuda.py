@@ -8,6 +8,7 @@ import time
 import numpy as np
 
 from ..camera import Camera
+from ..cancel import Cancellable
 from ..cells import Cells
 from ..errors import BackendFailed, BackendUnavailable, RenderError
 from ..scene import Scene
@@ -101,7 +102,7 @@ class CudaRenderer(NativeUploads, Renderer):
 
         return interop_status(_native_cuda.gl_devices(), _native_cuda.default_device())
 
-    def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
+    def render(self, camera: Camera, settings: RenderSettings, *, cancel: Cancellable | None = None,
                on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
         """One kernel sequence per frame: `cancel` is checked before and after it, progress is 0 then 1 of 1,
         `partial` receives the frame at the end."""
@@ -113,7 +114,7 @@ class CudaRenderer(NativeUploads, Renderer):
         return frame
 
     def render_to_texture(self, texture, camera: Camera, settings: RenderSettings, *,
-                          cancel: threading.Event | None = None, on_progress: Progress | None = None) -> FrameStats:
+                          cancel: Cancellable | None = None, on_progress: Progress | None = None) -> FrameStats:
         """Render into `texture` (a moderngl RGBA32F texture of the camera's size whose context, or one sharing
         objects with it, is current in this thread and runs on this renderer's device) through CUDA-GL interop:
         rgb and alpha as `render`'s Frame, row 0 the image's top; the pixels never leave the device (the

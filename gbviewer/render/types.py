@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import abc
 import enum
-import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -15,6 +14,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..camera import Camera
+from ..cancel import Cancellable
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, distinct_items, integer, real
@@ -240,7 +240,7 @@ class Renderer(abc.ABC):
         """Make `scene` the one later renders draw."""
 
     @abc.abstractmethod
-    def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
+    def render(self, camera: Camera, settings: RenderSettings, *, cancel: Cancellable | None = None,
                on_progress: Callable[[int, int], None] | None = None, partial: np.ndarray | None = None) -> Frame:
         """The frame; once `cancel` is set it raises RenderCancelled within one tile batch (GPU backends: one
         dispatch); `on_progress(done, total)` is called from the render as tiles (or dispatches) finish; `partial`

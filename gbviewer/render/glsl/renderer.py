@@ -39,19 +39,19 @@ Contexts: by default a headless EGL context shared by every renderer of the proc
 
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
 
+from . import interface as gi
 from ...camera import Camera
+from ...cancel import Cancellable
 from ...cells import Cells
 from ...errors import BackendUnavailable, RenderError
 from ...scene import Scene
 from ..control import Progress, RenderControl
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
 from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
-from . import interface as gi
 from .binning import bin_duplex, bin_splats, read_totals
 from .context import check_context, standalone_context
 from .gpu import WG, Gpu
@@ -172,7 +172,7 @@ class GlslRenderer(Renderer):
         if prep.cells is not None and prep.cells is not self._cells:
             self._upload_cells(prep.cells, prep.scene.num_splats)
 
-    def render(self, camera: Camera, settings: RenderSettings, *, cancel: threading.Event | None = None,
+    def render(self, camera: Camera, settings: RenderSettings, *, cancel: Cancellable | None = None,
                on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
         control = RenderControl(cancel, on_progress, partial)
         control.check_partial(camera.width, camera.height)
@@ -191,7 +191,7 @@ class GlslRenderer(Renderer):
         return Frame(img[:, :, :3].copy(), img[:, :, 3].copy(), stats, debug)
 
     def render_to_texture(self, texture, camera: Camera, settings: RenderSettings, *,
-                          cancel: threading.Event | None = None, on_progress: Progress | None = None) -> FrameStats:
+                          cancel: Cancellable | None = None, on_progress: Progress | None = None) -> FrameStats:
         """Render into `texture` (a moderngl RGBA32F texture of the camera's size, of this renderer's context or
         one sharing objects with it): rgb and alpha as `render`'s Frame, row 0 the image's top. The pixels stay on
         the GPU; what comes back is the stats (the evaluation counts summed per 1024 pixels on the GPU, 1/1024 of
