@@ -115,6 +115,12 @@ class SharedRenderer:
             self._scene = scene
             self._slot.bind(scene)
 
+    def release(self) -> None:
+        """Free the shared renderer's scene and buffers; the next frame of any handle uploads its scene again."""
+        with self._slot.lock:
+            self._slot.uploaded = None
+            self._slot.renderer.release()
+
 
 _renderers: dict[str, _Slot] = {}
 _renderers_lock = threading.Lock()

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from helpers import front_camera, random_scene, run_threads
+from gbviewer.render import BACKENDS
+from helpers import front_camera, random_scene, run_threads, skip_or_fail
 
 
 def test_get_renderer_reuses_and_releases_scenes():
@@ -91,6 +92,22 @@ def test_tile_list_that_does_not_fit_is_a_memory_error(tmp_path):
     res = subprocess.run([sys.executable, "-c", _OOM_SCRIPT], capture_output=True, text=True, timeout=300,
                          cwd=tmp_path)
     assert res.returncode == 0 and res.stdout.strip() == "MemoryError", (res.returncode, res.stdout, res.stderr[-2000:])
+
+
+@pytest.mark.parametrize("backend", ["cpu", "glsl"])
+def test_releasing_a_shared_handle_keeps_every_handle_rendering(backend):
+    """`get_renderer(...).release()` frees the process's shared renderer; the next frame of any handle (and
+    `gb.render`) uploads its scene again instead of rendering without one."""
+    ok, why = BACKENDS[backend].available()
+    if not ok:
+        skip_or_fail(f"{backend} unavailable: {why}")
+    scene, cam = random_scene(200, seed=4), front_camera(48, 32)
+    handle = gb.get_renderer(scene, backend)
+    a = handle.render(cam, gb.RenderSettings())
+    handle.release()
+    np.testing.assert_array_equal(gb.render(scene, cam, backend=backend).rgb, a.rgb)
+    handle.release()
+    np.testing.assert_array_equal(handle.render(cam, gb.RenderSettings()).rgb, a.rgb)
 
 
 def test_release_buffers():
