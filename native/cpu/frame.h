@@ -1,6 +1,7 @@
-// The CPU frame driver behind Renderer (renderer.cpp): preprocess (parallel over blocks of splats, in vector lanes),
-// per-tile binning and depth sort (binning.cpp), blending (parallel over tiles, dynamic schedule; frame.cpp). The
-// math is in include/gbv/*.h, shared with CUDA.
+// The CPU frame driver behind Renderer (renderer.cpp): the per-camera stage and each mode's finish of it (parallel
+// over blocks of splats, in vector lanes), per-tile binning and depth sort (binning.cpp), blending (parallel over the
+// tiles of every frame of a call together, dynamic schedule; frame.cpp). The math is in include/gbv/*.h, shared with
+// CUDA.
 #pragma once
 
 #include <omp.h>
@@ -11,6 +12,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <cstring>
 #include <vector>
 
 #include "renderer.h"
@@ -49,6 +51,34 @@ struct SceneView {
     std::vector<int32_t> cell_of = {};
 };
 
+// What a stage depends on: the uploaded scene (its upload generation: upload, upload_weights and upload_cells each
+// start a new one), every byte of the camera (a supersampled frame's camera is its own) and the SH degree.
+struct StageKey {
+    uint64_t scene = 0;
+    CameraParams cam = {};
+    int sh_deg = 0;
+    bool operator==(const StageKey& o) const {
+        return scene == o.scene && sh_deg == o.sh_deg && std::memcmp(&cam, &o.cam, sizeof cam) == 0;
+    }
+};
+
+// The per-camera stage (preprocess_range.h) every mode's finish reads, kept by the renderer while its key holds.
+struct Stage {
+    StageKey key;
+    bool ready = false;  // built for key (false while building and after a cancelled build)
+    std::vector<StageSplat> splats;
+    std::vector<uint8_t> valid;  // in front of the near plane and on screen in some mode
+    // The global depth order's seam (branch `order`): one order of the valid splats by depth, computed once per
+    // camera, which every mode then bins in, skipping the splats its finish culls. Unused so far: binning.cpp still
+    // sorts each tile's list; the merge wires depth_order(splats, valid, order, run) here and resets order_ready
+    // where the stage is rebuilt (build_stage).
+    std::vector<uint32_t> order;
+    bool order_ready = false;
+    size_t bytes() const {
+        return splats.capacity() * sizeof(StageSplat) + valid.capacity() + order.capacity() * sizeof(uint32_t);
+    }
+};
+
 // A frame's buffers, kept by the renderer between frames (no allocation, no page faults once sizes settle).
 struct FrameBuffers {
     std::vector<Splat2D> splats;
@@ -59,18 +89,20 @@ struct FrameBuffers {
     std::vector<SplatBounds> boxes;
 };
 
-// A running frame's cancel state and progress (Control): the caller's flag or a report that asked to stop; the
-// tiles blended so far. Relaxed atomics: only counts and flags.
+// A running call's cancel state and progress (Control) for its frames: the caller's flag or a report that asked to
+// stop; the tiles blended so far per frame. Relaxed atomics: only counts and flags.
 class FrameRun {
 public:
-    explicit FrameRun(const Control& c) : c_(c), last_(Clock::now()) {}
+    FrameRun(const Control& c, int frames) : c_(c), done_(frames), total_(frames, 0), last_(Clock::now()) {
+        for (std::atomic<int64_t>& d : done_) d.store(0, std::memory_order_relaxed);
+    }
     bool cancelled() const {
         return stop_.load(std::memory_order_relaxed) || (c_.cancel && __atomic_load_n(c_.cancel, __ATOMIC_RELAXED));
     }
     bool stopped() const { return stop_.load(std::memory_order_relaxed); }
-    float* partial() const { return c_.partial; }
-    void start(int64_t tiles) { total_ = tiles; }
-    void tile_done() { done_.fetch_add(1, std::memory_order_relaxed); }
+    float* partial(int frame) const { return (size_t)frame < c_.partial.size() ? c_.partial[frame] : nullptr; }
+    void start(int frame, int64_t tiles) { total_[frame] = tiles; }
+    void tile_done(int frame) { done_[frame].fetch_add(1, std::memory_order_relaxed); }
     // Called by every worker; reports on the calling thread only (OpenMP's master), at most every report_ms.
     void poll() {
         if (!c_.report || omp_get_thread_num() != 0 || cancelled()) return;
@@ -79,16 +111,18 @@ public:
         last_ = now;
         report();
     }
+    // Every frame's count.
     void report() {
-        if (c_.report && !c_.report(done_.load(std::memory_order_relaxed), total_))
-            stop_.store(true, std::memory_order_relaxed);
+        for (int f = 0; c_.report && f < (int)total_.size() && !stopped(); ++f)
+            if (!c_.report(f, done_[f].load(std::memory_order_relaxed), total_[f]))
+                stop_.store(true, std::memory_order_relaxed);
     }
 
 private:
     const Control& c_;
     std::atomic<bool> stop_{false};
-    std::atomic<int64_t> done_{0};
-    int64_t total_ = 0;
+    std::vector<std::atomic<int64_t>> done_;
+    std::vector<int64_t> total_;
     Clock::time_point last_;
 };
 
@@ -101,16 +135,31 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
                 std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st);
 
-// frame.cpp: preprocess and bin one image at the camera's resolution into `buf` (stops early once cancelled).
-void bin_frame(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
-               const simd::Path& path, FrameBuffers& buf, Stats& st, FrameRun& run);
-// Render one image at the camera's resolution into `img` (N: supersampling factor, for the partial frame).
-void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
-                  const float bg[3], const simd::Path& path, FrameBuffers& buf, Image& img, Stats& st, FrameRun& run,
-                  int N);
-// The pixel trace of output pixel (x, y) at N x N samples; `cam` is the sub-sample grid's camera.
-PixelTrace trace_frame_pixel(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit,
-                             int sh_deg, const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y,
-                             int N);
+// frame.cpp: the stage of `key` into `stage` (every splat; stops early once cancelled, leaving it not ready).
+void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& path, Stage& stage, Stats& st,
+                 FrameRun& run);
+// The mode's finish of a ready stage and the binning of one image at the camera's resolution into `buf` (stops early
+// once cancelled).
+void bin_frame(const SceneView& sc, const Stage& stage, Mode mode, const OitParams& oit, const simd::Path& path,
+               FrameBuffers& buf, Stats& st, FrameRun& run);
+
+// One frame of a call's joint blend: its binned buffers, how to blend them, and the image (at the stage camera's
+// resolution; N: supersampling factor, for the partial frame).
+struct BlendFrame {
+    FrameBuffers* buf;  // its boxes are computed here
+    const CameraParams* cam;
+    Mode mode;
+    OitParams oit;
+    const float* bg;
+    Image* img;
+    int N;
+    Stats* st;
+};
+// Blend every frame's tiles in one parallel loop, interleaved (each frame's tiles centre out, the frames' i-th tiles
+// together, in proportion to their tile counts); each frame's blend_ms is the loop's time.
+void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile, FrameRun& run);
+// The pixel trace of output pixel (x, y) at N x N samples from a ready stage (the sub-sample grid's camera).
+PixelTrace trace_frame_pixel(const SceneView& sc, const Stage& stage, Mode mode, const OitParams& oit,
+                             const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N);
 
 }  // namespace gbv::cpu
