@@ -81,7 +81,7 @@ class CpuRenderer(NativeUploads, Renderer):
             out = self._impl.render(*self._frame_args(camera, settings), settings.debug == "window",
                                     *(prep.oit or ()), threads=settings.threads, cancel=control.flag,
                                     on_progress=control.hook, partial=partial)
-        control.check()  # the native render skipped its remaining tiles once the flag was set
+        control.check(out["cancelled"])  # the native render skipped its remaining work once it saw the flag
         return native_frame(out, prep, camera, settings, self.name, t0)
 
     def trace(self, camera: Camera, settings: RenderSettings, x: int, y: int) -> PixelTrace:

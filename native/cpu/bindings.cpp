@@ -99,11 +99,17 @@ void bind_testing(nb::module_& m) {
     t.def("set_pixel_boxes", [](bool on) { cpu::testing::pixel_boxes.store(on); }, nb::arg("on"),
           "Skip lane groups outside a splat's pixel box (default) or evaluate every list entry.");
     t.def("set_capture_preprocess", [](bool on) { cpu::testing::capture.store(on); }, nb::arg("on"),
-          "Keep the next renders' preprocess output for captured_preprocess().");
+          "Keep the next renders' preprocess output and tile lists for captured_preprocess() and captured_lists().");
     t.def("captured_preprocess", [] {
         const std::vector<uint8_t> v = cpu::testing::captured_preprocess();
         return nb::bytes(reinterpret_cast<const char*>(v.data()), v.size());
     }, "The last captured frame's preprocess: per splat the valid byte, then its Splat2D and TileRect (zeros when culled).");
+    t.def("captured_lists", [] {
+        const auto [starts, keys] = cpu::testing::captured_lists();
+        return nb::make_tuple(nb::bytes(reinterpret_cast<const char*>(starts.data()), starts.size() * 8),
+                              nb::bytes(reinterpret_cast<const char*>(keys.data()), keys.size() * 8));
+    }, "The last captured frame's tile lists: (tile_start int64 (tiles + 1), keys uint64 (depth bits << 32 | splat id; "
+       "duplex: the splat id)).");
     t.def("set_simd", [](const std::string& name) { simd::select(name); }, nb::arg("name"),
           "Use this SIMD path for later renders (scalar, avx2, avx512).");
     t.def("exp_rate", &exp_rate, nb::arg("path"), nb::arg("n"),

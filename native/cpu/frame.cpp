@@ -75,11 +75,17 @@ std::vector<int> centre_out_order(int gx, int gy) {
     return order;
 }
 
-// Every splat's SplatBounds in `mode`.
-void splat_boxes(const std::vector<Splat2D>& splats, Mode mode, std::vector<SplatBounds>& boxes) {
-    boxes.resize(splats.size());
+constexpr int64_t BOX_BLOCK = 4096;  // splats between two cancel checks of splat_boxes
+
+// Every splat's SplatBounds in `mode` (stops early once cancelled).
+void splat_boxes(const std::vector<Splat2D>& splats, Mode mode, std::vector<SplatBounds>& boxes, FrameRun& run) {
+    const int64_t n = (int64_t)splats.size();
+    boxes.resize(n);
 #pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < (int64_t)splats.size(); ++i) boxes[i] = splat_bounds(splats[i], mode);
+    for (int64_t b = 0; b < (n + BOX_BLOCK - 1) / BOX_BLOCK; ++b) {
+        if (run.cancelled()) continue;
+        for (int64_t i = b * BOX_BLOCK; i < std::min(n, (b + 1) * BOX_BLOCK); ++i) boxes[i] = splat_bounds(splats[i], mode);
+    }
 }
 
 // Blend: each tile copies its splats (and their boxes) into contiguous per-thread buffers, then the selected SIMD
@@ -93,7 +99,7 @@ void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>&
     const int num_tiles = (int)tile_start.size() - 1;
     const std::vector<int> order = centre_out_order(gx, num_tiles / gx);
     auto t0 = Clock::now();
-    splat_boxes(splats, mode, boxes);
+    splat_boxes(splats, mode, boxes, run);
     TileJob frame = {};  // what every tile shares; each tile sets its list, rectangle and planes
     frame.width = W;
     frame.mode = mode;
@@ -179,11 +185,20 @@ void bin_frame(const SceneView& sc, const CameraParams& cam, Mode mode, const Oi
     std::vector<uint64_t>& keys = buf.keys;  // per tile list entry: splat id in the low 32 bits
     tile_start.assign(num_tiles + 1, 0);
     if (mode == DUPLEX) {
-        bin_duplex(sc, cam, splats, rects, valid, gx, gy, tile_start, keys, st);
+        bin_duplex(sc, cam, splats, rects, valid, gx, gy, tile_start, keys, st, run);
+    } else if (mode == WSR) {  // order-independent: the splat order
+        bin_splats(splats, rects, valid, nullptr, n, gx, tile_start, keys, st, run);
     } else {
-        bin_splats(splats, rects, valid, gx, mode != WSR, tile_start, keys, st);
+        t0 = Clock::now();
+        depth_order(splats, valid, buf.order, buf.order_scratch, run);
+        if (run.cancelled()) return;
+        st.sort_ms += ms_since(t0);
+        st.sort_length += (int64_t)buf.order.size();
+        bin_splats(splats, rects, valid, buf.order.data(), (int64_t)buf.order.size(), gx, tile_start, keys, st, run);
     }
+    if (run.cancelled()) return;
     if (keys.capacity() > 4 * keys.size() + (1u << 20)) keys.shrink_to_fit();  // after a much larger frame
+    if (testing::capture.load(std::memory_order_relaxed)) testing::record_lists(tile_start, keys);
 }
 
 void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
@@ -202,7 +217,7 @@ PixelTrace trace_frame_pixel(const SceneView& sc, const CameraParams& cam, Mode 
     const Control none;
     FrameRun run(none);
     bin_frame(sc, cam, mode, oit, sh_deg, path, buf, st, run);
-    splat_boxes(buf.splats, mode, buf.boxes);
+    splat_boxes(buf.splats, mode, buf.boxes, run);
     FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.keys.data(), cam.width,
                         cam.height, mode, oit, {bg[0], bg[1], bg[2]}};
     FlushDenormals ftz;

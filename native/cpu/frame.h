@@ -1,5 +1,5 @@
 // The CPU frame driver behind Renderer (renderer.cpp): preprocess (parallel over blocks of splats, in vector lanes),
-// per-tile binning and depth sort (binning.cpp), blending (parallel over tiles, dynamic schedule; frame.cpp). The
+// one depth order of the visible splats (order.cpp), binning in that order (binning.cpp), blending (parallel over tiles, dynamic schedule; frame.cpp). The
 // math is in include/gbv/*.h, shared with CUDA.
 #pragma once
 
@@ -11,6 +11,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <cstring>
 #include <vector>
 
 #include "renderer.h"
@@ -54,18 +55,23 @@ struct FrameBuffers {
     std::vector<Splat2D> splats;
     std::vector<TileRect> rects;
     std::vector<uint8_t> valid;
+    std::vector<uint64_t> order, order_scratch;  // depth_order's keys and its radix sort's second buffer
     std::vector<int64_t> tile_start;
     std::vector<uint64_t> keys;  // per tile list entry: splat id in the low 32 bits
     std::vector<SplatBounds> boxes;
 };
 
 // A running frame's cancel state and progress (Control): the caller's flag or a report that asked to stop; the
-// tiles blended so far. Relaxed atomics: only counts and flags.
+// tiles blended so far. Relaxed atomics: only counts and flags. Cancelled once, cancelled for good: a flag that the
+// caller clears again while the frame stops (to reuse it) cannot resume a frame whose stages stopped half-way.
 class FrameRun {
 public:
     explicit FrameRun(const Control& c) : c_(c), last_(Clock::now()) {}
     bool cancelled() const {
-        return stop_.load(std::memory_order_relaxed) || (c_.cancel && __atomic_load_n(c_.cancel, __ATOMIC_RELAXED));
+        if (stop_.load(std::memory_order_relaxed) || seen_.load(std::memory_order_relaxed)) return true;
+        if (!c_.cancel || !__atomic_load_n(c_.cancel, __ATOMIC_RELAXED)) return false;
+        seen_.store(true, std::memory_order_relaxed);
+        return true;
     }
     bool stopped() const { return stop_.load(std::memory_order_relaxed); }
     float* partial() const { return c_.partial; }
@@ -87,19 +93,53 @@ public:
 private:
     const Control& c_;
     std::atomic<bool> stop_{false};
+    mutable std::atomic<bool> seen_{false};  // the caller's flag was seen set
     std::atomic<int64_t> done_{0};
     int64_t total_ = 0;
     Clock::time_point last_;
 };
 
-// binning.cpp: each tile's list of (depth bits, splat id) keys, sorted by depth unless `sort` is false (wsr); duplex:
-// the tiles' cells front to back, each expanded to its visible splats in canonical order.
+// A thread's cancel check for loops of uneven steps: reads run.cancelled() once per CANCEL_WORK units of work
+// (entries read or written), a fraction of a millisecond, so that the check costs nothing in the loop.
+constexpr int64_t CANCEL_WORK = 1 << 15;
+class CancelPoll {
+public:
+    explicit CancelPoll(const FrameRun& run) : run_(run) {}
+    bool operator()(int64_t work) {
+        if ((left_ -= work) > 0) return false;
+        left_ = CANCEL_WORK;
+        return run_.cancelled();
+    }
+
+private:
+    const FrameRun& run_;
+    int64_t left_ = CANCEL_WORK;
+};
+
+// A splat's depth key: depth bits in the high 32 bits (depth > near > 0: the bits order as the floats), id low.
+inline uint64_t depth_key(const Splat2D& s, uint32_t id) {
+    uint32_t bits;
+    std::memcpy(&bits, &s.depth, 4);
+    return ((uint64_t)bits << 32) | id;
+}
+
+// order.cpp: the depth keys of the splats with valid[i] != 0, ascending (depth bits, then id), in `order` (resized
+// to their count); `scratch` is the radix sort's second buffer. Parallel, checks run.cancelled(): a cancelled call
+// leaves `order` unspecified (the caller checks run.cancelled() before using it).
+void depth_order(const std::vector<Splat2D>& splats, const std::vector<uint8_t>& valid, std::vector<uint64_t>& order,
+                 std::vector<uint64_t>& scratch, FrameRun& run);
+
+// binning.cpp: each tile's list of (depth bits, splat id) keys in the order of `order` (count keys, e.g. a
+// depth_order; entries whose splat is not valid[] are skipped, so the order of a superset serves), or in splat order
+// when `order` is null (wsr); tile_start (num_tiles + 1 entries) gets each tile's first entry. duplex: the tiles'
+// cells front to back, each expanded to its visible splats in canonical order. Both stop early once cancelled
+// (tile_start and keys then unspecified).
 void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>& rects,
-                const std::vector<uint8_t>& valid, int gx, bool sort, std::vector<int64_t>& tile_start,
-                std::vector<uint64_t>& keys, Stats& st);
+                const std::vector<uint8_t>& valid, const uint64_t* order, int64_t count, int gx,
+                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st, FrameRun& run);
 void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<Splat2D>& splats,
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
-                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st);
+                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st, FrameRun& run);
 
 // frame.cpp: preprocess and bin one image at the camera's resolution into `buf` (stops early once cancelled).
 void bin_frame(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,

@@ -158,6 +158,7 @@ size_t Renderer::buffer_bytes() const {
     const FrameBuffers& b = impl_->buffers;
     return b.splats.capacity() * sizeof(Splat2D) + b.rects.capacity() * sizeof(TileRect) + b.valid.capacity() +
            b.tile_start.capacity() * sizeof(int64_t) + b.keys.capacity() * sizeof(uint64_t) +
+           (b.order.capacity() + b.order_scratch.capacity()) * sizeof(uint64_t) +
            b.boxes.capacity() * sizeof(SplatBounds);
 }
 

@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cstdint>
 #include <mutex>
+#include <utility>
 #include <vector>
 
 #include "gbv/common.h"
@@ -20,5 +21,8 @@ extern std::atomic<bool> pixel_boxes;
 extern std::atomic<bool> capture;
 void record_preprocess(const Splat2D* splats, const TileRect* rects, const uint8_t* valid, int64_t n);
 std::vector<uint8_t> captured_preprocess();
+// ... and of its tile lists (bin_frame's tile_start and keys).
+void record_lists(const std::vector<int64_t>& tile_start, const std::vector<uint64_t>& keys);
+std::pair<std::vector<int64_t>, std::vector<uint64_t>> captured_lists();
 
 }  // namespace gbv::cpu::testing
