@@ -151,7 +151,8 @@ class RenderSettings:
 @dataclass
 class FrameStats:
     """What a render measured. Times in ms per stage; visible: splats that survive preprocess; sort_length: keys
-    sorted by depth (tile-splat pairs; 0 for wsr, whose tile lists are only binned; tile-cell pairs for duplex);
+    sorted by depth (cpu: one per visible splat, the frame's global depth order, which it then bins in order; glsl
+    and cuda: tile-splat pairs; 0 for wsr, whose tile lists are only binned; tile-cell pairs for duplex);
     sort_bytes: sort_length x SORT_ENTRY_BYTES; pairs: tile-list entries blended; evaluations: splat-pixel
     evaluations, evals_per_pixel their mean; backend; mode: `RenderSettings.label_for` the scene.
 
