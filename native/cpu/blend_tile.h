@@ -6,6 +6,10 @@
 // renders use NoTrace; the pixel trace (trace.cpp) runs the Lanes1 instance on a one-pixel rectangle with a recorder.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
 #include "gbv/blend.h"
 
 namespace gbv {
@@ -15,6 +19,35 @@ namespace gbv {
 struct SplatBounds {
     float x0, x1, y0, y1;
 };
+
+// gaussian_blending's SplatBounds: the window centres that can pass blend_gaussian's cut-off, before the group box
+// adds the lanes' half perimeters. A lane passes only if the point of its window box (lu x lv about the window centre
+// in the splat's eigen-frame) nearest the splat centre has (u is1)^2 + (v is2)^2 <= r2 = -2 log_min_alpha, i.e. lies
+// in the ellipse E whose screen bounding box has half sides sqrt(r2 (v1x^2 / is1^2 + v1y^2 / is2^2)) and
+// sqrt(r2 (v1y^2 / is1^2 + v1x^2 / is2^2)); that point is within half the window's diagonal <= half its perimeter
+// (w + h) / 2 of the centre. So the centre lies in E's box grown by the half perimeter, and (the reach test) within
+// radius + half perimeter of the splat centre: the box is the tighter of E's box and the radius square, in double,
+// widened for the lane's float rounding (1e-5 of the larger half side: r2's and the offsets' few ulp, in either
+// direction for a thin splat; plus 0.01 px and 1e-6 of the coordinates; the group box adds its own 1e-3 and 1e-6). Empty when opacity < min alpha (r2 < 0); the
+// radius square where a field is not finite (a NaN in the lane's test passes it).
+inline SplatBounds gaussian_blending_bounds(const Splat2D& s) {
+    constexpr float inf = std::numeric_limits<float>::infinity();
+    const double pos = 0.01 + 1e-6 * (fabs(s.xy.x) + fabs(s.xy.y));
+    double ex = (double)s.radius * (1.0 + 1e-6) + pos, ey = ex;
+    const double r2 = -2.0 * (double)s.log_min_alpha;
+    if (r2 < 0.0) return {inf, -inf, inf, -inf};
+    const double a = 1.0 / (double)s.inv_sigma1, b = 1.0 / (double)s.inv_sigma2;
+    const double vx = s.v1.x, vy = s.v1.y;
+    const double tx0 = std::sqrt(r2 * (vx * vx * a * a + vy * vy * b * b));
+    const double ty0 = std::sqrt(r2 * (vy * vy * a * a + vx * vx * b * b));
+    const double grow = 1e-5 * std::max(tx0, ty0) + pos;  // offsets round by ~4 ulp of |d| <= the larger half side
+    const double tx = tx0 + grow, ty = ty0 + grow;
+    if (std::isfinite(tx) && std::isfinite(ty)) {
+        ex = std::min(ex, tx);
+        ey = std::min(ey, ty);
+    }
+    return {(float)(s.xy.x - ex), (float)(s.xy.x + ex), (float)(s.xy.y - ey), (float)(s.xy.y + ey)};
+}
 
 struct TileJob {
     const Splat2D* list;        // the tile's splats in blend order
