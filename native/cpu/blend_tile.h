@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <type_traits>
 
 #include "gbv/blend.h"
 
@@ -135,8 +136,8 @@ void group_alpha(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
 
 // The group box of gaussian_blending: every lane's window centre, grown by the largest half perimeter (a lane
 // rejects a splat farther than radius + half perimeter from its window centre) and by float rounding.
-template <class L>
-void window_box(const WindowState<L>& win, Group<L>& g) {
+template <class L, class B>
+void window_box(const WindowState<L>& win, B& g) {
     const float reach = 0.5f * L::reduce_max(win.w + win.h) + 1e-3f;
     g.xa = L::reduce_min(win.x) - reach;
     g.xb = L::reduce_max(win.x) + reach;
@@ -149,18 +150,95 @@ void window_box(const WindowState<L>& win, Group<L>& g) {
     g.yb += slack;
 }
 
+// The lane type of each half of L (LanesX2's Half), void where L has no halves.
+template <class L, class = void>
+struct HalfOf {
+    using type = void;
+};
+template <class L>
+struct HalfOf<L, std::void_t<typename L::Half>> {
+    using type = typename L::Half;
+};
+
+// Half k of a two-half window state as the half lane type's state, and back.
+template <class H, class W>
+WindowState<H> get_half(const W& w, int k) {
+    const auto h = [k](const auto& p) { return k ? p.b : p.a; };
+    return {h(w.T), h(w.x), h(w.y), h(w.w), h(w.h), {h(w.C[0]), h(w.C[1]), h(w.C[2])}};
+}
+template <class H, class W>
+void set_half(W& w, int k, const WindowState<H>& v) {
+    const auto h = [k](auto& p) -> typename H::F& { return k ? p.b : p.a; };
+    h(w.T) = v.T;
+    h(w.x) = v.x;
+    h(w.y) = v.y;
+    h(w.w) = v.w;
+    h(w.h) = v.h;
+    for (int c = 0; c < 3; ++c) h(w.C[c]) = v.C[c];
+}
+
+struct Box {
+    float xa, xb, ya, yb;
+};
+
+// gaussian_blending on a group of two halves (AVX2's 2 x 8 lanes), each with its own window box: a splat whose bounds
+// miss one half's box cannot pass the cut-off in any of its lanes, so the other half takes it alone at half the work.
+// Bit-identical to stepping both halves: a step changes only lanes that pass the cut-off, and everything it decides
+// for the whole group (which branches run, the series length) depends on those lanes only.
+template <class L>
+void walk_gaussian_halves(const TileJob& job, typename L::M live, WindowState<L>& win, Out<L::N>& out) {
+    using H = typename HalfOf<L>::type;
+    Box box[2];
+    bool alive[2] = {H::any(live.a), H::any(live.b)};
+    for (int k = 0; k < 2; ++k) window_box<H>(get_half<H>(win, k), box[k]);
+    for (int i = 0; i < L::N; ++i) out.evals[i] = job.n;
+    for (int i = 0; i < job.n; ++i) {
+        const SplatBounds& b = job.bounds[i];
+        const bool in[2] = {alive[0] && !outside(b, box[0].xa, box[0].xb, box[0].ya, box[0].yb),
+                            alive[1] && !outside(b, box[1].xa, box[1].xb, box[1].ya, box[1].yb)};
+        if (!in[0] && !in[1]) continue;
+        typename L::M stop;
+        if (in[0] && in[1]) {
+            typename L::M took = L::none();
+            stop = blend_gaussian<L>(job.list[i], live, win, &took);
+            for (int k = 0; k < 2; ++k)
+                if (H::any(k ? took.b : took.a)) window_box<H>(get_half<H>(win, k), box[k]);
+        } else {
+            const int k = in[1];
+            WindowState<H> half = get_half<H>(win, k);
+            typename H::M took = H::none();
+            const typename H::M s = blend_gaussian<H>(job.list[i], k ? live.b : live.a, half, &took);
+            set_half<H>(win, k, half);
+            if (H::any(took)) window_box<H>(half, box[k]);
+            stop = k ? typename L::M{H::none(), s} : typename L::M{s, H::none()};
+        }
+        const uint32_t bits = L::bits(stop);
+        if (!bits) continue;
+        for (int k = 0; k < L::N; ++k)
+            if ((bits >> k) & 1u) out.evals[k] = i + 1;
+        live = L::and_not(live, stop);
+        alive[0] = H::any(live.a);
+        alive[1] = H::any(live.b);
+        if (!alive[0] && !alive[1]) break;
+    }
+}
+
 template <class L, class Tr>
 void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out) {
     const typename L::F one = L::set(1.0f), zero = L::set(0.0f);
     WindowState<L> win = {one, g.px, g.py, one, one, {zero, zero, zero}};
-    window_box<L>(win, g);
-    walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
-        typename L::M took = L::none();
-        const typename L::M stop = blend_gaussian<L, Tr>(s, live, win, &took);
-        if (L::any(took)) window_box<L>(win, g);
-        GBV_TRACE(Tr, after(win));
-        return stop;
-    });
+    if constexpr (!std::is_void_v<typename HalfOf<L>::type> && std::is_same_v<Tr, NoTrace>) {
+        walk_gaussian_halves<L>(job, g.live, win, out);
+    } else {
+        window_box<L>(win, g);
+        walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
+            typename L::M took = L::none();
+            const typename L::M stop = blend_gaussian<L, Tr>(s, live, win, &took);
+            if (L::any(took)) window_box<L>(win, g);
+            GBV_TRACE(Tr, after(win));
+            return stop;
+        });
+    }
     for (int c = 0; c < 3; ++c) L::store(win.C[c], out.C[c]);
     L::store(win.T, out.T);
     L::store(win.w, out.wx);
