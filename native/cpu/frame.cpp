@@ -16,16 +16,13 @@ namespace {
 // sqrt(r2 Sigma_yy) (Sigma = conic^-1), computed in double and widened for float rounding: the float power at a pixel
 // is off by at most ~4 ulp of conic-weighted |d|^2, i.e. a relative 2.4e-7 (lambda_max / lambda_min) of r2 at the
 // ellipse, so the box grows by 1e-6 kappa^2 + 1e-5 relative plus 0.01 px (the rounding of d = xy - pixel). duplex
-// also has its radius circle. gaussian_blending: the window centres within radius + half perimeter, so the square of
-// half side radius (the group box adds the half perimeters). analytic (alpha integrated over the pixel): no box.
+// also has its radius circle. gaussian_blending: gaussian_blending_bounds (blend_tile.h; the group box adds the
+// half perimeters). analytic (alpha integrated over the pixel): no box.
 
 SplatBounds splat_bounds(const Splat2D& s, Mode mode) {
     constexpr float inf = std::numeric_limits<float>::infinity();
     if (mode == ANALYTIC || !testing::pixel_boxes.load(std::memory_order_relaxed)) return {-inf, inf, -inf, inf};
-    if (mode == GAUSSIAN_BLENDING) {
-        const double r = (double)s.radius * (1.0 + 1e-6) + 0.01 + 1e-6 * (fabs(s.xy.x) + fabs(s.xy.y));
-        return {(float)(s.xy.x - r), (float)(s.xy.x + r), (float)(s.xy.y - r), (float)(s.xy.y + r)};
-    }
+    if (mode == GAUSSIAN_BLENDING) return gaussian_blending_bounds(s);
     const double a = s.conic[0], b = s.conic[1], c = s.conic[2];
     const double det = a * c - b * b;
     const double r2 = -2.0 * (double)s.log_min_alpha;
