@@ -25,6 +25,8 @@ using cpu::Renderer;
 using LArr = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;  // the caller's cancel flag
 using PArr = nb::ndarray<float, nb::ndim<3>, nb::c_contig, nb::device::cpu>;          // a partial frame, written here
 
+void bind_io(nb::module_& m);  // io_scatter.cpp: _native.io
+
 namespace {
 
 // An owner for Renderer::upload*: holds the arrays (references to the caller's numpy arrays, or the converted copies
@@ -165,6 +167,7 @@ NB_MODULE(_native, m) {
     }, "How this module was built: SIMD paths built, usable here and selected; scalar-only switch; OpenMP version "
        "(None without); whether the CUDA module was built alongside; compiler, build type and compile flags.");
     bind_testing(m);
+    bind_io(m);
     nb::class_<Renderer>(m, "Renderer")
         .def(nb::init<>())
         .def("upload",
