@@ -58,6 +58,7 @@ DEFAULT_SIGMA = 10.0  # sort-free GS's initial sigma, for depth correction on sc
 MAX_SUPERSAMPLE = 8
 MAX_THREADS = 1024
 MAX_CELL_SIZE = 1 << 20
+MAX_LOD = 1e6  # pixels: a cut of the root alone long before
 SORT_ENTRY_BYTES = 24  # per sorted key: 8-byte key + 4-byte value, input and output buffers (CUB SortPairs)
 
 
@@ -71,6 +72,9 @@ class RenderSettings:
     wsr and duplex: `depth_correct` multiplies each splat's weight by LC-WSR's max(0, 1 - z/sigma) (sigma: the
     scene's trained value, else 10); `et_grade` is Duplex-GS's E (None: the scene's trained value, else 4.0, the
     published final value); `cell_size` is the number of splats per cell built for scenes without cells.
+
+    `lod` (pixels >= 0): render the cut of the scene's splat hierarchy at that projected size (gbviewer.lod) in any
+    mode; None renders every splat.
     """
 
     mode: Mode = Mode.SCALAR
@@ -82,6 +86,7 @@ class RenderSettings:
     depth_correct: bool = False
     et_grade: float | None = None
     cell_size: int = 5
+    lod: float | None = None  # level of detail: draw the hierarchy's cut at this many pixels (None: every splat)
 
     def __post_init__(self) -> None:
         """Every number checked through gbviewer.validate (the native renderers take them as int32 and float32);
@@ -98,6 +103,7 @@ class RenderSettings:
                 "et_grade": None if self.et_grade is None else real(self.et_grade, "et_grade", lo=0, lo_open=True,
                                                                     f32=True),
                 "cell_size": integer(self.cell_size, "cell_size", lo=1, hi=MAX_CELL_SIZE),
+                "lod": None if self.lod is None else real(self.lod, "lod", lo=0, hi=MAX_LOD, f32=True),
             }
         except InvalidValue as exc:
             raise RenderError(str(exc)) from None
@@ -116,20 +122,35 @@ class RenderSettings:
             label += " (approx.: v=1)"
         elif self.mode == Mode.DUPLEX and (oit is None or oit.cells is None) and not neural:
             label += f" (built cells, K={self.cell_size})"
+        if self.lod is not None:
+            drawn, total = scene.meta.get("lod", (scene.num_splats, scene.num_splats))
+            label += f", {drawn:,} of {total:,} splats"
         return label
 
     @property
     def label(self) -> str:
-        return self.mode.label + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "")
+        lod = f" LOD \u03c4={self.lod:g} px" if self.lod is not None else ""
+        return self.mode.label + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "") + lod
 
     @property
     def spec(self) -> str:
-        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', ..."""
-        return self.mode.label + (f":{self.supersample}" if self.supersample > 1 else "")
+        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'scalar+lod:1', ..."""
+        lod = f"+lod:{self.lod:g}" if self.lod is not None else ""
+        return self.mode.label + (f":{self.supersample}" if self.supersample > 1 else "") + lod
 
     @classmethod
     def parse(cls, spec: str, **kwargs) -> "RenderSettings":
-        """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples."""
+        """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples; a suffix
+        '+lod' or '+lod:TAU' draws the level-of-detail cut at TAU pixels (default 1)."""
+        spec, plus, lod = spec.partition("+")
+        if plus:
+            kind, _, tau = lod.strip().partition(":")
+            if kind.strip().lower() != "lod":
+                raise RenderError(f"mode {spec + plus + lod!r}: expected MODE[:N][+lod[:TAU]]")
+            try:
+                kwargs = {**kwargs, "lod": float(tau) if tau.strip() else 1.0}
+            except ValueError:
+                raise RenderError(f"mode {spec + plus + lod!r}: LOD pixels {tau!r} is not a number") from None
         name, _, n = spec.strip().partition(":")
         try:
             supersample = int(n) if n else 1
@@ -159,7 +180,8 @@ class FrameStats:
     Filled by some backends or modes only (None elsewhere): simd, the SIMD path the cpu backend's blend ran
     ("scalar", "avx2" or "avx512", chosen by GBVIEWER_SIMD at load or gbviewer._native.testing.set_simd); duplex: cells,
     cells_visible and cell_misses (splat-tile pairs outside their cell's tiles; not counted by glsl); decode_ms: the
-    MLPs of a trained Duplex-GS model, per view.
+    MLPs of a trained Duplex-GS model, per view; lod_splats: the splats of the level-of-detail cut drawn
+    (`RenderSettings.lod`).
     """
 
     preprocess_ms: float = 0.0
@@ -179,6 +201,7 @@ class FrameStats:
     cells_visible: int | None = None
     cell_misses: int | None = None
     decode_ms: float | None = None
+    lod_splats: int | None = None
 
 
 @dataclass

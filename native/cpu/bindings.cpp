@@ -120,6 +120,10 @@ void bind_testing(nb::module_& m) {
 
 }  // namespace
 
+namespace gbv {
+void bind_lod(nb::module_& m);  // lod_bind.cpp
+}
+
 NB_MODULE(_native, m) {
     m.doc() = "gbviewer CPU renderer (C++17, OpenMP; blend vectorised with Google Highway, chosen at run time). One "
               "Renderer may be shared by threads: its calls are serialised, and renders release the GIL.";
@@ -168,6 +172,7 @@ NB_MODULE(_native, m) {
        "(None without); whether the CUDA module was built alongside; compiler, build type and compile flags.");
     bind_testing(m);
     bind_io(m);
+    bind_lod(m);
     nb::class_<Renderer>(m, "Renderer")
         .def(nb::init<>())
         .def("upload",
