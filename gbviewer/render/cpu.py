@@ -80,7 +80,8 @@ class CpuRenderer(NativeUploads, Renderer):
             self._sync(prep)
             out = self._impl.render(*self._frame_args(camera, settings), settings.debug == "window",
                                     *(prep.oit or ()), threads=settings.threads, cancel=control.flag,
-                                    on_progress=control.hook, partial=partial)
+                                    on_progress=control.hook, partial=partial,
+                                    view_filter=settings.view_filter.native())
         control.check(out["cancelled"])  # the native render skipped its remaining work once it saw the flag
         return native_frame(out, prep, camera, settings, self.name, t0)
 
@@ -89,5 +90,6 @@ class CpuRenderer(NativeUploads, Renderer):
         with self._lock:
             prep = prepare(self._scene, camera, settings, self.name)
             self._sync(prep)
-            out = self._impl.trace(*self._frame_args(camera, settings), *(prep.oit or ()), x=x, y=y)
+            out = self._impl.trace(*self._frame_args(camera, settings), *(prep.oit or ()), x=x, y=y,
+                                   view_filter=settings.view_filter.native())
         return from_native(out, settings, camera, x, y)

@@ -18,6 +18,7 @@ from ..cancel import Cancellable
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, distinct_items, integer, real
+from .view_filter import ViewFilter
 
 
 class Mode(enum.IntEnum):
@@ -69,6 +70,9 @@ class RenderSettings:
 
     `debug="window"` adds the final Gaussian Blending window size per pixel (H, W, 2) to `Frame.debug`.
 
+    scalar: `view_filter` is the 2D filter (default 3DGS's +0.3 px^2); `preset` names the viewer preset it came from
+    (gbviewer.render.presets, parsed from 'preset:NAME').
+
     wsr and duplex: `depth_correct` multiplies each splat's weight by LC-WSR's max(0, 1 - z/sigma) (sigma: the
     scene's trained value, else 10); `et_grade` is Duplex-GS's E (None: the scene's trained value, else 4.0, the
     published final value); `cell_size` is the number of splats per cell built for scenes without cells.
@@ -87,6 +91,8 @@ class RenderSettings:
     et_grade: float | None = None
     cell_size: int = 5
     lod: float | None = None  # level of detail: draw the hierarchy's cut at this many pixels (None: every splat)
+    view_filter: ViewFilter = ViewFilter()
+    preset: str = ""
 
     def __post_init__(self) -> None:
         """Every number checked through gbviewer.validate (the native renderers take them as int32 and float32);
@@ -110,6 +116,11 @@ class RenderSettings:
         for name, value in checked.items():
             object.__setattr__(self, name, value)
         object.__setattr__(self, "depth_correct", bool(self.depth_correct))
+        if not isinstance(self.view_filter, ViewFilter):
+            raise RenderError(f"view_filter {self.view_filter!r}; expected a gbviewer.render.ViewFilter")
+        if self.mode != Mode.SCALAR and not self.view_filter.is_default:
+            raise RenderError(f"view_filter {self.view_filter.describe()} applies to the scalar mode, not "
+                              f"{self.mode.label}")
 
     def label_for(self, scene: Scene) -> str:
         """The label with what the scene makes of the mode: wsr on a scene without trained view weights is an
@@ -128,20 +139,26 @@ class RenderSettings:
         return label
 
     @property
+    def name(self) -> str:
+        """'scalar', 'preset:supersplat', ..."""
+        return f"preset:{self.preset}" if self.preset else self.mode.label
+
+    @property
     def label(self) -> str:
         lod = f" LOD \u03c4={self.lod:g} px" if self.lod is not None else ""
-        return self.mode.label + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "") + lod
+        return self.name + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "") + lod
 
     @property
     def spec(self) -> str:
-        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'scalar+lod:1', ..."""
+        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1', ..."""
         lod = f"+lod:{self.lod:g}" if self.lod is not None else ""
-        return self.mode.label + (f":{self.supersample}" if self.supersample > 1 else "") + lod
+        return self.name + (f":{self.supersample}" if self.supersample > 1 else "") + lod
 
     @classmethod
     def parse(cls, spec: str, **kwargs) -> "RenderSettings":
-        """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples; a suffix
-        '+lod' or '+lod:TAU' draws the level-of-detail cut at TAU pixels (default 1)."""
+        """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples;
+        'preset:NAME[:N]' a viewer preset (gbviewer.render.presets); a suffix '+lod' or '+lod:TAU' draws the
+        level-of-detail cut at TAU pixels (default 1)."""
         spec, plus, lod = spec.partition("+")
         if plus:
             kind, _, tau = lod.strip().partition(":")
@@ -152,6 +169,10 @@ class RenderSettings:
             except ValueError:
                 raise RenderError(f"mode {spec + plus + lod!r}: LOD pixels {tau!r} is not a number") from None
         name, _, n = spec.strip().partition(":")
+        if name.strip().lower() == "preset":
+            from .presets import preset_settings  # presets build on this module
+
+            return preset_settings(n, **kwargs)
         try:
             supersample = int(n) if n else 1
         except ValueError:

@@ -44,10 +44,10 @@ nb::dict render(Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float
                 float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                 bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct,
                 int threads, std::optional<LArr> cancel, std::optional<nb::callable> on_progress,
-                std::optional<PArr> partial) {
+                std::optional<PArr> partial, std::optional<FArr> view_filter) {
     const RenderArgs a = render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
                                  supersample, sh_degree, background, want_window, sigma, weight_background, et_grade,
-                                 depth_correct);
+                                 depth_correct, view_filter);
     if (cancel && cancel->shape(0) < 1) throw std::invalid_argument("render: cancel must hold at least one int64");
     if (partial && (partial->shape(0) != (size_t)height || partial->shape(1) != (size_t)width ||
                     partial->shape(2) != 3))
@@ -220,19 +220,21 @@ NB_MODULE(_native, m) {
              nb::arg("want_window"), nb::arg("sigma") = 10.0f, nb::arg("weight_background") = 1.0f,
              nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false, nb::arg("threads") = 0,
              nb::arg("cancel").none() = nb::none(), nb::arg("on_progress").none() = nb::none(),
-             nb::arg("partial").none() = nb::none(),
+             nb::arg("partial").none() = nb::none(), nb::arg("view_filter").none() = nb::none(),
              "Render a frame of the uploaded scene. cancel: int64 array whose [0] stops the frame once nonzero (read "
              "by every worker); on_progress(done, total): called on this thread between tiles, at most every 5 ms, "
              "and at the end (an exception it raises stops the frame and is raised here); partial: float32 "
-             "(height, width, 3) receiving each finished tile.")
+             "(height, width, 3) receiving each finished tile; view_filter: the scalar mode's [dilation, pre_dilation, "
+             "cull_lambda, compensate] (none: 3DGS's).")
         .def(
             "trace",
             [](Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
-               float sigma, float weight_background, float et_grade, bool depth_correct, int x, int y) {
+               float sigma, float weight_background, float et_grade, bool depth_correct, int x, int y,
+               std::optional<FArr> view_filter) {
                 const RenderArgs a = render_args("trace", R, t, fx, fy, cx, cy, width, height, near_plane, projection,
                                              mode, supersample, sh_degree, background, false, sigma,
-                                             weight_background, et_grade, depth_correct);
+                                             weight_background, et_grade, depth_correct, view_filter);
                 PixelTrace traced;
                 {
                     nb::gil_scoped_release release;
@@ -244,7 +246,7 @@ NB_MODULE(_native, m) {
             nb::arg("width"), nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"),
             nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"), nb::arg("sigma") = 10.0f,
             nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
-            nb::arg("x") = 0, nb::arg("y") = 0, "The pixel trace (trace.h) of output pixel (x, y) of this frame.")
+            nb::arg("x") = 0, nb::arg("y") = 0, nb::arg("view_filter").none() = nb::none(), "The pixel trace (trace.h) of output pixel (x, y) of this frame.")
         .def("release_buffers", &Renderer::release_buffers, nb::call_guard<nb::gil_scoped_release>(),
              "Free the per-frame buffers kept for the next frame.")
         .def_prop_ro("buffer_bytes", [](const Renderer& r) {
