@@ -8,7 +8,7 @@ from __future__ import annotations
 import abc
 import enum
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
@@ -18,6 +18,7 @@ from ..cancel import Cancellable
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, distinct_items, integer, real
+from .presets import PRESETS
 from .view_filter import ViewFilter
 
 
@@ -170,15 +171,41 @@ class RenderSettings:
                 raise RenderError(f"mode {spec + plus + lod!r}: LOD pixels {tau!r} is not a number") from None
         name, _, n = spec.strip().partition(":")
         if name.strip().lower() == "preset":
-            from .presets import preset_settings  # presets build on this module
-
-            return preset_settings(n, **kwargs)
+            return cls._preset(n, **kwargs)
         try:
             supersample = int(n) if n else 1
         except ValueError:
             raise RenderError(f"mode {spec!r}: supersampling factor {n!r} is not an integer") from None
         mode = Mode.SCALAR if name.strip().lower() == "supersample" else Mode.parse(name)
         return cls(mode, supersample, **kwargs)
+
+    @classmethod
+    def _preset(cls, spec: str, **kwargs) -> "RenderSettings":
+        """'NAME' or 'NAME:N' (N x N supersampling) of gbviewer.render.presets; its SH bands cap `sh_degree`."""
+        name, _, n = spec.strip().partition(":")
+        preset = PRESETS.get(name.strip().lower())
+        if preset is None:
+            raise RenderError(f"unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
+        try:
+            supersample = int(n) if n else 1
+        except ValueError:
+            raise RenderError(f"preset {spec!r}: supersampling factor {n!r} is not an integer") from None
+        kwargs["sh_degree"] = min(preset.sh_degree, kwargs.get("sh_degree", 3))
+        return cls(Mode.parse(preset.mode), supersample, view_filter=preset.view_filter, preset=preset.name, **kwargs)
+
+    @classmethod
+    def of(cls, mode: "str | Mode", supersample: int = 1, **kwargs) -> "RenderSettings":
+        """A Mode, or any spec `parse` takes ('gaussian_blending', 'preset:spark', 'scalar+lod:1'), with
+        `supersample` (a spec's own factor must then agree)."""
+        if isinstance(mode, Mode):
+            return cls(mode, supersample, **kwargs)
+        settings = cls.parse(str(mode), **kwargs)
+        if supersample == 1 or settings.supersample == supersample:
+            return settings
+        if settings.supersample != 1:
+            raise RenderError(f"mode {mode!r} has supersampling {settings.supersample}; supersample={supersample} "
+                              "disagrees")
+        return replace(settings, supersample=supersample)
 
     @classmethod
     def parse_list(cls, specs: str, **kwargs) -> "list[RenderSettings]":
