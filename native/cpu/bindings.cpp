@@ -100,6 +100,8 @@ void bind_testing(nb::module_& m) {
     nb::module_ t = m.def_submodule("testing", "Test and benchmark switches of the CPU renderer (process-wide).");
     t.def("set_pixel_boxes", [](bool on) { cpu::testing::pixel_boxes.store(on); }, nb::arg("on"),
           "Skip lane groups outside a splat's pixel box (default) or evaluate every list entry.");
+    t.def("set_poison_images", [](bool on) { cpu::testing::poison_images.store(on); }, nb::arg("on"),
+          "Fill each new image with NaN (evaluation counts -1) before the blend (to show it writes every pixel).");
     t.def("set_capture_preprocess", [](bool on) { cpu::testing::capture.store(on); }, nb::arg("on"),
           "Keep the next renders' preprocess output and tile lists for captured_preprocess() and captured_lists().");
     t.def("captured_preprocess", [] {

@@ -1,5 +1,6 @@
 // The CPU renderer (renderer.h): the uploaded scene, the per-frame buffers, and one frame at a time.
 #include "renderer.h"
+#include "testing.h"
 
 #include <algorithm>
 #include <mutex>
@@ -121,12 +122,13 @@ RenderResult Renderer::render(const RenderArgs& a, const Control& control) {
     const int sh_deg = sh_degree_of(a, sc);
     FrameRun run(control);
     ThreadCount threads(control.threads);
-    res.image.resize(a.width, a.height, window);
+    const bool poison = testing::poison_images.load(std::memory_order_relaxed);
+    res.image.resize(a.width, a.height, window, poison);
     if (N == 1) {
         render_image(sc, a.cam, a.mode, a.oit, sh_deg, a.bg, path, impl_->buffers, res.image, res.stats, run, 1);
     } else {
         Image hi;
-        hi.resize(a.width * N, a.height * N, window);
+        hi.resize(a.width * N, a.height * N, window, poison);
         render_image(sc, a.cam, a.mode, a.oit, sh_deg, a.bg, path, impl_->buffers, hi, res.stats, run, N);
         const Clock::time_point t0 = Clock::now();
         if (!run.cancelled()) box_downsample(hi, N, res.image);
