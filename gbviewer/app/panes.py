@@ -170,7 +170,7 @@ class PaneRenders:
         total_ms = res.frame.stats.total_ms
         cam = res.job.camera
         if res.job.info.get("preview", 1.0) == 1.0 and total_ms:
-            key = (part, res.job.settings.mode.label, res.job.settings.supersample, res.job.backend)
+            key = (part, res.job.settings.name, res.job.settings.supersample, res.job.backend)
             p.ms_per_px[key] = total_ms / (cam.width * cam.height)
         p.fps[part].tick(res.finished)
         self._upload(res.job.slot, shown, res.frame, s.settings.panes[i].view)
