@@ -58,6 +58,17 @@ class OitData:
 
 
 @dataclass(frozen=True, eq=False)
+class Checked:
+    """A loader's word that it has done `Scene.from_arrays`'s per-value work on its arrays in its own pass over
+    them (gbviewer.io's INRIA loader, natively, as it reads them): `keep` (N,) bool marks the splats whose values are
+    all finite and within LIMITS; the quaternions are normalised as `unit_quats` does, opacities are in [0, 1],
+    filter_3d and scales >= 0 (or NaN, in a splat keep drops). from_arrays then only drops the splats keep
+    excludes."""
+
+    keep: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
 class Scene:
     """Splats with activated parameters (scales after exp, opacities after sigmoid, unit quaternions).
 
@@ -114,10 +125,11 @@ class Scene:
         et_grade: float | None = None,
         cells: Cells | None = None,
         neural: ViewDecoder | None = None,
+        checked: Checked | None = None,
     ) -> "Scene":
         """Validate activated arrays, drop non-finite splats and those beyond LIMITS (warning once), normalise
-        quaternions. The keywords
-        from view_weight_sh on make `Scene.oit` (wsr_sigma is `OitData.sigma`)."""
+        quaternions. The keywords from view_weight_sh on make `Scene.oit` (wsr_sigma is `OitData.sigma`).
+        `checked`: the loader has done the per-value checks already (`Checked`); only the shapes are checked here."""
         arrays = {
             "means": np.asarray(means, dtype=np.float32),
             "scales": np.asarray(scales, dtype=np.float32),
@@ -153,20 +165,13 @@ class Scene:
         if n == 0:
             raise GBViewerError(f"{source}: the scene has zero splats")
 
-        finite = np.ones(n, dtype=bool)
-        for arr in arrays.values():
-            # A finite sum proves every element finite (NaN and inf propagate); the per-splat reduction is only
-            # needed when it is not (or when a float32 sum of finite values overflowed).
-            with np.errstate(over="ignore", invalid="ignore"):
-                total = arr.sum(dtype=np.float32)  # float16 SH: summed in float32
-            if not np.isfinite(total):
-                finite &= np.isfinite(arr.reshape(n, -1)).all(axis=1)
-        for name, limit in LIMITS.items():
-            arr = arrays.get(name)
-            flat = arr.reshape(-1) if arr is not None else None
-            # fmax / fmin skip NaN (dropped above) and reduce without a temporary the size of the array
-            if flat is not None and max(np.fmax.reduce(flat), -np.fmin.reduce(flat)) > np.float32(limit):
-                finite &= ~(np.abs(arr) > np.float32(limit)).reshape(n, -1).any(axis=1)
+        if checked is None:
+            finite = _valid_rows(arrays, n)
+        elif checked.keep.shape == (n,) and checked.keep.dtype == bool:
+            finite = checked.keep
+        else:
+            raise GBViewerError(f"{source}: checked.keep is {checked.keep.dtype} {checked.keep.shape}; expected bool "
+                                f"({n},)")
         dropped = int(n - finite.sum())
         if dropped:
             why = f"non-finite values (or scales over {MAX_SCALE:g}, SH over {MAX_SH:g})"
@@ -178,24 +183,13 @@ class Scene:
                 cells = Cells.from_groups(cells.means, cells.scales, cells.quats, cells.cell_of(n)[finite],
                                           cells.origin, cells.build_ms, cells.info)
 
-        if (arrays["scales"] < 0).any():
-            raise GBViewerError(f"{source}: field 'scales': negative values; expected activated scales >= 0")
-        q = np.array(arrays["quats"], dtype=np.float32)  # a contiguous copy, normalised in place
-        with np.errstate(over="ignore"):
-            norm = np.sqrt(np.einsum("ij,ij->i", q, q))
-        big = np.isinf(norm)  # components near the float32 maximum, whose squares overflow: scaled down first
-        if big.any():
-            q[big] /= np.abs(q[big]).max(axis=1, keepdims=True)
-            norm[big] = np.sqrt(np.einsum("ij,ij->i", q[big], q[big]))
-        fix = np.abs(norm - 1) > 4 * np.finfo(np.float32).eps  # already unit: kept, so loading is idempotent
-        if fix.any():
-            degenerate = norm < 1e-12
-            q[fix] /= np.maximum(norm[fix], 1e-12)[:, None]
-            q[degenerate] = (1.0, 0.0, 0.0, 0.0)
-        arrays["quats"] = q
-        arrays["opacities"] = np.clip(arrays["opacities"], 0.0, 1.0)
-        if "filter_3d" in arrays:
-            arrays["filter_3d"] = np.abs(arrays["filter_3d"])
+        if checked is None:
+            if (arrays["scales"] < 0).any():
+                raise GBViewerError(f"{source}: field 'scales': negative values; expected activated scales >= 0")
+            arrays["quats"] = unit_quats(arrays["quats"])
+            arrays["opacities"] = np.clip(arrays["opacities"], 0.0, 1.0)
+            if "filter_3d" in arrays:
+                arrays["filter_3d"] = np.abs(arrays["filter_3d"])
         arrays = {k: np.ascontiguousarray(v) for k, v in arrays.items()}
         if cells is not None:
             if len(cells.members) and (cells.members.min() < 0 or cells.members.max() >= len(arrays["means"])):
@@ -207,3 +201,47 @@ class Scene:
         if vw is None and cells is None and neural is None and all(v is None for v in globals_.values()):
             oit = None
         return cls(source=source, meta=dict(meta or {}), oit=oit, **arrays)
+
+
+def _valid_rows(arrays: dict[str, np.ndarray], n: int) -> np.ndarray:
+    """(n,) bool: the splats whose values in every array are finite and within LIMITS."""
+    finite = np.ones(n, dtype=bool)
+    for arr in arrays.values():
+        # A finite sum proves every element finite (NaN and inf propagate); the per-splat reduction is only
+        # needed when it is not (or when a float32 sum of finite values overflowed).
+        with np.errstate(over="ignore", invalid="ignore"):
+            total = arr.sum(dtype=np.float32)  # float16 SH: summed in float32
+        if not np.isfinite(total):
+            finite &= np.isfinite(arr.reshape(n, -1)).all(axis=1)
+    for name, limit in LIMITS.items():
+        arr = arrays.get(name)
+        flat = arr.reshape(-1) if arr is not None else None
+        # fmax / fmin skip NaN (dropped above) and reduce without a temporary the size of the array
+        if flat is not None and max(np.fmax.reduce(flat), -np.fmin.reduce(flat)) > np.float32(limit):
+            finite &= ~(np.abs(arr) > np.float32(limit)).reshape(n, -1).any(axis=1)
+    return finite
+
+
+def _norms(q: np.ndarray) -> np.ndarray:
+    """|q| per row of (M, 4) float32, summed as (w^2 + x^2) + (y^2 + z^2): numpy's einsum order, and the native
+    loader's (gbviewer._native.io), so that both normalise to the same bits."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        sq = q * q
+        return np.sqrt((sq[:, 0] + sq[:, 1]) + (sq[:, 2] + sq[:, 3]))
+
+
+def unit_quats(quats: np.ndarray) -> np.ndarray:
+    """A normalised float32 copy of (N, 4) quaternions: rows within 4 float32 eps of unit length kept as they are
+    (so loading is idempotent), the others divided by their norm; norms under 1e-12 give the identity."""
+    q = np.array(quats, dtype=np.float32)  # a contiguous copy, normalised in place
+    norm = _norms(q)
+    big = np.isinf(norm)  # components near the float32 maximum, whose squares overflow: scaled down first
+    if big.any():
+        q[big] /= np.abs(q[big]).max(axis=1, keepdims=True)
+        norm[big] = _norms(q[big])
+    fix = np.abs(norm - 1) > 4 * np.finfo(np.float32).eps
+    if fix.any():
+        degenerate = norm < 1e-12
+        q[fix] /= np.maximum(norm[fix], 1e-12)[:, None]
+        q[degenerate] = (1.0, 0.0, 0.0, 0.0)
+    return q

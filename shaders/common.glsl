@@ -79,6 +79,10 @@ struct OitParams {
     float weight_background;
     float et_grade;
     int depth_correct;
+    float dilation;
+    float pre_dilation;
+    float cull_lambda;
+    int compensate;
 };
 
 // port of common.h: TileRect

@@ -31,8 +31,13 @@ const uint WINDOW_WORDS = 2u;        // gaussian_blending's final window sides p
 const uint BLEND_STATE_VEC4S = 3u;   // blend.comp's per-invocation state between dispatches: C, T; xy, wh; evals, done
 const uint BLEND_ACCUM_VEC4S = 2u;   // blend.comp's per-invocation box sum: rgba; window sum, evals sum
 
-// Components of the `oit` vec4 uniform: OitParams' fields in order (depth_correct as 0.0 or 1.0).
+// OitParams' fields in order: 0..3 the components of the `oit` vec4 uniform (depth_correct as 0.0 or 1.0), 4..7
+// those of preprocess.comp's `view_filter` vec4 uniform less 4 (the scalar mode's filter, compensate as 0.0 or 1.0).
 const int OIT_SIGMA = 0;
 const int OIT_WEIGHT_BACKGROUND = 1;
 const int OIT_ET_GRADE = 2;
 const int OIT_DEPTH_CORRECT = 3;
+const int OIT_DILATION = 4;
+const int OIT_PRE_DILATION = 5;
+const int OIT_CULL_LAMBDA = 6;
+const int OIT_COMPENSATE = 7;

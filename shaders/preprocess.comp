@@ -28,6 +28,7 @@ uniform float cam_near;
 uniform int cam_projection;  // PERSPECTIVE or ORTHOGRAPHIC
 uniform int weight_k;  // view-weight SH coefficients per splat, 0: none (v = 1)
 uniform vec4 oit;      // OitParams (wsr, duplex): components OIT_* (interface.glsl)
+uniform vec4 view_filter;  // OitParams' scalar filter: components OIT_* - 4 (interface.glsl)
 
 float load_sh(uint splat, int coeff, int channel) {
     return sh_data[splat * uint(3 * sh_k) + uint(coeff * 3 + channel)];
@@ -43,7 +44,9 @@ void main() {
     const vec4 g0 = geom[GEOM_VEC4S * i], g1 = geom[GEOM_VEC4S * i + 1u], g2 = geom[GEOM_VEC4S * i + 2u];
     const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, g0.w, i, g1.w, weight_k > 0, sh_degree_for_coeffs(weight_k), -1);
     const OitParams params = OitParams(oit[OIT_SIGMA], oit[OIT_WEIGHT_BACKGROUND], oit[OIT_ET_GRADE],
-                                        int(oit[OIT_DEPTH_CORRECT]));
+                                        int(oit[OIT_DEPTH_CORRECT]), view_filter[OIT_DILATION - 4],
+                                        view_filter[OIT_PRE_DILATION - 4], view_filter[OIT_CULL_LAMBDA - 4],
+                                        int(view_filter[OIT_COMPENSATE - 4]));
     Splat2D s;
     TileRect r;
     const bool valid = preprocess_splat(in_, sh_deg, cam, mode, params, grid.x, grid.y, s, r);

@@ -198,6 +198,29 @@ bool screen_footprint(CameraParams cam, vec3 pv, vec2 h, int grid_x, int grid_y,
 }
 
 // port of preprocess.h: preprocess_splat
+// port of view_filter.h: scalar_filter (the viewer presets' 2D filter); false: culled
+bool scalar_filter(OitParams f, inout precise vec3 cov, inout precise float opacity) {
+    if (f.pre_dilation != 0.0) {
+        cov[0] += f.pre_dilation;
+        cov[2] += f.pre_dilation;
+    }
+    precise float det0 = 0.0;
+    if (f.compensate != 0) det0 = cov[0] * cov[2] - cov[1] * cov[1];
+    cov[0] += f.dilation;
+    cov[2] += f.dilation;
+    if (f.compensate != 0) {
+        precise const float det1 = cov[0] * cov[2] - cov[1] * cov[1];
+        opacity *= sqrt(max(0.0, det0 / det1));
+    }
+    if (f.cull_lambda > 0.0) {
+        precise const float half_diff = 0.5 * (cov[0] - cov[2]);
+        precise const float root = sqrt(half_diff * half_diff + cov[1] * cov[1]);
+        precise const float lambda1 = 0.5 * (cov[0] + cov[2]) + root;
+        if (!(lambda1 >= f.cull_lambda)) return false;
+    }
+    return true;
+}
+
 bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitParams oit, int grid_x, int grid_y,
                       out Splat2D result, out TileRect rect) {
     rect = TileRect(0, 0, 0, 0);
@@ -236,8 +259,7 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
     if (mode == SCALAR) {
-        cov[0] += DILATION_3DGS;
-        cov[2] += DILATION_3DGS;
+        if (!scalar_filter(oit, cov, opacity)) return false;
     } else if (mode == MIP) {
         precise const float det0 = max(1e-6, cov[0] * cov[2] - cov[1] * cov[1]);
         cov[0] += MIP_KERNEL_SIZE;

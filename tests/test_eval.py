@@ -349,3 +349,16 @@ def test_an_8000x6000_photo_is_refused_under_an_8g_budget(tmp_path, capsys, monk
     assert f"{tmp_path / 'images' / 'a.png'}: the 8000x6000 photo needs about 1" in err, err
     assert "more than the 8 GiB budget (GBVIEWER_MEMORY_BUDGET); set GBVIEWER_MEMORY_BUDGET" in err
     assert "--images images_4" in err
+
+
+def test_auto_backend_follows_the_one_rule_and_gpu_requests_follow_capabilities():
+    """eval's auto is `choose_backend`'s pick (no policy of its own); Ray asks for GPUs by capability, not name."""
+    from gbviewer.eval.cluster import renders_on_device
+    from gbviewer.eval.tasks import pick_backend
+    from gbviewer.render import BACKENDS, choose_backend
+
+    assert pick_backend("auto") == choose_backend().name
+    assert pick_backend("cpu") == "cpu"
+    assert renders_on_device("auto")
+    for name, cls in BACKENDS.items():
+        assert renders_on_device(name) == (not cls.capabilities.host)

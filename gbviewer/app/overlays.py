@@ -10,7 +10,9 @@ from typing import TYPE_CHECKING, Callable
 from imgui_bundle import imgui
 
 from ..camera import format_rate
+from ..io.trained_as import describe
 from ..render import AUTO
+from ..render.presets import trained_spec
 from .difference_views import shows_photo
 from .keys import hint
 from .layout import Rect, loupe_uv
@@ -84,6 +86,8 @@ def pane_label(app: ViewerApp, p: PaneState, part: str) -> str:
     if job is None:
         return f"{p.name}  {ps.mode if part == 'a' else ps.split_mode}"
     label = job.settings.label_for(state.scene) if state.scene is not None else job.settings.label
+    if state.scene is not None and job.settings.name == trained_spec(state.scene.meta):
+        label += f" (as trained: {describe(state.scene.meta)})"
     rate = format_rate(job.info.get("rate", state.settings.rate))
     w, h = job.info.get("full_size", (job.camera.width, job.camera.height))
     name = p.name + ("'" if part == "b" else "")

@@ -11,13 +11,14 @@ from typing import Any, Container
 from ..camera import PROJECTIONS, UP_AXES
 from ..errors import InvalidValue
 from ..render import AUTO, BACKEND_NAMES, Mode
+from ..render.presets import PRESETS
 from ..validate import array, integer, read_json, real
 from .camera_control import CameraController
 from .layout import LAYOUTS
 from .rates import clamp_rate
 from .views import VIEWS
 
-MODE_NAMES = tuple(m.label for m in Mode)
+MODE_NAMES = tuple(m.label for m in Mode) + tuple(f"preset:{name}" for name in PRESETS)
 MAX_PANES = 4
 MAX_RECENT = 10
 VERSION = 2  # of the settings file; 2: backend "auto"

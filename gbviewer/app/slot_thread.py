@@ -55,7 +55,12 @@ class SlotThread:
     """One thread on the newest request per slot (`request.slot`), ordered by `policy`. A subclass defines
     `_work(request, cancel) -> result or None` (None: nothing to hand out, e.g. cancelled); `_renderer_for(scene)`
     gives it a renderer of `backend` of its own with `scene` uploaded. `nice`: added to the thread's niceness.
-    `on_result`: called from the thread after a result is handed out."""
+    `on_result`: called from the thread after a result is handed out.
+
+    A subclass may work on several requests at once: `_companions(first, waiting)` names the waiting requests that
+    go with the first (e.g. panes rendered together), `_work_all(requests, cancel)` returns a result per request.
+    They share one cancel token: a newer request of one slot stops them all, and the others (`.cancelled` results
+    whose slot has nothing newer) go back to the queue."""
 
     NAME = "gbviewer-slots"
 
@@ -64,11 +69,13 @@ class SlotThread:
         self.policy, self._backend, self._nice, self._on_result = policy, backend, nice, on_result
         self._lock = threading.Condition()
         self._pending: dict[Hashable, tuple[int, Any]] = {}  # slot -> (seq, request)
-        self._running: Any = None  # the request being worked on
+        self._running: list = []  # the requests being worked on
         self._cancel = CancelToken()  # the running request's: the native loop reads its flag directly
         self._results: list = []
         self._served: dict[Hashable, float] = {}
         self._seq = 0
+        self._cancelled_by: set[Hashable] = set()  # slots that stopped the running requests
+        self._generation = 0  # counts clear/forget/stop: running requests of an older one are not requeued
         self._stop = False
         self._wakes: set[str] = set()  # why the thread was woken without a request ("forget", a subclass's own)
         self._renderer = None
@@ -82,20 +89,27 @@ class SlotThread:
 
     def submit(self, request) -> None:
         """Queue `request`, replacing its slot's waiting one; cancel its slot's running one where the policy says."""
+        self.submit_all([request])
+
+    def submit_all(self, requests: list) -> None:
+        """`submit` each of `requests` at once: the thread sees them together (to work on them as companions)."""
         with self._lock:
-            self._seq += 1
-            self.dropped += request.slot in self._pending
-            self._pending[request.slot] = (self._seq, request)
-            running = self._running
-            if running is not None and running.slot == request.slot and self.policy.cancels(running, request):
-                self._cancel.set()
+            for request in requests:
+                self._seq += 1
+                self.dropped += request.slot in self._pending
+                self._pending[request.slot] = (self._seq, request)
+                for running in self._running:
+                    if running.slot == request.slot and self.policy.cancels(running, request):
+                        self._cancelled_by.add(request.slot)
+                        self._cancel.set()
             self._lock.notify()
 
     def cancel(self, slot: Hashable) -> None:
         """Forget `slot`'s waiting request and stop its running one."""
         with self._lock:
             self._pending.pop(slot, None)
-            if self._running is not None and self._running.slot == slot:
+            if any(running.slot == slot for running in self._running):
+                self._cancelled_by.add(slot)
                 self._cancel.set()
 
     def results(self) -> list:
@@ -107,18 +121,20 @@ class SlotThread:
         """Whether `slot` (or any slot) has a request waiting or being worked on."""
         with self._lock:
             if slot is None:
-                return bool(self._pending) or self._running is not None
-            return slot in self._pending or (self._running is not None and self._running.slot == slot)
+                return bool(self._pending) or bool(self._running)
+            return slot in self._pending or any(running.slot == slot for running in self._running)
 
     def clear(self) -> None:
         """Drop what is waiting."""
         with self._lock:
             self._pending.clear()
+            self._generation += 1
 
     def forget(self) -> None:
         """Drop what is waiting, stop what runs, and free the scene (a new scene is open)."""
         with self._lock:
             self._pending.clear()
+            self._generation += 1
             self._cancel.set()
         self._wake("forget")
 
@@ -126,6 +142,7 @@ class SlotThread:
         with self._lock:
             self._stop = True
             self._pending.clear()
+            self._generation += 1
             self._cancel.set()
             self._lock.notify()
         self._thread.join(timeout)
@@ -140,6 +157,14 @@ class SlotThread:
 
     def _work(self, request, cancel: CancelToken):
         raise NotImplementedError
+
+    def _companions(self, first, waiting: list) -> list:
+        """Of the `waiting` requests (in rank order), those worked on together with `first`: none by default."""
+        return []
+
+    def _work_all(self, requests: list, cancel: CancelToken) -> list:
+        """A result (or None) per request of `requests` (one, or `first` and its companions)."""
+        return [self._work(requests[0], cancel)]
 
     def _start(self) -> None:
         """First thing in the thread."""
@@ -161,15 +186,31 @@ class SlotThread:
             self._scene = scene
         return self._renderer
 
-    def _next(self):
-        """The waiting request the policy ranks first (taken off the queue), with a fresh cancel event."""
+    def _next(self) -> list:
+        """The waiting request the policy ranks first and its companions (taken off the queue), with a fresh cancel
+        token."""
         def rank(slot: Hashable) -> tuple:
             seq, request = self._pending[slot]
             return self.policy.rank(request, seq, self._served.get(slot, 0.0))
 
-        request = self._pending.pop(min(self._pending, key=rank))[1]
-        self._running, self._cancel = request, CancelToken()
-        return request
+        slots = sorted(self._pending, key=rank)
+        first = self._pending.pop(slots[0])[1]
+        companions = self._companions(first, [self._pending[s][1] for s in slots[1:]])
+        for request in companions:
+            del self._pending[request.slot]
+        self._running, self._cancel, self._cancelled_by = [first, *companions], CancelToken(), set()
+        return self._running
+
+    def _requeue(self, requests: list, results: list, seqs: dict, generation: int) -> set:
+        """Under the lock: put back the requests of a stopped group that nothing replaced or dropped; their slots."""
+        if len(requests) < 2 or generation != self._generation:
+            return set()
+        back = {request.slot for request, result in zip(requests, results) if getattr(result, "cancelled", False)}
+        back -= self._cancelled_by | set(self._pending)
+        for request in requests:
+            if request.slot in back:
+                self._pending[request.slot] = (seqs.get(request.slot, 0), request)
+        return back
 
     def _loop(self) -> None:
         if self._nice:
@@ -182,19 +223,23 @@ class SlotThread:
                 if self._stop:
                     break
                 wakes, self._wakes = self._wakes, set()
-                request = self._next() if self._pending else None
-                cancel = self._cancel
-            self._between(wakes, request)
-            if request is None:
+                seqs = {slot: seq for slot, (seq, _) in self._pending.items()}
+                requests = self._next() if self._pending else []
+                cancel, generation = self._cancel, self._generation
+            self._between(wakes, requests[0] if requests else None)
+            if not requests:
                 continue
-            result = self._work(request, cancel)
+            results = self._work_all(requests, cancel)
             with self._lock:
-                self._running = None
-                self._served[request.slot] = time.perf_counter()
-                if result is not None:
-                    self._results.append(result)
-                    self.done += 1
-            if result is not None and self._on_result is not None:
+                self._running = []
+                back = self._requeue(requests, results, seqs, generation)
+                now = time.perf_counter()
+                for request, result in zip(requests, results):
+                    self._served[request.slot] = now
+                    if result is not None and request.slot not in back:
+                        self._results.append(result)
+                        self.done += 1
+            if any(result is not None for result in results) and self._on_result is not None:
                 self._on_result()
         self._finish()
 

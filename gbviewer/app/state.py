@@ -10,7 +10,9 @@ from typing import Literal
 
 from ..camera import Camera, load_cameras_json
 from ..errors import GBViewerError
+from ..io.trained_as import describe
 from ..render import Mode, RenderSettings
+from ..render.presets import trained_spec
 from ..scene import Scene
 from .background import FIXED, PHOTOS, RGB, format_rgb
 from .camera_actions import CameraActions
@@ -130,9 +132,13 @@ class AppState(CameraActions):
             self.message(res.cameras_error, "error")
         for p in self.panes:
             p.forget()
+        trained = trained_spec(res.scene.meta)
+        if trained is not None:  # pane A, the reference of the differences, shows the scene as it was trained
+            self.settings.panes[0].mode = trained
         self.needs_reset = True
         self.message(f"opened {res.path.name}: {res.scene.num_splats:,} splats in {res.seconds:.2f} s"
-                     + (f", {len(self.cameras)} training cameras" if self.cameras else ""))
+                     + (f", {len(self.cameras)} training cameras" if self.cameras else "")
+                     + (f"; pane A {trained}, as trained ({describe(res.scene.meta)})" if trained else ""))
         if self.pending_cameras is not None:
             path, self.pending_cameras = self.pending_cameras, None
             self.needs_reset = False
@@ -285,9 +291,9 @@ class AppState(CameraActions):
     def settings_for(self, i: int, part: str) -> RenderSettings:
         """What pane i's part ('a', or 'b' of a split) renders with."""
         ps: PaneSettings = self.settings.panes[i]
-        mode = Mode.parse(ps.split_mode if part == "b" else ps.mode)
-        debug = "window" if ps.view == "window" and mode == Mode.GAUSSIAN_BLENDING else "none"
-        return RenderSettings(mode, ps.supersample, self.background, debug=debug)
+        base = RenderSettings.parse(ps.split_mode if part == "b" else ps.mode)
+        debug = "window" if ps.view == "window" and base.mode == Mode.GAUSSIAN_BLENDING else "none"
+        return replace(base, supersample=ps.supersample, background=self.background, debug=debug)
 
     # ---- zoom video ---------------------------------------------------------------------------------------------
 

@@ -10,6 +10,7 @@ from pathlib import Path
 from ..errors import GBViewerError
 from ..io import load, write_inria_ply
 from ..io.files import check_writable
+from ..io.trained_as import describe
 from ..render import build_info, compiler_line, simd_line
 
 
@@ -28,6 +29,7 @@ def cmd_info(args: argparse.Namespace) -> int:
         "splats": scene.num_splats,
         "sh_degree": scene.sh_degree,
         "filter_3D": scene.filter_3d is not None,
+        "trained_as": describe(scene.meta),
         "bounds": [lo.tolist(), hi.tolist()],
         "robust_bounds_2_98": [rlo.tolist(), rhi.tolist()],
         "properties": scene.meta.get("properties", []),

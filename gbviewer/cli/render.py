@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from ..argtypes import BACKGROUND, Rate, count
@@ -10,7 +11,9 @@ from ..errors import GBViewerError
 from ..figure import save_image
 from ..io import load
 from ..io.files import check_writable
+from ..io.trained_as import describe
 from ..render import Mode, RenderSettings, get_renderer
+from ..render.presets import PRESETS, trained_spec
 from .options import add_backend_arg, add_camera_args, backend_of, camera_from_args, check_render_size
 
 
@@ -23,11 +26,15 @@ def cmd_render(args: argparse.Namespace) -> int:
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, [args.scale], "--scale")
     cam = cam.at_sampling_rate(args.scale)
-    settings = RenderSettings(Mode.parse(args.mode), args.supersample, args.background, args.sh_degree)
+    trained = trained_spec(scene.meta)
+    spec = args.mode or trained or "scalar"
+    settings = replace(RenderSettings.parse(spec, background=args.background, sh_degree=args.sh_degree),
+                       supersample=args.supersample)
     frame = get_renderer(scene, backend_of(args)).render(cam, settings)
     save_image(out, frame.rgb, force=args.force)
     st = frame.stats
-    print(f"{out}: {cam.width}x{cam.height} {settings.label} on {args.backend}: {st.total_ms:.1f} ms "
+    how = f" (as trained: {describe(scene.meta)})" if args.mode is None and trained else ""
+    print(f"{out}: {cam.width}x{cam.height} {settings.label}{how} on {args.backend}: {st.total_ms:.1f} ms "
           f"(preprocess {st.preprocess_ms:.1f}, sort {st.sort_ms:.1f}, blend {st.blend_ms:.1f}), "
           f"{st.visible} visible splats, {st.evals_per_pixel:.1f} evaluations/pixel")
     return 0
@@ -37,7 +44,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="render one image")
     p.add_argument("scene", type=Path)
     add_camera_args(p)
-    p.add_argument("--mode", default="scalar", choices=[m.label for m in Mode])
+    p.add_argument("--mode", help=f"{', '.join(m.label for m in Mode)} or preset:NAME ({', '.join(PRESETS)}); "
+                   "default: the mode the file says the scene was trained with (gbviewer info: trained_as), else "
+                   "scalar")
     p.add_argument("--supersample", type=count(8), default=1, metavar="1..8")
     p.add_argument("--scale", type=Rate(), default=1.0, help="sampling rate: 8, 1, 0.125 or 1/8")
     add_backend_arg(p)

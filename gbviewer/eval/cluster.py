@@ -12,6 +12,7 @@ from typing import Callable
 
 from ..errors import GBViewerError
 from ..extras import require
+from ..render import AUTO, BACKENDS
 from .tasks import ViewResult, ViewTask, run_task
 
 TASK_CPUS = 4  # CPUs (render threads) per Ray task unless --threads says: a node runs cores / 4 tasks at once
@@ -44,10 +45,15 @@ def check_address(address: str) -> None:
                             f"{CONNECT_TIMEOUT_S:g} s ({exc.strerror or exc}); is the Ray head running?") from None
 
 
+def renders_on_device(backend: str) -> bool:
+    """Whether tasks of `backend` want a GPU: auto (a worker with one picks it) or a backend off the host."""
+    return backend == AUTO or (backend in BACKENDS and not BACKENDS[backend].capabilities.host)
+
+
 def run_on_ray(tasks: list[ViewTask], address: str, advance: Callable[[int], None]) -> list[ViewResult]:
     """Run `tasks` on the Ray cluster at `address` (host:port, ray://host:port or auto; local: start a Ray
-    instance in this process for the run). Where the cluster has GPUs and the backend is auto or cuda, each task
-    takes one GPU and renders with CUDA; else it takes the tasks' `threads` CPUs (0: TASK_CPUS, at most the
+    instance in this process for the run). Where the cluster has GPUs and the backend is auto or
+    one that renders off the host (`Capabilities.host` false), each task takes one GPU; else it takes the tasks' `threads` CPUs (0: TASK_CPUS, at most the
     smallest node's count) and renders with as many threads. `run_eval` has checked the address (`check_address`)."""
     ray = require("ray", "ray", "--ray")
     try:
@@ -56,7 +62,7 @@ def run_on_ray(tasks: list[ViewTask], address: str, advance: Callable[[int], Non
     except (ConnectionError, RuntimeError, ValueError) as exc:
         raise GBViewerError(f"--ray {address}: cannot connect ({' '.join(str(exc).split())[:200]})") from None
     try:
-        gpus = ray.cluster_resources().get("GPU", 0) > 0 and bool(tasks) and tasks[0].backend in ("auto", "cuda")
+        gpus = ray.cluster_resources().get("GPU", 0) > 0 and bool(tasks) and renders_on_device(tasks[0].backend)
         smallest = min((n["Resources"].get("CPU", 1) for n in ray.nodes() if n["Alive"]), default=1)
         cpus = (tasks[0].threads if tasks else 0) or max(1, min(TASK_CPUS, int(smallest)))
         remote = ray.remote(run_task).options(**({"num_gpus": 1, "num_cpus": 1} if gpus else {"num_cpus": cpus}))

@@ -38,7 +38,7 @@ def add_eval_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--background", type=BACKGROUND, default=(0.0, 0.0, 0.0), metavar=BACKGROUND.metavar,
                    help="background of the renders and of RGBA photos (1,1,1 for a Blender scene trained on white)")
     p.add_argument("--backend", default="auto", choices=["auto", *BACKENDS],
-                   help="auto (default): cuda where a worker has it, else cpu")
+                   help="auto (default): the backend auto picks in each worker (see gbviewer info)")
     runner = p.add_mutually_exclusive_group()
     runner.add_argument("--workers", type=count(MAX_WORKERS), default=1, help="local processes (default 1)")
     runner.add_argument("--ray", metavar="ADDRESS", help="run on a Ray cluster (host:port, ray://host:port, auto; "

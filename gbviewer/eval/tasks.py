@@ -12,7 +12,7 @@ from ..errors import GBViewerError
 from ..io import load
 from ..io.datasets import View
 from ..metrics import psnr, ssim
-from ..render import BACKENDS, RenderSettings, get_renderer
+from ..render import AUTO, RenderSettings, choose_backend, get_renderer
 from ..scene import Scene
 from .multiscale import camera_for_rate, ground_truths
 
@@ -20,7 +20,7 @@ from .multiscale import camera_for_rate, ground_truths
 @dataclass(frozen=True)
 class ViewTask:
     """Everything a worker needs (picklable): which scene file, which view, the modes, rates, background, backend
-    (auto: cuda where this worker has it, else cpu), CPU threads per render (0: all) and the cache folder."""
+    (auto: what `choose_backend` picks in the worker), CPU threads per render (0: all) and the cache folder."""
 
     scene: str
     scene_index: int
@@ -52,10 +52,8 @@ def _scene(path: str) -> Scene:
 
 
 def pick_backend(name: str) -> str:
-    """`name`, or for auto: cuda where this process can use it, else cpu."""
-    if name != "auto":
-        return name
-    return "cuda" if BACKENDS["cuda"].available()[0] else "cpu"
+    """`name`, or for auto: the backend `choose_backend` picks in this process (the same rule as everywhere)."""
+    return choose_backend().name if name == AUTO else name
 
 
 def finite(x: float) -> float | None:

@@ -19,6 +19,7 @@ from .progress import LoadProgress, Progress
 from .sog import ZIP_MAGIC, load_sog
 from .splat import load_splat, looks_like_splat
 from .spz import GZIP_MAGIC, MAGIC as SPZ_MAGIC, read_spz
+from .trained_as import ply_comments, resolve, signals_of
 from .write import write_inria_ply
 
 __all__ = ["load", "load_cameras_json", "write_inria_ply"]
@@ -36,7 +37,8 @@ def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable
     CallbackError chained to it. `cancel`: a gbviewer.CancelToken (or threading.Event); once it is set the load
     raises LoadCancelled within one chunk (at most a hundredth of the file or 65536 splats). `sh_dtype`:
     "float16" stores the SH coefficients as float16 (half their memory, rounded to nearest; an error where one is
-    beyond float16's range); the renderers convert them to float32 at upload."""
+    beyond float16's range); the renderers convert them to float32 at upload. `scene.meta["trained_as"]` and its
+    source: the mode the file says it was trained with (gbviewer.io.trained_as)."""
     path = Path(path)
     if sh_dtype not in SH_DTYPES:
         raise GBViewerError(f"sh_dtype {sh_dtype!r}; expected one of {', '.join(SH_DTYPES)}")
@@ -45,6 +47,7 @@ def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable
         reporter.check()
         with np.errstate(all="ignore"):  # overflow in decoding is data: Scene drops non-finite splats with a warning
             scene = _load(path, reporter, sh_dtype)
+            scene.meta.update(resolve(signals_of(scene.meta, ply_comments(path) if path.is_file() else [])))
             if scene.sh.dtype != sh_dtype:  # formats decoded in float32: converted once whole
                 scene = replace(scene, sh=check_sh_range(scene.sh, np.dtype(sh_dtype)).astype(sh_dtype))
             return scene

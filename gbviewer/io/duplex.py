@@ -321,8 +321,7 @@ def load_duplex(path: Path, ply: plyfile.PlyData) -> Scene:
     torch = _import_torch(path)
     wanted = (["x", "y", "z", "level", "extra_level", "info"] + groups["f_offset_"] + groups["f_anchor_feat_"]
               + groups["anchor_size_"] + ["anchor_shd_0"] + groups["anchor_shv_"])
-    cols = vertex_columns(path, ply, wanted)
-    data = np.asarray(cols(wanted), np.float32)
+    data = vertex_columns(path, ply, wanted)
     if not np.isfinite(data).all():
         raise SceneFormatError(path, "non-finite anchor values")
     pos = {name: i for i, name in enumerate(wanted)}

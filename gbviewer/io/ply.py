@@ -6,6 +6,7 @@ info[0] = weight_background, info[1] = sigma."""
 
 from __future__ import annotations
 
+import importlib
 import io
 import re
 from dataclasses import dataclass
@@ -16,7 +17,7 @@ import numpy as np
 import plyfile
 
 from ..errors import GBViewerError, InvalidValue, SceneFormatError
-from ..scene import Scene
+from ..scene import MAX_SCALE, MAX_SH, Checked, Scene
 from ..validate import declared_count
 from . import progress as load_progress
 from .progress import LoadProgress
@@ -103,17 +104,17 @@ def check_element_counts(path: Path, head: bytes, size: int) -> None:
             raise SceneFormatError(path, str(exc).removeprefix(f"element '{name}': "), field=name) from None
 
 
-def vertex_columns(path: Path, ply: plyfile.PlyData, names: list[str]) -> Callable[..., np.ndarray]:
-    """Check that each named vertex property is a scalar number; return `columns(names, rows=all) -> (rows, len)
-    float32` (see `table_columns`)."""
-    return table_columns(path, ply["vertex"].data, names)
+def vertex_columns(path: Path, ply: plyfile.PlyData, names: list[str]) -> np.ndarray:
+    """The named vertex properties (each checked to be a scalar number) as a (rows, len(names)) float32 array."""
+    table, pos = column_table(path, ply["vertex"].data, names)
+    return table if list(pos) == list(range(table.shape[1])) else np.take(table, pos, axis=1)
 
 
-def table_columns(path: Path, data: np.ndarray, names: list[str]) -> Callable[..., np.ndarray]:
-    """`vertex_columns` of a structured array of vertex rows.
-
-    For the usual all-float32 layout, consecutive properties come back as a strided view of the data (memory-mapped
-    or a chunk read from the file), so each byte is copied once, by whoever makes the final array."""
+def column_table(path: Path, data: np.ndarray, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """A structured array of vertex rows as a (rows, C) float32 table and the int32 positions of `names` in it, once
+    each named property is checked to be a scalar number. The usual all-float32 layout is viewed as it is (memory-
+    mapped or a chunk read from the file: each byte is copied once, by the scatter into the final arrays); other
+    layouts are converted, the named columns only."""
     fields = data.dtype.fields or {}
     for name in names:
         if name not in fields:
@@ -122,30 +123,39 @@ def table_columns(path: Path, data: np.ndarray, names: list[str]) -> Callable[..
         if dtype.kind not in "fiu" or dtype.shape:
             raise SceneFormatError(path, f"property has type {dtype}; expected a scalar number", field=name)
     all_names = list(data.dtype.names)
-    if all(fields[n][0] == np.dtype("<f4") for n in all_names) and data.dtype.itemsize == 4 * len(all_names):
-        flat = np.asarray(data).view("<f4").reshape(len(data), len(all_names))
+    if all(fields[n][0] == np.dtype("=f4") for n in all_names) and data.dtype.itemsize == 4 * len(all_names):
+        table = np.asarray(data).view(np.float32).reshape(len(data), len(all_names))
         pos = {n: i for i, n in enumerate(all_names)}
-
-        def columns(wanted: list[str], rows: slice = slice(None)) -> np.ndarray:
-            idx = [pos[n] for n in wanted]
-            if idx == list(range(idx[0], idx[0] + len(idx))):
-                return flat[rows, idx[0]:idx[0] + len(idx)]
-            return np.take(flat[rows], idx, axis=1)
-
-        return columns
-    return lambda wanted, rows=slice(None): np.stack([np.asarray(data[n][rows], dtype=np.float32) for n in wanted],
-                                                     axis=1)
+        return table, np.array([pos[n] for n in names], np.int32)
+    table = np.stack([np.asarray(data[n], dtype=np.float32) for n in names], axis=1)
+    return table, np.arange(len(names), dtype=np.int32)
 
 
 def check_sh_range(sh: np.ndarray, dtype: np.dtype) -> np.ndarray:
-    """`sh`, once checked to fit `dtype`: float16 storage (`gb.load(..., sh_dtype="float16")`) refuses coefficients
-    beyond its largest finite value rather than turning them into infinities."""
+    """`sh`, once checked to fit `dtype` (`check_sh_magnitude`)."""
     if np.dtype(dtype) == np.float16 and sh.size:
-        big = max(float(np.fmax.reduce(sh, axis=None)), -float(np.fmin.reduce(sh, axis=None)))
-        if big > float(np.finfo(np.float16).max):
-            raise GBViewerError(f"field 'sh': coefficients up to {big:.3g}, beyond float16's range (65504); load "
-                                "with sh_dtype='float32'")
+        check_sh_magnitude(max(float(np.fmax.reduce(sh, axis=None)), -float(np.fmin.reduce(sh, axis=None))), dtype)
     return sh
+
+
+def check_sh_magnitude(big: float, dtype: np.dtype) -> None:
+    """float16 storage (`gb.load(..., sh_dtype="float16")`) refuses SH coefficients up to `big` in magnitude when that
+    is beyond its largest finite value, rather than turning them into infinities."""
+    if np.dtype(dtype) == np.float16 and big > float(np.finfo(np.float16).max):
+        raise GBViewerError(f"field 'sh': coefficients up to {big:.3g}, beyond float16's range (65504); load "
+                            "with sh_dtype='float32'")
+
+
+def native_io():
+    """`gbviewer._native.io` (the INRIA row scatter), or a GBViewerError saying why the native module does not
+    import (a GBVIEWER_SIMD the CPU lacks, say): imported here, not with gbviewer, which imports without it. By
+    name: the compiled module is a leaf that imports nothing of gbviewer, but the import linter, which sees only
+    .py files, would take `from .. import _native` for an import of the whole package (and so of render)."""
+    try:
+        return importlib.import_module("gbviewer._native").io
+    except ImportError as exc:
+        raise GBViewerError(f"the native module gbviewer._native does not import ({exc}); the .ply loader needs "
+                            "it") from None
 
 
 def activate_opacity(raw: np.ndarray) -> np.ndarray:
@@ -214,30 +224,33 @@ class InriaArrays:
         self.filter_3d = np.empty(n, np.float32) if layout.has_filter else None
         self.weights = np.empty((n, len(layout.weight_cols) - 1), np.float32) if layout.weight_cols else None
         self.info = np.zeros(min(n, 2), np.float32)
+        self.keep = np.empty(n, bool)
+        self._scatter = native_io().scatter_inria
 
-    def fill(self, columns: Callable[[list[str]], np.ndarray], rows: slice) -> None:
-        """Copy rows `rows` from `columns(names)`, the raw float32 columns of just those rows."""
-        k = self.sh.shape[1]
-        self.sh[rows, 0, :] = check_sh_range(columns(["f_dc_0", "f_dc_1", "f_dc_2"]), self.sh.dtype)
-        if k > 1:  # f_rest is channel-major: all R coefficients, then G, then B
-            rest = check_sh_range(columns(self.layout.rest), self.sh.dtype)
-            self.sh[rows, 1:, :] = rest.reshape(-1, 3, k - 1).transpose(0, 2, 1)
-        self.means[rows] = columns(["x", "y", "z"])
-        self.scales[rows] = columns(["scale_0", "scale_1", "scale_2"])
-        self.quats[rows] = columns(["rot_0", "rot_1", "rot_2", "rot_3"])
-        self.opacities[rows] = columns(["opacity"])[:, 0]
-        if self.filter_3d is not None:
-            self.filter_3d[rows] = columns(["filter_3D"])[:, 0]
-        if self.weights is not None:
-            self.weights[rows] = columns(self.layout.weight_cols[:-1])
-            if rows.start < len(self.info):
-                head = columns(["info"])[: len(self.info) - rows.start, 0]
-                self.info[rows.start:rows.start + len(head)] = head
+    def fill(self, table: np.ndarray, cols: np.ndarray, rows: slice) -> None:
+        """Scatter `table` (rows, C) float32, the raw rows `rows`, its columns at `cols` (`column_table` of
+        `layout.wanted`) into the arrays: copied, checked and normalised as Scene.from_arrays would
+        (`gbviewer._native.io.scatter_inria`; `keep` marks the splats it would keep)."""
+        sliced = [None if a is None else a[rows] for a in (self.filter_3d, self.weights)]
+        dc, rest = self._scatter(table, cols[:-1] if self.weights is not None else cols, self.means[rows],
+                                 self.scales[rows], self.quats[rows], self.opacities[rows], self.sh[rows], *sliced,
+                                 self.keep.view(np.uint8)[rows], MAX_SH)
+        check_sh_magnitude(dc, self.sh.dtype)
+        check_sh_magnitude(rest, self.sh.dtype)
+        if self.weights is not None and rows.start < len(self.info):
+            head = table[: len(self.info) - rows.start, cols[-1]]
+            self.info[rows.start:rows.start + len(head)] = head
 
     def activate(self, rows: slice) -> None:
-        """exp of the scales, sigmoid of the opacities of rows `rows`, in place."""
-        self.scales[rows] = activate_scales(self.scales[rows])
-        self.opacities[rows] = activate_opacity(self.opacities[rows])
+        """exp of the scales, sigmoid of the opacities of rows `rows`, in place; `keep` then also drops the splats
+        whose activated scale is beyond MAX_SCALE (or not finite) and whose opacity is NaN, as Scene.from_arrays."""
+        scales, opacities = self.scales[rows], self.opacities[rows]
+        scales[...] = activate_scales(scales)
+        opacities[...] = activate_opacity(opacities)
+        ok = scales <= np.float32(MAX_SCALE)
+        if not ok.all():  # the per-splat reduction only where a chunk has such a scale
+            self.keep[rows] &= ok.all(axis=1)
+        self.keep[rows] &= ~np.isnan(opacities)
 
     def scene(self, path: Path) -> Scene:
         """The validated Scene of the filled, activated arrays."""
@@ -256,7 +269,7 @@ class InriaArrays:
             extra = {"weight_background": wbg, "wsr_sigma": sigma, "view_weight_sh": self.weights}
             meta.update(format="sort-free-ply", sort_free=True)
         return Scene.from_arrays(self.means, self.scales, self.quats, self.opacities, self.sh, self.filter_3d,
-                                 source=str(path), meta=meta, **extra)
+                                 source=str(path), meta=meta, checked=Checked(self.keep), **extra)
 
 
 def load_inria_ply(path: Path, ply: plyfile.PlyData, progress: LoadProgress | None = None) -> Scene:
@@ -266,11 +279,11 @@ def load_inria_ply(path: Path, ply: plyfile.PlyData, progress: LoadProgress | No
         raise SceneFormatError(path, "no 'vertex' element", field="vertex")
     n = ply["vertex"].count
     layout = inria_layout(path, list(ply["vertex"].data.dtype.names or ()), n)
-    columns = vertex_columns(path, ply, layout.wanted)
+    table, cols = column_table(path, ply["vertex"].data, layout.wanted)
     out = InriaArrays(layout, n)
     for begin, end in (progress or LoadProgress()).chunks(n, "splats", load_progress.MIN_SPLATS):
         rows = slice(begin, end)
-        out.fill(lambda wanted: columns(wanted, rows), rows)
+        out.fill(table[rows], cols, rows)
         out.activate(rows)
     return out.scene(path)
 
@@ -304,7 +317,7 @@ def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype
             return None  # read_ply reports what is wrong with it
         start, n = fh.tell(), element.count
         layout = inria_layout(path, list(row.names), n)
-        table_columns(path, np.empty(0, row), layout.wanted)  # the checks of each column's type
+        cols = column_table(path, np.empty(0, row), layout.wanted)[1]  # each column's type checked
         if size - start < n * row.itemsize:
             raise SceneFormatError(path, TRUNCATED, field="vertex")
         out = InriaArrays(layout, n, sh_dtype)
@@ -316,7 +329,7 @@ def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype
             chunk = buf[: (end - begin) * row.itemsize]
             if fh.readinto(chunk) != chunk.size:
                 raise SceneFormatError(path, TRUNCATED, field="vertex")
-            out.fill(table_columns(path, chunk.view(row), layout.wanted), slice(begin, end))
+            out.fill(column_table(path, chunk.view(row), layout.wanted)[0], cols, slice(begin, end))
             progress.report(start + end * row.itemsize, size, "bytes")
         del buf, chunk
         progress.report(size, size, "bytes")

@@ -15,6 +15,7 @@ import numpy as np
 from .files import atomic_write
 from ..scene import Scene
 from .ply import activate_opacity, activate_scales
+from .trained_as import COMMENT_KEY, WRITTEN
 
 RAW_LIMIT = 110.0  # |logit| and |log| beyond this saturate float32 sigmoid and exp
 SEARCH_ULPS = 1 << 16  # how far (in float32 steps) the exact preimage may lie from the float64 inverse
@@ -84,21 +85,29 @@ def inria_columns(scene: Scene) -> dict[str, np.ndarray]:
     return cols
 
 
-def ply_header(n: int, names: list[str]) -> bytes:
+def ply_header(n: int, names: list[str], comments: tuple[str, ...] = ()) -> bytes:
     """The header of a binary little-endian PLY with `n` vertices of float32 properties `names`."""
-    return (f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\n"
-            + "".join(f"property float {name}\n" for name in names) + "end_header\n").encode("ascii")
+    return (f"ply\nformat binary_little_endian 1.0\n" + "".join(f"comment {c}\n" for c in comments)
+            + f"element vertex {n}\n" + "".join(f"property float {name}\n" for name in names)
+            + "end_header\n").encode("ascii")
+
+
+def trained_as_comments(scene: Scene) -> tuple[str, ...]:
+    """The `SplatRenderMode` comment that keeps the scene's known training mode (gbviewer.io.trained_as)."""
+    value = WRITTEN.get(scene.meta.get("trained_as", ""))
+    return (f"{COMMENT_KEY}: {value}",) if value else ()
 
 
 def write_inria_ply(scene: Scene, path: str | Path, force: bool = False) -> Path:
-    """Write `scene` to `path` atomically; refuses to overwrite an existing file unless `force`."""
+    """Write `scene` to `path` atomically, its known training mode as a `SplatRenderMode` comment; refuses to
+    overwrite an existing file unless `force`."""
     if scene.oit is not None and scene.oit.neural is not None:
         from ..errors import GBViewerError
 
         raise GBViewerError(f"{scene.source}: a Duplex-GS checkpoint has no fixed splats (its MLPs decode them per "
                             "view), so it cannot be written as an INRIA ply")
     cols = inria_columns(scene)
-    header = ply_header(scene.num_splats, list(cols))
+    header = ply_header(scene.num_splats, list(cols), trained_as_comments(scene))
     body = np.stack(list(cols.values()), axis=1).astype("<f4")
 
     def write(tmp: Path) -> None:

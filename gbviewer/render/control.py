@@ -81,10 +81,11 @@ class RenderControl:
         if self.partial is not None:
             self.partial[...] = image
 
-    def check(self) -> None:
-        """Raise RenderCancelled if the render's cancel is set."""
+    def check(self, seen: bool = False) -> None:
+        """Raise RenderCancelled if the render's cancel is set, or `seen` (a native frame that saw the flag set and
+        stopped early: its image is incomplete even where the caller has cleared the token since)."""
         self._forward()
-        if self.flag[0]:
+        if self.flag[0] or seen:
             raise RenderCancelled("render cancelled")
 
 

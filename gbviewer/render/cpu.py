@@ -112,13 +112,14 @@ class CpuRenderer(NativeUploads, Renderer):
                 self._sync(next((p for p in preps[run.start:run.stop] if p.cells is not None), preps[run.start]))
                 hook = control.hook
                 outs = self._impl.render_many(
-                    [(*self._frame_args(camera, settings), settings.debug == "window", *(preps[i].oit or NO_OIT))
-                     for i, (camera, settings) in zip(run, jobs[run.start:run.stop])],
+                    [(*self._frame_args(camera, settings), settings.debug == "window", *(preps[i].oit or NO_OIT),
+                      settings.view_filter.native()) for i, (camera, settings) in zip(run, jobs[run.start:run.stop])],
                     threads=jobs[run.start][1].threads, cancel=control.flag,
                     on_progress=None if hook is None else (lambda job, done, total, b=run.start: hook(b + job, done,
                                                                                                      total)),
                     partials=parts[run.start:run.stop])
-                control.check()  # the native render skipped its remaining tiles once the flag was set
+                # the native render skipped its remaining work once it saw the flag (even if cleared since)
+                control.check(any(out["cancelled"] for out in outs))
                 frames += [native_frame(out, preps[i], *jobs[i], self.name, t0) for i, out in zip(run, outs)]
         return frames
 
@@ -127,5 +128,6 @@ class CpuRenderer(NativeUploads, Renderer):
         with self._lock:
             prep = prepare(self._scene, camera, settings, self.name)
             self._sync(prep)
-            out = self._impl.trace(*self._frame_args(camera, settings), *(prep.oit or ()), x=x, y=y)
+            out = self._impl.trace(*self._frame_args(camera, settings), *(prep.oit or ()), x=x, y=y,
+                                   view_filter=settings.view_filter.native())
         return from_native(out, settings, camera, x, y)

@@ -56,13 +56,13 @@ class CudaRenderer(NativeUploads, Renderer):
         self._cells: Cells | None = None
         self._textures = TextureRegistrations(self._release)
 
-    def _native(self, method: str, *args):
-        """The native renderer's `method(*args)`: RuntimeError -> RenderError, DeviceFailed -> BackendFailed (and
+    def _native(self, method: str, *args, **kwargs):
+        """The native renderer's `method(*args, **kwargs)`: RuntimeError -> RenderError, DeviceFailed -> BackendFailed (and
         the renderer unusable from then on)."""
         if self._failure is not None:
             raise BackendFailed(f"{self.name} backend stopped working: {self._failure}")
         try:
-            return getattr(self._impl, method)(*args)
+            return getattr(self._impl, method)(*args, **kwargs)
         except self._device_failed as exc:
             raise self.failed(str(exc).splitlines()[0]) from None
         except RuntimeError as exc:
@@ -153,7 +153,7 @@ class CudaRenderer(NativeUploads, Renderer):
             lead = tuple(self._textures.claim(x) for x in lead)
             out = self._native(method, *lead, *camera_args(camera), int(settings.mode), settings.supersample,
                              settings.sh_degree, np.asarray(settings.background, np.float32), *extra,
-                             *(prep.oit or ()))
+                             *(prep.oit or ()), view_filter=settings.view_filter.native())
             control.step(1, 1)
         return out, prep, t0
 

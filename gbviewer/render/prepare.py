@@ -1,5 +1,5 @@
 """The per-frame preparation every backend shares: the view's splats (a trained Duplex-GS model decoded for the
-camera), the wsr / duplex globals and cells, the camera as the native modules take it, and the frame's stats."""
+camera), the level-of-detail cut, the wsr / duplex globals and cells, the camera as the native modules take it, and the frame's stats."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ import numpy as np
 
 from ..camera import Camera
 from ..cells import Cells, cells_for
-from ..errors import RenderError
+from ..errors import GBViewerError, RenderError
+from ..lod import cut_scene
 from ..scene import Scene
 from .budget import check_frame_memory
 from .types import (DEFAULT_ET_GRADE, DEFAULT_SIGMA, ORDER_INDEPENDENT, SORT_ENTRY_BYTES, Frame, FrameStats, Mode,
@@ -76,6 +77,11 @@ def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backe
     t0 = time.perf_counter()
     view = view_scene(scene, camera)
     decode_ms = (time.perf_counter() - t0) * 1e3 if view is not scene else None
+    if settings.lod is not None:
+        try:
+            view = cut_scene(view, camera, settings.lod, threads=settings.threads)
+        except GBViewerError as exc:
+            raise RenderError(str(exc)) from None
     oit = oit_params(view, settings) if settings.mode in ORDER_INDEPENDENT else None
     cells = cells_for(view, settings.cell_size) if settings.mode == Mode.DUPLEX else None
     return Prepared(view, decode_ms, oit, cells)
@@ -135,6 +141,7 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
         cell_misses=None if cell_misses is None else int(cell_misses), decode_ms=prep.decode_ms,
         stage_reused=None if stage_reused is None else bool(stage_reused),
         stage_ms=None if stage_ms is None else float(stage_ms),
+        lod_splats=None if settings.lod is None else prep.scene.meta.get("lod", (prep.scene.num_splats,))[0],
     )
 
 

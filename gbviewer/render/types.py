@@ -9,7 +9,7 @@ import abc
 import enum
 import functools
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
@@ -19,6 +19,8 @@ from ..cancel import Cancellable
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, distinct_items, integer, real
+from .presets import PRESETS
+from .view_filter import ViewFilter
 
 
 class Mode(enum.IntEnum):
@@ -59,6 +61,7 @@ DEFAULT_SIGMA = 10.0  # sort-free GS's initial sigma, for depth correction on sc
 MAX_SUPERSAMPLE = 8
 MAX_THREADS = 1024
 MAX_CELL_SIZE = 1 << 20
+MAX_LOD = 1e6  # pixels: a cut of the root alone long before
 SORT_ENTRY_BYTES = 24  # per sorted key: 8-byte key + 4-byte value, input and output buffers (CUB SortPairs)
 
 
@@ -69,9 +72,15 @@ class RenderSettings:
 
     `debug="window"` adds the final Gaussian Blending window size per pixel (H, W, 2) to `Frame.debug`.
 
+    scalar: `view_filter` is the 2D filter (default 3DGS's +0.3 px^2); `preset` names the viewer preset it came from
+    (gbviewer.render.presets, parsed from 'preset:NAME').
+
     wsr and duplex: `depth_correct` multiplies each splat's weight by LC-WSR's max(0, 1 - z/sigma) (sigma: the
     scene's trained value, else 10); `et_grade` is Duplex-GS's E (None: the scene's trained value, else 4.0, the
     published final value); `cell_size` is the number of splats per cell built for scenes without cells.
+
+    `lod` (pixels >= 0): render the cut of the scene's splat hierarchy at that projected size (gbviewer.lod) in any
+    mode; None renders every splat.
     """
 
     mode: Mode = Mode.SCALAR
@@ -83,6 +92,9 @@ class RenderSettings:
     depth_correct: bool = False
     et_grade: float | None = None
     cell_size: int = 5
+    lod: float | None = None  # level of detail: draw the hierarchy's cut at this many pixels (None: every splat)
+    view_filter: ViewFilter = ViewFilter()
+    preset: str = ""
 
     def __post_init__(self) -> None:
         """Every number checked through gbviewer.validate (the native renderers take them as int32 and float32);
@@ -99,12 +111,18 @@ class RenderSettings:
                 "et_grade": None if self.et_grade is None else real(self.et_grade, "et_grade", lo=0, lo_open=True,
                                                                     f32=True),
                 "cell_size": integer(self.cell_size, "cell_size", lo=1, hi=MAX_CELL_SIZE),
+                "lod": None if self.lod is None else real(self.lod, "lod", lo=0, hi=MAX_LOD, f32=True),
             }
         except InvalidValue as exc:
             raise RenderError(str(exc)) from None
         for name, value in checked.items():
             object.__setattr__(self, name, value)
         object.__setattr__(self, "depth_correct", bool(self.depth_correct))
+        if not isinstance(self.view_filter, ViewFilter):
+            raise RenderError(f"view_filter {self.view_filter!r}; expected a gbviewer.render.ViewFilter")
+        if self.mode != Mode.SCALAR and not self.view_filter.is_default:
+            raise RenderError(f"view_filter {self.view_filter.describe()} applies to the scalar mode, not "
+                              f"{self.mode.label}")
 
     def label_for(self, scene: Scene) -> str:
         """The label with what the scene makes of the mode: wsr on a scene without trained view weights is an
@@ -117,27 +135,78 @@ class RenderSettings:
             label += " (approx.: v=1)"
         elif self.mode == Mode.DUPLEX and (oit is None or oit.cells is None) and not neural:
             label += f" (built cells, K={self.cell_size})"
+        if self.lod is not None:
+            drawn, total = scene.meta.get("lod", (scene.num_splats, scene.num_splats))
+            label += f", {drawn:,} of {total:,} splats"
         return label
 
     @property
+    def name(self) -> str:
+        """'scalar', 'preset:supersplat', ..."""
+        return f"preset:{self.preset}" if self.preset else self.mode.label
+
+    @property
     def label(self) -> str:
-        return self.mode.label + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "")
+        lod = f" LOD \u03c4={self.lod:g} px" if self.lod is not None else ""
+        return self.name + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "") + lod
 
     @property
     def spec(self) -> str:
-        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', ..."""
-        return self.mode.label + (f":{self.supersample}" if self.supersample > 1 else "")
+        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1', ..."""
+        lod = f"+lod:{self.lod:g}" if self.lod is not None else ""
+        return self.name + (f":{self.supersample}" if self.supersample > 1 else "") + lod
 
     @classmethod
     def parse(cls, spec: str, **kwargs) -> "RenderSettings":
-        """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples."""
+        """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples;
+        'preset:NAME[:N]' a viewer preset (gbviewer.render.presets); a suffix '+lod' or '+lod:TAU' draws the
+        level-of-detail cut at TAU pixels (default 1)."""
+        spec, plus, lod = spec.partition("+")
+        if plus:
+            kind, _, tau = lod.strip().partition(":")
+            if kind.strip().lower() != "lod":
+                raise RenderError(f"mode {spec + plus + lod!r}: expected MODE[:N][+lod[:TAU]]")
+            try:
+                kwargs = {**kwargs, "lod": float(tau) if tau.strip() else 1.0}
+            except ValueError:
+                raise RenderError(f"mode {spec + plus + lod!r}: LOD pixels {tau!r} is not a number") from None
         name, _, n = spec.strip().partition(":")
+        if name.strip().lower() == "preset":
+            return cls._preset(n, **kwargs)
         try:
             supersample = int(n) if n else 1
         except ValueError:
             raise RenderError(f"mode {spec!r}: supersampling factor {n!r} is not an integer") from None
         mode = Mode.SCALAR if name.strip().lower() == "supersample" else Mode.parse(name)
         return cls(mode, supersample, **kwargs)
+
+    @classmethod
+    def _preset(cls, spec: str, **kwargs) -> "RenderSettings":
+        """'NAME' or 'NAME:N' (N x N supersampling) of gbviewer.render.presets; its SH bands cap `sh_degree`."""
+        name, _, n = spec.strip().partition(":")
+        preset = PRESETS.get(name.strip().lower())
+        if preset is None:
+            raise RenderError(f"unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
+        try:
+            supersample = int(n) if n else 1
+        except ValueError:
+            raise RenderError(f"preset {spec!r}: supersampling factor {n!r} is not an integer") from None
+        kwargs["sh_degree"] = min(preset.sh_degree, kwargs.get("sh_degree", 3))
+        return cls(Mode.parse(preset.mode), supersample, view_filter=preset.view_filter, preset=preset.name, **kwargs)
+
+    @classmethod
+    def of(cls, mode: "str | Mode", supersample: int = 1, **kwargs) -> "RenderSettings":
+        """A Mode, or any spec `parse` takes ('gaussian_blending', 'preset:spark', 'scalar+lod:1'), with
+        `supersample` (a spec's own factor must then agree)."""
+        if isinstance(mode, Mode):
+            return cls(mode, supersample, **kwargs)
+        settings = cls.parse(str(mode), **kwargs)
+        if supersample == 1 or settings.supersample == supersample:
+            return settings
+        if settings.supersample != 1:
+            raise RenderError(f"mode {mode!r} has supersampling {settings.supersample}; supersample={supersample} "
+                              "disagrees")
+        return replace(settings, supersample=supersample)
 
     @classmethod
     def parse_list(cls, specs: str, **kwargs) -> "list[RenderSettings]":
@@ -152,16 +221,18 @@ class RenderSettings:
 @dataclass
 class FrameStats:
     """What a render measured. Times in ms per stage; visible: splats that survive preprocess; sort_length: keys
-    sorted by depth (tile-splat pairs; 0 for wsr, whose tile lists are only binned; tile-cell pairs for duplex);
+    sorted by depth (cpu: one per visible splat, the frame's global depth order, which it then bins in order; glsl
+    and cuda: tile-splat pairs; 0 for wsr, whose tile lists are only binned; tile-cell pairs for duplex);
     sort_bytes: sort_length x SORT_ENTRY_BYTES; pairs: tile-list entries blended; evaluations: splat-pixel
     evaluations, evals_per_pixel their mean; backend; mode: `RenderSettings.label_for` the scene.
 
     Filled by some backends or modes only (None elsewhere): simd, the SIMD path the cpu backend's blend ran
     ("scalar", "avx2" or "avx512", chosen by GBVIEWER_SIMD at load or gbviewer._native.testing.set_simd); duplex: cells,
     cells_visible and cell_misses (splat-tile pairs outside their cell's tiles; not counted by glsl); decode_ms: the
-    MLPs of a trained Duplex-GS model, per view; with `Capabilities.shared_stage` (cpu): stage_reused, whether the
-    frame used a per-camera stage (the mode-independent preprocess) computed before, by an earlier render or an
-    earlier job of the same `render_many`, and stage_ms, the time spent building it in this frame (0 when reused;
+    MLPs of a trained Duplex-GS model, per view; lod_splats: the splats of the level-of-detail cut drawn
+    (`RenderSettings.lod`); with `Capabilities.shared_stage` (cpu): stage_reused, whether the frame used a
+    per-camera stage (the mode-independent preprocess and the depth order) computed before, by an earlier render or
+    an earlier job of the same `render_many`, and stage_ms, the time spent building it in this frame (0 when reused;
     included in preprocess_ms). A `render_many` frame's total_ms counts from the start of the call, and on cpu its
     blend_ms is the time of the one tile loop all its frames share.
     """
@@ -185,6 +256,7 @@ class FrameStats:
     decode_ms: float | None = None
     stage_reused: bool | None = None
     stage_ms: float | None = None
+    lod_splats: int | None = None
 
 
 @dataclass

@@ -29,10 +29,10 @@ using IArr = nb::ndarray<const int32_t, nb::c_contig, nb::device::cpu>;
 }
 
 // A numpy array that takes over the vector's storage.
-template <typename T>
-nb::ndarray<nb::numpy, T> to_numpy(std::vector<T>&& v, std::initializer_list<size_t> shape) {
-    auto* heap = new std::vector<T>(std::move(v));
-    nb::capsule owner(heap, [](void* p) noexcept { delete static_cast<std::vector<T>*>(p); });
+template <typename T, typename A>
+nb::ndarray<nb::numpy, T> to_numpy(std::vector<T, A>&& v, std::initializer_list<size_t> shape) {
+    auto* heap = new std::vector<T, A>(std::move(v));
+    nb::capsule owner(heap, [](void* p) noexcept { delete static_cast<std::vector<T, A>*>(p); });
     return nb::ndarray<nb::numpy, T>(heap->data(), shape, owner);
 }
 
@@ -115,15 +115,34 @@ inline RenderArgs parse_render_args(const char* where, const FArr& R, const FArr
     return a;
 }
 
-// A render call's RenderArgs: parse_render_args' checks, then the SH degree cap and the window plane.
+// The scalar mode's viewer filter (gbv/view_filter.h) into `a.oit`: float32 [dilation, pre_dilation, cull_lambda,
+// compensate (0 or 1)], each finite and >= 0; none keeps 3DGS's (OitParams' defaults).
+inline void set_view_filter(const char* where, RenderArgs& a, const std::optional<FArr>& view_filter) {
+    if (!view_filter) return;
+    const FArr& f = *view_filter;
+    if (f.ndim() != 1 || f.shape(0) != 4) fail(where, "view_filter must be float32 (4,)");
+    const float* v = f.data();
+    for (int i = 0; i < 4; ++i)
+        if (!(std::isfinite(v[i]) && v[i] >= 0)) fail(where, "view_filter values must be finite and >= 0");
+    if (v[3] != 0 && v[3] != 1) fail(where, "view_filter compensate must be 0 or 1");
+    a.oit.dilation = v[0];
+    a.oit.pre_dilation = v[1];
+    a.oit.cull_lambda = v[2];
+    a.oit.compensate = v[3] != 0 ? 1 : 0;
+}
+
+// A render call's RenderArgs: parse_render_args' checks, then the SH degree cap, the window plane and the viewer
+// filter.
 inline RenderArgs render_args(const char* where, const FArr& R, const FArr& t, float fx, float fy, float cx, float cy,
                               int width, int height, float near_plane, int projection, int mode, int supersample,
                               int sh_degree, const FArr& background, bool want_window, float sigma,
-                              float weight_background, float et_grade, bool depth_correct) {
+                              float weight_background, float et_grade, bool depth_correct,
+                              const std::optional<FArr>& view_filter) {
     RenderArgs a = parse_render_args(where, R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
                                      supersample, background, sigma, weight_background, et_grade, depth_correct);
     a.sh_degree = sh_degree;
     a.want_window = want_window;
+    set_view_filter(where, a, view_filter);
     return a;
 }
 

@@ -27,6 +27,8 @@ using cpu::Renderer;
 using LArr = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;  // the caller's cancel flag
 using PArr = nb::ndarray<float, nb::ndim<3>, nb::c_contig, nb::device::cpu>;          // a partial frame, written here
 
+void bind_io(nb::module_& m);  // io_scatter.cpp: _native.io
+
 namespace {
 
 // An owner for Renderer::upload*: holds the arrays (references to the caller's numpy arrays, or the converted copies
@@ -88,10 +90,10 @@ nb::dict render(Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float
                 float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                 bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct,
                 int threads, std::optional<LArr> cancel, std::optional<nb::callable> on_progress,
-                std::optional<PArr> partial) {
+                std::optional<PArr> partial, std::optional<FArr> view_filter) {
     const RenderArgs a = render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
                                  supersample, sh_degree, background, want_window, sigma, weight_background, et_grade,
-                                 depth_correct);
+                                 depth_correct, view_filter);
     if (cancel && cancel->shape(0) < 1) throw std::invalid_argument("render: cancel must hold at least one int64");
     if (partial) check_partial("render", *partial, width, height);
     cpu::Control c;
@@ -102,7 +104,7 @@ nb::dict render(Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float
     return run_frames(r, {a}, c)[0];
 }
 
-// render()'s arguments R .. depth_correct of each frame, as one tuple per frame.
+// render()'s arguments R .. depth_correct and view_filter (None: 3DGS's) of each frame, as one tuple per frame.
 std::vector<nb::dict> render_many(Renderer& r, const std::vector<nb::tuple>& frames, int threads,
                                   std::optional<LArr> cancel, std::optional<nb::callable> on_progress,
                                   std::optional<std::vector<std::optional<PArr>>> partials) {
@@ -114,14 +116,17 @@ std::vector<nb::dict> render_many(Renderer& r, const std::vector<nb::tuple>& fra
     cpu::Control c;
     for (size_t f = 0; f < frames.size(); ++f) {
         const nb::tuple& p = frames[f];
-        if (p.size() != 19) throw std::invalid_argument("render_many: each frame is render()'s 19 frame arguments");
+        if (p.size() != 20)
+            throw std::invalid_argument("render_many: each frame is render()'s 19 frame arguments and view_filter");
+        std::optional<FArr> view_filter;
+        if (!p[19].is_none()) view_filter = nb::cast<FArr>(p[19]);
         args.push_back(render_args(where, nb::cast<FArr>(p[0]), nb::cast<FArr>(p[1]), nb::cast<float>(p[2]),
                                    nb::cast<float>(p[3]), nb::cast<float>(p[4]), nb::cast<float>(p[5]),
                                    nb::cast<int>(p[6]), nb::cast<int>(p[7]), nb::cast<float>(p[8]),
                                    nb::cast<int>(p[9]), nb::cast<int>(p[10]), nb::cast<int>(p[11]),
                                    nb::cast<int>(p[12]), nb::cast<FArr>(p[13]), nb::cast<bool>(p[14]),
                                    nb::cast<float>(p[15]), nb::cast<float>(p[16]), nb::cast<float>(p[17]),
-                                   nb::cast<bool>(p[18])));
+                                   nb::cast<bool>(p[18]), view_filter));
         const std::optional<PArr>* part = partials ? &(*partials)[f] : nullptr;
         if (part && *part) check_partial(where, **part, args.back().width, args.back().height);
         c.partial.push_back(part && *part ? (*part)->data() : nullptr);
@@ -151,12 +156,20 @@ void bind_testing(nb::module_& m) {
     nb::module_ t = m.def_submodule("testing", "Test and benchmark switches of the CPU renderer (process-wide).");
     t.def("set_pixel_boxes", [](bool on) { cpu::testing::pixel_boxes.store(on); }, nb::arg("on"),
           "Skip lane groups outside a splat's pixel box (default) or evaluate every list entry.");
+    t.def("set_poison_images", [](bool on) { cpu::testing::poison_images.store(on); }, nb::arg("on"),
+          "Fill each new image with NaN (evaluation counts -1) before the blend (to show it writes every pixel).");
     t.def("set_capture_preprocess", [](bool on) { cpu::testing::capture.store(on); }, nb::arg("on"),
-          "Keep the next renders' preprocess output for captured_preprocess().");
+          "Keep the next renders' preprocess output and tile lists for captured_preprocess() and captured_lists().");
     t.def("captured_preprocess", [] {
         const std::vector<uint8_t> v = cpu::testing::captured_preprocess();
         return nb::bytes(reinterpret_cast<const char*>(v.data()), v.size());
     }, "The last captured frame's preprocess: per splat the valid byte, then its Splat2D and TileRect (zeros when culled).");
+    t.def("captured_lists", [] {
+        const auto [starts, keys] = cpu::testing::captured_lists();
+        return nb::make_tuple(nb::bytes(reinterpret_cast<const char*>(starts.data()), starts.size() * 8),
+                              nb::bytes(reinterpret_cast<const char*>(keys.data()), keys.size() * 8));
+    }, "The last captured frame's tile lists: (tile_start int64 (tiles + 1), keys uint64 (depth bits << 32 | splat id; "
+       "duplex: the splat id)).");
     t.def("set_simd", [](const std::string& name) { simd::select(name); }, nb::arg("name"),
           "Use this SIMD path for later renders (scalar, avx2, avx512).");
     t.def("exp_rate", &exp_rate, nb::arg("path"), nb::arg("n"),
@@ -164,6 +177,10 @@ void bind_testing(nb::module_& m) {
 }
 
 }  // namespace
+
+namespace gbv {
+void bind_lod(nb::module_& m);  // lod_bind.cpp
+}
 
 NB_MODULE(_native, m) {
     m.doc() = "gbviewer CPU renderer (C++17, OpenMP; blend vectorised with Google Highway, chosen at run time). One "
@@ -212,6 +229,8 @@ NB_MODULE(_native, m) {
     }, "How this module was built: SIMD paths built, usable here and selected; scalar-only switch; OpenMP version "
        "(None without); whether the CUDA module was built alongside; compiler, build type and compile flags.");
     bind_testing(m);
+    bind_io(m);
+    bind_lod(m);
     nb::class_<Renderer>(m, "Renderer")
         .def(nb::init<>())
         .def("upload",
@@ -259,27 +278,29 @@ NB_MODULE(_native, m) {
              nb::arg("want_window"), nb::arg("sigma") = 10.0f, nb::arg("weight_background") = 1.0f,
              nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false, nb::arg("threads") = 0,
              nb::arg("cancel").none() = nb::none(), nb::arg("on_progress").none() = nb::none(),
-             nb::arg("partial").none() = nb::none(),
+             nb::arg("partial").none() = nb::none(), nb::arg("view_filter").none() = nb::none(),
              "Render a frame of the uploaded scene. cancel: int64 array whose [0] stops the frame once nonzero (read "
              "by every worker); on_progress(done, total): called on this thread between tiles, at most every 5 ms, "
              "and at the end (an exception it raises stops the frame and is raised here); partial: float32 "
-             "(height, width, 3) receiving each finished tile.")
+             "(height, width, 3) receiving each finished tile; view_filter: the scalar mode's [dilation, pre_dilation, "
+             "cull_lambda, compensate] (none: 3DGS's).")
         .def("render_many", &render_many, nb::arg("frames"), nb::arg("threads") = 0,
              nb::arg("cancel").none() = nb::none(), nb::arg("on_progress").none() = nb::none(),
              nb::arg("partials").none() = nb::none(),
              "Render several frames of the uploaded scene in one call (each a tuple of render()'s arguments R .. "
-             "depth_correct): the per-camera stage once per distinct camera and SH degree, then every frame's tiles "
-             "interleaved in one parallel loop. cancel as render's; on_progress(frame, done, total); partials: one "
-             "float32 (height, width, 3) array or None per frame. A list of render()'s dicts, which also hold "
-             "stage_ms and stage_reused.")
+             "depth_correct, then view_filter or None): the per-camera stage once per distinct camera and SH "
+             "degree, then every frame's tiles interleaved in one parallel loop. cancel as render's; "
+             "on_progress(frame, done, total); partials: one float32 (height, width, 3) array or None per frame. A "
+             "list of render()'s dicts, which also hold stage_ms and stage_reused.")
         .def(
             "trace",
             [](Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
-               float sigma, float weight_background, float et_grade, bool depth_correct, int x, int y) {
+               float sigma, float weight_background, float et_grade, bool depth_correct, int x, int y,
+               std::optional<FArr> view_filter) {
                 const RenderArgs a = render_args("trace", R, t, fx, fy, cx, cy, width, height, near_plane, projection,
                                              mode, supersample, sh_degree, background, false, sigma,
-                                             weight_background, et_grade, depth_correct);
+                                             weight_background, et_grade, depth_correct, view_filter);
                 PixelTrace traced;
                 {
                     nb::gil_scoped_release release;
@@ -291,7 +312,7 @@ NB_MODULE(_native, m) {
             nb::arg("width"), nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"),
             nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"), nb::arg("sigma") = 10.0f,
             nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
-            nb::arg("x") = 0, nb::arg("y") = 0, "The pixel trace (trace.h) of output pixel (x, y) of this frame.")
+            nb::arg("x") = 0, nb::arg("y") = 0, nb::arg("view_filter").none() = nb::none(), "The pixel trace (trace.h) of output pixel (x, y) of this frame.")
         .def("release_buffers", &Renderer::release_buffers, nb::call_guard<nb::gil_scoped_release>(),
              "Free the per-frame buffers and per-camera stages kept for the next frame.")
         .def_prop_ro("buffer_bytes", [](const Renderer& r) {

@@ -1,4 +1,5 @@
-// Binning (frame.h): each tile's list of splats, depth-sorted; for duplex, of cells expanded to their splats.
+// Binning (frame.h): each tile's list of splats, in a given (depth) order; for duplex, of cells expanded to their
+// splats.
 #include <algorithm>
 #include <cstring>
 
@@ -8,33 +9,37 @@
 
 namespace gbv::cpu {
 
-// Binning of splats, in parallel: each of up to BIN_THREADS threads counts the tiles of its static range of splats, a
-// prefix sum over (tile, range) gives every range its slots in every tile, and each range writes its (depth bits,
-// splat id) keys there. The ranges are in splat order, so each tile's list is in splat order as a sequential pass
-// would leave it; then (when `sort`) each tile's list is sorted by depth; wsr keeps the splat order. The key buffer
-// is sized between the two parallel passes (an allocation failure is a MemoryError, not an abort inside OpenMP).
+// Binning of splats, in parallel: the order (or the splat order) is split into up to BIN_THREADS ranges; each range
+// counts the tiles of its valid splats, a prefix sum over (tile, range) gives every range its slots in every tile,
+// and each range writes its keys there. The ranges follow the order, so each tile's list comes out in that order
+// (depth order from depth_order: no per-tile sort). The key buffer is sized between the two parallel passes (an
+// allocation failure is a MemoryError, not an abort inside OpenMP).
 constexpr int BIN_THREADS = 8;  // bounds the counts buffer (ranges x tiles) on many-core machines
 
 void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>& rects,
-                const std::vector<uint8_t>& valid, int gx, bool sort, std::vector<int64_t>& tile_start,
-                std::vector<uint64_t>& keys, Stats& st) {
+                const std::vector<uint8_t>& valid, const uint64_t* order, int64_t count, int gx,
+                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st, FrameRun& run) {
     const int num_tiles = (int)tile_start.size() - 1;
-    const int64_t n = (int64_t)splats.size();
     auto t0 = Clock::now();
+    const auto key_at = [&](int64_t p) { return order ? order[p] : depth_key(splats[p], (uint32_t)p); };
     const int ranges = std::max(1, std::min(omp_get_max_threads(), BIN_THREADS));
     std::vector<int64_t> slots((size_t)ranges * num_tiles, 0);  // [range][tile]: counts, then write cursors
     int64_t visible = 0;
 #pragma omp parallel for num_threads(ranges) schedule(static, 1) reduction(+ : visible)
     for (int k = 0; k < ranges; ++k) {
-        int64_t* count = slots.data() + (size_t)k * num_tiles;
-        for (int64_t i = n * k / ranges; i < n * (k + 1) / ranges; ++i) {
+        int64_t* cnt = slots.data() + (size_t)k * num_tiles;
+        CancelPoll poll(run);
+        for (int64_t p = count * k / ranges; p < count * (k + 1) / ranges; ++p) {
+            const uint32_t i = order ? (uint32_t)order[p] : (uint32_t)p;
             if (!valid[i]) continue;
             ++visible;
             const TileRect& r = rects[i];
             for (int ty = r.y0; ty < r.y1; ++ty)
-                for (int tx = r.x0; tx < r.x1; ++tx) ++count[ty * gx + tx];
+                for (int tx = r.x0; tx < r.x1; ++tx) ++cnt[ty * gx + tx];
+            if (poll(1 + (int64_t)(r.y1 - r.y0) * (r.x1 - r.x0))) break;
         }
     }
+    if (run.cancelled()) return;
     int64_t total = 0;
     for (int t = 0; t < num_tiles; ++t) {
         tile_start[t] = total;
@@ -49,21 +54,16 @@ void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>&
 #pragma omp parallel for num_threads(ranges) schedule(static, 1)
     for (int k = 0; k < ranges; ++k) {
         int64_t* cursor = slots.data() + (size_t)k * num_tiles;
-        for (int64_t i = n * k / ranges; i < n * (k + 1) / ranges; ++i) {
+        CancelPoll poll(run);
+        for (int64_t p = count * k / ranges; p < count * (k + 1) / ranges; ++p) {
+            const uint64_t key = key_at(p);
+            const uint32_t i = (uint32_t)key;
             if (!valid[i]) continue;
-            uint32_t depth_bits;
-            std::memcpy(&depth_bits, &splats[i].depth, 4);  // depth > near > 0: bits sort as floats
-            const uint64_t key = ((uint64_t)depth_bits << 32) | (uint32_t)i;
             const TileRect& r = rects[i];
             for (int ty = r.y0; ty < r.y1; ++ty)
                 for (int tx = r.x0; tx < r.x1; ++tx) keys[cursor[ty * gx + tx]++] = key;
+            if (poll(1 + (int64_t)(r.y1 - r.y0) * (r.x1 - r.x0))) break;
         }
-    }
-    if (sort) {
-#pragma omp parallel for schedule(dynamic, 4)
-        for (int t = 0; t < num_tiles; ++t)
-            std::sort(keys.begin() + tile_start[t], keys.begin() + tile_start[t + 1]);
-        st.sort_length += total;
     }
     st.sort_ms += ms_since(t0);
     st.visible += visible;
@@ -76,16 +76,18 @@ void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>&
 // (splat_less) so that the image does not depend on how the scene orders a cell's splats.
 void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<Splat2D>& splats,
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
-                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st) {
+                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st, FrameRun& run) {
     const int num_tiles = gx * gy;
     const int64_t m = sc.m;
     auto t0 = Clock::now();
     // visible members of each cell, canonically ordered; then the cell's screen proxy
     std::vector<int64_t> vis_start(m + 1, 0);
+    CancelPoll poll(run);
     for (int64_t c = 0; c < m; ++c) {
         int64_t cnt = 0;
         for (int32_t j = sc.cell_offsets[c]; j < sc.cell_offsets[c + 1]; ++j) cnt += valid[sc.cell_members[j]];
         vis_start[c + 1] = vis_start[c] + cnt;
+        if (poll(1 + sc.cell_offsets[c + 1] - sc.cell_offsets[c])) return;
     }
     std::vector<int32_t> vis(vis_start[m]);
     std::vector<Cell2D> cells(m);
@@ -93,6 +95,7 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
     std::vector<uint8_t> cvalid(m, 0);
 #pragma omp parallel for schedule(static)
     for (int64_t c = 0; c < m; ++c) {
+        if (run.cancelled()) continue;
         int64_t o = vis_start[c];
         for (int32_t j = sc.cell_offsets[c]; j < sc.cell_offsets[c + 1]; ++j)
             if (valid[sc.cell_members[j]]) vis[o++] = sc.cell_members[j];
@@ -102,6 +105,7 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
         CellIn in{sc.cell_means + 3 * c, sc.cell_scales + 3 * c, sc.cell_quats + 4 * c};
         cvalid[c] = preprocess_cell(in, cam, gx, gy, &cells[c], &crects[c]);
     }
+    if (run.cancelled()) return;
     st.preprocess_ms += ms_since(t0);
 
     t0 = Clock::now();
@@ -118,6 +122,7 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
                 tile_start[ty * gx + tx + 1] += members;
             }
         for (int64_t j = vis_start[c]; j < vis_start[c + 1]; ++j) misses += tiles_outside(rects[vis[j]], r);
+        if (poll(1 + members + (int64_t)(r.y1 - r.y0) * (r.x1 - r.x0))) return;
     }
     for (int t = 0; t < num_tiles; ++t) {
         cell_tile_start[t + 1] += cell_tile_start[t];
@@ -135,11 +140,13 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
             const TileRect& r = crects[c];
             for (int ty = r.y0; ty < r.y1; ++ty)
                 for (int tx = r.x0; tx < r.x1; ++tx) ckeys[cursor[ty * gx + tx]++] = key;
+            if (poll(1 + (int64_t)(r.y1 - r.y0) * (r.x1 - r.x0))) return;
         }
     }
     keys.resize(tile_start[num_tiles]);
 #pragma omp parallel for schedule(dynamic, 4)
     for (int t = 0; t < num_tiles; ++t) {
+        if (run.cancelled()) continue;
         std::sort(ckeys.begin() + cell_tile_start[t], ckeys.begin() + cell_tile_start[t + 1]);
         int64_t o = tile_start[t];
         for (int64_t k = cell_tile_start[t]; k < cell_tile_start[t + 1]; ++k) {
@@ -147,6 +154,7 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
             for (int64_t j = vis_start[c]; j < vis_start[c + 1]; ++j) keys[o++] = (uint32_t)vis[j];
         }
     }
+    if (run.cancelled()) return;
     st.sort_ms += ms_since(t0);
     int64_t visible = 0;  // splats that survive preprocess, as in the other modes
     for (uint8_t v : valid) visible += v;

@@ -6,6 +6,11 @@
 // renders use NoTrace; the pixel trace (trace.cpp) runs the Lanes1 instance on a one-pixel rectangle with a recorder.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <type_traits>
+
 #include "gbv/blend.h"
 
 namespace gbv {
@@ -15,6 +20,35 @@ namespace gbv {
 struct SplatBounds {
     float x0, x1, y0, y1;
 };
+
+// gaussian_blending's SplatBounds: the window centres that can pass blend_gaussian's cut-off, before the group box
+// adds the lanes' half perimeters. A lane passes only if the point of its window box (lu x lv about the window centre
+// in the splat's eigen-frame) nearest the splat centre has (u is1)^2 + (v is2)^2 <= r2 = -2 log_min_alpha, i.e. lies
+// in the ellipse E whose screen bounding box has half sides sqrt(r2 (v1x^2 / is1^2 + v1y^2 / is2^2)) and
+// sqrt(r2 (v1y^2 / is1^2 + v1x^2 / is2^2)); that point is within half the window's diagonal <= half its perimeter
+// (w + h) / 2 of the centre. So the centre lies in E's box grown by the half perimeter, and (the reach test) within
+// radius + half perimeter of the splat centre: the box is the tighter of E's box and the radius square, in double,
+// widened for the lane's float rounding (1e-5 of the larger half side: r2's and the offsets' few ulp, in either
+// direction for a thin splat; plus 0.01 px and 1e-6 of the coordinates; the group box adds its own 1e-3 and 1e-6). Empty when opacity < min alpha (r2 < 0); the
+// radius square where a field is not finite (a NaN in the lane's test passes it).
+inline SplatBounds gaussian_blending_bounds(const Splat2D& s) {
+    constexpr float inf = std::numeric_limits<float>::infinity();
+    const double pos = 0.01 + 1e-6 * (fabs(s.xy.x) + fabs(s.xy.y));
+    double ex = (double)s.radius * (1.0 + 1e-6) + pos, ey = ex;
+    const double r2 = -2.0 * (double)s.log_min_alpha;
+    if (r2 < 0.0) return {inf, -inf, inf, -inf};
+    const double a = 1.0 / (double)s.inv_sigma1, b = 1.0 / (double)s.inv_sigma2;
+    const double vx = s.v1.x, vy = s.v1.y;
+    const double tx0 = std::sqrt(r2 * (vx * vx * a * a + vy * vy * b * b));
+    const double ty0 = std::sqrt(r2 * (vy * vy * a * a + vx * vx * b * b));
+    const double grow = 1e-5 * std::max(tx0, ty0) + pos;  // offsets round by ~4 ulp of |d| <= the larger half side
+    const double tx = tx0 + grow, ty = ty0 + grow;
+    if (std::isfinite(tx) && std::isfinite(ty)) {
+        ex = std::min(ex, tx);
+        ey = std::min(ey, ty);
+    }
+    return {(float)(s.xy.x - ex), (float)(s.xy.x + ex), (float)(s.xy.y - ey), (float)(s.xy.y + ey)};
+}
 
 struct TileJob {
     const Splat2D* list;        // the tile's splats in blend order
@@ -102,8 +136,8 @@ void group_alpha(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
 
 // The group box of gaussian_blending: every lane's window centre, grown by the largest half perimeter (a lane
 // rejects a splat farther than radius + half perimeter from its window centre) and by float rounding.
-template <class L>
-void window_box(const WindowState<L>& win, Group<L>& g) {
+template <class L, class B>
+void window_box(const WindowState<L>& win, B& g) {
     const float reach = 0.5f * L::reduce_max(win.w + win.h) + 1e-3f;
     g.xa = L::reduce_min(win.x) - reach;
     g.xb = L::reduce_max(win.x) + reach;
@@ -116,18 +150,95 @@ void window_box(const WindowState<L>& win, Group<L>& g) {
     g.yb += slack;
 }
 
+// The lane type of each half of L (LanesX2's Half), void where L has no halves.
+template <class L, class = void>
+struct HalfOf {
+    using type = void;
+};
+template <class L>
+struct HalfOf<L, std::void_t<typename L::Half>> {
+    using type = typename L::Half;
+};
+
+// Half k of a two-half window state as the half lane type's state, and back.
+template <class H, class W>
+WindowState<H> get_half(const W& w, int k) {
+    const auto h = [k](const auto& p) { return k ? p.b : p.a; };
+    return {h(w.T), h(w.x), h(w.y), h(w.w), h(w.h), {h(w.C[0]), h(w.C[1]), h(w.C[2])}};
+}
+template <class H, class W>
+void set_half(W& w, int k, const WindowState<H>& v) {
+    const auto h = [k](auto& p) -> typename H::F& { return k ? p.b : p.a; };
+    h(w.T) = v.T;
+    h(w.x) = v.x;
+    h(w.y) = v.y;
+    h(w.w) = v.w;
+    h(w.h) = v.h;
+    for (int c = 0; c < 3; ++c) h(w.C[c]) = v.C[c];
+}
+
+struct Box {
+    float xa, xb, ya, yb;
+};
+
+// gaussian_blending on a group of two halves (AVX2's 2 x 8 lanes), each with its own window box: a splat whose bounds
+// miss one half's box cannot pass the cut-off in any of its lanes, so the other half takes it alone at half the work.
+// Bit-identical to stepping both halves: a step changes only lanes that pass the cut-off, and everything it decides
+// for the whole group (which branches run, the series length) depends on those lanes only.
+template <class L>
+void walk_gaussian_halves(const TileJob& job, typename L::M live, WindowState<L>& win, Out<L::N>& out) {
+    using H = typename HalfOf<L>::type;
+    Box box[2];
+    bool alive[2] = {H::any(live.a), H::any(live.b)};
+    for (int k = 0; k < 2; ++k) window_box<H>(get_half<H>(win, k), box[k]);
+    for (int i = 0; i < L::N; ++i) out.evals[i] = job.n;
+    for (int i = 0; i < job.n; ++i) {
+        const SplatBounds& b = job.bounds[i];
+        const bool in[2] = {alive[0] && !outside(b, box[0].xa, box[0].xb, box[0].ya, box[0].yb),
+                            alive[1] && !outside(b, box[1].xa, box[1].xb, box[1].ya, box[1].yb)};
+        if (!in[0] && !in[1]) continue;
+        typename L::M stop;
+        if (in[0] && in[1]) {
+            typename L::M took = L::none();
+            stop = blend_gaussian<L>(job.list[i], live, win, &took);
+            for (int k = 0; k < 2; ++k)
+                if (H::any(k ? took.b : took.a)) window_box<H>(get_half<H>(win, k), box[k]);
+        } else {
+            const int k = in[1];
+            WindowState<H> half = get_half<H>(win, k);
+            typename H::M took = H::none();
+            const typename H::M s = blend_gaussian<H>(job.list[i], k ? live.b : live.a, half, &took);
+            set_half<H>(win, k, half);
+            if (H::any(took)) window_box<H>(half, box[k]);
+            stop = k ? typename L::M{H::none(), s} : typename L::M{s, H::none()};
+        }
+        const uint32_t bits = L::bits(stop);
+        if (!bits) continue;
+        for (int k = 0; k < L::N; ++k)
+            if ((bits >> k) & 1u) out.evals[k] = i + 1;
+        live = L::and_not(live, stop);
+        alive[0] = H::any(live.a);
+        alive[1] = H::any(live.b);
+        if (!alive[0] && !alive[1]) break;
+    }
+}
+
 template <class L, class Tr>
 void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out) {
     const typename L::F one = L::set(1.0f), zero = L::set(0.0f);
     WindowState<L> win = {one, g.px, g.py, one, one, {zero, zero, zero}};
-    window_box<L>(win, g);
-    walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
-        typename L::M took = L::none();
-        const typename L::M stop = blend_gaussian<L, Tr>(s, live, win, &took);
-        if (L::any(took)) window_box<L>(win, g);
-        GBV_TRACE(Tr, after(win));
-        return stop;
-    });
+    if constexpr (!std::is_void_v<typename HalfOf<L>::type> && std::is_same_v<Tr, NoTrace>) {
+        walk_gaussian_halves<L>(job, g.live, win, out);
+    } else {
+        window_box<L>(win, g);
+        walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
+            typename L::M took = L::none();
+            const typename L::M stop = blend_gaussian<L, Tr>(s, live, win, &took);
+            if (L::any(took)) window_box<L>(win, g);
+            GBV_TRACE(Tr, after(win));
+            return stop;
+        });
+    }
     for (int c = 0; c < 3; ++c) L::store(win.C[c], out.C[c]);
     L::store(win.T, out.T);
     L::store(win.w, out.wx);

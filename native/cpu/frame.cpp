@@ -16,16 +16,13 @@ namespace {
 // sqrt(r2 Sigma_yy) (Sigma = conic^-1), computed in double and widened for float rounding: the float power at a pixel
 // is off by at most ~4 ulp of conic-weighted |d|^2, i.e. a relative 2.4e-7 (lambda_max / lambda_min) of r2 at the
 // ellipse, so the box grows by 1e-6 kappa^2 + 1e-5 relative plus 0.01 px (the rounding of d = xy - pixel). duplex
-// also has its radius circle. gaussian_blending: the window centres within radius + half perimeter, so the square of
-// half side radius (the group box adds the half perimeters). analytic (alpha integrated over the pixel): no box.
+// also has its radius circle. gaussian_blending: gaussian_blending_bounds (blend_tile.h; the group box adds the
+// half perimeters). analytic (alpha integrated over the pixel): no box.
 
 SplatBounds splat_bounds(const Splat2D& s, Mode mode) {
     constexpr float inf = std::numeric_limits<float>::infinity();
     if (mode == ANALYTIC || !testing::pixel_boxes.load(std::memory_order_relaxed)) return {-inf, inf, -inf, inf};
-    if (mode == GAUSSIAN_BLENDING) {
-        const double r = (double)s.radius * (1.0 + 1e-6) + 0.01 + 1e-6 * (fabs(s.xy.x) + fabs(s.xy.y));
-        return {(float)(s.xy.x - r), (float)(s.xy.x + r), (float)(s.xy.y - r), (float)(s.xy.y + r)};
-    }
+    if (mode == GAUSSIAN_BLENDING) return gaussian_blending_bounds(s);
     const double a = s.conic[0], b = s.conic[1], c = s.conic[2];
     const double det = a * c - b * b;
     const double r2 = -2.0 * (double)s.log_min_alpha;
@@ -75,11 +72,17 @@ std::vector<int> centre_out_order(int gx, int gy) {
     return order;
 }
 
-// Every splat's SplatBounds in `mode`.
-void splat_boxes(const std::vector<Splat2D>& splats, Mode mode, std::vector<SplatBounds>& boxes) {
-    boxes.resize(splats.size());
+constexpr int64_t BOX_BLOCK = 4096;  // splats between two cancel checks of splat_boxes
+
+// Every splat's SplatBounds in `mode` (stops early once cancelled).
+void splat_boxes(const std::vector<Splat2D>& splats, Mode mode, std::vector<SplatBounds>& boxes, FrameRun& run) {
+    const int64_t n = (int64_t)splats.size();
+    boxes.resize(n);
 #pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < (int64_t)splats.size(); ++i) boxes[i] = splat_bounds(splats[i], mode);
+    for (int64_t b = 0; b < (n + BOX_BLOCK - 1) / BOX_BLOCK; ++b) {
+        if (run.cancelled()) continue;
+        for (int64_t i = b * BOX_BLOCK; i < std::min(n, (b + 1) * BOX_BLOCK); ++i) boxes[i] = splat_bounds(splats[i], mode);
+    }
 }
 
 // One tile of one frame (blend_frames): copy its splats (and their boxes) into contiguous per-thread buffers, then
@@ -151,12 +154,12 @@ void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& pat
     st.preprocess_ms += ms;
 }
 
-void bin_frame(const SceneView& sc, const Stage& stage, Mode mode, const OitParams& oit, const simd::Path& path,
+void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, const simd::Path& path,
                FrameBuffers& buf, Stats& st, FrameRun& run) {
     const CameraParams& cam = stage.key.cam;
     const int gx = (cam.width + TILE - 1) / TILE, gy = (cam.height + TILE - 1) / TILE;
     const int64_t n = sc.n;
-    const Clock::time_point t0 = Clock::now();
+    Clock::time_point t0 = Clock::now();
     // every element of the reused buffers is written before it is read; a much smaller scene releases them
     if ((size_t)n < buf.splats.capacity() / 4) buf = FrameBuffers();
     std::vector<Splat2D>& splats = buf.splats;
@@ -179,11 +182,24 @@ void bin_frame(const SceneView& sc, const Stage& stage, Mode mode, const OitPara
     std::vector<uint64_t>& keys = buf.keys;  // per tile list entry: splat id in the low 32 bits
     tile_start.assign(gx * gy + 1, 0);
     if (mode == DUPLEX) {
-        bin_duplex(sc, cam, splats, rects, valid, gx, gy, tile_start, keys, st);
+        bin_duplex(sc, cam, splats, rects, valid, gx, gy, tile_start, keys, st, run);
+    } else if (mode == WSR) {  // order-independent: the splat order
+        bin_splats(splats, rects, valid, nullptr, n, gx, tile_start, keys, st, run);
     } else {
-        bin_splats(splats, rects, valid, gx, mode != WSR, tile_start, keys, st);
+        if (!stage.order_ready) {  // once per stage: every later frame of this camera bins in it
+            t0 = Clock::now();
+            depth_order(stage.splats, stage.valid, stage.order, stage.order_scratch, run);
+            if (run.cancelled()) return;
+            stage.order_ready = true;
+            st.sort_ms += ms_since(t0);
+        }
+        st.sort_length += (int64_t)stage.order.size();
+        bin_splats(splats, rects, valid, stage.order.data(), (int64_t)stage.order.size(), gx, tile_start, keys, st,
+                   run);
     }
+    if (run.cancelled()) return;
     if (keys.capacity() > 4 * keys.size() + (1u << 20)) keys.shrink_to_fit();  // after a much larger frame
+    if (testing::capture.load(std::memory_order_relaxed)) testing::record_lists(tile_start, keys);
 }
 
 void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile, FrameRun& run) {
@@ -192,7 +208,7 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
     std::vector<std::pair<double, std::pair<int, int>>> tiles;  // (fraction of its frame, (frame, tile))
     for (size_t f = 0; f < frames.size(); ++f) {
         const BlendFrame& fr = frames[f];
-        splat_boxes(fr.buf->splats, fr.mode, fr.buf->boxes);
+        splat_boxes(fr.buf->splats, fr.mode, fr.buf->boxes, run);
         TileJob& job = shared[f];
         job = {};
         job.width = fr.cam->width;
@@ -223,13 +239,13 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
     for (const BlendFrame& fr : frames) fr.st->blend_ms += ms;
 }
 
-PixelTrace trace_frame_pixel(const SceneView& sc, const Stage& stage, Mode mode, const OitParams& oit,
+PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
                              const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N) {
     Stats st;
     const Control none;
     FrameRun run(none, 1);
     bin_frame(sc, stage, mode, oit, path, buf, st, run);
-    splat_boxes(buf.splats, mode, buf.boxes);
+    splat_boxes(buf.splats, mode, buf.boxes, run);
     const CameraParams& cam = stage.key.cam;
     FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.keys.data(), cam.width,
                         cam.height, mode, oit, {bg[0], bg[1], bg[2]}};

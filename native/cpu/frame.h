@@ -68,14 +68,14 @@ struct Stage {
     bool ready = false;  // built for key (false while building and after a cancelled build)
     std::vector<StageSplat> splats;
     std::vector<uint8_t> valid;  // in front of the near plane and on screen in some mode
-    // The global depth order's seam (branch `order`): one order of the valid splats by depth, computed once per
-    // camera, which every mode then bins in, skipping the splats its finish culls. Unused so far: binning.cpp still
-    // sorts each tile's list; the merge wires depth_order(splats, valid, order, run) here and resets order_ready
-    // where the stage is rebuilt (build_stage).
-    std::vector<uint32_t> order;
+    // One depth order of the stage's valid splats (depth_order's keys), computed by the first frame that bins in
+    // depth order and shared by every later one: each bins in it, skipping the splats its finish culls (a superset's
+    // order gives the same tile lists). Not ready after build_stage or a cancelled sort.
+    std::vector<uint64_t> order, order_scratch;
     bool order_ready = false;
     size_t bytes() const {
-        return splats.capacity() * sizeof(StageSplat) + valid.capacity() + order.capacity() * sizeof(uint32_t);
+        return splats.capacity() * sizeof(StageSplat) + valid.capacity() +
+               (order.capacity() + order_scratch.capacity()) * sizeof(uint64_t);
     }
 };
 
@@ -90,14 +90,19 @@ struct FrameBuffers {
 };
 
 // A running call's cancel state and progress (Control) for its frames: the caller's flag or a report that asked to
-// stop; the tiles blended so far per frame. Relaxed atomics: only counts and flags.
+// stop; the tiles blended so far per frame. Relaxed atomics: only counts and flags. Cancelled once, cancelled for
+// good: a flag that the caller clears again while the frames stop (to reuse it) cannot resume a stage that stopped
+// half-way.
 class FrameRun {
 public:
     FrameRun(const Control& c, int frames) : c_(c), done_(frames), total_(frames, 0), last_(Clock::now()) {
         for (std::atomic<int64_t>& d : done_) d.store(0, std::memory_order_relaxed);
     }
     bool cancelled() const {
-        return stop_.load(std::memory_order_relaxed) || (c_.cancel && __atomic_load_n(c_.cancel, __ATOMIC_RELAXED));
+        if (stop_.load(std::memory_order_relaxed) || seen_.load(std::memory_order_relaxed)) return true;
+        if (!c_.cancel || !__atomic_load_n(c_.cancel, __ATOMIC_RELAXED)) return false;
+        seen_.store(true, std::memory_order_relaxed);
+        return true;
     }
     bool stopped() const { return stop_.load(std::memory_order_relaxed); }
     float* partial(int frame) const { return (size_t)frame < c_.partial.size() ? c_.partial[frame] : nullptr; }
@@ -121,26 +126,62 @@ public:
 private:
     const Control& c_;
     std::atomic<bool> stop_{false};
+    mutable std::atomic<bool> seen_{false};  // the caller's flag was seen set
     std::vector<std::atomic<int64_t>> done_;
     std::vector<int64_t> total_;
     Clock::time_point last_;
 };
 
-// binning.cpp: each tile's list of (depth bits, splat id) keys, sorted by depth unless `sort` is false (wsr); duplex:
-// the tiles' cells front to back, each expanded to its visible splats in canonical order.
+// A thread's cancel check for loops of uneven steps: reads run.cancelled() once per CANCEL_WORK units of work
+// (entries read or written), a fraction of a millisecond, so that the check costs nothing in the loop.
+constexpr int64_t CANCEL_WORK = 1 << 15;
+class CancelPoll {
+public:
+    explicit CancelPoll(const FrameRun& run) : run_(run) {}
+    bool operator()(int64_t work) {
+        if ((left_ -= work) > 0) return false;
+        left_ = CANCEL_WORK;
+        return run_.cancelled();
+    }
+
+private:
+    const FrameRun& run_;
+    int64_t left_ = CANCEL_WORK;
+};
+
+// A splat's depth key: depth bits in the high 32 bits (depth > near > 0: the bits order as the floats), id low.
+template <class S>  // Splat2D or StageSplat (the same depth)
+uint64_t depth_key(const S& s, uint32_t id) {
+    uint32_t bits;
+    std::memcpy(&bits, &s.depth, 4);
+    return ((uint64_t)bits << 32) | id;
+}
+
+// order.cpp: the depth keys of the splats with valid[i] != 0, ascending (depth bits, then id), in `order` (resized
+// to their count); `scratch` is the radix sort's second buffer. Parallel, checks run.cancelled(): a cancelled call
+// leaves `order` unspecified (the caller checks run.cancelled() before using it).
+template <class S>  // Splat2D or StageSplat
+void depth_order(const std::vector<S>& splats, const std::vector<uint8_t>& valid, std::vector<uint64_t>& order,
+                 std::vector<uint64_t>& scratch, FrameRun& run);
+
+// binning.cpp: each tile's list of (depth bits, splat id) keys in the order of `order` (count keys, e.g. a
+// depth_order; entries whose splat is not valid[] are skipped, so the order of a superset serves), or in splat order
+// when `order` is null (wsr); tile_start (num_tiles + 1 entries) gets each tile's first entry. duplex: the tiles'
+// cells front to back, each expanded to its visible splats in canonical order. Both stop early once cancelled
+// (tile_start and keys then unspecified).
 void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>& rects,
-                const std::vector<uint8_t>& valid, int gx, bool sort, std::vector<int64_t>& tile_start,
-                std::vector<uint64_t>& keys, Stats& st);
+                const std::vector<uint8_t>& valid, const uint64_t* order, int64_t count, int gx,
+                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st, FrameRun& run);
 void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<Splat2D>& splats,
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
-                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st);
+                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st, FrameRun& run);
 
 // frame.cpp: the stage of `key` into `stage` (every splat; stops early once cancelled, leaving it not ready).
 void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& path, Stage& stage, Stats& st,
                  FrameRun& run);
-// The mode's finish of a ready stage and the binning of one image at the camera's resolution into `buf` (stops early
-// once cancelled).
-void bin_frame(const SceneView& sc, const Stage& stage, Mode mode, const OitParams& oit, const simd::Path& path,
+// The mode's finish of a ready stage and the binning of one image at the camera's resolution into `buf`, in the
+// stage's depth order (sorted here when not ready yet); stops early once cancelled.
+void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, const simd::Path& path,
                FrameBuffers& buf, Stats& st, FrameRun& run);
 
 // One frame of a call's joint blend: its binned buffers, how to blend them, and the image (at the stage camera's
@@ -159,7 +200,7 @@ struct BlendFrame {
 // together, in proportion to their tile counts); each frame's blend_ms is the loop's time.
 void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile, FrameRun& run);
 // The pixel trace of output pixel (x, y) at N x N samples from a ready stage (the sub-sample grid's camera).
-PixelTrace trace_frame_pixel(const SceneView& sc, const Stage& stage, Mode mode, const OitParams& oit,
+PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
                              const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N);
 
 }  // namespace gbv::cpu

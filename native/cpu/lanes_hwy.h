@@ -119,6 +119,7 @@ GBV_PAIR_CMP(==)
 
 template <class L>
 struct LanesX2 {
+    using Half = L;  // the lane type of each half (blend_tile.h steps one half alone when only it can take a splat)
     using F = Pair<typename L::F>;
     using M = Pair<typename L::M>;
     using I = Pair<typename L::I>;

@@ -1,5 +1,6 @@
 // The CPU renderer (renderer.h): the uploaded scene, the per-frame buffers and stages, and the frames of a call.
 #include "renderer.h"
+#include "testing.h"
 
 #include <algorithm>
 #include <mutex>
@@ -165,11 +166,12 @@ std::vector<RenderResult> Renderer::render_many(const std::vector<RenderArgs>& f
     impl_->buffers.resize(count);  // the per-frame buffers of frames beyond this call's are freed
     std::vector<RenderResult> res(count);
     std::vector<Image> hi(count);  // supersampled frames' images at the camera's resolution
+    const bool poison = testing::poison_images.load(std::memory_order_relaxed);
     for (int f = 0; f < count; ++f) {
         const RenderArgs& a = frames[f];
         const bool window = a.want_window && a.mode == GAUSSIAN_BLENDING;
-        res[f].image.resize(a.width, a.height, window);
-        if (a.supersample > 1) hi[f].resize(a.width * a.supersample, a.height * a.supersample, window);
+        res[f].image.resize(a.width, a.height, window, poison);
+        if (a.supersample > 1) hi[f].resize(a.width * a.supersample, a.height * a.supersample, window, poison);
     }
     std::vector<BlendFrame> blend;
     for (int f = 0; f < count && !run.cancelled(); ++f) {

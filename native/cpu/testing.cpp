@@ -6,11 +6,14 @@
 namespace gbv::cpu::testing {
 
 std::atomic<bool> pixel_boxes{true};
+std::atomic<bool> poison_images{false};
 std::atomic<bool> capture{false};
 
 namespace {
 std::mutex captured_mutex;
 std::vector<uint8_t> captured;
+std::vector<int64_t> captured_starts;
+std::vector<uint64_t> captured_keys;
 }  // namespace
 
 void record_preprocess(const Splat2D* splats, const TileRect* rects, const uint8_t* valid, int64_t n) {
@@ -29,6 +32,17 @@ void record_preprocess(const Splat2D* splats, const TileRect* rects, const uint8
 std::vector<uint8_t> captured_preprocess() {
     std::lock_guard<std::mutex> lock(captured_mutex);
     return captured;
+}
+
+void record_lists(const std::vector<int64_t>& tile_start, const std::vector<uint64_t>& keys) {
+    std::lock_guard<std::mutex> lock(captured_mutex);
+    captured_starts = tile_start;
+    captured_keys = keys;
+}
+
+std::pair<std::vector<int64_t>, std::vector<uint64_t>> captured_lists() {
+    std::lock_guard<std::mutex> lock(captured_mutex);
+    return {captured_starts, captured_keys};
 }
 
 }  // namespace gbv::cpu::testing

@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cstdint>
 #include <mutex>
+#include <utility>
 #include <vector>
 
 #include "gbv/common.h"
@@ -15,10 +16,16 @@ namespace gbv::cpu::testing {
 // no pixel).
 extern std::atomic<bool> pixel_boxes;
 
+// Fill each new image with NaN (evaluation counts -1) before the blend, to show that it writes every pixel.
+extern std::atomic<bool> poison_images;
+
 // Keep a copy of the last frame's preprocess output (per splat: the valid flag, then the Splat2D and TileRect bytes
 // when valid, zeros when culled), so tests can compare the SIMD paths' preprocess bit for bit.
 extern std::atomic<bool> capture;
 void record_preprocess(const Splat2D* splats, const TileRect* rects, const uint8_t* valid, int64_t n);
 std::vector<uint8_t> captured_preprocess();
+// ... and of its tile lists (bin_frame's tile_start and keys).
+void record_lists(const std::vector<int64_t>& tile_start, const std::vector<uint64_t>& keys);
+std::pair<std::vector<int64_t>, std::vector<uint64_t>> captured_lists();
 
 }  // namespace gbv::cpu::testing

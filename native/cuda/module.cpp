@@ -23,7 +23,8 @@ namespace {
     nb::arg("R"), nb::arg("t"), nb::arg("fx"), nb::arg("fy"), nb::arg("cx"), nb::arg("cy"), nb::arg("width"),     \
         nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"), nb::arg("supersample"), \
         nb::arg("sh_degree"), nb::arg("background"), nb::arg("want_window") = false, nb::arg("sigma") = 10.0f,    \
-        nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false
+        nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,      \
+        nb::arg("view_filter").none() = nb::none()
 
 }  // namespace
 
@@ -44,9 +45,10 @@ NB_MODULE(_native_cuda, m) {
         "check_render_args",
         [](FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height, float near_plane,
            int projection, int mode, int supersample, int sh_degree, FArr background, bool want_window, float sigma,
-           float weight_background, float et_grade, bool depth_correct) {
+           float weight_background, float et_grade, bool depth_correct, std::optional<FArr> view_filter) {
             render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode, supersample,
-                        sh_degree, background, want_window, sigma, weight_background, et_grade, depth_correct);
+                        sh_degree, background, want_window, sigma, weight_background, et_grade, depth_correct,
+                        view_filter);
         },
         GBV_RENDER_ARGS, "Renderer.render's argument checks, without a device: raises ValueError as render would.");
     m.def(
@@ -92,10 +94,11 @@ NB_MODULE(_native_cuda, m) {
         .def("render",
              [](cuda::Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                 float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
-                bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct) {
+                bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct,
+                std::optional<FArr> view_filter) {
                  const RenderArgs a = render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane,
                                                   projection, mode, supersample, sh_degree, background, want_window,
-                                                  sigma, weight_background, et_grade, depth_correct);
+                                                  sigma, weight_background, et_grade, depth_correct, view_filter);
                  cuda::RenderResult res;
                  {
                      nb::gil_scoped_release release;
@@ -108,10 +111,11 @@ NB_MODULE(_native_cuda, m) {
              [](cuda::Renderer& r, unsigned int texture, FArr R, FArr t, float fx, float fy, float cx, float cy,
                 int width, int height, float near_plane, int projection, int mode, int supersample, int sh_degree,
                 FArr background, bool want_window, float sigma, float weight_background, float et_grade,
-                bool depth_correct) {
+                bool depth_correct, std::optional<FArr> view_filter) {
                  const RenderArgs a = render_args("render_to_gl_texture", R, t, fx, fy, cx, cy, width, height,
                                                   near_plane, projection, mode, supersample, sh_degree, background,
-                                                  want_window, sigma, weight_background, et_grade, depth_correct);
+                                                  want_window, sigma, weight_background, et_grade, depth_correct,
+                                                  view_filter);
                  cuda::RenderResult res;
                  {
                      nb::gil_scoped_release release;

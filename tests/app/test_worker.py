@@ -102,7 +102,7 @@ def test_a_newer_request_cancels_the_running_render_of_its_slot(bundled_scene):
         first = RenderJob(("p", "a"), bundled_scene, heavy, RenderSettings("gaussian_blending", supersample=4), "cpu")
         w.submit(first)
         t0 = time.time()
-        while w._running is not first and time.time() - t0 < 60:  # until the render thread has started it
+        while first not in w._running and time.time() - t0 < 60:  # until the render thread has started it
             time.sleep(0.001)
         second = RenderJob(("p", "a"), bundled_scene, heavy.with_size(64, 48), RenderSettings(), "cpu")
         w.submit(second)
@@ -173,7 +173,7 @@ def test_waiting_requests_of_higher_priority_go_first(bundled_scene):
         first = RenderJob("busy", bundled_scene, heavy, RenderSettings("gaussian_blending", supersample=2), "cpu")
         w.submit(first)
         t0 = time.time()
-        while w._running is not first and time.time() - t0 < 60:
+        while first not in w._running and time.time() - t0 < 60:
             time.sleep(0.001)
         small = heavy.with_size(32, 24)
         low = RenderJob("low", bundled_scene, small, RenderSettings(), "cpu")

@@ -5,6 +5,7 @@ vertex layout, the fuzz seeds and the shared scenes, in one chunk or a hundred."
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,7 @@ from helpers import shared_scene
 
 import gbviewer as gb
 from gbviewer.io import progress as load_progress
-from gbviewer.io.ply import load_inria_ply, load_streamed_ply, read_ply
+from gbviewer.io.ply import check_sh_range, load_inria_ply, load_streamed_ply, read_ply
 from gbviewer.io.write import ply_header
 
 SEEDS = Path(__file__).parent / "fuzz" / "seeds"
@@ -23,10 +24,12 @@ TAIL = ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "
 
 
 def raw_ply(path: Path, n: int, degree: int = 3, seed: int = 0, extra: tuple = (), dtypes: dict | None = None,
-            byte_order: str = "<", shuffle: bool = False, sort_free: int | None = None, faces: int = 0) -> Path:
+            byte_order: str = "<", shuffle: bool = False, sort_free: int | None = None, faces: int = 0,
+            extremes: np.ndarray | None = None) -> Path:
     """An INRIA vertex table of random raw values: SH `degree`, `extra` columns (filter_3D, ...), `dtypes` per
     column (default float32), shuffled columns, the sort-free columns of view-weight degree `sort_free`, and
-    `faces` mesh faces after the vertices."""
+    `faces` mesh faces after the vertices. `extremes`: values planted in 2% of each float column's rows, and
+    the rows of QUATS planted as quaternions."""
     rng = np.random.default_rng(seed)
     names = BASE + [f"f_rest_{i}" for i in range(3 * ((degree + 1) ** 2 - 1))] + TAIL + list(extra)
     if sort_free is not None:
@@ -38,6 +41,15 @@ def raw_ply(path: Path, n: int, degree: int = 3, seed: int = 0, extra: tuple = (
     data = np.empty(n, dt)
     for nm in names:
         data[nm] = rng.normal(0, 2, n) if not nm.startswith("rot") else rng.normal(0, 1, n)
+    if extremes is not None:
+        for nm in names:
+            if data[nm].dtype.kind == "f" and nm != "info":
+                rows = rng.random(n) < 0.02
+                data[nm][rows] = rng.choice(extremes, rows.sum())
+        rows = rng.choice(n, min(n, 3 * len(QUATS)), replace=False)
+        for i, q in zip(rows, np.resize(QUATS, (len(rows), 4))):
+            for c in range(4):
+                data[f"rot_{c}"][i] = q[c]
     if sort_free is not None:
         data["info"][:2] = (0.05, 8.0)
     elements = [plyfile.PlyElement.describe(data, "vertex")]
@@ -51,6 +63,13 @@ def raw_ply(path: Path, n: int, degree: int = 3, seed: int = 0, extra: tuple = (
 
 def reference(path: Path) -> gb.Scene:
     """An independent decode: plyfile reads the whole file into memory, INRIA activations in one go."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return decode(path)
+
+
+def decode(path: Path) -> gb.Scene:
+    """`reference`, its warnings left to the caller."""
     v = plyfile.PlyData.read(str(path), mmap=False)["vertex"].data
     names = v.dtype.names
     col = lambda *cols: np.stack([np.asarray(v[c], np.float32) for c in cols], axis=1)  # noqa: E731
@@ -70,10 +89,8 @@ def reference(path: Path) -> gb.Scene:
         extra = {"view_weight_sh": col("f_do_0", *ro), "weight_background": float(info[0]),
                  "wsr_sigma": float(info[1])}
     filt = col("filter_3D")[:, 0] if "filter_3D" in names else None
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return gb.Scene.from_arrays(col("x", "y", "z"), scales, col("rot_0", "rot_1", "rot_2", "rot_3"), opac, sh,
-                                    filt, **extra)
+    return gb.Scene.from_arrays(col("x", "y", "z"), scales, col("rot_0", "rot_1", "rot_2", "rot_3"), opac, sh, filt,
+                                source=str(path), **extra)
 
 
 def arrays(scene: gb.Scene) -> dict[str, np.ndarray | None]:
@@ -86,7 +103,8 @@ def assert_same(a: gb.Scene, b: gb.Scene) -> None:
     for (name, x), y in zip(arrays(a).items(), arrays(b).values()):
         assert (x is None) == (y is None), name
         if x is not None:
-            assert x.dtype == y.dtype == np.float32 and x.flags.c_contiguous, name
+            half = name == "sh" and x.dtype == np.float16  # sh_dtype="float16"
+            assert x.dtype == y.dtype == (np.float16 if half else np.float32) and x.flags.c_contiguous, name
             np.testing.assert_array_equal(x, y, err_msg=name, strict=True)
     if a.oit is not None:
         assert (a.oit.sigma, a.oit.weight_background) == (b.oit.sigma, b.oit.weight_background)
@@ -102,6 +120,18 @@ def load_quietly(path: Path) -> gb.Scene:
         warnings.simplefilter("ignore")  # random raw values: a few overflow and are dropped, on every path alike
         return gb.load(path)
 
+
+# Values at the edges of Scene.from_arrays's checks: non-finite, the SH limit 1e30 and the next float32, a raw scale
+# either side of log(MAX_SCALE) = 41.4465 and of exp's overflow, opacities whose sigmoid is 0 or 1, float16's range.
+EDGES = np.array([np.nan, np.inf, -np.inf, 1e30, np.nextafter(np.float32(1e30), np.float32(np.inf)), -1e30, -3e38,
+                  0.0, -0.0, 1e-30, 41.4465, 41.4466, 88.72, 89.0, -104.0, 65504.0, -65504.0, 1.00048828125], np.float32)
+HALF_EDGES = np.array([np.nan, 65504.0, -65504.0, 0.0, -0.0, 1e-8, 2.98e-8, 6e-8, 3e-5, 1.00048828125, 41.4466,
+                       89.0, -104.0], np.float32)  # all within float16's range (NaN: a dropped splat)
+# Quaternions at the edges of the normalisation: squares that overflow, norms under 1e-12, within and just beyond
+# 4 float32 eps of unit length, zero, non-finite.
+QUATS = np.array([[3e38, 3e38, 3e38, 3e38], [-3e38, 1.0, 0.0, 0.0], [1e-13, 0, 0, 0], [0, 0, 0, 0], [1, 0, 0, 0],
+                  [1 + 2**-22, 0, 0, 0], [1 + 2**-20, 0, 0, 0], [0.5, 0.5, 0.5, 0.5], [1e-20, 1e-20, 0, 0],
+                  [np.inf, 0, 0, 1], [np.nan, 1, 0, 0], [1e-7, 1e-7, 1e-7, 1.0]], np.float32)
 
 LAYOUTS = {
     "sh3": {}, "sh0": {"degree": 0}, "sh1": {"degree": 1}, "sh2": {"degree": 2},
@@ -161,3 +191,73 @@ def test_a_few_missing_bytes_are_truncated(tmp_path):
     path.write_bytes(ply_header(10, BASE + TAIL) + np.zeros((10, len(BASE + TAIL)), "<f4").tobytes()[:-5])
     with pytest.raises(gb.SceneFormatError, match="truncated"):
         gb.load(path)
+
+
+def full_checks(path: Path, sh_dtype: str) -> gb.Scene:
+    """The loader before the native scatter: plyfile's whole-file decode, the float16 range check of the DC block
+    then the rest, activations in numpy, and every check of Scene.from_arrays (no `checked`)."""
+    v = plyfile.PlyData.read(str(path), mmap=False)["vertex"].data
+    col = lambda *cols: np.stack([np.asarray(v[c], np.float32) for c in cols], axis=1)  # noqa: E731
+    rest = sorted((c for c in v.dtype.names if c.startswith("f_rest_")), key=lambda c: int(c[7:]))
+    check_sh_range(col("f_dc_0", "f_dc_1", "f_dc_2"), np.dtype(sh_dtype))
+    if rest:
+        check_sh_range(col(*rest), np.dtype(sh_dtype))
+    scene = decode(path)  # from_arrays of the float32 SH: the same splats dropped as of its float16 rounding
+    return replace(scene, sh=scene.sh.astype(sh_dtype))
+
+
+def outcome(fn, path: Path) -> tuple:
+    """('ok', scene, warnings) or ('error', message), their words after the file's name."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            scene = fn()
+        except gb.GBViewerError as exc:
+            return "error", str(exc).removeprefix(f"{path}: ")
+    return "ok", scene, sorted(str(w.message).removeprefix(f"{path}: ") for w in caught)
+
+
+@pytest.mark.parametrize("sh_dtype", ["float32", "float16"])
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+def test_values_at_the_edges_of_the_checks_load_as_the_full_checks_do(tmp_path, layout, sh_dtype, chunks):
+    path = raw_ply(tmp_path / "e.ply", 2000, seed=5, extremes=EDGES if sh_dtype == "float32" else HALF_EDGES,
+                   **LAYOUTS[layout])
+    if LAYOUTS[layout].get("sort_free") is not None:  # the globals row stays valid
+        patch_info(path)
+    got, want = (outcome(lambda: gb.load(path, sh_dtype=sh_dtype), path),
+                 outcome(lambda: full_checks(path, sh_dtype), path))
+    assert got[0] == want[0] == "ok", (got[:2], want[:2])
+    assert got[2] == want[2] and any("dropped" in w for w in got[2])  # the same splats dropped, the same words
+    assert_same(got[1], want[1])
+
+
+def patch_info(path: Path) -> None:
+    ply = plyfile.PlyData.read(str(path), mmap=False)
+    ply["vertex"].data["info"][:2] = (0.05, 8.0)
+    ply.write(str(path))
+
+
+@pytest.mark.parametrize("where", ["f_dc_1", "f_rest_30"])
+@pytest.mark.parametrize("big", [65520.0, np.inf, 1e30])
+def test_float16_refusals_name_the_same_coefficient(tmp_path, where, big, chunks):
+    path = raw_ply(tmp_path / "h.ply", 300, seed=2)
+    ply = plyfile.PlyData.read(str(path), mmap=False)
+    ply["vertex"].data[where][[7, 250]] = (big / 2, big)
+    ply.write(str(path))
+    got = outcome(lambda: gb.load(path, sh_dtype="float16"), path)
+    want = outcome(lambda: full_checks(path, "float16"), path)
+    if chunks:  # a chunk per hundredth: the first chunk with a refused value names its own largest
+        assert got[0] == "error" and "beyond float16's range" in got[1]
+    else:
+        assert got == want and got[0] == "error", (got, want)
+
+
+def test_quaternion_norms_sum_in_einsums_order():
+    """The native scatter and Scene.from_arrays sum |q|^2 as (w^2 + x^2) + (y^2 + z^2): numpy's einsum, which
+    normalised the quaternions before them, gives the same bits."""
+    from gbviewer.scene import _norms
+
+    q = np.concatenate([np.random.default_rng(1).normal(0, 1, (200_000, 4)) * np.logspace(-20, 19, 200_000)[:, None],
+                        QUATS[np.isfinite(QUATS).all(axis=1)]]).astype(np.float32)
+    with np.errstate(over="ignore"):
+        np.testing.assert_array_equal(_norms(q), np.sqrt(np.einsum("ij,ij->i", q, q)), strict=True)

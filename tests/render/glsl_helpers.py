@@ -18,7 +18,7 @@ pixels of an image, i.e. the 1e-4 stop fell one splat apart). The 0.2% bound lea
 (NVIDIA/AMD/Intel evaluate exp/log and contract FMAs differently) without hiding a real formula difference, which
 moves most pixels of an image by more than 1/255.
 
-`visible` and `sort_length` must match exactly up to the same kind of flip (bounded by 1e-4 of the splats).
+`visible` and `pairs` (tile-list entries) must match exactly up to the same kind of flip (bounded by 1e-4 of the splats).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from gbviewer.render.glsl import GlslRenderer
 MEAN_TOL = 1e-3
 MAX_TOL = 1.0 / 255.0
 THRESHOLD_FRACTION = 0.002
-COUNT_SLACK = 1e-4  # visible / sort_length: allowed relative difference (threshold flips, see above)
+COUNT_SLACK = 1e-4  # visible / pairs: allowed relative difference (threshold flips, see above)
 
 MODES = ["scalar", "mip", "analytic", "gaussian_blending", "scalar:2", "gaussian_blending:2", "wsr", "duplex"]
 
@@ -67,7 +67,7 @@ def compare(scene: gb.Scene, cam: gb.Camera, spec: str, renderer: GlslRenderer |
     print(where)
     assert m["mean"] < MEAN_TOL, where
     assert m["over"] <= THRESHOLD_FRACTION * diff.size, where
-    for key in ("visible", "sort_length"):
+    for key in ("visible", "pairs"):  # sort_length: the cpu sorts one key per splat
         a, b = getattr(out.stats, key), getattr(ref.stats, key)
         assert abs(a - b) <= COUNT_SLACK * max(b, 1), f"{where}: {key} {a} vs cpu {b}"
     return m

@@ -20,7 +20,7 @@ pytestmark = pytest.mark.skipif(not CUDA_OK, reason=f"no CUDA runtime here: {CUD
 def close(a: gb.Frame, b: gb.Frame) -> None:
     d = np.abs(a.rgb - b.rgb).max(axis=2)
     assert d.mean() < 1e-4 and (d > 1 / 255).mean() < 0.002, (d.mean(), d.max())
-    assert (a.stats.visible, a.stats.sort_length) == (b.stats.visible, b.stats.sort_length)
+    assert (a.stats.visible, a.stats.pairs) == (b.stats.visible, b.stats.pairs)
 
 
 @pytest.mark.parametrize("supersample", [1, 2])

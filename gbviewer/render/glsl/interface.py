@@ -66,6 +66,16 @@ def oit_uniform(sigma: float, weight_background: float, et_grade: float, depth_c
     return tuple(out)
 
 
+def view_filter_uniform(dilation: float, pre_dilation: float, cull_lambda: float, compensate: bool) -> tuple:
+    """preprocess.comp's `view_filter` vec4 uniform (OitParams' scalar filter) at its OIT_* - 4 positions."""
+    values = {"OIT_DILATION": dilation, "OIT_PRE_DILATION": pre_dilation, "OIT_CULL_LAMBDA": cull_lambda,
+              "OIT_COMPENSATE": float(compensate)}
+    out = [0.0] * 4
+    for name, value in values.items():
+        out[DEFINITIONS[name] - 4] = float(value)
+    return tuple(out)
+
+
 def records(vec4s: int, *columns: np.ndarray) -> np.ndarray:
     """Per-item storage records of `vec4s` vec4: the columns ((n,) or (n, k) each) side by side in float32."""
     out = np.concatenate([np.asarray(c, np.float32).reshape(len(c), -1) for c in columns], axis=1)

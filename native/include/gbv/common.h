@@ -138,13 +138,18 @@ struct Splat2D {
     int32_t cell;  // index of the splat's cell (duplex), -1 otherwise
 };
 
-// Globals of the order-independent modes (wsr, duplex): LC-WSR's depth correction max(0, 1 - z/sigma) when
-// depth_correct is 1, the background weight w_bg, and Duplex-GS's ET_grade E (alpha / E inside cells).
+// Per-frame mode globals. The order-independent modes (wsr, duplex): LC-WSR's depth correction max(0, 1 - z/sigma)
+// when depth_correct is 1, the background weight w_bg, and Duplex-GS's ET_grade E (alpha / E inside cells). The
+// scalar mode: the viewer presets' 2D filter (view_filter.h); its defaults are 3DGS's +0.3 dilation.
 struct OitParams {
     float sigma;
     float weight_background;
     float et_grade;
     int32_t depth_correct;
+    float dilation = DILATION_3DGS;
+    float pre_dilation = 0.0f;
+    float cull_lambda = 0.0f;
+    int32_t compensate = 0;
 };
 
 // Tile rectangle [x0, x1) x [y0, y1) in tile units.

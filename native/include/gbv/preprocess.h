@@ -8,6 +8,7 @@
 #include "lanes.h"
 #include "preprocess_stage.h"
 #include "sh.h"
+#include "view_filter.h"
 
 namespace gbv {
 
@@ -67,8 +68,7 @@ GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLan
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
     if (mode == SCALAR) {
-        cov[0] = cov[0] + L::set(DILATION_3DGS);
-        cov[2] = cov[2] + L::set(DILATION_3DGS);
+        scalar_filter<L>(oit, cov, opacity, ok);
     } else if (mode == MIP) {
         const F eps = L::set(1e-6f);
         const F det0 = L::fmax(eps, L::mul_rn(cov[0], cov[2]) - L::mul_rn(cov[1], cov[1]));

@@ -1,0 +1,87 @@
+"""The hierarchy's disk cache: one uncompressed .npz per scene file in the user cache folder
+(platformdirs: ~/.cache/gbviewer/lod on Linux), keyed by the file's identity (size, mtime, a hash of its first
+64 KiB) and what the hierarchy depends on besides (splat count, SH layout, the merge rule, the format version).
+Written atomically; an entry that does not read back whole is rebuilt with one warning."""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+import warnings
+import weakref
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import GBViewerError
+from ..io.files import atomic_write
+from ..scene import Scene
+from .tree import Hierarchy, build
+
+VERSION = 1  # of the tree layout and merge rules: bump when they change
+HEADER_BYTES = 1 << 16
+
+
+def default_folder() -> Path:
+    """The user's cache folder for hierarchies."""
+    from platformdirs import user_cache_dir
+
+    return Path(user_cache_dir("gbviewer")) / "lod"
+
+
+def cache_key(scene: Scene, rule: str) -> str | None:
+    """The cache key of the scene's hierarchy, None when the scene did not come from a readable file."""
+    path = Path(scene.source)
+    try:
+        st = path.stat()
+        with open(path, "rb") as fh:
+            header = fh.read(HEADER_BYTES)
+    except OSError:
+        return None
+    if not path.is_file():
+        return None
+    ident = (f"v{VERSION}|{st.st_size}|{st.st_mtime_ns}|{hashlib.sha256(header).hexdigest()}|{scene.num_splats}|"
+             f"{scene.sh.shape[1]}|{scene.sh.dtype}|{scene.filter_3d is not None}|{rule}")
+    return hashlib.sha256(ident.encode()).hexdigest()[:32]
+
+
+def _read(entry: Path, scene: Scene, rule: str) -> Hierarchy:
+    with np.load(entry, allow_pickle=False) as z:
+        arrays = {name: z[name] for name in z.files}
+    tree = Hierarchy(rule=rule, **arrays)
+    tree.check(scene)
+    return tree
+
+
+def cached_build(scene: Scene, rule: str, folder: Path | None = None) -> Hierarchy:
+    """The scene's hierarchy from the cache, else built (and written there when the folder can be written)."""
+    key = cache_key(scene, rule)
+    if key is None:
+        return build(scene, rule)
+    entry = (folder or default_folder()) / f"{key}.npz"
+    if entry.exists():
+        try:
+            return _read(entry, scene, rule)
+        except Exception as exc:  # noqa: BLE001 - a damaged entry of any kind (truncated zip, bad arrays)
+            warnings.warn(f"{entry}: damaged level-of-detail cache entry ({type(exc).__name__}: {exc}); rebuilt",
+                          stacklevel=3)
+    tree = build(scene, rule)
+    try:
+        atomic_write(entry, lambda tmp: np.savez(tmp, **tree.arrays()), force=True)
+    except (OSError, GBViewerError):  # a read-only cache: the tree still serves this run
+        pass
+    return tree
+
+
+_memo: "weakref.WeakKeyDictionary[Scene, dict[str, Hierarchy]]" = weakref.WeakKeyDictionary()
+_lock = threading.Lock()
+
+
+def hierarchy_for(scene: Scene, rule: str = "depth", cache: bool = True) -> Hierarchy:
+    """The scene's hierarchy: built once per Scene object (the first caller builds, others wait), read from or
+    written to the user cache when the scene came from a file and `cache` is true."""
+    with _lock:
+        per_scene = _memo.setdefault(scene, {})
+        if rule not in per_scene:
+            per_scene[rule] = cached_build(scene, rule) if cache else build(scene, rule)
+        return per_scene[rule]

@@ -1,0 +1,107 @@
+"""The splat hierarchy: an 8-ary tree over the Morton order of the splat centres, built natively (native/cpu/lod.cpp).
+
+Nodes are numbered flat: 0..N-1 the leaves in Morton order (leaf p is splat `order[p]`), then the interior nodes
+level by level up to the root (`levels[l]..levels[l+1]` are level l's ids). Interior node q of level l has the
+children `levels[l-1] + 8 (q - levels[l])` up to that level's end; its parent follows the same way. The interior
+arrays (`means` ... `size`) are indexed by id - N.
+
+Merge rule (float64): a leaf of opacity a and scales s weighs w = a A, A = pi/3 (s1 s2 + s2 s3 + s1 s3) (the mean
+of its principal cross-sections: opacity x area, as Hierarchical 3DGS weights children). A node's mean, covariance
+(the second central moment of the w-weighted mixture of its leaves), SH and 3D filter are the w-weighted means of
+its leaves'; its opacity keeps the leaves' area-weighted optical depth, -ln(1 - alpha) A_node = sum -ln(1 - a) A
+(two identical children: alpha = 1 - (1 - a)^2, what compositing them gives), or with `rule="sum"` the covered area,
+alpha A_node = sum a A. `radius`: a sphere about the mean holding every leaf's 3-sigma ellipsoid; `size`: the
+node's world footprint, 2 sqrt(largest eigenvalue), at least its children's (so a parent never projects smaller).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from ..errors import GBViewerError
+from ..scene import Scene
+
+RULES = ("depth", "sum")
+BRANCHING = 8
+INTERIOR = ("means", "scales", "quats", "opacities", "sh", "radius", "size")
+
+
+@dataclass(frozen=True, eq=False)
+class Hierarchy:
+    """A scene's splat hierarchy (see the module docstring); filter_3d only for scenes with a 3D filter."""
+
+    order: np.ndarray  # (N,) int32
+    levels: np.ndarray  # (L+1,) int64
+    means: np.ndarray  # (M,3) float32
+    scales: np.ndarray  # (M,3)
+    quats: np.ndarray  # (M,4)
+    opacities: np.ndarray  # (M,)
+    sh: np.ndarray  # (M,K,3)
+    radius: np.ndarray  # (M,)
+    size: np.ndarray  # (M,)
+    filter_3d: np.ndarray | None = None
+    rule: str = "depth"
+    build_ms: float = 0.0
+
+    @property
+    def num_leaves(self) -> int:
+        return int(self.levels[1])
+
+    @property
+    def num_interior(self) -> int:
+        return int(self.levels[-1] - self.levels[1])
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the arrays the hierarchy adds to the scene's."""
+        return sum(getattr(self, f.name).nbytes for f in fields(self) if isinstance(getattr(self, f.name), np.ndarray))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The arrays by name (filter_3d only when present)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        return {k: v for k, v in out.items() if isinstance(v, np.ndarray)}
+
+    def children(self, node: int) -> range:
+        """The ids of an interior node's children (flat ids)."""
+        lv = self.levels
+        level = int(np.searchsorted(lv, node, side="right")) - 1
+        if level < 1:
+            raise GBViewerError(f"node {node} is a leaf")
+        first = int(lv[level - 1]) + BRANCHING * (node - int(lv[level]))
+        return range(first, min(first + BRANCHING, int(lv[level])))
+
+    def check(self, scene: Scene) -> None:
+        """Raise ValueError unless the arrays fit `scene` (a cache entry from another file, or damaged)."""
+        n, m, k = scene.num_splats, self.num_interior, scene.sh.shape[1]
+        lv = self.levels
+        want = [n]
+        while want[-1] > 1:
+            want.append(-(-want[-1] // BRANCHING))
+        if lv[0] != 0 or np.diff(lv).tolist() != want:
+            raise ValueError("levels do not match the scene's splat count")
+        shapes = {"order": (n,), "means": (m, 3), "scales": (m, 3), "quats": (m, 4), "opacities": (m,),
+                  "sh": (m, k, 3), "radius": (m,), "size": (m,)}
+        for name, shape in shapes.items():
+            if getattr(self, name).shape != shape:
+                raise ValueError(f"{name} has shape {getattr(self, name).shape}, expected {shape}")
+        if (self.filter_3d is None) != (scene.filter_3d is None):
+            raise ValueError("filter_3d does not match the scene's")
+        if n and (self.order.min() < 0 or self.order.max() >= n):
+            raise ValueError("order holds indices outside the scene")
+
+
+def build(scene: Scene, rule: str = "depth", threads: int = 0) -> Hierarchy:
+    """Build the hierarchy of `scene` (float16 SH: merged from a float32 copy)."""
+    import time
+
+    from .._native import lod as native
+
+    if rule not in RULES:
+        raise GBViewerError(f"LOD opacity rule {rule!r}; expected one of {RULES}")
+    t0 = time.perf_counter()
+    out = native.build(scene.means, scene.scales, scene.quats, scene.opacities,
+                            np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d, RULES.index(rule), threads)
+    return Hierarchy(rule=rule, build_ms=(time.perf_counter() - t0) * 1e3, **out)
+

@@ -1,0 +1,83 @@
+"""Viewer presets: how other viewers render a splat scene, as a mode plus parameters (`--mode preset:NAME`), and the
+mode a scene was trained with (`trained_spec`). Each preset names the viewer code it reproduces and what of that
+viewer it does not model (their sort order, support radius and quantisation stay gbviewer's scalar mode's).
+
+| preset | source (repository: file) | what it sets |
+| inria | graphdeco-inria/diff-gaussian-rasterization: cuda_rasterizer/forward.cu (computeCov2D), the rasterizer SIBR's
+  gaussian viewer runs | +0.3 px^2, SH 3: the scalar mode itself |
+| gsplat-antialiased | nerfstudio-project/gsplat: gsplat/cuda/include/utils.cuh (add_blur), gsplat/rendering.py
+  (rasterization: eps2d = 0.3, rasterize_mode="antialiased" multiplies opacities by the compensation) |
+  +eps2d, opacity * sqrt(max(0, det_orig / det_blur)) |
+| supersplat | playcanvas/engine: src/scene/shader-lib/glsl/chunks/gsplat/vert/gsplatCorner.js (+0.3; early-out when
+  l1, l2 = 2 min(sqrt(2 lambda), vmin) are both < 2 px, i.e. lambda_max < 0.5 px^2); playcanvas/supersplat:
+  src/ui/view-panel.ts (SH bands slider, default 3) | +0.3, cull lambda_max < 0.5, SH 3 |
+| spark | sparkjsdev/spark: src/SparkRenderer.ts (preBlurAmount ?? 0.0, blurAmount ?? 0.3), src/shaders/splatVertex.glsl
+  (a += preBlurAmount; detOrig; a += blurAmount; alpha *= sqrt(max(0, detOrig / det))) | as gsplat-antialiased |
+| antimatter15 | antimatter15/splat: main.js (the vertex shader adds nothing to cov2d; .splat rows hold an 8-bit colour,
+  no SH) | +0, SH 0 |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from ..io.trained_as import ANTIALIASED, MIP_3D, THREEDGS
+from .view_filter import ViewFilter
+
+if TYPE_CHECKING:
+    from .types import RenderSettings
+
+
+@dataclass(frozen=True)
+class Preset:
+    """A viewer's rendering convention: mode, SH bands, filter, where it comes from and what is not modelled."""
+
+    name: str
+    mode: str  # a Mode label (this module sits below types, which parses presets with it)
+    sh_degree: int
+    view_filter: ViewFilter
+    source: str
+    not_modelled: str
+
+    def describe(self) -> str:
+        return f"{self.mode}, {self.view_filter.describe()}, SH {self.sh_degree}"
+
+
+PRESETS = {p.name: p for p in (
+    Preset("inria", "scalar", 3, ViewFilter(),
+           "graphdeco-inria/diff-gaussian-rasterization cuda_rasterizer/forward.cu (computeCov2D: +0.3); SIBR's "
+           "gaussian viewer renders with it", "nothing: the scalar mode is this rasterizer"),
+    Preset("gsplat-antialiased", "scalar", 3, ViewFilter(0.3, compensate=True),
+           "nerfstudio-project/gsplat gsplat/cuda/include/utils.cuh (add_blur), gsplat/rendering.py (eps2d=0.3, "
+           "rasterize_mode='antialiased')", "gsplat's 3-sigma radius and 1/255 cutoff are the scalar mode's already"),
+    Preset("supersplat", "scalar", 3, ViewFilter(0.3, cull_lambda=0.5),
+           "playcanvas/engine src/scene/shader-lib/glsl/chunks/gsplat/vert/gsplatCorner.js (+0.3, 2 px early-out); "
+           "playcanvas/supersplat src/ui/view-panel.ts (SH bands, default 3)",
+           "the lambda2 floor of 0.1, the 1024 px / viewport clamp, clipCorner's alpha-based quad shrink, 8-bit "
+           "output"),
+    Preset("spark", "scalar", 3, ViewFilter(0.3, pre_dilation=0.0, compensate=True),
+           "sparkjsdev/spark src/SparkRenderer.ts (preBlurAmount 0.0, blurAmount 0.3), src/shaders/splatVertex.glsl",
+           "maxStdDev sqrt(8) support, minAlpha 0.5/255, radial sort, clipXY 1.4, packed splat encoding"),
+    Preset("antimatter15", "scalar", 0, ViewFilter(0.0),
+           "antimatter15/splat main.js (no term added to cov2d; .splat colour only)",
+           "its 2 sqrt(2) sigma quad, no 1/255 cutoff, 8-bit colour, opacity and quaternion, float16 covariance"),
+)}
+
+
+TRAINED_SPECS = {THREEDGS: "scalar", ANTIALIASED: "preset:gsplat-antialiased", MIP_3D: "mip"}
+
+
+def trained_spec(meta: dict) -> str | None:
+    """The mode spec that renders a scene as it was trained (gbviewer.io.trained_as), None when unknown."""
+    return TRAINED_SPECS.get(meta.get("trained_as", ""))
+
+
+def differences(a: RenderSettings, b: RenderSettings) -> list[str]:
+    """What differs between two settings' modes, presets and parameters, for a side-by-side label (a view filter
+    other than the default is the scalar mode's only, so it differs only where one side is a scalar preset)."""
+    out = [] if a.mode == b.mode else [f"mode {a.mode.label} vs {b.mode.label}"]
+    out += a.view_filter.differences(b.view_filter)
+    out += [] if a.sh_degree == b.sh_degree else [f"SH {a.sh_degree} vs {b.sh_degree}"]
+    out += [] if a.supersample == b.supersample else [f"supersample {a.supersample} vs {b.supersample}"]
+    return out

@@ -1,0 +1,62 @@
+// Level of detail (issue 24): an 8-ary splat hierarchy over the Morton order of the splat centres, interior nodes
+// moment-matched Gaussians of their leaves, and the per-camera cut through it (lod.cpp; bound in lod_bind.cpp).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace gbv::lod {
+
+constexpr int BRANCHING = 8;  // children per interior node (the last node of a level may have fewer)
+
+// How an interior node's opacity follows from its leaves (leaf weight a A, A = the mean of the three principal
+// cross-section areas): DEPTH keeps the area-weighted optical depth, -ln(1 - alpha_p) A_p = sum -ln(1 - a) A; SUM
+// keeps the covered area, alpha_p A_p = sum a A (clamped to 1).
+enum OpacityRule { DEPTH = 0, SUM = 1 };
+
+// The scene's splats (activated, as gbviewer.Scene; sh float32 (N,K,3); filter_3d may be null).
+struct Splats {
+    const float *means, *scales, *quats, *opacities, *sh, *filter;
+    int64_t n;
+    int k;  // SH coefficients per channel
+};
+
+// Nodes are numbered flat: 0..N-1 the leaves in Morton order (leaf p is splat order[p]), then the interior nodes
+// level by level up to the root; levels[l]..levels[l+1] are level l's ids (level 0 the leaves). Node q of level
+// l > 0 has the children levels[l-1] + 8 (q - levels[l]) ... up to the level's end. The interior arrays below are
+// indexed by id - N (M = interior nodes).
+struct Tree {
+    std::vector<int32_t> order;          // (N,)
+    std::vector<int64_t> levels;         // (L+1,)
+    std::vector<float> means, scales;    // (M,3): the merged Gaussian; scales the square roots of its eigenvalues
+    std::vector<float> quats;            // (M,4) w,x,y,z: its eigenvectors
+    std::vector<float> opacities;        // (M,)
+    std::vector<float> sh;               // (M,K,3): the leaf-weighted mean of the leaves' SH
+    std::vector<float> filter;           // (M,) the weighted mean of the leaves' 3D filters (empty without one)
+    std::vector<float> radius;           // (M,) a sphere about the mean holding every leaf's 3-sigma ellipsoid
+    std::vector<float> size;             // (M,) world footprint: 2 sqrt(largest eigenvalue), at least the children's
+};
+
+Tree build(const Splats& s, OpacityRule rule, int threads);
+
+// The camera as the cut sees it: the eye (perspective) or the forward axis (orthographic), the larger focal length.
+struct View {
+    double eye[3];
+    double focal;
+    bool orthographic;
+};
+
+// The cut's drawn nodes with their opacity multipliers: leaves by splat index (ascending), interior nodes by
+// interior index (ascending). Along every leaf's path to the root the drawn weights sum to 1.
+struct Cut {
+    std::vector<int32_t> leaves, nodes;
+    std::vector<float> leaf_weights, node_weights;
+};
+
+// A node of projected size p px is drawn alone when p <= tau, replaced by its children when p >= tau (1 + band),
+// and drawn with weight 1 - o beside its children (weight o) in between, o = (p - tau) / (tau band). tau <= 0: the
+// leaves. Interior node i: centre means[i], radius, size as in Tree.
+Cut cut(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
+        const int32_t* order, const View& v, double tau, double band, int threads);
+
+}  // namespace gbv::lod

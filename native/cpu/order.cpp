@@ -1,0 +1,97 @@
+// The depth order (frame.h): a parallel LSD radix sort of the visible splats' (depth bits, id) keys.
+#include <algorithm>
+
+#include "frame.h"
+
+namespace gbv::cpu {
+namespace {
+
+// Three stable counting passes of 11, 11 and 10 bits over the 32 depth bits. Each pass splits its input into one
+// static range per thread, in input order; each range counts its digits, an exclusive prefix sum over (digit, range)
+// gives each range its first slot per digit, and each range moves its keys there in input order. Stable, so keys
+// of equal depth bits keep the first pass's input order: ascending ids, as sorting the whole 64-bit keys would.
+constexpr int DIGIT_BITS = 11, PASSES = 3;
+constexpr int BUCKETS = 1 << DIGIT_BITS;
+constexpr int MAX_RANGES = 64;  // bounds the histograms (ranges x BUCKETS) on many-core machines
+
+int digit(uint64_t key, int pass) { return (int)(key >> (32 + DIGIT_BITS * pass)) & (BUCKETS - 1); }
+
+// Input i of a pass: the first pass reads the splats (the visible ones, in id order), later ones the previous keys.
+template <bool FIRST, class S>
+bool input_key(const S* splats, const uint8_t* valid, const uint64_t* src, int64_t i, uint64_t& key) {
+    if constexpr (FIRST) {
+        if (!valid[i]) return false;
+        key = depth_key(splats[i], (uint32_t)i);
+    } else {
+        key = src[i];
+    }
+    return true;
+}
+
+// One pass of digit `pass` over inputs [0, len) into dst (the first pass sizes dst and `also` to the visible count,
+// between its two parallel loops: an allocation failure is a MemoryError, not an abort inside OpenMP). False when
+// cancelled, dst then unspecified.
+template <bool FIRST, class S>
+bool radix_pass(int pass, int64_t len, const S* splats, const uint8_t* valid, const uint64_t* src,
+                std::vector<uint64_t>& dst, std::vector<uint64_t>& also, std::vector<int64_t>& hist, int ranges,
+                FrameRun& run) {
+#pragma omp parallel for num_threads(ranges) schedule(static, 1)
+    for (int k = 0; k < ranges; ++k) {
+        int64_t* h = hist.data() + (size_t)k * BUCKETS;
+        std::fill(h, h + BUCKETS, 0);
+        CancelPoll poll(run);
+        uint64_t key;
+        for (int64_t i = len * k / ranges; i < len * (k + 1) / ranges; ++i) {
+            if (input_key<FIRST>(splats, valid, src, i, key)) ++h[digit(key, pass)];
+            if (poll(1)) break;
+        }
+    }
+    if (run.cancelled()) return false;
+    int64_t total = 0;
+    for (int b = 0; b < BUCKETS; ++b)
+        for (int k = 0; k < ranges; ++k) {
+            const int64_t c = hist[(size_t)k * BUCKETS + b];
+            hist[(size_t)k * BUCKETS + b] = total;
+            total += c;
+        }
+    if (FIRST) {
+        dst.resize(total);
+        also.resize(total);
+    }
+    uint64_t* out = dst.data();
+#pragma omp parallel for num_threads(ranges) schedule(static, 1)
+    for (int k = 0; k < ranges; ++k) {
+        int64_t* slot = hist.data() + (size_t)k * BUCKETS;
+        CancelPoll poll(run);
+        uint64_t key;
+        for (int64_t i = len * k / ranges; i < len * (k + 1) / ranges; ++i) {
+            if (input_key<FIRST>(splats, valid, src, i, key)) out[slot[digit(key, pass)]++] = key;
+            if (poll(1)) break;
+        }
+    }
+    return !run.cancelled();
+}
+
+}  // namespace
+
+template <class S>
+void depth_order(const std::vector<S>& splats, const std::vector<uint8_t>& valid, std::vector<uint64_t>& order,
+                 std::vector<uint64_t>& scratch, FrameRun& run) {
+    const int ranges = std::max(1, std::min(omp_get_max_threads(), MAX_RANGES));
+    std::vector<int64_t> hist((size_t)ranges * BUCKETS);
+    // splats -> order -> scratch -> order
+    if (!radix_pass<true>(0, (int64_t)splats.size(), splats.data(), valid.data(), nullptr, order, scratch, hist,
+                          ranges, run))
+        return;
+    static_assert(PASSES == 3, "the passes below alternate order and scratch and end in order");
+    const int64_t count = (int64_t)order.size();
+    if (!radix_pass<false, S>(1, count, nullptr, nullptr, order.data(), scratch, order, hist, ranges, run)) return;
+    radix_pass<false, S>(2, count, nullptr, nullptr, scratch.data(), order, scratch, hist, ranges, run);
+}
+
+template void depth_order(const std::vector<Splat2D>&, const std::vector<uint8_t>&, std::vector<uint64_t>&,
+                          std::vector<uint64_t>&, FrameRun&);
+template void depth_order(const std::vector<StageSplat>&, const std::vector<uint8_t>&, std::vector<uint64_t>&,
+                          std::vector<uint64_t>&, FrameRun&);
+
+}  // namespace gbv::cpu

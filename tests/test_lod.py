@@ -1,0 +1,204 @@
+"""Level of detail (gbviewer.lod): the merge rule, the moments of merged nodes against a float64 reference, the cut's
+coverage for random cameras (inside the scene too), tau = 0 being the scene itself, the disk cache."""
+
+from __future__ import annotations
+
+import os
+import warnings
+
+import numpy as np
+import pytest
+from helpers import random_scene, rotation
+
+import gbviewer as gb
+from gbviewer import lod
+from gbviewer.errors import GBViewerError, RenderError
+from gbviewer.io.write import write_inria_ply
+from gbviewer.lod.cache import cache_key, cached_build
+from gbviewer.lod.tree import BRANCHING
+
+
+def rotations(quats: np.ndarray) -> np.ndarray:
+    """(N,3,3) rotation matrices of unit quaternions (w,x,y,z), float64."""
+    w, x, y, z = np.asarray(quats, np.float64).T
+    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+                     2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                     2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1).reshape(-1, 3, 3)
+
+
+def covariances(scales: np.ndarray, quats: np.ndarray) -> np.ndarray:
+    R = rotations(quats)
+    return R @ (np.asarray(scales, np.float64)[:, :, None] ** 2 * R.transpose(0, 2, 1))
+
+
+def areas(scales: np.ndarray) -> np.ndarray:
+    """The rule's area of a Gaussian: the mean of its three principal cross-sections."""
+    s = np.sort(np.asarray(scales, np.float64), axis=1)
+    return np.pi / 3 * (s[:, 0] * s[:, 1] + s[:, 1] * s[:, 2] + s[:, 0] * s[:, 2])
+
+
+def leaves_under(tree: lod.Hierarchy, node: int) -> np.ndarray:
+    """Splat indices below interior node `node` (flat id): a contiguous run of the Morton order."""
+    level = int(np.searchsorted(tree.levels, node, side="right")) - 1
+    q = node - int(tree.levels[level])
+    span = BRANCHING**level
+    return tree.order[q * span:min((q + 1) * span, tree.num_leaves)]
+
+
+def paired_scene(alpha: float) -> gb.Scene:
+    """Two identical splats."""
+    q = np.array([[0.9, 0.1, -0.3, 0.2]] * 2)
+    return gb.Scene.from_arrays([[0.1, 0.2, 3.0]] * 2, [[0.3, 0.05, 0.1]] * 2, q, [alpha] * 2,
+                                np.full((2, 4, 3), 0.25))
+
+
+@pytest.mark.parametrize("rule, expected", [("depth", lambda a: 1 - (1 - a) ** 2), ("sum", lambda a: min(1, 2 * a))])
+@pytest.mark.parametrize("alpha", [0.2, 0.7])
+def test_parent_of_identical_children_is_the_child(rule, expected, alpha):
+    scene = paired_scene(alpha)
+    tree = lod.build(scene, rule)
+    assert tree.levels.tolist() == [0, 2, 3] and list(tree.children(2)) == [0, 1]
+    np.testing.assert_allclose(tree.means[0], scene.means[0], atol=1e-7)
+    np.testing.assert_allclose(covariances(tree.scales, tree.quats)[0], covariances(scene.scales, scene.quats)[0],
+                               atol=1e-7)
+    np.testing.assert_allclose(tree.sh[0], scene.sh[0], atol=1e-7)
+    np.testing.assert_allclose(tree.opacities[0], expected(alpha), rtol=1e-6)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_merged_moments_are_the_weighted_moments_of_the_leaves(seed):
+    scene = random_scene(700, seed=seed, sh_degree=2)
+    tree = lod.build(scene)
+    n = scene.num_splats
+    w = np.minimum(scene.opacities.astype(np.float64), 1 - 1e-7) * areas(scene.scales)
+    tau = -np.log1p(-np.minimum(scene.opacities.astype(np.float64), 1 - 1e-7)) * areas(scene.scales)
+    cov = covariances(scene.scales, scene.quats)
+    for node in [n, n + 5, int(tree.levels[2]), int(tree.levels[-1]) - 1]:  # level 1, 2 and the root
+        idx = leaves_under(tree, node)
+        ww = w[idx] / w[idx].sum()
+        mean = ww @ scene.means[idx].astype(np.float64)
+        d = scene.means[idx] - mean
+        second = np.einsum("i,ijk->jk", ww, cov[idx] + d[:, :, None] * d[:, None, :])
+        i = node - n
+        np.testing.assert_allclose(tree.means[i], mean, rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(covariances(tree.scales[i:i + 1], tree.quats[i:i + 1])[0], second,
+                                   rtol=1e-5, atol=1e-6 * np.abs(second).max())
+        np.testing.assert_allclose(tree.sh[i], np.einsum("i,ijk->jk", ww, scene.sh[idx].astype(np.float64)),
+                                   rtol=1e-5, atol=1e-6)
+        expect_alpha = -np.expm1(-tau[idx].sum() / areas(tree.scales[i:i + 1])[0])
+        np.testing.assert_allclose(tree.opacities[i], expect_alpha, rtol=1e-5)
+        d_max = np.linalg.norm(d, axis=1).max()
+        assert tree.radius[i] >= d_max * (1 - 1e-6)
+
+
+def cameras(scene: gb.Scene, seed: int) -> list[gb.Camera]:
+    """Random cameras around and inside the scene, perspective and orthographic."""
+    rng = np.random.default_rng(seed)
+    lo, hi = scene.bounds
+    out = []
+    for k in range(6):
+        eye = rng.uniform(lo, hi) if k % 2 else (lo + hi) / 2 + rng.normal(size=3) * 6
+        R = rotation(rng, np.pi)
+        cam = gb.Camera(64, 48, 50.0, 55.0, 32, 24, R, -R @ eye)
+        out.append(cam if k != 4 else cam.with_projection("orthographic", 4.0))
+    return out
+
+
+@pytest.mark.parametrize("band", [0.0, lod.DEFAULT_BAND])
+def test_the_cut_covers_every_leaf_exactly_once(band):
+    scene = random_scene(3000, seed=3)
+    tree = lod.build(scene)
+    n = scene.num_splats
+    position = np.empty(n, np.int64)
+    position[tree.order] = np.arange(n)
+    for cam in cameras(scene, 5):
+        for tau in (0.5, 2.0, 10.0):
+            c = lod.cut(tree, cam, tau, band=band)
+            assert len(np.unique(c.leaves)) == len(c.leaves) and len(np.unique(c.nodes)) == len(c.nodes)
+            assert ((c.leaf_weights > 0) & (c.leaf_weights <= 1)).all()
+            assert ((c.node_weights > 0) & (c.node_weights <= 1)).all()
+            drawn = np.zeros(int(tree.levels[-1]))
+            drawn[position[c.leaves]] = c.leaf_weights  # a leaf's flat id is its Morton position
+            drawn[n + c.nodes] = c.node_weights
+            coverage = np.zeros(n)  # per leaf: the drawn weights of its path to the root
+            for level in range(len(tree.levels) - 1):
+                ids = tree.levels[level] + np.arange(n) // BRANCHING**level
+                coverage += drawn[ids]
+            if band == 0:
+                assert (coverage == 1).all(), (cam.name, tau)
+                assert (c.leaf_weights == 1).all() and (c.node_weights == 1).all()
+            else:
+                np.testing.assert_allclose(coverage, 1, atol=1e-6)
+        assert lod.cut(tree, cam, 50.0).num_drawn < n  # the cut does coarsen
+
+
+def test_tau_zero_is_the_leaf_set_and_renders_bit_identically():
+    scene = random_scene(500, seed=4, sh_degree=1)
+    tree = lod.build(scene)
+    cam = gb.Camera(64, 48, 60.0, 60.0, 32, 24, np.eye(3), np.zeros(3))
+    c = lod.cut(tree, cam, 0.0)
+    assert c.leaves.tolist() == list(range(scene.num_splats)) and (c.leaf_weights == 1).all() and not len(c.nodes)
+    assert lod.cut_scene(scene, cam, 0.0) is scene
+    for mode in ("scalar", "gaussian_blending"):
+        full = gb.render(scene, cam, mode)
+        zero = gb.render(scene, cam, mode, lod=0)
+        assert np.array_equal(full.rgb, zero.rgb) and np.array_equal(full.alpha, zero.alpha)
+        assert zero.stats.lod_splats == scene.num_splats and full.stats.lod_splats is None
+
+
+def test_cut_scene_renders_in_every_mode_with_its_label():
+    scene = random_scene(2000, seed=6, sh_degree=1, spread=3.0)
+    cam = gb.Camera(64, 48, 20.0, 20.0, 32, 24, np.eye(3), np.zeros(3))
+    cut = lod.cut_scene(scene, cam, 2.0)
+    drawn, total = cut.meta["lod"]
+    assert drawn == cut.num_splats and total == scene.num_splats and cut.sh.shape[1:] == scene.sh.shape[1:]
+    for spec in ("scalar+lod:2", "mip+lod:2", "analytic+lod:2", "gaussian_blending+lod:2", "scalar:2+lod:2",
+                 "wsr+lod:2", "duplex+lod:2"):
+        settings = gb.RenderSettings.parse(spec)
+        assert settings.lod == 2.0 and gb.RenderSettings.parse(settings.spec) == settings
+        frame = gb.get_renderer(scene, "cpu").render(cam, settings)
+        direct = gb.get_renderer(cut, "cpu").render(cam, gb.RenderSettings.parse(spec.split("+")[0]))
+        assert np.array_equal(frame.rgb, direct.rgb), spec
+        assert frame.stats.lod_splats == drawn
+        assert frame.stats.mode.endswith(f"LOD \u03c4=2 px, {drawn:,} of {total:,} splats"), frame.stats.mode
+    for bad in ("scalar+lod:x", "scalar+mip", "scalar+lod:-1"):
+        with pytest.raises(RenderError):
+            gb.RenderSettings.parse(bad)
+
+
+def test_cut_refuses_scenes_with_order_independent_data():
+    base = random_scene(50, seed=7)
+    scene = gb.Scene.from_arrays(base.means, base.scales, base.quats, base.opacities, base.sh,
+                                 view_weight_sh=np.ones((50, 1)))
+    with pytest.raises(GBViewerError, match="level of detail is for plain splat scenes"):
+        lod.cut_scene(scene, gb.Camera(8, 8, 8.0, 8.0, 4, 4, np.eye(3), np.zeros(3)), 1.0)
+
+
+def test_cache_key_follows_the_file(tmp_path):
+    path = write_inria_ply(random_scene(300, seed=8), tmp_path / "a.ply")
+    scene = gb.load(path)
+    key = cache_key(scene, "depth")
+    assert key is not None and key == cache_key(gb.load(path), "depth") and key != cache_key(scene, "sum")
+    write_inria_ply(random_scene(300, seed=9), path, force=True)
+    os.utime(path, ns=(os.stat(path).st_atime_ns, os.stat(path).st_mtime_ns + 10**9))
+    assert cache_key(gb.load(path), "depth") != key
+    assert cache_key(random_scene(10), "depth") is None  # not from a file: built, never cached
+
+
+def test_a_truncated_cache_entry_is_rebuilt_with_one_warning(tmp_path):
+    path = write_inria_ply(random_scene(400, seed=10, sh_degree=1), tmp_path / "b.ply")
+    scene = gb.load(path)
+    cache = tmp_path / "cache"
+    first = cached_build(scene, "depth", cache)
+    (entry,) = cache.glob("*.npz")
+    data = entry.read_bytes()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        again = cached_build(scene, "depth", cache)  # read back, no warning
+    assert all(np.array_equal(a, b) for a, b in zip(first.arrays().values(), again.arrays().values()))
+    entry.write_bytes(data[: len(data) // 2])
+    with pytest.warns(UserWarning, match="damaged level-of-detail cache entry") as caught:
+        rebuilt = cached_build(scene, "depth", cache)
+    assert len(caught) == 1
+    assert all(np.array_equal(a, b) for a, b in zip(first.arrays().values(), rebuilt.arrays().values()))
+    assert entry.read_bytes() == data  # rewritten whole
