@@ -144,8 +144,8 @@ void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& pat
     stage.splats.resize(n);
     stage.valid.resize(n);
     const CameraParams& cam = key.cam;
-    const StageJob job{sc.means, sc.scales, sc.quats, sc.opacities, sc.sh, sc.filter_3d, sc.k, key.sh_deg, cam,
-                       (cam.width + TILE - 1) / TILE, (cam.height + TILE - 1) / TILE, stage.splats.data(),
+    const StageJob job{sc.means,  sc.scales, sc.quats, sc.opacities, sc.sh, sc.filter_3d, sc.k, key.sh_deg, cam,
+                       key.reach, (cam.width + TILE - 1) / TILE, (cam.height + TILE - 1) / TILE, stage.splats.data(),
                        stage.valid.data()};
     for_blocks(n, run, [&](int64_t begin, int64_t end) { path.stage(job, begin, end); });
     stage.ready = !run.cancelled();

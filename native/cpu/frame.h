@@ -51,14 +51,18 @@ struct SceneView {
     std::vector<int32_t> cell_of = {};
 };
 
-// What a stage depends on: the uploaded scene (its upload generation: upload, upload_weights and upload_cells each
-// start a new one), every byte of the camera (a supersampled frame's camera is its own) and the SH degree.
+// What a stage depends on (built by stage_key, renderer.cpp, the one place that fills it): the uploaded scene (its
+// upload generation: upload, upload_weights and upload_cells each start a new one), every byte of the camera (a
+// supersampled frame's camera is its own), the SH degree, and the reach of its on-screen cull (stage_on_screen: the
+// largest diagonal the frame's 2D filter adds, at least 3DGS's +0.3, so every built-in mode and preset shares one).
 struct StageKey {
     uint64_t scene = 0;
     CameraParams cam = {};
     int sh_deg = 0;
+    float reach = DILATION_3DGS;
     bool operator==(const StageKey& o) const {
-        return scene == o.scene && sh_deg == o.sh_deg && std::memcmp(&cam, &o.cam, sizeof cam) == 0;
+        return scene == o.scene && sh_deg == o.sh_deg && reach == o.reach &&
+               std::memcmp(&cam, &o.cam, sizeof cam) == 0;
     }
 };
 

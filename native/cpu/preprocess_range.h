@@ -25,6 +25,7 @@ struct StageJob {
     int k;  // SH coefficients per channel
     int sh_deg;
     CameraParams cam;
+    float reach;  // StageKey::reach (stage_on_screen)
     int grid_x, grid_y;
     StageSplat* stage;
     uint8_t* valid;
@@ -117,7 +118,7 @@ void stage_range(const StageJob& job, int64_t begin, int64_t end) {
             in.filter_3d = L::load(buf[11]);
             StageLanes<L> st;
             uint32_t ok = L::bits(preprocess_stage<L>(in, job.cam, &st));
-            if (ok) ok &= L::bits(stage_on_screen<L>(st, job.grid_x, job.grid_y));
+            if (ok) ok &= L::bits(stage_on_screen<L>(st, job.grid_x, job.grid_y, job.reach));
             for (int j = 0; j < count; ++j) job.valid[i0 + j] = (ok >> j) & 1u;
             if (!ok) continue;
             const typename L::F fields[7] = {st.xy[0], st.xy[1], st.depth, st.opacity, st.cov[0], st.cov[1], st.cov[2]};

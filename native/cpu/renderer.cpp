@@ -139,6 +139,14 @@ void check_cells(const RenderArgs& a, const SceneView& sc, const char* where) {
         throw std::invalid_argument(std::string(where) + ": duplex needs the scene's cells (upload_cells)");
 }
 
+// The StageKey of a frame: everything its stage depends on (add a field here and to StageKey::operator==). The reach
+// is the largest diagonal the frame's 2D filter adds: the scalar mode's view filter (dilation + pre-dilation), every
+// other mode at most DILATION_3DGS (preprocess_finish).
+StageKey stage_key(const RenderArgs& a, const SceneView& sc, uint64_t generation) {
+    const float filter = a.mode == SCALAR ? a.oit.dilation + a.oit.pre_dilation : 0.0f;
+    return StageKey{generation, a.cam, sh_degree_of(a, sc), std::max(DILATION_3DGS, filter)};
+}
+
 }  // namespace
 
 RenderResult Renderer::render(const RenderArgs& a, const Control& control) {
@@ -157,7 +165,7 @@ std::vector<RenderResult> Renderer::render_many(const std::vector<RenderArgs>& f
     std::vector<int> stage_of(count);
     for (int f = 0; f < count; ++f) {
         const RenderArgs& a = frames[f];
-        const StageKey key{impl_->generation, a.cam, sh_degree_of(a, sc)};
+        const StageKey key = stage_key(a, sc, impl_->generation);
         stage_of[f] = (int)(std::find(keys.begin(), keys.end(), key) - keys.begin());
         if (stage_of[f] == (int)keys.size()) keys.push_back(key);
         run.start(f, (int64_t)((a.cam.width + TILE - 1) / TILE) * ((a.cam.height + TILE - 1) / TILE));
@@ -209,7 +217,7 @@ PixelTrace Renderer::trace(const RenderArgs& a, int x, int y) {
     const SceneView& sc = impl_->scene;
     check_cells(a, sc, "trace");
     const simd::Path& path = simd::current();
-    const StageKey key{impl_->generation, a.cam, sh_degree_of(a, sc)};
+    const StageKey key = stage_key(a, sc, impl_->generation);
     std::vector<Stage> stages = impl_->take_stages({key});
     if (!stages[0].ready) {
         Stats st;

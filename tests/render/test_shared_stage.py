@@ -14,6 +14,7 @@ from helpers import SHARED_SCENES, shared_scene
 
 import gbviewer as gb
 from gbviewer.render import RenderSettings, create_renderer
+from gbviewer.render.view_filter import ViewFilter
 
 SCENES = sorted(p.name for p in SHARED_SCENES.glob("*") if p.suffix != ".md") or ["biker.compressed.ply"]
 SPECS = ["scalar", "gaussian_blending", "mip", "analytic", "scalar:2", "preset:supersplat", "wsr", "duplex"]
@@ -137,3 +138,22 @@ def test_partials_must_match_the_jobs():
     r.upload(scene)
     with pytest.raises(gb.RenderError, match="one array or None per job"):
         r.render_many([(cam, RenderSettings())], partials=[None, None])
+
+
+@pytest.mark.parametrize("dilation, pre_dilation", [(400.0, 0.0), (0.3, 400.0)])
+def test_a_wide_view_filter_keeps_splats_the_stage_would_call_off_screen(dilation, pre_dilation):
+    """A splat 8 px beyond the right edge, tiny on its own (3DGS's box: 5 px): a scalar view filter of +400 px^2
+    spreads it into the image. The narrow image equals the same columns of a wider image (same cx; the splat on
+    screen, inside both frustum clamps of the EWA Jacobian), where the stage's on-screen bound cannot cull it; a
+    3DGS-filter frame of the same camera (another stage reach) sees nothing."""
+    scene = gb.Scene.from_arrays(np.array([[8 / 3, 0.0, 4.0]]), np.full((1, 3), 0.01), np.array([[1.0, 0, 0, 0]]),
+                                 np.array([0.9]), np.full((1, 1, 3), 0.5))
+    narrow = gb.Camera(64, 48, 60.0, 60.0, 32.0, 24.0, np.eye(3), np.zeros(3))
+    wide = gb.Camera(160, 48, 60.0, 60.0, 32.0, 24.0, np.eye(3), np.zeros(3))
+    wide_filter = RenderSettings(view_filter=ViewFilter(dilation, pre_dilation=pre_dilation))
+    r = create_renderer("cpu")
+    r.upload(scene)
+    plain, f = r.render_many([(narrow, RenderSettings()), (narrow, wide_filter)])
+    assert plain.stats.visible == 0 and f.stats.visible == 1 and f.alpha.max() > 0.05
+    ref = fresh(scene, wide, wide_filter)
+    assert np.array_equal(f.rgb, ref.rgb[:, :64]) and np.array_equal(f.alpha, ref.alpha[:, :64])

@@ -186,13 +186,14 @@ GBV_HD void stage_color(const SplatInLanes<L>& in, int sh_deg, const CameraParam
 // Lanes of a stage that some mode may keep: false only where every mode's finish culls the splat for touching no
 // tile of a grid_x x grid_y grid. Every mode's half sides are at most its radius ceil(k sqrt(lambda1)) with
 // k <= RADIUS_SIGMAS_GB and lambda1 = mid + sqrt(max(0.1, mid^2 - det)) <= a + c + 0.32 of its filtered covariance,
-// whose a + c is at most the stage's + 2 DILATION_3DGS (det <= 0 is culled in every mode): h <= 3.34 sqrt(a + c + 1)
-// + 2 with room for float rounding. A splat whose box misses the image by that much (getRect: x + h < 1.5 or
-// x - h >= 16 grid_x + 0.5) is culled everywhere. NaN bounds or positions keep the lane (the finish decides).
+// whose a + c is at most the stage's + 2 reach (reach: the largest diagonal any of the stage's modes adds, at least
+// DILATION_3DGS; stage_key) (det <= 0 is culled in every mode): h <= 3.34 sqrt(a + c + 2 reach + 0.4) + 2 with room
+// for float rounding. A splat whose box misses the image by that much (getRect: x + h < 1.5 or x - h >= 16 grid_x +
+// 0.5) is culled everywhere. NaN bounds or positions keep the lane (the finish decides).
 template <class L>
-GBV_HD typename L::M stage_on_screen(const StageLanes<L>& st, int grid_x, int grid_y) {
+GBV_HD typename L::M stage_on_screen(const StageLanes<L>& st, int grid_x, int grid_y, float reach) {
     using F = typename L::F;
-    const F h = L::set(3.34f) * L::sqrt(st.cov[0] + st.cov[2] + L::set(1.0f)) + L::set(2.0f);
+    const F h = L::set(3.34f) * L::sqrt(st.cov[0] + st.cov[2] + L::set(2.0f * reach + 0.4f)) + L::set(2.0f);
     const typename L::M off = L::or_(L::or_(st.xy[0] + h < L::set(0.0f), st.xy[0] - h > L::set(TILE * grid_x + 1.0f)),
                                      L::or_(st.xy[1] + h < L::set(0.0f), st.xy[1] - h > L::set(TILE * grid_y + 1.0f)));
     return L::and_not(L::first_n(L::N), off);
