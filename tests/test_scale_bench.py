@@ -58,6 +58,7 @@ def test_run_scale_reports_every_measurement(tmp_path):
     panes = r["two_pane"]["panes"]
     assert [p["mode"] for p in panes] == ["scalar", "gaussian_blending"]
     assert [p["stage_reused"] for p in panes] == [False, True] and r["two_pane"]["second_over_first"] >= 0
+    assert [p["order_reused"] for p in panes] == [False, True]
     cancels = r["cancel"]
     assert [(c["stage"], c["supersample"]) for c in cancels] == [
         ("preprocess", 1), ("order+bin", 1), ("blend", 1), ("", 1), ("preprocess", 4), ("order+bin", 4), ("blend", 4)]

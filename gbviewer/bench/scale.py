@@ -121,8 +121,8 @@ def measure_two_pane(scene: Scene, cam: Camera, modes: tuple[str, str]) -> dict:
 
     frames = renderer.render_many(jobs, on_progress=on_progress)
     total = (time.perf_counter() - t0) * 1e3
-    panes = [{"mode": m, "first_tiles_ms": first_tiles.get(k), "stage_reused": f.stats.stage_reused, **_stages(f)}
-             for k, (m, f) in enumerate(zip(modes, frames))]
+    panes = [{"mode": m, "first_tiles_ms": first_tiles.get(k), "stage_reused": f.stats.stage_reused,
+              "order_reused": f.stats.order_reused, **_stages(f)} for k, (m, f) in enumerate(zip(modes, frames))]
     before_blend = [p["preprocess_ms"] + p["sort_ms"] for p in panes]
     return {"panes": panes, "total_ms": total, "second_over_first": before_blend[1] / max(before_blend[0], 1e-9)}
 
@@ -193,7 +193,8 @@ def print_scale(r: dict) -> None:
               f"{s['evals_per_pixel']:>10.0f}")
     tp = r["two_pane"]
     panes = ", ".join(f"{p['mode']} pre+order {p['preprocess_ms'] + p['sort_ms']:.0f} ms, first tiles at "
-                      f"{p['first_tiles_ms'] or 0:.0f} ms" for p in tp["panes"])
+                      f"{p['first_tiles_ms'] or 0:.0f} ms (stage {'reused' if p['stage_reused'] else 'built'}, order "
+                      f"{'reused' if p['order_reused'] else 'sorted'})" for p in tp["panes"])
     print(f"  two panes, one camera, one render_many: {panes}; both final at {tp['total_ms']:.0f} ms; second "
           f"pane's pre+order / first's {tp['second_over_first']:.2f}")
     for c in r["cancel"]:

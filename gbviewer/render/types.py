@@ -232,8 +232,9 @@ class FrameStats:
     MLPs of a trained Duplex-GS model, per view; lod_splats: the splats of the level-of-detail cut drawn
     (`RenderSettings.lod`); with `Capabilities.shared_stage` (cpu): stage_reused, whether the frame used a
     per-camera stage (the mode-independent preprocess and the depth order) computed before, by an earlier render or
-    an earlier job of the same `render_many`, and stage_ms, the time spent building it in this frame (0 when reused;
-    included in preprocess_ms). A `render_many` frame's total_ms counts from the start of the call, and on cpu its
+    an earlier job of the same `render_many`, order_reused, whether its tile lists were binned in a depth order an
+    earlier frame of that stage sorted (False where this frame sorted it, and for wsr and duplex, which bin without
+    it), and stage_ms, the time spent building the stage in this frame (0 when reused; included in preprocess_ms). A `render_many` frame's total_ms counts from the start of the call, and on cpu its
     blend_ms is the time of the one tile loop all its frames share.
     """
 
@@ -255,6 +256,7 @@ class FrameStats:
     cell_misses: int | None = None
     decode_ms: float | None = None
     stage_reused: bool | None = None
+    order_reused: bool | None = None
     stage_ms: float | None = None
     lod_splats: int | None = None
 

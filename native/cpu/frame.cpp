@@ -192,6 +192,8 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
             if (run.cancelled()) return;
             stage.order_ready = true;
             st.sort_ms += ms_since(t0);
+        } else {
+            st.order_reused = true;
         }
         st.sort_length += (int64_t)stage.order.size();
         bin_splats(splats, rects, valid, stage.order.data(), (int64_t)stage.order.size(), gx, tile_start, keys, st,

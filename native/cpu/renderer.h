@@ -21,6 +21,7 @@ namespace gbv::cpu {
 struct Stats {
     double preprocess_ms = 0, sort_ms = 0, blend_ms = 0, stage_ms = 0;
     bool stage_reused = false;
+    bool order_reused = false;  // binned in a depth order an earlier frame of the stage sorted (not wsr, duplex)
     int64_t visible = 0, sort_length = 0, pairs = 0;
     int64_t cells_visible = 0, cell_misses = 0;
 };

@@ -157,3 +157,17 @@ def test_a_wide_view_filter_keeps_splats_the_stage_would_call_off_screen(dilatio
     assert plain.stats.visible == 0 and f.stats.visible == 1 and f.alpha.max() > 0.05
     ref = fresh(scene, wide, wide_filter)
     assert np.array_equal(f.rgb, ref.rgb[:, :64]) and np.array_equal(f.alpha, ref.alpha[:, :64])
+
+
+def test_order_reused_says_which_frames_binned_in_an_earlier_frames_depth_order():
+    scene = gb.load(shared_scene("angel.compressed.ply"))
+    cam = gb.orbit_camera(scene, 10, 20, width=96, height=72)
+    r = create_renderer("cpu")
+    r.upload(scene)
+    specs = ["wsr", "scalar", "gaussian_blending", "scalar:2"]
+    frames = r.render_many([(cam, RenderSettings.parse(s)) for s in specs])
+    # wsr bins without an order; scalar sorts the stage's; gaussian_blending reuses it; x1 at 2x2 is another stage
+    assert [f.stats.order_reused for f in frames] == [False, False, True, False]
+    assert r.render(cam, RenderSettings.parse("mip")).stats.order_reused  # a later call: the kept stage's order
+    f = r.render(gb.orbit_camera(scene, 11, 20, width=96, height=72), RenderSettings.parse("mip"))  # a new camera
+    assert not f.stats.stage_reused and not f.stats.order_reused
