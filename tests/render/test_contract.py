@@ -238,3 +238,19 @@ def test_the_shared_renderer_that_stopped_working_is_replaced(backend, bundled_s
     second = get_renderer(bundled_scene, backend.name)
     assert second is not first and second.usable() == (True, "")
     assert second.render(view(bundled_scene), GB).rgb.std() > 0.01
+
+
+def test_render_many_equals_render_per_job(renderer, bundled_scene):
+    """Every backend's render_many (the CPU's shared stage, or the contract's default loop over render) gives each
+    job the frame `render` gives it, with progress per job."""
+    cam = view(bundled_scene)
+    jobs = [(cam, RenderSettings.parse(s)) for s in ("scalar", "gaussian_blending")] + [(view(bundled_scene, 64, 48),
+                                                                                         RenderSettings())]
+    seen: set[int] = set()
+    frames = renderer.render_many(jobs, on_progress=lambda job, done, total: seen.add(job))
+    assert len(frames) == len(jobs)
+    for (c, s), f in zip(jobs, frames):
+        ref = renderer.render(c, s)
+        assert np.array_equal(f.rgb, ref.rgb) and np.array_equal(f.alpha, ref.alpha), f"{renderer.name} {s.spec}"
+        assert (f.stats.visible, f.stats.pairs) == (ref.stats.visible, ref.stats.pairs)
+    assert not renderer.capabilities.progressive or seen == {0, 1, 2}
