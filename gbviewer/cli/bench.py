@@ -11,7 +11,7 @@ from ..errors import GBViewerError
 from ..extras import require
 from ..render import BACKENDS, RenderSettings
 from ..io.outputs import refuse_collisions, refuse_inputs
-from .options import MAX_COUNT, check_render_size, progress_bar
+from .options import MAX_COUNT, add_lod_arg, check_render_size, progress_bar, with_lod
 
 BENCH_DEFAULTS = {"modes": "scalar,gaussian_blending,supersample:3", "rates": "1,1/8", "views": 2, "repeat": 2,
                   "simd": None}
@@ -51,7 +51,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     refuse_inputs(outputs, [*args.scenes, args.cameras])
 
     result = bench.run_bench(
-        args.scenes, RenderSettings.parse_list(args.modes), args.rates, backends, views=args.views,
+        args.scenes, with_lod(RenderSettings.parse_list(args.modes), args.lod), args.rates, backends, views=args.views,
         size=args.size, repeat=args.repeat, cameras=args.cameras, up=args.up, simd=args.simd,
         flicker_frames=args.flicker_frames, flicker_step=args.flicker_step,
         outputs=outputs, force=args.force, progress=progress_bar)
@@ -76,9 +76,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"the full sweep (long: x4 renders 16x the pixels of x1): --modes {BENCH_FULL['modes']} "
                    f"--rates {BENCH_FULL['rates']} --views {BENCH_FULL['views']} --repeat {BENCH_FULL['repeat']} "
                    f"--simd {BENCH_FULL['simd']}; options given explicitly win")
-    p.add_argument("--modes", help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N); "
+    p.add_argument("--modes", help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, supersample:N = "
+                   "scalar:N; the level-of-detail cut at PX); "
                    "with wsr or duplex the sort length, cells, PSNR vs scalar and flicker are measured too "
                    f"(default {BENCH_DEFAULTS['modes']})")
+    add_lod_arg(p)
     p.add_argument("--backends", default="cpu")
     p.add_argument("--rates", type=Rate(many=True),
                    help=f"sampling rates, e.g. 8,4,2,1,1/2,1/4,1/8 (default {BENCH_DEFAULTS['rates']})")
