@@ -55,6 +55,10 @@ def test_run_scale_reports_every_measurement(tmp_path):
     assert r["load"]["raw_s"] > 0 and r["load"]["peak_rss_above_baseline"] > 0
     assert [(s["mode"], s["rate"], s["width"]) for s in r["stages"]] == [
         ("scalar", 1.0, 32), ("scalar", 0.5, 16), ("gaussian_blending", 1.0, 32), ("gaussian_blending", 0.5, 16)]
-    assert [p["mode"] for p in r["two_pane"]["panes"]] == ["scalar", "gaussian_blending"]
-    (c,) = r["cancel"]
-    assert c["finished"] != (c["latency_ms"] is not None)
+    panes = r["two_pane"]["panes"]
+    assert [p["mode"] for p in panes] == ["scalar", "gaussian_blending"]
+    assert [p["stage_reused"] for p in panes] == [False, True] and r["two_pane"]["second_over_first"] >= 0
+    cancels = r["cancel"]
+    assert [(c["stage"], c["supersample"]) for c in cancels] == [
+        ("preprocess", 1), ("order+bin", 1), ("blend", 1), ("", 1), ("preprocess", 4), ("order+bin", 4), ("blend", 4)]
+    assert all(c["finished"] != (c["latency_ms"] is not None) for c in cancels)

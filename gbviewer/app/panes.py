@@ -57,6 +57,7 @@ class PaneRenders:
         view_key = s.controller.state()
         moving = s.moving
         slots = sum(len(s.parts(p.index)) for p in s.visible)
+        jobs = []  # submitted together: the panes of one camera render as companions
         for p in s.visible:
             ps = s.settings.panes[p.index]
             for part in s.parts(p.index):
@@ -86,7 +87,7 @@ class PaneRenders:
                 shown = p.parts[part]
                 progressive = f == 1.0 and self.worker.capabilities(backend).progressive and ps.view == "color"
                 est_ms = cost * w * h if cost else None
-                self.worker.submit(RenderJob(
+                jobs.append(RenderJob(
                     (p.index, part), s.scene, cam, settings, backend,
                     {"key": key, "preview": f, "rate": s.settings.rate, "full_size": (w, h)},
                     priority=int(not moving and s.hover is not None and s.hover[0] == p.index),
@@ -96,6 +97,8 @@ class PaneRenders:
                     else None,
                     quick=self._quick(p.index, settings, est_ms) if progressive else None,
                     display=display))
+        if jobs:
+            self.worker.submit_all(jobs)
 
     def _quick(self, i: int, settings: RenderSettings, est_ms: float | None) -> tuple[Camera, RenderSettings] | None:
         """The x1 sample of a still frame that supersamples or zooms in and is expected to be slow (or not measured

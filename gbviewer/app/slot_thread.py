@@ -89,14 +89,19 @@ class SlotThread:
 
     def submit(self, request) -> None:
         """Queue `request`, replacing its slot's waiting one; cancel its slot's running one where the policy says."""
+        self.submit_all([request])
+
+    def submit_all(self, requests: list) -> None:
+        """`submit` each of `requests` at once: the thread sees them together (to work on them as companions)."""
         with self._lock:
-            self._seq += 1
-            self.dropped += request.slot in self._pending
-            self._pending[request.slot] = (self._seq, request)
-            for running in self._running:
-                if running.slot == request.slot and self.policy.cancels(running, request):
-                    self._cancelled_by.add(request.slot)
-                    self._cancel.set()
+            for request in requests:
+                self._seq += 1
+                self.dropped += request.slot in self._pending
+                self._pending[request.slot] = (self._seq, request)
+                for running in self._running:
+                    if running.slot == request.slot and self.policy.cancels(running, request):
+                        self._cancelled_by.add(request.slot)
+                        self._cancel.set()
             self._lock.notify()
 
     def cancel(self, slot: Hashable) -> None:

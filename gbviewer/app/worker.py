@@ -29,10 +29,10 @@ from ..render import AUTO, BACKENDS, BackendChoice, Capabilities, Frame, Rendere
 from ..render.choice import FALLBACK, decide_measured
 from ..scene import Scene
 from .display import DisplayTextures, SharedContext
+from .refine import companions, render_jobs
 from .slot_thread import RENDER_NICE, SlotPolicy, SlotThread
 
 
-PARTIAL_INTERVAL_S = 0.1  # how often a refining frame is posted (the first finished tiles at once)
 
 
 @dataclass
@@ -64,14 +64,6 @@ class RenderResult:
     partial: np.ndarray | None = None  # float32 (H, W, 3), still being written by the render
     progress: float = 1.0  # fraction of the frame's tiles done
     failed: bool = False  # the job's backend stopped working (error says why): its slot renders on another next
-
-
-def scaled_nearest(image: np.ndarray, width: int, height: int) -> np.ndarray:
-    """`image` (H, W, 3) resized to (height, width, 3) float32 by nearest neighbour."""
-    h, w = image.shape[:2]
-    ys = np.arange(height) * h // height
-    xs = np.arange(width) * w // width
-    return np.ascontiguousarray(image[ys[:, None], xs[None, :], :3], np.float32)
 
 
 def free(renderer: Renderer) -> None:
@@ -123,9 +115,10 @@ class RenderWorker(SlotThread):
 
     # ---- UI side -----------------------------------------------------------------------------------------------
 
-    def submit(self, job: RenderJob) -> None:
-        job.submitted = time.perf_counter()
-        super().submit(job)
+    def submit_all(self, jobs: list) -> None:
+        for job in jobs:
+            job.submitted = time.perf_counter()
+        super().submit_all(jobs)
 
     def backend_status(self, name: str) -> tuple[bool | None, str]:
         """(usable, reason); None while the render thread is still probing. "auto": (True, its choice)."""
@@ -275,36 +268,52 @@ class RenderWorker(SlotThread):
             self._shared.done_current()
         gc.collect()
 
-    def _work(self, job: RenderJob, cancel: CancelToken) -> RenderResult:
-        result = self._render(job, cancel)
-        self.cancelled += result.cancelled
-        self.rendered += not result.cancelled
-        return result
+    def _companions(self, first: RenderJob, waiting: list) -> list:
+        return companions(first, waiting)
 
-    def _render(self, job: RenderJob, cancel: CancelToken) -> RenderResult:
+    def _work(self, job: RenderJob, cancel: CancelToken) -> RenderResult:
+        return self._work_all([job], cancel)[0]
+
+    def _work_all(self, jobs: list, cancel: CancelToken) -> list:
+        results = self._render(jobs, cancel)
+        self.cancelled += sum(r.cancelled for r in results)
+        self.rendered += sum(not r.cancelled for r in results)
+        return results
+
+    def _render(self, jobs: list, cancel: CancelToken) -> list:
+        """A result per job of `jobs` (one, or the panes of one camera: `refine.companions`)."""
+        job = jobs[0]
         if job.scene is not self._scene:
             self._release()  # the previous scene's renderers and GPU buffers, freed in this thread
             self._scene = job.scene
+
+        def each(**kw) -> list:
+            return [RenderResult(j, None, finished=time.perf_counter(), **kw) for j in jobs]
+
         try:
             renderer = self._renderer_of(job.backend)
-            if job.display == "gpu" and self.display_path(job.backend)[0] == "gpu":
-                frame = self._render_to_texture(renderer, job, cancel)
-            elif not job.progressive:
-                frame = renderer.render(job.camera, job.settings, cancel=cancel)
+            if len(jobs) == 1 and job.display == "gpu" and self.display_path(job.backend)[0] == "gpu":
+                frames = [self._render_to_texture(renderer, job, cancel)]
+            elif len(jobs) == 1 and not job.progressive:
+                frames = [renderer.render(job.camera, job.settings, cancel=cancel)]
             else:
-                frame = self._refine(renderer, job, cancel)
-            return RenderResult(job, frame, "", time.perf_counter())
+                frames = render_jobs(renderer, jobs, cancel, self._post_stage)
+            return [RenderResult(j, f, "", time.perf_counter()) for j, f in zip(jobs, frames)]
         except RenderCancelled:
-            return RenderResult(job, None, "", time.perf_counter(), cancelled=True)
+            return each(cancelled=True)
         except BackendFailed as exc:
             if job.backend not in self.failed:
                 self._failed(job.backend, exc)
-            return RenderResult(job, None, self.backends[job.backend][1], time.perf_counter(), failed=True)
+            return each(error=self.backends[job.backend][1], failed=True)
         except GBViewerError as exc:
-            return RenderResult(job, None, str(exc), time.perf_counter())
+            return each(error=str(exc))
         except Exception as exc:  # noqa: BLE001 - shown in the window, never kills the thread
             traceback.print_exc()
-            return RenderResult(job, None, f"{type(exc).__name__}: {exc}", time.perf_counter())
+            return each(error=f"{type(exc).__name__}: {exc}")
+
+    def _post_stage(self, job: RenderJob, stage: str, frame: Frame | None, partial: np.ndarray | None,
+                    progress: float) -> None:
+        self._post(RenderResult(job, frame, "", time.perf_counter(), stage=stage, partial=partial, progress=progress))
 
     def _render_to_texture(self, renderer, job: RenderJob, cancel: CancelToken) -> Frame:
         """A GPU display path job: the frame stays in a display texture (a GpuFrame)."""
@@ -316,22 +325,3 @@ class RenderWorker(SlotThread):
             self.textures.discard(tex)
             raise
         return self.textures.frame(tex, stats)
-
-    def _refine(self, renderer, job: RenderJob, cancel: CancelToken) -> Frame:
-        """A progressive job: the quick stage, then the frame with its finished tiles posted as they come."""
-        base = job.underlay
-        if job.quick is not None:
-            quick = renderer.render(*job.quick, cancel=cancel)
-            self._post(RenderResult(job, quick, "", time.perf_counter(), stage="quick"))
-            base = quick.rgb
-        w, h = job.camera.width, job.camera.height
-        partial = scaled_nearest(base, w, h) if base is not None else np.zeros((h, w, 3), np.float32)
-        posted = [0.0, 0]  # when, tiles done
-
-        def on_progress(done: int, total: int) -> None:
-            now = time.perf_counter()
-            if done > posted[1] and done < total and (posted[1] == 0 or now - posted[0] >= PARTIAL_INTERVAL_S):
-                posted[:] = [now, done]
-                self._post(RenderResult(job, None, "", now, stage="partial", partial=partial, progress=done / total))
-
-        return renderer.render(job.camera, job.settings, cancel=cancel, on_progress=on_progress, partial=partial)

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import Camera, orbit_camera
+from ..cancel import CancelToken
 from ..errors import RenderCancelled
 from ..io import load
 from ..render import Mode, RenderSettings, get_renderer
@@ -105,41 +106,56 @@ def measure_stages(scene: Scene, cam: Camera, modes: list[str], rates: list[floa
 
 
 def measure_two_pane(scene: Scene, cam: Camera, modes: tuple[str, str]) -> dict:
-    """Two panes of one camera: the two modes rendered one after the other; wall time of each and of both."""
+    """Two panes of one camera as the viewer renders them: one `render_many` (the per-camera stage and depth order
+    once, tiles interleaved) from a renderer that has not seen the camera; each pane's stage times, the call's wall
+    time and when each pane's first tiles were reported (ms from the call's start)."""
     renderer = get_renderer(scene, "cpu")
-    panes = []
+    renderer.render(cam.at_sampling_rate(0.5), RenderSettings())  # a stage of another camera: nothing to reuse
+    jobs = [(cam, RenderSettings(mode=Mode.parse(m))) for m in modes]
+    first_tiles: dict[int, float] = {}
     t0 = time.perf_counter()
-    for mode in modes:
-        t = time.perf_counter()
-        frame = renderer.render(cam, RenderSettings(mode=Mode.parse(mode)))
-        panes.append({"mode": mode, "wall_ms": (time.perf_counter() - t) * 1e3, **_stages(frame)})
-    return {"panes": panes, "total_ms": (time.perf_counter() - t0) * 1e3}
+
+    def on_progress(k: int, done: int, total: int) -> None:
+        if done > 0 and k not in first_tiles:
+            first_tiles[k] = (time.perf_counter() - t0) * 1e3
+
+    frames = renderer.render_many(jobs, on_progress=on_progress)
+    total = (time.perf_counter() - t0) * 1e3
+    panes = [{"mode": m, "first_tiles_ms": first_tiles.get(k), "stage_reused": f.stats.stage_reused, **_stages(f)}
+             for k, (m, f) in enumerate(zip(modes, frames))]
+    before_blend = [p["preprocess_ms"] + p["sort_ms"] for p in panes]
+    return {"panes": panes, "total_ms": total, "second_over_first": before_blend[1] / max(before_blend[0], 1e-9)}
 
 
-def measure_cancel(scene: Scene, cam: Camera, mode: str, moments_ms: list[float]) -> list[dict]:
-    """For each moment: a render whose cancel event is set that many ms after it starts; the time from the event
-    to RenderCancelled (None with finished=True where the frame completed first)."""
+def measure_cancel(scene: Scene, cam: Camera, mode: str, moments_ms: list[float], supersample: int = 1) -> list[dict]:
+    """A render whose CancelToken (what the viewer passes) is set in the middle of each stage of an uncancelled
+    frame (preprocess, depth order and binning, blend) and at each of `moments_ms`: the time from the set to
+    RenderCancelled (None with finished=True where the frame completed first)."""
     renderer = get_renderer(scene, "cpu")
+    settings = RenderSettings(mode=Mode.parse(mode), supersample=supersample)
+    s = renderer.render(cam, settings).stats
+    stages = {"preprocess": s.preprocess_ms / 2, "order+bin": s.preprocess_ms + s.sort_ms / 2,
+              "blend": s.preprocess_ms + s.sort_ms + s.blend_ms / 2}
     rows = []
-    for at in moments_ms:
-        event = threading.Event()
+    for stage, at in [*stages.items(), *(("", m) for m in moments_ms)]:
+        token = CancelToken()
         stamp: list[float] = []
 
-        def fire(ev: threading.Event = event, st: list = stamp) -> None:
+        def fire(t: CancelToken = token, st: list = stamp) -> None:
             st.append(time.perf_counter())
-            ev.set()
+            t.set()
 
         timer = threading.Timer(at / 1e3, fire)
         t0 = time.perf_counter()
         timer.start()
         try:
-            renderer.render(cam, RenderSettings(mode=Mode.parse(mode)), cancel=event)
+            renderer.render(cam, settings, cancel=token)
             latency, finished = None, True
         except RenderCancelled:
             latency, finished = (time.perf_counter() - stamp[0]) * 1e3, False
         timer.cancel()
-        rows.append({"mode": mode, "set_at_ms": at, "latency_ms": latency, "finished": finished,
-                     "render_ms": (time.perf_counter() - t0) * 1e3})
+        rows.append({"mode": mode, "supersample": supersample, "stage": stage, "set_at_ms": at,
+                     "latency_ms": latency, "finished": finished, "render_ms": (time.perf_counter() - t0) * 1e3})
     return rows
 
 
@@ -156,7 +172,8 @@ def run_scale(path: Path, repeat: int, modes: list[str], rates: list[float], mom
     result["stages"] = measure_stages(scene, cam, modes, rates, repeat)
     log(f"{path.name}: two panes, cancel")
     result["two_pane"] = measure_two_pane(scene, cam, (modes[0], modes[-1]))
-    result["cancel"] = measure_cancel(scene, cam, modes[-1], moments_ms)
+    result["cancel"] = (measure_cancel(scene, cam, modes[-1], moments_ms)
+                        + measure_cancel(scene, scale_camera(scene, width // 2, height // 2), modes[0], [], 4))
     return result
 
 
@@ -175,8 +192,12 @@ def print_scale(r: dict) -> None:
               f"{s['sort_ms']:>9.0f}{s['blend_ms']:>10.0f}{s['total_ms']:>10.0f}{s['sort_length']:>12,}"
               f"{s['evals_per_pixel']:>10.0f}")
     tp = r["two_pane"]
-    panes = " + ".join(f"{p['mode']} {p['wall_ms']:.0f}" for p in tp["panes"])
-    print(f"  two panes, one camera: {panes} = {tp['total_ms']:.0f} ms")
+    panes = ", ".join(f"{p['mode']} pre+order {p['preprocess_ms'] + p['sort_ms']:.0f} ms, first tiles at "
+                      f"{p['first_tiles_ms'] or 0:.0f} ms" for p in tp["panes"])
+    print(f"  two panes, one camera, one render_many: {panes}; both final at {tp['total_ms']:.0f} ms; second "
+          f"pane's pre+order / first's {tp['second_over_first']:.2f}")
     for c in r["cancel"]:
-        got = "finished first" if c["finished"] else f"RenderCancelled {c['latency_ms']:.0f} ms after the event"
-        print(f"  cancel {c['mode']} at {c['set_at_ms']:.0f} ms: {got}")
+        got = "finished first" if c["finished"] else f"RenderCancelled {c['latency_ms']:.1f} ms after the set"
+        where = f" (mid {c['stage']})" if c["stage"] else ""
+        ss = f" supersample {c['supersample']}" if c["supersample"] > 1 else ""
+        print(f"  cancel {c['mode']}{ss} at {c['set_at_ms']:.0f} ms{where}: {got}")

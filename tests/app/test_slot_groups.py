@@ -82,3 +82,39 @@ def test_a_cleared_or_cancelled_group_is_not_requeued():
         assert all(r.cancelled for r in t.results())
     finally:
         t.stop()
+
+
+def test_the_render_thread_renders_the_panes_of_one_camera_together(bundled_scene):
+    """Two progressive panes of one camera, submitted together: one render_many (the second frame reuses the first's
+    stage), the second pane's first tiles posted before the first pane's last ones (interleaved tiles), both
+    frames equal to single renders; a preview and a pane of another camera are not grouped."""
+    import numpy as np
+
+    import gbviewer as gb
+    from gbviewer.app.refine import companions
+    from gbviewer.app.worker import RenderJob, RenderWorker
+    from gbviewer.render import RenderSettings
+
+    cam = gb.orbit_camera(bundled_scene, width=640, height=480)
+    specs = ("scalar:2", "gaussian_blending:2")
+    jobs = [RenderJob((k, "a"), bundled_scene, cam, RenderSettings.parse(s), "cpu", progressive=True)
+            for k, s in enumerate(specs)]
+    other = RenderJob((2, "a"), bundled_scene, cam.at_sampling_rate(0.5), RenderSettings(), "cpu")
+    preview = RenderJob((3, "a"), bundled_scene, cam, RenderSettings(), "cpu", preview=True)
+    assert companions(jobs[0], [jobs[1], other, preview]) == [jobs[1]] and companions(preview, jobs) == []
+    w = RenderWorker()
+    try:
+        w.submit_all(jobs)
+        out, t0 = [], time.time()
+        while sum(r.stage == "final" for r in out) < 2 and time.time() - t0 < 120:
+            out += w.results()
+            time.sleep(0.005)
+    finally:
+        w.stop()
+    finals = {r.job.slot: r.frame for r in out if r.stage == "final"}
+    assert [finals[(k, "a")].stats.stage_reused for k in range(2)] == [False, True]
+    partials = [r.job.slot[0] for r in out if r.stage == "partial"]
+    assert 1 in partials and partials.index(1) < len(partials) - 1 - partials[::-1].index(0), partials
+    for k, s in enumerate(specs):
+        ref = gb.render(bundled_scene, cam, *s.split(":")[:1], supersample=2)
+        np.testing.assert_array_equal(finals[(k, "a")].rgb, ref.rgb)
