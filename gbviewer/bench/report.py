@@ -81,13 +81,14 @@ def plot_path(out_dir: Path, scene: str) -> Path:
 
 
 def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = False) -> list[Path]:
-    """PSNR vs sampling rate per mode, and time per mode (one figure per scene), as PNG; existing plots are only
-    replaced with `force`."""
+    """PSNR vs sampling rate per mode, time per mode, and quality against cost (zoom-out PSNR against frame time,
+    one line per mode through its rates): one figure per scene, as PNG; existing plots are only replaced with
+    `force`."""
     plt = pyplot()
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for scene in sorted({r.scene for r in speed} | {r.scene for r in fidelity}):
-        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.5))
+        fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(18, 4.5))
         fid = [r for r in fidelity if r.scene == scene]
         for mode in dict.fromkeys(r.mode for r in fid):
             pts = sorted((r.rate, r.psnr) for r in fid if r.mode == mode)
@@ -108,11 +109,33 @@ def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow
         ax2.set_title(f"{scene}: time per mode")
         ax2.legend(fontsize=8)
         ax2.tick_params(axis="x", labelsize=7)
+        quality_cost(ax3, scene, [r for r in speed if r.scene == scene], fid)
         fig.tight_layout()
         path = plot_path(out_dir, scene)
         save_figure(fig, path, force)
         written.append(path)
     return written
+
+
+def quality_cost(ax, scene: str, speed: list[SpeedRow], fidelity: list[FidelityRow]) -> None:
+    """Zoom-out PSNR against the frame time (the fastest path measured) of each mode, a line through its rates
+    labelled x1/k."""
+    for mode in dict.fromkeys(r.mode for r in fidelity if r.kind == "zoom-out"):
+        pts = []
+        for f in sorted((r for r in fidelity if r.mode == mode and r.kind == "zoom-out"), key=lambda r: r.rate):
+            ms = [r.median_ms for r in speed if r.mode == mode and r.rate == f.rate]
+            if ms:
+                pts.append((min(ms), f.psnr, f.rate))
+        if pts:
+            (line,) = ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", label=mode)
+            for ms, db, rate in pts:
+                ax.annotate(f"x1/{round(1 / rate)}", (ms, db), fontsize=6, color=line.get_color(),
+                            xytext=(3, 3), textcoords="offset points")
+    ax.set_xscale("log")
+    ax.set_xlabel("ms per frame (median, fastest path)")
+    ax.set_ylabel("PSNR vs reference (dB)")
+    ax.set_title(f"{scene}: quality against cost (zoom-out)")
+    ax.legend(fontsize=8)
 
 
 def pyplot():
