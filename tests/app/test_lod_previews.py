@@ -7,7 +7,7 @@ from __future__ import annotations
 import time
 
 import gbviewer as gb
-from gbviewer.app import rates
+from gbviewer.app import loading, rates
 from gbviewer.app.panes import PaneRenders
 from gbviewer.app.settings import AppSettings, PaneSettings
 from gbviewer.app.state import AppState
@@ -114,3 +114,14 @@ def test_pane_lod_setting_is_normalised():
     assert state.settings_for(0, "a").lod == 2.5
     state.set_pane(0, lod=0.0)
     assert state.settings_for(0, "a").lod is None
+
+
+def test_the_loader_builds_the_hierarchy_in_the_background(monkeypatch):
+    built = []
+    monkeypatch.setattr(loading, "hierarchy_for", built.append)
+    loader = loading.SceneLoader(gb.DEFAULT_SCENE)
+    t0 = time.time()
+    while not built:
+        assert time.time() - t0 < 30, loader.poll()
+        time.sleep(0.01)
+    assert built == [loader.poll().scene]
