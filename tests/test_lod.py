@@ -229,3 +229,18 @@ def test_a_truncated_cache_entry_is_rebuilt_with_one_warning(tmp_path):
     assert len(caught) == 1
     assert all(np.array_equal(a, b) for a, b in zip(first.arrays().values(), rebuilt.arrays().values()))
     assert entry.read_bytes() == data  # rewritten whole
+
+
+def test_render_many_mixing_lod_and_full_panes_matches_single_renders():
+    """The viewer's companion panes: one camera, a full pane and LOD panes in one render_many (the cut is another
+    view scene: its own batch), each bit-identical to its own render."""
+    scene = random_scene(2000, seed=12, sh_degree=1, spread=3.0)
+    cam = gb.Camera(64, 48, 20.0, 20.0, 32, 24, np.eye(3), np.zeros(3))
+    settings = [gb.RenderSettings(), gb.RenderSettings(lod=2.0), gb.RenderSettings(),
+                gb.RenderSettings("gaussian_blending", lod=4.0)]
+    renderer = gb.get_renderer(scene, "cpu")
+    many = renderer.render_many([(cam, s) for s in settings])
+    for s, frame in zip(settings, many):
+        alone = gb.get_renderer(scene, "cpu").render(cam, s)
+        assert np.array_equal(frame.rgb, alone.rgb) and frame.stats.lod_splats == alone.stats.lod_splats, s.spec
+    assert not np.array_equal(many[0].rgb, many[1].rgb)
