@@ -9,6 +9,7 @@ import pytest
 import gbviewer as gb
 from gbviewer.cli import main
 from gbviewer.cli.options import with_lod
+from gbviewer.figure import drawable
 from helpers import patch_commands
 
 COMMON = ["--width", "48", "--height", "36", "--orbit", "10,20,0", "--backend", "cpu"]
@@ -54,3 +55,13 @@ def test_bad_lod_spec_one_line_exit_2(spec, says, tmp_path, capsys):
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and says in err, err
     assert not list(tmp_path.iterdir())
+
+
+def test_compare_lod_adds_the_lod_columns_with_spelled_out_tau(tmp_path, capsys):
+    out = tmp_path / "c.png"
+    argv = ["compare", str(gb.DEFAULT_SCENE), *COMMON, "--modes", "scalar", "--lod", "2", "--rates", "1,1/2",
+            "--out", str(out)]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "2 rates x 2 modes" in text and "scalar LOD \u03c4=2 px" in text
+    assert drawable("scalar LOD \u03c4=2 px, 10 of 20 splats") == "scalar LOD tau=2 px, 10 of 20 splats"
