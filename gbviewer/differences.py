@@ -115,6 +115,8 @@ def fidelity(rgb: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
 
 
 def camera_key(camera: Camera) -> tuple:
-    """A hashable key equal for cameras that render the same pixels (size, intrinsics, pose, near plane)."""
+    """A hashable key equal for cameras that render the same pixels (size, intrinsics, pose, near plane,
+    projection)."""
     return (camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy,
-            np.asarray(camera.R, np.float32).tobytes(), np.asarray(camera.t, np.float32).tobytes(), camera.near)
+            np.asarray(camera.R, np.float32).tobytes(), np.asarray(camera.t, np.float32).tobytes(), camera.near,
+            camera.projection)

@@ -292,7 +292,7 @@ def compare_figure(scene: Scene, camera: Camera, settings_list: Sequence[RenderS
     if diff is not None and diff not in DIFFS:
         raise GBViewerError(f"compare: difference rows {diff!r}; expected one of {', '.join(DIFFS)}")
     cells = render_grid(scene, camera, settings_list, rates, backend)
-    ref_settings = replace(settings_list[0], mode=Mode.SCALAR, supersample=1, debug="none")
+    ref_settings = RenderSettings(Mode.SCALAR, background=settings_list[0].background)  # plain scalar x1
     ref = next((c.rgb for row in cells for c in row if c.rate == 1.0 and c.settings == ref_settings), None)
     if ref is None and any(r <= 1 for r in rates):
         ref = get_renderer(scene, backend).render(camera, ref_settings).rgb

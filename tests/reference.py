@@ -84,10 +84,10 @@ def pixel_contributors(scene, cam, mode: str, x: int, y: int, supersample: int =
     return out
 
 
-def render_full_res(scene, cam, mode: str, supersample: int = 1, background=(0.0, 0.0, 0.0)):
+def render_full_res(scene, cam, mode: str, supersample: int = 1, background=(0.0, 0.0, 0.0), view_filter=None):
     """Render at the (super-sampled) resolution. Returns dict rgb (h,w,3), T (h,w), window (h,w,2),
     tie (h,w) bool, pre (the preprocess output)."""
-    pre = preprocess(scene, cam, mode, supersample)
+    pre = preprocess(scene, cam, mode, supersample, view_filter=view_filter)
     W, H = pre["W"], pre["H"]
     gx, gy = math.ceil(W / TILE), math.ceil(H / TILE)
     bg = np.asarray(background, np.float64)
@@ -157,13 +157,13 @@ def box_down(img: np.ndarray, n: int) -> np.ndarray:
 
 
 def reference_render(scene, cam, mode: str, supersample: int = 1, background=(0.0, 0.0, 0.0),
-                     return_window: bool = False, return_ties: bool = False):
+                     return_window: bool = False, return_ties: bool = False, view_filter: dict | None = None):
     """Float64 brute-force render. Returns (rgb (H,W,3), alpha (H,W)), then optionally the final GB window
     size (H,W,2) (None unless supersample == 1) and the tie mask (H,W): output pixels where some
     threshold decision (alpha cut, early stop, GB fallback / extent test) lay within TIE_REL of its cut.
     """
     n = int(supersample)
-    r = render_full_res(scene, cam, mode, n, background)
+    r = render_full_res(scene, cam, mode, n, background, view_filter)
     out = (box_down(r["rgb"], n), box_down(1.0 - r["T"], n))
     if return_window:
         out = out + (r["window"] if n == 1 else None,)

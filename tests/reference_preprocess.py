@@ -137,12 +137,18 @@ def _sh_raw(c: np.ndarray, dirs: np.ndarray) -> np.ndarray:
     return res
 
 
-def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = None) -> dict:
+def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = None,
+               view_filter: dict | None = None) -> dict:
     """Per-splat screen-space quantities (float64). Arrays are indexed like the scene; `keep` marks survivors.
 
     wsr / duplex (KERNELS.md §7.2, §8.3): as scalar (+0.3, radius 3 sqrt(lambda_max)), and the opacity becomes
     o * v * (1 - z/sigma if depth_correct), with v the view-weight SH (raw) or 1; culled when z >= sigma
-    (depth_correct) or v * correction <= 0."""
+    (depth_correct) or v * correction <= 0.
+
+    view_filter (scalar; a viewer preset's rule as its viewer's code states it, gbviewer/render/presets.py):
+    dict(dilation, pre_dilation, compensate, cull_lambda): Sigma' = Sigma + pre_dilation I, Sigma'' = Sigma' +
+    dilation I replace the +0.3; compensate multiplies the opacity by sqrt(max(0, det Sigma' / det Sigma'')); a
+    splat whose larger eigenvalue of Sigma'' is below cull_lambda is dropped."""
     assert mode in MODES + OIT_MODES, mode
     cp = camera_params(cam, supersample)
     W, H, R, t = (cp[k] for k in ("W", "H", "R", "t"))
@@ -172,7 +178,17 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
     dirs = view_dirs(cp, means)
     a, b, c = cov[:, 0, 0].copy(), cov[:, 0, 1].copy(), cov[:, 1, 1].copy()
 
-    if mode in ("scalar",) + OIT_MODES:
+    if mode == "scalar" and view_filter is not None:
+        a += view_filter["pre_dilation"]
+        c += view_filter["pre_dilation"]
+        det0 = a * c - b * b
+        a += view_filter["dilation"]
+        c += view_filter["dilation"]
+        if view_filter["compensate"]:
+            opac = opac * np.sqrt(np.maximum(0.0, det0 / (a * c - b * b)))
+        lam_max = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
+        keep &= lam_max >= view_filter["cull_lambda"]
+    elif mode in ("scalar",) + OIT_MODES:
         a += 0.3
         c += 0.3
     if mode in OIT_MODES:

@@ -3,6 +3,8 @@ colour bar, and the references against renders made here."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -103,3 +105,5 @@ def test_camera_key_tells_cameras_apart(output_view):
     moved = gb.Camera(output_view.width, output_view.height, output_view.fx, output_view.fy, output_view.cx,
                       output_view.cy, output_view.R, output_view.t + np.float32(0.01))
     assert differences.camera_key(moved) != differences.camera_key(output_view)
+    ortho = dataclasses.replace(output_view, projection="orthographic")
+    assert differences.camera_key(ortho) != differences.camera_key(output_view)  # the same numbers, other pixels

@@ -56,5 +56,7 @@ def test_run_scale_reports_every_measurement(tmp_path):
     assert [(s["mode"], s["rate"], s["width"]) for s in r["stages"]] == [
         ("scalar", 1.0, 32), ("scalar", 0.5, 16), ("gaussian_blending", 1.0, 32), ("gaussian_blending", 0.5, 16)]
     assert [p["mode"] for p in r["two_pane"]["panes"]] == ["scalar", "gaussian_blending"]
-    (c,) = r["cancel"]
-    assert c["finished"] != (c["latency_ms"] is not None)
+    cancels = r["cancel"]
+    assert [(c["stage"], c["supersample"]) for c in cancels] == [
+        ("preprocess", 1), ("order+bin", 1), ("blend", 1), ("", 1), ("preprocess", 4), ("order+bin", 4), ("blend", 4)]
+    assert all(c["finished"] != (c["latency_ms"] is not None) for c in cancels)

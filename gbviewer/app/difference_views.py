@@ -21,6 +21,7 @@ from ..differences import REFERENCES, camera_key, colour_difference
 from ..camera import format_rate
 from ..io.datasets import View
 from ..render import Frame
+from ..render.presets import differences
 from ..scene import Scene
 from .background import format_rgb
 from .difference_thread import PHOTO, Analysis, AnalysisThread, Request, Spec
@@ -222,7 +223,8 @@ class PaneAnalysis:
             what = f"{name} - A (photo {a.photo_name})" if a is not None else ""
         elif view == "difference":
             plane, auto = (a.diff, a.diff_scale) if fresh and a.spec.to_pane == spec.to_pane else (None, 0.0)
-            what = f"{name} - A ({spec.to_pane.label})"
+            differ = differences(self.state.settings_for(*slot), spec.to_pane)
+            what = f"{name} - A ({spec.to_pane.label})" + (f": {', '.join(differ)}" if differ else "")
         else:
             plane, auto = (a.error, a.error_scale) if fresh and a.spec.reference == spec.reference else (None, 0.0)
             what = f"{name} - {spec.reference} reference"

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import Camera, orbit_camera
+from ..cancel import CancelToken
 from ..errors import RenderCancelled
 from ..io import load
 from ..render import Mode, RenderSettings, get_renderer
@@ -116,30 +117,35 @@ def measure_two_pane(scene: Scene, cam: Camera, modes: tuple[str, str]) -> dict:
     return {"panes": panes, "total_ms": (time.perf_counter() - t0) * 1e3}
 
 
-def measure_cancel(scene: Scene, cam: Camera, mode: str, moments_ms: list[float]) -> list[dict]:
-    """For each moment: a render whose cancel event is set that many ms after it starts; the time from the event
-    to RenderCancelled (None with finished=True where the frame completed first)."""
+def measure_cancel(scene: Scene, cam: Camera, mode: str, moments_ms: list[float], supersample: int = 1) -> list[dict]:
+    """A render whose CancelToken (what the viewer passes) is set in the middle of each stage of an uncancelled
+    frame (preprocess, depth order and binning, blend) and at each of `moments_ms`: the time from the set to
+    RenderCancelled (None with finished=True where the frame completed first)."""
     renderer = get_renderer(scene, "cpu")
+    settings = RenderSettings(mode=Mode.parse(mode), supersample=supersample)
+    s = renderer.render(cam, settings).stats
+    stages = {"preprocess": s.preprocess_ms / 2, "order+bin": s.preprocess_ms + s.sort_ms / 2,
+              "blend": s.preprocess_ms + s.sort_ms + s.blend_ms / 2}
     rows = []
-    for at in moments_ms:
-        event = threading.Event()
+    for stage, at in [*stages.items(), *(("", m) for m in moments_ms)]:
+        token = CancelToken()
         stamp: list[float] = []
 
-        def fire(ev: threading.Event = event, st: list = stamp) -> None:
+        def fire(t: CancelToken = token, st: list = stamp) -> None:
             st.append(time.perf_counter())
-            ev.set()
+            t.set()
 
         timer = threading.Timer(at / 1e3, fire)
         t0 = time.perf_counter()
         timer.start()
         try:
-            renderer.render(cam, RenderSettings(mode=Mode.parse(mode)), cancel=event)
+            renderer.render(cam, settings, cancel=token)
             latency, finished = None, True
         except RenderCancelled:
             latency, finished = (time.perf_counter() - stamp[0]) * 1e3, False
         timer.cancel()
-        rows.append({"mode": mode, "set_at_ms": at, "latency_ms": latency, "finished": finished,
-                     "render_ms": (time.perf_counter() - t0) * 1e3})
+        rows.append({"mode": mode, "supersample": supersample, "stage": stage, "set_at_ms": at,
+                     "latency_ms": latency, "finished": finished, "render_ms": (time.perf_counter() - t0) * 1e3})
     return rows
 
 
@@ -156,7 +162,8 @@ def run_scale(path: Path, repeat: int, modes: list[str], rates: list[float], mom
     result["stages"] = measure_stages(scene, cam, modes, rates, repeat)
     log(f"{path.name}: two panes, cancel")
     result["two_pane"] = measure_two_pane(scene, cam, (modes[0], modes[-1]))
-    result["cancel"] = measure_cancel(scene, cam, modes[-1], moments_ms)
+    result["cancel"] = (measure_cancel(scene, cam, modes[-1], moments_ms)
+                        + measure_cancel(scene, scale_camera(scene, width // 2, height // 2), modes[0], [], 4))
     return result
 
 
@@ -178,5 +185,7 @@ def print_scale(r: dict) -> None:
     panes = " + ".join(f"{p['mode']} {p['wall_ms']:.0f}" for p in tp["panes"])
     print(f"  two panes, one camera: {panes} = {tp['total_ms']:.0f} ms")
     for c in r["cancel"]:
-        got = "finished first" if c["finished"] else f"RenderCancelled {c['latency_ms']:.0f} ms after the event"
-        print(f"  cancel {c['mode']} at {c['set_at_ms']:.0f} ms: {got}")
+        got = "finished first" if c["finished"] else f"RenderCancelled {c['latency_ms']:.1f} ms after the set"
+        where = f" (mid {c['stage']})" if c["stage"] else ""
+        ss = f" supersample {c['supersample']}" if c["supersample"] > 1 else ""
+        print(f"  cancel {c['mode']}{ss} at {c['set_at_ms']:.0f} ms{where}: {got}")

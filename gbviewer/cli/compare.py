@@ -11,6 +11,7 @@ from ..figure import DIFFS, write_comparison
 from ..io import load
 from ..io.files import check_writable
 from ..render import RenderSettings
+from ..render.presets import differences
 from .options import (add_backend_arg, add_camera_args, backend_of, camera_from_args, check_inset,
                       check_render_size)
 
@@ -27,6 +28,9 @@ def cmd_compare(args: argparse.Namespace) -> int:
     cmp = write_comparison(args.out, scene, cam, settings, rates, backend_of(args), args.inset, args.force,
                            args.diff)
     print(f"wrote {args.out} ({cmp.image.width}x{cmp.image.height}): {len(rates)} rates x {len(settings)} modes")
+    for other in settings[1:]:
+        if differ := differences(other, settings[0]):
+            print(f"  {other.label} vs {settings[0].label}: {', '.join(differ)}")
     for row, prow in zip(cmp.cells, cmp.psnr):
         for cell, p in zip(row, prow):
             if p is not None and p != float("inf"):

@@ -25,7 +25,7 @@ Progress = Callable[[int, int], None]
 class RenderControl:
     """One render's cancel flag, progress and partial frame; `check()` raises RenderCancelled once cancelled."""
 
-    def __init__(self, cancel: Cancellable | None = None, on_progress: Progress | None = None,
+    def __init__(self, cancel: Cancellable | None = None, on_progress: Callable[..., None] | None = None,
                  partial: np.ndarray | None = None) -> None:
         if why := cancel_problem(cancel):
             raise RenderError(why)
@@ -35,7 +35,7 @@ class RenderControl:
         self._bridged = cancel is not None and not token  # an Event: copied into self.flag by report()
 
     @property
-    def hook(self) -> Progress | None:
+    def hook(self) -> Callable[..., None] | None:
         """The native render's on_progress: `report` where there is a callback or an Event to forward, else None."""
         return self.report if self.on_progress is not None or self._bridged else None
 
@@ -46,12 +46,13 @@ class RenderControl:
     def __exit__(self, *exc) -> None:
         return None
 
-    def report(self, done: int, total: int) -> None:
-        """Progress from the render's thread: the caller's on_progress (an exception it raises becomes a
-        CallbackError, which stops the render), then an Event's state copied into the flag."""
+    def report(self, *counts: int) -> None:
+        """Progress from the render's thread, (done, total) or render_many's (job, done, total): the caller's
+        on_progress (an exception it raises becomes a CallbackError, which stops the render), then an Event's state
+        copied into the flag."""
         if self.on_progress is not None:
             try:
-                self.on_progress(done, total)
+                self.on_progress(*counts)
             except Exception as exc:
                 raise CallbackError(f"on_progress raised {type(exc).__name__}: {exc}; the render was cancelled") \
                     from exc

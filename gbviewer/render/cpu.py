@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -12,9 +13,27 @@ from ..cells import Cells
 from ..errors import BackendUnavailable
 from ..scene import Scene
 from .control import FrameLock, Progress, RenderControl
-from .prepare import NativeUploads, camera_args, native_frame, prepare
+from .prepare import NativeUploads, OitParams, Prepared, camera_args, native_frame, prepare
 from .trace import PixelTrace, from_native
-from .types import Capabilities, Frame, Renderer, RenderSettings
+from .types import DEFAULT_ET_GRADE, DEFAULT_SIGMA, Capabilities, Frame, Renderer, RenderSettings, job_partials
+
+NO_OIT = OitParams(DEFAULT_SIGMA, 1.0, DEFAULT_ET_GRADE, False)  # the native defaults, unused outside wsr and duplex
+Job = tuple[Camera, RenderSettings]
+
+
+def batches(jobs: list[Job], preps: list[Prepared]) -> list[range]:
+    """Runs of consecutive jobs one native call renders: the same view splats (a trained Duplex-GS model's views
+    differ per camera), no two different cells, the same thread count."""
+    out: list[range] = []
+    start, cells = 0, None
+    for i, prep in enumerate(preps):
+        other_cells = prep.cells is not None and cells is not None and prep.cells is not cells
+        if i > start and (prep.scene is not preps[start].scene or jobs[i][1].threads != jobs[start][1].threads
+                          or other_cells):
+            out.append(range(start, i))
+            start, cells = i, None
+        cells = prep.cells if prep.cells is not None else cells
+    return out + [range(start, len(jobs))] if jobs else out
 
 
 class CpuRenderer(NativeUploads, Renderer):
@@ -25,7 +44,7 @@ class CpuRenderer(NativeUploads, Renderer):
     mutex in the native renderer around its buffers); each frame runs on every core."""
 
     name = "cpu"
-    capabilities = Capabilities(progressive=True, trace=True, simd=True, host=True)
+    capabilities = Capabilities(progressive=True, shared_stage=True, trace=True, simd=True, host=True)
 
     def __init__(self) -> None:
         ok, why = self.available()
@@ -71,19 +90,38 @@ class CpuRenderer(NativeUploads, Renderer):
 
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: Cancellable | None = None,
                on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
+        progress = None if on_progress is None else (lambda _job, done, total: on_progress(done, total))
+        return self.render_many([(camera, settings)], cancel=cancel, on_progress=progress, partials=[partial])[0]
+
+    def render_many(self, jobs: Sequence[Job], *, cancel: Cancellable | None = None,
+                    on_progress: Callable[[int, int, int], None] | None = None,
+                    partials: Sequence[np.ndarray | None] | None = None) -> list[Frame]:
+        """`Renderer.render_many` in as few native calls as `batches` allows: in each, the per-camera stage once per
+        distinct camera (or reused from the last call) and every job's tiles blended in one interleaved loop."""
         t0 = time.perf_counter()
-        control = RenderControl(cancel, on_progress, partial)
-        control.check_partial(camera.width, camera.height)
+        jobs = list(jobs)
+        parts = job_partials(partials, len(jobs))
+        for (camera, _), part in zip(jobs, parts):
+            RenderControl(partial=part).check_partial(camera.width, camera.height)
+        control = RenderControl(cancel, on_progress)
         control.check()  # before any work (a trained model's decode included)
+        frames: list[Frame] = []
         with self._lock:
-            prep = prepare(self._scene, camera, settings, self.name)
-            self._sync(prep)
-            out = self._impl.render(*self._frame_args(camera, settings), settings.debug == "window",
-                                    *(prep.oit or ()), threads=settings.threads, cancel=control.flag,
-                                    on_progress=control.hook, partial=partial,
-                                    view_filter=settings.view_filter.native())
-        control.check(out["cancelled"])  # the native render skipped its remaining work once it saw the flag
-        return native_frame(out, prep, camera, settings, self.name, t0)
+            preps = [prepare(self._scene, camera, settings, self.name) for camera, settings in jobs]
+            for run in batches(jobs, preps):
+                self._sync(next((p for p in preps[run.start:run.stop] if p.cells is not None), preps[run.start]))
+                hook = control.hook
+                outs = self._impl.render_many(
+                    [(*self._frame_args(camera, settings), settings.debug == "window", *(preps[i].oit or NO_OIT),
+                      settings.view_filter.native()) for i, (camera, settings) in zip(run, jobs[run.start:run.stop])],
+                    threads=jobs[run.start][1].threads, cancel=control.flag,
+                    on_progress=None if hook is None else (lambda job, done, total, b=run.start: hook(b + job, done,
+                                                                                                     total)),
+                    partials=parts[run.start:run.stop])
+                # the native render skipped its remaining work once it saw the flag (even if cleared since)
+                control.check(any(out["cancelled"] for out in outs))
+                frames += [native_frame(out, preps[i], *jobs[i], self.name, t0) for i, out in zip(run, outs)]
+        return frames
 
     def trace(self, camera: Camera, settings: RenderSettings, x: int, y: int) -> PixelTrace:
         """The pixel trace of (x, y) in this frame (gbviewer.render.trace; `trace_pixel` checks the pixel)."""

@@ -127,7 +127,8 @@ def camera_args(camera: Camera) -> tuple:
 def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backend: str, t0: float, *,
                 preprocess_ms: float, sort_ms: float, blend_ms: float, visible: int, sort_length: int, pairs: int,
                 evaluations: int, cells_visible: int | None = None, cell_misses: int | None = None,
-                simd: str | None = None) -> FrameStats:
+                simd: str | None = None, stage_reused: bool | None = None,
+                stage_ms: float | None = None) -> FrameStats:
     """The frame's stats from a backend's counts and stage times; t0: when the render began."""
     return FrameStats(
         preprocess_ms=float(preprocess_ms), sort_ms=float(sort_ms), blend_ms=float(blend_ms),
@@ -138,6 +139,8 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
         cells=prep.cells.num_cells if prep.cells is not None else None,
         cells_visible=None if cells_visible is None else int(cells_visible),
         cell_misses=None if cell_misses is None else int(cell_misses), decode_ms=prep.decode_ms,
+        stage_reused=None if stage_reused is None else bool(stage_reused),
+        stage_ms=None if stage_ms is None else float(stage_ms),
         lod_splats=None if settings.lod is None else prep.scene.meta.get("lod", (prep.scene.num_splats,))[0],
     )
 
@@ -145,13 +148,14 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
 def native_stats(out: dict, prep: Prepared, camera: Camera, settings: RenderSettings, backend: str,
                  t0: float) -> FrameStats:
     """The stats of a native module's result dict (per-stage ms and counts, evaluations; duplex: cells_visible,
-    cell_misses; the CPU module: simd, the SIMD path its blend ran)."""
+    cell_misses; the CPU module: simd, the SIMD path its blend ran, stage_reused and stage_ms)."""
     duplex = settings.mode == Mode.DUPLEX
     return frame_stats(
         prep, camera, settings, backend, t0, preprocess_ms=out["preprocess_ms"], sort_ms=out["sort_ms"],
         blend_ms=out["blend_ms"], visible=out["visible"], sort_length=out["sort_length"], pairs=out["pairs"],
         evaluations=out["evaluations"], cells_visible=out["cells_visible"] if duplex else None,
         cell_misses=out["cell_misses"] if duplex else None, simd=str(out["simd"]) if "simd" in out else None,
+        stage_reused=out.get("stage_reused"), stage_ms=out.get("stage_ms"),
     )
 
 

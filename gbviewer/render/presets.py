@@ -20,11 +20,13 @@ viewer it does not model (their sort order, support radius and quantisation stay
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from ..errors import RenderError
 from ..io.trained_as import ANTIALIASED, MIP_3D, THREEDGS
-from .types import Mode, RenderSettings
 from .view_filter import ViewFilter
+
+if TYPE_CHECKING:
+    from .types import RenderSettings
 
 
 @dataclass(frozen=True)
@@ -32,49 +34,35 @@ class Preset:
     """A viewer's rendering convention: mode, SH bands, filter, where it comes from and what is not modelled."""
 
     name: str
-    mode: Mode
+    mode: str  # a Mode label (this module sits below types, which parses presets with it)
     sh_degree: int
     view_filter: ViewFilter
     source: str
     not_modelled: str
 
     def describe(self) -> str:
-        return f"{self.mode.label}, {self.view_filter.describe()}, SH {self.sh_degree}"
+        return f"{self.mode}, {self.view_filter.describe()}, SH {self.sh_degree}"
 
 
 PRESETS = {p.name: p for p in (
-    Preset("inria", Mode.SCALAR, 3, ViewFilter(),
+    Preset("inria", "scalar", 3, ViewFilter(),
            "graphdeco-inria/diff-gaussian-rasterization cuda_rasterizer/forward.cu (computeCov2D: +0.3); SIBR's "
            "gaussian viewer renders with it", "nothing: the scalar mode is this rasterizer"),
-    Preset("gsplat-antialiased", Mode.SCALAR, 3, ViewFilter(0.3, compensate=True),
+    Preset("gsplat-antialiased", "scalar", 3, ViewFilter(0.3, compensate=True),
            "nerfstudio-project/gsplat gsplat/cuda/include/utils.cuh (add_blur), gsplat/rendering.py (eps2d=0.3, "
            "rasterize_mode='antialiased')", "gsplat's 3-sigma radius and 1/255 cutoff are the scalar mode's already"),
-    Preset("supersplat", Mode.SCALAR, 3, ViewFilter(0.3, cull_lambda=0.5),
+    Preset("supersplat", "scalar", 3, ViewFilter(0.3, cull_lambda=0.5),
            "playcanvas/engine src/scene/shader-lib/glsl/chunks/gsplat/vert/gsplatCorner.js (+0.3, 2 px early-out); "
            "playcanvas/supersplat src/ui/view-panel.ts (SH bands, default 3)",
            "the lambda2 floor of 0.1, the 1024 px / viewport clamp, clipCorner's alpha-based quad shrink, 8-bit "
            "output"),
-    Preset("spark", Mode.SCALAR, 3, ViewFilter(0.3, pre_dilation=0.0, compensate=True),
+    Preset("spark", "scalar", 3, ViewFilter(0.3, pre_dilation=0.0, compensate=True),
            "sparkjsdev/spark src/SparkRenderer.ts (preBlurAmount 0.0, blurAmount 0.3), src/shaders/splatVertex.glsl",
            "maxStdDev sqrt(8) support, minAlpha 0.5/255, radial sort, clipXY 1.4, packed splat encoding"),
-    Preset("antimatter15", Mode.SCALAR, 0, ViewFilter(0.0),
+    Preset("antimatter15", "scalar", 0, ViewFilter(0.0),
            "antimatter15/splat main.js (no term added to cov2d; .splat colour only)",
            "its 2 sqrt(2) sigma quad, no 1/255 cutoff, 8-bit colour, opacity and quaternion, float16 covariance"),
 )}
-
-
-def preset_settings(spec: str, **kwargs) -> RenderSettings:
-    """RenderSettings of 'NAME' or 'NAME:N' (N x N supersampling); the preset's SH bands cap `sh_degree`."""
-    name, _, n = spec.strip().partition(":")
-    preset = PRESETS.get(name.strip().lower())
-    if preset is None:
-        raise RenderError(f"unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
-    try:
-        supersample = int(n) if n else 1
-    except ValueError:
-        raise RenderError(f"preset {spec!r}: supersampling factor {n!r} is not an integer") from None
-    kwargs["sh_degree"] = min(preset.sh_degree, kwargs.get("sh_degree", 3))
-    return RenderSettings(preset.mode, supersample, view_filter=preset.view_filter, preset=preset.name, **kwargs)
 
 
 TRAINED_SPECS = {THREEDGS: "scalar", ANTIALIASED: "preset:gsplat-antialiased", MIP_3D: "mip"}
@@ -86,10 +74,10 @@ def trained_spec(meta: dict) -> str | None:
 
 
 def differences(a: RenderSettings, b: RenderSettings) -> list[str]:
-    """What differs between two settings' modes, presets and parameters, for a side-by-side label."""
+    """What differs between two settings' modes, presets and parameters, for a side-by-side label (a view filter
+    other than the default is the scalar mode's only, so it differs only where one side is a scalar preset)."""
     out = [] if a.mode == b.mode else [f"mode {a.mode.label} vs {b.mode.label}"]
-    if a.mode == b.mode == Mode.SCALAR:
-        out += a.view_filter.differences(b.view_filter)
+    out += a.view_filter.differences(b.view_filter)
     out += [] if a.sh_degree == b.sh_degree else [f"SH {a.sh_degree} vs {b.sh_degree}"]
     out += [] if a.supersample == b.supersample else [f"supersample {a.supersample} vs {b.supersample}"]
     return out

@@ -163,6 +163,7 @@ def render(
     cancels the render: CallbackError, chained to it). `partial`: a float32 (height, width, 3) array that receives
     each tile's pixels as soon as it is blended (centre out), for showing a frame while it refines. Safe from any
     thread, with any scenes (each call renders its own scene)."""
-    settings = RenderSettings(Mode.parse(mode), supersample, tuple(background), sh_degree, debug, **options)
+    settings = RenderSettings.of(mode, supersample, background=tuple(background), sh_degree=sh_degree, debug=debug,
+                                 **options)
     return get_renderer(scene, backend).render(camera, settings, cancel=cancel, on_progress=on_progress,
                                                       partial=partial)

@@ -196,7 +196,7 @@ def trace_pixel(scene: Scene, camera: Camera, x: int, y: int, mode: str | Mode =
     """The trace of pixel (x, y) of `camera`'s image rendered in `mode` with N x N `supersample`, by the kernel of the
     first backend that traces pixels (`Capabilities.trace`: the CPU backend; the others are held to it by their
     tests); `options` as `gbviewer.render`'s (depth_correct, et_grade, cell_size)."""
-    settings = RenderSettings(Mode.parse(mode), supersample, tuple(background), sh_degree, **options)
+    settings = RenderSettings.of(mode, supersample, background=tuple(background), sh_degree=sh_degree, **options)
     xi, yi = check_pixel(camera, x, y)
     return get_renderer(scene, capable("trace")[0]).trace(camera, settings, xi, yi)
 

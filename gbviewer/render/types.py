@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import abc
 import enum
-from collections.abc import Callable
-from dataclasses import dataclass, field
+import functools
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
@@ -18,6 +19,7 @@ from ..cancel import Cancellable
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, distinct_items, integer, real
+from .presets import PRESETS
 from .view_filter import ViewFilter
 
 
@@ -170,15 +172,41 @@ class RenderSettings:
                 raise RenderError(f"mode {spec + plus + lod!r}: LOD pixels {tau!r} is not a number") from None
         name, _, n = spec.strip().partition(":")
         if name.strip().lower() == "preset":
-            from .presets import preset_settings  # presets build on this module
-
-            return preset_settings(n, **kwargs)
+            return cls._preset(n, **kwargs)
         try:
             supersample = int(n) if n else 1
         except ValueError:
             raise RenderError(f"mode {spec!r}: supersampling factor {n!r} is not an integer") from None
         mode = Mode.SCALAR if name.strip().lower() == "supersample" else Mode.parse(name)
         return cls(mode, supersample, **kwargs)
+
+    @classmethod
+    def _preset(cls, spec: str, **kwargs) -> "RenderSettings":
+        """'NAME' or 'NAME:N' (N x N supersampling) of gbviewer.render.presets; its SH bands cap `sh_degree`."""
+        name, _, n = spec.strip().partition(":")
+        preset = PRESETS.get(name.strip().lower())
+        if preset is None:
+            raise RenderError(f"unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
+        try:
+            supersample = int(n) if n else 1
+        except ValueError:
+            raise RenderError(f"preset {spec!r}: supersampling factor {n!r} is not an integer") from None
+        kwargs["sh_degree"] = min(preset.sh_degree, kwargs.get("sh_degree", 3))
+        return cls(Mode.parse(preset.mode), supersample, view_filter=preset.view_filter, preset=preset.name, **kwargs)
+
+    @classmethod
+    def of(cls, mode: "str | Mode", supersample: int = 1, **kwargs) -> "RenderSettings":
+        """A Mode, or any spec `parse` takes ('gaussian_blending', 'preset:spark', 'scalar+lod:1'), with
+        `supersample` (a spec's own factor must then agree)."""
+        if isinstance(mode, Mode):
+            return cls(mode, supersample, **kwargs)
+        settings = cls.parse(str(mode), **kwargs)
+        if supersample == 1 or settings.supersample == supersample:
+            return settings
+        if settings.supersample != 1:
+            raise RenderError(f"mode {mode!r} has supersampling {settings.supersample}; supersample={supersample} "
+                              "disagrees")
+        return replace(settings, supersample=supersample)
 
     @classmethod
     def parse_list(cls, specs: str, **kwargs) -> "list[RenderSettings]":
@@ -202,7 +230,11 @@ class FrameStats:
     ("scalar", "avx2" or "avx512", chosen by GBVIEWER_SIMD at load or gbviewer._native.testing.set_simd); duplex: cells,
     cells_visible and cell_misses (splat-tile pairs outside their cell's tiles; not counted by glsl); decode_ms: the
     MLPs of a trained Duplex-GS model, per view; lod_splats: the splats of the level-of-detail cut drawn
-    (`RenderSettings.lod`).
+    (`RenderSettings.lod`); with `Capabilities.shared_stage` (cpu): stage_reused, whether the frame used a
+    per-camera stage (the mode-independent preprocess and the depth order) computed before, by an earlier render or
+    an earlier job of the same `render_many`, and stage_ms, the time spent building it in this frame (0 when reused;
+    included in preprocess_ms). A `render_many` frame's total_ms counts from the start of the call, and on cpu its
+    blend_ms is the time of the one tile loop all its frames share.
     """
 
     preprocess_ms: float = 0.0
@@ -222,6 +254,8 @@ class FrameStats:
     cells_visible: int | None = None
     cell_misses: int | None = None
     decode_ms: float | None = None
+    stage_reused: bool | None = None
+    stage_ms: float | None = None
     lod_splats: int | None = None
 
 
@@ -252,7 +286,10 @@ class Capabilities:
     calling thread, which the renderer then belongs to), `check_context(ctx) -> (usable, why)` says whether one will
     do. Without it `gl_interop() -> (usable, why)` says whether `render_to_texture` can write into the textures of
     the context current in this thread, and a renderer may be used from any thread, from several at once.
-    shared_stage: renders of one camera share the per-camera stage (preprocess, binning) across settings.
+    shared_stage: renders of one camera share the per-camera stage (the preprocess that does not depend on the
+    mode: view-space positions and depth, 2D covariances before the mode's filter, SH colours, culling) across
+    frames and settings while the scene is unchanged; `render_many` builds it once per distinct camera and blends
+    its jobs' tiles interleaved; FrameStats.stage_reused and stage_ms say what was reused.
     trace: `trace(camera, settings, x, y) -> PixelTrace` (gbviewer.render.trace).
     simd: `FrameStats.simd` names the blend's SIMD path, switched process-wide by gbviewer.bench.simd.
     host: renders on the host's CPU cores (`RenderSettings.threads` of them): rates per core mean something.
@@ -297,6 +334,20 @@ class Renderer(abc.ABC):
         """Free what the renderer holds for its scene (buffers, device memory); `upload` again before the next
         render. Calling it twice is harmless."""
 
+    def render_many(self, jobs: Sequence[tuple[Camera, RenderSettings]], *, cancel: Cancellable | None = None,
+                    on_progress: Callable[[int, int, int], None] | None = None,
+                    partials: Sequence[np.ndarray | None] | None = None) -> list[Frame]:
+        """The frames of several (camera, settings) jobs, each what `render` gives it; `on_progress(job, done, total)`
+        per job, `partials[job]` that job's partial frame (None: none); a cancel raises RenderCancelled and returns
+        no frame. With `capabilities.shared_stage` the per-camera stage is built once per distinct camera and the jobs'
+        tiles are blended interleaved (each job's first tiles arrive together); this default renders one job after
+        another."""
+        jobs = list(jobs)
+        parts = job_partials(partials, len(jobs))
+        return [self.render(camera, settings, cancel=cancel,
+                            on_progress=None if on_progress is None else functools.partial(on_progress, i),
+                            partial=parts[i]) for i, (camera, settings) in enumerate(jobs)]
+
     def usable(self) -> tuple[bool, str]:
         """(whether this renderer still renders, why not): False once it raised BackendFailed."""
         return (False, self._failure) if self._failure is not None else (True, "")
@@ -314,3 +365,13 @@ class Renderer(abc.ABC):
 
     def release_texture(self, glo: int) -> None:
         """Forget what the renderer keeps for GL texture `glo` before the texture is deleted (nothing by default)."""
+
+
+def job_partials(partials: Sequence[np.ndarray | None] | None, count: int) -> list[np.ndarray | None]:
+    """`render_many`'s partials, one entry (or None) per job."""
+    if partials is None:
+        return [None] * count
+    parts = list(partials)
+    if len(parts) != count:
+        raise RenderError(f"partials: expected one array or None per job ({count}), got {len(parts)}")
+    return parts

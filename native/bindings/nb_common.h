@@ -29,10 +29,10 @@ using IArr = nb::ndarray<const int32_t, nb::c_contig, nb::device::cpu>;
 }
 
 // A numpy array that takes over the vector's storage.
-template <typename T>
-nb::ndarray<nb::numpy, T> to_numpy(std::vector<T>&& v, std::initializer_list<size_t> shape) {
-    auto* heap = new std::vector<T>(std::move(v));
-    nb::capsule owner(heap, [](void* p) noexcept { delete static_cast<std::vector<T>*>(p); });
+template <typename T, typename A>
+nb::ndarray<nb::numpy, T> to_numpy(std::vector<T, A>&& v, std::initializer_list<size_t> shape) {
+    auto* heap = new std::vector<T, A>(std::move(v));
+    nb::capsule owner(heap, [](void* p) noexcept { delete static_cast<std::vector<T, A>*>(p); });
     return nb::ndarray<nb::numpy, T>(heap->data(), shape, owner);
 }
 

@@ -7,7 +7,9 @@
 #include <nanobind/stl/vector.h>
 
 #include <algorithm>
+#include <functional>
 #include <memory>
+#include <string>
 #include <stdexcept>
 #include <tuple>
 
@@ -40,6 +42,50 @@ std::shared_ptr<const void> hold(A... arrays) {
     });
 }
 
+// on_progress(frame, done, total) as Control::report: with the GIL, on the calling thread; an exception stops the call
+// and is raised when it returns.
+std::function<bool(int, int64_t, int64_t)> reporter(const std::optional<nb::callable>& on_progress, bool with_frame) {
+    if (!on_progress) return {};
+    return [&on_progress, with_frame](int frame, int64_t done, int64_t total) {
+        nb::gil_scoped_acquire gil;
+        try {
+            if (with_frame) {
+                (*on_progress)(frame, done, total);
+            } else {
+                (*on_progress)(done, total);
+            }
+            return true;
+        } catch (nb::python_error& e) {
+            e.restore();
+            return false;
+        }
+    };
+}
+
+void check_partial(const char* where, const PArr& partial, int width, int height) {
+    if (partial.shape(0) != (size_t)height || partial.shape(1) != (size_t)width || partial.shape(2) != 3)
+        throw std::invalid_argument(std::string(where) + ": partial must be float32 (height, width, 3)");
+}
+
+std::vector<nb::dict> run_frames(Renderer& r, const std::vector<RenderArgs>& frames, cpu::Control& c) {
+    std::vector<cpu::RenderResult> res;
+    {
+        nb::gil_scoped_release release;
+        res = r.render_many(frames, c);
+    }
+    if (!res.empty() && res[0].stopped && PyErr_Occurred()) throw nb::python_error();
+    std::vector<nb::dict> out;
+    for (size_t f = 0; f < res.size(); ++f) {
+        nb::dict d = result_dict(res[f].image, res[f].stats, (size_t)frames[f].height, (size_t)frames[f].width);
+        d["simd"] = res[f].simd;
+        d["cancelled"] = res[f].cancelled;
+        d["stage_ms"] = res[f].stats.stage_ms;
+        d["stage_reused"] = res[f].stats.stage_reused;
+        out.push_back(std::move(d));
+    }
+    return out;
+}
+
 nb::dict render(Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                 float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                 bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct,
@@ -49,36 +95,46 @@ nb::dict render(Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float
                                  supersample, sh_degree, background, want_window, sigma, weight_background, et_grade,
                                  depth_correct, view_filter);
     if (cancel && cancel->shape(0) < 1) throw std::invalid_argument("render: cancel must hold at least one int64");
-    if (partial && (partial->shape(0) != (size_t)height || partial->shape(1) != (size_t)width ||
-                    partial->shape(2) != 3))
-        throw std::invalid_argument("render: partial must be float32 (height, width, 3)");
+    if (partial) check_partial("render", *partial, width, height);
     cpu::Control c;
     c.cancel = cancel ? cancel->data() : nullptr;
-    c.partial = partial ? partial->data() : nullptr;
+    if (partial) c.partial = {partial->data()};
     c.threads = threads;
-    if (on_progress) {
-        // With the GIL, on this (the calling) thread; an exception stops the frame and is raised when it returns.
-        c.report = [&on_progress](int64_t done, int64_t total) {
-            nb::gil_scoped_acquire gil;
-            try {
-                (*on_progress)(done, total);
-                return true;
-            } catch (nb::python_error& e) {
-                e.restore();
-                return false;
-            }
-        };
+    c.report = reporter(on_progress, false);
+    return run_frames(r, {a}, c)[0];
+}
+
+// render()'s arguments R .. depth_correct and view_filter (None: 3DGS's) of each frame, as one tuple per frame.
+std::vector<nb::dict> render_many(Renderer& r, const std::vector<nb::tuple>& frames, int threads,
+                                  std::optional<LArr> cancel, std::optional<nb::callable> on_progress,
+                                  std::optional<std::vector<std::optional<PArr>>> partials) {
+    const char* where = "render_many";
+    if (cancel && cancel->shape(0) < 1) throw std::invalid_argument("render_many: cancel must hold at least one int64");
+    if (partials && partials->size() != frames.size())
+        throw std::invalid_argument("render_many: partials must have one entry (or None) per frame");
+    std::vector<RenderArgs> args;
+    cpu::Control c;
+    for (size_t f = 0; f < frames.size(); ++f) {
+        const nb::tuple& p = frames[f];
+        if (p.size() != 20)
+            throw std::invalid_argument("render_many: each frame is render()'s 19 frame arguments and view_filter");
+        std::optional<FArr> view_filter;
+        if (!p[19].is_none()) view_filter = nb::cast<FArr>(p[19]);
+        args.push_back(render_args(where, nb::cast<FArr>(p[0]), nb::cast<FArr>(p[1]), nb::cast<float>(p[2]),
+                                   nb::cast<float>(p[3]), nb::cast<float>(p[4]), nb::cast<float>(p[5]),
+                                   nb::cast<int>(p[6]), nb::cast<int>(p[7]), nb::cast<float>(p[8]),
+                                   nb::cast<int>(p[9]), nb::cast<int>(p[10]), nb::cast<int>(p[11]),
+                                   nb::cast<int>(p[12]), nb::cast<FArr>(p[13]), nb::cast<bool>(p[14]),
+                                   nb::cast<float>(p[15]), nb::cast<float>(p[16]), nb::cast<float>(p[17]),
+                                   nb::cast<bool>(p[18]), view_filter));
+        const std::optional<PArr>* part = partials ? &(*partials)[f] : nullptr;
+        if (part && *part) check_partial(where, **part, args.back().width, args.back().height);
+        c.partial.push_back(part && *part ? (*part)->data() : nullptr);
     }
-    cpu::RenderResult res;
-    {
-        nb::gil_scoped_release release;
-        res = r.render(a, c);
-    }
-    if (res.stopped && PyErr_Occurred()) throw nb::python_error();
-    nb::dict d = result_dict(res.image, res.stats, (size_t)height, (size_t)width);
-    d["simd"] = res.simd;
-    d["cancelled"] = res.cancelled;
-    return d;
+    c.cancel = cancel ? cancel->data() : nullptr;
+    c.threads = threads;
+    c.report = reporter(on_progress, true);
+    return run_frames(r, args, c);
 }
 
 // Exp evaluations per second on one core through a SIMD path's exp (the benchmark's reference rate).
@@ -100,6 +156,8 @@ void bind_testing(nb::module_& m) {
     nb::module_ t = m.def_submodule("testing", "Test and benchmark switches of the CPU renderer (process-wide).");
     t.def("set_pixel_boxes", [](bool on) { cpu::testing::pixel_boxes.store(on); }, nb::arg("on"),
           "Skip lane groups outside a splat's pixel box (default) or evaluate every list entry.");
+    t.def("set_poison_images", [](bool on) { cpu::testing::poison_images.store(on); }, nb::arg("on"),
+          "Fill each new image with NaN (evaluation counts -1) before the blend (to show it writes every pixel).");
     t.def("set_capture_preprocess", [](bool on) { cpu::testing::capture.store(on); }, nb::arg("on"),
           "Keep the next renders' preprocess output and tile lists for captured_preprocess() and captured_lists().");
     t.def("captured_preprocess", [] {
@@ -226,6 +284,14 @@ NB_MODULE(_native, m) {
              "and at the end (an exception it raises stops the frame and is raised here); partial: float32 "
              "(height, width, 3) receiving each finished tile; view_filter: the scalar mode's [dilation, pre_dilation, "
              "cull_lambda, compensate] (none: 3DGS's).")
+        .def("render_many", &render_many, nb::arg("frames"), nb::arg("threads") = 0,
+             nb::arg("cancel").none() = nb::none(), nb::arg("on_progress").none() = nb::none(),
+             nb::arg("partials").none() = nb::none(),
+             "Render several frames of the uploaded scene in one call (each a tuple of render()'s arguments R .. "
+             "depth_correct, then view_filter or None): the per-camera stage once per distinct camera and SH "
+             "degree, then every frame's tiles interleaved in one parallel loop. cancel as render's; "
+             "on_progress(frame, done, total); partials: one float32 (height, width, 3) array or None per frame. A "
+             "list of render()'s dicts, which also hold stage_ms and stage_reused.")
         .def(
             "trace",
             [](Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
@@ -248,9 +314,9 @@ NB_MODULE(_native, m) {
             nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
             nb::arg("x") = 0, nb::arg("y") = 0, nb::arg("view_filter").none() = nb::none(), "The pixel trace (trace.h) of output pixel (x, y) of this frame.")
         .def("release_buffers", &Renderer::release_buffers, nb::call_guard<nb::gil_scoped_release>(),
-             "Free the per-frame buffers kept for the next frame.")
+             "Free the per-frame buffers and per-camera stages kept for the next frame.")
         .def_prop_ro("buffer_bytes", [](const Renderer& r) {
             nb::gil_scoped_release release;  // waits for a running render, whose report may take the GIL
             return r.buffer_bytes();
-        }, "Bytes of the per-frame buffers kept.");
+        }, "Bytes of the per-frame buffers and per-camera stages kept.");
 }

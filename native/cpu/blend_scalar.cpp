@@ -10,8 +10,8 @@ void blend_tile_scalar(const TileJob& job) { blend_tile<Lanes1>(job); }
 
 float exp_sum_scalar(int64_t n) { return exp_sum<Lanes1>(n); }
 
-void preprocess_range_scalar(const PreprocessJob& job, int64_t begin, int64_t end) {
-    preprocess_range<Lanes1>(job, begin, end);
-}
+void stage_range_scalar(const StageJob& job, int64_t begin, int64_t end) { stage_range<Lanes1>(job, begin, end); }
+
+void finish_range_scalar(const FinishJob& job, int64_t begin, int64_t end) { finish_range<Lanes1>(job, begin, end); }
 
 }  // namespace gbv

@@ -1,5 +1,5 @@
-// The frame driver (frame.h): pixel boxes, the parallel preprocess and blend, the partial frame, the pixel trace's
-// frame.
+// The frame driver (frame.h): pixel boxes, the parallel stage, finish and joint blend, the partial frame, the pixel
+// trace's frame.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -85,75 +85,81 @@ void splat_boxes(const std::vector<Splat2D>& splats, Mode mode, std::vector<Spla
     }
 }
 
-// Blend: each tile copies its splats (and their boxes) into contiguous per-thread buffers, then the selected SIMD
-// path blends its pixels in lane groups.
-void blend_tiles(const std::vector<Splat2D>& splats, const std::vector<int64_t>& tile_start,
-                 const std::vector<uint64_t>& keys, const CameraParams& cam, Mode mode, const OitParams& oit,
-                 const float bg[3], BlendTileFn blend_tile, std::vector<SplatBounds>& boxes, Image& img, Stats& st,
-                 FrameRun& run, int N) {
-    const int W = cam.width, H = cam.height;
+// One tile of one frame (blend_frames): copy its splats (and their boxes) into contiguous per-thread buffers, then
+// the selected SIMD path blends its pixels in lane groups.
+void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTileFn blend_tile,
+                    std::vector<Splat2D>& local, std::vector<SplatBounds>& bounds, float* partial) {
+    const int W = f.cam->width, H = f.cam->height;
     const int gx = (W + TILE - 1) / TILE;
-    const int num_tiles = (int)tile_start.size() - 1;
-    const std::vector<int> order = centre_out_order(gx, num_tiles / gx);
-    auto t0 = Clock::now();
-    splat_boxes(splats, mode, boxes, run);
-    TileJob frame = {};  // what every tile shares; each tile sets its list, rectangle and planes
-    frame.width = W;
-    frame.mode = mode;
-    frame.oit = oit;
-    for (int c = 0; c < 3; ++c) frame.bg[c] = bg[c];
-#pragma omp parallel
-    {
-        FlushDenormals ftz;
-        std::vector<Splat2D> local;
-        std::vector<SplatBounds> bounds;
-#pragma omp for schedule(dynamic, 1)
-        for (int i = 0; i < num_tiles; ++i) {
-            if (run.cancelled()) continue;  // a cancelled frame skips its remaining tiles
-            const int t = order[i];
-            const int64_t begin = tile_start[t], count = tile_start[t + 1] - begin;
-            local.resize(count);
-            bounds.resize(count);
-            for (int64_t j = 0; j < count; ++j) {
-                const uint32_t id = (uint32_t)keys[begin + j];
-                local[j] = splats[id];
-                bounds[j] = boxes[id];
-            }
-            TileJob job = frame;
-            job.list = local.data();
-            job.bounds = bounds.data();
-            job.n = (int)count;
-            job.x0 = (t % gx) * TILE;
-            job.y0 = (t / gx) * TILE;
-            job.x1 = std::min(job.x0 + TILE, W);
-            job.y1 = std::min(job.y0 + TILE, H);
-            const size_t origin = (size_t)job.y0 * W + job.x0;
-            job.rgb = img.rgb.data() + origin * 3;
-            job.alpha = img.alpha.data() + origin;
-            job.window = img.window.empty() ? nullptr : img.window.data() + origin * 2;
-            job.evals = img.evals.data() + origin;
-            blend_tile(job);
-            if (run.partial()) write_partial(img, N, job.x0, job.y0, job.x1, job.y1, run.partial());
-            run.tile_done();
-            run.poll();
-        }
+    const FrameBuffers& b = *f.buf;
+    const int64_t begin = b.tile_start[t], count = b.tile_start[t + 1] - begin;
+    local.resize(count);
+    bounds.resize(count);
+    for (int64_t j = 0; j < count; ++j) {
+        const uint32_t id = (uint32_t)b.keys[begin + j];
+        local[j] = b.splats[id];
+        bounds[j] = b.boxes[id];
     }
-    st.blend_ms += ms_since(t0);
+    TileJob job = shared;
+    job.list = local.data();
+    job.bounds = bounds.data();
+    job.n = (int)count;
+    job.x0 = (t % gx) * TILE;
+    job.y0 = (t / gx) * TILE;
+    job.x1 = std::min(job.x0 + TILE, W);
+    job.y1 = std::min(job.y0 + TILE, H);
+    Image& img = *f.img;
+    const size_t origin = (size_t)job.y0 * W + job.x0;
+    job.rgb = img.rgb.data() + origin * 3;
+    job.alpha = img.alpha.data() + origin;
+    job.window = img.window.empty() ? nullptr : img.window.data() + origin * 2;
+    job.evals = img.evals.data() + origin;
+    blend_tile(job);
+    if (partial) write_partial(img, f.N, job.x0, job.y0, job.x1, job.y1, partial);
 }
 
-constexpr int64_t PREPROCESS_BLOCK = 256;  // splats per call of a path's preprocess (a multiple of 16)
+constexpr int64_t PREPROCESS_BLOCK = 256;  // splats per call of a path's stage or finish (a multiple of 16)
+
+// fn(begin, end) over the blocks of n splats in parallel; a cancelled frame stops here too, not only between tiles.
+template <class Fn>
+void for_blocks(int64_t n, FrameRun& run, Fn fn) {
+    const int64_t blocks = (n + PREPROCESS_BLOCK - 1) / PREPROCESS_BLOCK;
+#pragma omp parallel for schedule(static)
+    for (int64_t b = 0; b < blocks; ++b) {
+        if (run.cancelled()) continue;
+        fn(b * PREPROCESS_BLOCK, std::min(n, (b + 1) * PREPROCESS_BLOCK));
+        run.poll();
+    }
+}
 
 }  // namespace
 
-void bin_frame(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
-               const simd::Path& path, FrameBuffers& buf, Stats& st, FrameRun& run) {
-    const int W = cam.width, H = cam.height;
-    const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE;
-    const int num_tiles = gx * gy;
+void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& path, Stage& stage, Stats& st,
+                 FrameRun& run) {
+    const Clock::time_point t0 = Clock::now();
     const int64_t n = sc.n;
-    run.start(num_tiles);
+    if ((size_t)n < stage.splats.capacity() / 4) stage = Stage();  // a much smaller scene releases the storage
+    stage.key = key;
+    stage.ready = stage.order_ready = false;
+    stage.splats.resize(n);
+    stage.valid.resize(n);
+    const CameraParams& cam = key.cam;
+    const StageJob job{sc.means, sc.scales, sc.quats, sc.opacities, sc.sh, sc.filter_3d, sc.k, key.sh_deg, cam,
+                       (cam.width + TILE - 1) / TILE, (cam.height + TILE - 1) / TILE, stage.splats.data(),
+                       stage.valid.data()};
+    for_blocks(n, run, [&](int64_t begin, int64_t end) { path.stage(job, begin, end); });
+    stage.ready = !run.cancelled();
+    const double ms = ms_since(t0);
+    st.stage_ms += ms;
+    st.preprocess_ms += ms;
+}
 
-    auto t0 = Clock::now();
+void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, const simd::Path& path,
+               FrameBuffers& buf, Stats& st, FrameRun& run) {
+    const CameraParams& cam = stage.key.cam;
+    const int gx = (cam.width + TILE - 1) / TILE, gy = (cam.height + TILE - 1) / TILE;
+    const int64_t n = sc.n;
+    Clock::time_point t0 = Clock::now();
     // every element of the reused buffers is written before it is read; a much smaller scene releases them
     if ((size_t)n < buf.splats.capacity() / 4) buf = FrameBuffers();
     std::vector<Splat2D>& splats = buf.splats;
@@ -162,17 +168,11 @@ void bin_frame(const SceneView& sc, const CameraParams& cam, Mode mode, const Oi
     splats.resize(n);
     rects.resize(n);
     valid.resize(n);
-    // in blocks of PREPROCESS_BLOCK splats through the SIMD path's preprocess (bit-identical on every path)
-    PreprocessJob job{sc.means, sc.scales, sc.quats, sc.opacities, sc.sh, sc.filter_3d, sc.k, sc.weight_sh,
-                      sc.weight_k, mode == DUPLEX ? sc.cell_of.data() : nullptr, sh_deg, cam, mode, oit, gx, gy,
-                      splats.data(), rects.data(), valid.data()};
-    const int64_t blocks = (n + PREPROCESS_BLOCK - 1) / PREPROCESS_BLOCK;
-#pragma omp parallel for schedule(static)
-    for (int64_t b = 0; b < blocks; ++b) {
-        if (run.cancelled()) continue;  // a cancelled frame stops here too, not only between tiles
-        path.preprocess(job, b * PREPROCESS_BLOCK, std::min(n, (b + 1) * PREPROCESS_BLOCK));
-        run.poll();
-    }
+    // in blocks of PREPROCESS_BLOCK splats through the SIMD path's finish (bit-identical on every path)
+    const FinishJob job{sc.means, sc.weight_sh, sc.weight_k, mode == DUPLEX ? sc.cell_of.data() : nullptr,
+                        stage.key.sh_deg, cam, mode, oit, gx, gy, stage.splats.data(), stage.valid.data(),
+                        splats.data(), rects.data(), valid.data()};
+    for_blocks(n, run, [&](int64_t begin, int64_t end) { path.finish(job, begin, end); });
     if (run.cancelled()) return;
     if (testing::capture.load(std::memory_order_relaxed))
         testing::record_preprocess(splats.data(), rects.data(), valid.data(), n);
@@ -180,41 +180,73 @@ void bin_frame(const SceneView& sc, const CameraParams& cam, Mode mode, const Oi
 
     std::vector<int64_t>& tile_start = buf.tile_start;
     std::vector<uint64_t>& keys = buf.keys;  // per tile list entry: splat id in the low 32 bits
-    tile_start.assign(num_tiles + 1, 0);
+    tile_start.assign(gx * gy + 1, 0);
     if (mode == DUPLEX) {
         bin_duplex(sc, cam, splats, rects, valid, gx, gy, tile_start, keys, st, run);
     } else if (mode == WSR) {  // order-independent: the splat order
         bin_splats(splats, rects, valid, nullptr, n, gx, tile_start, keys, st, run);
     } else {
-        t0 = Clock::now();
-        depth_order(splats, valid, buf.order, buf.order_scratch, run);
-        if (run.cancelled()) return;
-        st.sort_ms += ms_since(t0);
-        st.sort_length += (int64_t)buf.order.size();
-        bin_splats(splats, rects, valid, buf.order.data(), (int64_t)buf.order.size(), gx, tile_start, keys, st, run);
+        if (!stage.order_ready) {  // once per stage: every later frame of this camera bins in it
+            t0 = Clock::now();
+            depth_order(stage.splats, stage.valid, stage.order, stage.order_scratch, run);
+            if (run.cancelled()) return;
+            stage.order_ready = true;
+            st.sort_ms += ms_since(t0);
+        }
+        st.sort_length += (int64_t)stage.order.size();
+        bin_splats(splats, rects, valid, stage.order.data(), (int64_t)stage.order.size(), gx, tile_start, keys, st,
+                   run);
     }
     if (run.cancelled()) return;
     if (keys.capacity() > 4 * keys.size() + (1u << 20)) keys.shrink_to_fit();  // after a much larger frame
     if (testing::capture.load(std::memory_order_relaxed)) testing::record_lists(tile_start, keys);
 }
 
-void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
-                  const float bg[3], const simd::Path& path, FrameBuffers& buf, Image& img, Stats& st, FrameRun& run,
-                  int N) {
-    bin_frame(sc, cam, mode, oit, sh_deg, path, buf, st, run);
-    if (run.cancelled()) return;
-    blend_tiles(buf.splats, buf.tile_start, buf.keys, cam, mode, oit, bg, path.blend_tile, buf.boxes, img, st, run,
-                N);
+void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile, FrameRun& run) {
+    const Clock::time_point t0 = Clock::now();
+    std::vector<TileJob> shared(frames.size());  // what every tile of a frame shares; each tile sets its own
+    std::vector<std::pair<double, std::pair<int, int>>> tiles;  // (fraction of its frame, (frame, tile))
+    for (size_t f = 0; f < frames.size(); ++f) {
+        const BlendFrame& fr = frames[f];
+        splat_boxes(fr.buf->splats, fr.mode, fr.buf->boxes, run);
+        TileJob& job = shared[f];
+        job = {};
+        job.width = fr.cam->width;
+        job.mode = fr.mode;
+        job.oit = fr.oit;
+        for (int c = 0; c < 3; ++c) job.bg[c] = fr.bg[c];
+        const int gx = (fr.cam->width + TILE - 1) / TILE;
+        const int num_tiles = (int)fr.buf->tile_start.size() - 1;
+        const std::vector<int> order = centre_out_order(gx, num_tiles / gx);
+        for (int i = 0; i < num_tiles; ++i) tiles.push_back({(i + 0.5) / num_tiles, {(int)f, order[i]}});
+    }
+    std::stable_sort(tiles.begin(), tiles.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+#pragma omp parallel
+    {
+        FlushDenormals ftz;
+        std::vector<Splat2D> local;
+        std::vector<SplatBounds> bounds;
+#pragma omp for schedule(dynamic, 1)
+        for (int64_t i = 0; i < (int64_t)tiles.size(); ++i) {
+            if (run.cancelled()) continue;  // a cancelled call skips its remaining tiles
+            const int f = tiles[i].second.first;
+            blend_one_tile(frames[f], shared[f], tiles[i].second.second, blend_tile, local, bounds, run.partial(f));
+            run.tile_done(f);
+            run.poll();
+        }
+    }
+    const double ms = ms_since(t0);
+    for (const BlendFrame& fr : frames) fr.st->blend_ms += ms;
 }
 
-PixelTrace trace_frame_pixel(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit,
-                             int sh_deg, const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y,
-                             int N) {
+PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
+                             const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N) {
     Stats st;
     const Control none;
-    FrameRun run(none);
-    bin_frame(sc, cam, mode, oit, sh_deg, path, buf, st, run);
+    FrameRun run(none, 1);
+    bin_frame(sc, stage, mode, oit, path, buf, st, run);
     splat_boxes(buf.splats, mode, buf.boxes, run);
+    const CameraParams& cam = stage.key.cam;
     FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.keys.data(), cam.width,
                         cam.height, mode, oit, {bg[0], bg[1], bg[2]}};
     FlushDenormals ftz;

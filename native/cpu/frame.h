@@ -1,6 +1,7 @@
-// The CPU frame driver behind Renderer (renderer.cpp): preprocess (parallel over blocks of splats, in vector lanes),
-// one depth order of the visible splats (order.cpp), binning in that order (binning.cpp), blending (parallel over tiles, dynamic schedule; frame.cpp). The
-// math is in include/gbv/*.h, shared with CUDA.
+// The CPU frame driver behind Renderer (renderer.cpp): the per-camera stage and each mode's finish of it (parallel
+// over blocks of splats, in vector lanes), per-tile binning and depth sort (binning.cpp), blending (parallel over the
+// tiles of every frame of a call together, dynamic schedule; frame.cpp). The math is in include/gbv/*.h, shared with
+// CUDA.
 #pragma once
 
 #include <omp.h>
@@ -50,23 +51,53 @@ struct SceneView {
     std::vector<int32_t> cell_of = {};
 };
 
+// What a stage depends on: the uploaded scene (its upload generation: upload, upload_weights and upload_cells each
+// start a new one), every byte of the camera (a supersampled frame's camera is its own) and the SH degree.
+struct StageKey {
+    uint64_t scene = 0;
+    CameraParams cam = {};
+    int sh_deg = 0;
+    bool operator==(const StageKey& o) const {
+        return scene == o.scene && sh_deg == o.sh_deg && std::memcmp(&cam, &o.cam, sizeof cam) == 0;
+    }
+};
+
+// The per-camera stage (preprocess_range.h) every mode's finish reads, kept by the renderer while its key holds.
+struct Stage {
+    StageKey key;
+    bool ready = false;  // built for key (false while building and after a cancelled build)
+    std::vector<StageSplat> splats;
+    std::vector<uint8_t> valid;  // in front of the near plane and on screen in some mode
+    // One depth order of the stage's valid splats (depth_order's keys), computed by the first frame that bins in
+    // depth order and shared by every later one: each bins in it, skipping the splats its finish culls (a superset's
+    // order gives the same tile lists). Not ready after build_stage or a cancelled sort.
+    std::vector<uint64_t> order, order_scratch;
+    bool order_ready = false;
+    size_t bytes() const {
+        return splats.capacity() * sizeof(StageSplat) + valid.capacity() +
+               (order.capacity() + order_scratch.capacity()) * sizeof(uint64_t);
+    }
+};
+
 // A frame's buffers, kept by the renderer between frames (no allocation, no page faults once sizes settle).
 struct FrameBuffers {
     std::vector<Splat2D> splats;
     std::vector<TileRect> rects;
     std::vector<uint8_t> valid;
-    std::vector<uint64_t> order, order_scratch;  // depth_order's keys and its radix sort's second buffer
     std::vector<int64_t> tile_start;
     std::vector<uint64_t> keys;  // per tile list entry: splat id in the low 32 bits
     std::vector<SplatBounds> boxes;
 };
 
-// A running frame's cancel state and progress (Control): the caller's flag or a report that asked to stop; the
-// tiles blended so far. Relaxed atomics: only counts and flags. Cancelled once, cancelled for good: a flag that the
-// caller clears again while the frame stops (to reuse it) cannot resume a frame whose stages stopped half-way.
+// A running call's cancel state and progress (Control) for its frames: the caller's flag or a report that asked to
+// stop; the tiles blended so far per frame. Relaxed atomics: only counts and flags. Cancelled once, cancelled for
+// good: a flag that the caller clears again while the frames stop (to reuse it) cannot resume a stage that stopped
+// half-way.
 class FrameRun {
 public:
-    explicit FrameRun(const Control& c) : c_(c), last_(Clock::now()) {}
+    FrameRun(const Control& c, int frames) : c_(c), done_(frames), total_(frames, 0), last_(Clock::now()) {
+        for (std::atomic<int64_t>& d : done_) d.store(0, std::memory_order_relaxed);
+    }
     bool cancelled() const {
         if (stop_.load(std::memory_order_relaxed) || seen_.load(std::memory_order_relaxed)) return true;
         if (!c_.cancel || !__atomic_load_n(c_.cancel, __ATOMIC_RELAXED)) return false;
@@ -74,9 +105,9 @@ public:
         return true;
     }
     bool stopped() const { return stop_.load(std::memory_order_relaxed); }
-    float* partial() const { return c_.partial; }
-    void start(int64_t tiles) { total_ = tiles; }
-    void tile_done() { done_.fetch_add(1, std::memory_order_relaxed); }
+    float* partial(int frame) const { return (size_t)frame < c_.partial.size() ? c_.partial[frame] : nullptr; }
+    void start(int frame, int64_t tiles) { total_[frame] = tiles; }
+    void tile_done(int frame) { done_[frame].fetch_add(1, std::memory_order_relaxed); }
     // Called by every worker; reports on the calling thread only (OpenMP's master), at most every report_ms.
     void poll() {
         if (!c_.report || omp_get_thread_num() != 0 || cancelled()) return;
@@ -85,17 +116,19 @@ public:
         last_ = now;
         report();
     }
+    // Every frame's count.
     void report() {
-        if (c_.report && !c_.report(done_.load(std::memory_order_relaxed), total_))
-            stop_.store(true, std::memory_order_relaxed);
+        for (int f = 0; c_.report && f < (int)total_.size() && !stopped(); ++f)
+            if (!c_.report(f, done_[f].load(std::memory_order_relaxed), total_[f]))
+                stop_.store(true, std::memory_order_relaxed);
     }
 
 private:
     const Control& c_;
     std::atomic<bool> stop_{false};
     mutable std::atomic<bool> seen_{false};  // the caller's flag was seen set
-    std::atomic<int64_t> done_{0};
-    int64_t total_ = 0;
+    std::vector<std::atomic<int64_t>> done_;
+    std::vector<int64_t> total_;
     Clock::time_point last_;
 };
 
@@ -117,7 +150,8 @@ private:
 };
 
 // A splat's depth key: depth bits in the high 32 bits (depth > near > 0: the bits order as the floats), id low.
-inline uint64_t depth_key(const Splat2D& s, uint32_t id) {
+template <class S>  // Splat2D or StageSplat (the same depth)
+uint64_t depth_key(const S& s, uint32_t id) {
     uint32_t bits;
     std::memcpy(&bits, &s.depth, 4);
     return ((uint64_t)bits << 32) | id;
@@ -126,7 +160,8 @@ inline uint64_t depth_key(const Splat2D& s, uint32_t id) {
 // order.cpp: the depth keys of the splats with valid[i] != 0, ascending (depth bits, then id), in `order` (resized
 // to their count); `scratch` is the radix sort's second buffer. Parallel, checks run.cancelled(): a cancelled call
 // leaves `order` unspecified (the caller checks run.cancelled() before using it).
-void depth_order(const std::vector<Splat2D>& splats, const std::vector<uint8_t>& valid, std::vector<uint64_t>& order,
+template <class S>  // Splat2D or StageSplat
+void depth_order(const std::vector<S>& splats, const std::vector<uint8_t>& valid, std::vector<uint64_t>& order,
                  std::vector<uint64_t>& scratch, FrameRun& run);
 
 // binning.cpp: each tile's list of (depth bits, splat id) keys in the order of `order` (count keys, e.g. a
@@ -141,16 +176,31 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
                 std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st, FrameRun& run);
 
-// frame.cpp: preprocess and bin one image at the camera's resolution into `buf` (stops early once cancelled).
-void bin_frame(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
-               const simd::Path& path, FrameBuffers& buf, Stats& st, FrameRun& run);
-// Render one image at the camera's resolution into `img` (N: supersampling factor, for the partial frame).
-void render_image(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit, int sh_deg,
-                  const float bg[3], const simd::Path& path, FrameBuffers& buf, Image& img, Stats& st, FrameRun& run,
-                  int N);
-// The pixel trace of output pixel (x, y) at N x N samples; `cam` is the sub-sample grid's camera.
-PixelTrace trace_frame_pixel(const SceneView& sc, const CameraParams& cam, Mode mode, const OitParams& oit,
-                             int sh_deg, const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y,
-                             int N);
+// frame.cpp: the stage of `key` into `stage` (every splat; stops early once cancelled, leaving it not ready).
+void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& path, Stage& stage, Stats& st,
+                 FrameRun& run);
+// The mode's finish of a ready stage and the binning of one image at the camera's resolution into `buf`, in the
+// stage's depth order (sorted here when not ready yet); stops early once cancelled.
+void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, const simd::Path& path,
+               FrameBuffers& buf, Stats& st, FrameRun& run);
+
+// One frame of a call's joint blend: its binned buffers, how to blend them, and the image (at the stage camera's
+// resolution; N: supersampling factor, for the partial frame).
+struct BlendFrame {
+    FrameBuffers* buf;  // its boxes are computed here
+    const CameraParams* cam;
+    Mode mode;
+    OitParams oit;
+    const float* bg;
+    Image* img;
+    int N;
+    Stats* st;
+};
+// Blend every frame's tiles in one parallel loop, interleaved (each frame's tiles centre out, the frames' i-th tiles
+// together, in proportion to their tile counts); each frame's blend_ms is the loop's time.
+void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile, FrameRun& run);
+// The pixel trace of output pixel (x, y) at N x N samples from a ready stage (the sub-sample grid's camera).
+PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
+                             const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N);
 
 }  // namespace gbv::cpu

@@ -1,4 +1,4 @@
-// The preprocess for one vector instruction set: preprocess_splat<L> (gbv/preprocess.h) on Highway's lanes, 8 splats
+// The preprocess for one vector instruction set: the stage and a mode's finish (preprocess_range.h) on Highway's lanes, 8 splats
 // at a time with AVX2, 16 with AVX-512. CMake compiles this file once per set, like blend_isa.cpp, and with
 // -ffp-contract=off besides the lane type's mul_rn barrier: no multiply-add is fused, so every lane computes what
 // preprocess_splat computes for one splat, bit for bit.
@@ -10,8 +10,12 @@
 
 namespace gbv {
 
-void GBV_CAT(preprocess_range_, GBV_ISA_NAME)(const PreprocessJob& job, int64_t begin, int64_t end) {
-    preprocess_range<HWY_NAMESPACE::LanesHwy>(job, begin, end);
+void GBV_CAT(stage_range_, GBV_ISA_NAME)(const StageJob& job, int64_t begin, int64_t end) {
+    stage_range<HWY_NAMESPACE::LanesHwy>(job, begin, end);
+}
+
+void GBV_CAT(finish_range_, GBV_ISA_NAME)(const FinishJob& job, int64_t begin, int64_t end) {
+    finish_range<HWY_NAMESPACE::LanesHwy>(job, begin, end);
 }
 
 }  // namespace gbv

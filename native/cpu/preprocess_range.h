@@ -1,7 +1,8 @@
-// The CPU's preprocess of a range of splats, written once over a lane type L (gbv/lanes.h): Lanes1 calls
-// preprocess_splat one splat at a time (the scalar path, blend_scalar.cpp); a vector lane type (preprocess_isa.cpp,
-// once per instruction set) moves L::N splats' inputs into lanes, runs the same preprocess_splat<L> on all of them and
-// writes each lane's Splat2D, TileRect and flag: bit-identical to one splat at a time (preprocess.h).
+// The CPU's preprocess of a range of splats in two passes, written once over a lane type L (gbv/lanes.h; Lanes1: the
+// scalar path, blend_scalar.cpp; Highway's vectors: preprocess_isa.cpp, once per instruction set): stage_range runs
+// the per-camera stage (gbv/preprocess_stage.h) and stores it, finish_range runs a mode's finish
+// (gbv/preprocess.h) on the stored stage. Each moves L::N splats into lanes and each lane's result out again:
+// bit-identical to preprocess_splat one splat at a time (storing floats and loading them is exact).
 #pragma once
 
 #include <cstdint>
@@ -10,111 +11,211 @@
 
 namespace gbv {
 
-// One frame's preprocess: the scene (activated parameters, gbviewer.Scene's layout), the camera and mode, and the
-// per-splat outputs. Plain data, shared by the translation units of every instruction set.
-struct PreprocessJob {
+// One splat's stored stage (StageLanes): screen position, depth, opacity after the 3D filter, the 2D covariance
+// before the mode's filter, and the SH colour (computed only where stage_on_screen holds).
+struct StageSplat {
+    float xy[2], depth, opacity, cov[3], color[3];
+};
+
+// The stage of one camera: the scene (activated parameters, gbviewer.Scene's layout), the camera and SH degree, and
+// per splat its StageSplat and flag (in front of the near plane and possibly on screen in some mode). Plain data,
+// shared by the translation units of every instruction set.
+struct StageJob {
     const float *means, *scales, *quats, *opacities, *sh, *filter_3d;  // filter_3d may be null
-    int k;                     // SH coefficients per channel
-    const float* weight_sh;    // (n, weight_k) or null
+    int k;  // SH coefficients per channel
+    int sh_deg;
+    CameraParams cam;
+    int grid_x, grid_y;
+    StageSplat* stage;
+    uint8_t* valid;
+};
+
+// One mode's finish of a stored stage: the view weights (wsr, duplex) and cells, and the per-splat outputs.
+struct FinishJob {
+    const float* means;
+    const float* weight_sh;  // (n, weight_k) or null
     int weight_k;
-    const int32_t* cell_of;    // duplex: each splat's cell; null: -1
+    const int32_t* cell_of;  // duplex: each splat's cell; null: -1
     int sh_deg;
     CameraParams cam;
     Mode mode;
     OitParams oit;
     int grid_x, grid_y;
+    const StageSplat* stage;
+    const uint8_t* stage_valid;
     Splat2D* splats;
     TileRect* rects;
     uint8_t* valid;
 };
 
-// Preprocess splats [begin, end) of the job.
-using PreprocessFn = void (*)(const PreprocessJob& job, int64_t begin, int64_t end);
+// Splats [begin, end) of a job.
+using StageFn = void (*)(const StageJob& job, int64_t begin, int64_t end);
+using FinishFn = void (*)(const FinishJob& job, int64_t begin, int64_t end);
+
+// Splats i0 .. i0 + count - 1 of the (n, width) array src into lane buffers buf[0..width) (spare lanes repeat the
+// last splat).
+template <int N>
+inline void gather_lanes(const float* src, int width, const int64_t* ids, int count, float (*buf)[N]) {
+    if (count <= 0) return;
+    for (int j = 0; j < N; ++j) {
+        const float* s = src + (size_t)width * ids[j < count ? j : count - 1];
+        for (int c = 0; c < width; ++c) buf[c][j] = s[c];
+    }
+}
+
+// SH colours of the splats ids[0..count) into their stage.
+template <class L>
+void stage_colors(const StageJob& job, const int64_t* ids, int count) {
+    constexpr int N = L::N;
+    const int nsh = (job.sh_deg + 1) * (job.sh_deg + 1) * 3;  // coefficients sh_to_rgb reads
+    alignas(64) float mb[3][N], shb[48][N];
+    alignas(64) float o[3][N];
+    typename L::F sh[48];
+    for (int g = 0; g < count; g += N) {
+        const int c = count - g < N ? count - g : N;
+        gather_lanes<N>(job.means, 3, ids + g, c, mb);
+        for (int j = 0; j < N; ++j) {  // the first nsh of k * 3 coefficients
+            const float* s = job.sh + (size_t)job.k * 3 * ids[g + (j < c ? j : c - 1)];
+            for (int q = 0; q < nsh; ++q) shb[q][j] = s[q];
+        }
+        SplatInLanes<L> in;
+        for (int q = 0; q < 3; ++q) in.mean[q] = L::load(mb[q]);
+        for (int q = 0; q < nsh; ++q) sh[q] = L::load(shb[q]);
+        in.sh = sh;
+        typename L::F color[3];
+        stage_color<L>(in, job.sh_deg, job.cam, color);
+        for (int q = 0; q < 3; ++q) L::store(color[q], o[q]);
+        for (int j = 0; j < c; ++j)
+            for (int q = 0; q < 3; ++q) job.stage[ids[g + j]].color[q] = o[q][j];
+    }
+}
 
 template <class L>
-void preprocess_range(const PreprocessJob& job, int64_t begin, int64_t end) {
-    const int weight_deg = sh_degree_for_coeffs(job.weight_k);
-    if constexpr (L::N == 1) {
-        for (int64_t i = begin; i < end; ++i) {
-            SplatIn in{job.means + 3 * i, job.scales + 3 * i, job.quats + 4 * i, job.opacities[i],
-                       job.sh + (size_t)job.k * 3 * i, job.filter_3d ? job.filter_3d[i] : 0.0f,
-                       job.weight_sh ? job.weight_sh + (size_t)job.weight_k * i : nullptr, weight_deg,
-                       job.cell_of ? job.cell_of[i] : -1};
-            job.valid[i] = preprocess_splat(in, job.sh_deg, job.cam, job.mode, job.oit, job.grid_x, job.grid_y,
-                                            &job.splats[i], &job.rects[i]);
-        }
-    } else {
-        using F = typename L::F;
-        constexpr int N = L::N;
-        const bool oit = job.mode == WSR || job.mode == DUPLEX;
-        const int nsh = (job.sh_deg + 1) * (job.sh_deg + 1) * 3;  // coefficients sh_to_rgb reads
-        const int wdeg = job.sh_deg < weight_deg ? job.sh_deg : weight_deg;
-        const int nw = oit && job.weight_sh ? (wdeg + 1) * (wdeg + 1) : 0;  // ... and sh_to_weight
-        alignas(64) float buf[16][N];  // means, scales, quats, opacity, filter_3d
-        alignas(64) float shb[48][N], wb[16][N];
-        alignas(64) float o[17][N];
-        alignas(64) int32_t rb[4][N];
-        F sh[48], w[16];
-        for (int64_t i0 = begin; i0 < end; i0 += N) {
-            const int count = end - i0 < N ? (int)(end - i0) : N;
-            for (int j = 0; j < N; ++j) {
-                const int64_t i = i0 + (j < count ? j : count - 1);  // spare lanes repeat the last splat
-                for (int c = 0; c < 3; ++c) buf[c][j] = job.means[3 * i + c];
-                for (int c = 0; c < 3; ++c) buf[3 + c][j] = job.scales[3 * i + c];
-                for (int c = 0; c < 4; ++c) buf[6 + c][j] = job.quats[4 * i + c];
-                buf[10][j] = job.opacities[i];
-                buf[11][j] = job.filter_3d ? job.filter_3d[i] : 0.0f;
-                const float* s = job.sh + (size_t)job.k * 3 * i;
-                for (int q = 0; q < nsh; ++q) shb[q][j] = s[q];
-                if (nw > 0) {
-                    const float* ws = job.weight_sh + (size_t)job.weight_k * i;
-                    for (int q = 0; q < nw; ++q) wb[q][j] = ws[q];
-                }
-            }
+void stage_range(const StageJob& job, int64_t begin, int64_t end) {
+    constexpr int N = L::N;
+    constexpr int BLOCK = 256;  // splats whose colours are evaluated together, on-screen lanes packed
+    alignas(64) float buf[12][N];  // means, scales, quats, opacity, filter_3d
+    alignas(64) float o[8][N];
+    int64_t ids[N], on[BLOCK];
+    for (int64_t b0 = begin; b0 < end; b0 += BLOCK) {
+        const int64_t b1 = end - b0 < BLOCK ? end : b0 + BLOCK;
+        int count_on = 0;
+        for (int64_t i0 = b0; i0 < b1; i0 += N) {
+            const int count = b1 - i0 < N ? (int)(b1 - i0) : N;
+            for (int j = 0; j < N; ++j) ids[j] = i0 + j;
+            gather_lanes<N>(job.means, 3, ids, count, buf);
+            gather_lanes<N>(job.scales, 3, ids, count, buf + 3);
+            gather_lanes<N>(job.quats, 4, ids, count, buf + 6);
+            gather_lanes<N>(job.opacities, 1, ids, count, buf + 10);
+            for (int j = 0; j < N; ++j)
+                buf[11][j] = job.filter_3d ? job.filter_3d[ids[j < count ? j : count - 1]] : 0.0f;
             SplatInLanes<L> in;
             for (int c = 0; c < 3; ++c) in.mean[c] = L::load(buf[c]);
             for (int c = 0; c < 3; ++c) in.scale[c] = L::load(buf[3 + c]);
             for (int c = 0; c < 4; ++c) in.quat[c] = L::load(buf[6 + c]);
             in.opacity = L::load(buf[10]);
             in.filter_3d = L::load(buf[11]);
-            for (int q = 0; q < nsh; ++q) sh[q] = L::load(shb[q]);
-            for (int q = 0; q < nw; ++q) w[q] = L::load(wb[q]);
-            in.sh = sh;
-            in.weight_sh = job.weight_sh ? w : nullptr;
-            in.weight_deg = weight_deg;
-            Splat2DLanes<L> out;
-            TileRectLanes<L> rect;
-            const uint32_t ok = L::bits(preprocess_splat<L>(in, job.sh_deg, job.cam, job.mode, job.oit,
-                                                            job.grid_x, job.grid_y, &out, &rect));
+            StageLanes<L> st;
+            uint32_t ok = L::bits(preprocess_stage<L>(in, job.cam, &st));
+            if (ok) ok &= L::bits(stage_on_screen<L>(st, job.grid_x, job.grid_y));
             for (int j = 0; j < count; ++j) job.valid[i0 + j] = (ok >> j) & 1u;
             if (!ok) continue;
-            const F fields[17] = {out.xy[0], out.xy[1], out.depth, out.opacity, out.conic[0], out.conic[1],
-                                  out.conic[2], out.color[0], out.color[1], out.color[2], out.v1[0], out.v1[1],
-                                  out.sigma1, out.sigma2, out.inv_sigma1, out.inv_sigma2, out.radius};
-            for (int f = 0; f < 17; ++f) L::store(fields[f], o[f]);
+            const typename L::F fields[7] = {st.xy[0], st.xy[1], st.depth, st.opacity, st.cov[0], st.cov[1], st.cov[2]};
+            for (int f = 0; f < 7; ++f) L::store(fields[f], o[f]);
+            for (int j = 0; j < count; ++j) {
+                if (!((ok >> j) & 1u)) continue;
+                StageSplat& s = job.stage[i0 + j];
+                s.xy[0] = o[0][j];
+                s.xy[1] = o[1][j];
+                s.depth = o[2][j];
+                s.opacity = o[3][j];
+                for (int c = 0; c < 3; ++c) s.cov[c] = o[4 + c][j];
+                on[count_on++] = i0 + j;
+            }
+        }
+        stage_colors<L>(job, on, count_on);
+    }
+}
+
+template <class L>
+void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
+    using F = typename L::F;
+    constexpr int N = L::N;
+    const int weight_deg = sh_degree_for_coeffs(job.weight_k);
+    const bool weights = (job.mode == WSR || job.mode == DUPLEX) && job.weight_sh;
+    const int wdeg = job.sh_deg < weight_deg ? job.sh_deg : weight_deg;
+    const int nw = weights ? (wdeg + 1) * (wdeg + 1) : 0;  // coefficients sh_to_weight reads
+    alignas(64) float sb[8][N], mb[3][N], wb[16][N];
+    alignas(64) float o[14][N];
+    alignas(64) int32_t rb[4][N];
+    F w[16];
+    int64_t ids[N];
+    for (int64_t i0 = begin; i0 < end; i0 += N) {
+        const int count = end - i0 < N ? (int)(end - i0) : N;
+        bool any = false;
+        for (int j = 0; j < count; ++j) any |= job.stage_valid[i0 + j] != 0;
+        if (!any) {  // culled in the stage: culled in every mode
+            for (int j = 0; j < count; ++j) job.valid[i0 + j] = 0;
+            continue;
+        }
+        for (int j = 0; j < N; ++j) {
+            const int64_t i = i0 + (j < count ? j : count - 1);  // spare lanes repeat the last splat
+            ids[j] = i;
+            const StageSplat& s = job.stage[i];
+            const float f[8] = {s.xy[0], s.xy[1], s.depth, s.opacity, s.cov[0], s.cov[1], s.cov[2],
+                                job.stage_valid[i] ? 1.0f : 0.0f};
+            for (int c = 0; c < 8; ++c) sb[c][j] = f[c];
+        }
+        StageLanes<L> st;
+        st.xy[0] = L::load(sb[0]);
+        st.xy[1] = L::load(sb[1]);
+        st.depth = L::load(sb[2]);
+        st.opacity = L::load(sb[3]);
+        for (int c = 0; c < 3; ++c) st.cov[c] = L::load(sb[4 + c]);
+        SplatInLanes<L> in{};  // the finish reads mean and weight_sh only where weights are given
+        in.weight_deg = weight_deg;
+        if (weights) {
+            gather_lanes<N>(job.means, 3, ids, count, mb);
+            gather_lanes<N>(job.weight_sh, job.weight_k, ids, count, wb);  // the first nw are read
+            for (int c = 0; c < 3; ++c) in.mean[c] = L::load(mb[c]);
+            for (int q = 0; q < nw; ++q) w[q] = L::load(wb[q]);
+            in.weight_sh = w;
+        }
+        Splat2DLanes<L> out{};
+        TileRectLanes<L> rect{};
+        const uint32_t ok = L::bits(preprocess_finish<L>(in, st, L::load(sb[7]) > L::set(0.0f), job.sh_deg, job.cam,
+                                                         job.mode, job.oit, job.grid_x, job.grid_y, &out, &rect));
+        for (int j = 0; j < count; ++j) job.valid[i0 + j] = (ok >> j) & 1u;
+        if (!ok) continue;
+        const F fields[14] = {out.xy[0], out.xy[1], out.depth, out.opacity, out.conic[0], out.conic[1], out.conic[2],
+                              out.v1[0], out.v1[1], out.sigma1, out.sigma2, out.inv_sigma1, out.inv_sigma2, out.radius};
+        for (int f = 0; f < 14; ++f) L::store(fields[f], o[f]);
+        if constexpr (N == 1) {
+            rb[0][0] = rect.x0, rb[1][0] = rect.y0, rb[2][0] = rect.x1, rb[3][0] = rect.y1;
+        } else {
             L::storei(rect.x0, rb[0]);
             L::storei(rect.y0, rb[1]);
             L::storei(rect.x1, rb[2]);
             L::storei(rect.y1, rb[3]);
-            for (int j = 0; j < count; ++j) {
-                if (!((ok >> j) & 1u)) continue;
-                const int64_t i = i0 + j;
-                Splat2D& s = job.splats[i];
-                s.xy = Vec2{o[0][j], o[1][j]};
-                s.depth = o[2][j];
-                s.opacity = o[3][j];
-                s.log_min_alpha = out.log_min_alpha(o[3][j]);
-                for (int c = 0; c < 3; ++c) s.conic[c] = o[4 + c][j];
-                for (int c = 0; c < 3; ++c) s.color[c] = o[7 + c][j];
-                s.v1 = Vec2{o[10][j], o[11][j]};
-                s.sigma1 = o[12][j];
-                s.sigma2 = o[13][j];
-                s.inv_sigma1 = o[14][j];
-                s.inv_sigma2 = o[15][j];
-                s.radius = o[16][j];
-                s.cell = job.cell_of ? job.cell_of[i] : -1;
-                job.rects[i] = TileRect{rb[0][j], rb[1][j], rb[2][j], rb[3][j]};
-            }
+        }
+        for (int j = 0; j < count; ++j) {
+            if (!((ok >> j) & 1u)) continue;
+            const int64_t i = i0 + j;
+            Splat2D& s = job.splats[i];
+            s.xy = Vec2{o[0][j], o[1][j]};
+            s.depth = o[2][j];
+            s.opacity = o[3][j];
+            s.log_min_alpha = out.log_min_alpha(o[3][j]);
+            for (int c = 0; c < 3; ++c) s.conic[c] = o[4 + c][j];
+            for (int c = 0; c < 3; ++c) s.color[c] = job.stage[i].color[c];  // on screen: computed by the stage
+            s.v1 = Vec2{o[7][j], o[8][j]};
+            s.sigma1 = o[9][j];
+            s.sigma2 = o[10][j];
+            s.inv_sigma1 = o[11][j];
+            s.inv_sigma2 = o[12][j];
+            s.radius = o[13][j];
+            s.cell = job.cell_of ? job.cell_of[i] : -1;
+            job.rects[i] = TileRect{rb[0][j], rb[1][j], rb[2][j], rb[3][j]};
         }
     }
 }

@@ -1,5 +1,6 @@
-// The CPU renderer (renderer.h): the uploaded scene, the per-frame buffers, and one frame at a time.
+// The CPU renderer (renderer.h): the uploaded scene, the per-frame buffers and stages, and the frames of a call.
 #include "renderer.h"
+#include "testing.h"
 
 #include <algorithm>
 #include <mutex>
@@ -16,7 +17,35 @@ struct Renderer::Impl {
     SceneView scene;
     std::shared_ptr<const void> scene_owner, weights_owner, cells_owner;  // keep the caller's arrays alive
     std::atomic<int64_t> n{0};
-    FrameBuffers buffers;
+    uint64_t generation = 0;            // of the uploaded scene, weights and cells (StageKey::scene)
+    std::vector<Stage> stages;          // the last call's, one per distinct key
+    std::vector<FrameBuffers> buffers;  // the last call's, one per frame
+
+    // The stages of `keys` (distinct): a cached one reused where its key matches and it is ready, the others built
+    // in the storage of those left over (a new one where none is); what no key needs is freed.
+    std::vector<Stage> take_stages(const std::vector<StageKey>& keys) {
+        std::vector<Stage> out(keys.size());
+        std::vector<bool> found(keys.size(), false);
+        for (size_t k = 0; k < keys.size(); ++k) {
+            for (Stage& s : stages) {
+                if (s.ready && s.key == keys[k]) {
+                    out[k] = std::move(s);
+                    s = Stage();
+                    found[k] = true;
+                    break;
+                }
+            }
+        }
+        size_t spare = 0;
+        for (size_t k = 0; k < keys.size(); ++k) {
+            if (found[k]) continue;
+            while (spare < stages.size() && stages[spare].splats.capacity() == 0) ++spare;
+            if (spare < stages.size()) out[k] = std::move(stages[spare++]);
+            out[k].ready = false;
+        }
+        stages.clear();
+        return out;
+    }
 
     // Drop the owners under the lock, release them after it (an owner's deleter may take the Python GIL, which a
     // render's progress report takes while the lock is held).
@@ -51,6 +80,7 @@ void Renderer::upload(const float* means, const float* scales, const float* quat
         sc.k = k;
         sc.weight_sh = nullptr;
         sc.weight_k = 0;
+        ++impl_->generation;
         impl_->scene_owner = std::move(owner);
         impl_->n.store(n);
     }
@@ -64,6 +94,7 @@ void Renderer::upload_weights(const float* weight_sh, int64_t n, int weight_k, s
     if (n != impl_->scene.n) throw std::invalid_argument("upload_weights: weight_sh must have the scene's N rows");
     impl_->scene.weight_sh = weight_sh;
     impl_->scene.weight_k = weight_k;
+    ++impl_->generation;
     old = std::exchange(impl_->weights_owner, std::move(owner));
 }
 
@@ -82,6 +113,7 @@ void Renderer::upload_cells(const float* means, const float* scales, const float
     sc.cell_offsets = offsets;
     sc.cell_members = members;
     sc.m = num_cells;
+    ++impl_->generation;
     impl_->cells_owner = std::move(owner);
 }
 
@@ -110,31 +142,63 @@ void check_cells(const RenderArgs& a, const SceneView& sc, const char* where) {
 }  // namespace
 
 RenderResult Renderer::render(const RenderArgs& a, const Control& control) {
+    return std::move(render_many({a}, control)[0]);
+}
+
+std::vector<RenderResult> Renderer::render_many(const std::vector<RenderArgs>& frames, const Control& control) {
     std::lock_guard<std::mutex> lock(impl_->mutex);
     const SceneView& sc = impl_->scene;
-    check_cells(a, sc, "render");
-    RenderResult res;
-    const simd::Path& path = simd::current();  // the one this frame runs and reports, whatever set_simd does meanwhile
-    res.simd = path.name;
-    const bool window = a.want_window && a.mode == GAUSSIAN_BLENDING;
-    const int N = a.supersample;
-    const int sh_deg = sh_degree_of(a, sc);
-    FrameRun run(control);
+    for (const RenderArgs& a : frames) check_cells(a, sc, "render");
+    const int count = (int)frames.size();
+    const simd::Path& path = simd::current();  // the one these frames run and report, whatever set_simd does meanwhile
+    FrameRun run(control, count);
     ThreadCount threads(control.threads);
-    res.image.resize(a.width, a.height, window);
-    if (N == 1) {
-        render_image(sc, a.cam, a.mode, a.oit, sh_deg, a.bg, path, impl_->buffers, res.image, res.stats, run, 1);
-    } else {
-        Image hi;
-        hi.resize(a.width * N, a.height * N, window);
-        render_image(sc, a.cam, a.mode, a.oit, sh_deg, a.bg, path, impl_->buffers, hi, res.stats, run, N);
-        const Clock::time_point t0 = Clock::now();
-        if (!run.cancelled()) box_downsample(hi, N, res.image);
-        res.stats.blend_ms += ms_since(t0);
+    std::vector<StageKey> keys;
+    std::vector<int> stage_of(count);
+    for (int f = 0; f < count; ++f) {
+        const RenderArgs& a = frames[f];
+        const StageKey key{impl_->generation, a.cam, sh_degree_of(a, sc)};
+        stage_of[f] = (int)(std::find(keys.begin(), keys.end(), key) - keys.begin());
+        if (stage_of[f] == (int)keys.size()) keys.push_back(key);
+        run.start(f, (int64_t)((a.cam.width + TILE - 1) / TILE) * ((a.cam.height + TILE - 1) / TILE));
     }
-    if (!run.cancelled()) run.report();  // the last count
-    res.cancelled = run.cancelled();
-    res.stopped = run.stopped();
+    std::vector<Stage> stages = impl_->take_stages(keys);
+    impl_->buffers.resize(count);  // the per-frame buffers of frames beyond this call's are freed
+    std::vector<RenderResult> res(count);
+    std::vector<Image> hi(count);  // supersampled frames' images at the camera's resolution
+    const bool poison = testing::poison_images.load(std::memory_order_relaxed);
+    for (int f = 0; f < count; ++f) {
+        const RenderArgs& a = frames[f];
+        const bool window = a.want_window && a.mode == GAUSSIAN_BLENDING;
+        res[f].image.resize(a.width, a.height, window, poison);
+        if (a.supersample > 1) hi[f].resize(a.width * a.supersample, a.height * a.supersample, window, poison);
+    }
+    std::vector<BlendFrame> blend;
+    for (int f = 0; f < count && !run.cancelled(); ++f) {
+        const RenderArgs& a = frames[f];
+        RenderResult& r = res[f];
+        Stage& stage = stages[stage_of[f]];
+        r.stats.stage_reused = stage.ready;
+        if (!stage.ready) build_stage(sc, keys[stage_of[f]], path, stage, r.stats, run);
+        if (run.cancelled()) break;
+        bin_frame(sc, stage, a.mode, a.oit, path, impl_->buffers[f], r.stats, run);
+        Image* img = a.supersample > 1 ? &hi[f] : &r.image;
+        blend.push_back({&impl_->buffers[f], &stage.key.cam, a.mode, a.oit, a.bg, img, a.supersample, &r.stats});
+    }
+    if (!run.cancelled()) blend_frames(blend, path.blend_tile, run);
+    for (int f = 0; f < count; ++f) {
+        if (frames[f].supersample == 1 || run.cancelled()) continue;
+        const Clock::time_point t0 = Clock::now();
+        box_downsample(hi[f], frames[f].supersample, res[f].image);
+        res[f].stats.blend_ms += ms_since(t0);
+    }
+    if (!run.cancelled()) run.report();  // the last counts
+    for (RenderResult& r : res) {
+        r.simd = path.name;
+        r.cancelled = run.cancelled();
+        r.stopped = run.stopped();
+    }
+    impl_->stages = std::move(stages);
     return res;
 }
 
@@ -144,22 +208,39 @@ PixelTrace Renderer::trace(const RenderArgs& a, int x, int y) {
     std::lock_guard<std::mutex> lock(impl_->mutex);
     const SceneView& sc = impl_->scene;
     check_cells(a, sc, "trace");
-    return trace_frame_pixel(sc, a.cam, a.mode, a.oit, sh_degree_of(a, sc), a.bg, simd::current(), impl_->buffers, x,
-                             y, a.supersample);
+    const simd::Path& path = simd::current();
+    const StageKey key{impl_->generation, a.cam, sh_degree_of(a, sc)};
+    std::vector<Stage> stages = impl_->take_stages({key});
+    if (!stages[0].ready) {
+        Stats st;
+        const Control none;
+        FrameRun run(none, 1);
+        build_stage(sc, key, path, stages[0], st, run);
+    }
+    impl_->buffers.resize(1);
+    PixelTrace t = trace_frame_pixel(sc, stages[0], a.mode, a.oit, a.bg, path, impl_->buffers[0], x, y,
+                                     a.supersample);
+    impl_->stages = std::move(stages);
+    return t;
 }
 
 void Renderer::release_buffers() {
     std::lock_guard<std::mutex> lock(impl_->mutex);
-    impl_->buffers = FrameBuffers();
+    impl_->buffers.clear();
+    impl_->buffers.shrink_to_fit();
+    impl_->stages.clear();
+    impl_->stages.shrink_to_fit();
 }
 
 size_t Renderer::buffer_bytes() const {
     std::lock_guard<std::mutex> lock(impl_->mutex);
-    const FrameBuffers& b = impl_->buffers;
-    return b.splats.capacity() * sizeof(Splat2D) + b.rects.capacity() * sizeof(TileRect) + b.valid.capacity() +
-           b.tile_start.capacity() * sizeof(int64_t) + b.keys.capacity() * sizeof(uint64_t) +
-           (b.order.capacity() + b.order_scratch.capacity()) * sizeof(uint64_t) +
-           b.boxes.capacity() * sizeof(SplatBounds);
+    size_t bytes = 0;
+    for (const FrameBuffers& b : impl_->buffers)
+        bytes += b.splats.capacity() * sizeof(Splat2D) + b.rects.capacity() * sizeof(TileRect) + b.valid.capacity() +
+                 b.tile_start.capacity() * sizeof(int64_t) + b.keys.capacity() * sizeof(uint64_t) +
+                 b.boxes.capacity() * sizeof(SplatBounds);
+    for (const Stage& s : impl_->stages) bytes += s.bytes();
+    return bytes;
 }
 
 }  // namespace gbv::cpu

@@ -13,11 +13,14 @@
 
 namespace gbv::cpu {
 
-// What a frame measured. sort_length: keys ordered by depth (tile-splat pairs; 0 for wsr, whose tile lists are only
+// What a frame measured. preprocess_ms includes stage_ms, the time spent building the per-camera stage in this
+// frame (0 when stage_reused: the stage of an earlier frame, or of an earlier frame of the same call, was used).
+// render_many's frames blend in one loop: each frame's blend_ms is that loop's time. sort_length: keys ordered by depth (tile-splat pairs; 0 for wsr, whose tile lists are only
 // binned; tile-cell pairs for duplex); pairs: entries of the tile lists that the blend walks. duplex: visible cells,
 // and tile-splat pairs of the splats' own rectangles outside their cell's rectangle (pixels there miss the splat).
 struct Stats {
-    double preprocess_ms = 0, sort_ms = 0, blend_ms = 0;
+    double preprocess_ms = 0, sort_ms = 0, blend_ms = 0, stage_ms = 0;
+    bool stage_reused = false;
     int64_t visible = 0, sort_length = 0, pairs = 0;
     int64_t cells_visible = 0, cell_misses = 0;
 };
@@ -26,12 +29,13 @@ struct Stats {
 struct Control {
     // The caller's cancel flag (nonzero: stop), read by every worker thread between blocks of splats and tiles.
     const int64_t* cancel = nullptr;
-    // float32 (height, width, 3) output pixels: each finished tile is written there at once (a refining frame).
-    float* partial = nullptr;
-    // report(tiles done, tiles in the frame), called on the thread that called render (OpenMP's master thread)
-    // between blocks and tiles, at most every report_ms, and once at the end of a frame that was not cancelled.
-    // Returning false stops the frame as a cancel does (RenderResult::stopped).
-    std::function<bool(int64_t, int64_t)> report;
+    // Per frame (may be shorter: none for the rest), float32 (height, width, 3) output pixels: each finished tile is
+    // written there at once (a refining frame).
+    std::vector<float*> partial;
+    // report(frame, tiles done, tiles in the frame) for every frame of the call, called on the thread that called
+    // render (OpenMP's master thread) between blocks and tiles, at most every report_ms, and once at the end of a
+    // call that was not cancelled. Returning false stops the call as a cancel does (RenderResult::stopped).
+    std::function<bool(int, int64_t, int64_t)> report;
     double report_ms = 5.0;
     int threads = 0;  // OpenMP threads, 0 = the runtime's default
 };
@@ -44,7 +48,8 @@ struct RenderResult {
     bool stopped = false;    // stopped because report returned false
 };
 
-// One renderer owns its per-frame buffers. Every method is serialised by a mutex of the renderer (threads may share
+// One renderer owns its per-frame buffers and the per-camera stages of its last call (StageKey, frame.h): renders of
+// the same camera, scene and SH degree reuse the stage, whatever their mode and other settings. Every method is serialised by a mutex of the renderer (threads may share
 // one); the scene stays the caller's: upload references its arrays (no copy) and keeps `owner` until the next upload
 // or the renderer's end, so the arrays must stay unchanged while uploaded.
 class Renderer {
@@ -76,11 +81,16 @@ public:
     // std::invalid_argument for duplex without cells.
     RenderResult render(const RenderArgs& args, const Control& control = {});
 
+    // Render several frames in one call: the stage once per distinct StageKey, each frame's finish and binning, then
+    // one parallel loop over every frame's tiles interleaved (frame 0's first tile, frame 1's first, ...); control's
+    // cancel and report cover all of them. The results are render()'s of each frame, bit for bit.
+    std::vector<RenderResult> render_many(const std::vector<RenderArgs>& frames, const Control& control = {});
+
     // The trace (trace.h) of output pixel (x, y) of the frame `args` renders; (x, y) inside the output image.
     PixelTrace trace(const RenderArgs& args, int x, int y);
 
-    // Free the per-frame buffers kept for the next frame (gbviewer's CpuRenderer does when its scene changes), and
-    // their size in bytes.
+    // Free the per-frame buffers and stages kept for the next frame (gbviewer's CpuRenderer does when its scene
+    // changes), and their size in bytes.
     void release_buffers();
     size_t buffer_bytes() const;
 

@@ -1,4 +1,4 @@
-// Run-time choice of the blend's instruction set. The vector paths are separate translation units built with their
+// Run-time choice of the blend's and preprocess's instruction set. The vector paths are separate translation units built with their
 // own -m flags (CMakeLists.txt); this file is built for the baseline and only calls into them after checking the
 // CPU (and the OS's register state, which __builtin_cpu_supports includes) runs them.
 #include "simd.h"
@@ -10,28 +10,31 @@
 namespace gbv {
 void blend_tile_scalar(const TileJob& job);
 float exp_sum_scalar(int64_t n);
-void preprocess_range_scalar(const PreprocessJob& job, int64_t begin, int64_t end);
+void stage_range_scalar(const StageJob& job, int64_t begin, int64_t end);
+void finish_range_scalar(const FinishJob& job, int64_t begin, int64_t end);
 #ifdef GBV_HAVE_AVX2
 void blend_tile_avx2(const TileJob& job);
 float exp_sum_avx2(int64_t n);
-void preprocess_range_avx2(const PreprocessJob& job, int64_t begin, int64_t end);
+void stage_range_avx2(const StageJob& job, int64_t begin, int64_t end);
+void finish_range_avx2(const FinishJob& job, int64_t begin, int64_t end);
 #endif
 #ifdef GBV_HAVE_AVX512
 void blend_tile_avx512(const TileJob& job);
 float exp_sum_avx512(int64_t n);
-void preprocess_range_avx512(const PreprocessJob& job, int64_t begin, int64_t end);
+void stage_range_avx512(const StageJob& job, int64_t begin, int64_t end);
+void finish_range_avx512(const FinishJob& job, int64_t begin, int64_t end);
 #endif
 }  // namespace gbv
 
 namespace gbv::simd {
 namespace {
 
-const Path kScalar{"scalar", blend_tile_scalar, exp_sum_scalar, preprocess_range_scalar};
+const Path kScalar{"scalar", blend_tile_scalar, exp_sum_scalar, stage_range_scalar, finish_range_scalar};
 #ifdef GBV_HAVE_AVX2
-const Path kAvx2{"avx2", blend_tile_avx2, exp_sum_avx2, preprocess_range_avx2};
+const Path kAvx2{"avx2", blend_tile_avx2, exp_sum_avx2, stage_range_avx2, finish_range_avx2};
 #endif
 #ifdef GBV_HAVE_AVX512
-const Path kAvx512{"avx512", blend_tile_avx512, exp_sum_avx512, preprocess_range_avx512};
+const Path kAvx512{"avx512", blend_tile_avx512, exp_sum_avx512, stage_range_avx512, finish_range_avx512};
 #endif
 
 #if defined(GBV_HAVE_AVX2) || defined(GBV_HAVE_AVX512)

@@ -14,7 +14,8 @@ struct Path {
     const char* name;
     BlendTileFn blend_tile;
     float (*exp_sum)(int64_t);
-    PreprocessFn preprocess;
+    StageFn stage;    // the per-camera stage of a range of splats (preprocess_range.h)
+    FinishFn finish;  // a mode's finish of it
 };
 
 std::vector<const Path*> supported();          // paths this build and CPU can run, best last

@@ -6,6 +6,7 @@
 namespace gbv::cpu::testing {
 
 std::atomic<bool> pixel_boxes{true};
+std::atomic<bool> poison_images{false};
 std::atomic<bool> capture{false};
 
 namespace {

@@ -16,6 +16,9 @@ namespace gbv::cpu::testing {
 // no pixel).
 extern std::atomic<bool> pixel_boxes;
 
+// Fill each new image with NaN (evaluation counts -1) before the blend, to show that it writes every pixel.
+extern std::atomic<bool> poison_images;
+
 // Keep a copy of the last frame's preprocess output (per splat: the valid flag, then the Splat2D and TileRect bytes
 // when valid, zeros when culled), so tests can compare the SIMD paths' preprocess bit for bit.
 extern std::atomic<bool> capture;

@@ -122,7 +122,7 @@ def test_difference_view_and_psnr_labels(bundled_scene, output_view):
         rgb, legend = an.visualize((1, "a"), b.frame, "difference")
         scale = differences.robust_scale(d)
         np.testing.assert_array_equal(rgb, differences.colour_difference(d, scale))
-        assert an.shown_scale[(1, "a")] == scale and legend == "B - A (scalar)"
+        assert an.shown_scale[(1, "a")] == scale and legend == "B - A (scalar): mode gaussian_blending vs scalar"
         assert b.view == ""  # the result asked the panes to re-colour it
         an.set_scale(False, 0.02)
         np.testing.assert_array_equal(an.visualize((1, "a"), b.frame, "difference")[0],

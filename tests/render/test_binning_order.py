@@ -184,3 +184,28 @@ def test_cancel_at_random_moments_ends_cancelled_or_exact(big_frame):
         np.testing.assert_array_equal(after.rgb, small_frame.rgb)
     assert outcomes[:3] == ["cancelled"] * 3, outcomes  # during preprocess and during the sort and binning
     np.testing.assert_array_equal(r.render(cam, CANCEL_SETTINGS).rgb, frame.rgb)
+
+
+@pytest.mark.parametrize("mode", ["scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex"])
+def test_every_pixel_is_written_without_a_zero_fill(mode):
+    """The image planes are not zero-filled before the blend (image.h, Uninit): with each new image poisoned (NaN,
+    evaluation counts -1), every mode and supersampling writes every pixel, bit-identically to an unpoisoned frame;
+    views with empty tiles (x1/8 of a small scene, a view past the scene) included."""
+    scene = gb.load(shared_scene("plant.splat"))
+    cam = gb.orbit_camera(scene, 30, 20, width=120, height=90)
+    away = gb.Camera(64, 48, 50.0, 50.0, 32.0, 24.0, np.eye(3), np.array([0.0, 0.0, -1e4]))
+    views = [(cam, 1), (cam, 3), (cam.at_sampling_rate(1 / 8), 2), (away, 1), (away, 2)]
+    window = "window" if mode == "gaussian_blending" else "none"
+    plain = [gb.render(scene, c, mode, ss, debug=window) for c, ss in views]
+    _native.testing.set_poison_images(True)
+    try:
+        poisoned = [gb.render(scene, c, mode, ss, debug=window) for c, ss in views]
+    finally:
+        _native.testing.set_poison_images(False)
+    for a, b in zip(plain, poisoned):
+        assert np.isfinite(b.rgb).all() and np.isfinite(b.alpha).all() and (b.debug["evals"] >= 0).all()
+        np.testing.assert_array_equal(a.rgb, b.rgb)
+        np.testing.assert_array_equal(a.alpha, b.alpha)
+        np.testing.assert_array_equal(a.debug["evals"], b.debug["evals"])
+        if window == "window":
+            np.testing.assert_array_equal(a.debug["window"], b.debug["window"])

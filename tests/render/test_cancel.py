@@ -71,8 +71,8 @@ def test_event_set_during_the_render_cancels_it(scene):
 
 @pytest.mark.parametrize("ss", [1, 2])
 def test_native_module_skips_every_tile_once_the_flag_is_set(scene, ss):
-    """The cancel flag of the native call itself: with it set, no tile is blended (no progress past 0 is reported
-    and the image stays empty), and the result says it was cancelled."""
+    """The cancel flag of the native call itself: with it set, no tile is blended (no progress past 0 is reported;
+    the image planes are left unwritten, not zero-filled: image.h), and the result says it was cancelled."""
     from gbviewer import _native
     from gbviewer.render.prepare import camera_args
 
@@ -83,7 +83,7 @@ def test_native_module_skips_every_tile_once_the_flag_is_set(scene, ss):
     seen: list[tuple[int, int]] = []
     args = (*camera_args(cam), int(gb.Mode.SCALAR), ss, 3, np.zeros(3, np.float32), False)
     out = r.render(*args, cancel=flag, on_progress=lambda d, t: seen.append((d, t)))
-    assert out["cancelled"] and all(d == 0 for d, _ in seen) and not out["rgb"].any()
+    assert out["cancelled"] and all(d == 0 for d, _ in seen)
     flag[0] = 0
     out = r.render(*args, cancel=flag, on_progress=lambda d, t: seen.append((d, t)))
     assert not out["cancelled"] and seen[-1] == (-(-64 * ss // 16) * -(-48 * ss // 16),) * 2 and out["rgb"].any()

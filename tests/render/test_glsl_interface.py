@@ -5,7 +5,8 @@ gbviewer.render.glsl.interface reads at import; these tests tie it, and the GLSL
 - every GLSL struct of common.glsl has the fields of its C++ namesake (common.h) at the same byte offsets, with the
   same size: a small C++ program prints offsetof / sizeof of each field the GLSL declares (compiled with g++ against
   native/include), so a renamed, retyped, reordered or added field fails;
-- TileRect is RECT_WORDS words and OitParams' fields sit at their OIT_* components of the `oit` uniform;
+- TileRect is RECT_WORDS words and OitParams' fields sit at their OIT_* components of the `oit` and `view_filter`
+  uniforms;
 - pack_splat / unpack_splat (kernel.glsl) store every Splat2D field but those unpack recomputes, each at the same
   place both ways, in exactly SPLAT_VEC4S vec4;
 - the kernels and the driver name counter slots, never number them.
@@ -84,11 +85,13 @@ def test_glsl_structs_have_the_cpp_layout(cpp_layout, struct):
 def test_rect_and_oit_records_match_the_cpp_structs(cpp_layout):
     assert cpp_layout["TileRect"]["sizeof"] == gi.RECT_WORDS * gi.WORD_BYTES
     fields = [f for f, _ in glsl_fields("OitParams")]
-    assert cpp_layout["OitParams"]["sizeof"] == gi.VEC4_BYTES  # one vec4 uniform
+    assert cpp_layout["OitParams"]["sizeof"] == 2 * gi.VEC4_BYTES  # the `oit` and `view_filter` vec4 uniforms
     for f in fields:
         assert getattr(gi, f"OIT_{f.upper()}") * gi.WORD_BYTES == cpp_layout["OitParams"][f], f
-    assert gi.oit_uniform(2.0, 3.0, 4.0, True) == tuple(
-        {"sigma": 2.0, "weight_background": 3.0, "et_grade": 4.0, "depth_correct": 1.0}[f] for f in fields)
+    values = {"sigma": 2.0, "weight_background": 3.0, "et_grade": 4.0, "depth_correct": 1.0, "dilation": 0.5,
+              "pre_dilation": 0.25, "cull_lambda": 0.75, "compensate": 1.0}
+    packed = gi.oit_uniform(2.0, 3.0, 4.0, True) + gi.view_filter_uniform(0.5, 0.25, 0.75, True)
+    assert packed == tuple(values[f] for f in fields)
 
 
 def test_interface_is_definitions_only_with_distinct_slots(tmp_path):

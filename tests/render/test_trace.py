@@ -87,6 +87,20 @@ def test_trace_is_the_rendered_pixel_random_scenes(seed, mode, supersample):
         check_trace(gb.trace_pixel(scene, cam, x, y, mode, supersample, background=BACKGROUND), frame, x, y)
 
 
+@pytest.mark.parametrize("spec", ["preset:gsplat-antialiased", "preset:supersplat:2", "preset:antimatter15"])
+def test_trace_of_a_preset_is_its_rendered_pixel(spec):
+    """Presets trace with their own filter: the trace is the preset's rendered pixel, and not the scalar mode's."""
+    scene, cam = random_view(22, n=120)
+    frame = gb.render(scene, cam, spec, background=BACKGROUND)
+    plain = gb.render(scene, cam, "scalar", RenderSettings.parse(spec).supersample, background=BACKGROUND)
+    assert not np.array_equal(frame.rgb, plain.rgb)
+    rng = np.random.default_rng(22)
+    for x, y in zip(rng.integers(0, cam.width, 6), rng.integers(0, cam.height, 6)):
+        trace = gb.trace_pixel(scene, cam, x, y, spec, background=BACKGROUND)
+        check_trace(trace, frame, x, y)
+        assert trace.mode.startswith("preset:")
+
+
 @pytest.mark.parametrize("supersample", [1, 2])
 @pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize("seed", [11, 13])

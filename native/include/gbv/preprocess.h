@@ -1,10 +1,12 @@
 // Per-splat preprocess: cull, covariance, EWA projection, per-mode 2D filter, eigen-decomposition,
-// colour from SH, tile rectangle. One function for every backend (KERNELS.md §0, §2, §4, §6.2).
+// colour from SH, tile rectangle. One function for every backend (KERNELS.md §0, §2, §4, §6.2): the per-camera stage
+// (preprocess_stage.h, shared by every mode) and the mode's finish (preprocess_finish), composed by preprocess_splat.
 #pragma once
 
 #include "common.h"
 #include "footprint.h"
 #include "lanes.h"
+#include "preprocess_stage.h"
 #include "sh.h"
 #include "view_filter.h"
 
@@ -13,93 +15,11 @@ namespace gbv {
 // Every step is written once, as a template over a lane type L (lanes.h) like blend.h's: L::F holds one float per
 // splat lane, L::M one flag per lane, so the same source compiles to the one-splat functions (Lanes1: CUDA, the GLSL
 // port's reference and the scalar CPU path) and to the CPU's vector preprocess (native/cpu/preprocess_isa.cpp, 8 or
-// 16 splats at once). Culling is a lane mask; a lane culled early computes on and is dropped at the end, and the work
+// 16 splats at once; the CPU stores the stage per camera and runs each mode's finish on it). Culling is a lane mask; a lane culled early computes on and is dropped at the end, and the work
 // stops when no lane is left. Every lane type computes the same IEEE operations in the same order (its mul_rn,
 // fmin/fmax, frexp and ceil are libm's, bit for bit), so the vector preprocess is bit-identical to the scalar one.
 // The one-splat wrappers keep the signatures CUDA and the GLSL port use. SH evaluation is sh.h, the 2D footprint
 // (eigen-decomposition, radius, cutoff box, tile rectangle) footprint.h.
-
-// 3D covariance Sigma = R S S^T R^T (upper triangle: xx, xy, xz, yy, yz, zz) from a unit (w,x,y,z)
-// quaternion and per-axis scales (eq. 1).
-template <class L>
-GBV_HD void covariance_3d(const typename L::F q[4], const typename L::F s[3], typename L::F cov[6]) {
-    using F = typename L::F;
-    const F r = q[0], x = q[1], y = q[2], z = q[3];
-    const F xx = L::mul_rn(x, x), yy = L::mul_rn(y, y), zz = L::mul_rn(z, z), xy = L::mul_rn(x, y),
-            xz = L::mul_rn(x, z), yz = L::mul_rn(y, z), rx = L::mul_rn(r, x), ry = L::mul_rn(r, y),
-            rz = L::mul_rn(r, z);
-    const F one = L::set(1.0f), two = L::set(2.0f);
-    const F R[9] = {one - L::mul_rn(two, yy + zz), two * (xy - rz),                two * (xz + ry),
-                    two * (xy + rz),                one - L::mul_rn(two, xx + zz), two * (yz - rx),
-                    two * (xz - ry),                two * (yz + rx),                one - L::mul_rn(two, xx + yy)};
-    F M[9];  // M = R S
-    for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) M[i * 3 + j] = R[i * 3 + j] * s[j];
-    cov[0] = L::mul_rn(M[0], M[0]) + L::mul_rn(M[1], M[1]) + L::mul_rn(M[2], M[2]);
-    cov[1] = L::mul_rn(M[0], M[3]) + L::mul_rn(M[1], M[4]) + L::mul_rn(M[2], M[5]);
-    cov[2] = L::mul_rn(M[0], M[6]) + L::mul_rn(M[1], M[7]) + L::mul_rn(M[2], M[8]);
-    cov[3] = L::mul_rn(M[3], M[3]) + L::mul_rn(M[4], M[4]) + L::mul_rn(M[5], M[5]);
-    cov[4] = L::mul_rn(M[3], M[6]) + L::mul_rn(M[4], M[7]) + L::mul_rn(M[5], M[8]);
-    cov[5] = L::mul_rn(M[6], M[6]) + L::mul_rn(M[7], M[7]) + L::mul_rn(M[8], M[8]);
-}
-
-// EWA projection of a 3D covariance to screen space (eq. 3): J W Sigma W^T J^T, with the view-space
-// point clamped to 1.3x the frustum for the Jacobian only (computeCov2D). An orthographic camera's projection is
-// linear: J = diag(fx, fy) (no depth terms, nothing to clamp). Returns (a, b, c).
-template <class L>
-GBV_HD void project_covariance(const CameraParams& cam, const typename L::F cov3[6], const typename L::F pv[3],
-                               typename L::F out[3]) {
-    using F = typename L::F;
-    F j00 = L::set(cam.fx), j02 = L::set(0.0f), j11 = L::set(cam.fy), j12 = L::set(0.0f);
-    if (cam.projection != ORTHOGRAPHIC) {
-        const F tz = pv[2];
-        // clampf(v, lo, hi) = fminf(fmaxf(v, lo), hi)
-        const F tx = L::fmin(L::fmax(pv[0] / tz, L::set(-cam.lim_x_neg)), L::set(cam.lim_x_pos)) * tz;
-        const F ty = L::fmin(L::fmax(pv[1] / tz, L::set(-cam.lim_y_neg)), L::set(cam.lim_y_pos)) * tz;
-        j00 = L::set(cam.fx) / tz;
-        j02 = L::set(-cam.fx) * tx / (tz * tz);
-        j11 = L::set(cam.fy) / tz;
-        j12 = L::set(-cam.fy) * ty / (tz * tz);
-    }
-    const float* W = cam.R;
-    // T = J W (2x3)
-    F T[6];
-    for (int c = 0; c < 3; ++c) {
-        T[c] = L::mul_rn(j00, L::set(W[c])) + L::mul_rn(j02, L::set(W[6 + c]));
-        T[3 + c] = L::mul_rn(j11, L::set(W[3 + c])) + L::mul_rn(j12, L::set(W[6 + c]));
-    }
-    const F S[9] = {cov3[0], cov3[1], cov3[2], cov3[1], cov3[3], cov3[4], cov3[2], cov3[4], cov3[5]};
-    F TS[6];
-    for (int r = 0; r < 2; ++r)
-        for (int c = 0; c < 3; ++c)
-            TS[r * 3 + c] = L::mul_rn(T[r * 3], S[c]) + L::mul_rn(T[r * 3 + 1], S[3 + c]) +
-                            L::mul_rn(T[r * 3 + 2], S[6 + c]);
-    out[0] = L::mul_rn(TS[0], T[0]) + L::mul_rn(TS[1], T[1]) + L::mul_rn(TS[2], T[2]);
-    out[1] = L::mul_rn(TS[0], T[3]) + L::mul_rn(TS[1], T[4]) + L::mul_rn(TS[2], T[5]);
-    out[2] = L::mul_rn(TS[3], T[3]) + L::mul_rn(TS[4], T[4]) + L::mul_rn(TS[5], T[5]);
-}
-
-// Inputs of one splat (activated parameters, see gbviewer.Scene).
-struct SplatIn {
-    const float* mean;   // 3
-    const float* scale;  // 3
-    const float* quat;   // 4 (w, x, y, z), unit
-    float opacity;
-    const float* sh;     // K*3
-    float filter_3d;     // 0 when the scene has none
-    const float* weight_sh;  // sort-free view weight, weight_deg's (deg+1)^2 coefficients; null: v = 1
-    int weight_deg;
-    int32_t cell;        // the splat's cell (duplex), -1 when none
-};
-
-// Inputs of L::N splats, one per lane (SplatIn's values; sh[i * 3 + c] and weight_sh[i] as lanes).
-template <class L>
-struct SplatInLanes {
-    typename L::F mean[3], scale[3], quat[4], opacity, filter_3d;
-    const typename L::F* sh;
-    const typename L::F* weight_sh;  // null: v = 1
-    int weight_deg;
-};
 
 // Outputs of L::N splats: Splat2D's fields but log_min_alpha (log_min_alpha(lane_opacity), one lane at a time, with
 // libm's logf as on one splat) and cell (the caller's).
@@ -110,30 +30,11 @@ struct Splat2DLanes {
     GBV_HDI float log_min_alpha(float lane_opacity) const { return logf(min_alpha / lane_opacity); }
 };
 
-// View-space position R m + t of a world point; false behind the near plane (z <= 0.2, KERNELS.md §0.4). An
-// orthographic camera culls the same way: it sees what lies in front of its image plane (z = 0) by more than the
-// near distance, and sorts by the same view-space z.
+// The tiles of the box with half sides h around the screen position xy (getRect, which has h = (r, r)); false when a
+// value is not finite or no tile is touched.
 template <class L>
-GBV_HD typename L::M view_point(const CameraParams& cam, const typename L::F m[3], typename L::F pv[3]) {
-    const float* R = cam.R;
-    for (int i = 0; i < 3; ++i)
-        pv[i] = L::mul_rn(L::set(R[i * 3]), m[0]) + L::mul_rn(L::set(R[i * 3 + 1]), m[1]) +
-                L::mul_rn(L::set(R[i * 3 + 2]), m[2]) + L::set(cam.t[i]);
-    return pv[2] > L::set(cam.near_plane);
-}
-
-// Screen position of the view-space point pv (perspective: fx X/Z + cx; orthographic: fx X + cx) and the tiles of
-// the box with half sides h around it (getRect); false when a value is not finite or no tile is touched.
-template <class L>
-GBV_HD typename L::M screen_footprint(const CameraParams& cam, const typename L::F pv[3], const typename L::F h[2],
-                                      int grid_x, int grid_y, typename L::F xy[2], TileRectLanes<L>* rect) {
-    if (cam.projection == ORTHOGRAPHIC) {
-        xy[0] = L::mul_rn(L::set(cam.fx), pv[0]) + L::set(cam.cx);
-        xy[1] = L::mul_rn(L::set(cam.fy), pv[1]) + L::set(cam.cy);
-    } else {
-        xy[0] = L::set(cam.fx) * pv[0] / pv[2] + L::set(cam.cx);
-        xy[1] = L::set(cam.fy) * pv[1] / pv[2] + L::set(cam.cy);
-    }
+GBV_HD typename L::M tile_footprint(const typename L::F xy[2], const typename L::F h[2], int grid_x, int grid_y,
+                                    TileRectLanes<L>* rect) {
     const typename L::M finite =
         L::and_(L::and_(L::finite(xy[0]), L::finite(xy[1])), L::and_(L::finite(h[0]), L::finite(h[1])));
     if (!L::any(finite)) return finite;
@@ -141,54 +42,29 @@ GBV_HD typename L::M screen_footprint(const CameraParams& cam, const typename L:
     return L::and_(finite, L::and_(L::gti(rect->x1, rect->x0), L::gti(rect->y1, rect->y0)));
 }
 
-// Preprocess one splat per lane for `mode`; returns the lanes that survive: a splat is culled when it is behind the
-// near plane, degenerate, invisible, or touching no tile. wsr and duplex (KERNELS.md §7.2, §8.3) keep the 3DGS +0.3
-// dilation and 3-sigma radius and fold the view weight and the optional depth correction into the opacity:
-// o' = o * (v * (depth_correct ? 1 - z/sigma : 1)), culled when z >= sigma (depth_correct), v * dc <= 0 or
-// o' < 1/255. The outputs of culled lanes are unspecified.
+// Screen position of the view-space point pv and its tile footprint with half sides h (tile_footprint).
 template <class L>
-GBV_HD typename L::M preprocess_splat(const SplatInLanes<L>& in, int sh_deg, const CameraParams& cam, Mode mode,
-                                      const OitParams& oit, int grid_x, int grid_y, Splat2DLanes<L>* out,
-                                      TileRectLanes<L>* rect) {
+GBV_HD typename L::M screen_footprint(const CameraParams& cam, const typename L::F pv[3], const typename L::F h[2],
+                                      int grid_x, int grid_y, typename L::F xy[2], TileRectLanes<L>* rect) {
+    screen_position<L>(cam, pv, xy);
+    return tile_footprint<L>(xy, h, grid_x, grid_y, rect);
+}
+
+// The mode's finish of one splat per lane from its stage st (the lanes `ok`; in: only mean, weight_sh and weight_deg
+// are read, for the view weight): everything but the colour, which the caller takes from the stage. Returns the lanes
+// that survive: a splat is culled when it is degenerate, invisible, or touching no tile. wsr and duplex (KERNELS.md
+// §7.2, §8.3) keep the 3DGS +0.3 dilation and 3-sigma radius and fold the view weight and the optional depth
+// correction into the opacity: o' = o * (v * (depth_correct ? 1 - z/sigma : 1)), culled when z >= sigma
+// (depth_correct), v * dc <= 0 or o' < 1/255. The outputs of culled lanes are unspecified.
+template <class L>
+GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLanes<L>& st, typename L::M ok,
+                                       int sh_deg, const CameraParams& cam, Mode mode, const OitParams& oit,
+                                       int grid_x, int grid_y, Splat2DLanes<L>* out, TileRectLanes<L>* rect) {
     using F = typename L::F;
-    using M = typename L::M;
-    const F* m = in.mean;
-    F pv[3];
-    M ok = view_point<L>(cam, m, pv);
-    if (!L::any(ok)) return ok;
-    // SH and view-weight direction: from the eye to the splat; an orthographic camera's rays are parallel, so every
-    // splat is seen along the camera's forward axis (row 2 of R)
-    const bool ortho = cam.projection == ORTHOGRAPHIC;
-    F dir[3] = {ortho ? L::set(cam.R[6]) : m[0] - L::set(cam.campos[0]),
-                ortho ? L::set(cam.R[7]) : m[1] - L::set(cam.campos[1]),
-                ortho ? L::set(cam.R[8]) : m[2] - L::set(cam.campos[2])};
-    const F dn = L::sqrt(L::mul_rn(dir[0], dir[0]) + L::mul_rn(dir[1], dir[1]) + L::mul_rn(dir[2], dir[2]));
-    const M dpos = dn > L::set(0.0f);
-    dir[0] = L::select(dpos, dir[0] / dn, L::set(0.0f));
-    dir[1] = L::select(dpos, dir[1] / dn, L::set(0.0f));
-    dir[2] = L::select(dpos, dir[2] / dn, L::set(1.0f));
+    F cov[3] = {st.cov[0], st.cov[1], st.cov[2]};
+    F opacity = st.opacity;
 
-    // Mip-Splatting 3D filter (applied in every mode when present): scales grow, opacity compensates.
-    F s[3];
-    F opacity = in.opacity;
-    const M filtered = in.filter_3d > L::set(0.0f);
-    if (L::any(filtered)) {
-        const F f2 = L::mul_rn(in.filter_3d, in.filter_3d);
-        F ratio = L::set(1.0f);
-        for (int i = 0; i < 3; ++i) {
-            const F s2 = L::mul_rn(in.scale[i], in.scale[i]);
-            s[i] = L::select(filtered, L::sqrt(s2 + f2), in.scale[i]);
-            ratio = ratio * (s2 / (s2 + f2));
-        }
-        opacity = L::select(filtered, opacity * L::sqrt(ratio), opacity);
-    } else {
-        for (int i = 0; i < 3; ++i) s[i] = in.scale[i];
-    }
-
-    F cov3[6], cov[3];
-    covariance_3d<L>(in.quat, s, cov3);
-    project_covariance<L>(cam, cov3, pv, cov);
-
+    // the mode's 2D filter, opacity compensation, view weight and cut-off
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
     if (mode == SCALAR) {
@@ -208,11 +84,15 @@ GBV_HD typename L::M preprocess_splat(const SplatInLanes<L>& in, int sh_deg, con
     } else if (mode == WSR || mode == DUPLEX) {
         cov[0] = cov[0] + L::set(DILATION_3DGS);
         cov[2] = cov[2] + L::set(DILATION_3DGS);
-        F w = in.weight_sh ? sh_to_weight<L>(in.weight_sh, sh_deg < in.weight_deg ? sh_deg : in.weight_deg, dir)
-                           : L::set(1.0f);
+        F w = L::set(1.0f);
+        if (in.weight_sh) {
+            F dir[3];
+            view_direction<L>(cam, in.mean, dir);
+            w = sh_to_weight<L>(in.weight_sh, sh_deg < in.weight_deg ? sh_deg : in.weight_deg, dir);
+        }
         if (oit.depth_correct) {
-            ok = L::and_(ok, pv[2] < L::set(oit.sigma));
-            w = w * (L::set(1.0f) - pv[2] / L::set(oit.sigma));
+            ok = L::and_(ok, st.depth < L::set(oit.sigma));
+            w = w * (L::set(1.0f) - st.depth / L::set(oit.sigma));
         }
         ok = L::and_(ok, w > L::set(0.0f));
         opacity = opacity * w;
@@ -229,10 +109,12 @@ GBV_HD typename L::M preprocess_splat(const SplatInLanes<L>& in, int sh_deg, con
     const F r = splat_radius<L>(cov[0], cov[2], det, sigmas);
     F half[2];
     cutoff_half_sides<L>(mode, cov, det, opacity, min_alpha, r, half);
-    ok = L::and_(ok, screen_footprint<L>(cam, pv, half, grid_x, grid_y, out->xy, rect));
+    ok = L::and_(ok, tile_footprint<L>(st.xy, half, grid_x, grid_y, rect));
     if (!L::any(ok)) return ok;
 
-    out->depth = pv[2];
+    out->xy[0] = st.xy[0];
+    out->xy[1] = st.xy[1];
+    out->depth = st.depth;
     out->opacity = opacity;
     out->min_alpha = min_alpha;
     out->conic[0] = cov[2] * inv;
@@ -242,7 +124,21 @@ GBV_HD typename L::M preprocess_splat(const SplatInLanes<L>& in, int sh_deg, con
     out->inv_sigma1 = L::set(1.0f) / out->sigma1;
     out->inv_sigma2 = L::set(1.0f) / out->sigma2;
     out->radius = r;
-    sh_to_rgb<L>(in.sh, sh_deg, dir, out->color);
+    return ok;
+}
+
+// Preprocess one splat per lane for `mode`: the stage, the mode's finish, and the colour of the lanes that survive
+// (preprocess_finish's culls). The outputs of culled lanes are unspecified.
+template <class L>
+GBV_HD typename L::M preprocess_splat(const SplatInLanes<L>& in, int sh_deg, const CameraParams& cam, Mode mode,
+                                      const OitParams& oit, int grid_x, int grid_y, Splat2DLanes<L>* out,
+                                      TileRectLanes<L>* rect) {
+    StageLanes<L> st;
+    typename L::M ok = preprocess_stage<L>(in, cam, &st);
+    if (!L::any(ok)) return ok;
+    ok = preprocess_finish<L>(in, st, ok, sh_deg, cam, mode, oit, grid_x, grid_y, out, rect);
+    if (!L::any(ok)) return ok;
+    stage_color<L>(in, sh_deg, cam, out->color);
     return ok;
 }
 
