@@ -145,10 +145,10 @@ def pane_image(renderer, pf: PathFrame, settings: RenderSettings) -> np.ndarray:
 def measure_flicker(scene: Scene, path: Sequence[PathFrame], settings: Sequence[RenderSettings], *,
                     reference: RenderSettings | None = None, pairs: int = DEFAULT_PAIRS, backend: str = "cpu",
                     with_floor: bool = True, keep_pairs: bool = False, path_name: str = "",
-                    progress: Callable[[float], None] | None = None) -> FlickerReport:
+                    progress: Callable[[RenderSettings], None] | None = None) -> FlickerReport:
     """Flicker and change of every mode of `settings` over `pairs` pairs of consecutive frames of `path` (see the
     module's docstring), against `reference` (default scalar 8x8), with the floor unless `with_floor` is False.
-    keep_pairs: keep each pair's heat map (for `write_heat_video`). progress(1) after each render."""
+    keep_pairs: keep each pair's heat map (for `write_heat_video`). progress(settings) after each render."""
     reference = reference or RenderSettings.parse(DEFAULT_REFERENCE)
     if not settings:
         raise GBViewerError("no modes given")
@@ -164,7 +164,7 @@ def measure_flicker(scene: Scene, path: Sequence[PathFrame], settings: Sequence[
         if (s, i) not in cache:
             cache[s, i] = pane_image(renderer, path[i], s)
             if progress is not None:
-                progress(1)
+                progress(s)
         return cache[s, i]
 
     h, w = path[0].height, path[0].width

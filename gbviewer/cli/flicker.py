@@ -57,7 +57,7 @@ def cmd_flicker(args: argparse.Namespace) -> int:
     total = min(args.pairs, max(1, len(path) - 1)) * 2 * (len(settings) + 2)
     with progress_bar("flicker", total) as advance:
         report = measure_flicker(scene, path, settings, reference=reference, pairs=args.pairs, backend=backend,
-                                 keep_pairs=args.video, path_name=str(args.path), progress=advance)
+                                 keep_pairs=args.video, path_name=str(args.path), progress=lambda _: advance(1))
     print_report(report, cam.width, cam.height)
     written = write_table(out, report, args.force) + write_heat_maps(out, report, args.force)
     if args.video:
