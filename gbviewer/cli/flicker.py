@@ -78,7 +78,7 @@ def print_report(report, width: int, height: int) -> None:
     for row in report.rows():
         t.add_row(row["label"], f"{row['flicker']:.3f}", f"{row['change']:.3f}",
                   "-" if row["vs_floor"] is None else f"{row['vs_floor']:.2f}")
-    floor = "" if report.floor is None else f"; floor ({report.floor.spec} vs it) {report.floor.flicker:.3f}"
+    floor = "" if report.floor is None else f"; floor ({report.floor.spec} vs it): {report.floor.flicker:.3f}"
     t.caption = f"reference {report.reference}: change {report.reference_change:.3f}{floor}"
     wide_console().print(t)
 
