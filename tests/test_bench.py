@@ -152,6 +152,14 @@ def test_progress_units_add_up_to_the_totals(bundled_scene):
     assert sum(units) == pytest.approx(bench.stability_cost(bundled_scene, cams[0], settings, 2, (32, 24)))
 
 
+def test_bench_flicker_pairs_0_turns_the_measure_off():
+    kwargs = dict(views=1, size=(32, 24), repeat=1, simd="current")
+    settings = gb.RenderSettings.parse_list("scalar")
+    assert bench.run_bench([gb.DEFAULT_SCENE], settings, [1.0], ["cpu"], flicker_pairs=0, **kwargs).flicker == []
+    rows = bench.run_bench([gb.DEFAULT_SCENE], settings, [1.0], ["cpu"], flicker_pairs=1, **kwargs).flicker
+    assert [(r.mode, r.pairs) for r in rows] == [("scalar", 1)]
+
+
 def test_bench_simd_comparison_end_to_end(tmp_path, capsys):
     out = tmp_path / "b.json"
     paths = bench.simd_paths()

@@ -111,7 +111,7 @@ def test_outputs_heat_maps_table_and_video(tmp_path):
     assert [p.name for p in heat] == ["heat-scalar.png", "heat-mip.png"]
     img = np.asarray(Image.open(heat[0]))
     assert img.shape[1] == 64 and img.shape[0] > 48  # the map, then its caption below
-    rows = list(csv.DictReader(open(fl.write_table(tmp_path, rep)[0])))
+    rows = list(csv.DictReader(fl.write_table(tmp_path, rep)[0].read_text().splitlines()))
     assert [r["mode"] for r in rows] == ["scalar", "mip"]
     assert float(rows[0]["flicker"]) == pytest.approx(rep.modes[0].flicker)
     with pytest.raises(gb.GBViewerError, match="exists"):
