@@ -44,6 +44,7 @@ FLICKER_PATHS = (*PATHS, "orbit")
 DEFAULT_REFERENCE = "supersample:8"
 DEFAULT_DEGREES = 12.0  # azimuth swept by the orbit path (over 120 frames: 0.1 degree per frame)
 DEFAULT_PAIRS = 8
+VIEW_STEP = 0.1  # degrees of the viewer's flicker view: the orbit path's default step per frame
 MIN_HEAT_SCALE = 1.0  # 8-bit levels: the colour scale of heat maps that are all ~0
 CSV_COLUMNS = ("mode", "label", "flicker", "change", "vs_floor", "reference", "floor", "pairs", "frames", "path")
 
@@ -134,9 +135,9 @@ def floor_settings(reference: RenderSettings) -> RenderSettings | None:
     return replace(reference, supersample=reference.supersample // 2) if reference.supersample > 1 else None
 
 
-def pane_image(renderer, pf: PathFrame, settings: RenderSettings) -> np.ndarray:
+def pane_image(renderer, pf: PathFrame, settings: RenderSettings, cancel=None) -> np.ndarray:
     """One frame of the path as shown: rgb clipped to [0, 1], nearest-resized to the pane, float32."""
-    rgb = np.clip(renderer.render(pf.camera, settings).rgb, 0.0, 1.0)
+    rgb = np.clip(renderer.render(pf.camera, settings, cancel=cancel).rgb, 0.0, 1.0)
     if rgb.shape[:2] != (pf.height, pf.width):
         rgb = upscale_nearest(rgb, pf.height, pf.width)
     return rgb.astype(np.float32, copy=False)
@@ -145,10 +146,12 @@ def pane_image(renderer, pf: PathFrame, settings: RenderSettings) -> np.ndarray:
 def measure_flicker(scene: Scene, path: Sequence[PathFrame], settings: Sequence[RenderSettings], *,
                     reference: RenderSettings | None = None, pairs: int = DEFAULT_PAIRS, backend: str = "cpu",
                     with_floor: bool = True, keep_pairs: bool = False, path_name: str = "",
-                    progress: Callable[[RenderSettings], None] | None = None) -> FlickerReport:
+                    progress: Callable[[RenderSettings], None] | None = None, renderer=None,
+                    cancel=None) -> FlickerReport:
     """Flicker and change of every mode of `settings` over `pairs` pairs of consecutive frames of `path` (see the
     module's docstring), against `reference` (default scalar 8x8), with the floor unless `with_floor` is False.
-    keep_pairs: keep each pair's heat map (for `write_heat_video`). progress(settings) after each render."""
+    keep_pairs: keep each pair's heat map (for `write_heat_video`). progress(settings) after each render.
+    renderer: render on it (else the process's renderer of `backend`); cancel: passed to every render."""
     reference = reference or RenderSettings.parse(DEFAULT_REFERENCE)
     if not settings:
         raise GBViewerError("no modes given")
@@ -157,12 +160,12 @@ def measure_flicker(scene: Scene, path: Sequence[PathFrame], settings: Sequence[
     starts = pair_starts(len(path), pairs)
     floor = floor_settings(reference) if with_floor else None
     measured = list(dict.fromkeys([*settings, *([floor] if floor is not None else [])]))
-    renderer = get_renderer(scene, backend)
+    renderer = renderer or get_renderer(scene, backend)
     cache: dict[tuple[RenderSettings, int], np.ndarray] = {}
 
     def image(s: RenderSettings, i: int) -> np.ndarray:
         if (s, i) not in cache:
-            cache[s, i] = pane_image(renderer, path[i], s)
+            cache[s, i] = pane_image(renderer, path[i], s, cancel)
             if progress is not None:
                 progress(s)
         return cache[s, i]
@@ -188,6 +191,14 @@ def measure_flicker(scene: Scene, path: Sequence[PathFrame], settings: Sequence[
                               (heat[s] / n).astype(np.float32), per_pair[s]) for s in measured}
     return FlickerReport(path_name, len(path), starts, reference.spec, 255.0 * change[reference] / n,
                          [results[s] for s in settings], results[floor] if floor is not None else None)
+
+
+def view_flicker(renderer, scene: Scene, camera: Camera, settings: RenderSettings, degrees: float = VIEW_STEP,
+                 cancel=None) -> ModeFlicker:
+    """The flicker of one orbit step of `degrees` from `camera` in `settings` against the default reference (the
+    viewer's flicker view), on `renderer`."""
+    return measure_flicker(scene, orbit_path(camera, scene, 2, degrees), [settings], pairs=1, with_floor=False,
+                           renderer=renderer, cancel=cancel).modes[0]
 
 
 def heat_colours(heat: np.ndarray, scale: float) -> np.ndarray:
