@@ -60,7 +60,7 @@ def instrument(worker) -> tuple[dict, list[float]]:
     return asked, stale
 
 
-def run(scene: str, cycles: int, orbit_s: float, settle_s: float) -> dict:
+def run(scene: str, cycles: int, orbit_s: float, settle_s: float, screenshot: Path | None = None) -> dict:
     from gbviewer.app.window import ViewerApp
 
     app = ViewerApp(scene, size=WINDOW, persist=False)
@@ -118,6 +118,13 @@ def run(scene: str, cycles: int, orbit_s: float, settle_s: float) -> dict:
             settle(until_final=True)
             orbit(0.5)
             settle(until_final=False)
+        if screenshot is not None:  # the window with both panes final
+            orbit(0.1)
+            settle(until_final=True)
+            app.step()
+            from PIL import Image
+
+            Image.fromarray(app.read_window()).save(screenshot)
         orbit(0.5)
         return {
             "scene": Path(scene).name, "pane_render_sizes": sizes, "cycles": cycles, "gl_renderer": app.gl_renderer,
@@ -171,9 +178,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--orbit", type=float, default=3.0, help="seconds of orbiting per cycle")
     ap.add_argument("--settle", type=float, default=30.0, help="at most this long for the final frames per cycle")
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--screenshot", type=Path, help="a PNG of the window once the last stop's frames are final")
     args = ap.parse_args(argv)
     with xvfb_display(2000, 800):
-        result = run(args.scene, args.cycles, args.orbit, args.settle)
+        result = run(args.scene, args.cycles, args.orbit, args.settle, args.screenshot)
     text = json.dumps(result, indent=1)
     print("\n".join(markdown(result)))
     if args.json:

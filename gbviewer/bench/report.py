@@ -19,6 +19,7 @@ from ..validate import dumps_json
 from .fidelity import FidelityRow
 from .oit import OitRow
 from .simd import SIMD_NAMES, simd_summary
+from .stability import FlickerRow
 from .speed import SpeedRow, ratios
 
 
@@ -47,6 +48,21 @@ def print_oit(rows: list[OitRow]) -> None:
     wide_console().print(t)
 
 
+def print_flicker(rows: list[FlickerRow]) -> None:
+    """Flicker and change per mode (gbviewer.flicker), and each scene's floor."""
+    from rich.table import Table
+
+    t = Table(title="Flicker along a zoom x1 -> x1/4 (8-bit levels: frame-to-frame change minus the reference's; "
+                    "floor: the reference at half its samples per axis against it)")
+    for col in ("scene", "mode", "size", "pairs", "flicker", "change", "x floor", "floor", "reference"):
+        t.add_column(col, justify="left" if col in ("scene", "mode", "reference") else "right")
+    for r in rows:
+        t.add_row(r.scene, r.label, f"{r.width}x{r.height}", str(r.pairs), f"{r.flicker:.3f}", f"{r.change:.3f}",
+                  f"{r.flicker / r.floor:.2f}" if r.floor else "-", "-" if r.floor is None else f"{r.floor:.3f}",
+                  r.reference)
+    wide_console().print(t)
+
+
 def machine_description() -> dict:
     """CPU model, cores, Python, and the GL renderer when a GL backend is registered."""
     cpu = platform.processor()
@@ -66,10 +82,13 @@ def machine_description() -> dict:
 
 
 def write_json(path: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = False,
-               oit: list[OitRow] | None = None, simd: dict | None = None) -> Path:
-    """Every number: machine, simd (simd_info()), speed, fidelity, ratios, order_independent."""
+               oit: list[OitRow] | None = None, simd: dict | None = None, flicker: list[FlickerRow] | None = None
+               ) -> Path:
+    """Every number: machine, simd (simd_info()), speed, fidelity, ratios, flicker, order_independent."""
     doc = {"machine": machine_description(), "simd": simd, "speed": [asdict(r) for r in speed],
            "fidelity": [asdict(r) for r in fidelity], "ratios": ratios(speed)}
+    if flicker:
+        doc["flicker"] = [asdict(r) for r in flicker]
     if oit:
         doc["order_independent"] = [asdict(r) for r in oit]
     return atomic_write(path, lambda p: p.write_text(dumps_json(doc, indent=2)), force)

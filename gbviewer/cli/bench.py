@@ -53,14 +53,17 @@ def cmd_bench(args: argparse.Namespace) -> int:
     result = bench.run_bench(
         args.scenes, with_lod(RenderSettings.parse_list(args.modes), args.lod), args.rates, backends, views=args.views,
         size=args.size, repeat=args.repeat, cameras=args.cameras, up=args.up, simd=args.simd,
-        flicker_frames=args.flicker_frames, flicker_step=args.flicker_step,
+        flicker_frames=args.flicker_frames, flicker_step=args.flicker_step, flicker_pairs=args.flicker_pairs,
+        flicker_size=args.flicker_size,
         outputs=outputs, force=args.force, progress=progress_bar)
     bench.print_tables(result.speed, result.fidelity, result.simd)
+    if result.flicker:
+        bench.print_flicker(result.flicker)
     if result.oit:
         bench.print_oit(result.oit)
     if args.json:
         path = bench.write_json(Path(args.json), result.speed, result.fidelity, args.force, oit=result.oit,
-                                simd=result.simd)
+                                simd=result.simd, flicker=result.flicker)
         print(f"wrote {path}")
     if args.plots:
         for p in bench.write_plots(Path(args.plots), result.speed, result.fidelity, args.force):
@@ -97,6 +100,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", help="write every number and the machine description here")
     p.add_argument("--plots", help="write PNG plots into this folder")
     p.add_argument("--force", action="store_true", help="overwrite existing --json/--plots files")
+    p.add_argument("--flicker-pairs", type=count(MAX_COUNT, lo=0), default=3,
+                   help="pairs of frames of the zoom x1 -> x1/4 on which every mode's flicker is measured against "
+                   "scalar 8x8 (gbviewer flicker; default 3; 0: no flicker measure)")
+    p.add_argument("--flicker-size", type=SIZE, default=(160, 120), metavar="WxH",
+                   help="image size of that measure (default 160x120)")
     p.add_argument("--flicker-frames", type=count(MAX_COUNT), default=16,
                    help="with wsr or duplex among --modes: frames of the slow orbit that measures popping")
     p.add_argument("--flicker-step", type=positive(360.0), default=0.1,
