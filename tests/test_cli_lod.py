@@ -1,5 +1,5 @@
-"""The command line's level of detail: `--lod PX` and the `MODE+lod:TAU` spec on render, compare, bench, eval and
-video; what it renders is `RenderSettings(lod=PX)`'s image; bad values are one line and exit status 2."""
+"""The command line's level of detail: `--lod PX` and the `MODE+lod:TAU` spec on render, compare, bench, eval,
+video and flicker; what it renders is `RenderSettings(lod=PX)`'s image; bad values are one line and exit status 2."""
 
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ def test_with_lod_adds_each_modes_variant_once():
         "scalar", "scalar+lod:1"]
 
 
-@pytest.mark.parametrize("cmd", ["render", "compare", "bench", "eval", "video"])
+@pytest.mark.parametrize("cmd", ["render", "compare", "bench", "eval", "video", "flicker"])
 @pytest.mark.parametrize("value", ["-1", "nan", "x", "1e9"])
 def test_bad_lod_one_line_exit_2(cmd, value, capsys, monkeypatch):
     patch_commands(monkeypatch, "load", lambda *a: pytest.fail("loaded a scene despite a bad option"))

@@ -17,8 +17,8 @@ from ..io.files import check_writable
 from ..io.outputs import refuse_collisions
 from ..render import RenderSettings
 from ..video import MAX_FPS, MIN_FPS
-from .options import (MAX_COUNT, add_backend_arg, add_camera_args, backend_of, camera_from_args, check_render_size,
-                      progress_bar)
+from .options import (MAX_COUNT, add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args,
+                      check_render_size, progress_bar, with_lod)
 
 FLICKER_PANE = (320, 240)  # default pane size
 VIDEO_NAME = "heat.mp4"
@@ -28,7 +28,7 @@ def cmd_flicker(args: argparse.Namespace) -> int:
     """Flicker per mode along a path: printed table, flicker.csv/json, heat maps and optionally their video."""
     if args.video:
         require("video", "imageio_ffmpeg", "--video", load=False)
-    settings = RenderSettings.parse_list(args.modes)
+    settings = with_lod(RenderSettings.parse_list(args.modes), args.lod)
     try:
         reference = RenderSettings.parse(args.reference)
     except GBViewerError as exc:
@@ -88,7 +88,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scene", type=Path)
     add_camera_args(p)
     p.add_argument("--modes", default="scalar,mip,analytic,gaussian_blending,supersample:3",
-                   help="comma-separated MODE, MODE:N, supersample:N or preset:NAME")
+                   help="comma-separated MODE, MODE:N, supersample:N or preset:NAME, each with +lod[:PX] optionally")
+    add_lod_arg(p)
     p.add_argument("--reference", default=DEFAULT_REFERENCE,
                    help=f"the dense reference whose change is subtracted (default {DEFAULT_REFERENCE}); the floor "
                    "is it at half its samples per axis")
