@@ -188,6 +188,7 @@ def test_cut_scene_renders_in_every_mode_with_its_label():
         assert np.array_equal(frame.rgb, direct.rgb), spec
         assert frame.stats.lod_splats == drawn
         assert frame.stats.mode.endswith(f"LOD \u03c4=2 px, {drawn:,} of {total:,} splats"), frame.stats.mode
+    assert gb.RenderSettings(lod=2).label_for(scene) == "scalar LOD \u03c4=2 px"  # a whole scene: no cut's counts
     for bad in ("scalar+lod:x", "scalar+mip", "scalar+lod:-1"):
         with pytest.raises(RenderError):
             gb.RenderSettings.parse(bad)

@@ -135,9 +135,11 @@ class RenderSettings:
             label += " (approx.: v=1)"
         elif self.mode == Mode.DUPLEX and (oit is None or oit.cells is None) and not neural:
             label += f" (built cells, K={self.cell_size})"
-        if self.lod is not None:
-            drawn, total = scene.meta.get("lod", (scene.num_splats, scene.num_splats))
-            label += f" LOD \u03c4={self.lod:g} px, {drawn:,} of {total:,} splats"
+        if self.lod is not None:  # the counts of a cut's scene (the whole scene's label: none, cuts vary by camera)
+            label += f" LOD \u03c4={self.lod:g} px"
+            if "lod" in scene.meta:
+                drawn, total = scene.meta["lod"]
+                label += f", {drawn:,} of {total:,} splats"
         return label
 
     @property
