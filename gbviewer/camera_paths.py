@@ -120,6 +120,22 @@ def keyframe_path(keys: Sequence[Keyframe], frames: int) -> list[PathFrame]:
     return out
 
 
+def path_length(frames: int | None, fps: float = 30.0, seconds: float | None = None,
+                keys: Sequence[Keyframe] | None = None, max_frames: int = MAX_FRAMES) -> int:
+    """A path's frame count: `frames`; without it `seconds` x fps, or the keyframes' timed span x fps (+ 1, both
+    ends), or DEFAULT_SECONDS x fps; more than `max_frames` is an error."""
+    what = f"frames of the video (at most {max_frames}; --max-frames raises the limit)"
+    if frames is None:
+        if seconds is not None:
+            length = max(1.0, real(seconds, "seconds", lo=0.0, lo_open=True) * fps)
+        elif keys is not None and keys[0].time is not None:
+            length = (keys[-1].time - keys[0].time) * fps + 1
+        else:
+            length = DEFAULT_SECONDS * fps
+        frames = round(real(length, what))
+    return integer(frames, what, lo=1, hi=max_frames)
+
+
 def camera_path(kind: str | Path, base: Camera, frames: int | None, start: float = 1.0, end: float = 1.0 / 8.0,
                 scene: Scene | None = None, up: str = "-y", *, fps: float = 30.0,
                 seconds: float | None = None, max_frames: int = MAX_FRAMES) -> list[PathFrame]:
@@ -132,16 +148,7 @@ def camera_path(kind: str | Path, base: Camera, frames: int | None, start: float
     if keyed and not (str(kind).lower().endswith(".json") or Path(kind).is_file()):
         raise GBViewerError(f"path {str(kind)!r}; expected zoom, dolly, rate or a keyframes FILE.json")
     keys = load_keyframes(kind, base, scene, up) if keyed else None
-    what = f"frames of the video (at most {max_frames}; --max-frames raises the limit)"
-    if frames is None:
-        if seconds is not None:
-            length = max(1.0, real(seconds, "seconds", lo=0.0, lo_open=True) * fps)
-        elif keys is not None and keys[0].time is not None:
-            length = (keys[-1].time - keys[0].time) * fps + 1
-        else:
-            length = DEFAULT_SECONDS * fps
-        frames = round(real(length, what))
-    frames = integer(frames, what, lo=1, hi=max_frames)
+    frames = path_length(frames, fps, seconds, keys, max_frames)
     if keys is not None:
         return keyframe_path(keys, frames)
     if str(kind) == "zoom":

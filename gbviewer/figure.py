@@ -45,8 +45,14 @@ def _font(size: int) -> ImageFont.ImageFont:
         return ImageFont.load_default()
 
 
+def drawable(text: str) -> str:
+    """`text` in the glyphs of Pillow's default font, which has no Greek: the LOD label's tau spelled out."""
+    return text.replace("\u03c4", "tau")
+
+
 def draw_label(img: Image.Image, text: str, size: int = 14) -> None:
     """Write `text` in the top-left corner on a dark box."""
+    text = drawable(text)
     draw = ImageDraw.Draw(img)
     font = _font(size)
     box = draw.textbbox((4, 3), text, font=font)
@@ -161,7 +167,7 @@ def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = GA
         raise GBViewerError(f"captions {captions!r}; expected 'overlay' or 'below'")
     lines = lines or _default_lines
     fs = font_size or caption_font_size(height)
-    texts = [[lines(cell) for cell in row] for row in cells] if captions == "below" else None
+    texts = [[[drawable(t) for t in lines(cell)] for cell in row] for row in cells] if captions == "below" else None
     n_lines = max((len(t) for row in texts for t in row), default=0) if texts else 0
     layout = GridLayout(len(cells), len(cells[0]), width, height, gap, GridLayout.caption_height_for(n_lines, fs),
                         even)

@@ -7,7 +7,7 @@ import time
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 from PIL import Image
@@ -89,7 +89,7 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
     or cancel leaves neither. Refuses to overwrite an existing `out` unless `force`.
     Returns a VideoInfo (path, frame count, frame size, fps, wall time).
     """
-    imageio_ffmpeg = require("video", "imageio_ffmpeg", "an MP4 video")
+    require("video", "imageio_ffmpeg", "an MP4 video")
     out = Path(out)
     if out.suffix.lower() != ".mp4":
         raise GBViewerError(f"{out}: output must end in .mp4")
@@ -104,19 +104,35 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
     fps = real(fps, "fps", lo=MIN_FPS, hi=MAX_FPS)
     crf = integer(crf, "crf", lo=0, hi=51)
     renderer = get_renderer(scene, backend)
-    size: list[int] = []
     t0 = time.perf_counter()
+
+    def images() -> Iterator[np.ndarray]:
+        for i, pf in enumerate(frames):
+            cells = []
+            for s in settings_list:
+                if cancel is not None and cancel.is_set():
+                    raise VideoCancelled("video cancelled; nothing written")
+                cells.append(Cell.of(s, pf.rate, render_or_stop(renderer, pf.camera, s, cancel)))
+            yield np.asarray(compose_video_frame(cells, pf, inset))
+            if progress is not None:
+                progress(i + 1, len(frames))
+
+    width, height = write_mp4(out, images(), len(frames), fps=fps, crf=crf, preset=preset, force=force)
+    return VideoInfo(out, len(frames), width, height, float(fps), time.perf_counter() - t0)
+
+
+def write_mp4(out: str | Path, images: Iterable[np.ndarray], count: int, *, fps: float = 30.0, crf: int = DEFAULT_CRF,
+              preset: str = "medium", force: bool = False) -> tuple[int, int]:
+    """Stream `count` uint8 (H, W, 3) images of one size to imageio-ffmpeg's ffmpeg (libx264, yuv420p, constant
+    quality `crf`) into `out`, atomically: written beside it and renamed at the end, so an exception raised by
+    `images` (a cancel) leaves no file. Returns (width, height)."""
+    imageio_ffmpeg = require("video", "imageio_ffmpeg", "an MP4 video")
+    size: list[int] = []
 
     def write(tmp: Path) -> None:
         writer = None
         try:
-            for i, pf in enumerate(frames):
-                cells = []
-                for s in settings_list:
-                    if cancel is not None and cancel.is_set():
-                        raise VideoCancelled("video cancelled; nothing written")
-                    cells.append(Cell.of(s, pf.rate, render_or_stop(renderer, pf.camera, s, cancel)))
-                img = np.asarray(compose_video_frame(cells, pf, inset))
+            for img in images:
                 if writer is None:
                     size[:] = [img.shape[1], img.shape[0]]
                     writer = imageio_ffmpeg.write_frames(
@@ -125,14 +141,12 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
                         output_params=["-crf", str(crf), "-preset", preset, "-movflags", "+faststart"])
                     writer.send(None)
                 writer.send(np.ascontiguousarray(img))
-                if progress is not None:
-                    progress(i + 1, len(frames))
         finally:
             if writer is not None:
                 writer.close()  # ffmpeg finishes (or is stopped) before the file is renamed or removed
         written = imageio_ffmpeg.count_frames_and_secs(str(tmp))[0]  # imageio does not check ffmpeg's exit status
-        if written != len(frames):
-            raise GBViewerError(f"ffmpeg wrote {written} of {len(frames)} frames; see its messages above")
+        if written != count:
+            raise GBViewerError(f"ffmpeg wrote {written} of {count} frames; see its messages above")
 
     atomic_write(out, write, force)
-    return VideoInfo(out, len(frames), size[0], size[1], float(fps), time.perf_counter() - t0)
+    return size[0], size[1]

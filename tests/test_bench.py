@@ -44,7 +44,7 @@ def test_bench_command_end_to_end(tmp_path, capsys):
     out, plots = tmp_path / "b.json", tmp_path / "plots"
     args = ["bench", str(gb.DEFAULT_SCENE), "--modes", "scalar,gaussian_blending,supersample:2", "--views", "2",
             "--repeat", "2", "--size", "64x48", "--rates", "2,1,1/2", "--simd", "current", "--json", str(out),
-            "--plots", str(plots)]
+            "--plots", str(plots), "--flicker-pairs", "2", "--flicker-size", "48x32"]
     assert main(args) == 0
     doc = json.loads(out.read_text())
     assert {"cpu", "cores", "python"} <= set(doc["machine"])
@@ -63,6 +63,11 @@ def test_bench_command_end_to_end(tmp_path, capsys):
     assert all(set(r) >= {"psnr", "ssim", "mode", "scene", "simd"} for r in fid)
     assert {r["ratio"] for r in doc["ratios"]} == {"gaussian_blending / scalar", "scalar:2 / gaussian_blending"}
     assert [p.suffix for p in plots.iterdir()] == [".png"]
+    flicker = doc["flicker"]  # every mode, with the reference's floor
+    assert [r["mode"] for r in flicker] == ["scalar", "gaussian_blending", "scalar:2"]
+    assert all(r["flicker"] >= 0 and r["floor"] > 0 and r["pairs"] == 2 and r["reference"] == "scalar:8"
+               and (r["width"], r["height"]) == (48, 32) for r in flicker)
+    assert "Flicker along a zoom" in capsys.readouterr().out
     assert main(args) == 2  # the JSON exists now: refused without --force
     assert "--force" in capsys.readouterr().err
 
@@ -141,6 +146,18 @@ def test_progress_units_add_up_to_the_totals(bundled_scene):
     units = []
     bench.measure_oit(bundled_scene, "b", cams, settings, flicker_frames=3, progress=units.append)
     assert sum(units) == pytest.approx(bench.oit_cost(bundled_scene, cams, settings, 3))
+    units = []
+    settings = gb.RenderSettings.parse_list("scalar,supersample:4")  # supersample:4 is the floor: rendered once
+    bench.measure_stability(bundled_scene, "b", cams[0], settings, 2, (32, 24), progress=units.append)
+    assert sum(units) == pytest.approx(bench.stability_cost(bundled_scene, cams[0], settings, 2, (32, 24)))
+
+
+def test_bench_flicker_pairs_0_turns_the_measure_off():
+    kwargs = dict(views=1, size=(32, 24), repeat=1, simd="current")
+    settings = gb.RenderSettings.parse_list("scalar")
+    assert bench.run_bench([gb.DEFAULT_SCENE], settings, [1.0], ["cpu"], flicker_pairs=0, **kwargs).flicker == []
+    rows = bench.run_bench([gb.DEFAULT_SCENE], settings, [1.0], ["cpu"], flicker_pairs=1, **kwargs).flicker
+    assert [(r.mode, r.pairs) for r in rows] == [("scalar", 1)]
 
 
 def test_bench_simd_comparison_end_to_end(tmp_path, capsys):

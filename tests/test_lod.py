@@ -65,12 +65,12 @@ def test_parent_of_identical_children_is_the_child(rule, expected, alpha):
     np.testing.assert_allclose(tree.opacities[0], expected(alpha), rtol=1e-6)
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_merged_moments_are_the_weighted_moments_of_the_leaves(seed):
+@pytest.mark.parametrize("seed, rule", [(0, "depth"), (1, "depth"), (2, "opacity")])
+def test_merged_moments_are_the_weighted_moments_of_the_leaves(seed, rule):
     scene = random_scene(700, seed=seed, sh_degree=2)
-    tree = lod.build(scene)
+    tree = lod.build(scene, rule)
     n = scene.num_splats
-    w = np.minimum(scene.opacities.astype(np.float64), 1 - 1e-7) * areas(scene.scales)
+    w = np.minimum(scene.opacities.astype(np.float64), 1 - 1e-7) * (areas(scene.scales) if rule == "depth" else 1)
     tau = -np.log1p(-np.minimum(scene.opacities.astype(np.float64), 1 - 1e-7)) * areas(scene.scales)
     cov = covariances(scene.scales, scene.quats)
     for node in [n, n + 5, int(tree.levels[2]), int(tree.levels[-1]) - 1]:  # level 1, 2 and the root
@@ -132,6 +132,33 @@ def test_the_cut_covers_every_leaf_exactly_once(band):
         assert lod.cut(tree, cam, 50.0).num_drawn < n  # the cut does coarsen
 
 
+def flat_weights(tree: lod.Hierarchy, c: lod.Cut) -> np.ndarray:
+    """The drawn weight of every node by flat id (0: not drawn)."""
+    n = tree.num_leaves
+    position = np.empty(n, np.int64)
+    position[tree.order] = np.arange(n)
+    out = np.zeros(int(tree.levels[-1]))
+    out[position[c.leaves]] = c.leaf_weights
+    out[n + c.nodes] = c.node_weights
+    return out
+
+
+def test_cut_weights_are_continuous_in_tau():
+    """With the fade band every node's weight moves by little between nearby tau (no popping); a hard cut jumps."""
+    scene = random_scene(3000, seed=8)
+    tree = lod.build(scene)
+    cam = cameras(scene, 9)[0]
+    taus = np.geomspace(0.5, 30.0, 300)  # steps of 1.4 %
+    for band, bound in ((lod.DEFAULT_BAND, 0.1), (0.0, None)):
+        w = np.stack([flat_weights(tree, lod.cut(tree, cam, t, band=band)) for t in taus])
+        step = np.abs(np.diff(w, axis=0)).max()
+        assert lod.cut(tree, cam, taus[0], band=band).num_drawn > lod.cut(tree, cam, taus[-1], band=band).num_drawn
+        if bound is None:
+            assert step == 1.0
+        else:
+            assert step < bound, step
+
+
 def test_tau_zero_is_the_leaf_set_and_renders_bit_identically():
     scene = random_scene(500, seed=4, sh_degree=1)
     tree = lod.build(scene)
@@ -161,6 +188,7 @@ def test_cut_scene_renders_in_every_mode_with_its_label():
         assert np.array_equal(frame.rgb, direct.rgb), spec
         assert frame.stats.lod_splats == drawn
         assert frame.stats.mode.endswith(f"LOD \u03c4=2 px, {drawn:,} of {total:,} splats"), frame.stats.mode
+    assert gb.RenderSettings(lod=2).label_for(scene) == "scalar LOD \u03c4=2 px"  # a whole scene: no cut's counts
     for bad in ("scalar+lod:x", "scalar+mip", "scalar+lod:-1"):
         with pytest.raises(RenderError):
             gb.RenderSettings.parse(bad)
@@ -202,3 +230,18 @@ def test_a_truncated_cache_entry_is_rebuilt_with_one_warning(tmp_path):
     assert len(caught) == 1
     assert all(np.array_equal(a, b) for a, b in zip(first.arrays().values(), rebuilt.arrays().values()))
     assert entry.read_bytes() == data  # rewritten whole
+
+
+def test_render_many_mixing_lod_and_full_panes_matches_single_renders():
+    """The viewer's companion panes: one camera, a full pane and LOD panes in one render_many (the cut is another
+    view scene: its own batch), each bit-identical to its own render."""
+    scene = random_scene(2000, seed=12, sh_degree=1, spread=3.0)
+    cam = gb.Camera(64, 48, 20.0, 20.0, 32, 24, np.eye(3), np.zeros(3))
+    settings = [gb.RenderSettings(), gb.RenderSettings(lod=2.0), gb.RenderSettings(),
+                gb.RenderSettings("gaussian_blending", lod=4.0)]
+    renderer = gb.get_renderer(scene, "cpu")
+    many = renderer.render_many([(cam, s) for s in settings])
+    for s, frame in zip(settings, many):
+        alone = gb.get_renderer(scene, "cpu").render(cam, s)
+        assert np.array_equal(frame.rgb, alone.rgb) and frame.stats.lod_splats == alone.stats.lod_splats, s.spec
+    assert not np.array_equal(many[0].rgb, many[1].rgb)

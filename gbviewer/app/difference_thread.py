@@ -20,6 +20,7 @@ from ..camera import Camera
 from ..cancel import CancelToken
 from ..errors import GBViewerError, RenderCancelled
 from ..eval import default_cache, ground_truth
+from ..flicker import view_flicker
 from ..io.datasets import View
 from ..metrics import zoom_out_factor
 from ..render import Frame, RenderSettings
@@ -37,6 +38,11 @@ class Spec:
 
     reference: str | None = None  # 'box', 'dense' or PHOTO: the difference to it, PSNR and SSIM
     to_pane: RenderSettings | None = None  # pane A's settings: the difference to pane A
+    flicker: bool = False  # the flicker heat map of an orbit step from this view (gbviewer.flicker.view_flicker)
+
+    @property
+    def empty(self) -> bool:
+        return self.reference is None and self.to_pane is None and not self.flicker
 
 
 @dataclass
@@ -66,6 +72,8 @@ class Analysis:
     photo: np.ndarray | None = None  # the PHOTO reference (H, W, 3): what the photo pane shows
     photo_name: str = ""  # its view's name
     seconds: float = 0.0
+    heat: np.ndarray | None = None  # the flicker heat map (H, W), 8-bit levels
+    flicker: float = 0.0  # its mean
 
 
 class AnalysisThread(SlotThread):
@@ -127,6 +135,10 @@ class AnalysisThread(SlotThread):
                                                                                cancel=cancel).rgb)
                 out.diff = signed_difference(rgb, a)
                 out.diff_scale = robust_scale(out.diff)
+            if spec.flicker:
+                check_samples(req.camera, req.rate, "dense")
+                m = view_flicker(self._renderer, req.scene, req.camera, req.settings, cancel=cancel)
+                out.heat, out.flicker = m.heat, m.flicker
         except RenderCancelled:
             return None
         except GBViewerError as exc:

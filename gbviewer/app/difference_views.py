@@ -19,6 +19,7 @@ import numpy as np
 
 from ..differences import REFERENCES, camera_key, colour_difference
 from ..camera import format_rate
+from ..flicker import DEFAULT_REFERENCE, VIEW_STEP, heat_colours, heat_scale
 from ..io.datasets import View
 from ..render import Frame
 from ..render.presets import differences
@@ -31,7 +32,7 @@ from .state import AppState
 from .views import visualize as visualize_view
 from .worker import RenderWorker
 
-ANALYSIS_VIEWS = ("difference", "error", PHOTO)
+ANALYSIS_VIEWS = ("difference", "error", PHOTO, "flicker")
 REFERENCE_KINDS = {**REFERENCES, PHOTO: "the dataset view's photo"}
 Slot = tuple[int, str]  # (pane index, part)
 
@@ -111,7 +112,7 @@ class PaneAnalysis:
             return Spec(PHOTO)  # (the difference to pane A showing the photo is the difference to the photo)
         reference = self.options.reference if view == "error" or self.options.fidelity else None
         to_pane = replace(self.state.settings_for(0, "a"), debug="none") if view == "difference" else None
-        return Spec(reference, to_pane)
+        return Spec(reference, to_pane, view == "flicker")
 
     def a_shows_photo(self) -> bool:
         """Whether pane A's view is the photo (its difference views then compare with the photo)."""
@@ -146,7 +147,7 @@ class PaneAnalysis:
             for part in s.parts(p.index):
                 slot, shown = (p.index, part), p.parts[part]
                 spec = self.spec(*slot)
-                if (spec.reference is None and spec.to_pane is None) or not is_final(shown, s.scene):
+                if spec.empty or not is_final(shown, s.scene):
                     continue
                 asked = self._asked.get(slot)
                 if asked is not None and asked[0] is shown.frame and asked[1] == spec:
@@ -189,8 +190,7 @@ class PaneAnalysis:
         for p in self.state.visible:
             for part in self.state.parts(p.index):
                 spec, shown = self.spec(p.index, part), p.parts[part]
-                if (spec.reference is None and spec.to_pane is None) or (spec.reference == PHOTO
-                                                                         and self._photo((p.index, part))[1]):
+                if spec.empty or (spec.reference == PHOTO and self._photo((p.index, part))[1]):
                     continue
                 a = self.latest.get((p.index, part))
                 if a is None or a.frame is not shown.frame or a.spec != spec:
@@ -218,6 +218,12 @@ class PaneAnalysis:
             job = self.state.panes[slot[0]].parts[slot[1]].job
             rate = format_rate(job.info.get("rate", self.state.settings.rate) if job else self.state.settings.rate)
             return a.photo, f"{PHOTO} {a.photo_name}  {rate}  {a.photo.shape[1]}x{a.photo.shape[0]}"
+        if view == "flicker":
+            if not fresh or a.heat is None:
+                return frame.rgb, f"flicker: {self._waiting(slot, a, frame, view)}"
+            top = heat_scale([a.heat])
+            return heat_colours(a.heat, top), (f"{name} flicker {a.flicker:.3f} levels ({VIEW_STEP:g} deg orbit "
+                                               f"step vs {DEFAULT_REFERENCE}), red {top:.3g}")
         if view == "difference" and spec.reference == PHOTO:
             plane, auto = (a.error, a.error_scale) if fresh and a.spec == spec else (None, 0.0)
             what = f"{name} - A (photo {a.photo_name})" if a is not None else ""
@@ -241,7 +247,9 @@ class PaneAnalysis:
             return "when the camera stops"
         if self.spec(*slot).reference == PHOTO and self._photo(slot)[1]:
             return self._photo(slot)[1]
-        return "computing..." if view == "difference" else f"computing ({self.options.reference} reference)..."
+        if view in ("difference", "flicker"):
+            return "computing..."
+        return f"computing ({self.options.reference} reference)..."
 
     def fidelity_line(self, slot: Slot) -> tuple[str, bool] | None:
         """The PSNR/SSIM label of a pane part and whether it is stale (the camera moves, a newer frame or another

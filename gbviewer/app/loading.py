@@ -1,5 +1,6 @@
 """Scene loading off the UI thread (and the training cameras of a cameras.json beside the scene), with the load's
-progress for a determinate bar, and cancellation."""
+progress for a determinate bar, and cancellation; then the scene's level-of-detail hierarchy, for the previews, in
+the background."""
 
 from __future__ import annotations
 
@@ -13,7 +14,17 @@ from typing import Any
 from ..camera import Camera, load_cameras_json
 from ..cancel import CancelToken
 from ..errors import GBViewerError, LoadCancelled
+from ..lod import hierarchy_for
 from ..scene import Scene
+
+
+def prepare_lod(scene: Scene) -> None:
+    """Build (or read from the cache) the scene's hierarchy before the first preview draws a cut; a failure is left
+    to that render to report."""
+    try:
+        hierarchy_for(scene)
+    except (GBViewerError, OSError, MemoryError):
+        pass
 
 
 @dataclass
@@ -100,6 +111,8 @@ class SceneLoader:
         res.seconds = self.elapsed
         self._result = res
         self._done.set()
+        if isinstance(res.scene, Scene) and res.scene.oit is None:
+            threading.Thread(target=prepare_lod, args=(res.scene,), name="gbviewer-lod", daemon=True).start()
 
     def done(self) -> bool:
         return self._done.is_set()

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..render import Frame
 from .layout import Rect
+from .rates import PREVIEW_LOD_PX
 from .settings import PANE_NAMES
 from .worker import RenderJob
 
@@ -73,6 +74,7 @@ class PaneState:
     ms_per_px: dict = field(default_factory=dict)  # (part, mode, supersample, backend) -> cost of a full render
     rect: Rect = Rect(0, 0, 1, 1)
     render_size: tuple[int, int] = (1, 1)  # at the current rate, without a preview drop
+    preview_lod: float = PREVIEW_LOD_PX  # the LOD cut of its previews (rates.preview_lod adapts it)
 
     @property
     def name(self) -> str:

@@ -18,7 +18,7 @@ from ..render import Frame, RenderSettings
 from .blit import Blitter
 from .display import GpuFrame
 from .layout import split_parts
-from .rates import preview_factor
+from .rates import preview_factor, preview_lod
 from .pane_state import PaneError, PaneState, Shown
 from .state import AppState
 from .views import visualize
@@ -81,6 +81,8 @@ class PaneRenders:
                 key = (id(s.scene), view_key, (cam.width, cam.height), settings, backend, display)
                 if moving and (os.cpu_count() or 1) > 1:  # leave a core to the UI thread while the camera moves
                     settings = replace(settings, threads=(os.cpu_count() or 2) - 1)
+                if f < 1.0 and settings.lod is None and s.scene.oit is None:  # a preview draws a cut (rates)
+                    settings = replace(settings, lod=p.preview_lod)
                 if p.submitted.get(part) == key:
                     continue
                 p.submitted[part] = key
@@ -178,6 +180,8 @@ class PaneRenders:
         p.fps[part].tick(res.finished)
         self._upload(res.job.slot, shown, res.frame, s.settings.panes[i].view)
         preview = res.job.info.get("preview", 1.0) < 1.0
+        if preview and res.job.settings.lod == p.preview_lod and s.settings.panes[i].lod == 0:
+            p.preview_lod = preview_lod(p.preview_lod, total_ms)
         shown.stage, shown.progress = ("preview" if preview else "final"), None
         shown.pacing["preview" if preview else "final"] = (res.finished - res.job.submitted) * 1e3
 

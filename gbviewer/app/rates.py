@@ -1,5 +1,5 @@
 """Sampling rates (pixels per unit of scene, relative to the pane): the x1/8 .. x8 steps, the slider, labels, the
-render size of a pane, and the resolution drop while the camera moves."""
+render size of a pane, and the resolution drop and level-of-detail cut while the camera moves."""
 
 from __future__ import annotations
 
@@ -62,3 +62,20 @@ def preview_factor(pixels: int, ms_per_pixel: float | None, budget_ms: float, mo
         if pixels * f * f * ms_per_pixel <= budget_ms or f == PREVIEW_FACTORS[-1]:
             return f
     return PREVIEW_FACTORS[-1]
+
+
+# ---- level-of-detail cut of the previews ----------------------------------------------------------------------------
+
+PREVIEW_LOD_PX = 1.0  # the finest cut a preview draws (pixels of the preview's resolution)
+MAX_PREVIEW_LOD = 32.0
+PREVIEW_PANE_MS = 100.0  # a preview's budget per pane
+
+
+def preview_lod(tau: float, preview_ms: float) -> float:
+    """The next preview's cut after one that took `preview_ms` at `tau` pixels: twice as coarse over the pane's
+    budget, twice as fine under 40 % of it, between PREVIEW_LOD_PX and MAX_PREVIEW_LOD."""
+    if preview_ms > PREVIEW_PANE_MS:
+        return min(MAX_PREVIEW_LOD, tau * 2.0)
+    if preview_ms < 0.4 * PREVIEW_PANE_MS:
+        return max(PREVIEW_LOD_PX, tau / 2.0)
+    return tau

@@ -39,6 +39,9 @@ def _choice(value: Any, options: Container[str], default: str) -> str:
     return value if isinstance(value, str) and value in options else default
 
 
+MAX_PANE_LOD = 64.0  # pixels: the panel's LOD slider's end
+
+
 @dataclass
 class PaneSettings:
     mode: str = "scalar"
@@ -47,12 +50,13 @@ class PaneSettings:
     split: bool = False
     split_mode: str = "gaussian_blending"
     split_pos: float = 0.5
+    lod: float = 0.0  # the level-of-detail cut at this many pixels; 0: off (every splat)
 
     def normalised(self) -> "PaneSettings":
         return PaneSettings(_choice(self.mode, MODE_NAMES, "scalar"), _number(self.supersample, 1, 1, 8, integral=True),
                             _choice(self.view, VIEWS, "color"), bool(self.split),
                             _choice(self.split_mode, MODE_NAMES, "gaussian_blending"),
-                            _number(self.split_pos, 0.5, 0.0, 1.0))
+                            _number(self.split_pos, 0.5, 0.0, 1.0), _number(self.lod, 0.0, 0.0, MAX_PANE_LOD))
 
 
 DEFAULT_PANES = [PaneSettings("scalar"), PaneSettings("gaussian_blending"), PaneSettings("scalar", 3),

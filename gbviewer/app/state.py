@@ -293,7 +293,8 @@ class AppState(CameraActions):
         ps: PaneSettings = self.settings.panes[i]
         base = RenderSettings.parse(ps.split_mode if part == "b" else ps.mode)
         debug = "window" if ps.view == "window" and base.mode == Mode.GAUSSIAN_BLENDING else "none"
-        return replace(base, supersample=ps.supersample, background=self.background, debug=debug)
+        return replace(base, supersample=ps.supersample, background=self.background, debug=debug,
+                       lod=ps.lod if ps.lod > 0 else None)
 
     # ---- zoom video ---------------------------------------------------------------------------------------------
 

@@ -9,7 +9,7 @@ import zlib
 
 import numpy as np
 
-VIEWS = ("color", "alpha", "transmittance", "window", "evals", "difference", "error", "photo")
+VIEWS = ("color", "alpha", "transmittance", "window", "evals", "difference", "error", "photo", "flicker")
 VIEW_HELP = {
     "color": "the image",
     "alpha": "accumulated alpha (1 - final transmittance), black 0 to white 1",
@@ -20,6 +20,8 @@ VIEW_HELP = {
     "error": "this pane minus the reference chosen in 'Difference and error' (box-downsampled x1, dense 8x8 or the "
              "photo)",
     "photo": "the snapped dataset view's photo at the rate (box-downsampled, alpha-aware) instead of the render",
+    "flicker": "heat map of this pane's flicker over a 0.1 degree orbit step from here, against scalar 8x8 "
+               "(gbviewer flicker)",
 }
 
 _VIRIDIS = np.array([[0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.530], [0.207, 0.372, 0.553],

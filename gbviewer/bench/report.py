@@ -19,6 +19,7 @@ from ..validate import dumps_json
 from .fidelity import FidelityRow
 from .oit import OitRow
 from .simd import SIMD_NAMES, simd_summary
+from .stability import FlickerRow
 from .speed import SpeedRow, ratios
 
 
@@ -47,6 +48,21 @@ def print_oit(rows: list[OitRow]) -> None:
     wide_console().print(t)
 
 
+def print_flicker(rows: list[FlickerRow]) -> None:
+    """Flicker and change per mode (gbviewer.flicker), and each scene's floor."""
+    from rich.table import Table
+
+    t = Table(title="Flicker along a zoom x1 -> x1/4 (8-bit levels: frame-to-frame change minus the reference's; "
+                    "floor: the reference at half its samples per axis against it)")
+    for col in ("scene", "mode", "size", "pairs", "flicker", "change", "x floor", "floor", "reference"):
+        t.add_column(col, justify="left" if col in ("scene", "mode", "reference") else "right")
+    for r in rows:
+        t.add_row(r.scene, r.label, f"{r.width}x{r.height}", str(r.pairs), f"{r.flicker:.3f}", f"{r.change:.3f}",
+                  f"{r.flicker / r.floor:.2f}" if r.floor else "-", "-" if r.floor is None else f"{r.floor:.3f}",
+                  r.reference)
+    wide_console().print(t)
+
+
 def machine_description() -> dict:
     """CPU model, cores, Python, and the GL renderer when a GL backend is registered."""
     cpu = platform.processor()
@@ -66,10 +82,13 @@ def machine_description() -> dict:
 
 
 def write_json(path: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = False,
-               oit: list[OitRow] | None = None, simd: dict | None = None) -> Path:
-    """Every number: machine, simd (simd_info()), speed, fidelity, ratios, order_independent."""
+               oit: list[OitRow] | None = None, simd: dict | None = None, flicker: list[FlickerRow] | None = None
+               ) -> Path:
+    """Every number: machine, simd (simd_info()), speed, fidelity, ratios, flicker, order_independent."""
     doc = {"machine": machine_description(), "simd": simd, "speed": [asdict(r) for r in speed],
            "fidelity": [asdict(r) for r in fidelity], "ratios": ratios(speed)}
+    if flicker:
+        doc["flicker"] = [asdict(r) for r in flicker]
     if oit:
         doc["order_independent"] = [asdict(r) for r in oit]
     return atomic_write(path, lambda p: p.write_text(dumps_json(doc, indent=2)), force)
@@ -81,13 +100,14 @@ def plot_path(out_dir: Path, scene: str) -> Path:
 
 
 def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = False) -> list[Path]:
-    """PSNR vs sampling rate per mode, and time per mode (one figure per scene), as PNG; existing plots are only
-    replaced with `force`."""
+    """PSNR vs sampling rate per mode, time per mode, and quality against cost (zoom-out PSNR against frame time,
+    one line per mode through its rates): one figure per scene, as PNG; existing plots are only replaced with
+    `force`."""
     plt = pyplot()
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for scene in sorted({r.scene for r in speed} | {r.scene for r in fidelity}):
-        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.5))
+        fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(18, 4.5))
         fid = [r for r in fidelity if r.scene == scene]
         for mode in dict.fromkeys(r.mode for r in fid):
             pts = sorted((r.rate, r.psnr) for r in fid if r.mode == mode)
@@ -108,11 +128,33 @@ def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow
         ax2.set_title(f"{scene}: time per mode")
         ax2.legend(fontsize=8)
         ax2.tick_params(axis="x", labelsize=7)
+        quality_cost(ax3, scene, [r for r in speed if r.scene == scene], fid)
         fig.tight_layout()
         path = plot_path(out_dir, scene)
         save_figure(fig, path, force)
         written.append(path)
     return written
+
+
+def quality_cost(ax, scene: str, speed: list[SpeedRow], fidelity: list[FidelityRow]) -> None:
+    """Zoom-out PSNR against the frame time (the fastest path measured) of each mode, a line through its rates
+    labelled x1/k."""
+    for mode in dict.fromkeys(r.mode for r in fidelity if r.kind == "zoom-out"):
+        pts = []
+        for f in sorted((r for r in fidelity if r.mode == mode and r.kind == "zoom-out"), key=lambda r: r.rate):
+            ms = [r.median_ms for r in speed if r.mode == mode and r.rate == f.rate]
+            if ms:
+                pts.append((min(ms), f.psnr, f.rate))
+        if pts:
+            (line,) = ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", label=mode)
+            for ms, db, rate in pts:
+                ax.annotate(f"x1/{round(1 / rate)}", (ms, db), fontsize=6, color=line.get_color(),
+                            xytext=(3, 3), textcoords="offset points")
+    ax.set_xscale("log")
+    ax.set_xlabel("ms per frame (median, fastest path)")
+    ax.set_ylabel("PSNR vs reference (dB)")
+    ax.set_title(f"{scene}: quality against cost (zoom-out)")
+    ax.legend(fontsize=8)
 
 
 def pyplot():

@@ -1,5 +1,5 @@
-"""The benchmark's loop: views per scene, then speed, fidelity and (with wsr or duplex) the order-independent
-measures of every scene, with one progress bar per scene."""
+"""The benchmark's loop: views per scene, then speed, fidelity, flicker (temporal stability) and (with wsr or
+duplex) the order-independent measures of every scene, with one progress bar per scene."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from ..validate import integer
 from .fidelity import FidelityRow, fidelity_cost, measure_fidelity
 from .oit import OitRow, measure_oit, oit_cost
 from .simd import parse_simd, simd_info
+from .stability import FlickerRow, measure_stability, stability_cost
 from .speed import SpeedRow, measure_speed, speed_cost
 
 # progress(scene name, total render_cost units) -> a context that yields advance(units)
@@ -32,6 +33,7 @@ class BenchResult:
     fidelity: list[FidelityRow] = field(default_factory=list)
     oit: list[OitRow] = field(default_factory=list)
     simd: dict | None = None
+    flicker: list[FlickerRow] = field(default_factory=list)
 
 
 def bench_views(scene: Scene, views: int, width: int, height: int, cameras: Path | None = None,
@@ -59,9 +61,11 @@ def select_backends(names: Sequence[str]) -> tuple[list[str], dict[str, str]]:
 def run_bench(scenes: Sequence[Path], settings: list[RenderSettings], rates: list[float], backends: list[str], *,
               views: int, size: tuple[int, int], repeat: int, cameras: Path | None = None, up: str = "-y",
               simd: str | None = None, flicker_frames: int = 16, flicker_step: float = 0.1,
+              flicker_pairs: int = 3, flicker_size: tuple[int, int] = (160, 120),
               outputs: Sequence[Path] = (), force: bool = False, progress: Progress | None = None) -> BenchResult:
     """Speed on every backend (the CPU backend on each SIMD path of `simd`, see parse_simd), fidelity on the first
-    backend, and with wsr or duplex among `settings` the order-independent measures, for every scene file.
+    backend, flicker (`stability`; `flicker_pairs` pairs at `flicker_size`, 0 pairs: none) on the first backend,
+    and with wsr or duplex among `settings` the order-independent measures, for every scene file.
     `outputs`: files the caller writes afterwards, checked (`check_writable`) before anything is measured."""
     if not backends:
         raise GBViewerError("no backend available")
@@ -84,10 +88,14 @@ def run_bench(scenes: Sequence[Path], settings: list[RenderSettings], rates: lis
         cams = bench_views(scene, views, *size, cameras, up, multiple)
         total = (speed_cost(scene, cams, settings, backends, rates, repeat, paths)
                  + fidelity_cost(scene, cams, settings, rates)
+                 + (stability_cost(scene, cams[0], settings, flicker_pairs, flicker_size) if flicker_pairs else 0)
                  + (oit_cost(scene, cams, settings, flicker_frames) if with_oit else 0))
         with progress(name, total) if progress else nullcontext() as step:
             result.speed += measure_speed(scene, name, cams, settings, backends, rates, repeat, step, paths, exp)
             result.fidelity += measure_fidelity(scene, name, cams, settings, rates, backends[0], step)
+            if flicker_pairs:
+                result.flicker += measure_stability(scene, name, cams[0], settings, flicker_pairs, flicker_size,
+                                                    backends[0], step)
             if with_oit:
                 result.oit += measure_oit(scene, name, cams, settings, backends[0], flicker_frames, flicker_step,
                                           up, step)

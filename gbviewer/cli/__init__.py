@@ -1,4 +1,4 @@
-"""The `gbviewer` command line: info, render, demo (the main job), bench, eval, video, compare."""
+"""The `gbviewer` command line: info, render, demo (the main job), bench, eval, video, flicker, compare."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ from contextlib import contextmanager
 from ..argtypes import Parser
 from ..errors import GBViewerError
 from ..render.budget import BUDGET_ENV
-from . import bench, compare, info, render, trace, video, view
+from . import bench, compare, flicker, info, render, trace, video, view
 from . import eval as evaluation
 
-COMMANDS = (info, render, view, bench, evaluation, video, trace, compare)  # in the order --help lists them
+COMMANDS = (info, render, view, bench, evaluation, video, flicker, trace, compare)  # in the order --help lists them
 
 
 def build_parser() -> argparse.ArgumentParser:

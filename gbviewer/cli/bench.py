@@ -11,7 +11,7 @@ from ..errors import GBViewerError
 from ..extras import require
 from ..render import BACKENDS, RenderSettings
 from ..io.outputs import refuse_collisions, refuse_inputs
-from .options import MAX_COUNT, check_render_size, progress_bar
+from .options import MAX_COUNT, add_lod_arg, check_render_size, progress_bar, with_lod
 
 BENCH_DEFAULTS = {"modes": "scalar,gaussian_blending,supersample:3", "rates": "1,1/8", "views": 2, "repeat": 2,
                   "simd": None}
@@ -51,16 +51,19 @@ def cmd_bench(args: argparse.Namespace) -> int:
     refuse_inputs(outputs, [*args.scenes, args.cameras])
 
     result = bench.run_bench(
-        args.scenes, RenderSettings.parse_list(args.modes), args.rates, backends, views=args.views,
+        args.scenes, with_lod(RenderSettings.parse_list(args.modes), args.lod), args.rates, backends, views=args.views,
         size=args.size, repeat=args.repeat, cameras=args.cameras, up=args.up, simd=args.simd,
-        flicker_frames=args.flicker_frames, flicker_step=args.flicker_step,
+        flicker_frames=args.flicker_frames, flicker_step=args.flicker_step, flicker_pairs=args.flicker_pairs,
+        flicker_size=args.flicker_size,
         outputs=outputs, force=args.force, progress=progress_bar)
     bench.print_tables(result.speed, result.fidelity, result.simd)
+    if result.flicker:
+        bench.print_flicker(result.flicker)
     if result.oit:
         bench.print_oit(result.oit)
     if args.json:
         path = bench.write_json(Path(args.json), result.speed, result.fidelity, args.force, oit=result.oit,
-                                simd=result.simd)
+                                simd=result.simd, flicker=result.flicker)
         print(f"wrote {path}")
     if args.plots:
         for p in bench.write_plots(Path(args.plots), result.speed, result.fidelity, args.force):
@@ -76,9 +79,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"the full sweep (long: x4 renders 16x the pixels of x1): --modes {BENCH_FULL['modes']} "
                    f"--rates {BENCH_FULL['rates']} --views {BENCH_FULL['views']} --repeat {BENCH_FULL['repeat']} "
                    f"--simd {BENCH_FULL['simd']}; options given explicitly win")
-    p.add_argument("--modes", help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N); "
+    p.add_argument("--modes", help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, supersample:N = "
+                   "scalar:N; the level-of-detail cut at PX); "
                    "with wsr or duplex the sort length, cells, PSNR vs scalar and flicker are measured too "
                    f"(default {BENCH_DEFAULTS['modes']})")
+    add_lod_arg(p)
     p.add_argument("--backends", default="cpu")
     p.add_argument("--rates", type=Rate(many=True),
                    help=f"sampling rates, e.g. 8,4,2,1,1/2,1/4,1/8 (default {BENCH_DEFAULTS['rates']})")
@@ -95,6 +100,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", help="write every number and the machine description here")
     p.add_argument("--plots", help="write PNG plots into this folder")
     p.add_argument("--force", action="store_true", help="overwrite existing --json/--plots files")
+    p.add_argument("--flicker-pairs", type=count(MAX_COUNT, lo=0), default=3,
+                   help="pairs of frames of the zoom x1 -> x1/4 on which every mode's flicker is measured against "
+                   "scalar 8x8 (gbviewer flicker; default 3; 0: no flicker measure)")
+    p.add_argument("--flicker-size", type=SIZE, default=(160, 120), metavar="WxH",
+                   help="image size of that measure (default 160x120)")
     p.add_argument("--flicker-frames", type=count(MAX_COUNT), default=16,
                    help="with wsr or duplex among --modes: frames of the slow orbit that measures popping")
     p.add_argument("--flicker-step", type=positive(360.0), default=0.1,

@@ -12,13 +12,13 @@ from ..io import load
 from ..io.files import check_writable
 from ..render import RenderSettings
 from ..render.presets import differences
-from .options import (add_backend_arg, add_camera_args, backend_of, camera_from_args, check_inset,
-                      check_render_size)
+from .options import (add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_inset,
+                      check_render_size, with_lod)
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
     """Labelled grid of modes x sampling rates with PSNR under each cell."""
-    settings = RenderSettings.parse_list(args.modes)
+    settings = with_lod(RenderSettings.parse_list(args.modes), args.lod)
     rates = args.rates
     check_writable(args.out, args.force, inputs=[args.scene, args.cameras], option="--out")
     scene = load(args.scene)
@@ -48,7 +48,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("compare", help="labelled grid of modes x sampling rates with PSNR (PNG)")
     p.add_argument("scene", type=Path)
     add_camera_args(p)
-    p.add_argument("--modes", default="scalar,supersample:3,gaussian_blending")
+    p.add_argument("--modes", default="scalar,supersample:3,gaussian_blending",
+                   help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, the level-of-detail cut at PX)")
+    add_lod_arg(p)
     p.add_argument("--rates", type=Rate(many=True), default="1,1/2,1/4,1/8",
                    help="sampling rates, e.g. 1,1/2,1/4,1/8")
     add_backend_arg(p)

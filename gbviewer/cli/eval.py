@@ -9,7 +9,7 @@ from ..extras import require
 from ..io.files import check_writable
 from ..io.outputs import refuse_collisions
 from ..render import RenderSettings
-from .options import progress_bar
+from .options import add_lod_arg, progress_bar, with_lod
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
@@ -25,7 +25,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     for path in outputs:
         check_writable(path, args.force, inputs=[p for pair in pairs for p in pair])
     result = evaluation.run_eval(
-        pairs, RenderSettings.parse_list(args.modes), args.rates, split=args.split, background=args.background,
+        pairs, with_lod(RenderSettings.parse_list(args.modes), args.lod), args.rates, split=args.split, background=args.background,
         images=args.images, backend=args.backend, workers=args.workers, ray=args.ray, threads=args.threads,
         cache=args.cache or evaluation.default_cache(), progress=progress_bar)
     evaluation.print_tables(result)
@@ -41,4 +41,5 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("eval", help="PSNR and SSIM of every mode and sampling rate against a scene's training "
                                     "photos (COLMAP, Blender or cameras.json datasets), the paper's tables")
     add_eval_args(p)
+    add_lod_arg(p)
     p.set_defaults(func=cmd_eval)

@@ -8,11 +8,14 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..argtypes import MAX_SIDE, ORBIT, SIDE, count
+from dataclasses import replace
+
+from ..argtypes import MAX_SIDE, ORBIT, SIDE, Number, count
 from ..camera import PROJECTIONS, Camera, load_cameras_json, orbit_camera
 from ..camera_paths import scene_focus_depth
 from ..errors import GBViewerError
-from ..render import AUTO, BACKEND_NAMES, choose_backend
+from ..render import AUTO, BACKEND_NAMES, RenderSettings, choose_backend
+from ..render.types import MAX_LOD
 from ..scene import Scene
 from ..validate import integer
 
@@ -63,6 +66,26 @@ def camera_from_args(scene: Scene, args: argparse.Namespace) -> Camera:
         az, el, dist = args.orbit
         return orbit_camera(scene, az, el, dist if dist > 0 else None, w, h, up=args.up, projection=projection)
     return orbit_camera(scene, width=w, height=h, up=args.up, projection=projection)
+
+
+def add_lod_arg(p: argparse.ArgumentParser, many: bool = True) -> None:
+    """--lod PX: the level-of-detail cut at PX projected pixels (gbviewer.lod); with several modes each one is
+    measured or shown with and without it."""
+    text = ("also render each mode given without its own +lod at this level of detail, beside it (MODE+lod:PX)"
+            if many else "render the level-of-detail cut at this many projected pixels (MODE+lod:PX)")
+    p.add_argument("--lod", type=Number(lo=0, hi=MAX_LOD, f32=True), metavar="PX", help=text)
+
+
+def with_lod(settings: list[RenderSettings], lod: float | None) -> list[RenderSettings]:
+    """`settings` with each one that has no level of detail followed by its copy at `lod` pixels (None: as given),
+    each spec once."""
+    if lod is None:
+        return settings
+    out: dict[str, RenderSettings] = {}
+    for s in settings:
+        for t in (s, replace(s, lod=lod)) if s.lod is None else (s,):
+            out.setdefault(t.spec, t)
+    return list(out.values())
 
 
 def backend_of(args: argparse.Namespace) -> str:

@@ -14,7 +14,7 @@ from ..io.files import check_writable
 from ..io.trained_as import describe
 from ..render import Mode, RenderSettings, get_renderer
 from ..render.presets import PRESETS, trained_spec
-from .options import add_backend_arg, add_camera_args, backend_of, camera_from_args, check_render_size
+from .options import add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_render_size
 
 
 def cmd_render(args: argparse.Namespace) -> int:
@@ -30,6 +30,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     spec = args.mode or trained or "scalar"
     settings = replace(RenderSettings.parse(spec, background=args.background, sh_degree=args.sh_degree),
                        supersample=args.supersample)
+    if args.lod is not None:
+        settings = replace(settings, lod=args.lod)
     frame = get_renderer(scene, backend_of(args)).render(cam, settings)
     save_image(out, frame.rgb, force=args.force)
     st = frame.stats
@@ -48,6 +50,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "default: the mode the file says the scene was trained with (gbviewer info: trained_as), else "
                    "scalar")
     p.add_argument("--supersample", type=count(8), default=1, metavar="1..8")
+    add_lod_arg(p, many=False)
     p.add_argument("--scale", type=Rate(), default=1.0, help="sampling rate: 8, 1, 0.125 or 1/8")
     add_backend_arg(p)
     p.add_argument("--background", type=BACKGROUND, default=(0.0, 0.0, 0.0), metavar=BACKGROUND.metavar,

@@ -13,8 +13,8 @@ from ..io import load
 from ..io.files import check_writable
 from ..render import RenderSettings
 from ..video import MAX_FPS, MIN_FPS, record_video
-from .options import (add_backend_arg, add_camera_args, backend_of, camera_from_args, check_inset,
-                      check_render_size)
+from .options import (add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_inset,
+                      check_render_size, with_lod)
 
 VIDEO_PANE = (480, 360)  # default pane size of `gbviewer video`
 
@@ -25,7 +25,7 @@ def cmd_video(args: argparse.Namespace) -> int:
                                TimeRemainingColumn)
 
     require("video", "imageio_ffmpeg", "an MP4 video", load=False)
-    settings = RenderSettings.parse_list(args.modes)
+    settings = with_lod(RenderSettings.parse_list(args.modes), args.lod)
     if args.size:
         args.width, args.height = args.size
     elif not (args.width or args.height or args.cameras):
@@ -62,7 +62,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scene", type=Path)
     add_camera_args(p)
     p.add_argument("--modes", default="scalar,supersample:3,gaussian_blending",
-                   help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N)")
+                   help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, supersample:N = scalar:N; the "
+                   "level-of-detail cut at PX)")
+    add_lod_arg(p)
     p.add_argument("--path", default="zoom",
                    help="zoom (focal length), dolly (camera along its axis), rate (same view, rendered at the rate "
                    "and nearest-upscaled) or a keyframes FILE.json (see gbviewer.keyframes.load_keyframes)")

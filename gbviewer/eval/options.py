@@ -29,7 +29,7 @@ def add_eval_args(p: argparse.ArgumentParser) -> None:
                    "folder of scene files (with --data: a folder holding a dataset named as each scene)")
     add_dataset_args(p)
     p.add_argument("--modes", default="scalar,mip,analytic,gaussian_blending",
-                   help="comma-separated MODE or MODE:N (N x N supersampling)")
+                   help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, the level-of-detail cut at PX)")
     p.add_argument("--rates", type=Rate(many=True), default="1,1/2,1/4,1/8",
                    help="sampling rates 1/k: the photos box-downsampled by k are the ground truth (default "
                    "1,1/2,1/4,1/8)")

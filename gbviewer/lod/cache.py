@@ -46,7 +46,7 @@ def cache_key(scene: Scene, rule: str) -> str | None:
 
 
 def _read(entry: Path, scene: Scene, rule: str) -> Hierarchy:
-    with np.load(entry, allow_pickle=False) as z:
+    with open(entry, "rb") as fh, np.load(fh, allow_pickle=False) as z:  # np.load(path) leaks it on a bad zip
         arrays = {name: z[name] for name in z.files}
     tree = Hierarchy(rule=rule, **arrays)
     tree.check(scene)

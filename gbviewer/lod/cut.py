@@ -60,13 +60,15 @@ def cut(tree: Hierarchy, camera: Camera, tau: float, band: float = DEFAULT_BAND,
     return Cut(*out)
 
 
-def cut_scene(scene: Scene, camera: Camera, tau: float, band: float = DEFAULT_BAND, threads: int = 0) -> Scene:
-    """The Scene of the cut: the drawn leaves' splats, then the drawn interior nodes' Gaussians (SH as the
-    scene's), opacities times the weights; meta["lod"] = (drawn, of). The scene itself when the cut is its leaves."""
+def cut_scene(scene: Scene, camera: Camera, tau: float, band: float = DEFAULT_BAND, threads: int = 0,
+              rule: str = "depth") -> Scene:
+    """The Scene of the cut through the hierarchy merged by `rule`: the drawn leaves' splats, then the drawn interior
+    nodes' Gaussians (SH as the scene's), opacities times the weights; meta["lod"] = (drawn, of). The scene itself
+    when the cut is its leaves."""
     if scene.oit is not None:
         raise GBViewerError(f"{scene.source}: level of detail is for plain splat scenes; this one carries wsr / "
                             "duplex data (view weights, cells or a trained model)")
-    tree = hierarchy_for(scene)
+    tree = hierarchy_for(scene, rule)
     c = cut(tree, camera, tau, band, threads)
     if not len(c.nodes) and len(c.leaves) == scene.num_splats:
         return scene

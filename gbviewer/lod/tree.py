@@ -10,7 +10,7 @@ of its principal cross-sections: opacity x area, as Hierarchical 3DGS weights ch
 (the second central moment of the w-weighted mixture of its leaves), SH and 3D filter are the w-weighted means of
 its leaves'; its opacity keeps the leaves' area-weighted optical depth, -ln(1 - alpha) A_node = sum -ln(1 - a) A
 (two identical children: alpha = 1 - (1 - a)^2, what compositing them gives), or with `rule="sum"` the covered area,
-alpha A_node = sum a A. `radius`: a sphere about the mean holding every leaf's 3-sigma ellipsoid; `size`: the
+alpha A_node = sum a A. `rule="opacity"` is "depth" with the leaves weighted by a alone (measured against, not used). `radius`: a sphere about the mean holding every leaf's 3-sigma ellipsoid; `size`: the
 node's world footprint, 2 sqrt(largest eigenvalue), at least its children's (so a parent never projects smaller).
 """
 
@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import GBViewerError
 from ..scene import Scene
 
-RULES = ("depth", "sum")
+RULES = ("depth", "sum", "opacity")  # lod.h OpacityRule, in its order
 BRANCHING = 8
 INTERIOR = ("means", "scales", "quats", "opacities", "sh", "radius", "size")
 

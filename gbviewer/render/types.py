@@ -127,7 +127,7 @@ class RenderSettings:
     def label_for(self, scene: Scene) -> str:
         """The label with what the scene makes of the mode: wsr on a scene without trained view weights is an
         approximation (v = 1); duplex names where its cells come from."""
-        label = self.label
+        label = self.base_label
         oit = scene.oit
         neural = oit is not None and oit.neural is not None
         trained = neural or scene.meta.get("view_weights_in_opacity")
@@ -135,9 +135,11 @@ class RenderSettings:
             label += " (approx.: v=1)"
         elif self.mode == Mode.DUPLEX and (oit is None or oit.cells is None) and not neural:
             label += f" (built cells, K={self.cell_size})"
-        if self.lod is not None:
-            drawn, total = scene.meta.get("lod", (scene.num_splats, scene.num_splats))
-            label += f", {drawn:,} of {total:,} splats"
+        if self.lod is not None:  # the counts of a cut's scene (the whole scene's label: none, cuts vary by camera)
+            label += f" LOD \u03c4={self.lod:g} px"
+            if "lod" in scene.meta:
+                drawn, total = scene.meta["lod"]
+                label += f", {drawn:,} of {total:,} splats"
         return label
 
     @property
@@ -146,9 +148,13 @@ class RenderSettings:
         return f"preset:{self.preset}" if self.preset else self.mode.label
 
     @property
+    def base_label(self) -> str:
+        """The label without the level of detail: 'scalar 3x3', ..."""
+        return self.name + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "")
+
+    @property
     def label(self) -> str:
-        lod = f" LOD \u03c4={self.lod:g} px" if self.lod is not None else ""
-        return self.name + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "") + lod
+        return self.base_label + (f" LOD \u03c4={self.lod:g} px" if self.lod is not None else "")
 
     @property
     def spec(self) -> str:

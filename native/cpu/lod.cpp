@@ -31,9 +31,10 @@ uint64_t spread(uint64_t v) {
     return v;
 }
 
-// A node's float64 summary while the levels are merged.
+// A node's float64 summary while the levels are merged: mass w, averaging weight v (w, or the opacity sum for
+// OPACITY_WEIGHTS), optical mass t.
 struct Moments {
-    double w, t, mean[3], cov[6], radius, size, filter;  // cov: xx xy xz yy yz zz
+    double w, v, t, mean[3], cov[6], radius, size, filter;  // cov: xx xy xz yy yz zz
 };
 
 // Mean of the three principal cross-section areas of an ellipsoid with semi-axes sqrt(l).
@@ -43,7 +44,7 @@ double area(const double l[3]) {
     return PI / 3.0 * (a * b + b * c + a * c);
 }
 
-Moments leaf(const Splats& s, int64_t i) {
+Moments leaf(const Splats& s, int64_t i, OpacityRule rule) {
     const float* q = s.quats + 4 * i;
     const double w = q[0], x = q[1], y = q[2], z = q[3];
     const double R[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
@@ -63,6 +64,7 @@ Moments leaf(const Splats& s, int64_t i) {
     }
     const double alpha = std::min((double)s.opacities[i], MAX_ALPHA), A = area(l);
     m.w = alpha * A;
+    m.v = rule == OPACITY_WEIGHTS ? alpha : m.w;
     m.t = -std::log1p(-alpha) * A;
     for (int a = 0; a < 3; ++a) m.mean[a] = s.means[3 * i + a];
     m.radius = 0.0;
@@ -136,11 +138,11 @@ void quaternion(const double R[3][3], float q[4]) {
 template <class ShOf>
 void merge(const Moments* kids, int count, ShOf sh_of, int k, OpacityRule rule, Tree& tree, int64_t i,
            Moments& out) {
-    double W = 0.0, T = 0.0;
-    for (int c = 0; c < count; ++c) W += kids[c].w, T += kids[c].t;
-    auto weight = [&](int c) { return W > 0 ? kids[c].w / W : 1.0 / count; };  // massless leaves: equal weights
+    double W = 0.0, Vsum = 0.0, T = 0.0;
+    for (int c = 0; c < count; ++c) W += kids[c].w, Vsum += kids[c].v, T += kids[c].t;
+    auto weight = [&](int c) { return Vsum > 0 ? kids[c].v / Vsum : 1.0 / count; };  // massless leaves: equal weights
     Moments m{};
-    m.w = W, m.t = T;
+    m.w = W, m.v = Vsum, m.t = T;
     for (int c = 0; c < count; ++c)
         for (int a = 0; a < 3; ++a) m.mean[a] += weight(c) * kids[c].mean[a];
     const int pairs[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
@@ -156,7 +158,7 @@ void merge(const Moments* kids, int count, ShOf sh_of, int k, OpacityRule rule, 
     m.size = 2.0 * std::sqrt(std::max({l[0], l[1], l[2]}));
     double alpha = 0.0;
     if (A > 0)
-        alpha = rule == DEPTH ? -std::expm1(-T / A) : std::min(1.0, W / A);
+        alpha = rule != SUM ? -std::expm1(-T / A) : std::min(1.0, W / A);
     else
         alpha = W > 0 || T > 0 ? 1.0 : 0.0;
     for (int a = 0; a < 3; ++a) {
@@ -228,7 +230,7 @@ Tree build(const Splats& s, OpacityRule rule, int threads) {
             for (int c = 0; c < cn; ++c) {
                 if (l == 2) {
                     const int32_t splat = t.order[c0 + c];
-                    kids[c] = leaf(s, splat);
+                    kids[c] = leaf(s, splat, rule);
                     rows[c] = s.sh + (size_t)splat * 3 * k;
                 } else {
                     kids[c] = prev[c0 + c];

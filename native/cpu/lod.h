@@ -11,8 +11,10 @@ constexpr int BRANCHING = 8;  // children per interior node (the last node of a 
 
 // How an interior node's opacity follows from its leaves (leaf weight a A, A = the mean of the three principal
 // cross-section areas): DEPTH keeps the area-weighted optical depth, -ln(1 - alpha_p) A_p = sum -ln(1 - a) A; SUM
-// keeps the covered area, alpha_p A_p = sum a A (clamped to 1).
-enum OpacityRule { DEPTH = 0, SUM = 1 };
+// keeps the covered area, alpha_p A_p = sum a A (clamped to 1). OPACITY_WEIGHTS is DEPTH with the children's
+// mean, covariance, SH and filter weighted by opacity a alone instead of a A (the alternative the rule is measured
+// against: bench/lod_targets.py).
+enum OpacityRule { DEPTH = 0, SUM = 1, OPACITY_WEIGHTS = 2 };
 
 // The scene's splats (activated, as gbviewer.Scene; sh float32 (N,K,3); filter_3d may be null).
 struct Splats {

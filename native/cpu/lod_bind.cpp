@@ -22,7 +22,8 @@ namespace {
 nb::dict build(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, std::optional<FArr> filter, int rule,
                int threads) {
     const int64_t n = check_scene("lod build", means, scales, quats, opacities, sh, filter);
-    if (rule != lod::DEPTH && rule != lod::SUM) fail("lod build", "opacity rule must be 0 (depth) or 1 (sum)");
+    if (rule < lod::DEPTH || rule > lod::OPACITY_WEIGHTS)
+        fail("lod build", "rule must be 0 (depth), 1 (sum) or 2 (opacity weights)");
     const int k = (int)sh.shape(1);
     const lod::Splats s{means.data(), scales.data(), quats.data(), opacities.data(), sh.data(),
                         filter ? filter->data() : nullptr, n, k};

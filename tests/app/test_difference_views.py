@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer import differences, metrics
+from gbviewer import differences, flicker, metrics
 from gbviewer.app.difference_views import PaneAnalysis
 from gbviewer.app.difference_thread import AnalysisThread, Request, Spec
 from gbviewer.app.settings import AppSettings
@@ -59,6 +59,28 @@ def test_thread_computes_references_differences_and_psnr(thread, bundled_scene, 
     thread.submit(Request("x", bundled_scene, frame, cam, 0.5, gbs, Spec(None, scalar), other))
     (_, a), = wait_results(thread)
     np.testing.assert_array_equal(a.diff, frame.rgb.clip(0, 1).mean(axis=2))
+
+
+def test_flicker_view_is_the_heat_map_of_an_orbit_step(bundled_scene, output_view):
+    cam = output_view.at_sampling_rate(0.5)
+    state = panes_with_frames(bundled_scene, cam)
+    an = PaneAnalysis(state)
+    try:
+        b = state.panes[1].parts["a"]
+        state.set_pane(1, view="flicker")
+        assert "computing" in an.visualize((1, "a"), b.frame, "flicker")[1]
+        settle(an)
+        want = flicker.measure_flicker(bundled_scene, flicker.orbit_path(cam, bundled_scene, 2, flicker.VIEW_STEP),
+                                       [b.job.settings], pairs=1, with_floor=False).modes[0]
+        a = an.latest[(1, "a")]
+        np.testing.assert_array_equal(a.heat, want.heat)
+        assert a.flicker == want.flicker > 0 and a.heat.shape == b.frame.rgb.shape[:2]
+        rgb, legend = an.visualize((1, "a"), b.frame, "flicker")
+        np.testing.assert_array_equal(rgb, flicker.heat_colours(want.heat, flicker.heat_scale([want.heat])))
+        assert legend.startswith(f"B flicker {want.flicker:.3f} levels")
+        assert (0, "a") not in an.latest  # pane A shows its colour: nothing asked
+    finally:
+        an.stop()
 
 
 def test_a_newer_request_replaces_the_waiting_one_and_cancels_the_running_one(thread, bundled_scene, output_view):

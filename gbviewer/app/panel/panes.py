@@ -1,4 +1,5 @@
-"""Panel section: the number of panes, row or grid, and per pane its mode, supersampling, view and split."""
+"""Panel section: the number of panes, row or grid, and per pane its mode, supersampling, level of detail, view and
+split."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from ..settings import MODE_NAMES
+from ..settings import MAX_PANE_LOD, MODE_NAMES
 from ..views import VIEW_HELP, VIEWS
 
 if TYPE_CHECKING:
@@ -39,6 +40,20 @@ def draw(state: AppState) -> None:
         ch, ss = imgui.slider_int("supersample", ps.supersample, 1, 8, "%dx%d" % (ps.supersample, ps.supersample))
         if ch:
             state.set_pane(p.index, supersample=ss)
+        ch, on = imgui.checkbox("LOD", ps.lod > 0)
+        if ch:
+            state.set_pane(p.index, lod=1.0 if on else 0.0)
+        if imgui.is_item_hovered():
+            imgui.set_tooltip("draw the splat hierarchy's cut at tau projected pixels, still frames too (off: "
+                              "previews use a cut while the camera moves, still frames every splat)")
+        imgui.same_line()
+        imgui.begin_disabled(ps.lod == 0)
+        imgui.set_next_item_width(120)
+        ch, tau = imgui.slider_float("##lod", max(ps.lod, 0.25), 0.25, MAX_PANE_LOD, "tau %.2f px",
+                                     imgui.SliderFlags_.logarithmic.value)
+        if ch and ps.lod > 0:
+            state.set_pane(p.index, lod=tau)
+        imgui.end_disabled()
         imgui.set_next_item_width(170)
         ch, k = imgui.combo("view", VIEWS.index(ps.view), list(VIEWS))
         if ch:

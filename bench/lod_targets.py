@@ -1,0 +1,96 @@
+"""Level of detail against issue 24's targets, per scene: hierarchy build time against load time, its memory
+against the splat arrays, cut selection against the frame, LOD render time against the full render, and the merge
+rules' PSNR (tau = 1 px) against the full render at the same rate and against the zoom-out reference (the x1 scalar
+render box-downsampled), beside plain scalar, gaussian_blending and scalar 3x3.
+
+    nice python bench/lod_targets.py [SCENE ...] [--size 640x480] [--rates 1,1/4,1/8] [--tau 1] [--json out.json]
+
+Default scenes: /work/shared/scenes/*. Times are the best of `--repeat` (after one warm-up).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import gbviewer as gb
+from gbviewer import lod
+from gbviewer.bench.scale import scene_bytes
+from gbviewer.camera import orbit_camera, parse_rates
+from gbviewer.metrics import psnr, reference_psnr
+
+RULES = ("depth", "sum", "opacity")
+OTHERS = ("scalar", "gaussian_blending", "scalar:3")
+
+
+def best(fn, repeat: int) -> tuple[float, object]:
+    """The fastest of `repeat` calls after a warm-up, in ms, and its result."""
+    out = fn()
+    ms = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fn()
+        ms.append((time.perf_counter() - t) * 1e3)
+    return min(ms), out
+
+
+def measure(path: Path, size: tuple[int, int], rates: list[float], tau: float, repeat: int) -> dict:
+    load_ms, scene = best(lambda: gb.load(path), repeat)
+    build_ms, tree = best(lambda: lod.build(scene), repeat)
+    row = {"scene": path.name, "splats": scene.num_splats, "load_ms": load_ms, "build_ms": build_ms,
+           "tree_bytes": tree.nbytes, "scene_bytes": scene_bytes(scene), "rates": []}
+    cam = orbit_camera(scene, width=size[0], height=size[1])
+    renderer = gb.get_renderer(scene, "cpu")
+    ref_x1 = renderer.render(cam, gb.RenderSettings()).rgb
+    for rate in rates:
+        view = cam.at_sampling_rate(rate)
+        full_ms, full = best(lambda: renderer.render(view, gb.RenderSettings()), repeat)
+        lod_ms, frame = best(lambda: renderer.render(view, gb.RenderSettings(lod=tau)), repeat)
+        cut_ms, c = best(lambda: lod.cut(tree, view, tau), repeat)
+        r = {"rate": rate, "full_ms": full_ms, "lod_ms": lod_ms, "cut_ms": cut_ms, "drawn": c.num_drawn, "psnr": {}}
+        for rule in RULES:
+            img = gb.get_renderer(lod.cut_scene(scene, view, tau, rule=rule), "cpu").render(view, gb.RenderSettings())
+            r["psnr"][f"lod-{rule}"] = (psnr(img.rgb, full.rgb), reference_psnr(ref_x1, img.rgb, rate))
+        for spec in OTHERS:
+            img = renderer.render(view, gb.RenderSettings.parse(spec)).rgb
+            r["psnr"][spec] = (psnr(img, full.rgb), reference_psnr(ref_x1, img, rate))
+        row["rates"].append(r)
+    return row
+
+
+def show(row: dict) -> None:
+    print(f"\n{row['scene']}: {row['splats']:,} splats | load {row['load_ms']:.0f} ms, build {row['build_ms']:.0f} ms "
+          f"({row['build_ms'] / row['load_ms']:.0%}) | tree {row['tree_bytes'] / 2**20:.1f} MiB = "
+          f"{row['tree_bytes'] / row['scene_bytes']:.0%} of the splat arrays")
+    for r in row["rates"]:
+        print(f"  x{r['rate']:g}: full {r['full_ms']:.0f} ms, lod {r['lod_ms']:.0f} ms ({r['full_ms'] / r['lod_ms']:.1f}x"
+              f" faster), cut {r['cut_ms']:.1f} ms ({r['cut_ms'] / r['lod_ms']:.0%} of the lod frame), "
+              f"{r['drawn']:,} drawn")
+        for name, (vs_full, vs_ref) in r["psnr"].items():
+            ref = "" if vs_ref is None else f", {vs_ref:.2f} dB vs reference"
+            print(f"    {name:<18} {vs_full:6.2f} dB vs full{ref}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("scenes", nargs="*", type=Path)
+    ap.add_argument("--size", default="640x480")
+    ap.add_argument("--rates", default="1,1/4,1/8")
+    ap.add_argument("--tau", type=float, default=1.0)
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--json", type=Path)
+    args = ap.parse_args()
+    scenes = args.scenes or sorted(p for p in Path("/work/shared/scenes").iterdir() if p.suffix != ".md")
+    size = tuple(int(v) for v in args.size.split("x"))
+    rows = []
+    for path in scenes:
+        rows.append(measure(path, size, parse_rates(args.rates), args.tau, args.repeat))
+        show(rows[-1])
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,127 @@
+"""The viewer's level of detail: while the camera moves a pane's previews draw the hierarchy's cut (coarser when a
+preview runs over its 100 ms, finer when well under), a still pane renders every splat unless the user chose LOD
+for it in the panel (then its cut, moving or not); the pane setting persists normalised."""
+
+from __future__ import annotations
+
+import time
+
+import gbviewer as gb
+from gbviewer.app import loading, rates
+from gbviewer.app.panes import PaneRenders
+from gbviewer.app.settings import AppSettings, PaneSettings
+from gbviewer.app.state import AppState
+from gbviewer.app.worker import RenderResult
+from gbviewer.render import BACKENDS
+from gbviewer.render.glsl.context import standalone_context
+
+
+class FakeWorker:
+    """Takes the panes' requests; renders nothing (the test hands results back itself)."""
+
+    def __init__(self) -> None:
+        self.jobs: list = []
+
+    def backend_for(self, name: str) -> str:
+        return "cpu"
+
+    def display_path(self, name: str) -> tuple[str, str]:
+        return "copy", ""
+
+    def capabilities(self, name: str):
+        return BACKENDS["cpu"].capabilities
+
+    def submit_all(self, jobs: list) -> None:
+        for job in jobs:
+            job.submitted = time.perf_counter()
+        self.jobs += jobs
+
+
+def opened(monkeypatch, moving: list[bool]) -> AppState:
+    monkeypatch.setattr(AppState, "moving", property(lambda self: moving[0]))
+    state = AppState(AppSettings())
+    state.set_pane_count(2)
+    state.layout(640, 480, 20, 26, (1.0, 1.0))
+    state.open(gb.DEFAULT_SCENE)
+    t0 = time.time()
+    while state.poll_loader() is None:
+        assert time.time() - t0 < 30 and state.loader is not None, state.load_error
+        time.sleep(0.01)
+    for p in state.panes:  # measured: a full render is slow, so moving drops to a preview resolution
+        p.ms_per_px = {(part, ps.mode, ps.supersample, "cpu"): 1.0 for part in "ab" for ps in state.settings.panes}
+    return state
+
+
+def test_previews_draw_the_cut_and_still_frames_every_splat(monkeypatch):
+    moving = [True]
+    state = opened(monkeypatch, moving)
+    state.set_pane(1, lod=4.0)  # pane B: the user's LOD
+    worker = FakeWorker()
+    panes = PaneRenders(state, worker, standalone_context())
+    try:
+        panes.submit()
+        a, b = worker.jobs
+        assert a.preview and a.settings.lod == rates.PREVIEW_LOD_PX and b.preview and b.settings.lod == 4.0
+        frame = gb.get_renderer(state.scene, "cpu").render(a.camera, a.settings)  # the preview renders the cut
+        assert frame.stats.lod_splats is not None and "LOD" in frame.stats.mode
+        frame.stats.total_ms = 3 * rates.PREVIEW_PANE_MS  # over budget: the next preview's cut is coarser
+        panes._take(RenderResult(a, frame, finished=time.perf_counter()))
+        assert state.panes[0].preview_lod == 2 * rates.PREVIEW_LOD_PX
+        state.controller.orbit(5.0, 0.0)  # the camera moved on
+        worker.jobs.clear()
+        panes.submit()
+        assert [j.settings.lod for j in worker.jobs] == [2 * rates.PREVIEW_LOD_PX, 4.0]
+        moving[0] = False  # stopped: pane A finishes on the full scene, pane B on its cut
+        worker.jobs.clear()
+        panes.submit()
+        a, b = worker.jobs
+        assert not a.preview and a.settings.lod is None and not b.preview and b.settings.lod == 4.0
+        assert (a.camera.width, a.camera.height) == state.panes[0].render_size
+    finally:
+        panes.release()
+
+
+def test_scenes_without_a_hierarchy_preview_by_resolution_alone(monkeypatch):
+    moving = [True]
+    state = opened(monkeypatch, moving)
+    monkeypatch.setattr(type(state.scene), "oit", property(lambda self: object()))  # order-independent data
+    worker = FakeWorker()
+    panes = PaneRenders(state, worker, standalone_context())
+    try:
+        panes.submit()
+        assert all(j.preview and j.settings.lod is None for j in worker.jobs)
+    finally:
+        panes.release()
+
+
+def test_preview_lod_adapts_within_its_bounds():
+    tau = rates.PREVIEW_LOD_PX
+    for _ in range(20):
+        tau = rates.preview_lod(tau, 500.0)
+    assert tau == rates.MAX_PREVIEW_LOD
+    assert rates.preview_lod(tau, 0.6 * rates.PREVIEW_PANE_MS) == tau  # within budget: kept
+    for _ in range(20):
+        tau = rates.preview_lod(tau, 1.0)
+    assert tau == rates.PREVIEW_LOD_PX
+
+
+def test_pane_lod_setting_is_normalised():
+    assert PaneSettings(lod=-3).normalised().lod == 0.0
+    assert PaneSettings(lod=1e9).normalised().lod == 64.0
+    assert PaneSettings(lod="x").normalised().lod == 0.0
+    state = AppState(AppSettings())
+    state.set_pane(0, lod=2.5)
+    assert state.settings_for(0, "a").lod == 2.5
+    state.set_pane(0, lod=0.0)
+    assert state.settings_for(0, "a").lod is None
+
+
+def test_the_loader_builds_the_hierarchy_in_the_background(monkeypatch):
+    built = []
+    monkeypatch.setattr(loading, "hierarchy_for", built.append)
+    loader = loading.SceneLoader(gb.DEFAULT_SCENE)
+    t0 = time.time()
+    while not built:
+        assert time.time() - t0 < 30, loader.poll()
+        time.sleep(0.01)
+    assert built == [loader.poll().scene]
