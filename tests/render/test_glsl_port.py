@@ -82,6 +82,10 @@ NOT_PORTED = {
     "blend_alpha_pixel": "the shared body of C++'s one-pixel blend_scalar / blend_analytic wrappers around the lane "
                          "templates; GLSL has those two functions themselves",
     "dot": "GLSL built-in",
+    "screen_position": "a step of the CPU's per-camera stage (preprocess_stage.h); GLSL keeps the one-step "
+                       "preprocess_splat, which composes the same steps inline (its shared stage is not built)",
+    "stage_color": "as screen_position",
+    "view_direction": "as screen_position",
     "float_bits": "GLSL built-in floatBitsToUint",
     "splat_less": "the GLSL duplex keeps each cell's member order (cells.comp), which differs from the CPU's canonical "
                   "order only by float rounding, within the tolerances above",

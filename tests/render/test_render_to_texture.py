@@ -132,10 +132,10 @@ def test_cuda_wrapper_passes_the_texture_and_the_render_arguments(bundled_scene,
     from cuda_fakes import FakeNative, fake_renderer
 
     class Native(FakeNative):
-        def render_to_gl_texture(self, texture, *args):
+        def render_to_gl_texture(self, texture, *args, view_filter=None):
             assert texture == 7 and len(args) == (19 if spec == "duplex" else 15)  # + the oit globals
             _native_cuda.check_render_args(*args)
-            return super().render_to_gl_texture(texture, *args)
+            return super().render_to_gl_texture(texture, *args, view_filter=view_filter)
 
     class Texture:
         glo, size, components, dtype = 7, (32, 24), 4, "f4"
