@@ -63,7 +63,7 @@ def child_measure(kind: str, path: str) -> dict:
 def measure_in_child(kind: str, path: Path) -> dict:
     """`child_measure` in a new interpreter (so that its peak RSS is the measured step's alone)."""
     code = "import json,sys; from gbviewer.bench.scale import child_measure as m; print(json.dumps(m(*sys.argv[1:])))"
-    out = subprocess.run([sys.executable, "-c", code, kind, str(path)],
+    out = subprocess.run([sys.executable, "-P", "-c", code, kind, str(path)],
                          check=True, capture_output=True, text=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
