@@ -18,7 +18,7 @@ from ..io.outputs import refuse_collisions
 from ..render import RenderSettings
 from ..video import MAX_FPS, MIN_FPS
 from .options import (MAX_COUNT, add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args,
-                      check_render_size, progress_bar, with_lod)
+                      check_render_size, path_args, progress_bar, with_lod)
 
 FLICKER_PANE = (320, 240)  # default pane size
 VIDEO_NAME = "heat.mp4"
@@ -33,13 +33,7 @@ def cmd_flicker(args: argparse.Namespace) -> int:
         reference = RenderSettings.parse(args.reference)
     except GBViewerError as exc:
         raise GBViewerError(f"--reference {args.reference}: {exc}") from None
-    if args.size:
-        args.width, args.height = args.size
-    elif not (args.width or args.height or args.cameras):
-        args.width, args.height = FLICKER_PANE
-    if args.path not in FLICKER_PATHS and not Path(args.path).is_file():
-        raise GBViewerError(f"--path {args.path}: expected {', '.join(FLICKER_PATHS)} or a keyframes FILE.json, got "
-                            f"{'a folder' if Path(args.path).is_dir() else 'no such file'}")
+    path_args(args, FLICKER_PATHS, FLICKER_PANE)
     out = Path(args.out)
     outputs = [out / "flicker.csv", out / "flicker.json", *(heat_file(out, s.spec) for s in settings)]
     outputs += [out / VIDEO_NAME] if args.video else []

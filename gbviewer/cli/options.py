@@ -88,6 +88,18 @@ def with_lod(settings: list[RenderSettings], lod: float | None) -> list[RenderSe
     return list(out.values())
 
 
+def path_args(args: argparse.Namespace, paths: tuple[str, ...], pane: tuple[int, int]) -> None:
+    """A path command's --size into args.width/height (`pane` when no size, width, height or cameras are given), and
+    its --path checked: one of `paths` or a keyframes file."""
+    if args.size:
+        args.width, args.height = args.size
+    elif not (args.width or args.height or args.cameras):
+        args.width, args.height = pane
+    if args.path not in paths and not Path(args.path).is_file():
+        raise GBViewerError(f"--path {args.path}: expected {', '.join(paths)} or a keyframes FILE.json, got "
+                            f"{'a folder' if Path(args.path).is_dir() else 'no such file'}")
+
+
 def backend_of(args: argparse.Namespace) -> str:
     """The backend --backend names; for auto (the default) the one `choose_backend()` picks, said once on stderr."""
     if args.backend in (None, AUTO):

@@ -14,7 +14,7 @@ from ..io.files import check_writable
 from ..render import RenderSettings
 from ..video import MAX_FPS, MIN_FPS, record_video
 from .options import (add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_inset,
-                      check_render_size, with_lod)
+                      check_render_size, path_args, with_lod)
 
 VIDEO_PANE = (480, 360)  # default pane size of `gbviewer video`
 
@@ -26,13 +26,7 @@ def cmd_video(args: argparse.Namespace) -> int:
 
     require("video", "imageio_ffmpeg", "an MP4 video", load=False)
     settings = with_lod(RenderSettings.parse_list(args.modes), args.lod)
-    if args.size:
-        args.width, args.height = args.size
-    elif not (args.width or args.height or args.cameras):
-        args.width, args.height = VIDEO_PANE
-    if args.path not in PATHS and not Path(args.path).is_file():
-        raise GBViewerError(f"--path {args.path}: expected zoom, dolly, rate or a keyframes FILE.json, got "
-                            f"{'a folder' if Path(args.path).is_dir() else 'no such file'}")
+    path_args(args, PATHS, VIDEO_PANE)
     check_writable(args.out, args.force, inputs=[args.scene, args.cameras, None if args.path in PATHS else args.path],
                    option="--out")
     scene = load(args.scene)

@@ -14,6 +14,7 @@ from gbviewer.app.state import AppState
 from gbviewer.app.worker import RenderResult
 from gbviewer.render import BACKENDS
 from gbviewer.render.glsl.context import standalone_context
+from test_state import loaded
 
 
 class FakeWorker:
@@ -42,11 +43,7 @@ def opened(monkeypatch, moving: list[bool]) -> AppState:
     state = AppState(AppSettings())
     state.set_pane_count(2)
     state.layout(640, 480, 20, 26, (1.0, 1.0))
-    state.open(gb.DEFAULT_SCENE)
-    t0 = time.time()
-    while state.poll_loader() is None:
-        assert time.time() - t0 < 30 and state.loader is not None, state.load_error
-        time.sleep(0.01)
+    loaded(state)
     for p in state.panes:  # measured: a full render is slow, so moving drops to a preview resolution
         p.ms_per_px = {(part, ps.mode, ps.supersample, "cpu"): 1.0 for part in "ab" for ps in state.settings.panes}
     return state

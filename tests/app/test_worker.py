@@ -21,6 +21,7 @@ from gbviewer.app.state import AppState
 from gbviewer.app.worker import RENDER_NICE, RenderJob, RenderPolicy, RenderWorker
 from gbviewer.render import BACKENDS, CpuRenderer, RenderSettings
 from gbviewer.render.glsl.context import standalone_context
+from test_state import loaded
 
 
 def test_worker_renders_latest_request_per_slot_and_drops_stale_ones(bundled_scene):
@@ -218,11 +219,7 @@ def test_a_backend_that_stops_working_is_reported_and_its_pane_renders_on_the_ne
     state = AppState(AppSettings())
     state.set_pane_count(1)
     state.layout(640, 480, 20, 26, (1.0, 1.0))
-    state.open(gb.DEFAULT_SCENE)
-    t0 = time.time()
-    while state.poll_loader() is None:
-        assert time.time() - t0 < 30 and state.loader is not None, state.load_error
-        time.sleep(0.01)
+    loaded(state)
     ctx = standalone_context()  # the panes' textures (the process's headless context: a window may follow)
     panes = PaneRenders(state, w, ctx)
     pane = state.panes[0]
