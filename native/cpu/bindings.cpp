@@ -171,6 +171,10 @@ void bind_testing(nb::module_& m) {
                               nb::bytes(reinterpret_cast<const char*>(keys.data()), keys.size() * 8));
     }, "The last captured frame's tile lists: (tile_start int64 (tiles + 1), keys uint64 (depth bits << 32 | splat id; "
        "duplex: the splat id)).");
+    t.def("half_mismatches", &cpu::testing::half_mismatches, nb::arg("begin"), nb::arg("end"),
+          nb::call_guard<nb::gil_scoped_release>(),
+          "How many float bit patterns in [begin, end) (multiples of 4) the float16 conversion of the scene loader "
+          "converts otherwise than the F16C instruction; -1 without F16C.");
     t.def("set_simd", [](const std::string& name) { simd::select(name); }, nb::arg("name"),
           "Use this SIMD path for later renders (scalar, avx2, avx512).");
     t.def("exp_rate", &exp_rate, nb::arg("path"), nb::arg("n"),
@@ -195,13 +199,8 @@ NB_MODULE(_native, m) {
     }, "SIMD paths this CPU and build can run, best last.");
     m.def("build_info", [] {
         nb::dict d;
-        std::vector<std::string> built{"scalar"};
-#ifdef GBV_HAVE_AVX2
-        built.push_back("avx2");
-#endif
-#ifdef GBV_HAVE_AVX512
-        built.push_back("avx512");
-#endif
+        std::vector<std::string> built;
+        for (const simd::Path* p : simd::built()) built.push_back(p->name);
         d["simd_built"] = built;
         std::vector<std::string> usable;
         for (const simd::Path* p : simd::supported()) usable.push_back(p->name);

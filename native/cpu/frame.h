@@ -4,9 +4,11 @@
 // CUDA.
 #pragma once
 
-#include <omp.h>
+#include "omp_shim.h"
+#if defined(__SSE__) || defined(__x86_64__)
 #if defined(__SSE__) || defined(__x86_64__)
 #include <xmmintrin.h>
+#endif
 #endif
 
 #include <atomic>
@@ -33,6 +35,16 @@ struct FlushDenormals {
     unsigned saved = _mm_getcsr();
     FlushDenormals() { _mm_setcsr(saved | 0x8040u); }
     ~FlushDenormals() { _mm_setcsr(saved); }
+#elif defined(__aarch64__)
+    uint64_t saved = fpcr();
+    FlushDenormals() { set_fpcr(saved | (1u << 24)); }  // FPCR.FZ: subnormal inputs and results are zero
+    ~FlushDenormals() { set_fpcr(saved); }
+    static uint64_t fpcr() {
+        uint64_t v;
+        __asm__ __volatile__("mrs %0, fpcr" : "=r"(v));
+        return v;
+    }
+    static void set_fpcr(uint64_t v) { __asm__ __volatile__("msr fpcr, %0" : : "r"(v)); }
 #endif
 };
 

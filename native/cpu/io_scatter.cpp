@@ -17,6 +17,8 @@
 #include <string>
 #include <utility>
 
+#include "half.h"
+
 namespace nb = nanobind;
 
 namespace {
@@ -51,6 +53,9 @@ inline void normalise(float* q) {
     }
 }
 
+inline void store(float* p, float v) { *p = v; }
+inline void store(uint16_t* p, float v) { *p = gbv::half_bits(v); }  // float16 bits
+
 struct Maxima {
     float dc = 0.0f, rest = 0.0f;  // the largest |SH| of the rows (NaN skipped), for float16's range check
 };
@@ -73,11 +78,12 @@ void scatter_rows(const float* table, int64_t rows, int64_t stride, const int32_
             const float v = row[cols[XYZ + c]];
             ok &= finite(v);
             means[r * 3 + c] = v;
-            sh[r * k * 3 + c] = (SH)sh_value(cols[DC + c], mx.dc);
+            store(&sh[r * k * 3 + c], sh_value(cols[DC + c], mx.dc));
             scales[r * 3 + c] = row[cols[SCALE + c]];
         }
         for (int j = 0; j < rest; ++j)
-            for (int c = 0; c < 3; ++c) sh[(r * k + 1 + j) * 3 + c] = (SH)sh_value(cols[REST + c * rest + j], mx.rest);
+            for (int c = 0; c < 3; ++c)
+                store(&sh[(r * k + 1 + j) * 3 + c], sh_value(cols[REST + c * rest + j], mx.rest));
         opac[r] = row[cols[OPACITY]];
         float* q = quats + r * 4;
         for (int i = 0; i < 4; ++i) {
@@ -124,7 +130,7 @@ std::pair<float, float> scatter_inria(const Table& table, const Cols& cols, Out 
         float* wt = weights ? weights->data() : nullptr;
         if (half)
             scatter_rows(table.data(), rows, stride, cols.data(), k, w, f != nullptr, max_sh, means.data(),
-                         scales.data(), quats.data(), opacities.data(), static_cast<_Float16*>(sh.data()), f, wt,
+                         scales.data(), quats.data(), opacities.data(), static_cast<uint16_t*>(sh.data()), f, wt,
                          keep.data(), mx);
         else
             scatter_rows(table.data(), rows, stride, cols.data(), k, w, f != nullptr, max_sh, means.data(),

@@ -1,5 +1,5 @@
 // Vector lanes for the blend and preprocess steps (gbv/lanes.h) on Google Highway: 8 floats with AVX2, 16 with
-// AVX-512. Included by blend_isa.cpp and preprocess_isa.cpp, which are compiled once per instruction set with that
+// AVX-512, 4 with NEON. Included by blend_isa.cpp and preprocess_isa.cpp, which are compiled once per instruction set with that
 // set's -m flags, so Highway's static target (hwy::HWY_NAMESPACE, e.g. N_AVX2) is the one the files are built for and
 // the type lives in that namespace.
 #pragma once
@@ -55,7 +55,11 @@ struct LanesHwy {
     // passes through an empty asm statement, as gbv::mul_rn's does, so it is never fused into a multiply-add.
     static HWY_INLINE F mul_rn(F a, F b) {
         F p = a * b;
-        __asm__("" : "+v"(p.raw));
+#if defined(__aarch64__)
+        __asm__("" : "+w"(p.raw));  // a NEON register
+#else
+        __asm__("" : "+v"(p.raw));  // an SSE/AVX/AVX-512 register
+#endif
         return p;
     }
     // fminf / fmaxf: a NaN argument yields the other one; equal arguments yield the first (glibc's rule; the sign of
@@ -91,8 +95,8 @@ struct LanesHwy {
 
 namespace gbv::HWY_NAMESPACE {
 
-// Two vectors as one lane type of 2N lanes: a whole 16-pixel tile row per splat walk with AVX2, which halves the
-// per-splat work outside the lanes and gives the core two independent dependency chains.
+// Two vectors as one lane type of 2N lanes: a whole 16-pixel tile row per splat walk with AVX2 (half a row with NEON),
+// which halves the per-splat work outside the lanes and gives the core two independent dependency chains.
 template <class V>
 struct Pair {
     V a, b;
@@ -151,7 +155,7 @@ struct LanesX2 {
     static HWY_INLINE float reduce_max(F v) { return L::reduce_max(L::max(v.a, v.b)); }
 };
 
-// The lane type the blend uses: one tile row (16 pixels) per group.
+// The lane type the blend uses: one tile row (16 pixels) per group, half a row (8) with NEON.
 using BlendLanes = std::conditional_t<(LanesHwy::N >= 16), LanesHwy, LanesX2<LanesHwy>>;
 
 }  // namespace gbv::HWY_NAMESPACE

@@ -4,13 +4,15 @@
 // mean, so every node's moments are exactly the W-weighted moments of its leaves whatever the tree above them.
 #include "lod.h"
 
-#include <omp.h>
+#include "omp_shim.h"
 
 #include <algorithm>
 #include <cmath>
-#include <parallel/algorithm>
 #include <stdexcept>
 #include <utility>
+#if defined(_OPENMP) && defined(__GLIBCXX__)
+#include <parallel/algorithm>  // libstdc++'s parallel sort (OpenMP)
+#endif
 
 namespace gbv::lod {
 namespace {
@@ -200,7 +202,11 @@ Tree build(const Splats& s, OpacityRule rule, int threads) {
         keys[i] = {code, (int32_t)i};
     }
     omp_set_num_threads(nt);
+#if defined(_OPENMP) && defined(__GLIBCXX__)
     __gnu_parallel::sort(keys.begin(), keys.end());
+#else
+    std::sort(keys.begin(), keys.end());  // the keys are unique (index last), so the order is the same
+#endif
     Tree t;
     t.order.resize(n);
 #pragma omp parallel for num_threads(nt) schedule(static)

@@ -3,7 +3,7 @@
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/optional.h>
 
-#include <omp.h>
+#include "omp_shim.h"
 
 #include <cstring>
 #include <memory>

@@ -1,6 +1,7 @@
-// Run-time choice of the blend's and preprocess's instruction set. The vector paths are separate translation units built with their
-// own -m flags (CMakeLists.txt); this file is built for the baseline and only calls into them after checking the
-// CPU (and the OS's register state, which __builtin_cpu_supports includes) runs them.
+// Run-time choice of the blend's and preprocess's instruction set (x86-64: scalar, avx2, avx512; aarch64: scalar,
+// neon). The vector paths are separate translation units built with their own -m flags (cmake/simd.cmake); this file
+// is built for the baseline and only calls into them after checking the CPU (and the OS's register state, which
+// __builtin_cpu_supports includes) runs them.
 #include "simd.h"
 
 #include <atomic>
@@ -18,6 +19,12 @@ float exp_sum_avx2(int64_t n);
 void stage_range_avx2(const StageJob& job, int64_t begin, int64_t end);
 void finish_range_avx2(const FinishJob& job, int64_t begin, int64_t end);
 #endif
+#ifdef GBV_HAVE_NEON
+void blend_tile_neon(const TileJob& job);
+float exp_sum_neon(int64_t n);
+void stage_range_neon(const StageJob& job, int64_t begin, int64_t end);
+void finish_range_neon(const FinishJob& job, int64_t begin, int64_t end);
+#endif
 #ifdef GBV_HAVE_AVX512
 void blend_tile_avx512(const TileJob& job);
 float exp_sum_avx512(int64_t n);
@@ -32,6 +39,9 @@ namespace {
 const Path kScalar{"scalar", blend_tile_scalar, exp_sum_scalar, stage_range_scalar, finish_range_scalar};
 #ifdef GBV_HAVE_AVX2
 const Path kAvx2{"avx2", blend_tile_avx2, exp_sum_avx2, stage_range_avx2, finish_range_avx2};
+#endif
+#ifdef GBV_HAVE_NEON
+const Path kNeon{"neon", blend_tile_neon, exp_sum_neon, stage_range_neon, finish_range_neon};
 #endif
 #ifdef GBV_HAVE_AVX512
 const Path kAvx512{"avx512", blend_tile_avx512, exp_sum_avx512, stage_range_avx512, finish_range_avx512};
@@ -51,8 +61,25 @@ std::atomic<const Path*> g_current{nullptr};
 
 }  // namespace
 
+std::vector<const Path*> built() {
+    std::vector<const Path*> out{&kScalar};
+#ifdef GBV_HAVE_AVX2
+    out.push_back(&kAvx2);
+#endif
+#ifdef GBV_HAVE_AVX512
+    out.push_back(&kAvx512);
+#endif
+#ifdef GBV_HAVE_NEON
+    out.push_back(&kNeon);
+#endif
+    return out;
+}
+
 std::vector<const Path*> supported() {
     std::vector<const Path*> out{&kScalar};
+#ifdef GBV_HAVE_NEON
+    out.push_back(&kNeon);  // every aarch64 CPU has NEON (Advanced SIMD)
+#endif
 #ifdef GBV_HAVE_AVX2
     if (cpu_has_avx2()) out.push_back(&kAvx2);
 #endif
@@ -82,7 +109,7 @@ void select(const std::string& name) {
         }
         names += names.empty() ? p->name : std::string(", ") + p->name;
     }
-    const bool known = name == "scalar" || name == "avx2" || name == "avx512";
+    const bool known = name == "scalar" || name == "avx2" || name == "avx512" || name == "neon";
     throw std::invalid_argument("SIMD path '" + name + "' " +
                                 (known ? "is not supported by this CPU or build" : "is unknown") +
                                 "; available here: " + names);

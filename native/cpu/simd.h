@@ -1,5 +1,5 @@
 // The SIMD paths of the CPU blend and preprocess and the choice between them: the widest one the CPU runs, unless
-// GBVIEWER_SIMD=scalar|avx2|avx512 (read when the module loads) or set_simd() names another.
+// GBVIEWER_SIMD=scalar|avx2|avx512|neon (read when the module loads) or set_simd() names another.
 #pragma once
 
 #include <string>
@@ -18,6 +18,7 @@ struct Path {
     FinishFn finish;  // a mode's finish of it
 };
 
+std::vector<const Path*> built();              // paths in this build
 std::vector<const Path*> supported();          // paths this build and CPU can run, best last
 const Path& current();                         // the path renders use now
 void select(const std::string& name);          // throws std::invalid_argument naming the paths available

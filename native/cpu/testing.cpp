@@ -3,6 +3,13 @@
 
 #include <cstring>
 
+#include "half.h"
+#include "omp_shim.h"
+
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 namespace gbv::cpu::testing {
 
 std::atomic<bool> pixel_boxes{true};
@@ -43,6 +50,36 @@ void record_lists(const std::vector<int64_t>& tile_start, const std::vector<uint
 std::pair<std::vector<int64_t>, std::vector<uint64_t>> captured_lists() {
     std::lock_guard<std::mutex> lock(captured_mutex);
     return {captured_starts, captured_keys};
+}
+
+#if defined(__x86_64__)
+namespace {
+__attribute__((target("f16c"))) void f16c_convert(const float* in, uint16_t* out) {
+    _mm_storel_epi64(reinterpret_cast<__m128i*>(out), _mm_cvtps_ph(_mm_loadu_ps(in), _MM_FROUND_TO_NEAREST_INT));
+}
+}  // namespace
+#endif
+
+int64_t half_mismatches(uint64_t begin, uint64_t end) {
+#if defined(__x86_64__)
+    __builtin_cpu_init();
+    if (!__builtin_cpu_supports("f16c")) return -1;
+    int64_t bad = 0;
+#pragma omp parallel for schedule(static) reduction(+ : bad)
+    for (int64_t q = (int64_t)(begin / 4); q < (int64_t)(end / 4); ++q) {
+        uint32_t bits[4];
+        float in[4];
+        uint16_t hw[4];
+        for (int k = 0; k < 4; ++k) bits[k] = (uint32_t)(4 * q + k);
+        std::memcpy(in, bits, sizeof in);
+        f16c_convert(in, hw);
+        for (int k = 0; k < 4; ++k) bad += hw[k] != half_bits(in[k]);
+    }
+    return bad;
+#else
+    (void)begin, (void)end;
+    return -1;
+#endif
 }
 
 }  // namespace gbv::cpu::testing

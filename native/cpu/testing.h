@@ -28,4 +28,8 @@ std::vector<uint8_t> captured_preprocess();
 void record_lists(const std::vector<int64_t>& tile_start, const std::vector<uint64_t>& keys);
 std::pair<std::vector<int64_t>, std::vector<uint64_t>> captured_lists();
 
+// How many of the floats with bit patterns in [begin, end) (multiples of 4) half_bits (half.h) converts otherwise
+// than the F16C instruction; -1 where the CPU has no F16C (or is not x86-64).
+int64_t half_mismatches(uint64_t begin, uint64_t end);
+
 }  // namespace gbv::cpu::testing
