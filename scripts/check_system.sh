@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Check what building and testing gbviewer needs, without root and without installing anything: one line per
 # missing piece, naming the Debian/Ubuntu package that provides it. Exit status 1 when something the build needs is
-# missing (Highway's headers count unless GBVIEWER_SCALAR_ONLY=1 asks for a scalar-only build), else 0; what only
-# some tests need (EGL/Mesa, Xvfb, GLFW, glslangValidator, qemu-user) is listed and the setup goes on without it.
+# missing (Highway's headers count only with GBVIEWER_FETCH_HIGHWAY=OFF: else the build downloads them, and
+# GBVIEWER_SCALAR_ONLY=1 builds without), else 0; what only some tests need (EGL/Mesa, Xvfb, GLFW,
+# glslangValidator, qemu-user, clang, the aarch64 cross tools) is listed and the setup goes on without it.
 # Uses only bash builtins besides the tools it checks (it must run where little is installed).
 set -uo pipefail
 PY=${PYTHON:-python3}
@@ -33,8 +34,13 @@ if [ $hwy = 0 ]; then
     1|ON|on|YES|yes|TRUE|true)
       echo "setup: WARNING: Google Highway's headers are missing and GBVIEWER_SCALAR_ONLY=1: building the CPU" \
            "module scalar-only, its blend 3-5x slower (apt-get install libhwy-dev for the vector paths)" ;;
-    *) need "Google Highway's headers (hwy/highway.h; the CPU module's vector paths)" \
-            "libhwy-dev, or set GBVIEWER_SCALAR_ONLY=1 for a slower scalar-only build" ;;
+    *) case "${GBVIEWER_FETCH_HIGHWAY:-ON}" in
+         0|OFF|off|NO|no|FALSE|false)
+           need "Google Highway's headers (hwy/highway.h; the CPU module's vector paths; GBVIEWER_FETCH_HIGHWAY is off)" \
+                "libhwy-dev, or set GBVIEWER_SCALAR_ONLY=1 for a slower scalar-only build" ;;
+         *) echo "setup: note: Google Highway's headers (hwy/highway.h) are not installed: the build downloads the" \
+                 "pinned Highway 1.0.3 (needs the network; apt-get install libhwy-dev to use the system's)" ;;
+       esac ;;
   esac
 fi
 
@@ -45,4 +51,8 @@ command -v Xvfb >/dev/null || want Xvfb "xvfb xauth" "the viewer window tests"
 [[ $libs == *libglfw.so.3* ]] || want GLFW libglfw3 "the viewer and its window tests"
 command -v glslangValidator >/dev/null || want glslangValidator glslang-tools "the shader reference tests"
 command -v qemu-x86_64 >/dev/null || want qemu-x86_64 qemu-user "the emulated-older-CPU tests"
+command -v clang++ >/dev/null || want clang++ "clang libomp-dev" "the clang++ build test"
+command -v aarch64-linux-gnu-g++ >/dev/null || want aarch64-linux-gnu-g++ crossbuild-essential-arm64 "the aarch64 tests"
+command -v qemu-aarch64 >/dev/null || want qemu-aarch64 qemu-user "the aarch64 tests"
+command -v debootstrap >/dev/null || want debootstrap debootstrap "the aarch64 tests (their Python)"
 exit $need_missing

@@ -10,9 +10,12 @@ cd "$(dirname "$0")/.."
 # CUDA-GL interop (the viewer's GPU display path); libegl1,
 # libegl-mesa0, libgl1-mesa-dri: headless OpenGL 4.5 (Mesa llvmpipe through EGL) for the glsl backend and its tests;
 # glslang-tools: the Khronos reference GLSL front end the tests hold every shader variant to (and whose SPIR-V shows
-# the preprocess's `precise`); qemu-user: the tests run the built module on an emulated CPU without AVX.
+# the preprocess's `precise`); qemu-user: the tests run the built module on an emulated CPU without AVX, and the
+# aarch64 build (crossbuild-essential-arm64; debootstrap for its Python, scripts/check_aarch64.sh) under emulation;
+# clang, libomp-dev: the clang++ build test; ccache: the build tests' rebuilds.
 APT_PACKAGES=(build-essential cmake python3-venv python3-dev libhwy-dev libgl-dev libegl1 libegl-mesa0 libgl1-mesa-dri
-  glslang-tools qemu-user xvfb xauth libglfw3 libxrandr2 libxinerama1 libxcursor1 libxi6)  # xvfb..libxi6: the viewer window, tested under Xvfb
+  glslang-tools qemu-user xvfb xauth libglfw3 libxrandr2 libxinerama1 libxcursor1 libxi6  # xvfb..libxi6: the viewer window, tested under Xvfb
+  clang libomp-dev ccache crossbuild-essential-arm64 debootstrap)
 if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
   missing=()
   for p in "${APT_PACKAGES[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done

@@ -4,6 +4,10 @@
 // __builtin_cpu_supports includes) runs them.
 #include "simd.h"
 
+#if defined(__x86_64__)
+#include <cpuid.h>
+#endif
+
 #include <atomic>
 #include <cstdlib>
 #include <stdexcept>
@@ -52,7 +56,7 @@ const Path kAvx512{"avx512", blend_tile_avx512, exp_sum_avx512, stage_range_avx5
 bool cpu_has_avx2() {
     __builtin_cpu_init();
     return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") && __builtin_cpu_supports("bmi") &&
-           __builtin_cpu_supports("bmi2") && __builtin_cpu_supports("f16c") && __builtin_cpu_supports("sse4.2") &&
+           __builtin_cpu_supports("bmi2") && cpu_has_f16c() && __builtin_cpu_supports("sse4.2") &&
            __builtin_cpu_supports("pclmul") && __builtin_cpu_supports("aes");
 }
 #endif
@@ -60,6 +64,14 @@ bool cpu_has_avx2() {
 std::atomic<const Path*> g_current{nullptr};
 
 }  // namespace
+
+#if defined(__x86_64__)
+bool cpu_has_f16c() {
+    unsigned a, b, c, d;
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx") && __get_cpuid(1, &a, &b, &c, &d) && (c & bit_F16C);
+}
+#endif
 
 std::vector<const Path*> built() {
     std::vector<const Path*> out{&kScalar};

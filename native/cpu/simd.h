@@ -23,5 +23,9 @@ std::vector<const Path*> supported();          // paths this build and CPU can r
 const Path& current();                         // the path renders use now
 void select(const std::string& name);          // throws std::invalid_argument naming the paths available
 void init_from_env();                          // GBVIEWER_SIMD, when set
+#if defined(__x86_64__)
+// F16C (and the AVX state its VEX encoding needs), read from CPUID: Clang 14's __builtin_cpu_supports has no "f16c"
+bool cpu_has_f16c();
+#endif
 
 }  // namespace gbv::simd

@@ -5,6 +5,7 @@
 
 #include "half.h"
 #include "omp_shim.h"
+#include "simd.h"
 
 #if defined(__x86_64__)
 #include <immintrin.h>
@@ -62,8 +63,7 @@ __attribute__((target("f16c"))) void f16c_convert(const float* in, uint16_t* out
 
 int64_t half_mismatches(uint64_t begin, uint64_t end) {
 #if defined(__x86_64__)
-    __builtin_cpu_init();
-    if (!__builtin_cpu_supports("f16c")) return -1;
+    if (!simd::cpu_has_f16c()) return -1;
     int64_t bad = 0;
 #pragma omp parallel for schedule(static) reduction(+ : bad)
     for (int64_t q = (int64_t)(begin / 4); q < (int64_t)(end / 4); ++q) {
