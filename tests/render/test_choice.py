@@ -99,6 +99,15 @@ def test_probes_never_raise(monkeypatch):
     assert picked.name == "cpu" and "driver exploded" in picked.reason
 
 
+def test_macos_gets_the_cpu_backend_saying_why(monkeypatch):
+    """macOS's OpenGL ends at 4.1 (no compute shaders): auto says so and picks the CPU (CUDA aside)."""
+    monkeypatch.setattr(choice.CudaRenderer, "available", classmethod(lambda cls: (False, "no CUDA on macOS")))
+    monkeypatch.setattr("sys.platform", "darwin")
+    assert "macOS has no OpenGL 4.3" in choice.probe_gl().error
+    picked = gb.choose_backend()
+    assert picked.name == "cpu" and "macOS has no OpenGL 4.3" in picked.reason
+
+
 def test_a_hanging_gl_driver_counts_as_none(monkeypatch):
     release = threading.Event()
 
