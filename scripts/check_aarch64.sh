@@ -8,7 +8,7 @@
 # The aarch64 Python is Debian 12's (python3, python3-numpy, python3-pil, python3-zstandard and the headers),
 # unpacked from Debian's archive into GBVIEWER_AARCH64_ROOT (default ~/.cache/gbviewer/aarch64-root) by
 # `debootstrap --foreign` (its first stage: download and unpack, nothing run); --install makes it when missing (root,
-# about 70 MB). qemu-aarch64 -L runs it from there. BUILD_DIR/pkg is a copy of this checkout's gbviewer package with
+# about 400 MB unpacked). qemu-aarch64 -L runs it from there. BUILD_DIR/pkg is a copy of this checkout's gbviewer package with
 # the aarch64 module, and plyfile (pure Python) from this Python. Exit status 3, with one line, when a tool or the
 # aarch64 Python is missing (the test skips then), 1 when the build or the run fails.
 set -euo pipefail
