@@ -1,4 +1,5 @@
-"""The CPU blend's SIMD paths (scalar, avx2, avx512) against each other and against the float64 reference.
+"""The CPU blend's SIMD paths (scalar, avx2, avx512; aarch64: neon) against each other and against the float64
+reference.
 
 The preprocess (gbv/preprocess.h) runs on the same SIMD path as the blend (8 or 16 splats per call) and is bit-identical
 to the scalar path's: every Splat2D field, tile rectangle and culling decision (test_preprocess_bitwise).
@@ -30,7 +31,8 @@ from gbviewer.cells import build_cells
 from helpers import random_view, skip_or_fail
 from test_render_reference import BACKGROUND, SCENES, _check_strict
 
-ALL_PATHS = ("scalar", "avx2", "avx512")
+ALL_PATHS = ("scalar", "avx2", "avx512", "neon")
+VECTOR_PATHS = ("avx2", "avx512", "neon")
 MODES = ("scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex")
 TOL = 1e-5
 FLIP_FRACTION = 2e-3
@@ -88,7 +90,7 @@ def _cpu_flags() -> set[str]:
     return set(next((ln.split(":")[1].split() for ln in text.splitlines() if ln.startswith("flags")), []))
 
 
-@pytest.mark.parametrize("path", ["avx2", "avx512"])
+@pytest.mark.parametrize("path", VECTOR_PATHS)
 @pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize("supersample", [1, 2, 3])
 def test_vector_matches_scalar_random(path, mode, supersample):
@@ -101,7 +103,7 @@ def test_vector_matches_scalar_random(path, mode, supersample):
             assert np.abs(vec.debug["window"] - ref.debug["window"]).mean() < 1e-4
 
 
-@pytest.mark.parametrize("path", ["avx2", "avx512"])
+@pytest.mark.parametrize("path", VECTOR_PATHS)
 @pytest.mark.parametrize("mode", MODES)
 def test_vector_matches_scalar_bundled(path, mode, bundled_scene):
     scene = bundled_scene
@@ -191,7 +193,7 @@ def _preprocess_cases():
     yield "cuts orthographic", (scene, cam.with_projection("orthographic", 2.0))
 
 
-@pytest.mark.parametrize("path", ["avx2", "avx512"])
+@pytest.mark.parametrize("path", VECTOR_PATHS)
 @pytest.mark.parametrize("mode", MODES)
 def test_preprocess_bitwise(path, mode):
     """The vector preprocess gives every splat's Splat2D (every field, bit for bit), tile rectangle and culling decision
@@ -327,9 +329,9 @@ def test_env_var_rejects_unknown_or_unsupported(value):
 
 def test_set_simd_and_exp_rate():
     with pytest.raises(ValueError, match="available here"):
-        _native.testing.set_simd("neon")
+        _native.testing.set_simd("sve")
     with pytest.raises(ValueError):
-        _native.testing.exp_rate("neon", 1000)
+        _native.testing.exp_rate("sve", 1000)
     for path in _native.simd_paths():
         assert _native.testing.exp_rate(path, 100_000) > 0
 
