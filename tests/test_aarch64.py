@@ -19,7 +19,7 @@ from helpers import shared_scene, skip_or_fail
 from native_builds import ROOT, assert_renders_match, run_child
 
 SCENES = ("plant.splat", "biker.compressed.ply")
-SIZE = 64  # under emulation a render is 10-300x slower (analytic the most): the ten renders take ~50 s here
+SIZE = 96  # under emulation a render is 10-50x slower than native
 ROOTFS = Path(os.environ.get("GBVIEWER_AARCH64_ROOT")
               or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "gbviewer" / "aarch64-root")
 PYTHON = ["qemu-aarch64", "-L", str(ROOTFS), str(ROOTFS / "usr" / "bin" / "python3")]
