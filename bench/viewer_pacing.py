@@ -43,26 +43,30 @@ def percentile(values: list[float], q: float) -> float:
 
 def instrument(worker) -> tuple[dict, list[float], dict]:
     """Record when a request cancels a running render of its slot and when that render's result comes back, and
-    the finished previews per slot (`previews[slot]`: their finish times)."""
+    the finished previews per slot (`previews[slot]`: their finish times). Results are seen as the UI takes them
+    (`worker.results()`: finals and cancellations are queued there directly, only stages go through `_post`)."""
     asked: dict = {}
     stale: list[float] = []
     previews: dict = {}
-    submit, post = worker.submit, worker._post
+    submit_all, results = worker.submit_all, worker.results
 
-    def on_submit(job):
-        running = worker._running
-        if running is not None and running.slot == job.slot and running.seq not in asked:
-            asked[running.seq] = time.perf_counter()
-        submit(job)
+    def on_submit_all(jobs):
+        for job in jobs:
+            for running in list(worker._running):
+                if running.slot == job.slot and worker.policy.cancels(running, job) and id(running) not in asked:
+                    asked[id(running)] = time.perf_counter()
+        submit_all(jobs)
 
-    def on_post(result):
-        if result.cancelled and result.job.seq in asked:
-            stale.append((result.finished - asked.pop(result.job.seq)) * 1e3)
-        if not result.cancelled and result.job.info.get("preview", 1.0) < 1.0:
-            previews.setdefault(result.job.slot, []).append(result.finished)
-        post(result)
+    def on_results():
+        out = results()
+        for result in out:
+            if result.cancelled and id(result.job) in asked:
+                stale.append((result.finished - asked.pop(id(result.job))) * 1e3)
+            if not result.cancelled and result.stage == "final" and result.job.info.get("preview", 1.0) < 1.0:
+                previews.setdefault(result.job.slot, []).append(result.finished)
+        return out
 
-    worker.submit, worker._post = on_submit, on_post
+    worker.submit_all, worker.results = on_submit_all, on_results
     return asked, stale, previews
 
 
