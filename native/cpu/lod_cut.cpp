@@ -37,7 +37,7 @@ float opening(const float* means, const float* radius, const float* size, int64_
 template <class T, class Fn>
 void chunked(int64_t len, int nt, std::vector<T>& out, Fn fn) {
     std::vector<std::vector<T>> parts(nt);
-    if (len < 4096) nt = 1;
+    if (len < (1 << 16)) nt = 1;  // under ~1 ms of work: a parallel region (waking a busy core) costs more
 #pragma omp parallel num_threads(nt)
     {
         const int th = omp_get_thread_num(), nth = omp_get_num_threads();
