@@ -132,6 +132,26 @@ def test_the_cut_covers_every_leaf_exactly_once(band):
         assert lod.cut(tree, cam, 50.0).num_drawn < n  # the cut does coarsen
 
 
+def test_the_top_down_cut_equals_the_cut_over_every_node():
+    """The cut walks only the nodes it reaches; forced to evaluate every node (as it does once most of a large tree
+    is reached) it gives the same indices and weights, bit for bit."""
+    from gbviewer._native import testing
+
+    scene = random_scene(5000, seed=13, spread=3.0)
+    tree = lod.build(scene)
+    for cam in cameras(scene, 5):
+        for tau, band in ((0.0, 1.0), (0.5, 1.0), (2.0, 0.0), (10.0, 1.0), (200.0, 1.0)):
+            walked = lod.cut(tree, cam, tau, band)
+            try:
+                testing.set_cut_flat_above(0)
+                flat = lod.cut(tree, cam, tau, band)
+            finally:
+                testing.set_cut_flat_above(65536)
+            for field in ("leaves", "leaf_weights", "nodes", "node_weights"):
+                a, b = getattr(walked, field), getattr(flat, field)
+                assert a.dtype == b.dtype and np.array_equal(a, b), (cam.name, tau, field)
+
+
 def flat_weights(tree: lod.Hierarchy, c: lod.Cut) -> np.ndarray:
     """The drawn weight of every node by flat id (0: not drawn)."""
     n = tree.num_leaves

@@ -34,9 +34,10 @@ def wide_console():
 def print_oit(rows: list[OitRow]) -> None:
     from rich.table import Table
 
-    t = Table(title="Sorted vs order-independent modes (mean over views; flicker along a slow orbit)")
+    t = Table(title="Sorted vs order-independent modes (mean over views; popping along a slow orbit: the frames' "
+                    "second difference, metrics.flicker, not the shimmer against a reference of `gbviewer flicker`)")
     for col in ("scene", "mode", "visible", "cells vis/all", "sort length", "sort MB", "list entries", "preprocess",
-                "sort", "blend", "total ms", "PSNR vs scalar", "flicker", "pops %"):
+                "sort", "blend", "total ms", "PSNR vs scalar", "popping (2nd diff)", "pops %"):
         t.add_column(col, justify="left" if col in ("scene", "mode") else "right")
     for r in rows:
         cells = f"{r.cells_visible}/{r.cells}" if r.cells else "-"

@@ -49,15 +49,28 @@ def check_tau(tau: float, what: str = "lod") -> float:
     return tau
 
 
+def cut_view(camera: Camera, tau: float, band: float = DEFAULT_BAND) -> tuple:
+    """The cut's inputs as the native modules take them: (tau, band, eye float32, larger focal length,
+    orthographic). The CPU renderer draws the cut of the same tuple in place (RenderSettings.lod)."""
+    return (check_tau(tau), float(band), np.asarray(camera.position, np.float32), float(max(camera.fx, camera.fy)),
+            bool(camera.orthographic))
+
+
 def cut(tree: Hierarchy, camera: Camera, tau: float, band: float = DEFAULT_BAND, threads: int = 0) -> Cut:
     """The nodes drawn for `camera` at tau pixels (band 0: a hard cut, every weight 1)."""
     from .._native import lod as native
 
-    tau = check_tau(tau)
-    eye = np.asarray(camera.position, np.float32)
-    out = native.cut(tree.means, tree.radius, tree.size, tree.levels, tree.order, eye,
-                          float(max(camera.fx, camera.fy)), camera.orthographic, tau, float(band), threads)
+    tau, band, eye, focal, ortho = cut_view(camera, tau, band)
+    out = native.cut(tree.means, tree.radius, tree.size, tree.levels, tree.order, eye, focal, ortho, tau, band,
+                     threads)
     return Cut(*out)
+
+
+def check_plain(scene: Scene) -> None:
+    """Refuse a scene level of detail does not apply to (one that carries wsr / duplex data)."""
+    if scene.oit is not None:
+        raise GBViewerError(f"{scene.source}: level of detail is for plain splat scenes; this one carries wsr / "
+                            "duplex data (view weights, cells or a trained model)")
 
 
 def cut_scene(scene: Scene, camera: Camera, tau: float, band: float = DEFAULT_BAND, threads: int = 0,
@@ -65,9 +78,7 @@ def cut_scene(scene: Scene, camera: Camera, tau: float, band: float = DEFAULT_BA
     """The Scene of the cut through the hierarchy merged by `rule`: the drawn leaves' splats, then the drawn interior
     nodes' Gaussians (SH as the scene's), opacities times the weights; meta["lod"] = (drawn, of). The scene itself
     when the cut is its leaves."""
-    if scene.oit is not None:
-        raise GBViewerError(f"{scene.source}: level of detail is for plain splat scenes; this one carries wsr / "
-                            "duplex data (view weights, cells or a trained model)")
+    check_plain(scene)
     tree = hierarchy_for(scene, rule)
     c = cut(tree, camera, tau, band, threads)
     if not len(c.nodes) and len(c.leaves) == scene.num_splats:

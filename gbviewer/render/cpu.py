@@ -107,13 +107,16 @@ class CpuRenderer(NativeUploads, Renderer):
         control.check()  # before any work (a trained model's decode included)
         frames: list[Frame] = []
         with self._lock:
-            preps = [prepare(self._scene, camera, settings, self.name) for camera, settings in jobs]
+            preps = [prepare(self._scene, camera, settings, self.name, lod_in_place=True) for camera, settings in jobs]
             for run in batches(jobs, preps):
-                self._sync(next((p for p in preps[run.start:run.stop] if p.cells is not None), preps[run.start]))
+                for prep in [next((p for p in preps[run.start:run.stop] if p.cells is not None), preps[run.start]),
+                             *(p for p in preps[run.start:run.stop] if p.tree is not None)]:
+                    self._sync(prep)
                 hook = control.hook
                 outs = self._impl.render_many(
                     [(*self._frame_args(camera, settings), settings.debug == "window", *(preps[i].oit or NO_OIT),
-                      settings.view_filter.native()) for i, (camera, settings) in zip(run, jobs[run.start:run.stop])],
+                      settings.view_filter.native(), preps[i].lod)
+                     for i, (camera, settings) in zip(run, jobs[run.start:run.stop])],
                     threads=jobs[run.start][1].threads, cancel=control.flag,
                     on_progress=None if hook is None else (lambda job, done, total, b=run.start: hook(b + job, done,
                                                                                                      total)),
@@ -126,8 +129,8 @@ class CpuRenderer(NativeUploads, Renderer):
     def trace(self, camera: Camera, settings: RenderSettings, x: int, y: int) -> PixelTrace:
         """The pixel trace of (x, y) in this frame (gbviewer.render.trace; `trace_pixel` checks the pixel)."""
         with self._lock:
-            prep = prepare(self._scene, camera, settings, self.name)
+            prep = prepare(self._scene, camera, settings, self.name, lod_in_place=True)
             self._sync(prep)
             out = self._impl.trace(*self._frame_args(camera, settings), *(prep.oit or ()), x=x, y=y,
-                                   view_filter=settings.view_filter.native())
+                                   view_filter=settings.view_filter.native(), lod=prep.lod)
         return from_native(out, settings, camera, x, y)

@@ -12,7 +12,7 @@ import numpy as np
 from ..camera import Camera
 from ..cells import Cells, cells_for
 from ..errors import GBViewerError, RenderError
-from ..lod import cut_scene
+from ..lod import Hierarchy, check_plain, cut_scene, cut_view, hierarchy_for
 from ..scene import Scene
 from .budget import check_frame_memory
 from .types import (DEFAULT_ET_GRADE, DEFAULT_SIGMA, ORDER_INDEPENDENT, SORT_ENTRY_BYTES, Frame, FrameStats, Mode,
@@ -54,19 +54,25 @@ def view_scene(scene: Scene, camera: Camera) -> Scene:
 @dataclass(frozen=True)
 class Prepared:
     """What a backend renders this frame: the view's splats, the decode time (trained Duplex-GS models, else None),
-    the wsr / duplex globals (None in the other modes) and the duplex cells (None in the other modes)."""
+    the wsr / duplex globals (None in the other modes), the duplex cells (None in the other modes), and for a
+    level-of-detail frame drawn in place the scene's hierarchy and the native cut arguments (`cut_view`)."""
 
     scene: Scene
     decode_ms: float | None
     oit: OitParams | None
     cells: Cells | None
+    tree: Hierarchy | None = None
+    lod: tuple | None = None
 
 
 MAX_SAMPLES = 2**31 - 1  # sub-samples of one frame: the native modules and shaders index them with int32
 
 
-def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backend: str) -> Prepared:
-    """The frame's inputs for `backend` from its uploaded scene (None: nothing uploaded, an error)."""
+def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backend: str,
+            lod_in_place: bool = False) -> Prepared:
+    """The frame's inputs for `backend` from its uploaded scene (None: nothing uploaded, an error). A
+    level-of-detail frame gets the cut's Scene, or with `lod_in_place` (the CPU renderer; not duplex) the hierarchy
+    and cut arguments to draw the same cut from the uploaded scene."""
     if scene is None:
         raise RenderError(f"{backend} renderer: upload(scene) before render()")
     samples = camera.width * camera.height * settings.supersample**2
@@ -77,14 +83,19 @@ def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backe
     t0 = time.perf_counter()
     view = view_scene(scene, camera)
     decode_ms = (time.perf_counter() - t0) * 1e3 if view is not scene else None
+    tree = lod = None
     if settings.lod is not None:
         try:
-            view = cut_scene(view, camera, settings.lod, threads=settings.threads)
+            if lod_in_place and settings.mode != Mode.DUPLEX:  # duplex builds its cells of the cut's own splats
+                check_plain(view)
+                tree, lod = hierarchy_for(view), cut_view(camera, settings.lod)
+            else:
+                view = cut_scene(view, camera, settings.lod, threads=settings.threads)
         except GBViewerError as exc:
             raise RenderError(str(exc)) from None
     oit = oit_params(view, settings) if settings.mode in ORDER_INDEPENDENT else None
     cells = cells_for(view, settings.cell_size) if settings.mode == Mode.DUPLEX else None
-    return Prepared(view, decode_ms, oit, cells)
+    return Prepared(view, decode_ms, oit, cells, tree, lod)
 
 
 class NativeUploads:
@@ -93,13 +104,14 @@ class NativeUploads:
 
     _uploaded: Scene | None = None
     _cells: Cells | None = None
+    _tree: Hierarchy | None = None
 
     def _native(self, method: str, *args):
         return getattr(self._impl, method)(*args)
 
     def _upload(self, scene: Scene) -> None:
         """Forget what is uploaded first: a failed upload (out of memory) leaves no scene there."""
-        self._uploaded = self._cells = None
+        self._uploaded = self._cells = self._tree = None
         self._native("upload", scene.means, scene.scales, scene.quats, scene.opacities,
                      np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d)  # float16 SH: a float32 copy
         if scene.oit is not None and scene.oit.view_weight_sh is not None:
@@ -107,10 +119,17 @@ class NativeUploads:
         self._uploaded = scene
 
     def _sync(self, prep: Prepared) -> None:
-        """Upload the view's splats and duplex cells where they are not yet."""
+        """Upload the view's splats, duplex cells and (a level-of-detail frame drawn in place) the scene's hierarchy
+        where they are not yet."""
         scene, cells = prep.scene, prep.cells
         if scene is not self._uploaded:
             self._upload(scene)
+        if prep.tree is not None and prep.tree is not self._tree:
+            t = prep.tree
+            sh = np.ascontiguousarray(t.sh.astype(scene.sh.dtype, copy=False), np.float32)  # float16 scene: so too
+            self._native("upload_lod", t.means, t.scales, t.quats, t.opacities, sh, t.filter_3d, t.radius, t.size,
+                         t.levels, t.order)
+            self._tree = t
         if cells is not None and cells is not self._cells:
             self._cells = None
             self._native("upload_cells", cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
@@ -128,28 +147,34 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
                 preprocess_ms: float, sort_ms: float, blend_ms: float, visible: int, sort_length: int, pairs: int,
                 evaluations: int, cells_visible: int | None = None, cell_misses: int | None = None,
                 simd: str | None = None, stage_reused: bool | None = None, order_reused: bool | None = None,
-                stage_ms: float | None = None) -> FrameStats:
-    """The frame's stats from a backend's counts and stage times; t0: when the render began."""
+                stage_ms: float | None = None, lod_splats: int | None = None) -> FrameStats:
+    """The frame's stats from a backend's counts and stage times; t0: when the render began; lod_splats: the
+    level-of-detail cut a backend drew in place (else a cut's Scene says)."""
+    counts = None  # the cut's (drawn, of)
+    if settings.lod is not None:
+        counts = prep.scene.meta.get("lod") if lod_splats is None else (lod_splats, prep.scene.num_splats)
+        lod_splats = prep.scene.num_splats if counts is None else counts[0]
     return FrameStats(
         preprocess_ms=float(preprocess_ms), sort_ms=float(sort_ms), blend_ms=float(blend_ms),
         total_ms=(time.perf_counter() - t0) * 1e3, visible=int(visible), sort_length=int(sort_length),
         sort_bytes=int(sort_length) * SORT_ENTRY_BYTES, pairs=int(pairs), evaluations=int(evaluations),
         evals_per_pixel=int(evaluations) / (camera.width * camera.height), backend=backend,
-        mode=settings.label_for(prep.scene), simd=simd,
+        mode=settings.label_for(prep.scene, counts), simd=simd,
         cells=prep.cells.num_cells if prep.cells is not None else None,
         cells_visible=None if cells_visible is None else int(cells_visible),
         cell_misses=None if cell_misses is None else int(cell_misses), decode_ms=prep.decode_ms,
         stage_reused=None if stage_reused is None else bool(stage_reused),
         order_reused=None if order_reused is None else bool(order_reused),
         stage_ms=None if stage_ms is None else float(stage_ms),
-        lod_splats=None if settings.lod is None else prep.scene.meta.get("lod", (prep.scene.num_splats,))[0],
+        lod_splats=lod_splats,
     )
 
 
 def native_stats(out: dict, prep: Prepared, camera: Camera, settings: RenderSettings, backend: str,
                  t0: float) -> FrameStats:
     """The stats of a native module's result dict (per-stage ms and counts, evaluations; duplex: cells_visible,
-    cell_misses; the CPU module: simd, the SIMD path its blend ran, stage_reused, order_reused and stage_ms)."""
+    cell_misses; the CPU module: simd, the SIMD path its blend ran, stage_reused, order_reused, stage_ms and
+    lod_splats)."""
     duplex = settings.mode == Mode.DUPLEX
     return frame_stats(
         prep, camera, settings, backend, t0, preprocess_ms=out["preprocess_ms"], sort_ms=out["sort_ms"],
@@ -157,6 +182,7 @@ def native_stats(out: dict, prep: Prepared, camera: Camera, settings: RenderSett
         evaluations=out["evaluations"], cells_visible=out["cells_visible"] if duplex else None,
         cell_misses=out["cell_misses"] if duplex else None, simd=str(out["simd"]) if "simd" in out else None,
         stage_reused=out.get("stage_reused"), order_reused=out.get("order_reused"), stage_ms=out.get("stage_ms"),
+        lod_splats=out.get("lod_splats"),
     )
 
 

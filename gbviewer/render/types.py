@@ -124,9 +124,10 @@ class RenderSettings:
             raise RenderError(f"view_filter {self.view_filter.describe()} applies to the scalar mode, not "
                               f"{self.mode.label}")
 
-    def label_for(self, scene: Scene) -> str:
+    def label_for(self, scene: Scene, lod_counts: tuple[int, int] | None = None) -> str:
         """The label with what the scene makes of the mode: wsr on a scene without trained view weights is an
-        approximation (v = 1); duplex names where its cells come from."""
+        approximation (v = 1); duplex names where its cells come from; a level-of-detail frame the splats of its cut
+        (`lod_counts`: drawn, of; else what a cut's Scene says)."""
         label = self.base_label
         oit = scene.oit
         neural = oit is not None and oit.neural is not None
@@ -135,11 +136,11 @@ class RenderSettings:
             label += " (approx.: v=1)"
         elif self.mode == Mode.DUPLEX and (oit is None or oit.cells is None) and not neural:
             label += f" (built cells, K={self.cell_size})"
-        if self.lod is not None:  # the counts of a cut's scene (the whole scene's label: none, cuts vary by camera)
+        if self.lod is not None:  # the counts of the frame's cut (none without a frame: cuts vary by camera)
             label += f" LOD \u03c4={self.lod:g} px"
-            if "lod" in scene.meta:
-                drawn, total = scene.meta["lod"]
-                label += f", {drawn:,} of {total:,} splats"
+            counts = scene.meta.get("lod") if lod_counts is None else lod_counts
+            if counts is not None:
+                label += f", {counts[0]:,} of {counts[1]:,} splats"
         return label
 
     @property

@@ -15,6 +15,7 @@
 
 #include "../bindings/nb_common.h"
 #include "frame.h"
+#include "lod_args.h"
 #include "renderer.h"
 #include "simd.h"
 #include "testing.h"
@@ -82,6 +83,7 @@ std::vector<nb::dict> run_frames(Renderer& r, const std::vector<RenderArgs>& fra
         d["stage_ms"] = res[f].stats.stage_ms;
         d["stage_reused"] = res[f].stats.stage_reused;
         d["order_reused"] = res[f].stats.order_reused;
+        if (res[f].stats.lod_drawn >= 0) d["lod_splats"] = res[f].stats.lod_drawn;
         out.push_back(std::move(d));
     }
     return out;
@@ -91,10 +93,11 @@ nb::dict render(Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float
                 float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                 bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct,
                 int threads, std::optional<LArr> cancel, std::optional<nb::callable> on_progress,
-                std::optional<PArr> partial, std::optional<FArr> view_filter) {
-    const RenderArgs a = render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
-                                 supersample, sh_degree, background, want_window, sigma, weight_background, et_grade,
-                                 depth_correct, view_filter);
+                std::optional<PArr> partial, std::optional<FArr> view_filter, nb::handle lod) {
+    RenderArgs a = render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
+                               supersample, sh_degree, background, want_window, sigma, weight_background, et_grade,
+                               depth_correct, view_filter);
+    a.lod = lod_args("render", lod);
     if (cancel && cancel->shape(0) < 1) throw std::invalid_argument("render: cancel must hold at least one int64");
     if (partial) check_partial("render", *partial, width, height);
     cpu::Control c;
@@ -105,7 +108,8 @@ nb::dict render(Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float
     return run_frames(r, {a}, c)[0];
 }
 
-// render()'s arguments R .. depth_correct and view_filter (None: 3DGS's) of each frame, as one tuple per frame.
+// render()'s arguments R .. depth_correct, view_filter (None: 3DGS's) and lod (None: every splat) of each frame, as
+// one tuple per frame.
 std::vector<nb::dict> render_many(Renderer& r, const std::vector<nb::tuple>& frames, int threads,
                                   std::optional<LArr> cancel, std::optional<nb::callable> on_progress,
                                   std::optional<std::vector<std::optional<PArr>>> partials) {
@@ -117,8 +121,8 @@ std::vector<nb::dict> render_many(Renderer& r, const std::vector<nb::tuple>& fra
     cpu::Control c;
     for (size_t f = 0; f < frames.size(); ++f) {
         const nb::tuple& p = frames[f];
-        if (p.size() != 20)
-            throw std::invalid_argument("render_many: each frame is render()'s 19 frame arguments and view_filter");
+        if (p.size() != 21)
+            throw std::invalid_argument("render_many: each frame is render()'s 19 frame arguments, view_filter and lod");
         std::optional<FArr> view_filter;
         if (!p[19].is_none()) view_filter = nb::cast<FArr>(p[19]);
         args.push_back(render_args(where, nb::cast<FArr>(p[0]), nb::cast<FArr>(p[1]), nb::cast<float>(p[2]),
@@ -128,6 +132,7 @@ std::vector<nb::dict> render_many(Renderer& r, const std::vector<nb::tuple>& fra
                                    nb::cast<int>(p[12]), nb::cast<FArr>(p[13]), nb::cast<bool>(p[14]),
                                    nb::cast<float>(p[15]), nb::cast<float>(p[16]), nb::cast<float>(p[17]),
                                    nb::cast<bool>(p[18]), view_filter));
+        args.back().lod = lod_args(where, p[20]);
         const std::optional<PArr>* part = partials ? &(*partials)[f] : nullptr;
         if (part && *part) check_partial(where, **part, args.back().width, args.back().height);
         c.partial.push_back(part && *part ? (*part)->data() : nullptr);
@@ -157,6 +162,9 @@ void bind_testing(nb::module_& m) {
     nb::module_ t = m.def_submodule("testing", "Test and benchmark switches of the CPU renderer (process-wide).");
     t.def("set_pixel_boxes", [](bool on) { cpu::testing::pixel_boxes.store(on); }, nb::arg("on"),
           "Skip lane groups outside a splat's pixel box (default) or evaluate every list entry.");
+    t.def("set_cut_flat_above", [](int64_t n) { cpu::testing::cut_flat_above.store(n); }, nb::arg("n"),
+          "The level-of-detail cut walks top down until a level reaches more than n nodes and a quarter of it "
+          "(default 65536; 0: evaluate every node of any tree).");
     t.def("set_poison_images", [](bool on) { cpu::testing::poison_images.store(on); }, nb::arg("on"),
           "Fill each new image with NaN (evaluation counts -1) before the blend (to show it writes every pixel).");
     t.def("set_capture_preprocess", [](bool on) { cpu::testing::capture.store(on); }, nb::arg("on"),
@@ -248,6 +256,29 @@ NB_MODULE(_native, m) {
              "The scene (activated parameters, gbviewer.Scene's arrays), referenced until the next upload: keep "
              "them unchanged meanwhile. Forgets the view weights and cells.")
         .def_prop_ro("num_splats", &Renderer::num_splats)
+        .def("upload_lod",
+             [](Renderer& r, FArr means, FArr scales, FArr quats, FArr opacities, FArr sh,
+                std::optional<FArr> filter_3d, FArr radius, FArr size, L64 levels, IArr order) {
+                 std::pair<int, bool> layout;
+                 {
+                     nb::gil_scoped_release release;  // waits for a running render, whose report may take the GIL
+                     layout = r.scene_layout();
+                 }
+                 const auto [k, filter] = layout;
+                 check_lod_upload(r.num_splats(), means, scales, quats, opacities, sh, filter_3d, radius, size,
+                                  levels, order, k, filter);
+                 const float* f3d = filter_3d ? filter_3d->data() : nullptr;
+                 std::shared_ptr<const void> owner = hold(means, scales, quats, opacities, sh, filter_3d, radius,
+                                                          size, levels, order);
+                 nb::gil_scoped_release release;
+                 r.upload_lod(means.data(), scales.data(), quats.data(), opacities.data(), sh.data(), f3d,
+                              radius.data(), size.data(), levels.data(), (int)levels.size(), order.data(),
+                              std::move(owner));
+             },
+             nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"),
+             nb::arg("filter_3d").none(), nb::arg("radius"), nb::arg("size"), nb::arg("levels"), nb::arg("order"),
+             "The uploaded scene's splat hierarchy (gbviewer.lod.Hierarchy's arrays: interior nodes' Gaussians, "
+             "radius, size, levels, order), referenced until the next upload; render(lod=...) draws its cuts.")
         .def("upload_weights",
              [](Renderer& r, FArr weight_sh) {
                  const int k = check_weight_sh("upload_weights", weight_sh, r.num_splats());
@@ -279,16 +310,18 @@ NB_MODULE(_native, m) {
              nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false, nb::arg("threads") = 0,
              nb::arg("cancel").none() = nb::none(), nb::arg("on_progress").none() = nb::none(),
              nb::arg("partial").none() = nb::none(), nb::arg("view_filter").none() = nb::none(),
+             nb::arg("lod").none() = nb::none(),
              "Render a frame of the uploaded scene. cancel: int64 array whose [0] stops the frame once nonzero (read "
              "by every worker); on_progress(done, total): called on this thread between tiles, at most every 5 ms, "
              "and at the end (an exception it raises stops the frame and is raised here); partial: float32 "
              "(height, width, 3) receiving each finished tile; view_filter: the scalar mode's [dilation, pre_dilation, "
-             "cull_lambda, compensate] (none: 3DGS's).")
+             "cull_lambda, compensate] (none: 3DGS's); lod: (tau, band, eye, focal, orthographic) draws the cut "
+             "through the uploaded hierarchy in place (none: every splat). The dict's lod_splats: the cut's size.")
         .def("render_many", &render_many, nb::arg("frames"), nb::arg("threads") = 0,
              nb::arg("cancel").none() = nb::none(), nb::arg("on_progress").none() = nb::none(),
              nb::arg("partials").none() = nb::none(),
              "Render several frames of the uploaded scene in one call (each a tuple of render()'s arguments R .. "
-             "depth_correct, then view_filter or None): the per-camera stage once per distinct camera and SH "
+             "depth_correct, then view_filter and lod, each or None): the per-camera stage once per distinct camera and SH "
              "degree, then every frame's tiles interleaved in one parallel loop. cancel as render's; "
              "on_progress(frame, done, total); partials: one float32 (height, width, 3) array or None per frame. A "
              "list of render()'s dicts, which also hold stage_ms, stage_reused and order_reused.")
@@ -297,10 +330,11 @@ NB_MODULE(_native, m) {
             [](Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                float sigma, float weight_background, float et_grade, bool depth_correct, int x, int y,
-               std::optional<FArr> view_filter) {
-                const RenderArgs a = render_args("trace", R, t, fx, fy, cx, cy, width, height, near_plane, projection,
-                                             mode, supersample, sh_degree, background, false, sigma,
-                                             weight_background, et_grade, depth_correct, view_filter);
+               std::optional<FArr> view_filter, nb::handle lod) {
+                RenderArgs a = render_args("trace", R, t, fx, fy, cx, cy, width, height, near_plane, projection,
+                                           mode, supersample, sh_degree, background, false, sigma,
+                                           weight_background, et_grade, depth_correct, view_filter);
+                a.lod = lod_args("trace", lod);
                 PixelTrace traced;
                 {
                     nb::gil_scoped_release release;
@@ -312,7 +346,8 @@ NB_MODULE(_native, m) {
             nb::arg("width"), nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"),
             nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"), nb::arg("sigma") = 10.0f,
             nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
-            nb::arg("x") = 0, nb::arg("y") = 0, nb::arg("view_filter").none() = nb::none(), "The pixel trace (trace.h) of output pixel (x, y) of this frame.")
+            nb::arg("x") = 0, nb::arg("y") = 0, nb::arg("view_filter").none() = nb::none(),
+            nb::arg("lod").none() = nb::none(), "The pixel trace (trace.h) of output pixel (x, y) of this frame.")
         .def("release_buffers", &Renderer::release_buffers, nb::call_guard<nb::gil_scoped_release>(),
              "Free the per-frame buffers and per-camera stages kept for the next frame.")
         .def_prop_ro("buffer_bytes", [](const Renderer& r) {

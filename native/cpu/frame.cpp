@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "frame.h"
+#include "lod.h"
 #include "testing.h"
 
 namespace gbv::cpu {
@@ -134,19 +135,50 @@ void for_blocks(int64_t n, FrameRun& run, Fn fn) {
 
 }  // namespace
 
+// The level-of-detail cut of `key` (lod.h) as the stage's rows and weights: drawn leaves (scene rows) first, then
+// drawn interior nodes (rows n_scene + node), each ascending, the order gbviewer.lod.cut_scene gathers them in. No
+// rows for a cut that is the scene's leaves (drawn as the scene itself, bit for bit).
+void cut_rows(const SceneView& sc, const LodArgs& a, Stage& stage) {
+    const SceneView::Hierarchy& t = sc.tree;
+    const lod::View view{{a.eye[0], a.eye[1], a.eye[2]}, a.focal, a.orthographic};
+    lod::Cut c = lod::cut(t.means, t.radius, t.size, t.levels, t.num_levels, t.order, view, a.tau, a.band, 0);
+    stage.rows.clear();
+    stage.weights.clear();
+    if (c.nodes.empty() && (int64_t)c.leaves.size() == sc.n) return;
+    stage.rows = std::move(c.leaves);
+    stage.weights = std::move(c.leaf_weights);
+    for (int32_t node : c.nodes) stage.rows.push_back((int32_t)(sc.n + node));
+    stage.weights.insert(stage.weights.end(), c.node_weights.begin(), c.node_weights.end());
+}
+
 void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& path, Stage& stage, Stats& st,
                  FrameRun& run) {
     const Clock::time_point t0 = Clock::now();
-    const int64_t n = sc.n;
-    if ((size_t)n < stage.splats.capacity() / 4) stage = Stage();  // a much smaller scene releases the storage
+    if ((size_t)sc.n < stage.splats.capacity() / 4) stage = Stage();  // a much smaller scene releases the storage
     stage.key = key;
     stage.ready = stage.order_ready = false;
+    if (key.lod.on()) {
+        cut_rows(sc, key.lod, stage);
+    } else {
+        stage.rows.clear();
+        stage.weights.clear();
+    }
+    const bool cut = !stage.rows.empty();
+    const int64_t n = cut ? (int64_t)stage.rows.size() : sc.n;
     stage.splats.resize(n);
     stage.valid.resize(n);
     const CameraParams& cam = key.cam;
-    const StageJob job{sc.means,  sc.scales, sc.quats, sc.opacities, sc.sh, sc.filter_3d, sc.k, key.sh_deg, cam,
-                       key.reach, (cam.width + TILE - 1) / TILE, (cam.height + TILE - 1) / TILE, stage.splats.data(),
-                       stage.valid.data()};
+    StageJob job{sc.means,  sc.scales, sc.quats, sc.opacities, sc.sh, sc.filter_3d, sc.k, key.sh_deg, cam,
+                 key.reach, (cam.width + TILE - 1) / TILE, (cam.height + TILE - 1) / TILE, stage.splats.data(),
+                 stage.valid.data()};
+    job.n_scene = sc.n;
+    if (cut) {
+        const SceneView::Hierarchy& t = sc.tree;
+        job.rows = stage.rows.data();
+        job.weights = stage.weights.data();
+        job.node_means = t.means, job.node_scales = t.scales, job.node_quats = t.quats;
+        job.node_opacities = t.opacities, job.node_sh = t.sh, job.node_filter_3d = t.filter_3d;
+    }
     for_blocks(n, run, [&](int64_t begin, int64_t end) { path.stage(job, begin, end); });
     stage.ready = !run.cancelled();
     const double ms = ms_since(t0);
@@ -158,7 +190,8 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
                FrameBuffers& buf, Stats& st, FrameRun& run) {
     const CameraParams& cam = stage.key.cam;
     const int gx = (cam.width + TILE - 1) / TILE, gy = (cam.height + TILE - 1) / TILE;
-    const int64_t n = sc.n;
+    const int64_t n = (int64_t)stage.splats.size();  // the scene's splats, or a level-of-detail cut's
+    if (stage.key.lod.on()) st.lod_drawn = n;
     Clock::time_point t0 = Clock::now();
     // every element of the reused buffers is written before it is read; a much smaller scene releases them
     if ((size_t)n < buf.splats.capacity() / 4) buf = FrameBuffers();

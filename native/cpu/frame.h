@@ -61,19 +61,30 @@ struct SceneView {
     const int32_t *cell_offsets = nullptr, *cell_members = nullptr;
     int64_t m = 0;
     std::vector<int32_t> cell_of = {};
+    // The scene's splat hierarchy (lod.h Tree's arrays), for level-of-detail frames: its interior nodes' Gaussians
+    // (the scene's layouts), the cut's inputs; levels[0..num_levels). num_levels 0: none uploaded.
+    struct Hierarchy {
+        const float *means = nullptr, *scales = nullptr, *quats = nullptr, *opacities = nullptr, *sh = nullptr,
+                    *filter_3d = nullptr, *radius = nullptr, *size = nullptr;
+        const int64_t* levels = nullptr;
+        const int32_t* order = nullptr;
+        int num_levels = 0;
+    } tree;
 };
 
 // What a stage depends on (built by stage_key, renderer.cpp, the one place that fills it): the uploaded scene (its
-// upload generation: upload, upload_weights and upload_cells each start a new one), every byte of the camera (a
-// supersampled frame's camera is its own), the SH degree, and the reach of its on-screen cull (stage_on_screen: the
-// largest diagonal the frame's 2D filter adds, at least 3DGS's +0.3, so every built-in mode and preset shares one).
+// upload generation: upload, upload_weights, upload_cells and upload_lod each start a new one), every byte of the
+// camera (a supersampled frame's camera is its own), the SH degree, the reach of its on-screen cull
+// (stage_on_screen: the largest diagonal the frame's 2D filter adds, at least 3DGS's +0.3, so every built-in mode and
+// preset shares one), and the level-of-detail cut it draws (off: every splat).
 struct StageKey {
     uint64_t scene = 0;
     CameraParams cam = {};
     int sh_deg = 0;
     float reach = DILATION_3DGS;
+    LodArgs lod = {};
     bool operator==(const StageKey& o) const {
-        return scene == o.scene && sh_deg == o.sh_deg && reach == o.reach &&
+        return scene == o.scene && sh_deg == o.sh_deg && reach == o.reach && lod == o.lod &&
                std::memcmp(&cam, &o.cam, sizeof cam) == 0;
     }
 };
@@ -82,6 +93,10 @@ struct StageKey {
 struct Stage {
     StageKey key;
     bool ready = false;  // built for key (false while building and after a cancelled build)
+    // A level-of-detail stage's cut (StageJob::rows, weights): its splat i is that row of the scene or hierarchy.
+    // Empty when it draws every splat of the scene (no LOD, or a cut that is the scene's leaves).
+    std::vector<int32_t> rows;
+    std::vector<float> weights;
     std::vector<StageSplat> splats;
     std::vector<uint8_t> valid;  // in front of the near plane and on screen in some mode
     // One depth order of the stage's valid splats (depth_order's keys), computed by the first frame that bins in
@@ -90,7 +105,8 @@ struct Stage {
     std::vector<uint64_t> order, order_scratch;
     bool order_ready = false;
     size_t bytes() const {
-        return splats.capacity() * sizeof(StageSplat) + valid.capacity() +
+        return splats.capacity() * sizeof(StageSplat) + valid.capacity() + rows.capacity() * sizeof(int32_t) +
+               weights.capacity() * sizeof(float) +
                (order.capacity() + order_scratch.capacity()) * sizeof(uint64_t);
     }
 };
@@ -192,7 +208,8 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
                 std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st, FrameRun& run);
 
-// frame.cpp: the stage of `key` into `stage` (every splat; stops early once cancelled, leaving it not ready).
+// frame.cpp: the stage of `key` into `stage` (every splat, or the level-of-detail cut's; stops early once cancelled,
+// leaving it not ready).
 void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& path, Stage& stage, Stats& st,
                  FrameRun& run);
 // The mode's finish of a ready stage and the binning of one image at the camera's resolution into `buf`, in the

@@ -1,4 +1,4 @@
-// The splat hierarchy and its cut (lod.h). Build: Morton codes of the centres (21 bits per axis over their bounds),
+// The splat hierarchy (lod.h; its cut: lod_cut.cpp). Build: Morton codes of the centres (21 bits per axis over their bounds),
 // a parallel sort, then levels of 8 consecutive nodes merged bottom-up in float64: each node carries its leaves'
 // mass W = sum a A, mean, covariance (the mixture's second central moment), optical mass T = sum -ln(1 - a) A and SH
 // mean, so every node's moments are exactly the W-weighted moments of its leaves whatever the tree above them.
@@ -248,70 +248,6 @@ Tree build(const Splats& s, OpacityRule rule, int threads) {
         std::swap(prev, cur);
     }
     return t;
-}
-
-Cut cut(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
-        const int32_t* order, const View& v, double tau, double band, int threads) {
-    const int nt = team(threads);
-    const int64_t n = levels[1], m = levels[num_levels - 1] - n;
-    std::vector<float> open(m), weight(m);  // o and the weight reaching each interior node
-#pragma omp parallel for num_threads(nt) schedule(static)
-    for (int64_t i = 0; i < m; ++i) {
-        double p = INFINITY;  // projected size in pixels
-        if (v.orthographic) {
-            p = size[i] * v.focal;
-        } else {
-            const double d[3] = {means[3 * i] - v.eye[0], means[3 * i + 1] - v.eye[1], means[3 * i + 2] - v.eye[2]};
-            const double gap = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - radius[i];
-            if (gap > 0) p = size[i] * v.focal / gap;
-        }
-        double o = 1.0;
-        if (tau > 0) o = band > 0 ? std::clamp((p - tau) / (tau * band), 0.0, 1.0) : (p >= tau ? 1.0 : 0.0);
-        open[i] = (float)o;
-    }
-    // Weights top-down: the root gets 1, a child its parent's weight times the parent's o.
-    auto parent = [&](int l, int64_t id) { return levels[l + 1] + (id - levels[l]) / BRANCHING - n; };
-    if (m > 0) weight[m - 1] = 1.0f;
-    for (int l = num_levels - 3; l >= 1; --l) {
-#pragma omp parallel for num_threads(nt) schedule(static)
-        for (int64_t id = levels[l]; id < levels[l + 1]; ++id) {
-            const int64_t p = parent(l, id);
-            weight[id - n] = weight[p] * open[p];
-        }
-    }
-    std::vector<float> leaf_w(n);
-#pragma omp parallel for num_threads(nt) schedule(static)
-    for (int64_t id = 0; id < n; ++id) {
-        const int64_t p = m > 0 ? parent(0, id) : -1;
-        leaf_w[order[id]] = p < 0 ? 1.0f : weight[p] * open[p];
-    }
-    Cut c;
-    auto compact = [nt](const std::vector<float>& w, auto drawn, std::vector<int32_t>& idx, std::vector<float>& out) {
-        const int64_t len = (int64_t)w.size();
-        std::vector<int64_t> counts(nt + 1, 0);
-#pragma omp parallel num_threads(nt)
-        {
-            const int th = omp_get_thread_num(), nth = omp_get_num_threads();
-            const int64_t b = len * th / nth, e = len * (th + 1) / nth;
-            int64_t local = 0;
-            for (int64_t i = b; i < e; ++i) local += drawn(i) > 0.0f;
-            counts[th + 1] = local;
-#pragma omp barrier
-#pragma omp single
-            {
-                for (int j = 0; j < nth; ++j) counts[j + 1] += counts[j];
-                idx.resize(counts[nth]), out.resize(counts[nth]);
-            }
-            int64_t at = counts[th];
-            for (int64_t i = b; i < e; ++i) {
-                const float d = drawn(i);
-                if (d > 0.0f) idx[at] = (int32_t)i, out[at++] = d;
-            }
-        }
-    };
-    compact(leaf_w, [&](int64_t i) { return leaf_w[i]; }, c.leaves, c.leaf_weights);
-    compact(weight, [&](int64_t i) { return weight[i] * (1.0f - open[i]); }, c.nodes, c.node_weights);
-    return c;
 }
 
 }  // namespace gbv::lod

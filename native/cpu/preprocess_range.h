@@ -29,6 +29,20 @@ struct StageJob {
     int grid_x, grid_y;
     StageSplat* stage;
     uint8_t* valid;
+    // A level-of-detail frame's cut, drawn in place: stage splat i is row rows[i] of the scene's arrays, or, from
+    // n_scene on, interior node rows[i] - n_scene of the hierarchy's (the same layouts), its opacity times
+    // weights[i] (as gathering the cut into a scene of its own multiplies it). rows null: splat i is row i.
+    const int32_t* rows = nullptr;
+    const float* weights = nullptr;
+    int64_t n_scene = 0;
+    const float *node_means = nullptr, *node_scales = nullptr, *node_quats = nullptr, *node_opacities = nullptr,
+                *node_sh = nullptr, *node_filter_3d = nullptr;
+
+    int64_t row(int64_t i) const { return rows ? rows[i] : i; }
+    // Row r (width floats) of an input: the scene's array, or past n_scene the hierarchy's.
+    const float* at(const float* scene, const float* nodes, int width, int64_t r) const {
+        return r < n_scene || !nodes ? scene + (size_t)width * r : nodes + (size_t)width * (r - n_scene);
+    }
 };
 
 // One mode's finish of a stored stage: the view weights (wsr, duplex) and cells, and the per-splat outputs.
@@ -64,7 +78,17 @@ inline void gather_lanes(const float* src, int width, const int64_t* ids, int co
     }
 }
 
-// SH colours of the splats ids[0..count) into their stage.
+// The stage's inputs of rows[0..count) (StageJob::row) into lane buffers buf[0..width) (spare lanes repeat the last).
+template <int N>
+inline void gather_rows(const StageJob& job, const float* scene, const float* nodes, int width, const int64_t* rows,
+                        int count, float (*buf)[N]) {
+    for (int j = 0; j < N; ++j) {
+        const float* s = job.at(scene, nodes, width, rows[j < count ? j : count - 1]);
+        for (int c = 0; c < width; ++c) buf[c][j] = s[c];
+    }
+}
+
+// SH colours of the stage splats ids[0..count) into their stage.
 template <class L>
 void stage_colors(const StageJob& job, const int64_t* ids, int count) {
     constexpr int N = L::N;
@@ -72,11 +96,13 @@ void stage_colors(const StageJob& job, const int64_t* ids, int count) {
     alignas(64) float mb[3][N], shb[48][N];
     alignas(64) float o[3][N];
     typename L::F sh[48];
+    int64_t rows[N];
     for (int g = 0; g < count; g += N) {
         const int c = count - g < N ? count - g : N;
-        gather_lanes<N>(job.means, 3, ids + g, c, mb);
+        for (int j = 0; j < c; ++j) rows[j] = job.row(ids[g + j]);
+        gather_rows<N>(job, job.means, job.node_means, 3, rows, c, mb);
         for (int j = 0; j < N; ++j) {  // the first nsh of k * 3 coefficients
-            const float* s = job.sh + (size_t)job.k * 3 * ids[g + (j < c ? j : c - 1)];
+            const float* s = job.at(job.sh, job.node_sh, job.k * 3, rows[j < c ? j : c - 1]);
             for (int q = 0; q < nsh; ++q) shb[q][j] = s[q];
         }
         SplatInLanes<L> in;
@@ -97,26 +123,29 @@ void stage_range(const StageJob& job, int64_t begin, int64_t end) {
     constexpr int BLOCK = 256;  // splats whose colours are evaluated together, on-screen lanes packed
     alignas(64) float buf[12][N];  // means, scales, quats, opacity, filter_3d
     alignas(64) float o[8][N];
-    int64_t ids[N], on[BLOCK];
+    int64_t rows[N], on[BLOCK];
     for (int64_t b0 = begin; b0 < end; b0 += BLOCK) {
         const int64_t b1 = end - b0 < BLOCK ? end : b0 + BLOCK;
         int count_on = 0;
         for (int64_t i0 = b0; i0 < b1; i0 += N) {
             const int count = b1 - i0 < N ? (int)(b1 - i0) : N;
-            for (int j = 0; j < N; ++j) ids[j] = i0 + j;
-            gather_lanes<N>(job.means, 3, ids, count, buf);
-            gather_lanes<N>(job.scales, 3, ids, count, buf + 3);
-            gather_lanes<N>(job.quats, 4, ids, count, buf + 6);
-            gather_lanes<N>(job.opacities, 1, ids, count, buf + 10);
+            for (int j = 0; j < count; ++j) rows[j] = job.row(i0 + j);
+            gather_rows<N>(job, job.means, job.node_means, 3, rows, count, buf);
+            gather_rows<N>(job, job.scales, job.node_scales, 3, rows, count, buf + 3);
+            gather_rows<N>(job, job.quats, job.node_quats, 4, rows, count, buf + 6);
+            gather_rows<N>(job, job.opacities, job.node_opacities, 1, rows, count, buf + 10);
+            if (job.weights)
+                for (int j = 0; j < N; ++j) buf[10][j] *= job.weights[i0 + (j < count ? j : count - 1)];
             for (int j = 0; j < N; ++j)
-                buf[11][j] = job.filter_3d ? job.filter_3d[ids[j < count ? j : count - 1]] : 0.0f;
+                buf[11][j] = job.filter_3d ? *job.at(job.filter_3d, job.node_filter_3d, 1, rows[j < count ? j : count - 1])
+                                           : 0.0f;
             SplatInLanes<L> in;
             for (int c = 0; c < 3; ++c) in.mean[c] = L::load(buf[c]);
             for (int c = 0; c < 3; ++c) in.scale[c] = L::load(buf[3 + c]);
             for (int c = 0; c < 4; ++c) in.quat[c] = L::load(buf[6 + c]);
             in.opacity = L::load(buf[10]);
             in.filter_3d = L::load(buf[11]);
-            StageLanes<L> st;
+            StageLanes<L> st{};  // preprocess_stage leaves it unset when no lane is in front
             uint32_t ok = L::bits(preprocess_stage<L>(in, job.cam, &st));
             if (ok) ok &= L::bits(stage_on_screen<L>(st, job.grid_x, job.grid_y, job.reach));
             for (int j = 0; j < count; ++j) job.valid[i0 + j] = (ok >> j) & 1u;

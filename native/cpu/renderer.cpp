@@ -15,7 +15,7 @@ namespace gbv::cpu {
 struct Renderer::Impl {
     mutable std::mutex mutex;  // serialises every method
     SceneView scene;
-    std::shared_ptr<const void> scene_owner, weights_owner, cells_owner;  // keep the caller's arrays alive
+    std::shared_ptr<const void> scene_owner, weights_owner, cells_owner, lod_owner;  // keep the caller's arrays alive
     std::atomic<int64_t> n{0};
     uint64_t generation = 0;            // of the uploaded scene, weights and cells (StageKey::scene)
     std::vector<Stage> stages;          // the last call's, one per distinct key
@@ -69,7 +69,9 @@ void Renderer::upload(const float* means, const float* scales, const float* quat
         old = impl_->forget_cells();
         old.push_back(std::move(impl_->weights_owner));
         old.push_back(std::move(impl_->scene_owner));
+        old.push_back(std::move(impl_->lod_owner));
         SceneView& sc = impl_->scene;
+        sc.tree = {};
         sc.means = means;
         sc.scales = scales;
         sc.quats = quats;
@@ -87,6 +89,22 @@ void Renderer::upload(const float* means, const float* scales, const float* quat
 }
 
 int64_t Renderer::num_splats() const { return impl_->n.load(); }
+
+std::pair<int, bool> Renderer::scene_layout() const {
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    return {impl_->scene.k, impl_->scene.filter_3d != nullptr};
+}
+
+void Renderer::upload_lod(const float* means, const float* scales, const float* quats, const float* opacities,
+                          const float* sh, const float* filter_3d, const float* radius, const float* size,
+                          const int64_t* levels, int num_levels, const int32_t* order,
+                          std::shared_ptr<const void> owner) {
+    std::shared_ptr<const void> old;
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    impl_->scene.tree = {means, scales, quats, opacities, sh, filter_3d, radius, size, levels, order, num_levels};
+    ++impl_->generation;
+    old = std::exchange(impl_->lod_owner, std::move(owner));
+}
 
 void Renderer::upload_weights(const float* weight_sh, int64_t n, int weight_k, std::shared_ptr<const void> owner) {
     std::shared_ptr<const void> old;
@@ -134,9 +152,17 @@ int sh_degree_of(const RenderArgs& a, const SceneView& sc) {
     return std::max(0, std::min(a.sh_degree, sh_degree_for_coeffs(sc.k)));
 }
 
-void check_cells(const RenderArgs& a, const SceneView& sc, const char* where) {
+// What a frame needs uploaded: duplex its cells; level of detail the hierarchy, and a plain scene (the cut's splats
+// have no view weights or cells).
+void check_uploads(const RenderArgs& a, const SceneView& sc, const char* where) {
     if (a.mode == DUPLEX && sc.cell_of.size() != (size_t)sc.n)
         throw std::invalid_argument(std::string(where) + ": duplex needs the scene's cells (upload_cells)");
+    if (!a.lod.on()) return;
+    if (sc.tree.num_levels < 2)
+        throw std::invalid_argument(std::string(where) + ": level of detail needs the scene's hierarchy (upload_lod)");
+    if (a.mode == DUPLEX || sc.weight_sh || !sc.cell_of.empty())
+        throw std::invalid_argument(std::string(where) + ": level of detail is for plain splat scenes, not duplex "
+                                    "or a scene with view weights or cells");
 }
 
 // The StageKey of a frame: everything its stage depends on (add a field here and to StageKey::operator==). The reach
@@ -144,7 +170,8 @@ void check_cells(const RenderArgs& a, const SceneView& sc, const char* where) {
 // other mode at most DILATION_3DGS (preprocess_finish).
 StageKey stage_key(const RenderArgs& a, const SceneView& sc, uint64_t generation) {
     const float filter = a.mode == SCALAR ? a.oit.dilation + a.oit.pre_dilation : 0.0f;
-    return StageKey{generation, a.cam, sh_degree_of(a, sc), std::max(DILATION_3DGS, filter)};
+    return StageKey{generation, a.cam, sh_degree_of(a, sc), std::max(DILATION_3DGS, filter),
+                    a.lod.on() ? a.lod : LodArgs{}};
 }
 
 }  // namespace
@@ -156,7 +183,7 @@ RenderResult Renderer::render(const RenderArgs& a, const Control& control) {
 std::vector<RenderResult> Renderer::render_many(const std::vector<RenderArgs>& frames, const Control& control) {
     std::lock_guard<std::mutex> lock(impl_->mutex);
     const SceneView& sc = impl_->scene;
-    for (const RenderArgs& a : frames) check_cells(a, sc, "render");
+    for (const RenderArgs& a : frames) check_uploads(a, sc, "render");
     const int count = (int)frames.size();
     const simd::Path& path = simd::current();  // the one these frames run and report, whatever set_simd does meanwhile
     FrameRun run(control, count);
@@ -215,7 +242,7 @@ PixelTrace Renderer::trace(const RenderArgs& a, int x, int y) {
         throw std::invalid_argument("trace: pixel outside the image");
     std::lock_guard<std::mutex> lock(impl_->mutex);
     const SceneView& sc = impl_->scene;
-    check_cells(a, sc, "trace");
+    check_uploads(a, sc, "trace");
     const simd::Path& path = simd::current();
     const StageKey key = stage_key(a, sc, impl_->generation);
     std::vector<Stage> stages = impl_->take_stages({key});

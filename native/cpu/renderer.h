@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include "gbv/args.h"
@@ -24,6 +25,7 @@ struct Stats {
     bool order_reused = false;  // binned in a depth order an earlier frame of the stage sorted (not wsr, duplex)
     int64_t visible = 0, sort_length = 0, pairs = 0;
     int64_t cells_visible = 0, cell_misses = 0;
+    int64_t lod_drawn = -1;  // a level-of-detail frame: the splats and interior nodes of its cut
 };
 
 // How one render runs and what it tells its caller; every field optional.
@@ -68,6 +70,8 @@ public:
 
     // Splats of the uploaded scene (0 before the first upload).
     int64_t num_splats() const;
+    // Its SH coefficients per channel and whether it has a 3D filter.
+    std::pair<int, bool> scene_layout() const;
 
     // The sort-free view-weight SH of the uploaded scene (n, weight_k), for wsr and duplex.
     void upload_weights(const float* weight_sh, int64_t n, int weight_k, std::shared_ptr<const void> owner);
@@ -77,6 +81,13 @@ public:
     void upload_cells(const float* means, const float* scales, const float* quats, const int32_t* offsets,
                       const int32_t* members, const int32_t* cell_of, int64_t num_cells, int64_t num_members,
                       std::shared_ptr<const void> owner);
+
+    // The uploaded scene's splat hierarchy (lod.h Tree's arrays, referenced like the scene's: interior nodes'
+    // Gaussians, radius and size, levels[0..num_levels), order): frames with RenderArgs::lod draw its cut in place.
+    // The caller checks that it is the scene's (gbviewer.lod.Hierarchy.check); upload forgets it.
+    void upload_lod(const float* means, const float* scales, const float* quats, const float* opacities,
+                    const float* sh, const float* filter_3d, const float* radius, const float* size,
+                    const int64_t* levels, int num_levels, const int32_t* order, std::shared_ptr<const void> owner);
 
     // Render at args.cam's resolution (supersample x the output size per axis) and box-average back. Throws
     // std::invalid_argument for duplex without cells.

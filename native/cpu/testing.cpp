@@ -14,6 +14,7 @@
 namespace gbv::cpu::testing {
 
 std::atomic<bool> pixel_boxes{true};
+std::atomic<int64_t> cut_flat_above{65536};
 std::atomic<bool> poison_images{false};
 std::atomic<bool> capture{false};
 

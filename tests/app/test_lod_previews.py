@@ -78,6 +78,25 @@ def test_previews_draw_the_cut_and_still_frames_every_splat(monkeypatch):
         panes.release()
 
 
+def test_a_preview_cancelled_after_its_budget_coarsens_the_next_cut(monkeypatch):
+    """A cut too fine for the scene never finishes while the camera moves (the stop cancels it): the time it ran
+    still coarsens the next motion's previews; one cancelled within budget leaves the cut."""
+    moving = [True]
+    state = opened(monkeypatch, moving)
+    worker = FakeWorker()
+    panes = PaneRenders(state, worker, standalone_context())
+    try:
+        panes.submit()
+        a = worker.jobs[0]
+        panes._take(RenderResult(a, None, finished=a.submitted + 0.01, cancelled=True))  # 10 ms: within budget
+        assert state.panes[0].preview_lod == rates.PREVIEW_LOD_PX
+        panes._take(RenderResult(a, None, finished=a.submitted + 3.0, cancelled=True))  # ran 3 s, then stopped
+        assert state.panes[0].preview_lod == 2 * rates.PREVIEW_LOD_PX
+        assert state.panes[0].parts["a"].job is None  # nothing shown from it
+    finally:
+        panes.release()
+
+
 def test_scenes_without_a_hierarchy_preview_by_resolution_alone(monkeypatch):
     moving = [True]
     state = opened(monkeypatch, moving)

@@ -87,7 +87,7 @@ def test_a_cleared_or_cancelled_group_is_not_requeued():
 def test_the_render_thread_renders_the_panes_of_one_camera_together(bundled_scene):
     """Two progressive panes of one camera, submitted together: one render_many (the second frame reuses the first's
     stage), the second pane's first tiles posted before the first pane's last ones (interleaved tiles), both
-    frames equal to single renders; a preview and a pane of another camera are not grouped."""
+    frames equal to single renders; a preview groups only with previews, a pane of another camera with neither."""
     import numpy as np
 
     import gbviewer as gb
@@ -102,6 +102,8 @@ def test_the_render_thread_renders_the_panes_of_one_camera_together(bundled_scen
     other = RenderJob((2, "a"), bundled_scene, cam.at_sampling_rate(0.5), RenderSettings(), "cpu")
     preview = RenderJob((3, "a"), bundled_scene, cam, RenderSettings(), "cpu", preview=True)
     assert companions(jobs[0], [jobs[1], other, preview]) == [jobs[1]] and companions(preview, jobs) == []
+    previews = [RenderJob((k, "a"), bundled_scene, cam, RenderSettings(lod=2.0), "cpu", preview=True) for k in (4, 5)]
+    assert companions(previews[0], [*jobs, previews[1], other]) == [previews[1]]  # the panes' previews together
     w = RenderWorker()
     try:
         w.submit_all(jobs)

@@ -7,6 +7,20 @@
 
 namespace gbv {
 
+// A level-of-detail frame (the CPU renderer, native/cpu/lod.h): draw the cut at tau pixels through the uploaded
+// hierarchy, for the eye (perspective) and the larger focal length of the output camera. tau < 0: every splat.
+struct LodArgs {
+    double tau = -1.0, band = 1.0;
+    float eye[3] = {0, 0, 0};
+    double focal = 0.0;
+    bool orthographic = false;
+    bool on() const { return tau >= 0.0; }
+    bool operator==(const LodArgs& o) const {
+        return tau == o.tau && band == o.band && eye[0] == o.eye[0] && eye[1] == o.eye[1] && eye[2] == o.eye[2] &&
+               focal == o.focal && orthographic == o.orthographic;
+    }
+};
+
 struct RenderArgs {
     CameraParams cam;   // at supersample x the output size: supersampling renders there and box-averages
     Mode mode;
@@ -16,6 +30,7 @@ struct RenderArgs {
     OitParams oit;      // wsr / duplex globals
     int sh_degree = 3;  // SH degree cap, 0..3
     bool want_window = false;  // Gaussian Blending's final window size per pixel as a debug plane
+    LodArgs lod;               // CPU only: the CUDA renderer draws a cut gathered into a scene of its own
 };
 
 }  // namespace gbv

@@ -1,0 +1,183 @@
+// The per-camera cut through the splat hierarchy (lod.h): top down over the nodes it reaches, or by its definition
+// over every node when most of the tree is reached.
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <parallel/algorithm>
+#include <utility>
+#include <vector>
+
+#include "lod.h"
+#include "testing.h"
+
+namespace gbv::lod {
+namespace {
+
+int team(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
+
+// o of interior node i (its projected size against tau; see cut in lod.h).
+float opening(const float* means, const float* radius, const float* size, int64_t i, const View& v, double tau,
+              double band) {
+    double p = INFINITY;  // projected size in pixels
+    if (v.orthographic) {
+        p = size[i] * v.focal;
+    } else {
+        const double d[3] = {means[3 * i] - v.eye[0], means[3 * i + 1] - v.eye[1], means[3 * i + 2] - v.eye[2]};
+        const double gap = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - radius[i];
+        if (gap > 0) p = size[i] * v.focal / gap;
+    }
+    double o = 1.0;
+    if (tau > 0) o = band > 0 ? std::clamp((p - tau) / (tau * band), 0.0, 1.0) : (p >= tau ? 1.0 : 0.0);
+    return (float)o;
+}
+
+// fn(thread, begin, end) over [0, len) in contiguous chunks, one per thread (ascending with the thread number), then
+// the chunks' outputs concatenated in that order: out gets every thread's `parts[thread]` (parallel, in order).
+template <class T, class Fn>
+void chunked(int64_t len, int nt, std::vector<T>& out, Fn fn) {
+    std::vector<std::vector<T>> parts(nt);
+    if (len < (1 << 16)) nt = 1;  // under ~1 ms of work: a parallel region (waking a busy core) costs more
+#pragma omp parallel num_threads(nt)
+    {
+        const int th = omp_get_thread_num(), nth = omp_get_num_threads();
+        fn(parts[th], len * th / nth, len * (th + 1) / nth);
+    }
+    size_t total = out.size();
+    for (const std::vector<T>& part : parts) total += part.size();
+    out.reserve(total);
+    for (const std::vector<T>& part : parts) out.insert(out.end(), part.begin(), part.end());
+}
+
+// The cut by its definition, over every node: each interior node's o, the weights top-down level by level, each
+// leaf's; what the top-down walk falls back to when most of the tree is reached.
+Cut cut_flat(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
+             const int32_t* order, const View& v, double tau, double band, int nt) {
+    const int64_t n = levels[1], m = levels[num_levels - 1] - n;
+    std::vector<float> open(m), weight(m);  // o and the weight reaching each interior node
+#pragma omp parallel for num_threads(nt) schedule(static)
+    for (int64_t i = 0; i < m; ++i) open[i] = opening(means, radius, size, i, v, tau, band);
+    // Weights top-down: the root gets 1, a child its parent's weight times the parent's o.
+    auto parent = [&](int l, int64_t id) { return levels[l + 1] + (id - levels[l]) / BRANCHING - n; };
+    if (m > 0) weight[m - 1] = 1.0f;
+    for (int l = num_levels - 3; l >= 1; --l) {
+#pragma omp parallel for num_threads(nt) schedule(static)
+        for (int64_t id = levels[l]; id < levels[l + 1]; ++id) {
+            const int64_t p = parent(l, id);
+            weight[id - n] = weight[p] * open[p];
+        }
+    }
+    std::vector<float> leaf_w(n);
+#pragma omp parallel for num_threads(nt) schedule(static)
+    for (int64_t id = 0; id < n; ++id) {
+        const int64_t p = m > 0 ? parent(0, id) : -1;
+        leaf_w[order[id]] = p < 0 ? 1.0f : weight[p] * open[p];
+    }
+    Cut c;
+    auto compact = [nt](const std::vector<float>& w, auto drawn, std::vector<int32_t>& idx, std::vector<float>& out) {
+        const int64_t len = (int64_t)w.size();
+        std::vector<int64_t> counts(nt + 1, 0);
+#pragma omp parallel num_threads(nt)
+        {
+            const int th = omp_get_thread_num(), nth = omp_get_num_threads();
+            const int64_t b = len * th / nth, e = len * (th + 1) / nth;
+            int64_t local = 0;
+            for (int64_t i = b; i < e; ++i) local += drawn(i) > 0.0f;
+            counts[th + 1] = local;
+#pragma omp barrier
+#pragma omp single
+            {
+                for (int j = 0; j < nth; ++j) counts[j + 1] += counts[j];
+                idx.resize(counts[nth]), out.resize(counts[nth]);
+            }
+            int64_t at = counts[th];
+            for (int64_t i = b; i < e; ++i) {
+                const float d = drawn(i);
+                if (d > 0.0f) idx[at] = (int32_t)i, out[at++] = d;
+            }
+        }
+    };
+    compact(leaf_w, [&](int64_t i) { return leaf_w[i]; }, c.leaves, c.leaf_weights);
+    compact(weight, [&](int64_t i) { return weight[i] * (1.0f - open[i]); }, c.nodes, c.node_weights);
+    return c;
+}
+
+}  // namespace
+
+// Top down from the root, visiting only the nodes the cut reaches (a node is reached when its parent opens, o > 0):
+// the cost follows the cut, not the scene (cut_flat once a level's reached nodes are many and over a quarter of it). A
+// reached node of weight w (the root 1) is drawn at w (1 - o) and passes w o to its children: the products the flat
+// definition forms, so both give the same cut.
+Cut cut(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
+        const int32_t* order, const View& v, double tau, double band, int threads) {
+    const int nt = team(threads);
+    const int64_t n = levels[1], m = levels[num_levels - 1] - n;
+    Cut c;
+    if (m == 0) {  // one splat: the leaf
+        c.leaves.assign(n, 0);
+        c.leaf_weights.assign(n, 1.0f);
+        return c;
+    }
+    using Reached = std::pair<int64_t, float>;  // (interior index, weight reaching it)
+    std::vector<Reached> frontier{{m - 1, 1.0f}}, next;
+    std::vector<std::vector<Reached>> drawn(num_levels);  // per level, ascending
+    for (int l = num_levels - 2; l >= 1; --l) {  // level l's reached nodes: frontier
+        const int64_t reached = (int64_t)frontier.size();
+        if (reached > cpu::testing::cut_flat_above.load(std::memory_order_relaxed) &&
+            reached * 4 > levels[l + 1] - levels[l])  // most of a large tree: every node, flat
+            return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, nt);
+        next.clear();
+        chunked<Reached>((int64_t)frontier.size(), nt, drawn[l], [&](std::vector<Reached>& out, int64_t b, int64_t e) {
+            for (int64_t f = b; f < e; ++f) {
+                const auto [i, w] = frontier[f];
+                const float o = opening(means, radius, size, i, v, tau, band), kept = w * (1.0f - o);
+                if (kept > 0.0f) out.push_back({i, kept});
+            }
+        });
+        if (l == 1) break;
+        chunked<Reached>((int64_t)frontier.size(), nt, next, [&](std::vector<Reached>& out, int64_t b, int64_t e) {
+            for (int64_t f = b; f < e; ++f) {
+                const auto [i, w] = frontier[f];
+                const float passed = w * opening(means, radius, size, i, v, tau, band);
+                if (!(passed > 0.0f)) continue;
+                const int64_t id = i + n, first = levels[l - 1] + BRANCHING * (id - levels[l]);
+                for (int64_t child = first; child < std::min(first + BRANCHING, levels[l]); ++child)
+                    out.push_back({child - n, passed});
+            }
+        });
+        std::swap(frontier, next);
+    }
+    // The leaves under the reached level-1 nodes: (splat, weight), ascending by splat.
+    std::vector<std::pair<int32_t, float>> leaves;
+    chunked<std::pair<int32_t, float>>((int64_t)frontier.size(), nt, leaves,
+                                       [&](std::vector<std::pair<int32_t, float>>& out, int64_t b, int64_t e) {
+        for (int64_t f = b; f < e; ++f) {
+            const auto [i, w] = frontier[f];
+            const float passed = w * opening(means, radius, size, i, v, tau, band);
+            if (!(passed > 0.0f)) continue;
+            const int64_t first = BRANCHING * (i + n - levels[1]);
+            for (int64_t p = first; p < std::min(first + BRANCHING, n); ++p) out.push_back({order[p], passed});
+        }
+    });
+    if ((int64_t)leaves.size() * 16 < n) {  // few: sort them
+        __gnu_parallel::sort(leaves.begin(), leaves.end());
+    } else {  // many: place them by splat (order is a permutation) and keep the drawn in splat order
+        std::vector<float> w(n, 0.0f);
+#pragma omp parallel for num_threads(nt) schedule(static)
+        for (int64_t j = 0; j < (int64_t)leaves.size(); ++j) w[leaves[j].first] = leaves[j].second;
+        leaves.clear();
+        chunked<std::pair<int32_t, float>>(n, nt, leaves, [&](std::vector<std::pair<int32_t, float>>& out, int64_t b,
+                                                              int64_t e) {
+            for (int64_t i = b; i < e; ++i)
+                if (w[i] > 0.0f) out.push_back({(int32_t)i, w[i]});
+        });
+    }
+    c.leaves.resize(leaves.size());
+    c.leaf_weights.resize(leaves.size());
+    for (size_t j = 0; j < leaves.size(); ++j) c.leaves[j] = leaves[j].first, c.leaf_weights[j] = leaves[j].second;
+    for (int l = 1; l < num_levels; ++l)
+        for (const Reached& r : drawn[l]) c.nodes.push_back((int32_t)r.first), c.node_weights.push_back(r.second);
+    return c;
+}
+
+}  // namespace gbv::lod

@@ -1,0 +1,90 @@
+"""The CPU renderer draws a level-of-detail cut in place (the stage reads the scene's and the hierarchy's rows; no
+cut Scene is gathered or uploaded): bit-identical to rendering the gathered cut, stage kept per (camera, tau),
+traces of its pixels, and the native hierarchy upload's checks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import random_scene
+
+import gbviewer as gb
+from gbviewer import lod
+
+CAM = gb.Camera(64, 48, 20.0, 20.0, 32, 24, np.eye(3), np.zeros(3))
+
+
+def filtered_scene(seed: int, sh_dtype: str = "float32") -> gb.Scene:
+    """A random scene with a 3D filter (the hierarchy merges it too), SH stored as `sh_dtype`."""
+    base = random_scene(3000, seed=seed, sh_degree=2, spread=3.0)
+    rng = np.random.default_rng(seed)
+    return gb.Scene(base.means, base.scales, base.quats, base.opacities, base.sh.astype(sh_dtype),
+                    rng.uniform(0.0, 0.02, base.num_splats).astype(np.float32), source="test")
+
+
+@pytest.mark.parametrize("sh_dtype", ["float32", "float16"])
+@pytest.mark.parametrize("rate", [1.0, 0.25, 0.125])
+def test_in_place_cut_equals_the_gathered_cut(rate, sh_dtype):
+    scene = filtered_scene(21, sh_dtype)
+    view = CAM.at_sampling_rate(rate)
+    renderer = gb.get_renderer(scene, "cpu")
+    drawn = set()
+    for tau in (0.0, 1.0, 3.0):
+        gathered = lod.cut_scene(scene, view, tau)
+        for spec in ("scalar", "gaussian_blending", "mip", "analytic", "scalar:2", "preset:spark", "wsr"):
+            frame = renderer.render(view, gb.RenderSettings.parse(f"{spec}+lod:{tau:g}"))
+            ref = gb.get_renderer(gathered, "cpu").render(view, gb.RenderSettings.parse(spec))
+            for a, b in ((frame.rgb, ref.rgb), (frame.alpha, ref.alpha), (frame.debug["evals"], ref.debug["evals"])):
+                assert np.array_equal(a, b), (spec, tau)
+            assert frame.stats.lod_splats == gathered.meta.get("lod", (scene.num_splats,))[0]
+        drawn.add(frame.stats.lod_splats)
+    assert len(drawn) == 3  # the taus draw different cuts: the comparison is not of one scene thrice
+
+
+def test_the_stage_is_kept_per_camera_and_tau():
+    scene = filtered_scene(22)
+    renderer = gb.get_renderer(scene, "cpu")
+    lod2, lod4, full = gb.RenderSettings(lod=2.0), gb.RenderSettings("gaussian_blending", lod=4.0), gb.RenderSettings()
+    first = renderer.render_many([(CAM, lod2), (CAM, lod4), (CAM, full)])
+    assert [f.stats.stage_reused for f in first] == [False, False, False]
+    again = renderer.render_many([(CAM, gb.RenderSettings("gaussian_blending", lod=2.0)), (CAM, lod4), (CAM, full)])
+    assert [f.stats.stage_reused for f in again] == [True, True, True]
+    assert again[1].stats.lod_splats == first[1].stats.lod_splats < first[0].stats.lod_splats
+    moved = gb.Camera(64, 48, 20.0, 20.0, 32, 24, np.eye(3), np.array([0.0, 0.0, -0.5]))
+    assert not renderer.render(moved, lod2).stats.stage_reused
+    other = filtered_scene(23)  # same sizes, another scene: never its stage
+    renderer.upload(other)
+    frame = renderer.render(CAM, lod2)
+    assert not frame.stats.stage_reused
+    assert np.array_equal(frame.rgb, gb.get_renderer(lod.cut_scene(other, CAM, 2.0), "cpu").render(CAM, gb.RenderSettings()).rgb)
+
+
+def test_traces_of_an_in_place_cut_are_its_pixels():
+    scene = filtered_scene(24)
+    for mode in ("scalar", "gaussian_blending"):
+        frame = gb.render(scene, CAM, mode, lod=2.0)
+        for x, y in ((32, 24), (10, 40)):
+            t = gb.trace_pixel(scene, CAM, x, y, mode, lod=2.0)
+            np.testing.assert_allclose(t.color, frame.rgb[y, x], rtol=0, atol=1e-5)
+            assert abs(t.transmittance - (1.0 - frame.alpha[y, x])) <= 1e-5
+            assert t.mode == frame.stats.mode.split(",")[0]
+
+
+def test_the_native_upload_checks_the_hierarchy():
+    scene = filtered_scene(25)
+    tree = lod.build(scene)
+    native = gb.get_renderer(scene, "cpu")._impl
+    sh = np.ascontiguousarray(tree.sh, np.float32)
+    args = [tree.means, tree.scales, tree.quats, tree.opacities, sh, tree.filter_3d, tree.radius, tree.size]
+    with pytest.raises(ValueError, match="upload_lod: levels"):
+        native.upload_lod(*args, tree.levels[:-1].copy(), tree.order)
+    bad = tree.order.copy()
+    bad[5] = scene.num_splats
+    with pytest.raises(ValueError, match="upload_lod: order"):
+        native.upload_lod(*args, tree.levels, bad)
+    with pytest.raises(ValueError, match="upload_lod: the interior arrays"):
+        native.upload_lod(*args[:5], None, *args[6:], tree.levels, tree.order)
+    with pytest.raises(ValueError, match="level of detail needs the scene's hierarchy"):
+        native.render(np.eye(3, dtype=np.float32), np.zeros(3, np.float32), 20.0, 20.0, 32.0, 24.0, 64, 48, 0.2, 0,
+                      0, 1, 3, np.zeros(3, np.float32), False,
+                      lod=(1.0, 1.0, np.zeros(3, np.float32), 20.0, False))
