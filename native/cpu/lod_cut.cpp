@@ -1,10 +1,12 @@
 // The per-camera cut through the splat hierarchy (lod.h): top down over the nodes it reaches, or by its definition
 // over every node when most of the tree is reached.
-#include <omp.h>
+#include "omp_shim.h"
 
 #include <algorithm>
 #include <cmath>
-#include <parallel/algorithm>
+#if defined(_OPENMP) && defined(__GLIBCXX__)
+#include <parallel/algorithm>  // libstdc++'s parallel sort (OpenMP)
+#endif
 #include <utility>
 #include <vector>
 
@@ -160,7 +162,11 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
         }
     });
     if ((int64_t)leaves.size() * 16 < n) {  // few: sort them
+#if defined(_OPENMP) && defined(__GLIBCXX__)
         __gnu_parallel::sort(leaves.begin(), leaves.end());
+#else
+        std::sort(leaves.begin(), leaves.end());  // splats are unique (order is a permutation): the same order
+#endif
     } else {  // many: place them by splat (order is a permutation) and keep the drawn in splat order
         std::vector<float> w(n, 0.0f);
 #pragma omp parallel for num_threads(nt) schedule(static)
