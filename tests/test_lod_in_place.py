@@ -88,3 +88,19 @@ def test_the_native_upload_checks_the_hierarchy():
         native.render(np.eye(3, dtype=np.float32), np.zeros(3, np.float32), 20.0, 20.0, 32.0, 24.0, 64, 48, 0.2, 0,
                       0, 1, 3, np.zeros(3, np.float32), False,
                       lod=(1.0, 1.0, np.zeros(3, np.float32), 20.0, False))
+
+
+def test_a_coarse_cut_keeps_the_full_frames_buffers():
+    """A preview's small cut of the uploaded scene does not free the frame buffers its next full frame needs again
+    (a much smaller scene does: tests/render/test_render.py)."""
+    from gbviewer.render.cpu import CpuRenderer
+
+    scene = filtered_scene(26)
+    r = CpuRenderer()
+    r.upload(scene)
+    full = r.render(CAM, gb.RenderSettings())
+    kept = r._impl.buffer_bytes
+    cut = r.render(CAM, gb.RenderSettings(lod=50.0))
+    assert cut.stats.lod_splats * 4 < scene.num_splats  # a scene this small would release them
+    assert r._impl.buffer_bytes >= kept
+    assert np.array_equal(r.render(CAM, gb.RenderSettings()).rgb, full.rgb)

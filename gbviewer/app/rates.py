@@ -68,14 +68,14 @@ def preview_factor(pixels: int, ms_per_pixel: float | None, budget_ms: float, mo
 
 PREVIEW_LOD_PX = 1.0  # the finest cut a preview draws (pixels of the preview's resolution)
 MAX_PREVIEW_LOD = 32.0
-PREVIEW_PANE_MS = 100.0  # a preview's budget per pane
+PREVIEW_MS = 60.0  # a preview render's budget (the panes' previews of one camera render together): >= 10 a second
 
 
 def preview_lod(tau: float, preview_ms: float) -> float:
-    """The next preview's cut after one that took `preview_ms` at `tau` pixels: twice as coarse over the pane's
-    budget, twice as fine under 40 % of it, between PREVIEW_LOD_PX and MAX_PREVIEW_LOD."""
-    if preview_ms > PREVIEW_PANE_MS:
+    """The next preview's cut after one that took `preview_ms` at `tau` pixels: twice as coarse over the
+    budget PREVIEW_MS, twice as fine under 40 % of it, between PREVIEW_LOD_PX and MAX_PREVIEW_LOD."""
+    if preview_ms > PREVIEW_MS:
         return min(MAX_PREVIEW_LOD, tau * 2.0)
-    if preview_ms < 0.4 * PREVIEW_PANE_MS:
+    if preview_ms < 0.4 * PREVIEW_MS:
         return max(PREVIEW_LOD_PX, tau / 2.0)
     return tau

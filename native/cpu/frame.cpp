@@ -193,8 +193,9 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
     const int64_t n = (int64_t)stage.splats.size();  // the scene's splats, or a level-of-detail cut's
     if (stage.key.lod.on()) st.lod_drawn = n;
     Clock::time_point t0 = Clock::now();
-    // every element of the reused buffers is written before it is read; a much smaller scene releases them
-    if ((size_t)n < buf.splats.capacity() / 4) buf = FrameBuffers();
+    // every element of the reused buffers is written before it is read; a much smaller scene releases them (not a
+    // level-of-detail cut of this one: the viewer's previews would free what its next full frame allocates again)
+    if ((size_t)sc.n < buf.splats.capacity() / 4) buf = FrameBuffers();
     std::vector<Splat2D>& splats = buf.splats;
     std::vector<TileRect>& rects = buf.rects;
     std::vector<uint8_t>& valid = buf.valid;

@@ -61,7 +61,7 @@ def test_previews_draw_the_cut_and_still_frames_every_splat(monkeypatch):
         assert a.preview and a.settings.lod == rates.PREVIEW_LOD_PX and b.preview and b.settings.lod == 4.0
         frame = gb.get_renderer(state.scene, "cpu").render(a.camera, a.settings)  # the preview renders the cut
         assert frame.stats.lod_splats is not None and "LOD" in frame.stats.mode
-        frame.stats.total_ms = 3 * rates.PREVIEW_PANE_MS  # over budget: the next preview's cut is coarser
+        frame.stats.total_ms = 3 * rates.PREVIEW_MS  # over budget: the next preview's cut is coarser
         panes._take(RenderResult(a, frame, finished=time.perf_counter()))
         assert state.panes[0].preview_lod == 2 * rates.PREVIEW_LOD_PX
         state.controller.orbit(5.0, 0.0)  # the camera moved on
@@ -115,7 +115,7 @@ def test_preview_lod_adapts_within_its_bounds():
     for _ in range(20):
         tau = rates.preview_lod(tau, 500.0)
     assert tau == rates.MAX_PREVIEW_LOD
-    assert rates.preview_lod(tau, 0.6 * rates.PREVIEW_PANE_MS) == tau  # within budget: kept
+    assert rates.preview_lod(tau, 0.6 * rates.PREVIEW_MS) == tau  # within budget: kept
     for _ in range(20):
         tau = rates.preview_lod(tau, 1.0)
     assert tau == rates.PREVIEW_LOD_PX
