@@ -104,3 +104,17 @@ def test_a_coarse_cut_keeps_the_full_frames_buffers():
     assert cut.stats.lod_splats * 4 < scene.num_splats  # a scene this small would release them
     assert r._impl.buffer_bytes >= kept
     assert np.array_equal(r.render(CAM, gb.RenderSettings()).rgb, full.rgb)
+
+
+def test_cells_of_a_duplex_frame_do_not_stop_the_other_modes_cuts():
+    """A duplex frame uploads the scene's cells; a later level-of-detail frame of another mode (a moving pane's
+    preview) still draws its cut in place, and a duplex pane beside it draws the gathered cut."""
+    scene = filtered_scene(27)
+    renderer = gb.get_renderer(scene, "cpu")
+    renderer.render(CAM, gb.RenderSettings("duplex"))
+    for spec in ("scalar+lod:2", "gaussian_blending+lod:2", "duplex+lod:2"):
+        frame = renderer.render(CAM, gb.RenderSettings.parse(spec))
+        ref = gb.get_renderer(lod.cut_scene(scene, CAM, 2.0), "cpu").render(CAM, gb.RenderSettings.parse(spec.split("+")[0]))
+        assert np.array_equal(frame.rgb, ref.rgb), spec
+    both = renderer.render_many([(CAM, gb.RenderSettings("duplex")), (CAM, gb.RenderSettings(lod=2.0))])
+    assert both[1].stats.lod_splats is not None

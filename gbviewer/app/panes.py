@@ -158,10 +158,12 @@ class PaneRenders:
             return
         p = s.panes[i]
         if res.cancelled:  # superseded: the newer request of its slot is queued
-            if res.job.preview and res.job.settings.lod == p.preview_lod and s.settings.panes[i].lod == 0:
-                # a preview stopped by the camera's stop after running over its budget: the next motion's first
-                # preview draws a coarser cut (else a cut too fine for the scene is never measured, only cancelled)
-                p.preview_lod = max(p.preview_lod, preview_lod(p.preview_lod, (res.finished - res.job.submitted) * 1e3))
+            if (res.job.preview and res.started and res.job.settings.lod == p.preview_lod
+                    and s.settings.panes[i].lod == 0):
+                # a preview stopped by the camera's stop after rendering longer than its budget: the next motion's
+                # first preview draws a coarser cut (else a cut too fine for the scene is never measured, only
+                # cancelled); its time in the queue does not count
+                p.preview_lod = max(p.preview_lod, preview_lod(p.preview_lod, (res.finished - res.started) * 1e3))
             return
         shown = p.parts[part]
         if res.stage != "final":

@@ -64,6 +64,7 @@ class RenderResult:
     partial: np.ndarray | None = None  # float32 (H, W, 3), still being written by the render
     progress: float = 1.0  # fraction of the frame's tiles done
     failed: bool = False  # the job's backend stopped working (error says why): its slot renders on another next
+    started: float = 0.0  # when the render thread began it (perf_counter; 0: not rendered here)
 
 
 def free(renderer: Renderer) -> None:
@@ -287,8 +288,10 @@ class RenderWorker(SlotThread):
             self._release()  # the previous scene's renderers and GPU buffers, freed in this thread
             self._scene = job.scene
 
+        started = time.perf_counter()
+
         def each(**kw) -> list:
-            return [RenderResult(j, None, finished=time.perf_counter(), **kw) for j in jobs]
+            return [RenderResult(j, None, finished=time.perf_counter(), started=started, **kw) for j in jobs]
 
         try:
             renderer = self._renderer_of(job.backend)
@@ -298,7 +301,7 @@ class RenderWorker(SlotThread):
                 frames = [renderer.render(job.camera, job.settings, cancel=cancel)]
             else:
                 frames = render_jobs(renderer, jobs, cancel, self._post_stage)
-            return [RenderResult(j, f, "", time.perf_counter()) for j, f in zip(jobs, frames)]
+            return [RenderResult(j, f, "", time.perf_counter(), started=started) for j, f in zip(jobs, frames)]
         except RenderCancelled:
             return each(cancelled=True)
         except BackendFailed as exc:

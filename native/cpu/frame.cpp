@@ -136,19 +136,20 @@ void for_blocks(int64_t n, FrameRun& run, Fn fn) {
 }  // namespace
 
 // The level-of-detail cut of `key` (lod.h) as the stage's rows and weights: drawn leaves (scene rows) first, then
-// drawn interior nodes (rows n_scene + node), each ascending, the order gbviewer.lod.cut_scene gathers them in. No
-// rows for a cut that is the scene's leaves (drawn as the scene itself, bit for bit).
-void cut_rows(const SceneView& sc, const LodArgs& a, Stage& stage) {
+// drawn interior nodes (rows n_scene + node), each ascending, the order gbviewer.lod.cut_scene gathers them in.
+// False, and no rows, for a cut that is the scene's leaves (drawn as the scene itself, bit for bit).
+bool cut_rows(const SceneView& sc, const LodArgs& a, Stage& stage) {
     const SceneView::Hierarchy& t = sc.tree;
     const lod::View view{{a.eye[0], a.eye[1], a.eye[2]}, a.focal, a.orthographic};
     lod::Cut c = lod::cut(t.means, t.radius, t.size, t.levels, t.num_levels, t.order, view, a.tau, a.band, 0);
     stage.rows.clear();
     stage.weights.clear();
-    if (c.nodes.empty() && (int64_t)c.leaves.size() == sc.n) return;
+    if (c.nodes.empty() && (int64_t)c.leaves.size() == sc.n) return false;
     stage.rows = std::move(c.leaves);
     stage.weights = std::move(c.leaf_weights);
     for (int32_t node : c.nodes) stage.rows.push_back((int32_t)(sc.n + node));
     stage.weights.insert(stage.weights.end(), c.node_weights.begin(), c.node_weights.end());
+    return true;  // an empty cut (a root whose size is not a number) draws nothing, as cut_scene's gather
 }
 
 void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& path, Stage& stage, Stats& st,
@@ -157,13 +158,9 @@ void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& pat
     if ((size_t)sc.n < stage.splats.capacity() / 4) stage = Stage();  // a much smaller scene releases the storage
     stage.key = key;
     stage.ready = stage.order_ready = false;
-    if (key.lod.on()) {
-        cut_rows(sc, key.lod, stage);
-    } else {
-        stage.rows.clear();
-        stage.weights.clear();
-    }
-    const bool cut = !stage.rows.empty();
+    stage.rows.clear();
+    stage.weights.clear();
+    const bool cut = key.lod.on() && cut_rows(sc, key.lod, stage);
     const int64_t n = cut ? (int64_t)stage.rows.size() : sc.n;
     stage.splats.resize(n);
     stage.valid.resize(n);

@@ -94,7 +94,8 @@ struct Stage {
     StageKey key;
     bool ready = false;  // built for key (false while building and after a cancelled build)
     // A level-of-detail stage's cut (StageJob::rows, weights): its splat i is that row of the scene or hierarchy.
-    // Empty when it draws every splat of the scene (no LOD, or a cut that is the scene's leaves).
+    // Empty when it draws every splat of the scene (no LOD, or a cut that is the scene's leaves; splats.size() says
+    // which, an empty cut drawing none).
     std::vector<int32_t> rows;
     std::vector<float> weights;
     std::vector<StageSplat> splats;

@@ -152,17 +152,18 @@ int sh_degree_of(const RenderArgs& a, const SceneView& sc) {
     return std::max(0, std::min(a.sh_degree, sh_degree_for_coeffs(sc.k)));
 }
 
-// What a frame needs uploaded: duplex its cells; level of detail the hierarchy, and a plain scene (the cut's splats
-// have no view weights or cells).
+// What a frame needs uploaded: duplex its cells; level of detail the hierarchy, and no per-splat data the finish
+// would index by the cut's splats (duplex's cells, wsr's view weights; cells uploaded for a duplex frame of the
+// same scene are not read by the other modes).
 void check_uploads(const RenderArgs& a, const SceneView& sc, const char* where) {
     if (a.mode == DUPLEX && sc.cell_of.size() != (size_t)sc.n)
         throw std::invalid_argument(std::string(where) + ": duplex needs the scene's cells (upload_cells)");
     if (!a.lod.on()) return;
     if (sc.tree.num_levels < 2)
         throw std::invalid_argument(std::string(where) + ": level of detail needs the scene's hierarchy (upload_lod)");
-    if (a.mode == DUPLEX || sc.weight_sh || !sc.cell_of.empty())
+    if (a.mode == DUPLEX || (a.mode == WSR && sc.weight_sh))
         throw std::invalid_argument(std::string(where) + ": level of detail is for plain splat scenes, not duplex "
-                                    "or a scene with view weights or cells");
+                                    "or wsr with view weights");
 }
 
 // The StageKey of a frame: everything its stage depends on (add a field here and to StageKey::operator==). The reach

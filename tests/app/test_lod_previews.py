@@ -88,9 +88,10 @@ def test_a_preview_cancelled_after_its_budget_coarsens_the_next_cut(monkeypatch)
     try:
         panes.submit()
         a = worker.jobs[0]
-        panes._take(RenderResult(a, None, finished=a.submitted + 0.01, cancelled=True))  # 10 ms: within budget
+        t = a.submitted + 5.0  # it waited 5 s in the queue: that does not count
+        panes._take(RenderResult(a, None, finished=t + 0.01, cancelled=True, started=t))  # 10 ms: within budget
         assert state.panes[0].preview_lod == rates.PREVIEW_LOD_PX
-        panes._take(RenderResult(a, None, finished=a.submitted + 3.0, cancelled=True))  # ran 3 s, then stopped
+        panes._take(RenderResult(a, None, finished=t + 3.0, cancelled=True, started=t))  # ran 3 s, then stopped
         assert state.panes[0].preview_lod == 2 * rates.PREVIEW_LOD_PX
         assert state.panes[0].parts["a"].job is None  # nothing shown from it
     finally:
