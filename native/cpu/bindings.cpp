@@ -271,7 +271,7 @@ NB_MODULE(_native, m) {
                  std::shared_ptr<const void> owner = hold(means, scales, quats, opacities, sh, filter_3d, radius,
                                                           size, levels, order);
                  nb::gil_scoped_release release;
-                 r.upload_lod(means.data(), scales.data(), quats.data(), opacities.data(), sh.data(), f3d,
+                 r.upload_lod(means.data(), scales.data(), quats.data(), opacities.data(), sh.data(), k, f3d,
                               radius.data(), size.data(), levels.data(), (int)levels.size(), order.data(),
                               std::move(owner));
              },

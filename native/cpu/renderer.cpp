@@ -96,11 +96,14 @@ std::pair<int, bool> Renderer::scene_layout() const {
 }
 
 void Renderer::upload_lod(const float* means, const float* scales, const float* quats, const float* opacities,
-                          const float* sh, const float* filter_3d, const float* radius, const float* size,
+                          const float* sh, int k, const float* filter_3d, const float* radius, const float* size,
                           const int64_t* levels, int num_levels, const int32_t* order,
                           std::shared_ptr<const void> owner) {
     std::shared_ptr<const void> old;
     std::lock_guard<std::mutex> lock(impl_->mutex);
+    const SceneView& sc = impl_->scene;  // checked again here: a concurrent upload may have replaced the scene
+    if (num_levels < 2 || levels[1] != sc.n || k != sc.k || (filter_3d != nullptr) != (sc.filter_3d != nullptr))
+        throw std::invalid_argument("upload_lod: the hierarchy is not of the uploaded scene");
     impl_->scene.tree = {means, scales, quats, opacities, sh, filter_3d, radius, size, levels, order, num_levels};
     ++impl_->generation;
     old = std::exchange(impl_->lod_owner, std::move(owner));

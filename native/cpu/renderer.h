@@ -85,8 +85,9 @@ public:
     // The uploaded scene's splat hierarchy (lod.h Tree's arrays, referenced like the scene's: interior nodes'
     // Gaussians, radius and size, levels[0..num_levels), order): frames with RenderArgs::lod draw its cut in place.
     // The caller checks that it is the scene's (gbviewer.lod.Hierarchy.check); upload forgets it.
+    // Throws std::invalid_argument unless its leaves, SH size k and 3D filter are the uploaded scene's.
     void upload_lod(const float* means, const float* scales, const float* quats, const float* opacities,
-                    const float* sh, const float* filter_3d, const float* radius, const float* size,
+                    const float* sh, int k, const float* filter_3d, const float* radius, const float* size,
                     const int64_t* levels, int num_levels, const int32_t* order, std::shared_ptr<const void> owner);
 
     // Render at args.cam's resolution (supersample x the output size per axis) and box-average back. Throws
