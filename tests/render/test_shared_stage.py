@@ -107,6 +107,8 @@ def test_render_many_partials_and_progress_end_equal_to_the_frames():
     assert {k for k, _, _ in seen} == {0, 1}
     last = {k: (d, t) for k, d, t in seen}
     assert all(d == t for d, t in last.values())
+    ks = [k for k, _, _ in seen]  # the tiles interleaved: frame 1's first tiles come before frame 0's last
+    assert ks.index(1) < len(ks) - 1 - ks[::-1].index(0), ks
 
 
 def test_a_cancelled_render_many_raises_and_the_next_render_is_exact():
