@@ -96,7 +96,14 @@ void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTile
     const int64_t begin = b.tile_start[t], count = b.tile_start[t + 1] - begin;
     local.resize(count);
     bounds.resize(count);
+    constexpr int64_t AHEAD = 8;  // the list's splats are scattered over the frame's: fetch them ahead of the copy
     for (int64_t j = 0; j < count; ++j) {
+        if (j + AHEAD < count) {
+            const uint32_t next = (uint32_t)b.keys[begin + j + AHEAD];
+            __builtin_prefetch(&b.splats[next]);
+            __builtin_prefetch((const char*)&b.splats[next] + sizeof(Splat2D) - 1);
+            __builtin_prefetch(&b.boxes[next]);
+        }
         const uint32_t id = (uint32_t)b.keys[begin + j];
         local[j] = b.splats[id];
         bounds[j] = b.boxes[id];
@@ -215,7 +222,7 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
     if (mode == DUPLEX) {
         bin_duplex(sc, cam, splats, rects, valid, gx, gy, tile_start, keys, st, run);
     } else if (mode == WSR) {  // order-independent: the splat order
-        bin_splats(splats, rects, valid, nullptr, n, gx, tile_start, keys, st, run);
+        bin_splats(splats, rects, valid, nullptr, n, gx, tile_start, keys, buf.ranked, st, run);
     } else {
         if (!stage.order_ready) {  // once per stage: every later frame of this camera bins in it
             t0 = Clock::now();
@@ -227,8 +234,8 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
             st.order_reused = true;
         }
         st.sort_length += (int64_t)stage.order.size();
-        bin_splats(splats, rects, valid, stage.order.data(), (int64_t)stage.order.size(), gx, tile_start, keys, st,
-                   run);
+        bin_splats(splats, rects, valid, stage.order.data(), (int64_t)stage.order.size(), gx, tile_start, keys,
+                   buf.ranked, st, run);
     }
     if (run.cancelled()) return;
     if (keys.capacity() > 4 * keys.size() + (1u << 20)) keys.shrink_to_fit();  // after a much larger frame

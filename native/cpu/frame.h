@@ -112,6 +112,11 @@ struct Stage {
     }
 };
 
+// A splat's tile rectangle at its place in the binning order (bin_splats).
+struct RankedRect {
+    uint16_t x0, y0, x1, y1;
+};
+
 // A frame's buffers, kept by the renderer between frames (no allocation, no page faults once sizes settle).
 struct FrameBuffers {
     std::vector<Splat2D> splats;
@@ -120,6 +125,7 @@ struct FrameBuffers {
     std::vector<int64_t> tile_start;
     std::vector<uint64_t> keys;  // per tile list entry: splat id in the low 32 bits
     std::vector<SplatBounds> boxes;
+    std::vector<RankedRect> ranked;  // bin_splats' scratch
 };
 
 // A running call's cancel state and progress (Control) for its frames: the caller's flag or a report that asked to
@@ -204,7 +210,8 @@ void depth_order(const std::vector<S>& splats, const std::vector<uint8_t>& valid
 // (tile_start and keys then unspecified).
 void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>& rects,
                 const std::vector<uint8_t>& valid, const uint64_t* order, int64_t count, int gx,
-                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st, FrameRun& run);
+                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, std::vector<RankedRect>& ranked,
+                Stats& st, FrameRun& run);
 void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<Splat2D>& splats,
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
                 std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st, FrameRun& run);
