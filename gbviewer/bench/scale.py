@@ -108,7 +108,10 @@ def measure_stages(scene: Scene, cam: Camera, modes: list[str], rates: list[floa
 def measure_two_pane(scene: Scene, cam: Camera, modes: tuple[str, str]) -> dict:
     """Two panes of one camera as the viewer renders them: one `render_many` (the per-camera stage and depth order
     once, tiles interleaved) from a renderer that has not seen the camera; each pane's stage times, the call's wall
-    time and when each pane's first tiles were reported (ms from the call's start)."""
+    time and when each pane's first tiles were reported (ms from the call's start). Per pane, shared_ms is the
+    mode-independent work it did (the stage's preprocess and the depth order: FrameStats stage_ms + order_ms, 0
+    where reused) and own_ms its mode's own finish and binning; second_over_first compares the panes' shared work
+    (the issue's "preprocess + order"), before_blend_ratio all of their work before the blend."""
     renderer = get_renderer(scene, "cpu")
     renderer.render(cam.at_sampling_rate(0.5), RenderSettings())  # a stage of another camera: nothing to reuse
     jobs = [(cam, RenderSettings(mode=Mode.parse(m))) for m in modes]
@@ -121,10 +124,16 @@ def measure_two_pane(scene: Scene, cam: Camera, modes: tuple[str, str]) -> dict:
 
     frames = renderer.render_many(jobs, on_progress=on_progress)
     total = (time.perf_counter() - t0) * 1e3
-    panes = [{"mode": m, "first_tiles_ms": first_tiles.get(k), "stage_reused": f.stats.stage_reused,
-              "order_reused": f.stats.order_reused, **_stages(f)} for k, (m, f) in enumerate(zip(modes, frames))]
+    panes = []
+    for k, (m, f) in enumerate(zip(modes, frames)):
+        shared = (f.stats.stage_ms or 0.0) + (f.stats.order_ms or 0.0)
+        own = f.stats.preprocess_ms + f.stats.sort_ms - shared
+        panes.append({"mode": m, "first_tiles_ms": first_tiles.get(k), "stage_reused": f.stats.stage_reused,
+                      "order_reused": f.stats.order_reused, "shared_ms": shared, "own_ms": own, **_stages(f)})
     before_blend = [p["preprocess_ms"] + p["sort_ms"] for p in panes]
-    return {"panes": panes, "total_ms": total, "second_over_first": before_blend[1] / max(before_blend[0], 1e-9)}
+    return {"panes": panes, "total_ms": total,
+            "second_over_first": panes[1]["shared_ms"] / max(panes[0]["shared_ms"], 1e-9),
+            "before_blend_ratio": before_blend[1] / max(before_blend[0], 1e-9)}
 
 
 def measure_cancel(scene: Scene, cam: Camera, mode: str, moments_ms: list[float], supersample: int = 1) -> list[dict]:
@@ -192,11 +201,12 @@ def print_scale(r: dict) -> None:
               f"{s['sort_ms']:>9.0f}{s['blend_ms']:>10.0f}{s['total_ms']:>10.0f}{s['sort_length']:>12,}"
               f"{s['evals_per_pixel']:>10.0f}")
     tp = r["two_pane"]
-    panes = ", ".join(f"{p['mode']} pre+order {p['preprocess_ms'] + p['sort_ms']:.0f} ms, first tiles at "
-                      f"{p['first_tiles_ms'] or 0:.0f} ms (stage {'reused' if p['stage_reused'] else 'built'}, order "
-                      f"{'reused' if p['order_reused'] else 'sorted'})" for p in tp["panes"])
+    panes = ", ".join(f"{p['mode']} stage+order {p['shared_ms']:.0f} ms (stage "
+                      f"{'reused' if p['stage_reused'] else 'built'}, order {'reused' if p['order_reused'] else 'sorted'}) + own finish+bin {p['own_ms']:.0f} ms, "
+                      f"first tiles at {p['first_tiles_ms'] or 0:.0f} ms" for p in tp["panes"])
     print(f"  two panes, one camera, one render_many: {panes}; both final at {tp['total_ms']:.0f} ms; second "
-          f"pane's pre+order / first's {tp['second_over_first']:.2f}")
+          f"pane's stage+order / first's {tp['second_over_first']:.2f}, all its work before the blend / first's "
+          f"{tp['before_blend_ratio']:.2f}")
     for c in r["cancel"]:
         got = "finished first" if c["finished"] else f"RenderCancelled {c['latency_ms']:.1f} ms after the set"
         where = f" (mid {c['stage']})" if c["stage"] else ""

@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib
 import io
 import re
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -300,8 +301,8 @@ def _streamable(ply: plyfile.PlyData) -> bool:
 
 def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype: str = "float32") -> Scene | None:
     """Load a binary INRIA `.ply` by streaming its vertex rows in chunks of about a hundredth of the file straight
-    into the Scene's arrays (`InriaArrays`): no mapping or copy of the whole file, so the load costs about a read of
-    it and its memory is the arrays' plus one chunk. None when the file is not such a PLY (`read_ply` and the
+    into the Scene's arrays (`InriaArrays`), the next chunk read while one is scattered: no mapping or copy of the
+    whole file, so the load costs about a read of it and its memory is the arrays' plus two chunks. None when the file is not such a PLY (`read_ply` and the
     other loaders take it). `progress`: bytes read (and copied into the arrays), then splats activated. `sh_dtype`
     "float16": the SH is stored as float16 as it is read (see `check_sh_range`)."""
     progress = progress or LoadProgress()
@@ -323,15 +324,25 @@ def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype
         out = InriaArrays(layout, n, sh_dtype)
         progress.report(0, size, "bytes")
         ranges = load_progress.row_ranges(n, row.itemsize)
-        buf = np.empty((ranges[0][1] - ranges[0][0]) * row.itemsize, np.uint8)
+        bufs = [np.empty((ranges[0][1] - ranges[0][0]) * row.itemsize, np.uint8) for _ in range(2)]
+
+        def read(k: int) -> np.ndarray | None:
+            begin, end = ranges[k]
+            chunk = bufs[k % 2][: (end - begin) * row.itemsize]
+            return chunk if fh.readinto(chunk) == chunk.size else None
+
         fh.seek(start)
-        for begin, end in ranges:
-            chunk = buf[: (end - begin) * row.itemsize]
-            if fh.readinto(chunk) != chunk.size:
-                raise SceneFormatError(path, TRUNCATED, field="vertex")
-            out.fill(column_table(path, chunk.view(row), layout.wanted)[0], cols, slice(begin, end))
-            progress.report(start + end * row.itemsize, size, "bytes")
-        del buf, chunk
+        with ThreadPoolExecutor(1) as reader:  # the next chunk is read while this one is scattered (both GIL-free)
+            pending = reader.submit(read, 0)
+            for k, (begin, end) in enumerate(ranges):
+                chunk = pending.result()
+                if chunk is None:
+                    raise SceneFormatError(path, TRUNCATED, field="vertex")
+                if k + 1 < len(ranges):
+                    pending = reader.submit(read, k + 1)
+                out.fill(column_table(path, chunk.view(row), layout.wanted)[0], cols, slice(begin, end))
+                progress.report(start + end * row.itemsize, size, "bytes")
+        del bufs, chunk
         progress.report(size, size, "bytes")
     for begin, end in progress.chunks(n, "splats", load_progress.MIN_SPLATS):
         out.activate(slice(begin, end))

@@ -147,7 +147,8 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
                 preprocess_ms: float, sort_ms: float, blend_ms: float, visible: int, sort_length: int, pairs: int,
                 evaluations: int, cells_visible: int | None = None, cell_misses: int | None = None,
                 simd: str | None = None, stage_reused: bool | None = None, order_reused: bool | None = None,
-                stage_ms: float | None = None, lod_splats: int | None = None) -> FrameStats:
+                stage_ms: float | None = None, order_ms: float | None = None,
+                lod_splats: int | None = None) -> FrameStats:
     """The frame's stats from a backend's counts and stage times; t0: when the render began; lod_splats: the
     level-of-detail cut a backend drew in place (else a cut's Scene says)."""
     counts = None  # the cut's (drawn, of)
@@ -166,6 +167,7 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
         stage_reused=None if stage_reused is None else bool(stage_reused),
         order_reused=None if order_reused is None else bool(order_reused),
         stage_ms=None if stage_ms is None else float(stage_ms),
+        order_ms=None if order_ms is None else float(order_ms),
         lod_splats=lod_splats,
     )
 
@@ -173,8 +175,8 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
 def native_stats(out: dict, prep: Prepared, camera: Camera, settings: RenderSettings, backend: str,
                  t0: float) -> FrameStats:
     """The stats of a native module's result dict (per-stage ms and counts, evaluations; duplex: cells_visible,
-    cell_misses; the CPU module: simd, the SIMD path its blend ran, stage_reused, order_reused, stage_ms and
-    lod_splats)."""
+    cell_misses; the CPU module: simd, the SIMD path its blend ran, stage_reused, order_reused, stage_ms, order_ms
+    and lod_splats)."""
     duplex = settings.mode == Mode.DUPLEX
     return frame_stats(
         prep, camera, settings, backend, t0, preprocess_ms=out["preprocess_ms"], sort_ms=out["sort_ms"],
@@ -182,7 +184,7 @@ def native_stats(out: dict, prep: Prepared, camera: Camera, settings: RenderSett
         evaluations=out["evaluations"], cells_visible=out["cells_visible"] if duplex else None,
         cell_misses=out["cell_misses"] if duplex else None, simd=str(out["simd"]) if "simd" in out else None,
         stage_reused=out.get("stage_reused"), order_reused=out.get("order_reused"), stage_ms=out.get("stage_ms"),
-        lod_splats=out.get("lod_splats"),
+        order_ms=out.get("order_ms"), lod_splats=out.get("lod_splats"),
     )
 
 

@@ -241,7 +241,9 @@ class FrameStats:
     per-camera stage (the mode-independent preprocess and the depth order) computed before, by an earlier render or
     an earlier job of the same `render_many`, order_reused, whether its tile lists were binned in a depth order an
     earlier frame of that stage sorted (False where this frame sorted it, and for wsr and duplex, which bin without
-    it), and stage_ms, the time spent building the stage in this frame (0 when reused; included in preprocess_ms). A `render_many` frame's total_ms counts from the start of the call, and on cpu its
+    it), stage_ms, the time spent building the stage in this frame (0 when reused; included in preprocess_ms), and
+    order_ms, the time spent sorting its depth order in this frame (0 when reused; included in sort_ms, whose rest
+    is the frame's own binning). A `render_many` frame's total_ms counts from the start of the call, and on cpu its
     blend_ms is the time of the one tile loop all its frames share.
     """
 
@@ -265,6 +267,7 @@ class FrameStats:
     stage_reused: bool | None = None
     order_reused: bool | None = None
     stage_ms: float | None = None
+    order_ms: float | None = None
     lod_splats: int | None = None
 
 

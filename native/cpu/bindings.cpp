@@ -81,6 +81,7 @@ std::vector<nb::dict> run_frames(Renderer& r, const std::vector<RenderArgs>& fra
         d["simd"] = res[f].simd;
         d["cancelled"] = res[f].cancelled;
         d["stage_ms"] = res[f].stats.stage_ms;
+        d["order_ms"] = res[f].stats.order_ms;
         d["stage_reused"] = res[f].stats.stage_reused;
         d["order_reused"] = res[f].stats.order_reused;
         if (res[f].stats.lod_drawn >= 0) d["lod_splats"] = res[f].stats.lod_drawn;
@@ -324,7 +325,7 @@ NB_MODULE(_native, m) {
              "depth_correct, then view_filter and lod, each or None): the per-camera stage once per distinct camera and SH "
              "degree, then every frame's tiles interleaved in one parallel loop. cancel as render's; "
              "on_progress(frame, done, total); partials: one float32 (height, width, 3) array or None per frame. A "
-             "list of render()'s dicts, which also hold stage_ms, stage_reused and order_reused.")
+             "list of render()'s dicts, which also hold stage_ms, order_ms, stage_reused and order_reused.")
         .def(
             "trace",
             [](Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,

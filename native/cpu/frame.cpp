@@ -229,6 +229,7 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
             depth_order(stage.splats, stage.valid, stage.order, stage.order_scratch, run);
             if (run.cancelled()) return;
             stage.order_ready = true;
+            st.order_ms += ms_since(t0);
             st.sort_ms += ms_since(t0);
         } else {
             st.order_reused = true;

@@ -18,6 +18,7 @@
 #include <utility>
 
 #include "half.h"
+#include "omp_shim.h"
 
 namespace nb = nanobind;
 
@@ -128,14 +129,32 @@ std::pair<float, float> scatter_inria(const Table& table, const Cols& cols, Out 
         nb::gil_scoped_release release;
         float* f = filter_3d ? filter_3d->data() : nullptr;
         float* wt = weights ? weights->data() : nullptr;
-        if (half)
-            scatter_rows(table.data(), rows, stride, cols.data(), k, w, f != nullptr, max_sh, means.data(),
-                         scales.data(), quats.data(), opacities.data(), static_cast<uint16_t*>(sh.data()), f, wt,
-                         keep.data(), mx);
-        else
-            scatter_rows(table.data(), rows, stride, cols.data(), k, w, f != nullptr, max_sh, means.data(),
-                         scales.data(), quats.data(), opacities.data(), static_cast<float*>(sh.data()), f, wt,
-                         keep.data(), mx);
+        constexpr int64_t BLOCK = 4096;  // rows per task: each thread writes its own rows of every array
+        const int64_t blocks = (rows + BLOCK - 1) / BLOCK;
+#pragma omp parallel
+        {
+            Maxima local;
+#pragma omp for schedule(static)
+            for (int64_t b = 0; b < blocks; ++b) {
+                const int64_t r0 = b * BLOCK, count = std::min(BLOCK, rows - r0);
+                const float* t = table.data() + r0 * stride;
+                float* fr = f ? f + r0 : nullptr;
+                float* wr = wt ? wt + r0 * w : nullptr;
+                if (half)
+                    scatter_rows(t, count, stride, cols.data(), k, w, f != nullptr, max_sh, means.data() + r0 * 3,
+                                 scales.data() + r0 * 3, quats.data() + r0 * 4, opacities.data() + r0,
+                                 static_cast<uint16_t*>(sh.data()) + r0 * k * 3, fr, wr, keep.data() + r0, local);
+                else
+                    scatter_rows(t, count, stride, cols.data(), k, w, f != nullptr, max_sh, means.data() + r0 * 3,
+                                 scales.data() + r0 * 3, quats.data() + r0 * 4, opacities.data() + r0,
+                                 static_cast<float*>(sh.data()) + r0 * k * 3, fr, wr, keep.data() + r0, local);
+            }
+#pragma omp critical
+            {
+                mx.dc = std::max(mx.dc, local.dc);
+                mx.rest = std::max(mx.rest, local.rest);
+            }
+        }
     }
     return {mx.dc, mx.rest};
 }

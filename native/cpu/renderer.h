@@ -21,6 +21,7 @@ namespace gbv::cpu {
 // and tile-splat pairs of the splats' own rectangles outside their cell's rectangle (pixels there miss the splat).
 struct Stats {
     double preprocess_ms = 0, sort_ms = 0, blend_ms = 0, stage_ms = 0;
+    double order_ms = 0;  // the stage's depth order sorted in this frame (included in sort_ms; 0 when reused)
     bool stage_reused = false;
     bool order_reused = false;  // binned in a depth order an earlier frame of the stage sorted (not wsr, duplex)
     int64_t visible = 0, sort_length = 0, pairs = 0;

@@ -51,7 +51,8 @@ def test_render_many_equals_fresh_renders(name):
     for (c, s), f in zip(jobs, frames):
         same(f, fresh(scene, c, s), f"{name} {s.spec} {c.width}x{c.height}")
     again = r.render(cam, RenderSettings.parse("gaussian_blending"))  # a later call reuses the last call's stage
-    assert again.stats.stage_reused and again.stats.stage_ms == 0.0
+    assert again.stats.stage_reused and again.stats.stage_ms == 0.0 == again.stats.order_ms
+    assert frames[0].stats.order_ms > 0 and frames[0].stats.order_ms <= frames[0].stats.sort_ms
     same(again, frames[1], f"{name} gaussian_blending again")
 
 
