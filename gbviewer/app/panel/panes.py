@@ -49,8 +49,8 @@ def draw(state: AppState) -> None:
         imgui.same_line()
         imgui.begin_disabled(ps.lod == 0)
         imgui.set_next_item_width(120)
-        ch, tau = imgui.slider_float("##lod", max(ps.lod, 0.25), 0.25, MAX_PANE_LOD, "tau %.2f px",
-                                     imgui.SliderFlags_.logarithmic.value)
+        ch, tau = imgui.slider_float("##lod", ps.lod if ps.lod > 0 else 1.0, 0.25, MAX_PANE_LOD,
+                                     "tau %.2f px" if ps.lod > 0 else "off", imgui.SliderFlags_.logarithmic.value)
         if ch and ps.lod > 0:
             state.set_pane(p.index, lod=tau)
         imgui.end_disabled()
