@@ -118,3 +118,37 @@ def test_cells_of_a_duplex_frame_do_not_stop_the_other_modes_cuts():
         assert np.array_equal(frame.rgb, ref.rgb), spec
     both = renderer.render_many([(CAM, gb.RenderSettings("duplex")), (CAM, gb.RenderSettings(lod=2.0))])
     assert both[1].stats.lod_splats is not None
+
+
+def test_a_cancelled_cut_stops_and_the_next_render_is_exact():
+    """The cut reads the render's cancel flag: a set flag stops it (lod.cut, and so a gathered cut's prepare, raise
+    RenderCancelled; a clear one changes nothing), and in-place LOD renders cancelled at any moment, the cut's
+    included, end cancelled or exact, the next render exact."""
+    import threading
+
+    scene = filtered_scene(24)
+    tree = lod.hierarchy_for(scene)
+    token = gb.CancelToken()
+    want = lod.cut(tree, CAM, 0.5)
+    got = lod.cut(tree, CAM, 0.5, flag=token.flag)
+    assert np.array_equal(got.leaves, want.leaves) and np.array_equal(got.node_weights, want.node_weights)
+    token.set()
+    with pytest.raises(gb.RenderCancelled):
+        lod.cut(tree, CAM, 0.5, flag=token.flag)
+    with pytest.raises(gb.RenderCancelled):
+        lod.cut_scene(scene, CAM, 0.5, flag=token.flag)
+    renderer = gb.get_renderer(scene, "cpu")
+    settings = gb.RenderSettings("gaussian_blending", lod=0.5)
+    ref = renderer.render(CAM, settings)
+    other = gb.Camera(64, 48, 20.0, 20.0, 32, 24, np.eye(3), np.array([0.0, 0.0, -0.25]))
+    for at_ms in (0.0, 0.2, 1.0, 3.0):
+        renderer.render(other, settings)  # a stage of another camera: the next render cuts again
+        token = gb.CancelToken()
+        timer = threading.Timer(at_ms / 1e3, token.set)
+        timer.start()
+        try:
+            assert np.array_equal(renderer.render(CAM, settings, cancel=token).rgb, ref.rgb)
+        except gb.RenderCancelled:
+            pass
+        timer.join()
+        assert np.array_equal(renderer.render(CAM, settings).rgb, ref.rgb)

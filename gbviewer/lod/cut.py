@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera import Camera
-from ..errors import GBViewerError
+from ..errors import GBViewerError, RenderCancelled
 from ..scene import Scene
 from .cache import hierarchy_for
 from .tree import Hierarchy
@@ -56,13 +56,17 @@ def cut_view(camera: Camera, tau: float, band: float = DEFAULT_BAND) -> tuple:
             bool(camera.orthographic))
 
 
-def cut(tree: Hierarchy, camera: Camera, tau: float, band: float = DEFAULT_BAND, threads: int = 0) -> Cut:
-    """The nodes drawn for `camera` at tau pixels (band 0: a hard cut, every weight 1)."""
+def cut(tree: Hierarchy, camera: Camera, tau: float, band: float = DEFAULT_BAND, threads: int = 0,
+        flag: np.ndarray | None = None) -> Cut:
+    """The nodes drawn for `camera` at tau pixels (band 0: a hard cut, every weight 1). `flag`: a render's cancel
+    flag (int64 array, RenderControl.flag), read while the cut runs: RenderCancelled once it is nonzero."""
     from .._native import lod as native
 
     tau, band, eye, focal, ortho = cut_view(camera, tau, band)
     out = native.cut(tree.means, tree.radius, tree.size, tree.levels, tree.order, eye, focal, ortho, tau, band,
-                     threads)
+                     threads, flag)
+    if out is None:
+        raise RenderCancelled("render cancelled")
     return Cut(*out)
 
 
@@ -74,13 +78,13 @@ def check_plain(scene: Scene) -> None:
 
 
 def cut_scene(scene: Scene, camera: Camera, tau: float, band: float = DEFAULT_BAND, threads: int = 0,
-              rule: str = "depth") -> Scene:
+              rule: str = "depth", flag: np.ndarray | None = None) -> Scene:
     """The Scene of the cut through the hierarchy merged by `rule`: the drawn leaves' splats, then the drawn interior
     nodes' Gaussians (SH as the scene's), opacities times the weights; meta["lod"] = (drawn, of). The scene itself
-    when the cut is its leaves."""
+    when the cut is its leaves. `flag`: as cut's."""
     check_plain(scene)
     tree = hierarchy_for(scene, rule)
-    c = cut(tree, camera, tau, band, threads)
+    c = cut(tree, camera, tau, band, threads, flag)
     if not len(c.nodes) and len(c.leaves) == scene.num_splats:
         return scene
     from .._native import lod as native

@@ -107,7 +107,8 @@ class CpuRenderer(NativeUploads, Renderer):
         control.check()  # before any work (a trained model's decode included)
         frames: list[Frame] = []
         with self._lock:
-            preps = [prepare(self._scene, camera, settings, self.name, lod_in_place=True) for camera, settings in jobs]
+            preps = [prepare(self._scene, camera, settings, self.name, lod_in_place=True, flag=control.flag)
+                     for camera, settings in jobs]
             for run in batches(jobs, preps):
                 for prep in [next((p for p in preps[run.start:run.stop] if p.cells is not None), preps[run.start]),
                              *(p for p in preps[run.start:run.stop] if p.tree is not None)]:

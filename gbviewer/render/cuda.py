@@ -147,7 +147,7 @@ class CudaRenderer(NativeUploads, Renderer):
         after it; its result dict, the frame's inputs and the start time."""
         t0 = time.perf_counter()
         with self._lock, control:
-            prep = prepare(self._scene, camera, settings, self.name)
+            prep = prepare(self._scene, camera, settings, self.name, flag=control.flag)
             self._sync(prep)
             control.step(0, 1)
             lead = tuple(self._textures.claim(x) for x in lead)

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..cells import Cells, cells_for
-from ..errors import GBViewerError, RenderError
+from ..errors import GBViewerError, RenderCancelled, RenderError
 from ..lod import Hierarchy, check_plain, cut_scene, cut_view, hierarchy_for
 from ..scene import Scene
 from .budget import check_frame_memory
@@ -69,10 +69,11 @@ MAX_SAMPLES = 2**31 - 1  # sub-samples of one frame: the native modules and shad
 
 
 def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backend: str,
-            lod_in_place: bool = False) -> Prepared:
+            lod_in_place: bool = False, flag: np.ndarray | None = None) -> Prepared:
     """The frame's inputs for `backend` from its uploaded scene (None: nothing uploaded, an error). A
     level-of-detail frame gets the cut's Scene, or with `lod_in_place` (the CPU renderer; not duplex) the hierarchy
-    and cut arguments to draw the same cut from the uploaded scene."""
+    and cut arguments to draw the same cut from the uploaded scene. `flag`: the render's cancel flag
+    (RenderControl.flag), which stops the cut of a gathered cut Scene (RenderCancelled)."""
     if scene is None:
         raise RenderError(f"{backend} renderer: upload(scene) before render()")
     samples = camera.width * camera.height * settings.supersample**2
@@ -90,7 +91,9 @@ def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backe
                 check_plain(view)
                 tree, lod = hierarchy_for(view), cut_view(camera, settings.lod)
             else:
-                view = cut_scene(view, camera, settings.lod, threads=settings.threads)
+                view = cut_scene(view, camera, settings.lod, threads=settings.threads, flag=flag)
+        except RenderCancelled:
+            raise
         except GBViewerError as exc:
             raise RenderError(str(exc)) from None
     oit = oit_params(view, settings) if settings.mode in ORDER_INDEPENDENT else None

@@ -144,11 +144,13 @@ void for_blocks(int64_t n, FrameRun& run, Fn fn) {
 
 // The level-of-detail cut of `key` (lod.h) as the stage's rows and weights: drawn leaves (scene rows) first, then
 // drawn interior nodes (rows n_scene + node), each ascending, the order gbviewer.lod.cut_scene gathers them in.
-// False, and no rows, for a cut that is the scene's leaves (drawn as the scene itself, bit for bit).
-bool cut_rows(const SceneView& sc, const LodArgs& a, Stage& stage) {
+// False, and no rows, for a cut that is the scene's leaves (drawn as the scene itself, bit for bit). Stops early
+// once `run` is cancelled (the rows then unspecified: the stage is not ready).
+bool cut_rows(const SceneView& sc, const LodArgs& a, Stage& stage, FrameRun& run) {
     const SceneView::Hierarchy& t = sc.tree;
     const lod::View view{{a.eye[0], a.eye[1], a.eye[2]}, a.focal, a.orthographic};
-    lod::Cut c = lod::cut(t.means, t.radius, t.size, t.levels, t.num_levels, t.order, view, a.tau, a.band, 0);
+    lod::Cut c = lod::cut(t.means, t.radius, t.size, t.levels, t.num_levels, t.order, view, a.tau, a.band, 0,
+                          [&run] { return run.cancelled(); });
     stage.rows.clear();
     stage.weights.clear();
     if (c.nodes.empty() && (int64_t)c.leaves.size() == sc.n) return false;
@@ -167,7 +169,8 @@ void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& pat
     stage.ready = stage.order_ready = false;
     stage.rows.clear();
     stage.weights.clear();
-    const bool cut = key.lod.on() && cut_rows(sc, key.lod, stage);
+    const bool cut = key.lod.on() && cut_rows(sc, key.lod, stage, run);
+    if (run.cancelled()) return;  // not ready
     const int64_t n = cut ? (int64_t)stage.rows.size() : sc.n;
     stage.splats.resize(n);
     stage.valid.resize(n);

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 namespace gbv::lod {
@@ -57,8 +58,11 @@ struct Cut {
 
 // A node of projected size p px is drawn alone when p <= tau, replaced by its children when p >= tau (1 + band),
 // and drawn with weight 1 - o beside its children (weight o) in between, o = (p - tau) / (tau band). tau <= 0: the
-// leaves. Interior node i: centre means[i], radius, size as in Tree.
+// leaves. Interior node i: centre means[i], radius, size as in Tree. `stop` (thread-safe; may be empty) is asked
+// every few thousand nodes: once it says true the cut returns early, its contents unspecified (the caller, who
+// knows it stopped, discards it).
+using Stop = std::function<bool()>;
 Cut cut(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
-        const int32_t* order, const View& v, double tau, double band, int threads);
+        const int32_t* order, const View& v, double tau, double band, int threads, const Stop& stop = {});
 
 }  // namespace gbv::lod

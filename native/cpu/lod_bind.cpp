@@ -47,21 +47,25 @@ nb::dict build(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, std
     return d;
 }
 
-nb::tuple cut(FArr means, FArr radius, FArr size, LArr levels, IArr order, FArr eye, double focal, bool orthographic,
-              double tau, double band, int threads) {
+nb::object cut(FArr means, FArr radius, FArr size, LArr levels, IArr order, FArr eye, double focal, bool orthographic,
+               double tau, double band, int threads, std::optional<LArr> cancel) {
     const size_t L = levels.shape(0);
     if (L < 2 || eye.size() != 3) fail("lod cut", "levels must hold at least 2 offsets, eye 3 floats");
     const int64_t n = levels.data()[1], m = levels.data()[L - 1] - n;
     if (levels.data()[0] != 0 || order.size() != (size_t)n || means.size() != (size_t)m * 3 ||
         radius.size() != (size_t)m || size.size() != (size_t)m)
         fail("lod cut", "array shapes do not match the levels");
+    if (cancel && cancel->shape(0) < 1) fail("lod cut", "cancel must hold at least one int64");
     const lod::View v{{eye.data()[0], eye.data()[1], eye.data()[2]}, focal, orthographic};
+    const int64_t* flag = cancel ? cancel->data() : nullptr;
+    const auto stop = [flag] { return flag && __atomic_load_n(flag, __ATOMIC_RELAXED) != 0; };
     lod::Cut c;
     {
         nb::gil_scoped_release release;
         c = lod::cut(means.data(), radius.data(), size.data(), levels.data(), (int)L, order.data(), v, tau, band,
-                     threads);
+                     threads, stop);
     }
+    if (stop()) return nb::none();
     const size_t nl = c.leaves.size(), ni = c.nodes.size();
     return nb::make_tuple(to_numpy(std::move(c.leaves), {nl}), to_numpy(std::move(c.leaf_weights), {nl}),
                           to_numpy(std::move(c.nodes), {ni}), to_numpy(std::move(c.node_weights), {ni}));
@@ -129,7 +133,9 @@ void bind_lod(nb::module_& m) {
           "radius, size (filter_3d with one).");
     l.def("cut", &cut, nb::arg("means"), nb::arg("radius"), nb::arg("size"), nb::arg("levels"), nb::arg("order"),
           nb::arg("eye"), nb::arg("focal"), nb::arg("orthographic"), nb::arg("tau"), nb::arg("band"),
-          nb::arg("threads"), "(leaves, leaf weights, interior nodes, node weights) drawn for the view.");
+          nb::arg("threads"), nb::arg("cancel").none() = nb::none(),
+          "(leaves, leaf weights, interior nodes, node weights) drawn for the view; None once cancel[0] is nonzero "
+          "(the cut stopped early).");
     l.def("gather", &gather, nb::arg("scene"), nb::arg("tree"), nb::arg("leaves"), nb::arg("leaf_weights"),
           nb::arg("nodes"), nb::arg("node_weights"), nb::arg("threads"),
           "The cut's splat arrays (dict of scene and tree arrays in; means ... opacities times weights out).");

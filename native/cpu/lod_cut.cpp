@@ -3,6 +3,7 @@
 #include "omp_shim.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #if defined(_OPENMP) && defined(__GLIBCXX__)
 #include <parallel/algorithm>  // libstdc++'s parallel sort (OpenMP)
@@ -17,6 +18,22 @@ namespace gbv::lod {
 namespace {
 
 int team(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
+
+// The caller's stop, asked by every thread at most once per 4096 nodes of its loop (at(i)) or between phases
+// (now()); sticky once it said true.
+class Halt {
+public:
+    explicit Halt(const Stop& stop) : stop_(stop) {}
+    bool at(int64_t i) { return hit_.load(std::memory_order_relaxed) || ((i & 4095) == 0 && now()); }
+    bool now() {
+        if (!hit_.load(std::memory_order_relaxed) && stop_ && stop_()) hit_.store(true, std::memory_order_relaxed);
+        return hit_.load(std::memory_order_relaxed);
+    }
+
+private:
+    const Stop& stop_;
+    std::atomic<bool> hit_{false};
+};
 
 // o of interior node i (its projected size against tau; see cut in lod.h).
 float opening(const float* means, const float* radius, const float* size, int64_t i, const View& v, double tau,
@@ -54,15 +71,16 @@ void chunked(int64_t len, int nt, std::vector<T>& out, Fn fn) {
 // The cut by its definition, over every node: each interior node's o, the weights top-down level by level, each
 // leaf's; what the top-down walk falls back to when most of the tree is reached.
 Cut cut_flat(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
-             const int32_t* order, const View& v, double tau, double band, int nt) {
+             const int32_t* order, const View& v, double tau, double band, int nt, Halt& halt) {
     const int64_t n = levels[1], m = levels[num_levels - 1] - n;
     std::vector<float> open(m), weight(m);  // o and the weight reaching each interior node
 #pragma omp parallel for num_threads(nt) schedule(static)
-    for (int64_t i = 0; i < m; ++i) open[i] = opening(means, radius, size, i, v, tau, band);
+    for (int64_t i = 0; i < m; ++i)
+        if (!halt.at(i)) open[i] = opening(means, radius, size, i, v, tau, band);
     // Weights top-down: the root gets 1, a child its parent's weight times the parent's o.
     auto parent = [&](int l, int64_t id) { return levels[l + 1] + (id - levels[l]) / BRANCHING - n; };
     if (m > 0) weight[m - 1] = 1.0f;
-    for (int l = num_levels - 3; l >= 1; --l) {
+    for (int l = num_levels - 3; l >= 1 && !halt.now(); --l) {
 #pragma omp parallel for num_threads(nt) schedule(static)
         for (int64_t id = levels[l]; id < levels[l + 1]; ++id) {
             const int64_t p = parent(l, id);
@@ -70,13 +88,18 @@ Cut cut_flat(const float* means, const float* radius, const float* size, const i
         }
     }
     std::vector<float> leaf_w(n);
+    Cut c;
+    if (halt.now()) return c;
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int64_t id = 0; id < n; ++id) {
+        if (halt.at(id)) continue;
         const int64_t p = m > 0 ? parent(0, id) : -1;
         leaf_w[order[id]] = p < 0 ? 1.0f : weight[p] * open[p];
     }
-    Cut c;
-    auto compact = [nt](const std::vector<float>& w, auto drawn, std::vector<int32_t>& idx, std::vector<float>& out) {
+    if (halt.now()) return c;
+    // (a thread that stopped counting early, halt being sticky, writes nothing: never more than it counted)
+    auto compact = [nt, &halt](const std::vector<float>& w, auto drawn, std::vector<int32_t>& idx,
+                               std::vector<float>& out) {
         const int64_t len = (int64_t)w.size();
         std::vector<int64_t> counts(nt + 1, 0);
 #pragma omp parallel num_threads(nt)
@@ -84,7 +107,7 @@ Cut cut_flat(const float* means, const float* radius, const float* size, const i
             const int th = omp_get_thread_num(), nth = omp_get_num_threads();
             const int64_t b = len * th / nth, e = len * (th + 1) / nth;
             int64_t local = 0;
-            for (int64_t i = b; i < e; ++i) local += drawn(i) > 0.0f;
+            for (int64_t i = b; i < e && !halt.at(i); ++i) local += drawn(i) > 0.0f;
             counts[th + 1] = local;
 #pragma omp barrier
 #pragma omp single
@@ -93,13 +116,14 @@ Cut cut_flat(const float* means, const float* radius, const float* size, const i
                 idx.resize(counts[nth]), out.resize(counts[nth]);
             }
             int64_t at = counts[th];
-            for (int64_t i = b; i < e; ++i) {
+            for (int64_t i = b; i < e && !halt.at(i); ++i) {
                 const float d = drawn(i);
                 if (d > 0.0f) idx[at] = (int32_t)i, out[at++] = d;
             }
         }
     };
     compact(leaf_w, [&](int64_t i) { return leaf_w[i]; }, c.leaves, c.leaf_weights);
+    if (halt.now()) return c;
     compact(weight, [&](int64_t i) { return weight[i] * (1.0f - open[i]); }, c.nodes, c.node_weights);
     return c;
 }
@@ -111,8 +135,9 @@ Cut cut_flat(const float* means, const float* radius, const float* size, const i
 // reached node of weight w (the root 1) is drawn at w (1 - o) and passes w o to its children: the products the flat
 // definition forms, so both give the same cut.
 Cut cut(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
-        const int32_t* order, const View& v, double tau, double band, int threads) {
+        const int32_t* order, const View& v, double tau, double band, int threads, const Stop& stop) {
     const int nt = team(threads);
+    Halt halt(stop);
     const int64_t n = levels[1], m = levels[num_levels - 1] - n;
     Cut c;
     if (m == 0) {  // one splat: the leaf
@@ -127,10 +152,11 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
         const int64_t reached = (int64_t)frontier.size();
         if (reached > cpu::testing::cut_flat_above.load(std::memory_order_relaxed) &&
             reached * 4 > levels[l + 1] - levels[l])  // most of a large tree: every node, flat
-            return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, nt);
+            return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, nt, halt);
+        if (halt.now()) return c;
         next.clear();
         chunked<Reached>((int64_t)frontier.size(), nt, drawn[l], [&](std::vector<Reached>& out, int64_t b, int64_t e) {
-            for (int64_t f = b; f < e; ++f) {
+            for (int64_t f = b; f < e && !halt.at(f); ++f) {
                 const auto [i, w] = frontier[f];
                 const float o = opening(means, radius, size, i, v, tau, band), kept = w * (1.0f - o);
                 if (kept > 0.0f) out.push_back({i, kept});
@@ -138,7 +164,7 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
         });
         if (l == 1) break;
         chunked<Reached>((int64_t)frontier.size(), nt, next, [&](std::vector<Reached>& out, int64_t b, int64_t e) {
-            for (int64_t f = b; f < e; ++f) {
+            for (int64_t f = b; f < e && !halt.at(f); ++f) {
                 const auto [i, w] = frontier[f];
                 const float passed = w * opening(means, radius, size, i, v, tau, band);
                 if (!(passed > 0.0f)) continue;
@@ -151,9 +177,10 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
     }
     // The leaves under the reached level-1 nodes: (splat, weight), ascending by splat.
     std::vector<std::pair<int32_t, float>> leaves;
+    if (halt.now()) return c;
     chunked<std::pair<int32_t, float>>((int64_t)frontier.size(), nt, leaves,
                                        [&](std::vector<std::pair<int32_t, float>>& out, int64_t b, int64_t e) {
-        for (int64_t f = b; f < e; ++f) {
+        for (int64_t f = b; f < e && !halt.at(f); ++f) {
             const auto [i, w] = frontier[f];
             const float passed = w * opening(means, radius, size, i, v, tau, band);
             if (!(passed > 0.0f)) continue;
@@ -161,6 +188,7 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
             for (int64_t p = first; p < std::min(first + BRANCHING, n); ++p) out.push_back({order[p], passed});
         }
     });
+    if (halt.now()) return c;
     if ((int64_t)leaves.size() * 16 < n) {  // few: sort them
 #if defined(_OPENMP) && defined(__GLIBCXX__)
         __gnu_parallel::sort(leaves.begin(), leaves.end());
@@ -170,11 +198,12 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
     } else {  // many: place them by splat (order is a permutation) and keep the drawn in splat order
         std::vector<float> w(n, 0.0f);
 #pragma omp parallel for num_threads(nt) schedule(static)
-        for (int64_t j = 0; j < (int64_t)leaves.size(); ++j) w[leaves[j].first] = leaves[j].second;
+        for (int64_t j = 0; j < (int64_t)leaves.size(); ++j)
+            if (!halt.at(j)) w[leaves[j].first] = leaves[j].second;
         leaves.clear();
         chunked<std::pair<int32_t, float>>(n, nt, leaves, [&](std::vector<std::pair<int32_t, float>>& out, int64_t b,
                                                               int64_t e) {
-            for (int64_t i = b; i < e; ++i)
+            for (int64_t i = b; i < e && !halt.at(i); ++i)
                 if (w[i] > 0.0f) out.push_back({(int32_t)i, w[i]});
         });
     }

@@ -207,7 +207,7 @@ class GlslRenderer(Renderer):
         """One frame into `target` (None: the renderer's own output texture); its inputs, counts and start time."""
         self._make_current()
         t0 = time.perf_counter()
-        prep = prepare(self._scene, camera, settings, self.name)
+        prep = prepare(self._scene, camera, settings, self.name, flag=control.flag)
         self._sync(prep)
         with control:
             counts = self._frame(camera, settings, prep, want_window, control, target)
