@@ -177,12 +177,14 @@ class ViewerApp:
             self.step()
 
     def wait_rendered(self, timeout: float = 120.0) -> bool:
-        """Step until the scene is loaded and every visible pane shows its latest full-resolution request."""
+        """Step until the scene is loaded, the camera has stopped and every visible pane shows its latest
+        full-resolution request (a small pane renders at full resolution while the camera still moves)."""
         t0 = time.perf_counter()
         while time.perf_counter() - t0 < timeout:
             self.step()
             s = self.state
-            if s.loader is None and s.scene is not None and self.frame_count > 2 and self.panes.all_current():
+            if (s.loader is None and s.scene is not None and self.frame_count > 2 and not s.moving
+                    and self.panes.all_current()):
                 self.step()
                 return True
             time.sleep(0.01)
