@@ -284,3 +284,11 @@ def _camera_entry(e: object, where: str, k: int) -> Camera:
         return Camera(w, h, fx, fy, w / 2, h / 2, R, -R @ pos, name=name, projection=projection)
     except CameraError as exc:
         raise InvalidValue(f"{where}: {exc}") from None
+
+
+def camera_key(camera: Camera) -> tuple:
+    """A hashable key equal for cameras that render the same pixels (size, intrinsics, pose, near plane,
+    projection)."""
+    return (camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy,
+            np.asarray(camera.R, np.float32).tobytes(), np.asarray(camera.t, np.float32).tobytes(), camera.near,
+            camera.projection)

@@ -112,11 +112,3 @@ def reference_image(renderer: Renderer, camera: Camera, rate: float, kind: str,
 def fidelity(rgb: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
     """(PSNR in dB, SSIM) of a render against its reference (`metrics.psnr`, `metrics.ssim`)."""
     return psnr(rgb, reference), ssim(rgb, reference)
-
-
-def camera_key(camera: Camera) -> tuple:
-    """A hashable key equal for cameras that render the same pixels (size, intrinsics, pose, near plane,
-    projection)."""
-    return (camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy,
-            np.asarray(camera.R, np.float32).tobytes(), np.asarray(camera.t, np.float32).tobytes(), camera.near,
-            camera.projection)

@@ -22,6 +22,7 @@ const int NO_TOTAL = -1;             // scan_blocks.comp's total_slot when the t
 
 // Records of the storage buffers, in vec4 (16 bytes) or 32-bit words, indexed like the scene or the tiles.
 const uint SPLAT_VEC4S = 4u;         // Splat2D as pack_splat stores it (kernel.glsl)
+const uint STAGE_VEC4S = 3u;         // StageSplat as pack_stage stores it (kernel.glsl), with its kept flag
 const uint GEOM_VEC4S = 3u;          // splat geometry: mean + opacity, scale + 3D filter, unit quaternion (w, x, y, z)
 const uint CELL_GEOM_VEC4S = 3u;     // duplex cell ellipsoid: mean + 0, scale + 0, quaternion
 const uint CELL_OUT_VEC4S = 1u;      // projected cell: xy, depth, visible member count (uint bits)

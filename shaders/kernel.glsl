@@ -2,7 +2,8 @@
 #include "interface.glsl"
 
 // Helpers shared by the compute kernels (*.comp): flat work-group index of a 2D dispatch, and the storage layout
-// of Splat2D in the per-frame splat buffer (SPLAT_VEC4S vec4 per splat, indexed like the scene). The counter slots
+// of Splat2D in the per-frame splat buffer (SPLAT_VEC4S vec4 per splat, indexed like the scene; StageSplat's is
+// preprocess_stage.glsl's pack_stage). The counter slots
 // and record sizes are interface.glsl's.
 
 // The driver spreads large 1D dispatches over x and y (at most 65535 groups per axis); kernels that see an index
@@ -36,3 +37,4 @@ Splat2D unpack_splat(vec4 p0, vec4 p1, vec4 p2, vec4 p3) {
     s.cell = -1;
     return s;
 }
+

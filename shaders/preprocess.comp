@@ -1,5 +1,5 @@
-// Preprocess every splat (preprocess_splat), store its Splat2D and tile rectangle, flag survivors, count tile-splat
-// pairs and the depth range.
+// The mode's finish of every splat's stored stage (finish_splat; the stage: stage.comp): store its Splat2D and tile
+// rectangle, flag survivors, count tile-splat pairs and the depth range.
 #include "common.glsl"
 #include "mathf.glsl"
 #include "camera.glsl"
@@ -14,6 +14,7 @@ layout(std430, binding = 3) writeonly buffer Rects { ivec4 rects[]; };
 layout(std430, binding = 4) writeonly buffer Flags { uint flags[]; };
 layout(std430, binding = 5) buffer Totals { uint totals[]; };
 layout(std430, binding = 6) readonly buffer WeightSh { float weight_sh[]; };  // per splat: weight_k floats
+layout(std430, binding = 7) readonly buffer Stage { vec4 stage[]; };  // per splat: pack_stage's record
 
 uniform uint num_splats;
 uniform int sh_k;    // SH coefficients per channel stored in the scene
@@ -47,9 +48,12 @@ void main() {
                                         int(oit[OIT_DEPTH_CORRECT]), view_filter[OIT_DILATION - 4],
                                         view_filter[OIT_PRE_DILATION - 4], view_filter[OIT_CULL_LAMBDA - 4],
                                         int(view_filter[OIT_COMPENSATE - 4]));
+    bool kept;
+    const StageSplat st = unpack_stage(stage[STAGE_VEC4S * i], stage[STAGE_VEC4S * i + 1u],
+                                       stage[STAGE_VEC4S * i + 2u], kept);
     Splat2D s;
     TileRect r;
-    const bool valid = preprocess_splat(in_, sh_deg, cam, mode, params, grid.x, grid.y, s, r);
+    const bool valid = kept && finish_splat(in_, st, sh_deg, cam, mode, params, grid.x, grid.y, s, r);
     flags[i] = valid ? 1u : 0u;
     if (!valid) {
         rects[i] = ivec4(0);

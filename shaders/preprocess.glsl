@@ -1,5 +1,5 @@
-// GLSL port of the one-splat preprocess of native/include/gbv/preprocess.h, sh.h and footprint.h, function by
-// function with the same names and constants; each function's C++ original (named in its comment) documents it, and
+// GLSL port of the one-splat preprocess of native/include/gbv/preprocess.h, sh.h and footprint.h (and, included,
+// preprocess_stage.glsl: preprocess_stage.h), function by function with the same names and constants; each function's C++ original (named in its comment) documents it, and
 // the comments here say only where the port differs. Needs common.glsl, mathf.glsl and, from the including kernel,
 // `float load_sh(uint splat, int coeff, int channel)` (the scene's SH, coefficient-major, DC first).
 // Values whose C++ products go through mul_rn are `precise` here (function outputs, locals): no multiply-add
@@ -63,50 +63,7 @@ float sh_to_weight(uint splat, int deg, vec3 dir) {
     return v;
 }
 
-// port of preprocess.h: covariance_3d
-void covariance_3d(vec4 q, vec3 s, precise out float cov[6]) {
-    const float r = q[0], x = q[1], y = q[2], z = q[3];
-    precise const float R[9] = float[](1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - r * z), 2.0 * (x * z + r * y),
-                                       2.0 * (x * y + r * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - r * x),
-                                       2.0 * (x * z - r * y), 2.0 * (y * z + r * x), 1.0 - 2.0 * (x * x + y * y));
-    precise float M[9];  // M = R S
-    for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) M[i * 3 + j] = R[i * 3 + j] * s[j];
-    cov[0] = M[0] * M[0] + M[1] * M[1] + M[2] * M[2];
-    cov[1] = M[0] * M[3] + M[1] * M[4] + M[2] * M[5];
-    cov[2] = M[0] * M[6] + M[1] * M[7] + M[2] * M[8];
-    cov[3] = M[3] * M[3] + M[4] * M[4] + M[5] * M[5];
-    cov[4] = M[3] * M[6] + M[4] * M[7] + M[5] * M[8];
-    cov[5] = M[6] * M[6] + M[7] * M[7] + M[8] * M[8];
-}
-
-// port of preprocess.h: project_covariance
-void project_covariance(CameraParams cam, float cov3[6], vec3 pv, precise out vec3 result) {
-    precise float j00 = cam.fx, j02 = 0.0, j11 = cam.fy, j12 = 0.0;
-    if (cam.projection != ORTHOGRAPHIC) {
-        const float tz = pv[2];
-        precise const float tx = clampf(pv[0] / tz, -cam.lim_x_neg, cam.lim_x_pos) * tz;
-        precise const float ty = clampf(pv[1] / tz, -cam.lim_y_neg, cam.lim_y_pos) * tz;
-        j00 = cam.fx / tz;
-        j02 = -cam.fx * tx / (tz * tz);
-        j11 = cam.fy / tz;
-        j12 = -cam.fy * ty / (tz * tz);
-    }
-    // T = J W (2x3), W = cam.R
-    precise float T[6];
-    for (int c = 0; c < 3; ++c) {
-        T[c] = j00 * cam.R[c] + j02 * cam.R[6 + c];
-        T[3 + c] = j11 * cam.R[3 + c] + j12 * cam.R[6 + c];
-    }
-    const float S[9] = float[](cov3[0], cov3[1], cov3[2], cov3[1], cov3[3], cov3[4], cov3[2], cov3[4], cov3[5]);
-    precise float TS[6];
-    for (int r = 0; r < 2; ++r)
-        for (int c = 0; c < 3; ++c)
-            TS[r * 3 + c] = T[r * 3] * S[c] + T[r * 3 + 1] * S[3 + c] + T[r * 3 + 2] * S[6 + c];
-    result[0] = TS[0] * T[0] + TS[1] * T[1] + TS[2] * T[2];
-    result[1] = TS[0] * T[3] + TS[1] * T[4] + TS[2] * T[5];
-    result[2] = TS[3] * T[3] + TS[4] * T[4] + TS[5] * T[5];
-}
+#include "preprocess_stage.glsl"
 
 // port of footprint.h: eigen_2d
 void eigen_2d(float a, float b, float c, float det, out float sigma1, out float sigma2, out vec2 v1) {
@@ -164,40 +121,21 @@ TileRect tile_rect(vec2 xy, vec2 h, int grid_x, int grid_y) {
     return t;
 }
 
-// port of preprocess.h: SplatIn (`index` locates its SH coefficients)
-struct SplatIn {
-    vec3 mean;
-    vec3 scale;
-    vec4 quat;  // (w, x, y, z), unit
-    float opacity;
-    uint index;
-    float filter_3d;  // 0 when the scene has none
-    bool has_weight;  // the scene has view-weight SH (C++: weight_sh != null)
-    int weight_deg;
-    int cell;         // the splat's cell (duplex), -1 when none
-};
-
-// port of preprocess.h: view_point
-bool view_point(CameraParams cam, vec3 m, precise out vec3 pv) {
-    for (int i = 0; i < 3; ++i)
-        pv[i] = cam.R[i * 3] * m[0] + cam.R[i * 3 + 1] * m[1] + cam.R[i * 3 + 2] * m[2] + cam.t[i];
-    return pv[2] > cam.near_plane;
-}
-
-// port of preprocess.h: screen_footprint
-bool screen_footprint(CameraParams cam, vec3 pv, vec2 h, int grid_x, int grid_y, precise out vec2 xy,
-                      out TileRect rect) {
-    if (cam.projection == ORTHOGRAPHIC)
-        xy = vec2(cam.fx * pv[0] + cam.cx, cam.fy * pv[1] + cam.cy);
-    else
-        xy = vec2(cam.fx * pv[0] / pv[2] + cam.cx, cam.fy * pv[1] / pv[2] + cam.cy);
+// port of preprocess.h: tile_footprint
+bool tile_footprint(vec2 xy, vec2 h, int grid_x, int grid_y, out TileRect rect) {
     rect = TileRect(0, 0, 0, 0);
     if (!finitef(xy.x) || !finitef(xy.y) || !finitef(h.x) || !finitef(h.y)) return false;
     rect = tile_rect(xy, h, grid_x, grid_y);
     return rect.x1 > rect.x0 && rect.y1 > rect.y0;
 }
 
-// port of preprocess.h: preprocess_splat
+// port of preprocess.h: screen_footprint
+bool screen_footprint(CameraParams cam, vec3 pv, vec2 h, int grid_x, int grid_y, precise out vec2 xy,
+                      out TileRect rect) {
+    screen_position(cam, pv, xy);
+    return tile_footprint(xy, h, grid_x, grid_y, rect);
+}
+
 // port of view_filter.h: scalar_filter (the viewer presets' 2D filter); false: culled
 bool scalar_filter(OitParams f, inout precise vec3 cov, inout precise float opacity) {
     if (f.pre_dilation != 0.0) {
@@ -221,41 +159,12 @@ bool scalar_filter(OitParams f, inout precise vec3 cov, inout precise float opac
     return true;
 }
 
-bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitParams oit, int grid_x, int grid_y,
-                      out Splat2D result, out TileRect rect) {
+// port of preprocess.h: preprocess_finish (the mode's finish of a stored stage, but the colour; false: culled)
+bool preprocess_finish(SplatIn in_, StageSplat st, int sh_deg, CameraParams cam, int mode, OitParams oit, int grid_x,
+                       int grid_y, out Splat2D result, out TileRect rect) {
     rect = TileRect(0, 0, 0, 0);
-    const vec3 m = in_.mean;
-    precise vec3 pv;
-    if (!view_point(cam, m, pv)) return false;
-    // SH and view-weight direction: from the eye to the splat; an orthographic camera's rays are parallel, so every
-    // splat is seen along the camera's forward axis (row 2 of R)
-    precise vec3 dir = cam.projection == ORTHOGRAPHIC ? vec3(cam.R[6], cam.R[7], cam.R[8])
-                                                      : vec3(m[0] - cam.campos[0], m[1] - cam.campos[1],
-                                                             m[2] - cam.campos[2]);
-    precise const float dn = sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
-    dir = dn > 0.0 ? vec3(dir.x / dn, dir.y / dn, dir.z / dn) : vec3(0.0, 0.0, 1.0);
-
-    // Mip-Splatting 3D filter (applied in every mode when present): scales grow, opacity compensates.
-    precise vec3 s;
-    precise float opacity = in_.opacity;
-    if (in_.filter_3d > 0.0) {
-        precise const float f2 = in_.filter_3d * in_.filter_3d;
-        precise float ratio = 1.0;
-        for (int i = 0; i < 3; ++i) {
-            precise const float s2 = in_.scale[i] * in_.scale[i];
-            s[i] = sqrt(s2 + f2);
-            ratio *= s2 / (s2 + f2);
-        }
-        opacity *= sqrt(ratio);
-    } else {
-        s = in_.scale;
-    }
-
-    precise float cov3[6];
-    precise vec3 cov;
-    covariance_3d(in_.quat, s, cov3);
-    project_covariance(cam, cov3, pv, cov);
-
+    precise vec3 cov = st.cov;
+    precise float opacity = st.opacity;
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
     if (mode == SCALAR) {
@@ -273,11 +182,15 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
     } else if (mode == WSR || mode == DUPLEX) {
         cov[0] += DILATION_3DGS;
         cov[2] += DILATION_3DGS;
-        precise float w =
-            in_.has_weight ? sh_to_weight(in_.index, sh_deg < in_.weight_deg ? sh_deg : in_.weight_deg, dir) : 1.0;
+        precise float w = 1.0;
+        if (in_.has_weight) {
+            precise vec3 dir;
+            view_direction(cam, in_.mean, dir);
+            w = sh_to_weight(in_.index, sh_deg < in_.weight_deg ? sh_deg : in_.weight_deg, dir);
+        }
         if (oit.depth_correct != 0) {
-            if (!(pv[2] < oit.sigma)) return false;
-            w *= 1.0 - pv[2] / oit.sigma;
+            if (!(st.depth < oit.sigma)) return false;
+            w *= 1.0 - st.depth / oit.sigma;
         }
         if (!(w > 0.0)) return false;
         opacity *= w;
@@ -289,13 +202,11 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
     const float inv = 1.0 / det;
 
     precise const float r = splat_radius(cov[0], cov[2], det, sigmas);
-    precise vec2 xy;
-    if (!screen_footprint(cam, pv, cutoff_half_sides(mode, cov, det, opacity, min_alpha, r), grid_x, grid_y, xy,
-                          rect))
+    if (!tile_footprint(st.xy, cutoff_half_sides(mode, cov, det, opacity, min_alpha, r), grid_x, grid_y, rect))
         return false;
 
-    result.xy = xy;
-    result.depth = pv[2];
+    result.xy = st.xy;
+    result.depth = st.depth;
     result.opacity = opacity;
     result.log_min_alpha = logf(min_alpha / opacity);
     result.conic[0] = cov[2] * inv;
@@ -306,7 +217,23 @@ bool preprocess_splat(SplatIn in_, int sh_deg, CameraParams cam, int mode, OitPa
     result.inv_sigma2 = 1.0 / result.sigma2;
     result.radius = r;
     result.cell = in_.cell;
-    sh_to_rgb(in_.index, sh_deg, dir, result.color);
+    result.color = vec3(0.0);
+    return true;
+}
+
+// port of preprocess.h: stage_splat (stage.comp)
+bool stage_splat(SplatIn in_, int sh_deg, CameraParams cam, int grid_x, int grid_y, float reach,
+                 out StageSplat st) {
+    if (!preprocess_stage(in_, cam, st) || !stage_on_screen(st, grid_x, grid_y, reach)) return false;
+    stage_color(in_, sh_deg, cam, st.color);
+    return true;
+}
+
+// port of preprocess.h: finish_splat (preprocess.comp)
+bool finish_splat(SplatIn in_, StageSplat st, int sh_deg, CameraParams cam, int mode, OitParams oit, int grid_x,
+                  int grid_y, out Splat2D result, out TileRect rect) {
+    if (!preprocess_finish(in_, st, sh_deg, cam, mode, oit, grid_x, grid_y, result, rect)) return false;
+    result.color = st.color;
     return true;
 }
 

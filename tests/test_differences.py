@@ -10,6 +10,7 @@ import pytest
 
 import gbviewer as gb
 from gbviewer import differences, metrics
+from gbviewer.camera import camera_key
 from gbviewer.differences import DIVERGING
 
 
@@ -100,10 +101,10 @@ def test_box_reference_is_the_x1_render_box_downsampled(bundled_scene, output_vi
 
 
 def test_camera_key_tells_cameras_apart(output_view):
-    assert differences.camera_key(output_view) == differences.camera_key(output_view.at_sampling_rate(1.0))
-    assert differences.camera_key(output_view) != differences.camera_key(output_view.at_sampling_rate(0.5))
+    assert camera_key(output_view) == camera_key(output_view.at_sampling_rate(1.0))
+    assert camera_key(output_view) != camera_key(output_view.at_sampling_rate(0.5))
     moved = gb.Camera(output_view.width, output_view.height, output_view.fx, output_view.fy, output_view.cx,
                       output_view.cy, output_view.R, output_view.t + np.float32(0.01))
-    assert differences.camera_key(moved) != differences.camera_key(output_view)
+    assert camera_key(moved) != camera_key(output_view)
     ortho = dataclasses.replace(output_view, projection="orthographic")
-    assert differences.camera_key(ortho) != differences.camera_key(output_view)  # the same numbers, other pixels
+    assert camera_key(ortho) != camera_key(output_view)  # the same numbers, other pixels

@@ -13,8 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..differences import camera_key
-from ..camera import Camera, format_rate
+from ..camera import Camera, camera_key, format_rate
 from ..errors import GBViewerError
 from ..eval import camera_for_rate
 from ..io.datasets import SPLITS, Dataset, View, load_dataset

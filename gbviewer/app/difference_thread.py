@@ -14,9 +14,9 @@ from typing import Callable, Hashable
 
 import numpy as np
 
-from ..differences import (DENSE_SUPERSAMPLE, camera_key, fidelity, reference_image, reference_note, reference_settings,
+from ..camera import Camera, camera_key
+from ..differences import (DENSE_SUPERSAMPLE, fidelity, reference_image, reference_note, reference_settings,
                         robust_scale, signed_difference)
-from ..camera import Camera
 from ..cancel import CancelToken
 from ..errors import GBViewerError, RenderCancelled
 from ..eval import default_cache, ground_truth

@@ -17,8 +17,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..differences import REFERENCES, camera_key, colour_difference
-from ..camera import format_rate
+from ..camera import camera_key, format_rate
+from ..differences import REFERENCES, colour_difference
 from ..flicker import DEFAULT_REFERENCE, VIEW_STEP, heat_colours, heat_scale
 from ..io.datasets import View
 from ..render import Frame

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from ..cancel import CancelToken
-from ..differences import camera_key
+from ..camera import camera_key
 from ..render import Frame, Renderer
 
 if TYPE_CHECKING:

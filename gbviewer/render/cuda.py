@@ -30,7 +30,7 @@ class CudaRenderer(NativeUploads, Renderer):
     process."""
 
     name = "cuda"
-    capabilities = Capabilities(gl_texture=True)
+    capabilities = Capabilities(gl_texture=True, shared_stage=True)
 
     def __init__(self, device: int = -1) -> None:
         ok, why = self.available()

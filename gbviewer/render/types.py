@@ -14,7 +14,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..camera import Camera
+from ..camera import Camera, camera_key
 from ..cancel import Cancellable
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
@@ -237,14 +237,14 @@ class FrameStats:
     ("scalar", "avx2" or "avx512", chosen by GBVIEWER_SIMD at load or gbviewer._native.testing.set_simd); duplex: cells,
     cells_visible and cell_misses (splat-tile pairs outside their cell's tiles; not counted by glsl); decode_ms: the
     MLPs of a trained Duplex-GS model, per view; lod_splats: the splats of the level-of-detail cut drawn
-    (`RenderSettings.lod`); with `Capabilities.shared_stage` (cpu): stage_reused, whether the frame used a
-    per-camera stage (the mode-independent preprocess and the depth order) computed before, by an earlier render or
-    an earlier job of the same `render_many`, order_reused, whether its tile lists were binned in a depth order an
-    earlier frame of that stage sorted (False where this frame sorted it, and for wsr and duplex, which bin without
-    it), stage_ms, the time spent building the stage in this frame (0 when reused; included in preprocess_ms), and
-    order_ms, the time spent sorting its depth order in this frame (0 when reused; included in sort_ms, whose rest
-    is the frame's own binning). A `render_many` frame's total_ms counts from the start of the call, and on cpu its
-    blend_ms is the time of the one tile loop all its frames share.
+    (`RenderSettings.lod`); with `Capabilities.shared_stage`: stage_reused, whether the frame used a per-camera
+    stage (the mode-independent preprocess; on cpu also the depth order) computed before, by an earlier render or
+    an earlier job of the same `render_many`, stage_ms, the time spent building the stage in this frame (0 when
+    reused; included in preprocess_ms); cpu only: order_reused, whether its tile lists were binned in a depth order
+    an earlier frame of that stage sorted (False where this frame sorted it, and for wsr and duplex, which bin
+    without it), and order_ms, the time spent sorting its depth order in this frame (0 when reused; included in
+    sort_ms, whose rest is the frame's own binning). A `render_many` frame's total_ms counts from the start of the
+    call, and on cpu its blend_ms is the time of the one tile loop all its frames share.
     """
 
     preprocess_ms: float = 0.0
@@ -300,8 +300,9 @@ class Capabilities:
     the context current in this thread, and a renderer may be used from any thread, from several at once.
     shared_stage: renders of one camera share the per-camera stage (the preprocess that does not depend on the
     mode: view-space positions and depth, 2D covariances before the mode's filter, SH colours, culling) across
-    frames and settings while the scene is unchanged; `render_many` builds it once per distinct camera and blends
-    its jobs' tiles interleaved; FrameStats.stage_reused and stage_ms say what was reused.
+    frames and settings while the scene is unchanged; `render_many` builds it once per distinct camera (and, on
+    progressive backends, blends its jobs' tiles interleaved); FrameStats.stage_reused and stage_ms say what was
+    reused (cpu, glsl, cuda; the cpu also shares the depth order).
     trace: `trace(camera, settings, x, y) -> PixelTrace` (gbviewer.render.trace).
     simd: `FrameStats.simd` names the blend's SIMD path, switched process-wide by gbviewer.bench.simd.
     host: renders on the host's CPU cores (`RenderSettings.threads` of them): rates per core mean something.
@@ -353,12 +354,19 @@ class Renderer(abc.ABC):
         per job, `partials[job]` that job's partial frame (None: none); a cancel raises RenderCancelled and returns
         no frame. With `capabilities.shared_stage` the per-camera stage is built once per distinct camera and the jobs'
         tiles are blended interleaved (each job's first tiles arrive together); this default renders one job after
-        another."""
+        another, the jobs of one camera (and sampling grid) together, so that a backend keeping its last stage
+        (glsl, cuda) builds it once per distinct camera."""
         jobs = list(jobs)
         parts = job_partials(partials, len(jobs))
-        return [self.render(camera, settings, cancel=cancel,
-                            on_progress=None if on_progress is None else functools.partial(on_progress, i),
-                            partial=parts[i]) for i, (camera, settings) in enumerate(jobs)]
+        first: dict[tuple, int] = {}
+        order = sorted(range(len(jobs)), key=lambda i: first.setdefault(
+            (camera_key(jobs[i][0]), jobs[i][1].supersample), i))
+        frames: list[Frame | None] = [None] * len(jobs)
+        for i in order:
+            camera, settings = jobs[i]
+            frames[i] = self.render(camera, settings, cancel=cancel, partial=parts[i],
+                                    on_progress=None if on_progress is None else functools.partial(on_progress, i))
+        return frames  # type: ignore[return-value]
 
     def usable(self) -> tuple[bool, str]:
         """(whether this renderer still renders, why not): False once it raised BackendFailed."""

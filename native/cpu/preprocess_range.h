@@ -11,12 +11,6 @@
 
 namespace gbv {
 
-// One splat's stored stage (StageLanes): screen position, depth, opacity after the 3D filter, the 2D covariance
-// before the mode's filter, and the SH colour (computed only where stage_on_screen holds).
-struct StageSplat {
-    float xy[2], depth, opacity, cov[3], color[3];
-};
-
 // The stage of one camera: the scene (activated parameters, gbviewer.Scene's layout), the camera and SH degree, and
 // per splat its StageSplat and flag (in front of the near plane and possibly on screen in some mode). Plain data,
 // shared by the translation units of every instruction set.

@@ -1,4 +1,4 @@
-// The frame (State::run) and its splat steps: preprocess (one thread per splat), tile keys and a CUB radix sort of
+// The frame (State::run) and its splat steps: the per-camera stage and each mode's finish (one thread per splat), tile keys and a CUB radix sort of
 // (tile, depth), tile ranges; the CUB scans, sorts and sums the other steps share.
 #include <thrust/iterator/transform_iterator.h>
 
@@ -12,24 +12,38 @@ namespace gbv::cuda {
 using namespace detail;
 namespace {
 
+// The per-camera stage of every splat (stage_splat): kept while State::stage_key holds, shared by every mode's finish.
 __global__ void __launch_bounds__(THREADS)
-    preprocess_kernel(int64_t n, const float* means, const float* scales, const float* quats,
-                      const float* opacities, const float* sh, const float* filter_3d, int k, int sh_deg,
-                      const float* weight_sh, int weight_k, const int32_t* cell_of, OitParams oit, CameraParams cam,
-                      Mode mode, int gx, int gy, Splat2D* splats, TileRect* rects, uint32_t* touched,
-                      unsigned long long* visible) {
+    stage_kernel(int64_t n, const float* means, const float* scales, const float* quats, const float* opacities,
+                 const float* sh, const float* filter_3d, int k, int sh_deg, CameraParams cam, int gx, int gy,
+                 float reach, StageSplat* stage, unsigned char* stage_ok) {
+    const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    const SplatIn in{means + 3 * i, scales + 3 * i, quats + 4 * i, opacities[i], sh + (size_t)k * 3 * i,
+                     filter_3d ? filter_3d[i] : 0.0f, nullptr, 0, -1};
+    stage_ok[i] = stage_splat(in, sh_deg, cam, gx, gy, reach, &stage[i]) ? 1 : 0;
+}
+
+// The mode's finish of every splat's stage (finish_splat): Splat2D, tile rectangle, touched tile count.
+__global__ void __launch_bounds__(THREADS)
+    finish_kernel(int64_t n, const float* means, const StageSplat* stage, const unsigned char* stage_ok, int sh_deg,
+                  const float* weight_sh, int weight_k, const int32_t* cell_of, OitParams oit, CameraParams cam,
+                  Mode mode, int gx, int gy, Splat2D* splats, TileRect* rects, uint32_t* touched,
+                  unsigned long long* visible) {
     const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     bool valid = false;
     if (i < n) {
-        SplatIn in{means + 3 * i, scales + 3 * i, quats + 4 * i, opacities[i], sh + (size_t)k * 3 * i,
-                   filter_3d ? filter_3d[i] : 0.0f, weight_sh ? weight_sh + (size_t)weight_k * i : nullptr,
-                   sh_degree_for_coeffs(weight_k), cell_of ? cell_of[i] : -1};
-        TileRect r;
         uint32_t count = 0;
-        if (preprocess_splat(in, sh_deg, cam, mode, oit, gx, gy, &splats[i], &r)) {
-            count = (uint32_t)((r.x1 - r.x0) * (r.y1 - r.y0));
-            rects[i] = r;
-            valid = true;
+        if (stage_ok[i]) {
+            const SplatIn in{means + 3 * i, nullptr, nullptr, 0.0f, nullptr, 0.0f,
+                             weight_sh ? weight_sh + (size_t)weight_k * i : nullptr, sh_degree_for_coeffs(weight_k),
+                             cell_of ? cell_of[i] : -1};
+            TileRect r;
+            if (finish_splat(in, stage[i], sh_deg, cam, mode, oit, gx, gy, &splats[i], &r)) {
+                count = (uint32_t)((r.x1 - r.x0) * (r.y1 - r.y0));
+                rects[i] = r;
+                valid = true;
+            }
         }
         touched[i] = count;
     }
@@ -108,6 +122,7 @@ void State::forget_scene() {
     k = 1;
     weight_k = 0;
     has_filter = false;
+    stage_ready = false;
 }
 
 // An int count: CUB's scan kernel with 64-bit offsets spills registers on sm_90.
@@ -170,13 +185,28 @@ void State::run(const RenderArgs& a, RenderResult& res) {
     CUDA_CHECK(cudaMemsetAsync(ranges.ptr, 0, sizeof(uint2) * num_tiles));
 
     CUDA_CHECK(cudaEventRecord(ev[0].e));
+    // the stage: kept while its key holds (scene generation, camera, SH degree, the on-screen cull's reach)
+    const float filter = a.mode == SCALAR ? a.oit.dilation + a.oit.pre_dilation : 0.0f;
+    const StageKey key{generation, cam, sh_deg, std::max(DILATION_3DGS, filter)};
+    res.stage_reused = stage_ready && stage_key == key;
+    if (n > 0 && !res.stage_reused) {
+        stage_ready = false;
+        stage.ensure(n);
+        stage_ok.ensure(n);
+        stage_kernel<<<blocks(n), THREADS>>>(n, means.ptr, scales.ptr, quats.ptr, opacities.ptr, sh.ptr,
+                                             has_filter ? filter_3d.ptr : nullptr, k, sh_deg, cam, gx, gy, key.reach,
+                                             stage.ptr, stage_ok.ptr);
+        launched("stage_kernel");
+        stage_key = key;
+        stage_ready = true;
+    }
+    CUDA_CHECK(cudaEventRecord(ev_stage.e));
     if (n > 0) {
-        preprocess_kernel<<<blocks(n), THREADS>>>(n, means.ptr, scales.ptr, quats.ptr, opacities.ptr, sh.ptr,
-                                                  has_filter ? filter_3d.ptr : nullptr, k, sh_deg,
-                                                  weight_k ? weight_sh.ptr : nullptr, weight_k,
-                                                  a.mode == DUPLEX ? cell_of.ptr : nullptr, a.oit, cam, a.mode, gx,
-                                                  gy, splats.ptr, rects.ptr, touched.ptr, counters.ptr + VISIBLE);
-        launched("preprocess_kernel");
+        finish_kernel<<<blocks(n), THREADS>>>(n, means.ptr, stage.ptr, stage_ok.ptr, sh_deg,
+                                              weight_k ? weight_sh.ptr : nullptr, weight_k,
+                                              a.mode == DUPLEX ? cell_of.ptr : nullptr, a.oit, cam, a.mode, gx, gy,
+                                              splats.ptr, rects.ptr, touched.ptr, counters.ptr + VISIBLE);
+        launched("finish_kernel");
     }
     CUDA_CHECK(cudaEventRecord(ev[1].e));
 
@@ -198,6 +228,9 @@ void State::run(const RenderArgs& a, RenderResult& res) {
     CUDA_CHECK(cudaStreamSynchronize(0));
     float ms[3];
     for (int i = 0; i < 3; ++i) CUDA_CHECK(cudaEventElapsedTime(&ms[i], ev[i].e, ev[i + 1].e));
+    float stage_ms = 0;
+    CUDA_CHECK(cudaEventElapsedTime(&stage_ms, ev[0].e, ev_stage.e));
+    res.stage_ms = res.stage_reused ? 0.0 : stage_ms;
     res.preprocess_ms = ms[0];
     res.sort_ms = ms[1];
     res.blend_ms = ms[2];

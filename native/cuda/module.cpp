@@ -26,6 +26,13 @@ namespace {
         nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,      \
         nb::arg("view_filter").none() = nb::none()
 
+// A render's dict with the per-camera stage's stats (stage_reused, stage_ms), as the CPU module's.
+nb::dict with_stage(nb::dict d, const cuda::RenderResult& res) {
+    d["stage_reused"] = res.stage_reused;
+    d["stage_ms"] = res.stage_ms;
+    return d;
+}
+
 }  // namespace
 
 NB_MODULE(_native_cuda, m) {
@@ -104,7 +111,7 @@ NB_MODULE(_native_cuda, m) {
                      nb::gil_scoped_release release;
                      res = r.render(a);
                  }
-                 return result_dict(res, res, (size_t)a.height, (size_t)a.width);
+                 return with_stage(result_dict(res, res, (size_t)a.height, (size_t)a.width), res);
              },
              GBV_RENDER_ARGS)
         .def("render_to_gl_texture",
@@ -121,7 +128,7 @@ NB_MODULE(_native_cuda, m) {
                      nb::gil_scoped_release release;
                      res = r.render_to_gl_texture(texture, a);
                  }
-                 return stats_dict(res, res.evaluations);
+                 return with_stage(stats_dict(res, res.evaluations), res);
              },
              nb::arg("texture"), GBV_RENDER_ARGS,
              "Render into an existing GL_RGBA32F texture of the output size (its GL context, or one sharing it, "

@@ -23,6 +23,8 @@ struct RenderResult {
     int64_t visible = 0, sort_length = 0, pairs = 0;
     int64_t cells_visible = 0, cell_misses = 0;  // duplex, as the CPU module defines them (0 otherwise)
     int64_t evaluations = 0;  // render_to_gl_texture: the sum of the evaluation counts (render: see `evals`)
+    bool stage_reused = false;  // the per-camera stage was an earlier frame's (same scene, camera, SH degree, reach)
+    double stage_ms = 0;        // building the stage in this frame (0 when reused; part of preprocess_ms)
 };
 
 // A CUDA error after which the device is unusable in this process (a fault in a kernel, a watchdog timeout, the

@@ -1,5 +1,5 @@
 // A renderer's device state and the frame steps that use it (nvcc only), one file per concern:
-// binning.cu (preprocess, tile lists of splats, CUB scans and sorts, the frame), duplex.cu (cells and their
+// binning.cu (the stage and each mode's finish, tile lists of splats, CUB scans and sorts, the frame), duplex.cu (cells and their
 // canonical order), blend.cu (the blend and box-average kernels), interop.cu (CUDA-GL textures), renderer.cu (the
 // class: locking, uploads, results).
 #pragma once
@@ -8,6 +8,7 @@
 #include <cuda_runtime.h>
 
 #include <cstdint>
+#include <cstring>
 #include <map>
 #include <mutex>
 
@@ -55,6 +56,21 @@ struct State {
     Buf<Cell2D> cells;
     Buf<TileRect> crects;
     Buf<uint2> cell_ranges;
+    // the per-camera stage (binning.cu: stage_kernel), valid while stage_ready and its key holds
+    struct StageKey {
+        uint64_t scene = 0;
+        CameraParams cam = {};
+        int sh_deg = 0;
+        float reach = 0;
+        bool operator==(const StageKey& o) const {
+            return scene == o.scene && sh_deg == o.sh_deg && reach == o.reach &&
+                   std::memcmp(&cam, &o.cam, sizeof cam) == 0;
+        }
+    } stage_key;
+    bool stage_ready = false;
+    Buf<StageSplat> stage;
+    Buf<unsigned char> stage_ok;
+    detail::Event ev_stage;
     // per frame
     Buf<Splat2D> splats;
     Buf<TileRect> rects;

@@ -16,7 +16,7 @@ import numpy as np
 
 import gbviewer as gb
 from gbviewer import metrics
-from gbviewer.differences import camera_key
+from gbviewer.camera import camera_key
 from gbviewer.app import dataset as app_dataset
 from gbviewer.app.difference_views import PaneAnalysis
 from gbviewer.app.layout import Rect, fit_aspect

@@ -8,7 +8,8 @@ gbviewer.render.glsl.interface reads at import; these tests tie it, and the GLSL
 - TileRect is RECT_WORDS words and OitParams' fields sit at their OIT_* components of the `oit` and `view_filter`
   uniforms;
 - pack_splat / unpack_splat (kernel.glsl) store every Splat2D field but those unpack recomputes, each at the same
-  place both ways, in exactly SPLAT_VEC4S vec4;
+  place both ways, in exactly SPLAT_VEC4S vec4; pack_stage / unpack_stage (preprocess_stage.glsl) every StageSplat
+  field (preprocess_stage.h) and the kept flag in STAGE_VEC4S;
 - the kernels and the driver name counter slots, never number them.
 """
 
@@ -29,7 +30,8 @@ from gbviewer.render.glsl import interface as gi
 REPO = Path(__file__).resolve().parents[2]
 SHADERS = REPO / "shaders"
 FLOATS = {"float": 1, "int": 1, "uint": 1, "vec2": 2, "vec3": 3, "vec4": 4, "ivec4": 4}
-STRUCTS = ["CameraParams", "Splat2D", "TileRect", "OitParams"]
+STRUCTS = ["CameraParams", "Splat2D", "TileRect", "OitParams", "StageSplat"]
+STRUCT_FILES = ("common.glsl", "preprocess_stage.glsl")  # the GLSL ports of common.h and preprocess_stage.h
 
 
 def _code(name: str) -> str:
@@ -37,8 +39,9 @@ def _code(name: str) -> str:
 
 
 def glsl_fields(struct: str) -> list[tuple[str, int]]:
-    """(name, size in 4-byte words) of the struct's fields in common.glsl, in declaration order."""
-    body = re.search(rf"struct\s+{struct}\s*\{{([^}}]*)\}}", _code("common.glsl")).group(1)
+    """(name, size in 4-byte words) of the struct's fields in its GLSL file, in declaration order."""
+    code = "\n".join(_code(f) for f in STRUCT_FILES)
+    body = re.search(rf"struct\s+{struct}\s*\{{([^}}]*)\}}", code).group(1)
     out = []
     for decl in filter(None, (d.strip() for d in body.split(";"))):
         typ, names = decl.split(None, 1)
@@ -59,7 +62,7 @@ def cpp_layout(tmp_path_factory) -> dict[str, dict[str, int]]:
         lines.append(f'    std::printf("{struct} sizeof %zu\\n", sizeof(gbv::{struct}));')
         lines += [f'    std::printf("{struct} {f} %zu\\n", offsetof(gbv::{struct}, {f}));'
                   for f, _ in glsl_fields(struct)]
-    src = '#include <cstddef>\n#include <cstdio>\n#include "gbv/common.h"\nint main() {\n' + "\n".join(lines) + "\n}\n"
+    src = '#include <cstddef>\n#include <cstdio>\n#include "gbv/common.h"\n#include "gbv/preprocess_stage.h"\nint main() {\n' + "\n".join(lines) + "\n}\n"
     out = tmp_path_factory.mktemp("layout")
     (out / "layout.cpp").write_text(src)
     build = subprocess.run([cxx, "-std=c++17", "-I", str(REPO / "native" / "include"), str(out / "layout.cpp"), "-o",
@@ -137,6 +140,31 @@ def test_splat_storage_round_trips_every_field():
             recomputed.add(field)
     assert read == stored, "pack_splat and unpack_splat disagree on where a field is stored"
     assert set(stored) | recomputed == set(sizes) and not set(stored) & recomputed
+
+
+def test_stage_storage_round_trips_every_field():
+    """pack_stage's vec4 hold each StageSplat field, in declaration order, where unpack_stage's constructor reads it,
+    and the kept flag in the one spare component it reads back; STAGE_VEC4S vec4 in all."""
+    fields = glsl_fields("StageSplat")
+    code = _code("preprocess_stage.glsl")
+    pack = re.findall(r"p(\d) = vec4\(([^;]*)\);", re.search(r"void pack_stage\(.*?\n\}", code, re.S).group(0))
+    assert [int(i) for i, _ in pack] == list(range(gi.STAGE_VEC4S))
+    stored, flag = [], []
+    for i, args in pack:
+        at = 0
+        for arg in args.split(","):
+            if m := re.fullmatch(r"\s*s\.(\w+)\s*", arg):
+                stored.append((m.group(1), f"p{i}." + "xyzw"[at:at + dict(fields)[m.group(1)]]))
+                at += dict(fields)[m.group(1)]
+            else:
+                flag += [f"p{i}.{'xyzw'[at]}"] if "kept" in arg else []
+                at += 1
+        assert at == 4, f"pack_stage's p{i} holds {at} floats"
+    assert [f for f, _ in stored] == [f for f, _ in fields]
+    unpack = re.search(r"StageSplat unpack_stage\(.*?\n\}", code, re.S).group(0)
+    args = re.search(r"return StageSplat\(([^;]*)\);", unpack).group(1)
+    assert [a.strip() for a in args.split(",")] == [where for _, where in stored]
+    assert flag and re.search(rf"kept = {re.escape(flag[0])} != 0\.0;", unpack), flag
 
 
 def test_slots_and_sizes_are_named():

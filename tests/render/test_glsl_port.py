@@ -82,10 +82,8 @@ NOT_PORTED = {
     "blend_alpha_pixel": "the shared body of C++'s one-pixel blend_scalar / blend_analytic wrappers around the lane "
                          "templates; GLSL has those two functions themselves",
     "dot": "GLSL built-in",
-    "screen_position": "a step of the CPU's per-camera stage (preprocess_stage.h); GLSL keeps the one-step "
-                       "preprocess_splat, which composes the same steps inline (its shared stage is not built)",
-    "stage_color": "as screen_position",
-    "view_direction": "as screen_position",
+    "preprocess_splat": "the one-splat composition of stage_splat and finish_splat (the C++ reference of "
+                        "test_fp_contract); GLSL runs the two as kernels of their own, stage.comp and preprocess.comp",
     "float_bits": "GLSL built-in floatBitsToUint",
     "splat_less": "the GLSL duplex keeps each cell's member order (cells.comp), which differs from the CPU's canonical "
                   "order only by float rounding, within the tolerances above",
@@ -110,15 +108,16 @@ def test_function_names_ported():
     glsl_funcs = set(re.findall(r"^\w+\s+(\w+)\s*\(", shader_src, re.M))
     missing = sorted(cpp - glsl_funcs - set(NOT_PORTED))
     assert not missing, f"native functions without a GLSL port of the same name: {missing}"
-    assert {"preprocess_splat", "blend_gaussian", "make_camera"} <= glsl_funcs
+    assert {"stage_splat", "finish_splat", "blend_gaussian", "make_camera"} <= glsl_funcs
 
 
 # Functions whose C++ products go through mul_rn (common.h): no multiply-add of theirs may be contracted.
 NOT_CONTRACTED = {"make_camera", "sh_basis", "sh_to_rgb", "sh_to_weight", "covariance_3d", "project_covariance",
-                  "splat_radius", "tile_rect", "view_point", "screen_footprint", "preprocess_splat", "preprocess_cell"}
+                  "splat_radius", "tile_rect", "view_point", "view_direction", "screen_position", "screen_footprint",
+                  "preprocess_stage", "stage_on_screen", "preprocess_finish", "preprocess_cell"}
 
 
-@pytest.mark.parametrize("shader", ["preprocess.comp", "cells.comp"])
+@pytest.mark.parametrize("shader", ["stage.comp", "preprocess.comp", "cells.comp"])
 def test_preprocess_is_not_contracted(shader, tmp_path, monkeypatch):
     """The shaders compile (glslangValidator, OpenGL SPIR-V), and in the preprocess functions every multiply whose
     result feeds an add or subtract is `precise` together with that add (SPIR-V NoContraction on both), as the C++

@@ -1,8 +1,9 @@
-"""The CPU backend's per-camera stage (gbv/preprocess_stage.h, frame.cpp) and `render_many`: frames that reuse a
-stage, or share one inside a call, equal the same frames rendered by fresh renderers bit for bit; the stage is
-rebuilt when the camera, the scene (another scene, or the same one modified and uploaded again) or the SH degree
-changes; render_many's partial frames end equal to its frames; a cancelled render_many raises and the next render
-is exact."""
+"""The per-camera stage (gbv/preprocess_stage.h; the CPU's frame.cpp, the GLSL port's stage.comp, CUDA's
+stage_kernel) and `render_many`: frames that reuse a stage, or share one inside a call, equal the same frames rendered
+by fresh renderers bit for bit; the stage is rebuilt when the camera, the scene (another scene, or the same one
+modified and uploaded again) or the SH degree changes, on every backend with `Capabilities.shared_stage` that runs
+here; the CPU's render_many shares one stage per distinct camera, its partial frames end equal to its frames, and a
+cancelled render_many raises and the next render is exact."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import pytest
 from helpers import SHARED_SCENES, shared_scene
 
 import gbviewer as gb
-from gbviewer.render import RenderSettings, create_renderer
+from gbviewer.render import BACKENDS, RenderSettings, create_renderer
 from gbviewer.render.view_filter import ViewFilter
 
 SCENES = sorted(p.name for p in SHARED_SCENES.glob("*") if p.suffix != ".md") or ["biker.compressed.ply"]
@@ -21,8 +22,17 @@ SPECS = ["scalar", "gaussian_blending", "mip", "analytic", "scalar:2", "preset:s
 COUNTS = ("visible", "sort_length", "pairs", "evaluations")
 
 
-def fresh(scene: gb.Scene, cam: gb.Camera, settings: RenderSettings) -> gb.Frame:
-    r = create_renderer("cpu")
+@pytest.fixture(params=[name for name, cls in BACKENDS.items() if cls.capabilities.shared_stage])
+def staged(request) -> str:
+    """A backend with a shared per-camera stage that runs here."""
+    ok, why = BACKENDS[request.param].available()
+    if not ok:
+        pytest.skip(f"{request.param} backend unavailable here: {why}")
+    return request.param
+
+
+def fresh(scene: gb.Scene, cam: gb.Camera, settings: RenderSettings, backend: str = "cpu") -> gb.Frame:
+    r = create_renderer(backend)
     r.upload(scene)
     try:
         return r.render(cam, settings)
@@ -56,21 +66,41 @@ def test_render_many_equals_fresh_renders(name):
     same(again, frames[1], f"{name} gaussian_blending again")
 
 
-def test_sequential_modes_reuse_the_stage_and_stay_exact():
+def test_sequential_modes_reuse_the_stage_and_stay_exact(staged):
     scene = gb.load(shared_scene("plant.splat"))
     cam = gb.orbit_camera(scene, 50, 10, width=128, height=96)
-    r = create_renderer("cpu")
+    r = create_renderer(staged)
     r.upload(scene)
-    for i, spec in enumerate(["mip", "scalar", "gaussian_blending", "preset:gsplat-antialiased", "analytic"]):
+    for i, spec in enumerate(["mip", "scalar", "gaussian_blending", "preset:gsplat-antialiased", "analytic", "wsr"]):
         f = r.render(cam, RenderSettings.parse(spec))
         assert f.stats.stage_reused == (i > 0), spec
-        same(f, fresh(scene, cam, RenderSettings.parse(spec)), spec)
+        assert (f.stats.stage_ms == 0.0) == (i > 0) and f.stats.stage_ms <= f.stats.preprocess_ms, spec
+        same(f, fresh(scene, cam, RenderSettings.parse(spec), staged), spec)
+    wide = RenderSettings(view_filter=ViewFilter(2.0))  # a wider 2D filter: another on-screen reach, another stage
+    f = r.render(cam, wide)
+    assert not f.stats.stage_reused
+    same(f, fresh(scene, cam, wide, staged), "dilation 2")
 
 
-def test_the_stage_is_rebuilt_when_camera_scene_or_sh_degree_change():
+def test_render_many_builds_one_stage_per_camera_and_keeps_the_jobs_order(staged):
+    """Jobs of two cameras interleaved: each camera's stage is built once (the default render_many groups a camera's
+    jobs), and the frames come back in the jobs' order, each as a fresh renderer draws it."""
+    scene = gb.load(shared_scene("plant.splat"))
+    a, b = (gb.orbit_camera(scene, az, 10, width=96, height=72) for az in (20, 60))
+    jobs = [(a, RenderSettings.parse("scalar")), (b, RenderSettings.parse("scalar")),
+            (a, RenderSettings.parse("gaussian_blending")), (b, RenderSettings.parse("mip"))]
+    r = create_renderer(staged)
+    r.upload(scene)
+    frames = r.render_many(jobs)
+    assert [f.stats.stage_reused for f in frames] == [False, False, True, True]
+    for (cam, settings), f in zip(jobs, frames):
+        same(f, fresh(scene, cam, settings, staged), f"{staged} {settings.spec}")
+
+
+def test_the_stage_is_rebuilt_when_camera_scene_or_sh_degree_change(staged):
     a = gb.load(shared_scene("fruit_drops_minimal.ply"))  # SH degree 3
     cam = gb.orbit_camera(a, 30, 20, width=96, height=72)
-    r = create_renderer("cpu")
+    r = create_renderer(staged)
     r.upload(a)
     s = RenderSettings()
     assert not r.render(cam, s).stats.stage_reused
@@ -79,19 +109,19 @@ def test_the_stage_is_rebuilt_when_camera_scene_or_sh_degree_change():
     assert not r.render(moved, s).stats.stage_reused
     f = r.render(moved, RenderSettings(sh_degree=1))
     assert not f.stats.stage_reused
-    same(f, fresh(a, moved, RenderSettings(sh_degree=1)), "sh 1")
+    same(f, fresh(a, moved, RenderSettings(sh_degree=1), staged), "sh 1")
     b = gb.load(shared_scene("biker.compressed.ply"))
     r.upload(b)  # another scene, the same camera
     f = r.render(moved, s)
     assert not f.stats.stage_reused
-    same(f, fresh(b, moved, s), "other scene")
+    same(f, fresh(b, moved, s, staged), "other scene")
     # the first scene modified and uploaded again: the same splat count, other colours and positions
     c = gb.Scene.from_arrays(a.means + np.float32(0.01), a.scales, a.quats, a.opacities, a.sh[:, ::-1].copy())
     r.upload(c)
     f = r.render(moved, s)
     assert not f.stats.stage_reused
-    same(f, fresh(c, moved, s), "modified scene")
-    assert not np.array_equal(f.rgb, fresh(a, moved, s).rgb)
+    same(f, fresh(c, moved, s, staged), "modified scene")
+    assert not np.array_equal(f.rgb, fresh(a, moved, s, staged).rgb)
 
 
 def test_render_many_partials_and_progress_end_equal_to_the_frames():
@@ -144,7 +174,7 @@ def test_partials_must_match_the_jobs():
 
 
 @pytest.mark.parametrize("dilation, pre_dilation", [(400.0, 0.0), (0.3, 400.0)])
-def test_a_wide_view_filter_keeps_splats_the_stage_would_call_off_screen(dilation, pre_dilation):
+def test_a_wide_view_filter_keeps_splats_the_stage_would_call_off_screen(staged, dilation, pre_dilation):
     """A splat 8 px beyond the right edge, tiny on its own (3DGS's box: 5 px): a scalar view filter of +400 px^2
     spreads it into the image. The narrow image equals the same columns of a wider image (same cx; the splat on
     screen, inside both frustum clamps of the EWA Jacobian), where the stage's on-screen bound cannot cull it; a
@@ -154,11 +184,11 @@ def test_a_wide_view_filter_keeps_splats_the_stage_would_call_off_screen(dilatio
     narrow = gb.Camera(64, 48, 60.0, 60.0, 32.0, 24.0, np.eye(3), np.zeros(3))
     wide = gb.Camera(160, 48, 60.0, 60.0, 32.0, 24.0, np.eye(3), np.zeros(3))
     wide_filter = RenderSettings(view_filter=ViewFilter(dilation, pre_dilation=pre_dilation))
-    r = create_renderer("cpu")
+    r = create_renderer(staged)
     r.upload(scene)
     plain, f = r.render_many([(narrow, RenderSettings()), (narrow, wide_filter)])
     assert plain.stats.visible == 0 and f.stats.visible == 1 and f.alpha.max() > 0.05
-    ref = fresh(scene, wide, wide_filter)
+    ref = fresh(scene, wide, wide_filter, staged)
     assert np.array_equal(f.rgb, ref.rgb[:, :64]) and np.array_equal(f.alpha, ref.alpha[:, :64])
 
 

@@ -3,8 +3,11 @@
 Every stage runs on the GPU (shaders/*.comp; the math is shaders/*.glsl, a port of native/include/gbv/*.h with the
 same function names and constants):
 
-1. preprocess.comp: `preprocess_splat` per splat -> Splat2D, tile rectangle, survivor flag; atomics count the
-   tile-splat pairs and the depth range.
+1. stage.comp: the per-camera stage (`stage_splat`: view-space position and depth, 3D filter, 2D covariance before the
+   mode's filter, screen position, SH colour, near and on-screen cull) of every splat, kept in the `stage` buffer
+   while the scene, the camera, the SH degree and the on-screen cull's reach hold (`_stage_key`: a mode, supersample
+   or rate switch of one camera reuses it, as on the CPU); then preprocess.comp: the mode's `finish_splat` per splat
+   -> Splat2D, tile rectangle, survivor flag; atomics count the tile-splat pairs and the depth range.
 2. scan of the flags, compact.comp: survivors in splat-index order, key = depth bits - min depth bits.
 3. radix sort (radix_count + scan + radix_scatter, 4-bit digits, stable) of the survivors by depth: order (depth,
    index). Sorting the per-splat depth once and then the pairs by tile is the LSD radix sort of the (tile, depth)
@@ -52,6 +55,7 @@ from ...scene import Scene
 from ..control import Progress, RenderControl
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
 from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
+from ..view_filter import DILATION_3DGS
 from .binning import bin_duplex, bin_splats, read_totals
 from .context import check_context, standalone_context
 from .gpu import WG, Gpu
@@ -71,7 +75,7 @@ class GlslRenderer(Renderer):
     """
 
     name = "glsl"
-    capabilities = Capabilities(gl_texture=True, gl_context=True)
+    capabilities = Capabilities(gl_texture=True, gl_context=True, shared_stage=True)
 
     def __init__(self, ctx=None, precise_math: bool = True) -> None:
         self._owns_ctx = ctx is None
@@ -84,6 +88,8 @@ class GlslRenderer(Renderer):
         self._sh_k = 1
         self._weight_k = 0
         self._cells: Cells | None = None
+        self._generation = 0  # of the splats on the GPU: every upload starts a new one
+        self._stage_key: tuple | None = None  # what the `stage` buffer holds (None: nothing usable)
 
     @property
     def allocations(self) -> int:
@@ -154,6 +160,8 @@ class GlslRenderer(Renderer):
         self._sh_k = int(scene.sh.shape[1])
         self._cells = None
         self._uploaded = scene
+        self._generation += 1
+        self._stage_key = None
 
     def _upload_cells(self, cells: Cells, n: int) -> None:
         """Cell ellipsoids (48 B per cell), member lists and each splat's cell (duplex)."""
@@ -233,6 +241,7 @@ class GlslRenderer(Renderer):
         self.gpu.release()
         self._scene = self._uploaded = None
         self._cells = None
+        self._stage_key = None
 
     # ---- pipeline ------------------------------------------------------------------------------------------------
 
@@ -272,8 +281,10 @@ class GlslRenderer(Renderer):
             cam_size=(RW, RH), cam_near=float(f32(camera.near)), cam_projection=camera.projection_code,
         )
         weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", VEC4)
+        stage, stage_reused = self._stage(settings, n, sh_deg, cam_uniforms)
+        stage_ms = 0.0 if stage_reused else (time.perf_counter() - t0) * 1e3
         gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,
-                weight), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k,
+                weight, stage), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k,
                 oit=oit, view_filter=gi.view_filter_uniform(*settings.view_filter.native()), **cam_uniforms)
         scan(gpu, flags, n, total_slot=gi.TOTAL_VISIBLE)
         gpu.run("compact.comp", -(-n // WG), (splats, rects, flags, totals, dkeys[0], dvals[0]), num_splats=n)
@@ -298,7 +309,28 @@ class GlslRenderer(Renderer):
         self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, oit, control, target)
         self.ctx.finish()
         return dict(preprocess_ms=(t1 - t0) * 1e3, sort_ms=(t2 - t1) * 1e3, blend_ms=(time.perf_counter() - t2) * 1e3,
-                    visible=visible, sort_length=sort_length, pairs=pairs, **counts)
+                    visible=visible, sort_length=sort_length, pairs=pairs, stage_reused=stage_reused,
+                    stage_ms=stage_ms, **counts)
+
+    def _stage(self, settings: RenderSettings, n: int, sh_deg: int, cam_uniforms: dict) -> tuple:
+        """The `stage` buffer for this frame's camera (at its sampling grid) and whether it was kept from an earlier
+        frame: stage.comp runs (and the GL work finishes, for stage_ms) only when the scene's generation, the camera,
+        the SH degree or the on-screen cull's reach (the CPU's stage_key: the largest diagonal the frame's 2D filter
+        adds, at least 3DGS's +0.3) changed."""
+        gpu = self.gpu
+        stage = gpu.ensure("stage", n * gi.STAGE_VEC4S * VEC4, "per-camera stage")
+        vf = settings.view_filter.native() if settings.mode == Mode.SCALAR else np.zeros(2, np.float32)
+        reach = float(max(np.float32(DILATION_3DGS), vf[0] + vf[1]))
+        camera_bytes = tuple(np.asarray(v).tobytes() for v in cam_uniforms.values())
+        key = (self._generation, camera_bytes, sh_deg, reach)
+        if key == self._stage_key:
+            return stage, True
+        self._stage_key = None
+        gpu.run("stage.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], stage), num_splats=n,
+                sh_k=self._sh_k, sh_deg=sh_deg, reach=reach, **cam_uniforms)
+        self.ctx.finish()
+        self._stage_key = key
+        return stage, False
 
     def _blend(self, camera: Camera, settings: RenderSettings, want_window: bool, plan, longest: int, splats, tvals,
                ranges, oit: tuple, control: RenderControl, target=None) -> None:

@@ -1,6 +1,7 @@
 // Per-splat preprocess: cull, covariance, EWA projection, per-mode 2D filter, eigen-decomposition,
 // colour from SH, tile rectangle. One function for every backend (KERNELS.md §0, §2, §4, §6.2): the per-camera stage
-// (preprocess_stage.h, shared by every mode) and the mode's finish (preprocess_finish), composed by preprocess_splat.
+// (preprocess_stage.h, shared by every mode) and the mode's finish (preprocess_finish); for one splat stage_splat and
+// finish_splat, composed by preprocess_splat.
 #pragma once
 
 #include "common.h"
@@ -127,24 +128,10 @@ GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLan
     return ok;
 }
 
-// Preprocess one splat per lane for `mode`: the stage, the mode's finish, and the colour of the lanes that survive
-// (preprocess_finish's culls). The outputs of culled lanes are unspecified.
-template <class L>
-GBV_HD typename L::M preprocess_splat(const SplatInLanes<L>& in, int sh_deg, const CameraParams& cam, Mode mode,
-                                      const OitParams& oit, int grid_x, int grid_y, Splat2DLanes<L>* out,
-                                      TileRectLanes<L>* rect) {
-    StageLanes<L> st;
-    typename L::M ok = preprocess_stage<L>(in, cam, &st);
-    if (!L::any(ok)) return ok;
-    ok = preprocess_finish<L>(in, st, ok, sh_deg, cam, mode, oit, grid_x, grid_y, out, rect);
-    if (!L::any(ok)) return ok;
-    stage_color<L>(in, sh_deg, cam, out->color);
-    return ok;
-}
-
-// One splat (Lanes1): CUDA's, the scalar CPU path's and the GLSL port's signature.
-GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& cam, Mode mode, const OitParams& oit,
-                             int grid_x, int grid_y, Splat2D* out, TileRect* rect) {
+// One splat's stage (Lanes1; CUDA's stage kernel, the GLSL port's stage.comp): false behind the near plane or off
+// screen in every mode whose 2D filter adds at most `reach` (stage_on_screen); the colour is computed only when true.
+GBV_HD bool stage_splat(const SplatIn& in, int sh_deg, const CameraParams& cam, int grid_x, int grid_y, float reach,
+                        StageSplat* out) {
     const SplatInLanes<Lanes1> l{{in.mean[0], in.mean[1], in.mean[2]},
                                  {in.scale[0], in.scale[1], in.scale[2]},
                                  {in.quat[0], in.quat[1], in.quat[2], in.quat[3]},
@@ -153,16 +140,43 @@ GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& 
                                  in.sh,
                                  in.weight_sh,
                                  in.weight_deg};
+    StageLanes<Lanes1> st;
+    if (!preprocess_stage<Lanes1>(l, cam, &st) || !stage_on_screen<Lanes1>(st, grid_x, grid_y, reach)) return false;
+    out->xy[0] = st.xy[0];
+    out->xy[1] = st.xy[1];
+    out->depth = st.depth;
+    out->opacity = st.opacity;
+    for (int c = 0; c < 3; ++c) out->cov[c] = st.cov[c];
+    stage_color<Lanes1>(l, sh_deg, cam, out->color);
+    return true;
+}
+
+// The mode's finish of one splat's stored stage (Lanes1; CUDA's finish kernel): Splat2D and tile rectangle, the
+// colour the stage's; false when culled. Of `in` only mean, weight_sh, weight_deg and cell are read (the others may be
+// null).
+GBV_HD bool finish_splat(const SplatIn& in, const StageSplat& stage, int sh_deg, const CameraParams& cam, Mode mode,
+                         const OitParams& oit, int grid_x, int grid_y, Splat2D* out, TileRect* rect) {
+    SplatInLanes<Lanes1> l{};
+    for (int c = 0; c < 3; ++c) l.mean[c] = in.mean[c];
+    l.weight_sh = in.weight_sh;
+    l.weight_deg = in.weight_deg;
+    StageLanes<Lanes1> st;
+    st.xy[0] = stage.xy[0];
+    st.xy[1] = stage.xy[1];
+    st.depth = stage.depth;
+    st.opacity = stage.opacity;
+    for (int c = 0; c < 3; ++c) st.cov[c] = stage.cov[c];
     Splat2DLanes<Lanes1> o;
     TileRectLanes<Lanes1> r;
-    if (!preprocess_splat<Lanes1>(l, sh_deg, cam, mode, oit, grid_x, grid_y, &o, &r)) return false;
+    if (!preprocess_finish<Lanes1>(l, st, true, sh_deg, cam, mode, oit, grid_x, grid_y, &o, &r))
+        return false;
     *rect = TileRect{r.x0, r.y0, r.x1, r.y1};
     out->xy = Vec2{o.xy[0], o.xy[1]};
     out->depth = o.depth;
     out->opacity = o.opacity;
     out->log_min_alpha = o.log_min_alpha(o.opacity);
     for (int c = 0; c < 3; ++c) out->conic[c] = o.conic[c];
-    for (int c = 0; c < 3; ++c) out->color[c] = o.color[c];
+    for (int c = 0; c < 3; ++c) out->color[c] = stage.color[c];
     out->v1 = Vec2{o.v1[0], o.v1[1]};
     out->sigma1 = o.sigma1;
     out->sigma2 = o.sigma2;
@@ -171,6 +185,17 @@ GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& 
     out->radius = o.radius;
     out->cell = in.cell;
     return true;
+}
+
+// One splat for `mode` (Lanes1): its stage (stage_splat, with the reach of the mode's 2D filter, at least 3DGS's
+// +0.3, as the CPU's stage_key) and the mode's finish (finish_splat), as every backend's stored stage gives it.
+GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& cam, Mode mode, const OitParams& oit,
+                             int grid_x, int grid_y, Splat2D* out, TileRect* rect) {
+    const float filter = mode == SCALAR ? oit.dilation + oit.pre_dilation : 0.0f;
+    StageSplat st;
+    if (!stage_splat(in, sh_deg, cam, grid_x, grid_y, filter > DILATION_3DGS ? filter : DILATION_3DGS, &st))
+        return false;
+    return finish_splat(in, st, sh_deg, cam, mode, oit, grid_x, grid_y, out, rect);
 }
 
 // A Duplex-GS cell: an ellipsoid (centre, scales, unit (w,x,y,z) rotation) that covers its splats.

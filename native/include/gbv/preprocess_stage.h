@@ -3,7 +3,7 @@
 // Mip-Splatting 3D filter, the 3D covariance and its EWA projection before the mode's 2D filter, the screen position,
 // and the SH colour. Lane templates like preprocess.h's (lanes.h): every lane type computes the same IEEE
 // operations in the same order, and a stage stored as floats and loaded again is exact, so a mode's finish of a
-// stored stage is bit-identical to preprocess_splat, which composes the two for one splat (CUDA, the GLSL port).
+// stored stage is bit-identical to preprocess_splat (preprocess.h), which composes the two for one splat.
 #pragma once
 
 #include "common.h"
@@ -140,6 +140,13 @@ GBV_HD void screen_position(const CameraParams& cam, const typename L::F pv[3], 
 template <class L>
 struct StageLanes {
     typename L::F xy[2], depth, opacity, cov[3], color[3];
+};
+
+// One splat's stored stage (StageLanes): screen position, depth, opacity after the 3D filter, the 2D covariance
+// before the mode's filter, and the SH colour (computed only where stage_on_screen holds). The CPU and CUDA keep
+// one per splat while the camera holds; the GLSL port stores the same fields (shaders/kernel.glsl: pack_stage).
+struct StageSplat {
+    float xy[2], depth, opacity, cov[3], color[3];
 };
 
 // The stage of one splat per lane but its colour; returns the lanes in front of the near plane (the others'
