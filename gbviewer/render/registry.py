@@ -12,7 +12,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..cancel import Cancellable
-from ..errors import RenderError
+from ..errors import InvalidValue, RenderError
 from ..scene import Scene
 from .choice import AUTO, choose_backend
 from .control import FrameLock
@@ -130,6 +130,9 @@ def get_renderer(scene: Scene, backend: str = "cpu") -> SharedRenderer:
     """The process's renderer of `backend` ("auto": the best here) bound to `scene` (see SharedRenderer: safe to use
     from any thread). One renderer per backend, uploading only when the scene changes: it keeps the last scene
     alive, never every scene it has seen. One that stopped working (`usable()` False) is replaced by a new one."""
+    if not isinstance(scene, Scene):
+        raise InvalidValue(f"get_renderer: the first argument is the scene (a gbviewer.Scene: gb.load(path)), "
+                           f"got {type(scene).__name__} {scene!r:.60}")
     backend = resolve_backend(backend)
     with _renderers_lock:
         slot = _renderers.get(backend)

@@ -62,6 +62,11 @@ def check_concurrent_renders(backend: str, scene: gb.Scene, threads: int = 2, ro
             assert getattr(frame.stats, key) == getattr(ref.stats, key), f"{where}: {key}"
 
 
+def test_get_renderer_names_its_scene_argument():
+    with pytest.raises(gb.GBViewerError, match=r"^get_renderer: the first argument is the scene .* got str 'cpu'$"):
+        gb.get_renderer("cpu")  # a backend name where the scene goes
+
+
 def test_concurrent_renders_cpu():
     """Two Python threads sharing the process's CPU renderer (its frames are serialised, each on every core)."""
     check_concurrent_renders("cpu", random_scene(400, seed=5, sh_degree=1))
