@@ -43,7 +43,7 @@ from .pane_text import Item  # noqa: E402
 from .state import AppState  # noqa: E402
 from .worker import RenderWorker  # noqa: E402
 
-WAITING_FPS = 30  # UI frames a second while renders refine or a load runs (tiles are posted every 0.1 s)
+WAITING_FPS = 10  # UI frames a second while renders refine or a load runs (each posted result wakes it at once)
 
 
 class ViewerApp:
