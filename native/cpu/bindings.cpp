@@ -164,8 +164,8 @@ void bind_testing(nb::module_& m) {
     t.def("set_pixel_boxes", [](bool on) { cpu::testing::pixel_boxes.store(on); }, nb::arg("on"),
           "Skip lane groups outside a splat's pixel box (default) or evaluate every list entry.");
     t.def("set_cut_flat_above", [](int64_t n) { cpu::testing::cut_flat_above.store(n); }, nb::arg("n"),
-          "The level-of-detail cut walks top down until a level reaches more than n nodes and a quarter of it "
-          "(default 65536; 0: evaluate every node of any tree).");
+          "The level-of-detail cut walks top down; it evaluates every node instead once a level reaches more than n "
+          "nodes, a quarter of it, and most of them open on (default 65536; 0: every node of any tree).");
     t.def("set_poison_images", [](bool on) { cpu::testing::poison_images.store(on); }, nb::arg("on"),
           "Fill each new image with NaN (evaluation counts -1) before the blend (to show it writes every pixel).");
     t.def("set_capture_preprocess", [](bool on) { cpu::testing::capture.store(on); }, nb::arg("on"),

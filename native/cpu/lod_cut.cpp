@@ -8,6 +8,7 @@
 #if defined(_OPENMP) && defined(__GLIBCXX__)
 #include <parallel/algorithm>  // libstdc++'s parallel sort (OpenMP)
 #endif
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -51,21 +52,24 @@ float opening(const float* means, const float* radius, const float* size, int64_
     return (float)o;
 }
 
-// fn(thread, begin, end) over [0, len) in contiguous chunks, one per thread (ascending with the thread number), then
-// the chunks' outputs concatenated in that order: out gets every thread's `parts[thread]` (parallel, in order).
-template <class T, class Fn>
-void chunked(int64_t len, int nt, std::vector<T>& out, Fn fn) {
-    std::vector<std::vector<T>> parts(nt);
+// fn(outputs of this thread..., begin, end) over [0, len) in contiguous chunks, one per thread (ascending with the
+// thread number), then each output's chunks concatenated in that order onto `out...` (parallel, in order).
+template <class Fn, class... T>
+void chunked(int64_t len, int nt, Fn fn, std::vector<T>&... out) {
+    std::tuple<std::vector<std::vector<T>>...> parts{std::vector<std::vector<T>>(nt)...};
     if (len < (1 << 16)) nt = 1;  // under ~1 ms of work: a parallel region (waking a busy core) costs more
 #pragma omp parallel num_threads(nt)
     {
         const int th = omp_get_thread_num(), nth = omp_get_num_threads();
-        fn(parts[th], len * th / nth, len * (th + 1) / nth);
+        std::apply([&](auto&... p) { fn(p[th]..., len * th / nth, len * (th + 1) / nth); }, parts);
     }
-    size_t total = out.size();
-    for (const std::vector<T>& part : parts) total += part.size();
-    out.reserve(total);
-    for (const std::vector<T>& part : parts) out.insert(out.end(), part.begin(), part.end());
+    const auto append = [](auto& to, const auto& from) {
+        size_t total = to.size();
+        for (const auto& part : from) total += part.size();
+        to.reserve(total);
+        for (const auto& part : from) to.insert(to.end(), part.begin(), part.end());
+    };
+    std::apply([&](const auto&... p) { (append(out, p), ...); }, parts);
 }
 
 // The cut by its definition, over every node: each interior node's o, the weights top-down level by level, each
@@ -131,7 +135,8 @@ Cut cut_flat(const float* means, const float* radius, const float* size, const i
 }  // namespace
 
 // Top down from the root, visiting only the nodes the cut reaches (a node is reached when its parent opens, o > 0):
-// the cost follows the cut, not the scene (cut_flat once a level's reached nodes are many and over a quarter of it). A
+// the cost follows the cut, not the scene (cut_flat once most of a large level is reached and most of it opens on;
+// testing's cut_flat_above 0: always). A
 // reached node of weight w (the root 1) is drawn at w (1 - o) and passes w o to its children: the products the flat
 // definition forms, so both give the same cut.
 Cut cut(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
@@ -148,47 +153,46 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
     using Reached = std::pair<int64_t, float>;  // (interior index, weight reaching it)
     std::vector<Reached> frontier{{m - 1, 1.0f}}, next;
     std::vector<std::vector<Reached>> drawn(num_levels);  // per level, ascending
+    std::vector<std::pair<int32_t, float>> leaves;  // (splat, weight) under the reached level-1 nodes
+    const int64_t flat_above = cpu::testing::cut_flat_above.load(std::memory_order_relaxed);
+    if (flat_above == 0) return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, nt, halt);
     for (int l = num_levels - 2; l >= 1; --l) {  // level l's reached nodes: frontier
         const int64_t reached = (int64_t)frontier.size();
-        if (reached > cpu::testing::cut_flat_above.load(std::memory_order_relaxed) &&
-            reached * 4 > levels[l + 1] - levels[l])  // most of a large tree: every node, flat
-            return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, nt, halt);
+        if (reached > flat_above && reached * 4 > levels[l + 1] - levels[l]) {
+            // Most of a large level reached: the definition over every node costs less than walking (a walked entry
+            // costs about 3 of its) once the walk would go on into most of the tree: here when over 3/4 of the
+            // reached nodes open, on level 1 when their leaves (up to 8 each) would be over a third of the splats.
+            int64_t opened = 0;
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : opened)
+            for (int64_t f = 0; f < reached; ++f)
+                opened += frontier[f].second * opening(means, radius, size, frontier[f].first, v, tau, band) > 0.0f;
+            if (l == 1 ? opened * BRANCHING * 3 > n : opened * 4 > reached * 3)
+                return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, nt, halt);
+        }
         if (halt.now()) return c;
         next.clear();
-        chunked<Reached>((int64_t)frontier.size(), nt, drawn[l], [&](std::vector<Reached>& out, int64_t b, int64_t e) {
+        // each reached node's o once: drawn at w (1 - o) on this level, w o passed to its children (level 1's: leaves)
+        chunked(reached, nt, [&](std::vector<Reached>& out, std::vector<Reached>& down,
+                                 std::vector<std::pair<int32_t, float>>& below, int64_t b, int64_t e) {
             for (int64_t f = b; f < e && !halt.at(f); ++f) {
                 const auto [i, w] = frontier[f];
                 const float o = opening(means, radius, size, i, v, tau, band), kept = w * (1.0f - o);
                 if (kept > 0.0f) out.push_back({i, kept});
-            }
-        });
-        if (l == 1) break;
-        chunked<Reached>((int64_t)frontier.size(), nt, next, [&](std::vector<Reached>& out, int64_t b, int64_t e) {
-            for (int64_t f = b; f < e && !halt.at(f); ++f) {
-                const auto [i, w] = frontier[f];
-                const float passed = w * opening(means, radius, size, i, v, tau, band);
+                const float passed = w * o;
                 if (!(passed > 0.0f)) continue;
                 const int64_t id = i + n, first = levels[l - 1] + BRANCHING * (id - levels[l]);
-                for (int64_t child = first; child < std::min(first + BRANCHING, levels[l]); ++child)
-                    out.push_back({child - n, passed});
+                for (int64_t child = first; child < std::min(first + BRANCHING, levels[l]); ++child) {
+                    if (l == 1)
+                        below.push_back({order[child], passed});
+                    else
+                        down.push_back({child - n, passed});
+                }
             }
-        });
+        }, drawn[l], next, leaves);
         std::swap(frontier, next);
     }
-    // The leaves under the reached level-1 nodes: (splat, weight), ascending by splat.
-    std::vector<std::pair<int32_t, float>> leaves;
     if (halt.now()) return c;
-    chunked<std::pair<int32_t, float>>((int64_t)frontier.size(), nt, leaves,
-                                       [&](std::vector<std::pair<int32_t, float>>& out, int64_t b, int64_t e) {
-        for (int64_t f = b; f < e && !halt.at(f); ++f) {
-            const auto [i, w] = frontier[f];
-            const float passed = w * opening(means, radius, size, i, v, tau, band);
-            if (!(passed > 0.0f)) continue;
-            const int64_t first = BRANCHING * (i + n - levels[1]);
-            for (int64_t p = first; p < std::min(first + BRANCHING, n); ++p) out.push_back({order[p], passed});
-        }
-    });
-    if (halt.now()) return c;
+    // the leaves ascending by splat
     if ((int64_t)leaves.size() * 16 < n) {  // few: sort them
 #if defined(_OPENMP) && defined(__GLIBCXX__)
         __gnu_parallel::sort(leaves.begin(), leaves.end());
@@ -201,11 +205,10 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
         for (int64_t j = 0; j < (int64_t)leaves.size(); ++j)
             if (!halt.at(j)) w[leaves[j].first] = leaves[j].second;
         leaves.clear();
-        chunked<std::pair<int32_t, float>>(n, nt, leaves, [&](std::vector<std::pair<int32_t, float>>& out, int64_t b,
-                                                              int64_t e) {
+        chunked(n, nt, [&](std::vector<std::pair<int32_t, float>>& out, int64_t b, int64_t e) {
             for (int64_t i = b; i < e && !halt.at(i); ++i)
                 if (w[i] > 0.0f) out.push_back({(int32_t)i, w[i]});
-        });
+        }, leaves);
     }
     c.leaves.resize(leaves.size());
     c.leaf_weights.resize(leaves.size());

@@ -16,9 +16,9 @@ namespace gbv::cpu::testing {
 // no pixel).
 extern std::atomic<bool> pixel_boxes;
 
-// The level-of-detail cut walks the tree top down until a level's reached nodes are more than this many and a
-// quarter of the level, then evaluates every node (lod_cut.cpp); 0 forces the full evaluation for any tree, to show
-// both give the same cut.
+// The level-of-detail cut walks the tree top down; it evaluates every node instead (lod_cut.cpp) once a level's
+// reached nodes are more than this many, a quarter of the level, and most of them open on; 0 forces the full
+// evaluation for any tree, to show both give the same cut.
 extern std::atomic<int64_t> cut_flat_above;
 
 // Fill each new image with NaN (evaluation counts -1) before the blend, to show that it writes every pixel.
