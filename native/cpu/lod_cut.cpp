@@ -154,18 +154,23 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
     std::vector<Reached> frontier{{m - 1, 1.0f}}, next;
     std::vector<std::vector<Reached>> drawn(num_levels);  // per level, ascending
     std::vector<std::pair<int32_t, float>> leaves;  // (splat, weight) under the reached level-1 nodes
+    std::vector<float> opens;  // the frontier's openings, where the fallback's check computed them
     const int64_t flat_above = cpu::testing::cut_flat_above.load(std::memory_order_relaxed);
     if (flat_above == 0) return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, nt, halt);
     for (int l = num_levels - 2; l >= 1; --l) {  // level l's reached nodes: frontier
         const int64_t reached = (int64_t)frontier.size();
+        opens.clear();
         if (reached > flat_above && reached * 4 > levels[l + 1] - levels[l]) {
             // Most of a large level reached: the definition over every node costs less than walking (a walked entry
             // costs about 3 of its) once the walk would go on into most of the tree: here when over 3/4 of the
             // reached nodes open, on level 1 when their leaves (up to 8 each) would be over a third of the splats.
+            opens.resize(reached);
             int64_t opened = 0;
 #pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : opened)
-            for (int64_t f = 0; f < reached; ++f)
-                opened += frontier[f].second * opening(means, radius, size, frontier[f].first, v, tau, band) > 0.0f;
+            for (int64_t f = 0; f < reached; ++f) {
+                opens[f] = opening(means, radius, size, frontier[f].first, v, tau, band);
+                opened += frontier[f].second * opens[f] > 0.0f;
+            }
             if (l == 1 ? opened * BRANCHING * 3 > n : opened * 4 > reached * 3)
                 return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, nt, halt);
         }
@@ -176,7 +181,8 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
                                  std::vector<std::pair<int32_t, float>>& below, int64_t b, int64_t e) {
             for (int64_t f = b; f < e && !halt.at(f); ++f) {
                 const auto [i, w] = frontier[f];
-                const float o = opening(means, radius, size, i, v, tau, band), kept = w * (1.0f - o);
+                const float o = opens.empty() ? opening(means, radius, size, i, v, tau, band) : opens[f];
+                const float kept = w * (1.0f - o);
                 if (kept > 0.0f) out.push_back({i, kept});
                 const float passed = w * o;
                 if (!(passed > 0.0f)) continue;

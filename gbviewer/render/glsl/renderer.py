@@ -145,6 +145,8 @@ class GlslRenderer(Renderer):
             self._upload_splats(scene)
 
     def _upload_splats(self, scene: Scene) -> None:
+        self._uploaded = None  # nothing on the GPU is this scene's (or a stage of it) until every buffer is up
+        self._stage_key = None
         n = scene.num_splats
         f3d = scene.filter_3d if scene.filter_3d is not None else np.zeros(n, np.float32)
         geom = gi.records(gi.GEOM_VEC4S, scene.means, scene.opacities, scene.scales, f3d, scene.quats)
@@ -281,8 +283,7 @@ class GlslRenderer(Renderer):
             cam_size=(RW, RH), cam_near=float(f32(camera.near)), cam_projection=camera.projection_code,
         )
         weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", VEC4)
-        stage, stage_reused = self._stage(settings, n, sh_deg, cam_uniforms)
-        stage_ms = 0.0 if stage_reused else (time.perf_counter() - t0) * 1e3
+        stage, stage_reused, stage_ms = self._stage(settings, n, sh_deg, cam_uniforms)
         gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,
                 weight, stage), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k,
                 oit=oit, view_filter=gi.view_filter_uniform(*settings.view_filter.native()), **cam_uniforms)
@@ -313,8 +314,8 @@ class GlslRenderer(Renderer):
                     stage_ms=stage_ms, **counts)
 
     def _stage(self, settings: RenderSettings, n: int, sh_deg: int, cam_uniforms: dict) -> tuple:
-        """The `stage` buffer for this frame's camera (at its sampling grid) and whether it was kept from an earlier
-        frame: stage.comp runs (and the GL work finishes, for stage_ms) only when the scene's generation, the camera,
+        """The `stage` buffer for this frame's camera (at its sampling grid), whether it was kept from an earlier
+        frame and the ms spent building it: stage.comp runs (and the GL work finishes, for that time) only when the scene's generation, the camera,
         the SH degree or the on-screen cull's reach (the CPU's stage_key: the largest diagonal the frame's 2D filter
         adds, at least 3DGS's +0.3) changed."""
         gpu = self.gpu
@@ -324,13 +325,14 @@ class GlslRenderer(Renderer):
         camera_bytes = tuple(np.asarray(v).tobytes() for v in cam_uniforms.values())
         key = (self._generation, camera_bytes, sh_deg, reach)
         if key == self._stage_key:
-            return stage, True
+            return stage, True, 0.0
         self._stage_key = None
+        t0 = time.perf_counter()
         gpu.run("stage.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], stage), num_splats=n,
                 sh_k=self._sh_k, sh_deg=sh_deg, reach=reach, **cam_uniforms)
         self.ctx.finish()
         self._stage_key = key
-        return stage, False
+        return stage, False, (time.perf_counter() - t0) * 1e3
 
     def _blend(self, camera: Camera, settings: RenderSettings, want_window: bool, plan, longest: int, splats, tvals,
                ranges, oit: tuple, control: RenderControl, target=None) -> None:
