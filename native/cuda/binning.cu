@@ -1,5 +1,5 @@
-// The frame (State::run) and its splat steps: the per-camera stage and each mode's finish (one thread per splat), tile keys and a CUB radix sort of
-// (tile, depth), tile ranges; the CUB scans, sorts and sums the other steps share.
+// The frame (State::run) and its splat steps: the per-camera stage and each mode's finish (one thread per splat),
+// tile keys and a CUB radix sort of (tile, depth), tile ranges; the CUB scans, sorts and sums the other steps share.
 #include <thrust/iterator/transform_iterator.h>
 
 #include <algorithm>

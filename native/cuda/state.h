@@ -1,7 +1,7 @@
 // A renderer's device state and the frame steps that use it (nvcc only), one file per concern:
-// binning.cu (the stage and each mode's finish, tile lists of splats, CUB scans and sorts, the frame), duplex.cu (cells and their
-// canonical order), blend.cu (the blend and box-average kernels), interop.cu (CUDA-GL textures), renderer.cu (the
-// class: locking, uploads, results).
+// binning.cu (the stage and each mode's finish, tile lists of splats, CUB scans and sorts, the frame), duplex.cu
+// (cells and their canonical order), blend.cu (the blend and box-average kernels), interop.cu (CUDA-GL textures),
+// renderer.cu (the class: locking, uploads, results).
 #pragma once
 
 #include <cuda_gl_interop.h>  // includes GL/gl.h (Debian/Ubuntu: libgl-dev)

@@ -315,9 +315,9 @@ class GlslRenderer(Renderer):
 
     def _stage(self, settings: RenderSettings, n: int, sh_deg: int, cam_uniforms: dict) -> tuple:
         """The `stage` buffer for this frame's camera (at its sampling grid), whether it was kept from an earlier
-        frame and the ms spent building it: stage.comp runs (and the GL work finishes, for that time) only when the scene's generation, the camera,
-        the SH degree or the on-screen cull's reach (the CPU's stage_key: the largest diagonal the frame's 2D filter
-        adds, at least 3DGS's +0.3) changed."""
+        frame and the ms spent building it: stage.comp runs (and the GL work finishes, for that time) only when the
+        scene's generation, the camera, the SH degree or the on-screen cull's reach (the CPU's stage_key: the
+        largest diagonal the frame's 2D filter adds, at least 3DGS's +0.3) changed."""
         gpu = self.gpu
         stage = gpu.ensure("stage", n * gi.STAGE_VEC4S * VEC4, "per-camera stage")
         vf = settings.view_filter.native() if settings.mode == Mode.SCALAR else np.zeros(2, np.float32)
