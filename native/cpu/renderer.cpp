@@ -169,12 +169,9 @@ void check_uploads(const RenderArgs& a, const SceneView& sc, const char* where) 
                                     "or wsr with view weights");
 }
 
-// The StageKey of a frame: everything its stage depends on (add a field here and to StageKey::operator==). The reach
-// is the largest diagonal the frame's 2D filter adds: the scalar mode's view filter (dilation + pre-dilation), every
-// other mode at most DILATION_3DGS (preprocess_finish).
+// The StageKey of a frame: everything its stage depends on (add a field here and to StageKey::operator==).
 StageKey stage_key(const RenderArgs& a, const SceneView& sc, uint64_t generation) {
-    const float filter = a.mode == SCALAR ? a.oit.dilation + a.oit.pre_dilation : 0.0f;
-    return StageKey{generation, a.cam, sh_degree_of(a, sc), std::max(DILATION_3DGS, filter),
+    return StageKey{generation, a.cam, sh_degree_of(a, sc), stage_reach(a.mode, a.oit),
                     a.lod.on() ? a.lod : LodArgs{}};
 }
 

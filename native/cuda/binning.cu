@@ -186,8 +186,7 @@ void State::run(const RenderArgs& a, RenderResult& res) {
 
     CUDA_CHECK(cudaEventRecord(ev[0].e));
     // the stage: kept while its key holds (scene generation, camera, SH degree, the on-screen cull's reach)
-    const float filter = a.mode == SCALAR ? a.oit.dilation + a.oit.pre_dilation : 0.0f;
-    const StageKey key{generation, cam, sh_deg, std::max(DILATION_3DGS, filter)};
+    const StageKey key{generation, cam, sh_deg, stage_reach(a.mode, a.oit)};
     res.stage_reused = stage_ready && stage_key == key;
     if (n > 0 && !res.stage_reused) {
         stage_ready = false;

@@ -62,7 +62,8 @@ def cpp_layout(tmp_path_factory) -> dict[str, dict[str, int]]:
         lines.append(f'    std::printf("{struct} sizeof %zu\\n", sizeof(gbv::{struct}));')
         lines += [f'    std::printf("{struct} {f} %zu\\n", offsetof(gbv::{struct}, {f}));'
                   for f, _ in glsl_fields(struct)]
-    src = '#include <cstddef>\n#include <cstdio>\n#include "gbv/common.h"\n#include "gbv/preprocess_stage.h"\nint main() {\n' + "\n".join(lines) + "\n}\n"
+    includes = "".join(f"#include {h}\n" for h in ("<cstddef>", "<cstdio>", '"gbv/common.h"', '"gbv/preprocess_stage.h"'))
+    src = includes + "int main() {\n" + "\n".join(lines) + "\n}\n"
     out = tmp_path_factory.mktemp("layout")
     (out / "layout.cpp").write_text(src)
     build = subprocess.run([cxx, "-std=c++17", "-I", str(REPO / "native" / "include"), str(out / "layout.cpp"), "-o",

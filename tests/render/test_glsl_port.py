@@ -82,6 +82,8 @@ NOT_PORTED = {
     "blend_alpha_pixel": "the shared body of C++'s one-pixel blend_scalar / blend_analytic wrappers around the lane "
                          "templates; GLSL has those two functions themselves",
     "dot": "GLSL built-in",
+    "stage_reach": "the stage key's reach, a uniform of stage.comp that the driver computes (glsl/renderer.py "
+                   "_stage) as it keys the kept stage",
     "preprocess_splat": "the one-splat composition of stage_splat and finish_splat (the C++ reference of "
                         "test_fp_contract); GLSL runs the two as kernels of their own, stage.comp and preprocess.comp",
     "float_bits": "GLSL built-in floatBitsToUint",

@@ -163,7 +163,6 @@ class GlslRenderer(Renderer):
         self._cells = None
         self._uploaded = scene
         self._generation += 1
-        self._stage_key = None
 
     def _upload_cells(self, cells: Cells, n: int) -> None:
         """Cell ellipsoids (48 B per cell), member lists and each splat's cell (duplex)."""
@@ -316,12 +315,12 @@ class GlslRenderer(Renderer):
     def _stage(self, settings: RenderSettings, n: int, sh_deg: int, cam_uniforms: dict) -> tuple:
         """The `stage` buffer for this frame's camera (at its sampling grid), whether it was kept from an earlier
         frame and the ms spent building it: stage.comp runs (and the GL work finishes, for that time) only when the
-        scene's generation, the camera, the SH degree or the on-screen cull's reach (the CPU's stage_key: the
-        largest diagonal the frame's 2D filter adds, at least 3DGS's +0.3) changed."""
+        scene's generation, the camera, the SH degree or the on-screen cull's reach (the largest diagonal the
+        frame's 2D filter adds, at least 3DGS's +0.3: stage_reach in preprocess_stage.h) changed."""
         gpu = self.gpu
         stage = gpu.ensure("stage", n * gi.STAGE_VEC4S * VEC4, "per-camera stage")
         vf = settings.view_filter.native() if settings.mode == Mode.SCALAR else np.zeros(2, np.float32)
-        reach = float(max(np.float32(DILATION_3DGS), vf[0] + vf[1]))
+        reach = float(max(np.float32(DILATION_3DGS), vf[0] + vf[1]))  # gbv::stage_reach, in float32
         camera_bytes = tuple(np.asarray(v).tobytes() for v in cam_uniforms.values())
         key = (self._generation, camera_bytes, sh_deg, reach)
         if key == self._stage_key:

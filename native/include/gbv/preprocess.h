@@ -187,14 +187,12 @@ GBV_HD bool finish_splat(const SplatIn& in, const StageSplat& stage, int sh_deg,
     return true;
 }
 
-// One splat for `mode` (Lanes1): its stage (stage_splat, with the reach of the mode's 2D filter, at least 3DGS's
-// +0.3, as the CPU's stage_key) and the mode's finish (finish_splat), as every backend's stored stage gives it.
+// One splat for `mode` (Lanes1): its stage (stage_splat at the mode's stage_reach) and the mode's finish
+// (finish_splat), as every backend's stored stage gives it.
 GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& cam, Mode mode, const OitParams& oit,
                              int grid_x, int grid_y, Splat2D* out, TileRect* rect) {
-    const float filter = mode == SCALAR ? oit.dilation + oit.pre_dilation : 0.0f;
     StageSplat st;
-    if (!stage_splat(in, sh_deg, cam, grid_x, grid_y, filter > DILATION_3DGS ? filter : DILATION_3DGS, &st))
-        return false;
+    if (!stage_splat(in, sh_deg, cam, grid_x, grid_y, stage_reach(mode, oit), &st)) return false;
     return finish_splat(in, st, sh_deg, cam, mode, oit, grid_x, grid_y, out, rect);
 }
 

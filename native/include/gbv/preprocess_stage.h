@@ -144,7 +144,7 @@ struct StageLanes {
 
 // One splat's stored stage (StageLanes): screen position, depth, opacity after the 3D filter, the 2D covariance
 // before the mode's filter, and the SH colour (computed only where stage_on_screen holds). The CPU and CUDA keep
-// one per splat while the camera holds; the GLSL port stores the same fields (shaders/kernel.glsl: pack_stage).
+// one per splat while the camera holds; the GLSL port stores the same fields (preprocess_stage.glsl: pack_stage).
 struct StageSplat {
     float xy[2], depth, opacity, cov[3], color[3];
 };
@@ -197,6 +197,14 @@ GBV_HD void stage_color(const SplatInLanes<L>& in, int sh_deg, const CameraParam
 // DILATION_3DGS; stage_key) (det <= 0 is culled in every mode): h <= 3.34 sqrt(a + c + 2 reach + 0.4) + 2 with room
 // for float rounding. A splat whose box misses the image by that much (getRect: x + h < 1.5 or x - h >= 16 grid_x +
 // 0.5) is culled everywhere. NaN bounds or positions keep the lane (the finish decides).
+// The reach a frame's stage serves (stage_on_screen, every backend's stage key): the largest diagonal the frame's
+// 2D filter adds, the scalar mode's view filter (dilation + pre-dilation), every other mode at most DILATION_3DGS
+// (preprocess_finish).
+GBV_HD float stage_reach(Mode mode, const OitParams& oit) {
+    const float filter = mode == SCALAR ? oit.dilation + oit.pre_dilation : 0.0f;
+    return filter > DILATION_3DGS ? filter : DILATION_3DGS;
+}
+
 template <class L>
 GBV_HD typename L::M stage_on_screen(const StageLanes<L>& st, int grid_x, int grid_y, float reach) {
     using F = typename L::F;
