@@ -91,6 +91,49 @@ def test_merged_moments_are_the_weighted_moments_of_the_leaves(seed, rule):
         assert tree.radius[i] >= d_max * (1 - 1e-6)
 
 
+def second_moment(scene: gb.Scene, idx: np.ndarray) -> np.ndarray:
+    """The depth rule's float64 second central moment of the splats `idx`."""
+    w = np.minimum(scene.opacities[idx].astype(np.float64), 1 - 1e-7) * areas(scene.scales[idx])
+    w = w / w.sum()
+    d = scene.means[idx] - w @ scene.means[idx].astype(np.float64)
+    return np.einsum("i,ijk->jk", w, covariances(scene.scales[idx], scene.quats[idx]) + d[:, :, None] * d[:, None, :])
+
+
+@pytest.mark.parametrize("case", ["spheres", "spheroids", "needles", "line", "plane"])
+def test_merged_covariance_of_degenerate_and_extreme_children(case):
+    """The eigen-decomposition behind a node's scales and rotation: repeated eigenvalues, a 1e4 scale ratio, a
+    rank-one or rank-two spread of the children's means."""
+    rng = np.random.default_rng(7)
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (8, 1)) if case == "spheres" else rng.normal(size=(8, 4))
+    means = np.zeros((8, 3))
+    scales = {"spheres": np.full((8, 3), 0.1), "spheroids": np.tile([0.2, 0.2, 0.05], (8, 1)),
+              "needles": np.tile([1.0, 1e-4, 1e-4], (8, 1))}.get(case, np.full((8, 3), 1e-3))
+    if case == "line":
+        means[:, 0] = np.linspace(-1, 1, 8)
+    if case == "plane":
+        means[:, :2] = rng.normal(size=(8, 2))
+    scene = gb.Scene.from_arrays(means, scales, q, np.full(8, 0.5), np.full((8, 1, 3), 0.3))
+    tree = lod.build(scene)
+    assert tree.num_interior == 1
+    got = covariances(tree.scales, tree.quats)[0]
+    want = second_moment(scene, np.arange(8))
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+    np.testing.assert_allclose(np.linalg.norm(tree.quats[0]), 1, atol=1e-6)
+
+
+def test_a_node_is_never_smaller_than_its_children():
+    """A light, wide child under a heavy, small one: the parent's size still covers the child's (the cut opens it)."""
+    scene = random_scene(700, seed=3)
+    s = scene.scales.copy()
+    s[::50] *= 40  # a few wide splats
+    scene = gb.Scene.from_arrays(scene.means, s, scene.quats, scene.opacities, scene.sh)
+    tree = lod.build(scene)
+    n = tree.num_leaves
+    size = np.concatenate([2 * scene.scales.max(axis=1)[tree.order], tree.size])  # by flat id, leaves first
+    for node in range(n, int(tree.levels[-1])):
+        assert all(size[node] >= size[c] for c in tree.children(node))
+
+
 def cameras(scene: gb.Scene, seed: int) -> list[gb.Camera]:
     """Random cameras around and inside the scene, perspective and orthographic."""
     rng = np.random.default_rng(seed)

@@ -8,32 +8,9 @@
 #include <utility>
 #include <vector>
 
+#include "plane.h"
+
 namespace gbv {
-
-// An allocator whose new elements are left uninitialised: the blend writes every pixel of every tile, so a plane
-// needs no zero fill (a 6400x4800 supersampled frame's was 600 MB of serial memset before any cancel check); its
-// pages are first touched by the parallel, cancellable blend instead.
-template <class T>
-struct Uninit : std::allocator<T> {
-    template <class U>
-    struct rebind {
-        using other = Uninit<U>;
-    };
-    Uninit() = default;
-    template <class U>
-    Uninit(const Uninit<U>&) noexcept {}
-    template <class U>
-    void construct(U* p) noexcept {
-        ::new ((void*)p) U;
-    }
-    template <class U, class... A>
-    void construct(U* p, A&&... a) {
-        ::new ((void*)p) U(std::forward<A>(a)...);
-    }
-};
-
-template <class T>
-using Plane = std::vector<T, Uninit<T>>;
 
 struct Image {
     int width = 0, height = 0;

@@ -1,7 +1,8 @@
-// The splat hierarchy (lod.h; its cut: lod_cut.cpp). Build: Morton codes of the centres (21 bits per axis over their bounds),
-// a parallel sort, then levels of 8 consecutive nodes merged bottom-up in float64: each node carries its leaves'
-// mass W = sum a A, mean, covariance (the mixture's second central moment), optical mass T = sum -ln(1 - a) A and SH
-// mean, so every node's moments are exactly the W-weighted moments of its leaves whatever the tree above them.
+// The splat hierarchy (lod.h; its cut: lod_cut.cpp). Build: Morton codes of the centres (21 bits per axis over
+// their bounds), bucketed by their top bits and sorted per bucket, then levels of 8 consecutive nodes merged
+// bottom-up in float64: each node carries its leaves' mass W = sum a A, mean, covariance (the mixture's second
+// central moment), optical mass T = sum -ln(1 - a) A and SH mean, so every node's moments are exactly the
+// W-weighted moments of its leaves whatever the tree above them.
 #include "lod.h"
 
 #include "omp_shim.h"
@@ -19,6 +20,8 @@ namespace {
 
 constexpr double PI = 3.14159265358979323846;
 constexpr double MAX_ALPHA = 1.0 - 1e-7;  // a leaf's optical depth is finite
+constexpr int MAX_K = 16;                 // SH coefficients per channel (degree 3)
+constexpr int AHEAD = 4;                  // leaves' rows prefetched this many nodes ahead
 
 int team(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
 
@@ -75,44 +78,99 @@ Moments leaf(const Splats& s, int64_t i, OpacityRule rule) {
     return m;
 }
 
-// Eigen-decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations: eigenvalues l, eigenvectors V's columns.
-void eigen(const double cov[6], double l[3], double V[3][3]) {
-    double A[3][3] = {{cov[0], cov[1], cov[2]}, {cov[1], cov[3], cov[4]}, {cov[2], cov[4], cov[5]}};
-    for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c) V[r][c] = r == c;
-    for (int sweep = 0; sweep < 32; ++sweep) {
-        const double off = A[0][1] * A[0][1] + A[0][2] * A[0][2] + A[1][2] * A[1][2];
-        const double diag = A[0][0] * A[0][0] + A[1][1] * A[1][1] + A[2][2] * A[2][2];
-        if (off <= 1e-30 * diag || off == 0.0) break;
-        for (int p = 0; p < 2; ++p)
-            for (int q = p + 1; q < 3; ++q) {
-                if (A[p][q] == 0.0) continue;
-                const double theta = (A[q][q] - A[p][p]) / (2.0 * A[p][q]);
-                const double t = (theta >= 0 ? 1.0 : -1.0) / (std::fabs(theta) + std::sqrt(theta * theta + 1.0));
-                const double c = 1.0 / std::sqrt(t * t + 1.0), s = t * c;
-                for (int k = 0; k < 3; ++k) {  // A <- J^T A J
-                    const double akp = A[k][p], akq = A[k][q];
-                    A[k][p] = c * akp - s * akq;
-                    A[k][q] = s * akp + c * akq;
-                }
-                for (int k = 0; k < 3; ++k) {
-                    const double apk = A[p][k], aqk = A[q][k];
-                    A[p][k] = c * apk - s * aqk;
-                    A[q][k] = s * apk + c * aqk;
-                }
-                for (int k = 0; k < 3; ++k) {
-                    const double vkp = V[k][p], vkq = V[k][q];
-                    V[k][p] = c * vkp - s * vkq;
-                    V[k][q] = s * vkp + c * vkq;
-                }
-            }
+// Ask for splat i's rows ahead of their use.
+void prefetch(const Splats& s, int64_t i) {
+    const char* sh = (const char*)(s.sh + (size_t)i * 3 * s.k);
+    for (size_t b = 0; b < (size_t)s.k * 3 * sizeof(float); b += 64) __builtin_prefetch(sh + b);
+    __builtin_prefetch(s.means + 3 * i), __builtin_prefetch(s.scales + 3 * i), __builtin_prefetch(s.quats + 4 * i);
+    __builtin_prefetch(s.opacities + i);
+}
+
+double dot(const double a[3], const double b[3]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+void cross(const double a[3], const double b[3], double out[3]) {
+    out[0] = a[1] * b[2] - a[2] * b[1], out[1] = a[2] * b[0] - a[0] * b[2], out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+// A unit eigenvector of symmetric B (rows b) for its eigenvalue e of multiplicity 1: the longest cross product of
+// two rows of B - e I.
+void vector_of(const double b[3][3], double e, double v[3]) {
+    const double r[3][3] = {{b[0][0] - e, b[0][1], b[0][2]}, {b[1][0], b[1][1] - e, b[1][2]},
+                            {b[2][0], b[2][1], b[2][2] - e}};
+    double c[3][3], best = -1.0;
+    cross(r[0], r[1], c[0]), cross(r[0], r[2], c[1]), cross(r[1], r[2], c[2]);
+    for (int i = 0; i < 3; ++i)
+        if (const double d = dot(c[i], c[i]); d > best) best = d, v[0] = c[i][0], v[1] = c[i][1], v[2] = c[i][2];
+    const double inv = best > 0 ? 1.0 / std::sqrt(best) : 0.0;
+    for (int i = 0; i < 3; ++i) v[i] *= inv;
+    if (inv == 0.0) v[0] = 1.0;  // only a rounding of a multiple of the identity has no such product
+}
+
+// A unit eigenvector of B for eigenvalue e orthogonal to unit eigenvector w: the 2x2 problem in w's complement.
+void vector_beside(const double b[3][3], const double w[3], double e, double v[3]) {
+    double u[3], x[3];
+    if (std::fabs(w[0]) > std::fabs(w[1])) {
+        const double inv = 1.0 / std::sqrt(w[0] * w[0] + w[2] * w[2]);
+        u[0] = -w[2] * inv, u[1] = 0.0, u[2] = w[0] * inv;
+    } else {
+        const double inv = 1.0 / std::sqrt(w[1] * w[1] + w[2] * w[2]);
+        u[0] = 0.0, u[1] = w[2] * inv, u[2] = -w[1] * inv;
     }
-    for (int a = 0; a < 3; ++a) l[a] = std::max(A[a][a], 0.0);
-    const double det = V[0][0] * (V[1][1] * V[2][2] - V[1][2] * V[2][1]) -
-                       V[0][1] * (V[1][0] * V[2][2] - V[1][2] * V[2][0]) +
-                       V[0][2] * (V[1][0] * V[2][1] - V[1][1] * V[2][0]);
-    if (det < 0)
-        for (int k = 0; k < 3; ++k) V[k][2] = -V[k][2];  // a rotation
+    cross(w, u, x);
+    double bu[3], bx[3];
+    for (int i = 0; i < 3; ++i) bu[i] = dot(b[i], u), bx[i] = dot(b[i], x);
+    double m00 = dot(u, bu) - e, m01 = dot(u, bx), m11 = dot(x, bx) - e;
+    double p = 1.0, q = 0.0;  // v = p u + q x: the null vector of [[m00, m01], [m01, m11]], from its larger row
+    const bool first = std::fabs(m00) >= std::fabs(m11);
+    const double d = first ? m00 : m11;
+    if (std::max(std::fabs(d), std::fabs(m01)) > 0) {
+        if (std::fabs(d) >= std::fabs(m01)) {
+            const double r = m01 / d, c = 1.0 / std::sqrt(1.0 + r * r);
+            p = first ? r * c : c, q = first ? -c : -r * c;
+        } else {
+            const double r = d / m01, c = 1.0 / std::sqrt(1.0 + r * r);
+            p = first ? c : r * c, q = first ? -r * c : -c;
+        }
+    }
+    for (int i = 0; i < 3; ++i) v[i] = p * u[i] + q * x[i];
+}
+
+// Eigen-decomposition of a symmetric 3x3 matrix in closed form (D. Eberly, "A Robust Eigensolver for 3x3 Symmetric
+// Matrices", 2014): the eigenvalues by the trigonometric solution of the shifted, scaled characteristic cubic, the
+// most separated one's vector from cross products, the next one's in its orthogonal complement, the last their
+// cross product. l ascending, V's columns the orthonormal vectors, det V = +1.
+void eigen(const double cov[6], double l[3], double V[3][3]) {
+    double scale = 0.0;
+    for (int e = 0; e < 6; ++e) scale = std::max(scale, std::fabs(cov[e]));
+    const double off = cov[1] * cov[1] + cov[2] * cov[2] + cov[4] * cov[4];
+    if (scale == 0.0 || off == 0.0) {  // diagonal
+        for (int r = 0; r < 3; ++r)
+            for (int c = 0; c < 3; ++c) V[r][c] = r == c;
+        l[0] = std::max(cov[0], 0.0), l[1] = std::max(cov[3], 0.0), l[2] = std::max(cov[5], 0.0);
+        return;
+    }
+    const double b[3][3] = {{cov[0] / scale, cov[1] / scale, cov[2] / scale},
+                            {cov[1] / scale, cov[3] / scale, cov[4] / scale},
+                            {cov[2] / scale, cov[4] / scale, cov[5] / scale}};
+    const double q = (b[0][0] + b[1][1] + b[2][2]) / 3.0, n = off / (scale * scale);
+    const double c00 = b[0][0] - q, c11 = b[1][1] - q, c22 = b[2][2] - q;
+    const double p = std::sqrt((c00 * c00 + c11 * c11 + c22 * c22 + 2.0 * n) / 6.0);
+    const double b01 = b[0][1] / p, b02 = b[0][2] / p, b12 = b[1][2] / p, d00 = c00 / p, d11 = c11 / p, d22 = c22 / p;
+    const double half = std::clamp(0.5 * (d00 * (d11 * d22 - b12 * b12) - b01 * (b01 * d22 - b12 * b02) +
+                                          b02 * (b01 * b12 - d11 * b02)), -1.0, 1.0);
+    const double angle = std::acos(half) / 3.0;
+    const double hi = 2.0 * std::cos(angle), lo = 2.0 * std::cos(angle + 2.0 * PI / 3.0);
+    const double e[3] = {q + p * lo, q + p * (-(lo + hi)), q + p * hi};
+    double v[3][3];  // v[j]: the vector of e[j]
+    const int sep = half >= 0 ? 2 : 0, other = 2 - sep;  // the eigenvalue farthest from the middle one first
+    vector_of(b, e[sep], v[sep]);
+    vector_beside(b, v[sep], e[1], v[1]);
+    cross(v[1], v[sep], v[other]);
+    if (sep == 0) for (int i = 0; i < 3; ++i) v[2][i] = -v[2][i];  // v0 x v1 = v2 either way: a rotation
+    for (int j = 0; j < 3; ++j) {
+        l[j] = std::max(e[j] * scale, 0.0);
+        for (int i = 0; i < 3; ++i) V[i][j] = v[j][i];
+    }
 }
 
 // Unit quaternion (w,x,y,z) of a rotation matrix (Shepperd).
@@ -136,28 +194,28 @@ void quaternion(const double R[3][3], float q[4]) {
     q[0] = (float)(w / n), q[1] = (float)(x / n), q[2] = (float)(y / n), q[3] = (float)(z / n);
 }
 
-// Merge children [0, count) into `out`, writing interior node i's float32 arrays. sh_of(c): child c's SH row.
-template <class ShOf>
-void merge(const Moments* kids, int count, ShOf sh_of, int k, OpacityRule rule, Tree& tree, int64_t i,
+// Merge children [0, count) into `out`, writing interior node i's float32 arrays; rows[c]: child c's SH row.
+void merge(const Moments* kids, int count, const float* const* rows, int k, OpacityRule rule, Tree& tree, int64_t i,
            Moments& out) {
-    double W = 0.0, Vsum = 0.0, T = 0.0;
+    double W = 0.0, Vsum = 0.0, T = 0.0, wt[BRANCHING];
     for (int c = 0; c < count; ++c) W += kids[c].w, Vsum += kids[c].v, T += kids[c].t;
-    auto weight = [&](int c) { return Vsum > 0 ? kids[c].v / Vsum : 1.0 / count; };  // massless leaves: equal weights
+    for (int c = 0; c < count; ++c) wt[c] = Vsum > 0 ? kids[c].v / Vsum : 1.0 / count;  // massless leaves: equal
     Moments m{};
     m.w = W, m.v = Vsum, m.t = T;
     for (int c = 0; c < count; ++c)
-        for (int a = 0; a < 3; ++a) m.mean[a] += weight(c) * kids[c].mean[a];
+        for (int a = 0; a < 3; ++a) m.mean[a] += wt[c] * kids[c].mean[a];
     const int pairs[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
     for (int c = 0; c < count; ++c) {
         const double d[3] = {kids[c].mean[0] - m.mean[0], kids[c].mean[1] - m.mean[1], kids[c].mean[2] - m.mean[2]};
-        for (int e = 0; e < 6; ++e) m.cov[e] += weight(c) * (kids[c].cov[e] + d[pairs[e][0]] * d[pairs[e][1]]);
+        for (int e = 0; e < 6; ++e) m.cov[e] += wt[c] * (kids[c].cov[e] + d[pairs[e][0]] * d[pairs[e][1]]);
         m.radius = std::max(m.radius, std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) + kids[c].radius);
-        m.filter += weight(c) * kids[c].filter;
+        m.filter += wt[c] * kids[c].filter;
     }
     double l[3], V[3][3];
     eigen(m.cov, l, V);
     const double A = area(l);
     m.size = 2.0 * std::sqrt(std::max({l[0], l[1], l[2]}));
+    for (int c = 0; c < count; ++c) m.size = std::max(m.size, kids[c].size);  // never smaller than a child
     double alpha = 0.0;
     if (A > 0)
         alpha = rule != SUM ? -std::expm1(-T / A) : std::min(1.0, W / A);
@@ -172,46 +230,89 @@ void merge(const Moments* kids, int count, ShOf sh_of, int k, OpacityRule rule, 
     tree.radius[i] = (float)m.radius;
     tree.size[i] = (float)m.size;
     if (!tree.filter.empty()) tree.filter[i] = (float)m.filter;
-    for (int j = 0; j < 3 * k; ++j) {
-        double v = 0.0;
-        for (int c = 0; c < count; ++c) v += weight(c) * sh_of(c)[j];
-        tree.sh[(size_t)i * 3 * k + j] = (float)v;
-    }
+    double sh[3 * MAX_K] = {};
+    for (int c = 0; c < count; ++c)
+        for (int j = 0; j < 3 * k; ++j) sh[j] += wt[c] * rows[c][j];
+    for (int j = 0; j < 3 * k; ++j) tree.sh[(size_t)i * 3 * k + j] = (float)sh[j];
     out = m;
+}
+
+// The splats' Morton order (21 bits per axis over the centres' bounds; ties by index): a counting pass on the codes'
+// top 16 bits (stable, so every bucket is in index order), then each bucket sorted: the few large ones one after
+// another with every thread, the rest in parallel. The same order as one sort of the (code, index) pairs.
+Plane<int32_t> morton_order(const Splats& s, int nt) {
+    const int64_t n = s.n;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(min : lo[:3]) reduction(max : hi[:3])
+    for (int64_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], (double)s.means[3 * i + a]),
+                                    hi[a] = std::max(hi[a], (double)s.means[3 * i + a]);
+    const auto code = [&](int64_t i) {
+        uint64_t c = 0;
+        for (int a = 0; a < 3; ++a) {
+            const double span = hi[a] - lo[a];
+            const double u = span > 0 ? (s.means[3 * i + a] - lo[a]) / span : 0.0;
+            c |= spread((uint64_t)std::min(u * 2097152.0, 2097151.0)) << a;
+        }
+        return c;
+    };
+    constexpr int TOP = 16, SHIFT = 63 - TOP;
+    constexpr int64_t BUCKETS = int64_t(1) << TOP;
+    using Key = std::pair<uint64_t, int32_t>;
+    Plane<Key> keys(n);
+    std::vector<int64_t> at((size_t)nt * BUCKETS, 0), start(BUCKETS + 1, 0);
+#pragma omp parallel num_threads(nt)
+    {
+        const int t = omp_get_thread_num(), nth = omp_get_num_threads();
+        const int64_t b = n * t / nth, e = n * (t + 1) / nth;
+        int64_t* mine = &at[(size_t)t * BUCKETS];
+        for (int64_t i = b; i < e; ++i) ++mine[code(i) >> SHIFT];
+#pragma omp barrier
+#pragma omp single
+        {
+            int64_t sum = 0;
+            for (int64_t k = 0; k < BUCKETS; ++k) {
+                start[k] = sum;
+                for (int u = 0; u < nth; ++u) {
+                    const int64_t count = at[(size_t)u * BUCKETS + k];
+                    at[(size_t)u * BUCKETS + k] = sum, sum += count;
+                }
+            }
+            start[BUCKETS] = sum;
+        }
+        for (int64_t i = b; i < e; ++i) {
+            const uint64_t c = code(i);
+            keys[mine[c >> SHIFT]++] = {c, (int32_t)i};
+        }
+    }
+    const int64_t big = std::max<int64_t>(n / (4 * nt), 1 << 15);
+    for (int64_t k = 0; k < BUCKETS; ++k)
+        if (start[k + 1] - start[k] > big) {
+            omp_set_num_threads(nt);
+#if defined(_OPENMP) && defined(__GLIBCXX__)
+            __gnu_parallel::sort(keys.begin() + start[k], keys.begin() + start[k + 1]);
+#else
+            std::sort(keys.begin() + start[k], keys.begin() + start[k + 1]);
+#endif
+        }
+    Plane<int32_t> order(n);
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 64)
+    for (int64_t k = 0; k < BUCKETS; ++k) {
+        if (start[k + 1] - start[k] <= big) std::sort(keys.begin() + start[k], keys.begin() + start[k + 1]);
+        for (int64_t i = start[k]; i < start[k + 1]; ++i) order[i] = keys[i].second;
+    }
+    return order;
 }
 
 }  // namespace
 
 Tree build(const Splats& s, OpacityRule rule, int threads) {
     if (s.n < 1 || s.n > INT32_MAX / 2) throw std::invalid_argument("lod build: 1 to 2^30 splats");
+    if (s.k < 1 || s.k > MAX_K) throw std::invalid_argument("lod build: 1 to 16 SH coefficients per channel");
     const int nt = team(threads);
     const int64_t n = s.n;
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (int64_t i = 0; i < n; ++i)
-        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], (double)s.means[3 * i + a]),
-                                    hi[a] = std::max(hi[a], (double)s.means[3 * i + a]);
-    std::vector<std::pair<uint64_t, int32_t>> keys(n);
-#pragma omp parallel for num_threads(nt) schedule(static)
-    for (int64_t i = 0; i < n; ++i) {
-        uint64_t code = 0;
-        for (int a = 0; a < 3; ++a) {
-            const double span = hi[a] - lo[a];
-            const double u = span > 0 ? (s.means[3 * i + a] - lo[a]) / span : 0.0;
-            code |= spread((uint64_t)std::min(u * 2097152.0, 2097151.0)) << a;
-        }
-        keys[i] = {code, (int32_t)i};
-    }
-    omp_set_num_threads(nt);
-#if defined(_OPENMP) && defined(__GLIBCXX__)
-    __gnu_parallel::sort(keys.begin(), keys.end());
-#else
-    std::sort(keys.begin(), keys.end());  // the keys are unique (index last), so the order is the same
-#endif
     Tree t;
-    t.order.resize(n);
-#pragma omp parallel for num_threads(nt) schedule(static)
-    for (int64_t i = 0; i < n; ++i) t.order[i] = keys[i].second;
-    std::vector<std::pair<uint64_t, int32_t>>().swap(keys);
+    t.order = morton_order(s, nt);
 
     t.levels = {0, n};
     while (t.levels.back() - t.levels[t.levels.size() - 2] > 1) {
@@ -224,15 +325,18 @@ Tree build(const Splats& s, OpacityRule rule, int threads) {
     t.sh.resize((size_t)m * 3 * k), t.radius.resize(m), t.size.resize(m);
     if (s.filter) t.filter.resize(m);
 
-    std::vector<Moments> prev, cur;
+    Plane<Moments> prev, cur;
     for (size_t l = 2; l < t.levels.size(); ++l) {
         const int64_t first = t.levels[l - 1], count = t.levels[l] - first, below = first - t.levels[l - 2];
-        cur.assign(count, Moments{});
+        cur.resize(count);
 #pragma omp parallel for num_threads(nt) schedule(static, 256)
         for (int64_t q = 0; q < count; ++q) {
             const int64_t c0 = q * BRANCHING, cn = std::min<int64_t>(BRANCHING, below - c0);
             Moments kids[BRANCHING];
             const float* rows[BRANCHING];
+            if (l == 2)
+                for (int64_t p = c0 + AHEAD * BRANCHING; p < std::min(c0 + (AHEAD + 1) * BRANCHING, below); ++p)
+                    prefetch(s, t.order[p]);  // the leaves' rows are scattered over the scene's arrays
             for (int c = 0; c < cn; ++c) {
                 if (l == 2) {
                     const int32_t splat = t.order[c0 + c];
@@ -243,7 +347,7 @@ Tree build(const Splats& s, OpacityRule rule, int threads) {
                     rows[c] = &t.sh[(size_t)(t.levels[l - 2] - n + c0 + c) * 3 * k];
                 }
             }
-            merge(kids, (int)cn, [&](int c) { return rows[c]; }, k, rule, t, first - n + q, cur[q]);
+            merge(kids, (int)cn, rows, k, rule, t, first - n + q, cur[q]);
         }
         std::swap(prev, cur);
     }

@@ -6,6 +6,8 @@
 #include <functional>
 #include <vector>
 
+#include "plane.h"
+
 namespace gbv::lod {
 
 constexpr int BRANCHING = 8;  // children per interior node (the last node of a level may have fewer)
@@ -29,15 +31,15 @@ struct Splats {
 // l > 0 has the children levels[l-1] + 8 (q - levels[l]) ... up to the level's end. The interior arrays below are
 // indexed by id - N (M = interior nodes).
 struct Tree {
-    std::vector<int32_t> order;          // (N,)
+    Plane<int32_t> order;                // (N,)
     std::vector<int64_t> levels;         // (L+1,)
-    std::vector<float> means, scales;    // (M,3): the merged Gaussian; scales the square roots of its eigenvalues
-    std::vector<float> quats;            // (M,4) w,x,y,z: its eigenvectors
-    std::vector<float> opacities;        // (M,)
-    std::vector<float> sh;               // (M,K,3): the leaf-weighted mean of the leaves' SH
-    std::vector<float> filter;           // (M,) the weighted mean of the leaves' 3D filters (empty without one)
-    std::vector<float> radius;           // (M,) a sphere about the mean holding every leaf's 3-sigma ellipsoid
-    std::vector<float> size;             // (M,) world footprint: 2 sqrt(largest eigenvalue), at least the children's
+    Plane<float> means, scales;          // (M,3): the merged Gaussian; scales the square roots of its eigenvalues
+    Plane<float> quats;                  // (M,4) w,x,y,z: its eigenvectors
+    Plane<float> opacities;              // (M,)
+    Plane<float> sh;                     // (M,K,3): the leaf-weighted mean of the leaves' SH
+    Plane<float> filter;                 // (M,) the weighted mean of the leaves' 3D filters (empty without one)
+    Plane<float> radius;                 // (M,) a sphere about the mean holding every leaf's 3-sigma ellipsoid
+    Plane<float> size;                   // (M,) world footprint: 2 sqrt(largest eigenvalue), at least the children's
 };
 
 Tree build(const Splats& s, OpacityRule rule, int threads);
