@@ -91,6 +91,36 @@ def test_merged_moments_are_the_weighted_moments_of_the_leaves(seed, rule):
         assert tree.radius[i] >= d_max * (1 - 1e-6)
 
 
+def morton_order(means: np.ndarray) -> np.ndarray:
+    """The leaves' order by its definition: 21-bit Morton codes of the centres over their bounds, ties by index."""
+    m = means.astype(np.float64)
+    lo, hi = m.min(axis=0), m.max(axis=0)
+    span = hi - lo
+    u = np.where(span > 0, (m - lo) / np.where(span > 0, span, 1), 0.0)
+    cell = np.minimum(u * 2097152.0, 2097151.0).astype(np.uint64)
+    code = np.zeros(len(m), np.uint64)
+    for bit in range(21):
+        for axis in range(3):
+            code |= ((cell[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
+    return np.lexsort((np.arange(len(m)), code)).astype(np.int32)
+
+
+@pytest.mark.parametrize("layout", ["spread", "one_cluster", "ties"])
+def test_leaf_order_is_the_morton_order(layout):
+    """The build's bucketed sort against the definition: spread centres, most of them in one bucket of the top
+    bits (the bucket sorted by every thread), and exact ties (broken by index)."""
+    rng = np.random.default_rng(11)
+    n = 50_000
+    means = rng.uniform(-1, 1, (n, 3))
+    if layout == "one_cluster":
+        means[: n - 10] = means[: n - 10] * 1e-4 + 0.3  # far splats stretch the bounds around a dense cluster
+    if layout == "ties":
+        means = np.round(means * 4) / 4  # 9^3 distinct centres
+    scene = gb.Scene.from_arrays(means, np.full((n, 3), 0.01), np.tile([1.0, 0, 0, 0], (n, 1)), np.full(n, 0.5),
+                                 np.zeros((n, 1, 3)))
+    np.testing.assert_array_equal(lod.build(scene).order, morton_order(scene.means))
+
+
 def second_moment(scene: gb.Scene, idx: np.ndarray) -> np.ndarray:
     """The depth rule's float64 second central moment of the splats `idx`."""
     w = np.minimum(scene.opacities[idx].astype(np.float64), 1 - 1e-7) * areas(scene.scales[idx])
