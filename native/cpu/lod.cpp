@@ -21,7 +21,6 @@ namespace {
 constexpr double PI = 3.14159265358979323846;
 constexpr double MAX_ALPHA = 1.0 - 1e-7;  // a leaf's optical depth is finite
 constexpr int MAX_K = 16;                 // SH coefficients per channel (degree 3)
-constexpr int AHEAD = 4;                  // leaves' rows prefetched this many nodes ahead
 
 int team(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
 
@@ -76,14 +75,6 @@ Moments leaf(const Splats& s, int64_t i, OpacityRule rule) {
     m.size = 2.0 * smax;
     m.filter = s.filter ? s.filter[i] : 0.0;
     return m;
-}
-
-// Ask for splat i's rows ahead of their use.
-void prefetch(const Splats& s, int64_t i) {
-    const char* sh = (const char*)(s.sh + (size_t)i * 3 * s.k);
-    for (size_t b = 0; b < (size_t)s.k * 3 * sizeof(float); b += 64) __builtin_prefetch(sh + b);
-    __builtin_prefetch(s.means + 3 * i), __builtin_prefetch(s.scales + 3 * i), __builtin_prefetch(s.quats + 4 * i);
-    __builtin_prefetch(s.opacities + i);
 }
 
 double dot(const double a[3], const double b[3]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -334,9 +325,6 @@ Tree build(const Splats& s, OpacityRule rule, int threads) {
             const int64_t c0 = q * BRANCHING, cn = std::min<int64_t>(BRANCHING, below - c0);
             Moments kids[BRANCHING];
             const float* rows[BRANCHING];
-            if (l == 2)
-                for (int64_t p = c0 + AHEAD * BRANCHING; p < std::min(c0 + (AHEAD + 1) * BRANCHING, below); ++p)
-                    prefetch(s, t.order[p]);  // the leaves' rows are scattered over the scene's arrays
             for (int c = 0; c < cn; ++c) {
                 if (l == 2) {
                     const int32_t splat = t.order[c0 + c];
