@@ -151,19 +151,6 @@ def test_merged_covariance_of_degenerate_and_extreme_children(case):
     np.testing.assert_allclose(np.linalg.norm(tree.quats[0]), 1, atol=1e-6)
 
 
-def test_a_node_is_never_smaller_than_its_children():
-    """A light, wide child under a heavy, small one: the parent's size still covers the child's (the cut opens it)."""
-    scene = random_scene(700, seed=3)
-    s = scene.scales.copy()
-    s[::50] *= 40  # a few wide splats
-    scene = gb.Scene.from_arrays(scene.means, s, scene.quats, scene.opacities, scene.sh)
-    tree = lod.build(scene)
-    n = tree.num_leaves
-    size = np.concatenate([2 * scene.scales.max(axis=1)[tree.order], tree.size])  # by flat id, leaves first
-    for node in range(n, int(tree.levels[-1])):
-        assert all(size[node] >= size[c] for c in tree.children(node))
-
-
 def cameras(scene: gb.Scene, seed: int) -> list[gb.Camera]:
     """Random cameras around and inside the scene, perspective and orthographic."""
     rng = np.random.default_rng(seed)

@@ -10,8 +10,11 @@ of its principal cross-sections: opacity x area, as Hierarchical 3DGS weights ch
 (the second central moment of the w-weighted mixture of its leaves), SH and 3D filter are the w-weighted means of
 its leaves'; its opacity keeps the leaves' area-weighted optical depth, -ln(1 - alpha) A_node = sum -ln(1 - a) A
 (two identical children: alpha = 1 - (1 - a)^2, what compositing them gives), or with `rule="sum"` the covered area,
-alpha A_node = sum a A. `rule="opacity"` is "depth" with the leaves weighted by a alone (measured against, not used). `radius`: a sphere about the mean holding every leaf's 3-sigma ellipsoid; `size`: the
-node's world footprint, 2 sqrt(largest eigenvalue), at least its children's (so a parent never projects smaller).
+alpha A_node = sum a A. `rule="opacity"` is "depth" with the leaves weighted by a alone (measured against, not
+used). `radius`: a sphere about the mean holding every leaf's centre; `size`: the merged Gaussian's world
+footprint, 2 sqrt(largest eigenvalue). A light, wide child may be larger than its parent, which then stands for it
+in the cut (measured: taking the largest child's size instead drew 969 k rather than 540 k nodes of the 6.1 M scene
+at x1/8 and lost 0.7 dB against the zoom-out reference).
 """
 
 from __future__ import annotations

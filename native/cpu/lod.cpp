@@ -54,11 +54,8 @@ Moments leaf(const Splats& s, int64_t i, OpacityRule rule) {
     const double R[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
                             {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
                             {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
-    double l[3], smax = 0.0;
-    for (int a = 0; a < 3; ++a) {
-        l[a] = (double)s.scales[3 * i + a] * s.scales[3 * i + a];
-        smax = std::max(smax, (double)s.scales[3 * i + a]);
-    }
+    double l[3];
+    for (int a = 0; a < 3; ++a) l[a] = (double)s.scales[3 * i + a] * s.scales[3 * i + a];
     Moments m{};
     const int pairs[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
     for (int e = 0; e < 6; ++e) {
@@ -72,7 +69,6 @@ Moments leaf(const Splats& s, int64_t i, OpacityRule rule) {
     m.t = -std::log1p(-alpha) * A;
     for (int a = 0; a < 3; ++a) m.mean[a] = s.means[3 * i + a];
     m.radius = 0.0;
-    m.size = 2.0 * smax;
     m.filter = s.filter ? s.filter[i] : 0.0;
     return m;
 }
@@ -206,7 +202,6 @@ void merge(const Moments* kids, int count, const float* const* rows, int k, Opac
     eigen(m.cov, l, V);
     const double A = area(l);
     m.size = 2.0 * std::sqrt(std::max({l[0], l[1], l[2]}));
-    for (int c = 0; c < count; ++c) m.size = std::max(m.size, kids[c].size);  // never smaller than a child
     double alpha = 0.0;
     if (A > 0)
         alpha = rule != SUM ? -std::expm1(-T / A) : std::min(1.0, W / A);

@@ -38,8 +38,8 @@ struct Tree {
     Plane<float> opacities;              // (M,)
     Plane<float> sh;                     // (M,K,3): the leaf-weighted mean of the leaves' SH
     Plane<float> filter;                 // (M,) the weighted mean of the leaves' 3D filters (empty without one)
-    Plane<float> radius;                 // (M,) a sphere about the mean holding every leaf's 3-sigma ellipsoid
-    Plane<float> size;                   // (M,) world footprint: 2 sqrt(largest eigenvalue), at least the children's
+    Plane<float> radius;                 // (M,) a sphere about the mean holding every leaf's centre
+    Plane<float> size;                   // (M,) world footprint of the merged Gaussian: 2 sqrt(largest eigenvalue)
 };
 
 Tree build(const Splats& s, OpacityRule rule, int threads);
