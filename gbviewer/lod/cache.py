@@ -18,7 +18,7 @@ from ..io.files import atomic_write
 from ..scene import Scene
 from .tree import Hierarchy, build
 
-VERSION = 2  # of the tree layout and merge rules: bump when they change
+VERSION = 3  # of the tree layout and merge rules: bump when they change
 HEADER_BYTES = 1 << 16
 
 
