@@ -312,6 +312,20 @@ def test_a_truncated_cache_entry_is_rebuilt_with_one_warning(tmp_path):
     assert entry.read_bytes() == data  # rewritten whole
 
 
+def test_the_cache_keeps_the_entries_used_last_within_its_bound(tmp_path, monkeypatch):
+    scenes = [gb.load(write_inria_ply(random_scene(300, seed=20 + i), tmp_path / f"s{i}.ply")) for i in range(3)]
+    cache = tmp_path / "cache"
+    cached_build(scenes[0], "depth", cache)
+    (first,) = cache.glob("*.npz")
+    monkeypatch.setattr(lod.cache, "MAX_BYTES", 2 * first.stat().st_size + 1)  # two entries fit
+    cached_build(scenes[1], "depth", cache)
+    os.utime(first, ns=(0, 0))  # used longest ago ...
+    cached_build(scenes[0], "depth", cache)  # ... until read again
+    cached_build(scenes[2], "depth", cache)
+    names = {p.name for p in cache.glob("*.npz")}
+    assert names == {f"{cache_key(scenes[i], 'depth')}.npz" for i in (0, 2)}
+
+
 def test_render_many_mixing_lod_and_full_panes_matches_single_renders():
     """The viewer's companion panes: one camera, a full pane and LOD panes in one render_many (the cut is another
     view scene: its own batch), each bit-identical to its own render."""

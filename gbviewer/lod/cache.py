@@ -1,7 +1,8 @@
 """The hierarchy's disk cache: one uncompressed .npz per scene file in the user cache folder
 (platformdirs: ~/.cache/gbviewer/lod on Linux), keyed by the file's identity (size, mtime, a hash of its first
 64 KiB) and what the hierarchy depends on besides (splat count, SH layout, the merge rule, the format version).
-Written atomically; an entry that does not read back whole is rebuilt with one warning."""
+Written atomically; an entry that does not read back whole is rebuilt with one warning. The folder holds at most
+MAX_BYTES: a write drops the entries used longest ago (a read marks its entry used) until the rest fit."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from .tree import Hierarchy, build
 
 VERSION = 3  # of the tree layout and merge rules: bump when they change
 HEADER_BYTES = 1 << 16
+MAX_BYTES = 4 << 30  # the folder's bound: the trees of about sixteen 6 M-splat scenes
 
 
 def default_folder() -> Path:
@@ -61,16 +63,45 @@ def cached_build(scene: Scene, rule: str, folder: Path | None = None) -> Hierarc
     entry = (folder or default_folder()) / f"{key}.npz"
     if entry.exists():
         try:
-            return _read(entry, scene, rule)
+            tree = _read(entry, scene, rule)
+            _touch(entry)
+            return tree
         except Exception as exc:  # noqa: BLE001 - a damaged entry of any kind (truncated zip, bad arrays)
             warnings.warn(f"{entry}: damaged level-of-detail cache entry ({type(exc).__name__}: {exc}); rebuilt",
                           stacklevel=3)
     tree = build(scene, rule)
     try:
         atomic_write(entry, lambda tmp: np.savez(tmp, **tree.arrays()), force=True)
+        prune(entry.parent, keep=entry)
     except (OSError, GBViewerError):  # a read-only cache: the tree still serves this run
         pass
     return tree
+
+
+def _touch(entry: Path) -> None:
+    """Mark an entry used now (its mtime: the eviction order)."""
+    try:
+        entry.touch()
+    except OSError:
+        pass
+
+
+def prune(folder: Path, keep: Path) -> None:
+    """Drop the entries used longest ago until the folder's entries fit in MAX_BYTES (never `keep`)."""
+    entries = []
+    for p in folder.glob("*.npz"):
+        try:
+            st = p.stat()
+        except OSError:  # removed meanwhile (another process pruning)
+            continue
+        entries.append((st.st_mtime_ns, st.st_size, p))
+    total = sum(size for _, size, _ in entries)
+    for _, size, p in sorted(entries):
+        if total <= MAX_BYTES:
+            break
+        if p != keep:
+            p.unlink(missing_ok=True)
+            total -= size
 
 
 _memo: "weakref.WeakKeyDictionary[Scene, dict[str, Hierarchy]]" = weakref.WeakKeyDictionary()
