@@ -5,6 +5,7 @@
 // bit-identical to preprocess_splat one splat at a time (storing floats and loading them is exact).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 
 #include "gbv/preprocess.h"
@@ -93,6 +94,12 @@ void stage_colors(const StageJob& job, const int64_t* ids, int count) {
     int64_t rows[N];
     for (int g = 0; g < count; g += N) {
         const int c = count - g < N ? count - g : N;
+        if (job.rows)  // a level-of-detail cut's rows are scattered: ask for the SH rows two groups ahead
+            for (int a = g + 2 * N; a < std::min(g + 3 * N, count); ++a) {
+                const char* p = (const char*)job.at(job.sh, job.node_sh, job.k * 3, job.row(ids[a]));
+                for (int b = 0; b < nsh * (int)sizeof(float); b += 64) __builtin_prefetch(p + b);
+                __builtin_prefetch(p + nsh * sizeof(float) - 1);
+            }
         for (int j = 0; j < c; ++j) rows[j] = job.row(ids[g + j]);
         gather_rows<N>(job, job.means, job.node_means, 3, rows, c, mb);
         for (int j = 0; j < N; ++j) {  // the first nsh of k * 3 coefficients
@@ -123,6 +130,14 @@ void stage_range(const StageJob& job, int64_t begin, int64_t end) {
         int count_on = 0;
         for (int64_t i0 = b0; i0 < b1; i0 += N) {
             const int count = b1 - i0 < N ? (int)(b1 - i0) : N;
+            if (job.rows)  // a cut's rows are scattered: ask for their geometry two groups ahead
+                for (int64_t a = i0 + 2 * N; a < std::min<int64_t>(i0 + 3 * N, end); ++a) {
+                    const int64_t r = job.rows[a];
+                    __builtin_prefetch(job.at(job.means, job.node_means, 3, r));
+                    __builtin_prefetch(job.at(job.scales, job.node_scales, 3, r));
+                    __builtin_prefetch(job.at(job.quats, job.node_quats, 4, r));
+                    __builtin_prefetch(job.at(job.opacities, job.node_opacities, 1, r));
+                }
             for (int j = 0; j < count; ++j) rows[j] = job.row(i0 + j);
             gather_rows<N>(job, job.means, job.node_means, 3, rows, count, buf);
             gather_rows<N>(job, job.scales, job.node_scales, 3, rows, count, buf + 3);
