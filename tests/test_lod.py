@@ -129,15 +129,19 @@ def second_moment(scene: gb.Scene, idx: np.ndarray) -> np.ndarray:
     return np.einsum("i,ijk->jk", w, covariances(scene.scales[idx], scene.quats[idx]) + d[:, :, None] * d[:, None, :])
 
 
-@pytest.mark.parametrize("case", ["spheres", "spheroids", "needles", "line", "plane"])
+@pytest.mark.parametrize("case", ["spheres", "spheroids", "needles", "aligned_needles", "line", "plane"])
 def test_merged_covariance_of_degenerate_and_extreme_children(case):
-    """The eigen-decomposition behind a node's scales and rotation: repeated eigenvalues, a 1e4 scale ratio, a
-    rank-one or rank-two spread of the children's means."""
+    """The eigen-decomposition behind a node's scales and rotation: repeated eigenvalues, a 1e4 scale ratio (a
+    needle's thin axes to float precision, not to that of its long one), a rank-one or rank-two spread of the
+    children's means."""
     rng = np.random.default_rng(7)
     q = np.tile([1.0, 0.0, 0.0, 0.0], (8, 1)) if case == "spheres" else rng.normal(size=(8, 4))
+    if case == "aligned_needles":
+        q[:] = q[0]
     means = np.zeros((8, 3))
     scales = {"spheres": np.full((8, 3), 0.1), "spheroids": np.tile([0.2, 0.2, 0.05], (8, 1)),
-              "needles": np.tile([1.0, 1e-4, 1e-4], (8, 1))}.get(case, np.full((8, 3), 1e-3))
+              "needles": np.tile([1.0, 1e-4, 1e-4], (8, 1)),
+              "aligned_needles": np.tile([1.0, 1e-4, 2e-4], (8, 1))}.get(case, np.full((8, 3), 1e-3))
     if case == "line":
         means[:, 0] = np.linspace(-1, 1, 8)
     if case == "plane":
@@ -149,6 +153,8 @@ def test_merged_covariance_of_degenerate_and_extreme_children(case):
     want = second_moment(scene, np.arange(8))
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
     np.testing.assert_allclose(np.linalg.norm(tree.quats[0]), 1, atol=1e-6)
+    if case == "aligned_needles":  # the node is the needle itself
+        np.testing.assert_allclose(np.sort(tree.scales[0]), [1e-4, 2e-4, 1.0], rtol=1e-5)
 
 
 def cameras(scene: gb.Scene, seed: int) -> list[gb.Camera]:
@@ -321,9 +327,13 @@ def test_the_cache_keeps_the_entries_used_last_within_its_bound(tmp_path, monkey
     cached_build(scenes[1], "depth", cache)
     os.utime(first, ns=(0, 0))  # used longest ago ...
     cached_build(scenes[0], "depth", cache)  # ... until read again
+    writing, crashed = cache / ".other-writer.npz", cache / ".crashed-writer.npz"  # atomic_write's temporary names
+    writing.write_bytes(b"x" * first.stat().st_size)  # not counted, not removed
+    crashed.write_bytes(b"x")
+    os.utime(crashed, ns=(0, 0))  # left long ago: removed
     cached_build(scenes[2], "depth", cache)
     names = {p.name for p in cache.glob("*.npz")}
-    assert names == {f"{cache_key(scenes[i], 'depth')}.npz" for i in (0, 2)}
+    assert names == {f"{cache_key(scenes[i], 'depth')}.npz" for i in (0, 2)} | {writing.name}
 
 
 def test_render_many_mixing_lod_and_full_panes_matches_single_renders():

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import threading
+import time
 import warnings
 import weakref
 from pathlib import Path
@@ -19,9 +20,10 @@ from ..io.files import atomic_write
 from ..scene import Scene
 from .tree import Hierarchy, build
 
-VERSION = 3  # of the tree layout and merge rules: bump when they change
+VERSION = 4  # of the tree layout and merge rules: bump when they change
 HEADER_BYTES = 1 << 16
 MAX_BYTES = 4 << 30  # the folder's bound: the trees of about sixteen 6 M-splat scenes
+STALE_TEMP_S = 3600  # a hidden temporary file (atomic_write's) this old was left by a writer that died
 
 
 def default_folder() -> Path:
@@ -66,6 +68,8 @@ def cached_build(scene: Scene, rule: str, folder: Path | None = None) -> Hierarc
             tree = _read(entry, scene, rule)
             _touch(entry)
             return tree
+        except FileNotFoundError:  # pruned by another process meanwhile: a miss
+            pass
         except Exception as exc:  # noqa: BLE001 - a damaged entry of any kind (truncated zip, bad arrays)
             warnings.warn(f"{entry}: damaged level-of-detail cache entry ({type(exc).__name__}: {exc}); rebuilt",
                           stacklevel=3)
@@ -87,21 +91,33 @@ def _touch(entry: Path) -> None:
 
 
 def prune(folder: Path, keep: Path) -> None:
-    """Drop the entries used longest ago until the folder's entries fit in MAX_BYTES (never `keep`)."""
+    """Drop the entries used longest ago until the folder's entries fit in MAX_BYTES (never `keep`, so one entry
+    larger than the bound stays) and temporary files left for over STALE_TEMP_S (not another writer's current one)."""
     entries = []
     for p in folder.glob("*.npz"):
         try:
             st = p.stat()
         except OSError:  # removed meanwhile (another process pruning)
             continue
-        entries.append((st.st_mtime_ns, st.st_size, p))
+        if not p.name.startswith("."):
+            entries.append((st.st_mtime_ns, st.st_size, p))
+        elif time.time() - st.st_mtime > STALE_TEMP_S:  # a crashed writer's
+            _remove(p)
     total = sum(size for _, size, _ in entries)
     for _, size, p in sorted(entries):
         if total <= MAX_BYTES:
             break
-        if p != keep:
-            p.unlink(missing_ok=True)
+        if p != keep and _remove(p):
             total -= size
+
+
+def _remove(p: Path) -> bool:
+    """Remove a cache file; False when it may not be (not ours: the next may be)."""
+    try:
+        p.unlink(missing_ok=True)
+        return True
+    except OSError:
+        return False
 
 
 _memo: "weakref.WeakKeyDictionary[Scene, dict[str, Hierarchy]]" = weakref.WeakKeyDictionary()

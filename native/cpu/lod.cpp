@@ -93,8 +93,10 @@ void vector_of(const double b[3][3], double e, double v[3]) {
     if (inv == 0.0) v[0] = 1.0;  // only a rounding of a multiple of the identity has no such product
 }
 
-// A unit eigenvector of B for eigenvalue e orthogonal to unit eigenvector w: the 2x2 problem in w's complement.
-void vector_beside(const double b[3][3], const double w[3], double e, double v[3]) {
+// The other two eigenpairs of symmetric B, given its unit eigenvector w: B restricted to w's orthogonal complement
+// (basis u, x) is the symmetric 2x2 [[a, f], [f, c]], diagonalised exactly by one Jacobi rotation. e[0] with v[0],
+// e[1] with v[1].
+void plane_pairs(const double b[3][3], const double w[3], double e[2], double v[2][3]) {
     double u[3], x[3];
     if (std::fabs(w[0]) > std::fabs(w[1])) {
         const double inv = 1.0 / std::sqrt(w[0] * w[0] + w[2] * w[2]);
@@ -106,54 +108,55 @@ void vector_beside(const double b[3][3], const double w[3], double e, double v[3
     cross(w, u, x);
     double bu[3], bx[3];
     for (int i = 0; i < 3; ++i) bu[i] = dot(b[i], u), bx[i] = dot(b[i], x);
-    double m00 = dot(u, bu) - e, m01 = dot(u, bx), m11 = dot(x, bx) - e;
-    double p = 1.0, q = 0.0;  // v = p u + q x: the null vector of [[m00, m01], [m01, m11]], from its larger row
-    const bool first = std::fabs(m00) >= std::fabs(m11);
-    const double d = first ? m00 : m11;
-    if (std::max(std::fabs(d), std::fabs(m01)) > 0) {
-        if (std::fabs(d) >= std::fabs(m01)) {
-            const double r = m01 / d, c = 1.0 / std::sqrt(1.0 + r * r);
-            p = first ? r * c : c, q = first ? -c : -r * c;
-        } else {
-            const double r = d / m01, c = 1.0 / std::sqrt(1.0 + r * r);
-            p = first ? c : r * c, q = first ? -r * c : -c;
-        }
+    const double a = dot(u, bu), f = dot(u, bx), c = dot(x, bx);
+    double t = 0.0;  // tan of the rotation
+    if (f != 0.0) {
+        const double theta = (c - a) / (2.0 * f);
+        t = (theta >= 0 ? 1.0 : -1.0) / (std::fabs(theta) + std::sqrt(theta * theta + 1.0));
     }
-    for (int i = 0; i < 3; ++i) v[i] = p * u[i] + q * x[i];
+    const double cs = 1.0 / std::sqrt(t * t + 1.0), sn = t * cs;
+    e[0] = a - t * f, e[1] = c + t * f;
+    for (int i = 0; i < 3; ++i) v[0][i] = cs * u[i] - sn * x[i], v[1][i] = sn * u[i] + cs * x[i];
 }
 
-// Eigen-decomposition of a symmetric 3x3 matrix in closed form (D. Eberly, "A Robust Eigensolver for 3x3 Symmetric
-// Matrices", 2014): the eigenvalues by the trigonometric solution of the shifted, scaled characteristic cubic, the
-// most separated one's vector from cross products, the next one's in its orthogonal complement, the last their
-// cross product. l ascending, V's columns the orthonormal vectors, det V = +1.
+// Eigen-decomposition of a symmetric 3x3 matrix (after D. Eberly, "A Robust Eigensolver for 3x3 Symmetric
+// Matrices", 2014): the eigenvalues of the scaled matrix by the trigonometric solution of its shifted characteristic
+// cubic pick the one farthest from the others, whose vector comes from cross products of rows of B - e I; its value
+// is then its Rayleigh quotient and the other two pairs those of B in its orthogonal complement (exact: a needle's
+// or a disc's small eigenvalues keep their relative precision, where the cubic's roots carry an absolute error of
+// about 1e-8 of the largest). l unordered, V's columns the orthonormal vectors, det V = +1.
 void eigen(const double cov[6], double l[3], double V[3][3]) {
     double scale = 0.0;
     for (int e = 0; e < 6; ++e) scale = std::max(scale, std::fabs(cov[e]));
-    const double off = cov[1] * cov[1] + cov[2] * cov[2] + cov[4] * cov[4];
-    if (scale == 0.0 || off == 0.0) {  // diagonal
+    double b[3][3] = {};
+    if (scale > 0.0)
+        b[0][0] = cov[0] / scale, b[0][1] = b[1][0] = cov[1] / scale, b[0][2] = b[2][0] = cov[2] / scale,
+        b[1][1] = cov[3] / scale, b[1][2] = b[2][1] = cov[4] / scale, b[2][2] = cov[5] / scale;
+    const double n = b[0][1] * b[0][1] + b[0][2] * b[0][2] + b[1][2] * b[1][2];
+    if (n == 0.0) {  // diagonal (at this precision)
         for (int r = 0; r < 3; ++r)
             for (int c = 0; c < 3; ++c) V[r][c] = r == c;
         l[0] = std::max(cov[0], 0.0), l[1] = std::max(cov[3], 0.0), l[2] = std::max(cov[5], 0.0);
         return;
     }
-    const double b[3][3] = {{cov[0] / scale, cov[1] / scale, cov[2] / scale},
-                            {cov[1] / scale, cov[3] / scale, cov[4] / scale},
-                            {cov[2] / scale, cov[4] / scale, cov[5] / scale}};
-    const double q = (b[0][0] + b[1][1] + b[2][2]) / 3.0, n = off / (scale * scale);
+    const double q = (b[0][0] + b[1][1] + b[2][2]) / 3.0;
     const double c00 = b[0][0] - q, c11 = b[1][1] - q, c22 = b[2][2] - q;
     const double p = std::sqrt((c00 * c00 + c11 * c11 + c22 * c22 + 2.0 * n) / 6.0);
     const double b01 = b[0][1] / p, b02 = b[0][2] / p, b12 = b[1][2] / p, d00 = c00 / p, d11 = c11 / p, d22 = c22 / p;
     const double half = std::clamp(0.5 * (d00 * (d11 * d22 - b12 * b12) - b01 * (b01 * d22 - b12 * b02) +
                                           b02 * (b01 * b12 - d11 * b02)), -1.0, 1.0);
     const double angle = std::acos(half) / 3.0;
-    const double hi = 2.0 * std::cos(angle), lo = 2.0 * std::cos(angle + 2.0 * PI / 3.0);
-    const double e[3] = {q + p * lo, q + p * (-(lo + hi)), q + p * hi};
-    double v[3][3];  // v[j]: the vector of e[j]
-    const int sep = half >= 0 ? 2 : 0, other = 2 - sep;  // the eigenvalue farthest from the middle one first
-    vector_of(b, e[sep], v[sep]);
-    vector_beside(b, v[sep], e[1], v[1]);
-    cross(v[1], v[sep], v[other]);
-    if (sep == 0) for (int i = 0; i < 3; ++i) v[2][i] = -v[2][i];  // v0 x v1 = v2 either way: a rotation
+    // the largest root when it is the farthest from the middle one (half >= 0), else the smallest
+    const double root = q + p * 2.0 * std::cos(half >= 0 ? angle : angle + 2.0 * PI / 3.0);
+    double v[3][3], e[3], bw[3];
+    vector_of(b, root, v[0]);
+    for (int i = 0; i < 3; ++i) bw[i] = dot(b[i], v[0]);
+    e[0] = dot(v[0], bw);
+    plane_pairs(b, v[0], e + 1, v + 1);
+    double vx[3];
+    cross(v[1], v[2], vx);
+    if (dot(v[0], vx) < 0)
+        for (int i = 0; i < 3; ++i) v[2][i] = -v[2][i];  // a rotation
     for (int j = 0; j < 3; ++j) {
         l[j] = std::max(e[j] * scale, 0.0);
         for (int i = 0; i < 3; ++i) V[i][j] = v[j][i];
@@ -244,7 +247,11 @@ Plane<int32_t> morton_order(const Splats& s, int nt) {
     };
     constexpr int TOP = 16, SHIFT = 63 - TOP;
     constexpr int64_t BUCKETS = int64_t(1) << TOP;
-    using Key = std::pair<uint64_t, int32_t>;
+    struct Key {  // trivial (std::pair's constructor would zero-fill the Plane): the code, then the index
+        uint64_t code;
+        int32_t index;
+        bool operator<(const Key& o) const { return code < o.code || (code == o.code && index < o.index); }
+    };
     Plane<Key> keys(n);
     std::vector<int64_t> at((size_t)nt * BUCKETS, 0), start(BUCKETS + 1, 0);
 #pragma omp parallel num_threads(nt)
@@ -285,7 +292,7 @@ Plane<int32_t> morton_order(const Splats& s, int nt) {
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 64)
     for (int64_t k = 0; k < BUCKETS; ++k) {
         if (start[k + 1] - start[k] <= big) std::sort(keys.begin() + start[k], keys.begin() + start[k + 1]);
-        for (int64_t i = start[k]; i < start[k + 1]; ++i) order[i] = keys[i].second;
+        for (int64_t i = start[k]; i < start[k + 1]; ++i) order[i] = keys[i].index;
     }
     return order;
 }

@@ -137,6 +137,7 @@ void stage_range(const StageJob& job, int64_t begin, int64_t end) {
                     __builtin_prefetch(job.at(job.scales, job.node_scales, 3, r));
                     __builtin_prefetch(job.at(job.quats, job.node_quats, 4, r));
                     __builtin_prefetch(job.at(job.opacities, job.node_opacities, 1, r));
+                    if (job.filter_3d) __builtin_prefetch(job.at(job.filter_3d, job.node_filter_3d, 1, r));
                 }
             for (int j = 0; j < count; ++j) rows[j] = job.row(i0 + j);
             gather_rows<N>(job, job.means, job.node_means, 3, rows, count, buf);
