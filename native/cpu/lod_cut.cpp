@@ -5,9 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
-#if defined(_OPENMP) && defined(__GLIBCXX__)
-#include <parallel/algorithm>  // libstdc++'s parallel sort (OpenMP)
-#endif
+#include <cstdint>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -70,6 +68,19 @@ void chunked(int64_t len, int nt, Fn fn, std::vector<T>&... out) {
         for (const auto& part : from) to.insert(to.end(), part.begin(), part.end());
     };
     std::apply([&](const auto&... p) { (append(out, p), ...); }, parts);
+}
+
+// Pairs ascending by their splat (each splat once: order is a permutation): an LSD radix sort, 11 bits a pass, as
+// many passes as splat indices below n need (3 for up to 8 G).
+void sort_by_splat(std::vector<std::pair<int32_t, float>>& v, int64_t n) {
+    std::vector<std::pair<int32_t, float>> tmp(v.size());
+    for (int shift = 0; (int64_t(1) << shift) < n; shift += 11) {
+        std::vector<size_t> at(2049, 0);
+        for (const auto& e : v) ++at[((uint32_t)e.first >> shift & 2047) + 1];
+        for (int d = 0; d < 2048; ++d) at[d + 1] += at[d];
+        for (const auto& e : v) tmp[at[(uint32_t)e.first >> shift & 2047]++] = e;
+        v.swap(tmp);
+    }
 }
 
 // The cut by its definition, over every node: each interior node's o, the weights top-down level by level, each
@@ -200,11 +211,7 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
     if (halt.now()) return c;
     // the leaves ascending by splat
     if ((int64_t)leaves.size() * 16 < n) {  // few: sort them
-#if defined(_OPENMP) && defined(__GLIBCXX__)
-        __gnu_parallel::sort(leaves.begin(), leaves.end());
-#else
-        std::sort(leaves.begin(), leaves.end());  // splats are unique (order is a permutation): the same order
-#endif
+        sort_by_splat(leaves, n);
     } else {  // many: place them by splat (order is a permutation) and keep the drawn in splat order
         std::vector<float> w(n, 0.0f);
 #pragma omp parallel for num_threads(nt) schedule(static)
