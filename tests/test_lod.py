@@ -65,20 +65,31 @@ def test_parent_of_identical_children_is_the_child(rule, expected, alpha):
     np.testing.assert_allclose(tree.opacities[0], expected(alpha), rtol=1e-6)
 
 
+def leaf_weights(scene: gb.Scene, rule: str = "depth") -> np.ndarray:
+    """The rule's float64 merge weight of every splat: opacity x area ("depth"), or opacity alone ("opacity")."""
+    return np.minimum(scene.opacities.astype(np.float64), 1 - 1e-7) * (areas(scene.scales) if rule == "depth" else 1)
+
+
+def mixture_moments(scene: gb.Scene, idx: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The normalised weights, the mean, the offsets from it and the second central moment of the splats `idx`
+    weighted by `w` (theirs), in float64."""
+    ww = w / w.sum()
+    mean = ww @ scene.means[idx].astype(np.float64)
+    d = scene.means[idx] - mean
+    cov = covariances(scene.scales[idx], scene.quats[idx])
+    return ww, mean, d, np.einsum("i,ijk->jk", ww, cov + d[:, :, None] * d[:, None, :])
+
+
 @pytest.mark.parametrize("seed, rule", [(0, "depth"), (1, "depth"), (2, "opacity")])
 def test_merged_moments_are_the_weighted_moments_of_the_leaves(seed, rule):
     scene = random_scene(700, seed=seed, sh_degree=2)
     tree = lod.build(scene, rule)
     n = scene.num_splats
-    w = np.minimum(scene.opacities.astype(np.float64), 1 - 1e-7) * (areas(scene.scales) if rule == "depth" else 1)
+    w = leaf_weights(scene, rule)
     tau = -np.log1p(-np.minimum(scene.opacities.astype(np.float64), 1 - 1e-7)) * areas(scene.scales)
-    cov = covariances(scene.scales, scene.quats)
     for node in [n, n + 5, int(tree.levels[2]), int(tree.levels[-1]) - 1]:  # level 1, 2 and the root
         idx = leaves_under(tree, node)
-        ww = w[idx] / w[idx].sum()
-        mean = ww @ scene.means[idx].astype(np.float64)
-        d = scene.means[idx] - mean
-        second = np.einsum("i,ijk->jk", ww, cov[idx] + d[:, :, None] * d[:, None, :])
+        ww, mean, d, second = mixture_moments(scene, idx, w[idx])
         i = node - n
         np.testing.assert_allclose(tree.means[i], mean, rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(covariances(tree.scales[i:i + 1], tree.quats[i:i + 1])[0], second,
@@ -121,14 +132,6 @@ def test_leaf_order_is_the_morton_order(layout):
     np.testing.assert_array_equal(lod.build(scene).order, morton_order(scene.means))
 
 
-def second_moment(scene: gb.Scene, idx: np.ndarray) -> np.ndarray:
-    """The depth rule's float64 second central moment of the splats `idx`."""
-    w = np.minimum(scene.opacities[idx].astype(np.float64), 1 - 1e-7) * areas(scene.scales[idx])
-    w = w / w.sum()
-    d = scene.means[idx] - w @ scene.means[idx].astype(np.float64)
-    return np.einsum("i,ijk->jk", w, covariances(scene.scales[idx], scene.quats[idx]) + d[:, :, None] * d[:, None, :])
-
-
 @pytest.mark.parametrize("case", ["spheres", "spheroids", "needles", "aligned_needles", "line", "plane"])
 def test_merged_covariance_of_degenerate_and_extreme_children(case):
     """The eigen-decomposition behind a node's scales and rotation: repeated eigenvalues, a 1e4 scale ratio (a
@@ -150,7 +153,7 @@ def test_merged_covariance_of_degenerate_and_extreme_children(case):
     tree = lod.build(scene)
     assert tree.num_interior == 1
     got = covariances(tree.scales, tree.quats)[0]
-    want = second_moment(scene, np.arange(8))
+    want = mixture_moments(scene, np.arange(8), leaf_weights(scene))[3]
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
     np.testing.assert_allclose(np.linalg.norm(tree.quats[0]), 1, atol=1e-6)
     if case == "aligned_needles":  # the node is the needle itself

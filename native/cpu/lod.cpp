@@ -38,7 +38,7 @@ uint64_t spread(uint64_t v) {
 // A node's float64 summary while the levels are merged: mass w, averaging weight v (w, or the opacity sum for
 // OPACITY_WEIGHTS), optical mass t.
 struct Moments {
-    double w, v, t, mean[3], cov[6], radius, size, filter;  // cov: xx xy xz yy yz zz
+    double w, v, t, mean[3], cov[6], radius, filter;  // cov: xx xy xz yy yz zz
 };
 
 // Mean of the three principal cross-section areas of an ellipsoid with semi-axes sqrt(l).
@@ -204,7 +204,6 @@ void merge(const Moments* kids, int count, const float* const* rows, int k, Opac
     double l[3], V[3][3];
     eigen(m.cov, l, V);
     const double A = area(l);
-    m.size = 2.0 * std::sqrt(std::max({l[0], l[1], l[2]}));
     double alpha = 0.0;
     if (A > 0)
         alpha = rule != SUM ? -std::expm1(-T / A) : std::min(1.0, W / A);
@@ -217,7 +216,7 @@ void merge(const Moments* kids, int count, const float* const* rows, int k, Opac
     quaternion(V, &tree.quats[4 * i]);
     tree.opacities[i] = (float)alpha;
     tree.radius[i] = (float)m.radius;
-    tree.size[i] = (float)m.size;
+    tree.size[i] = (float)(2.0 * std::sqrt(std::max({l[0], l[1], l[2]})));
     if (!tree.filter.empty()) tree.filter[i] = (float)m.filter;
     double sh[3 * MAX_K] = {};
     for (int c = 0; c < count; ++c)

@@ -190,13 +190,6 @@ GBV_HD void stage_color(const SplatInLanes<L>& in, int sh_deg, const CameraParam
     sh_to_rgb<L>(in.sh, sh_deg, dir, color);
 }
 
-// Lanes of a stage that some mode may keep: false only where every mode's finish culls the splat for touching no
-// tile of a grid_x x grid_y grid. Every mode's half sides are at most its radius ceil(k sqrt(lambda1)) with
-// k <= RADIUS_SIGMAS_GB and lambda1 = mid + sqrt(max(0.1, mid^2 - det)) <= a + c + 0.32 of its filtered covariance,
-// whose a + c is at most the stage's + 2 reach (reach: the largest diagonal any of the stage's modes adds, at least
-// DILATION_3DGS; stage_key) (det <= 0 is culled in every mode): h <= 3.34 sqrt(a + c + 2 reach + 0.4) + 2 with room
-// for float rounding. A splat whose box misses the image by that much (getRect: x + h < 1.5 or x - h >= 16 grid_x +
-// 0.5) is culled everywhere. NaN bounds or positions keep the lane (the finish decides).
 // The reach a frame's stage serves (stage_on_screen, every backend's stage key): the largest diagonal the frame's
 // 2D filter adds, the scalar mode's view filter (dilation + pre-dilation), every other mode at most DILATION_3DGS
 // (preprocess_finish).
@@ -205,6 +198,13 @@ GBV_HD float stage_reach(Mode mode, const OitParams& oit) {
     return filter > DILATION_3DGS ? filter : DILATION_3DGS;
 }
 
+// Lanes of a stage that some mode may keep: false only where every mode's finish culls the splat for touching no
+// tile of a grid_x x grid_y grid. Every mode's half sides are at most its radius ceil(k sqrt(lambda1)) with
+// k <= RADIUS_SIGMAS_GB and lambda1 = mid + sqrt(max(0.1, mid^2 - det)) <= a + c + 0.32 of its filtered covariance,
+// whose a + c is at most the stage's + 2 reach (reach: the largest diagonal any of the stage's modes adds, at least
+// DILATION_3DGS: stage_reach) (det <= 0 is culled in every mode): h <= 3.34 sqrt(a + c + 2 reach + 0.4) + 2 with room
+// for float rounding. A splat whose box misses the image by that much (getRect: x + h < 1.5 or x - h >= 16 grid_x +
+// 0.5) is culled everywhere. NaN bounds or positions keep the lane (the finish decides).
 template <class L>
 GBV_HD typename L::M stage_on_screen(const StageLanes<L>& st, int grid_x, int grid_y, float reach) {
     using F = typename L::F;
