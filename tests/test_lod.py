@@ -221,6 +221,31 @@ def test_the_top_down_cut_equals_the_cut_over_every_node():
                 assert a.dtype == b.dtype and np.array_equal(a, b), (cam.name, tau, field)
 
 
+def test_the_top_down_cut_equals_the_cut_over_every_node_on_a_large_tree():
+    """Large enough for the walk's levels to run on several threads (counted, then written at each thread's offsets)
+    and for its leaves to be sorted by the parallel radix sort (a coarse cut) or placed by splat (a finer one)."""
+    from gbviewer._native import testing
+
+    scene = random_scene(400_000, seed=21, spread=30.0)
+    tree = lod.build(scene)
+    n = scene.num_splats
+    for dist, lo, hi in ((750.0, 16384, n // 16), (600.0, n // 16, n // 4)):  # leaves: sorted, placed
+        cam = gb.Camera(640, 480, 500.0, 500.0, 320, 240, np.eye(3), np.array([0.0, 0.0, dist]))
+        flat = None
+        for threads in (1, 2, 3):
+            walked = lod.cut(tree, cam, 2.0, threads=threads)
+            assert lo <= len(walked.leaves) < hi, (dist, len(walked.leaves))
+            if flat is None:
+                try:
+                    testing.set_cut_flat_above(0)
+                    flat = lod.cut(tree, cam, 2.0)
+                finally:
+                    testing.set_cut_flat_above(65536)
+            for field in ("leaves", "leaf_weights", "nodes", "node_weights"):
+                a, b = getattr(walked, field), getattr(flat, field)
+                assert a.dtype == b.dtype and np.array_equal(a, b), (dist, threads, field)
+
+
 def flat_weights(tree: lod.Hierarchy, c: lod.Cut) -> np.ndarray:
     """The drawn weight of every node by flat id (0: not drawn)."""
     n = tree.num_leaves

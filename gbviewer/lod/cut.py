@@ -67,7 +67,8 @@ def cut(tree: Hierarchy, camera: Camera, tau: float, band: float = DEFAULT_BAND,
                      threads, flag)
     if out is None:
         raise RenderCancelled("render cancelled")
-    return Cut(*out)
+    rows, weights, nl = out
+    return Cut(rows[:nl], weights[:nl], rows[nl:], weights[nl:])
 
 
 def check_plain(scene: Scene) -> None:

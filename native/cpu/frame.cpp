@@ -149,15 +149,13 @@ void for_blocks(int64_t n, FrameRun& run, Fn fn) {
 bool cut_rows(const SceneView& sc, const LodArgs& a, Stage& stage, FrameRun& run) {
     const SceneView::Hierarchy& t = sc.tree;
     const lod::View view{{a.eye[0], a.eye[1], a.eye[2]}, a.focal, a.orthographic};
-    lod::Cut c = lod::cut(t.means, t.radius, t.size, t.levels, t.num_levels, t.order, view, a.tau, a.band, 0,
-                          [&run] { return run.cancelled(); });
+    lod::Cut c = lod::cut(t.means, t.radius, t.size, t.levels, t.num_levels, t.order, view, a.tau, a.band,
+                          (int32_t)sc.n, 0, [&run] { return run.cancelled(); });
     stage.rows.clear();
     stage.weights.clear();
-    if (c.nodes.empty() && (int64_t)c.leaves.size() == sc.n) return false;
-    stage.rows = std::move(c.leaves);
-    stage.weights = std::move(c.leaf_weights);
-    for (int32_t node : c.nodes) stage.rows.push_back((int32_t)(sc.n + node));
-    stage.weights.insert(stage.weights.end(), c.node_weights.begin(), c.node_weights.end());
+    if ((int64_t)c.rows.size() == sc.n && c.leaves == sc.n) return false;
+    stage.rows = std::move(c.rows);
+    stage.weights = std::move(c.weights);
     return true;  // an empty cut (a root whose size is not a number) draws nothing, as cut_scene's gather
 }
 

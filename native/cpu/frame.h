@@ -96,8 +96,8 @@ struct Stage {
     // A level-of-detail stage's cut (StageJob::rows, weights): its splat i is that row of the scene or hierarchy.
     // Empty when it draws every splat of the scene (no LOD, or a cut that is the scene's leaves; splats.size() says
     // which, an empty cut drawing none).
-    std::vector<int32_t> rows;
-    std::vector<float> weights;
+    Plane<int32_t> rows;
+    Plane<float> weights;
     std::vector<StageSplat> splats;
     std::vector<uint8_t> valid;  // in front of the near plane and on screen in some mode
     // One depth order of the stage's valid splats (depth_order's keys), computed by the first frame that bins in

@@ -62,13 +62,12 @@ nb::object cut(FArr means, FArr radius, FArr size, LArr levels, IArr order, FArr
     lod::Cut c;
     {
         nb::gil_scoped_release release;
-        c = lod::cut(means.data(), radius.data(), size.data(), levels.data(), (int)L, order.data(), v, tau, band,
+        c = lod::cut(means.data(), radius.data(), size.data(), levels.data(), (int)L, order.data(), v, tau, band, 0,
                      threads, stop);
     }
     if (stop()) return nb::none();
-    const size_t nl = c.leaves.size(), ni = c.nodes.size();
-    return nb::make_tuple(to_numpy(std::move(c.leaves), {nl}), to_numpy(std::move(c.leaf_weights), {nl}),
-                          to_numpy(std::move(c.nodes), {ni}), to_numpy(std::move(c.node_weights), {ni}));
+    const size_t rows = c.rows.size();
+    return nb::make_tuple(to_numpy(std::move(c.rows), {rows}), to_numpy(std::move(c.weights), {rows}), c.leaves);
 }
 
 // Rows `leaves` of a then `nodes` of b, `width` floats each, into a new (len, width) array.
@@ -134,8 +133,8 @@ void bind_lod(nb::module_& m) {
     l.def("cut", &cut, nb::arg("means"), nb::arg("radius"), nb::arg("size"), nb::arg("levels"), nb::arg("order"),
           nb::arg("eye"), nb::arg("focal"), nb::arg("orthographic"), nb::arg("tau"), nb::arg("band"),
           nb::arg("threads"), nb::arg("cancel").none() = nb::none(),
-          "(leaves, leaf weights, interior nodes, node weights) drawn for the view; None once cancel[0] is nonzero "
-          "(the cut stopped early).");
+          "(rows, weights, leaves) drawn for the view: the first `leaves` rows are splats, the rest interior nodes; "
+          "None once cancel[0] is nonzero (the cut stopped early).");
     l.def("gather", &gather, nb::arg("scene"), nb::arg("tree"), nb::arg("leaves"), nb::arg("leaf_weights"),
           nb::arg("nodes"), nb::arg("node_weights"), nb::arg("threads"),
           "The cut's splat arrays (dict of scene and tree arrays in; means ... opacities times weights out).");

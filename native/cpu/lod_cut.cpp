@@ -6,7 +6,6 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
-#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -50,43 +49,38 @@ float opening(const float* means, const float* radius, const float* size, int64_
     return (float)o;
 }
 
-// fn(outputs of this thread..., begin, end) over [0, len) in contiguous chunks, one per thread (ascending with the
-// thread number), then each output's chunks concatenated in that order onto `out...` (parallel, in order).
-template <class Fn, class... T>
-void chunked(int64_t len, int nt, Fn fn, std::vector<T>&... out) {
-    std::tuple<std::vector<std::vector<T>>...> parts{std::vector<std::vector<T>>(nt)...};
-    if (len < (1 << 16)) nt = 1;  // under ~1 ms of work: a parallel region (waking a busy core) costs more
+// Appends (base + i, drawn(i)) for every i in [0, len) with drawn(i) > 0, ascending, to c's rows and weights: counted
+// per thread, then written at each thread's offset (a thread that stopped counting early, halt being sticky, writes
+// nothing: never more than it counted).
+template <class Drawn>
+void compact(int64_t len, Drawn drawn, int64_t base, Cut& c, int nt, Halt& halt) {
+    const int64_t at0 = (int64_t)c.rows.size();
+    std::vector<int64_t> counts(nt + 1, 0);
 #pragma omp parallel num_threads(nt)
     {
         const int th = omp_get_thread_num(), nth = omp_get_num_threads();
-        std::apply([&](auto&... p) { fn(p[th]..., len * th / nth, len * (th + 1) / nth); }, parts);
-    }
-    const auto append = [](auto& to, const auto& from) {
-        size_t total = to.size();
-        for (const auto& part : from) total += part.size();
-        to.reserve(total);
-        for (const auto& part : from) to.insert(to.end(), part.begin(), part.end());
-    };
-    std::apply([&](const auto&... p) { (append(out, p), ...); }, parts);
-}
-
-// Pairs ascending by their splat (each splat once: order is a permutation): an LSD radix sort, 11 bits a pass, as
-// many passes as splat indices below n need (3 for up to 8 G).
-void sort_by_splat(std::vector<std::pair<int32_t, float>>& v, int64_t n) {
-    std::vector<std::pair<int32_t, float>> tmp(v.size());
-    for (int shift = 0; (int64_t(1) << shift) < n; shift += 11) {
-        std::vector<size_t> at(2049, 0);
-        for (const auto& e : v) ++at[((uint32_t)e.first >> shift & 2047) + 1];
-        for (int d = 0; d < 2048; ++d) at[d + 1] += at[d];
-        for (const auto& e : v) tmp[at[(uint32_t)e.first >> shift & 2047]++] = e;
-        v.swap(tmp);
+        const int64_t b = len * th / nth, e = len * (th + 1) / nth;
+        int64_t local = 0;
+        for (int64_t i = b; i < e && !halt.at(i); ++i) local += drawn(i) > 0.0f;
+        counts[th + 1] = local;
+#pragma omp barrier
+#pragma omp single
+        {
+            for (int j = 0; j < nth; ++j) counts[j + 1] += counts[j];
+            c.rows.resize(at0 + counts[nth]), c.weights.resize(at0 + counts[nth]);
+        }
+        int64_t at = at0 + counts[th];
+        for (int64_t i = b; i < e && !halt.at(i); ++i) {
+            const float d = drawn(i);
+            if (d > 0.0f) c.rows[at] = (int32_t)(base + i), c.weights[at++] = d;
+        }
     }
 }
 
 // The cut by its definition, over every node: each interior node's o, the weights top-down level by level, each
 // leaf's; what the top-down walk falls back to when most of the tree is reached.
 Cut cut_flat(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
-             const int32_t* order, const View& v, double tau, double band, int nt, Halt& halt) {
+             const int32_t* order, const View& v, double tau, double band, int32_t node_base, int nt, Halt& halt) {
     const int64_t n = levels[1], m = levels[num_levels - 1] - n;
     std::vector<float> open(m), weight(m);  // o and the weight reaching each interior node
 #pragma omp parallel for num_threads(nt) schedule(static)
@@ -112,64 +106,143 @@ Cut cut_flat(const float* means, const float* radius, const float* size, const i
         leaf_w[order[id]] = p < 0 ? 1.0f : weight[p] * open[p];
     }
     if (halt.now()) return c;
-    // (a thread that stopped counting early, halt being sticky, writes nothing: never more than it counted)
-    auto compact = [nt, &halt](const std::vector<float>& w, auto drawn, std::vector<int32_t>& idx,
-                               std::vector<float>& out) {
-        const int64_t len = (int64_t)w.size();
-        std::vector<int64_t> counts(nt + 1, 0);
+    compact(n, [&](int64_t i) { return leaf_w[i]; }, 0, c, nt, halt);
+    c.leaves = (int64_t)c.rows.size();
+    if (halt.now()) return c;
+    compact(m, [&](int64_t i) { return weight[i] * (1.0f - open[i]); }, node_base, c, nt, halt);
+    return c;
+}
+
+// Nodes with the weight reaching them: a level's reached interior nodes, its drawn ones, or level 1's leaves (splats).
+struct Reached {
+    Plane<int32_t> id;
+    Plane<float> w;
+    int64_t size() const { return (int64_t)id.size(); }
+    void resize(int64_t k) { id.resize(k), w.resize(k); }
+};
+
+// Walked levels under this many children run on one thread (under ~1 ms: a parallel region costs more).
+constexpr int64_t WALK_PARALLEL_MIN = 1 << 15;
+
+// Level l of the walk: each reached node's o once (in `o`: the fallback's check's, or computed here when empty),
+// drawn at w (1 - o), w o passed to each of its children (level 1's: leaves, as splats). Counted per thread, then
+// written at each thread's offsets, so both outputs stay ascending.
+void walk_level(const Reached& frontier, Plane<float>& o, int l, const float* means, const float* radius,
+                const float* size, const int64_t* levels, const int32_t* order, const View& v, double tau,
+                double band, int nt, Halt& halt, Reached& drawn, Reached& down) {
+    const int64_t len = frontier.size(), n = levels[1];
+    if (len * BRANCHING < WALK_PARALLEL_MIN) nt = 1;
+    const bool known = !o.empty();
+    o.resize(len);
+    const auto children = [&](int64_t f) {  // [first, last) of frontier[f]'s children on level l - 1
+        const int64_t first = levels[l - 1] + BRANCHING * (frontier.id[f] + n - levels[l]);
+        return std::pair<int64_t, int64_t>{first, std::min(first + BRANCHING, levels[l])};
+    };
+    std::vector<int64_t> kept(nt + 1, 0), kids(nt + 1, 0);
 #pragma omp parallel num_threads(nt)
+    {
+        const int th = omp_get_thread_num(), nth = omp_get_num_threads();
+        const int64_t b = len * th / nth, e = len * (th + 1) / nth;
+        int64_t k = 0, c = 0;
+        for (int64_t f = b; f < e && !halt.at(f); ++f) {
+            if (!known) o[f] = opening(means, radius, size, frontier.id[f], v, tau, band);
+            const float w = frontier.w[f];
+            k += w * (1.0f - o[f]) > 0.0f;
+            if (w * o[f] > 0.0f) c += children(f).second - children(f).first;
+        }
+        kept[th + 1] = k, kids[th + 1] = c;
+#pragma omp barrier
+#pragma omp single
         {
-            const int th = omp_get_thread_num(), nth = omp_get_num_threads();
-            const int64_t b = len * th / nth, e = len * (th + 1) / nth;
-            int64_t local = 0;
-            for (int64_t i = b; i < e && !halt.at(i); ++i) local += drawn(i) > 0.0f;
-            counts[th + 1] = local;
+            for (int j = 0; j < nth; ++j) kept[j + 1] += kept[j], kids[j + 1] += kids[j];
+            drawn.resize(kept[nth]), down.resize(kids[nth]);
+        }
+        int64_t at = kept[th], below = kids[th];
+        for (int64_t f = b; f < e && !halt.at(f); ++f) {
+            const float w = frontier.w[f], kw = w * (1.0f - o[f]), pw = w * o[f];
+            if (kw > 0.0f) drawn.id[at] = frontier.id[f], drawn.w[at++] = kw;
+            if (!(pw > 0.0f)) continue;
+            const auto [first, last] = children(f);
+            for (int64_t child = first; child < last; ++child, ++below)
+                down.id[below] = l == 1 ? order[child] : (int32_t)(child - n), down.w[below] = pw;
+        }
+    }
+}
+
+// Level 1's leaves (each splat below n at most once) ascending by splat into out_rows / out_w: a parallel LSD radix
+// sort, as few passes of at most 12 bits as splats below n need (2 up to 16 M).
+void sort_by_splat(Reached& in, int64_t n, int32_t* out_rows, float* out_w, int nt) {
+    const int64_t len = in.size();
+    int bits = 0;
+    while ((int64_t(1) << bits) < n) ++bits;
+    const int passes = (bits + 11) / 12, digit = passes ? (bits + passes - 1) / passes : 0, buckets = 1 << digit;
+    if (passes == 0 || len < (1 << 14)) nt = 1;
+    Reached tmp;
+    tmp.resize(passes > 1 ? len : 0);
+    std::vector<int64_t> hist((size_t)nt * buckets);
+#pragma omp parallel num_threads(nt)
+    {
+        const int th = omp_get_thread_num(), nth = omp_get_num_threads();
+        const int64_t b = len * th / nth, e = len * (th + 1) / nth;
+        int64_t* h = &hist[(size_t)th * buckets];
+        for (int p = 0; p < passes; ++p) {  // from in to tmp, tmp to in, ..., the last into out
+            const Reached& src = p % 2 == 0 ? in : tmp;
+            int32_t* dr = p == passes - 1 ? out_rows : (p % 2 == 0 ? tmp : in).id.data();
+            float* dw = p == passes - 1 ? out_w : (p % 2 == 0 ? tmp : in).w.data();
+            const int shift = p * digit;
+            const uint32_t mask = (uint32_t)buckets - 1;
+            std::fill(h, h + buckets, 0);
+            for (int64_t i = b; i < e; ++i) ++h[(uint32_t)src.id[i] >> shift & mask];
 #pragma omp barrier
 #pragma omp single
             {
-                for (int j = 0; j < nth; ++j) counts[j + 1] += counts[j];
-                idx.resize(counts[nth]), out.resize(counts[nth]);
+                int64_t at = 0;
+                for (int d = 0; d < buckets; ++d)
+                    for (int t = 0; t < nth; ++t) {
+                        const int64_t count = hist[(size_t)t * buckets + d];
+                        hist[(size_t)t * buckets + d] = at;
+                        at += count;
+                    }
             }
-            int64_t at = counts[th];
-            for (int64_t i = b; i < e && !halt.at(i); ++i) {
-                const float d = drawn(i);
-                if (d > 0.0f) idx[at] = (int32_t)i, out[at++] = d;
+            for (int64_t i = b; i < e; ++i) {
+                const int64_t to = h[(uint32_t)src.id[i] >> shift & mask]++;
+                dr[to] = src.id[i], dw[to] = src.w[i];
             }
+#pragma omp barrier
         }
-    };
-    compact(leaf_w, [&](int64_t i) { return leaf_w[i]; }, c.leaves, c.leaf_weights);
-    if (halt.now()) return c;
-    compact(weight, [&](int64_t i) { return weight[i] * (1.0f - open[i]); }, c.nodes, c.node_weights);
-    return c;
+    }
+    if (passes == 0) std::copy(in.id.begin(), in.id.end(), out_rows), std::copy(in.w.begin(), in.w.end(), out_w);
 }
 
 }  // namespace
 
 // Top down from the root, visiting only the nodes the cut reaches (a node is reached when its parent opens, o > 0):
 // the cost follows the cut, not the scene (cut_flat once most of a large level is reached and most of it opens on;
-// testing's cut_flat_above 0: always). A
-// reached node of weight w (the root 1) is drawn at w (1 - o) and passes w o to its children: the products the flat
-// definition forms, so both give the same cut.
+// testing's cut_flat_above 0: always). A reached node of weight w (the root 1) is drawn at w (1 - o) and passes w o
+// to its children: the products the flat definition forms, so both give the same cut.
 Cut cut(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
-        const int32_t* order, const View& v, double tau, double band, int threads, const Stop& stop) {
+        const int32_t* order, const View& v, double tau, double band, int32_t node_base, int threads,
+        const Stop& stop) {
     const int nt = team(threads);
     Halt halt(stop);
     const int64_t n = levels[1], m = levels[num_levels - 1] - n;
     Cut c;
     if (m == 0) {  // one splat: the leaf
-        c.leaves.assign(n, 0);
-        c.leaf_weights.assign(n, 1.0f);
+        c.rows.assign(n, 0);
+        c.weights.assign(n, 1.0f);
+        c.leaves = n;
         return c;
     }
-    using Reached = std::pair<int64_t, float>;  // (interior index, weight reaching it)
-    std::vector<Reached> frontier{{m - 1, 1.0f}}, next;
-    std::vector<std::vector<Reached>> drawn(num_levels);  // per level, ascending
-    std::vector<std::pair<int32_t, float>> leaves;  // (splat, weight) under the reached level-1 nodes
-    std::vector<float> opens;  // the frontier's openings, where the fallback's check computed them
     const int64_t flat_above = cpu::testing::cut_flat_above.load(std::memory_order_relaxed);
-    if (flat_above == 0) return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, nt, halt);
+    if (flat_above == 0)
+        return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, node_base, nt, halt);
+    Reached frontier, next, leaves;  // level 1's children: leaves (splat, weight)
+    frontier.resize(1);
+    frontier.id[0] = (int32_t)(m - 1), frontier.w[0] = 1.0f;
+    std::vector<Reached> drawn(num_levels);  // per level, ascending
+    Plane<float> opens;  // the frontier's openings
     for (int l = num_levels - 2; l >= 1; --l) {  // level l's reached nodes: frontier
-        const int64_t reached = (int64_t)frontier.size();
+        const int64_t reached = frontier.size();
         opens.clear();
         if (reached > flat_above && reached * 4 > levels[l + 1] - levels[l]) {
             // Most of a large level reached: the definition over every node costs less than walking (a walked entry
@@ -179,55 +252,42 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
             int64_t opened = 0;
 #pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : opened)
             for (int64_t f = 0; f < reached; ++f) {
-                opens[f] = opening(means, radius, size, frontier[f].first, v, tau, band);
-                opened += frontier[f].second * opens[f] > 0.0f;
+                opens[f] = opening(means, radius, size, frontier.id[f], v, tau, band);
+                opened += frontier.w[f] * opens[f] > 0.0f;
             }
             if (l == 1 ? opened * BRANCHING * 3 > n : opened * 4 > reached * 3)
-                return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, nt, halt);
+                return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, node_base, nt, halt);
         }
         if (halt.now()) return c;
-        next.clear();
-        // each reached node's o once: drawn at w (1 - o) on this level, w o passed to its children (level 1's: leaves)
-        chunked(reached, nt, [&](std::vector<Reached>& out, std::vector<Reached>& down,
-                                 std::vector<std::pair<int32_t, float>>& below, int64_t b, int64_t e) {
-            for (int64_t f = b; f < e && !halt.at(f); ++f) {
-                const auto [i, w] = frontier[f];
-                const float o = opens.empty() ? opening(means, radius, size, i, v, tau, band) : opens[f];
-                const float kept = w * (1.0f - o);
-                if (kept > 0.0f) out.push_back({i, kept});
-                const float passed = w * o;
-                if (!(passed > 0.0f)) continue;
-                const int64_t id = i + n, first = levels[l - 1] + BRANCHING * (id - levels[l]);
-                for (int64_t child = first; child < std::min(first + BRANCHING, levels[l]); ++child) {
-                    if (l == 1)
-                        below.push_back({order[child], passed});
-                    else
-                        down.push_back({child - n, passed});
-                }
-            }
-        }, drawn[l], next, leaves);
+        walk_level(frontier, opens, l, means, radius, size, levels, order, v, tau, band, nt, halt, drawn[l],
+                   l == 1 ? leaves : next);
         std::swap(frontier, next);
     }
     if (halt.now()) return c;
     // the leaves ascending by splat
-    if ((int64_t)leaves.size() * 16 < n) {  // few: sort them
-        sort_by_splat(leaves, n);
+    if (leaves.size() * 16 < n) {  // few: sort them
+        c.rows.resize(leaves.size()), c.weights.resize(leaves.size());
+        sort_by_splat(leaves, n, c.rows.data(), c.weights.data(), nt);
     } else {  // many: place them by splat (order is a permutation) and keep the drawn in splat order
-        std::vector<float> w(n, 0.0f);
-#pragma omp parallel for num_threads(nt) schedule(static)
-        for (int64_t j = 0; j < (int64_t)leaves.size(); ++j)
-            if (!halt.at(j)) w[leaves[j].first] = leaves[j].second;
-        leaves.clear();
-        chunked(n, nt, [&](std::vector<std::pair<int32_t, float>>& out, int64_t b, int64_t e) {
-            for (int64_t i = b; i < e && !halt.at(i); ++i)
-                if (w[i] > 0.0f) out.push_back({(int32_t)i, w[i]});
-        }, leaves);
+        Plane<float> w(n);
+#pragma omp parallel num_threads(nt)
+        {
+#pragma omp for schedule(static)
+            for (int64_t i = 0; i < n; ++i) w[i] = 0.0f;
+#pragma omp for schedule(static)
+            for (int64_t j = 0; j < leaves.size(); ++j)
+                if (!halt.at(j)) w[leaves.id[j]] = leaves.w[j];
+        }
+        compact(n, [&](int64_t i) { return w[i]; }, 0, c, nt, halt);
     }
-    c.leaves.resize(leaves.size());
-    c.leaf_weights.resize(leaves.size());
-    for (size_t j = 0; j < leaves.size(); ++j) c.leaves[j] = leaves[j].first, c.leaf_weights[j] = leaves[j].second;
-    for (int l = 1; l < num_levels; ++l)
-        for (const Reached& r : drawn[l]) c.nodes.push_back((int32_t)r.first), c.node_weights.push_back(r.second);
+    c.leaves = (int64_t)c.rows.size();
+    int64_t at = c.leaves, total = at;
+    for (int l = 1; l < num_levels; ++l) total += drawn[l].size();
+    c.rows.resize(total), c.weights.resize(total);
+    for (int l = 1; l < num_levels; ++l) {
+        const Reached& d = drawn[l];
+        for (int64_t j = 0; j < d.size(); ++j, ++at) c.rows[at] = node_base + d.id[j], c.weights[at] = d.w[j];
+    }
     return c;
 }
 
