@@ -163,6 +163,10 @@ void bind_testing(nb::module_& m) {
     nb::module_ t = m.def_submodule("testing", "Test and benchmark switches of the CPU renderer (process-wide).");
     t.def("set_pixel_boxes", [](bool on) { cpu::testing::pixel_boxes.store(on); }, nb::arg("on"),
           "Skip lane groups outside a splat's pixel box (default) or evaluate every list entry.");
+    t.def("set_row_bands", [](bool on) { cpu::testing::row_bands.store(on); }, nb::arg("on"),
+          "Lane groups walk their row's band of the tile list where that saves work (default) or the whole list.");
+    t.def("set_gaussian_band_margin", [](float px) { cpu::testing::gaussian_band_margin.store(px); }, nb::arg("px"),
+          "How far (px) gaussian_blending's row bands reach about the row's pixel centres (default 2).");
     t.def("set_cut_flat_above", [](int64_t n) { cpu::testing::cut_flat_above.store(n); }, nb::arg("n"),
           "The level-of-detail cut walks top down; it evaluates every node instead once a level reaches more than n "
           "nodes, a quarter of it, and most of them open on (default 65536; 0: every node of any tree).");

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <limits>
 #include <type_traits>
+#include <vector>
 
 #include "gbv/blend.h"
 
@@ -50,6 +51,17 @@ inline SplatBounds gaussian_blending_bounds(const Splat2D& s) {
     return {(float)(s.xy.x - ex), (float)(s.xy.x + ex), (float)(s.xy.y - ey), (float)(s.xy.y + ey)};
 }
 
+// Row bands of a tile's list: for each pixel row of the tile, the list entries whose SplatBounds meet the band
+// [yc - margin, yc + margin] about the row's pixel centre yc, in list order (build_bands, blend_bands.h). A lane group
+// of that row whose box lies inside the band can walk the band instead of the whole list: every other entry's bounds
+// miss the box in y, so the walk's `outside` test would skip it anyway.
+struct Bands {
+    float lo[TILE], hi[TILE];  // row r's band
+    int32_t start[TILE + 1];   // row r's entries: idx[start[r] .. start[r + 1])
+    std::vector<int32_t> idx;
+    std::vector<int8_t> first, last;  // each entry's rows first .. last (none when last < first)
+};
+
 struct TileJob {
     const Splat2D* list;        // the tile's splats in blend order
     const SplatBounds* bounds;  // one per list entry
@@ -61,11 +73,27 @@ struct TileJob {
     float bg[3];
     float *rgb, *alpha, *window;  // image planes, at the rectangle's pixel (x0, y0); window may be null
     int32_t* evals;
+    const Bands* bands;  // the list's row bands, or null: every group walks the whole list
 };
 
 using BlendTileFn = void (*)(const TileJob&);
 
 namespace tile {
+
+// The list entries a group visits, in order: its row's band while the group's box lies inside the band [lo, hi],
+// then (once a moving window leaves it) the whole list on from the last entry visited; or the whole list.
+struct Cursor {
+    const int32_t* band;  // null: the whole list
+    int band_n;
+    float lo, hi;
+    int j = 0, i = -1;
+    // The next entry, -1 after the last; [ya, yb]: the group's box now.
+    int next(int n, float ya, float yb) {
+        if (band && !(ya >= lo && yb <= hi)) band = nullptr;
+        if (band) return j < band_n ? (i = band[j++]) : -1;
+        return ++i < n ? i : -1;
+    }
+};
 
 // A lane group: N pixels of one row, `count` of them inside the tile. [xa, xb] x [ya, yb]: the box a splat's
 // SplatBounds must meet to matter to any lane (the lanes' pixel centres; for gaussian_blending the lanes' window
@@ -76,6 +104,7 @@ struct Group {
     typename L::M live;
     float xa, xb, ya, yb;
     int count;
+    Cursor entries;
 };
 
 static inline bool outside(const SplatBounds& b, float xa, float xb, float ya, float yb) {
@@ -95,7 +124,8 @@ template <class L, class Tr, class Step>
 void walk(const TileJob& job, const Group<L>& g, Out<L::N>& out, Step step) {
     typename L::M live = g.live;
     for (int i = 0; i < L::N; ++i) out.evals[i] = job.n;
-    for (int i = 0; i < job.n; ++i) {
+    Cursor entries = g.entries;
+    for (int i; (i = entries.next(job.n, g.ya, g.yb)) >= 0;) {
         if (outside(job.bounds[i], g.xa, g.xb, g.ya, g.yb)) {
             GBV_TRACE(Tr, entry(i, SKIP_BOX));
             continue;
@@ -186,13 +216,14 @@ struct Box {
 // Bit-identical to stepping both halves: a step changes only lanes that pass the cut-off, and everything it decides
 // for the whole group (which branches run, the series length) depends on those lanes only.
 template <class L>
-void walk_gaussian_halves(const TileJob& job, typename L::M live, WindowState<L>& win, Out<L::N>& out) {
+void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries, WindowState<L>& win,
+                          Out<L::N>& out) {
     using H = typename HalfOf<L>::type;
     Box box[2];
     bool alive[2] = {H::any(live.a), H::any(live.b)};
     for (int k = 0; k < 2; ++k) window_box<H>(get_half<H>(win, k), box[k]);
     for (int i = 0; i < L::N; ++i) out.evals[i] = job.n;
-    for (int i = 0; i < job.n; ++i) {
+    for (int i; (i = entries.next(job.n, std::min(box[0].ya, box[1].ya), std::max(box[0].yb, box[1].yb))) >= 0;) {
         const SplatBounds& b = job.bounds[i];
         const bool in[2] = {alive[0] && !outside(b, box[0].xa, box[0].xb, box[0].ya, box[0].yb),
                             alive[1] && !outside(b, box[1].xa, box[1].xb, box[1].ya, box[1].yb)};
@@ -228,7 +259,7 @@ void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out) {
     const typename L::F one = L::set(1.0f), zero = L::set(0.0f);
     WindowState<L> win = {one, g.px, g.py, one, one, {zero, zero, zero}};
     if constexpr (!std::is_void_v<typename HalfOf<L>::type> && std::is_same_v<Tr, NoTrace>) {
-        walk_gaussian_halves<L>(job, g.live, win, out);
+        walk_gaussian_halves<L>(job, g.live, g.entries, win, out);
     } else {
         window_box<L>(win, g);
         walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
@@ -296,6 +327,14 @@ void blend_tile(const TileJob& job) {
             g.xa = (float)x + 0.5f;
             g.xb = (float)(x + g.count - 1) + 0.5f;
             g.ya = g.yb = (float)y + 0.5f;
+            g.entries = {nullptr, 0, 0.0f, 0.0f};
+            if constexpr (std::is_same_v<Tr, NoTrace>) {  // a trace records every entry's test: the whole list
+                if (job.bands) {
+                    const Bands& b = *job.bands;
+                    const int r = y - job.y0;
+                    g.entries = {b.idx.data() + b.start[r], b.start[r + 1] - b.start[r], b.lo[r], b.hi[r]};
+                }
+            }
             switch (job.mode) {
                 case GAUSSIAN_BLENDING: tile::group_gaussian<L, Tr>(job, g, out); break;
                 case WSR: tile::group_wsr<L, Tr>(job, g, out); break;

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 
+#include "blend_bands.h"
 #include "frame.h"
 #include "lod.h"
 #include "testing.h"
@@ -89,7 +90,7 @@ void splat_boxes(const std::vector<Splat2D>& splats, Mode mode, std::vector<Spla
 // One tile of one frame (blend_frames): copy its splats (and their boxes) into contiguous per-thread buffers, then
 // the selected SIMD path blends its pixels in lane groups.
 void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTileFn blend_tile,
-                    std::vector<Splat2D>& local, std::vector<SplatBounds>& bounds, float* partial) {
+                    std::vector<Splat2D>& local, std::vector<SplatBounds>& bounds, Bands& bands, float* partial) {
     const int W = f.cam->width, H = f.cam->height;
     const int gx = (W + TILE - 1) / TILE;
     const FrameBuffers& b = *f.buf;
@@ -116,6 +117,12 @@ void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTile
     job.y0 = (t / gx) * TILE;
     job.x1 = std::min(job.x0 + TILE, W);
     job.y1 = std::min(job.y0 + TILE, H);
+    // gaussian_blending's group box starts 1.001 px about the row and moves with its windows: a wider band (2 px)
+    const float margin =
+        f.mode == GAUSSIAN_BLENDING ? testing::gaussian_band_margin.load(std::memory_order_relaxed) : 0.0f;
+    const bool banded = testing::row_bands.load(std::memory_order_relaxed) &&
+                        build_bands(job.bounds, job.n, job.y0, job.y1 - job.y0, margin, bands);
+    job.bands = banded ? &bands : nullptr;
     Image& img = *f.img;
     const size_t origin = (size_t)job.y0 * W + job.x0;
     job.rgb = img.rgb.data() + origin * 3;
@@ -268,11 +275,13 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
         FlushDenormals ftz;
         std::vector<Splat2D> local;
         std::vector<SplatBounds> bounds;
+        Bands bands;
 #pragma omp for schedule(dynamic, 1)
         for (int64_t i = 0; i < (int64_t)tiles.size(); ++i) {
             if (run.cancelled()) continue;  // a cancelled call skips its remaining tiles
             const int f = tiles[i].second.first;
-            blend_one_tile(frames[f], shared[f], tiles[i].second.second, blend_tile, local, bounds, run.partial(f));
+            blend_one_tile(frames[f], shared[f], tiles[i].second.second, blend_tile, local, bounds, bands,
+                           run.partial(f));
             run.tile_done(f);
             run.poll();
         }

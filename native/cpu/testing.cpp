@@ -14,6 +14,8 @@
 namespace gbv::cpu::testing {
 
 std::atomic<bool> pixel_boxes{true};
+std::atomic<bool> row_bands{true};
+std::atomic<float> gaussian_band_margin{2.0f};
 std::atomic<int64_t> cut_flat_above{65536};
 std::atomic<bool> poison_images{false};
 std::atomic<bool> capture{false};

@@ -16,6 +16,12 @@ namespace gbv::cpu::testing {
 // no pixel).
 extern std::atomic<bool> pixel_boxes;
 
+// A lane group walks its row's band of the tile list (blend_bands.h) where the bands save work (the default), or the
+// whole list (to show the bands change no pixel); gaussian_blending's bands reach this far (px) about the row's pixel
+// centres (its group box starts 1.001 px about them: just above that, windows leave the band at once).
+extern std::atomic<bool> row_bands;
+extern std::atomic<float> gaussian_band_margin;
+
 // The level-of-detail cut walks the tree top down; it evaluates every node instead (lod_cut.cpp) once a level's
 // reached nodes are more than this many, a quarter of the level, and most of them open on; 0 forces the full
 // evaluation for any tree, to show both give the same cut.
