@@ -246,6 +246,38 @@ def test_the_top_down_cut_equals_the_cut_over_every_node_on_a_large_tree():
                 assert a.dtype == b.dtype and np.array_equal(a, b), (dist, threads, field)
 
 
+def test_a_cut_stopped_anywhere_is_cancelled_never_partial():
+    """A stop at any of a cut's checks (between levels, inside a level's count or write, the fallback's check, the
+    leaves' sort) raises RenderCancelled; a cut that was not stopped is the whole cut. Levels large enough for the
+    fallback's check (lowered to 1000 nodes) and several threads."""
+    from gbviewer._native import testing
+
+    from gbviewer.errors import RenderCancelled
+
+    scene = random_scene(60_000, seed=22, spread=10.0)
+    tree = lod.build(scene)
+    cams = [gb.Camera(320, 240, 250.0, 250.0, 160, 120, np.eye(3), np.array([0.0, 0.0, d])) for d in (150.0, 300.0)]
+    try:
+        testing.set_cut_flat_above(1000)
+        for cam in cams:
+            full = lod.cut(tree, cam, 1.0, threads=3)
+            stopped = 0
+            for k in range(0, 90, 2):
+                testing.set_cut_stop_after(k)
+                try:
+                    got = lod.cut(tree, cam, 1.0, threads=3)
+                except RenderCancelled:
+                    stopped += 1
+                    continue
+                finally:
+                    testing.set_cut_stop_after(-1)
+                for field in ("leaves", "leaf_weights", "nodes", "node_weights"):
+                    assert np.array_equal(getattr(got, field), getattr(full, field)), (k, field)
+            assert 3 <= stopped < 45, stopped  # the stop did land inside these cuts, and some ran to the end
+    finally:
+        testing.set_cut_flat_above(65536)
+
+
 def flat_weights(tree: lod.Hierarchy, c: lod.Cut) -> np.ndarray:
     """The drawn weight of every node by flat id (0: not drawn)."""
     n = tree.num_leaves

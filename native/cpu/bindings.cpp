@@ -165,11 +165,16 @@ void bind_testing(nb::module_& m) {
           "Skip lane groups outside a splat's pixel box (default) or evaluate every list entry.");
     t.def("set_row_bands", [](bool on) { cpu::testing::row_bands.store(on); }, nb::arg("on"),
           "Lane groups walk their row's band of the tile list where that saves work (default) or the whole list.");
-    t.def("set_gaussian_band_margin", [](float px) { cpu::testing::gaussian_band_margin.store(px); }, nb::arg("px"),
-          "How far (px) gaussian_blending's row bands reach about the row's pixel centres (default 2).");
+    t.def("set_gaussian_band_margin", [](float px) {
+        if (!(px >= 0.0f && px <= 16.0f)) throw std::invalid_argument("the band margin must be in [0, 16] px");
+        cpu::testing::gaussian_band_margin.store(px);
+    }, nb::arg("px"), "How far (px, 0 ... 16) gaussian_blending's row bands reach about the row's pixel centres "
+                      "(default 2).");
     t.def("set_cut_flat_above", [](int64_t n) { cpu::testing::cut_flat_above.store(n); }, nb::arg("n"),
           "The level-of-detail cut walks top down; it evaluates every node instead once a level reaches more than n "
           "nodes, a quarter of it, and most of them open on (default 65536; 0: every node of any tree).");
+    t.def("set_cut_stop_after", [](int64_t n) { cpu::testing::cut_stop_after.store(n); }, nb::arg("n"),
+          "lod.cut stops, as if cancelled, once it has asked its stop n times (-1: never, the default).");
     t.def("set_poison_images", [](bool on) { cpu::testing::poison_images.store(on); }, nb::arg("on"),
           "Fill each new image with NaN (evaluation counts -1) before the blend (to show it writes every pixel).");
     t.def("set_capture_preprocess", [](bool on) { cpu::testing::capture.store(on); }, nb::arg("on"),

@@ -21,7 +21,7 @@ inline bool build_bands(const SplatBounds* b, int n, int y0, int rows, float mar
     }
     out.first.resize(n);
     out.last.resize(n);
-    int32_t cover[TILE + 1] = {};  // entries starting at row r minus those ending before it
+    int64_t cover[TILE + 1] = {};  // entries starting at row r minus those ending before it
     const float rows_f = (float)rows;
     for (int i = 0; i < n; ++i) {
         const float y0 = b[i].y0, y1 = b[i].y1;
@@ -41,14 +41,14 @@ inline bool build_bands(const SplatBounds* b, int n, int y0, int rows, float mar
         if (f <= l) ++cover[f], --cover[l + 1];
     }
     out.start[0] = 0;
-    int32_t rows_covered = 0;
+    int64_t rows_covered = 0;
     for (int r = 0; r < rows; ++r) {
         rows_covered += cover[r];
         out.start[r + 1] = out.start[r] + rows_covered;
     }
-    if ((int64_t)out.start[rows] * 2 > (int64_t)n * rows) return false;
+    if (out.start[rows] * 2 > (int64_t)n * rows) return false;
     out.idx.resize(out.start[rows]);
-    int32_t at[TILE];
+    int64_t at[TILE];
     std::copy(out.start, out.start + rows, at);
     for (int i = 0; i < n; ++i)
         for (int r = out.first[i]; r <= out.last[i]; ++r) out.idx[at[r]++] = i;

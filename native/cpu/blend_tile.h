@@ -57,7 +57,7 @@ inline SplatBounds gaussian_blending_bounds(const Splat2D& s) {
 // miss the box in y, so the walk's `outside` test would skip it anyway.
 struct Bands {
     float lo[TILE], hi[TILE];  // row r's band
-    int32_t start[TILE + 1];   // row r's entries: idx[start[r] .. start[r + 1])
+    int64_t start[TILE + 1];   // row r's entries: idx[start[r] .. start[r + 1])
     std::vector<int32_t> idx;
     std::vector<int8_t> first, last;  // each entry's rows first .. last (none when last < first)
 };
@@ -223,7 +223,10 @@ void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries
     bool alive[2] = {H::any(live.a), H::any(live.b)};
     for (int k = 0; k < 2; ++k) window_box<H>(get_half<H>(win, k), box[k]);
     for (int i = 0; i < L::N; ++i) out.evals[i] = job.n;
-    for (int i; (i = entries.next(job.n, std::min(box[0].ya, box[1].ya), std::max(box[0].yb, box[1].yb))) >= 0;) {
+    // both halves' boxes in y (a NaN side kept: it leaves the band, as in the one-box walk)
+    const auto lower = [](float a, float b) { return a != a || b != b ? a + b : std::min(a, b); };
+    const auto upper = [](float a, float b) { return a != a || b != b ? a + b : std::max(a, b); };
+    for (int i; (i = entries.next(job.n, lower(box[0].ya, box[1].ya), upper(box[0].yb, box[1].yb))) >= 0;) {
         const SplatBounds& b = job.bounds[i];
         const bool in[2] = {alive[0] && !outside(b, box[0].xa, box[0].xb, box[0].ya, box[0].yb),
                             alive[1] && !outside(b, box[1].xa, box[1].xb, box[1].ya, box[1].yb)};
@@ -332,7 +335,7 @@ void blend_tile(const TileJob& job) {
                 if (job.bands) {
                     const Bands& b = *job.bands;
                     const int r = y - job.y0;
-                    g.entries = {b.idx.data() + b.start[r], b.start[r + 1] - b.start[r], b.lo[r], b.hi[r]};
+                    g.entries = {b.idx.data() + b.start[r], (int)(b.start[r + 1] - b.start[r]), b.lo[r], b.hi[r]};
                 }
             }
             switch (job.mode) {

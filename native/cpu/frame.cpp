@@ -160,7 +160,7 @@ bool cut_rows(const SceneView& sc, const LodArgs& a, Stage& stage, FrameRun& run
                           (int32_t)sc.n, 0, [&run] { return run.cancelled(); });
     stage.rows.clear();
     stage.weights.clear();
-    if ((int64_t)c.rows.size() == sc.n && c.leaves == sc.n) return false;
+    if (c.stopped || ((int64_t)c.rows.size() == sc.n && c.leaves == sc.n)) return false;  // (a stop: not ready)
     stage.rows = std::move(c.rows);
     stage.weights = std::move(c.weights);
     return true;  // an empty cut (a root whose size is not a number) draws nothing, as cut_scene's gather

@@ -58,13 +58,14 @@ struct Cut {
     Plane<int32_t> rows;
     Plane<float> weights;
     int64_t leaves = 0;
+    bool stopped = false;  // the stop said true: rows and weights unspecified
 };
 
 // A node of projected size p px is drawn alone when p <= tau, replaced by its children when p >= tau (1 + band),
 // and drawn with weight 1 - o beside its children (weight o) in between, o = (p - tau) / (tau band). tau <= 0: the
 // leaves. Interior node i: centre means[i], radius, size as in Tree; its row in the Cut is node_base + i (the
 // renderer's rows continue the scene's). `stop` (thread-safe; may be empty) is asked every few thousand nodes: once
-// it says true the cut returns early, its contents unspecified (the caller, who knows it stopped, discards it).
+// it says true the cut returns early, `stopped`, its contents unspecified.
 using Stop = std::function<bool()>;
 Cut cut(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
         const int32_t* order, const View& v, double tau, double band, int32_t node_base, int threads,

@@ -5,12 +5,14 @@
 
 #include "omp_shim.h"
 
+#include <atomic>
 #include <cstring>
 #include <memory>
 #include <optional>
 
 #include "../bindings/nb_common.h"
 #include "lod.h"
+#include "testing.h"
 
 namespace nb = nanobind;
 using namespace gbv::nbc;
@@ -58,14 +60,19 @@ nb::object cut(FArr means, FArr radius, FArr size, LArr levels, IArr order, FArr
     if (cancel && cancel->shape(0) < 1) fail("lod cut", "cancel must hold at least one int64");
     const lod::View v{{eye.data()[0], eye.data()[1], eye.data()[2]}, focal, orthographic};
     const int64_t* flag = cancel ? cancel->data() : nullptr;
-    const auto stop = [flag] { return flag && __atomic_load_n(flag, __ATOMIC_RELAXED) != 0; };
+    const int64_t stop_after = cpu::testing::cut_stop_after.load(std::memory_order_relaxed);
+    std::atomic<int64_t> asks{0};
+    const auto stop = [flag, stop_after, &asks] {
+        return (flag && __atomic_load_n(flag, __ATOMIC_RELAXED) != 0) ||
+               (stop_after >= 0 && asks.fetch_add(1, std::memory_order_relaxed) >= stop_after);
+    };
     lod::Cut c;
     {
         nb::gil_scoped_release release;
         c = lod::cut(means.data(), radius.data(), size.data(), levels.data(), (int)L, order.data(), v, tau, band, 0,
                      threads, stop);
     }
-    if (stop()) return nb::none();
+    if (c.stopped) return nb::none();
     const size_t rows = c.rows.size();
     return nb::make_tuple(to_numpy(std::move(c.rows), {rows}), to_numpy(std::move(c.weights), {rows}), c.leaves);
 }

@@ -214,17 +214,12 @@ void sort_by_splat(Reached& in, int64_t n, int32_t* out_rows, float* out_w, int 
     if (passes == 0) std::copy(in.id.begin(), in.id.end(), out_rows), std::copy(in.w.begin(), in.w.end(), out_w);
 }
 
-}  // namespace
-
 // Top down from the root, visiting only the nodes the cut reaches (a node is reached when its parent opens, o > 0):
 // the cost follows the cut, not the scene (cut_flat once most of a large level is reached and most of it opens on;
 // testing's cut_flat_above 0: always). A reached node of weight w (the root 1) is drawn at w (1 - o) and passes w o
 // to its children: the products the flat definition forms, so both give the same cut.
-Cut cut(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
-        const int32_t* order, const View& v, double tau, double band, int32_t node_base, int threads,
-        const Stop& stop) {
-    const int nt = team(threads);
-    Halt halt(stop);
+Cut cut_walk(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
+             const int32_t* order, const View& v, double tau, double band, int32_t node_base, int nt, Halt& halt) {
     const int64_t n = levels[1], m = levels[num_levels - 1] - n;
     Cut c;
     if (m == 0) {  // one splat: the leaf
@@ -242,6 +237,8 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
     std::vector<Reached> drawn(num_levels);  // per level, ascending
     Plane<float> opens;  // the frontier's openings
     for (int l = num_levels - 2; l >= 1; --l) {  // level l's reached nodes: frontier
+        // (after a stop, part of the frontier was never written: read none of it)
+        if (halt.now()) return c;
         const int64_t reached = frontier.size();
         opens.clear();
         if (reached > flat_above && reached * 4 > levels[l + 1] - levels[l]) {
@@ -258,7 +255,6 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
             if (l == 1 ? opened * BRANCHING * 3 > n : opened * 4 > reached * 3)
                 return cut_flat(means, radius, size, levels, num_levels, order, v, tau, band, node_base, nt, halt);
         }
-        if (halt.now()) return c;
         walk_level(frontier, opens, l, means, radius, size, levels, order, v, tau, band, nt, halt, drawn[l],
                    l == 1 ? leaves : next);
         std::swap(frontier, next);
@@ -288,6 +284,18 @@ Cut cut(const float* means, const float* radius, const float* size, const int64_
         const Reached& d = drawn[l];
         for (int64_t j = 0; j < d.size(); ++j, ++at) c.rows[at] = node_base + d.id[j], c.weights[at] = d.w[j];
     }
+    return c;
+}
+
+}  // namespace
+
+// The cut (lod.h); `stopped` once the stop said true.
+Cut cut(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
+        const int32_t* order, const View& v, double tau, double band, int32_t node_base, int threads,
+        const Stop& stop) {
+    Halt halt(stop);
+    Cut c = cut_walk(means, radius, size, levels, num_levels, order, v, tau, band, node_base, team(threads), halt);
+    c.stopped = halt.now();
     return c;
 }
 

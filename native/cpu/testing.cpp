@@ -17,6 +17,7 @@ std::atomic<bool> pixel_boxes{true};
 std::atomic<bool> row_bands{true};
 std::atomic<float> gaussian_band_margin{2.0f};
 std::atomic<int64_t> cut_flat_above{65536};
+std::atomic<int64_t> cut_stop_after{-1};
 std::atomic<bool> poison_images{false};
 std::atomic<bool> capture{false};
 

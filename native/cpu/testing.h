@@ -27,6 +27,9 @@ extern std::atomic<float> gaussian_band_margin;
 // evaluation for any tree, to show both give the same cut.
 extern std::atomic<int64_t> cut_flat_above;
 
+// gbviewer._native.lod.cut stops (as if cancelled) once it has asked its stop this many times; -1: never (default).
+extern std::atomic<int64_t> cut_stop_after;
+
 // Fill each new image with NaN (evaluation counts -1) before the blend, to show that it writes every pixel.
 extern std::atomic<bool> poison_images;
 
