@@ -148,7 +148,10 @@ void walk_level(const Reached& frontier, Plane<float>& o, int l, const float* me
             if (!known) o[f] = opening(means, radius, size, frontier.id[f], v, tau, band);
             const float w = frontier.w[f];
             k += w * (1.0f - o[f]) > 0.0f;
-            if (w * o[f] > 0.0f) c += children(f).second - children(f).first;
+            if (w * o[f] > 0.0f) {
+                const auto [first, last] = children(f);
+                c += last - first;
+            }
         }
         kept[th + 1] = k, kids[th + 1] = c;
 #pragma omp barrier

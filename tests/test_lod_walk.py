@@ -1,0 +1,85 @@
+"""The level-of-detail cut's top-down walk (native/cpu/lod_cut.cpp) against the cut by its definition over every node:
+bit for bit on small and large trees and any thread count, and a stop anywhere in it cancelling the whole cut."""
+
+from __future__ import annotations
+
+import numpy as np
+from helpers import random_scene
+from test_lod import cameras
+
+import gbviewer as gb
+from gbviewer import lod
+from gbviewer.errors import RenderCancelled
+
+
+def cut_over_every_node(tree: lod.Hierarchy, cam: gb.Camera, tau: float, band: float = lod.DEFAULT_BAND) -> lod.Cut:
+    """The cut by its definition: the walk forced to evaluate every node (as it does once most of a large tree is
+    reached)."""
+    from gbviewer._native import testing
+
+    try:
+        testing.set_cut_flat_above(0)
+        return lod.cut(tree, cam, tau, band)
+    finally:
+        testing.set_cut_flat_above(65536)
+
+
+def assert_same_cut(got: lod.Cut, want: lod.Cut, where) -> None:
+    """Indices and weights equal bit for bit, dtypes too."""
+    for field in ("leaves", "leaf_weights", "nodes", "node_weights"):
+        a, b = getattr(got, field), getattr(want, field)
+        assert a.dtype == b.dtype and np.array_equal(a, b), (where, field)
+
+
+def test_the_top_down_cut_equals_the_cut_over_every_node():
+    """The cut walks only the nodes it reaches; forced to evaluate every node (as it does once most of a large tree
+    is reached) it gives the same indices and weights, bit for bit."""
+    scene = random_scene(5000, seed=13, spread=3.0)
+    tree = lod.build(scene)
+    for cam in cameras(scene, 5):
+        for tau, band in ((0.0, 1.0), (0.5, 1.0), (2.0, 0.0), (10.0, 1.0), (200.0, 1.0)):
+            assert_same_cut(lod.cut(tree, cam, tau, band), cut_over_every_node(tree, cam, tau, band), (cam.name, tau))
+
+
+def test_the_top_down_cut_equals_the_cut_over_every_node_on_a_large_tree():
+    """Large enough for the walk's levels to run on several threads (counted, then written at each thread's offsets)
+    and for its leaves to be sorted by the parallel radix sort (a coarse cut) or placed by splat (a finer one)."""
+    scene = random_scene(400_000, seed=21, spread=30.0)
+    tree = lod.build(scene)
+    n = scene.num_splats
+    for dist, lo, hi in ((750.0, 16384, n // 16), (600.0, n // 16, n // 4)):  # leaves: sorted, placed
+        cam = gb.Camera(640, 480, 500.0, 500.0, 320, 240, np.eye(3), np.array([0.0, 0.0, dist]))
+        flat = cut_over_every_node(tree, cam, 2.0)
+        for threads in (1, 2, 3):
+            walked = lod.cut(tree, cam, 2.0, threads=threads)
+            assert lo <= len(walked.leaves) < hi, (dist, len(walked.leaves))
+            assert_same_cut(walked, flat, (dist, threads))
+
+
+def test_a_cut_stopped_anywhere_is_cancelled_never_partial():
+    """A stop at any of a cut's checks (between levels, inside a level's count or write, the fallback's check, the
+    leaves' sort) raises RenderCancelled; a cut that was not stopped is the whole cut. Levels large enough for the
+    fallback's check (lowered to 1000 nodes) and several threads."""
+    from gbviewer._native import testing
+
+    scene = random_scene(60_000, seed=22, spread=10.0)
+    tree = lod.build(scene)
+    cams = [gb.Camera(320, 240, 250.0, 250.0, 160, 120, np.eye(3), np.array([0.0, 0.0, d])) for d in (150.0, 300.0)]
+    try:
+        testing.set_cut_flat_above(1000)
+        for cam in cams:
+            full = lod.cut(tree, cam, 1.0, threads=3)
+            stopped = 0
+            for k in range(0, 90, 2):
+                testing.set_cut_stop_after(k)
+                try:
+                    got = lod.cut(tree, cam, 1.0, threads=3)
+                except RenderCancelled:
+                    stopped += 1
+                    continue
+                finally:
+                    testing.set_cut_stop_after(-1)
+                assert_same_cut(got, full, k)
+            assert 3 <= stopped < 45, stopped  # the stop did land inside these cuts, and some ran to the end
+    finally:
+        testing.set_cut_flat_above(65536)
