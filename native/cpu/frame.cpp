@@ -183,10 +183,11 @@ void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& pat
     const int64_t n = cut ? (int64_t)stage.rows.size() : sc.n;
     stage.splats.resize(n);
     stage.valid.resize(n);
+    stage.depth.resize(n);
     const CameraParams& cam = key.cam;
     StageJob job{sc.means,  sc.scales, sc.quats, sc.opacities, sc.sh, sc.filter_3d, sc.k, key.sh_deg, cam,
                  key.reach, (cam.width + TILE - 1) / TILE, (cam.height + TILE - 1) / TILE, stage.splats.data(),
-                 stage.valid.data()};
+                 stage.valid.data(), stage.depth.data()};
     job.n_scene = sc.n;
     if (cut) {
         const SceneView::Hierarchy& t = sc.tree;
@@ -238,7 +239,7 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
     } else {
         if (!stage.order_ready) {  // once per stage: every later frame of this camera bins in it
             t0 = Clock::now();
-            depth_order(stage.splats, stage.valid, stage.order, stage.order_scratch, run);
+            depth_order(stage.depth, stage.order, stage.order_scratch, run);
             if (run.cancelled()) return;
             stage.order_ready = true;
             st.order_ms += ms_since(t0);

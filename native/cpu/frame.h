@@ -17,6 +17,7 @@
 #include <cstring>
 #include <vector>
 
+#include "plane.h"
 #include "renderer.h"
 #include "simd.h"
 
@@ -100,13 +101,15 @@ struct Stage {
     Plane<float> weights;
     std::vector<StageSplat> splats;
     std::vector<uint8_t> valid;  // in front of the near plane and on screen in some mode
+    Plane<uint32_t> depth;       // StageJob::depth: a valid splat's depth bits, else NO_DEPTH
     // One depth order of the stage's valid splats (depth_order's keys), computed by the first frame that bins in
     // depth order and shared by every later one: each bins in it, skipping the splats its finish culls (a superset's
     // order gives the same tile lists). Not ready after build_stage or a cancelled sort.
     std::vector<uint64_t> order, order_scratch;
     bool order_ready = false;
     size_t bytes() const {
-        return splats.capacity() * sizeof(StageSplat) + valid.capacity() + rows.capacity() * sizeof(int32_t) +
+        return splats.capacity() * sizeof(StageSplat) + valid.capacity() + depth.capacity() * sizeof(uint32_t) +
+               rows.capacity() * sizeof(int32_t) +
                weights.capacity() * sizeof(float) +
                (order.capacity() + order_scratch.capacity()) * sizeof(uint64_t);
     }
@@ -189,19 +192,18 @@ private:
 };
 
 // A splat's depth key: depth bits in the high 32 bits (depth > near > 0: the bits order as the floats), id low.
-template <class S>  // Splat2D or StageSplat (the same depth)
-uint64_t depth_key(const S& s, uint32_t id) {
+inline uint64_t depth_key(uint32_t depth_bits, uint32_t id) { return ((uint64_t)depth_bits << 32) | id; }
+inline uint64_t depth_key(const Splat2D& s, uint32_t id) {
     uint32_t bits;
     std::memcpy(&bits, &s.depth, 4);
-    return ((uint64_t)bits << 32) | id;
+    return depth_key(bits, id);
 }
 
-// order.cpp: the depth keys of the splats with valid[i] != 0, ascending (depth bits, then id), in `order` (resized
-// to their count); `scratch` is the radix sort's second buffer. Parallel, checks run.cancelled(): a cancelled call
-// leaves `order` unspecified (the caller checks run.cancelled() before using it).
-template <class S>  // Splat2D or StageSplat
-void depth_order(const std::vector<S>& splats, const std::vector<uint8_t>& valid, std::vector<uint64_t>& order,
-                 std::vector<uint64_t>& scratch, FrameRun& run);
+// order.cpp: the depth keys (depth bits, id) of the splats whose depth[i] is not NO_DEPTH, ascending, in `order`
+// (resized to their count); `scratch` is the radix sort's second buffer. Parallel, checks run.cancelled(): a
+// cancelled call leaves `order` unspecified (the caller checks run.cancelled() before using it).
+void depth_order(const Plane<uint32_t>& depth, std::vector<uint64_t>& order, std::vector<uint64_t>& scratch,
+                 FrameRun& run);
 
 // binning.cpp: each tile's list of (depth bits, splat id) keys in the order of `order` (count keys, e.g. a
 // depth_order; entries whose splat is not valid[] are skipped, so the order of a superset serves), or in splat order

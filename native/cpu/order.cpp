@@ -16,12 +16,13 @@ constexpr int MAX_RANGES = 64;  // bounds the histograms (ranges x BUCKETS) on m
 
 int digit(uint64_t key, int pass) { return (int)(key >> (32 + DIGIT_BITS * pass)) & (BUCKETS - 1); }
 
-// Input i of a pass: the first pass reads the splats (the visible ones, in id order), later ones the previous keys.
-template <bool FIRST, class S>
-bool input_key(const S* splats, const uint8_t* valid, const uint64_t* src, int64_t i, uint64_t& key) {
+// Input i of a pass: the first pass reads the stage's depth bits (the valid splats', in id order), later ones the
+// previous keys.
+template <bool FIRST>
+bool input_key(const uint32_t* depth, const uint64_t* src, int64_t i, uint64_t& key) {
     if constexpr (FIRST) {
-        if (!valid[i]) return false;
-        key = depth_key(splats[i], (uint32_t)i);
+        if (depth[i] == NO_DEPTH) return false;
+        key = depth_key(depth[i], (uint32_t)i);
     } else {
         key = src[i];
     }
@@ -31,8 +32,8 @@ bool input_key(const S* splats, const uint8_t* valid, const uint64_t* src, int64
 // One pass of digit `pass` over inputs [0, len) into dst (the first pass sizes dst and `also` to the visible count,
 // between its two parallel loops: an allocation failure is a MemoryError, not an abort inside OpenMP). False when
 // cancelled, dst then unspecified.
-template <bool FIRST, class S>
-bool radix_pass(int pass, int64_t len, const S* splats, const uint8_t* valid, const uint64_t* src,
+template <bool FIRST>
+bool radix_pass(int pass, int64_t len, const uint32_t* depth, const uint64_t* src,
                 std::vector<uint64_t>& dst, std::vector<uint64_t>& also, std::vector<int64_t>& hist, int ranges,
                 FrameRun& run) {
 #pragma omp parallel for num_threads(ranges) schedule(static, 1)
@@ -42,7 +43,7 @@ bool radix_pass(int pass, int64_t len, const S* splats, const uint8_t* valid, co
         CancelPoll poll(run);
         uint64_t key;
         for (int64_t i = len * k / ranges; i < len * (k + 1) / ranges; ++i) {
-            if (input_key<FIRST>(splats, valid, src, i, key)) ++h[digit(key, pass)];
+            if (input_key<FIRST>(depth, src, i, key)) ++h[digit(key, pass)];
             if (poll(1)) break;
         }
     }
@@ -65,7 +66,7 @@ bool radix_pass(int pass, int64_t len, const S* splats, const uint8_t* valid, co
         CancelPoll poll(run);
         uint64_t key;
         for (int64_t i = len * k / ranges; i < len * (k + 1) / ranges; ++i) {
-            if (input_key<FIRST>(splats, valid, src, i, key)) out[slot[digit(key, pass)]++] = key;
+            if (input_key<FIRST>(depth, src, i, key)) out[slot[digit(key, pass)]++] = key;
             if (poll(1)) break;
         }
     }
@@ -74,24 +75,17 @@ bool radix_pass(int pass, int64_t len, const S* splats, const uint8_t* valid, co
 
 }  // namespace
 
-template <class S>
-void depth_order(const std::vector<S>& splats, const std::vector<uint8_t>& valid, std::vector<uint64_t>& order,
-                 std::vector<uint64_t>& scratch, FrameRun& run) {
+void depth_order(const Plane<uint32_t>& depth, std::vector<uint64_t>& order, std::vector<uint64_t>& scratch,
+                 FrameRun& run) {
     const int ranges = std::max(1, std::min(omp_get_max_threads(), MAX_RANGES));
     std::vector<int64_t> hist((size_t)ranges * BUCKETS);
-    // splats -> order -> scratch -> order
-    if (!radix_pass<true>(0, (int64_t)splats.size(), splats.data(), valid.data(), nullptr, order, scratch, hist,
-                          ranges, run))
+    // depth -> order -> scratch -> order
+    if (!radix_pass<true>(0, (int64_t)depth.size(), depth.data(), nullptr, order, scratch, hist, ranges, run))
         return;
     static_assert(PASSES == 3, "the passes below alternate order and scratch and end in order");
     const int64_t count = (int64_t)order.size();
-    if (!radix_pass<false, S>(1, count, nullptr, nullptr, order.data(), scratch, order, hist, ranges, run)) return;
-    radix_pass<false, S>(2, count, nullptr, nullptr, scratch.data(), order, scratch, hist, ranges, run);
+    if (!radix_pass<false>(1, count, nullptr, order.data(), scratch, order, hist, ranges, run)) return;
+    radix_pass<false>(2, count, nullptr, scratch.data(), order, scratch, hist, ranges, run);
 }
-
-template void depth_order(const std::vector<Splat2D>&, const std::vector<uint8_t>&, std::vector<uint64_t>&,
-                          std::vector<uint64_t>&, FrameRun&);
-template void depth_order(const std::vector<StageSplat>&, const std::vector<uint8_t>&, std::vector<uint64_t>&,
-                          std::vector<uint64_t>&, FrameRun&);
 
 }  // namespace gbv::cpu
