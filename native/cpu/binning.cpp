@@ -12,8 +12,8 @@ namespace gbv::cpu {
 
 // Binning of splats, in parallel: the order (or the splat order) is split into up to BIN_THREADS ranges; each range
 // counts the tiles of its valid splats, a prefix sum over (tile, range) gives every range its slots in every tile,
-// and each range writes its keys there. The ranges follow the order, so each tile's list comes out in that order
-// (depth order from depth_order: no per-tile sort). The key buffer is sized between the two parallel passes (an
+// and each range writes its splat ids there. The ranges follow the order, so each tile's list comes out in that order
+// (depth order from depth_order: no per-tile sort). The id buffer is sized between the two parallel passes (an
 // allocation failure is a MemoryError, not an abort inside OpenMP). The counting pass also copies each splat's tile
 // rectangle to its place in the order (`ranked`; empty for a splat that is not valid), so that the writing pass
 // streams it instead of gathering rects[] and valid[] in depth order a second time (the gather, a cache miss per
@@ -21,13 +21,11 @@ namespace gbv::cpu {
 constexpr int BIN_THREADS = 8;  // bounds the counts buffer (ranges x tiles) on many-core machines
 constexpr int64_t AHEAD = 16;   // prefetch distance of the gather, in splats
 
-void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>& rects,
-                const std::vector<uint8_t>& valid, const uint64_t* order, int64_t count, int gx,
-                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, std::vector<RankedRect>& ranked,
+void bin_splats(const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, const uint64_t* order,
+                int64_t count, int gx, std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids, std::vector<RankedRect>& ranked,
                 Stats& st, FrameRun& run) {
     const int num_tiles = (int)tile_start.size() - 1;
     auto t0 = Clock::now();
-    const auto key_at = [&](int64_t p) { return order ? order[p] : depth_key(splats[p], (uint32_t)p); };
     const int ranges = std::max(1, std::min(omp_get_max_threads(), BIN_THREADS));
     if (gx > UINT16_MAX || num_tiles / gx > UINT16_MAX) throw std::length_error("bin_splats: tile grid over 2^16");
     std::vector<int64_t> slots((size_t)ranges * num_tiles, 0);  // [range][tile]: counts, then write cursors
@@ -67,11 +65,11 @@ void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>&
         }
     }
     tile_start[num_tiles] = total;
-    if ((size_t)total > keys.capacity()) {  // grown with slack, without copying: a moving camera's count varies
-        keys = std::vector<uint64_t>();
-        keys.reserve((size_t)total + (size_t)total / 8);
+    if ((size_t)total > ids.capacity()) {  // grown with slack, without copying: a moving camera's count varies
+        ids = std::vector<uint32_t>();
+        ids.reserve((size_t)total + (size_t)total / 8);
     }
-    keys.resize(total);
+    ids.resize(total);
 #pragma omp parallel for num_threads(ranges) schedule(static, 1)
     for (int k = 0; k < ranges; ++k) {
         int64_t* cursor = slots.data() + (size_t)k * num_tiles;
@@ -79,9 +77,9 @@ void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>&
         for (int64_t p = count * k / ranges; p < count * (k + 1) / ranges; ++p) {
             const RankedRect r = ranked[p];
             if (r.x1 <= r.x0) continue;
-            const uint64_t key = key_at(p);
+            const uint32_t id = order ? (uint32_t)order[p] : (uint32_t)p;
             for (int ty = r.y0; ty < r.y1; ++ty)
-                for (int tx = r.x0; tx < r.x1; ++tx) keys[cursor[ty * gx + tx]++] = key;
+                for (int tx = r.x0; tx < r.x1; ++tx) ids[cursor[ty * gx + tx]++] = id;
             if (poll(1 + (int64_t)(r.y1 - r.y0) * (r.x1 - r.x0))) break;
         }
     }
@@ -96,7 +94,7 @@ void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>&
 // (splat_less) so that the image does not depend on how the scene orders a cell's splats.
 void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<Splat2D>& splats,
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
-                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st, FrameRun& run) {
+                std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids, Stats& st, FrameRun& run) {
     const int num_tiles = gx * gy;
     const int64_t m = sc.m;
     auto t0 = Clock::now();
@@ -163,7 +161,7 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
             if (poll(1 + (int64_t)(r.y1 - r.y0) * (r.x1 - r.x0))) return;
         }
     }
-    keys.resize(tile_start[num_tiles]);
+    ids.resize(tile_start[num_tiles]);
 #pragma omp parallel for schedule(dynamic, 4)
     for (int t = 0; t < num_tiles; ++t) {
         if (run.cancelled()) continue;
@@ -171,7 +169,7 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
         int64_t o = tile_start[t];
         for (int64_t k = cell_tile_start[t]; k < cell_tile_start[t + 1]; ++k) {
             const uint32_t c = (uint32_t)ckeys[k];
-            for (int64_t j = vis_start[c]; j < vis_start[c + 1]; ++j) keys[o++] = (uint32_t)vis[j];
+            for (int64_t j = vis_start[c]; j < vis_start[c + 1]; ++j) ids[o++] = (uint32_t)vis[j];
         }
     }
     if (run.cancelled()) return;

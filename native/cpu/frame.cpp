@@ -101,12 +101,12 @@ void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTile
     constexpr int64_t AHEAD = 8;  // the list's splats are scattered over the frame's: fetch them ahead of the copy
     for (int64_t j = 0; j < count; ++j) {
         if (j + AHEAD < count) {
-            const uint32_t next = (uint32_t)b.keys[begin + j + AHEAD];
+            const uint32_t next = b.ids[begin + j + AHEAD];
             __builtin_prefetch(&b.splats[next]);
             __builtin_prefetch((const char*)&b.splats[next] + sizeof(Splat2D) - 1);
             __builtin_prefetch(&b.boxes[next]);
         }
-        const uint32_t id = (uint32_t)b.keys[begin + j];
+        const uint32_t id = b.ids[begin + j];
         local[j] = b.splats[id];
         bounds[j] = b.boxes[id];
     }
@@ -230,12 +230,12 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
     st.preprocess_ms += ms_since(t0);
 
     std::vector<int64_t>& tile_start = buf.tile_start;
-    std::vector<uint64_t>& keys = buf.keys;  // per tile list entry: splat id in the low 32 bits
+    std::vector<uint32_t>& ids = buf.ids;
     tile_start.assign(gx * gy + 1, 0);
     if (mode == DUPLEX) {
-        bin_duplex(sc, cam, splats, rects, valid, gx, gy, tile_start, keys, st, run);
+        bin_duplex(sc, cam, splats, rects, valid, gx, gy, tile_start, ids, st, run);
     } else if (mode == WSR) {  // order-independent: the splat order
-        bin_splats(splats, rects, valid, nullptr, n, gx, tile_start, keys, buf.ranked, st, run);
+        bin_splats(rects, valid, nullptr, n, gx, tile_start, ids, buf.ranked, st, run);
     } else {
         if (!stage.order_ready) {  // once per stage: every later frame of this camera bins in it
             t0 = Clock::now();
@@ -248,12 +248,13 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
             st.order_reused = true;
         }
         st.sort_length += (int64_t)stage.order.size();
-        bin_splats(splats, rects, valid, stage.order.data(), (int64_t)stage.order.size(), gx, tile_start, keys,
+        bin_splats(rects, valid, stage.order.data(), (int64_t)stage.order.size(), gx, tile_start, ids,
                    buf.ranked, st, run);
     }
     if (run.cancelled()) return;
-    if (keys.capacity() > 4 * keys.size() + (1u << 20)) keys.shrink_to_fit();  // after a much larger frame
-    if (testing::capture.load(std::memory_order_relaxed)) testing::record_lists(tile_start, keys);
+    if (ids.capacity() > 4 * ids.size() + (1u << 20)) ids.shrink_to_fit();  // after a much larger frame
+    if (testing::capture.load(std::memory_order_relaxed))
+        testing::record_lists(tile_start, ids, splats, mode != DUPLEX);
 }
 
 void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile, FrameRun& run) {
@@ -303,7 +304,7 @@ PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const
     bin_frame(sc, stage, mode, oit, path, buf, st, run);
     splat_boxes(buf.splats, mode, buf.boxes, run);
     const CameraParams& cam = stage.key.cam;
-    FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.keys.data(), cam.width,
+    FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.ids.data(), cam.width,
                         cam.height, mode, oit, {bg[0], bg[1], bg[2]}};
     FlushDenormals ftz;
     return trace_pixel(lists, x, y, N);

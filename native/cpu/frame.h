@@ -126,7 +126,7 @@ struct FrameBuffers {
     std::vector<TileRect> rects;
     std::vector<uint8_t> valid;
     std::vector<int64_t> tile_start;
-    std::vector<uint64_t> keys;  // per tile list entry: splat id in the low 32 bits
+    std::vector<uint32_t> ids;  // per tile list entry: its splat (4 bytes: half the traffic of a depth key)
     std::vector<SplatBounds> boxes;
     std::vector<RankedRect> ranked;  // bin_splats' scratch
 };
@@ -205,18 +205,17 @@ inline uint64_t depth_key(const Splat2D& s, uint32_t id) {
 void depth_order(const Plane<uint32_t>& depth, std::vector<uint64_t>& order, std::vector<uint64_t>& scratch,
                  FrameRun& run);
 
-// binning.cpp: each tile's list of (depth bits, splat id) keys in the order of `order` (count keys, e.g. a
-// depth_order; entries whose splat is not valid[] are skipped, so the order of a superset serves), or in splat order
-// when `order` is null (wsr); tile_start (num_tiles + 1 entries) gets each tile's first entry. duplex: the tiles'
-// cells front to back, each expanded to its visible splats in canonical order. Both stop early once cancelled
-// (tile_start and keys then unspecified).
-void bin_splats(const std::vector<Splat2D>& splats, const std::vector<TileRect>& rects,
-                const std::vector<uint8_t>& valid, const uint64_t* order, int64_t count, int gx,
-                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, std::vector<RankedRect>& ranked,
-                Stats& st, FrameRun& run);
+// binning.cpp: each tile's list of splat ids in the order of `order` (count depth keys, e.g. a depth_order; entries
+// whose splat is not valid[] are skipped, so the order of a superset serves), or in splat order when `order` is null
+// (wsr); tile_start (num_tiles + 1 entries) gets each tile's first entry. duplex: the tiles' cells front to back,
+// each expanded to its visible splats in canonical order. Both stop early once cancelled (tile_start and ids then
+// unspecified).
+void bin_splats(const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, const uint64_t* order,
+                int64_t count, int gx, std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids,
+                std::vector<RankedRect>& ranked, Stats& st, FrameRun& run);
 void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<Splat2D>& splats,
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
-                std::vector<int64_t>& tile_start, std::vector<uint64_t>& keys, Stats& st, FrameRun& run);
+                std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids, Stats& st, FrameRun& run);
 
 // frame.cpp: the stage of `key` into `stage` (every splat, or the level-of-detail cut's; stops early once cancelled,
 // leaving it not ready).

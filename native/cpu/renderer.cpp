@@ -273,7 +273,7 @@ size_t Renderer::buffer_bytes() const {
     size_t bytes = 0;
     for (const FrameBuffers& b : impl_->buffers)
         bytes += b.splats.capacity() * sizeof(Splat2D) + b.rects.capacity() * sizeof(TileRect) + b.valid.capacity() +
-                 b.tile_start.capacity() * sizeof(int64_t) + b.keys.capacity() * sizeof(uint64_t) +
+                 b.tile_start.capacity() * sizeof(int64_t) + b.ids.capacity() * sizeof(uint32_t) +
                  b.boxes.capacity() * sizeof(SplatBounds);
     for (const Stage& s : impl_->stages) bytes += s.bytes();
     return bytes;

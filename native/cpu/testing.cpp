@@ -46,10 +46,16 @@ std::vector<uint8_t> captured_preprocess() {
     return captured;
 }
 
-void record_lists(const std::vector<int64_t>& tile_start, const std::vector<uint64_t>& keys) {
+void record_lists(const std::vector<int64_t>& tile_start, const std::vector<uint32_t>& ids,
+                  const std::vector<Splat2D>& splats, bool depth_keys) {
     std::lock_guard<std::mutex> lock(captured_mutex);
     captured_starts = tile_start;
-    captured_keys = keys;
+    captured_keys.resize(ids.size());
+    for (size_t j = 0; j < ids.size(); ++j) {
+        uint32_t bits = 0;
+        if (depth_keys) std::memcpy(&bits, &splats[ids[j]].depth, 4);
+        captured_keys[j] = ((uint64_t)bits << 32) | ids[j];
+    }
 }
 
 std::pair<std::vector<int64_t>, std::vector<uint64_t>> captured_lists() {

@@ -38,8 +38,10 @@ extern std::atomic<bool> poison_images;
 extern std::atomic<bool> capture;
 void record_preprocess(const Splat2D* splats, const TileRect* rects, const uint8_t* valid, int64_t n);
 std::vector<uint8_t> captured_preprocess();
-// ... and of its tile lists (bin_frame's tile_start and keys).
-void record_lists(const std::vector<int64_t>& tile_start, const std::vector<uint64_t>& keys);
+// ... and of its tile lists (bin_frame's tile_start and ids), each entry as its depth key (depth bits << 32 | splat
+// id; only the id where not depth_keys: duplex).
+void record_lists(const std::vector<int64_t>& tile_start, const std::vector<uint32_t>& ids,
+                  const std::vector<Splat2D>& splats, bool depth_keys);
 std::pair<std::vector<int64_t>, std::vector<uint64_t>> captured_lists();
 
 // How many of the floats with bit patterns in [begin, end) (multiples of 4) half_bits (half.h) converts otherwise

@@ -92,7 +92,7 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
             bounds.resize(count);
             ids.resize(count);
             for (int64_t j = 0; j < count; ++j) {  // as blend_tiles copies a tile's list
-                ids[j] = (uint32_t)f.keys[begin + j];
+                ids[j] = f.ids[begin + j];
                 list[j] = f.splats[ids[j]];
                 bounds[j] = f.boxes[ids[j]];
             }

@@ -11,13 +11,13 @@
 namespace gbv {
 
 // What a frame's binning leaves for its blend (frame.cpp): the splats and their boxes by splat id, the tile lists
-// (tile t: keys[tile_start[t] .. tile_start[t + 1]), splat id in the low 32 bits), at the frame's size (the
+// (tile t: the splats ids[tile_start[t] .. tile_start[t + 1])), at the frame's size (the
 // sub-sample grid when supersampling).
 struct FrameLists {
     const Splat2D* splats;
     const SplatBounds* boxes;
     const int64_t* tile_start;
-    const uint64_t* keys;
+    const uint32_t* ids;
     int width, height;
     Mode mode;
     OitParams oit;
