@@ -83,3 +83,64 @@ def test_a_cut_stopped_anywhere_is_cancelled_never_partial():
             assert 3 <= stopped < 45, stopped  # the stop did land inside these cuts, and some ran to the end
     finally:
         testing.set_cut_flat_above(65536)
+
+
+def cut_by_numpy(tree: lod.Hierarchy, cam: gb.Camera, tau: float, band: float) -> lod.Cut:
+    """The cut's definition (gbviewer.lod.cut) computed independently in numpy: each interior node's o from its
+    projected size in float64, rounded to float32 as the native cut keeps it; weights multiplied top-down in float32."""
+    from gbviewer.lod.tree import BRANCHING
+
+    n, lv = tree.num_leaves, tree.levels
+    f = float(max(cam.fx, cam.fy))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if cam.orthographic:
+            p = tree.size.astype(np.float64) * f
+        else:
+            d = tree.means.astype(np.float64) - np.asarray(cam.position, np.float32).astype(np.float64)
+            gap = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]) - tree.radius
+            p = np.where(gap > 0, tree.size.astype(np.float64) * f / gap, np.inf)
+        if tau <= 0:
+            o = np.ones_like(p)
+        else:
+            o = np.clip((p - tau) / (tau * band), 0.0, 1.0) if band > 0 else (p >= tau).astype(np.float64)
+    o = o.astype(np.float32)
+    w = np.zeros(len(o), np.float32)
+    w[-1] = 1.0
+    for level in range(len(lv) - 3, 0, -1):
+        ids = np.arange(lv[level], lv[level + 1])
+        parent = lv[level + 1] + (ids - lv[level]) // BRANCHING - n
+        w[ids - n] = w[parent] * o[parent]
+    parent = lv[1] + np.arange(n) // BRANCHING - n
+    leaf_w = np.empty(n, np.float32)
+    leaf_w[tree.order] = w[parent] * o[parent]
+    node_w = w * (np.float32(1.0) - o)
+    leaves, nodes = np.flatnonzero(leaf_w > 0).astype(np.int32), np.flatnonzero(node_w > 0).astype(np.int32)
+    return lod.Cut(leaves, leaf_w[leaves], nodes, node_w[nodes])
+
+
+def test_the_cut_equals_its_definition_computed_in_numpy_at_the_band_edges():
+    """The native opening test decides most nodes without a square root or a division and defers to the exact form
+    within a margin: every node's o must still be the definition's. tau is put a hair (1e-13 relative) on either
+    side of nodes' exact projected sizes, and the band's upper edge likewise (band 1e-9 makes o there visible in
+    float32), for cameras outside and inside the scene and an orthographic one."""
+    scene = random_scene(20_000, seed=31, spread=6.0)
+    tree = lod.build(scene)
+    rng = np.random.default_rng(31)
+    checked = 0
+    for cam in cameras(scene, 8):
+        f = float(max(cam.fx, cam.fy))
+        if cam.orthographic:
+            p = tree.size.astype(np.float64) * f
+        else:
+            d = tree.means.astype(np.float64) - np.asarray(cam.position, np.float32).astype(np.float64)
+            gap = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]) - tree.radius
+            p = np.where(gap > 0, tree.size.astype(np.float64) * f / np.maximum(gap, 1e-30), np.inf)
+        finite = np.flatnonzero(np.isfinite(p) & (p > 0))
+        for k in rng.choice(finite, 4, replace=False):
+            for nudge in (-1e-13, 0.0, 1e-13):
+                for tau, band in ((p[k] * (1 + nudge), 1.0), (p[k] * (1 + nudge), 0.0),
+                                  (p[k] / (1 + 1e-9) * (1 + nudge), 1e-9)):
+                    want = cut_by_numpy(tree, cam, tau, band)
+                    assert_same_cut(lod.cut(tree, cam, tau, band), want, (cam.name, k, nudge, band))
+                    checked += 1
+    assert checked == 6 * 4 * 3 * 3

@@ -33,7 +33,14 @@ private:
     std::atomic<bool> hit_{false};
 };
 
-// o of interior node i (its projected size against tau; see cut in lod.h).
+// A relative margin far above the double rounding of either form of the opening's tests (~1e-15).
+constexpr double SURE = 1e-9;
+
+// o of interior node i (its projected size against tau; see cut in lod.h). In perspective p = s / gap (s = size x
+// focal, gap = |d| - radius, p infinite where gap <= 0), so with hi = tau (1 + band): p >= hi (o = 1) iff
+// |d| hi <= s + radius hi, and p <= tau (o = 0, for s >= 0) iff |d| tau >= s + radius tau. Both are decided squared,
+// without a square root or a division, where they hold by the margin SURE (most nodes; 8 % of the 6.1 M scene's x1/8
+// cut), else by the exact form.
 float opening(const float* means, const float* radius, const float* size, int64_t i, const View& v, double tau,
               double band) {
     double p = INFINITY;  // projected size in pixels
@@ -41,8 +48,15 @@ float opening(const float* means, const float* radius, const float* size, int64_
         p = size[i] * v.focal;
     } else {
         const double d[3] = {means[3 * i] - v.eye[0], means[3 * i + 1] - v.eye[1], means[3 * i + 2] - v.eye[2]};
-        const double gap = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - radius[i];
-        if (gap > 0) p = size[i] * v.focal / gap;
+        const double dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        const double s = size[i] * v.focal, r = radius[i];
+        if (tau > 0) {
+            const double hi = tau * (1.0 + std::max(band, 0.0)), a = s + r * hi, b = s + r * tau;
+            if (a >= 0 && dd * hi * hi < a * a * (1.0 - SURE)) return 1.0f;
+            if (s >= 0 && b >= 0 && dd * tau * tau * (1.0 - SURE) > b * b) return 0.0f;
+        }
+        const double gap = std::sqrt(dd) - r;
+        if (gap > 0) p = s / gap;
     }
     double o = 1.0;
     if (tau > 0) o = band > 0 ? std::clamp((p - tau) / (tau * band), 0.0, 1.0) : (p >= tau ? 1.0 : 0.0);
