@@ -3,6 +3,8 @@ bit for bit on small and large trees and any thread count, and a stop anywhere i
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from helpers import random_scene
 from test_lod import cameras
@@ -144,3 +146,30 @@ def test_the_cut_equals_its_definition_computed_in_numpy_at_the_band_edges():
                     assert_same_cut(lod.cut(tree, cam, tau, band), want, (cam.name, k, nudge, band))
                     checked += 1
     assert checked == 6 * 4 * 3 * 3
+
+
+def test_the_cut_equals_its_definition_on_a_hierarchy_with_negative_radii():
+    """The squared tests hold only for radius >= 0 (s + radius tau can cancel below its rounding otherwise): a damaged
+    hierarchy with negative radii, tau at nodes' exact projected sizes, still gets the definition's cut."""
+    scene = random_scene(5000, seed=32, spread=4.0)
+    tree = lod.build(scene)
+    rng = np.random.default_rng(32)
+    radius = tree.radius.copy()
+    flip = rng.random(len(radius)) < 0.5
+    radius[flip] = -radius[flip] * rng.uniform(0.5, 2.0, flip.sum()).astype(np.float32)
+    damaged = dataclasses.replace(tree, radius=radius)
+    # a root whose s + radius tau cancels to 0 exactly while the eye is 1e-30 from its centre: p = tau exactly, o = 1
+    means, size = tree.means.copy(), tree.size.copy()
+    means[-1], radius[-1], size[-1] = (1e-30, 0.0, 0.0), -1.0, 1.0 / 64.0
+    root_case = dataclasses.replace(tree, means=means, radius=radius, size=size)
+    at_origin = gb.Camera(64, 48, 64.0, 64.0, 32, 24, np.eye(3), np.zeros(3))
+    for band in (0.0, 1.0):
+        assert_same_cut(lod.cut(root_case, at_origin, 1.0, band), cut_by_numpy(root_case, at_origin, 1.0, band), band)
+    for cam in cameras(scene, 9)[:4]:
+        d = damaged.means.astype(np.float64) - np.asarray(cam.position, np.float32).astype(np.float64)
+        gap = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]) - damaged.radius
+        p = damaged.size.astype(np.float64) * float(max(cam.fx, cam.fy)) / gap
+        for k in rng.choice(np.flatnonzero(gap > 0), 5, replace=False):
+            for band in (0.0, 1.0):
+                want = cut_by_numpy(damaged, cam, p[k], band)
+                assert_same_cut(lod.cut(damaged, cam, p[k], band), want, (k, band))

@@ -37,10 +37,11 @@ private:
 constexpr double SURE = 1e-9;
 
 // o of interior node i (its projected size against tau; see cut in lod.h). In perspective p = s / gap (s = size x
-// focal, gap = |d| - radius, p infinite where gap <= 0), so with hi = tau (1 + band): p >= hi (o = 1) iff
-// |d| hi <= s + radius hi, and p <= tau (o = 0, for s >= 0) iff |d| tau >= s + radius tau. Both are decided squared,
-// without a square root or a division, where they hold by the margin SURE (most nodes; 8 % of the 6.1 M scene's x1/8
-// cut), else by the exact form.
+// focal, gap = |d| - radius, p infinite where gap <= 0), so with hi = tau (1 + band), s >= 0 and radius >= 0 (as
+// built): p >= hi (o = 1) iff |d| hi <= s + radius hi, and p <= tau (o = 0) iff |d| tau >= s + radius tau. Both
+// are decided squared, without a square root or a division, where they hold by the margin SURE and no square
+// overflows (most nodes; 8 % of the 6.1 M scene's x1/8 cut), else by the exact form. (A negative radius could
+// cancel s + radius tau below its rounding, an overflowing square the margin.)
 float opening(const float* means, const float* radius, const float* size, int64_t i, const View& v, double tau,
               double band) {
     double p = INFINITY;  // projected size in pixels
@@ -50,10 +51,13 @@ float opening(const float* means, const float* radius, const float* size, int64_
         const double d[3] = {means[3 * i] - v.eye[0], means[3 * i + 1] - v.eye[1], means[3 * i + 2] - v.eye[2]};
         const double dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
         const double s = size[i] * v.focal, r = radius[i];
-        if (tau > 0) {
+        if (tau > 0 && s >= 0 && r >= 0) {
             const double hi = tau * (1.0 + std::max(band, 0.0)), a = s + r * hi, b = s + r * tau;
-            if (a >= 0 && dd * hi * hi < a * a * (1.0 - SURE)) return 1.0f;
-            if (s >= 0 && b >= 0 && dd * tau * tau * (1.0 - SURE) > b * b) return 0.0f;
+            const double dh2 = dd * hi * hi, dt2 = dd * tau * tau, a2 = a * a, b2 = b * b;
+            if (std::isfinite(dh2) && std::isfinite(dt2) && std::isfinite(a2) && std::isfinite(b2)) {
+                if (dh2 < a2 * (1.0 - SURE)) return 1.0f;
+                if (dt2 * (1.0 - SURE) > b2) return 0.0f;
+            }
         }
         const double gap = std::sqrt(dd) - r;
         if (gap > 0) p = s / gap;

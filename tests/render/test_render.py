@@ -74,7 +74,7 @@ def test_concurrent_renders_cpu():
 
 _OOM_SCRIPT = r"""
 import resource, numpy as np, gbviewer as gb
-n = 3000
+n = 6000
 rng = np.random.default_rng(0)
 scene = gb.Scene.from_arrays(np.c_[rng.uniform(-0.1, 0.1, (n, 2)), np.full(n, 3.0)], np.full((n, 3), 50.0),
                              np.tile([1.0, 0, 0, 0], (n, 1)), np.full(n, 0.5), np.full((n, 1, 3), 0.2))
@@ -83,7 +83,7 @@ gb.render(scene, cam.with_size(32, 32))  # starts the thread pool before the lim
 vm = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmSize")) * 1024
 resource.setrlimit(resource.RLIMIT_AS, (vm + 400 * 2**20, resource.RLIM_INFINITY))
 try:
-    gb.render(scene, cam, supersample=2)  # 3000 splats x 16384 tiles: 49M tile-list keys, 390 MB
+    gb.render(scene, cam, supersample=2)  # 6000 splats x 16384 tiles: 98M tile-list ids, 393 MB
 except MemoryError:
     print("MemoryError")
 """
