@@ -193,11 +193,6 @@ private:
 
 // A splat's depth key: depth bits in the high 32 bits (depth > near > 0: the bits order as the floats), id low.
 inline uint64_t depth_key(uint32_t depth_bits, uint32_t id) { return ((uint64_t)depth_bits << 32) | id; }
-inline uint64_t depth_key(const Splat2D& s, uint32_t id) {
-    uint32_t bits;
-    std::memcpy(&bits, &s.depth, 4);
-    return depth_key(bits, id);
-}
 
 // order.cpp: the depth keys (depth bits, id) of the splats whose depth[i] is not NO_DEPTH, ascending, in `order`
 // (resized to their count); `scratch` is the radix sort's second buffer. Parallel, checks run.cancelled(): a
