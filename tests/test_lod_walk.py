@@ -87,20 +87,26 @@ def test_a_cut_stopped_anywhere_is_cancelled_never_partial():
         testing.set_cut_flat_above(65536)
 
 
+def projected_sizes(tree: lod.Hierarchy, cam: gb.Camera) -> np.ndarray:
+    """Every interior node's projected size p in pixels, in float64 as the definition states it (infinite where the
+    eye is within the node's radius)."""
+    f = float(max(cam.fx, cam.fy))
+    if cam.orthographic:
+        return tree.size.astype(np.float64) * f
+    d = tree.means.astype(np.float64) - np.asarray(cam.position, np.float32).astype(np.float64)
+    gap = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]) - tree.radius
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(gap > 0, tree.size.astype(np.float64) * f / gap, np.inf)
+
+
 def cut_by_numpy(tree: lod.Hierarchy, cam: gb.Camera, tau: float, band: float) -> lod.Cut:
     """The cut's definition (gbviewer.lod.cut) computed independently in numpy: each interior node's o from its
     projected size in float64, rounded to float32 as the native cut keeps it; weights multiplied top-down in float32."""
     from gbviewer.lod.tree import BRANCHING
 
     n, lv = tree.num_leaves, tree.levels
-    f = float(max(cam.fx, cam.fy))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        if cam.orthographic:
-            p = tree.size.astype(np.float64) * f
-        else:
-            d = tree.means.astype(np.float64) - np.asarray(cam.position, np.float32).astype(np.float64)
-            gap = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]) - tree.radius
-            p = np.where(gap > 0, tree.size.astype(np.float64) * f / gap, np.inf)
+    p = projected_sizes(tree, cam)
+    with np.errstate(invalid="ignore"):
         if tau <= 0:
             o = np.ones_like(p)
         else:
@@ -130,13 +136,7 @@ def test_the_cut_equals_its_definition_computed_in_numpy_at_the_band_edges():
     rng = np.random.default_rng(31)
     checked = 0
     for cam in cameras(scene, 8):
-        f = float(max(cam.fx, cam.fy))
-        if cam.orthographic:
-            p = tree.size.astype(np.float64) * f
-        else:
-            d = tree.means.astype(np.float64) - np.asarray(cam.position, np.float32).astype(np.float64)
-            gap = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]) - tree.radius
-            p = np.where(gap > 0, tree.size.astype(np.float64) * f / np.maximum(gap, 1e-30), np.inf)
+        p = projected_sizes(tree, cam)
         finite = np.flatnonzero(np.isfinite(p) & (p > 0))
         for k in rng.choice(finite, 4, replace=False):
             for nudge in (-1e-13, 0.0, 1e-13):
@@ -166,10 +166,8 @@ def test_the_cut_equals_its_definition_on_a_hierarchy_with_negative_radii():
     for band in (0.0, 1.0):
         assert_same_cut(lod.cut(root_case, at_origin, 1.0, band), cut_by_numpy(root_case, at_origin, 1.0, band), band)
     for cam in cameras(scene, 9)[:4]:
-        d = damaged.means.astype(np.float64) - np.asarray(cam.position, np.float32).astype(np.float64)
-        gap = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]) - damaged.radius
-        p = damaged.size.astype(np.float64) * float(max(cam.fx, cam.fy)) / gap
-        for k in rng.choice(np.flatnonzero(gap > 0), 5, replace=False):
+        p = projected_sizes(damaged, cam)
+        for k in rng.choice(np.flatnonzero(np.isfinite(p)), 5, replace=False):
             for band in (0.0, 1.0):
                 want = cut_by_numpy(damaged, cam, p[k], band)
                 assert_same_cut(lod.cut(damaged, cam, p[k], band), want, (k, band))

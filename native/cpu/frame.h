@@ -191,9 +191,6 @@ private:
     int64_t left_ = CANCEL_WORK;
 };
 
-// A splat's depth key: depth bits in the high 32 bits (depth > near > 0: the bits order as the floats), id low.
-inline uint64_t depth_key(uint32_t depth_bits, uint32_t id) { return ((uint64_t)depth_bits << 32) | id; }
-
 // order.cpp: the depth keys (depth bits, id) of the splats whose depth[i] is not NO_DEPTH, ascending, in `order`
 // (resized to their count); `scratch` is the radix sort's second buffer. Parallel, checks run.cancelled(): a
 // cancelled call leaves `order` unspecified (the caller checks run.cancelled() before using it).

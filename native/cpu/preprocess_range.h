@@ -17,6 +17,10 @@ namespace gbv {
 // float bits are below 2^31).
 constexpr uint32_t NO_DEPTH = 0xFFFFFFFFu;
 
+// A splat's depth key, the depth order's: depth bits in the high 32 bits (depth > near > 0: the bits order as the
+// floats), id low.
+inline uint64_t depth_key(uint32_t depth_bits, uint32_t id) { return ((uint64_t)depth_bits << 32) | id; }
+
 // The stage of one camera: the scene (activated parameters, gbviewer.Scene's layout), the camera and SH degree, and
 // per splat its StageSplat, flag (in front of the near plane and possibly on screen in some mode) and depth bits
 // (the depth order's keys, 4 bytes a splat: its sort reads them instead of the 40-byte records). Plain data, shared

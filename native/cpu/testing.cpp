@@ -5,6 +5,7 @@
 
 #include "half.h"
 #include "omp_shim.h"
+#include "preprocess_range.h"
 #include "simd.h"
 
 #if defined(__x86_64__)
@@ -54,7 +55,7 @@ void record_lists(const std::vector<int64_t>& tile_start, const std::vector<uint
     for (size_t j = 0; j < ids.size(); ++j) {
         uint32_t bits = 0;
         if (depth_keys) std::memcpy(&bits, &splats[ids[j]].depth, 4);
-        captured_keys[j] = ((uint64_t)bits << 32) | ids[j];
+        captured_keys[j] = depth_key(bits, ids[j]);
     }
 }
 
