@@ -89,6 +89,31 @@ struct LanesHwy {
     static HWY_INLINE F to_float(I v) { return hn::ConvertTo(D(), v); }
     static HWY_INLINE M gti(I a, I b) { return hn::RebindMask(D(), a > b); }
     static HWY_INLINE void storei(I v, int32_t* out) { hn::StoreU(v, DI(), out); }
+
+    // An N x N block of floats transposed by shuffles (moves, no arithmetic) where the preprocess would copy it float
+    // by float: v[j]'s lane c becomes v[c]'s lane j. AVX2's 8 x 8 only (TRANSPOSES).
+    static constexpr bool TRANSPOSES = N == 8;
+    static HWY_INLINE void transpose(F* v) {
+        const D d;
+        const hn::Repartition<uint64_t, D> d64;
+        F t[8];
+        for (int j = 0; j < 8; j += 2)  // per 128-bit block: (a0 b0 a1 b1), (a2 b2 a3 b3)
+            t[j] = hn::InterleaveLower(d, v[j], v[j + 1]), t[j + 1] = hn::InterleaveUpper(d, v[j], v[j + 1]);
+        for (int h = 0; h < 8; h += 4)  // (a0 b0 c0 d0), (a1 b1 c1 d1), (a2 ...), (a3 ...) per block
+            for (int k = 0; k < 2; ++k) {
+                const auto lo = hn::BitCast(d64, t[h + k]), hi = hn::BitCast(d64, t[h + 2 + k]);
+                v[h + 2 * k] = hn::BitCast(d, hn::InterleaveLower(d64, lo, hi));
+                v[h + 2 * k + 1] = hn::BitCast(d, hn::InterleaveUpper(d64, lo, hi));
+            }
+        for (int c = 0; c < 4; ++c)  // rows 0-3's block then rows 4-7's: the low blocks are columns 0-3
+            t[c] = hn::ConcatLowerLower(d, v[4 + c], v[c]), t[4 + c] = hn::ConcatUpperUpper(d, v[4 + c], v[c]);
+        for (int c = 0; c < 8; ++c) v[c] = t[c];
+    }
+    // cols[c] = lane j: rows[j][c0 + c] (c, j < N).
+    static HWY_INLINE void transpose(const float* const* rows, int c0, F* cols) {
+        for (int j = 0; j < N; ++j) cols[j] = hn::LoadU(D(), rows[j] + c0);
+        transpose(cols);
+    }
 };
 
 }  // namespace gbv::HWY_NAMESPACE
