@@ -91,7 +91,8 @@ struct LanesHwy {
     static HWY_INLINE void storei(I v, int32_t* out) { hn::StoreU(v, DI(), out); }
 
     // An N x N block of floats transposed by shuffles (moves, no arithmetic) where the preprocess would copy it float
-    // by float: v[j]'s lane c becomes v[c]'s lane j. AVX2's 8 x 8 only (TRANSPOSES).
+    // by float: v[j]'s lane c becomes v[c]'s lane j. TRANSPOSES: AVX2's 8 x 8 (and the preprocess then also moves
+    // rows in with load3 / load4).
     static constexpr bool TRANSPOSES = N == 8;
     static HWY_INLINE void transpose(F* v) {
         const D d;
@@ -109,6 +110,9 @@ struct LanesHwy {
             t[c] = hn::ConcatLowerLower(d, v[4 + c], v[c]), t[4 + c] = hn::ConcatUpperUpper(d, v[4 + c], v[c]);
         for (int c = 0; c < 8; ++c) v[c] = t[c];
     }
+    // v[c] = lane j: p[3 j + c] (load3) or p[4 j + c] (load4), j < N: N rows of 3 or 4 floats deinterleaved.
+    static HWY_INLINE void load3(const float* p, F* v) { hn::LoadInterleaved3(D(), p, v[0], v[1], v[2]); }
+    static HWY_INLINE void load4(const float* p, F* v) { hn::LoadInterleaved4(D(), p, v[0], v[1], v[2], v[3]); }
     // cols[c] = lane j: rows[j][c0 + c] (c, j < N).
     static HWY_INLINE void transpose(const float* const* rows, int c0, F* cols) {
         for (int j = 0; j < N; ++j) cols[j] = hn::LoadU(D(), rows[j] + c0);

@@ -168,28 +168,57 @@ void stage_range(const StageJob& job, int64_t begin, int64_t end) {
                     __builtin_prefetch(job.at(job.opacities, job.node_opacities, 1, r));
                     if (job.filter_3d) __builtin_prefetch(job.at(job.filter_3d, job.node_filter_3d, 1, r));
                 }
-            for (int j = 0; j < count; ++j) rows[j] = job.row(i0 + j);
-            gather_rows<N>(job, job.means, job.node_means, 3, rows, count, buf);
-            gather_rows<N>(job, job.scales, job.node_scales, 3, rows, count, buf + 3);
-            gather_rows<N>(job, job.quats, job.node_quats, 4, rows, count, buf + 6);
-            gather_rows<N>(job, job.opacities, job.node_opacities, 1, rows, count, buf + 10);
-            if (job.weights)
-                for (int j = 0; j < N; ++j) buf[10][j] *= job.weights[i0 + (j < count ? j : count - 1)];
-            for (int j = 0; j < N; ++j)
-                buf[11][j] = job.filter_3d ? *job.at(job.filter_3d, job.node_filter_3d, 1, rows[j < count ? j : count - 1])
-                                           : 0.0f;
             SplatInLanes<L> in;
-            for (int c = 0; c < 3; ++c) in.mean[c] = L::load(buf[c]);
-            for (int c = 0; c < 3; ++c) in.scale[c] = L::load(buf[3 + c]);
-            for (int c = 0; c < 4; ++c) in.quat[c] = L::load(buf[6 + c]);
-            in.opacity = L::load(buf[10]);
-            in.filter_3d = L::load(buf[11]);
+            bool moved = false;
+            if constexpr (transposes<L>())
+                if (!job.rows && count == N) {  // N consecutive rows: deinterleaved by shuffles
+                    L::load3(job.means + 3 * i0, in.mean);
+                    L::load3(job.scales + 3 * i0, in.scale);
+                    L::load4(job.quats + 4 * i0, in.quat);
+                    in.opacity = L::load(job.opacities + i0);
+                    in.filter_3d = job.filter_3d ? L::load(job.filter_3d + i0) : L::set(0.0f);
+                    moved = true;
+                }
+            if (!moved) {
+                for (int j = 0; j < count; ++j) rows[j] = job.row(i0 + j);
+                gather_rows<N>(job, job.means, job.node_means, 3, rows, count, buf);
+                gather_rows<N>(job, job.scales, job.node_scales, 3, rows, count, buf + 3);
+                gather_rows<N>(job, job.quats, job.node_quats, 4, rows, count, buf + 6);
+                gather_rows<N>(job, job.opacities, job.node_opacities, 1, rows, count, buf + 10);
+                if (job.weights)
+                    for (int j = 0; j < N; ++j) buf[10][j] *= job.weights[i0 + (j < count ? j : count - 1)];
+                for (int j = 0; j < N; ++j)
+                    buf[11][j] = job.filter_3d
+                                     ? *job.at(job.filter_3d, job.node_filter_3d, 1, rows[j < count ? j : count - 1])
+                                     : 0.0f;
+                for (int c = 0; c < 3; ++c) in.mean[c] = L::load(buf[c]);
+                for (int c = 0; c < 3; ++c) in.scale[c] = L::load(buf[3 + c]);
+                for (int c = 0; c < 4; ++c) in.quat[c] = L::load(buf[6 + c]);
+                in.opacity = L::load(buf[10]);
+                in.filter_3d = L::load(buf[11]);
+            }
             StageLanes<L> st{};  // preprocess_stage leaves it unset when no lane is in front
             uint32_t ok = L::bits(preprocess_stage<L>(in, job.cam, &st));
             if (ok) ok &= L::bits(stage_on_screen<L>(st, job.grid_x, job.grid_y, job.reach));
             for (int j = 0; j < count; ++j) job.valid[i0 + j] = (ok >> j) & 1u;
             if (!ok) {
                 std::fill(job.depth + i0, job.depth + i0 + count, NO_DEPTH);
+                continue;
+            }
+            if constexpr (transposes<L>()) {  // a valid lane's record as one row of 8 (the 8th, colour 0, is
+                // written by stage_colors below, as every valid lane's colour)
+                static_assert(offsetof(StageSplat, cov) == 16 && offsetof(StageSplat, color) == 28);
+                typename L::F rec[N] = {st.xy[0], st.xy[1], st.depth, st.opacity, st.cov[0], st.cov[1], st.cov[2],
+                                        st.cov[2]};
+                L::transpose(rec);
+                L::store(st.depth, o[2]);
+                for (int j = 0; j < count; ++j) {
+                    job.depth[i0 + j] = NO_DEPTH;
+                    if (!((ok >> j) & 1u)) continue;
+                    std::memcpy(&job.depth[i0 + j], &o[2][j], 4);
+                    L::store(rec[j], job.stage[i0 + j].xy);
+                    on[count_on++] = i0 + j;
+                }
                 continue;
             }
             const typename L::F fields[7] = {st.xy[0], st.xy[1], st.depth, st.opacity, st.cov[0], st.cov[1], st.cov[2]};
