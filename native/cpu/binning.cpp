@@ -16,12 +16,13 @@ namespace gbv::cpu {
 // (depth order from depth_order: no per-tile sort). The id buffer is sized between the two parallel passes (an
 // allocation failure is a MemoryError, not an abort inside OpenMP). The counting pass also copies each splat's tile
 // rectangle to its place in the order (`ranked`; empty for a splat that is not valid), so that the writing pass
-// streams it instead of gathering rects[] and valid[] in depth order a second time (the gather, a cache miss per
-// splat, was half of the binning at 6 M splats).
+// streams it instead of gathering rects[] in depth order a second time (the gather, a cache miss per splat, was half
+// of the binning at 6 M splats). An empty rect marks a splat that is not valid (the finish writes one), so the gather
+// reads no valid[] besides.
 constexpr int BIN_THREADS = 8;  // bounds the counts buffer (ranges x tiles) on many-core machines
 constexpr int64_t AHEAD = 16;   // prefetch distance of the gather, in splats
 
-void bin_splats(const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, const uint64_t* order,
+void bin_splats(const std::vector<TileRect>& rects, const uint64_t* order,
                 int64_t count, int gx, std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids, std::vector<RankedRect>& ranked,
                 Stats& st, FrameRun& run) {
     const int num_tiles = (int)tile_start.size() - 1;
@@ -38,16 +39,14 @@ void bin_splats(const std::vector<TileRect>& rects, const std::vector<uint8_t>& 
         const int64_t end = count * (k + 1) / ranges;
         for (int64_t p = count * k / ranges; p < end; ++p) {
             const uint32_t i = order ? (uint32_t)order[p] : (uint32_t)p;
-            if (order && p + AHEAD < end) {  // the order's splats are scattered: fetch them ahead
+            if (order && p + AHEAD < end)  // the order's splats are scattered: fetch them ahead
                 __builtin_prefetch(&rects[(uint32_t)order[p + AHEAD]]);
-                __builtin_prefetch(&valid[(uint32_t)order[p + AHEAD]]);
-            }
-            if (!valid[i]) {
+            const TileRect& r = rects[i];  // tile indices < 2^16 (MAX_IMAGE_SIZE x supersampling / TILE)
+            if (r.x1 <= r.x0) {  // not valid
                 ranked[p] = {0, 0, 0, 0};
                 continue;
             }
             ++visible;
-            const TileRect& r = rects[i];  // tile indices < 2^16 (MAX_IMAGE_SIZE x supersampling / TILE)
             ranked[p] = {(uint16_t)r.x0, (uint16_t)r.y0, (uint16_t)r.x1, (uint16_t)r.y1};
             for (int ty = r.y0; ty < r.y1; ++ty)
                 for (int tx = r.x0; tx < r.x1; ++tx) ++cnt[ty * gx + tx];

@@ -235,7 +235,7 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
     if (mode == DUPLEX) {
         bin_duplex(sc, cam, splats, rects, valid, gx, gy, tile_start, ids, st, run);
     } else if (mode == WSR) {  // order-independent: the splat order
-        bin_splats(rects, valid, nullptr, n, gx, tile_start, ids, buf.ranked, st, run);
+        bin_splats(rects, nullptr, n, gx, tile_start, ids, buf.ranked, st, run);
     } else {
         if (!stage.order_ready) {  // once per stage: every later frame of this camera bins in it
             t0 = Clock::now();
@@ -248,7 +248,7 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
             st.order_reused = true;
         }
         st.sort_length += (int64_t)stage.order.size();
-        bin_splats(rects, valid, stage.order.data(), (int64_t)stage.order.size(), gx, tile_start, ids,
+        bin_splats(rects, stage.order.data(), (int64_t)stage.order.size(), gx, tile_start, ids,
                    buf.ranked, st, run);
     }
     if (run.cancelled()) return;

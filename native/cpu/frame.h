@@ -123,7 +123,7 @@ struct RankedRect {
 // A frame's buffers, kept by the renderer between frames (no allocation, no page faults once sizes settle).
 struct FrameBuffers {
     std::vector<Splat2D> splats;
-    std::vector<TileRect> rects;
+    std::vector<TileRect> rects;  // empty (0, 0, 0, 0) where not valid: the binning reads no valid[]
     std::vector<uint8_t> valid;
     std::vector<int64_t> tile_start;
     std::vector<uint32_t> ids;  // per tile list entry: its splat (4 bytes: half the traffic of a depth key)
@@ -198,11 +198,11 @@ void depth_order(const Plane<uint32_t>& depth, std::vector<uint64_t>& order, std
                  FrameRun& run);
 
 // binning.cpp: each tile's list of splat ids in the order of `order` (count depth keys, e.g. a depth_order; entries
-// whose splat is not valid[] are skipped, so the order of a superset serves), or in splat order when `order` is null
-// (wsr); tile_start (num_tiles + 1 entries) gets each tile's first entry. duplex: the tiles' cells front to back,
+// whose splat is not valid, its rect empty, are skipped, so the order of a superset serves), or in splat order when
+// `order` is null (wsr); tile_start (num_tiles + 1 entries) gets each tile's first entry. duplex: the tiles' cells front to back,
 // each expanded to its visible splats in canonical order. Both stop early once cancelled (tile_start and ids then
 // unspecified).
-void bin_splats(const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, const uint64_t* order,
+void bin_splats(const std::vector<TileRect>& rects, const uint64_t* order,
                 int64_t count, int gx, std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids,
                 std::vector<RankedRect>& ranked, Stats& st, FrameRun& run);
 void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<Splat2D>& splats,

@@ -67,7 +67,7 @@ struct FinishJob {
     const StageSplat* stage;
     const uint8_t* stage_valid;
     Splat2D* splats;
-    TileRect* rects;
+    TileRect* rects;  // empty (0, 0, 0, 0) where not valid
     uint8_t* valid;
 };
 
@@ -263,7 +263,7 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
         bool any = false;
         for (int j = 0; j < count; ++j) any |= job.stage_valid[i0 + j] != 0;
         if (!any) {  // culled in the stage: culled in every mode
-            for (int j = 0; j < count; ++j) job.valid[i0 + j] = 0;
+            for (int j = 0; j < count; ++j) job.valid[i0 + j] = 0, job.rects[i0 + j] = TileRect{0, 0, 0, 0};
             continue;
         }
         StageLanes<L> st;
@@ -306,7 +306,10 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
         }
         const uint32_t ok = L::bits(preprocess_finish<L>(in, st, L::load(sb[7]) > L::set(0.0f), job.sh_deg, job.cam,
                                                          job.mode, job.oit, job.grid_x, job.grid_y, &out, &rect));
-        for (int j = 0; j < count; ++j) job.valid[i0 + j] = (ok >> j) & 1u;
+        for (int j = 0; j < count; ++j) {
+            job.valid[i0 + j] = (ok >> j) & 1u;
+            if (!((ok >> j) & 1u)) job.rects[i0 + j] = TileRect{0, 0, 0, 0};
+        }
         if (!ok) continue;
         if constexpr (transposes<L>()) {  // Splat2D's floats 0-15 a valid lane's two rows of 8; the rest as below
             static_assert(offsetof(Splat2D, color) == 28 && offsetof(Splat2D, inv_sigma2) == 60 &&
