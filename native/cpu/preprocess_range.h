@@ -127,7 +127,17 @@ void stage_colors(const StageJob& job, const int64_t* ids, int count) {
             __builtin_prefetch(p + nsh * sizeof(float) - 1);
         }
         for (int j = 0; j < N; ++j) rows[j] = job.row(ids[g + (j < c ? j : c - 1)]);  // spare lanes repeat the last
-        gather_rows<N>(job, job.means, job.node_means, 3, rows, c, mb);
+        SplatInLanes<L> in;
+        bool moved = false;
+        if constexpr (transposes<L>())
+            if (!job.rows && rows[N - 1] - rows[0] == N - 1) {  // N consecutive scene rows
+                L::load3(job.means + 3 * rows[0], in.mean);
+                moved = true;
+            }
+        if (!moved) {
+            gather_rows<N>(job, job.means, job.node_means, 3, rows, c, mb);
+            for (int q = 0; q < 3; ++q) in.mean[q] = L::load(mb[q]);
+        }
         const float* srow[N];  // the first nsh of k * 3 coefficients of each
         for (int j = 0; j < N; ++j) srow[j] = job.at(job.sh, job.node_sh, job.k * 3, rows[j]);
         int q0 = 0;
@@ -135,8 +145,6 @@ void stage_colors(const StageJob& job, const int64_t* ids, int count) {
             for (; q0 + N <= nsh; q0 += N) L::transpose(srow, q0, sh + q0);
         for (int j = 0; j < N; ++j)
             for (int q = q0; q < nsh; ++q) shb[q][j] = srow[j][q];
-        SplatInLanes<L> in;
-        for (int q = 0; q < 3; ++q) in.mean[q] = L::load(mb[q]);
         for (int q = q0; q < nsh; ++q) sh[q] = L::load(shb[q]);
         in.sh = sh;
         typename L::F color[3];
