@@ -47,6 +47,10 @@ struct StageJob {
                 *node_sh = nullptr, *node_filter_3d = nullptr;
 
     int64_t row(int64_t i) const { return rows ? rows[i] : i; }
+    // Whether rows r[0..n), strictly ascending, are n consecutive rows of one array (the scene's or the hierarchy's).
+    bool run(const int64_t* r, int n) const {
+        return r[n - 1] - r[0] == n - 1 && (r[0] < n_scene) == (r[n - 1] < n_scene);
+    }
     // Row r (width floats) of an input: the scene's array, or past n_scene the hierarchy's.
     const float* at(const float* scene, const float* nodes, int width, int64_t r) const {
         return r < n_scene || !nodes ? scene + (size_t)width * r : nodes + (size_t)width * (r - n_scene);
@@ -130,8 +134,8 @@ void stage_colors(const StageJob& job, const int64_t* ids, int count) {
         SplatInLanes<L> in;
         bool moved = false;
         if constexpr (transposes<L>())
-            if (!job.rows && rows[N - 1] - rows[0] == N - 1) {  // N consecutive scene rows
-                L::load3(job.means + 3 * rows[0], in.mean);
+            if (c == N && job.run(rows, N)) {  // N consecutive rows (no spare lane)
+                L::load3(job.at(job.means, job.node_means, 3, rows[0]), in.mean);
                 moved = true;
             }
         if (!moved) {
@@ -177,18 +181,21 @@ void stage_range(const StageJob& job, int64_t begin, int64_t end) {
                     if (job.filter_3d) __builtin_prefetch(job.at(job.filter_3d, job.node_filter_3d, 1, r));
                 }
             SplatInLanes<L> in;
+            for (int j = 0; j < count; ++j) rows[j] = job.row(i0 + j);
             bool moved = false;
             if constexpr (transposes<L>())
-                if (!job.rows && count == N) {  // N consecutive rows: deinterleaved by shuffles
-                    L::load3(job.means + 3 * i0, in.mean);
-                    L::load3(job.scales + 3 * i0, in.scale);
-                    L::load4(job.quats + 4 * i0, in.quat);
-                    in.opacity = L::load(job.opacities + i0);
-                    in.filter_3d = job.filter_3d ? L::load(job.filter_3d + i0) : L::set(0.0f);
+                if (count == N && job.run(rows, N)) {  // N consecutive rows: deinterleaved by shuffles
+                    const int64_t r = rows[0];
+                    L::load3(job.at(job.means, job.node_means, 3, r), in.mean);
+                    L::load3(job.at(job.scales, job.node_scales, 3, r), in.scale);
+                    L::load4(job.at(job.quats, job.node_quats, 4, r), in.quat);
+                    in.opacity = L::load(job.at(job.opacities, job.node_opacities, 1, r));
+                    if (job.weights) in.opacity = in.opacity * L::load(job.weights + i0);
+                    in.filter_3d = job.filter_3d ? L::load(job.at(job.filter_3d, job.node_filter_3d, 1, r))
+                                                 : L::set(0.0f);
                     moved = true;
                 }
             if (!moved) {
-                for (int j = 0; j < count; ++j) rows[j] = job.row(i0 + j);
                 gather_rows<N>(job, job.means, job.node_means, 3, rows, count, buf);
                 gather_rows<N>(job, job.scales, job.node_scales, 3, rows, count, buf + 3);
                 gather_rows<N>(job, job.quats, job.node_quats, 4, rows, count, buf + 6);

@@ -28,6 +28,7 @@ import pytest
 import gbviewer as gb
 from gbviewer import _native
 from gbviewer.cells import build_cells
+from gbviewer.render import create_renderer
 from helpers import random_view, skip_or_fail
 from test_render_reference import BACKGROUND, SCENES, _check_strict
 
@@ -53,8 +54,12 @@ def simd(path: str):
 
 
 def render(path, scene, cam, mode, supersample=1, **kw):
+    """A frame on `path` from a renderer of its own: a renderer keeps its per-camera stage, and one that another
+    path built would be reused (the paths' stages would then never be compared)."""
     with simd(path):
-        return gb.render(scene, cam, mode=mode, supersample=supersample, **kw)
+        renderer = create_renderer("cpu")
+        renderer.upload(scene)
+        return renderer.render(cam, gb.RenderSettings.of(mode, supersample, **kw))
 
 
 def assert_close_to_scalar(vec, ref, what):
@@ -184,7 +189,22 @@ def _cut_scene(seed):
     return scene, gb.Camera(97, 61, 52.3, 47.9, 50.1, 29.7, R, np.array([0.03, -0.02, 0.1]))
 
 
+def _gapped_scene():
+    """16 splats, all on screen but splat 14 (behind the camera), SH degree 3: the stage's second colour group holds
+    splats 8-13 and 15 with a spare lane, whose first and last rows are 7 apart though they are not 8 consecutive rows
+    (a vector path that took them for a run would read splat 14's mean for splat 15's view direction)."""
+    rng = np.random.default_rng(3)
+    n = 16
+    means = np.c_[rng.uniform(-1, 1, n), rng.uniform(-0.6, 0.6, n), rng.uniform(2.5, 4, n)]
+    means[14, 2] = -1.0
+    quats = rng.normal(size=(n, 4))
+    scene = gb.Scene(means, np.full((n, 3), 0.05), quats / np.linalg.norm(quats, axis=1, keepdims=True),
+                     np.full(n, 0.8), rng.uniform(-0.5, 0.5, (n, 16, 3)), source="gapped")
+    return scene, gb.Camera(64, 48, 40.0, 40.0, 32, 24, np.eye(3), np.zeros(3))
+
+
 def _preprocess_cases():
+    yield "gapped", _gapped_scene()
     for seed, sh_degree, filter3d in SCENES[:3]:
         yield f"random{seed}", random_view(seed, n=777, sh_degree=sh_degree, filter3d=filter3d, W=61, H=37)
     yield "needles", _needle_scene(5)
