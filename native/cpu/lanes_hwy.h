@@ -93,7 +93,7 @@ struct LanesHwy {
     // An N x N block of floats transposed by shuffles (moves, no arithmetic) where the preprocess would copy it float
     // by float: v[j]'s lane c becomes v[c]'s lane j. TRANSPOSES: AVX2's 8 x 8 (and the preprocess then also moves
     // rows in with load3 / load4).
-    static constexpr bool TRANSPOSES = N == 8;
+    static constexpr bool TRANSPOSES = HWY_TARGET == HWY_AVX2;  // N == 8; x86's interleaves within 128-bit blocks
     static HWY_INLINE void transpose(F* v) {
         const D d;
         const hn::Repartition<uint64_t, D> d64;

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer import _native
+from gbviewer import _native, lod
 from gbviewer.cells import build_cells
 from gbviewer.render import create_renderer
 from helpers import random_view, skip_or_fail
@@ -227,7 +227,7 @@ def test_preprocess_bitwise(path, mode):
             scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
                                          scene.filter_3d, view_weight_sh=scene.oit and scene.oit.view_weight_sh,
                                          cells=build_cells(scene, 6))
-        for kw in variants + [{"sh_degree": 1}]:
+        for kw in variants + [{"sh_degree": 1}, {"sh_degree": 2}]:
             ref, ref_frame = preprocessed("scalar", scene, cam, mode, **kw)
             vec, vec_frame = preprocessed(path, scene, cam, mode, **kw)
             what = f"{path} {mode} {name} {kw}"
@@ -242,6 +242,29 @@ def test_preprocess_bitwise(path, mode):
                             f"rectangles, fields {fields}")
             for stat in ("visible", "sort_length", "pairs"):
                 assert getattr(vec_frame.stats, stat) == getattr(ref_frame.stats, stat), what
+
+
+@pytest.mark.parametrize("path", VECTOR_PATHS)
+def test_lod_preprocess_bitwise(path):
+    """A level-of-detail frame's preprocess (the stage reads a cut's scattered rows: scene leaves, then hierarchy
+    nodes, opacities times the cut's weights) is the scalar path's, bit for bit, with a 3D filter and every SH
+    degree."""
+    seed = SCENES[2][0]
+    scene, cam = random_view(seed, n=3000, sh_degree=3, filter3d=True, W=61, H=37)
+    tree = lod.build(scene)  # the hierarchy the renderer draws (the same build; its cache is not needed here)
+    for tau in (32.0, 64.0):  # these splats are large against the 61 x 37 image: cuts of 150-200 nodes
+        for degree in (3, 2, 0):
+            out = []
+            for p in ("scalar", path):
+                _native.testing.set_capture_preprocess(True)
+                try:
+                    frame = render(p, scene, cam, "gaussian_blending", lod=tau, sh_degree=degree)
+                    out.append(_native.testing.captured_preprocess())
+                finally:
+                    _native.testing.set_capture_preprocess(False)
+            what = f"{path} lod {tau} sh {degree}"
+            assert len(lod.cut(tree, cam, tau).nodes) > 100 and frame.stats.lod_splats > 100, what
+            assert out[0] == out[1], what
 
 
 def _needle_scene(seed):
