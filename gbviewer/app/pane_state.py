@@ -80,8 +80,10 @@ class PaneState:
     def name(self) -> str:
         return PANE_NAMES[self.index]
 
-    def forget(self) -> None:
-        """Drop what belongs to the previous scene: its frames, requests and measured costs."""
+    def forget(self, preview_lod: float = PREVIEW_LOD_PX) -> None:
+        """Drop what belongs to the previous scene: its frames, requests and measured costs; the next scene's previews
+        start at `preview_lod` (rates.first_preview_lod)."""
         self.parts = {"a": Shown(), "b": Shown()}
         self.submitted.clear()
         self.ms_per_px.clear()
+        self.preview_lod = preview_lod

@@ -21,7 +21,7 @@ from .dataset import DatasetViews, bounds_fit_cameras
 from .layout import PANEL_W, Rect, dock_split, fit_aspect, pane_rects
 from .loading import SceneLoader
 from .pane_state import PaneState
-from .rates import clamp_rate, render_size, step_rate
+from .rates import clamp_rate, first_preview_lod, render_size, step_rate
 from .recording import VideoJob
 from .screenshots import shot_name
 from .settings import MAX_PANES, MODE_NAMES, AppSettings, PaneSettings, add_recent
@@ -131,7 +131,7 @@ class AppState(CameraActions):
         if res.cameras_error:
             self.message(res.cameras_error, "error")
         for p in self.panes:
-            p.forget()
+            p.forget(first_preview_lod(res.scene.num_splats))
         trained = trained_spec(res.scene.meta)
         if trained is not None:  # pane A, the reference of the differences, shows the scene as it was trained
             self.settings.panes[0].mode = trained

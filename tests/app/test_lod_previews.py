@@ -10,6 +10,7 @@ import gbviewer as gb
 from gbviewer.app import loading, rates
 from gbviewer.app.panes import PaneRenders
 from gbviewer.app.settings import AppSettings, PaneSettings
+from gbviewer.app import state as state_module
 from gbviewer.app.state import AppState
 from gbviewer.app.worker import RenderResult
 from gbviewer.render import BACKENDS
@@ -109,6 +110,21 @@ def test_scenes_without_a_hierarchy_preview_by_resolution_alone(monkeypatch):
         assert all(j.preview and j.settings.lod is None for j in worker.jobs)
     finally:
         panes.release()
+
+
+def test_a_large_scene_starts_its_previews_coarse(monkeypatch):
+    """A new scene's panes start at the cut its size calls for (a 6 M-splat scene at 8 px, not 1), whatever the
+    previous scene's previews had come to."""
+    assert [rates.first_preview_lod(n) for n in (1, 999_999, 1_000_000, 2_100_000, 6_109_840, 10**9)] == \
+        [1.0, 1.0, 2.0, 4.0, 8.0, 8.0]
+    state = opened(monkeypatch, [True])
+    assert all(p.preview_lod == rates.PREVIEW_LOD_PX for p in state.panes)  # the bundled scene: 1 px
+    state.panes[0].preview_lod = 32.0  # where a large scene's previews had gone
+    sizes = []
+    monkeypatch.setattr(state_module, "first_preview_lod", lambda n: sizes.append(n) or 8.0)
+    loaded(state)  # opened again: as a scene of 6 M splats would be
+    assert sizes and sizes[0] == state.scene.num_splats
+    assert all(p.preview_lod == 8.0 for p in state.panes)
 
 
 def test_preview_lod_adapts_within_its_bounds():
