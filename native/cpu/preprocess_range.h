@@ -326,34 +326,6 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
             if (!((ok >> j) & 1u)) job.rects[i0 + j] = TileRect{0, 0, 0, 0};
         }
         if (!ok) continue;
-        if constexpr (transposes<L>()) {  // Splat2D's floats 0-15 a valid lane's two rows of 8; the rest as below
-            static_assert(offsetof(Splat2D, color) == 28 && offsetof(Splat2D, inv_sigma2) == 60 &&
-                          offsetof(Splat2D, log_min_alpha) == 64);
-            typename L::F a[N] = {out.xy[0], out.xy[1], out.depth, out.opacity, out.conic[0], out.conic[1],
-                                  out.conic[2], cols[7]};
-            typename L::F b[N] = {color[6], color[7], out.v1[0], out.v1[1], out.sigma1, out.sigma2,
-                                  out.inv_sigma1, out.inv_sigma2};
-            L::transpose(a);
-            L::transpose(b);
-            L::store(out.radius, o[13]);
-            L::store(out.opacity, o[3]);
-            L::storei(rect.x0, rb[0]);
-            L::storei(rect.y0, rb[1]);
-            L::storei(rect.x1, rb[2]);
-            L::storei(rect.y1, rb[3]);
-            for (int j = 0; j < count; ++j) {
-                if (!((ok >> j) & 1u)) continue;
-                const int64_t i = i0 + j;
-                Splat2D& s = job.splats[i];
-                L::store(a[j], &s.xy.x);
-                L::store(b[j], &s.color[1]);
-                s.log_min_alpha = out.log_min_alpha(o[3][j]);
-                s.radius = o[13][j];
-                s.cell = job.cell_of ? job.cell_of[i] : -1;
-                job.rects[i] = TileRect{rb[0][j], rb[1][j], rb[2][j], rb[3][j]};
-            }
-            continue;
-        }
         const F fields[14] = {out.xy[0], out.xy[1], out.depth, out.opacity, out.conic[0], out.conic[1], out.conic[2],
                               out.v1[0], out.v1[1], out.sigma1, out.sigma2, out.inv_sigma1, out.inv_sigma2, out.radius};
         for (int f = 0; f < 14; ++f) L::store(fields[f], o[f]);
@@ -365,21 +337,39 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
             L::storei(rect.x1, rb[2]);
             L::storei(rect.y1, rb[3]);
         }
+        F a[N], b[N];  // with transposes: each lane's Splat2D floats 0-7 (a) and 8-15 (b) as rows
+        if constexpr (transposes<L>()) {
+            static_assert(offsetof(Splat2D, color) == 28 && offsetof(Splat2D, inv_sigma2) == 60 &&
+                          offsetof(Splat2D, log_min_alpha) == 64);
+            const F rows_a[N] = {out.xy[0], out.xy[1], out.depth, out.opacity, out.conic[0], out.conic[1],
+                                 out.conic[2], cols[7]};
+            const F rows_b[N] = {color[6], color[7], out.v1[0], out.v1[1], out.sigma1, out.sigma2, out.inv_sigma1,
+                                 out.inv_sigma2};
+            std::copy(rows_a, rows_a + N, a);
+            std::copy(rows_b, rows_b + N, b);
+            L::transpose(a);
+            L::transpose(b);
+        }
         for (int j = 0; j < count; ++j) {
             if (!((ok >> j) & 1u)) continue;
             const int64_t i = i0 + j;
             Splat2D& s = job.splats[i];
-            s.xy = Vec2{o[0][j], o[1][j]};
-            s.depth = o[2][j];
-            s.opacity = o[3][j];
+            if constexpr (transposes<L>()) {
+                L::store(a[j], &s.xy.x);
+                L::store(b[j], &s.color[1]);
+            } else {
+                s.xy = Vec2{o[0][j], o[1][j]};
+                s.depth = o[2][j];
+                s.opacity = o[3][j];
+                for (int c = 0; c < 3; ++c) s.conic[c] = o[4 + c][j];
+                for (int c = 0; c < 3; ++c) s.color[c] = job.stage[i].color[c];  // on screen: computed by the stage
+                s.v1 = Vec2{o[7][j], o[8][j]};
+                s.sigma1 = o[9][j];
+                s.sigma2 = o[10][j];
+                s.inv_sigma1 = o[11][j];
+                s.inv_sigma2 = o[12][j];
+            }
             s.log_min_alpha = out.log_min_alpha(o[3][j]);
-            for (int c = 0; c < 3; ++c) s.conic[c] = o[4 + c][j];
-            for (int c = 0; c < 3; ++c) s.color[c] = job.stage[i].color[c];  // on screen: computed by the stage
-            s.v1 = Vec2{o[7][j], o[8][j]};
-            s.sigma1 = o[9][j];
-            s.sigma2 = o[10][j];
-            s.inv_sigma1 = o[11][j];
-            s.inv_sigma2 = o[12][j];
             s.radius = o[13][j];
             s.cell = job.cell_of ? job.cell_of[i] : -1;
             job.rects[i] = TileRect{rb[0][j], rb[1][j], rb[2][j], rb[3][j]};
