@@ -9,7 +9,6 @@
 #include <cstdint>
 #include <cstddef>
 #include <cstring>
-#include <type_traits>
 
 #include "gbv/preprocess.h"
 
@@ -100,17 +99,6 @@ inline void gather_rows(const StageJob& job, const float* scene, const float* no
     }
 }
 
-// Whether lane type L transposes N x N blocks of floats with vector shuffles (L::transpose; lanes_hwy.h).
-template <class L, class = void>
-struct HasTranspose : std::false_type {};
-template <class L>
-struct HasTranspose<L, std::void_t<decltype(L::TRANSPOSES)>> : std::true_type {};
-template <class L>
-constexpr bool transposes() {
-    if constexpr (HasTranspose<L>::value) return L::TRANSPOSES;
-    return false;
-}
-
 // SH colours of the stage splats ids[0..count) into their stage.
 template <class L>
 void stage_colors(const StageJob& job, const int64_t* ids, int count) {
@@ -133,7 +121,7 @@ void stage_colors(const StageJob& job, const int64_t* ids, int count) {
         for (int j = 0; j < N; ++j) rows[j] = job.row(ids[g + (j < c ? j : c - 1)]);  // spare lanes repeat the last
         SplatInLanes<L> in;
         bool moved = false;
-        if constexpr (transposes<L>())
+        if constexpr (L::TRANSPOSES)
             if (c == N && job.run(rows, N)) {  // N consecutive rows (no spare lane)
                 L::load3(job.at(job.means, job.node_means, 3, rows[0]), in.mean);
                 moved = true;
@@ -145,7 +133,7 @@ void stage_colors(const StageJob& job, const int64_t* ids, int count) {
         const float* srow[N];  // the first nsh of k * 3 coefficients of each
         for (int j = 0; j < N; ++j) srow[j] = job.at(job.sh, job.node_sh, job.k * 3, rows[j]);
         int q0 = 0;
-        if constexpr (transposes<L>())
+        if constexpr (L::TRANSPOSES)
             for (; q0 + N <= nsh; q0 += N) L::transpose(srow, q0, sh + q0);
         for (int j = 0; j < N; ++j)
             for (int q = q0; q < nsh; ++q) shb[q][j] = srow[j][q];
@@ -183,7 +171,7 @@ void stage_range(const StageJob& job, int64_t begin, int64_t end) {
             SplatInLanes<L> in;
             for (int j = 0; j < count; ++j) rows[j] = job.row(i0 + j);
             bool moved = false;
-            if constexpr (transposes<L>())
+            if constexpr (L::TRANSPOSES)
                 if (count == N && job.run(rows, N)) {  // N consecutive rows: deinterleaved by shuffles
                     const int64_t r = rows[0];
                     L::load3(job.at(job.means, job.node_means, 3, r), in.mean);
@@ -220,34 +208,31 @@ void stage_range(const StageJob& job, int64_t begin, int64_t end) {
                 std::fill(job.depth + i0, job.depth + i0 + count, NO_DEPTH);
                 continue;
             }
-            if constexpr (transposes<L>()) {  // a valid lane's record as one row of 8 (the 8th, colour 0, is
-                // written by stage_colors below, as every valid lane's colour)
-                static_assert(offsetof(StageSplat, cov) == 16 && offsetof(StageSplat, color) == 28);
-                typename L::F rec[N] = {st.xy[0], st.xy[1], st.depth, st.opacity, st.cov[0], st.cov[1], st.cov[2],
-                                        st.cov[2]};
-                L::transpose(rec);
-                L::store(st.depth, o[2]);
-                for (int j = 0; j < count; ++j) {
-                    job.depth[i0 + j] = NO_DEPTH;
-                    if (!((ok >> j) & 1u)) continue;
-                    std::memcpy(&job.depth[i0 + j], &o[2][j], 4);
-                    L::store(rec[j], job.stage[i0 + j].xy);
-                    on[count_on++] = i0 + j;
-                }
-                continue;
-            }
             const typename L::F fields[7] = {st.xy[0], st.xy[1], st.depth, st.opacity, st.cov[0], st.cov[1], st.cov[2]};
             for (int f = 0; f < 7; ++f) L::store(fields[f], o[f]);
+            // with transposes: each lane's record as one row of 8 (the 8th, colour 0, is written by stage_colors
+            // below, as every valid lane's colour)
+            typename L::F rec[N];
+            if constexpr (L::TRANSPOSES) {
+                static_assert(offsetof(StageSplat, cov) == 16 && offsetof(StageSplat, color) == 28);
+                std::copy(fields, fields + 7, rec);
+                rec[7] = st.cov[2];
+                L::transpose(rec);
+            }
             for (int j = 0; j < count; ++j) {
                 job.depth[i0 + j] = NO_DEPTH;
                 if (!((ok >> j) & 1u)) continue;
                 std::memcpy(&job.depth[i0 + j], &o[2][j], 4);
                 StageSplat& s = job.stage[i0 + j];
-                s.xy[0] = o[0][j];
-                s.xy[1] = o[1][j];
-                s.depth = o[2][j];
-                s.opacity = o[3][j];
-                for (int c = 0; c < 3; ++c) s.cov[c] = o[4 + c][j];
+                if constexpr (L::TRANSPOSES) {
+                    L::store(rec[j], s.xy);
+                } else {
+                    s.xy[0] = o[0][j];
+                    s.xy[1] = o[1][j];
+                    s.depth = o[2][j];
+                    s.opacity = o[3][j];
+                    for (int c = 0; c < 3; ++c) s.cov[c] = o[4 + c][j];
+                }
                 on[count_on++] = i0 + j;
             }
         }
@@ -282,7 +267,7 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
             continue;
         }
         StageLanes<L> st;
-        if constexpr (transposes<L>()) {  // the records' first 8 floats: xy, depth, opacity, cov, (colour)
+        if constexpr (L::TRANSPOSES) {  // the records' first 8 floats: xy, depth, opacity, cov, (colour)
             static_assert(offsetof(StageSplat, cov) == 16 && sizeof(StageSplat) >= 8 * sizeof(float));
             const float* rec[N];
             for (int j = 0; j < N; ++j) {
@@ -338,7 +323,7 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
             L::storei(rect.y1, rb[3]);
         }
         F a[N], b[N];  // with transposes: each lane's Splat2D floats 0-7 (a) and 8-15 (b) as rows
-        if constexpr (transposes<L>()) {
+        if constexpr (L::TRANSPOSES) {
             static_assert(offsetof(Splat2D, color) == 28 && offsetof(Splat2D, inv_sigma2) == 60 &&
                           offsetof(Splat2D, log_min_alpha) == 64);
             const F rows_a[N] = {out.xy[0], out.xy[1], out.depth, out.opacity, out.conic[0], out.conic[1],
@@ -354,7 +339,7 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
             if (!((ok >> j) & 1u)) continue;
             const int64_t i = i0 + j;
             Splat2D& s = job.splats[i];
-            if constexpr (transposes<L>()) {
+            if constexpr (L::TRANSPOSES) {
                 L::store(a[j], &s.xy.x);
                 L::store(b[j], &s.color[1]);
             } else {

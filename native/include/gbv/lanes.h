@@ -11,6 +11,7 @@ namespace gbv {
 
 struct Lanes1 {
     static constexpr int N = 1;
+    static constexpr bool TRANSPOSES = false;  // no shuffled moves (the CPU's LanesHwy has them on AVX2)
     using F = float;
     using M = bool;
     using I = int32_t;
