@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import importlib
 import io
+import os
 import re
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +26,7 @@ from . import progress as load_progress
 from .progress import LoadProgress
 
 HEADER_MAX_BYTES = 1 << 20
+SCATTER_ROWS = 16384  # rows a streamed load reads and scatters at a time (about 4 MB: still in cache when scattered)
 TRUNCATED = "truncated or malformed data: early end-of-file"
 USED_ELEMENTS = ("vertex", "chunk", "sh")  # what the loaders read; elements after the last of these stay unread
 TYPE_BYTES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
@@ -228,14 +231,15 @@ class InriaArrays:
         self.keep = np.empty(n, bool)
         self._scatter = native_io().scatter_inria
 
-    def fill(self, table: np.ndarray, cols: np.ndarray, rows: slice) -> None:
+    def fill(self, table: np.ndarray, cols: np.ndarray, rows: slice, threads: int = 0) -> None:
         """Scatter `table` (rows, C) float32, the raw rows `rows`, its columns at `cols` (`column_table` of
         `layout.wanted`) into the arrays: copied, checked and normalised as Scene.from_arrays would
-        (`gbviewer._native.io.scatter_inria`; `keep` marks the splats it would keep)."""
+        (`gbviewer._native.io.scatter_inria` on `threads` threads, 0: all; `keep` marks the splats it would keep).
+        Calls for different rows may run at once."""
         sliced = [None if a is None else a[rows] for a in (self.filter_3d, self.weights)]
         dc, rest = self._scatter(table, cols[:-1] if self.weights is not None else cols, self.means[rows],
                                  self.scales[rows], self.quats[rows], self.opacities[rows], self.sh[rows], *sliced,
-                                 self.keep.view(np.uint8)[rows], MAX_SH)
+                                 self.keep.view(np.uint8)[rows], MAX_SH, threads)
         check_sh_magnitude(dc, self.sh.dtype)
         check_sh_magnitude(rest, self.sh.dtype)
         if self.weights is not None and rows.start < len(self.info):
@@ -299,12 +303,24 @@ def _streamable(ply: plyfile.PlyData) -> bool:
             and "chunk" not in {e.name for e in ply.elements} and "f_anchor_feat_0" not in names)
 
 
+def _read_at(fd: int, buf: np.ndarray, offset: int) -> bool:
+    """Fill `buf` with the file's bytes from `offset` on (thread-safe: no file position); False at an early end."""
+    view, got = memoryview(buf).cast("B"), 0
+    while got < len(view):
+        n = os.preadv(fd, [view[got:]], offset + got)
+        if n == 0:
+            return False
+        got += n
+    return True
+
+
 def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype: str = "float32") -> Scene | None:
-    """Load a binary INRIA `.ply` by streaming its vertex rows in chunks of about a hundredth of the file straight
-    into the Scene's arrays (`InriaArrays`), the next chunk read while one is scattered: no mapping or copy of the
-    whole file, so the load costs about a read of it and its memory is the arrays' plus two chunks. None when the file is not such a PLY (`read_ply` and the
-    other loaders take it). `progress`: bytes read (and copied into the arrays), then splats activated. `sh_dtype`
-    "float16": the SH is stored as float16 as it is read (see `check_sh_range`)."""
+    """Load a binary INRIA `.ply` by streaming its vertex rows straight into the Scene's arrays (`InriaArrays`): a
+    worker per core takes a hundredth of the file at a time and reads, scatters and activates it SCATTER_ROWS rows
+    at a time on its own thread (no mapping or copy of the whole file: the load costs about a read of it, its memory
+    is the arrays' plus a few MB a core). None when the file is not such a PLY (`read_ply` and the other loaders
+    take it). `progress`: bytes read (copied into the arrays and activated). `sh_dtype` "float16": the SH is stored
+    as float16 as it is read (see `check_sh_range`)."""
     progress = progress or LoadProgress()
     with open(path, "rb") as fh:
         size = _checked_header(path, fh)
@@ -324,26 +340,29 @@ def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype
         out = InriaArrays(layout, n, sh_dtype)
         progress.report(0, size, "bytes")
         ranges = load_progress.row_ranges(n, row.itemsize)
-        bufs = [np.empty((ranges[0][1] - ranges[0][0]) * row.itemsize, np.uint8) for _ in range(2)]
+        workers = min(len(ranges), os.cpu_count() or 1)
+        buffers = threading.local()  # each worker's chunk buffer
 
-        def read(k: int) -> np.ndarray | None:
-            begin, end = ranges[k]
-            chunk = bufs[k % 2][: (end - begin) * row.itemsize]
-            return chunk if fh.readinto(chunk) == chunk.size else None
-
-        fh.seek(start)
-        with ThreadPoolExecutor(1) as reader:  # the next chunk is read while this one is scattered (both GIL-free)
-            pending = reader.submit(read, 0)
-            for k, (begin, end) in enumerate(ranges):
-                chunk = pending.result()
-                if chunk is None:
+        def load(k: int) -> None:
+            if not hasattr(buffers, "chunk"):
+                buffers.chunk = np.empty(min(n, SCATTER_ROWS) * row.itemsize, np.uint8)
+            for begin in range(*ranges[k], SCATTER_ROWS):
+                end = min(begin + SCATTER_ROWS, ranges[k][1])
+                chunk = buffers.chunk[: (end - begin) * row.itemsize]
+                if not _read_at(fh.fileno(), chunk, start + begin * row.itemsize):
                     raise SceneFormatError(path, TRUNCATED, field="vertex")
-                if k + 1 < len(ranges):
-                    pending = reader.submit(read, k + 1)
-                out.fill(column_table(path, chunk.view(row), layout.wanted)[0], cols, slice(begin, end))
-                progress.report(start + end * row.itemsize, size, "bytes")
-        del bufs, chunk
+                out.fill(column_table(path, chunk.view(row), layout.wanted)[0], cols, slice(begin, end),
+                         1 if workers > 1 else 0)
+                out.activate(slice(begin, end))
+
+        with ThreadPoolExecutor(workers) as pool:  # each worker reads, scatters and activates its rows (GIL-free)
+            pending = [pool.submit(load, k) for k in range(len(ranges))]
+            try:
+                for (begin, end), done in zip(ranges, pending):
+                    done.result()
+                    progress.report(start + end * row.itemsize, size, "bytes")
+            finally:
+                for later in pending:
+                    later.cancel()
         progress.report(size, size, "bytes")
-    for begin, end in progress.chunks(n, "splats", load_progress.MIN_SPLATS):
-        out.activate(slice(begin, end))
     return out.scene(path)

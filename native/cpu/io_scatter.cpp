@@ -111,7 +111,7 @@ void need(bool ok, const char* what) {
 
 std::pair<float, float> scatter_inria(const Table& table, const Cols& cols, Out means, Out scales, Out quats,
                                       Out opacities, AnyOut sh, std::optional<Out> filter_3d,
-                                      std::optional<Out> weights, Keep keep, float max_sh) {
+                                      std::optional<Out> weights, Keep keep, float max_sh, int threads) {
     const int64_t rows = (int64_t)table.shape(0), stride = (int64_t)table.shape(1);
     need(sh.ndim() == 3 && sh.shape(0) == (size_t)rows && sh.shape(2) == 3, "sh must be (rows, K, 3)");
     const int k = (int)sh.shape(1);
@@ -131,7 +131,8 @@ std::pair<float, float> scatter_inria(const Table& table, const Cols& cols, Out 
         float* wt = weights ? weights->data() : nullptr;
         constexpr int64_t BLOCK = 4096;  // rows per task: each thread writes its own rows of every array
         const int64_t blocks = (rows + BLOCK - 1) / BLOCK;
-#pragma omp parallel
+        const int team = threads > 0 ? threads : omp_get_max_threads();
+#pragma omp parallel num_threads(team)
         {
             Maxima local;
 #pragma omp for schedule(static)
@@ -165,10 +166,10 @@ void bind_io(nb::module_& m) {
     nb::module_ io = m.def_submodule("io", "Scene-file decoding helpers of gbviewer.io.");
     io.def("scatter_inria", &scatter_inria, nb::arg("table"), nb::arg("cols"), nb::arg("means"), nb::arg("scales"),
            nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"), nb::arg("filter_3d").none(),
-           nb::arg("weights").none(), nb::arg("keep"), nb::arg("max_sh"),
+           nb::arg("weights").none(), nb::arg("keep"), nb::arg("max_sh"), nb::arg("threads") = 0,
            "De-interleave INRIA vertex rows `table` (rows, C) float32 into the column arrays (slices of the Scene's "
            "arrays for those rows; sh float32 or float16), columns at `cols` (the order of InriaLayout.wanted "
            "without info). Quaternions normalised and filter_3D made >= 0 as Scene.from_arrays does; scales and "
-           "opacities raw. keep[r] = 0 where a copied value is non-finite or an SH / view weight is beyond max_sh. "
+           "opacities raw. `threads`: OpenMP threads (0: all). keep[r] = 0 where a copied value is non-finite or an SH / view weight is beyond max_sh. "
            "Returns the largest |f_dc| and |f_rest| of the rows (NaN skipped).");
 }

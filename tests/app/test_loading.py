@@ -9,6 +9,7 @@ import shutil
 import threading
 import time
 
+import plyfile
 import pytest
 
 import gbviewer as gb
@@ -71,8 +72,15 @@ def test_scene_loader_picks_up_cameras_json_beside_the_scene(tmp_path):
     assert res.cameras[0].R == pytest.approx(cam.R) and math.isclose(res.cameras[0].fx, cam.fx)
 
 
-def test_scene_loader_reports_each_phase_to_its_end():
-    ld = SceneLoader(gb.DEFAULT_SCENE)
+def test_scene_loader_reports_each_phase_to_its_end(tmp_path):
+    ld = SceneLoader(gb.DEFAULT_SCENE)  # a binary INRIA .ply: read, scattered and activated in one phase
+    wait_for(ld.done)
+    size = gb.DEFAULT_SCENE.stat().st_size
+    assert ld.progress == (size, size, "bytes") and ld.fraction == 1.0
+    assert ld.describe() == f"reading 100% ({size / 1e6:.1f} / {size / 1e6:.1f} MB)"
+    text = tmp_path / "text.ply"  # an ASCII one: read, then decoded
+    plyfile.PlyData([plyfile.PlyData.read(str(gb.DEFAULT_SCENE))["vertex"]], text=True).write(str(text))
+    ld = SceneLoader(text)
     wait_for(ld.done)
     n = ld.poll().scene.num_splats
     assert ld.progress == (n, n, "splats") and ld.fraction == 1.0
