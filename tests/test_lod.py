@@ -4,6 +4,7 @@ coverage for random cameras (inside the scene too), tau = 0 being the scene itse
 from __future__ import annotations
 
 import os
+import threading
 import warnings
 
 import numpy as np
@@ -317,6 +318,30 @@ def test_the_cache_keeps_the_entries_used_last_within_its_bound(tmp_path, monkey
     cached_build(scenes[2], "depth", cache)
     names = {p.name for p in cache.glob("*.npz")}
     assert names == {f"{cache_key(scenes[i], 'depth')}.npz" for i in (0, 2)} | {writing.name}
+
+
+def test_a_waiting_caller_gets_the_tree_while_the_builder_writes_the_cache(tmp_path, monkeypatch):
+    """hierarchy_for hands a built tree over before its cache entry is written (the viewer's previews wait for the
+    tree, not for the write); the builder's call returns once the entry is in place."""
+    scene = gb.load(write_inria_ply(random_scene(300, seed=30), tmp_path / "w.ply"))
+    monkeypatch.setattr(lod.cache, "default_folder", lambda: tmp_path / "cache")
+    writing, release, store = threading.Event(), threading.Event(), lod.cache._store
+
+    def slow_store(entry, tree):
+        writing.set()
+        assert release.wait(10)
+        store(entry, tree)
+
+    monkeypatch.setattr(lod.cache, "_store", slow_store)
+    built: list = []
+    builder = threading.Thread(target=lambda: built.append(lod.hierarchy_for(scene)))
+    builder.start()
+    assert writing.wait(10)
+    waiting = lod.hierarchy_for(scene)  # while the builder is held in its write
+    assert not list((tmp_path / "cache").glob("*.npz"))
+    release.set()
+    builder.join(10)
+    assert built == [waiting] and len(list((tmp_path / "cache").glob("*.npz"))) == 1
 
 
 def test_render_many_mixing_lod_and_full_panes_matches_single_renders():

@@ -12,6 +12,7 @@ import time
 import warnings
 import weakref
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -59,27 +60,43 @@ def _read(entry: Path, scene: Scene, rule: str) -> Hierarchy:
 
 def cached_build(scene: Scene, rule: str, folder: Path | None = None) -> Hierarchy:
     """The scene's hierarchy from the cache, else built (and written there when the folder can be written)."""
+    tree, write = _lookup(scene, rule, folder)
+    write()
+    return tree
+
+
+def _lookup(scene: Scene, rule: str, folder: Path | None = None) -> tuple[Hierarchy, Callable[[], None]]:
+    """The scene's hierarchy from the cache, else built; and what writes a built one there (nothing to write after
+    a hit or for a scene that did not come from a file)."""
     key = cache_key(scene, rule)
     if key is None:
-        return build(scene, rule)
+        return build(scene, rule), _nothing
     entry = (folder or default_folder()) / f"{key}.npz"
     if entry.exists():
         try:
             tree = _read(entry, scene, rule)
             _touch(entry)
-            return tree
+            return tree, _nothing
         except FileNotFoundError:  # pruned by another process meanwhile: a miss
             pass
         except Exception as exc:  # noqa: BLE001 - a damaged entry of any kind (truncated zip, bad arrays)
             warnings.warn(f"{entry}: damaged level-of-detail cache entry ({type(exc).__name__}: {exc}); rebuilt",
-                          stacklevel=3)
+                          stacklevel=4)
     tree = build(scene, rule)
+    return tree, lambda: _store(entry, tree)
+
+
+def _nothing() -> None:
+    pass
+
+
+def _store(entry: Path, tree: Hierarchy) -> None:
+    """Write `tree` as the cache entry `entry` (atomically), then prune the folder; a read-only cache is left be."""
     try:
         atomic_write(entry, lambda tmp: np.savez(tmp, **tree.arrays()), force=True)
         prune(entry.parent, keep=entry)
     except (OSError, GBViewerError):  # a read-only cache: the tree still serves this run
         pass
-    return tree
 
 
 def _touch(entry: Path) -> None:
@@ -126,9 +143,14 @@ _lock = threading.Lock()
 
 def hierarchy_for(scene: Scene, rule: str = "depth", cache: bool = True) -> Hierarchy:
     """The scene's hierarchy: built once per Scene object (the first caller builds, others wait), read from or
-    written to the user cache when the scene came from a file and `cache` is true."""
+    written to the user cache when the scene came from a file and `cache` is true. The builder writes the cache
+    entry after handing the tree over, so that callers waiting for it (the viewer's previews) do not wait for the
+    write too."""
     with _lock:
         per_scene = _memo.setdefault(scene, {})
-        if rule not in per_scene:
-            per_scene[rule] = cached_build(scene, rule) if cache else build(scene, rule)
-        return per_scene[rule]
+        if rule in per_scene:
+            return per_scene[rule]
+        tree, write = _lookup(scene, rule) if cache else (build(scene, rule), _nothing)
+        per_scene[rule] = tree
+    write()
+    return tree
