@@ -252,13 +252,15 @@ Plane<int32_t> morton_order(const Splats& s, int nt) {
         bool operator<(const Key& o) const { return code < o.code || (code == o.code && index < o.index); }
     };
     Plane<Key> keys(n);
+    Plane<uint64_t> codes(n);
     std::vector<int64_t> at((size_t)nt * BUCKETS, 0), start(BUCKETS + 1, 0);
 #pragma omp parallel num_threads(nt)
     {
         const int t = omp_get_thread_num(), nth = omp_get_num_threads();
         const int64_t b = n * t / nth, e = n * (t + 1) / nth;
         int64_t* mine = &at[(size_t)t * BUCKETS];
-        for (int64_t i = b; i < e; ++i) ++mine[code(i) >> SHIFT];
+        for (int64_t i = b; i < e; ++i) codes[i] = code(i);
+        for (int64_t i = b; i < e; ++i) ++mine[codes[i] >> SHIFT];
 #pragma omp barrier
 #pragma omp single
         {
@@ -272,10 +274,7 @@ Plane<int32_t> morton_order(const Splats& s, int nt) {
             }
             start[BUCKETS] = sum;
         }
-        for (int64_t i = b; i < e; ++i) {
-            const uint64_t c = code(i);
-            keys[mine[c >> SHIFT]++] = {c, (int32_t)i};
-        }
+        for (int64_t i = b; i < e; ++i) keys[mine[codes[i] >> SHIFT]++] = {codes[i], (int32_t)i};
     }
     const int64_t big = std::max<int64_t>(n / (4 * nt), 1 << 15);
     for (int64_t k = 0; k < BUCKETS; ++k)
