@@ -27,6 +27,7 @@ from .progress import LoadProgress
 
 HEADER_MAX_BYTES = 1 << 20
 SCATTER_ROWS = 16384  # rows a streamed load reads and scatters at a time (about 4 MB: still in cache when scattered)
+MAX_LOAD_WORKERS = 8  # a streamed load's threads at most (its buffers: 4 MB each)
 TRUNCATED = "truncated or malformed data: early end-of-file"
 USED_ELEMENTS = ("vertex", "chunk", "sh")  # what the loaders read; elements after the last of these stay unread
 TYPE_BYTES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
@@ -316,11 +317,11 @@ def _read_at(fd: int, buf: np.ndarray, offset: int) -> bool:
 
 def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype: str = "float32") -> Scene | None:
     """Load a binary INRIA `.ply` by streaming its vertex rows straight into the Scene's arrays (`InriaArrays`): a
-    worker per core takes a hundredth of the file at a time and reads, scatters and activates it SCATTER_ROWS rows
-    at a time on its own thread (no mapping or copy of the whole file: the load costs about a read of it, its memory
-    is the arrays' plus a few MB a core). None when the file is not such a PLY (`read_ply` and the other loaders
-    take it). `progress`: bytes read (copied into the arrays and activated). `sh_dtype` "float16": the SH is stored
-    as float16 as it is read (see `check_sh_range`)."""
+    worker per core (up to MAX_LOAD_WORKERS) takes a hundredth of the file at a time and reads, scatters and
+    activates it SCATTER_ROWS rows at a time on its own thread (no mapping or copy of the whole file: the load costs
+    about a read of it, its memory is the arrays' plus 4 MB a worker). None when the file is not such a PLY
+    (`read_ply` and the other loaders take it). `progress`: bytes read (copied into the arrays and activated).
+    `sh_dtype` "float16": the SH is stored as float16 as it is read (see `check_sh_range`)."""
     progress = progress or LoadProgress()
     with open(path, "rb") as fh:
         size = _checked_header(path, fh)
@@ -340,7 +341,7 @@ def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype
         out = InriaArrays(layout, n, sh_dtype)
         progress.report(0, size, "bytes")
         ranges = load_progress.row_ranges(n, row.itemsize)
-        workers = min(len(ranges), os.cpu_count() or 1)
+        workers = min(len(ranges), os.cpu_count() or 1, MAX_LOAD_WORKERS)
         buffers = threading.local()  # each worker's chunk buffer
 
         def load(k: int) -> None:
