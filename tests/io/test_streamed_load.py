@@ -14,6 +14,7 @@ import pytest
 from helpers import shared_scene
 
 import gbviewer as gb
+from gbviewer.io import ply
 from gbviewer.io import progress as load_progress
 from gbviewer.io.ply import check_sh_range, load_inria_ply, load_streamed_ply, read_ply
 from gbviewer.io.write import ply_header
@@ -143,11 +144,13 @@ LAYOUTS = {
 }
 
 
-@pytest.fixture(params=[False, True], ids=["default-chunks", "tiny-chunks"])
+@pytest.fixture(params=[0, 1, 2], ids=["default-chunks", "tiny-chunks", "tiny-blocks"])
 def chunks(request, monkeypatch):
     if request.param:  # a chunk per hundredth of the file: many row ranges, one of them possibly a single row
         monkeypatch.setattr(load_progress, "MIN_BYTES", 1)
         monkeypatch.setattr(load_progress, "MIN_SPLATS", 1)
+    if request.param == 2:  # each worker reads and scatters its range 3 rows at a time (the last block shorter)
+        monkeypatch.setattr(ply, "SCATTER_ROWS", 3)
     return request.param
 
 
