@@ -170,6 +170,6 @@ void bind_io(nb::module_& m) {
            "De-interleave INRIA vertex rows `table` (rows, C) float32 into the column arrays (slices of the Scene's "
            "arrays for those rows; sh float32 or float16), columns at `cols` (the order of InriaLayout.wanted "
            "without info). Quaternions normalised and filter_3D made >= 0 as Scene.from_arrays does; scales and "
-           "opacities raw. `threads`: OpenMP threads (0: all). keep[r] = 0 where a copied value is non-finite or an SH / view weight is beyond max_sh. "
-           "Returns the largest |f_dc| and |f_rest| of the rows (NaN skipped).");
+           "opacities raw. keep[r] = 0 where a copied value is non-finite or an SH / view weight is beyond max_sh. "
+           "Returns the largest |f_dc| and |f_rest| of the rows (NaN skipped). `threads`: OpenMP threads, 0: all.");
 }
