@@ -14,7 +14,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 import plyfile
@@ -26,8 +26,8 @@ from . import progress as load_progress
 from .progress import LoadProgress
 
 HEADER_MAX_BYTES = 1 << 20
-SCATTER_ROWS = 16384  # rows a streamed load reads and scatters at a time (about 4 MB: still in cache when scattered)
-MAX_LOAD_WORKERS = 8  # a streamed load's threads at most (its buffers: 4 MB each)
+SCATTER_BYTES = 4 << 20  # of rows a streamed load reads and scatters at a time (still in cache when scattered)
+MAX_LOAD_WORKERS = 8  # a streamed load's threads at most (a SCATTER_BYTES buffer each)
 TRUNCATED = "truncated or malformed data: early end-of-file"
 USED_ELEMENTS = ("vertex", "chunk", "sh")  # what the loaders read; elements after the last of these stay unread
 TYPE_BYTES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
@@ -232,20 +232,24 @@ class InriaArrays:
         self.keep = np.empty(n, bool)
         self._scatter = native_io().scatter_inria
 
-    def fill(self, table: np.ndarray, cols: np.ndarray, rows: slice, threads: int = 0) -> None:
+    def fill(self, table: np.ndarray, cols: np.ndarray, rows: slice, threads: int = 0) -> tuple[float, float]:
         """Scatter `table` (rows, C) float32, the raw rows `rows`, its columns at `cols` (`column_table` of
         `layout.wanted`) into the arrays: copied, checked and normalised as Scene.from_arrays would
         (`gbviewer._native.io.scatter_inria` on `threads` threads, 0: all; `keep` marks the splats it would keep).
-        Calls for different rows may run at once."""
+        Calls for different rows may run at once. Returns the rows' largest |f_dc| and |f_rest| for `check_sh`."""
         sliced = [None if a is None else a[rows] for a in (self.filter_3d, self.weights)]
-        dc, rest = self._scatter(table, cols[:-1] if self.weights is not None else cols, self.means[rows],
-                                 self.scales[rows], self.quats[rows], self.opacities[rows], self.sh[rows], *sliced,
-                                 self.keep.view(np.uint8)[rows], MAX_SH, threads)
-        check_sh_magnitude(dc, self.sh.dtype)
-        check_sh_magnitude(rest, self.sh.dtype)
+        maxima = self._scatter(table, cols[:-1] if self.weights is not None else cols, self.means[rows],
+                               self.scales[rows], self.quats[rows], self.opacities[rows], self.sh[rows], *sliced,
+                               self.keep.view(np.uint8)[rows], MAX_SH, threads)
         if self.weights is not None and rows.start < len(self.info):
             head = table[: len(self.info) - rows.start, cols[-1]]
             self.info[rows.start:rows.start + len(head)] = head
+        return maxima
+
+    def check_sh(self, dc: float, rest: float) -> None:
+        """Refuse SH coefficients as large as `fill` found (the DC block's first) when the storage cannot hold them."""
+        check_sh_magnitude(dc, self.sh.dtype)
+        check_sh_magnitude(rest, self.sh.dtype)
 
     def activate(self, rows: slice) -> None:
         """exp of the scales, sigmoid of the opacities of rows `rows`, in place; `keep` then also drops the splats
@@ -289,7 +293,7 @@ def load_inria_ply(path: Path, ply: plyfile.PlyData, progress: LoadProgress | No
     out = InriaArrays(layout, n)
     for begin, end in (progress or LoadProgress()).chunks(n, "splats", load_progress.MIN_SPLATS):
         rows = slice(begin, end)
-        out.fill(table[rows], cols, rows)
+        out.check_sh(*out.fill(table[rows], cols, rows))
         out.activate(rows)
     return out.scene(path)
 
@@ -304,12 +308,18 @@ def _streamable(ply: plyfile.PlyData) -> bool:
             and "chunk" not in {e.name for e in ply.elements} and "f_anchor_feat_0" not in names)
 
 
-def _read_at(fd: int, buf: np.ndarray, offset: int) -> bool:
-    """Fill `buf` with the file's bytes from `offset` on (thread-safe: no file position); False at an early end."""
+def _read_at(fh, lock: threading.Lock, buf: np.ndarray, offset: int) -> bool:
+    """Fill `buf` with the bytes of the open file `fh` from `offset` on, from any thread: `os.preadv` where the
+    platform has it, else a seek and a read under `lock` (Windows). False when the file ends first."""
     view, got = memoryview(buf).cast("B"), 0
     while got < len(view):
-        n = os.preadv(fd, [view[got:]], offset + got)
-        if n == 0:
+        if hasattr(os, "preadv"):
+            n = os.preadv(fh.fileno(), [view[got:]], offset + got)
+        else:
+            with lock:
+                fh.seek(offset + got)
+                n = fh.readinto(view[got:])
+        if not n:
             return False
         got += n
     return True
@@ -318,8 +328,8 @@ def _read_at(fd: int, buf: np.ndarray, offset: int) -> bool:
 def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype: str = "float32") -> Scene | None:
     """Load a binary INRIA `.ply` by streaming its vertex rows straight into the Scene's arrays (`InriaArrays`): a
     worker per core (up to MAX_LOAD_WORKERS) takes a hundredth of the file at a time and reads, scatters and
-    activates it SCATTER_ROWS rows at a time on its own thread (no mapping or copy of the whole file: the load costs
-    about a read of it, its memory is the arrays' plus 4 MB a worker). None when the file is not such a PLY
+    activates it SCATTER_BYTES at a time on its own thread (no mapping or copy of the whole file: the load costs
+    about a read of it, its memory is the arrays' plus SCATTER_BYTES a worker). None when the file is not such a PLY
     (`read_ply` and the other loaders take it). `progress`: bytes read (copied into the arrays and activated).
     `sh_dtype` "float16": the SH is stored as float16 as it is read (see `check_sh_range`)."""
     progress = progress or LoadProgress()
@@ -342,28 +352,37 @@ def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype
         progress.report(0, size, "bytes")
         ranges = load_progress.row_ranges(n, row.itemsize)
         workers = min(len(ranges), os.cpu_count() or 1, MAX_LOAD_WORKERS)
-        buffers = threading.local()  # each worker's chunk buffer
+        block = max(1, SCATTER_BYTES // row.itemsize)  # rows read and scattered at a time
+        buffers, lock, errors = threading.local(), threading.Lock(), np.geterr()  # the caller's numpy error state
 
         def load(k: int) -> None:
             if not hasattr(buffers, "chunk"):
-                buffers.chunk = np.empty(min(n, SCATTER_ROWS) * row.itemsize, np.uint8)
-            for begin in range(*ranges[k], SCATTER_ROWS):
-                end = min(begin + SCATTER_ROWS, ranges[k][1])
-                chunk = buffers.chunk[: (end - begin) * row.itemsize]
-                if not _read_at(fh.fileno(), chunk, start + begin * row.itemsize):
-                    raise SceneFormatError(path, TRUNCATED, field="vertex")
-                out.fill(column_table(path, chunk.view(row), layout.wanted)[0], cols, slice(begin, end),
-                         1 if workers > 1 else 0)
-                out.activate(slice(begin, end))
+                buffers.chunk = np.empty(min(n, block) * row.itemsize, np.uint8)
+            dc = rest = 0.0  # the range's largest |f_dc|, |f_rest| (float16 refuses the range's, not a block's)
+            with np.errstate(**errors):
+                for begin in range(*ranges[k], block):
+                    end = min(begin + block, ranges[k][1])
+                    chunk = buffers.chunk[: (end - begin) * row.itemsize]
+                    if not _read_at(fh, lock, chunk, start + begin * row.itemsize):
+                        raise SceneFormatError(path, TRUNCATED, field="vertex")
+                    table = column_table(path, chunk.view(row), layout.wanted)[0]
+                    block_dc, block_rest = out.fill(table, cols, slice(begin, end), 1 if workers > 1 else 0)
+                    dc, rest = max(dc, block_dc), max(rest, block_rest)
+                    out.activate(slice(begin, end))
+            out.check_sh(dc, rest)
 
-        with ThreadPoolExecutor(workers) as pool:  # each worker reads, scatters and activates its rows (GIL-free)
-            pending = [pool.submit(load, k) for k in range(len(ranges))]
-            try:
-                for (begin, end), done in zip(ranges, pending):
-                    done.result()
-                    progress.report(start + end * row.itemsize, size, "bytes")
-            finally:
-                for later in pending:
-                    later.cancel()
+        def report(done: Iterator[None]) -> None:
+            for (_, end), _ in zip(ranges, done):
+                progress.report(start + end * row.itemsize, size, "bytes")
+
+        if workers == 1:  # in this thread (its OpenMP team lasts from load to load)
+            report(map(load, range(len(ranges))))
+        else:
+            with ThreadPoolExecutor(workers) as pool:  # each worker reads, scatters and activates its ranges
+                done = pool.map(load, range(len(ranges)))
+                try:
+                    report(done)
+                finally:
+                    done.close()  # the ranges not begun are cancelled
         progress.report(size, size, "bytes")
     return out.scene(path)

@@ -4,6 +4,7 @@ vertex layout, the fuzz seeds and the shared scenes, in one chunk or a hundred."
 
 from __future__ import annotations
 
+import os
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -149,8 +150,8 @@ def chunks(request, monkeypatch):
     if request.param:  # a chunk per hundredth of the file: many row ranges, one of them possibly a single row
         monkeypatch.setattr(load_progress, "MIN_BYTES", 1)
         monkeypatch.setattr(load_progress, "MIN_SPLATS", 1)
-    if request.param == 2:  # each worker reads and scatters its range 3 rows at a time (the last block shorter)
-        monkeypatch.setattr(ply, "SCATTER_ROWS", 3)
+    if request.param == 2:  # each worker reads and scatters its range a few rows at a time (the last block shorter)
+        monkeypatch.setattr(ply, "SCATTER_BYTES", 1000)
     return request.param
 
 
@@ -175,6 +176,30 @@ def test_fuzz_seeds_load_as_before(seed, chunks):
     assert_same(scene, reference(path))
     assert_same(scene, mapped(path))
     assert (load_streamed_ply(path) is None) == (seed == "ascii.ply")  # ASCII: the row-by-row path
+
+
+def test_without_preadv_the_workers_read_the_file_under_a_lock(tmp_path, monkeypatch):
+    """Where os.preadv is missing (Windows), the workers seek and read the one open file in turn: the same arrays."""
+    path = raw_ply(tmp_path / "s.ply", 3001, seed=4, extra=("filter_3D",))
+    monkeypatch.setattr(load_progress, "MIN_BYTES", 1)
+    monkeypatch.setattr(ply, "SCATTER_BYTES", 1000)
+    monkeypatch.delattr(os, "preadv", raising=False)
+    assert_same(load_quietly(path), reference(path))
+
+
+def test_the_callers_numpy_error_state_holds_in_the_workers(tmp_path, monkeypatch):
+    """A float64 column beyond float32 is cast with gb.load's errors ignored in every worker, as in one thread: no
+    RuntimeWarning (an error under a strict filter), only the dropped splats' warning."""
+    path = raw_ply(tmp_path / "s.ply", 3001, seed=6, dtypes={"x": "f8"})
+    v = plyfile.PlyData.read(str(path), mmap=False)
+    v["vertex"].data["x"][[5, 2900]] = 1e300
+    v.write(str(path))
+    monkeypatch.setattr(load_progress, "MIN_BYTES", 1)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("error", RuntimeWarning)
+        warnings.simplefilter("always", UserWarning)
+        scene = gb.load(path)
+    assert scene.num_splats == 2999 and [str(w.message).count("dropped 2 of 3001") for w in caught] == [1]
 
 
 def test_other_ply_formats_are_not_streamed():
