@@ -14,7 +14,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 import plyfile
@@ -308,7 +308,7 @@ def _streamable(ply: plyfile.PlyData) -> bool:
             and "chunk" not in {e.name for e in ply.elements} and "f_anchor_feat_0" not in names)
 
 
-def _read_at(fh, lock: threading.Lock, buf: np.ndarray, offset: int) -> bool:
+def _read_at(fh: BinaryIO, lock: threading.Lock, buf: np.ndarray, offset: int) -> bool:
     """Fill `buf` with the bytes of the open file `fh` from `offset` on, from any thread: `os.preadv` where the
     platform has it, else a seek and a read under `lock` (Windows). False when the file ends first."""
     view, got = memoryview(buf).cast("B"), 0
