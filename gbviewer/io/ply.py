@@ -6,6 +6,7 @@ info[0] = weight_background, info[1] = sigma."""
 
 from __future__ import annotations
 
+import functools
 import importlib
 import io
 import os
@@ -120,20 +121,27 @@ def column_table(path: Path, data: np.ndarray, names: list[str]) -> tuple[np.nda
     each named property is checked to be a scalar number. The usual all-float32 layout is viewed as it is (memory-
     mapped or a chunk read from the file: each byte is copied once, by the scatter into the final arrays); other
     layouts are converted, the named columns only."""
-    fields = data.dtype.fields or {}
+    viewed, pos = _table_layout(path, data.dtype, tuple(names))
+    if viewed:
+        return np.asarray(data).view(np.float32).reshape(len(data), len(data.dtype.names)), np.array(pos, np.int32)
+    table = np.stack([np.asarray(data[n], dtype=np.float32) for n in names], axis=1)
+    return table, np.arange(len(names), dtype=np.int32)
+
+
+@functools.lru_cache(maxsize=16)
+def _table_layout(path: Path, dtype: np.dtype, names: tuple[str, ...]) -> tuple[bool, tuple[int, ...]]:
+    """`column_table`'s checks of a row type, and whether its rows are viewed as they are (then the positions of
+    `names`); once per row type (a streamed load asks for every block it reads)."""
+    fields = dtype.fields or {}
     for name in names:
         if name not in fields:
             raise SceneFormatError(path, "missing required property", field=name)
-        dtype = fields[name][0]
-        if dtype.kind not in "fiu" or dtype.shape:
-            raise SceneFormatError(path, f"property has type {dtype}; expected a scalar number", field=name)
-    all_names = list(data.dtype.names)
-    if all(fields[n][0] == np.dtype("=f4") for n in all_names) and data.dtype.itemsize == 4 * len(all_names):
-        table = np.asarray(data).view(np.float32).reshape(len(data), len(all_names))
-        pos = {n: i for i, n in enumerate(all_names)}
-        return table, np.array([pos[n] for n in names], np.int32)
-    table = np.stack([np.asarray(data[n], dtype=np.float32) for n in names], axis=1)
-    return table, np.arange(len(names), dtype=np.int32)
+        if fields[name][0].kind not in "fiu" or fields[name][0].shape:
+            raise SceneFormatError(path, f"property has type {fields[name][0]}; expected a scalar number", field=name)
+    all_names = list(dtype.names)
+    if all(fields[n][0] == np.dtype("=f4") for n in all_names) and dtype.itemsize == 4 * len(all_names):
+        return True, tuple(all_names.index(n) for n in names)
+    return False, ()
 
 
 def check_sh_range(sh: np.ndarray, dtype: np.dtype) -> np.ndarray:
