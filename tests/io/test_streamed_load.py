@@ -150,6 +150,7 @@ def chunks(request, monkeypatch):
     if request.param:  # a chunk per hundredth of the file: many row ranges, one of them possibly a single row
         monkeypatch.setattr(load_progress, "MIN_BYTES", 1)
         monkeypatch.setattr(load_progress, "MIN_SPLATS", 1)
+        monkeypatch.setattr(os, "cpu_count", lambda: 3)  # several workers whatever the machine
     if request.param == 2:  # each worker reads and scatters its range a few rows at a time (the last block shorter)
         monkeypatch.setattr(ply, "SCATTER_BYTES", 1000)
     return request.param
@@ -183,6 +184,7 @@ def test_without_preadv_the_workers_read_the_file_under_a_lock(tmp_path, monkeyp
     path = raw_ply(tmp_path / "s.ply", 3001, seed=4, extra=("filter_3D",))
     monkeypatch.setattr(load_progress, "MIN_BYTES", 1)
     monkeypatch.setattr(ply, "SCATTER_BYTES", 1000)
+    monkeypatch.setattr(os, "cpu_count", lambda: 3)
     monkeypatch.delattr(os, "preadv", raising=False)
     assert_same(load_quietly(path), reference(path))
 
@@ -195,6 +197,7 @@ def test_the_callers_numpy_error_state_holds_in_the_workers(tmp_path, monkeypatc
     v["vertex"].data["x"][[5, 2900]] = 1e300
     v.write(str(path))
     monkeypatch.setattr(load_progress, "MIN_BYTES", 1)
+    monkeypatch.setattr(os, "cpu_count", lambda: 3)  # workers, whose numpy error state is their own
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("error", RuntimeWarning)
         warnings.simplefilter("always", UserWarning)
