@@ -281,6 +281,11 @@ def test_cache_key_follows_the_file(tmp_path):
     os.utime(path, ns=(os.stat(path).st_atime_ns, os.stat(path).st_mtime_ns + 10**9))
     assert cache_key(gb.load(path), "depth") != key
     assert cache_key(random_scene(10), "depth") is None  # not from a file: built, never cached
+    loaded = gb.load(path)
+    write_inria_ply(random_scene(300, seed=10), path, force=True)  # rewritten after the load, same layout
+    os.utime(path, ns=(os.stat(path).st_atime_ns, os.stat(path).st_mtime_ns + 10**9))
+    assert cache_key(loaded, "depth") is None  # its tree is the loaded splats', not the new file's
+    assert cache_key(gb.load(path), "depth") is not None
 
 
 def test_a_truncated_cache_entry_is_rebuilt_with_one_warning(tmp_path):
@@ -297,7 +302,7 @@ def test_a_truncated_cache_entry_is_rebuilt_with_one_warning(tmp_path):
     entry.write_bytes(data[: len(data) // 2])
     with pytest.warns(UserWarning, match="damaged level-of-detail cache entry") as caught:
         rebuilt = cached_build(scene, "depth", cache)
-    assert len(caught) == 1
+    assert len(caught) == 1 and caught[0].filename == __file__  # pointed at the caller
     assert all(np.array_equal(a, b) for a, b in zip(first.arrays().values(), rebuilt.arrays().values()))
     assert entry.read_bytes() == data  # rewritten whole
 
@@ -342,6 +347,40 @@ def test_a_waiting_caller_gets_the_tree_while_the_builder_writes_the_cache(tmp_p
     release.set()
     builder.join(10)
     assert built == [waiting] and len(list((tmp_path / "cache").glob("*.npz"))) == 1
+
+
+def test_a_second_scene_of_the_file_gets_the_tree_being_written(tmp_path, monkeypatch):
+    """Two loads of one file (a reload): while the first's tree is written to a damaged entry's place, the second
+    gets that tree, with no second build and no second warning; a use of an entry pruned meanwhile makes no file."""
+    path = write_inria_ply(random_scene(300, seed=31), tmp_path / "r.ply")
+    cache = tmp_path / "cache"
+    monkeypatch.setattr(lod.cache, "default_folder", lambda: cache)
+    cache.mkdir()
+    (cache / f"{cache_key(gb.load(path), 'depth')}.npz").write_bytes(b"PK damaged")
+    writing, release, store, build = threading.Event(), threading.Event(), lod.cache._store, lod.cache.build
+    builds: list = []
+
+    def slow_store(entry, tree):
+        writing.set()
+        assert release.wait(10)
+        store(entry, tree)
+
+    monkeypatch.setattr(lod.cache, "_store", slow_store)
+    monkeypatch.setattr(lod.cache, "build", lambda scene, rule: builds.append(scene) or build(scene, rule))
+    first, second = gb.load(path), gb.load(path)
+    built: list = []
+    with pytest.warns(UserWarning, match="damaged level-of-detail cache entry") as caught:
+        builder = threading.Thread(target=lambda: built.append(lod.hierarchy_for(first)))
+        builder.start()
+        assert writing.wait(10)
+        again = lod.hierarchy_for(second)
+        release.set()
+        builder.join(10)
+    assert len(caught) == 1 and builds == [first] and built == [again]
+    (entry,) = cache.glob("*.npz")
+    entry.unlink()
+    lod.cache._touch(entry)
+    assert not entry.exists()
 
 
 def test_render_many_mixing_lod_and_full_panes_matches_single_renders():

@@ -14,6 +14,7 @@ from ..errors import CallbackError, GBViewerError, LoadCancelled, SceneFormatErr
 from ..scene import Scene
 from .compressed_ply import is_compressed_ply, load_compressed_ply
 from .duplex import is_duplex_ply, load_duplex
+from .files import file_stat
 from .ply import check_sh_range, load_inria_ply, load_streamed_ply, read_ply
 from .progress import LoadProgress, Progress
 from .sog import ZIP_MAGIC, load_sog
@@ -38,18 +39,22 @@ def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable
     raises LoadCancelled within one chunk (at most a hundredth of the file or 65536 splats). `sh_dtype`:
     "float16" stores the SH coefficients as float16 (half their memory, rounded to nearest; an error where one is
     beyond float16's range); the renderers convert them to float32 at upload. `scene.meta["trained_as"]` and its
-    source: the mode the file says it was trained with (gbviewer.io.trained_as)."""
+    source: the mode the file says it was trained with (gbviewer.io.trained_as). `scene.meta["file_stat"]`: the
+    file's (size, mtime_ns), when it was the same before and after the load (what the hierarchy cache keys on)."""
     path = Path(path)
     if sh_dtype not in SH_DTYPES:
         raise GBViewerError(f"sh_dtype {sh_dtype!r}; expected one of {', '.join(SH_DTYPES)}")
     reporter = LoadProgress(progress, cancel)
     try:
         reporter.check()
+        before = file_stat(path)
         with np.errstate(all="ignore"):  # overflow in decoding is data: Scene drops non-finite splats with a warning
             scene = _load(path, reporter, sh_dtype)
             scene.meta.update(resolve(signals_of(scene.meta, ply_comments(path) if path.is_file() else [])))
             if scene.sh.dtype != sh_dtype:  # formats decoded in float32: converted once whole
                 scene = replace(scene, sh=check_sh_range(scene.sh, np.dtype(sh_dtype)).astype(sh_dtype))
+            if before is not None and file_stat(path) == before:
+                scene.meta["file_stat"] = before
             return scene
     except (SceneFormatError, LoadCancelled, CallbackError):
         raise

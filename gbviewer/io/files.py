@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import stat
 import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -100,3 +101,12 @@ def atomic_write(path: str | Path, write: Callable[[Path], object], force: bool 
     finally:
         tmp.unlink(missing_ok=True)
     return path
+
+
+def file_stat(path: Path) -> tuple[int, int] | None:
+    """A regular file's (size, mtime_ns), else None."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_size, st.st_mtime_ns) if stat.S_ISREG(st.st_mode) else None

@@ -7,6 +7,7 @@ MAX_BYTES: a write drops the entries used longest ago (a read marks its entry us
 from __future__ import annotations
 
 import hashlib
+import os
 import threading
 import time
 import warnings
@@ -17,7 +18,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import GBViewerError
-from ..io.files import atomic_write
+from ..io.files import atomic_write, file_stat
 from ..scene import Scene
 from .tree import Hierarchy, build
 
@@ -35,17 +36,19 @@ def default_folder() -> Path:
 
 
 def cache_key(scene: Scene, rule: str) -> str | None:
-    """The cache key of the scene's hierarchy, None when the scene did not come from a readable file."""
+    """The cache key of the scene's hierarchy; None when the scene was not loaded from a file (gbviewer.load's
+    meta["file_stat"]) or the file has changed since (a tree of the loaded splats must not be kept as the new
+    file's)."""
     path = Path(scene.source)
+    loaded = scene.meta.get("file_stat")
+    if loaded is None or file_stat(path) != tuple(loaded):
+        return None
     try:
-        st = path.stat()
         with open(path, "rb") as fh:
             header = fh.read(HEADER_BYTES)
     except OSError:
         return None
-    if not path.is_file():
-        return None
-    ident = (f"v{VERSION}|{st.st_size}|{st.st_mtime_ns}|{hashlib.sha256(header).hexdigest()}|{scene.num_splats}|"
+    ident = (f"v{VERSION}|{loaded[0]}|{loaded[1]}|{hashlib.sha256(header).hexdigest()}|{scene.num_splats}|"
              f"{scene.sh.shape[1]}|{scene.sh.dtype}|{scene.filter_3d is not None}|{rule}")
     return hashlib.sha256(ident.encode()).hexdigest()[:32]
 
@@ -72,6 +75,14 @@ def _lookup(scene: Scene, rule: str, folder: Path | None = None) -> tuple[Hierar
     if key is None:
         return build(scene, rule), _nothing
     entry = (folder or default_folder()) / f"{key}.npz"
+    with _writing_lock:  # another scene of the same file whose tree is being written: that tree
+        pending = _writing.get(entry)
+    if pending is not None:
+        try:
+            pending.check(scene)
+            return pending, _nothing
+        except ValueError:  # not this scene's after all (a key collision): its own tree
+            pass
     if entry.exists():
         try:
             tree = _read(entry, scene, rule)
@@ -81,8 +92,12 @@ def _lookup(scene: Scene, rule: str, folder: Path | None = None) -> tuple[Hierar
             pass
         except Exception as exc:  # noqa: BLE001 - a damaged entry of any kind (truncated zip, bad arrays)
             warnings.warn(f"{entry}: damaged level-of-detail cache entry ({type(exc).__name__}: {exc}); rebuilt",
-                          stacklevel=4)
+                          stacklevel=3)  # hierarchy_for or cached_build's caller
     tree = build(scene, rule)
+    with _writing_lock:
+        if entry in _writing:  # built meanwhile by another scene of the file: its write serves both
+            return tree, _nothing
+        _writing[entry] = tree
     return tree, lambda: _store(entry, tree)
 
 
@@ -91,18 +106,22 @@ def _nothing() -> None:
 
 
 def _store(entry: Path, tree: Hierarchy) -> None:
-    """Write `tree` as the cache entry `entry` (atomically), then prune the folder; a read-only cache is left be."""
+    """Write `tree` as the cache entry `entry` (atomically), then prune the folder; a read-only cache is left be.
+    Until it is written, lookups of the entry get `tree` (_writing)."""
     try:
         atomic_write(entry, lambda tmp: np.savez(tmp, **tree.arrays()), force=True)
         prune(entry.parent, keep=entry)
     except (OSError, GBViewerError):  # a read-only cache: the tree still serves this run
         pass
+    finally:
+        with _writing_lock:
+            _writing.pop(entry, None)
 
 
 def _touch(entry: Path) -> None:
-    """Mark an entry used now (its mtime: the eviction order)."""
+    """Mark an entry used now (its mtime: the eviction order); one pruned meanwhile is not made again."""
     try:
-        entry.touch()
+        os.utime(entry)
     except OSError:
         pass
 
@@ -137,6 +156,8 @@ def _remove(p: Path) -> bool:
         return False
 
 
+_writing: dict[Path, Hierarchy] = {}  # entries being written, and their trees
+_writing_lock = threading.Lock()
 _memo: "weakref.WeakKeyDictionary[Scene, dict[str, Hierarchy]]" = weakref.WeakKeyDictionary()
 _lock = threading.Lock()
 
