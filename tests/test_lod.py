@@ -325,11 +325,9 @@ def test_the_cache_keeps_the_entries_used_last_within_its_bound(tmp_path, monkey
     assert names == {f"{cache_key(scenes[i], 'depth')}.npz" for i in (0, 2)} | {writing.name}
 
 
-def test_a_waiting_caller_gets_the_tree_while_the_builder_writes_the_cache(tmp_path, monkeypatch):
-    """hierarchy_for hands a built tree over before its cache entry is written (the viewer's previews wait for the
-    tree, not for the write); the builder's call returns once the entry is in place."""
-    scene = gb.load(write_inria_ply(random_scene(300, seed=30), tmp_path / "w.ply"))
-    monkeypatch.setattr(lod.cache, "default_folder", lambda: tmp_path / "cache")
+def hold_cache_writes(monkeypatch, folder) -> tuple[threading.Event, threading.Event]:
+    """The cache in `folder`, its writes held: (set when a write starts, set it to let the write go on)."""
+    monkeypatch.setattr(lod.cache, "default_folder", lambda: folder)
     writing, release, store = threading.Event(), threading.Event(), lod.cache._store
 
     def slow_store(entry, tree):
@@ -338,6 +336,14 @@ def test_a_waiting_caller_gets_the_tree_while_the_builder_writes_the_cache(tmp_p
         store(entry, tree)
 
     monkeypatch.setattr(lod.cache, "_store", slow_store)
+    return writing, release
+
+
+def test_a_waiting_caller_gets_the_tree_while_the_builder_writes_the_cache(tmp_path, monkeypatch):
+    """hierarchy_for hands a built tree over before its cache entry is written (the viewer's previews wait for the
+    tree, not for the write); the builder's call returns once the entry is in place."""
+    scene = gb.load(write_inria_ply(random_scene(300, seed=30), tmp_path / "w.ply"))
+    writing, release = hold_cache_writes(monkeypatch, tmp_path / "cache")
     built: list = []
     builder = threading.Thread(target=lambda: built.append(lod.hierarchy_for(scene)))
     builder.start()
@@ -354,18 +360,10 @@ def test_a_second_scene_of_the_file_gets_the_tree_being_written(tmp_path, monkey
     gets that tree, with no second build and no second warning; a use of an entry pruned meanwhile makes no file."""
     path = write_inria_ply(random_scene(300, seed=31), tmp_path / "r.ply")
     cache = tmp_path / "cache"
-    monkeypatch.setattr(lod.cache, "default_folder", lambda: cache)
     cache.mkdir()
     (cache / f"{cache_key(gb.load(path), 'depth')}.npz").write_bytes(b"PK damaged")
-    writing, release, store, build = threading.Event(), threading.Event(), lod.cache._store, lod.cache.build
-    builds: list = []
-
-    def slow_store(entry, tree):
-        writing.set()
-        assert release.wait(10)
-        store(entry, tree)
-
-    monkeypatch.setattr(lod.cache, "_store", slow_store)
+    writing, release = hold_cache_writes(monkeypatch, cache)
+    build, builds = lod.cache.build, []
     monkeypatch.setattr(lod.cache, "build", lambda scene, rule: builds.append(scene) or build(scene, rule))
     first, second = gb.load(path), gb.load(path)
     built: list = []
@@ -376,7 +374,7 @@ def test_a_second_scene_of_the_file_gets_the_tree_being_written(tmp_path, monkey
         again = lod.hierarchy_for(second)
         release.set()
         builder.join(10)
-    assert len(caught) == 1 and builds == [first] and built == [again]
+    assert len(caught) == 1 and len(builds) == 1 and builds[0] is first and built == [again]
     (entry,) = cache.glob("*.npz")
     entry.unlink()
     lod.cache._touch(entry)

@@ -41,7 +41,7 @@ def cache_key(scene: Scene, rule: str) -> str | None:
     file's)."""
     path = Path(scene.source)
     loaded = scene.meta.get("file_stat")
-    if loaded is None or file_stat(path) != tuple(loaded):
+    if loaded is None or file_stat(path) != loaded:
         return None
     try:
         with open(path, "rb") as fh:
