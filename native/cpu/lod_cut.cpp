@@ -100,7 +100,7 @@ void compact(int64_t len, Drawn drawn, int64_t base, Cut& c, int nt, Halt& halt)
 Cut cut_flat(const float* means, const float* radius, const float* size, const int64_t* levels, int num_levels,
              const int32_t* order, const View& v, double tau, double band, int32_t node_base, int nt, Halt& halt) {
     const int64_t n = levels[1], m = levels[num_levels - 1] - n;
-    std::vector<float> open(m), weight(m);  // o and the weight reaching each interior node
+    Plane<float> open(m), weight(m);  // o and the weight reaching each interior node (every one written below)
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int64_t i = 0; i < m; ++i)
         if (!halt.at(i)) open[i] = opening(means, radius, size, i, v, tau, band);
@@ -114,9 +114,10 @@ Cut cut_flat(const float* means, const float* radius, const float* size, const i
             weight[id - n] = weight[p] * open[p];
         }
     }
-    std::vector<float> leaf_w(n);
+    Plane<float> leaf_w(n);  // every leaf's written below (its pages first touched by the threads)
     Cut c;
     if (halt.now()) return c;
+    c.rows.reserve(n + m), c.weights.reserve(n + m);  // the leaves' and nodes' compactions then grow it in place
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int64_t id = 0; id < n; ++id) {
         if (halt.at(id)) continue;
@@ -281,6 +282,9 @@ Cut cut_walk(const float* means, const float* radius, const float* size, const i
         std::swap(frontier, next);
     }
     if (halt.now()) return c;
+    int64_t total = leaves.size();  // the drawn leaves and nodes: the cut's size, allocated once
+    for (int l = 1; l < num_levels; ++l) total += drawn[l].size();
+    c.rows.reserve(total), c.weights.reserve(total);
     // the leaves ascending by splat
     if (leaves.size() * 16 < n) {  // few: sort them
         c.rows.resize(leaves.size()), c.weights.resize(leaves.size());
@@ -298,8 +302,7 @@ Cut cut_walk(const float* means, const float* radius, const float* size, const i
         compact(n, [&](int64_t i) { return w[i]; }, 0, c, nt, halt);
     }
     c.leaves = (int64_t)c.rows.size();
-    int64_t at = c.leaves, total = at;
-    for (int l = 1; l < num_levels; ++l) total += drawn[l].size();
+    int64_t at = c.leaves;
     c.rows.resize(total), c.weights.resize(total);
     for (int l = 1; l < num_levels; ++l) {
         const Reached& d = drawn[l];
