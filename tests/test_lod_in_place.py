@@ -41,6 +41,32 @@ def test_in_place_cut_equals_the_gathered_cut(rate, sh_dtype):
     assert len(drawn) == 3  # the taus draw different cuts: the comparison is not of one scene thrice
 
 
+def test_leaves_in_the_tree_order_are_read_row_by_row():
+    """A cut's leaves come in the tree's (Morton) order unless they are over half the splats: in a scene laid out so
+    that every level-1 node's children are rows 8q, 8q+2, 8q+1, 8q+3 ... 8q+7, each group of 8 leaves spans 8
+    consecutive rows out of order, which the stage must not load as one run."""
+    base = filtered_scene(26)
+    n = base.num_splats - base.num_splats % 8
+    base = gb.Scene(*(a[:n] for a in (base.means, base.scales, base.quats, base.opacities, base.sh, base.filter_3d)))
+    swapped = np.arange(n)
+    swapped[1::8], swapped[2::8] = swapped[2::8].copy(), swapped[1::8].copy()
+    perm = lod.build(base).order[swapped]  # the splat at Morton position p becomes row swapped[p]
+    scene = gb.Scene(*(a[perm] for a in (base.means, base.scales, base.quats, base.opacities, base.sh, base.filter_3d)))
+    assert np.array_equal(lod.build(scene).order, swapped)
+    renderer, view = gb.get_renderer(scene, "cpu"), CAM.at_sampling_rate(0.25)
+    for tau, tree_order in ((2.0, True), (1.0, False)):
+        c = lod.cut(lod.hierarchy_for(scene), view, tau)
+        assert len(c.nodes)
+        if tree_order:  # such groups are drawn
+            assert len(c.leaves) <= n // 2 and (c.leaves[1::8] == c.leaves[::8] + 2).sum() > 10
+        else:
+            assert len(c.leaves) > n // 2 and (np.diff(c.leaves) > 0).all()
+        gathered = gb.get_renderer(lod.cut_scene(scene, view, tau), "cpu")
+        for mode in ("scalar", "gaussian_blending"):
+            frame = renderer.render(view, gb.RenderSettings(mode, lod=tau))
+            assert np.array_equal(frame.rgb, gathered.render(view, gb.RenderSettings(mode)).rgb), (mode, tau)
+
+
 def test_the_stage_is_kept_per_camera_and_tau():
     scene = filtered_scene(22)
     renderer = gb.get_renderer(scene, "cpu")

@@ -44,12 +44,12 @@ def test_the_top_down_cut_equals_the_cut_over_every_node():
 
 
 def test_the_top_down_cut_equals_the_cut_over_every_node_on_a_large_tree():
-    """Large enough for the walk's levels to run on several threads (counted, then written at each thread's offsets)
-    and for its leaves to be sorted by the parallel radix sort (a coarse cut) or placed by splat (a finer one)."""
+    """Large enough for the walk's levels to run on several threads (counted, then written at each thread's offsets),
+    with coarse cuts (leaves in the tree's order) and a fine one (over half the splats: ascending)."""
     scene = random_scene(400_000, seed=21, spread=30.0)
     tree = lod.build(scene)
     n = scene.num_splats
-    for dist, lo, hi in ((750.0, 16384, n // 16), (600.0, n // 16, n // 4)):  # leaves: sorted, placed
+    for dist, lo, hi in ((750.0, 16384, n // 16), (600.0, n // 16, n // 4), (300.0, n // 2 + 1, n)):
         cam = gb.Camera(640, 480, 500.0, 500.0, 320, 240, np.eye(3), np.array([0.0, 0.0, dist]))
         flat = cut_over_every_node(tree, cam, 2.0)
         for threads in (1, 2, 3):
@@ -119,11 +119,12 @@ def cut_by_numpy(tree: lod.Hierarchy, cam: gb.Camera, tau: float, band: float) -
         parent = lv[level + 1] + (ids - lv[level]) // BRANCHING - n
         w[ids - n] = w[parent] * o[parent]
     parent = lv[1] + np.arange(n) // BRANCHING - n
-    leaf_w = np.empty(n, np.float32)
-    leaf_w[tree.order] = w[parent] * o[parent]
+    leaf_w = w[parent] * o[parent]  # by Morton position
     node_w = w * (np.float32(1.0) - o)
-    leaves, nodes = np.flatnonzero(leaf_w > 0).astype(np.int32), np.flatnonzero(node_w > 0).astype(np.int32)
-    return lod.Cut(leaves, leaf_w[leaves], nodes, node_w[nodes])
+    drawn, nodes = np.flatnonzero(leaf_w > 0), np.flatnonzero(node_w > 0).astype(np.int32)
+    if len(drawn) > n // 2:  # over half the splats: ascending, else in the tree's order
+        drawn = drawn[np.argsort(tree.order[drawn])]
+    return lod.Cut(tree.order[drawn], leaf_w[drawn], nodes, node_w[nodes])
 
 
 def test_the_cut_equals_its_definition_computed_in_numpy_at_the_band_edges():

@@ -25,8 +25,9 @@ DEFAULT_BAND = 1.0  # parents fade out between tau and 2 tau
 
 @dataclass(frozen=True)
 class Cut:
-    """The drawn nodes: leaves as splat indices (ascending) and interior nodes as interior indices (id - N,
-    ascending), each with its opacity multiplier in (0, 1]."""
+    """The drawn nodes: leaves as splat indices, in the tree's (Morton) order or, when they are over half the
+    splats, ascending; interior nodes as interior indices (id - N, ascending); each with its opacity multiplier in
+    (0, 1]."""
 
     leaves: np.ndarray
     leaf_weights: np.ndarray

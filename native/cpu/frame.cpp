@@ -153,8 +153,9 @@ void for_blocks(int64_t n, FrameRun& run, Fn fn) {
 
 }  // namespace
 
-// The level-of-detail cut of `key` (lod.h) as the stage's rows and weights: drawn leaves (scene rows) first, then
-// drawn interior nodes (rows n_scene + node), each ascending, the order gbviewer.lod.cut_scene gathers them in.
+// The level-of-detail cut of `key` (lod.h) as the stage's rows and weights: drawn leaves (scene rows, in the cut's
+// order) first, then drawn interior nodes (rows n_scene + node, ascending), the order gbviewer.lod.cut_scene gathers
+// them in.
 // False, and no rows, for a cut that is the scene's leaves (drawn as the scene itself, bit for bit). Stops early
 // once `run` is cancelled (the rows then unspecified: the stage is not ready).
 bool cut_rows(const SceneView& sc, const LodArgs& a, Stage& stage, FrameRun& run) {

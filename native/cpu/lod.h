@@ -51,9 +51,10 @@ struct View {
     bool orthographic;
 };
 
-// The cut's drawn nodes with their opacity multipliers, as rows: its `leaves` leaves first, by splat index
-// (ascending), then interior nodes, node_base + interior index (ascending). Along every leaf's path to the root the
-// drawn weights sum to 1.
+// The cut's drawn nodes with their opacity multipliers, as rows: its `leaves` leaves first, as splat indices, in the
+// tree's (Morton) order, or ascending when they are over half the splats (where the renderer's stage reads runs of
+// consecutive rows), then interior nodes, node_base + interior index (ascending). Along every leaf's path to the
+// root the drawn weights sum to 1.
 struct Cut {
     Plane<int32_t> rows;
     Plane<float> weights;

@@ -67,11 +67,11 @@ float opening(const float* means, const float* radius, const float* size, int64_
     return (float)o;
 }
 
-// Appends (base + i, drawn(i)) for every i in [0, len) with drawn(i) > 0, ascending, to c's rows and weights: counted
-// per thread, then written at each thread's offset (a thread that stopped counting early, halt being sticky, writes
-// nothing: never more than it counted).
-template <class Drawn>
-void compact(int64_t len, Drawn drawn, int64_t base, Cut& c, int nt, Halt& halt) {
+// Appends (row(i), drawn(i)) for every i in [0, len) with drawn(i) > 0, in the order of i, to c's rows and weights:
+// counted per thread, then written at each thread's offset (a thread that stopped counting early, halt being sticky,
+// writes nothing: never more than it counted).
+template <class Drawn, class Row>
+void compact(int64_t len, Drawn drawn, Row row, Cut& c, int nt, Halt& halt) {
     const int64_t at0 = (int64_t)c.rows.size();
     std::vector<int64_t> counts(nt + 1, 0);
 #pragma omp parallel num_threads(nt)
@@ -90,9 +90,24 @@ void compact(int64_t len, Drawn drawn, int64_t base, Cut& c, int nt, Halt& halt)
         int64_t at = at0 + counts[th];
         for (int64_t i = b; i < e && !halt.at(i); ++i) {
             const float d = drawn(i);
-            if (d > 0.0f) c.rows[at] = (int32_t)(base + i), c.weights[at++] = d;
+            if (d > 0.0f) c.rows[at] = row(i), c.weights[at++] = d;
         }
     }
+}
+
+// Whether a cut's `drawn` leaves of n come in splat order (over half of them: the stage reads long runs of
+// consecutive rows) rather than in the tree's (Morton) order, which needs no sort (lod.h).
+bool splat_order(int64_t drawn, int64_t n) { return drawn > n / 2; }
+
+// The drawn leaves ascending by splat: `scatter(w)` writes each drawn leaf's weight into w (n floats, zero
+// elsewhere), then those over zero are compacted.
+template <class Scatter>
+void by_splat(int64_t n, Scatter scatter, Cut& c, int nt, Halt& halt) {
+    Plane<float> w(n);
+#pragma omp parallel for num_threads(nt) schedule(static)
+    for (int64_t i = 0; i < n; ++i) w[i] = 0.0f;
+    scatter(w.data());
+    compact(n, [&](int64_t i) { return w[i]; }, [](int64_t i) { return (int32_t)i; }, c, nt, halt);
 }
 
 // The cut by its definition, over every node: each interior node's o, the weights top-down level by level, each
@@ -114,21 +129,26 @@ Cut cut_flat(const float* means, const float* radius, const float* size, const i
             weight[id - n] = weight[p] * open[p];
         }
     }
-    Plane<float> leaf_w(n);  // every leaf's written below (its pages first touched by the threads)
     Cut c;
     if (halt.now()) return c;
     c.rows.reserve(n + m), c.weights.reserve(n + m);  // the leaves' and nodes' compactions then grow it in place
+    // leaf id (Morton position; splat order[id]) is drawn at its parent's weight times o
+    const auto leaf = [&](int64_t id) { return m > 0 ? weight[parent(0, id)] * open[parent(0, id)] : 1.0f; };
+    int64_t drawn = 0;
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : drawn)
+    for (int64_t id = 0; id < n; ++id) drawn += leaf(id) > 0.0f;
+    if (splat_order(drawn, n))
+        by_splat(n, [&](float* w) {
 #pragma omp parallel for num_threads(nt) schedule(static)
-    for (int64_t id = 0; id < n; ++id) {
-        if (halt.at(id)) continue;
-        const int64_t p = m > 0 ? parent(0, id) : -1;
-        leaf_w[order[id]] = p < 0 ? 1.0f : weight[p] * open[p];
-    }
-    if (halt.now()) return c;
-    compact(n, [&](int64_t i) { return leaf_w[i]; }, 0, c, nt, halt);
+            for (int64_t id = 0; id < n; ++id) w[order[id]] = leaf(id);
+        }, c, nt, halt);
+    else
+        compact(n, leaf, [&](int64_t id) { return order[id]; }, c, nt, halt);
     c.leaves = (int64_t)c.rows.size();
     if (halt.now()) return c;
-    compact(m, [&](int64_t i) { return weight[i] * (1.0f - open[i]); }, node_base, c, nt, halt);
+    compact(
+        m, [&](int64_t i) { return weight[i] * (1.0f - open[i]); },
+        [&](int64_t i) { return (int32_t)(node_base + i); }, c, nt, halt);
     return c;
 }
 
@@ -191,51 +211,6 @@ void walk_level(const Reached& frontier, Plane<float>& o, int l, const float* me
     }
 }
 
-// Level 1's leaves (each splat below n at most once) ascending by splat into out_rows / out_w: a parallel LSD radix
-// sort, as few passes of at most 12 bits as splats below n need (2 up to 16 M).
-void sort_by_splat(Reached& in, int64_t n, int32_t* out_rows, float* out_w, int nt) {
-    const int64_t len = in.size();
-    int bits = 0;
-    while ((int64_t(1) << bits) < n) ++bits;
-    const int passes = (bits + 11) / 12, digit = passes ? (bits + passes - 1) / passes : 0, buckets = 1 << digit;
-    if (passes == 0 || len < (1 << 14)) nt = 1;
-    Reached tmp;
-    tmp.resize(passes > 1 ? len : 0);
-    std::vector<int64_t> hist((size_t)nt * buckets);
-#pragma omp parallel num_threads(nt)
-    {
-        const int th = omp_get_thread_num(), nth = omp_get_num_threads();
-        const int64_t b = len * th / nth, e = len * (th + 1) / nth;
-        int64_t* h = &hist[(size_t)th * buckets];
-        for (int p = 0; p < passes; ++p) {  // from in to tmp, tmp to in, ..., the last into out
-            const Reached& src = p % 2 == 0 ? in : tmp;
-            int32_t* dr = p == passes - 1 ? out_rows : (p % 2 == 0 ? tmp : in).id.data();
-            float* dw = p == passes - 1 ? out_w : (p % 2 == 0 ? tmp : in).w.data();
-            const int shift = p * digit;
-            const uint32_t mask = (uint32_t)buckets - 1;
-            std::fill(h, h + buckets, 0);
-            for (int64_t i = b; i < e; ++i) ++h[(uint32_t)src.id[i] >> shift & mask];
-#pragma omp barrier
-#pragma omp single
-            {
-                int64_t at = 0;
-                for (int d = 0; d < buckets; ++d)
-                    for (int t = 0; t < nth; ++t) {
-                        const int64_t count = hist[(size_t)t * buckets + d];
-                        hist[(size_t)t * buckets + d] = at;
-                        at += count;
-                    }
-            }
-            for (int64_t i = b; i < e; ++i) {
-                const int64_t to = h[(uint32_t)src.id[i] >> shift & mask]++;
-                dr[to] = src.id[i], dw[to] = src.w[i];
-            }
-#pragma omp barrier
-        }
-    }
-    if (passes == 0) std::copy(in.id.begin(), in.id.end(), out_rows), std::copy(in.w.begin(), in.w.end(), out_w);
-}
-
 // Top down from the root, visiting only the nodes the cut reaches (a node is reached when its parent opens, o > 0):
 // the cost follows the cut, not the scene (cut_flat once most of a large level is reached and most of it opens on;
 // testing's cut_flat_above 0: always). A reached node of weight w (the root 1) is drawn at w (1 - o) and passes w o
@@ -285,21 +260,14 @@ Cut cut_walk(const float* means, const float* radius, const float* size, const i
     int64_t total = leaves.size();  // the drawn leaves and nodes: the cut's size, allocated once
     for (int l = 1; l < num_levels; ++l) total += drawn[l].size();
     c.rows.reserve(total), c.weights.reserve(total);
-    // the leaves ascending by splat
-    if (leaves.size() * 16 < n) {  // few: sort them
-        c.rows.resize(leaves.size()), c.weights.resize(leaves.size());
-        sort_by_splat(leaves, n, c.rows.data(), c.weights.data(), nt);
-    } else {  // many: place them by splat (order is a permutation) and keep the drawn in splat order
-        Plane<float> w(n);
-#pragma omp parallel num_threads(nt)
-        {
-#pragma omp for schedule(static)
-            for (int64_t i = 0; i < n; ++i) w[i] = 0.0f;
-#pragma omp for schedule(static)
-            for (int64_t j = 0; j < leaves.size(); ++j)
-                if (!halt.at(j)) w[leaves.id[j]] = leaves.w[j];
-        }
-        compact(n, [&](int64_t i) { return w[i]; }, 0, c, nt, halt);
+    if (splat_order(leaves.size(), n)) {
+        by_splat(n, [&](float* w) {
+#pragma omp parallel for num_threads(nt) schedule(static)
+            for (int64_t j = 0; j < leaves.size(); ++j) w[leaves.id[j]] = leaves.w[j];
+        }, c, nt, halt);
+    } else {  // in the walk's order: the tree's
+        c.rows.assign(leaves.id.begin(), leaves.id.end());
+        c.weights.assign(leaves.w.begin(), leaves.w.end());
     }
     c.leaves = (int64_t)c.rows.size();
     int64_t at = c.leaves;

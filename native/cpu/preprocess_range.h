@@ -46,9 +46,12 @@ struct StageJob {
                 *node_sh = nullptr, *node_filter_3d = nullptr;
 
     int64_t row(int64_t i) const { return rows ? rows[i] : i; }
-    // Whether rows r[0..n), strictly ascending, are n consecutive rows of one array (the scene's or the hierarchy's).
+    // Whether rows r[0..n) are n consecutive rows of one array (the scene's or the hierarchy's), in order (a cut's
+    // leaves come in the tree's order: rows 7, 9, 8, 10 are not a run).
     bool run(const int64_t* r, int n) const {
-        return r[n - 1] - r[0] == n - 1 && (r[0] < n_scene) == (r[n - 1] < n_scene);
+        for (int j = 1; j < n; ++j)
+            if (r[j] != r[0] + j) return false;
+        return (r[0] < n_scene) == (r[n - 1] < n_scene);
     }
     // Row r (width floats) of an input: the scene's array, or past n_scene the hierarchy's.
     const float* at(const float* scene, const float* nodes, int width, int64_t r) const {
