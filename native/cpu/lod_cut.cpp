@@ -99,13 +99,11 @@ void compact(int64_t len, Drawn drawn, Row row, Cut& c, int nt, Halt& halt) {
 // consecutive rows) rather than in the tree's (Morton) order, which needs no sort (lod.h).
 bool splat_order(int64_t drawn, int64_t n) { return drawn > n / 2; }
 
-// The drawn leaves ascending by splat: `scatter(w)` writes each drawn leaf's weight into w (n floats, zero
-// elsewhere), then those over zero are compacted.
+// The drawn leaves ascending by splat: `scatter(w)` writes every element of w (n floats): each drawn leaf's weight,
+// zero elsewhere; then those over zero are compacted.
 template <class Scatter>
 void by_splat(int64_t n, Scatter scatter, Cut& c, int nt, Halt& halt) {
     Plane<float> w(n);
-#pragma omp parallel for num_threads(nt) schedule(static)
-    for (int64_t i = 0; i < n; ++i) w[i] = 0.0f;
     scatter(w.data());
     compact(n, [&](int64_t i) { return w[i]; }, [](int64_t i) { return (int32_t)i; }, c, nt, halt);
 }
@@ -262,8 +260,13 @@ Cut cut_walk(const float* means, const float* radius, const float* size, const i
     c.rows.reserve(total), c.weights.reserve(total);
     if (splat_order(leaves.size(), n)) {
         by_splat(n, [&](float* w) {
-#pragma omp parallel for num_threads(nt) schedule(static)
-            for (int64_t j = 0; j < leaves.size(); ++j) w[leaves.id[j]] = leaves.w[j];
+#pragma omp parallel num_threads(nt)
+            {
+#pragma omp for schedule(static)
+                for (int64_t i = 0; i < n; ++i) w[i] = 0.0f;
+#pragma omp for schedule(static)
+                for (int64_t j = 0; j < leaves.size(); ++j) w[leaves.id[j]] = leaves.w[j];
+            }
         }, c, nt, halt);
     } else {  // in the walk's order: the tree's
         c.rows.assign(leaves.id.begin(), leaves.id.end());
