@@ -45,13 +45,15 @@ def test_leaves_in_the_tree_order_are_read_row_by_row():
     """A cut's leaves come in the tree's (Morton) order unless they are over half the splats: in a scene laid out so
     that every level-1 node's children are rows 8q, 8q+2, 8q+1, 8q+3 ... 8q+7, each group of 8 leaves spans 8
     consecutive rows out of order, which the stage must not load as one run."""
+    def rows(s: gb.Scene, index) -> gb.Scene:
+        return gb.Scene(*(a[index] for a in (s.means, s.scales, s.quats, s.opacities, s.sh, s.filter_3d)))
+
     base = filtered_scene(26)
     n = base.num_splats - base.num_splats % 8
-    base = gb.Scene(*(a[:n] for a in (base.means, base.scales, base.quats, base.opacities, base.sh, base.filter_3d)))
+    base = rows(base, slice(0, n))
     swapped = np.arange(n)
     swapped[1::8], swapped[2::8] = swapped[2::8].copy(), swapped[1::8].copy()
-    perm = lod.build(base).order[swapped]  # the splat at Morton position p becomes row swapped[p]
-    scene = gb.Scene(*(a[perm] for a in (base.means, base.scales, base.quats, base.opacities, base.sh, base.filter_3d)))
+    scene = rows(base, lod.build(base).order[swapped])  # the splat at Morton position p becomes row swapped[p]
     assert np.array_equal(lod.build(scene).order, swapped)
     renderer, view = gb.get_renderer(scene, "cpu"), CAM.at_sampling_rate(0.25)
     for tau, tree_order in ((2.0, True), (1.0, False)):
