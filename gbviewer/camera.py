@@ -130,6 +130,16 @@ class Camera:
         if abs(np.linalg.det(R) - 1) > ROTATION_TOLERANCE or np.abs(R @ R.T - np.eye(3)).max() > ROTATION_TOLERANCE:
             raise CameraError(f"{who}: R is not a rotation matrix (det {np.linalg.det(R):.4g})")
 
+    def __eq__(self, other: object) -> bool:
+        """Equal when every field is: the arrays by value (a dataclass's own comparison of array fields raises on
+        Python 3.13, which compares field by field)."""
+        if not isinstance(other, Camera):
+            return NotImplemented
+        return camera_key(self) == camera_key(other) and self.name == other.name
+
+    def __hash__(self) -> int:
+        return hash((camera_key(self), self.name))
+
     @property
     def position(self) -> np.ndarray:
         """Camera centre in world coordinates (orthographic: the centre of its plane z = 0)."""

@@ -60,7 +60,7 @@ def draw_label(img: Image.Image, text: str, size: int = 14) -> None:
     draw.text((4, 3), text, fill=(255, 255, 255), font=font)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Cell:
     """One rendered cell of a comparison grid."""
 

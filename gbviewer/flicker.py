@@ -49,7 +49,7 @@ MIN_HEAT_SCALE = 1.0  # 8-bit levels: the colour scale of heat maps that are all
 CSV_COLUMNS = ("mode", "label", "flicker", "change", "vs_floor", "reference", "floor", "pairs", "frames", "path")
 
 
-@dataclass
+@dataclass(eq=False)
 class ModeFlicker:
     """One mode's measure: flicker and change in 8-bit levels (means over pairs, pixels and channels), heat (H, W)
     the per-pixel flicker averaged over pairs; per_pair: each pair's map (float16), kept for the heat-map video."""

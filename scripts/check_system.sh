@@ -47,12 +47,16 @@ fi
 libs=$( (/sbin/ldconfig -p || ldconfig -p) 2>/dev/null)
 [[ $libs == *libEGL.so.1* && $libs == *libEGL_mesa.so.0* ]] ||
   want "headless OpenGL (EGL + Mesa)" "libegl1 libegl-mesa0 libgl1-mesa-dri" "the glsl backend and its GL tests"
-command -v Xvfb >/dev/null || want Xvfb "xvfb xauth" "the viewer window tests"
 [[ $libs == *libglfw.so.3* ]] || want GLFW libglfw3 "the viewer and its window tests"
-command -v glslangValidator >/dev/null || want glslangValidator glslang-tools "the shader reference tests"
-command -v qemu-x86_64 >/dev/null || want qemu-x86_64 qemu-user "the emulated-older-CPU tests"
-command -v clang++ >/dev/null || want clang++ "clang libomp-dev" "the clang++ build test"
-command -v aarch64-linux-gnu-g++ >/dev/null || want aarch64-linux-gnu-g++ crossbuild-essential-arm64 "the aarch64 tests"
-command -v qemu-aarch64 >/dev/null || want qemu-aarch64 qemu-user "the aarch64 tests"
-command -v debootstrap >/dev/null || want debootstrap debootstrap "the aarch64 tests (their Python)"
+# what only the tests need: checked unless the setup is for the viewer alone (scripts/setup.sh without --dev)
+if [ "${GBVIEWER_SETUP_DEV:-1}" = 1 ]; then
+  command -v Xvfb >/dev/null || want Xvfb "xvfb xauth" "the viewer window tests"
+  command -v glslangValidator >/dev/null || want glslangValidator glslang-tools "the shader reference tests"
+  command -v qemu-x86_64 >/dev/null || want qemu-x86_64 qemu-user "the emulated-older-CPU tests"
+  command -v clang++ >/dev/null || want clang++ "clang libomp-dev" "the clang++ build test"
+  command -v aarch64-linux-gnu-g++ >/dev/null ||
+    want aarch64-linux-gnu-g++ crossbuild-essential-arm64 "the aarch64 tests"
+  command -v qemu-aarch64 >/dev/null || want qemu-aarch64 qemu-user "the aarch64 tests"
+  command -v debootstrap >/dev/null || want debootstrap debootstrap "the aarch64 and Debian 13 tests (their roots)"
+fi
 exit $need_missing

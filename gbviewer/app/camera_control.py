@@ -19,7 +19,7 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     return c * np.eye(3) + s * K + (1 - c) * np.outer(axis, axis)
 
 
-@dataclass
+@dataclass(eq=False)
 class CameraController:
     """One camera shared by every pane: a world-to-camera rotation R (OpenCV axes, rows x right, y down, z forward),
     an orbit target and the distance to it (the eye is target - distance * forward), a vertical field of view and

@@ -45,7 +45,7 @@ class Spec:
         return self.reference is None and self.to_pane is None and not self.flicker
 
 
-@dataclass
+@dataclass(eq=False)
 class Request:
     slot: Hashable
     scene: Scene
@@ -58,7 +58,7 @@ class Request:
     photo: View | None = None  # for the PHOTO reference: the view whose photo at `rate` has `camera`'s pixels
 
 
-@dataclass
+@dataclass(eq=False)
 class Analysis:
     frame: Frame  # the frame analysed
     spec: Spec

@@ -62,7 +62,7 @@ def describe(path: str) -> str:
 
 # ---- the shared context -------------------------------------------------------------------------------------------
 
-@dataclass
+@dataclass(eq=False)
 class SharedContext:
     """The hidden glfw window whose OpenGL 4.3 context shares objects with the viewer window's (None, and why not,
     where the GPU display path is off). Made and destroyed on the UI thread; its context is current in the render

@@ -87,7 +87,7 @@ def ellipse_points(mean: tuple[float, float], covariance: tuple[float, float, fl
 
 # ---- the thread ----------------------------------------------------------------------------------------------------
 
-@dataclass
+@dataclass(eq=False)
 class TraceRequest:
     slot: Hashable
     scene: Scene

@@ -27,7 +27,7 @@ def prepare_lod(scene: Scene) -> None:
         pass
 
 
-@dataclass
+@dataclass(eq=False)
 class LoadResult:
     path: Path
     scene: Scene | None = None

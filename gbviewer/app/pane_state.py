@@ -47,7 +47,7 @@ class PaneError:
     text: str
 
 
-@dataclass
+@dataclass(eq=False)
 class Shown:
     """What one pane part (its whole image, or one side of a split) shows: the last finished frame."""
 

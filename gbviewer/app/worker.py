@@ -35,7 +35,7 @@ from .slot_thread import RENDER_NICE, SlotPolicy, SlotThread
 
 
 
-@dataclass
+@dataclass(eq=False)
 class RenderJob:
     slot: Hashable  # e.g. (pane index, part)
     scene: Scene
@@ -53,7 +53,7 @@ class RenderJob:
     submitted: float = 0.0  # set by the worker: perf_counter at submission
 
 
-@dataclass
+@dataclass(eq=False)
 class RenderResult:
     job: RenderJob
     frame: Frame | None

@@ -46,7 +46,7 @@ class SceneEval:
         return {key: {m: mean([r[m] for r in rs]) for m in ("psnr", "ssim", "render_ms")} for key, rs in rows.items()}
 
 
-@dataclass
+@dataclass(eq=False)
 class EvalResult:
     """Every scene's measures and how they were run."""
 

@@ -23,7 +23,7 @@ from .tree import Hierarchy
 DEFAULT_BAND = 1.0  # parents fade out between tau and 2 tau
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Cut:
     """The drawn nodes: leaves as splat indices, in the tree's (Morton) order or, when they are over half the
     splats, ascending; interior nodes as interior indices (id - N, ascending); each with its opacity multiplier in

@@ -39,6 +39,8 @@ def compiler_line(info: dict[str, Any]) -> str:
     omp = f"OpenMP {info['openmp']}" if info["openmp"] else "no OpenMP"
     cuda = "CUDA module built" if info["cuda_module_built"] else "no CUDA module"
     isa = f"; {info['isa_flags']}" if info["isa_flags"] else ""
+    if info.get("highway"):
+        isa += f"; Highway {info['highway']}"
     return f"{info['compiler']} {info['build_type']} [{info['flags']}{isa}], {omp}, {cuda}"
 
 

@@ -51,7 +51,7 @@ def view_scene(scene: Scene, camera: Camera) -> Scene:
     return neural.decode(camera) if neural is not None else scene
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Prepared:
     """What a backend renders this frame: the view's splats, the decode time (trained Duplex-GS models, else None),
     the wsr / duplex globals (None in the other modes), the duplex cells (None in the other modes), and for a

@@ -271,7 +271,7 @@ class FrameStats:
     lod_splats: int | None = None
 
 
-@dataclass
+@dataclass(eq=False)
 class Frame:
     """A rendered image: rgb (H,W,3) float32, alpha = 1 - final transmittance (H,W), debug planes, stats.
 

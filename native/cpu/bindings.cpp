@@ -243,9 +243,11 @@ NB_MODULE(_native, m) {
         d["build_type"] = GBV_BUILD_TYPE;
         d["flags"] = GBV_BUILD_FLAGS;
         d["isa_flags"] = GBV_BUILD_ISA_FLAGS;
+        d["highway"] = std::string(GBV_BUILD_HIGHWAY).empty() ? nb::none() : nb::object(nb::str(GBV_BUILD_HIGHWAY));
         return d;
     }, "How this module was built: SIMD paths built, usable here and selected; scalar-only switch; OpenMP version "
-       "(None without); whether the CUDA module was built alongside; compiler, build type and compile flags.");
+       "(None without); whether the CUDA module was built alongside; compiler, build type and compile flags; the "
+       "version of Google Highway's headers the vector paths were built with (None without vector paths).");
     bind_testing(m);
     bind_io(m);
     bind_lod(m);
