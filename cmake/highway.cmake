@@ -79,7 +79,7 @@ if(HWY_INCLUDE_DIR)
   set(GBV_HWY_SOURCE "installed, ${HWY_INCLUDE_DIR}")
 elseif(GBVIEWER_FETCH_HIGHWAY)
   gbv_fetch_highway()
-  set(GBV_HWY_SOURCE "downloaded ${GBV_HWY_VERSION}")
+  set(GBV_HWY_SOURCE "downloaded")
 else()
   gbv_fail("gbviewer: Google Highway's headers (hwy/highway.h) not found and GBVIEWER_FETCH_HIGHWAY is off, so the "
            "CPU module would have no vector paths (3-5x slower blend): install them (Debian/Ubuntu: apt-get install "

@@ -8,9 +8,11 @@
 #      and its dependencies from the index, then runs
 #      `gbviewer info` and `gbviewer demo --backend cpu` there, outside the checkout.
 # Linux only (auditwheel); other platforms: the [tool.cibuildwheel] configuration in pyproject.toml.
+#
+#   scripts/build_wheel.sh [PYTHON]      the Python to build for (default: $PYTHON, else python3), e.g. python3.13
 set -euo pipefail
 cd "$(dirname "$0")/.."
-PY=${PYTHON:-python3}
+PY=${1:-${PYTHON:-python3}}
 step() { echo "build_wheel: $*"; }
 fail() { echo "build_wheel: $*" >&2; exit 1; }
 [ "$(uname -s)" = Linux ] || fail "auditwheel repairs Linux wheels only; elsewhere use cibuildwheel (README, Install)"

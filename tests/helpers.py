@@ -17,6 +17,10 @@ import gbviewer as gb
 REPO = Path(__file__).resolve().parents[1]
 SHARED_SCENES = REPO.parent / "shared" / "scenes"
 IN_CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
+# The suite inside scripts/check_distro.sh's root: the checks of other builds and systems (other Highways, Pythons,
+# aarch64, the distro check itself) are the host suite's, which runs that one.
+HOST_ONLY = pytest.mark.skipif(os.environ.get("GBVIEWER_IN_DISTRO_CHECK") == "1",
+                               reason="a check of other builds and systems: the host's suite runs it")
 
 
 OUTPUT_W, OUTPUT_H = 96, 64  # the pane of the output-layer tests (video, figure, camera paths, keyframes)

@@ -4,11 +4,14 @@ renders with this process's."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
 import subprocess
 import sys
+import tarfile
+import urllib.request
 from pathlib import Path
 
 import numpy as np
@@ -46,14 +49,15 @@ def cmake_env(**extra: str) -> dict[str, str]:
     return {**{k: v for k, v in os.environ.items() if k not in drop}, **extra}
 
 
-def configure(build: Path, *args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    """`cmake -S ROOT -B build` for the CPU module alone (no CUDA), with this Python and its nanobind; ccache when
-    installed (the build tests rebuild the same sources)."""
-    nb_dir = subprocess.check_output([sys.executable, "-m", "nanobind", "--cmake_dir"], text=True).strip()
+def configure(build: Path, *args: str, env: dict[str, str] | None = None,
+              python: str = sys.executable) -> subprocess.CompletedProcess:
+    """`cmake -S ROOT -B build` for the CPU module alone (no CUDA), with `python` (this one) and its nanobind; ccache
+    when installed (the build tests rebuild the same sources)."""
+    nb_dir = subprocess.check_output([python, "-m", "nanobind", "--cmake_dir"], text=True).strip()
     gen = ["-G", "Ninja"] if shutil.which("ninja") else []
     cache = ["-DCMAKE_CXX_COMPILER_LAUNCHER=ccache"] if shutil.which("ccache") else []
     cmd = ["cmake", "-S", str(ROOT), "-B", str(build), *gen, *cache, "-DGBVIEWER_CUDA=OFF", f"-Dnanobind_DIR={nb_dir}",
-           f"-DPython_EXECUTABLE={sys.executable}", "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON", *args]
+           f"-DPython_EXECUTABLE={python}", "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON", *args]
     return subprocess.run(cmd, capture_output=True, text=True, env=env or cmake_env(), timeout=300)
 
 
@@ -69,6 +73,47 @@ def hidden_highway() -> list[str]:
     """CMake arguments under which installed Highway headers are not found: their include directory ignored."""
     dirs = [d for d in ("/usr/include", "/usr/local/include") if (Path(d) / "hwy/highway.h").exists()]
     return [f"-DCMAKE_IGNORE_PATH={';'.join(dirs)}"] if dirs else []
+
+
+# Highway releases a user can have beside the pinned 1.0.3 (Debian 12): 1.1, 1.2 (Debian 13) and the newest. Each
+# SHA-256 is GitHub's release tarball's, as Homebrew's and Spack's recipes pin it; Debian's orig tarballs are the same
+# bytes where Debian has the release.
+HIGHWAY_RELEASES = {
+    "1.1.0": "354a8b4539b588e70b98ec70844273e3f2741302c4c377bcc4e81b3d1866f7c9",
+    "1.2.0": "7e0be78b8318e8bdbf6fa545d2ecb4c90f947df03f7aadc42c1967f019e63343",
+    "1.3.0": "07b3c1ba2c1096878a85a31a5b9b3757427af963b1141ca904db2f9f4afe0bc2",
+}
+CACHE = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "gbviewer"
+
+
+def fetch_highway(version: str, dest: Path) -> Path | str:
+    """Highway `version`'s headers unpacked under dest (its include directory), the tarball kept in the user's cache
+    once its SHA-256 matched; or, where no source gives it, why (a string)."""
+    archive = CACHE / "highway" / f"highway-{version}.tar.gz"
+    tried = []
+    for url in (f"https://github.com/google/highway/archive/refs/tags/{version}.tar.gz",
+                f"https://deb.debian.org/debian/pool/main/h/highway/highway_{version}.orig.tar.gz"):
+        if archive.exists() and hashlib.sha256(archive.read_bytes()).hexdigest() == HIGHWAY_RELEASES[version]:
+            break
+        archive.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            with urllib.request.urlopen(url, timeout=60) as reply:
+                data = reply.read(64 << 20)
+        except OSError as exc:
+            tried.append(f"{url} ({exc})")
+            continue
+        if hashlib.sha256(data).hexdigest() != HIGHWAY_RELEASES[version]:
+            tried.append(f"{url} (SHA-256 mismatch)")
+            continue
+        archive.with_suffix(".part").write_bytes(data)
+        archive.with_suffix(".part").replace(archive)
+    else:
+        if not archive.exists():
+            return f"Highway {version} could not be fetched: {'; '.join(tried)}"
+    with tarfile.open(archive) as tar:
+        tar.extractall(dest, members=[m for m in tar.getmembers() if m.name.startswith(f"highway-{version}/hwy/")],
+                       filter="data")
+    return dest / f"highway-{version}"
 
 
 def stage_package(module: Path, dest: Path) -> Path:

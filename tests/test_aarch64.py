@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers import shared_scene, skip_or_fail
+from helpers import HOST_ONLY, shared_scene, skip_or_fail
 from native_builds import ROOT, assert_renders_match, run_child
 
 SCENES = ("plant.splat", "biker.compressed.ply")
@@ -25,7 +25,7 @@ ROOTFS = Path(os.environ.get("GBVIEWER_AARCH64_ROOT")
 PYTHON = ["qemu-aarch64", "-L", str(ROOTFS), str(ROOTFS / "usr" / "bin" / "python3")]
 ENV = {"PATH": "/usr/bin:/bin"}  # nothing of this process's environment selects code paths in the emulated one
 
-pytestmark = [pytest.mark.slow, pytest.mark.skipif(platform.machine() != "x86_64", reason="cross-built from x86-64")]
+pytestmark = [pytest.mark.slow, HOST_ONLY, pytest.mark.skipif(platform.machine() != "x86_64", reason="cross-built from x86-64")]
 
 
 @pytest.fixture(scope="module")

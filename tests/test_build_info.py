@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import re
 from pathlib import Path
 
 import gbviewer as gb
@@ -32,6 +33,7 @@ def test_build_info_matches_the_module():
     assert info["openmp"] and info["compiler"] and "-ffp-contract=off" in info["flags"]
     if X86 and not info["scalar_only"]:  # a vector build (the default; the switch is off here)
         assert info["simd_built"] == ["scalar", "avx2", "avx512"] and "-mavx2" in info["isa_flags"]
+        assert re.fullmatch(r"1\.\d+\.\d+", info["highway"]), info["highway"]  # the headers' version
         if {"avx2", "fma", "bmi2", "f16c"} <= cpu_flags():
             assert "avx2" in info["simd_usable"]
             if not os.environ.get("GBVIEWER_SIMD"):

@@ -1,4 +1,4 @@
-"""The CPU module's other builds (issue 26), each configured with CMake here (slow; CI runs them):
+"""The CPU module's other builds, each configured with CMake here (slow; CI runs them):
 
 - Highway's headers hidden: the configure downloads the pinned release (cmake/highway.cmake) and uses it; a local
   copy (GBVIEWER_HIGHWAY_ARCHIVE) is checked against the pinned SHA-256; with the download off (or a wrong archive)
@@ -59,7 +59,7 @@ def archive(tmp_path_factory) -> Path:
     if proc.returncode != 0 and "download of Highway" in proc.stdout + proc.stderr:
         skip_or_fail(f"no network for Highway's download: {one_line(proc, 'gbviewer: ')[:300]}")
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert "CPU blend paths scalar, avx2, avx512 (Highway downloaded 1.0.3)" in proc.stdout
+    assert "CPU blend paths scalar, avx2, avx512 (Highway 1.0.3: downloaded)" in proc.stdout
     commands = json.loads((b / "compile_commands.json").read_text())
     blend = next(c["command"] for c in commands if c["file"].endswith("blend_isa.cpp"))
     assert f"-I{b / '_deps' / HWY}" in blend or f"-isystem {b / '_deps' / HWY}" in blend
@@ -83,7 +83,7 @@ def test_clang_build_from_the_archive(tmp_path, archive):
     proc = configure(b, *hidden_highway(), "-DCMAKE_CXX_COMPILER=clang++", env=cmake_env(
         GBVIEWER_HIGHWAY_ARCHIVE=str(archive), GBVIEWER_FETCH_HIGHWAY="OFF"))
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert f"(Highway the archive {archive})" in proc.stdout
+    assert f"(Highway 1.0.3: the archive {archive})" in proc.stdout
     pkg = stage_package(build(b), tmp_path / "pkg")
     code = "import gbviewer._native as n; print(n.testing.half_mismatches(0, 2**32))"
     half = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd="/",
