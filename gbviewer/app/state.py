@@ -291,10 +291,10 @@ class AppState(CameraActions):
     def settings_for(self, i: int, part: str) -> RenderSettings:
         """What pane i's part ('a', or 'b' of a split) renders with."""
         ps: PaneSettings = self.settings.panes[i]
-        base = RenderSettings.parse(ps.split_mode if part == "b" else ps.mode)
-        debug = "window" if ps.view == "window" and base.mode == Mode.GAUSSIAN_BLENDING else "none"
-        return replace(base, supersample=ps.supersample, background=self.background, debug=debug,
-                       lod=ps.lod if ps.lod > 0 else None)
+        settings = RenderSettings.parse(ps.split_mode if part == "b" else ps.mode, supersample=ps.supersample,
+                                        background=self.background, lod=ps.lod if ps.lod > 0 else None)
+        debug = "window" if ps.view == "window" and settings.mode == Mode.GAUSSIAN_BLENDING else "none"
+        return replace(settings, debug=debug)
 
     # ---- zoom video ---------------------------------------------------------------------------------------------
 

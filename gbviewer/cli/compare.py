@@ -10,15 +10,14 @@ from ..camera import format_rate
 from ..figure import DIFFS, write_comparison
 from ..io import load
 from ..io.files import check_writable
-from ..render import RenderSettings
 from ..render.presets import differences
 from .options import (add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_inset,
-                      check_render_size, with_lod)
+                      check_render_size, settings_of)
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
     """Labelled grid of modes x sampling rates with PSNR under each cell."""
-    settings = with_lod(RenderSettings.parse_list(args.modes), args.lod)
+    settings = settings_of(args)
     rates = args.rates
     check_writable(args.out, args.force, inputs=[args.scene, args.cameras], option="--out")
     scene = load(args.scene)
