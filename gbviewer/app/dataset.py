@@ -17,7 +17,7 @@ from ..camera import Camera, camera_key, format_rate
 from ..errors import GBViewerError
 from ..eval import camera_for_rate
 from ..io.datasets import SPLITS, Dataset, View, load_dataset
-from .background import Backdrop, estimate_backdrop
+from ..io.datasets.backdrop import Backdrop, estimate_backdrop
 
 Message = Callable[[str, str], None]  # (text, level): AppState.message
 
