@@ -64,3 +64,18 @@ def test_eval_scores_on_the_photos_backdrop_and_says_so(grey_capture, bundled_sc
                         backend="cpu", cache=tmp_path / "c")
     assert given.scenes[0].background.source == GIVEN
     assert ev.to_json(given)["scenes"][0]["views"][0]["results"][0]["psnr"] < min(scores.values()) - 6
+
+
+def test_compare_and_bench_report_their_background(tmp_path, capsys, bundled_scene):
+    view = ["--orbit", "30,20,0", "--width", "64", "--height", "48", "--rates", "1", "--backend", "cpu"]
+    assert cli.main(["compare", str(gb.DEFAULT_SCENE), *view, "--modes", "scalar", "--out", str(tmp_path / "a.png")]) \
+        == 0
+    assert "modes on background 0.00 0.00 0.00 (default: no photos)" in capsys.readouterr().out
+    assert cli.main(["compare", str(gb.DEFAULT_SCENE), *view, "--modes", "scalar", "--background", "0.5,0.5,0.5",
+                     "--out", str(tmp_path / "b.png")]) == 0
+    assert "modes on background 0.50 0.50 0.50 (given)" in capsys.readouterr().out
+    from gbviewer import bench
+
+    doc = json.loads(bench.write_json(tmp_path / "b.json", [], []).read_text())
+    assert doc["background"] == {"rgb": [0.0, 0.0, 0.0], "source": DEFAULT,
+                                 "describe": "0.00 0.00 0.00 (default: no photos)"}
