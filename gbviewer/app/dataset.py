@@ -17,7 +17,7 @@ from ..camera import Camera, camera_key, format_rate
 from ..errors import GBViewerError
 from ..eval import camera_for_rate
 from ..io.datasets import SPLITS, Dataset, View, load_dataset
-from .background import Backdrop, estimate_backdrop
+from ..io.datasets.backdrop import Backdrop, estimate_backdrop
 
 Message = Callable[[str, str], None]  # (text, level): AppState.message
 
@@ -95,7 +95,7 @@ class DatasetViews:
             return None
         self.dataset, self.backdrop, self.index, self.snap_key = ld.dataset, ld.backdrop, -1, None
         self.set_aside = None
-        test = sum(v.split == "test" for v in ld.dataset.views)
+        test = sum(v.in_split("test") for v in ld.dataset.views)
         self.message(f"dataset {ld.path.name}: {len(ld.dataset.views)} views ({test} test, {ld.dataset.format}) in "
                      f"{ld.elapsed:.1f} s; [ ] step through the {self.split} views", "info")
         return ld.dataset
@@ -134,7 +134,7 @@ class DatasetViews:
             return []
         f = self.name_filter.strip().lower()
         return [k for k, v in enumerate(self.dataset.views)
-                if self.split in ("all", v.split) and f in v.name.lower()]
+                if v.in_split(self.split) and f in v.name.lower()]
 
     def set_split(self, split: str) -> None:
         if split not in SPLITS:

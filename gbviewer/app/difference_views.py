@@ -24,7 +24,7 @@ from ..io.datasets import View
 from ..render import Frame
 from ..render.presets import differences
 from ..scene import Scene
-from .background import format_rgb
+from ..io.datasets.backdrop import format_rgb
 from .difference_thread import PHOTO, Analysis, AnalysisThread, Request, Spec
 from .settings import PANE_NAMES
 from .pane_state import Shown

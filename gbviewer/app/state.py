@@ -10,11 +10,12 @@ from typing import Literal
 
 from ..camera import Camera, load_cameras_json
 from ..errors import GBViewerError
+from ..io.datasets.backdrop import RGB, choose_background, format_rgb
 from ..io.trained_as import describe
 from ..render import Mode, RenderSettings
 from ..render.presets import trained_spec
 from ..scene import Scene
-from .background import FIXED, PHOTOS, RGB, format_rgb
+from .background import FIXED, PHOTOS
 from .camera_actions import CameraActions
 from .camera_control import CameraController
 from .dataset import DatasetViews, bounds_fit_cameras
@@ -152,10 +153,11 @@ class AppState(CameraActions):
         """Take a finished dataset load; its photos' backdrop becomes the background when they are opaque (unless
         the command line gave one)."""
         if self.dataset.poll() is not None:
-            b = self.dataset.backdrop
-            if b is not None and b.opaque and not self.background_given:
+            given = tuple(self.settings.background) if self.background_given else None
+            choice = choose_background(given, self.dataset.backdrop)
+            if choice.source == PHOTOS:
                 self.background_source = PHOTOS
-                self.message(f"background from the photos: {b.describe()}")
+                self.message(f"background from the photos: {choice.describe()}")
 
     def close_dataset(self) -> None:
         d = self.dataset.close()
@@ -291,10 +293,10 @@ class AppState(CameraActions):
     def settings_for(self, i: int, part: str) -> RenderSettings:
         """What pane i's part ('a', or 'b' of a split) renders with."""
         ps: PaneSettings = self.settings.panes[i]
-        base = RenderSettings.parse(ps.split_mode if part == "b" else ps.mode)
-        debug = "window" if ps.view == "window" and base.mode == Mode.GAUSSIAN_BLENDING else "none"
-        return replace(base, supersample=ps.supersample, background=self.background, debug=debug,
-                       lod=ps.lod if ps.lod > 0 else None)
+        settings = RenderSettings.parse(ps.split_mode if part == "b" else ps.mode, supersample=ps.supersample,
+                                        background=self.background, lod=ps.lod if ps.lod > 0 else None)
+        debug = "window" if ps.view == "window" and settings.mode == Mode.GAUSSIAN_BLENDING else "none"
+        return replace(settings, debug=debug)
 
     # ---- zoom video ---------------------------------------------------------------------------------------------
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..camera import format_rate
 from ..extras import require
+from ..io.datasets.backdrop import choose_background
 from ..io.files import atomic_write
 from ..render import BACKENDS
 from ..validate import dumps_json
@@ -21,6 +22,8 @@ from .oit import OitRow
 from .simd import SIMD_NAMES, simd_summary
 from .stability import FlickerRow
 from .speed import SpeedRow, ratios
+
+BENCH_BACKGROUND = choose_background(None, None)  # the one rule without photos: every bench render is on black
 
 
 def wide_console():
@@ -86,7 +89,8 @@ def write_json(path: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], f
                oit: list[OitRow] | None = None, simd: dict | None = None, flicker: list[FlickerRow] | None = None
                ) -> Path:
     """Every number: machine, simd (simd_info()), speed, fidelity, ratios, flicker, order_independent."""
-    doc = {"machine": machine_description(), "simd": simd, "speed": [asdict(r) for r in speed],
+    doc = {"machine": machine_description(), "simd": simd, "background": BENCH_BACKGROUND.to_json(),
+           "speed": [asdict(r) for r in speed],
            "fidelity": [asdict(r) for r in fidelity], "ratios": ratios(speed)}
     if flicker:
         doc["flicker"] = [asdict(r) for r in flicker]
@@ -222,6 +226,7 @@ def print_tables(speed: list[SpeedRow], fidelity: list[FidelityRow], simd: dict 
     out = wide_console()
     if simd:
         out.print(simd_summary(simd), highlight=False)
+    out.print(f"background {BENCH_BACKGROUND.describe()}", highlight=False)
     t = Table(title="Speed (median over repeats and views; Mevals/s/core: splat-pixel evaluations per second per "
                     "core over the frame / the blend stage, exp: that SIMD path's exp evaluations per second on a "
                     "core)")

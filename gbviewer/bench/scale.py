@@ -18,7 +18,7 @@ from ..camera import Camera, orbit_camera
 from ..cancel import CancelToken
 from ..errors import RenderCancelled
 from ..io import load
-from ..render import Mode, RenderSettings, get_renderer
+from ..render import RenderSettings, get_renderer
 from ..scene import Scene
 
 
@@ -99,7 +99,7 @@ def measure_stages(scene: Scene, cam: Camera, modes: list[str], rates: list[floa
     for mode in modes:
         for rate in rates:
             view = cam.at_sampling_rate(rate)
-            frames = [renderer.render(view, RenderSettings(mode=Mode.parse(mode))) for _ in range(repeat)]
+            frames = [renderer.render(view, RenderSettings.parse(mode)) for _ in range(repeat)]
             best = min(frames, key=lambda f: f.stats.total_ms)
             rows.append({"mode": mode, "rate": rate, "width": view.width, "height": view.height, **_stages(best)})
     return rows
@@ -114,7 +114,7 @@ def measure_two_pane(scene: Scene, cam: Camera, modes: tuple[str, str]) -> dict:
     (the issue's "preprocess + order"), before_blend_ratio all of their work before the blend."""
     renderer = get_renderer(scene, "cpu")
     renderer.render(cam.at_sampling_rate(0.5), RenderSettings())  # a stage of another camera: nothing to reuse
-    jobs = [(cam, RenderSettings(mode=Mode.parse(m))) for m in modes]
+    jobs = [(cam, RenderSettings.parse(m)) for m in modes]
     first_tiles: dict[int, float] = {}
     t0 = time.perf_counter()
 
@@ -141,7 +141,7 @@ def measure_cancel(scene: Scene, cam: Camera, mode: str, moments_ms: list[float]
     frame (preprocess, depth order and binning, blend) and at each of `moments_ms`: the time from the set to
     RenderCancelled (None with finished=True where the frame completed first)."""
     renderer = get_renderer(scene, "cpu")
-    settings = RenderSettings(mode=Mode.parse(mode), supersample=supersample)
+    settings = RenderSettings.parse(mode, supersample=supersample)
     s = renderer.render(cam, settings).stats
     stages = {"preprocess": s.preprocess_ms / 2, "order+bin": s.preprocess_ms + s.sort_ms / 2,
               "blend": s.preprocess_ms + s.sort_ms + s.blend_ms / 2}

@@ -9,9 +9,9 @@ from ..argtypes import SIZE, Rate, count, positive
 from ..camera import parse_rates
 from ..errors import GBViewerError
 from ..extras import require
-from ..render import BACKENDS, RenderSettings
+from ..render import BACKENDS
 from ..io.outputs import refuse_collisions, refuse_inputs
-from .options import MAX_COUNT, add_lod_arg, check_render_size, progress_bar, with_lod
+from .options import MAX_COUNT, add_lod_arg, check_render_size, progress_bar, settings_of
 
 BENCH_DEFAULTS = {"modes": "scalar,gaussian_blending,supersample:3", "rates": "1,1/8", "views": 2, "repeat": 2,
                   "simd": None}
@@ -51,7 +51,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     refuse_inputs(outputs, [*args.scenes, args.cameras])
 
     result = bench.run_bench(
-        args.scenes, with_lod(RenderSettings.parse_list(args.modes), args.lod), args.rates, backends, views=args.views,
+        args.scenes, settings_of(args), args.rates, backends, views=args.views,
         size=args.size, repeat=args.repeat, cameras=args.cameras, up=args.up, simd=args.simd,
         flicker_frames=args.flicker_frames, flicker_step=args.flicker_step, flicker_pairs=args.flicker_pairs,
         flicker_size=args.flicker_size,

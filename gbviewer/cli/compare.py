@@ -5,20 +5,21 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..argtypes import INSET, Rate
+from ..argtypes import BACKGROUND, INSET, Rate
 from ..camera import format_rate
 from ..figure import DIFFS, write_comparison
 from ..io import load
+from ..io.datasets.backdrop import choose_background
 from ..io.files import check_writable
-from ..render import RenderSettings
 from ..render.presets import differences
 from .options import (add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_inset,
-                      check_render_size, with_lod)
+                      check_render_size, settings_of)
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
     """Labelled grid of modes x sampling rates with PSNR under each cell."""
-    settings = with_lod(RenderSettings.parse_list(args.modes), args.lod)
+    settings = settings_of(args)
+    background = choose_background(args.background, None)
     rates = args.rates
     check_writable(args.out, args.force, inputs=[args.scene, args.cameras], option="--out")
     scene = load(args.scene)
@@ -27,7 +28,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     check_inset(args.inset, cam.width, cam.height)
     cmp = write_comparison(args.out, scene, cam, settings, rates, backend_of(args), args.inset, args.force,
                            args.diff)
-    print(f"wrote {args.out} ({cmp.image.width}x{cmp.image.height}): {len(rates)} rates x {len(settings)} modes")
+    print(f"wrote {args.out} ({cmp.image.width}x{cmp.image.height}): {len(rates)} rates x {len(settings)} modes on "
+          f"background {background.describe()}")
     for other in settings[1:]:
         if differ := differences(other, settings[0]):
             print(f"  {other.label} vs {settings[0].label}: {', '.join(differ)}")
@@ -54,6 +56,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rates", type=Rate(many=True), default="1,1/2,1/4,1/8",
                    help="sampling rates, e.g. 1,1/2,1/4,1/8")
     add_backend_arg(p)
+    p.add_argument("--background", type=BACKGROUND, metavar=BACKGROUND.metavar,
+                   help="background colour, each in 0..1 (default black)")
     p.add_argument("--inset", type=INSET, metavar=INSET.metavar, help="magnify this region (x1 pixels) in a corner")
     p.add_argument("--diff", nargs="?", const="first", choices=list(DIFFS),
                    help="add under each rate a row of signed differences (mean over RGB, colour bar below): to the "

@@ -8,8 +8,7 @@ from ..eval.options import add_eval_args, scene_pairs
 from ..extras import require
 from ..io.files import check_writable
 from ..io.outputs import refuse_collisions
-from ..render import RenderSettings
-from .options import add_lod_arg, progress_bar, with_lod
+from .options import add_lod_arg, progress_bar, settings_of
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
@@ -25,7 +24,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     for path in outputs:
         check_writable(path, args.force, inputs=[p for pair in pairs for p in pair])
     result = evaluation.run_eval(
-        pairs, with_lod(RenderSettings.parse_list(args.modes), args.lod), args.rates, split=args.split, background=args.background,
+        pairs, settings_of(args), args.rates, split=args.split, background=args.background,
         images=args.images, backend=args.backend, workers=args.workers, ray=args.ray, threads=args.threads,
         cache=args.cache or evaluation.default_cache(), progress=progress_bar)
     evaluation.print_tables(result)

@@ -18,7 +18,7 @@ from ..io.outputs import refuse_collisions
 from ..render import RenderSettings
 from ..video import MAX_FPS, MIN_FPS
 from .options import (MAX_COUNT, add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args,
-                      check_render_size, path_args, progress_bar, with_lod)
+                      check_render_size, path_args, progress_bar, settings_of)
 
 FLICKER_PANE = (320, 240)  # default pane size
 VIDEO_NAME = "heat.mp4"
@@ -28,7 +28,7 @@ def cmd_flicker(args: argparse.Namespace) -> int:
     """Flicker per mode along a path: printed table, flicker.csv/json, heat maps and optionally their video."""
     if args.video:
         require("video", "imageio_ffmpeg", "--video", load=False)
-    settings = with_lod(RenderSettings.parse_list(args.modes), args.lod)
+    settings = settings_of(args)
     try:
         reference = RenderSettings.parse(args.reference)
     except GBViewerError as exc:

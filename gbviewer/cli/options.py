@@ -88,6 +88,20 @@ def with_lod(settings: list[RenderSettings], lod: float | None) -> list[RenderSe
     return list(out.values())
 
 
+MODE_OPTIONS = ("supersample", "sh_degree", "background")  # the options some commands have beside their modes
+
+
+def settings_of(args: argparse.Namespace, default: str = "scalar") -> list[RenderSettings]:
+    """What a command renders: its --modes, or its one --mode (`default` when not given, at --lod), each parsed by
+    `RenderSettings.parse` with the command's --supersample, --sh-degree and --background filling what the spec leaves
+    unset (one disagreeing with the spec is one line); --lod with --modes adds each mode's cut beside it
+    (`with_lod`). The one way every command reads its modes."""
+    fill = {key: getattr(args, key, None) for key in MODE_OPTIONS}
+    if hasattr(args, "modes"):
+        return with_lod(RenderSettings.parse_list(args.modes, **fill), getattr(args, "lod", None))
+    return [RenderSettings.parse(args.mode or default, lod=args.lod, **fill)]
+
+
 def path_args(args: argparse.Namespace, paths: tuple[str, ...], pane: tuple[int, int]) -> None:
     """A path command's --size into args.width/height (`pane` when no size, width, height or cameras are given), and
     its --path checked: one of `paths` or a keyframes file."""

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
 from ..argtypes import BACKGROUND, Rate, count
@@ -12,9 +11,10 @@ from ..figure import save_image
 from ..io import load
 from ..io.files import check_writable
 from ..io.trained_as import describe
-from ..render import Mode, RenderSettings, get_renderer
+from ..render import Mode, get_renderer
 from ..render.presets import PRESETS, trained_spec
-from .options import add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_render_size
+from .options import (add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_render_size,
+                      settings_of)
 
 
 def cmd_render(args: argparse.Namespace) -> int:
@@ -27,11 +27,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     check_render_size(cam.width, cam.height, [args.scale], "--scale")
     cam = cam.at_sampling_rate(args.scale)
     trained = trained_spec(scene.meta)
-    spec = args.mode or trained or "scalar"
-    settings = replace(RenderSettings.parse(spec, background=args.background, sh_degree=args.sh_degree),
-                       supersample=args.supersample)
-    if args.lod is not None:
-        settings = replace(settings, lod=args.lod)
+    settings = settings_of(args, trained or "scalar")[0]
     frame = get_renderer(scene, backend_of(args)).render(cam, settings)
     save_image(out, frame.rgb, force=args.force)
     st = frame.stats
@@ -46,16 +42,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="render one image")
     p.add_argument("scene", type=Path)
     add_camera_args(p)
-    p.add_argument("--mode", help=f"{', '.join(m.label for m in Mode)} or preset:NAME ({', '.join(PRESETS)}); "
-                   "default: the mode the file says the scene was trained with (gbviewer info: trained_as), else "
-                   "scalar")
-    p.add_argument("--supersample", type=count(8), default=1, metavar="1..8")
+    p.add_argument("--mode", help=f"MODE[:N][+lod[:PX]], MODE one of {', '.join(m.label for m in Mode)} or "
+                   f"preset:NAME ({', '.join(PRESETS)}); default: the mode the file says the scene was trained with "
+                   "(gbviewer info: trained_as), else scalar")
+    p.add_argument("--supersample", type=count(8), metavar="1..8",
+                   help="N x N samples per pixel where --mode gives no :N (default 1)")
     add_lod_arg(p, many=False)
     p.add_argument("--scale", type=Rate(), default=1.0, help="sampling rate: 8, 1, 0.125 or 1/8")
     add_backend_arg(p)
     p.add_argument("--background", type=BACKGROUND, default=(0.0, 0.0, 0.0), metavar=BACKGROUND.metavar,
                    help="background colour, each in 0..1")
-    p.add_argument("--sh-degree", type=count(3, lo=0), default=3, metavar="0..3")
+    p.add_argument("--sh-degree", type=count(3, lo=0), metavar="0..3",
+                   help="SH degree drawn (default 3, a preset's own bands)")
     p.add_argument("--out", required=True, help="FILE.png or FILE.npy (float32 RGB)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=cmd_render)

@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
 from ..argtypes import BACKGROUND, PIXEL, Rate, count
 from ..errors import GBViewerError
 from ..io import load
 from ..io.files import check_writable
-from ..render import RenderSettings, trace_pixel
-from .options import MAX_COUNT, add_camera_args, camera_from_args, check_render_size
+from ..render import trace_pixel
+from .options import MAX_COUNT, add_camera_args, camera_from_args, check_render_size, settings_of
 
 
 def cmd_trace(args: argparse.Namespace) -> int:
@@ -20,9 +19,7 @@ def cmd_trace(args: argparse.Namespace) -> int:
 
     if args.json:
         check_writable(args.json, args.force, inputs=[args.scene, args.cameras], option="--json")
-    settings = RenderSettings.parse_list(args.modes, background=args.background)
-    if args.supersample is not None:
-        settings = [s if s.supersample > 1 else replace(s, supersample=args.supersample) for s in settings]
+    settings = settings_of(args)
     scene = load(args.scene)
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, [args.scale], "--scale")
@@ -31,7 +28,7 @@ def cmd_trace(args: argparse.Namespace) -> int:
     if x >= cam.width or y >= cam.height:
         raise GBViewerError(f"--pixel {x},{y}: outside the {cam.width}x{cam.height} image at --scale "
                             f"{args.scale:g} (x in 0..{cam.width - 1}, y in 0..{cam.height - 1})")
-    traces = [trace_pixel(scene, cam, x, y, s.mode, s.supersample, s.background) for s in settings]
+    traces = [trace_pixel(scene, cam, x, y, s) for s in settings]
     print_traces(traces, args.top)
     if args.json:
         print(f"wrote {write_traces(Path(args.json), traces, str(args.scene), args.force)}")
@@ -46,8 +43,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pixel", type=PIXEL, required=True, metavar=PIXEL.metavar,
                    help="the output pixel, from 0 (x right, y down) in the image at --scale")
     p.add_argument("--modes", default="scalar,gaussian_blending",
-                   help="comma-separated MODE or MODE:N (N x N supersampling; supersample:N = scalar:N)")
-    p.add_argument("--supersample", type=count(8), metavar="1..8", help="N x N samples for the modes given without :N")
+                   help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, supersample:N = scalar:N; "
+                   "preset:NAME; the level-of-detail cut at PX)")
+    p.add_argument("--supersample", type=count(8), metavar="1..8",
+                   help="N x N samples for the modes given without :N (one with another :N is refused)")
     p.add_argument("--scale", type=Rate(), default=1.0, help="sampling rate: 8, 1, 0.125 or 1/8")
     p.add_argument("--background", type=BACKGROUND, default=(0.0, 0.0, 0.0), metavar=BACKGROUND.metavar,
                    help="background colour, each in 0..1")

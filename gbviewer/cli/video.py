@@ -11,10 +11,9 @@ from ..errors import GBViewerError
 from ..extras import require
 from ..io import load
 from ..io.files import check_writable
-from ..render import RenderSettings
 from ..video import MAX_FPS, MIN_FPS, record_video
 from .options import (add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_inset,
-                      check_render_size, path_args, with_lod)
+                      check_render_size, path_args, settings_of)
 
 VIDEO_PANE = (480, 360)  # default pane size of `gbviewer video`
 
@@ -25,7 +24,7 @@ def cmd_video(args: argparse.Namespace) -> int:
                                TimeRemainingColumn)
 
     require("video", "imageio_ffmpeg", "an MP4 video", load=False)
-    settings = with_lod(RenderSettings.parse_list(args.modes), args.lod)
+    settings = settings_of(args)
     path_args(args, PATHS, VIDEO_PANE)
     check_writable(args.out, args.force, inputs=[args.scene, args.cameras, None if args.path in PATHS else args.path],
                    option="--out")

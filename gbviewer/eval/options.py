@@ -35,8 +35,10 @@ def add_eval_args(p: argparse.ArgumentParser) -> None:
                    "1,1/2,1/4,1/8)")
     p.add_argument("--split", default="test", choices=SPLITS, help="views to evaluate (default test: every 8th "
                    "photo of a capture, transforms_test.json of a Blender set)")
-    p.add_argument("--background", type=BACKGROUND, default=(0.0, 0.0, 0.0), metavar=BACKGROUND.metavar,
-                   help="background of the renders and of RGBA photos (1,1,1 for a Blender scene trained on white)")
+    p.add_argument("--background", type=BACKGROUND, metavar=BACKGROUND.metavar,
+                   help="background of the renders and of RGBA photos (1,1,1 for a Blender scene trained on white); "
+                   "default: the viewer's, the photos' backdrop (their borders' median colour) where every photo is "
+                   "opaque, else black; each table says which")
     p.add_argument("--backend", default="auto", choices=["auto", *BACKENDS],
                    help="auto (default): the backend auto picks in each worker (see gbviewer info)")
     runner = p.add_mutually_exclusive_group()

@@ -54,7 +54,7 @@ def print_tables(result: EvalResult) -> None:
     for s in result.scenes:
         backends = ", ".join(sorted({v.backend for v in s.results}))
         _print_table(f"{s.scene.name} against {s.dataset.name} ({s.format}, {result.split}: {len(s.views)} views, "
-                     f"{backends}; ms: mean render time)", s.table(), result)
+                     f"{backends}; ms: mean render time; background {s.background.describe()})", s.table(), result)
     if len(result.scenes) > 1:
         _print_table(f"Mean over {len(result.scenes)} scenes", mean_table([s.table() for s in result.scenes]),
                      result)
@@ -71,12 +71,14 @@ def _rows(table: Table, result: EvalResult) -> dict:
 def to_json(result: EvalResult) -> dict:
     """Every view's numbers, each scene's table and averages, their mean over scenes, and how it ran. Missing
     numbers (SSIM of an image under 11 pixels, identical images' PSNR) are null."""
-    scenes = [{"scene": str(s.scene), "dataset": str(s.dataset), "format": s.format, **_rows(s.table(), result),
+    scenes = [{"scene": str(s.scene), "dataset": str(s.dataset), "format": s.format,
+               "background": s.background.to_json(), **_rows(s.table(), result),
                "views": [{"name": v.name, "image": str(v.image), "width": v.camera.width, "height": v.camera.height,
                           "backend": r.backend, "results": r.results} for v, r in zip(s.views, s.results)]}
               for s in result.scenes]
     return {"modes": result.modes, "rates": result.rates, "split": result.split,
-            "background": list(result.background), "runner": result.runner, "elapsed_s": result.elapsed_s,
+            "background": None if result.background is None else list(result.background), "runner": result.runner,
+            "elapsed_s": result.elapsed_s,
             "machine": machine_description(), "scenes": scenes,
             "mean": _rows(mean_table([s.table() for s in result.scenes]), result)}
 

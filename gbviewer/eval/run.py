@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import GBViewerError
 from ..io.datasets import View, load_dataset
+from ..io.datasets.backdrop import Background, choose_background, estimate_backdrop
 from ..io.files import check_writable
 from ..render import RenderSettings
 from .memory import check_view_memory
@@ -29,13 +30,14 @@ Progress = Callable[[str, int], AbstractContextManager[Callable[[int], None]]]
 @dataclass
 class SceneEval:
     """One scene against its dataset (the folder or cameras.json given): the views of the split and each one's
-    measures, in dataset order."""
+    measures, in dataset order, and the background they were measured on."""
 
     scene: Path
     dataset: Path
     format: str
     views: list[View]
     results: list[ViewResult]
+    background: Background  # what the renders and RGBA photos were on (`choose_background`)
 
     def table(self) -> dict[tuple[str, float], dict[str, float | None]]:
         """(mode, rate) -> mean PSNR, SSIM and render time over the views."""
@@ -53,7 +55,7 @@ class EvalResult:
     modes: list[str]
     rates: list[float]
     split: str
-    background: tuple[float, float, float]
+    background: tuple[float, float, float] | None  # the one given (None: each dataset's, `choose_background`)
     runner: str
     scenes: list[SceneEval] = field(default_factory=list)
     elapsed_s: float = 0.0
@@ -103,13 +105,14 @@ def _refuse_cache_in_datasets(cache: Path, datasets: Sequence[Path], images: str
 
 
 def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettings], rates: Sequence[float], *,
-             split: str = "test", background: tuple[float, float, float] = (0.0, 0.0, 0.0), images: str = "images",
+             split: str = "test", background: tuple[float, float, float] | None = None, images: str = "images",
              backend: str = "auto", workers: int = 1, ray: str | None = None, threads: int | None = None,
              cache: Path | None = None, progress: Progress | None = None) -> EvalResult:
     """Evaluate each (scene file, dataset) pair: every view of `split` in every mode of `settings` at every rate
     1/k against the photos box-downsampled by k. workers > 1: a local process pool; `ray`: a Ray cluster's
     address (local: a Ray instance started here) instead. threads: CPU threads per render (default: the cores
-    shared among the workers; on Ray as `cluster.run_on_ray` chooses). cache: folder of box-downsampled photos."""
+    shared among the workers; on Ray as `cluster.run_on_ray` chooses). cache: folder of box-downsampled photos.
+    background: the renders' and RGBA photos' (None: each dataset's, as the viewer's: `choose_background`)."""
     for rate in rates:
         rate_factor(rate)
     if ray:
@@ -133,8 +136,9 @@ def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettin
         views = dataset.split(split)
         for view in views:
             check_view_memory(view, settings, rates, dataset.format, 1 if ray else min(workers, len(views)))
-        result.scenes.append(SceneEval(scene, data, dataset.format, views, []))
-        tasks += [ViewTask(str(scene), i, j, v, tuple(settings), tuple(rates), background, backend, threads,
+        chosen = choose_background(background, None if background is not None else estimate_backdrop(dataset.views))
+        result.scenes.append(SceneEval(scene, data, dataset.format, views, [], chosen))
+        tasks += [ViewTask(str(scene), i, j, v, tuple(settings), tuple(rates), chosen.colour, backend, threads,
                            str(cache) if cache is not None else None) for j, v in enumerate(views)]
     t0 = time.perf_counter()
     with progress("eval", len(tasks)) if progress else nullcontext(lambda n: None) as advance:

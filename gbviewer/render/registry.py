@@ -149,24 +149,25 @@ def render(
     scene: Scene,
     camera: Camera,
     mode: str | Mode = "scalar",
-    supersample: int = 1,
+    supersample: int | None = None,
     backend: str = "cpu",
     background: tuple[float, float, float] = (0.0, 0.0, 0.0),
-    sh_degree: int = 3,
+    sh_degree: int | None = None,
     debug: str = "none",
     cancel: Cancellable | None = None,
     on_progress: Callable[[int, int], None] | None = None,
     partial: np.ndarray | None = None,
     **options,
 ) -> Frame:
-    """Render `scene` from `camera` in `mode` on `backend` (cpu, glsl, cuda, or auto: `choose_backend()`'s pick);
-    `options`: depth_correct, et_grade, cell_size, threads, lod.
+    """Render `scene` from `camera` in `mode` (any spec `RenderSettings.parse` takes; `supersample`, `sh_degree` and
+    `options` fill what it leaves unset and must agree with what it sets) on `backend` (cpu, glsl, cuda, or auto:
+    `choose_backend()`'s pick); `options`: depth_correct, et_grade, cell_size, threads, lod.
     `cancel`: a gbviewer.CancelToken (or a threading.Event); once set, the call raises RenderCancelled within one
     tile batch. `on_progress`: called as fn(done_tiles, total_tiles) from the rendering thread (an exception it raises
     cancels the render: CallbackError, chained to it). `partial`: a float32 (height, width, 3) array that receives
     each tile's pixels as soon as it is blended (centre out), for showing a frame while it refines. Safe from any
     thread, with any scenes (each call renders its own scene)."""
-    settings = RenderSettings.of(mode, supersample, background=tuple(background), sh_degree=sh_degree, debug=debug,
-                                 **options)
+    settings = RenderSettings.parse(mode, supersample=supersample, background=tuple(background), sh_degree=sh_degree,
+                                    debug=debug, **options)
     return get_renderer(scene, backend).render(camera, settings, cancel=cancel, on_progress=on_progress,
                                                       partial=partial)

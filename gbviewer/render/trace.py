@@ -190,13 +190,20 @@ def check_pixel(camera: Camera, x: object, y: object) -> tuple[int, int]:
     return xi, yi
 
 
-def trace_pixel(scene: Scene, camera: Camera, x: int, y: int, mode: str | Mode = "scalar", supersample: int = 1,
-                background: tuple[float, float, float] = (0.0, 0.0, 0.0), sh_degree: int = 3,
-                **options) -> PixelTrace:
-    """The trace of pixel (x, y) of `camera`'s image rendered in `mode` with N x N `supersample`, by the kernel of the
-    first backend that traces pixels (`Capabilities.trace`: the CPU backend; the others are held to it by their
-    tests); `options` as `gbviewer.render`'s (depth_correct, et_grade, cell_size)."""
-    settings = RenderSettings.of(mode, supersample, background=tuple(background), sh_degree=sh_degree, **options)
+def trace_pixel(scene: Scene, camera: Camera, x: int, y: int, mode: str | Mode | RenderSettings = "scalar",
+                supersample: int | None = None, background: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                sh_degree: int | None = None, **options) -> PixelTrace:
+    """The trace of pixel (x, y) of `camera`'s image rendered in `mode` (a RenderSettings, or a spec parsed as
+    `gbviewer.render` parses it, with N x N `supersample`, `sh_degree` and `options`: depth_correct, et_grade,
+    cell_size, lod), by the kernel of the first backend that traces pixels (`Capabilities.trace`: the CPU backend; the
+    others are held to it by their tests)."""
+    if isinstance(mode, RenderSettings):
+        if supersample is not None or sh_degree is not None or options or tuple(background) != (0.0, 0.0, 0.0):
+            raise RenderError("trace_pixel: a RenderSettings says everything; give the options in it instead")
+        settings = mode
+    else:
+        settings = RenderSettings.parse(mode, supersample=supersample, background=tuple(background),
+                                        sh_degree=sh_degree, **options)
     xi, yi = check_pixel(camera, x, y)
     return get_renderer(scene, capable("trace")[0]).trace(camera, settings, xi, yi)
 

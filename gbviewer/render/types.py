@@ -19,7 +19,7 @@ from ..cancel import Cancellable
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, distinct_items, integer, real
-from .presets import PRESETS
+from .spec import shortest, shown, spec_parts
 from .view_filter import ViewFilter
 
 
@@ -160,67 +160,36 @@ class RenderSettings:
     @property
     def spec(self) -> str:
         """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1', ..."""
-        lod = f"+lod:{self.lod:g}" if self.lod is not None else ""
+        lod = f"+lod:{shortest(self.lod)}" if self.lod is not None else ""
         return self.name + (f":{self.supersample}" if self.supersample > 1 else "") + lod
 
     @classmethod
-    def parse(cls, spec: str, **kwargs) -> "RenderSettings":
+    def parse(cls, spec: "str | Mode", **options) -> "RenderSettings":
         """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples;
-        'preset:NAME[:N]' a viewer preset (gbviewer.render.presets); a suffix '+lod' or '+lod:TAU' draws the
-        level-of-detail cut at TAU pixels (default 1)."""
-        spec, plus, lod = spec.partition("+")
-        if plus:
-            kind, _, tau = lod.strip().partition(":")
-            if kind.strip().lower() != "lod":
-                raise RenderError(f"mode {spec + plus + lod!r}: expected MODE[:N][+lod[:TAU]]")
-            try:
-                kwargs = {**kwargs, "lod": float(tau) if tau.strip() else 1.0}
-            except ValueError:
-                raise RenderError(f"mode {spec + plus + lod!r}: LOD pixels {tau!r} is not a number") from None
-        name, _, n = spec.strip().partition(":")
-        if name.strip().lower() == "preset":
-            return cls._preset(n, **kwargs)
-        try:
-            supersample = int(n) if n else 1
-        except ValueError:
-            raise RenderError(f"mode {spec!r}: supersampling factor {n!r} is not an integer") from None
-        mode = Mode.SCALAR if name.strip().lower() == "supersample" else Mode.parse(name)
-        return cls(mode, supersample, **kwargs)
+        'preset:NAME[:N]' a viewer preset (gbviewer.render.presets: its mode, view filter and SH bands); a suffix
+        '+lod' or '+lod:TAU' draws the level-of-detail cut at TAU pixels (default 1).
+
+        The one parser of every surface that takes a mode (commands, viewer panes, the library): `options`
+        (RenderSettings fields; None: not given) fill what the spec leaves unset, and one that disagrees with a part
+        the spec sets is a one-line RenderError, never a silent override."""
+        text = spec.label if isinstance(spec, Mode) else str(spec)
+        parts = spec_parts(text)
+        given = {k: v for k, v in options.items() if v is not None}
+        settings = cls(**{**given, **parts})
+        for key in sorted(given.keys() & parts.keys()):
+            ours, theirs = getattr(settings, key), getattr(replace(settings, **{key: given[key]}), key)
+            if theirs != ours:
+                what = key.replace("_", " ")
+                raise RenderError(f"mode {text!r} sets {what} {shown(ours)}; {what} {shown(theirs)} disagrees "
+                                  "(give one of them)")
+        return settings
 
     @classmethod
-    def _preset(cls, spec: str, **kwargs) -> "RenderSettings":
-        """'NAME' or 'NAME:N' (N x N supersampling) of gbviewer.render.presets; its SH bands cap `sh_degree`."""
-        name, _, n = spec.strip().partition(":")
-        preset = PRESETS.get(name.strip().lower())
-        if preset is None:
-            raise RenderError(f"unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
+    def parse_list(cls, specs: str, **options) -> "list[RenderSettings]":
+        """Comma-separated mode specs, each through `parse` with `options`, e.g. 'scalar,supersample:3,
+        gaussian_blending': at least one, each once (SCALAR, scalar:1 and supersample:1 are scalar), none empty."""
         try:
-            supersample = int(n) if n else 1
-        except ValueError:
-            raise RenderError(f"preset {spec!r}: supersampling factor {n!r} is not an integer") from None
-        kwargs["sh_degree"] = min(preset.sh_degree, kwargs.get("sh_degree", 3))
-        return cls(Mode.parse(preset.mode), supersample, view_filter=preset.view_filter, preset=preset.name, **kwargs)
-
-    @classmethod
-    def of(cls, mode: "str | Mode", supersample: int = 1, **kwargs) -> "RenderSettings":
-        """A Mode, or any spec `parse` takes ('gaussian_blending', 'preset:spark', 'scalar+lod:1'), with
-        `supersample` (a spec's own factor must then agree)."""
-        if isinstance(mode, Mode):
-            return cls(mode, supersample, **kwargs)
-        settings = cls.parse(str(mode), **kwargs)
-        if supersample == 1 or settings.supersample == supersample:
-            return settings
-        if settings.supersample != 1:
-            raise RenderError(f"mode {mode!r} has supersampling {settings.supersample}; supersample={supersample} "
-                              "disagrees")
-        return replace(settings, supersample=supersample)
-
-    @classmethod
-    def parse_list(cls, specs: str, **kwargs) -> "list[RenderSettings]":
-        """Comma-separated mode specs, e.g. 'scalar,supersample:3,gaussian_blending': at least one, each once
-        (SCALAR, scalar:1 and supersample:1 are scalar), none empty."""
-        try:
-            return distinct_items(specs, "--modes", lambda s: cls.parse(s, **kwargs), key=lambda s: s.spec)
+            return distinct_items(specs, "--modes", lambda s: cls.parse(s, **options), key=lambda s: s.spec)
         except InvalidValue as exc:
             raise RenderError(str(exc)) from None
 

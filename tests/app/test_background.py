@@ -17,7 +17,8 @@ import pytest
 
 import gbviewer as gb
 from gbviewer import metrics
-from gbviewer.app.background import FIXED, PHOTOS, border, estimate_backdrop
+from gbviewer.app.background import FIXED, PHOTOS
+from gbviewer.io.datasets.backdrop import border, estimate_backdrop
 from gbviewer.app.dataset import bounds_fit_cameras
 from gbviewer.app.difference_views import PaneAnalysis
 from gbviewer.app.overlays import stats_lines

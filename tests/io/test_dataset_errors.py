@@ -132,14 +132,46 @@ def test_colmap_reads_under_an_address_space_limit_below_its_own(tmp_path):
     assert out.returncode == 0 and out.stdout.strip() == "2", out.stderr
 
 
-def test_blender_frames_sharing_a_photo(tmp_path):
+def blender_frames(root, splits: dict[str, list[tuple[str, np.ndarray]]], angles=None):
+    """transforms_SPLIT.json of (photo, camera-to-world) frames, each photo an 8x6 RGBA PNG under root/photos."""
     import json
 
-    frames = [{"file_path": "./test/a", "transform_matrix": np.eye(4).tolist()}] * 2
-    (tmp_path / "transforms_test.json").write_text(json.dumps({"camera_angle_x": 0.7, "frames": frames}))
-    (tmp_path / "test").mkdir()
-    Image.new("RGBA", (8, 6)).save(tmp_path / "test" / "a.png")
-    one_line(tmp_path, "'a.png' is the photo of two frames (test and test)")
+    (root / "photos").mkdir(exist_ok=True)
+    for split, frames in splits.items():
+        doc = {"camera_angle_x": (angles or {}).get(split, 0.7),
+               "frames": [{"file_path": f"./photos/{name}", "transform_matrix": c2w.tolist()} for name, c2w in frames]}
+        (root / f"transforms_{split}.json").write_text(json.dumps(doc))
+        for name, _ in frames:
+            Image.new("RGBA", (8, 6)).save(root / "photos" / f"{name}.png")
+
+
+def test_blender_photo_listed_twice_with_the_same_camera_is_one_view(tmp_path):
+    """An exporter that writes one file as transforms_train and transforms_test: each photo one view, in both
+    splits; a pose written again through float32 still agrees."""
+    moved = np.eye(4)
+    moved[:3, 3] = [0.1, 0.2, 3.0]
+    frames = [("a", np.eye(4)), ("b", moved)]
+    again = [("a", np.eye(4)), ("b", moved.astype(np.float32).astype(np.float64)), ("c", np.eye(4))]
+    blender_frames(tmp_path, {"train": frames, "test": again})
+    data = load_dataset(tmp_path)
+    assert [(v.name, v.split) for v in data.views] == [("photos/a", "train+test"), ("photos/b", "train+test"),
+                                                      ("photos/c", "test")]
+    assert [v.name for v in data.split("train")] == ["photos/a", "photos/b"]
+    assert [v.name for v in data.split("test")] == ["photos/a", "photos/b", "photos/c"]
+    assert len(data.split("all")) == 3
+
+
+@pytest.mark.parametrize("case, says", [("pose", "(train and test)"), ("angle", "(train and test)"),
+                                        ("same split", "(test and test)")])
+def test_blender_photo_of_two_different_frames_is_refused(tmp_path, case, says):
+    moved = np.eye(4)
+    moved[:3, 3] = [0.0, 0.0, 1e-3]
+    if case == "same split":
+        blender_frames(tmp_path, {"test": [("a", np.eye(4)), ("a", moved)]})
+    else:
+        blender_frames(tmp_path, {"train": [("a", np.eye(4))], "test": [("a", moved if case == "pose" else np.eye(4))]},
+                       angles={"test": 0.8 if case == "angle" else 0.7})
+    one_line(tmp_path, "'a.png' is the photo of two frames " + says, "with different cameras")
 
 
 @pytest.mark.parametrize("name", ["/etc/hostname", "../a.png"])

@@ -120,7 +120,7 @@ def test_missing_photos_and_other_aspect_ratio(tmp_path, views):
     save_rgb(tmp_path / "images" / "v05.png", views[5].rgb[:, :80])
     with pytest.raises(DatasetError) as exc:
         load_dataset(tmp_path)
-    one_line(exc, "v05.png", "80x100", "aspect ratio")
+    one_line(exc, "v05.png", "80x100", "integer downscale")
     with pytest.raises(DatasetError) as exc:
         load_dataset(tmp_path, images="images_8")
     one_line(exc, "images_8", "--images")

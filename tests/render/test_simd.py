@@ -59,7 +59,7 @@ def render(path, scene, cam, mode, supersample=1, **kw):
     with simd(path):
         renderer = create_renderer("cpu")
         renderer.upload(scene)
-        return renderer.render(cam, gb.RenderSettings.of(mode, supersample, **kw))
+        return renderer.render(cam, gb.RenderSettings.parse(mode, supersample=supersample, **kw))
 
 
 def assert_close_to_scalar(vec, ref, what):

@@ -56,7 +56,7 @@ def draw(state: AppState, dialogs: FileDialogs) -> None:
             imgui.text_disabled("no dataset (gbviewer SCENE --data DATASET)")
         return
     d = ds.dataset
-    test = sum(v.split == "test" for v in d.views)
+    test = sum(v.in_split("test") for v in d.views)
     if imgui.small_button("Close dataset"):
         state.close_dataset()
         return

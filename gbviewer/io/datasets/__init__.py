@@ -36,7 +36,7 @@ def load_cameras_dataset(path: Path, images: str = "images") -> Dataset:
         raise DatasetError(f"{path}: {len(cams) - len(split)} cameras share an img_name with another")
     pairs = sorted(zip(cams, photos), key=lambda pair: pair[0].name)
     return Dataset(path.parent, "cameras.json",
-                   tuple(View(c.name, fit_to_photo(c, p), p, split[c.name]) for c, p in pairs))
+                   tuple(View(c.name, fit_to_photo(c, p, larger=True), p, split[c.name]) for c, p in pairs))
 
 
 def load_dataset(path: str | Path, images: str = "images") -> Dataset:

@@ -4,6 +4,7 @@ OpenGL axes (x right, y up, z backwards) and the horizontal field of view `camer
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,7 @@ import numpy as np
 from ...camera import Camera
 from ...errors import CameraError, DatasetError, InvalidValue
 from ...validate import array, field, read_json, real
-from .dataset import Dataset, View
+from .dataset import BOTH, Dataset, View
 from .photos import find_photo, missing_photos, photo_size
 
 SPLIT_FILES = {"train": "transforms_train.json", "test": "transforms_test.json"}
@@ -65,13 +66,27 @@ def _views(root: Path, split: str, path: Path) -> list[View]:
 
 
 def load_blender(root: Path) -> Dataset:
-    """The views of transforms_train.json and transforms_test.json (either may be absent, not both)."""
+    """The views of transforms_train.json and transforms_test.json (either may be absent, not both). A photo
+    listed twice with the same camera (some exporters write one file as both splits) is one view, of both splits
+    where they differ; with another camera it is a one-line DatasetError."""
     views = [v for split, name in SPLIT_FILES.items() if (root / name).is_file()
              for v in _views(root, split, root / name)]
     seen: dict[Path, View] = {}
     for v in views:
-        if v.image in seen:
-            raise DatasetError(f"{root}: {v.image.name!r:.300} is the photo of two frames ({seen[v.image].split} and "
-                               f"{v.split}); expected one frame per photo")
-        seen[v.image] = v
-    return Dataset(root, "blender", tuple(views))
+        first = seen.setdefault(v.image, v)
+        if first is v:
+            continue
+        if not same_camera(first.camera, v.camera):
+            raise DatasetError(f"{root}: {v.image.name!r:.300} is the photo of two frames ({first.split} and "
+                               f"{v.split}) with different cameras; expected one pose per photo")
+        if v.split != first.split:
+            seen[v.image] = replace(first, split=BOTH)
+    return Dataset(root, "blender", tuple(seen.values()))
+
+
+def same_camera(a: Camera, b: Camera) -> bool:
+    """Whether two cameras agree to within float rounding (a pose written twice, through float32 or text)."""
+    def numbers(c: Camera) -> np.ndarray:
+        return np.concatenate([[c.width, c.height, c.fx, c.fy, c.cx, c.cy], np.ravel(c.R), np.ravel(c.t)])
+
+    return bool(np.allclose(numbers(a), numbers(b), rtol=1e-6, atol=1e-6))

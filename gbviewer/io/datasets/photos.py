@@ -27,6 +27,8 @@ MAX_DECODED_BYTES = 4 << 30  # decoded pixels plus their float32 copy, per photo
 MAX_JPEG_SCANS = 100  # libjpeg-turbo's advice against scan bombs (djpeg -maxscan); real progressive JPEGs have ~10
 # what Pillow raises for a malformed file: OSError, SyntaxError (a broken PNG chunk), EOFError, struct.error, ...
 DECODE_ERRORS = (OSError, ValueError, SyntaxError, EOFError, struct.error, IndexError, Image.DecompressionBombError)
+# the photo modes read, each with its largest value (16-bit grey PNGs open as I;16; a palette is expanded first)
+PHOTO_RANGES = {"1": 1, "L": 255, "LA": 255, "RGB": 255, "RGBA": 255, "I;16": 65535, "I;16B": 65535, "I;16L": 65535}
 SOS = b"\xff\xda"  # JPEG start of scan: entropy-coded data stuffs 0xff with 0x00, so only markers hold this pair
 
 
@@ -91,16 +93,42 @@ def photo_size(path: Path) -> tuple[int, int]:
 
 
 def read_photo(path: Path) -> np.ndarray:
-    """The photo as float32 in [0, 1]: (H, W, 4) straight RGBA when it has an alpha channel (or a transparent
-    palette entry), (H, W, 3) RGB otherwise. Size, format and scans are checked from the file before decoding."""
+    """The photo as float32 in [0, 1], each value divided by its mode's largest (255, 65535 for 16-bit grey, 1 for
+    1-bit): (H, W, 4) straight RGBA when it has an alpha channel (or a transparent palette entry or colour),
+    (H, W, 3) RGB otherwise; grey repeated in R, G and B. Pillow holds 16-bit colour PNGs at 8 bits (their high
+    bytes). Other modes (CMYK) are a one-line `DatasetError`. Size, format and scans are checked from the file
+    before decoding."""
     photo_size(path)
     try:
         with _open(path) as im:
-            alpha = "A" in im.getbands() or "transparency" in im.info
-            pixels = np.asarray(im.convert("RGBA" if alpha else "RGB"))
+            if im.mode not in PHOTO_RANGES and im.mode not in ("P", "PA"):
+                raise DatasetError(f"{path}: a {im.mode} photo; expected greyscale, RGB or RGBA (8 or 16 bits, a "
+                                   "palette or 1 bit)" + (": convert it to RGB (its colours depend on a print "
+                                                           "profile)" if im.mode == "CMYK" else ""))
+            return _pixels(im)
     except DECODE_ERRORS as exc:
         raise DatasetError(f"{path}: cannot decode the photo ({exc})") from None
-    return pixels.astype(np.float32) / np.float32(255)
+
+
+def _pixels(im: Image.Image) -> np.ndarray:
+    """`read_photo`'s array of an open image in one of PHOTO_RANGES' modes (a palette's expanded to RGB(A))."""
+    if im.mode in ("P", "PA"):
+        im = im.convert("RGBA" if im.mode == "PA" or "transparency" in im.info else "RGB")
+    raw = np.asarray(im)
+    raw = raw[..., None] if raw.ndim == 2 else raw
+    scale = np.float32(PHOTO_RANGES[im.mode])
+    alpha_band = im.mode in ("LA", "RGBA")
+    colour = raw[..., :-1] if alpha_band else raw
+    rgb = np.repeat(colour, 3, axis=-1) if colour.shape[-1] == 1 else colour
+    out = rgb.astype(np.float32) / scale
+    key = None if alpha_band else im.info.get("transparency")  # tRNS: the one colour that is transparent
+    if alpha_band:
+        alpha = raw[..., -1:].astype(np.float32) / scale
+    elif key is not None and not isinstance(key, bytes):
+        alpha = np.all(colour != np.reshape(key, (1, 1, -1)), axis=-1, keepdims=True).astype(np.float32)
+    else:
+        return out
+    return np.concatenate([out, alpha], axis=-1)
 
 
 def find_photo(folder: Path, name: str) -> Path:
@@ -145,13 +173,22 @@ def missing_photos(paths: list[Path], where: str) -> None:
                            f"(first: {missing[0]})")
 
 
-def fit_to_photo(camera: Camera, path: Path) -> Camera:
-    """The camera at the photo's size: intrinsics rescaled when the photo was resized (images_4, a cameras.json of
-    3DGS's training resolution), the aspect kept to within a pixel of rounding on each side."""
+def fit_to_photo(camera: Camera, path: Path, larger: bool = False) -> Camera:
+    """The camera at the photo's size, told by its header before anything is decoded: the camera's own size or an
+    integer downscale of it (images_2, images_4, ...: each side divided by k, rounded either way), the intrinsics
+    rescaled; with `larger` (a cameras.json, which may hold a training size below its photos') also an integer
+    upscale. Any other size (a 12000x12000 photo of a 64x64 camera) is a one-line DatasetError."""
     w, h = photo_size(path)
     if (w, h) == (camera.width, camera.height):
         return camera
-    if abs(w * camera.height - h * camera.width) > camera.width + camera.height:
-        raise DatasetError(f"{path}: photo is {w}x{h} but its camera {camera.name!r} is {camera.width}x"
-                           f"{camera.height}: not the same aspect ratio")
-    return camera.with_size(w, h)
+    if _divided((camera.width, camera.height), (w, h)) or (larger and _divided((w, h), (camera.width, camera.height))):
+        return camera.with_size(w, h)
+    raise DatasetError(f"{path}: photo is {w}x{h} but its camera {camera.name!r} is {camera.width}x{camera.height}; "
+                       f"expected that size or an integer {'down- or upscale' if larger else 'downscale'} of it "
+                       "(images_2, images_4, ...)")
+
+
+def _divided(big: tuple[int, int], small: tuple[int, int]) -> bool:
+    """Whether `small` is `big` divided by one integer, each side rounded down or up."""
+    k = round(big[0] / small[0])
+    return k >= 1 and all(s in (b // k, -(-b // k)) for b, s in zip(big, small))

@@ -1,0 +1,56 @@
+"""What a mode spec text sets ('scalar:3', 'preset:spark+lod:40', ...): the parts `RenderSettings.parse` keeps, and
+the texts its `spec` and messages write. Sits below types (whose Mode the spec's mode name becomes)."""
+
+from __future__ import annotations
+
+import enum
+
+from ..errors import RenderError
+from .presets import PRESETS
+from .view_filter import ViewFilter
+
+
+def spec_parts(spec: str) -> dict:
+    """The RenderSettings fields a mode spec sets (see `RenderSettings.parse`), the mode as its name."""
+    body, plus, suffix = spec.partition("+")
+    parts: dict = {}
+    if plus:
+        kind, _, tau = suffix.partition(":")
+        if kind.strip().lower() != "lod":
+            raise RenderError(f"mode {spec!r}: expected MODE[:N][+lod[:TAU]]")
+        parts["lod"] = _spec_number(tau, float, spec, "LOD pixels") if tau.strip() else 1.0
+    name, _, n = body.strip().partition(":")
+    name = name.strip().lower()
+    if name == "preset":
+        name, _, n = n.strip().partition(":")
+        preset = PRESETS.get(name.strip().lower())
+        if preset is None:
+            raise RenderError(f"mode {spec!r}: unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
+        parts.update(mode=preset.mode, view_filter=preset.view_filter, preset=preset.name,
+                     sh_degree=preset.sh_degree)
+    else:
+        parts["mode"] = "scalar" if name == "supersample" else name  # RenderSettings parses (and checks) it
+    if n.strip():
+        parts["supersample"] = _spec_number(n, int, spec, "supersampling factor")
+    return parts
+
+
+def _spec_number(text: str, kind: type, spec: str, what: str) -> float | int:
+    try:
+        return kind(text)
+    except ValueError:
+        raise RenderError(f"mode {spec!r}: {what} {text!r} is not {'an integer' if kind is int else 'a number'}") \
+            from None
+
+
+def shortest(x: float) -> str:
+    """A short text of `x` that reads back as it exactly ('40', '0.1', '12.3456789012')."""
+    return f"{x:g}" if float(f"{x:g}") == x else repr(float(x))
+
+
+def shown(value: object) -> str:
+    """A field's value in a message: a mode's name, a view filter's parts, a number as written."""
+    if isinstance(value, enum.Enum):
+        return value.name.lower()
+    return value.describe() if isinstance(value, ViewFilter) else f"{value:g}" if isinstance(value, float) else \
+        str(value)
