@@ -33,6 +33,13 @@ if [ ! -e "$ROOTFS/.gbviewer-root" ]; then
   touch "$tmp/.gbviewer-root" && rm -rf "$ROOTFS" && mv "$tmp" "$ROOTFS" && rm -f "$tmp.log"
 fi
 cp /etc/resolv.conf "$ROOTFS/etc/resolv.conf"
+# the certificate authorities this machine adds to Debian's (a network's TLS proxy, say): a machine on this network
+# trusts them too
+if compgen -G "/usr/local/share/ca-certificates/*.crt" >/dev/null; then
+  mkdir -p "$ROOTFS/usr/local/share/ca-certificates"
+  cp /usr/local/share/ca-certificates/*.crt "$ROOTFS/usr/local/share/ca-certificates/"
+  chroot "$ROOTFS" update-ca-certificates >/dev/null 2>&1 || { say "update-ca-certificates failed in the root"; exit 1; }
+fi
 
 mounted=()
 cleanup() { for ((i = ${#mounted[@]} - 1; i >= 0; i--)); do umount -l "${mounted[i]}" 2>/dev/null || true; done; }
@@ -69,7 +76,8 @@ for f in out/comparison.png out/zoom.mp4; do
 done
 say "$(inside ".venv/bin/python -c 'import platform; print(\"Python\", platform.python_version())'" 2>&1); $(inside \
   "c++ --version | head -1" 2>&1); Highway $(inside "dpkg-query -W -f '\${Version}' libhwy-dev" 2>&1)"
-say "$(inside ".venv/bin/gbviewer info | head -1" 2>&1)"
+say "$(inside ".venv/bin/gbviewer info | head -1" 2>&1); the venv after the first command: $(inside \
+  "du -sh .venv | cut -f1" 2>&1)"
 say "bash scripts/setup.sh --dev && .venv/bin/pytest -q"
 inside "bash scripts/setup.sh --dev && .venv/bin/pytest -q" >> "$LOG" 2>&1 ||
   { status=1; say "the test command failed"; }

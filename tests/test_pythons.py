@@ -76,6 +76,7 @@ def test_the_suite_part_passes_on(version, tmp_path):
     shutil.copy2(ROOT / "pyproject.toml", work)
     shutil.copy2(module, work / "gbviewer" / module.name)
     env = {k: v for k, v in cmake_env().items() if not k.startswith(("PYTHON", "VIRTUAL_ENV"))}
+    env["PYTHONPATH"] = str(work)  # the staged package, for the tests' own child processes too
     proc = subprocess.run([str(vpython), "-m", "pytest", "-q", "-p", "no:cacheprovider", *TESTS], cwd=work, env=env,
                           capture_output=True, text=True, timeout=900)
     summary = proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else proc.stderr[-2000:]
