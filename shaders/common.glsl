@@ -83,6 +83,9 @@ struct OitParams {
     float pre_dilation;
     float cull_lambda;
     int compensate;
+    int dc_clamp;
+    float support;
+    int sort_radial;
 };
 
 // port of common.h: TileRect

@@ -33,7 +33,8 @@ const uint BLEND_STATE_VEC4S = 3u;   // blend.comp's per-invocation state betwee
 const uint BLEND_ACCUM_VEC4S = 2u;   // blend.comp's per-invocation box sum: rgba; window sum, evals sum
 
 // OitParams' fields in order: 0..3 the components of the `oit` vec4 uniform (depth_correct as 0.0 or 1.0), 4..7
-// those of preprocess.comp's `view_filter` vec4 uniform less 4 (the scalar mode's filter, compensate as 0.0 or 1.0).
+// those of preprocess.comp's `view_filter` vec4 uniform less 4 (the scalar mode's filter, compensate as 0.0 or 1.0),
+// 8..10 those of its `view_rules` vec3 uniform less 8 (the presets' rules, dc_clamp and sort_radial as 0.0 or 1.0).
 const int OIT_SIGMA = 0;
 const int OIT_WEIGHT_BACKGROUND = 1;
 const int OIT_ET_GRADE = 2;
@@ -42,3 +43,6 @@ const int OIT_DILATION = 4;
 const int OIT_PRE_DILATION = 5;
 const int OIT_CULL_LAMBDA = 6;
 const int OIT_COMPENSATE = 7;
+const int OIT_DC_CLAMP = 8;
+const int OIT_SUPPORT = 9;
+const int OIT_SORT_RADIAL = 10;

@@ -30,6 +30,7 @@ uniform int cam_projection;  // PERSPECTIVE or ORTHOGRAPHIC
 uniform int weight_k;  // view-weight SH coefficients per splat, 0: none (v = 1)
 uniform vec4 oit;      // OitParams (wsr, duplex): components OIT_* (interface.glsl)
 uniform vec4 view_filter;  // OitParams' scalar filter: components OIT_* - 4 (interface.glsl)
+uniform vec3 view_rules;   // OitParams' preset rules: components OIT_* - 8 (interface.glsl)
 
 float load_sh(uint splat, int coeff, int channel) {
     return sh_data[splat * uint(3 * sh_k) + uint(coeff * 3 + channel)];
@@ -47,7 +48,8 @@ void main() {
     const OitParams params = OitParams(oit[OIT_SIGMA], oit[OIT_WEIGHT_BACKGROUND], oit[OIT_ET_GRADE],
                                         int(oit[OIT_DEPTH_CORRECT]), view_filter[OIT_DILATION - 4],
                                         view_filter[OIT_PRE_DILATION - 4], view_filter[OIT_CULL_LAMBDA - 4],
-                                        int(view_filter[OIT_COMPENSATE - 4]));
+                                        int(view_filter[OIT_COMPENSATE - 4]), int(view_rules[OIT_DC_CLAMP - 8]),
+                                        view_rules[OIT_SUPPORT - 8], int(view_rules[OIT_SORT_RADIAL - 8]));
     bool kept;
     const StageSplat st = unpack_stage(stage[STAGE_VEC4S * i], stage[STAGE_VEC4S * i + 1u],
                                        stage[STAGE_VEC4S * i + 2u], kept);

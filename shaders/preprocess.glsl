@@ -44,12 +44,13 @@ int sh_basis(int deg, vec3 dir, precise out float basis[16]) {
 }
 
 // port of sh.h: sh_to_rgb (`splat` selects the coefficients (C++: a pointer to them))
-void sh_to_rgb(uint splat, int deg, vec3 dir, out vec3 result) {
+void sh_to_rgb(uint splat, int deg, vec3 dir, bool dc_clamp, out vec3 result) {
     float basis[16];
     const int k = sh_basis(deg, dir, basis);
     for (int c = 0; c < 3; ++c) {
-        precise float v = 0.5;
-        for (int i = 0; i < k; ++i) v += basis[i] * load_sh(splat, i, c);
+        precise float v = 0.5 + basis[0] * load_sh(splat, 0, c);
+        if (dc_clamp) v = min(max(v, 0.0), 1.0);
+        for (int i = 1; i < k; ++i) v += basis[i] * load_sh(splat, i, c);
         result[c] = max(v, 0.0);
     }
 }
@@ -159,6 +160,12 @@ bool scalar_filter(OitParams f, inout precise vec3 cov, inout precise float opac
     return true;
 }
 
+// port of view_filter.h: support_power
+float support_power(OitParams f) {
+    precise const float s2 = f.support * f.support;
+    return f.support > 0.0 ? -0.5 * s2 : uintBitsToFloat(0xff800000u);
+}
+
 // port of preprocess.h: preprocess_finish (the mode's finish of a stored stage, but the colour; false: culled)
 bool preprocess_finish(SplatIn in_, StageSplat st, int sh_deg, CameraParams cam, int mode, OitParams oit, int grid_x,
                        int grid_y, out Splat2D result, out TileRect rect) {
@@ -167,8 +174,10 @@ bool preprocess_finish(SplatIn in_, StageSplat st, int sh_deg, CameraParams cam,
     precise float opacity = st.opacity;
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
+    float min_power = uintBitsToFloat(0xff800000u);
     if (mode == SCALAR) {
         if (!scalar_filter(oit, cov, opacity)) return false;
+        min_power = support_power(oit);
     } else if (mode == MIP) {
         precise const float det0 = max(1e-6, cov[0] * cov[2] - cov[1] * cov[1]);
         cov[0] += MIP_KERNEL_SIZE;
@@ -208,7 +217,7 @@ bool preprocess_finish(SplatIn in_, StageSplat st, int sh_deg, CameraParams cam,
     result.xy = st.xy;
     result.depth = st.depth;
     result.opacity = opacity;
-    result.log_min_alpha = logf(min_alpha / opacity);
+    result.log_min_alpha = max(logf(min_alpha / opacity), min_power);
     result.conic[0] = cov[2] * inv;
     result.conic[1] = -cov[1] * inv;
     result.conic[2] = cov[0] * inv;
@@ -222,10 +231,10 @@ bool preprocess_finish(SplatIn in_, StageSplat st, int sh_deg, CameraParams cam,
 }
 
 // port of preprocess.h: stage_splat (stage.comp)
-bool stage_splat(SplatIn in_, int sh_deg, CameraParams cam, int grid_x, int grid_y, float reach,
+bool stage_splat(SplatIn in_, int sh_deg, int rules, CameraParams cam, int grid_x, int grid_y, float reach,
                  out StageSplat st) {
-    if (!preprocess_stage(in_, cam, st) || !stage_on_screen(st, grid_x, grid_y, reach)) return false;
-    stage_color(in_, sh_deg, cam, st.color);
+    if (!preprocess_stage(in_, cam, rules, st) || !stage_on_screen(st, grid_x, grid_y, reach)) return false;
+    stage_color(in_, sh_deg, rules, cam, st.color);
     return true;
 }
 

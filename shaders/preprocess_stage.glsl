@@ -91,8 +91,12 @@ struct StageSplat {
     vec3 color;
 };
 
+// port of preprocess_stage.h: STAGE_DC_CLAMP, STAGE_RADIAL
+const int STAGE_DC_CLAMP = 1;
+const int STAGE_RADIAL = 2;
+
 // port of preprocess_stage.h: preprocess_stage (all but the colour; false behind the near plane)
-bool preprocess_stage(SplatIn in_, CameraParams cam, out StageSplat st) {
+bool preprocess_stage(SplatIn in_, CameraParams cam, int rules, out StageSplat st) {
     precise vec3 pv;
     if (!view_point(cam, in_.mean, pv)) return false;
     // Mip-Splatting 3D filter (applied in every mode when present): scales grow, opacity compensates.
@@ -118,6 +122,10 @@ bool preprocess_stage(SplatIn in_, CameraParams cam, out StageSplat st) {
     screen_position(cam, pv, xy);
     st.xy = xy;
     st.depth = pv[2];
+    if ((rules & STAGE_RADIAL) != 0 && cam.projection != ORTHOGRAPHIC) {
+        precise const float d2 = pv[0] * pv[0] + pv[1] * pv[1] + pv[2] * pv[2];
+        st.depth = sqrt(d2);
+    }
     st.opacity = opacity;
     st.cov = cov;
     st.color = vec3(0.0);
@@ -125,10 +133,10 @@ bool preprocess_stage(SplatIn in_, CameraParams cam, out StageSplat st) {
 }
 
 // port of preprocess_stage.h: stage_color
-void stage_color(SplatIn in_, int sh_deg, CameraParams cam, out vec3 color) {
+void stage_color(SplatIn in_, int sh_deg, int rules, CameraParams cam, out vec3 color) {
     precise vec3 dir;
     view_direction(cam, in_.mean, dir);
-    sh_to_rgb(in_.index, sh_deg, dir, color);
+    sh_to_rgb(in_.index, sh_deg, dir, (rules & STAGE_DC_CLAMP) != 0, color);
 }
 
 // port of preprocess_stage.h: stage_on_screen

@@ -16,6 +16,7 @@ uniform int sh_k;    // SH coefficients per channel stored in the scene
 uniform int sh_deg;  // degree evaluated
 uniform ivec2 grid;
 uniform float reach;  // the largest diagonal a mode's 2D filter adds (stage_on_screen)
+uniform int rules;    // the presets' stage rules (stage_rules)
 uniform float cam_R[9];
 uniform float cam_t[3];
 uniform vec4 cam_f;  // fx, fy, cx, cy
@@ -37,7 +38,7 @@ void main() {
     const vec4 g0 = geom[GEOM_VEC4S * i], g1 = geom[GEOM_VEC4S * i + 1u], g2 = geom[GEOM_VEC4S * i + 2u];
     const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, g0.w, i, g1.w, false, 0, -1);
     StageSplat st = StageSplat(vec2(0.0), 0.0, 0.0, vec3(0.0), vec3(0.0));
-    const bool kept = stage_splat(in_, sh_deg, cam, grid.x, grid.y, reach, st);
+    const bool kept = stage_splat(in_, sh_deg, rules, cam, grid.x, grid.y, reach, st);
     vec4 p0, p1, p2;
     pack_stage(st, kept, p0, p1, p2);
     stage[STAGE_VEC4S * i] = p0;

@@ -71,7 +71,9 @@ def blend_scalar_like(pre, idx, pix, mode, added=None):
         else:
             A, B, Cc = pre["conic"][s]
             power = -0.5 * (A * d[:, 0] ** 2 + Cc * d[:, 1] ** 2) - B * d[:, 0] * d[:, 1]
-            ok = power <= 0
+            ok = (power <= 0) & (power >= pre.get("min_power", -np.inf))  # a preset's support cut
+            if np.isfinite(pre.get("min_power", -np.inf)):
+                tie |= ~done & _near(power, pre["min_power"])
             alpha = np.minimum(0.99, o * np.exp(np.minimum(power, 0.0)))
         tie |= ~done & _near(alpha, MIN_ALPHA_3DGS)
         ok &= ~done & (alpha >= MIN_ALPHA_3DGS)

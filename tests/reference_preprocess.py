@@ -51,11 +51,14 @@ def quat_to_rotmat(q: np.ndarray) -> np.ndarray:
     ], -2)
 
 
-def sh_to_rgb(sh: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-    """Evaluate the 3DGS real SH basis; sh (N,K,3), dirs (N,3) unit. Returns max(0, sum + 0.5)."""
+def sh_to_rgb(sh: np.ndarray, dirs: np.ndarray, dc_clamp: bool = False) -> np.ndarray:
+    """Evaluate the 3DGS real SH basis; sh (N,K,3), dirs (N,3) unit. Returns max(0, sum + 0.5); with dc_clamp the
+    base colour 0.5 + C0 dc is clamped to [0, 1] before the higher bands are added."""
     k = sh.shape[1]
     x, y, z = (dirs[:, i:i + 1] for i in range(3))
-    res = SH_C0 * sh[:, 0]
+    res = SH_C0 * sh[:, 0] + 0.5
+    if dc_clamp:
+        res = np.clip(res, 0.0, 1.0)
     if k > 1:
         res = res - SH_C1 * y * sh[:, 1] + SH_C1 * z * sh[:, 2] - SH_C1 * x * sh[:, 3]
     if k > 4:
@@ -68,7 +71,7 @@ def sh_to_rgb(sh: np.ndarray, dirs: np.ndarray) -> np.ndarray:
                + SH_C3[2] * y * (4 * zz - xx - yy) * sh[:, 11] + SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * sh[:, 12]
                + SH_C3[4] * x * (4 * zz - xx - yy) * sh[:, 13] + SH_C3[5] * z * (xx - yy) * sh[:, 14]
                + SH_C3[6] * x * (xx - 3 * yy) * sh[:, 15])
-    return np.maximum(res + 0.5, 0.0)
+    return np.maximum(res, 0.0)
 
 
 def camera_params(cam, supersample: int = 1) -> dict:
@@ -148,7 +151,9 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
     view_filter (scalar; a viewer preset's rule as its viewer's code states it, gbviewer/render/presets.py):
     dict(dilation, pre_dilation, compensate, cull_lambda): Sigma' = Sigma + pre_dilation I, Sigma'' = Sigma' +
     dilation I replace the +0.3; compensate multiplies the opacity by sqrt(max(0, det Sigma' / det Sigma'')); a
-    splat whose larger eigenvalue of Sigma'' is below cull_lambda is dropped."""
+    splat whose larger eigenvalue of Sigma'' is below cull_lambda is dropped; dc_clamp clamps the base colour
+    (sh_to_rgb); support > 0 gives no alpha beyond that Mahalanobis radius (`min_power` = -support^2 / 2, the blend's
+    cut); sort_radial orders by the distance from the eye (perspective), the `depth` it returns."""
     assert mode in MODES + OIT_MODES, mode
     cp = camera_params(cam, supersample)
     W, H, R, t = (cp[k] for k in ("W", "H", "R", "t"))
@@ -237,13 +242,16 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
     v1 = np.stack([np.cos(theta), np.sin(theta)], -1)
     v2 = np.stack([-np.sin(theta), np.cos(theta)], -1)
 
-    color = sh_to_rgb(sh, dirs)
+    vf = view_filter if mode == "scalar" and view_filter is not None else {}
+    color = sh_to_rgb(sh, dirs, vf.get("dc_clamp", False))
+    depth = np.linalg.norm(view, axis=1) if vf.get("sort_radial") and not cp["ortho"] else Z
+    min_power = -0.5 * vf["support"] ** 2 if vf.get("support", 0.0) > 0 else -np.inf
 
     with np.errstate(divide="ignore", invalid="ignore"):
         conic = np.stack([c / det, -b / det, a / det], -1)
     return dict(
         keep=keep, xy=np.stack([x, y], -1), cov=np.stack([a, b, c], -1), conic=conic, opacity=opac,
-        depth=Z, color=color, rect=np.stack([x0, x1, y0, y1], -1), radius=radius,
+        depth=depth, min_power=min_power, color=color, rect=np.stack([x0, x1, y0, y1], -1), radius=radius,
         lam=np.stack([lam1, lam2], -1), sigma=np.sqrt(np.abs(np.stack([lam1, lam2], -1))), v1=v1, v2=v2,
         W=W, H=H,
     )

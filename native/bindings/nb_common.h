@@ -115,20 +115,25 @@ inline RenderArgs parse_render_args(const char* where, const FArr& R, const FArr
     return a;
 }
 
-// The scalar mode's viewer filter (gbv/view_filter.h) into `a.oit`: float32 [dilation, pre_dilation, cull_lambda,
-// compensate (0 or 1)], each finite and >= 0; none keeps 3DGS's (OitParams' defaults).
+// The scalar mode's viewer filter and rules (gbv/view_filter.h) into `a.oit`: float32 [dilation, pre_dilation,
+// cull_lambda, compensate (0 or 1), dc_clamp (0 or 1), support, sort_radial (0 or 1)], each finite and >= 0; none
+// keeps 3DGS's (OitParams' defaults).
 inline void set_view_filter(const char* where, RenderArgs& a, const std::optional<FArr>& view_filter) {
     if (!view_filter) return;
     const FArr& f = *view_filter;
-    if (f.ndim() != 1 || f.shape(0) != 4) fail(where, "view_filter must be float32 (4,)");
+    if (f.ndim() != 1 || f.shape(0) != 7) fail(where, "view_filter must be float32 (7,)");
     const float* v = f.data();
-    for (int i = 0; i < 4; ++i)
+    for (int i = 0; i < 7; ++i)
         if (!(std::isfinite(v[i]) && v[i] >= 0)) fail(where, "view_filter values must be finite and >= 0");
-    if (v[3] != 0 && v[3] != 1) fail(where, "view_filter compensate must be 0 or 1");
+    for (int i : {3, 4, 6})
+        if (v[i] != 0 && v[i] != 1) fail(where, "view_filter compensate, dc_clamp and sort_radial must be 0 or 1");
     a.oit.dilation = v[0];
     a.oit.pre_dilation = v[1];
     a.oit.cull_lambda = v[2];
     a.oit.compensate = v[3] != 0 ? 1 : 0;
+    a.oit.dc_clamp = v[4] != 0 ? 1 : 0;
+    a.oit.support = v[5];
+    a.oit.sort_radial = v[6] != 0 ? 1 : 0;
 }
 
 // A render call's RenderArgs: parse_render_args' checks, then the SH degree cap, the window plane and the viewer

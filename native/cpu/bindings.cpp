@@ -327,7 +327,7 @@ NB_MODULE(_native, m) {
              "by every worker); on_progress(done, total): called on this thread between tiles, at most every 5 ms, "
              "and at the end (an exception it raises stops the frame and is raised here); partial: float32 "
              "(height, width, 3) receiving each finished tile; view_filter: the scalar mode's [dilation, pre_dilation, "
-             "cull_lambda, compensate] (none: 3DGS's); lod: (tau, band, eye, focal, orthographic) draws the cut "
+             "cull_lambda, compensate, dc_clamp, support, sort_radial] (none: 3DGS's); lod: (tau, band, eye, focal, orthographic) draws the cut "
              "through the uploaded hierarchy in place (none: every splat). The dict's lod_splats: the cut's size.")
         .def("render_many", &render_many, nb::arg("frames"), nb::arg("threads") = 0,
              nb::arg("cancel").none() = nb::none(), nb::arg("on_progress").none() = nb::none(),

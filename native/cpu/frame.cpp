@@ -187,7 +187,7 @@ void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& pat
     stage.depth.resize(n);
     const CameraParams& cam = key.cam;
     StageJob job{sc.means,  sc.scales, sc.quats, sc.opacities, sc.sh, sc.filter_3d, sc.k, key.sh_deg, cam,
-                 key.reach, (cam.width + TILE - 1) / TILE, (cam.height + TILE - 1) / TILE, stage.splats.data(),
+                 key.reach, key.rules, (cam.width + TILE - 1) / TILE, (cam.height + TILE - 1) / TILE, stage.splats.data(),
                  stage.valid.data(), stage.depth.data()};
     job.n_scene = sc.n;
     if (cut) {

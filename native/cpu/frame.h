@@ -77,15 +77,16 @@ struct SceneView {
 // upload generation: upload, upload_weights, upload_cells and upload_lod each start a new one), every byte of the
 // camera (a supersampled frame's camera is its own), the SH degree, the reach of its on-screen cull
 // (stage_on_screen: the largest diagonal the frame's 2D filter adds, at least 3DGS's +0.3, so every built-in mode and
-// preset shares one), and the level-of-detail cut it draws (off: every splat).
+// preset shares one), the level-of-detail cut it draws (off: every splat) and the presets' stage rules (stage_rules).
 struct StageKey {
     uint64_t scene = 0;
     CameraParams cam = {};
     int sh_deg = 0;
     float reach = DILATION_3DGS;
     LodArgs lod = {};
+    int rules = 0;  // stage_rules: the presets' base-colour clamp and radial depth
     bool operator==(const StageKey& o) const {
-        return scene == o.scene && sh_deg == o.sh_deg && reach == o.reach && lod == o.lod &&
+        return scene == o.scene && sh_deg == o.sh_deg && reach == o.reach && lod == o.lod && rules == o.rules &&
                std::memcmp(&cam, &o.cam, sizeof cam) == 0;
     }
 };

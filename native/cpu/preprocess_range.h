@@ -32,6 +32,7 @@ struct StageJob {
     int sh_deg;
     CameraParams cam;
     float reach;  // StageKey::reach (stage_on_screen)
+    int rules;    // StageKey::rules (stage_rules)
     int grid_x, grid_y;
     StageSplat* stage;
     uint8_t* valid;
@@ -143,7 +144,7 @@ void stage_colors(const StageJob& job, const int64_t* ids, int count) {
         for (int q = q0; q < nsh; ++q) sh[q] = L::load(shb[q]);
         in.sh = sh;
         typename L::F color[3];
-        stage_color<L>(in, job.sh_deg, job.cam, color);
+        stage_color<L>(in, job.sh_deg, job.rules, job.cam, color);
         for (int q = 0; q < 3; ++q) L::store(color[q], o[q]);
         for (int j = 0; j < c; ++j)
             for (int q = 0; q < 3; ++q) job.stage[ids[g + j]].color[q] = o[q][j];
@@ -204,7 +205,7 @@ void stage_range(const StageJob& job, int64_t begin, int64_t end) {
                 in.filter_3d = L::load(buf[11]);
             }
             StageLanes<L> st{};  // preprocess_stage leaves it unset when no lane is in front
-            uint32_t ok = L::bits(preprocess_stage<L>(in, job.cam, &st));
+            uint32_t ok = L::bits(preprocess_stage<L>(in, job.cam, job.rules, &st));
             if (ok) ok &= L::bits(stage_on_screen<L>(st, job.grid_x, job.grid_y, job.reach));
             for (int j = 0; j < count; ++j) job.valid[i0 + j] = (ok >> j) & 1u;
             if (!ok) {

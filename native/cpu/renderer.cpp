@@ -172,7 +172,7 @@ void check_uploads(const RenderArgs& a, const SceneView& sc, const char* where) 
 // The StageKey of a frame: everything its stage depends on (add a field here and to StageKey::operator==).
 StageKey stage_key(const RenderArgs& a, const SceneView& sc, uint64_t generation) {
     return StageKey{generation, a.cam, sh_degree_of(a, sc), stage_reach(a.mode, a.oit),
-                    a.lod.on() ? a.lod : LodArgs{}};
+                    a.lod.on() ? a.lod : LodArgs{}, stage_rules(a.mode, a.oit)};
 }
 
 }  // namespace

@@ -16,12 +16,12 @@ namespace {
 __global__ void __launch_bounds__(THREADS)
     stage_kernel(int64_t n, const float* means, const float* scales, const float* quats, const float* opacities,
                  const float* sh, const float* filter_3d, int k, int sh_deg, CameraParams cam, int gx, int gy,
-                 float reach, StageSplat* stage, unsigned char* stage_ok) {
+                 float reach, int rules, StageSplat* stage, unsigned char* stage_ok) {
     const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     if (i >= n) return;
     const SplatIn in{means + 3 * i, scales + 3 * i, quats + 4 * i, opacities[i], sh + (size_t)k * 3 * i,
                      filter_3d ? filter_3d[i] : 0.0f, nullptr, 0, -1};
-    stage_ok[i] = stage_splat(in, sh_deg, cam, gx, gy, reach, &stage[i]) ? 1 : 0;
+    stage_ok[i] = stage_splat(in, sh_deg, rules, cam, gx, gy, reach, &stage[i]) ? 1 : 0;
 }
 
 // The mode's finish of every splat's stage (finish_splat): Splat2D, tile rectangle, touched tile count.
@@ -185,8 +185,9 @@ void State::run(const RenderArgs& a, RenderResult& res) {
     CUDA_CHECK(cudaMemsetAsync(ranges.ptr, 0, sizeof(uint2) * num_tiles));
 
     CUDA_CHECK(cudaEventRecord(ev[0].e));
-    // the stage: kept while its key holds (scene generation, camera, SH degree, the on-screen cull's reach)
-    const StageKey key{generation, cam, sh_deg, stage_reach(a.mode, a.oit)};
+    // the stage: kept while its key holds (scene generation, camera, SH degree, the on-screen cull's reach, the
+    // presets' stage rules)
+    const StageKey key{generation, cam, sh_deg, stage_reach(a.mode, a.oit), stage_rules(a.mode, a.oit)};
     res.stage_reused = stage_ready && stage_key == key;
     if (n > 0 && !res.stage_reused) {
         stage_ready = false;
@@ -194,7 +195,7 @@ void State::run(const RenderArgs& a, RenderResult& res) {
         stage_ok.ensure(n);
         stage_kernel<<<blocks(n), THREADS>>>(n, means.ptr, scales.ptr, quats.ptr, opacities.ptr, sh.ptr,
                                              has_filter ? filter_3d.ptr : nullptr, k, sh_deg, cam, gx, gy, key.reach,
-                                             stage.ptr, stage_ok.ptr);
+                                             key.rules, stage.ptr, stage_ok.ptr);
         launched("stage_kernel");
         stage_key = key;
         stage_ready = true;

@@ -62,8 +62,9 @@ struct State {
         CameraParams cam = {};
         int sh_deg = 0;
         float reach = 0;
+        int rules = 0;  // stage_rules
         bool operator==(const StageKey& o) const {
-            return scene == o.scene && sh_deg == o.sh_deg && reach == o.reach &&
+            return scene == o.scene && sh_deg == o.sh_deg && reach == o.reach && rules == o.rules &&
                    std::memcmp(&cam, &o.cam, sizeof cam) == 0;
         }
     } stage_key;

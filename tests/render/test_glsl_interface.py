@@ -89,12 +89,15 @@ def test_glsl_structs_have_the_cpp_layout(cpp_layout, struct):
 def test_rect_and_oit_records_match_the_cpp_structs(cpp_layout):
     assert cpp_layout["TileRect"]["sizeof"] == gi.RECT_WORDS * gi.WORD_BYTES
     fields = [f for f, _ in glsl_fields("OitParams")]
-    assert cpp_layout["OitParams"]["sizeof"] == 2 * gi.VEC4_BYTES  # the `oit` and `view_filter` vec4 uniforms
+    # the `oit` and `view_filter` vec4 uniforms and the `view_rules` vec3
+    assert cpp_layout["OitParams"]["sizeof"] == 2 * gi.VEC4_BYTES + 3 * gi.WORD_BYTES
     for f in fields:
         assert getattr(gi, f"OIT_{f.upper()}") * gi.WORD_BYTES == cpp_layout["OitParams"][f], f
     values = {"sigma": 2.0, "weight_background": 3.0, "et_grade": 4.0, "depth_correct": 1.0, "dilation": 0.5,
-              "pre_dilation": 0.25, "cull_lambda": 0.75, "compensate": 1.0}
-    packed = gi.oit_uniform(2.0, 3.0, 4.0, True) + gi.view_filter_uniform(0.5, 0.25, 0.75, True)
+              "pre_dilation": 0.25, "cull_lambda": 0.75, "compensate": 1.0, "dc_clamp": 1.0, "support": 2.5,
+              "sort_radial": 1.0}
+    packed = (gi.oit_uniform(2.0, 3.0, 4.0, True) + gi.view_filter_uniform(0.5, 0.25, 0.75, True)
+              + gi.view_rules_uniform(True, 2.5, True))
     assert packed == tuple(values[f] for f in fields)
 
 

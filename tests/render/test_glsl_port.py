@@ -84,6 +84,8 @@ NOT_PORTED = {
     "dot": "GLSL built-in",
     "stage_reach": "the stage key's reach, a uniform of stage.comp that the driver computes (glsl/renderer.py "
                    "_stage) as it keys the kept stage",
+    "stage_rules": "the stage key's preset rules, a uniform of stage.comp that the driver computes (ViewFilter."
+                   "stage_rules) as it keys the kept stage",
     "preprocess_splat": "the one-splat composition of stage_splat and finish_splat (the C++ reference of "
                         "test_fp_contract); GLSL runs the two as kernels of their own, stage.comp and preprocess.comp",
     "float_bits": "GLSL built-in floatBitsToUint",

@@ -76,6 +76,15 @@ def view_filter_uniform(dilation: float, pre_dilation: float, cull_lambda: float
     return tuple(out)
 
 
+def view_rules_uniform(dc_clamp: bool, support: float, sort_radial: bool) -> tuple:
+    """preprocess.comp's `view_rules` vec3 uniform (OitParams' preset rules) at its OIT_* - 8 positions."""
+    values = {"OIT_DC_CLAMP": float(dc_clamp), "OIT_SUPPORT": support, "OIT_SORT_RADIAL": float(sort_radial)}
+    out = [0.0] * 3
+    for name, value in values.items():
+        out[DEFINITIONS[name] - 8] = float(value)
+    return tuple(out)
+
+
 def records(vec4s: int, *columns: np.ndarray) -> np.ndarray:
     """Per-item storage records of `vec4s` vec4: the columns ((n,) or (n, k) each) side by side in float32."""
     out = np.concatenate([np.asarray(c, np.float32).reshape(len(c), -1) for c in columns], axis=1)

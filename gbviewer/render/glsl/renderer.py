@@ -285,7 +285,8 @@ class GlslRenderer(Renderer):
         stage, stage_reused, stage_ms = self._stage(settings, n, sh_deg, cam_uniforms)
         gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,
                 weight, stage), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k,
-                oit=oit, view_filter=gi.view_filter_uniform(*settings.view_filter.native()), **cam_uniforms)
+                oit=oit, view_filter=gi.view_filter_uniform(*settings.view_filter.native()[:4]),
+                view_rules=gi.view_rules_uniform(*settings.view_filter.native()[4:]), **cam_uniforms)
         scan(gpu, flags, n, total_slot=gi.TOTAL_VISIBLE)
         gpu.run("compact.comp", -(-n // WG), (splats, rects, flags, totals, dkeys[0], dvals[0]), num_splats=n)
         t = read_totals(gpu)
@@ -316,19 +317,21 @@ class GlslRenderer(Renderer):
         """The `stage` buffer for this frame's camera (at its sampling grid), whether it was kept from an earlier
         frame and the ms spent building it: stage.comp runs (and the GL work finishes, for that time) only when the
         scene's generation, the camera, the SH degree or the on-screen cull's reach (the largest diagonal the
-        frame's 2D filter adds, at least 3DGS's +0.3: stage_reach in preprocess_stage.h) changed."""
+        frame's 2D filter adds, at least 3DGS's +0.3: stage_reach in preprocess_stage.h) or the presets' stage rules
+        (stage_rules) changed."""
         gpu = self.gpu
         stage = gpu.ensure("stage", n * gi.STAGE_VEC4S * VEC4, "per-camera stage")
         vf = settings.view_filter.native() if settings.mode == Mode.SCALAR else np.zeros(2, np.float32)
         reach = float(max(np.float32(DILATION_3DGS), vf[0] + vf[1]))  # gbv::stage_reach, in float32
+        rules = settings.view_filter.stage_rules if settings.mode == Mode.SCALAR else 0
         camera_bytes = tuple(np.asarray(v).tobytes() for v in cam_uniforms.values())
-        key = (self._generation, camera_bytes, sh_deg, reach)
+        key = (self._generation, camera_bytes, sh_deg, reach, rules)
         if key == self._stage_key:
             return stage, True, 0.0
         self._stage_key = None
         t0 = time.perf_counter()
         gpu.run("stage.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], stage), num_splats=n,
-                sh_k=self._sh_k, sh_deg=sh_deg, reach=reach, **cam_uniforms)
+                sh_k=self._sh_k, sh_deg=sh_deg, reach=reach, rules=rules, **cam_uniforms)
         self.ctx.finish()
         self._stage_key = key
         return stage, False, (time.perf_counter() - t0) * 1e3

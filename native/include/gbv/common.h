@@ -140,7 +140,8 @@ struct Splat2D {
 
 // Per-frame mode globals. The order-independent modes (wsr, duplex): LC-WSR's depth correction max(0, 1 - z/sigma)
 // when depth_correct is 1, the background weight w_bg, and Duplex-GS's ET_grade E (alpha / E inside cells). The
-// scalar mode: the viewer presets' 2D filter (view_filter.h); its defaults are 3DGS's +0.3 dilation.
+// scalar mode: the viewer presets' 2D filter (view_filter.h) and their rules (view_filter.h: stage_rules,
+// support_power); the defaults are 3DGS's +0.3 dilation and none of the rules.
 struct OitParams {
     float sigma;
     float weight_background;
@@ -150,6 +151,9 @@ struct OitParams {
     float pre_dilation = 0.0f;
     float cull_lambda = 0.0f;
     int32_t compensate = 0;
+    int32_t dc_clamp = 0;     // base colour clamped to [0, 1] before the view-dependent SH terms are added
+    float support = 0.0f;     // alpha 0 beyond this Mahalanobis radius (sigmas); 0: no such cut
+    int32_t sort_radial = 0;  // sort by distance from the eye instead of view-space z (perspective)
 };
 
 // Tile rectangle [x0, x1) x [y0, y1) in tile units.

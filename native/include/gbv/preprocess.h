@@ -23,12 +23,14 @@ namespace gbv {
 // (eigen-decomposition, radius, cutoff box, tile rectangle) footprint.h.
 
 // Outputs of L::N splats: Splat2D's fields but log_min_alpha (log_min_alpha(lane_opacity), one lane at a time, with
-// libm's logf as on one splat) and cell (the caller's).
+// libm's logf as on one splat) and cell (the caller's). min_power: a preset's support cut (support_power); the blend
+// skips powers below log_min_alpha, so the cut raises it.
 template <class L>
 struct Splat2DLanes {
     typename L::F xy[2], depth, opacity, conic[3], color[3], v1[2], sigma1, sigma2, inv_sigma1, inv_sigma2, radius;
     float min_alpha;
-    GBV_HDI float log_min_alpha(float lane_opacity) const { return logf(min_alpha / lane_opacity); }
+    float min_power;
+    GBV_HDI float log_min_alpha(float lane_opacity) const { return maxf(logf(min_alpha / lane_opacity), min_power); }
 };
 
 // The tiles of the box with half sides h around the screen position xy (getRect, which has h = (r, r)); false when a
@@ -68,8 +70,10 @@ GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLan
     // the mode's 2D filter, opacity compensation, view weight and cut-off
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
+    float min_power = -INFINITY;
     if (mode == SCALAR) {
         scalar_filter<L>(oit, cov, opacity, ok);
+        min_power = support_power(oit);
     } else if (mode == MIP) {
         const F eps = L::set(1e-6f);
         const F det0 = L::fmax(eps, L::mul_rn(cov[0], cov[2]) - L::mul_rn(cov[1], cov[1]));
@@ -118,6 +122,7 @@ GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLan
     out->depth = st.depth;
     out->opacity = opacity;
     out->min_alpha = min_alpha;
+    out->min_power = min_power;
     out->conic[0] = cov[2] * inv;
     out->conic[1] = L::neg(cov[1]) * inv;
     out->conic[2] = cov[0] * inv;
@@ -130,8 +135,8 @@ GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLan
 
 // One splat's stage (Lanes1; CUDA's stage kernel, the GLSL port's stage.comp): false behind the near plane or off
 // screen in every mode whose 2D filter adds at most `reach` (stage_on_screen); the colour is computed only when true.
-GBV_HD bool stage_splat(const SplatIn& in, int sh_deg, const CameraParams& cam, int grid_x, int grid_y, float reach,
-                        StageSplat* out) {
+GBV_HD bool stage_splat(const SplatIn& in, int sh_deg, int rules, const CameraParams& cam, int grid_x, int grid_y,
+                        float reach, StageSplat* out) {
     const SplatInLanes<Lanes1> l{{in.mean[0], in.mean[1], in.mean[2]},
                                  {in.scale[0], in.scale[1], in.scale[2]},
                                  {in.quat[0], in.quat[1], in.quat[2], in.quat[3]},
@@ -141,13 +146,14 @@ GBV_HD bool stage_splat(const SplatIn& in, int sh_deg, const CameraParams& cam, 
                                  in.weight_sh,
                                  in.weight_deg};
     StageLanes<Lanes1> st;
-    if (!preprocess_stage<Lanes1>(l, cam, &st) || !stage_on_screen<Lanes1>(st, grid_x, grid_y, reach)) return false;
+    if (!preprocess_stage<Lanes1>(l, cam, rules, &st) || !stage_on_screen<Lanes1>(st, grid_x, grid_y, reach))
+        return false;
     out->xy[0] = st.xy[0];
     out->xy[1] = st.xy[1];
     out->depth = st.depth;
     out->opacity = st.opacity;
     for (int c = 0; c < 3; ++c) out->cov[c] = st.cov[c];
-    stage_color<Lanes1>(l, sh_deg, cam, out->color);
+    stage_color<Lanes1>(l, sh_deg, rules, cam, out->color);
     return true;
 }
 
@@ -192,7 +198,8 @@ GBV_HD bool finish_splat(const SplatIn& in, const StageSplat& stage, int sh_deg,
 GBV_HD bool preprocess_splat(const SplatIn& in, int sh_deg, const CameraParams& cam, Mode mode, const OitParams& oit,
                              int grid_x, int grid_y, Splat2D* out, TileRect* rect) {
     StageSplat st;
-    if (!stage_splat(in, sh_deg, cam, grid_x, grid_y, stage_reach(mode, oit), &st)) return false;
+    if (!stage_splat(in, sh_deg, stage_rules(mode, oit), cam, grid_x, grid_y, stage_reach(mode, oit), &st))
+        return false;
     return finish_splat(in, st, sh_deg, cam, mode, oit, grid_x, grid_y, out, rect);
 }
 

@@ -12,6 +12,17 @@
 
 namespace gbv {
 
+// The viewer presets' rules that change the stage (stage_rules): a bit each.
+constexpr int STAGE_DC_CLAMP = 1;  // sh_to_rgb's dc_clamp
+constexpr int STAGE_RADIAL = 2;    // the depth (the sort key) is the distance from the eye (perspective)
+
+// The stage rules of a frame: OitParams' dc_clamp and sort_radial, the scalar mode's only (the presets'); 0 for every
+// other mode. Part of every backend's stage key, like stage_reach.
+GBV_HD int stage_rules(Mode mode, const OitParams& oit) {
+    if (mode != SCALAR) return 0;
+    return (oit.dc_clamp ? STAGE_DC_CLAMP : 0) | (oit.sort_radial ? STAGE_RADIAL : 0);
+}
+
 // 3D covariance Sigma = R S S^T R^T (upper triangle: xx, xy, xz, yy, yz, zz) from a unit (w,x,y,z)
 // quaternion and per-axis scales (eq. 1).
 template <class L>
@@ -150,9 +161,11 @@ struct StageSplat {
 };
 
 // The stage of one splat per lane but its colour; returns the lanes in front of the near plane (the others'
-// outputs are unspecified).
+// outputs are unspecified). The depth is view-space z, or with STAGE_RADIAL in `rules` and a perspective camera the
+// distance from the eye.
 template <class L>
-GBV_HD typename L::M preprocess_stage(const SplatInLanes<L>& in, const CameraParams& cam, StageLanes<L>* st) {
+GBV_HD typename L::M preprocess_stage(const SplatInLanes<L>& in, const CameraParams& cam, int rules,
+                                      StageLanes<L>* st) {
     using F = typename L::F;
     F pv[3];
     const typename L::M ok = view_point<L>(cam, in.mean, pv);
@@ -177,17 +190,20 @@ GBV_HD typename L::M preprocess_stage(const SplatInLanes<L>& in, const CameraPar
     covariance_3d<L>(in.quat, s, cov3);
     project_covariance<L>(cam, cov3, pv, st->cov);
     st->depth = pv[2];
+    if ((rules & STAGE_RADIAL) && cam.projection != ORTHOGRAPHIC)
+        st->depth = L::sqrt(L::mul_rn(pv[0], pv[0]) + L::mul_rn(pv[1], pv[1]) + L::mul_rn(pv[2], pv[2]));
     st->opacity = opacity;
     screen_position<L>(cam, pv, st->xy);
     return ok;
 }
 
-// The stage's colour: SH of degree sh_deg seen from the eye.
+// The stage's colour: SH of degree sh_deg seen from the eye (its base colour clamped with STAGE_DC_CLAMP in `rules`).
 template <class L>
-GBV_HD void stage_color(const SplatInLanes<L>& in, int sh_deg, const CameraParams& cam, typename L::F color[3]) {
+GBV_HD void stage_color(const SplatInLanes<L>& in, int sh_deg, int rules, const CameraParams& cam,
+                        typename L::F color[3]) {
     typename L::F dir[3];
     view_direction<L>(cam, in.mean, dir);
-    sh_to_rgb<L>(in.sh, sh_deg, dir, color);
+    sh_to_rgb<L>(in.sh, sh_deg, dir, (rules & STAGE_DC_CLAMP) != 0, color);
 }
 
 // The reach a frame's stage serves (stage_on_screen, every backend's stage key): the largest diagonal the frame's

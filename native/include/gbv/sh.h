@@ -47,14 +47,17 @@ GBV_HD int sh_basis(int deg, const typename L::F dir[3], typename L::F basis[16]
 }
 
 // View-dependent colour from SH coefficients sh[K][3] (DC first), as computeColorFromSH:
-// +0.5 offset, clamped at 0 from below only.
+// +0.5 offset, clamped at 0 from below only. With dc_clamp the base colour 0.5 + C0 dc is first clamped to [0, 1], as
+// a viewer that stores it in 8 bits does before adding the higher bands (stage_rules).
 template <class L>
-GBV_HD void sh_to_rgb(const typename L::F* sh, int deg, const typename L::F dir[3], typename L::F out[3]) {
+GBV_HD void sh_to_rgb(const typename L::F* sh, int deg, const typename L::F dir[3], bool dc_clamp,
+                      typename L::F out[3]) {
     typename L::F basis[16];
     const int k = sh_basis<L>(deg, dir, basis);
     for (int c = 0; c < 3; ++c) {
-        typename L::F v = L::set(0.5f);
-        for (int i = 0; i < k; ++i) v = v + L::mul_rn(basis[i], sh[i * 3 + c]);
+        typename L::F v = L::set(0.5f) + L::mul_rn(basis[0], sh[c]);
+        if (dc_clamp) v = L::fmin(L::fmax(v, L::set(0.0f)), L::set(1.0f));
+        for (int i = 1; i < k; ++i) v = v + L::mul_rn(basis[i], sh[i * 3 + c]);
         out[c] = L::fmax(v, L::set(0.0f));
     }
 }

@@ -3,6 +3,8 @@
 // `compensate` the opacity times sqrt(max(0, det Sigma' / det Sigma'')) (gsplat's add_blur, Spark's blurAmount); a
 // splat whose larger eigenvalue of Sigma'' is below cull_lambda px^2 is culled (SuperSplat's 2-pixel early-out).
 // The defaults (no pre-dilation, +0.3, no compensation, no cull) compute 3DGS's dilation as before, bit for bit.
+// support_power: the lowest Gaussian power -d^2/2 a splat keeps when the preset cuts it at the Mahalanobis radius
+// `support` (a viewer whose quad and fragment discard end there), -inf without such a cut.
 #pragma once
 
 #include "common.h"
@@ -30,6 +32,10 @@ GBV_HD void scalar_filter(const OitParams& f, typename L::F cov[3], typename L::
         const F root = L::sqrt(L::mul_rn(half, half) + L::mul_rn(cov[1], cov[1]));
         ok = L::and_(ok, L::mul_rn(L::set(0.5f), cov[0] + cov[2]) + root >= L::set(f.cull_lambda));
     }
+}
+
+GBV_HD float support_power(const OitParams& f) {
+    return f.support > 0.0f ? -0.5f * mul_rn(f.support, f.support) : -INFINITY;
 }
 
 }  // namespace gbv
