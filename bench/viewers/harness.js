@@ -51,6 +51,8 @@ async function playcanvas(job, canvas) {
   app.root.addChild(camera);
   app.start();
   return async (c) => {
+    canvas.width = c.width;
+    canvas.height = c.height;
     app.resizeCanvas(c.width, c.height);
     camera.camera.fov = c.fov_y;
     camera.setPosition(...c.eye);
