@@ -245,6 +245,17 @@ def test_preprocess_bitwise(path, mode):
 
 
 @pytest.mark.parametrize("path", VECTOR_PATHS)
+@pytest.mark.parametrize("preset", ["spark", "antimatter15"])
+def test_preset_rules_preprocess_bitwise(path, preset):
+    """The presets' rules (base-colour clamp, support cut, radial depth) keep the vector preprocess the scalar one's,
+    bit for bit."""
+    for name, (scene, cam) in _preprocess_cases():
+        ref, _ = preprocessed("scalar", scene, cam, f"preset:{preset}")
+        vec, _ = preprocessed(path, scene, cam, f"preset:{preset}")
+        assert ref["valid"].sum() > 0 and ref.tobytes() == vec.tobytes(), f"{path} {preset} {name}"
+
+
+@pytest.mark.parametrize("path", VECTOR_PATHS)
 def test_lod_preprocess_bitwise(path):
     """A level-of-detail frame's preprocess (the stage reads a cut's scattered rows: scene leaves, then hierarchy
     nodes, opacities times the cut's weights) is the scalar path's, bit for bit, with a 3D filter and every SH
