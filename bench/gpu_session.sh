@@ -9,7 +9,7 @@
 # SCENES_DIR: default ./shared/scenes, else ../shared/scenes, else the bundled scene alone (the report says which).
 # --no-gpu (and any machine without a usable CUDA device): no CUDA build, each CUDA piece reported as "no GPU";
 # the GLSL pieces still run on the machine's EGL driver (Mesa llvmpipe included). --pieces: only those pieces
-# (bench/gpu_session.py's names), the others reported as not selected. Exit 0 when every piece that ran passed.
+# (bench/gpu_session.py's names), the others reported as not selected. Exit 0 unless a piece failed.
 # Environment: PYTHON (default: the checkout's .venv, else python3), GBV_WHEELHOUSE (a folder of wheels to install
 # from offline; without it pip's index is used), GBV_SESSION_SECONDS (default 470).
 set -uo pipefail
