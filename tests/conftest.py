@@ -17,6 +17,7 @@ sys.path.insert(0, str(_SRC / "tools"))  # developer tools the tests share with 
 import pytest  # noqa: E402
 
 import gbviewer as gb  # noqa: E402
+from dataset_builders import shots, write_colmap  # noqa: E402
 from helpers import OUTPUT_H, OUTPUT_W  # noqa: E402
 
 
@@ -29,3 +30,10 @@ def bundled_scene() -> gb.Scene:
 def output_view(bundled_scene) -> gb.Camera:
     """The bundled scene from a 30, 20 degree orbit at OUTPUT_W x OUTPUT_H (the output-layer tests' pane)."""
     return gb.orbit_camera(bundled_scene, 30, 20, width=OUTPUT_W, height=OUTPUT_H)
+
+
+@pytest.fixture(scope="session")
+def capture(bundled_scene, tmp_path_factory):
+    """A COLMAP capture of the bundled scene (`dataset_builders.shots`), for `gbviewer eval`."""
+    pytest.importorskip("pycolmap")
+    return write_colmap(tmp_path_factory.mktemp("colmap"), shots(bundled_scene))

@@ -86,9 +86,12 @@ class CudaRenderer(NativeUploads, Renderer):
                 self._upload(scene)
 
     def release(self) -> None:
-        """Forget the scene (its device buffers are reused by the next upload and freed with the renderer)."""
+        """Forget the scene and free the device buffers (after a device failure only the scene: the failed
+        context's memory goes with the renderer); the texture registrations stay."""
         with self._lock:
             self._scene = self._uploaded = self._cells = None
+            if self._failure is None:
+                self._native("release_buffers")
 
     @classmethod
     def gl_interop(cls) -> tuple[bool, str]:

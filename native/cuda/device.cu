@@ -1,4 +1,6 @@
 // Error classification, the process's failed devices, device guards, availability (device.h, renderer.h).
+#include <cuda.h>  // the driver API's types only: its one call is looked up at run time (no libcuda link)
+
 #include <map>
 #include <mutex>
 
@@ -42,27 +44,61 @@ std::string failure(int device) {
     return it == failed_devices.end() ? std::string() : it->second;
 }
 
-void check(cudaError_t e, const char* what) {
-    if (e == cudaSuccess) return;
-    std::string msg = std::string("CUDA error in ") + what + ": " + cudaGetErrorString(e);
-    cudaGetLastError();  // clears a non-sticky error (a sticky one stays)
-    bool fatal = is_fatal(e);
-    if (!fatal && e != cudaErrorMemoryAllocation) {
-        const cudaError_t probe = cudaDeviceSynchronize();  // a sticky error shows here too
-        if (probe != cudaSuccess && probe != cudaErrorMemoryAllocation) {
-            fatal = true;
-            msg += std::string(" (then ") + cudaGetErrorString(probe) + ")";
+namespace {
+
+// Whether a CUDA context is current on this thread (cuCtxGetCurrent, looked up through the runtime so that the
+// module loads where no driver is installed). Where it cannot be asked, a context is assumed (the guard then
+// restores as a thread that had chosen a device).
+bool has_context() {
+    using GetCurrent = CUresult (*)(CUcontext*);
+    static const GetCurrent get_current = [] {
+        void* fn = nullptr;
+        cudaDriverEntryPointQueryResult found = cudaDriverEntryPointSymbolNotFound;
+#if CUDART_VERSION >= 12050
+        const cudaError_t e =
+            cudaGetDriverEntryPointByVersion("cuCtxGetCurrent", &fn, 12000, cudaEnableDefault, &found);
+#else
+        const cudaError_t e = cudaGetDriverEntryPoint("cuCtxGetCurrent", &fn, cudaEnableDefault, &found);
+#endif
+        if (e != cudaSuccess) cudaGetLastError();
+        return e == cudaSuccess && found == cudaDriverEntryPointSuccess ? reinterpret_cast<GetCurrent>(fn) : nullptr;
+    }();
+    CUcontext ctx = nullptr;
+    return get_current == nullptr || (get_current(&ctx) == CUDA_SUCCESS && ctx != nullptr);
+}
+
+// The CUDA runtime as host_logic.h's templates call it.
+struct Runtime {
+    static std::string error_string(int e) { return cudaGetErrorString((cudaError_t)e); }
+    static void clear_error() { cudaGetLastError(); }
+    static bool is_fatal(int e) { return detail::is_fatal((cudaError_t)e); }
+    static bool out_of_memory(int e) { return e == cudaErrorMemoryAllocation; }
+    static int synchronize() { return cudaDeviceSynchronize(); }
+    static int current_device() {
+        int device = -1;
+        if (cudaGetDevice(&device) != cudaSuccess) {
+            cudaGetLastError();
+            return -1;
         }
+        return device;
     }
-    if (!fatal) throw std::runtime_error(msg);
-    int device = -1;
-    cudaGetDevice(&device);
-    msg = "CUDA device " + std::to_string(device) + " failed: " + msg;
-    {
-        std::lock_guard<std::mutex> lock(failed_mutex);
-        failed_devices.emplace(device, msg);  // the first reason stays
+    [[noreturn]] static void fail(int device, const std::string& msg) {
+        {
+            std::lock_guard<std::mutex> lock(failed_mutex);
+            failed_devices.emplace(device, msg);  // the first reason stays
+        }
+        throw DeviceFailed(msg);
     }
-    throw DeviceFailed(msg);
+    static bool has_context() { return detail::has_context(); }
+    static int set_device(int device) { return cudaSetDevice(device); }
+    static void check(int e, const char* what, int device) { detail::check((cudaError_t)e, what, device); }
+};
+
+}  // namespace
+
+void check(cudaError_t e, const char* what, int device) {
+    Runtime rt;
+    host::check_error(rt, (int)e, what, device);
 }
 
 void launched(const char* kernel) {
@@ -87,12 +123,13 @@ std::pair<bool, std::string> usable(int device) {
 }
 
 DeviceGuard::DeviceGuard(int device) : device_(device) {
-    CUDA_CHECK(cudaGetDevice(&previous_));
-    if (previous_ != device_) CUDA_CHECK(cudaSetDevice(device_));
+    Runtime rt;
+    before_ = host::enter_device(rt, device);
 }
 
 DeviceGuard::~DeviceGuard() {
-    if (previous_ >= 0 && previous_ != device_) cudaSetDevice(previous_);
+    Runtime rt;
+    host::leave_device(rt, before_, device_);
 }
 
 }  // namespace detail
@@ -109,6 +146,13 @@ int default_device() {
         return -1;
     }
     return device;
+}
+
+std::pair<size_t, size_t> memory_info(int device) {
+    detail::DeviceGuard guard(device);
+    size_t free = 0, total = 0;
+    CUDA_CHECK(cudaMemGetInfo(&free, &total));
+    return {free, total};
 }
 
 std::pair<bool, std::string> availability() {

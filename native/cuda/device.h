@@ -9,6 +9,7 @@
 #include <string>
 #include <utility>
 
+#include "host_logic.h"
 #include "renderer.h"
 
 namespace gbv::cuda::detail {
@@ -17,8 +18,9 @@ namespace gbv::cuda::detail {
 bool is_fatal(cudaError_t e);
 
 // Throws for e != cudaSuccess: DeviceFailed when e is fatal or the device no longer answers a synchronise (the
-// current device is then marked failed), else std::runtime_error naming `what` (the error cleared).
-void check(cudaError_t e, const char* what);
+// device is then marked failed: `device`, the one the operation targeted, else the current one), else
+// std::runtime_error naming `what` (the error cleared). host::check_error decides.
+void check(cudaError_t e, const char* what, int device = -1);
 #define CUDA_CHECK(x) ::gbv::cuda::detail::check((x), #x)
 
 // After each kernel launch or CUB call: a launch error names the kernel. Debug builds (no NDEBUG) also wait for it,
@@ -31,8 +33,9 @@ std::string failure(int device);
 // The device's name if it can run the kernels (sm_75 or newer, not failed), else a reason.
 std::pair<bool, std::string> usable(int device);
 
-// Makes `device` current on this thread while it lives and restores the thread's previous device after (the
-// runtime's current device is per thread: a renderer must not change its callers').
+// Makes `device` current on this thread while it lives and restores the device the thread had chosen after (the
+// runtime's current device is per thread: a renderer must not change its callers'; host::leave_device says what
+// is restored on a thread that had chosen none).
 class DeviceGuard {
 public:
     explicit DeviceGuard(int device);
@@ -41,7 +44,8 @@ public:
     DeviceGuard& operator=(const DeviceGuard&) = delete;
 
 private:
-    int previous_ = -1, device_;
+    host::ThreadDevice before_;
+    int device_;
 };
 
 }  // namespace gbv::cuda::detail

@@ -42,6 +42,7 @@ NB_MODULE(_native_cuda, m) {
     m.def("availability", &cuda::availability, "(usable, reason or the default device's name)");
     m.def("default_device", &cuda::default_device,
           "The device Renderer() uses on this thread (the runtime's current device); -1 without a usable runtime.");
+    m.def("memory_info", &cuda::memory_info, nb::arg("device"), "(free, total) bytes of the device's memory.");
     m.def("gl_devices", &cuda::gl_devices,
           "CUDA devices that drive the OpenGL context current on this thread ([] when none or unknown).");
     m.def("error_info", &cuda::error_info, nb::arg("code"),
@@ -141,5 +142,12 @@ NB_MODULE(_native_cuda, m) {
                 nb::gil_scoped_release release;
                 r.release_gl_texture(texture);
             },
-            nb::arg("texture"), "Drop the texture's CUDA registration (its GL context must be current).");
+            nb::arg("texture"), "Drop the texture's CUDA registration (its GL context must be current).")
+        .def(
+            "release_buffers",
+            [](cuda::Renderer& r) {
+                nb::gil_scoped_release release;
+                r.release_buffers();
+            },
+            "Forget the scene and free the device buffers (upload again before the next render).");
 }

@@ -39,13 +39,6 @@ void get(std::vector<T>& out, const T* src, size_t count) {
     CUDA_CHECK(cudaMemcpy(out.data(), src, count * sizeof(T), cudaMemcpyDeviceToHost));
 }
 
-void check_generation(const State& s, uint64_t generation, const char* what) {
-    if (!s.has_scene) throw std::runtime_error(std::string("CUDA renderer: upload a scene before its ") + what);
-    if (generation != s.generation)
-        throw std::runtime_error(std::string("CUDA renderer: another scene was uploaded while its ") + what +
-                                 " were checked");
-}
-
 }  // namespace
 
 Renderer::Renderer(int device) {
@@ -67,11 +60,12 @@ Renderer::Renderer(int device) {
 }
 
 Renderer::~Renderer() {
-    int previous = -1;
-    const bool restore = cudaGetDevice(&previous) == cudaSuccess && previous != device_;
-    cudaSetDevice(device_);  // frees and texture unregistrations on the renderer's device
-    state_.reset();
-    if (restore) cudaSetDevice(previous);
+    try {
+        DeviceGuard guard(device_);  // frees and texture unregistrations on the renderer's device
+        state_.reset();
+    } catch (const std::exception&) {  // the device cannot be made current (it failed): its frees fail harmlessly
+        state_.reset();
+    }
     cudaGetLastError();
 }
 
@@ -104,11 +98,13 @@ void Renderer::upload(const float* means, const float* scales, const float* quat
 void Renderer::upload_weights(const float* weight_sh, int64_t n, int weight_k, uint64_t generation) {
     State& s = *state_;
     call(s, [&] {
-        s.weight_k = 0;
-        check_generation(s, generation, "view weights");
-        if (n != s.n) throw std::runtime_error("CUDA renderer: view weights for another scene size");
-        put(s.weight_sh, weight_sh, (size_t)n * weight_k);
-        s.weight_k = weight_k;
+        host::replace_derived(
+            s.has_scene, s.generation, generation, "view weights", [&] { s.weight_k = 0; },
+            [&] {
+                if (n != s.n) throw std::runtime_error("CUDA renderer: view weights for another scene size");
+                put(s.weight_sh, weight_sh, (size_t)n * weight_k);
+                s.weight_k = weight_k;
+            });
     });
 }
 
@@ -117,20 +113,25 @@ void Renderer::upload_cells(const float* means, const float* scales, const float
                             uint64_t generation) {
     State& s = *state_;
     call(s, [&] {
-        s.has_cells = false;
-        s.m = s.num_members = 0;
-        check_generation(s, generation, "cells");
-        if (num_cells >= (1ll << 31) || num_members >= (1ll << 31))
-            throw std::runtime_error("CUDA renderer: more than 2^31 - 1 cells or cell members");
-        put(s.cmeans, means, num_cells * 3);
-        put(s.cscales, scales, num_cells * 3);
-        put(s.cquats, quats, num_cells * 4);
-        put(s.coffsets, offsets, num_cells + 1);
-        put(s.cmembers, members, num_members);
-        put(s.cell_of, cell_of, s.n);
-        s.m = num_cells;
-        s.num_members = num_members;
-        s.has_cells = true;
+        host::replace_derived(
+            s.has_scene, s.generation, generation, "cells",
+            [&] {
+                s.has_cells = false;
+                s.m = s.num_members = 0;
+            },
+            [&] {
+                if (num_cells >= (1ll << 31) || num_members >= (1ll << 31))
+                    throw std::runtime_error("CUDA renderer: more than 2^31 - 1 cells or cell members");
+                put(s.cmeans, means, num_cells * 3);
+                put(s.cscales, scales, num_cells * 3);
+                put(s.cquats, quats, num_cells * 4);
+                put(s.coffsets, offsets, num_cells + 1);
+                put(s.cmembers, members, num_members);
+                put(s.cell_of, cell_of, s.n);
+                s.m = num_cells;
+                s.num_members = num_members;
+                s.has_cells = true;
+            });
     });
 }
 
@@ -171,6 +172,14 @@ RenderResult Renderer::render_to_gl_texture(unsigned int texture, const RenderAr
         res.evaluations = s.sum_evals(ss ? s.o_evals.ptr : s.evals.ptr, px);
         s.copy_to_texture(texture, a.width, a.height);
         return res;
+    });
+}
+
+void Renderer::release_buffers() {
+    State& s = *state_;
+    call(s, [&] {
+        s.forget_scene();
+        s.release_buffers();
     });
 }
 

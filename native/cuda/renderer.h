@@ -53,6 +53,9 @@ std::pair<bool, std::string> availability();
 // -1 without a usable runtime.
 int default_device();
 
+// (free, total) bytes of `device`'s memory (its context made current for the call, as a renderer's calls do).
+std::pair<size_t, size_t> memory_info(int device);
+
 // The CUDA devices that drive the OpenGL context current on this thread (empty when none is current, it runs on
 // another vendor's driver or the driver cannot tell).
 std::vector<int> gl_devices();
@@ -110,6 +113,10 @@ public:
 
     // Drop the CUDA registration of a texture (no-op when it has none); its GL context must be current.
     void release_gl_texture(unsigned int texture);
+
+    // Forget the scene and free every device buffer (the texture registrations stay): the next upload and frame
+    // allocate again. A scene is uploaded again before the next render.
+    void release_buffers();
 
 private:
     int device_;

@@ -58,6 +58,9 @@ class FakeNative:
     def release_gl_texture(self, texture):
         self._call(f"release {texture}")
 
+    def release_buffers(self):
+        self._call("release_buffers")
+
 
 STATS = dict(preprocess_ms=1.0, sort_ms=2.0, blend_ms=3.0, visible=5, sort_length=6, pairs=7, evaluations=96,
              cells_visible=2, cell_misses=1)

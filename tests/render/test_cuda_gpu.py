@@ -1,9 +1,13 @@
 """CUDA fixes that only a GPU can run (they skip elsewhere, saying why; bench/gpu_session.sh runs them): images
 taller than CUDA's grid rows, uploads of other scenes racing cell uploads, a large cell of splats at one depth
-(the canonical order's former quadratic case), and the caller's current device left alone."""
+(the canonical order's former quadratic case), the caller's current device left alone (and no context made on
+device 0 for a thread that never chose it), and release() freeing the device memory."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
@@ -82,14 +86,78 @@ def test_cuda_duplex_large_cell_at_one_depth():
 
 
 def test_cuda_renderer_leaves_the_callers_device_current():
-    """A renderer on another device than the thread's current one restores the thread's device after each call."""
+    """A renderer on another device than the one a thread chose restores the thread's device after each call."""
     from gbviewer import _native_cuda
 
     try:
         native = _native_cuda.Renderer(1)
     except RuntimeError as exc:
         pytest.skip(f"one CUDA device only: {exc}")
-    before = _native_cuda.default_device()
-    s = random_scene(20)
-    native.upload(s.means, s.scales, s.quats, s.opacities, s.sh, None)
-    assert native.device == 1 and _native_cuda.default_device() == before
+    chosen = []
+
+    def work(_: int) -> None:
+        _native_cuda.Renderer(0)  # this thread now has device 0 current
+        s = random_scene(20)
+        native.upload(s.means, s.scales, s.quats, s.opacities, s.sh, None)
+        chosen.append(_native_cuda.default_device())
+
+    run_threads(work, 1, timeout=60)
+    assert native.device == 1 and chosen == [0]
+
+
+PRIMARY_CONTEXT_ACTIVE = """
+import ctypes
+cuda = ctypes.CDLL("libcuda.so.1")
+def active(device):
+    dev, flags, on = ctypes.c_int(), ctypes.c_uint(), ctypes.c_int()
+    assert cuda.cuInit(0) == 0 and cuda.cuDeviceGet(ctypes.byref(dev), device) == 0
+    assert cuda.cuDevicePrimaryCtxGetState(dev, ctypes.byref(flags), ctypes.byref(on)) == 0
+    return bool(on.value)
+"""
+
+
+def test_cuda_renderer_makes_no_context_on_device_0():
+    """A process whose threads never chose a device renders on device 1 only: the guard no longer 'restores'
+    device 0 after each call (which created a context there, memory on GPU 0 and, on an exclusive-process GPU 0
+    held by another process, an error pinned on device 1)."""
+    script = PRIMARY_CONTEXT_ACTIVE + textwrap.dedent("""
+        import threading
+        import numpy as np
+        from gbviewer import _native_cuda
+        native = _native_cuda.Renderer(1)
+        z = np.zeros((4, 3), np.float32)
+        q = np.tile(np.float32([1, 0, 0, 0]), (4, 1))
+        def call():
+            native.upload(z, z + 0.1, q, np.full(4, 0.5, np.float32), np.zeros((4, 1, 3), np.float32), None)
+        call()
+        t = threading.Thread(target=call)
+        t.start()
+        t.join()
+        print(active(0), active(1))
+    """)
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    if "does not exist" in proc.stderr:
+        pytest.skip("one CUDA device only")
+    assert proc.returncode == 0 and proc.stdout.split() == ["False", "True"], proc.stdout + proc.stderr[-2000:]
+
+
+def test_cuda_release_frees_the_device_memory():
+    """CudaRenderer.release() gives back the scene's and the frame's device buffers (it freed nothing: several GB
+    held at 6 M splats); the next frame uploads the scene again and renders as before."""
+    from gbviewer import _native_cuda
+
+    n = 1_000_000
+    scene = random_scene(n, seed=3)
+    scene_bytes = sum(a.nbytes for a in (scene.means, scene.scales, scene.quats, scene.opacities, scene.sh))
+    r = CudaRenderer()
+    device = r._impl.device
+    cam = front_camera(640, 480)
+    r.upload(scene)
+    first = r.render(cam, gb.RenderSettings("gaussian_blending"))
+    held = _native_cuda.memory_info(device)[0]
+    r.release()
+    freed = _native_cuda.memory_info(device)[0] - held
+    assert freed >= scene_bytes, (freed, scene_bytes)
+    r.upload(scene)
+    again = r.render(cam, gb.RenderSettings("gaussian_blending"))
+    close(first, again)

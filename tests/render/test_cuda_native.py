@@ -80,3 +80,13 @@ def test_tall_images_pass_the_checks():
                 background=np.zeros(3, np.float32))
     _native_cuda.check_render_args(**args)
     _native_cuda.check_render_args(**dict(args, height=600_000, supersample=2))
+
+
+@needs_module
+def test_the_wrapper_finds_its_native_calls():
+    """The names gbviewer/render/cuda.py and the GPU tests call exist in the built module (a stand-in answers them
+    without a GPU)."""
+    for name in ("upload", "upload_weights", "upload_cells", "render", "render_to_gl_texture", "release_gl_texture",
+                 "release_buffers"):
+        assert callable(getattr(_native_cuda.Renderer, name, None)), name
+    assert callable(_native_cuda.memory_info)

@@ -1,7 +1,7 @@
 """The CUDA backend's Python wrapper without a GPU, on a stand-in native renderer (cuda_fakes): state after failed
-uploads, a failed device (BackendFailed, usable(), the CLI's one line; the registry's replacement is tested by
-tests/render/test_contract.py), the texture registrations (a GL name reused by another texture), the GL finish
-after interop, and which GL device interop accepts."""
+uploads, release freeing the device buffers, a failed device (BackendFailed, usable(), the CLI's one line; the
+registry's replacement is tested by tests/render/test_contract.py), the texture registrations (a GL name reused by
+another texture), the GL finish after interop, and which GL device interop accepts."""
 
 from __future__ import annotations
 
@@ -34,6 +34,31 @@ def test_cuda_wrapper_failed_upload_is_retried():
     r._sync(prepare(r._scene, cam, duplex, "cuda"))
     r._sync(prepare(r._scene, cam, duplex, "cuda"))
     assert fake.calls == ["upload", "upload", "upload_cells", "upload_cells"]
+
+
+def test_release_frees_the_device_buffers():
+    """release() frees the native renderer's device buffers (it only forgot the scene, holding several GB at 6 M
+    splats, while the CPU and GLSL backends free theirs); the next frame uploads the scene again. After a device
+    failure it forgets the scene without calling the failed device, and raises nothing."""
+    scene = random_scene(20, seed=2)
+    fake = FakeNative()
+    r = fake_renderer(fake)
+    r.upload(scene)
+    r.release()
+    r.release()
+    assert fake.calls == ["upload", "release_buffers", "release_buffers"] and r._uploaded is None
+    with pytest.raises(RenderError, match="upload"):
+        r.render(front_camera(), gb.RenderSettings())
+    r.upload(scene)
+    r.render(front_camera(), gb.RenderSettings())
+    assert fake.calls[-2:] == ["upload", "render"]
+    broken = FakeNative(device_fails={"render"})
+    r = fake_renderer(broken)
+    r.upload(scene)
+    with pytest.raises(BackendFailed):
+        r.render(front_camera(), gb.RenderSettings())
+    r.release()
+    assert broken.calls == ["upload", "render"] and r._scene is None
 
 
 def test_cuda_wrapper_without_scene():
