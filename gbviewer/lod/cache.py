@@ -1,7 +1,8 @@
 """The hierarchy's disk cache: one uncompressed .npz per scene file in the user cache folder
 (platformdirs: ~/.cache/gbviewer/lod on Linux), keyed by the file's identity (size, mtime, a hash of its first
 64 KiB) and what the hierarchy depends on besides (splat count, SH layout, the merge rule, the format version).
-Written atomically; an entry that does not read back whole is rebuilt with one warning. The folder holds at most
+Written atomically; an entry is untrusted input (`entry.read_entry` checks it whole before use): one that does not
+read back as a well-formed tree of the scene is rebuilt with one warning naming it. The folder holds at most
 MAX_BYTES: a write drops the entries used longest ago (a read marks its entry used) until the rest fit."""
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 from ..errors import GBViewerError
 from ..io.files import atomic_write, file_stat
 from ..scene import Scene
+from .entry import read_entry
 from .tree import Hierarchy, build
 
 VERSION = 4  # of the tree layout and merge rules: bump when they change
@@ -53,14 +55,6 @@ def cache_key(scene: Scene, rule: str) -> str | None:
     return hashlib.sha256(ident.encode()).hexdigest()[:32]
 
 
-def _read(entry: Path, scene: Scene, rule: str) -> Hierarchy:
-    with open(entry, "rb") as fh, np.load(fh, allow_pickle=False) as z:  # np.load(path) leaks it on a bad zip
-        arrays = {name: z[name] for name in z.files}
-    tree = Hierarchy(rule=rule, **arrays)
-    tree.check(scene)
-    return tree
-
-
 def cached_build(scene: Scene, rule: str, folder: Path | None = None) -> Hierarchy:
     """The scene's hierarchy from the cache, else built (and written there when the folder can be written)."""
     tree, write = _lookup(scene, rule, folder)
@@ -85,15 +79,19 @@ def _lookup(scene: Scene, rule: str, folder: Path | None = None) -> tuple[Hierar
             pass
     if entry.exists():
         try:
-            tree = _read(entry, scene, rule)
+            tree = read_entry(entry, scene, rule)
             _touch(entry)
             return tree, _nothing
         except FileNotFoundError:  # pruned by another process meanwhile: a miss
             pass
-        except Exception as exc:  # noqa: BLE001 - a damaged entry of any kind (truncated zip, bad arrays)
+        except Exception as exc:  # noqa: BLE001 - a damaged or hostile entry of any kind (entry.read_entry)
             warnings.warn(f"{entry}: damaged level-of-detail cache entry ({type(exc).__name__}: {exc}); rebuilt",
                           stacklevel=3)  # hierarchy_for or cached_build's caller
     tree = build(scene, rule)
+    try:
+        tree.check(scene)
+    except ValueError:  # values beyond float32 (a scene near its limits): it would not read back, so is not kept
+        return tree, _nothing
     with _writing_lock:
         if entry in _writing:  # built meanwhile by another scene of the file: its write serves both
             return tree, _nothing
