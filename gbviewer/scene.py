@@ -76,7 +76,9 @@ class Scene:
     float16 when given so: `gb.load(path, sh_dtype="float16")`; the renderers convert it at upload),
     optional filter_3d (N,) (Mip-Splatting's 3D filter, applied by every renderer mode).
     `meta` holds loader facts (format, version, property names) for `gbviewer info`. `oit`: the data of the
-    order-independent modes (`OitData`), None for ordinary scenes.
+    order-independent modes (`OitData`), None for ordinary scenes. `content`: the SHA-256 digest of the bytes a
+    scene was loaded from (`gbviewer.load`, its arrays then read-only), what caches of data derived from its splats
+    key on; None for any other scene, one made by `dataclasses.replace` included (it does not carry it over).
     """
 
     means: np.ndarray
@@ -88,6 +90,16 @@ class Scene:
     source: str = "<arrays>"
     meta: dict[str, Any] = field(default_factory=dict)
     oit: OitData | None = None
+    content: str | None = field(default=None, init=False, compare=False, repr=False)
+
+    @property
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The splat arrays by name (filter_3d only when present)."""
+        out = {"means": self.means, "scales": self.scales, "quats": self.quats, "opacities": self.opacities,
+               "sh": self.sh}
+        if self.filter_3d is not None:
+            out["filter_3d"] = self.filter_3d
+        return out
 
     @property
     def num_splats(self) -> int:
@@ -201,6 +213,14 @@ class Scene:
         if vw is None and cells is None and neural is None and all(v is None for v in globals_.values()):
             oit = None
         return cls(source=source, meta=dict(meta or {}), oit=oit, **arrays)
+
+
+def loaded_from(scene: Scene, content: str | None) -> Scene:
+    """`scene` with its arrays made read-only and `content` the digest of the bytes it came from (gbviewer.load)."""
+    for a in scene.arrays.values():
+        a.flags.writeable = False
+    object.__setattr__(scene, "content", content)
+    return scene
 
 
 def _valid_rows(arrays: dict[str, np.ndarray], n: int) -> np.ndarray:

@@ -1,6 +1,7 @@
-"""The hierarchy's disk cache: one uncompressed .npz per scene file in the user cache folder
-(platformdirs: ~/.cache/gbviewer/lod on Linux), keyed by the file's identity (size, mtime, a hash of its first
-64 KiB) and what the hierarchy depends on besides (splat count, SH layout, the merge rule, the format version).
+"""The hierarchy's disk cache: one uncompressed .npz per scene content in the user cache folder
+(platformdirs: ~/.cache/gbviewer/lod on Linux), keyed by a digest of the bytes the scene was loaded from
+(Scene.content, hashed as the loader read them) and what the hierarchy depends on besides (splat count, SH layout,
+the merge rule, the format version).
 Written atomically; an entry is untrusted input (`entry.read_entry` checks it whole before use): one that does not
 read back as a well-formed tree of the scene is rebuilt with one warning naming it. The folder holds at most
 MAX_BYTES: a write drops the entries used longest ago (a read marks its entry used) until the rest fit."""
@@ -19,13 +20,12 @@ from typing import Callable
 import numpy as np
 
 from ..errors import GBViewerError
-from ..io.files import atomic_write, file_stat
+from ..io.files import atomic_write
 from ..scene import Scene
 from .entry import read_entry
 from .tree import Hierarchy, build
 
 VERSION = 4  # of the tree layout and merge rules: bump when they change
-HEADER_BYTES = 1 << 16
 MAX_BYTES = 4 << 30  # the folder's bound: the trees of about sixteen 6 M-splat scenes
 STALE_TEMP_S = 3600  # a hidden temporary file (atomic_write's) this old was left by a writer that died
 
@@ -38,20 +38,13 @@ def default_folder() -> Path:
 
 
 def cache_key(scene: Scene, rule: str) -> str | None:
-    """The cache key of the scene's hierarchy; None when the scene was not loaded from a file (gbviewer.load's
-    meta["file_stat"]) or the file has changed since (a tree of the loaded splats must not be kept as the new
-    file's)."""
-    path = Path(scene.source)
-    loaded = scene.meta.get("file_stat")
-    if loaded is None or file_stat(path) != loaded:
+    """The cache key of the scene's hierarchy: the digest of the bytes the scene was loaded from (Scene.content)
+    and what the tree depends on besides; None for a scene that is not exactly a file's content (not loaded, or
+    made from a loaded one by dataclasses.replace: no content; arrays made writable again: maybe edited)."""
+    if scene.content is None or any(a.flags.writeable for a in scene.arrays.values()):
         return None
-    try:
-        with open(path, "rb") as fh:
-            header = fh.read(HEADER_BYTES)
-    except OSError:
-        return None
-    ident = (f"v{VERSION}|{loaded[0]}|{loaded[1]}|{hashlib.sha256(header).hexdigest()}|{scene.num_splats}|"
-             f"{scene.sh.shape[1]}|{scene.sh.dtype}|{scene.filter_3d is not None}|{rule}")
+    ident = (f"v{VERSION}|{scene.content}|{scene.num_splats}|{scene.sh.shape[1]}|{scene.sh.dtype}|"
+             f"{scene.filter_3d is not None}|{rule}")
     return hashlib.sha256(ident.encode()).hexdigest()[:32]
 
 
