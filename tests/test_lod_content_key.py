@@ -27,6 +27,13 @@ def same_trees(a: lod.Hierarchy, b: lod.Hierarchy) -> bool:
     return all(np.array_equal(x, y) for x, y in zip(a.arrays().values(), b.arrays().values()))
 
 
+def writable(a: np.ndarray) -> None:
+    """Set the WRITEABLE flag of `a` and of every array it is a view of (bases first)."""
+    if isinstance(a.base, np.ndarray):
+        writable(a.base)
+    a.flags.writeable = True
+
+
 def rewrite_keeping_stat(path, edit) -> None:
     """Change the file's bytes in place, its size and mtime as they were (as `cp -p`, `rsync -a`, `tar` leave a
     file)."""
@@ -88,7 +95,7 @@ def test_a_replaced_or_reopened_scene_is_never_stored_under_its_files_key(tmp_pa
     cached_build(flipped, "depth", cache)
     assert not cache.exists()  # built, not stored
     edited = gb.load(path)
-    edited.sh.flags.writeable = True  # made writable again: its arrays may no longer be the file's
+    writable(edited.sh)  # made writable again, deliberately: its arrays may no longer be the file's
     edited.sh[:] *= -1
     assert cache_key(edited, "depth") is None
     cached_build(edited, "depth", cache)
