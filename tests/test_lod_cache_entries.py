@@ -200,3 +200,22 @@ def test_upload_lod_refuses_a_tree_the_stage_cannot_draw(case):
     with pytest.raises(ValueError, match="permutation" if case == "repeated leaf" else "not finite"):
         r.upload_lod(tree.means, tree.scales, tree.quats, tree.opacities, tree.sh, None, radius, tree.size,
                      tree.levels, order)
+
+
+def test_a_cache_write_that_raises_leaves_no_tree_behind(tmp_path, monkeypatch):
+    """A write failing other than as a read-only cache (here a ValueError from the archive) fails the call and is
+    not remembered: the next call builds and writes again, instead of serving the memo of a call that raised."""
+    scene = gb.load(write_inria_ply(random_scene(300, seed=7), tmp_path / "m.ply"))
+    monkeypatch.setattr(lod.cache, "default_folder", lambda: tmp_path / "cache")
+    savez = np.savez
+
+    def broken(*args, **kwargs):
+        raise ValueError("archive failed")
+
+    monkeypatch.setattr(np, "savez", broken)
+    with pytest.raises(ValueError, match="archive failed"):
+        lod.hierarchy_for(scene)
+    assert "depth" not in lod.cache._memo.get(scene, {})
+    monkeypatch.setattr(np, "savez", savez)
+    tree = lod.hierarchy_for(scene)
+    assert len(list((tmp_path / "cache").glob("*.npz"))) == 1 and lod.hierarchy_for(scene) is tree

@@ -157,12 +157,19 @@ def hierarchy_for(scene: Scene, rule: str = "depth", cache: bool = True) -> Hier
     """The scene's hierarchy: built once per Scene object (the first caller builds, others wait), read from or
     written to the user cache when the scene came from a file and `cache` is true. The builder writes the cache
     entry after handing the tree over, so that callers waiting for it (the viewer's previews) do not wait for the
-    write too."""
+    write too; a write that raises (other than for a read-only cache) is not remembered: the next call builds
+    again."""
     with _lock:
         per_scene = _memo.setdefault(scene, {})
         if rule in per_scene:
             return per_scene[rule]
         tree, write = _lookup(scene, rule) if cache else (build(scene, rule), _nothing)
         per_scene[rule] = tree
-    write()
+    try:
+        write()
+    except BaseException:  # a write that fails other than as a read-only cache (_store): this call leaves nothing
+        with _lock:
+            if per_scene.get(rule) is tree:
+                del per_scene[rule]
+        raise
     return tree
