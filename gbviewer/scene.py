@@ -20,6 +20,7 @@ SH_C0 = 0.28209479177387814  # degree-0 SH basis: colour = 0.5 + SH_C0 * dc
 MAX_SCALE = 1e18  # activated scale: the covariance sums scale^2
 MAX_SH = 1e30  # SH coefficient: a colour sums 16 of them times basis values up to ~3, then blends
 LIMITS = {"scales": MAX_SCALE, "sh": MAX_SH, "view_weight_sh": MAX_SH}
+ARRAYS = ("means", "scales", "quats", "opacities", "sh", "filter_3d")  # a Scene's splat arrays
 
 
 def sh_degree_for(num_coeffs: int) -> int:
@@ -28,6 +29,45 @@ def sh_degree_for(num_coeffs: int) -> int:
         if k == num_coeffs:
             return deg
     raise GBViewerError(f"sh has {num_coeffs} coefficients per channel; expected one of 1, 4, 9, 16")
+
+
+READ_ONLY = ("a Scene's arrays are read-only (a renderer reuses what it derived from them for as long as the Scene "
+             "lives); edit a copy: arrays = scene.editable(), then dataclasses.replace(scene, **arrays)")
+
+
+class SceneArray(np.ndarray):
+    """A Scene's read-only view of one of its arrays, whose writes (item assignment, in-place operators, a ufunc's
+    `out`) fail with READ_ONLY: what to do instead. Computations on it give plain arrays."""
+
+    def __setitem__(self, key, value) -> None:
+        if not self.flags.writeable:
+            raise ValueError(READ_ONLY)
+        super().__setitem__(key, value)
+
+    def __getitem__(self, key):
+        out = super().__getitem__(key)
+        # a view keeps the type (its writes fail alike); a copy (fancy indexing) is the caller's, plain
+        return out.view(np.ndarray) if isinstance(out, np.ndarray) and out.flags.writeable else out
+
+    def __array_ufunc__(self, ufunc, method, *inputs, out=None, **kwargs):
+        if out is not None and any(isinstance(o, SceneArray) and not o.flags.writeable for o in out):
+            raise ValueError(READ_ONLY)
+        inputs = tuple(a.view(np.ndarray) if isinstance(a, SceneArray) else a for a in inputs)
+        if out is not None:
+            kwargs["out"] = tuple(o.view(np.ndarray) if isinstance(o, SceneArray) else o for o in out)
+        return getattr(ufunc, method)(*inputs, **kwargs)
+
+
+def read_only(a: np.ndarray | None, half: bool = False) -> np.ndarray | None:
+    """`a` as a Scene holds it: C-contiguous float32 (float16 kept where `half`), a copy where it was not; a
+    read-only SceneArray view, the array it was given as made read-only too (not edited through that either)."""
+    if a is None or isinstance(a, SceneArray) and not a.flags.writeable:
+        return a
+    a = np.asarray(a)
+    if not (a.flags.c_contiguous and (a.dtype == np.float32 or half and a.dtype == np.float16)):
+        a = np.ascontiguousarray(a, np.float32)
+    a.flags.writeable = False
+    return a.view(SceneArray)
 
 
 class ViewDecoder(Protocol):
@@ -56,6 +96,9 @@ class OitData:
     cells: Cells | None = None
     neural: ViewDecoder | None = None
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "view_weight_sh", read_only(self.view_weight_sh))
+
 
 @dataclass(frozen=True, eq=False)
 class Checked:
@@ -75,8 +118,12 @@ class Scene:
     means (N,3), scales (N,3), quats (N,4) as (w,x,y,z), opacities (N,), sh (N,K,3) with DC first (float32, or
     float16 when given so: `gb.load(path, sh_dtype="float16")`; the renderers convert it at upload),
     optional filter_3d (N,) (Mip-Splatting's 3D filter, applied by every renderer mode).
+    The arrays are read-only once a Scene holds them (renderers reuse what they derive from them per camera): those
+    handed in are made read-only too; `editable()` gives writable copies to make an edited Scene of.
     `meta` holds loader facts (format, version, property names) for `gbviewer info`. `oit`: the data of the
-    order-independent modes (`OitData`), None for ordinary scenes.
+    order-independent modes (`OitData`), None for ordinary scenes. `content`: the SHA-256 digest of the bytes a
+    scene was loaded from (`gbviewer.load`, its arrays then read-only), what caches of data derived from its splats
+    key on; None for any other scene, one made by `dataclasses.replace` included (it does not carry it over).
     """
 
     means: np.ndarray
@@ -88,6 +135,21 @@ class Scene:
     source: str = "<arrays>"
     meta: dict[str, Any] = field(default_factory=dict)
     oit: OitData | None = None
+    content: str | None = field(default=None, init=False, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        for name in ARRAYS:
+            object.__setattr__(self, name, read_only(getattr(self, name), half=name == "sh"))
+
+    def editable(self) -> dict[str, np.ndarray]:
+        """Writable copies of the splat arrays by name (filter_3d only when present): edit them, then make the
+        edited scene with dataclasses.replace(scene, **arrays) (or Scene.from_arrays, which checks them)."""
+        return {name: np.array(a) for name, a in self.arrays.items()}
+
+    @property
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The splat arrays by name (filter_3d only when present)."""
+        return {name: getattr(self, name) for name in ARRAYS if getattr(self, name) is not None}
 
     @property
     def num_splats(self) -> int:
@@ -201,6 +263,12 @@ class Scene:
         if vw is None and cells is None and neural is None and all(v is None for v in globals_.values()):
             oit = None
         return cls(source=source, meta=dict(meta or {}), oit=oit, **arrays)
+
+
+def loaded_from(scene: Scene, content: str | None) -> Scene:
+    """`scene` with `content` the digest of the bytes it came from (gbviewer.load)."""
+    object.__setattr__(scene, "content", content)
+    return scene
 
 
 def _valid_rows(arrays: dict[str, np.ndarray], n: int) -> np.ndarray:

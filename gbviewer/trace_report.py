@@ -44,8 +44,8 @@ def trace_table(trace: PixelTrace, top: int):
         t.add_column(col, justify="left" if col in ("colour", "window centre", "window size") else "right")
     for s in top_steps(trace, top):
         row = [str(s.sample)] if multi else []
-        row += [str(s.index), f"{s.depth:.4g}", f"{s.alpha:.4f}", f"{s.weight:.4f}", f"{s.T_before:.4f}",
-                f"{s.T_after:.4f}", _rgb(s.color)]
+        row += [s.short, f"{s.depth:.4g}", f"{s.alpha:.4f}", f"{s.weight:.4f}",
+                f"{s.T_before:.4f}", f"{s.T_after:.4f}", _rgb(s.color)]
         row += [_xy(s.window_center) + (" (fallback)" if s.fallback else ""), _xy(s.window_size)] if window else []
         row += [str(s.cell), f"{s.T_cell:.4f}"] if duplex else []
         t.add_row(*row)
@@ -72,7 +72,7 @@ def print_traces(traces: list[PixelTrace], top: int) -> None:
         best = top_steps(trace, 1)
         summary.add_row(trace.mode, _rgb(trace.color), f"{trace.transmittance:.4g}",
                         str(sum(1 for s in trace.steps if not s.rejected)),
-                        f"{best[0].weight:.4f} (splat {best[0].index})" if best else "-")
+                        f"{best[0].weight:.4f} ({best[0].source})" if best else "-")
     console.print(summary)
 
 

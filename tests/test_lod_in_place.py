@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import random_scene
+from helpers import front_camera, random_scene
 
 import gbviewer as gb
 from gbviewer import lod
@@ -180,3 +180,22 @@ def test_a_cancelled_cut_stops_and_the_next_render_is_exact():
             pass
         timer.join()
         assert np.array_equal(renderer.render(CAM, settings).rgb, ref.rgb)
+
+
+def test_a_trace_names_the_scenes_splat_or_the_hierarchy_node_drawn_in_place():
+    """With the cut drawn in place, a trace step's index is the scene's splat, or the interior node (flat id, `node`)
+    drawn in its splats' place, as the gathered cut Scene's rows map to them; never the entry's position in the cut
+    (which the inspector showed as "splat")."""
+    scene = random_scene(3000, seed=6, spread=1.5)
+    cam = front_camera(64, 48)
+    tau = 8.0
+    c = lod.cut(lod.hierarchy_for(scene), cam, tau)
+    gathered = gb.trace_pixel(lod.cut_scene(scene, cam, tau), cam, 32, 24, "scalar")
+    nl, n = len(c.leaves), scene.num_splats
+    want = [(int(c.leaves[s.index]), False) if s.index < nl else (n + int(c.nodes[s.index - nl]), True)
+            for s in gathered.steps]
+    traced = gb.trace_pixel(scene, cam, 32, 24, "scalar", lod=tau)
+    assert [(s.index, s.node) for s in traced.steps] == want
+    assert {s.node for s in traced.steps} == {False, True}  # both kinds at this pixel
+    node = next(s for s in traced.steps if s.node)
+    assert node.source == f"node {node.index}" and node.short == f"node {node.index}"

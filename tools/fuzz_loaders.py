@@ -58,7 +58,7 @@ def _keyframes(path: Path) -> list[np.ndarray]:
 
 
 READERS = {"cameras": _cameras, "keyframes": _keyframes, **fuzz_targets.READERS}  # the others: scene formats
-SLOW = set(fuzz_targets.READERS) - {"photo"}  # a child process per COLMAP input (30 s deadline), or the CLI
+SLOW = set(fuzz_targets.READERS) - {"photo", "lod_entry"}  # a child process per COLMAP input (30 s deadline), or the CLI
 
 
 def check_load(path: Path, kind: str = "scene") -> str:

@@ -9,6 +9,9 @@ command lines, each read from the one input file the fuzzer writes.
 - photo: the bytes of one photo (read_photo)
 - eval_args, trace_args: a command line, one argument per line, after `gbviewer eval` (its work replaced by a stub:
   the options and the checks before the work are the target) or `gbviewer trace tiny.ply` (a five-splat scene)
+- lod_entry: a level-of-detail cache entry (.npz) of the fixed scene `_lod_scene` (its seed: the entry gbviewer
+  writes), found in the cache by a render at tau 2 px: a bad entry is rebuilt (one warning), a good one drawn in
+  place and gathered
 """
 
 from __future__ import annotations
@@ -202,5 +205,78 @@ def trace_args(path: Path) -> list[np.ndarray]:
     return _run_cli(["trace", "tiny.ply", *_argv(path)], root)
 
 
+LOD_SPLATS = 70  # the entry's scene: three levels above its leaves, a partial node on each
+
+
+def _lod_scene(root: Path):
+    """The scene of the lod_entry target, written to `root` and loaded (a fixed file: its content is the cache's
+    key), and its camera."""
+    import gbviewer as gb
+    from gbviewer.io import write_inria_ply
+
+    rng = np.random.default_rng(4)
+    n = LOD_SPLATS
+    means = np.column_stack([rng.uniform(-1, 1, (n, 2)), rng.uniform(2, 4, n)])
+    scene = gb.Scene.from_arrays(means, rng.uniform(0.02, 0.2, (n, 3)), rng.normal(size=(n, 4)),
+                                 rng.uniform(0.1, 1.0, n), rng.normal(0, 0.5, (n, 4, 3)))
+    scene = gb.load(write_inria_ply(scene, root / "lod.ply"))
+    return scene, gb.Camera(24, 16, 20.0, 20.0, 12.0, 8.0, np.eye(3), np.zeros(3))
+
+
+def _fixed_crcs(data: bytes) -> bytes:
+    """`data` with the CRC-32 of each stored zip member recomputed in its central and local headers (as far as they
+    parse): a mutation of the arrays' bytes then reaches the entry's checks instead of failing the zip's CRC."""
+    import struct
+    import zlib
+
+    out = bytearray(data)
+    eocd = out.rfind(b"PK\x05\x06")
+    if eocd < 0 or eocd + 22 > len(out):
+        return data
+    count, _, at = struct.unpack_from("<HII", out, eocd + 10)
+    for _ in range(count):
+        if at + 46 > len(out) or out[at:at + 4] != b"PK\x01\x02":
+            break
+        method, size, name_len, extra_len, comment_len, local = (struct.unpack_from("<H", out, at + 10)[0],
+                                                                 *struct.unpack_from("<I", out, at + 20),
+                                                                 *struct.unpack_from("<HHH", out, at + 28),
+                                                                 *struct.unpack_from("<I", out, at + 42))
+        if method == 0 and local + 30 <= len(out) and out[local:local + 4] == b"PK\x03\x04":
+            begin = local + 30 + sum(struct.unpack_from("<HH", out, local + 26))
+            crc = zlib.crc32(out[begin:begin + size])
+            struct.pack_into("<I", out, at + 16, crc)
+            struct.pack_into("<I", out, local + 14, crc)
+        at += 46 + name_len + extra_len + comment_len
+    return bytes(out)
+
+
+def lod_entry(path: Path) -> list[np.ndarray]:
+    import os
+    import warnings
+
+    import gbviewer as gb
+    from gbviewer import lod
+    from gbviewer.lod.cache import cache_key, default_folder
+
+    root = _fresh(path)
+    scene, camera = _lod_scene(root)
+    before = os.environ.get("XDG_CACHE_HOME")
+    os.environ["XDG_CACHE_HOME"] = str(root / "cache")  # the user cache folder (platformdirs) of this input
+    try:
+        folder = default_folder()
+        folder.mkdir(parents=True)
+        (folder / f"{cache_key(scene, 'depth')}.npz").write_bytes(_fixed_crcs(path.read_bytes()))
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", ".*damaged level-of-detail cache entry", UserWarning)
+            frame = gb.render(scene, camera, "scalar", lod=2.0, threads=1)
+    finally:
+        if before is None:
+            os.environ.pop("XDG_CACHE_HOME")
+        else:
+            os.environ["XDG_CACHE_HOME"] = before
+    cut = lod.cut_scene(scene, camera, 2.0, threads=1)  # the same tree, gathered
+    return [frame.rgb, frame.alpha, *cut.arrays.values()]
+
+
 READERS = {f.__name__: f for f in (colmap_bin, colmap_txt, colmap_doc, blender, cameras_dataset, photo, eval_args,
-                                    trace_args)}
+                                    trace_args, lod_entry)}

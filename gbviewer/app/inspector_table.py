@@ -15,7 +15,7 @@ Cell = Callable[[TraceStep], str]
 # (header, the cell, a value as wide as the widest, priority: lower is kept first)
 COLUMNS: tuple[tuple[str, Cell, str, int], ...] = (
     ("sample", lambda s: str(s.sample), "00", 8),
-    ("splat", lambda s: str(s.index), "", 1),
+    ("splat", lambda s: s.short, "", 1),
     ("depth", lambda s: f"{s.depth:.4g}", "-0.000e+00", 6),
     ("alpha", lambda s: f"{s.alpha:.4f}", "0.0000", 3),
     ("weight", lambda s: f"{s.weight:.4f}", "0.0000", 2),
@@ -32,7 +32,7 @@ COLUMNS: tuple[tuple[str, Cell, str, int], ...] = (
 def describe(s: TraceStep, k: int) -> str:
     """Step k (0-based) in words, with every value the table has."""
     what = s.rejected or ("added" + (" (fallback)" if s.fallback else "") + (", stops the pixel" if s.stopped else ""))
-    line = (f"#{k + 1} splat {s.index}  depth {s.depth:.4g}  {what}  alpha {s.alpha:.4f}  weight {s.weight:.4f}  "
+    line = (f"#{k + 1} {s.source}  depth {s.depth:.4g}  {what}  alpha {s.alpha:.4f}  weight {s.weight:.4f}  "
             f"T {s.T_before:.4f} -> {s.T_after:.4f}")
     if s.window_center is not None:
         line += (f"  window after: centre {s.window_center[0]:.3f}, {s.window_center[1]:.3f}  size "
@@ -50,7 +50,7 @@ def columns(t: PixelTrace, steps: tuple, width: float, measure: Callable[[str], 
     present = [c for c in COLUMNS if (c[0] != "sample" or t.supersample > 1)
                and (c[0] not in ("window centre", "window size") or s0.window_center is not None)
                and (c[0] not in ("cell", "T_cell") or s0.cell is not None)]
-    widest = {"splat": str(max(s.index for s in steps)), "note": max(
+    widest = {"splat": max((s.short for s in steps), key=len), "note": max(
         (r for r in (*t.rejected_counts(), "fallback")), key=measure)}
     used = measure(str(len(steps))) + pad
     kept = []

@@ -11,7 +11,7 @@ import numpy as np
 from ..camera import load_cameras_json
 from ..cancel import Cancellable
 from ..errors import CallbackError, GBViewerError, LoadCancelled, SceneFormatError
-from ..scene import Scene
+from ..scene import Scene, loaded_from
 from .compressed_ply import is_compressed_ply, load_compressed_ply
 from .duplex import is_duplex_ply, load_duplex
 from .files import file_stat
@@ -39,8 +39,9 @@ def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable
     raises LoadCancelled within one chunk (at most a hundredth of the file or 65536 splats). `sh_dtype`:
     "float16" stores the SH coefficients as float16 (half their memory, rounded to nearest; an error where one is
     beyond float16's range); the renderers convert them to float32 at upload. `scene.meta["trained_as"]` and its
-    source: the mode the file says it was trained with (gbviewer.io.trained_as). `scene.meta["file_stat"]`: the
-    file's (size, mtime_ns), when it was the same before and after the load (what the hierarchy cache keys on)."""
+    source: the mode the file says it was trained with (gbviewer.io.trained_as). `scene.content`: the digest of
+    the bytes read (every file of a multi-file format), hashed as they are read (what the hierarchy cache keys on);
+    None when the file changed during the load. The scene's arrays are read-only."""
     path = Path(path)
     if sh_dtype not in SH_DTYPES:
         raise GBViewerError(f"sh_dtype {sh_dtype!r}; expected one of {', '.join(SH_DTYPES)}")
@@ -53,9 +54,9 @@ def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable
             scene.meta.update(resolve(signals_of(scene.meta, ply_comments(path) if path.is_file() else [])))
             if scene.sh.dtype != sh_dtype:  # formats decoded in float32: converted once whole
                 scene = replace(scene, sh=check_sh_range(scene.sh, np.dtype(sh_dtype)).astype(sh_dtype))
-            if before is not None and file_stat(path) == before:
-                scene.meta["file_stat"] = before
-            return scene
+            unchanged = path.is_dir() or (before is not None and file_stat(path) == before)  # (mapped reads)
+            plain = scene.oit is None or scene.oit.neural is None  # a trained model's other files are not hashed
+            return loaded_from(scene, reporter.digest.hexdigest() if unchanged and plain else None)
     except (SceneFormatError, LoadCancelled, CallbackError):
         raise
     except GBViewerError as exc:  # Scene validation of decoded data, e.g. every splat non-finite

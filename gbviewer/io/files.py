@@ -74,8 +74,8 @@ def check_writable(path: str | Path, force: bool = False, *, folder: bool = Fals
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], object], force: bool = False) -> Path:
-    """Call write(tmp) for a temporary file beside `path`, flush it to disk, then move it into place, so readers
-    never see a partial file. Without `force` an existing file is refused, including one that appears while
+    """Call write(tmp) for a temporary file beside `path`, flush it to disk, then move it into place and flush the
+    folder, so readers never see a partial file and a crash after the return does not lose it. Without `force` an existing file is refused, including one that appears while
     writing (the final step links rather than renames). The file gets the usual umask permissions."""
     path = refuse_overwrite(path, force)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -100,7 +100,25 @@ def atomic_write(path: str | Path, write: Callable[[Path], object], force: bool 
                 os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+    _sync_folder(path.parent)
     return path
+
+
+def _sync_folder(folder: Path) -> None:
+    """Flush a folder's entries to disk (POSIX: fsync of the folder), so that a rename or link into it survives a
+    crash; where folders cannot be opened (Windows) or synced (some file systems) the rename stands as it is."""
+    if not hasattr(os, "O_DIRECTORY"):
+        return
+    try:
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def file_stat(path: Path) -> tuple[int, int] | None:

@@ -40,15 +40,18 @@ REST_COUNTS = {0: 0, 9: 1, 24: 2, 45: 3}  # f_rest_* count -> SH degree
 REST_COUNTS_1 = {0: 0, 3: 1, 8: 2, 15: 3}  # f_ro_* count (1-channel view weight) -> SH degree
 
 
-def _checked_header(path: Path, fh) -> int:
-    """Check the magic line and the element counts of the PLY open as `fh`; returns the file size, `fh` at 0."""
+def _checked_header(path: Path, fh, progress: LoadProgress) -> tuple[int, plyfile.PlyData]:
+    """Check the magic line and the element counts of the PLY open as `fh`, then parse its header (`fh` left at its
+    end, its bytes recorded in the load's digest); returns the file size and the header."""
     head = fh.read(HEADER_MAX_BYTES)
     if not (head.startswith(b"ply\n") or head.startswith(b"ply\r\n")):
         raise SceneFormatError(path, "not a PLY file (missing 'ply' magic line)")
     size = fh.seek(0, 2)
     check_element_counts(path, head, size)
     fh.seek(0)
-    return size
+    ply = plyfile.PlyData._parse_header(fh)
+    progress.digest.add("", 0, head[:fh.tell()])  # a header longer than `head` leaves a gap: no digest
+    return size, ply
 
 
 def read_ply(path: Path, progress: LoadProgress | None = None) -> plyfile.PlyData:
@@ -59,10 +62,9 @@ def read_ply(path: Path, progress: LoadProgress | None = None) -> plyfile.PlyDat
     progress = progress or LoadProgress()
     try:
         with open(path, "rb") as fh:
-            size = _checked_header(path, fh)
-            progress.report(0, size, "bytes")
             # plyfile's PlyData.read, stopping early: the same header parser and per-element reader it uses
-            ply = plyfile.PlyData._parse_header(fh)
+            size, ply = _checked_header(path, fh, progress)
+            progress.report(0, size, "bytes")
             stream = io.TextIOWrapper(fh, "ascii") if ply.text else fh
             used = [i for i, e in enumerate(ply.elements) if e.name in USED_ELEMENTS]
             ply.elements = ply.elements[: used[-1] + 1] if used else ()
@@ -74,6 +76,7 @@ def read_ply(path: Path, progress: LoadProgress | None = None) -> plyfile.PlyDat
                 if not rows:  # memory-mapped by plyfile
                     progress.page_in(fh, begin, fh.tell(), size)
                     counted.pos = fh.tell()
+            counted.finish()
             progress.report(size, size, "bytes")
         return ply
     except plyfile.PlyElementParseError as exc:
@@ -342,9 +345,8 @@ def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype
     `sh_dtype` "float16": the SH is stored as float16 as it is read (see `check_sh_range`)."""
     progress = progress or LoadProgress()
     with open(path, "rb") as fh:
-        size = _checked_header(path, fh)
         try:
-            ply = plyfile.PlyData._parse_header(fh)
+            size, ply = _checked_header(path, fh, progress)
             if not _streamable(ply):
                 return None
             element = ply.elements[0]
@@ -373,6 +375,7 @@ def load_streamed_ply(path: Path, progress: LoadProgress | None = None, sh_dtype
                     chunk = buffers.chunk[: (end - begin) * row.itemsize]
                     if not _read_at(fh, lock, chunk, start + begin * row.itemsize):
                         raise SceneFormatError(path, TRUNCATED, field="vertex")
+                    progress.digest.add("", start + begin * row.itemsize, chunk)
                     table = column_table(path, chunk.view(row), layout.wanted)[0]
                     block_dc, block_rest = out.fill(table, cols, slice(begin, end), 1 if workers > 1 else 0)
                     dc, rest = max(dc, block_dc), max(rest, block_rest)

@@ -107,12 +107,17 @@ def _read_member(path: Path, zf: zipfile.ZipFile, name: str, limit: int) -> byte
 
 def _load(where: Path, read: Reader, size: Sizer, bundled: bool, progress: LoadProgress,
           meta_name: str = "meta.json") -> Scene:
+    def hashed(name: str, limit: int) -> bytes:  # each file or member: a part of the load's digest
+        data = read(name, limit)
+        progress.digest.add(name, 0, data)
+        return data
+
     try:
-        meta = parse_json(read(meta_name, META_MAX_BYTES), meta_name)
+        meta = parse_json(hashed(meta_name, META_MAX_BYTES), meta_name)
     except InvalidValue as exc:
         raise SceneFormatError(where, str(exc).removeprefix(f"{meta_name}: "), field=meta_name) from None
     try:
-        return _decode(where, _Images(where, read, size, meta, progress), meta, bundled)
+        return _decode(where, _Images(where, hashed, size, meta, progress), meta, bundled)
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise SceneFormatError(where, f"malformed meta.json: {type(exc).__name__}: {exc}", field="meta.json") from None
 

@@ -1,7 +1,9 @@
-"""The hierarchy's disk cache: one uncompressed .npz per scene file in the user cache folder
-(platformdirs: ~/.cache/gbviewer/lod on Linux), keyed by the file's identity (size, mtime, a hash of its first
-64 KiB) and what the hierarchy depends on besides (splat count, SH layout, the merge rule, the format version).
-Written atomically; an entry that does not read back whole is rebuilt with one warning. The folder holds at most
+"""The hierarchy's disk cache: one uncompressed .npz per scene content in the user cache folder
+(platformdirs: ~/.cache/gbviewer/lod on Linux), keyed by a digest of the bytes the scene was loaded from
+(Scene.content, hashed as the loader read them) and what the hierarchy depends on besides (splat count, SH layout,
+the merge rule, the format version).
+Written atomically; an entry is untrusted input (`entry.read_entry` checks it whole before use): one that does not
+read back as a well-formed tree of the scene is rebuilt with one warning naming it. The folder holds at most
 MAX_BYTES: a write drops the entries used longest ago (a read marks its entry used) until the rest fit."""
 
 from __future__ import annotations
@@ -18,12 +20,12 @@ from typing import Callable
 import numpy as np
 
 from ..errors import GBViewerError
-from ..io.files import atomic_write, file_stat
+from ..io.files import atomic_write
 from ..scene import Scene
+from .entry import read_entry
 from .tree import Hierarchy, build
 
 VERSION = 4  # of the tree layout and merge rules: bump when they change
-HEADER_BYTES = 1 << 16
 MAX_BYTES = 4 << 30  # the folder's bound: the trees of about sixteen 6 M-splat scenes
 STALE_TEMP_S = 3600  # a hidden temporary file (atomic_write's) this old was left by a writer that died
 
@@ -36,29 +38,14 @@ def default_folder() -> Path:
 
 
 def cache_key(scene: Scene, rule: str) -> str | None:
-    """The cache key of the scene's hierarchy; None when the scene was not loaded from a file (gbviewer.load's
-    meta["file_stat"]) or the file has changed since (a tree of the loaded splats must not be kept as the new
-    file's)."""
-    path = Path(scene.source)
-    loaded = scene.meta.get("file_stat")
-    if loaded is None or file_stat(path) != loaded:
+    """The cache key of the scene's hierarchy: the digest of the bytes the scene was loaded from (Scene.content)
+    and what the tree depends on besides; None for a scene that is not exactly a file's content (not loaded, or
+    made from a loaded one by dataclasses.replace: no content; arrays made writable again: maybe edited)."""
+    if scene.content is None or any(a.flags.writeable for a in scene.arrays.values()):
         return None
-    try:
-        with open(path, "rb") as fh:
-            header = fh.read(HEADER_BYTES)
-    except OSError:
-        return None
-    ident = (f"v{VERSION}|{loaded[0]}|{loaded[1]}|{hashlib.sha256(header).hexdigest()}|{scene.num_splats}|"
-             f"{scene.sh.shape[1]}|{scene.sh.dtype}|{scene.filter_3d is not None}|{rule}")
+    ident = (f"v{VERSION}|{scene.content}|{scene.num_splats}|{scene.sh.shape[1]}|{scene.sh.dtype}|"
+             f"{scene.filter_3d is not None}|{rule}")
     return hashlib.sha256(ident.encode()).hexdigest()[:32]
-
-
-def _read(entry: Path, scene: Scene, rule: str) -> Hierarchy:
-    with open(entry, "rb") as fh, np.load(fh, allow_pickle=False) as z:  # np.load(path) leaks it on a bad zip
-        arrays = {name: z[name] for name in z.files}
-    tree = Hierarchy(rule=rule, **arrays)
-    tree.check(scene)
-    return tree
 
 
 def cached_build(scene: Scene, rule: str, folder: Path | None = None) -> Hierarchy:
@@ -85,15 +72,19 @@ def _lookup(scene: Scene, rule: str, folder: Path | None = None) -> tuple[Hierar
             pass
     if entry.exists():
         try:
-            tree = _read(entry, scene, rule)
+            tree = read_entry(entry, scene, rule)
             _touch(entry)
             return tree, _nothing
         except FileNotFoundError:  # pruned by another process meanwhile: a miss
             pass
-        except Exception as exc:  # noqa: BLE001 - a damaged entry of any kind (truncated zip, bad arrays)
+        except Exception as exc:  # noqa: BLE001 - a damaged or hostile entry of any kind (entry.read_entry)
             warnings.warn(f"{entry}: damaged level-of-detail cache entry ({type(exc).__name__}: {exc}); rebuilt",
                           stacklevel=3)  # hierarchy_for or cached_build's caller
     tree = build(scene, rule)
+    try:
+        tree.check(scene)
+    except ValueError:  # values beyond float32 (a scene near its limits): it would not read back, so is not kept
+        return tree, _nothing
     with _writing_lock:
         if entry in _writing:  # built meanwhile by another scene of the file: its write serves both
             return tree, _nothing
@@ -166,12 +157,19 @@ def hierarchy_for(scene: Scene, rule: str = "depth", cache: bool = True) -> Hier
     """The scene's hierarchy: built once per Scene object (the first caller builds, others wait), read from or
     written to the user cache when the scene came from a file and `cache` is true. The builder writes the cache
     entry after handing the tree over, so that callers waiting for it (the viewer's previews) do not wait for the
-    write too."""
+    write too; a write that raises (other than for a read-only cache) is not remembered: the next call builds
+    again."""
     with _lock:
         per_scene = _memo.setdefault(scene, {})
         if rule in per_scene:
             return per_scene[rule]
         tree, write = _lookup(scene, rule) if cache else (build(scene, rule), _nothing)
         per_scene[rule] = tree
-    write()
+    try:
+        write()
+    except BaseException:  # a write that fails other than as a read-only cache (_store): this call leaves nothing
+        with _lock:
+            if per_scene.get(rule) is tree:
+                del per_scene[rule]
+        raise
     return tree

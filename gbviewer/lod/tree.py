@@ -24,11 +24,12 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from ..errors import GBViewerError
-from ..scene import Scene
+from ..scene import MAX_SH, Scene
 
 RULES = ("depth", "sum", "opacity")  # lod.h OpacityRule, in its order
 BRANCHING = 8
 INTERIOR = ("means", "scales", "quats", "opacities", "sh", "radius", "size")
+QUAT_NORM_TOLERANCE = 1e-4  # |q|^2 - 1 of a built node's float32 unit quaternion is within a few float32 eps
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,23 +77,61 @@ class Hierarchy:
         return range(first, min(first + BRANCHING, int(lv[level])))
 
     def check(self, scene: Scene) -> None:
-        """Raise ValueError unless the arrays fit `scene` (a cache entry from another file, or damaged)."""
-        n, m, k = scene.num_splats, self.num_interior, scene.sh.shape[1]
-        lv = self.levels
-        want = [n]
-        while want[-1] > 1:
-            want.append(-(-want[-1] // BRANCHING))
-        if lv[0] != 0 or np.diff(lv).tolist() != want:
+        """Raise ValueError unless the tree is a well-formed hierarchy of `scene`'s layout, as `build` makes them:
+        the arrays' dtypes and shapes (`layout`), the levels, `order` a permutation of the splats, every value
+        finite, scales, radius, size and filter_3d >= 0, opacities in [0, 1], unit quaternions, SH within MAX_SH.
+        What the cut and the renderers index with or draw is checked before they see it: a cache entry is
+        untrusted input (another version, a crash, a copy or anyone may have written it)."""
+        want = layout(scene)
+        arrays = self.arrays()
+        if set(arrays) != set(want):
+            raise ValueError(f"arrays {sorted(arrays)}, expected {sorted(want)}")
+        for name, (shape, dtype) in want.items():
+            a = arrays[name]
+            if a.shape != shape or a.dtype != dtype:
+                raise ValueError(f"{name} is {a.dtype} {a.shape}, expected {np.dtype(dtype)} {shape}")
+        if self.levels.tolist() != level_offsets(scene.num_splats):
             raise ValueError("levels do not match the scene's splat count")
-        shapes = {"order": (n,), "means": (m, 3), "scales": (m, 3), "quats": (m, 4), "opacities": (m,),
-                  "sh": (m, k, 3), "radius": (m,), "size": (m,)}
-        for name, shape in shapes.items():
-            if getattr(self, name).shape != shape:
-                raise ValueError(f"{name} has shape {getattr(self, name).shape}, expected {shape}")
-        if (self.filter_3d is None) != (scene.filter_3d is None):
-            raise ValueError("filter_3d does not match the scene's")
-        if n and (self.order.min() < 0 or self.order.max() >= n):
+        n = scene.num_splats
+        if self.order.min() < 0 or self.order.max() >= n:
             raise ValueError("order holds indices outside the scene")
+        seen = np.zeros(n, bool)
+        seen[self.order] = True
+        if not seen.all():
+            raise ValueError("order is not a permutation of the splats (an index repeats)")
+        for name in ("means", "scales", "quats", "opacities", "sh", "radius", "size", "filter_3d"):
+            if name in arrays and not np.isfinite(arrays[name]).all():
+                raise ValueError(f"{name} holds values that are not finite")
+        for name in ("scales", "radius", "size", "filter_3d"):
+            if name in arrays and (arrays[name] < 0).any():
+                raise ValueError(f"{name} holds negative values")
+        if ((self.opacities < 0) | (self.opacities > 1)).any():
+            raise ValueError("opacities outside [0, 1]")
+        if (np.abs(np.einsum("ij,ij->i", self.quats, self.quats) - 1) > QUAT_NORM_TOLERANCE).any():
+            raise ValueError("quats are not unit quaternions")
+        if (np.abs(self.sh) > np.float32(MAX_SH)).any():
+            raise ValueError(f"sh holds values beyond {MAX_SH:g}")
+
+
+def level_offsets(n: int) -> list[int]:
+    """The levels of a hierarchy of n splats: 0, n, then ceil(count / 8) more nodes per level up to one root."""
+    offsets, count = [0, n], n
+    while count > 1:
+        count = -(-count // BRANCHING)
+        offsets.append(offsets[-1] + count)
+    return offsets
+
+
+def layout(scene: Scene) -> dict[str, tuple[tuple[int, ...], str]]:
+    """The (shape, dtype) of each array of `scene`'s hierarchy (filter_3d only for a scene with a 3D filter)."""
+    levels = level_offsets(scene.num_splats)
+    n, m, k = scene.num_splats, levels[-1] - levels[1], scene.sh.shape[1]
+    out = {"order": ((n,), "int32"), "levels": ((len(levels),), "int64"), "means": ((m, 3), "float32"),
+           "scales": ((m, 3), "float32"), "quats": ((m, 4), "float32"), "opacities": ((m,), "float32"),
+           "sh": ((m, k, 3), "float32"), "radius": ((m,), "float32"), "size": ((m,), "float32")}
+    if scene.filter_3d is not None:
+        out["filter_3d"] = ((m,), "float32")
+    return out
 
 
 def build(scene: Scene, rule: str = "depth", threads: int = 0) -> Hierarchy:

@@ -134,4 +134,4 @@ class CpuRenderer(NativeUploads, Renderer):
             self._sync(prep)
             out = self._impl.trace(*self._frame_args(camera, settings), *(prep.oit or ()), x=x, y=y,
                                    view_filter=settings.view_filter.native(), lod=prep.lod)
-        return from_native(out, settings, camera, x, y)
+        return from_native(out, settings, camera, x, y, prep.scene.num_splats)

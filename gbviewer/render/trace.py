@@ -49,10 +49,14 @@ class TraceStep(NamedTuple):
     sum(weight * color) + transmittance * background. 0 where the kernel computed or added nothing. `T_before`,
     `T_after`: the sample's transmittance (duplex: the product of (1 - alpha/E); wsr: 1). gaussian_blending:
     `window_center`, `window_size` after the entry; duplex: `cell` and `T_cell` after it.
+
+    `index`: the scene's splat, or with level of detail (`node`) where the cut drew an interior node of the scene's
+    hierarchy in place of its splats, that node's flat id (gbviewer.lod.Hierarchy: num_splats + its interior
+    index); `source` says which.
     """
 
     sample: int
-    index: int  # the splat's index in the rendered scene
+    index: int  # the scene's splat, or (node) the hierarchy's interior node drawn in place of its splats
     depth: float
     rejected: str  # a SKIP_REASONS entry; "" when the splat added to the pixel
     alpha: float
@@ -73,6 +77,17 @@ class TraceStep(NamedTuple):
     window_size: tuple[float, float] | None = None
     cell: int | None = None
     T_cell: float | None = None
+    node: bool = False
+
+    @property
+    def source(self) -> str:
+        """What the entry drew: "splat 12", or "node 1234" (level of detail: an interior node of the hierarchy)."""
+        return f"{'node' if self.node else 'splat'} {self.index}"
+
+    @property
+    def short(self) -> str:
+        """`source` in a column headed "splat": "12", or "node 1234"."""
+        return f"node {self.index}" if self.node else str(self.index)
 
 
 @dataclass(frozen=True)
@@ -109,8 +124,8 @@ class PixelTrace:
         return tuple(s for sample in self.samples for s in sample.steps)
 
     def contributions(self) -> list[tuple[int, float]]:
-        """(splat index, share of the pixel colour) of the splats that added, largest share first: the pixel is
-        sum(share * colour) + transmittance * background."""
+        """(index, share of the pixel colour) of the splats (level of detail: or hierarchy nodes, TraceStep.node)
+        that added, largest share first: the pixel is sum(share * colour) + transmittance * background."""
         share: Counter[int] = Counter()
         n = len(self.samples)
         for s in self.steps:
@@ -139,8 +154,9 @@ def _rows(a: np.ndarray) -> list[tuple]:
     return list(map(tuple, a.tolist()))
 
 
-def from_native(out: dict, settings: RenderSettings, camera: Camera, x: int, y: int) -> PixelTrace:
-    """A PixelTrace from the CPU module's Renderer.trace(..., x=x, y=y) result (native/cpu/trace.cpp's columns)."""
+def from_native(out: dict, settings: RenderSettings, camera: Camera, x: int, y: int, num_splats: int) -> PixelTrace:
+    """A PixelTrace from the CPU module's Renderer.trace(..., x=x, y=y) result (native/cpu/trace.cpp's columns) of a
+    scene of `num_splats` splats (an index past them: a level-of-detail cut's interior node, drawn in place)."""
     n = settings.supersample
     mode = settings.mode
     xy, conic = out["xy"] / n, out["conic"].astype(np.float64) * n * n
@@ -157,7 +173,8 @@ def from_native(out: dict, settings: RenderSettings, camera: Camera, x: int, y: 
         raw_weight=out["weight"].tolist(), T_before=out["T_before"].tolist(), T_after=out["T_after"].tolist(),
         color=_rows(out["color"]), opacity=out["opacity"].tolist(), mean=_rows(xy), conic=_rows(conic),
         covariance=_rows(cov), radius=(out["radius"] / n).tolist(), cutoff=cutoff.tolist(),
-        fallback=((out["flags"] & _FALLBACK) != 0).tolist(), stopped=((out["flags"] & _STOPPED) != 0).tolist())
+        fallback=((out["flags"] & _FALLBACK) != 0).tolist(), stopped=((out["flags"] & _STOPPED) != 0).tolist(),
+        node=(out["index"] >= num_splats).tolist())
     if mode == Mode.GAUSSIAN_BLENDING:
         cols.update(window_center=_rows(window[:, :2]), window_size=_rows(window[:, 2:]))
     if mode == Mode.DUPLEX:

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "../bindings/nb_common.h"
 
@@ -14,29 +15,49 @@ namespace gbv::nbc {
 
 using L64 = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
 
-// A hierarchy of the uploaded scene's n splats (lod.h Tree): levels of ceil(n / 8^l) nodes down to the root,
-// interior arrays of their total, the scene's SH size, order a permutation's range. What the cut and the stage index
-// with is checked here (O(n)); that it was built from this scene is the caller's (Hierarchy.check).
+// Levels of a hierarchy of n >= 1 splats (lod.h Tree): 0, n, then ceil(count / 8) nodes per level up to one root;
+// the number of interior nodes. What the cut walks by is checked here (O(levels)).
+inline int64_t check_levels(const char* where, const L64& levels, int64_t n) {
+    const int64_t L = (int64_t)levels.shape(0);
+    const int64_t* lv = levels.data();
+    bool ok = L >= 2 && lv[0] == 0 && lv[1] == n && n >= 1 && n <= INT32_MAX;
+    for (int64_t l = 1; ok && l + 1 < L; ++l) {
+        const int64_t below = lv[l] - lv[l - 1];
+        ok = below > 1 && lv[l + 1] - lv[l] == (below + 7) / 8;
+    }
+    ok = ok && lv[L - 1] - lv[L - 2] == 1;
+    if (!ok) fail(where, "levels must count the scene's splats, then ceil(count / 8) nodes per level up to one root");
+    return lv[L - 1] - n;
+}
+
+// A hierarchy of the uploaded scene's n splats (lod.h Tree): its levels, interior arrays of their total with the
+// scene's SH size, every value finite, order a permutation of the splats (the cut's scatter by splat writes each
+// weight once: a repeated index would leave one unwritten). What the cut and the stage read is checked here (O(n),
+// once per upload); that it was built from this scene is the caller's (Hierarchy.check).
 inline void check_lod_upload(int64_t n, const FArr& means, const FArr& scales, const FArr& quats,
                              const FArr& opacities, const FArr& sh, const std::optional<FArr>& filter_3d,
                              const FArr& radius, const FArr& size, const L64& levels, const IArr& order, int scene_k,
                              bool scene_filter) {
     const char* where = "upload_lod";
-    const int64_t L = (int64_t)levels.shape(0);
-    bool ok = L >= 2 && levels.data()[0] == 0 && levels.data()[1] == n && n >= 1;
-    for (int64_t l = 1; ok && l + 1 < L; ++l) {
-        const int64_t below = levels.data()[l] - levels.data()[l - 1];
-        ok = below > 1 && levels.data()[l + 1] - levels.data()[l] == (below + 7) / 8;
-    }
-    ok = ok && levels.data()[L - 1] - levels.data()[L - 2] == 1;
-    if (!ok) fail(where, "levels must count the scene's splats, then ceil(count / 8) nodes per level up to one root");
-    const int64_t m = levels.data()[L - 1] - n;
+    const int64_t m = check_levels(where, levels, n);
     if (check_scene(where, means, scales, quats, opacities, sh, filter_3d) != m || radius.size() != (size_t)m ||
         size.size() != (size_t)m || order.size() != (size_t)n || (int)sh.shape(1) != scene_k ||
         filter_3d.has_value() != scene_filter || n + m > INT32_MAX)
         fail(where, "the interior arrays must hold one row per interior node, with the scene's SH size and 3D filter");
-    for (size_t i = 0; i < order.size(); ++i)
-        if (order.data()[i] < 0 || order.data()[i] >= n) fail(where, "order holds indices outside the scene");
+    std::vector<uint8_t> seen((size_t)n, 0);
+    for (size_t i = 0; i < order.size(); ++i) {
+        const int32_t s = order.data()[i];
+        if (s < 0 || s >= n) fail(where, "order holds indices outside the scene");
+        if (seen[s]++) fail(where, "order is not a permutation of the splats (an index repeats)");
+    }
+    auto finite = [](const FArr& a) {
+        for (size_t i = 0; i < a.size(); ++i)
+            if (!std::isfinite(a.data()[i])) return false;
+        return true;
+    };
+    if (!(finite(means) && finite(scales) && finite(quats) && finite(opacities) && finite(sh) && finite(radius) &&
+          finite(size) && (!filter_3d || finite(*filter_3d))))
+        fail(where, "the interior arrays hold values that are not finite");
 }
 
 // A frame's level of detail: None, or (tau >= 0, band >= 0, eye float32 (3,), focal > 0, orthographic).

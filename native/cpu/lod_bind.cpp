@@ -12,11 +12,12 @@
 
 #include "../bindings/nb_common.h"
 #include "lod.h"
+#include "lod_args.h"
 #include "testing.h"
 
 namespace nb = nanobind;
 using namespace gbv::nbc;
-using LArr = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using LArr = L64;
 
 namespace gbv {
 namespace {
@@ -53,9 +54,9 @@ nb::object cut(FArr means, FArr radius, FArr size, LArr levels, IArr order, FArr
                double tau, double band, int threads, std::optional<LArr> cancel) {
     const size_t L = levels.shape(0);
     if (L < 2 || eye.size() != 3) fail("lod cut", "levels must hold at least 2 offsets, eye 3 floats");
-    const int64_t n = levels.data()[1], m = levels.data()[L - 1] - n;
-    if (levels.data()[0] != 0 || order.size() != (size_t)n || means.size() != (size_t)m * 3 ||
-        radius.size() != (size_t)m || size.size() != (size_t)m)
+    const int64_t n = levels.data()[1], m = check_levels("lod cut", levels, n);
+    if (order.size() != (size_t)n || means.size() != (size_t)m * 3 || radius.size() != (size_t)m ||
+        size.size() != (size_t)m || n + m > INT32_MAX)
         fail("lod cut", "array shapes do not match the levels");
     if (cancel && cancel->shape(0) < 1) fail("lod cut", "cancel must hold at least one int64");
     const lod::View v{{eye.data()[0], eye.data()[1], eye.data()[2]}, focal, orthographic};

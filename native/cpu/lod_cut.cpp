@@ -95,6 +95,10 @@ void compact(int64_t len, Drawn drawn, Row row, Cut& c, int nt, Halt& halt) {
     }
 }
 
+// Whether splat index s is one of the n splats: the scatters by splat write only those (`order` is a permutation
+// wherever it comes from gbviewer, but the cut must not write outside its array whatever it is given).
+bool in_range(int32_t s, int64_t n) { return s >= 0 && s < n; }
+
 // Whether a cut's `drawn` leaves of n come in splat order (over half of them: the stage reads long runs of
 // consecutive rows) rather than in the tree's (Morton) order, which needs no sort (lod.h).
 bool splat_order(int64_t drawn, int64_t n) { return drawn > n / 2; }
@@ -138,7 +142,8 @@ Cut cut_flat(const float* means, const float* radius, const float* size, const i
     if (splat_order(drawn, n))
         by_splat(n, [&](float* w) {
 #pragma omp parallel for num_threads(nt) schedule(static)
-            for (int64_t id = 0; id < n; ++id) w[order[id]] = leaf(id);
+            for (int64_t id = 0; id < n; ++id)
+                if (in_range(order[id], n)) w[order[id]] = leaf(id);
         }, c, nt, halt);
     else
         compact(n, leaf, [&](int64_t id) { return order[id]; }, c, nt, halt);
@@ -265,7 +270,8 @@ Cut cut_walk(const float* means, const float* radius, const float* size, const i
 #pragma omp for schedule(static)
                 for (int64_t i = 0; i < n; ++i) w[i] = 0.0f;
 #pragma omp for schedule(static)
-                for (int64_t j = 0; j < leaves.size(); ++j) w[leaves.id[j]] = leaves.w[j];
+                for (int64_t j = 0; j < leaves.size(); ++j)
+                    if (in_range(leaves.id[j], n)) w[leaves.id[j]] = leaves.w[j];
             }
         }, c, nt, halt);
     } else {  // in the walk's order: the tree's

@@ -256,6 +256,9 @@ PixelTrace Renderer::trace(const RenderArgs& a, int x, int y) {
     impl_->buffers.resize(1);
     PixelTrace t = trace_frame_pixel(sc, stages[0], a.mode, a.oit, a.bg, path, impl_->buffers[0], x, y,
                                      a.supersample);
+    const Plane<int32_t>& rows = stages[0].rows;  // a level-of-detail cut drawn in place: entry i is row rows[i]
+    if (!rows.empty())
+        for (TraceStep& s : t.steps) s.index = rows[s.index];  // the scene's splat, or n + an interior node's index
     impl_->stages = std::move(stages);
     return t;
 }

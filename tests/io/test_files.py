@@ -49,3 +49,27 @@ def test_failed_write_leaves_nothing(tmp_path):
     with pytest.raises(RuntimeError):
         atomic_write(tmp_path / "d.txt", boom)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not hasattr(os, "O_DIRECTORY"), reason="folders are not opened for fsync here (Windows)")
+@pytest.mark.parametrize("force", [False, True])
+def test_the_folder_is_synced_after_the_file_is_moved_into_it(tmp_path, monkeypatch, force):
+    """The file's data is flushed before the rename, the folder's entry after it: a crash after atomic_write returns
+    keeps the file."""
+    events = []
+    fsync, replace, link = os.fsync, os.replace, os.link
+
+    def record(name, fn):
+        def call(*args):
+            if name == "fsync":
+                events.append("fsync folder" if stat.S_ISDIR(os.fstat(args[0]).st_mode) else "fsync file")
+            else:
+                events.append("move")
+            return fn(*args)
+        return call
+
+    monkeypatch.setattr(os, "fsync", record("fsync", fsync))
+    monkeypatch.setattr(os, "replace", record("replace", replace))
+    monkeypatch.setattr(os, "link", record("link", link))
+    atomic_write(tmp_path / "out.bin", lambda p: p.write_bytes(b"data"), force=force)
+    assert events == ["fsync file", "move", "fsync folder"]

@@ -1,0 +1,69 @@
+"""A Scene's arrays are read-only: the renderers reuse what they derived from them per camera (the shared stage),
+so an edit in place would draw a stale frame. A write fails with a message saying what to do; `editable()` gives
+the copies an edited Scene is made of."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from helpers import front_camera, random_scene
+
+import gbviewer as gb
+from gbviewer.io.write import write_inria_ply
+
+WRITES = {
+    "in-place operator on a slice": lambda s: s.sh.__getitem__(slice(None)).__imul__(-1),
+    "item assignment": lambda s: s.opacities.__setitem__(0, 0.5),
+    "in-place operator": lambda s: s.means.__iadd__(1),
+    "ufunc out": lambda s: np.multiply(s.scales, 2, out=s.scales),
+    "a view's item": lambda s: s.sh[:, 0].__setitem__(0, 3.0),
+}
+
+
+@pytest.mark.parametrize("how", sorted(WRITES))
+def test_a_write_into_a_rendered_scene_fails_saying_what_to_do(tmp_path, how):
+    scene = gb.load(write_inria_ply(random_scene(200, seed=1, sh_degree=1), tmp_path / "s.ply"))
+    cam = front_camera()
+    first = gb.render(scene, cam)
+    before = {name: np.array(a) for name, a in scene.arrays.items()}
+    with pytest.raises(ValueError, match=r"read-only.*scene\.editable\(\)"):
+        WRITES[how](scene)
+    assert all(np.array_equal(before[name], a) for name, a in scene.arrays.items())
+    assert np.array_equal(gb.render(scene, cam).rgb, first.rgb)
+
+
+def test_an_edited_copy_renders_the_edit():
+    """The issue's sequence, done the documented way: render, negate the SH, render again: the second frame is the
+    edited scene's (as a fresh renderer draws it), not the first."""
+    scene = random_scene(300, seed=2, sh_degree=1)
+    cam = front_camera()
+    first = gb.render(scene, cam)
+    arrays = scene.editable()
+    assert all(a.flags.writeable for a in arrays.values())
+    arrays["sh"] *= -1
+    edited = dataclasses.replace(scene, **arrays)
+    again = gb.render(edited, cam)
+    assert not np.array_equal(again.rgb, first.rgb)
+    fresh = gb.Scene.from_arrays(np.array(scene.means), np.array(scene.scales), np.array(scene.quats),
+                                 np.array(scene.opacities), -np.array(scene.sh))
+    assert np.array_equal(again.rgb, gb.render(fresh, cam).rgb)
+    assert np.array_equal(gb.render(scene, cam).rgb, first.rgb)  # the original, unchanged
+
+
+def test_arrays_handed_to_a_scene_are_read_only_and_computations_on_them_plain():
+    means = np.zeros((4, 3), np.float32)
+    weights = np.ones((4, 1), np.float32)
+    scene = gb.Scene(means, np.ones((4, 3), np.float32), np.tile(np.float32([1, 0, 0, 0]), (4, 1)),
+                     np.ones(4, np.float32), np.zeros((4, 1, 3), np.float32),
+                     oit=gb.scene.OitData(view_weight_sh=weights))
+    with pytest.raises(ValueError):
+        means[0, 0] = 1.0  # not through the array it was given as either
+    with pytest.raises(ValueError, match="read-only"):
+        scene.oit.view_weight_sh[0] = 2.0
+    for out in (scene.means * 2, scene.means[[0, 1]], scene.means.min(axis=0), np.ascontiguousarray(scene.sh)):
+        assert type(out) is np.ndarray
+    copy = scene.means[[0, 1]]
+    copy[0] = 5.0  # a copy is the caller's
+    assert scene.means[0, 0] == 0.0
