@@ -219,3 +219,25 @@ def test_a_cache_write_that_raises_leaves_no_tree_behind(tmp_path, monkeypatch):
     monkeypatch.setattr(np, "savez", savez)
     tree = lod.hierarchy_for(scene)
     assert len(list((tmp_path / "cache").glob("*.npz"))) == 1 and lod.hierarchy_for(scene) is tree
+
+
+@pytest.mark.parametrize("kind", ["fifo", "link to /dev/zero"])
+def test_an_entry_that_is_not_a_regular_file_is_rebuilt_without_blocking(tmp_path, kind):
+    """A FIFO (whose open waits for a writer) or a link to an endless device in an entry's place hung the lookup:
+    it is refused as any damaged entry, with one warning, and the tree is built and written in its place."""
+    scene, tree, entry = entry_of(tmp_path)
+    entry.unlink()
+    if kind == "fifo":
+        os.mkfifo(entry)
+    else:
+        os.symlink("/dev/zero", entry)
+    out = subprocess.run([sys.executable, "-c", (
+        "import sys, warnings; from pathlib import Path; import gbviewer as gb; "
+        "from gbviewer.lod.cache import cached_build; scene = gb.load(sys.argv[1]); "
+        "warnings.simplefilter('always'); cached_build(scene, 'depth', Path(sys.argv[2]))"),
+        str(tmp_path / "s.ply"), str(entry.parent)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stderr.count("damaged level-of-detail cache entry") == 1 and "not a regular file" in out.stderr
+    assert not entry.is_symlink() and entry.is_file()
+    assert all(np.array_equal(a, b) for a, b in zip(tree.arrays().values(), read_entry(entry, scene,
+                                                                                      "depth").arrays().values()))

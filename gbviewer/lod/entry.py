@@ -1,11 +1,14 @@
 """A hierarchy cache entry read as the untrusted input it is: an .npz (numpy's zip of .npy members) whose members
 must be exactly the arrays of the scene's hierarchy (`tree.layout`); each member's header (dtype, shape, order) is
 checked before its data is read, so a damaged or hostile entry allocates no more than the scene's tree, and the
-values are then checked whole (`Hierarchy.check`) before the cut or a renderer sees them. Any problem raises
+values are then checked whole (`Hierarchy.check`) before the cut or a renderer sees them. Only a regular file is
+read (a FIFO or a device put in its place, or a link to one, would block or never end). Any problem raises
 (ValueError, zipfile.BadZipFile, OSError): the cache rebuilds the tree."""
 
 from __future__ import annotations
 
+import os
+import stat
 import zipfile
 from pathlib import Path
 from typing import BinaryIO
@@ -21,7 +24,11 @@ HEADER_READERS = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.fo
 def read_entry(entry: Path | BinaryIO, scene: Scene, rule: str) -> Hierarchy:
     """The hierarchy stored in `entry` (a path or an open binary file) for `scene` merged by `rule`, checked."""
     if isinstance(entry, Path):
-        with open(entry, "rb") as fh:
+        # opened without blocking (a FIFO's open waits for a writer), then refused unless a regular file
+        fd = os.open(entry, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with open(fd, "rb") as fh:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                raise ValueError("not a regular file")
             return read_entry(fh, scene, rule)
     want = layout(scene)
     with zipfile.ZipFile(entry) as z:
