@@ -131,8 +131,8 @@ std::pair<float, float> scatter_inria(const Table& table, const Cols& cols, Out 
         float* wt = weights ? weights->data() : nullptr;
         constexpr int64_t BLOCK = 4096;  // rows per task: each thread writes its own rows of every array
         const int64_t blocks = (rows + BLOCK - 1) / BLOCK;
-        const int team = threads > 0 ? threads : omp_get_max_threads();
-#pragma omp parallel num_threads(team)
+        const int nt = gbv::team(threads);
+#pragma omp parallel num_threads(nt)
         {
             Maxima local;
 #pragma omp for schedule(static)

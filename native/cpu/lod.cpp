@@ -22,8 +22,6 @@ constexpr double PI = 3.14159265358979323846;
 constexpr double MAX_ALPHA = 1.0 - 1e-7;  // a leaf's optical depth is finite
 constexpr int MAX_K = 16;                 // SH coefficients per channel (degree 3)
 
-int team(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
-
 // Spread the low 21 bits of v to every third bit.
 uint64_t spread(uint64_t v) {
     v &= 0x1fffff;

@@ -108,7 +108,7 @@ nb::ndarray<nb::numpy, float> rows(const FArr& a, const FArr& b, const IArr& lea
 nb::dict gather(nb::dict scene, nb::dict tree, IArr leaves, FArr leaf_w, IArr nodes, FArr node_w, int threads) {
     if (leaf_w.size() != leaves.size() || node_w.size() != nodes.size())
         fail("lod gather", "one weight per index expected");
-    const int nt = threads > 0 ? threads : omp_get_max_threads();
+    const int nt = gbv::team(threads);
     nb::dict d;
     auto arr = [](nb::dict& src, const char* name) { return nb::cast<FArr>(src[name]); };
     const std::pair<const char*, size_t> fields[] = {{"means", 3}, {"scales", 3}, {"quats", 4}, {"opacities", 1}};

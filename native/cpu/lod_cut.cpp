@@ -15,8 +15,6 @@
 namespace gbv::lod {
 namespace {
 
-int team(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
-
 // The caller's stop, asked by every thread at most once per 4096 nodes of its loop (at(i)) or between phases
 // (now()); sticky once it said true.
 class Halt {

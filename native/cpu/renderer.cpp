@@ -140,14 +140,14 @@ void Renderer::upload_cells(const float* means, const float* scales, const float
 
 namespace {
 
-// omp_set_num_threads for the scope (0: unchanged).
+// omp_set_num_threads for the scope: `team(t)` (0: OpenMP's default, capped at MAX_TEAM), unchanged where it is so.
 struct ThreadCount {
     int prev = omp_get_max_threads(), threads;
-    explicit ThreadCount(int t) : threads(t) {
-        if (threads > 0) omp_set_num_threads(threads);
+    explicit ThreadCount(int t) : threads(team(t)) {
+        if (threads != prev) omp_set_num_threads(threads);
     }
     ~ThreadCount() {
-        if (threads > 0) omp_set_num_threads(prev);
+        if (threads != prev) omp_set_num_threads(prev);
     }
 };
 
