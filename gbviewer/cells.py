@@ -249,9 +249,12 @@ _cache: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 def cells_for(scene, k: int = DEFAULT_CELL_SIZE) -> Cells:
     """The scene's own cells when it has them (trained Duplex-GS), else cells of k splats, built once and cached;
-    validated against the scene (every backend takes its cells from here)."""
+    validated against the scene (every backend takes its cells from here); built anew for a scene whose arrays may
+    have been edited since (`Scene.intact`)."""
     cells = scene.oit.cells if scene.oit is not None else None
-    if cells is None:
+    if cells is None and not scene.intact:
+        cells = build_cells(scene, k)
+    elif cells is None:
         per_scene = _cache.setdefault(scene, {})
         if k not in per_scene:
             per_scene[k] = build_cells(scene, k)

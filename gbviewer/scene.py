@@ -52,6 +52,8 @@ class SceneArray(np.ndarray):
     def __array_ufunc__(self, ufunc, method, *inputs, out=None, **kwargs):
         if out is not None and any(isinstance(o, SceneArray) and not o.flags.writeable for o in out):
             raise ValueError(READ_ONLY)
+        if method == "at" and isinstance(inputs[0], SceneArray) and not inputs[0].flags.writeable:
+            raise ValueError(READ_ONLY)  # ufunc.at writes in place whatever the flag says (numpy 2.4)
         inputs = tuple(a.view(np.ndarray) if isinstance(a, SceneArray) else a for a in inputs)
         if out is not None:
             kwargs["out"] = tuple(o.view(np.ndarray) if isinstance(o, SceneArray) else o for o in out)
@@ -59,15 +61,43 @@ class SceneArray(np.ndarray):
 
 
 def read_only(a: np.ndarray | None, half: bool = False) -> np.ndarray | None:
-    """`a` as a Scene holds it: C-contiguous float32 (float16 kept where `half`), a copy where it was not; a
-    read-only SceneArray view, the array it was given as made read-only too (not edited through that either)."""
-    if a is None or isinstance(a, SceneArray) and not a.flags.writeable:
+    """`a` as a Scene holds it: C-contiguous float32 (float16 kept where `half`), a copy where it was not or where
+    its memory is not an array's (a bytearray, a mapping: written past numpy's flags); a read-only SceneArray view,
+    the array it was given as and every array that one views made read-only too (not edited through those either:
+    `sealed` tells whether one was made writable again)."""
+    if a is None or isinstance(a, SceneArray) and sealed(a):
         return a
     a = np.asarray(a)
-    if not (a.flags.c_contiguous and (a.dtype == np.float32 or half and a.dtype == np.float16)):
-        a = np.ascontiguousarray(a, np.float32)
-    a.flags.writeable = False
+    if not (a.flags.c_contiguous and (a.dtype == np.float32 or half and a.dtype == np.float16)) or \
+            not _array_memory(a):
+        a = np.array(a, np.float16 if half and a.dtype == np.float16 else np.float32, order="C")
+    chain = a
+    while isinstance(chain, np.ndarray):
+        chain.flags.writeable = False
+        chain = chain.base
     return a.view(SceneArray)
+
+
+def _array_memory(a: np.ndarray) -> bool:
+    """Whether `a`'s memory belongs to an array (it, or the array it views), or to a read-only buffer (bytes)."""
+    while isinstance(a.base, np.ndarray):
+        a = a.base
+    if a.base is None:
+        return True
+    try:
+        return memoryview(a.base).readonly
+    except TypeError:
+        return False
+
+
+def sealed(a: np.ndarray | None) -> bool:
+    """Whether `a` (a Scene's array) and every array it views are still read-only: one made writable again
+    (`a.base.flags.writeable = True`, or the array handed to the Scene) may have been edited since."""
+    while isinstance(a, np.ndarray):
+        if a.flags.writeable:
+            return False
+        a = a.base
+    return True
 
 
 class ViewDecoder(Protocol):
@@ -150,6 +180,14 @@ class Scene:
     def arrays(self) -> dict[str, np.ndarray]:
         """The splat arrays by name (filter_3d only when present)."""
         return {name: getattr(self, name) for name in ARRAYS if getattr(self, name) is not None}
+
+    @property
+    def intact(self) -> bool:
+        """Whether no array of the scene can have been written since it was made (each still `sealed`): what the
+        renderers and caches derived from it holds. False once an array it was made of was made writable again;
+        they then derive it anew each time."""
+        extra = [self.oit.view_weight_sh] if self.oit is not None else []
+        return all(sealed(a) for a in [*self.arrays.values(), *extra])
 
     @property
     def num_splats(self) -> int:

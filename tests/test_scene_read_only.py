@@ -67,3 +67,58 @@ def test_arrays_handed_to_a_scene_are_read_only_and_computations_on_them_plain()
     copy = scene.means[[0, 1]]
     copy[0] = 5.0  # a copy is the caller's
     assert scene.means[0, 0] == 0.0
+
+
+def test_ufunc_at_into_a_scene_array_fails_saying_what_to_do():
+    """numpy's ufunc.at writes in place whatever an array's read-only flag says: np.add.at(s.opacities, ...)
+    edited a rendered scene, and the next render was the stale first frame."""
+    scene = random_scene(50, seed=3)
+    before = np.array(scene.opacities)
+    with pytest.raises(ValueError, match=r"read-only.*scene\.editable\(\)"):
+        np.add.at(scene.opacities, [0, 1], 0.25)
+    assert np.array_equal(scene.opacities, before)
+
+
+def test_the_arrays_a_scene_views_are_read_only_too(tmp_path):
+    """A loaded PLY's opacities view a writable array: s.opacities.base.base[:] = 0 edited the scene without a
+    flag changed. Every array a Scene's array views is read-only; memory no array owns (a bytearray handed in) is
+    copied."""
+    scene = gb.load(write_inria_ply(random_scene(200, seed=4), tmp_path / "s.ply"))
+    for a in scene.arrays.values():
+        while isinstance(a, np.ndarray):
+            assert not a.flags.writeable
+            a = a.base
+    memory = bytearray(np.ones(4, np.float32).tobytes())
+    handed = gb.Scene(np.zeros((4, 3), np.float32), np.ones((4, 3), np.float32),
+                      np.tile(np.float32([1, 0, 0, 0]), (4, 1)), np.frombuffer(memory, np.float32),
+                      np.zeros((4, 1, 3), np.float32))
+    memory[:4] = bytes(4)
+    assert handed.opacities[0] == 1.0 and handed.intact
+
+
+def reopen(a: np.ndarray) -> np.ndarray:
+    """The array `a` views, made writable again (numpy allows it for the array that owns the memory)."""
+    while a.base is not None:
+        a = a.base
+    a.flags.writeable = True
+    return a
+
+
+def test_an_array_made_writable_again_is_an_edit_every_cache_sees(tmp_path, monkeypatch):
+    """s.sh.base.flags.writeable = True, then an edit through it: the renders reused the first frame's stage and
+    the LOD cache stored the edited tree under the file's key. Such a scene is no longer `intact`: each render
+    derives its stage, cut and hierarchy anew, and nothing is cached for it."""
+    monkeypatch.setattr(gb.lod.cache, "default_folder", lambda: tmp_path / "cache")
+    scene = gb.load(write_inria_ply(random_scene(300, seed=6, sh_degree=1), tmp_path / "s.ply"))
+    cam = front_camera()
+    first = [gb.render(scene, cam, m).rgb for m in ("scalar", "scalar+lod:4")]
+    assert scene.intact and gb.lod.cache.cache_key(scene, "depth") is not None
+    reopen(scene.sh)[:] *= -1
+    reopen(scene.means)[:, 0] += 0.05
+    assert not scene.intact and gb.lod.cache.cache_key(scene, "depth") is None
+    fresh = gb.Scene(**scene.editable())
+    for m, before in zip(("scalar", "scalar+lod:4"), first):
+        again = gb.render(scene, cam, m).rgb
+        assert not np.array_equal(again, before)
+        assert np.array_equal(again, gb.render(fresh, cam, m).rgb)
+    assert gb.lod.hierarchy_for(scene) is not gb.lod.hierarchy_for(scene)

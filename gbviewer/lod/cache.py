@@ -41,7 +41,7 @@ def cache_key(scene: Scene, rule: str) -> str | None:
     """The cache key of the scene's hierarchy: the digest of the bytes the scene was loaded from (Scene.content)
     and what the tree depends on besides; None for a scene that is not exactly a file's content (not loaded, or
     made from a loaded one by dataclasses.replace: no content; arrays made writable again: maybe edited)."""
-    if scene.content is None or any(a.flags.writeable for a in scene.arrays.values()):
+    if scene.content is None or not scene.intact:
         return None
     ident = (f"v{VERSION}|{scene.content}|{scene.num_splats}|{scene.sh.shape[1]}|{scene.sh.dtype}|"
              f"{scene.filter_3d is not None}|{rule}")
@@ -158,7 +158,9 @@ def hierarchy_for(scene: Scene, rule: str = "depth", cache: bool = True) -> Hier
     written to the user cache when the scene came from a file and `cache` is true. The builder writes the cache
     entry after handing the tree over, so that callers waiting for it (the viewer's previews) do not wait for the
     write too; a write that raises (other than for a read-only cache) is not remembered: the next call builds
-    again."""
+    again. A scene whose arrays may have been edited since (`Scene.intact`) gets a tree built anew, kept nowhere."""
+    if not scene.intact:
+        return build(scene, rule)
     with _lock:
         per_scene = _memo.setdefault(scene, {})
         if rule in per_scene:

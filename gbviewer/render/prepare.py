@@ -125,7 +125,7 @@ class NativeUploads:
         """Upload the view's splats, duplex cells and (a level-of-detail frame drawn in place) the scene's hierarchy
         where they are not yet."""
         scene, cells = prep.scene, prep.cells
-        if scene is not self._uploaded:
+        if scene is not self._uploaded or not scene.intact:  # maybe edited since: its stage too
             self._upload(scene)
         if prep.tree is not None and prep.tree is not self._tree:
             t = prep.tree

@@ -176,7 +176,7 @@ class GlslRenderer(Renderer):
 
     def _sync(self, prep: Prepared) -> None:
         """Put the view's splats (a trained Duplex-GS model's, every frame) and duplex cells on the GPU."""
-        if prep.scene is not self._uploaded:
+        if prep.scene is not self._uploaded or not prep.scene.intact:  # maybe edited since: its stage too
             self._upload_splats(prep.scene)
         if prep.cells is not None and prep.cells is not self._cells:
             self._upload_cells(prep.cells, prep.scene.num_splats)
