@@ -96,6 +96,11 @@ def test_decode_budgets_are_checked_from_the_header(tmp_path, monkeypatch):
     monkeypatch.setattr(photos, "MAX_JPEG_SCANS", 3)
     with pytest.raises(DatasetError, match=f"JPEG of {scans} scans; at most 3"):
         read_photo(path)
+    mpo = tmp_path / "phone.jpg"  # a JPEG with a second picture appended (phones), which Pillow opens as MPO
+    Image.new("RGB", (64, 48)).save(mpo, format="MPO", save_all=True, progressive=True,
+                                    append_images=[Image.new("RGB", (64, 48))])
+    with pytest.raises(DatasetError, match="phone.jpg: JPEG of .* scans; at most 3"):
+        read_photo(mpo)
     buf = io.BytesIO()
     Image.new("I;16", (64, 48)).save(buf, format="PNG")  # 16-bit grey: 2 bytes per pixel, then float32 RGBA
     (tmp_path / "p16.png").write_bytes(buf.getvalue())

@@ -74,7 +74,7 @@ def photo_size(path: Path) -> tuple[int, int]:
             w, h = im.size
             decoded, kind = _decoded_bytes(im), im.format
         size = path.stat().st_size
-        scans = _scans(path) if kind == "JPEG" else 0
+        scans = _scans(path) if kind in ("JPEG", "MPO") else 0  # MPO: a phone's JPEG with more pictures appended
     except FileNotFoundError:
         raise DatasetError(f"{path}: photo missing") from None
     except DECODE_ERRORS as exc:
