@@ -131,6 +131,14 @@ def _reject_constant(name: str) -> float:
     raise ValueError(f"{name} is not a finite number")
 
 
+def _one_value_per_key(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if out.setdefault(key, value) != value:
+            raise ValueError(f"key {key!r:.60} given twice with different values")
+    return out
+
+
 def _finite_float(text: str) -> float:
     x = float(text)
     if not math.isfinite(x):
@@ -154,11 +162,13 @@ def _depth(doc: Any, limit: int) -> int:
 def parse_json(text: str | bytes, what: str, *, max_bytes: int = JSON_MAX_BYTES,
                max_depth: int = JSON_MAX_DEPTH) -> Any:
     """A JSON document with its size, nesting depth and numbers bounded: `NaN`/`Infinity` and integers too long
-    to convert are errors, as are documents over `max_bytes` or nested deeper than `max_depth`."""
+    to convert are errors, as are documents over `max_bytes` or nested deeper than `max_depth`, and an object that
+    gives one key two different values (JSON readers disagree on which one holds)."""
     if len(text) > max_bytes:
         raise InvalidValue(f"{what}: {len(text)} bytes of JSON, more than the {max_bytes} allowed")
     try:
-        doc = json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float)
+        doc = json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float,
+                         object_pairs_hook=_one_value_per_key)
     except RecursionError:
         raise InvalidValue(f"{what}: JSON nested deeper than {max_depth} levels") from None
     except (ValueError, UnicodeDecodeError) as exc:

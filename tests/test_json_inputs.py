@@ -68,6 +68,7 @@ def test_cameras_json_bad_field_is_one_line_naming_entry_and_key(tmp_path, chang
     ('[{"width": Infinity}]', "not a finite number"), ("[" * 100 + "]" * 100, "nested deeper"), ("{}", "non-empty"),
     ("[]", "non-empty"), ("[1]", "entry 0: expected a JSON object, got int"), ("[{}]", "entry 0: missing 'width'"),
     ('{"width": 1}', "non-empty JSON list"), ("\xff\xfe", "not valid JSON"), ("", "not valid JSON"),
+    ('[{"width": 64, "width": 32}]', "key 'width' given twice with different values"),
 ])
 def test_cameras_json_bad_document_is_one_line(tmp_path, text, message):
     path = tmp_path / "cameras.json"
