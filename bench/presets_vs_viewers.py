@@ -154,7 +154,7 @@ def our_specs() -> dict[str, RenderSettings]:
         s = RenderSettings.parse(f"preset:{name}")
         out[f"preset:{name}"] = s
         if replace(p.view_filter, **RULES_OFF) != p.view_filter:
-            out[f"preset:{name}-2d"] = replace(s, view_filter=replace(p.view_filter, **RULES_OFF))
+            out[f"preset:{name}-2d"] = replace(s, view_filter=replace(p.view_filter, **RULES_OFF), preset="")
     return out
 
 

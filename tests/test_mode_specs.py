@@ -4,6 +4,8 @@ leaves unset and one that disagrees with it is one line, exit 2."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 
 import numpy as np
@@ -70,6 +72,18 @@ def test_options_fill_only_what_the_spec_leaves_unset():
         RenderSettings.parse("preset:spark", view_filter=ViewFilter(0.1))
     with pytest.raises(RenderError, match="sets supersample 3"):  # the library takes the same rule
         gb.render(random_scene(5), gb.orbit_camera(random_scene(5), width=8, height=8), "scalar:3", supersample=1)
+
+
+def test_settings_named_after_a_preset_are_that_preset():
+    """RenderSettings(preset="spark") drew plain scalar labelled 'preset:spark' (the name alone, none of its
+    filter or rules); an unknown name was kept too. Both are one line; parse makes the preset's settings."""
+    with pytest.raises(RenderError, match=r"preset 'spark': is scalar, .*RenderSettings.parse\('preset:spark'\)"):
+        RenderSettings(preset="spark")
+    with pytest.raises(RenderError, match="preset 'nope': unknown; expected one of inria"):
+        RenderSettings(preset="nope")
+    with pytest.raises(RenderError, match="preset 'antimatter15'"):
+        dataclasses.replace(RenderSettings.parse("preset:antimatter15"), sh_degree=3)
+    assert RenderSettings(preset="inria").spec == "preset:inria"
 
 
 # ---- property: a spec string reaches every command's settings whole ------------------------------------------------

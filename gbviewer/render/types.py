@@ -19,6 +19,7 @@ from ..cancel import Cancellable
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, distinct_items, integer, real
+from .presets import PRESETS
 from .spec import shortest, shown, spec_parts
 from .view_filter import ViewFilter
 
@@ -123,6 +124,14 @@ class RenderSettings:
         if self.mode != Mode.SCALAR and not self.view_filter.is_default:
             raise RenderError(f"view_filter {self.view_filter.describe()} applies to the scalar mode, not "
                               f"{self.mode.label}")
+        if self.preset:  # a name only: the settings must be the preset's, else they are labelled what they are not
+            p = PRESETS.get(self.preset)
+            if p is None or (Mode.parse(p.mode), p.view_filter, p.sh_degree) != \
+                    (self.mode, self.view_filter, self.sh_degree):
+                raise RenderError(f"preset {self.preset!r}: " + (
+                    f"unknown; expected one of {', '.join(PRESETS)}" if p is None else
+                    f"is {p.describe()}; these settings are not (make them with RenderSettings.parse"
+                    f"('preset:{p.name}'))"))
 
     def label_for(self, scene: Scene, lod_counts: tuple[int, int] | None = None) -> str:
         """The label with what the scene makes of the mode: wsr on a scene without trained view weights is an
@@ -177,7 +186,8 @@ class RenderSettings:
         given = {k: v for k, v in options.items() if v is not None}
         settings = cls(**{**given, **parts})
         for key in sorted(given.keys() & parts.keys()):
-            ours, theirs = getattr(settings, key), getattr(replace(settings, **{key: given[key]}), key)
+            ours = getattr(settings, key)
+            theirs = getattr(replace(settings, preset="", **{key: given[key]}), key)  # the option as a field holds it
             if theirs != ours:
                 what = key.replace("_", " ")
                 raise RenderError(f"mode {text!r} sets {what} {shown(ours)}; {what} {shown(theirs)} disagrees "
