@@ -88,11 +88,12 @@ class _Slot:
 
 class SharedRenderer:
     """The process's renderer of a backend, bound to one scene: what `get_renderer` returns. Its frames (render,
-    render_to_texture, trace) and uploads run under the backend's lock with its own scene uploaded first, so threads
-    that render different scenes through `get_renderer` or `render` each get their own scene's frames (one frame at
-    a time per backend). Everything else is the renderer's (name, available, release_texture, ...)."""
+    render_many, render_to_texture, trace) and uploads run under the backend's lock with its own scene uploaded
+    first, so threads that render different scenes through `get_renderer` or `render` each get their own scene's
+    frames (one frame at a time per backend). Everything else is the renderer's (name, available, release_texture,
+    ...)."""
 
-    _SCENE_CALLS = frozenset({"render", "render_to_texture", "trace"})
+    _SCENE_CALLS = frozenset({"render", "render_many", "render_to_texture", "trace"})
 
     def __init__(self, slot: _Slot, scene: Scene) -> None:
         self._slot, self._scene = slot, scene

@@ -184,3 +184,15 @@ def test_a_frame_beyond_int32_samples_is_one_line(bundled_scene):
     cam = gb.orbit_camera(bundled_scene, width=16384, height=16384)
     with pytest.raises(gb.RenderError, match="^16384x16384 at supersample 8: .* samples, more than"):
         gb.render(bundled_scene, cam, "scalar", supersample=8)
+
+
+def test_render_many_of_a_handle_draws_its_own_scene():
+    """A handle's render_many went to the shared renderer as it stood: after another scene's render it drew that
+    scene (and ran outside the backend's lock). It uploads its own scene first, as render does."""
+    cam = front_camera(32, 24)
+    a, b = random_scene(60, seed=31), random_scene(60, seed=32)
+    handle = gb.get_renderer(a, "cpu")
+    own = handle.render(cam, gb.RenderSettings()).rgb
+    gb.get_renderer(b, "cpu").render(cam, gb.RenderSettings())
+    (frame,) = handle.render_many([(cam, gb.RenderSettings())])
+    assert np.array_equal(frame.rgb, own)
