@@ -250,12 +250,17 @@ def orbit_camera(
     """
     if up not in UP_AXES:
         raise CameraError(f"up axis {up!r}; expected one of {sorted(UP_AXES)}")
-    centre, radius, framing = frame_box(*scene.robust_bounds(), fov_y_deg, width / height)
-    if distance is not None:
-        try:
+    try:  # checked before the framing divides by them
+        width, height = (integer(v, f"orbit {name}", lo=1, hi=MAX_IMAGE_SIZE) for v, name in ((width, "width"),
+                                                                                            (height, "height")))
+        fov_y_deg = real(fov_y_deg, "orbit field of view (degrees)", lo=0, hi=180, lo_open=True)
+        azimuth_deg, elevation_deg = (real(v, f"orbit {name} (degrees)") for v, name in (
+            (azimuth_deg, "azimuth"), (elevation_deg, "elevation")))
+        if distance is not None:
             distance = real(distance, "orbit distance", lo=0, lo_open=True, f32=True)
-        except InvalidValue as exc:
-            raise CameraError(str(exc)) from None
+    except InvalidValue as exc:
+        raise CameraError(str(exc)) from None
+    centre, radius, framing = frame_box(*scene.robust_bounds(), fov_y_deg, width / height)
     up_v = np.array(UP_AXES[up])
     distance = framing if distance is None else distance
     eye = centre + distance * orbit_direction(up_v, azimuth_deg, elevation_deg)

@@ -91,6 +91,17 @@ def test_invalid_cameras_raise():
         gb.Camera(10, 10, 1, 1, 0, 0, np.eye(3) * 2, np.zeros(3))
 
 
+@pytest.mark.parametrize("kwargs, says", [
+    ({"width": 0, "height": 5}, "orbit width: expected >= 1"), ({"height": 0}, "orbit height: expected >= 1"),
+    ({"fov_y_deg": 0}, "orbit field of view"), ({"elevation_deg": float("inf")}, "orbit elevation"),
+    ({"azimuth_deg": "x"}, "orbit azimuth"),
+])
+def test_orbit_camera_arguments_are_one_line(bundled_scene, kwargs, says):
+    """A zero height or field of view divided by zero (ZeroDivisionError), an infinite elevation failed in math."""
+    with pytest.raises(gb.CameraError, match=says):
+        orbit_camera(bundled_scene, **kwargs)
+
+
 def test_rate_labels_and_parsing():
     from gbviewer.camera import format_rate, parse_rate, parse_rates
 
