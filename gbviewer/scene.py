@@ -170,6 +170,7 @@ class Scene:
     def __post_init__(self) -> None:
         for name in ARRAYS:
             object.__setattr__(self, name, read_only(getattr(self, name), half=name == "sh"))
+        check_shapes(self.arrays, self.source)  # the native renderers index every array by the splat
 
     def editable(self) -> dict[str, np.ndarray]:
         """Writable copies of the splat arrays by name (filter_3d only when present): edit them, then make the
@@ -244,15 +245,7 @@ class Scene:
             arrays["view_weight_sh"] = vw.reshape(len(vw), -1) if vw.ndim != 2 else vw
         if arrays["sh"].ndim == 2:
             arrays["sh"] = arrays["sh"][:, None, :]
-        n = arrays["means"].shape[0] if arrays["means"].ndim == 2 else -1
-        expected = {"means": (n, 3), "scales": (n, 3), "quats": (n, 4), "opacities": (n,), "filter_3d": (n,)}
-        for name, shape in expected.items():
-            if name in arrays and arrays[name].shape != shape:
-                raise GBViewerError(f"{source}: field '{name}': shape {arrays[name].shape}, expected {shape}")
-        sh_arr = arrays["sh"]
-        if sh_arr.ndim != 3 or sh_arr.shape[0] != n or sh_arr.shape[2] != 3:
-            raise GBViewerError(f"{source}: field 'sh': shape {sh_arr.shape}, expected ({n}, K, 3)")
-        sh_degree_for(sh_arr.shape[1])
+        n = check_shapes(arrays, source)
         if "view_weight_sh" in arrays:
             vw = arrays["view_weight_sh"]
             if vw.shape[0] != n:
@@ -301,6 +294,22 @@ class Scene:
         if vw is None and cells is None and neural is None and all(v is None for v in globals_.values()):
             oit = None
         return cls(source=source, meta=dict(meta or {}), oit=oit, **arrays)
+
+
+def check_shapes(arrays: dict[str, np.ndarray], source: str) -> int:
+    """The splat count of a Scene's arrays by name, whose shapes must be (N, 3) means and scales, (N, 4) quats, (N,)
+    opacities and filter_3d, (N, K, 3) sh of a K that is an SH degree's; else a one-line GBViewerError."""
+    means = arrays["means"]
+    n = means.shape[0] if means.ndim == 2 else -1
+    expected = {"means": (n, 3), "scales": (n, 3), "quats": (n, 4), "opacities": (n,), "filter_3d": (n,)}
+    for name, shape in expected.items():
+        if arrays.get(name) is not None and arrays[name].shape != shape:
+            raise GBViewerError(f"{source}: field '{name}': shape {arrays[name].shape}, expected {shape}")
+    sh = arrays["sh"]
+    if sh.ndim != 3 or sh.shape[0] != n or sh.shape[2] != 3:
+        raise GBViewerError(f"{source}: field 'sh': shape {sh.shape}, expected ({n}, K, 3)")
+    sh_degree_for(sh.shape[1])
+    return n
 
 
 def loaded_from(scene: Scene, content: str | None) -> Scene:

@@ -122,3 +122,35 @@ def test_an_array_made_writable_again_is_an_edit_every_cache_sees(tmp_path, monk
         assert not np.array_equal(again, before)
         assert np.array_equal(again, gb.render(fresh, cam, m).rgb)
     assert gb.lod.hierarchy_for(scene) is not gb.lod.hierarchy_for(scene)
+
+
+def splats(n: int = 4, **change) -> dict[str, np.ndarray]:
+    arrays = {"means": np.zeros((n, 3), np.float32), "scales": np.full((n, 3), 0.1, np.float32),
+              "quats": np.tile(np.float32([1, 0, 0, 0]), (n, 1)), "opacities": np.full(n, 0.5, np.float32),
+              "sh": np.zeros((n, 1, 3), np.float32)}
+    return {**arrays, **change}
+
+
+@pytest.mark.parametrize("change, says", [
+    ({"opacities": np.ones(3, np.float32)}, "field 'opacities': shape \\(3,\\), expected \\(4,\\)"),
+    ({"sh": np.zeros((4, 3), np.float32)}, "field 'sh': shape \\(4, 3\\), expected \\(4, K, 3\\)"),
+    ({"sh": np.zeros((4, 5, 3), np.float32)}, "sh has 5 coefficients"),
+    ({"filter_3d": np.zeros(5, np.float32)}, "field 'filter_3d'"),
+])
+def test_a_scene_of_arrays_that_disagree_is_one_line(change, says):
+    """Scene(...) took arrays of different splat counts (or an SH count of no degree): the renders raised the
+    native module's ValueError, or drew K=5 as some degree. Its shapes are checked as from_arrays checks them."""
+    with pytest.raises(gb.GBViewerError, match=says):
+        gb.Scene(**splats(**change))
+
+
+def test_level_of_detail_of_a_scene_it_cannot_draw_is_one_line():
+    """A Scene of no splats, or made directly of NaN values (from_arrays drops those): level of detail raised the
+    native build's or upload's ValueError; a RenderError names the scene, and the plain render still draws."""
+    cam = front_camera(16, 12)
+    with pytest.raises(gb.RenderError, match="no splats to build a level-of-detail hierarchy"):
+        gb.render(gb.Scene(**{k: v[:0] for k, v in splats().items()}), cam, "scalar+lod:2")
+    nan = gb.Scene(**splats(means=np.full((4, 3), np.nan, np.float32)))
+    with pytest.raises(gb.RenderError, match="level of detail: .*non-finite"):
+        gb.render(nan, cam, "scalar+lod:2")
+    assert np.isfinite(gb.render(nan, cam).rgb).all()

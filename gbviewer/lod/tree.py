@@ -142,6 +142,8 @@ def build(scene: Scene, rule: str = "depth", threads: int = 0) -> Hierarchy:
 
     if rule not in RULES:
         raise GBViewerError(f"LOD opacity rule {rule!r}; expected one of {RULES}")
+    if not scene.num_splats:
+        raise GBViewerError(f"{scene.source}: no splats to build a level-of-detail hierarchy of")
     t0 = time.perf_counter()
     out = native.build(scene.means, scene.scales, scene.quats, scene.opacities,
                             np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d, RULES.index(rule), threads)

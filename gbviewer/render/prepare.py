@@ -130,8 +130,12 @@ class NativeUploads:
         if prep.tree is not None and prep.tree is not self._tree:
             t = prep.tree
             sh = np.ascontiguousarray(t.sh.astype(scene.sh.dtype, copy=False), np.float32)  # float16 scene: so too
-            self._native("upload_lod", t.means, t.scales, t.quats, t.opacities, sh, t.filter_3d, t.radius, t.size,
-                         t.levels, t.order)
+            try:
+                self._native("upload_lod", t.means, t.scales, t.quats, t.opacities, sh, t.filter_3d, t.radius,
+                             t.size, t.levels, t.order)
+            except ValueError as exc:  # a Scene made of values its renders drop (NaN): Scene.from_arrays drops them
+                raise RenderError(f"{scene.source}: level of detail: {exc} (the scene holds splats with non-finite "
+                                  "values or beyond float32; Scene.from_arrays drops those)") from None
             self._tree = t
         if cells is not None and cells is not self._cells:
             self._cells = None
