@@ -104,6 +104,13 @@ class SharedRenderer:
             return attr
 
         def call(*args, **kwargs):
+            if name == "render_many":
+                jobs = args[0] if args else kwargs.get("jobs", ())
+                for job in jobs if isinstance(jobs, (list, tuple)) else [jobs]:
+                    _check_job(name, *job if isinstance(job, tuple) and len(job) == 2 else (job, None))
+            else:  # render_to_texture(texture, camera, settings), the others (camera, settings, ...)
+                first = 1 if name == "render_to_texture" else 0
+                _check_job(name, *[*args[first:], kwargs.get("camera"), kwargs.get("settings")][:2])
             with self._slot.lock:
                 self._slot.bind(self._scene)
                 return attr(*args, **kwargs)
@@ -121,6 +128,13 @@ class SharedRenderer:
         with self._slot.lock:
             self._slot.uploaded = None
             self._slot.renderer.release()
+
+
+def _check_job(call: str, camera: object, settings: object) -> None:
+    """A frame's camera and settings as a renderer takes them, else one line naming the call."""
+    if not (isinstance(camera, Camera) and isinstance(settings, RenderSettings)):
+        raise InvalidValue(f"{call}: expected a gbviewer.Camera and a RenderSettings (RenderSettings.parse(spec)) "
+                           f"per frame, got {type(camera).__name__} and {type(settings).__name__}")
 
 
 _renderers: dict[str, _Slot] = {}

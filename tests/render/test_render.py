@@ -196,3 +196,18 @@ def test_render_many_of_a_handle_draws_its_own_scene():
     gb.get_renderer(b, "cpu").render(cam, gb.RenderSettings())
     (frame,) = handle.render_many([(cam, gb.RenderSettings())])
     assert np.array_equal(frame.rgb, own)
+
+
+@pytest.mark.parametrize("call", ["render str camera", "render str settings", "trace", "render_many triple"])
+def test_a_frame_of_other_types_is_one_line(call):
+    """A handle's frame of a camera or settings of another type raised AttributeError (or an unpacking error)
+    from inside the backend; it is one line naming the call, before the backend's lock."""
+    scene = random_scene(20, seed=33)
+    cam, handle = front_camera(8, 8), gb.get_renderer(scene, "cpu")
+    calls = {"render str camera": lambda: gb.render(scene, "front"),
+             "render str settings": lambda: handle.render(cam, "scalar"),
+             "trace": lambda: handle.trace(None, gb.RenderSettings(), 1, 1),
+             "render_many triple": lambda: handle.render_many([(cam, gb.RenderSettings(), 1)])}
+    with pytest.raises(gb.GBViewerError, match=r"expected a gbviewer.Camera and a RenderSettings"):
+        calls[call]()
+    assert handle.render(camera=cam, settings=gb.RenderSettings()).rgb.shape == (8, 8, 3)
