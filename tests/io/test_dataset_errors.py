@@ -179,6 +179,17 @@ def test_blender_photo_of_two_different_frames_is_refused(tmp_path, case, says):
     one_line(tmp_path, "'a.png' is the photo of two frames " + says, "with different cameras")
 
 
+@pytest.mark.parametrize("kind", ["folder", "fifo", "broken link"])
+def test_a_blender_split_file_that_is_not_a_file_is_one_line(tmp_path, kind):
+    """transforms_train.json as a folder, a FIFO or a broken link was taken for an absent split: the dataset
+    silently lost its training views."""
+    blender_frames(tmp_path, {"train": [("a", np.eye(4))], "test": [("b", np.eye(4))]})
+    path = tmp_path / "transforms_train.json"
+    path.unlink()
+    {"folder": path.mkdir, "fifo": lambda: os.mkfifo(path), "broken link": lambda: path.symlink_to("gone")}[kind]()
+    one_line(tmp_path, "transforms_train.json: not a readable file")
+
+
 @pytest.mark.parametrize("name", ["/etc/hostname", "../a.png"])
 def test_photo_names_outside_the_photo_folder(tmp_path, name):
     one_line(colmap_text(tmp_path, [(POSE, "1", name)], photo_names=[]), f"photo name {name!r}",

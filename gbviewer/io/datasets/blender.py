@@ -69,6 +69,9 @@ def load_blender(root: Path) -> Dataset:
     """The views of transforms_train.json and transforms_test.json (either may be absent, not both). A photo
     listed twice with the same camera (some exporters write one file as both splits) is one view, of both splits
     where they differ; with another camera it is a one-line DatasetError."""
+    for name in SPLIT_FILES.values():  # one that is there but not a file (a folder, a FIFO, a broken link) is no split
+        if not (root / name).is_file() and ((root / name).exists() or (root / name).is_symlink()):
+            raise DatasetError(f"{root / name}: not a readable file; expected the split's transforms JSON")
     views = [v for split, name in SPLIT_FILES.items() if (root / name).is_file()
              for v in _views(root, split, root / name)]
     seen: dict[Path, View] = {}
