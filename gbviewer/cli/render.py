@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..argtypes import BACKGROUND, Rate, count
-from ..errors import GBViewerError
+from ..errors import GBViewerError, RenderError
 from ..figure import save_image
 from ..io import load
 from ..io.files import check_writable
@@ -27,7 +27,13 @@ def cmd_render(args: argparse.Namespace) -> int:
     check_render_size(cam.width, cam.height, [args.scale], "--scale")
     cam = cam.at_sampling_rate(args.scale)
     trained = trained_spec(scene.meta)
-    settings = settings_of(args, trained or "scalar")[0]
+    try:
+        settings = settings_of(args, trained or "scalar")[0]
+    except RenderError as exc:  # an option against the file's mode, which the user did not give
+        if args.mode is not None or not trained:
+            raise
+        raise RenderError(f"{exc}: {args.scene} says it was trained as {describe(scene.meta)}, so it renders as "
+                          f"{trained} unless --mode says otherwise") from None
     frame = get_renderer(scene, backend_of(args)).render(cam, settings)
     save_image(out, frame.rgb, force=args.force)
     st = frame.stats

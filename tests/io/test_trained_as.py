@@ -99,3 +99,17 @@ def test_info_says_where_it_came_from(tmp_path, capsys):
     capsys.readouterr()
     assert main(["info", str(tmp_path / "a.spz"), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["trained_as"] == "antialiased: spz flag"
+
+
+def test_an_option_against_the_mode_the_file_says_names_the_file(tmp_path, capsys):
+    """render of an antialiased file with --sh-degree 1 and no --mode said "mode 'preset:gsplat-antialiased' sets sh
+    degree 3; sh degree 1 disagrees (give one of them)": a mode the user never gave. The line says where it came
+    from and that --mode overrides it."""
+    path = write_ply(tmp_path / "s.ply", ["SplatRenderMode: mip"])
+    out = str(tmp_path / "o.png")
+    assert main(["render", str(path), "--sh-degree", "1", "--width", "8", "--height", "8", "--out", out]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert f"{path} says it was trained as antialiased" in err and "unless --mode says otherwise" in err
+    assert main(["render", str(path), "--mode", "scalar", "--sh-degree", "1", "--width", "8", "--height", "8",
+                 "--out", out, "--backend", "cpu"]) == 0
