@@ -129,6 +129,11 @@ class OitData:
     def __post_init__(self) -> None:
         object.__setattr__(self, "view_weight_sh", read_only(self.view_weight_sh))
 
+    def __setstate__(self, state: dict) -> None:
+        """Unpickled or deep-copied: read-only again (numpy's pickles restore arrays writable)."""
+        self.__dict__.update(state)
+        self.__post_init__()
+
 
 @dataclass(frozen=True, eq=False)
 class Checked:
@@ -171,6 +176,17 @@ class Scene:
         for name in ARRAYS:
             object.__setattr__(self, name, read_only(getattr(self, name), half=name == "sh"))
         check_shapes(self.arrays, self.source)  # the native renderers index every array by the splat
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        if not self.intact:  # maybe edited since it was loaded: no longer its file's content
+            state["content"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        """Unpickled or deep-copied: read-only again, as every Scene (numpy's pickles restore arrays writable)."""
+        self.__dict__.update(state)
+        self.__post_init__()
 
     def editable(self) -> dict[str, np.ndarray]:
         """Writable copies of the splat arrays by name (filter_3d only when present): edit them, then make the

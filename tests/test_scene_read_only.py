@@ -154,3 +154,20 @@ def test_level_of_detail_of_a_scene_it_cannot_draw_is_one_line():
     with pytest.raises(gb.RenderError, match="level of detail: .*non-finite"):
         gb.render(nan, cam, "scalar+lod:2")
     assert np.isfinite(gb.render(nan, cam).rgb).all()
+
+
+@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
+def test_an_unpickled_scene_is_read_only_and_keeps_its_content_only_when_intact(tmp_path, how):
+    """numpy's pickles restore arrays writable: an unpickled (or deep-copied) Scene took writes, and lost its cache
+    key. It is read-only again with its file's content; one pickled after an edit carries no content."""
+    import copy
+    import pickle
+
+    again = (lambda s: pickle.loads(pickle.dumps(s))) if how == "pickle" else copy.deepcopy
+    scene = gb.load(write_inria_ply(random_scene(100, seed=8), tmp_path / "s.ply"))
+    twin = again(scene)
+    assert twin.intact and twin.content == scene.content and twin.content is not None
+    with pytest.raises(ValueError, match="read-only"):
+        twin.opacities[0] = 0.0
+    reopen(scene.sh)[:] *= -1
+    assert again(scene).content is None
