@@ -35,6 +35,9 @@ PACKAGE_ROOT = Path(gb.__file__).resolve().parents[1]
     (4, 9, [2], 2),          # --threads 4 on 2-CPU nodes: a task needs a node that can hold it
     (3, 9, [16], 3),
     (0, 0, [], 1),
+    (8, 9, [0, 16], 8),      # a head node without CPUs runs no task: it capped every task at 1 CPU
+    (0, 4, [0, 16], 4),
+    (0, 2, [2, 64], 32),     # both tasks fit the large node
 ])
 def test_task_cpus_share_the_cluster(threads, tasks, nodes, expected):
     assert task_cpus(threads, tasks, nodes) == expected

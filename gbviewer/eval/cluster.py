@@ -55,11 +55,13 @@ def renders_on_device(backend: str) -> bool:
 def task_cpus(threads: int, tasks: int, node_cpus: list[float]) -> int:
     """The CPUs each of `tasks` Ray tasks asks for (and renders with) on alive nodes of `node_cpus` CPUs:
     `threads` when given, else the most that still runs every task at once (each node running as many as its
-    CPUs hold), 1 where even that cannot; at most the smallest node's count (else no node could run a task)."""
-    smallest = max(1, int(min(node_cpus, default=1)))
+    CPUs hold), 1 where even that cannot; at most the largest node's count (else no node could run a task). Nodes
+    without a whole CPU (a head started with --num-cpus=0, as Ray advises for large clusters) run no task and do
+    not count: they capped every task at 1 CPU, --threads included."""
+    usable = [int(n) for n in node_cpus if n >= 1] or [1]
     if threads:
-        return min(threads, smallest)
-    return next((c for c in range(smallest, 1, -1) if sum(int(n) // c for n in node_cpus) >= tasks), 1)
+        return min(threads, max(usable))
+    return next((c for c in range(max(usable), 1, -1) if sum(n // c for n in usable) >= tasks), 1)
 
 
 class _NoTokenNotice(logging.Filter):
