@@ -7,10 +7,13 @@ present can hold, JSON bounded in size and depth. Failures raise `InvalidValue` 
 
 from __future__ import annotations
 
+import errno
 import json
 import math
+import os
+import stat
 from pathlib import Path
-from typing import Any, Callable, TypeVar
+from typing import Any, BinaryIO, Callable, TypeVar
 
 import numpy as np
 
@@ -195,11 +198,25 @@ def dumps_json(doc: Any, indent: int | None = None) -> str:
     return json.dumps(finite_json(doc), indent=indent, allow_nan=False)
 
 
+def open_regular(path: str | Path) -> BinaryIO:
+    """`path` opened to read bytes when it is a regular file (or a link to one), else OSError "not a regular file":
+    a FIFO's open waits for a writer and a device may never end, so it is opened without blocking to find out."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", str(path))
+    except BaseException:
+        os.close(fd)
+        raise
+    return open(fd, "rb")
+
+
 def read_json(path: str | Path, *, max_bytes: int = JSON_MAX_BYTES, max_depth: int = JSON_MAX_DEPTH) -> Any:
-    """`parse_json` of a file, reading at most `max_bytes` + 1 bytes of it; errors name the file."""
+    """`parse_json` of a file (a regular one: `open_regular`), reading at most `max_bytes` + 1 bytes of it; errors
+    name the file."""
     path = Path(path)
     try:
-        with open(path, "rb") as fh:
+        with open_regular(path) as fh:
             data = fh.read(max_bytes + 1)
     except OSError as exc:
         raise InvalidValue(f"{path}: cannot read ({exc.strerror or exc})") from None

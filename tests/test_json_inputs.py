@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -76,6 +77,21 @@ def test_cameras_json_bad_document_is_one_line(tmp_path, text, message):
     with pytest.raises(CameraError, match=message) as info:
         gb.load_cameras_json(path)
     assert_one_line(info.value, path)
+
+
+@pytest.mark.parametrize("reader", [
+    "gb.load_cameras_json(path)",
+    "from gbviewer.app.settings import load_settings; print(load_settings(path)[1])",
+])
+def test_a_json_input_that_is_a_fifo_is_one_line_without_blocking(tmp_path, reader):
+    """--cameras (or the viewer's settings.json) naming a FIFO blocked in open() until a writer came: forever."""
+    path = tmp_path / "cameras.json"
+    os.mkfifo(path)
+    code = ("import sys, gbviewer as gb; from pathlib import Path\npath = Path(sys.argv[1])\ntry:\n"
+            f"    {reader}\nexcept gb.GBViewerError as e:\n    print(e)")
+    run = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert f"{path}: cannot read (not a regular file)" in run.stdout
 
 
 def test_cameras_json_missing_file_and_folder(tmp_path):

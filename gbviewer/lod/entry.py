@@ -7,8 +7,6 @@ read (a FIFO or a device put in its place, or a link to one, would block or neve
 
 from __future__ import annotations
 
-import os
-import stat
 import zipfile
 from pathlib import Path
 from typing import BinaryIO
@@ -16,6 +14,7 @@ from typing import BinaryIO
 import numpy as np
 
 from ..scene import Scene
+from ..validate import open_regular
 from .tree import Hierarchy, layout
 
 HEADER_READERS = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
@@ -24,11 +23,7 @@ HEADER_READERS = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.fo
 def read_entry(entry: Path | BinaryIO, scene: Scene, rule: str) -> Hierarchy:
     """The hierarchy stored in `entry` (a path or an open binary file) for `scene` merged by `rule`, checked."""
     if isinstance(entry, Path):
-        # opened without blocking (a FIFO's open waits for a writer), then refused unless a regular file
-        fd = os.open(entry, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-        with open(fd, "rb") as fh:
-            if not stat.S_ISREG(os.fstat(fd).st_mode):
-                raise ValueError("not a regular file")
+        with open_regular(entry) as fh:
             return read_entry(fh, scene, rule)
     want = layout(scene)
     with zipfile.ZipFile(entry) as z:
