@@ -22,7 +22,7 @@ from PIL import Image, features
 
 from ..errors import InvalidValue, SceneFormatError
 from ..scene import Scene
-from ..validate import parse_json
+from ..validate import open_regular, parse_json
 from .packing import MAX_SPLATS, smallest_three
 from .progress import LoadProgress
 
@@ -78,10 +78,12 @@ def _member_size(zf: zipfile.ZipFile, name: str) -> int:
 
 def _read_file(folder: Path, name: str, limit: int) -> bytes:
     try:
-        with open(folder / name, "rb") as fh:
+        with open_regular(folder / name) as fh:  # a FIFO in its place would block
             data = fh.read(limit + 1)
-    except OSError:
+    except FileNotFoundError:
         raise SceneFormatError(folder, "missing file in the SOG folder", field=name) from None
+    except OSError as exc:
+        raise SceneFormatError(folder, f"cannot read it ({exc.strerror or exc})", field=name) from None
     if len(data) > limit:
         raise _too_big(folder / name, name, len(data), limit)
     return data

@@ -146,3 +146,21 @@ def test_unrecognised_and_missing(tmp_path):
     assert "no such file" in _message(tmp_path / "missing.spz")
     (tmp_path / "empty_dir").mkdir()
     assert "meta.json" in _message(tmp_path / "empty_dir")
+
+
+@pytest.mark.parametrize("name", ["meta.json", "means_l.webp"])
+def test_a_sog_folder_file_that_is_a_fifo_is_one_line(tmp_path, name):
+    """A SOG folder's meta.json or image as a FIFO blocked the load in open() forever (gbviewer info hung)."""
+    import os
+    import subprocess
+    import sys
+
+    files = sog_files(random_params(50, seed=10))
+    for n, data in files.items():
+        (tmp_path / n).write_bytes(data)
+    (tmp_path / name).unlink()
+    os.mkfifo(tmp_path / name)
+    run = subprocess.run([sys.executable, "-m", "gbviewer", "info", str(tmp_path)], capture_output=True, text=True,
+                         timeout=60)
+    assert run.returncode == 2 and run.stderr.strip().splitlines() == [
+        f"gbviewer: error: {tmp_path}: field '{name}': cannot read it (not a regular file)"]
