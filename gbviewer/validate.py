@@ -230,3 +230,30 @@ def field(doc: Any, key: str, what: str) -> Any:
     if key not in doc:
         raise InvalidValue(f"{what}: missing '{key}'")
     return doc[key]
+
+
+NPY_HEADER_READERS = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
+
+
+def read_npy(fh: BinaryIO, what: str, shapes: list[tuple[int, ...]], dtype: np.dtype) -> np.ndarray:
+    """One .npy array from the binary file `fh`, read as the untrusted input it is: its header must say `dtype`,
+    one of `shapes` and C order before any data is read (so it allocates no more than expected), its data fill
+    that shape exactly; else ValueError naming `what`."""
+    version = np.lib.format.read_magic(fh)
+    if version not in NPY_HEADER_READERS:
+        raise ValueError(f"{what}: .npy format version {version}, expected 1.0 or 2.0")
+    got_shape, fortran, got_dtype = NPY_HEADER_READERS[version](fh, max_header_size=1 << 12)
+    if got_shape not in shapes or got_dtype != dtype or fortran:
+        raise ValueError(f"{what} is {got_dtype} {got_shape}{' (Fortran order)' if fortran else ''}, expected "
+                         f"{dtype} {' or '.join(map(str, shapes))}")
+    out = np.empty(got_shape, dtype)
+    buf = memoryview(out.reshape(-1).view(np.uint8))
+    got = 0
+    while got < len(buf):
+        n = fh.readinto(buf[got:])
+        if not n:
+            raise ValueError(f"{what}: data ends after {got} of {len(buf)} bytes")
+        got += n
+    if fh.read(1):
+        raise ValueError(f"{what}: data runs past its {len(buf)} bytes")
+    return out

@@ -15,8 +15,10 @@ from ..errors import GBViewerError
 from ..io.datasets import View, read_photo
 from ..io.files import atomic_write
 from ..metrics import composite, premultiplied_box_downsample, zoom_factor
+from ..validate import open_regular, read_npy
 
-CACHE_VERSION = 1  # part of every key: a change of what is stored invalidates the old entries
+CACHE_VERSION = 2  # part of every key: a change of what is stored (or of the key) invalidates the old entries
+DIGEST_CHUNK = 1 << 20  # bytes of a photo hashed at a time
 
 
 def default_cache() -> Path:
@@ -49,21 +51,35 @@ def camera_for_rate(camera: Camera, rate: float) -> Camera:
     return cropped.at_sampling_rate(1 / k) if k > 1 else cropped
 
 
-def _entry(cache: Path, photo: Path, k: int) -> Path:
-    """The cache file of `photo` at factor k: keyed by its path, size and modification time."""
-    st = photo.stat()
-    key = f"{CACHE_VERSION}\0{photo.resolve()}\0{st.st_size}\0{st.st_mtime_ns}\0{k}"
+def photo_digest(photo: Path) -> str:
+    """The SHA-256 of the photo's bytes: what its cached levels are keyed by (its path, size and modification time
+    do not tell a same-size edit whose time was restored, as cp -p, rsync -a and tar do)."""
+    h = hashlib.sha256()
+    try:
+        with open_regular(photo) as fh:
+            while chunk := fh.read(DIGEST_CHUNK):
+                h.update(chunk)
+    except OSError as exc:
+        raise GBViewerError(f"{photo}: cannot read the photo ({exc.strerror or exc})") from None
+    return h.hexdigest()
+
+
+def _entry(cache: Path, digest: str, k: int) -> Path:
+    """The cache file of the photo of `digest` (`photo_digest`) at factor k."""
+    key = f"{CACHE_VERSION}\0{digest}\0{k}"
     return cache / f"{hashlib.sha256(key.encode()).hexdigest()[:40]}.npy"
 
 
 def _cached(entry: Path, shape: tuple[int, int]) -> np.ndarray | None:
-    """The stored level when it is what it must be (float32, the expected size, RGB or RGBA); else None."""
+    """The stored level when it is what it must be (a regular file of float32 RGB or RGBA of the expected size,
+    every value in [0, 1], checked from its header before its data is read); else None: an entry is untrusted."""
     try:
-        level = np.load(entry, allow_pickle=False)
+        with open_regular(entry) as fh:
+            level = read_npy(fh, str(entry), [(*shape, 3), (*shape, 4)], np.dtype(np.float32))
     except (OSError, ValueError, EOFError):
         return None
-    ok = level.dtype == np.float32 and level.ndim == 3 and level.shape[:2] == shape and level.shape[2] in (3, 4)
-    return level if ok else None
+    with np.errstate(invalid="ignore"):
+        return level if level.size and 0 <= level.min() and level.max() <= 1 else None  # NaN fails both
 
 
 def ground_truths(view: View, rates: Sequence[float], background: tuple[float, float, float],
@@ -75,8 +91,9 @@ def ground_truths(view: View, rates: Sequence[float], background: tuple[float, f
     for r in rates:
         camera_for_rate(view.camera, r)  # every k fits the photo
     levels: dict[int, np.ndarray] = {}
+    digest = photo_digest(view.image) if cache is not None and any(k > 1 for k in ks) else ""
     for k in {k for k in ks if k > 1 and cache is not None}:
-        hit = _cached(_entry(cache, view.image, k), (view.camera.height // k, view.camera.width // k))
+        hit = _cached(_entry(cache, digest, k), (view.camera.height // k, view.camera.width // k))
         if hit is not None:
             levels[k] = hit
     missing = [k for k in dict.fromkeys(ks) if k not in levels]
@@ -88,7 +105,7 @@ def ground_truths(view: View, rates: Sequence[float], background: tuple[float, f
         for k in missing:
             levels[k] = premultiplied_box_downsample(photo, k)
             if k > 1 and cache is not None:
-                atomic_write(_entry(cache, view.image, k), lambda p, a=levels[k]: np.save(p, a), force=True)
+                atomic_write(_entry(cache, digest, k), lambda p, a=levels[k]: np.save(p, a), force=True)
     return [composite(levels[k], background) for k in ks]
 
 

@@ -14,10 +14,8 @@ from typing import BinaryIO
 import numpy as np
 
 from ..scene import Scene
-from ..validate import open_regular
+from ..validate import open_regular, read_npy
 from .tree import Hierarchy, layout
-
-HEADER_READERS = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
 
 
 def read_entry(entry: Path | BinaryIO, scene: Scene, rule: str) -> Hierarchy:
@@ -33,30 +31,7 @@ def read_entry(entry: Path | BinaryIO, scene: Scene, rule: str) -> Hierarchy:
         arrays = {}
         for name, (shape, dtype) in want.items():
             with z.open(f"{name}.npy") as member:
-                arrays[name] = _read_member(member, name, shape, np.dtype(dtype))
+                arrays[name] = read_npy(member, name, [shape], np.dtype(dtype))
     tree = Hierarchy(rule=rule, **arrays)
     tree.check(scene)
     return tree
-
-
-def _read_member(member: BinaryIO, name: str, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
-    """One .npy member: its header must say `dtype` and `shape` in C order, its data fill them exactly (the zip's
-    CRC is checked at the member's end)."""
-    version = np.lib.format.read_magic(member)
-    if version not in HEADER_READERS:
-        raise ValueError(f"{name}: .npy format version {version}, expected 1.0 or 2.0")
-    got_shape, fortran, got_dtype = HEADER_READERS[version](member, max_header_size=1 << 12)
-    if got_shape != shape or got_dtype != dtype or fortran:
-        raise ValueError(f"{name} is {got_dtype} {got_shape}{' (Fortran order)' if fortran else ''}, expected "
-                         f"{dtype} {shape}")
-    out = np.empty(shape, dtype)
-    buf = memoryview(out.reshape(-1).view(np.uint8))
-    got = 0
-    while got < len(buf):
-        n = member.readinto(buf[got:])
-        if not n:
-            raise ValueError(f"{name}: data ends after {got} of {len(buf)} bytes")
-        got += n
-    if member.read(1):
-        raise ValueError(f"{name}: data runs past its {len(buf)} bytes")
-    return out
