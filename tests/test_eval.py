@@ -5,7 +5,6 @@ process pool and a local Ray instance."""
 from __future__ import annotations
 
 import dataclasses
-import io
 import json
 import os
 import subprocess
@@ -106,37 +105,6 @@ def test_cache_is_keyed_by_the_photo_and_stays_out_of_the_dataset(tmp_path, bund
     for entry in cache.iterdir():
         entry.write_bytes(b"garbage")  # a damaged entry is recomputed, not an error
     assert np.array_equal(ev.ground_truths(view, [1 / 2], WHITE, cache)[0], np.zeros((H // 2, W // 2, 3)))
-
-
-def test_a_cached_level_is_the_photo_s_content_and_an_entry_untrusted(tmp_path, bundled_scene):
-    """The ground-truth cache keyed a photo by path, size and modification time: a same-size edit with the time
-    restored (cp -p, rsync -a, tar) scored against the old photo. It is keyed by the photo's bytes; an entry of
-    NaN, of values beyond [0, 1], with a header claiming a huge shape, or a FIFO in its place is recomputed."""
-    data = write_blender(tmp_path / "data", shots(bundled_scene, n=1, vary=False), test=(0,))
-    view, cache = load_dataset(data).views[0], tmp_path / "cache"
-    photo = np.array(Image.open(view.image))
-    Image.fromarray(photo).save(view.image, compress_level=0)  # stored: its size is its pixel count's
-    first = ev.ground_truths(view, [1 / 2], WHITE, cache)[0]
-    st = view.image.stat()
-    photo[..., :3] = 255 - photo[..., :3]
-    Image.fromarray(photo).save(view.image, compress_level=0)
-    os.utime(view.image, ns=(st.st_atime_ns, st.st_mtime_ns))
-    assert view.image.stat().st_size == st.st_size
-    expected = composite(premultiplied_box_downsample(read_photo(view.image), 2), WHITE)
-    edited = ev.ground_truths(view, [1 / 2], WHITE, cache)[0]
-    assert np.array_equal(edited, expected) and not np.array_equal(edited, first)
-    entry = gt_module._entry(cache, gt_module.photo_digest(view.image), 2)
-    good = np.load(entry)
-    for bad in (np.full_like(good, np.nan), good + 2):
-        np.save(entry, bad)
-        assert np.array_equal(ev.ground_truths(view, [1 / 2], WHITE, cache)[0], expected)
-    huge = io.BytesIO()
-    np.lib.format.write_array_header_1_0(huge, {"descr": "<f4", "fortran_order": False, "shape": (10**6, 10**6, 4)})
-    entry.write_bytes(huge.getvalue())
-    assert np.array_equal(ev.ground_truths(view, [1 / 2], WHITE, cache)[0], expected)
-    entry.unlink()
-    os.mkfifo(entry)
-    assert gt_module._cached(entry, good.shape[:2]) is None
 
 
 def test_eval_numbers_are_the_metrics_computed_directly(blender, bundled_scene, tmp_path):

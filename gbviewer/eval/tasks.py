@@ -45,10 +45,29 @@ class ViewResult:
     results: list[dict] = field(default_factory=list)
 
 
-@lru_cache(maxsize=2)
 def _scene(path: str) -> Scene:
-    """A worker's scenes, each loaded once (tasks come scene by scene)."""
+    """A worker's scenes, each loaded once (tasks come scene by scene) for as long as its file is the same: an
+    in-process run, or a Ray worker that lives on, evaluated a replaced file's old scene in the next run."""
+    return _loaded(path, file_identity(Path(path)))
+
+
+@lru_cache(maxsize=2)
+def _loaded(path: str, identity: tuple) -> Scene:
     return load(path)
+
+
+def file_identity(path: Path) -> tuple:
+    """What changes whenever the file (a SOG folder: any of its files) is written or replaced: its inode, size,
+    modification and status-change times (the last cannot be set back, as cp -p or rsync -a set the first)."""
+    paths = sorted(path.iterdir()) if path.is_dir() else [path]
+    out = []
+    for p in paths:
+        try:
+            st = p.stat()
+        except OSError:  # gone meanwhile: loading says so
+            continue
+        out.append((p.name, st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns))
+    return tuple(out)
 
 
 def pick_backend(name: str) -> str:
