@@ -241,3 +241,14 @@ def test_an_entry_that_is_not_a_regular_file_is_rebuilt_without_blocking(tmp_pat
     assert not entry.is_symlink() and entry.is_file()
     assert all(np.array_equal(a, b) for a, b in zip(tree.arrays().values(), read_entry(entry, scene,
                                                                                       "depth").arrays().values()))
+
+
+def test_the_shared_tree_is_read_only():
+    """hierarchy_for hands every caller the scene's one tree: an edit of its arrays (tree.opacities[:] = 0) changed
+    what later cuts gathered (the GLSL and CUDA frames, a re-upload) while the uploaded copy stayed as it was."""
+    scene = random_scene(300, seed=9)
+    tree = lod.hierarchy_for(scene)
+    for name, a in tree.arrays().items():
+        with pytest.raises(ValueError, match="read-only"):
+            a[0] = 0
+    assert lod.hierarchy_for(scene) is tree

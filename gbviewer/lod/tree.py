@@ -49,6 +49,12 @@ class Hierarchy:
     rule: str = "depth"
     build_ms: float = 0.0
 
+    def __post_init__(self) -> None:
+        for name, a in self.arrays().items():  # read-only views: a tree is shared by every render of its scene
+            view = a.view()
+            view.flags.writeable = False
+            object.__setattr__(self, name, view)
+
     @property
     def num_leaves(self) -> int:
         return int(self.levels[1])
