@@ -73,6 +73,10 @@ class Cells:
         if off.shape != (m + 1,) or off[0] != 0 or off[-1] != len(self.members) or (np.diff(off) < 0).any():
             raise GBViewerError(f"{self._name}: offsets must be {m + 1} non-decreasing values from 0 to "
                                 f"len(members) = {len(self.members)}")
+        for name in ("means", "scales", "quats", "offsets", "members"):  # checked once (validate), then trusted
+            view = getattr(self, name).view()
+            view.flags.writeable = False
+            object.__setattr__(self, name, view)
 
     @property
     def _name(self) -> str:

@@ -262,13 +262,12 @@ class DuplexModel:
             out = {name: v.cpu().numpy() for name, v in (("xyz", xyz), ("scaling", scaling), ("rot", rot),
                                                            ("color", color), ("opac", opac), ("cell_rot", cell_rot))}
         sh = ((out["color"] - 0.5) / SH_C0)[:, None, :]
-        cells = Cells(anchor.astype(np.float32), self.anchor_scales[idx].astype(np.float32),
-                      out["cell_rot"].astype(np.float32), np.arange(0, A * k + 1, k, dtype=np.int32),
-                      np.arange(A * k, dtype=np.int32), "duplex-gs anchors", 0.0)
-        quats = out["rot"]
-        quats[np.linalg.norm(quats, axis=1) < 1e-12] = (1.0, 0.0, 0.0, 0.0)
-        cq = cells.quats
-        cq[np.linalg.norm(cq, axis=1) < 1e-12] = (1.0, 0.0, 0.0, 0.0)
+        quats, cq = out["rot"], out["cell_rot"].astype(np.float32)
+        for q in (quats, cq):
+            q[np.linalg.norm(q, axis=1) < 1e-12] = (1.0, 0.0, 0.0, 0.0)
+        cells = Cells(anchor.astype(np.float32), self.anchor_scales[idx].astype(np.float32), cq,
+                      np.arange(0, A * k + 1, k, dtype=np.int32), np.arange(A * k, dtype=np.int32),
+                      "duplex-gs anchors", 0.0)
         return Scene.from_arrays(out["xyz"], out["scaling"], quats, np.clip(out["opac"], 0.0, 1.0), sh,
                                  source=f"{self.path} @ view", meta={"format": "duplex-gs decoded",
                                                                      "view_weights_in_opacity": True},

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from helpers import random_view
+from helpers import random_scene, random_view
 
 import gbviewer as gb
 from gbviewer.cells import Cells, build_cells, cells_for
@@ -170,3 +170,15 @@ def test_cells_follow_dropped_splats():
     assert sc.num_splats == 39 and sc.oit.cells.sizes.sum() == 39 and sc.oit.cells.num_cells == cells.num_cells
     assert sorted(sc.oit.cells.members) == list(range(39))
     assert np.isfinite(gb.render(sc, cam, "duplex").rgb).all()
+
+
+def test_the_shared_cells_are_read_only():
+    """cells_for hands every backend the scene's one Cells, whose members are checked once (validate) and then
+    indexed unchecked: an edit after the check (cells.members[1] = cells.members[0]) went unseen."""
+    from gbviewer.cells import cells_for
+
+    scene = random_scene(400, seed=12)
+    cells = cells_for(scene)
+    for name in ("means", "scales", "quats", "offsets", "members"):
+        with pytest.raises(ValueError, match="read-only"):
+            getattr(cells, name)[0] = 0
