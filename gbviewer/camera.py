@@ -124,6 +124,9 @@ class Camera:
                 checked[name] = real(getattr(self, name), f"{who}: {name}", f32=True)
         except InvalidValue as exc:
             raise CameraError(str(exc)) from None
+        for name in ("R", "t"):  # a read-only copy: a camera compares and hashes by value, and the caller's array
+            checked[name] = np.array(checked[name])  # edited after would have moved it unchecked
+            checked[name].flags.writeable = False
         for name, value in checked.items():
             object.__setattr__(self, name, value)
         R = checked["R"]

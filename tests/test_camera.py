@@ -102,6 +102,18 @@ def test_orbit_camera_arguments_are_one_line(bundled_scene, kwargs, says):
         orbit_camera(bundled_scene, **kwargs)
 
 
+def test_a_camera_holds_its_own_read_only_pose():
+    """Camera kept the caller's float64 R and t: editing them afterwards moved the camera (unchecked: R need not stay
+    a rotation) and changed its hash while it was a key. It holds read-only copies."""
+    R, t = np.eye(3), np.zeros(3)
+    cam = gb.Camera(10, 10, 5, 5, 5, 5, R, t)
+    key = hash(cam)
+    R[0, 0], t[0] = 2.0, 1.0
+    assert cam.R[0, 0] == 1.0 and cam.t[0] == 0.0 and hash(cam) == key
+    with pytest.raises(ValueError, match="read-only"):
+        cam.R[0, 0] = 2.0
+
+
 def test_rate_labels_and_parsing():
     from gbviewer.camera import format_rate, parse_rate, parse_rates
 
