@@ -86,6 +86,21 @@ def test_settings_named_after_a_preset_are_that_preset():
     assert RenderSettings(preset="inria").spec == "preset:inria"
 
 
+def test_render_and_trace_take_a_render_settings_alike():
+    """trace_pixel took a RenderSettings as its mode while gb.render read its repr as a spec and refused it in a
+    garbled line; both take one now, by one rule (it says everything: other options are refused)."""
+    scene = random_scene(40, seed=14)
+    cam = gb.orbit_camera(scene, width=12, height=8)
+    settings = RenderSettings.parse("preset:spark:2+lod:3", background=(0.2, 0.3, 0.4))
+    frame = gb.render(scene, cam, settings)
+    assert np.array_equal(frame.rgb, gb.render(scene, cam, "preset:spark:2+lod:3", background=(0.2, 0.3, 0.4)).rgb)
+    assert np.allclose(gb.trace_pixel(scene, cam, 5, 4, settings).color, frame.rgb[4, 5], atol=1e-6)
+    for call in (lambda: gb.render(scene, cam, settings, supersample=2),
+                 lambda: gb.trace_pixel(scene, cam, 5, 4, settings, background=(1, 1, 1))):
+        with pytest.raises(RenderError, match="a RenderSettings says everything"):
+            call()
+
+
 # ---- property: a spec string reaches every command's settings whole ------------------------------------------------
 
 PRESET_NAMES = sorted(PRESETS)

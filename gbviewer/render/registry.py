@@ -16,7 +16,7 @@ from ..errors import InvalidValue, RenderError
 from ..scene import Scene
 from .choice import AUTO, choose_backend
 from .control import FrameLock
-from .types import Frame, Mode, Renderer, RenderSettings
+from .types import Frame, Mode, Renderer, RenderSettings, settings_from
 
 _MODULES = {"cpu": ("cpu", "CpuRenderer"), "cuda": ("cuda", "CudaRenderer"), "glsl": ("glsl", "GlslRenderer")}
 
@@ -163,7 +163,7 @@ def get_renderer(scene: Scene, backend: str = "cpu") -> SharedRenderer:
 def render(
     scene: Scene,
     camera: Camera,
-    mode: str | Mode = "scalar",
+    mode: str | Mode | RenderSettings = "scalar",
     supersample: int | None = None,
     backend: str = "cpu",
     background: tuple[float, float, float] = (0.0, 0.0, 0.0),
@@ -174,15 +174,16 @@ def render(
     partial: np.ndarray | None = None,
     **options,
 ) -> Frame:
-    """Render `scene` from `camera` in `mode` (any spec `RenderSettings.parse` takes; `supersample`, `sh_degree` and
-    `options` fill what it leaves unset and must agree with what it sets) on `backend` (cpu, glsl, cuda, or auto:
-    `choose_backend()`'s pick); `options`: depth_correct, et_grade, cell_size, threads, lod.
+    """Render `scene` from `camera` in `mode` (a RenderSettings, which says everything; or any spec
+    `RenderSettings.parse` takes, `supersample`, `sh_degree` and `options` filling what it leaves unset and agreeing
+    with what it sets) on `backend` (cpu, glsl, cuda, or auto: `choose_backend()`'s pick); `options`: depth_correct,
+    et_grade, cell_size, threads, lod.
     `cancel`: a gbviewer.CancelToken (or a threading.Event); once set, the call raises RenderCancelled within one
     tile batch. `on_progress`: called as fn(done_tiles, total_tiles) from the rendering thread (an exception it raises
     cancels the render: CallbackError, chained to it). `partial`: a float32 (height, width, 3) array that receives
     each tile's pixels as soon as it is blended (centre out), for showing a frame while it refines. Safe from any
     thread, with any scenes (each call renders its own scene)."""
-    settings = RenderSettings.parse(mode, supersample=supersample, background=tuple(background), sh_degree=sh_degree,
-                                    debug=debug, **options)
+    settings = settings_from(mode, "render", background, debug, supersample=supersample, sh_degree=sh_degree,
+                             **options)
     return get_renderer(scene, backend).render(camera, settings, cancel=cancel, on_progress=on_progress,
                                                       partial=partial)

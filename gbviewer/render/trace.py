@@ -18,7 +18,7 @@ from ..errors import InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import dumps_json, integer
 from .registry import capable, get_renderer
-from .types import Mode, RenderSettings
+from .types import Mode, RenderSettings, settings_from
 
 # Why a list entry added nothing (gbv::Skip in native/include/gbv/trace.h, by value); "" when it added.
 SKIP_REASONS = (
@@ -214,13 +214,8 @@ def trace_pixel(scene: Scene, camera: Camera, x: int, y: int, mode: str | Mode |
     `gbviewer.render` parses it, with N x N `supersample`, `sh_degree` and `options`: depth_correct, et_grade,
     cell_size, lod), by the kernel of the first backend that traces pixels (`Capabilities.trace`: the CPU backend; the
     others are held to it by their tests)."""
-    if isinstance(mode, RenderSettings):
-        if supersample is not None or sh_degree is not None or options or tuple(background) != (0.0, 0.0, 0.0):
-            raise RenderError("trace_pixel: a RenderSettings says everything; give the options in it instead")
-        settings = mode
-    else:
-        settings = RenderSettings.parse(mode, supersample=supersample, background=tuple(background),
-                                        sh_degree=sh_degree, **options)
+    settings = settings_from(mode, "trace_pixel", background, supersample=supersample, sh_degree=sh_degree,
+                             **options)
     xi, yi = check_pixel(camera, x, y)
     return get_renderer(scene, capable("trace")[0]).trace(camera, settings, xi, yi)
 

@@ -204,6 +204,17 @@ class RenderSettings:
             raise RenderError(str(exc)) from None
 
 
+def settings_from(mode: "str | Mode | RenderSettings", where: str,
+                  background: Sequence[float] = (0.0, 0.0, 0.0), debug: str = "none", **options) -> RenderSettings:
+    """What a library call (`where`: render, trace_pixel) draws: `mode` a RenderSettings, which says everything
+    (the call's other options then left at their defaults), else a spec `RenderSettings.parse` reads with them."""
+    if isinstance(mode, RenderSettings):
+        if any(v is not None for v in options.values()) or tuple(background) != (0.0, 0.0, 0.0) or debug != "none":
+            raise RenderError(f"{where}: a RenderSettings says everything; give the options in it instead")
+        return mode
+    return RenderSettings.parse(mode, background=tuple(background), debug=debug, **options)
+
+
 @dataclass
 class FrameStats:
     """What a render measured. Times in ms per stage; visible: splats that survive preprocess; sort_length: keys
