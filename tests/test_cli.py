@@ -125,6 +125,16 @@ def test_bad_input_one_line_exit_2(tmp_path, args, message):
     assert len(proc.stderr.splitlines()) == 1
 
 
+def test_a_file_name_with_control_characters_stays_one_line(tmp_path):
+    """A scene named with a newline (or a terminal escape) split the error over two lines (or drove the terminal):
+    control characters are written as escapes."""
+    bad = tmp_path / "a\nb\x1b[2J.ply"
+    bad.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 1\nend_header\n")
+    proc = run("info", str(bad), cwd=tmp_path)
+    assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1
+    assert "a\\nb\\x1b[2J.ply" in proc.stderr and "\x1b" not in proc.stderr
+
+
 def test_demo_writes_comparison_and_zoom_video(tmp_path):
     import imageio_ffmpeg
 

@@ -72,6 +72,11 @@ def _quiet_stdout() -> None:
     os.dup2(devnull, sys.stdout.fileno())
 
 
+def one_line(text: str) -> str:
+    """`text` as one line: control characters (a newline in a file name, a terminal escape) written as escapes."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit status: 0, 2 for bad input (one line on stderr), 128 + N for signal N
     (SIGINT, SIGTERM, SIGHUP; SIGPIPE when stdout is closed early)."""
@@ -98,13 +103,13 @@ def main(argv: list[str] | None = None) -> int:
     except (GBViewerError, OSError) as exc:
         if args.debug:
             raise
-        print(f"gbviewer: error: {exc}", file=sys.stderr)
+        print(f"gbviewer: error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except MemoryError as exc:  # beyond the estimate render.budget refuses before a frame (e.g. long tile lists)
         if args.debug:
             raise
-        print(f"gbviewer: error: out of memory ({exc or 'MemoryError'}); render smaller, or see {BUDGET_ENV}",
-              file=sys.stderr)
+        print(f"gbviewer: error: out of memory ({one_line(str(exc)) or 'MemoryError'}); render smaller, or see "
+              f"{BUDGET_ENV}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
         signum = exc.signum if isinstance(exc, Terminated) else signal.SIGINT
