@@ -160,7 +160,7 @@ def render(
     **options,
 ) -> Frame:
     """Render `scene` from `camera` in `mode` on `backend` (cpu, glsl, cuda, or auto: `choose_backend()`'s pick);
-    `options`: depth_correct, et_grade, cell_size, threads, lod.
+    `options`: depth_correct, et_grade, cell_size, threads, lod, seed and frame (stochastic).
     `cancel`: a gbviewer.CancelToken (or a threading.Event); once set, the call raises RenderCancelled within one
     tile batch. `on_progress`: called as fn(done_tiles, total_tiles) from the rendering thread (an exception it raises
     cancels the render: CallbackError, chained to it). `partial`: a float32 (height, width, 3) array that receives

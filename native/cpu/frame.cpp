@@ -270,6 +270,7 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
         job.width = fr.cam->width;
         job.mode = fr.mode;
         job.oit = fr.oit;
+        job.frame_key = fr.frame_key;
         for (int c = 0; c < 3; ++c) job.bg[c] = fr.bg[c];
         const int gx = (fr.cam->width + TILE - 1) / TILE;
         const int num_tiles = (int)fr.buf->tile_start.size() - 1;
@@ -298,7 +299,7 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
 }
 
 PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
-                             const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N) {
+                             uint32_t frame_key, const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N) {
     Stats st;
     const Control none;
     FrameRun run(none, 1);
@@ -306,7 +307,7 @@ PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const
     splat_boxes(buf.splats, mode, buf.boxes, run);
     const CameraParams& cam = stage.key.cam;
     FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.ids.data(), cam.width,
-                        cam.height, mode, oit, {bg[0], bg[1], bg[2]}};
+                        cam.height, mode, oit, {bg[0], bg[1], bg[2]}, frame_key};
     FlushDenormals ftz;
     return trace_pixel(lists, x, y, N);
 }

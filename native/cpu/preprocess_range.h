@@ -360,6 +360,7 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
             s.log_min_alpha = out.log_min_alpha(o[3][j]);
             s.radius = o[13][j];
             s.cell = job.cell_of ? job.cell_of[i] : -1;
+            s.id = (int32_t)i;
             job.rects[i] = TileRect{rb[0][j], rb[1][j], rb[2][j], rb[3][j]};
         }
     }

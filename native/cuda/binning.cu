@@ -40,6 +40,7 @@ __global__ void __launch_bounds__(THREADS)
                              cell_of ? cell_of[i] : -1};
             TileRect r;
             if (finish_splat(in, stage[i], sh_deg, cam, mode, oit, gx, gy, &splats[i], &r)) {
+                splats[i].id = (int32_t)i;
                 count = (uint32_t)((r.x1 - r.x0) * (r.y1 - r.y0));
                 rects[i] = r;
                 valid = true;

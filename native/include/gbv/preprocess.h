@@ -68,7 +68,7 @@ GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLan
     // the mode's 2D filter, opacity compensation, view weight and cut-off
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
-    if (mode == SCALAR) {
+    if (mode == SCALAR || mode == STOCHASTIC) {  // stochastic keeps fragments with scalar's alpha
         scalar_filter<L>(oit, cov, opacity, ok);
     } else if (mode == MIP) {
         const F eps = L::set(1e-6f);
@@ -184,6 +184,7 @@ GBV_HD bool finish_splat(const SplatIn& in, const StageSplat& stage, int sh_deg,
     out->inv_sigma2 = o.inv_sigma2;
     out->radius = o.radius;
     out->cell = in.cell;
+    out->id = -1;  // the caller's (the splat's index)
     return true;
 }
 
