@@ -12,8 +12,9 @@
 // the image.
 //
 // Compiled once per mode and sampling: the driver defines BLEND_MODE_<MODE> (SCALAR, MIP, ANALYTIC,
-// GAUSSIAN_BLENDING, WSR or DUPLEX) and SUPERSAMPLED (0 or 1). wsr walks index-ordered lists with no early
-// termination; duplex walks cell-sorted lists, reads each splat's cell from `cell_of` and uses `oit`.
+// GAUSSIAN_BLENDING, WSR, DUPLEX or STOCHASTIC) and SUPERSAMPLED (0 or 1). wsr walks index-ordered lists with no
+// early termination; duplex walks cell-sorted lists, reads each splat's cell from `cell_of` and uses `oit`;
+// stochastic hashes each sample's (seed, frame, X, Y) with the splat's index (stochastic.h).
 #include "common.glsl"
 #include "mathf.glsl"
 #include "blend.glsl"
@@ -31,6 +32,8 @@ const int MODE = GAUSSIAN_BLENDING;
 const int MODE = WSR;
 #elif defined(BLEND_MODE_DUPLEX)
 const int MODE = DUPLEX;
+#elif defined(BLEND_MODE_STOCHASTIC)
+const int MODE = STOCHASTIC;
 #endif
 
 layout(local_size_x = 16, local_size_y = 16) in;
@@ -58,6 +61,7 @@ uniform int store_state;
 uniform int load_accum;
 uniform int store_accum;
 uniform vec4 oit;  // OitParams: components OIT_* (interface.glsl)
+uniform uvec2 stochastic;  // stochastic: seed, frame index (stochastic.h)
 
 shared Splat2D batch[256];
 shared int done_count;
@@ -94,6 +98,10 @@ void main() {
         const int n = int(range.y - range.x);
         const int begin = min(n, chunk_begin), end = min(n, chunk_end);
         const vec2 pix = vec2(rpix) + 0.5;
+#if defined(BLEND_MODE_STOCHASTIC)
+        const uint key = stochastic_sample_key(stochastic_frame_key(stochastic.x, stochastic.y), uint(rpix.x),
+                                               uint(rpix.y));
+#endif
 #if defined(BLEND_MODE_GAUSSIAN_BLENDING)
         TransmittanceWindow win = TransmittanceWindow(1.0, pix, vec2(1.0, 1.0));
 #elif defined(BLEND_MODE_WSR)
@@ -139,6 +147,7 @@ void main() {
 #if defined(BLEND_MODE_DUPLEX)
                 batch[lid].cell = cell_of[s];
 #endif
+                batch[lid].id = int(s);
             }
             memoryBarrierShared();
             barrier();  // batch loaded; nobody changes done_count before everyone has read it
@@ -155,6 +164,8 @@ void main() {
                     const bool finished = blend_duplex(batch[j], pix, oit[OIT_ET_GRADE], dst);
 #elif defined(BLEND_MODE_ANALYTIC)
                     const bool finished = blend_analytic(batch[j], pix, T, C);
+#elif defined(BLEND_MODE_STOCHASTIC)
+                    const bool finished = blend_stochastic(batch[j], pix, key, T, C);
 #else
                     const bool finished = blend_scalar(batch[j], pix, T, C);
 #endif

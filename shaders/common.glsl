@@ -9,6 +9,7 @@ const int ANALYTIC = 2;
 const int GAUSSIAN_BLENDING = 3;
 const int WSR = 4;
 const int DUPLEX = 5;
+const int STOCHASTIC = 6;
 
 const int PERSPECTIVE = 0;
 const int ORTHOGRAPHIC = 1;
@@ -71,6 +72,7 @@ struct Splat2D {
     float log_min_alpha;
     float radius;
     int cell;
+    int id;
 };
 
 // port of common.h: OitParams

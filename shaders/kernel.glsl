@@ -35,6 +35,7 @@ Splat2D unpack_splat(vec4 p0, vec4 p1, vec4 p2, vec4 p3) {
     s.log_min_alpha = p3.z;
     s.radius = p3.w;
     s.cell = -1;
+    s.id = -1;  // blend.comp sets the splat's index
     return s;
 }
 

@@ -351,7 +351,7 @@ class GlslRenderer(Renderer):
         accum = gpu.ensure("blend_accum", invocations * gi.BLEND_ACCUM_VEC4S * VEC4, "blend sums")
         prog = gpu.program("blend.comp", **{f"BLEND_MODE_{settings.mode.name}": 1, "SUPERSAMPLED": int(N > 1)})
         gpu.set(prog, out_size=(W, H), supersample=N, grid=(gx, gy), background=tuple(settings.background),
-                  want_window=int(want_window), oit=oit)
+                  want_window=int(want_window), oit=oit, stochastic=(settings.seed, settings.frame))
         cell_of = gpu.buffers["cell_of"] if settings.mode == Mode.DUPLEX else gpu.ensure("dummy", VEC4)
         for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of)):
             buf.bind_to_storage_buffer(i)

@@ -1,0 +1,105 @@
+"""The stochastic mode (native/include/gbv/stochastic.h): a fixed seed and frame reproduce bit for bit, other frames
+and seeds are other samples, the mean over frames is the float64 expectation (alpha blending in depth order,
+tests/reference_stochastic.py) within its sampling error, `stochastic:N` converges to `scalar:N`, and every SIMD path
+and the GLSL port make the same decisions but where float rounding puts alpha on the other side of the uniform."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import random_view
+from reference import box_down
+from reference_stochastic import expectation
+from test_simd import VECTOR_PATHS, render
+
+import gbviewer as gb
+from gbviewer.render import Mode, RenderSettings
+
+BACKGROUND = (0.2, 0.3, 0.4)
+FRAMES = 256
+SIGMAS = 6.0  # |mean - E| <= 6 sigma / sqrt(M) per pixel and channel: P(fail) < 2e-9 each, < 1e-4 per test
+BIAS = 2e-6  # P(u < alpha) is alpha rounded up to the 2^-24 grid, plus float32 alpha and colour rounding
+
+
+def _scene(seed=2):
+    return random_view(seed, sh_degree=1, W=40, H=32, max_px_sigma=3.0)
+
+
+def _mean(scene, cam, supersample, frames=FRAMES, seed=0):
+    frames_rgb = [gb.render(scene, cam, mode="stochastic", supersample=supersample, background=BACKGROUND,
+                            seed=seed, frame=f).rgb.astype(np.float64) for f in range(frames)]
+    return np.mean(frames_rgb, axis=0)
+
+
+def test_seed_and_frame_reproduce_bit_for_bit_and_vary():
+    scene, cam = _scene()
+    a = gb.render(scene, cam, mode="stochastic", seed=7, frame=3)
+    b = gb.render(scene, cam, mode="stochastic", seed=7, frame=3)
+    assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.alpha, b.alpha)
+    assert set(np.unique(a.alpha)) <= {0.0, 1.0}  # kept fragments are opaque: a sample is covered or not
+    for other in ({"seed": 7, "frame": 4}, {"seed": 8, "frame": 3}):
+        c = gb.render(scene, cam, mode="stochastic", **other)
+        assert (np.abs(c.rgb - a.rgb).max(axis=2) > 0).mean() > 0.05, other
+
+
+def test_mean_over_frames_is_depth_ordered_alpha_blending():
+    """Per pixel, the mean of M frames is E (reference_stochastic.expectation) within 6 sigma / sqrt(M), sigma the
+    sample's standard deviation computed from the same reference; and it is no closer to E by chance: the
+    normalised errors have about unit variance."""
+    scene, cam = _scene()
+    mean = _mean(scene, cam, 1)
+    E, var = expectation(scene, cam, 1, BACKGROUND)
+    err = np.abs(mean - E)
+    bound = SIGMAS * np.sqrt(var / FRAMES) + BIAS
+    assert (err <= bound).all(), f"max excess {(err - bound).max():.3g}"
+    z = (mean - E)[var > 1e-4] / np.sqrt(var[var > 1e-4] / FRAMES)
+    assert z.size > 500 and 0.7 < z.std() < 1.3, z.std()
+
+
+def test_supersampled_converges_to_scalar_n():
+    """stochastic:2 is four independent samples per pixel: its mean is the box average of the samples' expectations
+    (scalar:2's alpha blending, without the early stop), within the box mean's sampling error; and the float32
+    scalar:2 render lies within its early stop (T < 1e-4) of that expectation."""
+    scene, cam = _scene(5)
+    n = 2
+    mean = _mean(scene, cam, n, frames=128)
+    E, var = expectation(scene, cam, n, BACKGROUND)
+    E_out, var_out = box_down(E, n), box_down(var, n) / (n * n)
+    assert (np.abs(mean - E_out) <= SIGMAS * np.sqrt(var_out / 128) + BIAS).all()
+    scalar = gb.render(scene, cam, mode="scalar", supersample=n, background=BACKGROUND).rgb
+    assert np.abs(scalar - E_out).max() < 2e-3
+
+
+@pytest.mark.parametrize("path", VECTOR_PATHS)
+def test_vector_paths_make_the_scalar_paths_decisions(path):
+    """The decisions are the same integer hash on every path; only alpha's exp differs in its last bits, so a pixel
+    may differ only where some fragment's uniform lies within float rounding of its alpha: a handful of pixels."""
+    scene, cam = _scene()
+    for supersample in (1, 2):
+        for frame in range(4):
+            kw = dict(background=BACKGROUND, frame=frame)
+            ref = render("scalar", scene, cam, "stochastic", supersample, **kw)
+            vec = render(path, scene, cam, "stochastic", supersample, **kw)
+            assert vec.stats.simd == path and ref.stats.simd == "scalar"
+            differ = np.abs(vec.rgb - ref.rgb).max(axis=2) > 1e-5
+            assert differ.sum() <= 2 + 2e-3 * differ.size, (supersample, frame, differ.sum())
+
+
+def test_trace_names_discarded_fragments():
+    scene, cam = _scene()
+    frame = gb.render(scene, cam, mode="stochastic")
+    y, x = np.unravel_index(np.argmax(frame.alpha > 0), frame.alpha.shape)
+    trace = gb.get_renderer(scene, "cpu").trace(cam, RenderSettings(Mode.STOCHASTIC), int(x), int(y))
+    rejected = [step.rejected for sample in trace.samples for step in sample.steps]
+    assert "" in rejected  # the kept fragment
+    assert all(r in ("", "discarded", "outside_box", "invalid_exponent", "below_cutoff", "alpha_below_min",
+                     "terminated") for r in rejected)
+
+
+def test_settings_and_spec():
+    s = RenderSettings.parse("stochastic:3", seed=5, frame=9)
+    assert (s.mode, s.supersample, s.seed, s.frame, s.spec) == (Mode.STOCHASTIC, 3, 5, 9, "stochastic:3")
+    with pytest.raises(gb.RenderError, match="seed"):
+        RenderSettings(Mode.STOCHASTIC, seed=-1)
+    with pytest.raises(gb.RenderError, match="frame"):
+        RenderSettings(Mode.STOCHASTIC, frame=2**32)
