@@ -14,9 +14,10 @@ from reference import _tile_lists
 from reference_preprocess import MIN_ALPHA_3DGS, TILE, preprocess
 
 
-def expectation(scene, cam, supersample: int = 1, background=(0.0, 0.0, 0.0)):
-    """Per sample of the N x N supersampled grid: (mean rgb (H,W,3), variance (H,W,3)) of one stochastic sample."""
-    pre = preprocess(scene, cam, "scalar", supersample)
+def expectation(scene, cam, supersample: int = 1, background=(0.0, 0.0, 0.0), view_filter: dict | None = None):
+    """Per sample of the N x N supersampled grid: (mean rgb (H,W,3), variance (H,W,3)) of one stochastic sample
+    (`view_filter`: a preset's 2D filter, as reference.render_full_res takes it)."""
+    pre = preprocess(scene, cam, "scalar", supersample, view_filter=view_filter)
     W, H = pre["W"], pre["H"]
     bg = np.asarray(background, np.float64)
     mean = np.zeros((H, W, 3))

@@ -13,6 +13,9 @@ viewer it does not model (their sort order, support radius and quantisation stay
   src/ui/view-panel.ts (SH bands slider, default 3) | +0.3, cull lambda_max < 0.5, SH 3 |
 | spark | sparkjsdev/spark: src/SparkRenderer.ts (preBlurAmount ?? 0.0, blurAmount ?? 0.3), src/shaders/splatVertex.glsl
   (a += preBlurAmount; detOrig; a += blurAmount; alpha *= sqrt(max(0, detOrig / det))) | as gsplat-antialiased |
+| spark-stochastic | sparkjsdev/spark: src/shaders/splatFragment.glsl (#ifdef STOCHASTIC: uniform from a hash of time,
+  pixel and splat index; kept when below alpha, written opaque; SparkViewpoint.stochastic) | the stochastic mode with
+  spark's filter |
 | antimatter15 | antimatter15/splat: main.js (the vertex shader adds nothing to cov2d; .splat rows hold an 8-bit colour,
   no SH) | +0, SH 0 |
 """
@@ -59,6 +62,11 @@ PRESETS = {p.name: p for p in (
     Preset("spark", "scalar", 3, ViewFilter(0.3, pre_dilation=0.0, compensate=True),
            "sparkjsdev/spark src/SparkRenderer.ts (preBlurAmount 0.0, blurAmount 0.3), src/shaders/splatVertex.glsl",
            "maxStdDev sqrt(8) support, minAlpha 0.5/255, radial sort, clipXY 1.4, packed splat encoding"),
+    Preset("spark-stochastic", "stochastic", 3, ViewFilter(0.3, pre_dilation=0.0, compensate=True),
+           "sparkjsdev/spark src/shaders/splatFragment.glsl (STOCHASTIC: a hash of time, gl_FragCoord and the splat "
+           "index; rand < alpha writes the colour opaque, else discard), the spark preset's filter",
+           "its PCG-style hash (ours is stochastic.h's), a time-based rather than frame-index seed, the spark "
+           "preset's list"),
     Preset("antimatter15", "scalar", 0, ViewFilter(0.0),
            "antimatter15/splat main.js (no term added to cov2d; .splat colour only)",
            "its 2 sqrt(2) sigma quad, no 1/255 cutoff, 8-bit colour, opacity and quaternion, float16 covariance"),

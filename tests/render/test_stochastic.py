@@ -5,6 +5,8 @@ and the GLSL port make the same decisions but where float rounding puts alpha on
 
 from __future__ import annotations
 
+from dataclasses import asdict
+
 import numpy as np
 import pytest
 from helpers import random_view
@@ -15,6 +17,7 @@ from test_simd import VECTOR_PATHS, render
 
 import gbviewer as gb
 from gbviewer.render import Mode, RenderSettings
+from gbviewer.render.presets import PRESETS
 
 BACKGROUND = (0.2, 0.3, 0.4)
 FRAMES = 256
@@ -26,8 +29,8 @@ def _scene(seed=2):
     return random_view(seed, sh_degree=1, W=40, H=32, max_px_sigma=3.0)
 
 
-def _mean(scene, cam, supersample, frames=FRAMES, seed=0):
-    frames_rgb = [gb.render(scene, cam, mode="stochastic", supersample=supersample, background=BACKGROUND,
+def _mean(scene, cam, supersample, frames=FRAMES, seed=0, mode="stochastic"):
+    frames_rgb = [gb.render(scene, cam, mode=mode, supersample=supersample, background=BACKGROUND,
                             seed=seed, frame=f).rgb.astype(np.float64) for f in range(frames)]
     return np.mean(frames_rgb, axis=0)
 
@@ -118,3 +121,15 @@ def test_glsl_makes_the_cpus_decisions(gl):
             assert glsl.stats.backend == "glsl"
             differ = np.abs(glsl.rgb - cpu.rgb).max(axis=2) > 1e-5
             assert differ.sum() <= 2 + 2e-3 * differ.size, (supersample, frame, differ.sum())
+
+
+def test_spark_stochastic_preset_is_the_expectation_with_sparks_filter():
+    """preset:spark-stochastic keeps fragments with spark's filtered alpha: its mean over frames is the expectation
+    computed with that filter, and not the one without it (the filter's compensation changes alphas by far more than
+    the sampling error)."""
+    scene, cam = _scene()
+    mean = _mean(scene, cam, 1, mode="preset:spark-stochastic")
+    E, var = expectation(scene, cam, 1, BACKGROUND, asdict(PRESETS["spark-stochastic"].view_filter))
+    assert (np.abs(mean - E) <= SIGMAS * np.sqrt(var / FRAMES) + BIAS).all()
+    E_plain, _ = expectation(scene, cam, 1, BACKGROUND)
+    assert (np.abs(mean - E_plain) > SIGMAS * np.sqrt(var / FRAMES) + BIAS).any()
