@@ -47,6 +47,9 @@ class Preset:
         return f"{self.mode}, {self.view_filter.describe()}, SH {self.sh_degree}"
 
 
+# The modes a preset's 2D filter applies to: those whose alpha is 3DGS's at the pixel centre.
+FILTERED_MODES = ("scalar", "stochastic", "stochastic_popfree")
+
 PRESETS = {p.name: p for p in (
     Preset("inria", "scalar", 3, ViewFilter(),
            "graphdeco-inria/diff-gaussian-rasterization cuda_rasterizer/forward.cu (computeCov2D: +0.3); SIBR's "

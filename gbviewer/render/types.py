@@ -19,7 +19,7 @@ from ..cancel import Cancellable
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, distinct_items, integer, real
-from .presets import PRESETS
+from .presets import FILTERED_MODES, PRESETS
 from .view_filter import ViewFilter
 
 
@@ -33,6 +33,7 @@ class Mode(enum.IntEnum):
     WSR = 4  # sort-free weighted sum (LC-WSR, Hou et al.): order independent, no sort
     DUPLEX = 5  # Duplex-GS: cells sorted, weighted sum inside a cell, cell transmittance and early termination
     STOCHASTIC = 6  # stochastic transparency (StochasticSplats ST): fragments kept with probability alpha, opaque
+    STOCHASTIC_POPFREE = 7  # its pop-free variant (ST-popfree): depth-tested on each splat's per-pixel depth plane
 
     @classmethod
     def parse(cls, value: "str | int | Mode") -> "Mode":
@@ -58,7 +59,6 @@ DEBUG_OUTPUTS = ("none", "window")
 ORDER_INDEPENDENT = (Mode.WSR, Mode.DUPLEX)
 DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (KERNELS.md §8.1)
 DEFAULT_SIGMA = 10.0  # sort-free GS's initial sigma, for depth correction on scenes without a trained one
-SCALAR_FILTERED = (Mode.SCALAR, Mode.STOCHASTIC)  # the modes whose alpha is 3DGS's, with the viewer presets' filter
 MAX_SUPERSAMPLE = 8
 MAX_THREADS = 1024
 MAX_CELL_SIZE = 1 << 20
@@ -96,8 +96,8 @@ class RenderSettings:
     lod: float | None = None  # level of detail: draw the hierarchy's cut at this many pixels (None: every splat)
     view_filter: ViewFilter = ViewFilter()
     preset: str = ""
-    seed: int = 0  # stochastic: the keep decisions' hash seed (gbv/stochastic.h): same seed and frame, same bits
-    frame: int = 0  # stochastic: the frame index (another index, another sample)
+    seed: int = 0  # stochastic modes: the keep decisions' hash seed (gbv/stochastic.h); same seed and frame, same bits
+    frame: int = 0  # stochastic modes: the frame index (another index, another sample)
 
     def __post_init__(self) -> None:
         """Every number checked through gbviewer.validate (the native renderers take them as int32 and float32);
@@ -124,7 +124,7 @@ class RenderSettings:
         object.__setattr__(self, "depth_correct", bool(self.depth_correct))
         if not isinstance(self.view_filter, ViewFilter):
             raise RenderError(f"view_filter {self.view_filter!r}; expected a gbviewer.render.ViewFilter")
-        if self.mode not in SCALAR_FILTERED and not self.view_filter.is_default:
+        if self.mode.label not in FILTERED_MODES and not self.view_filter.is_default:
             raise RenderError(f"view_filter {self.view_filter.describe()} is not for {self.mode.label}")
 
     def label_for(self, scene: Scene, lod_counts: tuple[int, int] | None = None) -> str:

@@ -56,7 +56,7 @@ inline void check_view(const char* where, const FArr& R, const FArr& t, const FA
 }
 
 inline Mode check_mode(const char* where, int mode) {
-    if (mode < SCALAR || mode > STOCHASTIC) fail(where, "unknown mode");
+    if (mode < SCALAR || mode > STOCHASTIC_POPFREE) fail(where, "unknown mode");
     return (Mode)mode;
 }
 

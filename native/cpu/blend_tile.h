@@ -297,6 +297,22 @@ void group_stochastic(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     L::store(st.T, out.T);
 }
 
+// stochastic_popfree: the same keys; every lane walks the whole list, depth-testing its kept fragments.
+template <class L, class Tr>
+void group_popfree(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
+    uint32_t keys[L::N];
+    for (int k = 0; k < L::N; ++k) keys[k] = stochastic_sample_key(job.frame_key, (uint32_t)(g.x + k), (uint32_t)g.y);
+    const typename L::F zero = L::set(0.0f);
+    PopfreeState<L> st = {L::set(1.0f), L::set(-std::numeric_limits<float>::infinity()), {zero, zero, zero}};
+    walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
+        blend_stochastic_popfree<L, Tr>(s, g.px, g.py, live, keys, st);
+        GBV_TRACE(Tr, after(st));
+        return L::none();
+    });
+    for (int c = 0; c < 3; ++c) L::store(st.C[c], out.C[c]);
+    L::store(st.T, out.T);
+}
+
 template <class L, class Tr>
 void group_wsr(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     WsrSumsN<L::N> acc = {};
@@ -363,6 +379,7 @@ void blend_tile(const TileJob& job) {
                 case WSR: tile::group_wsr<L, Tr>(job, g, out); break;
                 case DUPLEX: tile::group_duplex<L, Tr>(job, g, out); break;
                 case STOCHASTIC: tile::group_stochastic<L, Tr>(job, g, out); break;
+                case STOCHASTIC_POPFREE: tile::group_popfree<L, Tr>(job, g, out); break;
                 default: tile::group_alpha<L, Tr>(job, g, out); break;
             }
             for (int k = 0; k < g.count; ++k) {

@@ -221,7 +221,8 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
     rects.resize(n);
     valid.resize(n);
     // in blocks of PREPROCESS_BLOCK splats through the SIMD path's finish (bit-identical on every path)
-    const FinishJob job{sc.means, sc.weight_sh, sc.weight_k, mode == DUPLEX ? sc.cell_of.data() : nullptr,
+    const FinishJob job{sc.means, sc.scales, sc.quats, sc.filter_3d, sc.weight_sh, sc.weight_k,
+                        mode == DUPLEX ? sc.cell_of.data() : nullptr,
                         stage.key.sh_deg, cam, mode, oit, gx, gy, stage.splats.data(), stage.valid.data(),
                         splats.data(), rects.data(), valid.data()};
     for_blocks(n, run, [&](int64_t begin, int64_t end) { path.finish(job, begin, end); });

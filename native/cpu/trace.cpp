@@ -62,6 +62,7 @@ struct PixelTracer {
         for (int k = 0; k < 4; ++k) log->window[k] = log->last().window[k] = win[k];
         log->T = log->last().T_after = w.T;
     }
+    static void after(const PopfreeState<Lanes1>& st) { log->T = log->last().T_after = st.T; }
     static void after(const DuplexLanes<Lanes1>& d) {
         log->T = log->last().T_after = d.T;
         log->T_cell = log->last().T_cell = d.T_cell;

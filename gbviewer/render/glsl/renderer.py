@@ -54,7 +54,8 @@ from ...errors import BackendUnavailable, RenderError
 from ...scene import Scene
 from ..control import Progress, RenderControl
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
-from ..types import SCALAR_FILTERED, Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
+from ..presets import FILTERED_MODES
+from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
 from ..view_filter import DILATION_3DGS
 from .binning import bin_duplex, bin_splats, read_totals
 from .context import check_context, standalone_context
@@ -319,7 +320,7 @@ class GlslRenderer(Renderer):
         frame's 2D filter adds, at least 3DGS's +0.3: stage_reach in preprocess_stage.h) changed."""
         gpu = self.gpu
         stage = gpu.ensure("stage", n * gi.STAGE_VEC4S * VEC4, "per-camera stage")
-        vf = settings.view_filter.native() if settings.mode in SCALAR_FILTERED else np.zeros(2, np.float32)
+        vf = settings.view_filter.native() if settings.mode.label in FILTERED_MODES else np.zeros(2, np.float32)
         reach = float(max(np.float32(DILATION_3DGS), vf[0] + vf[1]))  # gbv::stage_reach, in float32
         camera_bytes = tuple(np.asarray(v).tobytes() for v in cam_uniforms.values())
         key = (self._generation, camera_bytes, sh_deg, reach)

@@ -10,12 +10,19 @@
 // per-fragment depth order without early termination. Every sample of an N x N supersampled pixel (the sub-pixel
 // (X, Y) of the supersampled grid) decides on its own, so `stochastic:N` converges to `scalar:N`.
 //
+// `stochastic_popfree` (StochasticSplats' ST-popfree, shader/splat_vert_ST_popfree.glsl) keeps the same fragments
+// but depth-tests them at their depth along the pixel's ray on the splat's depth plane (popfree.h): per pixel, the
+// nearest kept fragment in that order, which is the order of the depths of maximum response along the ray to first
+// order about the mean, and does not change when centre depths swap. The whole list is walked (no early stop).
+// E[C] is then alpha blending in that per-pixel order.
+//
 // The decision u < alpha takes u from a hash of (seed, frame, X, Y, splat id): deterministic for a given seed and
 // frame, stable for a splat under camera motion within a frame index (the splat id, not its list position, is
 // hashed, as PlayCanvas and Spark hash it: sparkjsdev/spark src/shaders/splatFragment.glsl).
 #pragma once
 
 #include "blend.h"
+#include "popfree.h"
 
 namespace gbv {
 
@@ -78,6 +85,48 @@ GBV_HD typename L::M blend_stochastic(const Splat2D& s, typename L::F px, typena
     return kept;
 }
 
+// Per-lane state of stochastic_popfree: the kept fragment's colour, T (1 until a fragment is kept, then 0) and its
+// depth key (larger is nearer; -inf before any, so that a fragment at the lowest key, -FLT_MAX, can be kept).
+template <class L>
+struct PopfreeState {
+    typename L::F T, key, C[3];
+};
+
+// One splat of stochastic_popfree: blend_stochastic's keep decision, then the depth test against the lane's nearest
+// kept fragment at the pixel's point of the splat's depth plane. Never stops a lane.
+template <class L, class Tr = NoTrace>
+GBV_HD void blend_stochastic_popfree(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
+                                     const uint32_t* keys, PopfreeState<L>& st) {
+    using F = typename L::F;
+    using M = typename L::M;
+    const F power = gaussian_power<L>(s, L::set(s.xy.x) - px, L::set(s.xy.y) - py);
+    M pass = L::and_(live, L::and_(power <= L::set(0.0f), power >= L::set(s.log_min_alpha)));
+    GBV_TRACE(Tr, skip(L::and_not(live, power <= L::set(0.0f)), SKIP_POWER));
+    GBV_TRACE(Tr, skip(L::and_not(live, pass), SKIP_CUTOFF));
+    if (!L::any(pass)) return;
+    const F alpha = L::min(L::set(s.opacity) * L::exp(L::select(pass, power, L::set(0.0f))), L::set(MAX_ALPHA));
+    GBV_TRACE(Tr, alpha(pass, alpha));
+    GBV_TRACE(Tr, skip(L::and_(pass, alpha < L::set(MIN_ALPHA_3DGS)), SKIP_ALPHA));
+    pass = L::and_not(pass, alpha < L::set(MIN_ALPHA_3DGS));
+    const uint32_t bits = L::bits(pass);
+    if (!bits) return;
+    const uint32_t splat_key = stochastic_splat_key(s.id);
+    float u[L::N];
+    GBV_UNROLL
+    for (int k = 0; k < L::N; ++k) u[k] = (bits >> k) & 1u ? stochastic_uniform(keys[k], splat_key) : 1.0f;
+    const M kept = L::and_(pass, L::load(u) < alpha);
+    GBV_TRACE(Tr, skip(L::and_not(pass, kept), SKIP_DISCARD));
+    // 1/z or -z on the plane; NaN (a splat without a plane: a needle, c = 0) is behind every plane
+    F key = (L::set(s.popfree[0]) * px + L::set(s.popfree[1]) * py + L::set(s.popfree[2])) / L::set(s.popfree[3]);
+    key = L::select(key == key, key, L::set(-3.402823466e38f));
+    const M nearer = L::and_(kept, key > st.key);
+    GBV_TRACE(Tr, skip(L::and_not(kept, nearer), SKIP_DEPTH));
+    GBV_TRACE(Tr, weight(nearer, L::set(1.0f)));
+    for (int c = 0; c < 3; ++c) st.C[c] = L::select(nearer, L::set(s.color[c]), st.C[c]);
+    st.T = L::select(nearer, L::set(0.0f), st.T);
+    st.key = L::select(nearer, key, st.key);
+}
+
 // One pixel (CUDA's per-thread loop; the GLSL port has this name): the sample key `key`, T and C as blend_scalar's.
 GBV_HD bool blend_stochastic(const Splat2D& s, Vec2 pix, uint32_t key, float& T, float C[3]) {
     AlphaState<Lanes1> st = {T, {C[0], C[1], C[2]}};
@@ -85,6 +134,14 @@ GBV_HD bool blend_stochastic(const Splat2D& s, Vec2 pix, uint32_t key, float& T,
     T = st.T;
     for (int c = 0; c < 3; ++c) C[c] = st.C[c];
     return stop;
+}
+
+GBV_HD void blend_stochastic_popfree(const Splat2D& s, Vec2 pix, uint32_t key, float& T, float& depth_key, float C[3]) {
+    PopfreeState<Lanes1> st = {T, depth_key, {C[0], C[1], C[2]}};
+    blend_stochastic_popfree<Lanes1>(s, pix.x, pix.y, true, &key, st);
+    T = st.T;
+    depth_key = st.key;
+    for (int c = 0; c < 3; ++c) C[c] = st.C[c];
 }
 
 }  // namespace gbv
