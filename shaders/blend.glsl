@@ -64,6 +64,22 @@ bool blend_stochastic(Splat2D s, vec2 pix, uint key, inout float T, inout vec3 C
     return true;
 }
 
+// port of stochastic.h: blend_stochastic_popfree (one pixel: T, the nearest kept fragment's depth key, C)
+void blend_stochastic_popfree(Splat2D s, vec4 plane, vec2 pix, uint key, inout float T, inout float depth_key,
+                              inout vec3 C) {
+    const float power = gaussian_power(s, s.xy - pix);
+    if (!(power <= 0.0 && power >= s.log_min_alpha)) return;  // NaN rejects
+    const float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
+    if (alpha < MIN_ALPHA_3DGS) return;
+    if (!(stochastic_uniform(key, stochastic_splat_key(s.id)) < alpha)) return;
+    float k = (plane.x * pix.x + plane.y * pix.y + plane.z) / plane.w;
+    if (isnan(k)) k = -3.402823466e38;  // a splat without a plane is behind every plane
+    if (!(k > depth_key)) return;
+    C = s.color;
+    T = 0.0;
+    depth_key = k;
+}
+
 // port of gaussian.h: approx_cdf
 float approx_cdf(float x) { return 1.0 / (1.0 + expf(-(1.6 * x + 0.07 * x * x * x))); }
 

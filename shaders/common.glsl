@@ -10,6 +10,10 @@ const int GAUSSIAN_BLENDING = 3;
 const int WSR = 4;
 const int DUPLEX = 5;
 const int STOCHASTIC = 6;
+const int STOCHASTIC_POPFREE = 7;
+
+// port of common.h: view_filtered
+bool view_filtered(int mode) { return mode == SCALAR || mode == STOCHASTIC || mode == STOCHASTIC_POPFREE; }
 
 const int PERSPECTIVE = 0;
 const int ORTHOGRAPHIC = 1;

@@ -75,6 +75,7 @@ struct TileJob {
     int32_t* evals;
     const Bands* bands;  // the list's row bands, or null: every group walks the whole list
     uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
+    const DepthPlane* planes;  // stochastic_popfree: per splat (Splat2D::id), else null
 };
 
 using BlendTileFn = void (*)(const TileJob&);
@@ -305,7 +306,7 @@ void group_popfree(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     const typename L::F zero = L::set(0.0f);
     PopfreeState<L> st = {L::set(1.0f), L::set(-std::numeric_limits<float>::infinity()), {zero, zero, zero}};
     walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
-        blend_stochastic_popfree<L, Tr>(s, g.px, g.py, live, keys, st);
+        blend_stochastic_popfree<L, Tr>(s, job.planes[s.id], g.px, g.py, live, keys, st);
         GBV_TRACE(Tr, after(st));
         return L::none();
     });

@@ -275,7 +275,7 @@ size_t Renderer::buffer_bytes() const {
     for (const FrameBuffers& b : impl_->buffers)
         bytes += b.splats.capacity() * sizeof(Splat2D) + b.rects.capacity() * sizeof(TileRect) + b.valid.capacity() +
                  b.tile_start.capacity() * sizeof(int64_t) + b.ids.capacity() * sizeof(uint32_t) +
-                 b.boxes.capacity() * sizeof(SplatBounds);
+                 b.boxes.capacity() * sizeof(SplatBounds) + b.planes.capacity() * sizeof(DepthPlane);
     for (const Stage& s : impl_->stages) bytes += s.bytes();
     return bytes;
 }

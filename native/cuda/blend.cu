@@ -14,7 +14,8 @@ constexpr int BLOCK = TILE * TILE;
 template <int M>
 __global__ void __launch_bounds__(BLOCK)
     render_kernel(const uint2* ranges, const uint32_t* values, const Splat2D* splats, int W, int H, int gx,
-                  float3 bg, OitParams oit, uint32_t frame_key, float* rgb, float* alpha, int32_t* evals, float* window) {
+                  float3 bg, OitParams oit, uint32_t frame_key, const DepthPlane* planes, float* rgb, float* alpha, int32_t* evals,
+                  float* window) {
     __shared__ Splat2D batch[BLOCK];
     const int tile = blockIdx.x;
     const int x = (tile % gx) * TILE + threadIdx.x, y = (tile / gx) * TILE + threadIdx.y;
@@ -28,6 +29,7 @@ __global__ void __launch_bounds__(BLOCK)
     WsrSums wsr = {{0, 0, 0}, 0};
     DuplexState dst = {1.0f, 1.0f, -1, 0.0f, {0.0f, 0.0f, 0.0f}};
     const uint32_t key = stochastic_sample_key(frame_key, x, y);
+    float depth_key = -INFINITY;  // stochastic_popfree: the nearest kept fragment's (stochastic.h)
     int32_t ev = 0;
     for (uint32_t start = range.x; start < range.y; start += BLOCK) {
         if (__syncthreads_count(done) == BLOCK) break;
@@ -44,6 +46,8 @@ __global__ void __launch_bounds__(BLOCK)
                 done = blend_duplex(batch[j], pix, oit.et_grade, dst);
             else if (M == STOCHASTIC)
                 done = blend_stochastic(batch[j], pix, key, T, C);
+            else if (M == STOCHASTIC_POPFREE)
+                blend_stochastic_popfree(batch[j], planes[batch[j].id], pix, key, T, depth_key, C);
             else if (M == ANALYTIC)
                 done = blend_analytic(batch[j], pix, T, C);
             else
@@ -104,9 +108,11 @@ __global__ void pack_rgba_kernel(int64_t n, const float* rgb, const float* alpha
 
 template <int M>
 void launch_blend(const State& s, int num_tiles, const uint32_t* values, int W, int H, int gx, float3 bg,
-                  const OitParams& oit, uint32_t frame_key, float* win) {
-    render_kernel<M><<<num_tiles, dim3(TILE, TILE)>>>(s.ranges.ptr, values, s.splats.ptr, W, H, gx, bg, oit,
-                                                       frame_key, s.rgb.ptr, s.alpha.ptr, s.evals.ptr, win);
+                  const RenderArgs& a, float* win) {
+    const uint32_t frame_key = stochastic_frame_key(a.seed, a.frame);
+    render_kernel<M><<<num_tiles, dim3(TILE, TILE)>>>(s.ranges.ptr, values, s.splats.ptr, W, H, gx, bg, a.oit,
+                                                       frame_key, M == STOCHASTIC_POPFREE ? s.planes.ptr : nullptr,
+                                                       s.rgb.ptr, s.alpha.ptr, s.evals.ptr, win);
 }
 
 }  // namespace
@@ -123,14 +129,14 @@ void State::blend(const RenderArgs& a, int gx, int gy, const uint32_t* tile_valu
     const float3 bgc = make_float3(a.bg[0], a.bg[1], a.bg[2]);
     float* win = window_on ? window.ptr : nullptr;
     const int num_tiles = gx * gy;
-    const uint32_t key = stochastic_frame_key(a.seed, a.frame);
     switch (a.mode) {
-        case GAUSSIAN_BLENDING: launch_blend<GAUSSIAN_BLENDING>(*this, num_tiles, v, W, H, gx, bgc, a.oit, key, win); break;
-        case ANALYTIC: launch_blend<ANALYTIC>(*this, num_tiles, v, W, H, gx, bgc, a.oit, key, win); break;
-        case WSR: launch_blend<WSR>(*this, num_tiles, v, W, H, gx, bgc, a.oit, key, win); break;
-        case DUPLEX: launch_blend<DUPLEX>(*this, num_tiles, v, W, H, gx, bgc, a.oit, key, win); break;
-        case STOCHASTIC: launch_blend<STOCHASTIC>(*this, num_tiles, v, W, H, gx, bgc, a.oit, key, win); break;
-        default: launch_blend<SCALAR>(*this, num_tiles, v, W, H, gx, bgc, a.oit, key, win);
+        case GAUSSIAN_BLENDING: launch_blend<GAUSSIAN_BLENDING>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case ANALYTIC: launch_blend<ANALYTIC>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case WSR: launch_blend<WSR>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case DUPLEX: launch_blend<DUPLEX>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case STOCHASTIC: launch_blend<STOCHASTIC>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case STOCHASTIC_POPFREE: launch_blend<STOCHASTIC_POPFREE>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        default: launch_blend<SCALAR>(*this, num_tiles, v, W, H, gx, bgc, a, win);
     }
     launched("render_kernel");
     if (N > 1) {

@@ -29,8 +29,8 @@ def _scene(seed=2):
     return random_view(seed, sh_degree=1, W=40, H=32, max_px_sigma=3.0)
 
 
-def _mean(scene, cam, supersample, frames=FRAMES, seed=0, mode="stochastic"):
-    frames_rgb = [gb.render(scene, cam, mode=mode, supersample=supersample, background=BACKGROUND,
+def _mean(scene, cam, supersample, frames=FRAMES, seed=0, mode="stochastic", background=BACKGROUND):
+    frames_rgb = [gb.render(scene, cam, mode=mode, supersample=supersample, background=background,
                             seed=seed, frame=f).rgb.astype(np.float64) for f in range(frames)]
     return np.mean(frames_rgb, axis=0)
 
@@ -46,13 +46,14 @@ def test_seed_and_frame_reproduce_bit_for_bit_and_vary():
         assert (np.abs(c.rgb - a.rgb).max(axis=2) > 0).mean() > 0.05, other
 
 
-def test_mean_over_frames_is_depth_ordered_alpha_blending():
-    """Per pixel, the mean of M frames is E (reference_stochastic.expectation) within 6 sigma / sqrt(M), sigma the
-    sample's standard deviation computed from the same reference; and it is no closer to E by chance: the
-    normalised errors have about unit variance."""
+@pytest.mark.parametrize("mode", ["stochastic", "stochastic_popfree"])
+def test_mean_over_frames_is_depth_ordered_alpha_blending(mode):
+    """Per pixel, the mean of M frames is E (reference_stochastic.expectation: centre-depth order, or per pixel the
+    depth planes' order) within 6 sigma / sqrt(M), sigma the sample's standard deviation computed from the same
+    reference; and it is no closer to E by chance: the normalised errors have about unit variance."""
     scene, cam = _scene()
-    mean = _mean(scene, cam, 1)
-    E, var = expectation(scene, cam, 1, BACKGROUND)
+    mean = _mean(scene, cam, 1, mode=mode)
+    E, var = expectation(scene, cam, 1, BACKGROUND, popfree=mode == "stochastic_popfree")
     err = np.abs(mean - E)
     bound = SIGMAS * np.sqrt(var / FRAMES) + BIAS
     assert (err <= bound).all(), f"max excess {(err - bound).max():.3g}"
@@ -74,16 +75,17 @@ def test_supersampled_converges_to_scalar_n():
     assert np.abs(scalar - E_out).max() < 2e-3
 
 
+@pytest.mark.parametrize("mode", ["stochastic", "stochastic_popfree"])
 @pytest.mark.parametrize("path", VECTOR_PATHS)
-def test_vector_paths_make_the_scalar_paths_decisions(path):
+def test_vector_paths_make_the_scalar_paths_decisions(path, mode):
     """The decisions are the same integer hash on every path; only alpha's exp differs in its last bits, so a pixel
     may differ only where some fragment's uniform lies within float rounding of its alpha: a handful of pixels."""
     scene, cam = _scene()
     for supersample in (1, 2):
         for frame in range(4):
             kw = dict(background=BACKGROUND, frame=frame)
-            ref = render("scalar", scene, cam, "stochastic", supersample, **kw)
-            vec = render(path, scene, cam, "stochastic", supersample, **kw)
+            ref = render("scalar", scene, cam, mode, supersample, **kw)
+            vec = render(path, scene, cam, mode, supersample, **kw)
             assert vec.stats.simd == path and ref.stats.simd == "scalar"
             differ = np.abs(vec.rgb - ref.rgb).max(axis=2) > 1e-5
             assert differ.sum() <= 2 + 2e-3 * differ.size, (supersample, frame, differ.sum())
@@ -109,13 +111,14 @@ def test_settings_and_spec():
         RenderSettings(Mode.STOCHASTIC, frame=2**32)
 
 
-def test_glsl_makes_the_cpus_decisions(gl):
+@pytest.mark.parametrize("mode", ["stochastic", "stochastic_popfree"])
+def test_glsl_makes_the_cpus_decisions(gl, mode):
     """The GLSL port (llvmpipe here) hashes the same (seed, frame, sample, splat index): its frames are the CPU's but
     where float rounding puts a fragment's alpha on the other side of its uniform."""
     scene, cam = _scene()
     for supersample in (1, 2):
         for frame in range(3):
-            kw = dict(mode="stochastic", supersample=supersample, background=BACKGROUND, seed=3, frame=frame)
+            kw = dict(mode=mode, supersample=supersample, background=BACKGROUND, seed=3, frame=frame)
             cpu = gb.render(scene, cam, **kw)
             glsl = gb.render(scene, cam, backend="glsl", **kw)
             assert glsl.stats.backend == "glsl"
@@ -133,3 +136,38 @@ def test_spark_stochastic_preset_is_the_expectation_with_sparks_filter():
     assert (np.abs(mean - E) <= SIGMAS * np.sqrt(var / FRAMES) + BIAS).all()
     E_plain, _ = expectation(scene, cam, 1, BACKGROUND)
     assert (np.abs(mean - E_plain) > SIGMAS * np.sqrt(var / FRAMES) + BIAS).any()
+
+
+def _parallel_disks(yaw_deg: float):
+    """A red disk at z = 5 (centre x = -0.5) in front of a blue one at z = 5.2 (centre x = +0.5), both facing the
+    camera, opacity 0.9; the camera at the origin turned by `yaw_deg` about y. Beyond about 11 degrees the blue
+    disk's centre is the nearer one, while along every ray the red disk stays in front."""
+    c0 = 0.28209479177387814
+    sh = np.array([[[0.5 / c0, -0.5 / c0, -0.5 / c0]], [[-0.5 / c0, -0.5 / c0, 0.5 / c0]]])
+    scene = gb.Scene.from_arrays(np.array([[-0.5, 0.0, 5.0], [0.5, 0.0, 5.2]]), np.array([[1.0, 1.0, 1e-4]] * 2),
+                                 np.array([[1.0, 0.0, 0.0, 0.0]] * 2), np.array([0.9, 0.9]), sh)
+    a = np.radians(yaw_deg)
+    R = np.array([[np.cos(a), 0.0, -np.sin(a)], [0.0, 1.0, 0.0], [np.sin(a), 0.0, np.cos(a)]])
+    return scene, gb.Camera(32, 24, 30.0, 30.0, 16.0, 12.0, R, np.zeros(3))
+
+
+def test_popfree_keeps_the_per_ray_order_when_centre_depths_swap():
+    """Unturned, both modes have one order (red in front) and one expectation. Turned so that the blue disk's centre
+    is nearer, stochastic puts blue in front where the disks overlap (its depth test uses centre depths) and
+    stochastic_popfree still red (each disk's plane along the ray); each mode's mean over frames is its expectation."""
+    for yaw in (0.0, -15.0):
+        scene, cam = _parallel_disks(yaw)
+        view_z = scene.means @ cam.R.T + cam.t
+        assert (view_z[1, 2] < view_z[0, 2]) == (yaw != 0.0)
+        E = {}
+        for mode in ("stochastic", "stochastic_popfree"):
+            mean = _mean(scene, cam, 1, frames=64, mode=mode, background=(0.0, 0.0, 0.0))
+            E[mode], var = expectation(scene, cam, 1, popfree=mode == "stochastic_popfree")
+            assert (np.abs(mean - E[mode]) <= SIGMAS * np.sqrt(var / 64) + BIAS).all(), (yaw, mode)
+        st, pf = E["stochastic"], E["stochastic_popfree"]
+        if yaw == 0.0:
+            np.testing.assert_allclose(st, pf, atol=1e-12)
+            continue
+        # red in front: red shows its full alpha a_r and blue a_b (1 - a_r); blue in front the other way round
+        assert (pf[..., 0] >= st[..., 0] - 1e-12).all() and (st[..., 2] >= pf[..., 2] - 1e-12).all()
+        assert ((pf[..., 0] - st[..., 0]) > 0.2).sum() > 10 and ((st[..., 2] - pf[..., 2]) > 0.2).sum() > 10

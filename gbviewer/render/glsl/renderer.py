@@ -285,7 +285,7 @@ class GlslRenderer(Renderer):
         weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", VEC4)
         stage, stage_reused, stage_ms = self._stage(settings, n, sh_deg, cam_uniforms)
         gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,
-                weight, stage), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k,
+                weight, stage, self._planes(settings, n)), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k,
                 oit=oit, view_filter=gi.view_filter_uniform(*settings.view_filter.native()), **cam_uniforms)
         scan(gpu, flags, n, total_slot=gi.TOTAL_VISIBLE)
         gpu.run("compact.comp", -(-n // WG), (splats, rects, flags, totals, dkeys[0], dvals[0]), num_splats=n)
@@ -334,6 +334,13 @@ class GlslRenderer(Renderer):
         self._stage_key = key
         return stage, False, (time.perf_counter() - t0) * 1e3
 
+    def _planes(self, settings: RenderSettings, n: int | None = None):
+        """stochastic_popfree's per-splat depth planes (popfree.h), sized for n splats (None: as preprocess sized
+        them); a dummy in the other modes."""
+        if settings.mode != Mode.STOCHASTIC_POPFREE:
+            return self.gpu.ensure("dummy", VEC4)
+        return self.gpu.buffers["planes"] if n is None else self.gpu.ensure("planes", n * VEC4, "depth planes")
+
     def _blend(self, camera: Camera, settings: RenderSettings, want_window: bool, plan, longest: int, splats, tvals,
                ranges, oit: tuple, control: RenderControl, target=None) -> None:
         """blend.comp into `target` or the output texture, in the dispatches of `plan` (one unless the driver caps
@@ -354,7 +361,8 @@ class GlslRenderer(Renderer):
         gpu.set(prog, out_size=(W, H), supersample=N, grid=(gx, gy), background=tuple(settings.background),
                   want_window=int(want_window), oit=oit, stochastic=(settings.seed, settings.frame))
         cell_of = gpu.buffers["cell_of"] if settings.mode == Mode.DUPLEX else gpu.ensure("dummy", VEC4)
-        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of)):
+        planes = self._planes(settings)
+        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of, planes)):
             buf.bind_to_storage_buffer(i)
         tex.bind_to_image(0, read=False, write=True)
         tiles = N * N

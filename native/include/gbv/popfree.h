@@ -1,5 +1,6 @@
 // The depth plane of the stochastic_popfree mode (stochastic.h): where a splat's fragment lies along each pixel's
-// ray, for the depth test. Computed in the mode's finish (preprocess.h) into Splat2D::popfree.
+// ray, for the depth test. Each backend computes it after the mode's finish, into a per-splat array beside the
+// Splat2D (indexed by Splat2D::id), which the other modes neither compute nor read.
 #pragma once
 
 #include "common.h"
@@ -7,6 +8,11 @@
 #include "preprocess_stage.h"
 
 namespace gbv {
+
+// (a, b, c, d): the plane along the ray of pixel (px, py) lies at key (a px + b py + c) / d (popfree_plane).
+struct DepthPlane {
+    float a, b, c, d;
+};
 
 // a . b of strided 3-vectors, and a b - c d, every product through mul_rn (common.h): the same bits on every path
 GBV_HD float dot3_rn(const float* a, int sa, const float* b, int sb) {
@@ -22,7 +28,7 @@ GBV_HD float minor_rn(float a, float b, float c, float d) { return mul_rn(a, b) 
 // orthographic camera, whose rays are parallel). The adjugate stands for the inverse (a positive factor). In pixel
 // coordinates, out = (a, b, c, d): the plane along the ray of pixel (px, py) lies at 1/z (perspective) or -z
 // (orthographic) = (a px + b py + c) / d, d > 0 for a positive definite Sigma_v: larger is nearer.
-GBV_HD void popfree_plane(const CameraParams& cam, const float pv[3], const float cov3[6], float out[4]) {
+GBV_HD DepthPlane popfree_plane(const CameraParams& cam, const float pv[3], const float cov3[6]) {
     const float S[9] = {cov3[0], cov3[1], cov3[2], cov3[1], cov3[3], cov3[4], cov3[2], cov3[4], cov3[5]};
     const float* R = cam.R;
     float RS[9], V[9];  // V = R S R^T
@@ -41,17 +47,13 @@ GBV_HD void popfree_plane(const CameraParams& cam, const float pv[3], const floa
     for (int i = 0; i < 3; ++i) n[i] = dot3_rn(adj + i * 3, 1, dir, 1);
     const float c = dot3_rn(n, 1, pv, 1);  // the plane n . x = c
     // the pixel's ray: view x = (px - cx) / fx, y = (py - cy) / fy, times z when perspective
-    out[0] = n[0] / cam.fx;
-    out[1] = n[1] / cam.fy;
-    out[2] = (ortho ? -c : n[2]) - mul_rn(out[0], cam.cx) - mul_rn(out[1], cam.cy);
-    out[3] = ortho ? n[2] : c;
+    const float a = n[0] / cam.fx, b = n[1] / cam.fy;
+    return {a, b, (ortho ? -c : n[2]) - mul_rn(a, cam.cx) - mul_rn(b, cam.cy), ortho ? n[2] : c};
 }
 
 // popfree_plane of one splat from its scene inputs (mean, scale, quat, filter_3d), its covariance as the stage's
-// (the 3D filter included); zeros in the other modes.
-GBV_HD void splat_popfree_plane(const CameraParams& cam, Mode mode, const SplatIn& in, float out[4]) {
-    for (int i = 0; i < 4; ++i) out[i] = 0.0f;
-    if (mode != STOCHASTIC_POPFREE) return;
+// (the 3D filter included).
+GBV_HD DepthPlane splat_popfree_plane(const CameraParams& cam, const SplatIn& in) {
     SplatInLanes<Lanes1> l{};
     for (int i = 0; i < 3; ++i) l.mean[i] = in.mean[i], l.scale[i] = in.scale[i];
     for (int i = 0; i < 4; ++i) l.quat[i] = in.quat[i];
@@ -60,7 +62,7 @@ GBV_HD void splat_popfree_plane(const CameraParams& cam, Mode mode, const SplatI
     view_point<Lanes1>(cam, l.mean, pv);
     filter_3d_scales<Lanes1>(l, s, &opacity);
     covariance_3d<Lanes1>(l.quat, s, cov3);
-    popfree_plane(cam, pv, cov3, out);
+    return popfree_plane(cam, pv, cov3);
 }
 
 }  // namespace gbv

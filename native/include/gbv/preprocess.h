@@ -7,7 +7,6 @@
 #include "common.h"
 #include "footprint.h"
 #include "lanes.h"
-#include "popfree.h"
 #include "preprocess_stage.h"
 #include "sh.h"
 #include "view_filter.h"
@@ -69,7 +68,7 @@ GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLan
     // the mode's 2D filter, opacity compensation, view weight and cut-off
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
-    if (mode == SCALAR || mode == STOCHASTIC || mode == STOCHASTIC_POPFREE) {  // stochastic: scalar's alpha
+    if (view_filtered(mode)) {
         scalar_filter<L>(oit, cov, opacity, ok);
     } else if (mode == MIP) {
         const F eps = L::set(1e-6f);
@@ -154,7 +153,7 @@ GBV_HD bool stage_splat(const SplatIn& in, int sh_deg, const CameraParams& cam, 
 
 // The mode's finish of one splat's stored stage (Lanes1; CUDA's finish kernel): Splat2D and tile rectangle, the
 // colour the stage's; false when culled. Of `in` only mean, weight_sh, weight_deg and cell are read (the others may be
-// null), and scale, quat and filter_3d in stochastic_popfree (its depth plane, popfree.h).
+// null).
 GBV_HD bool finish_splat(const SplatIn& in, const StageSplat& stage, int sh_deg, const CameraParams& cam, Mode mode,
                          const OitParams& oit, int grid_x, int grid_y, Splat2D* out, TileRect* rect) {
     SplatInLanes<Lanes1> l{};
@@ -186,7 +185,6 @@ GBV_HD bool finish_splat(const SplatIn& in, const StageSplat& stage, int sh_deg,
     out->radius = o.radius;
     out->cell = in.cell;
     out->id = -1;  // the caller's (the splat's index)
-    splat_popfree_plane(cam, mode, in, out->popfree);
     return true;
 }
 

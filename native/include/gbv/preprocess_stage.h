@@ -201,7 +201,7 @@ GBV_HD void stage_color(const SplatInLanes<L>& in, int sh_deg, const CameraParam
 // 2D filter adds, the scalar mode's view filter (dilation + pre-dilation), every other mode at most DILATION_3DGS
 // (preprocess_finish).
 GBV_HD float stage_reach(Mode mode, const OitParams& oit) {
-    const float filter = mode == SCALAR || mode == STOCHASTIC || mode == STOCHASTIC_POPFREE ? oit.dilation + oit.pre_dilation : 0.0f;
+    const float filter = view_filtered(mode) ? oit.dilation + oit.pre_dilation : 0.0f;
     return filter > DILATION_3DGS ? filter : DILATION_3DGS;
 }
 

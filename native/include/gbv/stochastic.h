@@ -11,7 +11,7 @@
 // (X, Y) of the supersampled grid) decides on its own, so `stochastic:N` converges to `scalar:N`.
 //
 // `stochastic_popfree` (StochasticSplats' ST-popfree, shader/splat_vert_ST_popfree.glsl) keeps the same fragments
-// but depth-tests them at their depth along the pixel's ray on the splat's depth plane (popfree.h): per pixel, the
+// but depth-tests them at their depth along the pixel's ray on the splat's depth plane (popfree.h, one per splat beside the Splat2D): per pixel, the
 // nearest kept fragment in that order, which is the order of the depths of maximum response along the ray to first
 // order about the mean, and does not change when centre depths swap. The whole list is walked (no early stop).
 // E[C] is then alpha blending in that per-pixel order.
@@ -39,7 +39,9 @@ GBV_HD uint32_t hash32(uint32_t x) {
 
 // Unlike the published single packing of (x, y << 20, sample << 8, primitive + seed), which collides, every input is
 // chained through its own hash: the frame's key once per frame, a sample's once per sample, a splat's once per splat.
-GBV_HD uint32_t stochastic_frame_key(uint32_t seed, uint32_t frame) { return hash32(hash32(seed ^ 0x9e3779b9u) ^ frame); }
+GBV_HD uint32_t stochastic_frame_key(uint32_t seed, uint32_t frame) {
+    return hash32(hash32(seed ^ 0x9e3779b9u) ^ frame);
+}
 
 // The key of sample (X, Y) of the supersampled grid (output pixel (X / N, Y / N), sample (X % N, Y % N)).
 GBV_HD uint32_t stochastic_sample_key(uint32_t frame_key, uint32_t X, uint32_t Y) {
@@ -95,8 +97,8 @@ struct PopfreeState {
 // One splat of stochastic_popfree: blend_stochastic's keep decision, then the depth test against the lane's nearest
 // kept fragment at the pixel's point of the splat's depth plane. Never stops a lane.
 template <class L, class Tr = NoTrace>
-GBV_HD void blend_stochastic_popfree(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
-                                     const uint32_t* keys, PopfreeState<L>& st) {
+GBV_HD void blend_stochastic_popfree(const Splat2D& s, const DepthPlane& plane, typename L::F px, typename L::F py,
+                                     typename L::M live, const uint32_t* keys, PopfreeState<L>& st) {
     using F = typename L::F;
     using M = typename L::M;
     const F power = gaussian_power<L>(s, L::set(s.xy.x) - px, L::set(s.xy.y) - py);
@@ -117,7 +119,7 @@ GBV_HD void blend_stochastic_popfree(const Splat2D& s, typename L::F px, typenam
     const M kept = L::and_(pass, L::load(u) < alpha);
     GBV_TRACE(Tr, skip(L::and_not(pass, kept), SKIP_DISCARD));
     // 1/z or -z on the plane; NaN (a splat without a plane: a needle, c = 0) is behind every plane
-    F key = (L::set(s.popfree[0]) * px + L::set(s.popfree[1]) * py + L::set(s.popfree[2])) / L::set(s.popfree[3]);
+    F key = (L::set(plane.a) * px + L::set(plane.b) * py + L::set(plane.c)) / L::set(plane.d);
     key = L::select(key == key, key, L::set(-3.402823466e38f));
     const M nearer = L::and_(kept, key > st.key);
     GBV_TRACE(Tr, skip(L::and_not(kept, nearer), SKIP_DEPTH));
@@ -136,9 +138,10 @@ GBV_HD bool blend_stochastic(const Splat2D& s, Vec2 pix, uint32_t key, float& T,
     return stop;
 }
 
-GBV_HD void blend_stochastic_popfree(const Splat2D& s, Vec2 pix, uint32_t key, float& T, float& depth_key, float C[3]) {
+GBV_HD void blend_stochastic_popfree(const Splat2D& s, const DepthPlane& plane, Vec2 pix, uint32_t key, float& T,
+                                     float& depth_key, float C[3]) {
     PopfreeState<Lanes1> st = {T, depth_key, {C[0], C[1], C[2]}};
-    blend_stochastic_popfree<Lanes1>(s, pix.x, pix.y, true, &key, st);
+    blend_stochastic_popfree<Lanes1>(s, plane, pix.x, pix.y, true, &key, st);
     T = st.T;
     depth_key = st.key;
     for (int c = 0; c < 3; ++c) C[c] = st.C[c];
