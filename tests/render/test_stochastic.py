@@ -16,7 +16,7 @@ from glsl_helpers import gl  # noqa: F401 (fixture)
 from test_simd import VECTOR_PATHS, render
 
 import gbviewer as gb
-from gbviewer.render import Mode, RenderSettings
+from gbviewer.render import CudaRenderer, Mode, RenderSettings
 from gbviewer.render.presets import PRESETS
 
 BACKGROUND = (0.2, 0.3, 0.4)
@@ -111,21 +111,6 @@ def test_settings_and_spec():
         RenderSettings(Mode.STOCHASTIC, frame=2**32)
 
 
-@pytest.mark.parametrize("mode", ["stochastic", "stochastic_popfree"])
-def test_glsl_makes_the_cpus_decisions(gl, mode):
-    """The GLSL port (llvmpipe here) hashes the same (seed, frame, sample, splat index): its frames are the CPU's but
-    where float rounding puts a fragment's alpha on the other side of its uniform."""
-    scene, cam = _scene()
-    for supersample in (1, 2):
-        for frame in range(3):
-            kw = dict(mode=mode, supersample=supersample, background=BACKGROUND, seed=3, frame=frame)
-            cpu = gb.render(scene, cam, **kw)
-            glsl = gb.render(scene, cam, backend="glsl", **kw)
-            assert glsl.stats.backend == "glsl"
-            differ = np.abs(glsl.rgb - cpu.rgb).max(axis=2) > 1e-5
-            assert differ.sum() <= 2 + 2e-3 * differ.size, (supersample, frame, differ.sum())
-
-
 def test_spark_stochastic_preset_is_the_expectation_with_sparks_filter():
     """preset:spark-stochastic keeps fragments with spark's filtered alpha: its mean over frames is the expectation
     computed with that filter, and not the one without it (the filter's compensation changes alphas by far more than
@@ -136,6 +121,33 @@ def test_spark_stochastic_preset_is_the_expectation_with_sparks_filter():
     assert (np.abs(mean - E) <= SIGMAS * np.sqrt(var / FRAMES) + BIAS).all()
     E_plain, _ = expectation(scene, cam, 1, BACKGROUND)
     assert (np.abs(mean - E_plain) > SIGMAS * np.sqrt(var / FRAMES) + BIAS).any()
+
+
+def _same_decisions(backend: str, mode: str) -> None:
+    """Frames of `backend` are the CPU's but where float rounding puts a fragment's alpha on the other side of its
+    uniform: the same (seed, frame, sample, splat index) hash on every backend."""
+    scene, cam = _scene()
+    for supersample in (1, 2):
+        for frame in range(3):
+            kw = dict(mode=mode, supersample=supersample, background=BACKGROUND, seed=3, frame=frame)
+            cpu = gb.render(scene, cam, **kw)
+            other = gb.render(scene, cam, backend=backend, **kw)
+            assert other.stats.backend == backend
+            differ = np.abs(other.rgb - cpu.rgb).max(axis=2) > 1e-5
+            assert differ.sum() <= 2 + 2e-3 * differ.size, (supersample, frame, differ.sum())
+
+
+@pytest.mark.parametrize("mode", ["stochastic", "stochastic_popfree"])
+def test_glsl_makes_the_cpus_decisions(gl, mode):
+    _same_decisions("glsl", mode)
+
+
+@pytest.mark.parametrize("mode", ["stochastic", "stochastic_popfree"])
+def test_cuda_makes_the_cpus_decisions(mode):
+    ok, why = CudaRenderer.available()
+    if not ok:
+        pytest.skip(f"no CUDA runtime here: {why}")
+    _same_decisions("cuda", mode)
 
 
 def _parallel_disks(yaw_deg: float):
