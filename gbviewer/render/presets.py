@@ -13,6 +13,9 @@ viewer it does not model (their sort order, support radius and quantisation stay
   src/ui/view-panel.ts (SH bands slider, default 3) | +0.3, cull lambda_max < 0.5, SH 3 |
 | spark | sparkjsdev/spark: src/SparkRenderer.ts (preBlurAmount ?? 0.0, blurAmount ?? 0.3), src/shaders/splatVertex.glsl
   (a += preBlurAmount; detOrig; a += blurAmount; alpha *= sqrt(max(0, detOrig / det))) | as gsplat-antialiased |
+| supersplat-stochastic | playcanvas/engine: src/scene/shader-lib/glsl/chunks/gsplat/frag/gsplat.js (opacityDither with
+  the splat id * 0.013 as offset), src/scene/shader-lib/glsl/chunks/standard/frag/opacity-dither.js (discard when
+  alpha < the dither's noise) | the stochastic mode with supersplat's filter |
 | spark-stochastic | sparkjsdev/spark: src/shaders/splatFragment.glsl (#ifdef STOCHASTIC: uniform from a hash of time,
   pixel and splat index; kept when below alpha, written opaque; SparkViewpoint.stochastic) | the stochastic mode with
   spark's filter |
@@ -65,6 +68,12 @@ PRESETS = {p.name: p for p in (
     Preset("spark", "scalar", 3, ViewFilter(0.3, pre_dilation=0.0, compensate=True),
            "sparkjsdev/spark src/SparkRenderer.ts (preBlurAmount 0.0, blurAmount 0.3), src/shaders/splatVertex.glsl",
            "maxStdDev sqrt(8) support, minAlpha 0.5/255, radial sort, clipXY 1.4, packed splat encoding"),
+    Preset("supersplat-stochastic", "stochastic", 3, ViewFilter(0.3, cull_lambda=0.5),
+           "playcanvas/engine src/scene/shader-lib/glsl/chunks/gsplat/frag/gsplat.js (opacityDither(alpha, "
+           "id * 0.013): the splat id offsets the dither), src/scene/shader-lib/glsl/chunks/standard/frag/"
+           "opacity-dither.js (discard when alpha < noise), the supersplat preset's filter",
+           "its blue-noise (or Bayer) dither texture and per-frame jitter (ours: stochastic.h's white-noise hash), "
+           "the supersplat preset's list"),
     Preset("spark-stochastic", "stochastic", 3, ViewFilter(0.3, pre_dilation=0.0, compensate=True),
            "sparkjsdev/spark src/shaders/splatFragment.glsl (STOCHASTIC: a hash of time, gl_FragCoord and the splat "
            "index; rand < alpha writes the colour opaque, else discard), the spark preset's filter",

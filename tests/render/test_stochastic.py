@@ -111,13 +111,14 @@ def test_settings_and_spec():
         RenderSettings(Mode.STOCHASTIC, frame=2**32)
 
 
-def test_spark_stochastic_preset_is_the_expectation_with_sparks_filter():
-    """preset:spark-stochastic keeps fragments with spark's filtered alpha: its mean over frames is the expectation
-    computed with that filter, and not the one without it (the filter's compensation changes alphas by far more than
-    the sampling error)."""
+@pytest.mark.parametrize("name", ["spark-stochastic", "supersplat-stochastic"])
+def test_stochastic_presets_are_the_expectation_with_their_filter(name):
+    """A stochastic preset keeps fragments with its viewer's filtered alpha: its mean over frames is the expectation
+    computed with that filter, and not the one without it (the filter changes alphas, or culls splats, by far more
+    than the sampling error)."""
     scene, cam = _scene()
-    mean = _mean(scene, cam, 1, mode="preset:spark-stochastic")
-    E, var = expectation(scene, cam, 1, BACKGROUND, asdict(PRESETS["spark-stochastic"].view_filter))
+    mean = _mean(scene, cam, 1, mode=f"preset:{name}")
+    E, var = expectation(scene, cam, 1, BACKGROUND, asdict(PRESETS[name].view_filter))
     assert (np.abs(mean - E) <= SIGMAS * np.sqrt(var / FRAMES) + BIAS).all()
     E_plain, _ = expectation(scene, cam, 1, BACKGROUND)
     assert (np.abs(mean - E_plain) > SIGMAS * np.sqrt(var / FRAMES) + BIAS).any()
