@@ -3,17 +3,19 @@
 // Each splat fragment (splat, sample) is kept with probability alpha, alpha computed as `scalar` computes it (eq. 5,
 // the 1/255 cut-off, the 0.99 clamp); a kept fragment is opaque (its colour, T = 0) and the depth test keeps the
 // nearest kept fragment by the splat's centre depth (the published ST: every fragment of a splat's quad has the
-// depth of its projected centre). Lists are in centre-depth order, front to back (ties in list order, which a strict
-// less-than depth test also keeps), so the nearest kept fragment is the first kept one: a lane stops there.
+// depth of its projected centre, shader/splat_geom.glsl offsetting the corners in x and y only). Lists are in
+// centre-depth order, front to back (ties in list order, which a strict less-than depth test also keeps), so the
+// nearest kept fragment is the first kept one: a lane stops there.
 //
 // Per sample: E[C] = sum_i c_i alpha_i prod_{j<i} (1 - alpha_j), E[T] = prod_i (1 - alpha_i): alpha blending in
 // per-fragment depth order without early termination. Every sample of an N x N supersampled pixel (the sub-pixel
 // (X, Y) of the supersampled grid) decides on its own, so `stochastic:N` converges to `scalar:N`.
 //
 // `stochastic_popfree` (StochasticSplats' ST-popfree, shader/splat_vert_ST_popfree.glsl) keeps the same fragments
-// but depth-tests them at their depth along the pixel's ray on the splat's depth plane (popfree.h, one per splat beside the Splat2D): per pixel, the
-// nearest kept fragment in that order, which is the order of the depths of maximum response along the ray to first
-// order about the mean, and does not change when centre depths swap. The whole list is walked (no early stop).
+// but depth-tests them at their depth along the pixel's ray on the splat's depth plane (popfree.h, one per splat
+// beside the Splat2D): per pixel, the nearest kept fragment in that order, which is the order of the depths of
+// maximum response along the ray to first order about the mean, and does not change when centre depths swap. The
+// whole list is walked (no early stop).
 // E[C] is then alpha blending in that per-pixel order.
 //
 // The decision u < alpha takes u from a hash of (seed, frame, X, Y, splat id): deterministic for a given seed and
