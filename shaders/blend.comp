@@ -12,8 +12,9 @@
 // the image.
 //
 // Compiled once per mode and sampling: the driver defines BLEND_MODE_<MODE> (SCALAR, MIP, ANALYTIC,
-// GAUSSIAN_BLENDING, WSR or DUPLEX) and SUPERSAMPLED (0 or 1). wsr walks index-ordered lists with no early
-// termination; duplex walks cell-sorted lists, reads each splat's cell from `cell_of` and uses `oit`.
+// GAUSSIAN_BLENDING, WSR, DUPLEX, STOCHASTIC or STOCHASTIC_POPFREE) and SUPERSAMPLED (0 or 1). wsr walks index-ordered lists with no
+// early termination; duplex walks cell-sorted lists, reads each splat's cell from `cell_of` and uses `oit`;
+// stochastic hashes each sample's (seed, frame, X, Y) with the splat's index (stochastic.h).
 #include "common.glsl"
 #include "mathf.glsl"
 #include "blend.glsl"
@@ -31,6 +32,10 @@ const int MODE = GAUSSIAN_BLENDING;
 const int MODE = WSR;
 #elif defined(BLEND_MODE_DUPLEX)
 const int MODE = DUPLEX;
+#elif defined(BLEND_MODE_STOCHASTIC)
+const int MODE = STOCHASTIC;
+#elif defined(BLEND_MODE_STOCHASTIC_POPFREE)
+const int MODE = STOCHASTIC_POPFREE;
 #endif
 
 layout(local_size_x = 16, local_size_y = 16) in;
@@ -42,6 +47,7 @@ layout(std430, binding = 4) writeonly buffer WindowOut { vec2 window_out[]; };
 layout(std430, binding = 5) buffer State { vec4 state[]; };  // BLEND_STATE_VEC4S per invocation
 layout(std430, binding = 6) buffer Accum { vec4 accum[]; };  // BLEND_ACCUM_VEC4S per invocation
 layout(std430, binding = 7) readonly buffer CellOf { int cell_of[]; };  // duplex: each splat's cell
+layout(std430, binding = 8) readonly buffer Planes { vec4 planes[]; };  // stochastic_popfree: each splat's depth plane
 layout(rgba32f, binding = 0) uniform writeonly image2D out_image;  // rgb, alpha = 1 - T; row 0 = image top
 
 uniform ivec2 out_size;
@@ -58,6 +64,7 @@ uniform int store_state;
 uniform int load_accum;
 uniform int store_accum;
 uniform vec4 oit;  // OitParams: components OIT_* (interface.glsl)
+uniform uvec2 stochastic;  // stochastic: seed, frame index (stochastic.h)
 
 shared Splat2D batch[256];
 shared int done_count;
@@ -94,6 +101,10 @@ void main() {
         const int n = int(range.y - range.x);
         const int begin = min(n, chunk_begin), end = min(n, chunk_end);
         const vec2 pix = vec2(rpix) + 0.5;
+#if defined(BLEND_MODE_STOCHASTIC) || defined(BLEND_MODE_STOCHASTIC_POPFREE)
+        const uint key = stochastic_sample_key(stochastic_frame_key(stochastic.x, stochastic.y), uint(rpix.x),
+                                               uint(rpix.y));
+#endif
 #if defined(BLEND_MODE_GAUSSIAN_BLENDING)
         TransmittanceWindow win = TransmittanceWindow(1.0, pix, vec2(1.0, 1.0));
 #elif defined(BLEND_MODE_WSR)
@@ -102,6 +113,9 @@ void main() {
         DuplexState dst = DuplexState(1.0, 1.0, -1, 0.0, vec3(0.0));
 #else
         float T = 1.0;
+#endif
+#if defined(BLEND_MODE_STOCHASTIC_POPFREE)
+        float depth_key = uintBitsToFloat(0xff800000u);  // -inf: no fragment kept yet (stochastic.h)
 #endif
         vec3 C = vec3(0.0);
         int evals = 0;
@@ -120,6 +134,9 @@ void main() {
 #endif
             evals = floatBitsToInt(s2.x);
             done = s2.y != 0.0;
+#if defined(BLEND_MODE_STOCHASTIC_POPFREE)
+            depth_key = s2.z;
+#endif
         }
 
         memoryBarrierShared();
@@ -139,6 +156,7 @@ void main() {
 #if defined(BLEND_MODE_DUPLEX)
                 batch[lid].cell = cell_of[s];
 #endif
+                batch[lid].id = int(s);
             }
             memoryBarrierShared();
             barrier();  // batch loaded; nobody changes done_count before everyone has read it
@@ -155,6 +173,11 @@ void main() {
                     const bool finished = blend_duplex(batch[j], pix, oit[OIT_ET_GRADE], dst);
 #elif defined(BLEND_MODE_ANALYTIC)
                     const bool finished = blend_analytic(batch[j], pix, T, C);
+#elif defined(BLEND_MODE_STOCHASTIC)
+                    const bool finished = blend_stochastic(batch[j], pix, key, T, C);
+#elif defined(BLEND_MODE_STOCHASTIC_POPFREE)
+                    blend_stochastic_popfree(batch[j], planes[batch[j].id], pix, key, T, depth_key, C);
+                    const bool finished = false;  // a nearer kept fragment may follow
 #else
                     const bool finished = blend_scalar(batch[j], pix, T, C);
 #endif
@@ -193,7 +216,11 @@ void main() {
 #else
             state[at + 1u] = vec4(wxy, wh);
 #endif
+#if defined(BLEND_MODE_STOCHASTIC_POPFREE)
+            state[at + 2u] = vec4(intBitsToFloat(evals), done ? 1.0 : 0.0, depth_key, 0.0);
+#else
             state[at + 2u] = vec4(intBitsToFloat(evals), done ? 1.0 : 0.0, 0.0, 0.0);
+#endif
             continue;  // store_state is uniform, and the driver then gives this dispatch one render tile
         }
 #if defined(BLEND_MODE_WSR)

@@ -9,6 +9,11 @@ const int ANALYTIC = 2;
 const int GAUSSIAN_BLENDING = 3;
 const int WSR = 4;
 const int DUPLEX = 5;
+const int STOCHASTIC = 6;
+const int STOCHASTIC_POPFREE = 7;
+
+// port of common.h: view_filtered
+bool view_filtered(int mode) { return mode == SCALAR || mode == STOCHASTIC || mode == STOCHASTIC_POPFREE; }
 
 const int PERSPECTIVE = 0;
 const int ORTHOGRAPHIC = 1;
@@ -71,6 +76,7 @@ struct Splat2D {
     float log_min_alpha;
     float radius;
     int cell;
+    int id;
 };
 
 // port of common.h: OitParams

@@ -15,6 +15,7 @@ layout(std430, binding = 4) writeonly buffer Flags { uint flags[]; };
 layout(std430, binding = 5) buffer Totals { uint totals[]; };
 layout(std430, binding = 6) readonly buffer WeightSh { float weight_sh[]; };  // per splat: weight_k floats
 layout(std430, binding = 7) readonly buffer Stage { vec4 stage[]; };  // per splat: pack_stage's record
+layout(std430, binding = 8) writeonly buffer Planes { vec4 planes[]; };  // stochastic_popfree: depth plane per splat
 
 uniform uint num_splats;
 uniform int sh_k;    // SH coefficients per channel stored in the scene
@@ -68,6 +69,7 @@ void main() {
     splats[SPLAT_VEC4S * i + 1u] = p1;
     splats[SPLAT_VEC4S * i + 2u] = p2;
     splats[SPLAT_VEC4S * i + 3u] = p3;
+    if (mode == STOCHASTIC_POPFREE) planes[i] = splat_popfree_plane(cam, in_);
     const uint area = uint((r.x1 - r.x0) * (r.y1 - r.y0));
     const uint before = atomicAdd(totals[TOTAL_PAIRS], area);
     if (before + area < before) atomicOr(totals[TOTAL_OVERFLOW], 1u);

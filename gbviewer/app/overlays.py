@@ -13,6 +13,7 @@ from ..camera import format_rate
 from ..io.trained_as import describe
 from ..render import AUTO
 from ..render.presets import trained_spec
+from .accumulate import is_stochastic
 from .difference_views import shows_photo
 from .keys import hint
 from .layout import Rect, loupe_uv
@@ -88,6 +89,8 @@ def pane_label(app: ViewerApp, p: PaneState, part: str) -> str:
     label = job.settings.label_for(state.scene) if state.scene is not None else job.settings.label
     if state.scene is not None and job.settings.name == trained_spec(state.scene.meta):
         label += f" (as trained: {describe(state.scene.meta)})"
+    if is_stochastic(job.settings):  # the running mean's samples per pixel (accumulate)
+        label += f" {shown.accumulation.samples(job.settings.supersample)} spp"
     rate = format_rate(job.info.get("rate", state.settings.rate))
     w, h = job.info.get("full_size", (job.camera.width, job.camera.height))
     name = p.name + ("'" if part == "b" else "")

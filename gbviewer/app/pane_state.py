@@ -11,6 +11,7 @@ from typing import Literal
 import numpy as np
 
 from ..render import Frame
+from .accumulate import Accumulation
 from .layout import Rect
 from .rates import PREVIEW_LOD_PX
 from .settings import PANE_NAMES
@@ -61,6 +62,7 @@ class Shown:
     progress: float | None = None  # fraction of a refining frame's tiles on screen; None once final
     stage: str = ""  # what is on screen: "preview", "quick" (x1 sample), "refining", "final"
     pacing: dict[str, float] = field(default_factory=dict)  # ms from a request to its "preview"/"tiles"/"final"
+    accumulation: Accumulation = field(default_factory=Accumulation)  # a stochastic mode's frames so far
 
 
 @dataclass

@@ -15,6 +15,7 @@ import numpy as np
 from ..camera import Camera
 from ..figure import to_uint8
 from ..render import Frame, RenderSettings
+from .accumulate import is_stochastic
 from .blit import Blitter
 from .display import GpuFrame
 from .layout import split_parts
@@ -77,8 +78,15 @@ class PaneRenders:
                     continue
                 if p.parts[part].error is not None and p.parts[part].error.kind == "too_large":
                     p.parts[part].error = None
-                display = "gpu" if ps.view == "color" and self.worker.display_path(backend)[0] == "gpu" else "copy"
-                key = (id(s.scene), view_key, (cam.width, cam.height), settings, backend, display)
+                stochastic = is_stochastic(settings)  # its running mean needs each frame's pixels: the copy path
+                gpu = ps.view == "color" and not stochastic and self.worker.display_path(backend)[0] == "gpu"
+                display = "gpu" if gpu else "copy"
+                key = base = (id(s.scene), view_key, (cam.width, cam.height), settings, backend, display)
+                if stochastic:  # still: the next frame index of its running mean (accumulate)
+                    settings = p.parts[part].accumulation.request(base, settings, moving or f < 1.0)
+                    if settings is None:
+                        continue
+                    key = base + (settings.frame,)
                 if moving and (os.cpu_count() or 1) > 1:  # leave a core to the UI thread while the camera moves
                     settings = replace(settings, threads=(os.cpu_count() or 2) - 1)
                 if f < 1.0 and settings.lod is None and s.scene.oit is None:  # a preview draws a cut (rates)
@@ -87,11 +95,13 @@ class PaneRenders:
                     continue
                 p.submitted[part] = key
                 shown = p.parts[part]
-                progressive = f == 1.0 and self.worker.capabilities(backend).progressive and ps.view == "color"
+                progressive = (f == 1.0 and self.worker.capabilities(backend).progressive and ps.view == "color"
+                               and settings.frame == 0)  # a later frame of a running mean arrives whole
                 est_ms = cost * w * h if cost else None
                 jobs.append(RenderJob(
                     (p.index, part), s.scene, cam, settings, backend,
-                    {"key": key, "preview": f, "rate": s.settings.rate, "full_size": (w, h)},
+                    {"key": key, "preview": f, "rate": s.settings.rate, "full_size": (w, h),
+                     "accumulate": base if stochastic else None},
                     priority=int(not moving and s.hover is not None and s.hover[0] == p.index),
                     preview=f < 1.0,
                     progressive=progressive,
@@ -186,7 +196,10 @@ class PaneRenders:
             key = (part, res.job.settings.name, res.job.settings.supersample, res.job.backend)
             p.ms_per_px[key] = total_ms / (cam.width * cam.height)
         p.fps[part].tick(res.finished)
-        self._upload(res.job.slot, shown, res.frame, s.settings.panes[i].view)
+        frame, base = res.frame, res.job.info.get("accumulate")
+        if base is not None:
+            frame = shown.accumulation.add(base, frame, res.job.settings.frame)
+        self._upload(res.job.slot, shown, frame, s.settings.panes[i].view)
         preview = res.job.info.get("preview", 1.0) < 1.0
         if preview and res.job.settings.lod == p.preview_lod and s.settings.panes[i].lod == 0:
             p.preview_lod = preview_lod(p.preview_lod, total_ms)

@@ -87,7 +87,8 @@ def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backe
     tree = lod = None
     if settings.lod is not None:
         try:
-            if lod_in_place and settings.mode != Mode.DUPLEX:  # duplex builds its cells of the cut's own splats
+            # duplex builds its cells of the cut's own splats; stochastic_popfree's depth plane reads the cut's
+            if lod_in_place and settings.mode not in (Mode.DUPLEX, Mode.STOCHASTIC_POPFREE):
                 check_plain(view)
                 tree, lod = hierarchy_for(view), cut_view(camera, settings.lod)
             else:

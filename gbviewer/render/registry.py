@@ -161,7 +161,8 @@ def render(
 ) -> Frame:
     """Render `scene` from `camera` in `mode` (any spec `RenderSettings.parse` takes; `supersample`, `sh_degree` and
     `options` fill what it leaves unset and must agree with what it sets) on `backend` (cpu, glsl, cuda, or auto:
-    `choose_backend()`'s pick); `options`: depth_correct, et_grade, cell_size, threads, lod.
+    `choose_backend()`'s pick); `options`: depth_correct, et_grade, cell_size, threads, lod, seed and frame
+    (stochastic).
     `cancel`: a gbviewer.CancelToken (or a threading.Event); once set, the call raises RenderCancelled within one
     tile batch. `on_progress`: called as fn(done_tiles, total_tiles) from the rendering thread (an exception it raises
     cancels the render: CallbackError, chained to it). `partial`: a float32 (height, width, 3) array that receives

@@ -19,6 +19,7 @@ from ..cancel import Cancellable
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, distinct_items, integer, real
+from .presets import FILTERED_MODES
 from .spec import shortest, shown, spec_parts
 from .view_filter import ViewFilter
 
@@ -32,6 +33,8 @@ class Mode(enum.IntEnum):
     GAUSSIAN_BLENDING = 3  # spatial transmittance window (Gaussian Blending)
     WSR = 4  # sort-free weighted sum (LC-WSR, Hou et al.): order independent, no sort
     DUPLEX = 5  # Duplex-GS: cells sorted, weighted sum inside a cell, cell transmittance and early termination
+    STOCHASTIC = 6  # stochastic transparency (StochasticSplats ST): fragments kept with probability alpha, opaque
+    STOCHASTIC_POPFREE = 7  # its pop-free variant (ST-popfree): depth-tested on each splat's per-pixel depth plane
 
     @classmethod
     def parse(cls, value: "str | int | Mode") -> "Mode":
@@ -54,7 +57,6 @@ class Mode(enum.IntEnum):
 
 
 DEBUG_OUTPUTS = ("none", "window")
-
 ORDER_INDEPENDENT = (Mode.WSR, Mode.DUPLEX)
 DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (KERNELS.md §8.1)
 DEFAULT_SIGMA = 10.0  # sort-free GS's initial sigma, for depth correction on scenes without a trained one
@@ -72,8 +74,8 @@ class RenderSettings:
 
     `debug="window"` adds the final Gaussian Blending window size per pixel (H, W, 2) to `Frame.debug`.
 
-    scalar: `view_filter` is the 2D filter (default 3DGS's +0.3 px^2); `preset` names the viewer preset it came from
-    (gbviewer.render.presets, parsed from 'preset:NAME').
+    scalar, stochastic: `view_filter` is the 2D filter (default 3DGS's +0.3 px^2); `preset` names the viewer preset it
+    came from (gbviewer.render.presets, parsed from 'preset:NAME').
 
     wsr and duplex: `depth_correct` multiplies each splat's weight by LC-WSR's max(0, 1 - z/sigma) (sigma: the
     scene's trained value, else 10); `et_grade` is Duplex-GS's E (None: the scene's trained value, else 4.0, the
@@ -95,6 +97,8 @@ class RenderSettings:
     lod: float | None = None  # level of detail: draw the hierarchy's cut at this many pixels (None: every splat)
     view_filter: ViewFilter = ViewFilter()
     preset: str = ""
+    seed: int = 0  # stochastic modes: the keep decisions' hash seed (gbv/stochastic.h); same seed and frame, same bits
+    frame: int = 0  # stochastic modes: the frame index (another index, another sample)
 
     def __post_init__(self) -> None:
         """Every number checked through gbviewer.validate (the native renderers take them as int32 and float32);
@@ -112,6 +116,7 @@ class RenderSettings:
                                                                     f32=True),
                 "cell_size": integer(self.cell_size, "cell_size", lo=1, hi=MAX_CELL_SIZE),
                 "lod": None if self.lod is None else real(self.lod, "lod", lo=0, hi=MAX_LOD, f32=True),
+                **{k: integer(getattr(self, k), k, lo=0, hi=2**32 - 1) for k in ("seed", "frame")},
             }
         except InvalidValue as exc:
             raise RenderError(str(exc)) from None
@@ -120,9 +125,8 @@ class RenderSettings:
         object.__setattr__(self, "depth_correct", bool(self.depth_correct))
         if not isinstance(self.view_filter, ViewFilter):
             raise RenderError(f"view_filter {self.view_filter!r}; expected a gbviewer.render.ViewFilter")
-        if self.mode != Mode.SCALAR and not self.view_filter.is_default:
-            raise RenderError(f"view_filter {self.view_filter.describe()} applies to the scalar mode, not "
-                              f"{self.mode.label}")
+        if self.mode.label not in FILTERED_MODES and not self.view_filter.is_default:
+            raise RenderError(f"view_filter {self.view_filter.describe()} is not for {self.mode.label}")
 
     def label_for(self, scene: Scene, lod_counts: tuple[int, int] | None = None) -> str:
         """The label with what the scene makes of the mode: wsr on a scene without trained view weights is an

@@ -56,7 +56,7 @@ inline void check_view(const char* where, const FArr& R, const FArr& t, const FA
 }
 
 inline Mode check_mode(const char* where, int mode) {
-    if (mode < SCALAR || mode > DUPLEX) fail(where, "unknown mode");
+    if (mode < SCALAR || mode > STOCHASTIC_POPFREE) fail(where, "unknown mode");
     return (Mode)mode;
 }
 
@@ -136,18 +136,20 @@ inline void set_view_filter(const char* where, RenderArgs& a, const std::optiona
     a.oit.sort_radial = v[6] != 0 ? 1 : 0;
 }
 
-// A render call's RenderArgs: parse_render_args' checks, then the SH degree cap, the window plane and the viewer
-// filter.
+// A render call's RenderArgs: parse_render_args' checks, then the SH degree cap, the window plane, the viewer
+// filter and the stochastic mode's seed and frame index.
 inline RenderArgs render_args(const char* where, const FArr& R, const FArr& t, float fx, float fy, float cx, float cy,
                               int width, int height, float near_plane, int projection, int mode, int supersample,
                               int sh_degree, const FArr& background, bool want_window, float sigma,
                               float weight_background, float et_grade, bool depth_correct,
-                              const std::optional<FArr>& view_filter) {
+                              const std::optional<FArr>& view_filter, uint32_t seed = 0, uint32_t frame = 0) {
     RenderArgs a = parse_render_args(where, R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
                                      supersample, background, sigma, weight_background, et_grade, depth_correct);
     a.sh_degree = sh_degree;
     a.want_window = want_window;
     set_view_filter(where, a, view_filter);
+    a.seed = seed;
+    a.frame = frame;
     return a;
 }
 

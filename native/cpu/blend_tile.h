@@ -12,7 +12,7 @@
 #include <type_traits>
 #include <vector>
 
-#include "gbv/blend.h"
+#include "gbv/stochastic.h"
 
 namespace gbv {
 
@@ -74,6 +74,8 @@ struct TileJob {
     float *rgb, *alpha, *window;  // image planes, at the rectangle's pixel (x0, y0); window may be null
     int32_t* evals;
     const Bands* bands;  // the list's row bands, or null: every group walks the whole list
+    uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
+    const DepthPlane* planes;  // stochastic_popfree: per splat (Splat2D::id), else null
 };
 
 using BlendTileFn = void (*)(const TileJob&);
@@ -100,6 +102,7 @@ struct Cursor {
 // centres grown by their largest half perimeter, updated as the windows move).
 template <class L>
 struct Group {
+    int x, y;  // the first lane's pixel
     typename L::F px, py;
     typename L::M live;
     float xa, xb, ya, yb;
@@ -279,6 +282,38 @@ void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out) {
     L::store(win.h, out.wy);
 }
 
+// stochastic (gbv/stochastic.h): each lane's sample key once per group, then the list until every lane kept a
+// fragment.
+template <class L, class Tr>
+void group_stochastic(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
+    uint32_t keys[L::N];
+    for (int k = 0; k < L::N; ++k) keys[k] = stochastic_sample_key(job.frame_key, (uint32_t)(g.x + k), (uint32_t)g.y);
+    AlphaState<L> st = {L::set(1.0f), {L::set(0.0f), L::set(0.0f), L::set(0.0f)}};
+    walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
+        const typename L::M stop = blend_stochastic<L, Tr>(s, g.px, g.py, live, keys, st);
+        GBV_TRACE(Tr, after(st));
+        return stop;
+    });
+    for (int c = 0; c < 3; ++c) L::store(st.C[c], out.C[c]);
+    L::store(st.T, out.T);
+}
+
+// stochastic_popfree: the same keys; every lane walks the whole list, depth-testing its kept fragments.
+template <class L, class Tr>
+void group_popfree(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
+    uint32_t keys[L::N];
+    for (int k = 0; k < L::N; ++k) keys[k] = stochastic_sample_key(job.frame_key, (uint32_t)(g.x + k), (uint32_t)g.y);
+    const typename L::F zero = L::set(0.0f);
+    PopfreeState<L> st = {L::set(1.0f), L::set(-std::numeric_limits<float>::infinity()), {zero, zero, zero}};
+    walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
+        blend_stochastic_popfree<L, Tr>(s, job.planes[s.id], g.px, g.py, live, keys, st);
+        GBV_TRACE(Tr, after(st));
+        return L::none();
+    });
+    for (int c = 0; c < 3; ++c) L::store(st.C[c], out.C[c]);
+    L::store(st.T, out.T);
+}
+
 template <class L, class Tr>
 void group_wsr(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     WsrSumsN<L::N> acc = {};
@@ -323,6 +358,8 @@ void blend_tile(const TileJob& job) {
     for (int y = job.y0; y < job.y1; ++y) {
         for (int x = job.x0; x < job.x1; x += N) {
             tile::Group<L> g;
+            g.x = x;
+            g.y = y;
             g.count = job.x1 - x < N ? job.x1 - x : N;
             g.px = L::set((float)x) + lane_offset;  // x + k + 0.5 exactly, as one pixel computes it
             g.py = L::set((float)y + 0.5f);
@@ -342,6 +379,8 @@ void blend_tile(const TileJob& job) {
                 case GAUSSIAN_BLENDING: tile::group_gaussian<L, Tr>(job, g, out); break;
                 case WSR: tile::group_wsr<L, Tr>(job, g, out); break;
                 case DUPLEX: tile::group_duplex<L, Tr>(job, g, out); break;
+                case STOCHASTIC: tile::group_stochastic<L, Tr>(job, g, out); break;
+                case STOCHASTIC_POPFREE: tile::group_popfree<L, Tr>(job, g, out); break;
                 default: tile::group_alpha<L, Tr>(job, g, out); break;
             }
             for (int k = 0; k < g.count; ++k) {

@@ -220,10 +220,13 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
     splats.resize(n);
     rects.resize(n);
     valid.resize(n);
+    buf.planes.resize(mode == STOCHASTIC_POPFREE ? n : 0);
     // in blocks of PREPROCESS_BLOCK splats through the SIMD path's finish (bit-identical on every path)
-    const FinishJob job{sc.means, sc.weight_sh, sc.weight_k, mode == DUPLEX ? sc.cell_of.data() : nullptr,
+    const FinishJob job{sc.means, sc.scales, sc.quats, sc.filter_3d, sc.weight_sh, sc.weight_k,
+                        mode == DUPLEX ? sc.cell_of.data() : nullptr,
                         stage.key.sh_deg, cam, mode, oit, gx, gy, stage.splats.data(), stage.valid.data(),
-                        splats.data(), rects.data(), valid.data()};
+                        splats.data(), rects.data(), valid.data(),
+                        mode == STOCHASTIC_POPFREE ? buf.planes.data() : nullptr};
     for_blocks(n, run, [&](int64_t begin, int64_t end) { path.finish(job, begin, end); });
     if (run.cancelled()) return;
     if (testing::capture.load(std::memory_order_relaxed))
@@ -270,6 +273,8 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
         job.width = fr.cam->width;
         job.mode = fr.mode;
         job.oit = fr.oit;
+        job.frame_key = fr.frame_key;
+        job.planes = fr.buf->planes.empty() ? nullptr : fr.buf->planes.data();
         for (int c = 0; c < 3; ++c) job.bg[c] = fr.bg[c];
         const int gx = (fr.cam->width + TILE - 1) / TILE;
         const int num_tiles = (int)fr.buf->tile_start.size() - 1;
@@ -298,7 +303,8 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
 }
 
 PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
-                             const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N) {
+                             uint32_t frame_key, const float bg[3], const simd::Path& path, FrameBuffers& buf, int x,
+                             int y, int N) {
     Stats st;
     const Control none;
     FrameRun run(none, 1);
@@ -306,7 +312,8 @@ PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const
     splat_boxes(buf.splats, mode, buf.boxes, run);
     const CameraParams& cam = stage.key.cam;
     FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.ids.data(), cam.width,
-                        cam.height, mode, oit, {bg[0], bg[1], bg[2]}};
+                        cam.height, mode, oit, {bg[0], bg[1], bg[2]}, frame_key,
+                        buf.planes.empty() ? nullptr : buf.planes.data()};
     FlushDenormals ftz;
     return trace_pixel(lists, x, y, N);
 }

@@ -130,6 +130,7 @@ struct FrameBuffers {
     std::vector<uint32_t> ids;  // per tile list entry: its splat (4 bytes: half the traffic of a depth key)
     std::vector<SplatBounds> boxes;
     std::vector<RankedRect> ranked;  // bin_splats' scratch
+    std::vector<DepthPlane> planes;  // stochastic_popfree: per splat (others: empty)
 };
 
 // A running call's cancel state and progress (Control) for its frames: the caller's flag or a report that asked to
@@ -230,12 +231,14 @@ struct BlendFrame {
     Image* img;
     int N;
     Stats* st;
+    uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
 };
 // Blend every frame's tiles in one parallel loop, interleaved (each frame's tiles centre out, the frames' i-th tiles
 // together, in proportion to their tile counts); each frame's blend_ms is the loop's time.
 void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile, FrameRun& run);
 // The pixel trace of output pixel (x, y) at N x N samples from a ready stage (the sub-sample grid's camera).
 PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
-                             const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N);
+                             uint32_t frame_key, const float bg[3], const simd::Path& path, FrameBuffers& buf, int x,
+                             int y, int N);
 
 }  // namespace gbv::cpu

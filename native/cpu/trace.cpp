@@ -62,6 +62,7 @@ struct PixelTracer {
         for (int k = 0; k < 4; ++k) log->window[k] = log->last().window[k] = win[k];
         log->T = log->last().T_after = w.T;
     }
+    static void after(const PopfreeState<Lanes1>& st) { log->T = log->last().T_after = st.T; }
     static void after(const DuplexLanes<Lanes1>& d) {
         log->T = log->last().T_after = d.T;
         log->T_cell = log->last().T_cell = d.T_cell;
@@ -108,6 +109,8 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
             job.width = N;
             job.mode = f.mode;
             job.oit = f.oit;
+            job.frame_key = f.frame_key;
+            job.planes = f.planes;
             for (int c = 0; c < 3; ++c) job.bg[c] = f.bg[c];
             job.rgb = out.samples.rgb.data() + q * 3;
             job.alpha = out.samples.alpha.data() + q;

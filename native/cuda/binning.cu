@@ -24,9 +24,11 @@ __global__ void __launch_bounds__(THREADS)
     stage_ok[i] = stage_splat(in, sh_deg, rules, cam, gx, gy, reach, &stage[i]) ? 1 : 0;
 }
 
-// The mode's finish of every splat's stage (finish_splat): Splat2D, tile rectangle, touched tile count.
+// The mode's finish of every splat's stage (finish_splat): Splat2D, tile rectangle, touched tile count; and where
+// `planes` is given (stochastic_popfree) each splat's depth plane (popfree.h) from its mean, scale, quat and 3D filter.
 __global__ void __launch_bounds__(THREADS)
-    finish_kernel(int64_t n, const float* means, const StageSplat* stage, const unsigned char* stage_ok, int sh_deg,
+    finish_kernel(int64_t n, const float* means, const float* scales, const float* quats, const float* filter_3d,
+                  DepthPlane* planes, const StageSplat* stage, const unsigned char* stage_ok, int sh_deg,
                   const float* weight_sh, int weight_k, const int32_t* cell_of, OitParams oit, CameraParams cam,
                   Mode mode, int gx, int gy, Splat2D* splats, TileRect* rects, uint32_t* touched,
                   unsigned long long* visible) {
@@ -35,11 +37,14 @@ __global__ void __launch_bounds__(THREADS)
     if (i < n) {
         uint32_t count = 0;
         if (stage_ok[i]) {
-            const SplatIn in{means + 3 * i, nullptr, nullptr, 0.0f, nullptr, 0.0f,
+            const SplatIn in{means + 3 * i, scales + 3 * i, quats + 4 * i, 0.0f, nullptr,
+                             filter_3d ? filter_3d[i] : 0.0f,
                              weight_sh ? weight_sh + (size_t)weight_k * i : nullptr, sh_degree_for_coeffs(weight_k),
                              cell_of ? cell_of[i] : -1};
             TileRect r;
             if (finish_splat(in, stage[i], sh_deg, cam, mode, oit, gx, gy, &splats[i], &r)) {
+                splats[i].id = (int32_t)i;
+                if (planes) planes[i] = splat_popfree_plane(cam, in);
                 count = (uint32_t)((r.x1 - r.x0) * (r.y1 - r.y0));
                 rects[i] = r;
                 valid = true;
@@ -202,7 +207,10 @@ void State::run(const RenderArgs& a, RenderResult& res) {
     }
     CUDA_CHECK(cudaEventRecord(ev_stage.e));
     if (n > 0) {
-        finish_kernel<<<blocks(n), THREADS>>>(n, means.ptr, stage.ptr, stage_ok.ptr, sh_deg,
+        const bool popfree = a.mode == STOCHASTIC_POPFREE;
+        if (popfree) planes.ensure(n);
+        finish_kernel<<<blocks(n), THREADS>>>(n, means.ptr, scales.ptr, quats.ptr, has_filter ? filter_3d.ptr : nullptr,
+                                              popfree ? planes.ptr : nullptr, stage.ptr, stage_ok.ptr, sh_deg,
                                               weight_k ? weight_sh.ptr : nullptr, weight_k,
                                               a.mode == DUPLEX ? cell_of.ptr : nullptr, a.oit, cam, a.mode, gx, gy,
                                               splats.ptr, rects.ptr, touched.ptr, counters.ptr + VISIBLE);

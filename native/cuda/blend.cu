@@ -2,7 +2,7 @@
 // the block is done) and the box-average for supersampling. Blocks are numbered along one grid dimension (tile =
 // blockIdx.x), so any image the arguments allow (2^31 - 1 pixels) fits CUDA's grid: its y and z dimensions stop
 // at 65,535 blocks, 1,048,560 pixels of height.
-#include "gbv/blend.h"
+#include "gbv/stochastic.h"
 #include "state.h"
 
 namespace gbv::cuda {
@@ -14,7 +14,8 @@ constexpr int BLOCK = TILE * TILE;
 template <int M>
 __global__ void __launch_bounds__(BLOCK)
     render_kernel(const uint2* ranges, const uint32_t* values, const Splat2D* splats, int W, int H, int gx,
-                  float3 bg, OitParams oit, float* rgb, float* alpha, int32_t* evals, float* window) {
+                  float3 bg, OitParams oit, uint32_t frame_key, const DepthPlane* planes, float* rgb, float* alpha, int32_t* evals,
+                  float* window) {
     __shared__ Splat2D batch[BLOCK];
     const int tile = blockIdx.x;
     const int x = (tile % gx) * TILE + threadIdx.x, y = (tile / gx) * TILE + threadIdx.y;
@@ -27,6 +28,8 @@ __global__ void __launch_bounds__(BLOCK)
     TransmittanceWindow win = {1.0f, pix, {1.0f, 1.0f}};
     WsrSums wsr = {{0, 0, 0}, 0};
     DuplexState dst = {1.0f, 1.0f, -1, 0.0f, {0.0f, 0.0f, 0.0f}};
+    const uint32_t key = stochastic_sample_key(frame_key, x, y);
+    float depth_key = -INFINITY;  // stochastic_popfree: the nearest kept fragment's (stochastic.h)
     int32_t ev = 0;
     for (uint32_t start = range.x; start < range.y; start += BLOCK) {
         if (__syncthreads_count(done) == BLOCK) break;
@@ -41,6 +44,10 @@ __global__ void __launch_bounds__(BLOCK)
                 done = blend_wsr(batch[j], pix, wsr);
             else if (M == DUPLEX)
                 done = blend_duplex(batch[j], pix, oit.et_grade, dst);
+            else if (M == STOCHASTIC)
+                done = blend_stochastic(batch[j], pix, key, T, C);
+            else if (M == STOCHASTIC_POPFREE)
+                blend_stochastic_popfree(batch[j], planes[batch[j].id], pix, key, T, depth_key, C);
             else if (M == ANALYTIC)
                 done = blend_analytic(batch[j], pix, T, C);
             else
@@ -101,8 +108,10 @@ __global__ void pack_rgba_kernel(int64_t n, const float* rgb, const float* alpha
 
 template <int M>
 void launch_blend(const State& s, int num_tiles, const uint32_t* values, int W, int H, int gx, float3 bg,
-                  const OitParams& oit, float* win) {
-    render_kernel<M><<<num_tiles, dim3(TILE, TILE)>>>(s.ranges.ptr, values, s.splats.ptr, W, H, gx, bg, oit,
+                  const RenderArgs& a, float* win) {
+    const uint32_t frame_key = stochastic_frame_key(a.seed, a.frame);
+    render_kernel<M><<<num_tiles, dim3(TILE, TILE)>>>(s.ranges.ptr, values, s.splats.ptr, W, H, gx, bg, a.oit,
+                                                       frame_key, M == STOCHASTIC_POPFREE ? s.planes.ptr : nullptr,
                                                        s.rgb.ptr, s.alpha.ptr, s.evals.ptr, win);
 }
 
@@ -121,11 +130,13 @@ void State::blend(const RenderArgs& a, int gx, int gy, const uint32_t* tile_valu
     float* win = window_on ? window.ptr : nullptr;
     const int num_tiles = gx * gy;
     switch (a.mode) {
-        case GAUSSIAN_BLENDING: launch_blend<GAUSSIAN_BLENDING>(*this, num_tiles, v, W, H, gx, bgc, a.oit, win); break;
-        case ANALYTIC: launch_blend<ANALYTIC>(*this, num_tiles, v, W, H, gx, bgc, a.oit, win); break;
-        case WSR: launch_blend<WSR>(*this, num_tiles, v, W, H, gx, bgc, a.oit, win); break;
-        case DUPLEX: launch_blend<DUPLEX>(*this, num_tiles, v, W, H, gx, bgc, a.oit, win); break;
-        default: launch_blend<SCALAR>(*this, num_tiles, v, W, H, gx, bgc, a.oit, win);
+        case GAUSSIAN_BLENDING: launch_blend<GAUSSIAN_BLENDING>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case ANALYTIC: launch_blend<ANALYTIC>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case WSR: launch_blend<WSR>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case DUPLEX: launch_blend<DUPLEX>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case STOCHASTIC: launch_blend<STOCHASTIC>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case STOCHASTIC_POPFREE: launch_blend<STOCHASTIC_POPFREE>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        default: launch_blend<SCALAR>(*this, num_tiles, v, W, H, gx, bgc, a, win);
     }
     launched("render_kernel");
     if (N > 1) {

@@ -15,6 +15,7 @@
 #include "buffers.h"
 #include "gbv/args.h"
 #include "gbv/common.h"
+#include "gbv/popfree.h"
 #include "gbv/preprocess.h"
 #include "renderer.h"
 
@@ -74,6 +75,7 @@ struct State {
     detail::Event ev_stage;
     // per frame
     Buf<Splat2D> splats;
+    Buf<DepthPlane> planes;  // stochastic_popfree: per splat (popfree.h)
     Buf<TileRect> rects;
     Buf<uint32_t> touched, values_in, values_out;
     Buf<uint64_t> offsets, keys_in, keys_out;

@@ -54,6 +54,7 @@ from ...errors import BackendUnavailable, RenderError
 from ...scene import Scene
 from ..control import Progress, RenderControl
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
+from ..presets import FILTERED_MODES
 from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
 from ..view_filter import DILATION_3DGS
 from .binning import bin_duplex, bin_splats, read_totals
@@ -284,8 +285,9 @@ class GlslRenderer(Renderer):
         weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", VEC4)
         stage, stage_reused, stage_ms = self._stage(settings, n, sh_deg, cam_uniforms)
         gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,
-                weight, stage), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k,
-                oit=oit, view_filter=gi.view_filter_uniform(*settings.view_filter.native()[:4]),
+                weight, stage, self._planes(settings, n)), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg,
+                mode=int(mode), weight_k=self._weight_k, oit=oit,
+                view_filter=gi.view_filter_uniform(*settings.view_filter.native()[:4]),
                 view_rules=gi.view_rules_uniform(*settings.view_filter.native()[4:]), **cam_uniforms)
         scan(gpu, flags, n, total_slot=gi.TOTAL_VISIBLE)
         gpu.run("compact.comp", -(-n // WG), (splats, rects, flags, totals, dkeys[0], dvals[0]), num_splats=n)
@@ -321,9 +323,9 @@ class GlslRenderer(Renderer):
         (stage_rules) changed."""
         gpu = self.gpu
         stage = gpu.ensure("stage", n * gi.STAGE_VEC4S * VEC4, "per-camera stage")
-        vf = settings.view_filter.native() if settings.mode == Mode.SCALAR else np.zeros(2, np.float32)
+        vf = settings.view_filter.native() if settings.mode.label in FILTERED_MODES else np.zeros(2, np.float32)
         reach = float(max(np.float32(DILATION_3DGS), vf[0] + vf[1]))  # gbv::stage_reach, in float32
-        rules = settings.view_filter.stage_rules if settings.mode == Mode.SCALAR else 0
+        rules = settings.view_filter.stage_rules if settings.mode.label in FILTERED_MODES else 0
         camera_bytes = tuple(np.asarray(v).tobytes() for v in cam_uniforms.values())
         key = (self._generation, camera_bytes, sh_deg, reach, rules)
         if key == self._stage_key:
@@ -335,6 +337,13 @@ class GlslRenderer(Renderer):
         self.ctx.finish()
         self._stage_key = key
         return stage, False, (time.perf_counter() - t0) * 1e3
+
+    def _planes(self, settings: RenderSettings, n: int | None = None):
+        """stochastic_popfree's per-splat depth planes (popfree.h), sized for n splats (None: as preprocess sized
+        them); a dummy in the other modes."""
+        if settings.mode != Mode.STOCHASTIC_POPFREE:
+            return self.gpu.ensure("dummy", VEC4)
+        return self.gpu.buffers["planes"] if n is None else self.gpu.ensure("planes", n * VEC4, "depth planes")
 
     def _blend(self, camera: Camera, settings: RenderSettings, want_window: bool, plan, longest: int, splats, tvals,
                ranges, oit: tuple, control: RenderControl, target=None) -> None:
@@ -354,9 +363,10 @@ class GlslRenderer(Renderer):
         accum = gpu.ensure("blend_accum", invocations * gi.BLEND_ACCUM_VEC4S * VEC4, "blend sums")
         prog = gpu.program("blend.comp", **{f"BLEND_MODE_{settings.mode.name}": 1, "SUPERSAMPLED": int(N > 1)})
         gpu.set(prog, out_size=(W, H), supersample=N, grid=(gx, gy), background=tuple(settings.background),
-                  want_window=int(want_window), oit=oit)
+                  want_window=int(want_window), oit=oit, stochastic=(settings.seed, settings.frame))
         cell_of = gpu.buffers["cell_of"] if settings.mode == Mode.DUPLEX else gpu.ensure("dummy", VEC4)
-        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of)):
+        planes = self._planes(settings)
+        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of, planes)):
             buf.bind_to_storage_buffer(i)
         tex.bind_to_image(0, read=False, write=True)
         tiles = N * N

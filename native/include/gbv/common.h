@@ -26,7 +26,11 @@
 namespace gbv {
 
 // Blending modes; the integer values are the Python enum's values (gbviewer/render/types.py).
-enum Mode : int32_t { SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5 };
+enum Mode : int32_t { SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5, STOCHASTIC = 6,
+                     STOCHASTIC_POPFREE = 7 };
+// The modes whose alpha is 3DGS's at the pixel centre, with the viewer presets' 2D filter (view_filter.h): scalar and
+// the stochastic modes, which keep fragments with that alpha (gbviewer.render.presets.FILTERED_MODES).
+constexpr bool view_filtered(Mode mode) { return mode == SCALAR || mode == STOCHASTIC || mode == STOCHASTIC_POPFREE; }
 // Camera projections; the values are the indices of gbviewer.camera.PROJECTIONS.
 enum Projection : int32_t { PERSPECTIVE = 0, ORTHOGRAPHIC = 1 };
 
@@ -136,6 +140,7 @@ struct Splat2D {
     float log_min_alpha;   // ln(min_alpha / opacity): lowest log-Gaussian value that can give a visible alpha
     float radius;  // screen-space bounding radius in pixels (duplex rejects pixels outside this circle)
     int32_t cell;  // index of the splat's cell (duplex), -1 otherwise
+    int32_t id;    // the splat's index in the frame's splats (stochastic hashes it: stochastic.h)
 };
 
 // Per-frame mode globals. The order-independent modes (wsr, duplex): LC-WSR's depth correction max(0, 1 - z/sigma)

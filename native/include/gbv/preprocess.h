@@ -71,7 +71,7 @@ GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLan
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
     float min_power = -INFINITY;
-    if (mode == SCALAR) {
+    if (view_filtered(mode)) {
         scalar_filter<L>(oit, cov, opacity, ok);
         min_power = support_power(oit);
     } else if (mode == MIP) {
@@ -190,6 +190,7 @@ GBV_HD bool finish_splat(const SplatIn& in, const StageSplat& stage, int sh_deg,
     out->inv_sigma2 = o.inv_sigma2;
     out->radius = o.radius;
     out->cell = in.cell;
+    out->id = -1;  // the caller's (the splat's index)
     return true;
 }
 
