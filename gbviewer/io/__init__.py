@@ -23,9 +23,10 @@ from .sog import ZIP_MAGIC, load_sog
 from .splat import load_splat, looks_like_splat
 from .spz import GZIP_MAGIC, MAGIC as SPZ_MAGIC, read_spz
 from .trained_as import ply_comments, resolve, signals_of
+from .save import WRITE_FORMATS, dropped, format_for, save
 from .write import write_inria_ply
 
-__all__ = ["load", "load_cameras_json", "write_inria_ply"]
+__all__ = ["WRITE_FORMATS", "dropped", "format_for", "load", "load_cameras_json", "save", "write_inria_ply"]
 
 SH_DTYPES = ("float32", "float16")
 FORMATS = ("INRIA (incl. sort-free GS), Duplex-GS or compressed .ply, .spz, .sog (zip, folder or meta.json), .splat or "
