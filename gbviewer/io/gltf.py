@@ -86,9 +86,9 @@ class Gltf:
         acc = self.element("accessors", index, where)
         name = f"accessors[{index}] ({where})"
         ctype, norm, kind = acc.get("componentType"), acc.get("normalized", False), acc.get("type")
-        if WIDTHS.get(kind) != width:
+        if not isinstance(kind, str) or WIDTHS.get(kind) != width:
             raise self.error(f"type {kind!r}; expected {_type_name(width)}", name)
-        if ctype not in allowed or norm not in allowed[ctype]:
+        if not _is_index(ctype) or ctype not in allowed or not isinstance(norm, bool) or norm not in allowed[ctype]:
             raise self.error(f"componentType {ctype!r}{' normalized' if norm is True else ''} is not allowed here; "
                              f"expected {_allowed_text(allowed)}", name)
         n = _count(self, acc, "count", name)
