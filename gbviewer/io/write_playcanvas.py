@@ -29,7 +29,8 @@ from .compressed_ply import CHUNK_SIZE, COLOR_PROPS, PACKED_PROPS, RANGE_PROPS
 from .write import trained_as_comments
 from .write_packed import antialiased_mode, u8
 
-PALETTE = 8192  # SOG SH palette entries for scenes of more than 65536 splats
+PALETTE = 4096  # SOG SH palette entries for scenes of more than 65536 splats
+SAMPLE = 16  # splats per palette entry that the k-means rounds fit (then every splat takes its nearest entry)
 KMEANS_ROUNDS = 6
 SH_BANDS = {4: 1, 9: 2, 16: 3}
 
@@ -131,23 +132,25 @@ def _webp(pixels: np.ndarray, width: int) -> bytes:
 
 
 def _palette(rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(P, K-1, 3) SH palette and each splat's label: the splats themselves up to 65536, else k-means."""
+    """(P, K-1, 3) SH palette and each splat's label: the splats themselves up to 65536, else k-means (fitted on a
+    random sample of SAMPLE splats per entry)."""
     n = len(rest)
     flat = rest.reshape(n, -1).astype(np.float32)
     if n <= 65536:
         return rest, np.arange(n)
     rng = np.random.default_rng(0)
-    centres = flat[rng.choice(n, PALETTE, replace=False)]
+    sample = flat[rng.choice(n, min(n, SAMPLE * PALETTE), replace=False)]
+    centres = sample[:PALETTE]
     for _ in range(KMEANS_ROUNDS):
-        labels = _assign(flat, centres)
+        labels = _assign(sample, centres)
         counts = np.bincount(labels, minlength=PALETTE)
         sums = np.zeros_like(centres, dtype=np.float64)
-        np.add.at(sums, labels, flat)
+        np.add.at(sums, labels, sample)
         centres = np.where(counts[:, None] > 0, sums / np.maximum(counts, 1)[:, None], centres).astype(np.float32)
     return centres.reshape(PALETTE, *rest.shape[1:]), _assign(flat, centres)
 
 
-def _assign(flat: np.ndarray, centres: np.ndarray, rows: int = 16384) -> np.ndarray:
+def _assign(flat: np.ndarray, centres: np.ndarray, rows: int = 2048) -> np.ndarray:
     """Nearest centre of each row (squared distances by matrix product, a block of rows at a time)."""
     norms = (centres * centres).sum(axis=1)
     return np.concatenate([np.argmin(norms - 2 * flat[i:i + rows] @ centres.T, axis=1)
