@@ -20,7 +20,6 @@ from ..video import MAX_FPS, MIN_FPS
 from .options import (MAX_COUNT, add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of,
                       camera_from_args, check_render_size, load_options, path_args, progress_bar, settings_of)
 
-
 FLICKER_PANE = (320, 240)  # default pane size
 VIDEO_NAME = "heat.mp4"
 

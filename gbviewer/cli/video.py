@@ -15,7 +15,6 @@ from ..video import MAX_FPS, MIN_FPS, record_video
 from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of, camera_from_args,
                       check_inset, check_render_size, load_options, path_args, settings_of)
 
-
 VIDEO_PANE = (480, 360)  # default pane size of `gbviewer video`
 
 
