@@ -47,8 +47,9 @@ def looks_like_gltf(path: Path, head: bytes) -> bool:
 class Gltf:
     """A parsed glTF document and its buffers; `element`, `accessor` and `view_bytes` check what they index."""
 
-    def __init__(self, path: Path, doc: dict, buffers: list[memoryview], glb: bool) -> None:
+    def __init__(self, path: Path, doc: dict, buffers: list[memoryview], glb: bool, size: int) -> None:
         self.path, self.doc, self.buffers, self.glb = path, doc, buffers, glb
+        self.size = size + sum(len(b) for b in buffers)  # bytes of the file and its buffers: what bounds counts
 
     def error(self, message: str, field: str | None = None) -> SceneFormatError:
         return SceneFormatError(self.path, message, field=field)
@@ -99,6 +100,9 @@ class Gltf:
             data, stride = self.view_bytes(acc["bufferView"], f"{name}.bufferView")
             raw = _strided(self, data, _count(self, acc, "byteOffset", name, 0), stride, n, width, dtype, name)
         else:  # all zeros, as glTF defines an accessor without a bufferView (sparse values may follow)
+            if n > self.size:
+                raise self.error(f"count {n} without a bufferView: more elements than the file's {self.size} bytes "
+                                 "could describe", name)
             raw = np.zeros((n, width), dtype)
         if "sparse" in acc:
             raw = self._sparse(acc["sparse"], raw, dtype, name)
@@ -154,7 +158,8 @@ def read_gltf(path: Path, progress: LoadProgress) -> Gltf:
     buffers = doc.get("buffers", [])
     if not isinstance(buffers, list):
         raise SceneFormatError(path, "expected a list", field="buffers")
-    return Gltf(path, doc, [_buffer(path, b, i, binary) for i, b in enumerate(buffers)], is_glb(data[:4]))
+    return Gltf(path, doc, [_buffer(path, b, i, binary) for i, b in enumerate(buffers)], is_glb(data[:4]),
+                len(data))
 
 
 def _glb_chunks(path: Path, data: memoryview) -> tuple[memoryview, memoryview | None]:

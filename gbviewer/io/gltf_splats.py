@@ -63,7 +63,7 @@ def load_gltf(path: Path, progress: LoadProgress, primitive: int | None = None) 
             raise gl.error(f"--primitive {primitive}: the file has {len(instances)} splat primitives "
                            f"(0..{len(instances) - 1})")
         instances = [instances[primitive]]
-    budget = sum(len(b) for b in gl.buffers) + path.stat().st_size  # each splat needs data somewhere
+    budget = gl.size  # each splat needs data somewhere
     parts, exts, total = [], [], 0
     for prim, matrix, where in instances:
         arrays, ext = _decode(gl, prim, where)
