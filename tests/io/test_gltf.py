@@ -211,8 +211,8 @@ def hostile(tmp_path, edit) -> str:
 
 @pytest.mark.parametrize("name,edit", [
     ("count beyond bytes", lambda f: f.doc["accessors"][0].update(count=1 << 27)),
-    ("zeros beyond bytes", lambda f: f.doc["accessors"][0].pop("bufferView") and f.doc["accessors"][0].update(
-        count=1 << 40)),
+    ("zeros beyond bytes", lambda f: (f.doc["accessors"][0].pop("bufferView"), f.doc["accessors"][0].update(
+        count=1 << 40))),
     ("offset beyond view", lambda f: f.doc["accessors"][1].update(byteOffset=4000)),
     ("view beyond buffer", lambda f: f.doc["bufferViews"][0].update(byteLength=1 << 30)),
     ("bad index", lambda f: f.doc["accessors"][2].update(bufferView=99)),
