@@ -2,10 +2,10 @@
 
     python tools/fuzz_loaders.py FORMAT [--seconds N] [--corpus DIR] [-- libFuzzer options]
 
-FORMAT is one of the seed folders in tests/io/fuzz/seeds (inria, compressed, spz, splat, sog, ..., the JSON readers
-cameras and keyframes, and the datasets and command lines of tools/fuzz_targets.py): its small seed files start the
-corpus, new inputs go to `--corpus` (default .fuzz/FORMAT, kept between runs). An input fails when loading it raises
-anything but a one-line GBViewerError, emits a numpy RuntimeWarning, or returns a scene with non-finite values;
+FORMAT is one of the seed folders in tests/io/fuzz/seeds (inria, compressed, spz, splat, sog, gltf, ..., the JSON
+readers cameras and keyframes, and the datasets and command lines of tools/fuzz_targets.py): its small seed files
+start the corpus, new inputs go to `--corpus` (default .fuzz/FORMAT, kept between runs). An input fails when loading
+it raises anything but a one-line GBViewerError, emits a numpy RuntimeWarning, or returns a scene with non-finite values;
 libFuzzer also flags inputs that take over 10 s (60 s for the targets of a child process or the CLI) or 2 GiB.
 Failing inputs are written to tests/io/fuzz/crashes/ where tests/io/test_fuzz_regressions.py replays them with
 `check_load` forever after.

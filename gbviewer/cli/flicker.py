@@ -17,8 +17,8 @@ from ..io.files import check_writable
 from ..io.outputs import refuse_collisions
 from ..render import RenderSettings
 from ..video import MAX_FPS, MIN_FPS
-from .options import (MAX_COUNT, add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args,
-                      check_render_size, path_args, progress_bar, settings_of)
+from .options import (MAX_COUNT, add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of,
+                      camera_from_args, check_render_size, load_options, path_args, progress_bar, settings_of)
 
 FLICKER_PANE = (320, 240)  # default pane size
 VIDEO_NAME = "heat.mp4"
@@ -41,7 +41,7 @@ def cmd_flicker(args: argparse.Namespace) -> int:
     inputs = [args.scene, args.cameras, None if args.path in FLICKER_PATHS else args.path]
     for path in outputs:
         check_writable(path, args.force, inputs=inputs, option="--out")
-    scene = load(args.scene)
+    scene = load(args.scene, **load_options(args))
     cam = camera_from_args(scene, args)
     if args.path == "rate":
         check_render_size(cam.width, cam.height, [args.from_rate, args.to_rate], "--from/--to")
@@ -80,6 +80,7 @@ def print_report(report, width: int, height: int) -> None:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("flicker", help="temporal stability per mode along a camera path: table, heat maps, video")
     p.add_argument("scene", type=Path)
+    add_load_args(p)
     add_camera_args(p)
     p.add_argument("--modes", default="scalar,mip,analytic,gaussian_blending,supersample:3",
                    help="comma-separated MODE, MODE:N, supersample:N or preset:NAME, each with +lod[:PX] optionally")

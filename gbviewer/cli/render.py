@@ -13,8 +13,8 @@ from ..io.files import check_writable
 from ..io.trained_as import describe
 from ..render import Mode, get_renderer
 from ..render.presets import PRESETS, trained_spec
-from .options import (add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_render_size,
-                      settings_of)
+from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of, camera_from_args,
+                      check_render_size, load_options, settings_of)
 
 
 def cmd_render(args: argparse.Namespace) -> int:
@@ -22,7 +22,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in (".png", ".npy"):
         raise GBViewerError(f"{out}: output must end in .png or .npy")
     check_writable(out, args.force, inputs=[args.scene, args.cameras], option="--out")
-    scene = load(args.scene)
+    scene = load(args.scene, **load_options(args))
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, [args.scale], "--scale")
     cam = cam.at_sampling_rate(args.scale)
@@ -41,6 +41,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="render one image")
     p.add_argument("scene", type=Path)
+    add_load_args(p)
     add_camera_args(p)
     p.add_argument("--mode", help=f"MODE[:N][+lod[:PX]], MODE one of {', '.join(m.label for m in Mode)} or "
                    f"preset:NAME ({', '.join(PRESETS)}); default: the mode the file says the scene was trained with "

@@ -12,8 +12,8 @@ from ..extras import require
 from ..io import load
 from ..io.files import check_writable
 from ..video import MAX_FPS, MIN_FPS, record_video
-from .options import (add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_inset,
-                      check_render_size, path_args, settings_of)
+from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of, camera_from_args,
+                      check_inset, check_render_size, load_options, path_args, settings_of)
 
 VIDEO_PANE = (480, 360)  # default pane size of `gbviewer video`
 
@@ -28,7 +28,7 @@ def cmd_video(args: argparse.Namespace) -> int:
     path_args(args, PATHS, VIDEO_PANE)
     check_writable(args.out, args.force, inputs=[args.scene, args.cameras, None if args.path in PATHS else args.path],
                    option="--out")
-    scene = load(args.scene)
+    scene = load(args.scene, **load_options(args))
     cam = camera_from_args(scene, args)
     check_inset(args.inset, cam.width, cam.height)
     if args.path == "rate":
@@ -53,6 +53,7 @@ def cmd_video(args: argparse.Namespace) -> int:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("video", help="side-by-side zoom video of several modes (H.264 MP4)")
     p.add_argument("scene", type=Path)
+    add_load_args(p)
     add_camera_args(p)
     p.add_argument("--modes", default="scalar,supersample:3,gaussian_blending",
                    help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, supersample:N = scalar:N; the "

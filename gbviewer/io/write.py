@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import GBViewerError
 from .files import atomic_write
 from ..scene import Scene
 from .ply import activate_opacity, activate_scales
@@ -98,14 +99,17 @@ def trained_as_comments(scene: Scene) -> tuple[str, ...]:
     return (f"{COMMENT_KEY}: {value}",) if value else ()
 
 
+def refuse_neural(scene: Scene, what: str) -> None:
+    """Refuse a Duplex-GS checkpoint, whose splats only its MLPs give, per view."""
+    if scene.oit is not None and scene.oit.neural is not None:
+        raise GBViewerError(f"{scene.source}: a Duplex-GS checkpoint has no fixed splats (its MLPs decode them per "
+                            f"view), so it cannot be written as {what}")
+
+
 def write_inria_ply(scene: Scene, path: str | Path, force: bool = False) -> Path:
     """Write `scene` to `path` atomically, its known training mode as a `SplatRenderMode` comment; refuses to
     overwrite an existing file unless `force`."""
-    if scene.oit is not None and scene.oit.neural is not None:
-        from ..errors import GBViewerError
-
-        raise GBViewerError(f"{scene.source}: a Duplex-GS checkpoint has no fixed splats (its MLPs decode them per "
-                            "view), so it cannot be written as an INRIA ply")
+    refuse_neural(scene, "an INRIA ply")
     cols = inria_columns(scene)
     header = ply_header(scene.num_splats, list(cols), trained_as_comments(scene))
     body = np.stack(list(cols.values()), axis=1).astype("<f4")
