@@ -32,6 +32,8 @@ class Mode(enum.IntEnum):
     GAUSSIAN_BLENDING = 3  # spatial transmittance window (Gaussian Blending)
     WSR = 4  # sort-free weighted sum (LC-WSR, Hou et al.): order independent, no sort
     DUPLEX = 5  # Duplex-GS: cells sorted, weighted sum inside a cell, cell transmittance and early termination
+    EVAL3D = 7  # 3DGUT: each splat at its maximum along the pixel's ray, per pixel in that depth's order
+    STOPTHEPOP = 8  # StopThePop: 3DGS's 2D splats, per pixel by depth along the ray through a K-entry queue
 
     @classmethod
     def parse(cls, value: "str | int | Mode") -> "Mode":
@@ -56,6 +58,9 @@ class Mode(enum.IntEnum):
 DEBUG_OUTPUTS = ("none", "window")
 
 ORDER_INDEPENDENT = (Mode.WSR, Mode.DUPLEX)
+PER_PIXEL_SORTED = (Mode.EVAL3D, Mode.STOPTHEPOP)  # the cpu backend's only (gbv::per_pixel_sorted)
+STOPTHEPOP_QUEUE = 4  # StopThePop's published per-pixel queue (gbv::STOPTHEPOP_QUEUE)
+MAX_QUEUE = 64  # the longest per-pixel queue (0: unbounded, the exact per-pixel sort)
 DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (KERNELS.md §8.1)
 DEFAULT_SIGMA = 10.0  # sort-free GS's initial sigma, for depth correction on scenes without a trained one
 MAX_SUPERSAMPLE = 8
@@ -79,6 +84,9 @@ class RenderSettings:
     scene's trained value, else 10); `et_grade` is Duplex-GS's E (None: the scene's trained value, else 4.0, the
     published final value); `cell_size` is the number of splats per cell built for scenes without cells.
 
+    stopthepop: `queue` is the per-pixel queue length K (0..64; 0: unbounded, the exact per-pixel sort; default 4, as
+    published), spelled 'stopthepop:K' (and 'stopthepop:K:N' with N x N supersampling).
+
     `lod` (pixels >= 0): render the cut of the scene's splat hierarchy at that projected size (gbviewer.lod) in any
     mode; None renders every splat.
     """
@@ -95,6 +103,7 @@ class RenderSettings:
     lod: float | None = None  # level of detail: draw the hierarchy's cut at this many pixels (None: every splat)
     view_filter: ViewFilter = ViewFilter()
     preset: str = ""
+    queue: int = STOPTHEPOP_QUEUE
 
     def __post_init__(self) -> None:
         """Every number checked through gbviewer.validate (the native renderers take them as int32 and float32);
@@ -112,6 +121,7 @@ class RenderSettings:
                                                                     f32=True),
                 "cell_size": integer(self.cell_size, "cell_size", lo=1, hi=MAX_CELL_SIZE),
                 "lod": None if self.lod is None else real(self.lod, "lod", lo=0, hi=MAX_LOD, f32=True),
+                "queue": integer(self.queue, "queue", lo=0, hi=MAX_QUEUE),
             }
         except InvalidValue as exc:
             raise RenderError(str(exc)) from None
@@ -120,6 +130,8 @@ class RenderSettings:
         object.__setattr__(self, "depth_correct", bool(self.depth_correct))
         if not isinstance(self.view_filter, ViewFilter):
             raise RenderError(f"view_filter {self.view_filter!r}; expected a gbviewer.render.ViewFilter")
+        if self.mode != Mode.STOPTHEPOP and self.queue != STOPTHEPOP_QUEUE:
+            raise RenderError(f"queue {self.queue} applies to the stopthepop mode, not {self.mode.label}")
         if self.mode != Mode.SCALAR and not self.view_filter.is_default:
             raise RenderError(f"view_filter {self.view_filter.describe()} applies to the scalar mode, not "
                               f"{self.mode.label}")
@@ -145,8 +157,15 @@ class RenderSettings:
 
     @property
     def name(self) -> str:
-        """'scalar', 'preset:supersplat', ..."""
-        return f"preset:{self.preset}" if self.preset else self.mode.label
+        """'scalar', 'preset:supersplat', 'stopthepop:8' (a queue other than the published 4), ..."""
+        if self.preset:
+            return f"preset:{self.preset}"
+        return self.mode.label + (f":{self.queue}" if self.queue != STOPTHEPOP_QUEUE else "")
+
+    @property
+    def native_mode(self) -> int:
+        """The mode word the native renderers take: the Mode, stopthepop's queue length in the bits above 8."""
+        return int(self.mode) | (self.queue << 8 if self.mode == Mode.STOPTHEPOP else 0)
 
     @property
     def base_label(self) -> str:
@@ -161,11 +180,13 @@ class RenderSettings:
     def spec(self) -> str:
         """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1', ..."""
         lod = f"+lod:{self.lod:g}" if self.lod is not None else ""
-        return self.name + (f":{self.supersample}" if self.supersample > 1 else "") + lod
+        name = f"stopthepop:{self.queue}" if self.mode == Mode.STOPTHEPOP and self.supersample > 1 else self.name
+        return name + (f":{self.supersample}" if self.supersample > 1 else "") + lod
 
     @classmethod
     def parse(cls, spec: str, **kwargs) -> "RenderSettings":
-        """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples;
+        """'MODE' or 'MODE:N' (N x N supersampling); 'stopthepop:K[:N]' (K: its queue length); 'supersample:N'
+        means scalar with N x N samples;
         'preset:NAME[:N]' a viewer preset (gbviewer.render.presets); a suffix '+lod' or '+lod:TAU' draws the
         level-of-detail cut at TAU pixels (default 1)."""
         spec, plus, lod = spec.partition("+")
@@ -180,6 +201,12 @@ class RenderSettings:
         name, _, n = spec.strip().partition(":")
         if name.strip().lower() == "preset":
             return cls._preset(n, **kwargs)
+        if name.strip().lower() == "stopthepop" and n:
+            queue, _, n = n.partition(":")
+            try:
+                kwargs = {**kwargs, "queue": int(queue)}
+            except ValueError:
+                raise RenderError(f"mode {spec!r}: queue length {queue!r} is not an integer") from None
         try:
             supersample = int(n) if n else 1
         except ValueError:

@@ -129,6 +129,7 @@ struct FrameBuffers {
     std::vector<uint32_t> ids;  // per tile list entry: its splat (4 bytes: half the traffic of a depth key)
     std::vector<SplatBounds> boxes;
     std::vector<RankedRect> ranked;  // bin_splats' scratch
+    std::vector<RaySplat> rays;      // eval3d, stopthepop: each splat's ray data (finish_rays)
 };
 
 // A running call's cancel state and progress (Control) for its frames: the caller's flag or a report that asked to
@@ -208,6 +209,12 @@ void bin_splats(const std::vector<TileRect>& rects, const uint64_t* order,
 void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<Splat2D>& splats,
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
                 std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids, Stats& st, FrameRun& run);
+
+// rays.cpp: the per-pixel sorted modes' finish after (stopthepop) or instead of (eval3d) the SIMD path's: every
+// splat's ray data (gbv/ray3d.h) into buf.rays; eval3d also sets splats, rects and valid from the stage: the splat
+// as the stage has it (no 2D filter), the tiles its 3D footprint (ray_footprint) touches. stopthepop drops a valid
+// splat whose ray data is degenerate.
+void finish_rays(const SceneView& sc, const Stage& stage, Mode mode, FrameBuffers& buf, FrameRun& run);
 
 // frame.cpp: the stage of `key` into `stage` (every splat, or the level-of-detail cut's; stops early once cancelled,
 // leaving it not ready).

@@ -83,6 +83,7 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
     std::vector<Splat2D> list;
     std::vector<SplatBounds> bounds;
     std::vector<uint32_t> ids;
+    std::vector<RaySplat> rays;
     for (int sy = 0; sy < N; ++sy) {
         for (int sx = 0; sx < N; ++sx) {
             const int hx = x * N + sx, hy = y * N + sy;
@@ -96,10 +97,15 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
                 list[j] = f.splats[ids[j]];
                 bounds[j] = f.boxes[ids[j]];
             }
+            if (f.rays) {
+                rays.resize(count);
+                for (int64_t j = 0; j < count; ++j) rays[j] = f.rays[ids[j]];
+            }
             const size_t q = (size_t)sy * N + sx;
             TileJob job = {};
             job.list = list.data();
             job.bounds = bounds.data();
+            job.rays = f.rays ? rays.data() : nullptr;
             job.n = (int)count;
             job.x0 = hx;
             job.y0 = hy;

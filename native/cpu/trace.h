@@ -18,6 +18,7 @@ struct FrameLists {
     const SplatBounds* boxes;
     const int64_t* tile_start;
     const uint32_t* ids;
+    const RaySplat* rays;  // eval3d, stopthepop: per splat (else null)
     int width, height;
     Mode mode;
     OitParams oit;

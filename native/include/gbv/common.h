@@ -26,7 +26,12 @@
 namespace gbv {
 
 // Blending modes; the integer values are the Python enum's values (gbviewer/render/types.py).
-enum Mode : int32_t { SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5 };
+enum Mode : int32_t {
+    SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5,
+    EVAL3D = 7, STOPTHEPOP = 8,  // per-pixel sorted along the ray (ray3d.h)
+};
+// Modes that order each pixel's splats by the depth of their maximum along its ray (ray3d.h).
+GBV_HD bool per_pixel_sorted(Mode m) { return m == EVAL3D || m == STOPTHEPOP; }
 // Camera projections; the values are the indices of gbviewer.camera.PROJECTIONS.
 enum Projection : int32_t { PERSPECTIVE = 0, ORTHOGRAPHIC = 1 };
 
@@ -51,6 +56,10 @@ constexpr float WSR_FIXED_MAX = 64.0f;         // 2^6: per-term clamp; 2^21 - 1 
 constexpr float DUPLEX_CELL_SIGMAS = 2.0f;     // cell radius ceil(2 sqrt(lambda1)) (§8.3)
 constexpr float DUPLEX_T_STOP = 0.01f;         // CUMMULT_THRESHOLD: cell-level early termination (§8.1)
 constexpr float TWO_PI = 6.283185307179586f;
+// StopThePop's published per-pixel queue length (SortQueueSizes.per_pixel = 4; tile_4x4 = 64, tile_2x2 = 8:
+// r4dl/StopThePop-Rasterization diff_gaussian_rasterization/__init__.py).
+constexpr int STOPTHEPOP_QUEUE = 4;
+constexpr int MAX_QUEUE = 64;  // the longest per-pixel queue accepted (0: unbounded, the exact per-pixel sort)
 
 struct Vec2 {
     float x, y;
@@ -150,6 +159,7 @@ struct OitParams {
     float pre_dilation = 0.0f;
     float cull_lambda = 0.0f;
     int32_t compensate = 0;
+    int32_t queue = STOPTHEPOP_QUEUE;  // stopthepop: the per-pixel queue length K (0: unbounded)
 };
 
 // Tile rectangle [x0, x1) x [y0, y1) in tile units.

@@ -68,7 +68,7 @@ GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLan
     // the mode's 2D filter, opacity compensation, view weight and cut-off
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
-    if (mode == SCALAR) {
+    if (mode == SCALAR || mode == STOPTHEPOP) {  // stopthepop blends 3DGS's 2D splats in its own order
         scalar_filter<L>(oit, cov, opacity, ok);
     } else if (mode == MIP) {
         const F eps = L::set(1e-6f);
