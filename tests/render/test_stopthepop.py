@@ -14,7 +14,7 @@ import pytest
 import gbviewer as gb
 from gbviewer import flicker as fl
 from gbviewer.errors import RenderError
-from gbviewer.render import RenderSettings
+from gbviewer.render import RenderSettings, create_renderer
 from gbviewer.scene import SH_C0
 from helpers import random_view
 from reference_ray import render_sorted
@@ -135,3 +135,25 @@ def test_stopthepop_does_not_pop_on_an_orbit():
                              with_floor=False)
     scalar, stp = rep.modes
     assert scalar.flicker > 4 * stp.flicker, (scalar.flicker, stp.flicker)
+
+
+@pytest.mark.parametrize("spec, order", [("stopthepop", [3, 4, 2, 1, 0]), ("stopthepop:0", [4, 3, 2, 1, 0]),
+                                         ("eval3d", [4, 3, 2, 1, 0])])
+def test_trace_lists_the_pixel_blend_order(spec, order):
+    """The pixel trace walks the constructed pixel in its blend order (the queue's, or the exact sort's) and
+    gives the rendered colour."""
+    scene, cam = crossing_splats(), camera()
+    renderer = create_renderer("cpu")
+    renderer.upload(scene)
+    settings = RenderSettings.parse(spec)
+    tr = renderer.trace(cam, settings, 24, 20)
+    assert [s.index for s in tr.samples[0].steps] == order
+    np.testing.assert_array_equal(tr.color, renderer.render(cam, settings).rgb[20, 24])
+
+
+def test_backends_without_them_refuse_in_one_line():
+    from gbviewer.render.prepare import prepare
+
+    for spec in ("eval3d", "stopthepop"):
+        with pytest.raises(RenderError, match=f"{spec}: the glsl backend does not render it; use the cpu backend"):
+            prepare(random_scene(), camera(), RenderSettings.parse(spec), "glsl")
