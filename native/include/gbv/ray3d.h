@@ -17,6 +17,7 @@
 #include "common.h"
 #include "gaussian.h"
 #include "lanes.h"
+#include "preprocess_stage.h"
 
 namespace gbv {
 
@@ -162,6 +163,43 @@ GBV_HD int ray_footprint(const RaySplat& s, float log_min_alpha, double box[4]) 
     box[2] = cy - hy - pad;
     box[3] = cy + hy + pad;
     return 1;
+}
+
+// The tiles whose pixel centres may lie in the box of pixel offsets `box` about xy (ray_footprint's `kind` and box),
+// widened by the rounding of the offset px - xy; pixel i's centre is i + 0.5, in tile floor(i / TILE).
+GBV_HD TileRect footprint_tiles(Vec2 xy, int kind, const double box[4], int gx, int gy) {
+    if (kind == 2) return {0, 0, gx, gy};
+    if (kind == 0) return {0, 0, 0, 0};
+    const double slack = 1e-6 * (fabs((double)xy.x) + fabs((double)xy.y));
+    const double t[4] = {floor((xy.x + box[0] - slack - 0.5) / TILE), floor((xy.y + box[2] - slack - 0.5) / TILE),
+                         floor((xy.x + box[1] + slack - 0.5) / TILE) + 1, floor((xy.y + box[3] + slack - 0.5) / TILE) + 1};
+    const double g[4] = {(double)gx, (double)gy, (double)gx, (double)gy};
+    int r[4];
+    for (int k = 0; k < 4; ++k) r[k] = (int)fmin(fmax(t[k], 0.0), g[k]);
+    return {r[0], r[1], r[2], r[3]};
+}
+
+// A per-pixel sorted mode's finish of one splat from its stage (mean, scale, quat and filter_3d of `in` are read):
+// its ray data; for eval3d also its splat (the stage's position, depth, opacity and colour: no 2D filter, the
+// conic unused) and tile rectangle (ray_footprint), for stopthepop the scalar finish's splat and rectangle are kept
+// (its depth uses scales >= STOPTHEPOP_MIN_SCALE). False when the splat is dropped: opacity below 1/255 or no tile
+// (eval3d), degenerate ray data (both).
+GBV_HD bool finish_ray_splat(const SplatIn& in, const StageSplat& st, const CameraParams& cam, Mode mode, int gx,
+                             int gy, Splat2D* out, TileRect* rect, RaySplat* ray) {
+    const bool ok = ray_splat(cam, in.mean, in.quat, in.scale, in.filter_3d,
+                              mode == STOPTHEPOP ? STOPTHEPOP_MIN_SCALE : 0.0f, ray);
+    if (mode != EVAL3D) return ok;
+    *out = Splat2D{};
+    out->xy = {st.xy[0], st.xy[1]};
+    out->depth = st.depth;
+    out->opacity = st.opacity;
+    for (int c = 0; c < 3; ++c) out->color[c] = st.color[c];
+    out->log_min_alpha = logf(MIN_ALPHA_3DGS / st.opacity);
+    out->cell = -1;
+    double box[4] = {0, 0, 0, 0};
+    const int kind = ok && st.opacity >= MIN_ALPHA_3DGS ? ray_footprint(*ray, out->log_min_alpha, box) : 0;
+    *rect = footprint_tiles(out->xy, kind, box, gx, gy);
+    return rect->x1 > rect->x0 && rect->y1 > rect->y0;
 }
 
 }  // namespace gbv
