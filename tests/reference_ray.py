@@ -113,8 +113,8 @@ def render_sorted(scene, cam, mode: str, queue: int | None = None, supersample: 
         for x in range(W):
             ids = cand
             if mode == "stopthepop":
-                r = pre["rect"][ids]
-                ids = ids[(r[:, 0] <= x // TILE) & (x // TILE < r[:, 1]) & (r[:, 2] <= y // TILE) & (y // TILE < r[:, 3])]
+                r, tx, ty = pre["rect"][ids], x // TILE, y // TILE
+                ids = ids[(r[:, 0] <= tx) & (tx < r[:, 1]) & (r[:, 2] <= ty) & (ty < r[:, 3])]
             px, py = x + 0.5, y + 0.5
             o, d = pixel_ray(cp, px, py)
             E, t = ray_maximum(P[ids], mu[ids], o, d)

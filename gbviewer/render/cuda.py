@@ -30,7 +30,7 @@ class CudaRenderer(NativeUploads, Renderer):
     process."""
 
     name = "cuda"
-    capabilities = Capabilities(gl_texture=True, shared_stage=True)
+    capabilities = Capabilities(gl_texture=True, shared_stage=True, sorted_modes=True)
 
     def __init__(self, device: int = -1) -> None:
         ok, why = self.available()
@@ -147,11 +147,12 @@ class CudaRenderer(NativeUploads, Renderer):
         after it; its result dict, the frame's inputs and the start time."""
         t0 = time.perf_counter()
         with self._lock, control:
-            prep = prepare(self._scene, camera, settings, self.name, flag=control.flag)
+            prep = prepare(self._scene, camera, settings, self.name, flag=control.flag,
+                           sorted_modes=self.capabilities.sorted_modes)
             self._sync(prep)
             control.step(0, 1)
             lead = tuple(self._textures.claim(x) for x in lead)
-            out = self._native(method, *lead, *camera_args(camera), int(settings.mode), settings.supersample,
+            out = self._native(method, *lead, *camera_args(camera), settings.native_mode, settings.supersample,
                              settings.sh_degree, np.asarray(settings.background, np.float32), *extra,
                              *(prep.oit or ()), view_filter=settings.view_filter.native())
             control.step(1, 1)

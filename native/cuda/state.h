@@ -16,6 +16,7 @@
 #include "gbv/args.h"
 #include "gbv/common.h"
 #include "gbv/preprocess.h"
+#include "gbv/ray3d.h"
 #include "renderer.h"
 
 namespace gbv::cuda {
@@ -73,6 +74,7 @@ struct State {
     detail::Event ev_stage;
     // per frame
     Buf<Splat2D> splats;
+    Buf<RaySplat> rays;  // eval3d, stopthepop
     Buf<TileRect> rects;
     Buf<uint32_t> touched, values_in, values_out;
     Buf<uint64_t> offsets, keys_in, keys_out;

@@ -32,7 +32,9 @@ struct RaySplat {
     int32_t ortho;
 };
 
-GBV_HD float dot3(const float a[3], const float b[3]) { return mul_rn(a[0], b[0]) + mul_rn(a[1], b[1]) + mul_rn(a[2], b[2]); }
+GBV_HD float dot3(const float a[3], const float b[3]) {
+    return mul_rn(a[0], b[0]) + mul_rn(a[1], b[1]) + mul_rn(a[2], b[2]);
+}
 
 // The ray data of a splat (mean in world space, unit (w,x,y,z) quaternion, scales; filter_3d > 0: Mip-Splatting's
 // 3D filter, as the stage applies it; scales below min_scale are raised to it first). False when a scale is not
@@ -172,7 +174,8 @@ GBV_HD TileRect footprint_tiles(Vec2 xy, int kind, const double box[4], int gx, 
     if (kind == 0) return {0, 0, 0, 0};
     const double slack = 1e-6 * (fabs((double)xy.x) + fabs((double)xy.y));
     const double t[4] = {floor((xy.x + box[0] - slack - 0.5) / TILE), floor((xy.y + box[2] - slack - 0.5) / TILE),
-                         floor((xy.x + box[1] + slack - 0.5) / TILE) + 1, floor((xy.y + box[3] + slack - 0.5) / TILE) + 1};
+                         floor((xy.x + box[1] + slack - 0.5) / TILE) + 1,
+                         floor((xy.y + box[3] + slack - 0.5) / TILE) + 1};
     const double g[4] = {(double)gx, (double)gy, (double)gx, (double)gy};
     int r[4];
     for (int k = 0; k < 4; ++k) r[k] = (int)fmin(fmax(t[k], 0.0), g[k]);
