@@ -13,6 +13,7 @@ import pytest
 
 import gbviewer as gb
 from gbviewer import flicker as fl
+from gbviewer import lod
 from gbviewer.errors import RenderError
 from gbviewer.render import RenderSettings, create_renderer
 from gbviewer.scene import SH_C0
@@ -157,3 +158,27 @@ def test_backends_without_them_refuse_in_one_line():
     for spec in ("eval3d", "stopthepop"):
         with pytest.raises(RenderError, match=f"{spec}: the glsl backend does not render it; use the cpu backend"):
             prepare(random_scene(), camera(), RenderSettings.parse(spec), "glsl")
+
+
+@pytest.mark.parametrize("spec, mode, queue", [("eval3d:2", "eval3d", None), ("stopthepop:4:2", "stopthepop", 4)])
+def test_supersampled_matches_the_reference(spec, mode, queue):
+    """N x N samples: the reference's sorted render at N times the resolution, box-averaged."""
+    scene, cam = random_scene(9, 30), gb.Camera(24, 20, 20.0, 20.0, 12.25, 10.25, np.eye(3), np.zeros(3))
+    rgb, _ = render_sorted(scene, cam, mode, queue, supersample=2)
+    err = np.abs(gb.render(scene, cam, spec).rgb - rgb).max(axis=2)
+    assert np.quantile(err, 0.99) < 1e-4 and err.max() < 5e-3
+
+
+@pytest.mark.parametrize("spec", ["eval3d", "stopthepop"])
+def test_level_of_detail_drawn_in_place_is_the_cut_scene(spec):
+    """The cut drawn in place (its rows of the scene and the hierarchy's interior nodes) gives the image of the cut
+    gathered into a scene of its own, bit for bit."""
+    rng = np.random.default_rng(4)
+    n = 3000
+    means = np.stack([rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(2, 6, n)], 1)
+    scene = gb.Scene.from_arrays(means, np.exp(rng.uniform(-4.0, -1.5, (n, 3))), rng.normal(size=(n, 4)),
+                                 rng.uniform(0.05, 1.0, n), rng.normal(0, 0.5, (n, 1, 3)))
+    cam = gb.Camera(64, 48, 60.0, 60.0, 32, 24, np.eye(3), np.zeros(3))
+    frame = gb.render(scene, cam, f"{spec}+lod:2")
+    assert frame.stats.lod_splats != n  # interior nodes drawn
+    assert np.array_equal(frame.rgb, gb.render(lod.cut_scene(scene, cam, 2.0), cam, spec).rgb)
