@@ -167,7 +167,7 @@ bool preprocess_finish(SplatIn in_, StageSplat st, int sh_deg, CameraParams cam,
     precise float opacity = st.opacity;
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
-    if (mode == SCALAR) {
+    if (mode == SCALAR || mode == STOPTHEPOP) {
         if (!scalar_filter(oit, cov, opacity)) return false;
     } else if (mode == MIP) {
         precise const float det0 = max(1e-6, cov[0] * cov[2] - cov[1] * cov[1]);

@@ -44,8 +44,7 @@ class CpuRenderer(NativeUploads, Renderer):
     mutex in the native renderer around its buffers); each frame runs on every core."""
 
     name = "cpu"
-    capabilities = Capabilities(progressive=True, shared_stage=True, trace=True, simd=True, host=True,
-                                sorted_modes=True)
+    capabilities = Capabilities(progressive=True, shared_stage=True, trace=True, simd=True, host=True)
 
     def __init__(self) -> None:
         ok, why = self.available()
@@ -108,8 +107,7 @@ class CpuRenderer(NativeUploads, Renderer):
         control.check()  # before any work (a trained model's decode included)
         frames: list[Frame] = []
         with self._lock:
-            preps = [prepare(self._scene, camera, settings, self.name, lod_in_place=True, flag=control.flag,
-                             sorted_modes=self.capabilities.sorted_modes)
+            preps = [prepare(self._scene, camera, settings, self.name, lod_in_place=True, flag=control.flag)
                      for camera, settings in jobs]
             for run in batches(jobs, preps):
                 for prep in [next((p for p in preps[run.start:run.stop] if p.cells is not None), preps[run.start]),
@@ -132,8 +130,7 @@ class CpuRenderer(NativeUploads, Renderer):
     def trace(self, camera: Camera, settings: RenderSettings, x: int, y: int) -> PixelTrace:
         """The pixel trace of (x, y) in this frame (gbviewer.render.trace; `trace_pixel` checks the pixel)."""
         with self._lock:
-            prep = prepare(self._scene, camera, settings, self.name, lod_in_place=True,
-                           sorted_modes=self.capabilities.sorted_modes)
+            prep = prepare(self._scene, camera, settings, self.name, lod_in_place=True)
             self._sync(prep)
             out = self._impl.trace(*self._frame_args(camera, settings), *(prep.oit or ()), x=x, y=y,
                                    view_filter=settings.view_filter.native(), lod=prep.lod)

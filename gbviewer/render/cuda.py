@@ -30,7 +30,7 @@ class CudaRenderer(NativeUploads, Renderer):
     process."""
 
     name = "cuda"
-    capabilities = Capabilities(gl_texture=True, shared_stage=True, sorted_modes=True)
+    capabilities = Capabilities(gl_texture=True, shared_stage=True)
 
     def __init__(self, device: int = -1) -> None:
         ok, why = self.available()
@@ -147,8 +147,7 @@ class CudaRenderer(NativeUploads, Renderer):
         after it; its result dict, the frame's inputs and the start time."""
         t0 = time.perf_counter()
         with self._lock, control:
-            prep = prepare(self._scene, camera, settings, self.name, flag=control.flag,
-                           sorted_modes=self.capabilities.sorted_modes)
+            prep = prepare(self._scene, camera, settings, self.name, flag=control.flag)
             self._sync(prep)
             control.step(0, 1)
             lead = tuple(self._textures.claim(x) for x in lead)

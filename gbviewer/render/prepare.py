@@ -15,8 +15,8 @@ from ..errors import GBViewerError, RenderCancelled, RenderError
 from ..lod import Hierarchy, check_plain, cut_scene, cut_view, hierarchy_for
 from ..scene import Scene
 from .budget import check_frame_memory
-from .types import (DEFAULT_ET_GRADE, DEFAULT_SIGMA, ORDER_INDEPENDENT, PER_PIXEL_SORTED, SORT_ENTRY_BYTES, Frame,
-                    FrameStats, Mode, RenderSettings)
+from .types import (DEFAULT_ET_GRADE, DEFAULT_SIGMA, ORDER_INDEPENDENT, SORT_ENTRY_BYTES, Frame, FrameStats, Mode,
+                    RenderSettings)
 
 
 class OitParams(NamedTuple):
@@ -69,16 +69,13 @@ MAX_SAMPLES = 2**31 - 1  # sub-samples of one frame: the native modules and shad
 
 
 def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backend: str,
-            lod_in_place: bool = False, flag: np.ndarray | None = None, sorted_modes: bool = False) -> Prepared:
+            lod_in_place: bool = False, flag: np.ndarray | None = None) -> Prepared:
     """The frame's inputs for `backend` from its uploaded scene (None: nothing uploaded, an error). A
     level-of-detail frame gets the cut's Scene, or with `lod_in_place` (the CPU renderer; not duplex) the hierarchy
     and cut arguments to draw the same cut from the uploaded scene. `flag`: the render's cancel flag
-    (RenderControl.flag), which stops the cut of a gathered cut Scene (RenderCancelled). `sorted_modes`: the backend
-    renders the per-pixel sorted modes (eval3d, stopthepop; else they are a RenderError)."""
+    (RenderControl.flag), which stops the cut of a gathered cut Scene (RenderCancelled)."""
     if scene is None:
         raise RenderError(f"{backend} renderer: upload(scene) before render()")
-    if settings.mode in PER_PIXEL_SORTED and not sorted_modes:
-        raise RenderError(f"{settings.mode.label}: the {backend} backend does not render it; use the cpu backend")
     samples = camera.width * camera.height * settings.supersample**2
     if samples > MAX_SAMPLES:
         raise RenderError(f"{camera.width}x{camera.height} at supersample {settings.supersample}: {samples} samples, "

@@ -333,7 +333,6 @@ class Capabilities:
     trace: `trace(camera, settings, x, y) -> PixelTrace` (gbviewer.render.trace).
     simd: `FrameStats.simd` names the blend's SIMD path, switched process-wide by gbviewer.bench.simd.
     host: renders on the host's CPU cores (`RenderSettings.threads` of them): rates per core mean something.
-    sorted_modes: renders the per-pixel sorted modes (eval3d, stopthepop; elsewhere they are a RenderError).
     """
 
     progressive: bool = False
@@ -343,7 +342,6 @@ class Capabilities:
     trace: bool = False
     simd: bool = False
     host: bool = False
-    sorted_modes: bool = False
 
 
 class Renderer(abc.ABC):

@@ -117,7 +117,7 @@ inline RenderArgs parse_render_args(const char* where, const FArr& R, const FArr
     a.height = height;
     for (int c = 0; c < 3; ++c) a.bg[c] = background.data()[c];
     a.oit = OitParams{sigma, weight_background, et_grade, depth_correct ? 1 : 0};
-    if (md == STOPTHEPOP) a.oit.queue = mode >> 8;
+    if (md == STOPTHEPOP) a.queue = mode >> 8;
     return a;
 }
 

@@ -71,6 +71,7 @@ struct TileJob {
     int width;           // row stride of the planes in pixels
     Mode mode;
     OitParams oit;
+    int queue;  // stopthepop's K (0: unbounded)
     float bg[3];
     float *rgb, *alpha, *window;  // image planes, at the rectangle's pixel (x0, y0); window may be null
     int32_t* evals;
@@ -304,7 +305,7 @@ template <class L, class Tr>
 void group_sorted(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     static_assert(L::N == 1, "the per-pixel sorted modes have no vector lanes");
     AlphaState<Lanes1> st = {1.0f, {0.0f, 0.0f, 0.0f}};
-    const int queue = job.mode == EVAL3D ? 0 : job.oit.queue;
+    const int queue = job.mode == EVAL3D ? 0 : job.queue;
     out.evals[0] = blend_sorted_pixel<Tr>(job.list, job.rays, job.n, job.mode, queue, L::reduce_max(g.px),
                                           L::reduce_max(g.py), st);
     for (int c = 0; c < 3; ++c) out.C[c][0] = st.C[c];

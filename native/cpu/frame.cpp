@@ -279,6 +279,7 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
         job.width = fr.cam->width;
         job.mode = fr.mode;
         job.oit = fr.oit;
+        job.queue = fr.queue;
         for (int c = 0; c < 3; ++c) job.bg[c] = fr.bg[c];
         const int gx = (fr.cam->width + TILE - 1) / TILE;
         const int num_tiles = (int)fr.buf->tile_start.size() - 1;
@@ -307,7 +308,7 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
     for (const BlendFrame& fr : frames) fr.st->blend_ms += ms;
 }
 
-PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
+PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, int queue,
                              const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N) {
     Stats st;
     const Control none;
@@ -317,7 +318,7 @@ PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const
     const CameraParams& cam = stage.key.cam;
     FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.ids.data(),
                         per_pixel_sorted(mode) ? buf.rays.data() : nullptr, cam.width,
-                        cam.height, mode, oit, {bg[0], bg[1], bg[2]}};
+                        cam.height, mode, oit, queue, {bg[0], bg[1], bg[2]}};
     FlushDenormals ftz;
     return trace_pixel(lists, x, y, N);
 }

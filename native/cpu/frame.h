@@ -232,6 +232,7 @@ struct BlendFrame {
     const CameraParams* cam;
     Mode mode;
     OitParams oit;
+    int queue;  // stopthepop's K
     const float* bg;
     Image* img;
     int N;
@@ -241,7 +242,7 @@ struct BlendFrame {
 // together, in proportion to their tile counts); each frame's blend_ms is the loop's time.
 void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile, FrameRun& run);
 // The pixel trace of output pixel (x, y) at N x N samples from a ready stage (the sub-sample grid's camera).
-PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
+PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, int queue,
                              const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N);
 
 }  // namespace gbv::cpu

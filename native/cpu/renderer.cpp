@@ -219,7 +219,8 @@ std::vector<RenderResult> Renderer::render_many(const std::vector<RenderArgs>& f
         if (run.cancelled()) break;
         bin_frame(sc, stage, a.mode, a.oit, path, impl_->buffers[f], r.stats, run);
         Image* img = a.supersample > 1 ? &hi[f] : &r.image;
-        blend.push_back({&impl_->buffers[f], &stage.key.cam, a.mode, a.oit, a.bg, img, a.supersample, &r.stats});
+        blend.push_back(
+            {&impl_->buffers[f], &stage.key.cam, a.mode, a.oit, a.queue, a.bg, img, a.supersample, &r.stats});
     }
     if (!run.cancelled()) blend_frames(blend, path.blend_tile, run);
     for (int f = 0; f < count; ++f) {
@@ -254,7 +255,7 @@ PixelTrace Renderer::trace(const RenderArgs& a, int x, int y) {
         build_stage(sc, key, path, stages[0], st, run);
     }
     impl_->buffers.resize(1);
-    PixelTrace t = trace_frame_pixel(sc, stages[0], a.mode, a.oit, a.bg, path, impl_->buffers[0], x, y,
+    PixelTrace t = trace_frame_pixel(sc, stages[0], a.mode, a.oit, a.queue, a.bg, path, impl_->buffers[0], x, y,
                                      a.supersample);
     impl_->stages = std::move(stages);
     return t;

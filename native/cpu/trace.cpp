@@ -114,6 +114,7 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
             job.width = N;
             job.mode = f.mode;
             job.oit = f.oit;
+            job.queue = f.queue;
             for (int c = 0; c < 3; ++c) job.bg[c] = f.bg[c];
             job.rgb = out.samples.rgb.data() + q * 3;
             job.alpha = out.samples.alpha.data() + q;

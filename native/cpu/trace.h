@@ -22,6 +22,7 @@ struct FrameLists {
     int width, height;
     Mode mode;
     OitParams oit;
+    int queue;
     float bg[3];
 };
 

@@ -64,12 +64,13 @@ __global__ void __launch_bounds__(BLOCK)
 }
 
 // The per-pixel sorted modes (eval3d, stopthepop: gbv/resort.h), one thread per pixel of a 16x16 block: the tile's
-// fragments in list order through the queue of K = oit.queue in registers and local memory; K = 0 (and eval3d): the
+// fragments in list order through the queue of K = `queue` in registers and local memory; K = 0 (and eval3d): the
 // exact order by selection, each pass taking the nearest fragment after the last one blended (depth, then list
 // position) until the pixel stops. evals as the CPU's: the list position where it stopped (+1), else the list length.
 __global__ void __launch_bounds__(BLOCK)
     sorted_kernel(const uint2* ranges, const uint32_t* values, const Splat2D* splats, const RaySplat* rays, Mode mode,
-                  int W, int H, int gx, float3 bg, OitParams oit, float* rgb, float* alpha, int32_t* evals) {
+                  int queue, int W, int H, int gx, float3 bg, OitParams oit, float* rgb, float* alpha,
+                  int32_t* evals) {
     const int tile = blockIdx.x;
     const int x = (tile % gx) * TILE + threadIdx.x, y = (tile / gx) * TILE + threadIdx.y;
     if (x >= W || y >= H) return;
@@ -77,7 +78,7 @@ __global__ void __launch_bounds__(BLOCK)
     const uint2 range = ranges[tile];
     const int n = (int)(range.y - range.x);
     AlphaState<Lanes1> st = {1.0f, {0.0f, 0.0f, 0.0f}};
-    const int K = mode == EVAL3D ? 0 : oit.queue;
+    const int K = mode == EVAL3D ? 0 : queue;
     const auto fragment = [&](int i, Fragment& f) {
         const uint32_t id = values[range.x + i];
         f.entry = i;
@@ -180,8 +181,8 @@ void State::blend(const RenderArgs& a, int gx, int gy, const uint32_t* tile_valu
     switch (a.mode) {
         case EVAL3D:
         case STOPTHEPOP:
-            sorted_kernel<<<num_tiles, dim3(TILE, TILE)>>>(ranges.ptr, v, splats.ptr, rays.ptr, a.mode, W, H, gx, bgc,
-                                                            a.oit, rgb.ptr, alpha.ptr, evals.ptr);
+            sorted_kernel<<<num_tiles, dim3(TILE, TILE)>>>(ranges.ptr, v, splats.ptr, rays.ptr, a.mode, a.queue, W, H,
+                                                            gx, bgc, a.oit, rgb.ptr, alpha.ptr, evals.ptr);
             break;
         case GAUSSIAN_BLENDING: launch_blend<GAUSSIAN_BLENDING>(*this, num_tiles, v, W, H, gx, bgc, a.oit, win); break;
         case ANALYTIC: launch_blend<ANALYTIC>(*this, num_tiles, v, W, H, gx, bgc, a.oit, win); break;

@@ -14,7 +14,6 @@ import pytest
 from helpers import skip_or_fail
 from gbviewer.render.glsl import SHADER_DIR, shader_source
 from gbviewer.render import Mode
-from gbviewer.render.types import PER_PIXEL_SORTED
 
 
 def variants() -> list[tuple[str, dict]]:
@@ -23,7 +22,7 @@ def variants() -> list[tuple[str, dict]]:
         for precise in (0, 1):
             if path.name == "blend.comp":
                 out += [(path.name, {f"BLEND_MODE_{m.name}": 1, "SUPERSAMPLED": ss, "GBV_PRECISE_MATH": precise})
-                        for m in Mode if m not in PER_PIXEL_SORTED for ss in (0, 1)]  # cpu only
+                        for m in Mode for ss in (0, 1)]
             else:
                 out.append((path.name, {"GBV_PRECISE_MATH": precise}))
     return out

@@ -152,14 +152,6 @@ def test_trace_lists_the_pixel_blend_order(spec, order):
     np.testing.assert_array_equal(tr.color, renderer.render(cam, settings).rgb[20, 24])
 
 
-def test_backends_without_them_refuse_in_one_line():
-    from gbviewer.render.prepare import prepare
-
-    for spec in ("eval3d", "stopthepop"):
-        with pytest.raises(RenderError, match=f"{spec}: the glsl backend does not render it; use the cpu backend"):
-            prepare(random_scene(), camera(), RenderSettings.parse(spec), "glsl")
-
-
 @pytest.mark.parametrize("spec, mode, queue", [("eval3d:2", "eval3d", None), ("stopthepop:4:2", "stopthepop", 4)])
 def test_supersampled_matches_the_reference(spec, mode, queue):
     """N x N samples: the reference's sorted render at N times the resolution, box-averaged."""

@@ -159,7 +159,6 @@ struct OitParams {
     float pre_dilation = 0.0f;
     float cull_lambda = 0.0f;
     int32_t compensate = 0;
-    int32_t queue = STOPTHEPOP_QUEUE;  // stopthepop: the per-pixel queue length K (0: unbounded)
 };
 
 // Tile rectangle [x0, x1) x [y0, y1) in tile units.
