@@ -58,7 +58,7 @@ class Mode(enum.IntEnum):
 DEBUG_OUTPUTS = ("none", "window")
 
 ORDER_INDEPENDENT = (Mode.WSR, Mode.DUPLEX)
-PER_PIXEL_SORTED = (Mode.EVAL3D, Mode.STOPTHEPOP)  # the cpu backend's only (gbv::per_pixel_sorted)
+PER_PIXEL_SORTED = (Mode.EVAL3D, Mode.STOPTHEPOP)  # each pixel in its own order (gbv::per_pixel_sorted)
 STOPTHEPOP_QUEUE = 4  # StopThePop's published per-pixel queue (gbv::STOPTHEPOP_QUEUE)
 MAX_QUEUE = 64  # the longest per-pixel queue (0: unbounded, the exact per-pixel sort)
 DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (KERNELS.md §8.1)
