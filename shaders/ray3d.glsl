@@ -79,16 +79,17 @@ float ray_max(RaySplat s, float dx, float dy, out float t) {
     return dot3(n, n) / uu;
 }
 
-// port of ray3d.h: ray_footprint (box: x0, x1, y0, y1; an array: llvmpipe loses a dvec4's last component)
+// port of ray3d.h: ray_footprint (box: x0, x1, y0, y1; an array: llvmpipe loses a dvec4's last component). The
+// values C++ multiplies through dmul_rn are `precise`.
 int ray_footprint(RaySplat s, float log_min_alpha, out double box[4]) {
     box = double[4](0.0, 0.0, 0.0, 0.0);
     const dvec3 c = dvec3(s.c), a0 = dvec3(s.a0), a1 = dvec3(s.a1), u0 = dvec3(s.u0);
-    const double cc = dot(c, c);
+    precise double cc = dot(c, c);
     const double r0 = -2.0 * double(log_min_alpha);
     if (!(r0 >= 0.0)) return 0;
-    const double rad = sqrt(r0) * (1.0 + 1e-4) + 1e-6 * sqrt(cc) + 1e-4;
+    precise double rad = sqrt(r0) * (1.0 + 1e-4) + 1e-6 * sqrt(cc) + 1e-4;
     const double r2 = rad * rad;
-    double K00, K01, K11, K02 = 0.0, K12 = 0.0, K22 = -r2;
+    precise double K00, K01, K11, K02 = 0.0, K12 = 0.0, K22 = -r2;
     if (s.ortho != 0) {
         const double nn = dot(u0, u0);
         if (!(nn > 0.0)) return 2;
@@ -99,7 +100,7 @@ int ray_footprint(RaySplat s, float log_min_alpha, out double box[4]) {
     } else {
         const double g = cc - r2;
         if (!(g > 0.0)) return 2;
-        const double b0 = dot(a0, c), b1 = dot(a1, c), b2 = dot(u0, c);
+        precise double b0 = dot(a0, c), b1 = dot(a1, c), b2 = dot(u0, c);
         K00 = g * dot(a0, a0) - b0 * b0;
         K01 = g * dot(a0, a1) - b0 * b1;
         K11 = g * dot(a1, a1) - b1 * b1;
@@ -107,15 +108,15 @@ int ray_footprint(RaySplat s, float log_min_alpha, out double box[4]) {
         K12 = g * dot(a1, u0) - b1 * b2;
         K22 = g * dot(u0, u0) - b2 * b2;
     }
-    const double det = K00 * K11 - K01 * K01;
+    precise double det = K00 * K11 - K01 * K01;
     if (!(K00 > 0.0) || !(det > 0.0)) return 2;
     const double i00 = K11 / det, i01 = -K01 / det, i11 = K00 / det;
-    const double cx = -(i00 * K02 + i01 * K12), cy = -(i01 * K02 + i11 * K12);
-    const double qmin = K22 + K02 * cx + K12 * cy;
+    precise double cx = -(i00 * K02 + i01 * K12), cy = -(i01 * K02 + i11 * K12);
+    precise double qmin = K22 + K02 * cx + K12 * cy;
     if (!(qmin <= 0.0)) return qmin > 0.0 ? 0 : 2;
     const double hx = sqrt(-qmin * i00), hy = sqrt(-qmin * i11);
     if (!finitef(float(hx)) || !finitef(float(hy)) || !finitef(float(cx)) || !finitef(float(cy))) return 2;
-    const double pad = 0.01 + 1e-6 * (abs(cx) + abs(cy) + hx + hy);
+    precise double pad = 0.01 + 1e-6 * (abs(cx) + abs(cy) + hx + hy);
     box = double[4](cx - hx - pad, cx + hx + pad, cy - hy - pad, cy + hy + pad);
     return 1;
 }
@@ -124,7 +125,7 @@ int ray_footprint(RaySplat s, float log_min_alpha, out double box[4]) {
 TileRect footprint_tiles(vec2 xy, int kind, double box[4], int gx, int gy) {
     if (kind == 2) return TileRect(0, 0, gx, gy);
     if (kind == 0) return TileRect(0, 0, 0, 0);
-    const double slack = 1e-6 * (abs(double(xy.x)) + abs(double(xy.y)));
+    precise double slack = 1e-6 * (abs(double(xy.x)) + abs(double(xy.y)));
     const double p[4] = double[4](double(xy.x) - slack, double(xy.x) + slack, double(xy.y) - slack,
                                   double(xy.y) + slack);
     int r[4];  // x0, x1, y0, y1

@@ -113,6 +113,16 @@ GBV_HD bool sorted_fragment(Mode mode, const Splat2D& s, const RaySplat& ray, fl
     return *alpha >= MIN_ALPHA_3DGS;
 }
 
+// a * b in double, never fused with a following add (mul_rn's rule for the footprint's double arithmetic: nvcc fuses
+// by default, the host builds with -ffp-contract=off), so every backend culls the same tiles.
+GBV_HD double dmul_rn(double a, double b) {
+#if defined(__CUDA_ARCH__)
+    return __dmul_rn(a, b);
+#else
+    return a * b;
+#endif
+}
+
 // The pixel offsets from the splat's screen position where the half line's E can be <= r2 = -2 log_min_alpha (with
 // margins for the float evaluation), as the box [x0, x1] x [y0, y1] in box[0..4). Returns 0: no pixel, 1: the box,
 // 2: unbounded (the camera inside the grown ellipsoid E <= r2, or its cone of rays reaching past the image plane's
@@ -120,30 +130,32 @@ GBV_HD bool sorted_fragment(Mode mode, const Splat2D& s, const RaySplat& ray, fl
 // G = (|c|^2 - r2) I - c c^T (perspective; u = B (dx, dy, 1), B = [a0 a1 u0]); orthographic rays have E = |u0 x w|^2 /
 // |u0|^2, a quadratic form in (dx, dy). Computed in double.
 GBV_HD int ray_footprint(const RaySplat& s, float log_min_alpha, double box[4]) {
-    const double cc = (double)s.c[0] * s.c[0] + (double)s.c[1] * s.c[1] + (double)s.c[2] * s.c[2];
+    auto d3 = [](const double* x, const double* y) {
+        return dmul_rn(x[0], y[0]) + dmul_rn(x[1], y[1]) + dmul_rn(x[2], y[2]);
+    };
+    const double a0[3] = {s.a0[0], s.a0[1], s.a0[2]}, a1[3] = {s.a1[0], s.a1[1], s.a1[2]};
+    const double u0[3] = {s.u0[0], s.u0[1], s.u0[2]}, c[3] = {s.c[0], s.c[1], s.c[2]};
+    const double cc = d3(c, c);
     const double r0 = -2.0 * (double)log_min_alpha;
     if (!(r0 >= 0.0)) return 0;
     // E's float error: a few ulp relative, and a few ulp of |c| |w| absolute in sqrt(E)
-    const double rad = sqrt(r0) * (1.0 + 1e-4) + 1e-6 * sqrt(cc) + 1e-4;
+    const double rad = dmul_rn(sqrt(r0), 1.0 + 1e-4) + dmul_rn(1e-6, sqrt(cc)) + 1e-4;
     const double r2 = rad * rad;
     double K00, K01, K11, K02 = 0.0, K12 = 0.0, K22 = -r2;  // the region (dx, dy, 1) K (dx, dy, 1)^T <= 0
-    const double a0[3] = {s.a0[0], s.a0[1], s.a0[2]}, a1[3] = {s.a1[0], s.a1[1], s.a1[2]};
-    const double u0[3] = {s.u0[0], s.u0[1], s.u0[2]}, c[3] = {s.c[0], s.c[1], s.c[2]};
-    auto d3 = [](const double* x, const double* y) { return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]; };
     if (s.ortho) {  // E = |w|^2 - (w.n)^2 with n = u0 / |u0|
         const double nn = d3(u0, u0);
         if (!(nn > 0.0)) return 2;
         const double p0 = d3(a0, u0), p1 = d3(a1, u0);
-        K00 = d3(a0, a0) - p0 * p0 / nn;
-        K01 = d3(a0, a1) - p0 * p1 / nn;
-        K11 = d3(a1, a1) - p1 * p1 / nn;
+        K00 = d3(a0, a0) - dmul_rn(p0, p0) / nn;
+        K01 = d3(a0, a1) - dmul_rn(p0, p1) / nn;
+        K11 = d3(a1, a1) - dmul_rn(p1, p1) / nn;
     } else {
         const double g = cc - r2;
         if (!(g > 0.0)) return 2;  // the camera inside
         const double* B[3] = {a0, a1, u0};
         double K[3][3];
         for (int i = 0; i < 3; ++i)
-            for (int j = 0; j < 3; ++j) K[i][j] = g * d3(B[i], B[j]) - d3(B[i], c) * d3(B[j], c);
+            for (int j = 0; j < 3; ++j) K[i][j] = dmul_rn(g, d3(B[i], B[j])) - dmul_rn(d3(B[i], c), d3(B[j], c));
         K00 = K[0][0];
         K01 = K[0][1];
         K11 = K[1][1];
@@ -151,15 +163,15 @@ GBV_HD int ray_footprint(const RaySplat& s, float log_min_alpha, double box[4]) 
         K12 = K[1][2];
         K22 = K[2][2];
     }
-    const double det = K00 * K11 - K01 * K01;
+    const double det = dmul_rn(K00, K11) - dmul_rn(K01, K01);
     if (!(K00 > 0.0) || !(det > 0.0)) return 2;
     const double i00 = K11 / det, i01 = -K01 / det, i11 = K00 / det;  // K2^-1
-    const double cx = -(i00 * K02 + i01 * K12), cy = -(i01 * K02 + i11 * K12);
-    const double qmin = K22 + K02 * cx + K12 * cy;
+    const double cx = -(dmul_rn(i00, K02) + dmul_rn(i01, K12)), cy = -(dmul_rn(i01, K02) + dmul_rn(i11, K12));
+    const double qmin = K22 + dmul_rn(K02, cx) + dmul_rn(K12, cy);
     if (!(qmin <= 0.0)) return qmin > 0.0 ? 0 : 2;
     const double hx = sqrt(-qmin * i00), hy = sqrt(-qmin * i11);
     if (!finitef((float)hx) || !finitef((float)hy) || !finitef((float)cx) || !finitef((float)cy)) return 2;
-    const double pad = 0.01 + 1e-6 * (fabs(cx) + fabs(cy) + hx + hy);
+    const double pad = 0.01 + dmul_rn(1e-6, fabs(cx) + fabs(cy) + hx + hy);
     box[0] = cx - hx - pad;
     box[1] = cx + hx + pad;
     box[2] = cy - hy - pad;
@@ -172,7 +184,7 @@ GBV_HD int ray_footprint(const RaySplat& s, float log_min_alpha, double box[4]) 
 GBV_HD TileRect footprint_tiles(Vec2 xy, int kind, const double box[4], int gx, int gy) {
     if (kind == 2) return {0, 0, gx, gy};
     if (kind == 0) return {0, 0, 0, 0};
-    const double slack = 1e-6 * (fabs((double)xy.x) + fabs((double)xy.y));
+    const double slack = dmul_rn(1e-6, fabs((double)xy.x) + fabs((double)xy.y));
     const double t[4] = {floor((xy.x + box[0] - slack - 0.5) / TILE), floor((xy.y + box[2] - slack - 0.5) / TILE),
                          floor((xy.x + box[1] + slack - 0.5) / TILE) + 1,
                          floor((xy.y + box[3] + slack - 0.5) / TILE) + 1};
