@@ -285,8 +285,9 @@ class GlslRenderer(Renderer):
         stage, stage_reused, stage_ms = self._stage(settings, n, sh_deg, cam_uniforms)
         rays = gpu.ensure("rays", n * gi.RAY_VEC4S * VEC4, "ray data") if mode in PER_PIXEL_SORTED else None
         gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,
-                weight, stage, rays or gpu.ensure("dummy", VEC4)), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k,
-                oit=oit, view_filter=gi.view_filter_uniform(*settings.view_filter.native()), **cam_uniforms)
+                weight, stage, rays or gpu.ensure("dummy", VEC4)), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg,
+                mode=int(mode), weight_k=self._weight_k, oit=oit,
+                view_filter=gi.view_filter_uniform(*settings.view_filter.native()), **cam_uniforms)
         scan(gpu, flags, n, total_slot=gi.TOTAL_VISIBLE)
         gpu.run("compact.comp", -(-n // WG), (splats, rects, flags, totals, dkeys[0], dvals[0]), num_splats=n)
         t = read_totals(gpu)
