@@ -12,13 +12,17 @@
 // the image.
 //
 // Compiled once per mode and sampling: the driver defines BLEND_MODE_<MODE> (SCALAR, MIP, ANALYTIC,
-// GAUSSIAN_BLENDING, WSR, DUPLEX, STOCHASTIC or STOCHASTIC_POPFREE) and SUPERSAMPLED (0 or 1). wsr walks index-ordered lists with no
-// early termination; duplex walks cell-sorted lists, reads each splat's cell from `cell_of` and uses `oit`;
-// stochastic hashes each sample's (seed, frame, X, Y) with the splat's index (stochastic.h).
+// GAUSSIAN_BLENDING, WSR, DUPLEX, STOCHASTIC, STOCHASTIC_POPFREE, EVAL3D or STOPTHEPOP) and SUPERSAMPLED (0 or 1).
+// wsr walks index-ordered lists with no early termination; duplex walks cell-sorted lists, reads each splat's cell
+// from `cell_of` and uses `oit`; stochastic hashes each sample's (seed, frame, X, Y) with the splat's index
+// (stochastic.h). The per-pixel sorted modes (eval3d, stopthepop: resort.glsl) read the list directly, each pixel in
+// its own order, in one dispatch (the driver refuses lists too long for a driver's loop cap).
 #include "common.glsl"
 #include "mathf.glsl"
 #include "blend.glsl"
 #include "kernel.glsl"
+#include "ray3d.glsl"
+#include "resort.glsl"
 
 #if defined(BLEND_MODE_SCALAR)
 const int MODE = SCALAR;
@@ -36,6 +40,15 @@ const int MODE = DUPLEX;
 const int MODE = STOCHASTIC;
 #elif defined(BLEND_MODE_STOCHASTIC_POPFREE)
 const int MODE = STOCHASTIC_POPFREE;
+#elif defined(BLEND_MODE_EVAL3D)
+const int MODE = EVAL3D;
+#elif defined(BLEND_MODE_STOPTHEPOP)
+const int MODE = STOPTHEPOP;
+#endif
+#if defined(BLEND_MODE_EVAL3D) || defined(BLEND_MODE_STOPTHEPOP)
+#define SORTED 1
+#else
+#define SORTED 0
 #endif
 
 layout(local_size_x = 16, local_size_y = 16) in;
@@ -48,6 +61,7 @@ layout(std430, binding = 5) buffer State { vec4 state[]; };  // BLEND_STATE_VEC4
 layout(std430, binding = 6) buffer Accum { vec4 accum[]; };  // BLEND_ACCUM_VEC4S per invocation
 layout(std430, binding = 7) readonly buffer CellOf { int cell_of[]; };  // duplex: each splat's cell
 layout(std430, binding = 8) readonly buffer Planes { vec4 planes[]; };  // stochastic_popfree: each splat's depth plane
+layout(std430, binding = 9) readonly buffer Rays { vec4 rays[]; };  // eval3d, stopthepop: pack_ray per splat
 layout(rgba32f, binding = 0) uniform writeonly image2D out_image;  // rgb, alpha = 1 - T; row 0 = image top
 
 uniform ivec2 out_size;
@@ -65,6 +79,7 @@ uniform int load_accum;
 uniform int store_accum;
 uniform vec4 oit;  // OitParams: components OIT_* (interface.glsl)
 uniform uvec2 stochastic;  // stochastic: seed, frame index (stochastic.h)
+uniform int queue;  // stopthepop's K (0: the exact order)
 
 shared Splat2D batch[256];
 shared int done_count;
@@ -72,6 +87,59 @@ shared int done_count;
 shared vec4 sample_rgba[256];
 shared int sample_evals[256];
 shared vec2 sample_window[256];
+#endif
+
+#if SORTED
+Splat2D list_splat(uint id) {
+    const uint at = SPLAT_VEC4S * id;
+    return unpack_splat(splats[at], splats[at + 1u], splats[at + 2u], splats[at + 3u]);
+}
+
+// Entry i of the list starting at `first` as a fragment at pix (sorted_fragment).
+bool list_fragment(uint first, int i, vec2 pix, out Fragment f) {
+    const uint id = tile_vals[first + uint(i)];
+    const uint at = RAY_VEC4S * id;
+    const RaySplat ray = unpack_ray(rays[at], rays[at + 1u], rays[at + 2u], rays[at + 3u]);
+    f.entry = i;
+    return sorted_fragment(MODE, list_splat(id), ray, pix.x, pix.y, f.alpha, f.depth);
+}
+
+vec3 list_color(uint first, Fragment f) { return list_splat(tile_vals[first + uint(f.entry)]).color; }
+
+// One pixel of a per-pixel sorted mode (CUDA's sorted_kernel): the queue of K, or (K = 0) the exact order by
+// selection. Returns its evals: the list position where it stopped (+1), else n.
+int sorted_walk(uint first, int n, vec2 pix, inout float T, inout vec3 C) {
+    const int K = MODE == EVAL3D ? 0 : queue;
+    int ev = n;
+    if (K > 0) {
+        Fragment q[MAX_QUEUE];
+        int qn = 0;
+        bool done = false;
+        for (int i = 0; i < n && !done; ++i) {
+            Fragment f;
+            if (!list_fragment(first, i, pix, f)) continue;
+            if (qn == K) {
+                done = blend_fragment(q[0], list_color(first, q[0]), T, C);
+                queue_pop(q, qn);
+                if (done) ev = i + 1;
+            }
+            if (!done) queue_insert(q, qn, f);
+        }
+        for (int k = 0; k < qn && !done; ++k) done = blend_fragment(q[k], list_color(first, q[k]), T, C);
+    } else {
+        const float inf = uintBitsToFloat(0x7f800000u);
+        Fragment last = Fragment(-inf, 0.0, -1);
+        for (bool done = false; !done;) {
+            Fragment best = Fragment(inf, 0.0, n), f;
+            for (int i = 0; i < n; ++i)
+                if (list_fragment(first, i, pix, f) && fragment_before(last, f) && fragment_before(f, best)) best = f;
+            if (best.entry == n) break;
+            done = blend_fragment(best, list_color(first, best), T, C);
+            last = best;
+        }
+    }
+    return ev;
+}
 #endif
 
 void main() {
@@ -145,6 +213,9 @@ void main() {
         memoryBarrierShared();
         barrier();
         if (done) atomicAdd(done_count, 1);
+#if SORTED
+        if (!done) evals = sorted_walk(range.x, n, pix, T, C);
+#else
         for (int start = begin; start < end; start += 256) {
             memoryBarrierShared();
             barrier();  // everyone finished the previous batch (and its done_count increments)
@@ -189,6 +260,7 @@ void main() {
                 }
             }
         }
+#endif
 #if defined(BLEND_MODE_GAUSSIAN_BLENDING)
         float T_final = win.T;
         const vec2 wh = win.wh;

@@ -175,7 +175,7 @@ bool preprocess_finish(SplatIn in_, StageSplat st, int sh_deg, CameraParams cam,
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
     float min_power = uintBitsToFloat(0xff800000u);
-    if (view_filtered(mode)) {
+    if (view_filtered(mode) || mode == STOPTHEPOP) {
         if (!scalar_filter(oit, cov, opacity)) return false;
         min_power = support_power(oit);
     } else if (mode == MIP) {

@@ -85,7 +85,7 @@ class CpuRenderer(NativeUploads, Renderer):
     @staticmethod
     def _frame_args(camera: Camera, settings: RenderSettings) -> tuple:
         """The native call's camera, mode, supersampling, SH cap, background; the oit globals follow."""
-        return (*camera_args(camera), int(settings.mode), settings.supersample, settings.sh_degree,
+        return (*camera_args(camera), settings.native_mode, settings.supersample, settings.sh_degree,
                 np.asarray(settings.background, np.float32))
 
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: Cancellable | None = None,

@@ -30,6 +30,9 @@ def spec_parts(spec: str) -> dict:
                      sh_degree=preset.sh_degree)
     else:
         parts["mode"] = "scalar" if name == "supersample" else name  # RenderSettings parses (and checks) it
+        if name == "stopthepop" and n.strip():  # 'stopthepop:K[:N]': K, its queue length, comes first
+            queue, _, n = n.partition(":")
+            parts["queue"] = _spec_number(queue, int, spec, "queue length")
     if n.strip():
         parts["supersample"] = _spec_number(n, int, spec, "supersampling factor")
     return parts

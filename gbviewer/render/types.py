@@ -1,12 +1,11 @@
-"""The render layer's types: Mode, RenderSettings, Frame and its FrameStats, the Renderer contract and its
-Capabilities, constants.
+"""The render layer's types: RenderSettings, Frame and its FrameStats, the Renderer contract and its Capabilities,
+constants; Mode and its groups re-exported from gbviewer.render.modes.
 
 Imports no backend."""
 
 from __future__ import annotations
 
 import abc
-import enum
 import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -19,45 +18,14 @@ from ..cancel import Cancellable
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, distinct_items, integer, real
+# Mode and its groups live in .modes; imported here too so that `from .types import Mode, ...` keeps working
+from .modes import MAX_QUEUE, ORDER_INDEPENDENT, PER_PIXEL_SORTED, STOPTHEPOP_QUEUE, Mode
 from .presets import FILTERED_MODES
 from .spec import shortest, shown, spec_parts
 from .view_filter import ViewFilter
 
 
-class Mode(enum.IntEnum):
-    """Blending modes; values match `gbv::Mode` in native/include/gbv/common.h."""
-
-    SCALAR = 0  # 3DGS: alpha at the pixel centre, +0.3 px^2 dilation
-    MIP = 1  # Mip-Splatting 2D filter (0.1 px^2 with opacity compensation)
-    ANALYTIC = 2  # Analytic-Splatting: alpha integrated over the pixel, scalar transmittance
-    GAUSSIAN_BLENDING = 3  # spatial transmittance window (Gaussian Blending)
-    WSR = 4  # sort-free weighted sum (LC-WSR, Hou et al.): order independent, no sort
-    DUPLEX = 5  # Duplex-GS: cells sorted, weighted sum inside a cell, cell transmittance and early termination
-    STOCHASTIC = 6  # stochastic transparency (StochasticSplats ST): fragments kept with probability alpha, opaque
-    STOCHASTIC_POPFREE = 7  # its pop-free variant (ST-popfree): depth-tested on each splat's per-pixel depth plane
-
-    @classmethod
-    def parse(cls, value: "str | int | Mode") -> "Mode":
-        if isinstance(value, cls):
-            return value
-        if isinstance(value, str):
-            try:
-                return cls[value.strip().upper().replace("-", "_")]
-            except KeyError:
-                names = ", ".join(m.name.lower() for m in cls)
-                raise RenderError(f"unknown mode {value!r}; expected one of {names}") from None
-        try:
-            return cls(int(value))
-        except ValueError:
-            raise RenderError(f"unknown mode {value!r}") from None
-
-    @property
-    def label(self) -> str:
-        return self.name.lower()
-
-
 DEBUG_OUTPUTS = ("none", "window")
-ORDER_INDEPENDENT = (Mode.WSR, Mode.DUPLEX)
 DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (KERNELS.md §8.1)
 DEFAULT_SIGMA = 10.0  # sort-free GS's initial sigma, for depth correction on scenes without a trained one
 MAX_SUPERSAMPLE = 8
@@ -81,6 +49,9 @@ class RenderSettings:
     scene's trained value, else 10); `et_grade` is Duplex-GS's E (None: the scene's trained value, else 4.0, the
     published final value); `cell_size` is the number of splats per cell built for scenes without cells.
 
+    stopthepop: `queue` is the per-pixel queue length K (0..64; 0: unbounded, the exact per-pixel sort; default 4, as
+    published), spelled 'stopthepop:K' (and 'stopthepop:K:N' with N x N supersampling).
+
     `lod` (pixels >= 0): render the cut of the scene's splat hierarchy at that projected size (gbviewer.lod) in any
     mode; None renders every splat.
     """
@@ -99,6 +70,7 @@ class RenderSettings:
     preset: str = ""
     seed: int = 0  # stochastic modes: the keep decisions' hash seed (gbv/stochastic.h); same seed and frame, same bits
     frame: int = 0  # stochastic modes: the frame index (another index, another sample)
+    queue: int = STOPTHEPOP_QUEUE
 
     def __post_init__(self) -> None:
         """Every number checked through gbviewer.validate (the native renderers take them as int32 and float32);
@@ -117,6 +89,7 @@ class RenderSettings:
                 "cell_size": integer(self.cell_size, "cell_size", lo=1, hi=MAX_CELL_SIZE),
                 "lod": None if self.lod is None else real(self.lod, "lod", lo=0, hi=MAX_LOD, f32=True),
                 **{k: integer(getattr(self, k), k, lo=0, hi=2**32 - 1) for k in ("seed", "frame")},
+                "queue": integer(self.queue, "queue", lo=0, hi=MAX_QUEUE),
             }
         except InvalidValue as exc:
             raise RenderError(str(exc)) from None
@@ -125,6 +98,8 @@ class RenderSettings:
         object.__setattr__(self, "depth_correct", bool(self.depth_correct))
         if not isinstance(self.view_filter, ViewFilter):
             raise RenderError(f"view_filter {self.view_filter!r}; expected a gbviewer.render.ViewFilter")
+        if self.mode != Mode.STOPTHEPOP and self.queue != STOPTHEPOP_QUEUE:
+            raise RenderError(f"queue {self.queue} applies to the stopthepop mode, not {self.mode.label}")
         if self.mode.label not in FILTERED_MODES and not self.view_filter.is_default:
             raise RenderError(f"view_filter {self.view_filter.describe()} is not for {self.mode.label}")
 
@@ -149,8 +124,15 @@ class RenderSettings:
 
     @property
     def name(self) -> str:
-        """'scalar', 'preset:supersplat', ..."""
-        return f"preset:{self.preset}" if self.preset else self.mode.label
+        """'scalar', 'preset:supersplat', 'stopthepop:8' (a queue other than the published 4), ..."""
+        if self.preset:
+            return f"preset:{self.preset}"
+        return self.mode.label + (f":{self.queue}" if self.queue != STOPTHEPOP_QUEUE else "")
+
+    @property
+    def native_mode(self) -> int:
+        """The mode word the native renderers take: the Mode, stopthepop's queue length in the bits above 8."""
+        return int(self.mode) | (self.queue << 8 if self.mode == Mode.STOPTHEPOP else 0)
 
     @property
     def base_label(self) -> str:
@@ -165,13 +147,14 @@ class RenderSettings:
     def spec(self) -> str:
         """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1', ..."""
         lod = f"+lod:{shortest(self.lod)}" if self.lod is not None else ""
-        return self.name + (f":{self.supersample}" if self.supersample > 1 else "") + lod
+        name = f"stopthepop:{self.queue}" if self.mode == Mode.STOPTHEPOP and self.supersample > 1 else self.name
+        return name + (f":{self.supersample}" if self.supersample > 1 else "") + lod
 
     @classmethod
     def parse(cls, spec: "str | Mode", **options) -> "RenderSettings":
-        """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples;
-        'preset:NAME[:N]' a viewer preset (gbviewer.render.presets: its mode, view filter and SH bands); a suffix
-        '+lod' or '+lod:TAU' draws the level-of-detail cut at TAU pixels (default 1).
+        """'MODE' or 'MODE:N' (N x N supersampling); 'stopthepop:K[:N]' (K: its queue length); 'supersample:N'
+        means scalar with N x N samples; 'preset:NAME[:N]' a viewer preset (gbviewer.render.presets: its mode, view
+        filter and SH bands); a suffix '+lod' or '+lod:TAU' draws the level-of-detail cut at TAU pixels (default 1).
 
         The one parser of every surface that takes a mode (commands, viewer panes, the library): `options`
         (RenderSettings fields; None: not given) fill what the spec leaves unset, and one that disagrees with a part

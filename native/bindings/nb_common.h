@@ -55,9 +55,14 @@ inline void check_view(const char* where, const FArr& R, const FArr& t, const FA
         fail(where, "R must be 3x3, t and background 3 floats");
 }
 
+// The mode word: the Mode in its low 8 bits, stopthepop's per-pixel queue length K (0..MAX_QUEUE, 0: unbounded) in
+// the bits above (gbviewer.render.RenderSettings.native_mode).
 inline Mode check_mode(const char* where, int mode) {
-    if (mode < SCALAR || mode > STOCHASTIC_POPFREE) fail(where, "unknown mode");
-    return (Mode)mode;
+    const int m = mode & 0xff, param = mode >> 8;
+    if (mode < 0 || m > STOPTHEPOP) fail(where, "unknown mode");
+    if (param != 0 && m != STOPTHEPOP) fail(where, "only stopthepop takes a mode parameter (its queue length)");
+    if (param > MAX_QUEUE) fail(where, "stopthepop's queue length must be 0..64");
+    return (Mode)m;
 }
 
 inline Projection check_projection(const char* where, int projection) {
@@ -112,6 +117,7 @@ inline RenderArgs parse_render_args(const char* where, const FArr& R, const FArr
     a.height = height;
     for (int c = 0; c < 3; ++c) a.bg[c] = background.data()[c];
     a.oit = OitParams{sigma, weight_background, et_grade, depth_correct ? 1 : 0};
+    if (md == STOPTHEPOP) a.queue = mode >> 8;
     return a;
 }
 

@@ -12,6 +12,8 @@
 #include <type_traits>
 #include <vector>
 
+#include "blend_sorted.h"
+#include "gbv/blend.h"
 #include "gbv/stochastic.h"
 
 namespace gbv {
@@ -70,15 +72,18 @@ struct TileJob {
     int width;           // row stride of the planes in pixels
     Mode mode;
     OitParams oit;
+    int queue;  // stopthepop's K (0: unbounded)
     float bg[3];
     float *rgb, *alpha, *window;  // image planes, at the rectangle's pixel (x0, y0); window may be null
     int32_t* evals;
     const Bands* bands;  // the list's row bands, or null: every group walks the whole list
     uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
     const DepthPlane* planes;  // stochastic_popfree: per splat (Splat2D::id), else null
+    const RaySplat* rays;  // eval3d, stopthepop: one per list entry (ray3d.h), else null
 };
 
 using BlendTileFn = void (*)(const TileJob&);
+void blend_tile_scalar(const TileJob& job);  // the scalar path's (blend_scalar.cpp)
 
 namespace tile {
 
@@ -330,6 +335,19 @@ void group_wsr(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     }
 }
 
+// eval3d and stopthepop, one pixel after another (blend_sorted.h; the scalar path only: frame.cpp runs it for these
+// modes on every SIMD path).
+template <class L, class Tr>
+void group_sorted(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
+    static_assert(L::N == 1, "the per-pixel sorted modes have no vector lanes");
+    AlphaState<Lanes1> st = {1.0f, {0.0f, 0.0f, 0.0f}};
+    const int queue = job.mode == EVAL3D ? 0 : job.queue;
+    out.evals[0] = blend_sorted_pixel<Tr>(job.list, job.rays, job.n, job.mode, queue, L::reduce_max(g.px),
+                                          L::reduce_max(g.py), st);
+    for (int c = 0; c < 3; ++c) out.C[c][0] = st.C[c];
+    out.T[0] = st.T;
+}
+
 template <class L, class Tr>
 void group_duplex(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     const typename L::F one = L::set(1.0f), zero = L::set(0.0f);
@@ -381,6 +399,10 @@ void blend_tile(const TileJob& job) {
                 case DUPLEX: tile::group_duplex<L, Tr>(job, g, out); break;
                 case STOCHASTIC: tile::group_stochastic<L, Tr>(job, g, out); break;
                 case STOCHASTIC_POPFREE: tile::group_popfree<L, Tr>(job, g, out); break;
+                case EVAL3D:
+                case STOPTHEPOP:
+                    if constexpr (L::N == 1) tile::group_sorted<L, Tr>(job, g, out);
+                    break;
                 default: tile::group_alpha<L, Tr>(job, g, out); break;
             }
             for (int k = 0; k < g.count; ++k) {

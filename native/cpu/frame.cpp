@@ -91,7 +91,8 @@ void splat_boxes(const std::vector<Splat2D>& splats, Mode mode, std::vector<Spla
 // One tile of one frame (blend_frames): copy its splats (and their boxes) into contiguous per-thread buffers, then
 // the selected SIMD path blends its pixels in lane groups.
 void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTileFn blend_tile,
-                    Plane<Splat2D>& local, Plane<SplatBounds>& bounds, Bands& bands, float* partial) {
+                    Plane<Splat2D>& local, Plane<SplatBounds>& bounds, Plane<RaySplat>& rays, Bands& bands,
+                    float* partial) {
     const int W = f.cam->width, H = f.cam->height;
     const int gx = (W + TILE - 1) / TILE;
     const FrameBuffers& b = *f.buf;
@@ -110,9 +111,16 @@ void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTile
         local[j] = b.splats[id];
         bounds[j] = b.boxes[id];
     }
+    const bool sorted = per_pixel_sorted(f.mode);
+    if (sorted) {
+        rays.resize(count);
+        for (int64_t j = 0; j < count; ++j) rays[j] = b.rays[b.ids[begin + j]];
+        blend_tile = blend_tile_scalar;  // one pixel at a time on every path (blend_sorted.h)
+    }
     TileJob job = shared;
     job.list = local.data();
     job.bounds = bounds.data();
+    job.rays = sorted ? rays.data() : nullptr;
     job.n = (int)count;
     job.x0 = (t % gx) * TILE;
     job.y0 = (t / gx) * TILE;
@@ -227,7 +235,8 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
                         stage.key.sh_deg, cam, mode, oit, gx, gy, stage.splats.data(), stage.valid.data(),
                         splats.data(), rects.data(), valid.data(),
                         mode == STOCHASTIC_POPFREE ? buf.planes.data() : nullptr};
-    for_blocks(n, run, [&](int64_t begin, int64_t end) { path.finish(job, begin, end); });
+    if (mode != EVAL3D) for_blocks(n, run, [&](int64_t begin, int64_t end) { path.finish(job, begin, end); });
+    if (per_pixel_sorted(mode) && !run.cancelled()) finish_rays(sc, stage, mode, buf, run);
     if (run.cancelled()) return;
     if (testing::capture.load(std::memory_order_relaxed))
         testing::record_preprocess(splats.data(), rects.data(), valid.data(), n);
@@ -275,6 +284,7 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
         job.oit = fr.oit;
         job.frame_key = fr.frame_key;
         job.planes = fr.buf->planes.empty() ? nullptr : fr.buf->planes.data();
+        job.queue = fr.queue;
         for (int c = 0; c < 3; ++c) job.bg[c] = fr.bg[c];
         const int gx = (fr.cam->width + TILE - 1) / TILE;
         const int num_tiles = (int)fr.buf->tile_start.size() - 1;
@@ -287,12 +297,13 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
         FlushDenormals ftz;
         Plane<Splat2D> local;  // each tile's entries are copied in before they are read
         Plane<SplatBounds> bounds;
+        Plane<RaySplat> rays;
         Bands bands;
 #pragma omp for schedule(dynamic, 1)
         for (int64_t i = 0; i < (int64_t)tiles.size(); ++i) {
             if (run.cancelled()) continue;  // a cancelled call skips its remaining tiles
             const int f = tiles[i].second.first;
-            blend_one_tile(frames[f], shared[f], tiles[i].second.second, blend_tile, local, bounds, bands,
+            blend_one_tile(frames[f], shared[f], tiles[i].second.second, blend_tile, local, bounds, rays, bands,
                            run.partial(f));
             run.tile_done(f);
             run.poll();
@@ -302,7 +313,7 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
     for (const BlendFrame& fr : frames) fr.st->blend_ms += ms;
 }
 
-PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
+PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, int queue,
                              uint32_t frame_key, const float bg[3], const simd::Path& path, FrameBuffers& buf, int x,
                              int y, int N) {
     Stats st;
@@ -311,9 +322,9 @@ PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const
     bin_frame(sc, stage, mode, oit, path, buf, st, run);
     splat_boxes(buf.splats, mode, buf.boxes, run);
     const CameraParams& cam = stage.key.cam;
-    FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.ids.data(), cam.width,
-                        cam.height, mode, oit, {bg[0], bg[1], bg[2]}, frame_key,
-                        buf.planes.empty() ? nullptr : buf.planes.data()};
+    FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.ids.data(),
+                        per_pixel_sorted(mode) ? buf.rays.data() : nullptr, cam.width, cam.height, mode, oit, queue,
+                        {bg[0], bg[1], bg[2]}, frame_key, buf.planes.empty() ? nullptr : buf.planes.data()};
     FlushDenormals ftz;
     return trace_pixel(lists, x, y, N);
 }

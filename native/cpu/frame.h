@@ -131,6 +131,7 @@ struct FrameBuffers {
     std::vector<SplatBounds> boxes;
     std::vector<RankedRect> ranked;  // bin_splats' scratch
     std::vector<DepthPlane> planes;  // stochastic_popfree: per splat (others: empty)
+    std::vector<RaySplat> rays;      // eval3d, stopthepop: each splat's ray data (finish_rays)
 };
 
 // A running call's cancel state and progress (Control) for its frames: the caller's flag or a report that asked to
@@ -211,6 +212,12 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
                 std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids, Stats& st, FrameRun& run);
 
+// rays.cpp: the per-pixel sorted modes' finish after (stopthepop) or instead of (eval3d) the SIMD path's: every
+// splat's ray data (gbv/ray3d.h) into buf.rays; eval3d also sets splats, rects and valid from the stage: the splat
+// as the stage has it (no 2D filter), the tiles its 3D footprint (ray_footprint) touches. stopthepop drops a valid
+// splat whose ray data is degenerate.
+void finish_rays(const SceneView& sc, const Stage& stage, Mode mode, FrameBuffers& buf, FrameRun& run);
+
 // frame.cpp: the stage of `key` into `stage` (every splat, or the level-of-detail cut's; stops early once cancelled,
 // leaving it not ready).
 void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& path, Stage& stage, Stats& st,
@@ -227,6 +234,7 @@ struct BlendFrame {
     const CameraParams* cam;
     Mode mode;
     OitParams oit;
+    int queue;  // stopthepop's K
     const float* bg;
     Image* img;
     int N;
@@ -237,7 +245,7 @@ struct BlendFrame {
 // together, in proportion to their tile counts); each frame's blend_ms is the loop's time.
 void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile, FrameRun& run);
 // The pixel trace of output pixel (x, y) at N x N samples from a ready stage (the sub-sample grid's camera).
-PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
+PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, int queue,
                              uint32_t frame_key, const float bg[3], const simd::Path& path, FrameBuffers& buf, int x,
                              int y, int N);
 

@@ -84,6 +84,7 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
     std::vector<Splat2D> list;
     std::vector<SplatBounds> bounds;
     std::vector<uint32_t> ids;
+    std::vector<RaySplat> rays;
     for (int sy = 0; sy < N; ++sy) {
         for (int sx = 0; sx < N; ++sx) {
             const int hx = x * N + sx, hy = y * N + sy;
@@ -97,10 +98,15 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
                 list[j] = f.splats[ids[j]];
                 bounds[j] = f.boxes[ids[j]];
             }
+            if (f.rays) {
+                rays.resize(count);
+                for (int64_t j = 0; j < count; ++j) rays[j] = f.rays[ids[j]];
+            }
             const size_t q = (size_t)sy * N + sx;
             TileJob job = {};
             job.list = list.data();
             job.bounds = bounds.data();
+            job.rays = f.rays ? rays.data() : nullptr;
             job.n = (int)count;
             job.x0 = hx;
             job.y0 = hy;
@@ -111,6 +117,7 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
             job.oit = f.oit;
             job.frame_key = f.frame_key;
             job.planes = f.planes;
+            job.queue = f.queue;
             for (int c = 0; c < 3; ++c) job.bg[c] = f.bg[c];
             job.rgb = out.samples.rgb.data() + q * 3;
             job.alpha = out.samples.alpha.data() + q;

@@ -17,6 +17,7 @@
 #include "gbv/common.h"
 #include "gbv/popfree.h"
 #include "gbv/preprocess.h"
+#include "gbv/ray3d.h"
 #include "renderer.h"
 
 namespace gbv::cuda {
@@ -76,6 +77,7 @@ struct State {
     // per frame
     Buf<Splat2D> splats;
     Buf<DepthPlane> planes;  // stochastic_popfree: per splat (popfree.h)
+    Buf<RaySplat> rays;  // eval3d, stopthepop
     Buf<TileRect> rects;
     Buf<uint32_t> touched, values_in, values_out;
     Buf<uint64_t> offsets, keys_in, keys_out;

@@ -17,6 +17,7 @@ from gbviewer.errors import RenderError
 from gbviewer.render import Mode, RenderSettings
 from gbviewer.render.prepare import oit_params
 from gbviewer.render.trace import SKIP_REASONS
+from gbviewer.render.types import PER_PIXEL_SORTED
 from helpers import random_view
 from reference import pixel_contributors
 
@@ -104,7 +105,8 @@ def test_trace_of_a_preset_is_its_rendered_pixel(spec):
 
 
 @pytest.mark.parametrize("supersample", [1, 2])
-@pytest.mark.parametrize("mode", [m for m in MODES if not m.startswith("stochastic")])  # test_stochastic.py
+@pytest.mark.parametrize("mode", [m for m in MODES if not m.startswith("stochastic")  # test_stochastic.py
+                                  and Mode[m.upper()] not in PER_PIXEL_SORTED])  # test_stopthepop.py
 @pytest.mark.parametrize("seed", [11, 13])
 def test_added_splats_are_the_references(seed, mode, supersample):
     """Per sample, the splats the trace adds (rejected == "") are those the float64 reference renderer adds, in

@@ -55,7 +55,7 @@ from ...scene import Scene
 from ..control import Progress, RenderControl
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
 from ..presets import FILTERED_MODES
-from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
+from ..types import PER_PIXEL_SORTED, Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
 from ..view_filter import DILATION_3DGS
 from .binning import bin_duplex, bin_splats, read_totals
 from .context import check_context, standalone_context
@@ -284,9 +284,10 @@ class GlslRenderer(Renderer):
         )
         weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", VEC4)
         stage, stage_reused, stage_ms = self._stage(settings, n, sh_deg, cam_uniforms)
+        rays = gpu.ensure("rays", n * gi.RAY_VEC4S * VEC4, "ray data") if mode in PER_PIXEL_SORTED else None
         gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,
-                weight, stage, self._planes(settings, n)), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg,
-                mode=int(mode), weight_k=self._weight_k, oit=oit,
+                weight, stage, self._planes(settings, n), rays or gpu.ensure("dummy", VEC4)), num_splats=n,
+                sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k, oit=oit,
                 view_filter=gi.view_filter_uniform(*settings.view_filter.native()[:4]),
                 view_rules=gi.view_rules_uniform(*settings.view_filter.native()[4:]), **cam_uniforms)
         scan(gpu, flags, n, total_slot=gi.TOTAL_VISIBLE)
@@ -305,11 +306,12 @@ class GlslRenderer(Renderer):
         else:
             tvals, ranges = bin_splats(gpu, mode, visible, pairs, dmin, dmax, num_tiles, gx)
             sort_length = 0 if mode == Mode.WSR else pairs
-        plan, longest = blend_plan(gpu, N, ranges, num_tiles, pairs)
+        queue = (0 if mode == Mode.EVAL3D else settings.queue) if mode in PER_PIXEL_SORTED else None
+        plan, longest = blend_plan(gpu, N, ranges, num_tiles, pairs, queue)
         self.ctx.finish()
         t2 = time.perf_counter()
         control.check()
-        self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, oit, control, target)
+        self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, rays, oit, control, target)
         self.ctx.finish()
         return dict(preprocess_ms=(t1 - t0) * 1e3, sort_ms=(t2 - t1) * 1e3, blend_ms=(time.perf_counter() - t2) * 1e3,
                     visible=visible, sort_length=sort_length, pairs=pairs, stage_reused=stage_reused,
@@ -326,6 +328,8 @@ class GlslRenderer(Renderer):
         vf = settings.view_filter.native() if settings.mode.label in FILTERED_MODES else np.zeros(2, np.float32)
         reach = float(max(np.float32(DILATION_3DGS), vf[0] + vf[1]))  # gbv::stage_reach, in float32
         rules = settings.view_filter.stage_rules if settings.mode.label in FILTERED_MODES else 0
+        if settings.mode == Mode.EVAL3D:
+            reach = 1e30  # eval3d: its footprint is the ray's: the stage keeps every splat in front of the plane
         camera_bytes = tuple(np.asarray(v).tobytes() for v in cam_uniforms.values())
         key = (self._generation, camera_bytes, sh_deg, reach, rules)
         if key == self._stage_key:
@@ -346,9 +350,9 @@ class GlslRenderer(Renderer):
         return self.gpu.buffers["planes"] if n is None else self.gpu.ensure("planes", n * VEC4, "depth planes")
 
     def _blend(self, camera: Camera, settings: RenderSettings, want_window: bool, plan, longest: int, splats, tvals,
-               ranges, oit: tuple, control: RenderControl, target=None) -> None:
+               ranges, rays, oit: tuple, control: RenderControl, target=None) -> None:
         """blend.comp into `target` or the output texture, in the dispatches of `plan` (one unless the driver caps
-        loops)."""
+        loops); `rays`: the per-pixel sorted modes' ray data (else None)."""
         gpu = self.gpu
         N = settings.supersample
         W, H = camera.width, camera.height
@@ -363,10 +367,12 @@ class GlslRenderer(Renderer):
         accum = gpu.ensure("blend_accum", invocations * gi.BLEND_ACCUM_VEC4S * VEC4, "blend sums")
         prog = gpu.program("blend.comp", **{f"BLEND_MODE_{settings.mode.name}": 1, "SUPERSAMPLED": int(N > 1)})
         gpu.set(prog, out_size=(W, H), supersample=N, grid=(gx, gy), background=tuple(settings.background),
-                  want_window=int(want_window), oit=oit, stochastic=(settings.seed, settings.frame))
+                  want_window=int(want_window), oit=oit, stochastic=(settings.seed, settings.frame),
+                  queue=settings.queue)
         cell_of = gpu.buffers["cell_of"] if settings.mode == Mode.DUPLEX else gpu.ensure("dummy", VEC4)
         planes = self._planes(settings)
-        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of, planes)):
+        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of, planes,
+                                 rays or gpu.ensure("dummy", VEC4))):
             buf.bind_to_storage_buffer(i)
         tex.bind_to_image(0, read=False, write=True)
         tiles = N * N

@@ -30,6 +30,7 @@ struct RenderArgs {
     OitParams oit;      // wsr / duplex globals
     int sh_degree = 3;  // SH degree cap, 0..3
     bool want_window = false;  // Gaussian Blending's final window size per pixel as a debug plane
+    int queue = STOPTHEPOP_QUEUE;  // stopthepop: the per-pixel queue length K (0: unbounded, the exact sort)
     LodArgs lod;               // CPU only: the CUDA renderer draws a cut gathered into a scene of its own
     uint32_t seed = 0, frame = 0;  // stochastic: the hash's seed and frame index (stochastic.h)
 };

@@ -26,11 +26,18 @@
 namespace gbv {
 
 // Blending modes; the integer values are the Python enum's values (gbviewer/render/types.py).
-enum Mode : int32_t { SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5, STOCHASTIC = 6,
-                     STOCHASTIC_POPFREE = 7 };
+enum Mode : int32_t {
+    SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5, STOCHASTIC = 6,
+    STOCHASTIC_POPFREE = 7,
+    EVAL3D = 8, STOPTHEPOP = 9,  // per-pixel sorted along the ray (ray3d.h)
+};
 // The modes whose alpha is 3DGS's at the pixel centre, with the viewer presets' 2D filter (view_filter.h): scalar and
-// the stochastic modes, which keep fragments with that alpha (gbviewer.render.presets.FILTERED_MODES).
+// the stochastic modes, which keep fragments with that alpha (gbviewer.render.presets.FILTERED_MODES). stopthepop
+// blends 3DGS's 2D splats through the same filter (preprocess_finish), but only with its default, 3DGS's +0.3: no
+// preset or view filter takes it (gbviewer.render.RenderSettings refuses one).
 constexpr bool view_filtered(Mode mode) { return mode == SCALAR || mode == STOCHASTIC || mode == STOCHASTIC_POPFREE; }
+// Modes that order each pixel's splats by the depth of their maximum along its ray (ray3d.h).
+GBV_HD bool per_pixel_sorted(Mode m) { return m == EVAL3D || m == STOPTHEPOP; }
 // Camera projections; the values are the indices of gbviewer.camera.PROJECTIONS.
 enum Projection : int32_t { PERSPECTIVE = 0, ORTHOGRAPHIC = 1 };
 
@@ -55,6 +62,10 @@ constexpr float WSR_FIXED_MAX = 64.0f;         // 2^6: per-term clamp; 2^21 - 1 
 constexpr float DUPLEX_CELL_SIGMAS = 2.0f;     // cell radius ceil(2 sqrt(lambda1)) (§8.3)
 constexpr float DUPLEX_T_STOP = 0.01f;         // CUMMULT_THRESHOLD: cell-level early termination (§8.1)
 constexpr float TWO_PI = 6.283185307179586f;
+// StopThePop's published per-pixel queue length (SortQueueSizes.per_pixel = 4; tile_4x4 = 64, tile_2x2 = 8:
+// r4dl/StopThePop-Rasterization diff_gaussian_rasterization/__init__.py).
+constexpr int STOPTHEPOP_QUEUE = 4;
+constexpr int MAX_QUEUE = 64;  // the longest per-pixel queue accepted (0: unbounded, the exact per-pixel sort)
 
 struct Vec2 {
     float x, y;

@@ -71,7 +71,7 @@ GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLan
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
     float min_power = -INFINITY;
-    if (view_filtered(mode)) {
+    if (view_filtered(mode) || mode == STOPTHEPOP) {  // stopthepop blends 3DGS's 2D splats in its own order
         scalar_filter<L>(oit, cov, opacity, ok);
         min_power = support_power(oit);
     } else if (mode == MIP) {

@@ -215,8 +215,10 @@ GBV_HD void stage_color(const SplatInLanes<L>& in, int sh_deg, int rules, const 
 
 // The reach a frame's stage serves (stage_on_screen, every backend's stage key): the largest diagonal the frame's
 // 2D filter adds, the scalar mode's view filter (dilation + pre-dilation), every other mode at most DILATION_3DGS
-// (preprocess_finish).
+// (preprocess_finish); eval3d infinite (every splat in front of the near plane is kept: the 2D covariance does not
+// bound its footprint).
 GBV_HD float stage_reach(Mode mode, const OitParams& oit) {
+    if (mode == EVAL3D) return INFINITY;  // its footprint is the ray's (ray3d.h), not the 2D covariance's: keep all
     const float filter = view_filtered(mode) ? oit.dilation + oit.pre_dilation : 0.0f;
     return filter > DILATION_3DGS ? filter : DILATION_3DGS;
 }
