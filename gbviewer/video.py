@@ -105,9 +105,9 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
     """Render every frame of `camera_path` in every mode of `settings_list` side by side and write a video
     (`write_video`: `codec` in the container `out`'s extension names, quality `crf`, default the codec's).
 
-    camera_path: PathFrames (`gbviewer.camera_paths`) or plain
-    Cameras (rate 1, pane = the camera's size); every frame must have the same pane size. Frames are rendered,
-    composed and piped to ffmpeg (imageio-ffmpeg's bundled one) one at a time, so memory does not grow with the length; the CPU backend uses every core for each frame.
+    camera_path: PathFrames (`gbviewer.camera_paths`) or plain Cameras (rate 1, pane = the camera's size); every
+    frame must have the same pane size. Frames are rendered, composed and piped to ffmpeg (imageio-ffmpeg's bundled
+    one) one at a time, so memory does not grow with the length; the CPU backend uses every core for each frame.
 
     Safe to call from a background thread with a backend that needs no GL context (`Capabilities.gl_context`: a
     GL backend's context belongs to the thread that made it; the cpu renderer releases the GIL):

@@ -129,9 +129,9 @@ def test_cycle_orthographic_and_refusals(bundled_scene, tmp_path):
     (tmp_path / "c.json").write_text(json.dumps(dict(doc, is_cycle=True)))
     p = load_nerfstudio_path(tmp_path / "c.json")
     assert [k.time for k in p.keys] == pytest.approx([0.0, 0.1, 0.25, 0.35]) and p.keys[-1].camera == p.keys[0].camera
-    ortho = dict(doc, camera_type="orthographic",
-                 keyframes=[{k: v for k, v in e.items() if k != "fov"} | {"view_height": 2.0} for e in doc["keyframes"]],
-                 camera_path=[{"camera_to_world": e["camera_to_world"], "view_height": 2.0} for e in doc["camera_path"]])
+    keys = [{k: v for k, v in e.items() if k != "fov"} | {"view_height": 2.0} for e in doc["keyframes"]]
+    path = [{"camera_to_world": e["camera_to_world"], "view_height": 2.0} for e in doc["camera_path"]]
+    ortho = dict(doc, camera_type="orthographic", keyframes=keys, camera_path=path)
     (tmp_path / "o.json").write_text(json.dumps(ortho))
     o = load_nerfstudio_path(tmp_path / "o.json")
     assert o.frames[0].orthographic and o.frames[0].fy == H / 2.0
