@@ -22,6 +22,7 @@ from .extras import require
 from .figure import GAP, Cell, GridLayout, caption_font_size, compose_grid
 from .io.files import atomic_write, refuse_overwrite
 from .render import RenderSettings, get_renderer
+from .render.tiles import render_tiled
 from .scene import Scene
 from .validate import integer, real
 
@@ -89,10 +90,11 @@ def video_layout(pf: PathFrame, n_modes: int) -> GridLayout:
         pf.height)), even=True)
 
 
-def render_or_stop(renderer, camera: Camera, settings: RenderSettings, cancel):
-    """One cell's frame; a cancel set during it (the token reaches the native loop) stops the video at once."""
+def render_or_stop(renderer, camera: Camera, settings: RenderSettings, splats: int, cancel):
+    """One cell's frame (in parts beyond the memory budget: `render_tiled`); a cancel set during it (the token
+    reaches the native loop) stops the video at once."""
     try:
-        return renderer.render(camera, settings, cancel=cancel)
+        return render_tiled(renderer, camera, settings, splats, cancel=cancel)
     except RenderCancelled:
         raise VideoCancelled("video cancelled; nothing written") from None
 
@@ -139,7 +141,7 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
             for s in settings_list:
                 if cancel is not None and cancel.is_set():
                     raise VideoCancelled("video cancelled; nothing written")
-                cells.append(Cell.of(s, pf.rate, render_or_stop(renderer, pf.camera, s, cancel)))
+                cells.append(Cell.of(s, pf.rate, render_or_stop(renderer, pf.camera, s, scene.num_splats, cancel)))
             yield np.asarray(compose_video_frame(cells, pf, inset))
             if progress is not None:
                 progress(i + 1, len(frames))
