@@ -356,8 +356,9 @@ NB_MODULE(_native, m) {
              nb::arg("cancel").none() = nb::none(), nb::arg("on_progress").none() = nb::none(),
              nb::arg("partials").none() = nb::none(),
              "Render several frames of the uploaded scene in one call (each a tuple of render()'s arguments R .. "
-             "depth_correct, then view_filter and lod, each or None, then seed and frame, and optionally the region (x, y, w, h) of "
-             "output pixels rendered, x and y times supersample multiples of 16, or None): the per-camera stage once per distinct camera and SH "
+             "depth_correct, then view_filter and lod, each or None, then seed and frame, and optionally the "
+             "region (x, y, w, h) of output pixels rendered, x and y times supersample multiples of 16, or None): "
+             "the per-camera stage once per distinct camera and SH "
              "degree, then every frame's tiles interleaved in one parallel loop. cancel as render's; "
              "on_progress(frame, done, total); partials: one float32 (height, width, 3) array or None per frame. A "
              "list of render()'s dicts, which also hold stage_ms, order_ms, stage_reused and order_reused.")
