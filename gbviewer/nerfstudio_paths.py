@@ -68,7 +68,7 @@ def is_nerfstudio_path(doc: Any) -> bool:
 def camera_from_c2w(c2w: object, lens: float, width: int, height: int, projection: str, where: str) -> Camera:
     """A centred camera from a flattened camera-to-world OpenGL matrix; `lens`: the vertical field of view in
     degrees (perspective) or the world units the height spans (orthographic)."""
-    m = array(c2w, f"{where}: camera-to-world matrix", (16,)).reshape(4, 4)
+    m = array(c2w, f"{where}: camera-to-world matrix", (16,), f32=True).reshape(4, 4)
     if np.abs(m[3] - [0.0, 0.0, 0.0, 1.0]).max() > 1e-6:
         raise InvalidValue(f"{where}: camera-to-world matrix: expected a last row of 0, 0, 0, 1, got "
                            f"{m[3].tolist()}")
