@@ -23,13 +23,11 @@ def cmd_video(args: argparse.Namespace) -> int:
     """Side-by-side zoom video of several modes (H.264, H.265, VP9 or AV1; MP4 or WebM)."""
     require("video", "imageio_ffmpeg", "a video", load=False)
     settings = settings_of(args)
-    video_encoder(args.out, args.codec, args.crf)
     if args.camera_path is not None:
         return _camera_path_video(args, settings)
     args.path = args.path or "zoom"
     path_args(args, PATHS, VIDEO_PANE)
-    check_writable(args.out, args.force, inputs=[args.scene, args.cameras, None if args.path in PATHS else args.path],
-                   option="--out")
+    _check_out(args, [args.scene, args.cameras, None if args.path in PATHS else args.path])
     scene = load(args.scene, **load_options(args))
     cam = camera_from_args(scene, args)
     check_inset(args.inset, cam.width, cam.height)
@@ -42,10 +40,16 @@ def cmd_video(args: argparse.Namespace) -> int:
         f"{args.from_rate:g} -> {args.to_rate:g} " if args.path in PATHS else ""))
 
 
+def _check_out(args: argparse.Namespace, inputs: list) -> None:
+    """--out: writable, none of the inputs, a container that holds --codec and an encoder here for it."""
+    check_writable(args.out, args.force, inputs=inputs, option="--out")
+    video_encoder(args.out, args.codec, args.crf)
+
+
 def _camera_path_video(args: argparse.Namespace, settings: list) -> int:
     """The video along a nerfstudio camera_path.json: its frames at its render size (or --size), at ns-render's
     frame rate (or --fps)."""
-    check_writable(args.out, args.force, inputs=[args.scene, args.camera_path], option="--out")
+    _check_out(args, [args.scene, args.camera_path])
     p = load_nerfstudio_path(args.camera_path, args.size)
     path = nerfstudio_frames(p, args.frames, args.seconds, args.max_frames)
     check_inset(args.inset, *p.size)

@@ -37,10 +37,11 @@ def region_step(settings: RenderSettings) -> int:
     return REGION_ALIGN // gcd(REGION_ALIGN, settings.supersample)
 
 
-def plan_parts(camera: Camera, settings: RenderSettings, splats: int, budget: int) -> list[Region] | None:
+def plan_parts(camera: Camera, settings: RenderSettings, splats: int, budget: int,
+               source: str = "given") -> list[Region] | None:
     """The parts (x, y, w, h) a frame renders in under `budget` bytes (None: whole, it fits), the stitched image
     counted; halves the longer side of the part (on `region_step`) until it fits. A one-line `RenderError` when
-    not even the smallest part does."""
+    not even the smallest part does (`source`: where the budget comes from, as `memory_budget` says)."""
     if frame_bytes(camera, settings, splats) <= budget:
         return None
     W, H = camera.width, camera.height
@@ -51,7 +52,7 @@ def plan_parts(camera: Camera, settings: RenderSettings, splats: int, budget: in
         if w <= step and h <= step:
             raise RenderError(f"{W}x{H} at supersample {settings.supersample}: even {w}x{h} parts need "
                               f"{gib(frame_bytes(camera, settings, splats, (w, h)) + held)} with the stitched image, "
-                              f"more than the {gib(budget)} budget; set {BUDGET_ENV} to raise it")
+                              f"more than the {gib(budget)} budget ({source}); set {BUDGET_ENV} to raise it")
         if w >= h:
             w = max(step, -(-w // 2 // step) * step)
         else:
@@ -68,7 +69,7 @@ def render_tiled(renderer: Renderer, camera: Camera, settings: RenderSettings, s
     A stitched frame's stats add up the parts' times and counts; its visible is the most splats one part drew."""
     parts = None
     if hasattr(renderer, "render_region") and settings.mode != Mode.DUPLEX:
-        parts = plan_parts(camera, settings, splats, memory_budget()[0] if budget is None else budget)
+        parts = plan_parts(camera, settings, splats, *(memory_budget() if budget is None else (budget,)))
     if parts is None:
         return renderer.render(camera, settings, cancel=cancel)
     W, H = camera.width, camera.height
