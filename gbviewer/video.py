@@ -52,7 +52,6 @@ CODECS = {
                                                        "libaom-av1": ("-b:v", "0", "-cpu-used", "6", "-row-mt", "1")}),
 }
 CONTAINERS = {".mp4": ("h264", "h265", "vp9", "av1"), ".webm": ("vp9", "av1")}  # WebM holds VP8, VP9 and AV1 only
-DEFAULT_CRF = CODECS["h264"].default_crf
 MIN_FPS, MAX_FPS = 0.1, 1000.0  # frame rates of a video (the encoder's time base is fps to 1/1001)
 
 
