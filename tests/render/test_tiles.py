@@ -33,7 +33,8 @@ def cpu(bundled_scene):
 @pytest.mark.parametrize("spec, projection", [
     ("scalar", "perspective"), ("gaussian_blending", "perspective"), ("scalar:3", "perspective"),
     ("gaussian_blending:2", "perspective"), ("mip", "perspective"), ("analytic", "perspective"),
-    ("wsr", "perspective"), ("stochastic", "perspective"), ("scalar+lod:4", "perspective"),
+    ("wsr", "perspective"), ("stochastic", "perspective"), ("stochastic_popfree:2", "perspective"),
+    ("scalar+lod:4", "perspective"), ("gaussian_blending:2+lod:4", "perspective"),
     ("scalar", "orthographic"), ("gaussian_blending:4", "orthographic"),
 ])
 def test_parts_equal_the_whole_frame_bit_for_bit(bundled_scene, cpu, spec, projection):
