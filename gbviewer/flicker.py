@@ -38,7 +38,7 @@ from .io.files import atomic_write
 from .render import FrameStats, Mode, RenderSettings, get_renderer
 from .scene import Scene
 from .validate import dumps_json, integer, real
-from .video import write_mp4
+from .video import write_video
 
 FLICKER_PATHS = (*PATHS, "orbit")
 DEFAULT_REFERENCE = "supersample:8"
@@ -253,7 +253,7 @@ def write_heat_video(out: str | Path, report: FlickerReport, path: Sequence[Path
             yield np.asarray(compose_grid([cells], w, h, GAP, captions="below", even=True,
                                           lines=lambda c: [c.mode_label, caption]))
 
-    write_mp4(out, images(), len(report.starts), fps=fps, force=force)
+    write_video(out, images(), len(report.starts), fps=fps, force=force)
     return Path(out)
 
 

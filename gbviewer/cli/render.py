@@ -13,11 +13,15 @@ from ..io.files import check_writable
 from ..io.trained_as import describe
 from ..render import Mode, get_renderer
 from ..render.presets import PRESETS, trained_spec
+from ..render.tiles import render_tiled
 from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of, camera_from_args,
-                      check_render_size, load_options, settings_of)
+                      check_render_size, load_options, progress_columns, settings_of)
 
 
 def cmd_render(args: argparse.Namespace) -> int:
+    """One image; beyond the memory budget the CPU backend renders it in parts (`render_tiled`), bit for bit."""
+    from rich.progress import Progress
+
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".npy"):
         raise GBViewerError(f"{out}: output must end in .png or .npy")
@@ -28,7 +32,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     cam = cam.at_sampling_rate(args.scale)
     trained = trained_spec(scene.meta)
     settings = settings_of(args, trained or "scalar")[0]
-    frame = get_renderer(scene, backend_of(args)).render(cam, settings)
+    renderer = get_renderer(scene, backend_of(args))
+    with Progress(*progress_columns(), transient=True) as bar:  # shown while a large frame renders in parts
+        task = bar.add_task("parts", total=None, visible=False)
+        frame = render_tiled(renderer, cam, settings, scene.num_splats,
+                             progress=lambda done, total: bar.update(task, completed=done, total=total, visible=True))
     save_image(out, frame.rgb, force=args.force)
     st = frame.stats
     how = f" (as trained: {describe(scene.meta)})" if args.mode is None and trained else ""

@@ -4,7 +4,7 @@ camera), the level-of-detail cut, the wsr / duplex globals and cells, the camera
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -69,18 +69,21 @@ MAX_SAMPLES = 2**31 - 1  # sub-samples of one frame: the native modules and shad
 
 
 def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backend: str,
-            lod_in_place: bool = False, flag: np.ndarray | None = None) -> Prepared:
+            lod_in_place: bool = False, flag: np.ndarray | None = None,
+            size: tuple[int, int] | None = None) -> Prepared:
     """The frame's inputs for `backend` from its uploaded scene (None: nothing uploaded, an error). A
     level-of-detail frame gets the cut's Scene, or with `lod_in_place` (the CPU renderer; not duplex) the hierarchy
     and cut arguments to draw the same cut from the uploaded scene. `flag`: the render's cancel flag
-    (RenderControl.flag), which stops the cut of a gathered cut Scene (RenderCancelled)."""
+    (RenderControl.flag), which stops the cut of a gathered cut Scene (RenderCancelled). `size`: the (width,
+    height) of the part of the image rendered (the CPU renderer's regions), by default all of it."""
     if scene is None:
         raise RenderError(f"{backend} renderer: upload(scene) before render()")
-    samples = camera.width * camera.height * settings.supersample**2
+    w, h = size or (camera.width, camera.height)
+    samples = w * h * settings.supersample**2
     if samples > MAX_SAMPLES:
-        raise RenderError(f"{camera.width}x{camera.height} at supersample {settings.supersample}: {samples} samples, "
+        raise RenderError(f"{w}x{h} at supersample {settings.supersample}: {samples} samples, "
                           f"more than the {MAX_SAMPLES} one frame can hold")
-    check_frame_memory(camera, settings, scene.num_splats)
+    check_frame_memory(camera, settings, scene.num_splats, size)
     t0 = time.perf_counter()
     view = view_scene(scene, camera)
     decode_ms = (time.perf_counter() - t0) * 1e3 if view is not scene else None
@@ -193,12 +196,16 @@ def native_stats(out: dict, prep: Prepared, camera: Camera, settings: RenderSett
 
 
 def native_frame(out: dict, prep: Prepared, camera: Camera, settings: RenderSettings, backend: str,
-                 t0: float) -> Frame:
-    """A Frame from a native module's result dict: rgb, alpha, evals, window? and `native_stats`' fields."""
+                 t0: float, region: tuple[int, int, int, int] | None = None) -> Frame:
+    """A Frame from a native module's result dict: rgb, alpha, evals, window? and `native_stats`' fields (of the
+    region's pixels when only a region (x, y, w, h) was rendered)."""
     debug = {"evals": out["evals"]}
     if "window" in out:
         debug["window"] = out["window"]
-    return Frame(out["rgb"], out["alpha"], native_stats(out, prep, camera, settings, backend, t0), debug)
+    stats = native_stats(out, prep, camera, settings, backend, t0)
+    if region is not None:
+        stats = replace(stats, evals_per_pixel=stats.evaluations / (region[2] * region[3]))
+    return Frame(out["rgb"], out["alpha"], stats, debug)
 
 
 def check_display_texture(texture, camera: Camera, backend: str) -> None:

@@ -77,7 +77,9 @@ std::vector<nb::dict> run_frames(Renderer& r, const std::vector<RenderArgs>& fra
     if (!res.empty() && res[0].stopped && PyErr_Occurred()) throw nb::python_error();
     std::vector<nb::dict> out;
     for (size_t f = 0; f < res.size(); ++f) {
-        nb::dict d = result_dict(res[f].image, res[f].stats, (size_t)frames[f].height, (size_t)frames[f].width);
+        const RenderArgs& a = frames[f];
+        nb::dict d = result_dict(res[f].image, res[f].stats, (size_t)(a.rw ? a.rh : a.height),
+                                 (size_t)(a.rw ? a.rw : a.width));
         d["simd"] = res[f].simd;
         d["cancelled"] = res[f].cancelled;
         d["stage_ms"] = res[f].stats.stage_ms;
@@ -88,6 +90,20 @@ std::vector<nb::dict> run_frames(Renderer& r, const std::vector<RenderArgs>& fra
         out.push_back(std::move(d));
     }
     return out;
+}
+
+// A frame's part (x, y, w, h) in output pixels, or None: all of it (RenderArgs::rx .. rh).
+void set_region(const char* where, RenderArgs& a, nb::handle region) {
+    if (region.is_none()) return;
+    const nb::tuple r = nb::cast<nb::tuple>(region);
+    if (r.size() != 4) throw std::invalid_argument(std::string(where) + ": region must be (x, y, w, h)");
+    const int x = nb::cast<int>(r[0]), y = nb::cast<int>(r[1]), w = nb::cast<int>(r[2]), h = nb::cast<int>(r[3]);
+    if (x < 0 || y < 0 || w < 1 || h < 1 || x > a.width - w || y > a.height - h)
+        throw std::invalid_argument(std::string(where) + ": region must be (x, y, w, h) inside the image");
+    if ((int64_t)x * a.supersample % TILE || (int64_t)y * a.supersample % TILE)
+        throw std::invalid_argument(std::string(where) + ": region x and y times supersample must be multiples of " +
+                                    std::to_string(TILE));
+    a.rx = x, a.ry = y, a.rw = w, a.rh = h;
 }
 
 nb::dict render(Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
@@ -123,9 +139,9 @@ std::vector<nb::dict> render_many(Renderer& r, const std::vector<nb::tuple>& fra
     cpu::Control c;
     for (size_t f = 0; f < frames.size(); ++f) {
         const nb::tuple& p = frames[f];
-        if (p.size() != 23)
-            throw std::invalid_argument(
-                "render_many: each frame is render()'s 19 frame arguments, view_filter, lod, seed and frame");
+        if (p.size() != 23 && p.size() != 24)
+            throw std::invalid_argument("render_many: each frame is render()'s 19 frame arguments, view_filter, lod, "
+                                        "seed and frame, and optionally its region");
         std::optional<FArr> view_filter;
         if (!p[19].is_none()) view_filter = nb::cast<FArr>(p[19]);
         args.push_back(render_args(where, nb::cast<FArr>(p[0]), nb::cast<FArr>(p[1]), nb::cast<float>(p[2]),
@@ -137,7 +153,10 @@ std::vector<nb::dict> render_many(Renderer& r, const std::vector<nb::tuple>& fra
                                    nb::cast<bool>(p[18]), view_filter, nb::cast<uint32_t>(p[21]),
                                    nb::cast<uint32_t>(p[22])));
         args.back().lod = lod_args(where, p[20]);
+        if (p.size() == 24) set_region(where, args.back(), p[23]);
         const std::optional<PArr>* part = partials ? &(*partials)[f] : nullptr;
+        if (part && *part && args.back().rw)
+            throw std::invalid_argument("render_many: a frame with a region has no partial frame");
         if (part && *part) check_partial(where, **part, args.back().width, args.back().height);
         c.partial.push_back(part && *part ? (*part)->data() : nullptr);
     }
@@ -337,7 +356,9 @@ NB_MODULE(_native, m) {
              nb::arg("cancel").none() = nb::none(), nb::arg("on_progress").none() = nb::none(),
              nb::arg("partials").none() = nb::none(),
              "Render several frames of the uploaded scene in one call (each a tuple of render()'s arguments R .. "
-             "depth_correct, then view_filter and lod, each or None, then seed and frame): the per-camera stage once per distinct camera and SH "
+             "depth_correct, then view_filter and lod, each or None, then seed and frame, and optionally the "
+             "region (x, y, w, h) of output pixels rendered, x and y times supersample multiples of 16, or None): "
+             "the per-camera stage once per distinct camera and SH "
              "degree, then every frame's tiles interleaved in one parallel loop. cancel as render's; "
              "on_progress(frame, done, total); partials: one float32 (height, width, 3) array or None per frame. A "
              "list of render()'s dicts, which also hold stage_ms, order_ms, stage_reused and order_reused.")

@@ -222,10 +222,20 @@ void finish_rays(const SceneView& sc, const Stage& stage, Mode mode, FrameBuffer
 // leaving it not ready).
 void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& path, Stage& stage, Stats& st,
                  FrameRun& run);
-// The mode's finish of a ready stage and the binning of one image at the camera's resolution into `buf`, in the
-// stage's depth order (sorted here when not ready yet); stops early once cancelled.
+// The rectangle of the camera's image (at its resolution: supersampled) that a frame renders: [x0, x1) x [y0, y1),
+// x0 and y0 multiples of TILE, so that its tiles are tiles of the whole image's grid.
+struct TileRegion {
+    int x0, y0, x1, y1;
+    int gx() const { return (x1 - x0 + TILE - 1) / TILE; }
+    int gy() const { return (y1 - y0 + TILE - 1) / TILE; }
+    static TileRegion whole(const CameraParams& cam) { return {0, 0, cam.width, cam.height}; }
+};
+
+// The mode's finish of a ready stage and the binning of the tiles of `reg` (of the image at the camera's
+// resolution) into `buf`, in the stage's depth order (sorted here when not ready yet); stops early once cancelled.
+// Each tile's list is the whole image's list of that tile.
 void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, const simd::Path& path,
-               FrameBuffers& buf, Stats& st, FrameRun& run);
+               FrameBuffers& buf, Stats& st, FrameRun& run, const TileRegion& reg);
 
 // One frame of a call's joint blend: its binned buffers, how to blend them, and the image (at the stage camera's
 // resolution; N: supersampling factor, for the partial frame).
@@ -240,6 +250,7 @@ struct BlendFrame {
     int N;
     Stats* st;
     uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
+    TileRegion reg;      // what of the camera's image `img` holds (bin_frame's region)
 };
 // Blend every frame's tiles in one parallel loop, interleaved (each frame's tiles centre out, the frames' i-th tiles
 // together, in proportion to their tile counts); each frame's blend_ms is the loop's time.
