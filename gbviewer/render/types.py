@@ -20,7 +20,7 @@ from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, distinct_items, integer, real
 from .presets import FILTERED_MODES
-from .spec import shortest, shown, spec_parts
+from .spec import PRECISIONS, shortest, shown, spec_parts
 from .view_filter import ViewFilter
 
 
@@ -83,6 +83,10 @@ class RenderSettings:
 
     `lod` (pixels >= 0): render the cut of the scene's splat hierarchy at that projected size (gbviewer.lod) in any
     mode; None renders every splat.
+
+    `precision` ("exact" or "fast", spec suffix '+fast'): gaussian_blending's fast kernel stays within 1/1024 of the
+    exact one per channel and in alpha (tests/render/test_gb_fast.py); the library renders exact unless asked, the
+    viewer's panes fast. Other modes have one kernel: their precision is always "exact".
     """
 
     mode: Mode = Mode.SCALAR
@@ -99,11 +103,16 @@ class RenderSettings:
     preset: str = ""
     seed: int = 0  # stochastic modes: the keep decisions' hash seed (gbv/stochastic.h); same seed and frame, same bits
     frame: int = 0  # stochastic modes: the frame index (another index, another sample)
+    precision: str = "exact"  # gaussian_blending: "fast" within the stated bound of "exact"
 
     def __post_init__(self) -> None:
         """Every number checked through gbviewer.validate (the native renderers take them as int32 and float32);
         a bad one is a one-line RenderError naming the field."""
         object.__setattr__(self, "mode", Mode.parse(self.mode))
+        if self.precision not in PRECISIONS:
+            raise RenderError(f"precision {self.precision!r}; expected one of {', '.join(PRECISIONS)}")
+        if self.mode != Mode.GAUSSIAN_BLENDING:
+            object.__setattr__(self, "precision", "exact")
         if self.debug not in DEBUG_OUTPUTS:
             raise RenderError(f"debug output {self.debug!r}; expected one of {DEBUG_OUTPUTS}")
         try:
@@ -154,8 +163,9 @@ class RenderSettings:
 
     @property
     def base_label(self) -> str:
-        """The label without the level of detail: 'scalar 3x3', ..."""
-        return self.name + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "")
+        """The label without the level of detail: 'scalar 3x3', 'gaussian_blending fast', ..."""
+        return self.name + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "") + \
+            (" fast" if self.precision == "fast" else "")
 
     @property
     def label(self) -> str:
@@ -163,15 +173,18 @@ class RenderSettings:
 
     @property
     def spec(self) -> str:
-        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1', ..."""
+        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1',
+        'gaussian_blending:2+fast', ..."""
         lod = f"+lod:{shortest(self.lod)}" if self.lod is not None else ""
-        return self.name + (f":{self.supersample}" if self.supersample > 1 else "") + lod
+        fast = "+fast" if self.precision == "fast" else ""
+        return self.name + (f":{self.supersample}" if self.supersample > 1 else "") + fast + lod
 
     @classmethod
     def parse(cls, spec: "str | Mode", **options) -> "RenderSettings":
         """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples;
         'preset:NAME[:N]' a viewer preset (gbviewer.render.presets: its mode, view filter and SH bands); a suffix
-        '+lod' or '+lod:TAU' draws the level-of-detail cut at TAU pixels (default 1).
+        '+fast' or '+exact' sets the precision; '+lod' or '+lod:TAU' draws the level-of-detail cut at TAU pixels
+        (default 1).
 
         The one parser of every surface that takes a mode (commands, viewer panes, the library): `options`
         (RenderSettings fields; None: not given) fill what the spec leaves unset, and one that disagrees with a part

@@ -274,6 +274,7 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
         job.mode = fr.mode;
         job.oit = fr.oit;
         job.frame_key = fr.frame_key;
+        job.fast = fr.fast;
         job.planes = fr.buf->planes.empty() ? nullptr : fr.buf->planes.data();
         for (int c = 0; c < 3; ++c) job.bg[c] = fr.bg[c];
         const int gx = (fr.cam->width + TILE - 1) / TILE;
@@ -303,8 +304,8 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
 }
 
 PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
-                             uint32_t frame_key, const float bg[3], const simd::Path& path, FrameBuffers& buf, int x,
-                             int y, int N) {
+                             uint32_t frame_key, bool fast, const float bg[3], const simd::Path& path,
+                             FrameBuffers& buf, int x, int y, int N) {
     Stats st;
     const Control none;
     FrameRun run(none, 1);
@@ -313,7 +314,7 @@ PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const
     const CameraParams& cam = stage.key.cam;
     FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.ids.data(), cam.width,
                         cam.height, mode, oit, {bg[0], bg[1], bg[2]}, frame_key,
-                        buf.planes.empty() ? nullptr : buf.planes.data()};
+                        buf.planes.empty() ? nullptr : buf.planes.data(), fast};
     FlushDenormals ftz;
     return trace_pixel(lists, x, y, N);
 }

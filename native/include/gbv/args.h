@@ -32,6 +32,7 @@ struct RenderArgs {
     bool want_window = false;  // Gaussian Blending's final window size per pixel as a debug plane
     LodArgs lod;               // CPU only: the CUDA renderer draws a cut gathered into a scene of its own
     uint32_t seed = 0, frame = 0;  // stochastic: the hash's seed and frame index (stochastic.h)
+    bool fast = false;             // gaussian_blending at the fast precision (blend.h: blend_gaussian's Fast)
 };
 
 }  // namespace gbv
