@@ -217,7 +217,8 @@ class FrameStats:
     sorted by depth (cpu: one per visible splat, the frame's global depth order, which it then bins in order; glsl
     and cuda: tile-splat pairs; 0 for wsr, whose tile lists are only binned; tile-cell pairs for duplex);
     sort_bytes: sort_length x SORT_ENTRY_BYTES; pairs: tile-list entries blended; evaluations: splat-pixel
-    evaluations, evals_per_pixel their mean; backend; mode: `RenderSettings.label_for` the scene.
+    evaluations, evals_per_pixel their mean; backend; mode: `RenderSettings.label_for` the scene; precision: the
+    gaussian_blending kernel that ran ("exact" in every other mode, and on a backend without the fast one).
 
     Filled by some backends or modes only (None elsewhere): simd, the SIMD path the cpu backend's blend ran
     ("scalar", "avx2" or "avx512", chosen by GBVIEWER_SIMD at load or gbviewer._native.testing.set_simd); duplex: cells,
@@ -255,6 +256,7 @@ class FrameStats:
     stage_ms: float | None = None
     order_ms: float | None = None
     lod_splats: int | None = None
+    precision: str = "exact"
 
 
 @dataclass(eq=False)
