@@ -79,6 +79,7 @@ std::vector<nb::dict> run_frames(Renderer& r, const std::vector<RenderArgs>& fra
     for (size_t f = 0; f < res.size(); ++f) {
         nb::dict d = result_dict(res[f].image, res[f].stats, (size_t)frames[f].height, (size_t)frames[f].width);
         d["simd"] = res[f].simd;
+        d["fast"] = frames[f].fast && frames[f].mode == GAUSSIAN_BLENDING;  // the kernel that ran
         d["cancelled"] = res[f].cancelled;
         d["stage_ms"] = res[f].stats.stage_ms;
         d["order_ms"] = res[f].stats.order_ms;
