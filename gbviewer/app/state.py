@@ -15,6 +15,7 @@ from ..io.datasets.backdrop import RGB, choose_background, format_rgb
 from ..io.trained_as import describe
 from ..render import Mode, RenderSettings
 from ..render.presets import trained_spec
+from ..render.spec import spec_parts
 from ..scene import Scene
 from .background import FIXED, PHOTOS
 from .camera_actions import CameraActions
@@ -300,8 +301,11 @@ class AppState(CameraActions):
     def settings_for(self, i: int, part: str) -> RenderSettings:
         """What pane i's part ('a', or 'b' of a split) renders with."""
         ps: PaneSettings = self.settings.panes[i]
-        settings = RenderSettings.parse(ps.split_mode if part == "b" else ps.mode, supersample=ps.supersample,
-                                        background=self.background, lod=ps.lod if ps.lod > 0 else None)
+        spec = ps.split_mode if part == "b" else ps.mode
+        settings = RenderSettings.parse(spec, supersample=ps.supersample, background=self.background,
+                                        lod=ps.lod if ps.lod > 0 else None)
+        if "precision" not in spec_parts(str(spec)):  # interactive frames: fast unless the pane asks for exact
+            settings = replace(settings, precision="fast")
         debug = "window" if ps.view == "window" and settings.mode == Mode.GAUSSIAN_BLENDING else "none"
         return replace(settings, debug=debug)
 

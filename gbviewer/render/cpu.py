@@ -141,7 +141,8 @@ class CpuRenderer(NativeUploads, Renderer):
                 hook = control.hook
                 outs = self._impl.render_many(
                     [(*self._frame_args(camera, settings), settings.debug == "window", *(preps[i].oit or NO_OIT),
-                      settings.view_filter.native(), preps[i].lod, settings.seed, settings.frame, regions[i])
+                      settings.view_filter.native(), preps[i].lod, settings.seed, settings.frame,
+                      settings.precision == "fast", regions[i])
                      for i, (camera, settings) in zip(run, jobs[run.start:run.stop])],
                     threads=jobs[run.start][1].threads, cancel=control.flag,
                     on_progress=None if hook is None else (lambda job, done, total, b=run.start: hook(b + job, done,
@@ -160,5 +161,5 @@ class CpuRenderer(NativeUploads, Renderer):
             self._sync(prep)
             out = self._impl.trace(*self._frame_args(camera, settings), *(prep.oit or ()), x=x, y=y,
                                    view_filter=settings.view_filter.native(), lod=prep.lod, seed=settings.seed,
-                                   frame=settings.frame)
+                                   frame=settings.frame, fast=settings.precision == "fast")
         return from_native(out, settings, camera, x, y, prep.scene.num_splats)

@@ -155,9 +155,12 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
                 evaluations: int, cells_visible: int | None = None, cell_misses: int | None = None,
                 simd: str | None = None, stage_reused: bool | None = None, order_reused: bool | None = None,
                 stage_ms: float | None = None, order_ms: float | None = None,
-                lod_splats: int | None = None) -> FrameStats:
+                lod_splats: int | None = None, fast: bool = False) -> FrameStats:
     """The frame's stats from a backend's counts and stage times; t0: when the render began; lod_splats: the
-    level-of-detail cut a backend drew in place (else a cut's Scene says)."""
+    level-of-detail cut a backend drew in place (else a cut's Scene says); fast: the backend ran the fast precision
+    the settings ask for (a backend without that kernel renders, and says, exact)."""
+    if settings.precision == "fast" and not fast:
+        settings = replace(settings, precision="exact")
     counts = None  # the cut's (drawn, of)
     if settings.lod is not None:
         counts = prep.scene.meta.get("lod") if lod_splats is None else (lod_splats, prep.scene.num_splats)
@@ -167,7 +170,7 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
         total_ms=(time.perf_counter() - t0) * 1e3, visible=int(visible), sort_length=int(sort_length),
         sort_bytes=int(sort_length) * SORT_ENTRY_BYTES, pairs=int(pairs), evaluations=int(evaluations),
         evals_per_pixel=int(evaluations) / (camera.width * camera.height), backend=backend,
-        mode=settings.label_for(prep.scene, counts), simd=simd,
+        mode=settings.label_for(prep.scene, counts), simd=simd, precision=settings.precision,
         cells=prep.cells.num_cells if prep.cells is not None else None,
         cells_visible=None if cells_visible is None else int(cells_visible),
         cell_misses=None if cell_misses is None else int(cell_misses), decode_ms=prep.decode_ms,
@@ -191,7 +194,7 @@ def native_stats(out: dict, prep: Prepared, camera: Camera, settings: RenderSett
         evaluations=out["evaluations"], cells_visible=out["cells_visible"] if duplex else None,
         cell_misses=out["cell_misses"] if duplex else None, simd=str(out["simd"]) if "simd" in out else None,
         stage_reused=out.get("stage_reused"), order_reused=out.get("order_reused"), stage_ms=out.get("stage_ms"),
-        order_ms=out.get("order_ms"), lod_splats=out.get("lod_splats"),
+        order_ms=out.get("order_ms"), lod_splats=out.get("lod_splats"), fast=bool(out.get("fast", False)),
     )
 
 

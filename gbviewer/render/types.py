@@ -21,7 +21,7 @@ from ..validate import array, distinct_items, integer, real
 # Mode and its groups live in .modes; imported here too so that `from .types import Mode, ...` keeps working
 from .modes import MAX_QUEUE, ORDER_INDEPENDENT, PER_PIXEL_SORTED, STOPTHEPOP_QUEUE, Mode
 from .presets import FILTERED_MODES
-from .spec import shortest, shown, spec_parts
+from .spec import PRECISIONS, shortest, shown, spec_parts
 from .view_filter import ViewFilter
 
 
@@ -54,6 +54,10 @@ class RenderSettings:
 
     `lod` (pixels >= 0): render the cut of the scene's splat hierarchy at that projected size (gbviewer.lod) in any
     mode; None renders every splat.
+
+    `precision` ("exact" or "fast", spec suffix '+fast'): gaussian_blending's fast kernel stays within 1/1024 of the
+    exact one per channel and in alpha (tests/render/test_gb_fast.py); the library renders exact unless asked, the
+    viewer's panes fast. Other modes have one kernel: their precision is always "exact".
     """
 
     mode: Mode = Mode.SCALAR
@@ -71,11 +75,16 @@ class RenderSettings:
     seed: int = 0  # stochastic modes: the keep decisions' hash seed (gbv/stochastic.h); same seed and frame, same bits
     frame: int = 0  # stochastic modes: the frame index (another index, another sample)
     queue: int = STOPTHEPOP_QUEUE
+    precision: str = "exact"  # gaussian_blending: "fast" within the stated bound of "exact"
 
     def __post_init__(self) -> None:
         """Every number checked through gbviewer.validate (the native renderers take them as int32 and float32);
         a bad one is a one-line RenderError naming the field."""
         object.__setattr__(self, "mode", Mode.parse(self.mode))
+        if self.precision not in PRECISIONS:
+            raise RenderError(f"precision {self.precision!r}; expected one of {', '.join(PRECISIONS)}")
+        if self.mode != Mode.GAUSSIAN_BLENDING:
+            object.__setattr__(self, "precision", "exact")
         if self.debug not in DEBUG_OUTPUTS:
             raise RenderError(f"debug output {self.debug!r}; expected one of {DEBUG_OUTPUTS}")
         try:
@@ -136,8 +145,9 @@ class RenderSettings:
 
     @property
     def base_label(self) -> str:
-        """The label without the level of detail: 'scalar 3x3', ..."""
-        return self.name + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "")
+        """The label without the level of detail: 'scalar 3x3', 'gaussian_blending fast', ..."""
+        return self.name + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "") + \
+            (" fast" if self.precision == "fast" else "")
 
     @property
     def label(self) -> str:
@@ -145,16 +155,19 @@ class RenderSettings:
 
     @property
     def spec(self) -> str:
-        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1', ..."""
+        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1',
+        'gaussian_blending:2+fast', ..."""
         lod = f"+lod:{shortest(self.lod)}" if self.lod is not None else ""
         name = f"stopthepop:{self.queue}" if self.mode == Mode.STOPTHEPOP and self.supersample > 1 else self.name
-        return name + (f":{self.supersample}" if self.supersample > 1 else "") + lod
+        fast = "+fast" if self.precision == "fast" else ""
+        return name + (f":{self.supersample}" if self.supersample > 1 else "") + fast + lod
 
     @classmethod
     def parse(cls, spec: "str | Mode", **options) -> "RenderSettings":
         """'MODE' or 'MODE:N' (N x N supersampling); 'stopthepop:K[:N]' (K: its queue length); 'supersample:N'
         means scalar with N x N samples; 'preset:NAME[:N]' a viewer preset (gbviewer.render.presets: its mode, view
-        filter and SH bands); a suffix '+lod' or '+lod:TAU' draws the level-of-detail cut at TAU pixels (default 1).
+        filter and SH bands); a suffix '+fast' or '+exact' sets the precision; '+lod' or '+lod:TAU' draws the
+        level-of-detail cut at TAU pixels (default 1).
 
         The one parser of every surface that takes a mode (commands, viewer panes, the library): `options`
         (RenderSettings fields; None: not given) fill what the spec leaves unset, and one that disagrees with a part
@@ -187,7 +200,8 @@ class FrameStats:
     sorted by depth (cpu: one per visible splat, the frame's global depth order, which it then bins in order; glsl
     and cuda: tile-splat pairs; 0 for wsr, whose tile lists are only binned; tile-cell pairs for duplex);
     sort_bytes: sort_length x SORT_ENTRY_BYTES; pairs: tile-list entries blended; evaluations: splat-pixel
-    evaluations, evals_per_pixel their mean; backend; mode: `RenderSettings.label_for` the scene.
+    evaluations, evals_per_pixel their mean; backend; mode: `RenderSettings.label_for` the scene; precision: the
+    gaussian_blending kernel that ran ("exact" in every other mode, and on a backend without the fast one).
 
     Filled by some backends or modes only (None elsewhere): simd, the SIMD path the cpu backend's blend ran
     ("scalar", "avx2" or "avx512", chosen by GBVIEWER_SIMD at load or gbviewer._native.testing.set_simd); duplex: cells,
@@ -225,6 +239,7 @@ class FrameStats:
     stage_ms: float | None = None
     order_ms: float | None = None
     lod_splats: int | None = None
+    precision: str = "exact"
 
 
 @dataclass(eq=False)

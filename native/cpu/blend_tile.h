@@ -80,6 +80,7 @@ struct TileJob {
     uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
     const DepthPlane* planes;  // stochastic_popfree: per splat (Splat2D::id), else null
     const RaySplat* rays;  // eval3d, stopthepop: one per list entry (ray3d.h), else null
+    bool fast = false;         // gaussian_blending at the fast precision (blend_gaussian's Fast)
 };
 
 using BlendTileFn = void (*)(const TileJob&);
@@ -223,7 +224,7 @@ struct Box {
 // miss one half's box cannot pass the cut-off in any of its lanes, so the other half takes it alone at half the work.
 // Bit-identical to stepping both halves: a step changes only lanes that pass the cut-off, and everything it decides
 // for the whole group (which branches run, the series length) depends on those lanes only.
-template <class L>
+template <class L, bool Fast>
 void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries, WindowState<L>& win,
                           Out<L::N>& out) {
     using H = typename HalfOf<L>::type;
@@ -242,14 +243,14 @@ void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries
         typename L::M stop;
         if (in[0] && in[1]) {
             typename L::M took = L::none();
-            stop = blend_gaussian<L>(job.list[i], live, win, &took);
+            stop = blend_gaussian<L, NoTrace, Fast>(job.list[i], live, win, &took);
             for (int k = 0; k < 2; ++k)
                 if (H::any(k ? took.b : took.a)) window_box<H>(get_half<H>(win, k), box[k]);
         } else {
             const int k = in[1];
             WindowState<H> half = get_half<H>(win, k);
             typename H::M took = H::none();
-            const typename H::M s = blend_gaussian<H>(job.list[i], k ? live.b : live.a, half, &took);
+            const typename H::M s = blend_gaussian<H, NoTrace, Fast>(job.list[i], k ? live.b : live.a, half, &took);
             set_half<H>(win, k, half);
             if (H::any(took)) window_box<H>(half, box[k]);
             stop = k ? typename L::M{H::none(), s} : typename L::M{s, H::none()};
@@ -265,17 +266,17 @@ void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries
     }
 }
 
-template <class L, class Tr>
+template <class L, class Tr, bool Fast>
 void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out) {
     const typename L::F one = L::set(1.0f), zero = L::set(0.0f);
     WindowState<L> win = {one, g.px, g.py, one, one, {zero, zero, zero}};
     if constexpr (!std::is_void_v<typename HalfOf<L>::type> && std::is_same_v<Tr, NoTrace>) {
-        walk_gaussian_halves<L>(job, g.live, g.entries, win, out);
+        walk_gaussian_halves<L, Fast>(job, g.live, g.entries, win, out);
     } else {
         window_box<L>(win, g);
         walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
             typename L::M took = L::none();
-            const typename L::M stop = blend_gaussian<L, Tr>(s, live, win, &took);
+            const typename L::M stop = blend_gaussian<L, Tr, Fast>(s, live, win, &took);
             if (L::any(took)) window_box<L>(win, g);
             GBV_TRACE(Tr, after(win));
             return stop;
@@ -394,7 +395,12 @@ void blend_tile(const TileJob& job) {
                 }
             }
             switch (job.mode) {
-                case GAUSSIAN_BLENDING: tile::group_gaussian<L, Tr>(job, g, out); break;
+                case GAUSSIAN_BLENDING:
+                    if (job.fast)
+                        tile::group_gaussian<L, Tr, true>(job, g, out);
+                    else
+                        tile::group_gaussian<L, Tr, false>(job, g, out);
+                    break;
                 case WSR: tile::group_wsr<L, Tr>(job, g, out); break;
                 case DUPLEX: tile::group_duplex<L, Tr>(job, g, out); break;
                 case STOCHASTIC: tile::group_stochastic<L, Tr>(job, g, out); break;

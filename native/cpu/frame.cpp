@@ -302,6 +302,7 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
         job.mode = fr.mode;
         job.oit = fr.oit;
         job.frame_key = fr.frame_key;
+        job.fast = fr.fast;
         job.planes = fr.buf->planes.empty() ? nullptr : fr.buf->planes.data();
         job.queue = fr.queue;
         for (int c = 0; c < 3; ++c) job.bg[c] = fr.bg[c];
@@ -333,8 +334,8 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
 }
 
 PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, int queue,
-                             uint32_t frame_key, const float bg[3], const simd::Path& path, FrameBuffers& buf, int x,
-                             int y, int N) {
+                             uint32_t frame_key, bool fast, const float bg[3], const simd::Path& path,
+                             FrameBuffers& buf, int x, int y, int N) {
     Stats st;
     const Control none;
     FrameRun run(none, 1);
@@ -343,7 +344,7 @@ PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const
     const CameraParams& cam = stage.key.cam;
     FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.ids.data(),
                         per_pixel_sorted(mode) ? buf.rays.data() : nullptr, cam.width, cam.height, mode, oit, queue,
-                        {bg[0], bg[1], bg[2]}, frame_key, buf.planes.empty() ? nullptr : buf.planes.data()};
+                        {bg[0], bg[1], bg[2]}, frame_key, buf.planes.empty() ? nullptr : buf.planes.data(), fast};
     FlushDenormals ftz;
     return trace_pixel(lists, x, y, N);
 }

@@ -251,13 +251,14 @@ struct BlendFrame {
     Stats* st;
     uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
     TileRegion reg;      // what of the camera's image `img` holds (bin_frame's region)
+    bool fast;           // gaussian_blending's fast precision
 };
 // Blend every frame's tiles in one parallel loop, interleaved (each frame's tiles centre out, the frames' i-th tiles
 // together, in proportion to their tile counts); each frame's blend_ms is the loop's time.
 void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile, FrameRun& run);
 // The pixel trace of output pixel (x, y) at N x N samples from a ready stage (the sub-sample grid's camera).
 PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, int queue,
-                             uint32_t frame_key, const float bg[3], const simd::Path& path, FrameBuffers& buf, int x,
-                             int y, int N);
+                             uint32_t frame_key, bool fast, const float bg[3], const simd::Path& path,
+                             FrameBuffers& buf, int x, int y, int N);
 
 }  // namespace gbv::cpu

@@ -233,7 +233,7 @@ std::vector<RenderResult> Renderer::render_many(const std::vector<RenderArgs>& f
         bin_frame(sc, stage, a.mode, a.oit, path, impl_->buffers[f], r.stats, run, reg);
         Image* img = a.supersample > 1 ? &hi[f] : &r.image;
         blend.push_back({&impl_->buffers[f], &stage.key.cam, a.mode, a.oit, a.queue, a.bg, img, a.supersample,
-                         &r.stats, stochastic_frame_key(a.seed, a.frame), reg});
+                         &r.stats, stochastic_frame_key(a.seed, a.frame), reg, a.fast});
     }
     if (!run.cancelled()) blend_frames(blend, path.blend_tile, run);
     for (int f = 0; f < count; ++f) {
@@ -269,7 +269,7 @@ PixelTrace Renderer::trace(const RenderArgs& a, int x, int y) {
     }
     impl_->buffers.resize(1);
     PixelTrace t = trace_frame_pixel(sc, stages[0], a.mode, a.oit, a.queue, stochastic_frame_key(a.seed, a.frame),
-                                     a.bg, path, impl_->buffers[0], x, y, a.supersample);
+                                     a.fast, a.bg, path, impl_->buffers[0], x, y, a.supersample);
     const Plane<int32_t>& rows = stages[0].rows;  // a level-of-detail cut drawn in place: entry i is row rows[i]
     if (!rows.empty())
         for (TraceStep& s : t.steps) s.index = rows[s.index];  // the scene's splat, or n + an interior node's index

@@ -118,6 +118,7 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
             job.frame_key = f.frame_key;
             job.planes = f.planes;
             job.queue = f.queue;
+            job.fast = f.fast;
             for (int c = 0; c < 3; ++c) job.bg[c] = f.bg[c];
             job.rgb = out.samples.rgb.data() + q * 3;
             job.alpha = out.samples.alpha.data() + q;

@@ -37,6 +37,7 @@ struct RenderArgs {
     // it), every pixel as the whole image's (the camera, its culling and its tile grid stay the whole image's);
     // rx x supersample and ry x supersample are multiples of TILE.
     int rx = 0, ry = 0, rw = 0, rh = 0;
+    bool fast = false;             // gaussian_blending at the fast precision (blend.h: blend_gaussian's Fast)
 };
 
 }  // namespace gbv
