@@ -80,7 +80,7 @@ class ViewDecoder(Protocol):
 
 @dataclass(frozen=True, eq=False)
 class OitData:
-    """A scene's data for the order-independent modes (wsr, duplex; KERNELS.md §7-8); every field is optional.
+    """A scene's data for the order-independent modes (wsr, duplex; docs/modes.md#wsr); every field is optional.
 
     view_weight_sh (N,K): the sort-free view weight v_i as a raw 1-channel SH (f_do_0, f_ro_*; wsr and duplex
     multiply the opacity by it); sigma (LC-WSR's depth-correction scale) and weight_background: the trained globals

@@ -58,7 +58,7 @@ class Mode(enum.IntEnum):
 
 DEBUG_OUTPUTS = ("none", "window")
 ORDER_INDEPENDENT = (Mode.WSR, Mode.DUPLEX)
-DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (KERNELS.md §8.1)
+DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (docs/modes.md#duplex)
 DEFAULT_SIGMA = 10.0  # sort-free GS's initial sigma, for depth correction on scenes without a trained one
 MAX_SUPERSAMPLE = 8
 MAX_THREADS = 1024
