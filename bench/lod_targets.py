@@ -22,7 +22,7 @@ from gbviewer.bench.scale import scene_bytes
 from gbviewer.camera import orbit_camera, parse_rates
 from gbviewer.metrics import psnr, reference_psnr
 
-RULES = ("depth", "sum", "opacity")
+RULES = lod.tree.RULES
 OTHERS = ("scalar", "gaussian_blending", "scalar:3")
 
 
