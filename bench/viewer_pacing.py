@@ -1,4 +1,4 @@
-"""Frame pacing of the real viewer window (issue 14), under an Xvfb server of its own:
+"""Frame pacing of the real viewer window, under an Xvfb server of its own:
 
     .venv/bin/python bench/viewer_pacing.py [--scene PATH] [--cycles 3] [--json OUT]
 
@@ -31,7 +31,7 @@ import gbviewer as gb  # noqa: E402
 from gbviewer.app.camera_actions import MOVING_HOLD_S  # noqa: E402
 
 TARGETS = {"ui_p95_ms": 33.0, "stale_ms": 50.0, "first_tiles_ms": 100.0}
-PREVIEWS_PER_S = 10.0  # per pane while orbiting (issue 24, on the 6.1 M-splat scene)
+PREVIEWS_PER_S = 10.0  # per pane while orbiting (docs/lod.md, on the 6.1 M-splat scene)
 DEFAULT_SCENE = HERE.parents[1] / "shared" / "scenes" / "guitar.compressed.ply"  # the issue's slow case
 WINDOW = (1900, 700)  # two panes of about 800x600 beside the side panel
 

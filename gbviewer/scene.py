@@ -80,7 +80,7 @@ class ViewDecoder(Protocol):
 
 @dataclass(frozen=True, eq=False)
 class OitData:
-    """A scene's data for the order-independent modes (wsr, duplex; KERNELS.md §7-8); every field is optional.
+    """A scene's data for the order-independent modes (wsr, duplex; docs/modes.md#wsr); every field is optional.
 
     view_weight_sh (N,K): the sort-free view weight v_i as a raw 1-channel SH (f_do_0, f_ro_*; wsr and duplex
     multiply the opacity by it); sigma (LC-WSR's depth-correction scale) and weight_background: the trained globals
@@ -113,17 +113,23 @@ class Checked:
 
 @dataclass(frozen=True, eq=False)
 class Scene:
-    """Splats with activated parameters (scales after exp, opacities after sigmoid, unit quaternions).
+    """Splats with activated parameters, field by field (N splats; float32 unless said):
 
-    means (N,3), scales (N,3), quats (N,4) as (w,x,y,z), opacities (N,), sh (N,K,3) with DC first (float32, or
-    float16 when given so: `gb.load(path, sh_dtype="float16")`; the renderers convert it at upload),
-    optional filter_3d (N,) (Mip-Splatting's 3D filter, applied by every renderer mode).
+    means (N,3): centres in world space.
+    scales (N,3): standard deviations along the splat's axes (after exp).
+    quats (N,4): unit rotation quaternions (w, x, y, z).
+    opacities (N,): in [0, 1] (after the sigmoid).
+    sh (N,K,3): spherical-harmonics coefficients, K = (degree + 1)^2, DC first (float16 when loaded with
+        `gb.load(path, sh_dtype="float16")`; the renderers convert it at upload).
+    filter_3d (N,) or None: Mip-Splatting's 3D filter, applied in every mode (docs/modes.md#3d-filter).
+    source: the file it was loaded from ("<arrays>" otherwise).
+    meta: loader facts (format, version, property names, training mode) for `gbviewer info`.
+    oit: the data of the order-independent modes (`OitData`), None for ordinary scenes.
+    content: the SHA-256 digest of the bytes a scene was loaded from (`gbviewer.load`), what caches of data derived
+        from its splats key on; None for any other scene, one made by `dataclasses.replace` included.
+
     The arrays are read-only once a Scene holds them (renderers reuse what they derive from them per camera): those
     handed in are made read-only too; `editable()` gives writable copies to make an edited Scene of.
-    `meta` holds loader facts (format, version, property names) for `gbviewer info`. `oit`: the data of the
-    order-independent modes (`OitData`), None for ordinary scenes. `content`: the SHA-256 digest of the bytes a
-    scene was loaded from (`gbviewer.load`, its arrays then read-only), what caches of data derived from its splats
-    key on; None for any other scene, one made by `dataclasses.replace` included (it does not carry it over).
     """
 
     means: np.ndarray

@@ -1,4 +1,4 @@
-"""Trained Duplex-GS checkpoints (KERNELS.md §1.2, §8.2): an anchor ply plus TorchScript MLPs, decoded per view.
+"""Trained Duplex-GS checkpoints (docs/formats.md#duplex-gs): an anchor ply plus TorchScript MLPs, decoded per view.
 
 Layout (LiYukeee/Duplex-GS `save_ply`, `save_mlp_checkpoints`): `point_cloud.ply` with one vertex per anchor (cell):
 `x y z level extra_level info f_offset_* f_anchor_feat_* anchor_size_0..2 anchor_rot_0..3 anchor_shd_0 anchor_shv_*`,

@@ -1,4 +1,4 @@
-"""Write a Scene as a standard INRIA 3DGS `.ply` (binary float32, KERNELS.md §1.1).
+"""Write a Scene as a standard INRIA 3DGS `.ply` (binary float32, docs/formats.md#inria-3dgs-ply).
 
 Raw parameters are chosen so that loading the file gives back the Scene bit for bit whenever such
 values exist (always for a Scene loaded from an INRIA `.ply`): log and logit are refined, by
@@ -70,7 +70,7 @@ def inria_columns(scene: Scene) -> dict[str, np.ndarray]:
     cols["opacity"] = opacity
     oit = scene.oit
     vw = oit.view_weight_sh if oit is not None else None
-    if vw is not None:  # sort-free GS layout (KERNELS.md §1.2)
+    if vw is not None:  # sort-free GS layout (docs/formats.md#variant-layouts)
         cols["f_do_0"] = vw[:, 0]
         cols.update({f"f_ro_{i}": vw[:, i + 1] for i in range(vw.shape[1] - 1)})
     cols.update({f"scale_{i}": scale[:, i] for i in range(3)})

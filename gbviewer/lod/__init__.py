@@ -1,4 +1,4 @@
-"""Level of detail (issue 24): a scene's splat hierarchy (`tree`, cached on disk by `cache`) and the cut through
+"""Level of detail (docs/lod.md): a scene's splat hierarchy (`tree`, cached on disk by `cache`) and the cut through
 it per camera (`cut`), whose Scene any renderer draws (the CPU renderer draws it in place: `cut_view`). Scene
 layer: imports io, scene and camera only."""
 

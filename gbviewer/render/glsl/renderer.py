@@ -14,8 +14,8 @@ same function names and constants):
    keys with its low (depth) digits done before duplication, where they are the same for all of a splat's pairs.
 4. gather_counts + scan + duplicate.comp: one (tile, splat) pair per touched tile, in depth order (one invocation
    per pair, which finds its splat by binary search).
-5. radix sort of the pairs by tile (stable): every tile's list is ordered by (depth, splat index), exactly as the
-   CPU driver's per-tile std::sort of (depth bits, index) keys.
+5. radix sort of the pairs by tile (stable): every tile's list is ordered by (depth, splat index), the same order
+   as the CPU driver's tile lists, which it bins in one global depth order (docs/modes.md#order).
 6. tile_ranges.comp, then blend.comp: one work group per 16x16 output block; supersampling blends the N x N
    render tiles of the block and box-averages them in shared memory.
 

@@ -31,7 +31,7 @@ struct AlphaState {
     typename L::F T, C[3];
 };
 
-// Scalar front-to-back compositing of one alpha per lane (3DGS renderCUDA, KERNELS.md §0.7): skip below
+// Scalar front-to-back compositing of one alpha per lane (3DGS renderCUDA, docs/modes.md#scalar): skip below
 // min_alpha; stop without adding the splat when T(1 - alpha) < 1e-4. Returns the lanes that stopped.
 template <class L, class Tr = NoTrace>
 GBV_HD typename L::M composite_scalar(typename L::M pass, typename L::F alpha, const float color[3],
@@ -95,10 +95,10 @@ struct WindowState {
 
 // `gaussian_blending`: blend one splat onto the window and replace the window by the uniform one
 // with the same mass, mean and variance of T(x)(1 - alpha(x)) (eqs. 8-11, Appendix A), as the
-// authors' renderCUDA does it (KERNELS.md §6.3), with the moments taken about the window centre (more accurate
-// than the published float32 form, see window_side_moments): window sides go to the eigen-axis within 45 degrees,
-// a window outside [0.1, 1e6] sigma falls back to scalar alpha at the window centre, and the pixel
-// stops after adding a splat that leaves T < 1e-4. `took`, when given, receives the lanes whose window changed.
+// authors' renderCUDA does it (docs/modes.md#gaussian-blending), with the moments taken about the window centre (more
+// accurate than the published float32 form, see window_side_moments): window sides go to the eigen-axis within 45
+// degrees, a window outside [0.1, 1e6] sigma falls back to scalar alpha at the window centre, and the pixel stops after
+// adding a splat that leaves T < 1e-4. `took`, when given, receives the lanes whose window changed.
 // Fast: the `fast` precision (RenderSettings.precision): shorter series and one exp for both sides' factors
 // (window_side_moments), within the error bound tests/render/test_gb_fast.py asserts; every test and branch is the
 // exact path's.

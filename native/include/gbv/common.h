@@ -41,7 +41,7 @@ GBV_HD bool per_pixel_sorted(Mode m) { return m == EVAL3D || m == STOPTHEPOP; }
 // Camera projections; the values are the indices of gbviewer.camera.PROJECTIONS.
 enum Projection : int32_t { PERSPECTIVE = 0, ORTHOGRAPHIC = 1 };
 
-constexpr int TILE = 16;                       // BLOCK_X = BLOCK_Y (KERNELS.md §0.4)
+constexpr int TILE = 16;                       // BLOCK_X = BLOCK_Y (docs/modes.md#culling-radius-tiles)
 constexpr float DILATION_3DGS = 0.3f;          // +0.3 px^2, no compensation (§0.3)
 constexpr float MIP_KERNEL_SIZE = 0.1f;        // Mip-Splatting 2D filter (§2)
 constexpr float MAX_ALPHA = 0.99f;

@@ -15,7 +15,7 @@ GBV_HD typename L::F gaussian_power(const Splat2D& s, typename L::F dx, typename
            L::set(s.conic[1]) * dx * dy;
 }
 
-// Analytic-Splatting's logistic approximation of the standard normal CDF (KERNELS.md §4):
+// Analytic-Splatting's logistic approximation of the standard normal CDF (docs/modes.md#analytic):
 // sigmoid(1.6x + 0.07x^3), written with exp (the published 0.5 tanh(z/2) + 0.5 is the same function).
 template <class L>
 GBV_HD typename L::F approx_cdf(typename L::F x) {

@@ -125,9 +125,9 @@ GBV_HD void filter_3d_scales(const SplatInLanes<L>& in, typename L::F s[3], type
     }
 }
 
-// View-space position R m + t of a world point; false behind the near plane (z <= 0.2, KERNELS.md §0.4). An
-// orthographic camera culls the same way: it sees what lies in front of its image plane (z = 0) by more than the
-// near distance, and sorts by the same view-space z.
+// View-space position R m + t of a world point; false behind the near plane (z <= 0.2,
+// docs/modes.md#culling-radius-tiles). An orthographic camera culls the same way: it sees what lies in front of its
+// image plane (z = 0) by more than the near distance, and sorts by the same view-space z.
 template <class L>
 GBV_HD typename L::M view_point(const CameraParams& cam, const typename L::F m[3], typename L::F pv[3]) {
     const float* R = cam.R;
