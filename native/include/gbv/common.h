@@ -25,7 +25,7 @@
 
 namespace gbv {
 
-// Blending modes; the integer values are the Python enum's values (gbviewer/render/types.py).
+// Blending modes; the integer values are the Python enum's values (gbviewer/render/modes.py).
 enum Mode : int32_t {
     SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5, STOCHASTIC = 6,
     STOCHASTIC_POPFREE = 7,
@@ -35,7 +35,9 @@ enum Mode : int32_t {
 // the stochastic modes, which keep fragments with that alpha (gbviewer.render.presets.FILTERED_MODES). stopthepop
 // blends 3DGS's 2D splats through the same filter (preprocess_finish), but only with its default, 3DGS's +0.3: no
 // preset or view filter takes it (gbviewer.render.RenderSettings refuses one).
-constexpr bool view_filtered(Mode mode) { return mode == SCALAR || mode == STOCHASTIC || mode == STOCHASTIC_POPFREE; }
+GBV_HD constexpr bool view_filtered(Mode mode) {
+    return mode == SCALAR || mode == STOCHASTIC || mode == STOCHASTIC_POPFREE;
+}
 // Modes that order each pixel's splats by the depth of their maximum along its ray (ray3d.h).
 GBV_HD bool per_pixel_sorted(Mode m) { return m == EVAL3D || m == STOPTHEPOP; }
 // Camera projections; the values are the indices of gbviewer.camera.PROJECTIONS.
