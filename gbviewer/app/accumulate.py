@@ -11,9 +11,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..render import Frame, Mode, RenderSettings
+from ..render import Frame, RenderSettings
+from ..render.modes import STOCHASTIC_MODES
 
-STOCHASTIC_MODES = (Mode.STOCHASTIC, Mode.STOCHASTIC_POPFREE)
 MAX_FRAMES = 256  # a still pane stops sampling here
 
 

@@ -51,7 +51,8 @@ def cmd_flicker(args: argparse.Namespace) -> int:
     total = min(args.pairs, max(1, len(path) - 1)) * 2 * (len(settings) + 2)
     with progress_bar("flicker", total) as advance:
         report = measure_flicker(scene, path, settings, reference=reference, pairs=args.pairs, backend=backend,
-                                 keep_pairs=args.video, path_name=str(args.path), progress=lambda _: advance(1))
+                                 keep_pairs=args.video, path_name=str(args.path), progress=lambda _: advance(1),
+                                 accumulate=args.accumulate)
     print_report(report, cam.width, cam.height)
     written = write_table(out, report, args.force) + write_heat_maps(out, report, args.force)
     if args.video:
@@ -103,6 +104,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-frames", type=count(), default=MAX_FRAMES, help="refuse longer paths")
     p.add_argument("--pairs", type=count(MAX_COUNT), default=DEFAULT_PAIRS,
                    help=f"pairs of consecutive frames measured, spread over the path (default {DEFAULT_PAIRS})")
+    p.add_argument("--accumulate", type=count(MAX_COUNT), default=1,
+                   help="stochastic modes: show each frame as the mean of this many frame indices, as a still "
+                        "viewer pane after that many frames (default 1: one sample per pixel per frame)")
     p.add_argument("--size", type=SIZE, metavar="WxH", help="pane size (default 320x240)")
     add_backend_arg(p)
     p.add_argument("--out", required=True, help="folder for flicker.csv, flicker.json, heat-MODE.png (and heat.mp4)")

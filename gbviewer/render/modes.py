@@ -43,6 +43,7 @@ class Mode(enum.IntEnum):
 
 
 ORDER_INDEPENDENT = (Mode.WSR, Mode.DUPLEX)
+STOCHASTIC_MODES = (Mode.STOCHASTIC, Mode.STOCHASTIC_POPFREE)  # another frame index, another sample
 PER_PIXEL_SORTED = (Mode.EVAL3D, Mode.STOPTHEPOP)  # each pixel in its own order (gbv::per_pixel_sorted)
 STOPTHEPOP_QUEUE = 4  # StopThePop's published per-pixel queue (gbv::STOPTHEPOP_QUEUE)
 MAX_QUEUE = 64  # the longest per-pixel queue (0: unbounded, the exact per-pixel sort)
