@@ -16,11 +16,17 @@ from ..cancel import CancelToken
 from ..errors import GBViewerError, LoadCancelled
 from ..lod import hierarchy_for
 from ..scene import Scene
+from .slot_thread import lower_priority
+
+LOD_NICE = 19  # the hierarchy's build runs at the lowest priority: below the render thread, whose first frames of
+# the scene it must not delay (nice 10 against 0 would leave the render a tenth of the cores it shares with it)
 
 
 def prepare_lod(scene: Scene) -> None:
-    """Build (or read from the cache) the scene's hierarchy before the first preview draws a cut; a failure is left
-    to that render to report."""
+    """Build (or read from the cache) the scene's hierarchy, at the lowest priority, for the previews' cuts (they
+    draw the scene's sparse stand-in until it is there); a failure is left to the first render of a cut to
+    report."""
+    lower_priority(LOD_NICE)  # this thread's, and the build's OpenMP threads' it starts
     try:
         hierarchy_for(scene)
     except (GBViewerError, OSError, MemoryError):
