@@ -20,14 +20,15 @@ _memo: "weakref.WeakKeyDictionary[Scene, Scene]" = weakref.WeakKeyDictionary()
 _lock = threading.Lock()
 
 
-def stride(num_splats: int, splats: int = STAND_IN_SPLATS) -> int:
-    """k: the stand-in keeps every k-th of `num_splats` splats (1: the scene is small enough as it is)."""
-    return max(1, math.ceil(num_splats / max(1, splats)))
+def stride(num_splats: int, splats: int | None = None) -> int:
+    """k: the stand-in keeps every k-th of `num_splats` splats, to keep at most `splats` (default STAND_IN_SPLATS);
+    1: the scene is small enough as it is."""
+    return max(1, math.ceil(num_splats / max(1, STAND_IN_SPLATS if splats is None else splats)))
 
 
-def stand_in(scene: Scene, splats: int = STAND_IN_SPLATS) -> Scene:
-    """The scene's stand-in of at most `splats` splats (the scene itself when it has no more), made once per scene;
-    meta["stand_in"] = k."""
+def stand_in(scene: Scene, splats: int | None = None) -> Scene:
+    """The scene's stand-in of at most `splats` splats (default STAND_IN_SPLATS; the scene itself when it has no
+    more), made once per scene; meta["stand_in"] = k."""
     k = stride(scene.num_splats, splats)
     if k == 1:
         return scene
