@@ -148,13 +148,13 @@ class PaneRenders:
             doing = "waiting for the render thread"
         elif asked.preview:
             k = stride(s.scene.num_splats)
-            doing = f"rendering a preview {w}x{h}" + (f" of every {k}th splat" if asked.stand_in else "")
+            doing = f"rendering a preview {w}x{h}" + (f" (every {k}th splat)" if asked.stand_in else "")
         else:
-            doing = f"rendering {w}x{h}, its first tiles next"
+            doing = f"rendering {w}x{h}"
         since = asked.started or asked.submitted
-        line = ("preview shown; " if shown.job is not None else "") + f"{doing}, {time.perf_counter() - since:.1f} s"
-        lod = {"building": "building", "reading": "reading"}.get(hierarchy_state(s.scene))
-        return line + (f"; {lod} the level of detail in the background" if lod else "")
+        line = ("preview shown; " if shown.job is not None else "") + f"{doing} {time.perf_counter() - since:.1f} s"
+        lod = hierarchy_state(s.scene)
+        return line + (f" · {lod} level of detail" if lod in ("building", "reading") else "")
 
     def poll(self) -> None:
         """Take finished renders; re-colour frames whose pane view changed (a GPU frame's pane asks for a copy-path
