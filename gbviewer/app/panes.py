@@ -70,9 +70,9 @@ class PaneRenders:
                 w, h = p.render_size
                 cost = p.ms_per_px.get((part, ps.mode if part == "a" else ps.split_mode, ps.supersample, backend))
                 shown = p.parts[part]
-                first = shown.job is None and shown.error is None  # nothing of this scene shown yet
-                f = (first_preview(s.scene.num_splats) if first
-                     else preview_factor(w * h, cost, PREVIEW_BUDGET_MS * 2 / max(2, slots), moving))
+                first = first_preview(s.scene.num_splats)  # a large scene's first picture: nothing of it shown yet
+                first = first if first < 1.0 and shown.job is None and shown.error is None else None
+                f = first or preview_factor(w * h, cost, PREVIEW_BUDGET_MS * 2 / max(2, slots), moving)
                 cam = s.pane_camera(p.index, f)
                 settings = s.settings_for(p.index, part)
                 samples = cam.width * cam.height * settings.supersample ** 2
@@ -112,7 +112,7 @@ class PaneRenders:
                 jobs.append(RenderJob(
                     (p.index, part), s.scene, cam, settings, backend,
                     {"key": key, "preview": f, "rate": s.settings.rate, "full_size": (w, h),
-                     "accumulate": base if stochastic else None, "first": first},
+                     "accumulate": base if stochastic else None, "first": first is not None},
                     priority=int(not moving and s.hover is not None and s.hover[0] == p.index),
                     preview=f < 1.0,
                     progressive=progressive,
