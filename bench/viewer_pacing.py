@@ -163,7 +163,7 @@ def first_picture(scene: str, window: tuple[int, int], folder: Path, timeout: fl
     level-of-detail cache in `folder`, and step it as `ViewerApp.run` does: seconds from the start to the scene
     opened (the load), and from the open to each pane's first pixels on screen (whatever stage: preview, tiles,
     final) and to both panes' final frames; the message lines the panes showed before their first pixels; with
-    `shots`, PNGs of the window at the first frame after the open and once every pane has pixels."""
+    `shots`, PNGs of the window at the first message before any pixels and once every pane has pixels."""
     from gbviewer.app.window import ViewerApp
     from gbviewer.lod import cache
 
@@ -185,10 +185,7 @@ def first_picture(scene: str, window: tuple[int, int], folder: Path, timeout: fl
             now = time.perf_counter()
             if s.scene is None:
                 continue
-            if opened is None:
-                opened = now
-                if shots is not None:
-                    _save(app, shots / f"{label}progress.png")
+            opened = now if opened is None else opened
             for p in s.visible:
                 shown = p.parts["a"]
                 if p.name not in first and shown.texture is not None:
@@ -198,6 +195,8 @@ def first_picture(scene: str, window: tuple[int, int], folder: Path, timeout: fl
                 lines = [i.full for i in app.placed if i.role == "message" and p.rect.x <= i.x < p.rect.x + p.rect.w]
                 if p.name not in first and lines and lines[0] not in said.setdefault(p.name, []):
                     said[p.name].append(lines[0])
+                    if shots is not None and not first and len(said[p.name]) == 1:
+                        _save(app, shots / f"{label}progress.png")
             if app.panes.all_current():
                 final = now - opened
         built = None
@@ -263,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--settle", type=float, default=30.0, help="at most this long for the final frames per cycle")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--screenshot", type=Path, help="a PNG of the window once the last stop's frames are final (--first-picture: a folder "
-                         "for the PNGs of the window before and at the first pixels)")
+                         "for PNGs of the window: a pane's first message line, and every pane's first pixels)")
     ap.add_argument("--window", default=f"{WINDOW[0]}x{WINDOW[1]}",
                     help="window size WxH (2900x800: two panes of about 1280x720 beside the panel)")
     ap.add_argument("--first-picture", action="store_true",

@@ -148,7 +148,7 @@ class PaneRenders:
             doing = "waiting for the render thread"
         elif asked.preview:
             k = stride(s.scene.num_splats)
-            doing = f"rendering a preview {w}x{h}" + (f" (every {k}th splat)" if asked.stand_in else "")
+            doing = f"rendering a preview {w}x{h}" + (f" (1 splat in {k})" if asked.stand_in else "")
         else:
             doing = f"rendering {w}x{h}"
         since = asked.started or asked.submitted

@@ -21,14 +21,16 @@ from gbviewer.app.state import AppState
 from gbviewer.app.worker import RenderResult
 from gbviewer.lod import cache, sparse
 from gbviewer.render.glsl.context import standalone_context
-from test_lod_previews import FakeWorker
+from test_lod_previews import FakeWorker, opened
 from test_state import loaded
 from window_helpers import shot
 
 
 @pytest.fixture
-def large(monkeypatch):
-    """The bundled scene counts as large: its first pictures are previews, its stand-in keeps 1 splat in 4."""
+def large(monkeypatch, tmp_path):
+    """The bundled scene counts as large: its first pictures are previews, its stand-in keeps 1 splat in 4; the
+    hierarchy's cache in tmp_path."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     n = gb.load(gb.DEFAULT_SCENE).num_splats
     monkeypatch.setattr(rates, "FIRST_PREVIEW_SPLATS", n)
     monkeypatch.setattr(sparse, "STAND_IN_SPLATS", n // 4 + 1)
@@ -75,7 +77,7 @@ def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypa
         jobs = list(worker.jobs)
         for j in jobs:  # the render thread takes them
             j.started = time.perf_counter()
-        assert f"rendering a preview {jobs[0].camera.width}x{jobs[0].camera.height} (every 4th splat)" in \
+        assert f"rendering a preview {jobs[0].camera.width}x{jobs[0].camera.height} (1 splat in 4)" in \
             panes.progress(0, "a")
         state.last_move = 0.0
         panes.submit()
@@ -101,6 +103,29 @@ def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypa
         panes.release()
 
 
+def test_moving_previews_draw_the_stand_in_until_the_hierarchy_is_there(monkeypatch, large):
+    monkeypatch.setattr(loading, "prepare_lod", lambda scene: None)
+    moving = [True]
+    state = opened(monkeypatch, moving)
+    for p in state.panes:  # something of the scene is on screen: no first preview
+        p.parts["a"].job = object()
+    worker = FakeWorker()
+    panes = PaneRenders(state, worker, standalone_context())
+    try:
+        panes.submit()
+        assert worker.jobs and all(j.preview and j.stand_in and j.settings.lod is None and not j.info["first"]
+                                   for j in worker.jobs)
+        assert cache.hierarchy_state(state.scene) == ""  # nobody asked for it: nothing waits for it
+        cache.hierarchy_for(state.scene)
+        state.controller.orbit(5.0, 0.0)
+        worker.jobs.clear()
+        panes.submit()
+        assert worker.jobs and all(j.preview and not j.stand_in and j.settings.lod == state.panes[0].preview_lod
+                                   for j in worker.jobs)
+    finally:
+        panes.release()
+
+
 def test_previews_draw_the_cut_once_the_hierarchy_is_there(monkeypatch, large):
     state = loaded(AppState(AppSettings()))
     state.layout(640, 480, 20, 26, (1.0, 1.0))
@@ -111,7 +136,7 @@ def test_previews_draw_the_cut_once_the_hierarchy_is_there(monkeypatch, large):
         panes.submit()
         assert worker.jobs and all(j.preview and not j.stand_in and j.settings.lod == state.panes[0].preview_lod
                                    for j in worker.jobs)
-        assert "every" not in panes.progress(0, "a") and "level of detail" not in panes.progress(0, "a")
+        assert "splat in" not in panes.progress(0, "a") and "level of detail" not in panes.progress(0, "a")
     finally:
         panes.release()
 
@@ -133,8 +158,7 @@ def test_panes_get_pictures_while_the_hierarchy_build_is_held_back(xvfb, tmp_pat
     """In the window: the build is held until the test lets it go (after both panes' final frames); meanwhile each
     pane says what it waits for, then shows a preview of the stand-in, then its full frame. The build runs at the
     lowest priority."""
-    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))  # no cached hierarchy: it is built
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))  # (and no cached hierarchy: `large`)
     release, building, priority = threading.Event(), threading.Event(), []
     real = cache.build
 
@@ -178,7 +202,7 @@ def test_panes_get_pictures_while_the_hierarchy_build_is_held_back(xvfb, tmp_pat
         for name in ("A", "B"):
             assert stages[name][:2] == ["", "preview"] and stages[name][-1] == "final", stages
             said = lines[name]
-            assert any("(every 4th splat)" in t and t.endswith(" · building level of detail") for t in said), said
+            assert any("(1 splat in 4)" in t and t.endswith(" · building level of detail") for t in said), said
             assert any(t.startswith("preview shown; ") for t in said), said
         assert all(p.parts["a"].job.settings.lod is None and not p.parts["a"].job.stand_in for p in s.visible)
         if priority:
