@@ -261,7 +261,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--orbit", type=float, default=3.0, help="seconds of orbiting per cycle")
     ap.add_argument("--settle", type=float, default=30.0, help="at most this long for the final frames per cycle")
     ap.add_argument("--json", type=Path)
-    ap.add_argument("--screenshot", type=Path, help="a PNG of the window once the last stop's frames are final (--first-picture: a folder "
+    ap.add_argument("--screenshot", type=Path,
+                    help="a PNG of the window once the last stop's frames are final (--first-picture: a folder "
                          "for PNGs of the window: a pane's first message line, and every pane's first pixels)")
     ap.add_argument("--window", default=f"{WINDOW[0]}x{WINDOW[1]}",
                     help="window size WxH (2900x800: two panes of about 1280x720 beside the panel)")

@@ -33,8 +33,8 @@ def scaled_nearest(image: np.ndarray, width: int, height: int) -> np.ndarray:
 
 def companions(first: "Job", waiting: list) -> list:
     """Of the `waiting` jobs, those rendered in one `render_many` with `first`: frames of its kind (previews with a
-    preview of the same splats, which share its cut's stage; final frames with a final frame) on the copy display path, of the same
-    scene, backend and camera."""
+    preview of the same splats, which share its cut's stage; final frames with a final frame) on the copy display
+    path, of the same scene, backend and camera."""
     if first.display == "gpu":
         return []
     key = camera_key(first.camera)

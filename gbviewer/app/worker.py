@@ -25,9 +25,9 @@ import numpy as np
 from ..camera import Camera
 from ..cancel import CancelToken
 from ..errors import BackendFailed, BackendUnavailable, GBViewerError, RenderCancelled, RenderError
+from ..lod import stand_in as sparse_stand_in
 from ..render import AUTO, BACKENDS, BackendChoice, Capabilities, Frame, Renderer, RenderSettings, create_gl_context
 from ..render.choice import FALLBACK, decide_measured
-from ..lod import stand_in as sparse_stand_in
 from ..scene import Scene
 from .display import DisplayTextures, SharedContext
 from .refine import companions, render_jobs
@@ -239,7 +239,7 @@ class RenderWorker(SlotThread):
 
     def _failed(self, name: str, exc: BackendFailed) -> None:
         """Backend `name` stopped working: unusable from now on (with its renderer's reason), auto picks again."""
-        renderers = [r for key in [k for k in self._renderers if k[0] == name] if (r := self._renderers.pop(key))]
+        renderers = [self._renderers.pop(key) for key in [k for k in self._renderers if k[0] == name]]
         ok, why = next((r.usable() for r in renderers), (True, ""))
         self.failed[name] = str(exc) if ok else why
         self.backends[name] = (False, f"stopped working: {self.failed[name]}")

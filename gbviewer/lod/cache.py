@@ -14,8 +14,9 @@ import threading
 import time
 import warnings
 import weakref
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -50,7 +51,8 @@ def cache_key(scene: Scene, rule: str) -> str | None:
 
 def cached_build(scene: Scene, rule: str, folder: Path | None = None) -> Hierarchy:
     """The scene's hierarchy from the cache, else built (and written there when the folder can be written)."""
-    tree, write = _lookup(scene, rule, folder)
+    with _working(scene):
+        tree, write = _lookup(scene, rule, folder)
     write()
     return tree
 
@@ -164,6 +166,16 @@ def hierarchy_state(scene: Scene, rule: str = "depth") -> str:
     return _doing.get(scene, "")
 
 
+@contextmanager
+def _working(scene: Scene) -> Iterator[None]:
+    """While a hierarchy of `scene` is looked up or built (`_lookup` says which: reading, building)."""
+    _doing[scene] = "building"
+    try:
+        yield
+    finally:
+        _doing.pop(scene, None)
+
+
 def hierarchy_for(scene: Scene, rule: str = "depth", cache: bool = True) -> Hierarchy:
     """The scene's hierarchy: built once per Scene object (the first caller builds, others wait), read from or
     written to the user cache when the scene came from a file and `cache` is true. The builder writes the cache
@@ -174,11 +186,8 @@ def hierarchy_for(scene: Scene, rule: str = "depth", cache: bool = True) -> Hier
         per_scene = _memo.setdefault(scene, {})
         if rule in per_scene:
             return per_scene[rule]
-        _doing[scene] = "building"
-        try:
+        with _working(scene):
             tree, write = _lookup(scene, rule) if cache else (build(scene, rule), _nothing)
-        finally:
-            _doing.pop(scene, None)
         per_scene[rule] = tree
     try:
         write()

@@ -89,7 +89,8 @@ def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypa
         assert all(p.parts["a"].stage == "preview" for p in state.visible)
         panes.submit()
         full = worker.jobs[2:]
-        assert [(j.preview, j.stand_in, j.progressive, j.settings.lod) for j in full] == [(False, False, True, None)] * 2
+        assert [(j.preview, j.stand_in, j.progressive, j.settings.lod) for j in full] == \
+            [(False, False, True, None)] * 2
         assert (full[0].camera.width, full[0].camera.height) == state.panes[0].render_size
         assert full[0].underlay is frames[0].rgb  # the tiles refine over the preview
         assert panes.progress(0, "a").startswith("preview shown; waiting for the render thread")
