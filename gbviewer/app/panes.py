@@ -161,6 +161,10 @@ class PaneRenders:
         render instead: its texture holds colour only); hand the display textures of dropped frames back."""
         for res in self.worker.results():
             self._take(res)
+        s = self.state
+        if not s.pictured.is_set() and s.scene is not None and all(
+                p.parts[part].job is not None for p in s.visible for part in s.parts(p.index)):
+            s.pictured.set()  # every pane shows the scene: its hierarchy's build may begin (loading.prepare_lod)
         for p in self.state.visible:
             view = self.state.settings.panes[p.index].view
             for part, shown in p.parts.items():

@@ -1,7 +1,8 @@
 """The first picture of a large scene: each pane's first request is a preview (the hierarchy's cut, or the scene's
 sparse stand-in while the hierarchy is not there), the full frame is asked for once it is shown and refines over
 it; each pane says what it waits for until its first tiles; the hierarchy builds at the lowest priority and no
-preview waits for it (a build held back until the panes are final, in the real window, delays none of them)."""
+preview waits for it (a build held back until the panes are final, in the real window, delays none of them); it
+begins once every pane shows its first picture."""
 
 from __future__ import annotations
 
@@ -61,7 +62,7 @@ def test_hierarchy_state_while_it_builds(monkeypatch, tmp_path):
 
 
 def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypatch, large):
-    monkeypatch.setattr(loading, "prepare_lod", lambda scene: None)  # no hierarchy: previews draw the stand-in
+    monkeypatch.setattr(loading, "prepare_lod", lambda scene, after: None)  # no hierarchy: previews draw the stand-in
     state = AppState(AppSettings())
     state.set_pane_count(2)
     state.layout(640, 480, 20, 26, (1.0, 1.0))
@@ -73,7 +74,11 @@ def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypa
         panes.submit()  # even while the framing counts as a motion: nothing of the scene is on screen yet
         assert [(j.preview, j.stand_in, j.settings.lod, j.info["first"], j.info["preview"]) for j in worker.jobs] \
             == [(True, True, None, True, rates.FIRST_PREVIEW)] * 2
-        assert "waiting for the render thread" in panes.progress(0, "a")
+        assert panes.progress(0, "a").startswith("waiting for the render thread")
+        for doing in ("building", "reading"):
+            monkeypatch.setattr(panes_module, "hierarchy_state", lambda scene, doing=doing: doing)
+            assert panes.progress(0, "a").endswith(f" · {doing} level of detail")
+        monkeypatch.setattr(panes_module, "hierarchy_state", lambda scene: "")
         jobs = list(worker.jobs)
         for j in jobs:  # the render thread takes them
             j.started = time.perf_counter()
@@ -105,7 +110,7 @@ def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypa
 
 
 def test_moving_previews_draw_the_stand_in_until_the_hierarchy_is_there(monkeypatch, large):
-    monkeypatch.setattr(loading, "prepare_lod", lambda scene: None)
+    monkeypatch.setattr(loading, "prepare_lod", lambda scene, after: None)
     moving = [True]
     state = opened(monkeypatch, moving)
     for p in state.panes:  # something of the scene is on screen: no first preview
@@ -157,8 +162,8 @@ def test_small_scenes_show_the_full_frame_first(monkeypatch):
 @pytest.mark.display
 def test_panes_get_pictures_while_the_hierarchy_build_is_held_back(xvfb, tmp_path, monkeypatch, large):
     """In the window: the build is held until the test lets it go (after both panes' final frames); meanwhile each
-    pane says what it waits for, then shows a preview of the stand-in, then its full frame. The build runs at the
-    lowest priority."""
+    pane says what it waits for, then shows a preview of the stand-in, then its full frame. The build begins once
+    every pane has its first picture, at the lowest priority."""
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))  # (and no cached hierarchy: `large`)
     release, building, priority = threading.Event(), threading.Event(), []
     real = cache.build
@@ -185,6 +190,8 @@ def test_panes_get_pictures_while_the_hierarchy_build_is_held_back(xvfb, tmp_pat
         while not (s.scene is not None and app.panes.all_current()):
             assert time.time() - t0 < 120, "the panes never finished"
             app.step()
+            if any(p.parts["a"].stage == "" for p in s.visible):
+                assert not building.is_set()  # the build waits for the panes' first pictures
             for p in s.visible:
                 shown = p.parts["a"]
                 if not stages.get(p.name) or stages[p.name][-1] != shown.stage:
@@ -203,8 +210,8 @@ def test_panes_get_pictures_while_the_hierarchy_build_is_held_back(xvfb, tmp_pat
         for name in ("A", "B"):
             assert stages[name][:2] == ["", "preview"] and stages[name][-1] == "final", stages
             said = lines[name]
-            assert any("(1 splat in 4)" in t and t.endswith(" · building level of detail") for t in said), said
-            assert any(t.startswith("preview shown; ") for t in said), said
+            assert any(t.startswith("preview shown; rendering a preview ") and "(1 splat in 4)" in t
+                       for t in said), said
         assert all(p.parts["a"].job.settings.lod is None and not p.parts["a"].job.stand_in for p in s.visible)
         if priority:
             assert priority == [19]  # loading.LOD_NICE: below the render thread's
