@@ -144,7 +144,9 @@ class PaneRenders:
         if shown.job is asked and not asked.preview:
             return None  # its quick stage, tiles or frame are on screen
         w, h = asked.camera.width, asked.camera.height
-        if not asked.started:
+        if shown.job is asked:  # the preview came this frame: the full frame is asked for after drawing it
+            doing = "rendering {}x{} next".format(*asked.info["full_size"])
+        elif not asked.started:
             doing = "waiting for the render thread"
         elif asked.preview:
             k = stride(s.scene.num_splats)
@@ -152,7 +154,8 @@ class PaneRenders:
         else:
             doing = f"rendering {w}x{h}"
         since = asked.started or asked.submitted
-        line = ("preview shown; " if shown.job is not None else "") + f"{doing} {time.perf_counter() - since:.1f} s"
+        line = ("preview shown; " if shown.job is not None else "") + doing
+        line += "" if shown.job is asked else f" {time.perf_counter() - since:.1f} s"
         lod = hierarchy_state(s.scene)
         return line + (f" · {lod} level of detail" if lod in ("building", "reading") else "")
 
