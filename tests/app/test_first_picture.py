@@ -212,7 +212,7 @@ def test_panes_get_pictures_while_the_hierarchy_build_is_held_back(xvfb, tmp_pat
             assert stages[name][:2] == ["", "preview"] and stages[name][-1] == "final", stages
             said = lines[name]
             w, h = s.panes[0].render_size
-            assert f"preview shown; rendering {w}x{h} next" in said, said
+            assert any(t.startswith(f"preview shown; rendering {w}x{h} next") for t in said), said
         assert all(p.parts["a"].job.settings.lod is None and not p.parts["a"].job.stand_in for p in s.visible)
         if priority:
             assert priority == [19]  # loading.LOD_NICE: below the render thread's
