@@ -78,7 +78,8 @@ def first_preview_lod(num_splats: int) -> float:
     return float(min(8.0, max(PREVIEW_LOD_PX, 2.0 ** math.floor(math.log2(max(num_splats, 1) / 500_000)))))
 
 
-FIRST_PREVIEW_SPLATS = 1_000_000  # from this many splats a pane's first picture of a scene is a preview
+FIRST_PREVIEW_SPLATS = 2_000_000  # from this many splats a pane's first picture of a scene is a preview (at 1 M the
+# full frame's first tiles came about as soon as a preview, whose render then delayed the final frame)
 FIRST_PREVIEW = 0.25  # its fraction of the render resolution (per axis)
 
 
