@@ -172,8 +172,11 @@ class Scene:
 
     def robust_bounds(self, percentile: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of the central splats (per-axis percentiles), ignoring stray far splats. Interpolated in float64:
-        float32 differences of coordinates near 1e38 overflow."""
-        lo, hi = np.percentile(self.means.astype(np.float64), [percentile, 100.0 - percentile], axis=0)
+        float32 differences of coordinates near 1e38 overflow. Column by column: the same values as over axis 0 of
+        the (N, 3) array, whose strided partition took most of a second at 6 M splats (framing a scene just opened
+        waits for it)."""
+        q = [percentile, 100.0 - percentile]
+        lo, hi = np.stack([np.percentile(self.means[:, j].astype(np.float64), q) for j in range(3)], axis=1)
         return lo.astype(np.float32), hi.astype(np.float32)
 
     @classmethod

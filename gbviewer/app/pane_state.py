@@ -72,6 +72,7 @@ class PaneState:
     index: int
     parts: dict[str, Shown] = field(default_factory=lambda: {"a": Shown(), "b": Shown()})
     submitted: dict = field(default_factory=dict)  # part -> key of the last request
+    asked: dict = field(default_factory=dict)  # part -> the last request (RenderJob: what it waits for)
     fps: dict[str, RateMeter] = field(default_factory=lambda: {"a": RateMeter(), "b": RateMeter()})
     ms_per_px: dict = field(default_factory=dict)  # (part, mode, supersample, backend) -> cost of a full render
     rect: Rect = Rect(0, 0, 1, 1)
@@ -87,5 +88,6 @@ class PaneState:
         start at `preview_lod` (rates.first_preview_lod)."""
         self.parts = {"a": Shown(), "b": Shown()}
         self.submitted.clear()
+        self.asked.clear()
         self.ms_per_px.clear()
         self.preview_lod = preview_lod

@@ -78,6 +78,18 @@ def first_preview_lod(num_splats: int) -> float:
     return float(min(8.0, max(PREVIEW_LOD_PX, 2.0 ** math.floor(math.log2(max(num_splats, 1) / 500_000)))))
 
 
+FIRST_PREVIEW_SPLATS = 2_000_000  # from this many splats a pane's first picture of a scene is a preview (at 1 M the
+# full frame's first tiles came about as soon as a preview, whose render then delayed the final frame)
+FIRST_PREVIEW = 0.25  # its fraction of the render resolution (per axis)
+
+
+def first_preview(num_splats: int) -> float:
+    """The resolution factor of a pane's first picture of a scene: FIRST_PREVIEW from FIRST_PREVIEW_SPLATS splats
+    (it shows within a second while the full frame takes seconds; then the full frame refines over it), else 1 (the
+    full frame at once)."""
+    return FIRST_PREVIEW if num_splats >= FIRST_PREVIEW_SPLATS else 1.0
+
+
 def preview_lod(tau: float, preview_ms: float) -> float:
     """The next preview's cut after one that took `preview_ms` at `tau` pixels: twice as coarse over the
     budget PREVIEW_MS, twice as fine under 40 % of it, between PREVIEW_LOD_PX and MAX_PREVIEW_LOD."""

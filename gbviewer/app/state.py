@@ -3,6 +3,7 @@ all of it is unit-tested without a window (tests/app/test_state.py); `window.Vie
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -58,6 +59,7 @@ class AppState(CameraActions):
         self.cam_index = -1
         self.dataset = DatasetViews(self.message)  # the training photos, their views, the snapped one
         self.loader: SceneLoader | None = None
+        self.pictured = threading.Event()  # the scene's LoadResult.pictured: set once the panes show it
         self.load_error = self.load_error_short = ""
         self.fly = False
         self.show_help = False
@@ -134,6 +136,7 @@ class AppState(CameraActions):
             self.dataset.drop_for_new_scene(ds is not None and bounds_fit_cameras(lo, hi, [v.camera for v in ds.views]))
             self.background_source = FIXED
         self.scene, self.scene_path = res.scene, res.path
+        self.pictured = res.pictured
         self.load_error = ""
         self.settings.recent = add_recent(self.settings.recent, res.path)
         self.cameras, self.cameras_path, self.cam_index = (res.cameras or []), res.cameras_path, -1
