@@ -16,6 +16,7 @@ from gbviewer import flicker as fl
 from gbviewer import lod
 from gbviewer.errors import RenderError
 from gbviewer.render import RenderSettings, create_renderer
+from gbviewer.render.view_filter import ViewFilter
 from gbviewer.scene import SH_C0
 from helpers import random_view
 from reference_ray import render_sorted
@@ -110,6 +111,15 @@ def test_grammar():
             RenderSettings.parse(bad)
     with pytest.raises(RenderError, match="queue"):
         RenderSettings(gb.Mode.SCALAR, queue=8)
+
+
+@pytest.mark.parametrize("mode", ["stopthepop", "eval3d"])
+def test_no_view_filter_or_preset_rule(mode):
+    """stopthepop blends with 3DGS's own +0.3 (its queue of one is scalar, above); neither it nor eval3d takes a view
+    filter or a preset's rules (they are not among the modes a preset's filter applies to: FILTERED_MODES)."""
+    for vf in (ViewFilter(0.1), ViewFilter(dc_clamp=True), ViewFilter(support=3.0), ViewFilter(sort_radial=True)):
+        with pytest.raises(RenderError, match=f"is not for {mode}"):
+            RenderSettings(gb.Mode.parse(mode), view_filter=vf)
 
 
 def wall_and_ball() -> gb.Scene:
