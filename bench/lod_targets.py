@@ -1,4 +1,4 @@
-"""Level of detail against issue 24's targets, per scene: hierarchy build time against load time, its memory
+"""Level of detail against its targets (docs/lod.md), per scene: hierarchy build time against load time, its memory
 against the splat arrays, cut selection against the frame, LOD render time against the full render, and the merge
 rules' PSNR (tau = 1 px) against the full render at the same rate and against the zoom-out reference (the x1 scalar
 render box-downsampled), beside plain scalar, gaussian_blending and scalar 3x3.
@@ -22,7 +22,7 @@ from gbviewer.bench.scale import scene_bytes
 from gbviewer.camera import orbit_camera, parse_rates
 from gbviewer.metrics import psnr, reference_psnr
 
-RULES = ("depth", "sum", "opacity")
+RULES = lod.tree.RULES
 OTHERS = ("scalar", "gaussian_blending", "scalar:3")
 
 

@@ -1,4 +1,4 @@
-"""Regenerate bench/RESULTS.md (and the README's headline table) in one command:
+"""Regenerate bench/RESULTS.md in one command:
 
     .venv/bin/python bench/run_all.py [--quick]
 
@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import statistics
 import subprocess
 import sys
@@ -121,14 +120,9 @@ def targets(speed: list, fidelity: list, names: list[str], simd: list, in_use: s
     return rows
 
 
-def target_header(short: bool = False, in_use: str | None = None) -> list[str]:
+def target_header(in_use: str | None = None) -> list[str]:
     w, h = SIMD_SIZE
     in_use = in_use or bench.current_simd()
-    if short:
-        return ["scene", "gaussian_blending / scalar", "scalar 3x3 / gaussian_blending", "x1/8 PSNR: GB vs scalar 3x3",
-                "x1/8 PSNR: GB - scalar", f"GB blend speedup {in_use} over scalar",
-                f"scalar blend speedup {in_use} over scalar",
-                f"GB ms at {w}x{h}"]
     return ["scene", "gaussian_blending / scalar (<= 1.5)", "scalar 3x3 / gaussian_blending (>= 3)",
             "x1/8 PSNR: GB vs scalar 3x3 (GB >=)", "x1/8 PSNR: GB - scalar (>= +6 dB)",
             f"GB blend speedup {in_use} over scalar at {w}x{h} (>= {BLEND_SPEEDUP_TARGET['gaussian_blending']:g})",
@@ -233,13 +227,7 @@ def main() -> int:
     lines += ["## Run time", "", ", ".join(f"{k} {v / 60:.1f} min" for k, v in times.items()), ""]
     atomic_write(HERE / "RESULTS.md", lambda p: p.write_text("\n".join(lines)), force=True)
 
-    readme = REPO / "README.md"
-    head = md_table(target_header(short=True), targets(speed, fidelity, names, simd))
-    text = readme.read_text()
-    block = f"<!-- headline:start -->\n{head}\n<!-- headline:end -->"
-    text = re.sub(r"<!-- headline:start -->.*<!-- headline:end -->", block, text, flags=re.S)
-    atomic_write(readme, lambda p: p.write_text(text), force=True)
-    print(f"wrote {HERE / 'RESULTS.md'} and the README headline in {times['total'] / 60:.1f} min "
+    print(f"wrote {HERE / 'RESULTS.md'} in {times['total'] / 60:.1f} min "
           f"({', '.join(f'{k} {v / 60:.1f}' for k, v in times.items() if k != 'total')})")
     return 0
 

@@ -13,7 +13,10 @@ import os
 from pathlib import Path
 
 from gbviewer.bench.scale import print_scale, run_scale
-from gbviewer.bench.scale_scene import DEFAULT_SOURCE, TILES, tiled_scene
+from gbviewer.bench.scale_scene import TILES, tiled_scene
+
+# The capture it tiles by default: the scenes folder beside this checkout (--source names another).
+DEFAULT_SOURCE = Path(__file__).resolve().parents[1].parent / "shared" / "scenes" / "biker.compressed.ply"
 
 
 def main() -> None:

@@ -1,4 +1,4 @@
-"""Frame pacing of the real viewer window (issue 14), under an Xvfb server of its own:
+"""Frame pacing of the real viewer window, under an Xvfb server of its own:
 
     .venv/bin/python bench/viewer_pacing.py [--scene PATH] [--cycles 3] [--json OUT]
 
@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import tempfile
 import statistics
 import sys
 import time
@@ -31,7 +33,7 @@ import gbviewer as gb  # noqa: E402
 from gbviewer.app.camera_actions import MOVING_HOLD_S  # noqa: E402
 
 TARGETS = {"ui_p95_ms": 33.0, "stale_ms": 50.0, "first_tiles_ms": 100.0}
-PREVIEWS_PER_S = 10.0  # per pane while orbiting (issue 24, on the 6.1 M-splat scene)
+PREVIEWS_PER_S = 10.0  # per pane while orbiting (docs/lod.md, on the 6.1 M-splat scene)
 DEFAULT_SCENE = HERE.parents[1] / "shared" / "scenes" / "guitar.compressed.ply"  # the issue's slow case
 WINDOW = (1900, 700)  # two panes of about 800x600 beside the side panel
 
@@ -155,6 +157,67 @@ def run(scene: str, cycles: int, orbit_s: float, settle_s: float, screenshot: Pa
         app.close()
 
 
+def first_picture(scene: str, window: tuple[int, int], folder: Path, timeout: float, shots: Path | None = None,
+                  label: str = "") -> dict:
+    """Open `scene` in a fresh window (panes A scalar, B gaussian_blending on the CPU backend) with the
+    level-of-detail cache in `folder`, and step it as `ViewerApp.run` does: seconds from the start to the scene
+    opened (the load), and from the open to each pane's first pixels on screen (whatever stage: preview, tiles,
+    final) and to both panes' final frames; the message lines the panes showed before their first pixels; with
+    `shots`, PNGs of the window at the first message before any pixels and once every pane has pixels."""
+    from gbviewer.app.window import ViewerApp
+    from gbviewer.lod import cache
+
+    cache.default_folder = lambda: folder  # this run's cache: empty (cold) or written by the run before (warm)
+    t0 = time.perf_counter()
+    app = ViewerApp(scene, size=window, persist=False)
+    s = app.state
+    s.settings.pane_count, s.settings.backend = 2, "cpu"
+    for ps, mode in zip(s.settings.panes, ("scalar", "gaussian_blending")):
+        ps.mode, ps.split, ps.supersample, ps.view, ps.lod = mode, False, 1, "color", 0.0
+    opened = final = None
+    first: dict[str, float] = {}
+    kinds: dict[str, str] = {}
+    said: dict[str, list[str]] = {}
+    try:
+        while time.perf_counter() - t0 < timeout and final is None:
+            app.wait_for_events()
+            app.step(poll=False)
+            now = time.perf_counter()
+            if s.scene is None:
+                continue
+            opened = now if opened is None else opened
+            for p in s.visible:
+                shown = p.parts["a"]
+                if p.name not in first and shown.texture is not None:
+                    first[p.name], kinds[p.name] = now - opened, shown.stage
+                    if len(first) == len(s.visible) and shots is not None:
+                        _save(app, shots / f"{label}first.png")
+                lines = [i.full for i in app.placed if i.role == "message" and p.rect.x <= i.x < p.rect.x + p.rect.w]
+                if p.name not in first and lines and lines[0] not in said.setdefault(p.name, []):
+                    said[p.name].append(lines[0])
+                    if shots is not None and not first and len(said[p.name]) == 1:
+                        _save(app, shots / f"{label}progress.png")
+            if app.panes.all_current():
+                final = now - opened
+        built = None
+        while time.perf_counter() - t0 < timeout and built is None:  # the hierarchy written to the cache
+            if any(not f.name.startswith(".") for f in folder.glob("*.npz")):
+                built = time.perf_counter() - opened if opened else None
+            time.sleep(0.05)
+        return {"scene": Path(scene).name, "splats": s.scene.num_splats if s.scene else None,
+                "load_s": None if opened is None else opened - t0, "first_pixels_s": first, "first_stage": kinds,
+                "final_s": final, "lod_cached_s": built, "messages_before_pixels": said,
+                "load_average": os.getloadavg()[0]}
+    finally:
+        app.close()
+
+
+def _save(app, path: Path) -> None:
+    from PIL import Image
+
+    Image.fromarray(app.read_window()).save(path)
+
+
 def markdown(r: dict) -> list[str]:
     """The RESULTS.md section: measured figures beside their targets."""
     def verdict(value: float | None, target: float) -> str:
@@ -198,9 +261,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--orbit", type=float, default=3.0, help="seconds of orbiting per cycle")
     ap.add_argument("--settle", type=float, default=30.0, help="at most this long for the final frames per cycle")
     ap.add_argument("--json", type=Path)
-    ap.add_argument("--screenshot", type=Path, help="a PNG of the window once the last stop's frames are final")
+    ap.add_argument("--screenshot", type=Path,
+                    help="a PNG of the window once the last stop's frames are final (--first-picture: a folder "
+                         "for PNGs of the window: a pane's first message line, and every pane's first pixels)")
     ap.add_argument("--window", default=f"{WINDOW[0]}x{WINDOW[1]}",
                     help="window size WxH (2900x800: two panes of about 1280x720 beside the panel)")
+    ap.add_argument("--first-picture", action="store_true",
+                    help="instead: open the scene twice, with an empty level-of-detail cache, then with the one the "
+                         "first open wrote; times from the open to each pane's first pixels and to the final frames")
+    ap.add_argument("--timeout", type=float, default=300.0, help="--first-picture: at most this long per open")
     args = ap.parse_args(argv)
     try:
         window = tuple(int(v) for v in args.window.lower().split("x"))
@@ -208,9 +277,15 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, AssertionError):
         ap.error(f"--window {args.window!r}: expected WxH, each at least 200")
     with xvfb_display(window[0] + 100, window[1] + 100):
-        result = run(args.scene, args.cycles, args.orbit, args.settle, args.screenshot, window)
+        if args.first_picture:
+            with tempfile.TemporaryDirectory() as folder:
+                shots = args.screenshot
+                result = {cache: first_picture(args.scene, window, Path(folder), args.timeout, shots, f"{cache}-")
+                          for cache in ("cold", "warm")}
+        else:
+            result = run(args.scene, args.cycles, args.orbit, args.settle, args.screenshot, window)
     text = json.dumps(result, indent=1)
-    print("\n".join(markdown(result)))
+    print(text if args.first_picture else "\n".join(markdown(result)))
     if args.json:
         args.json.write_text(text + "\n")
     return 0

@@ -8,7 +8,7 @@ from .camera import Camera, load_cameras_json, orbit_camera
 from .cancel import CancelToken
 from .errors import (BackendUnavailable, CallbackError, CameraError, Cancelled, GBViewerError, LoadCancelled,
                      RenderCancelled, RenderError, SceneFormatError, VideoCancelled)
-from .io import load
+from .io import load, save
 from .render import (BackendChoice, Frame, FrameStats, Mode, PixelTrace, Renderer, RenderSettings, choose_backend,
                      build_info, get_renderer, render, trace_pixel)
 from .scene import Scene
@@ -22,6 +22,6 @@ __all__ = [
     "ASSETS", "DEFAULT_SCENE", "BackendChoice", "BackendUnavailable", "CallbackError", "Camera", "CameraError",
     "CancelToken", "Cancelled", "Frame", "FrameStats", "GBViewerError", "LoadCancelled", "Mode", "PixelTrace",
     "RenderCancelled", "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError", "VideoCancelled",
-    "build_info", "choose_backend", "get_renderer", "load", "load_cameras_json", "orbit_camera", "render",
+    "build_info", "choose_backend", "get_renderer", "load", "load_cameras_json", "orbit_camera", "render", "save",
     "trace_pixel",
 ]

@@ -16,7 +16,7 @@ from .validate import F32_MAX, array, distinct_items, field, integer, read_json,
 if TYPE_CHECKING:
     from .scene import Scene
 
-NEAR_PLANE = 0.2  # published 3DGS near cull (KERNELS.md §0.4)
+NEAR_PLANE = 0.2  # published 3DGS near cull (docs/modes.md#culling-radius-tiles)
 MIN_RATE, MAX_RATE = 1e-3, 64.0  # sampling rates: x1/1000 (zoomed out) to x64 (supersampled)
 MAX_IMAGE_SIZE = 16384  # pixels per axis of any camera
 ROTATION_TOLERANCE = 1e-3  # |R R^T - I| and |det R - 1| allowed for a rotation read from a file

@@ -15,6 +15,7 @@ import numpy as np
 from .camera import Camera
 from .errors import GBViewerError
 from .keyframes import Keyframe, interpolate_keyframes, key_times, load_keyframes
+from .nerfstudio_paths import NerfstudioPath
 from .scene import Scene
 from .validate import integer, real
 
@@ -134,6 +135,21 @@ def path_length(frames: int | None, fps: float = 30.0, seconds: float | None = N
             length = DEFAULT_SECONDS * fps
         frames = round(real(length, what))
     return integer(frames, what, lo=1, hi=max_frames)
+
+
+def nerfstudio_frames(p: NerfstudioPath, frames: int | None = None, seconds: float | None = None,
+                      max_frames: int = MAX_FRAMES) -> list[PathFrame]:
+    """The frames of a camera_path.json: its interpolated camera_path list as ns-render renders it, or without one
+    its keyframes interpolated here (`keyframe_path`; length as `path_length`, at the file's fps). `frames` or
+    `seconds` with a camera_path list is an error: the file sets them."""
+    if p.frames:
+        if frames is not None or seconds is not None:
+            raise GBViewerError("the camera path file lists its frames; drop --frames and --seconds")
+        integer(len(p.frames), f"frames of the camera path (at most {max_frames}; --max-frames raises the limit)",
+                hi=max_frames)
+        return [PathFrame.of(c) for c in p.frames]
+    return keyframe_path(p.keys, path_length(frames, p.fps, seconds if seconds is not None else p.seconds,
+                                             p.keys, max_frames))
 
 
 def camera_path(kind: str | Path, base: Camera, frames: int | None, start: float = 1.0, end: float = 1.0 / 8.0,

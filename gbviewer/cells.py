@@ -1,4 +1,4 @@
-"""Duplex-GS cells: ellipsoids that group splats, so that only cells are depth-sorted (KERNELS.md §8).
+"""Duplex-GS cells: ellipsoids that group splats, so that only cells are depth-sorted (docs/modes.md#duplex).
 
 A trained Duplex-GS checkpoint has its own cells (the anchors, decoded per view by `gbviewer.io.duplex`). Any other
 scene gets cells built once, on first use, by `build_cells`:

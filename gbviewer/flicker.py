@@ -36,9 +36,10 @@ from .errors import GBViewerError
 from .figure import GAP, Cell, compose_grid, save_image, upscale_nearest
 from .io.files import atomic_write
 from .render import FrameStats, Mode, RenderSettings, get_renderer
+from .render.modes import STOCHASTIC_MODES
 from .scene import Scene
 from .validate import dumps_json, integer, real
-from .video import write_mp4
+from .video import write_video
 
 FLICKER_PATHS = (*PATHS, "orbit")
 DEFAULT_REFERENCE = "supersample:8"
@@ -135,9 +136,15 @@ def floor_settings(reference: RenderSettings) -> RenderSettings | None:
     return replace(reference, supersample=reference.supersample // 2) if reference.supersample > 1 else None
 
 
-def pane_image(renderer, pf: PathFrame, settings: RenderSettings, cancel=None) -> np.ndarray:
-    """One frame of the path as shown: rgb clipped to [0, 1], nearest-resized to the pane, float32."""
-    rgb = np.clip(renderer.render(pf.camera, settings, cancel=cancel).rgb, 0.0, 1.0)
+def pane_image(renderer, pf: PathFrame, settings: RenderSettings, cancel=None, accumulate: int = 1) -> np.ndarray:
+    """One frame of the path as shown: rgb clipped to [0, 1], nearest-resized to the pane, float32. A stochastic
+    mode shows the mean of `accumulate` frame indices from its own (as a still viewer pane after that many frames)."""
+    k = integer(accumulate, "--accumulate", lo=1) if settings.mode in STOCHASTIC_MODES else 1
+    rgb = renderer.render(pf.camera, settings, cancel=cancel).rgb
+    if k > 1:
+        rgb = np.mean([rgb, *(renderer.render(pf.camera, replace(settings, frame=settings.frame + f),
+                                              cancel=cancel).rgb for f in range(1, k))], axis=0)
+    rgb = np.clip(rgb, 0.0, 1.0)
     if rgb.shape[:2] != (pf.height, pf.width):
         rgb = upscale_nearest(rgb, pf.height, pf.width)
     return rgb.astype(np.float32, copy=False)
@@ -147,11 +154,12 @@ def measure_flicker(scene: Scene, path: Sequence[PathFrame], settings: Sequence[
                     reference: RenderSettings | None = None, pairs: int = DEFAULT_PAIRS, backend: str = "cpu",
                     with_floor: bool = True, keep_pairs: bool = False, path_name: str = "",
                     progress: Callable[[RenderSettings], None] | None = None, renderer=None,
-                    cancel=None) -> FlickerReport:
+                    cancel=None, accumulate: int = 1) -> FlickerReport:
     """Flicker and change of every mode of `settings` over `pairs` pairs of consecutive frames of `path` (see the
     module's docstring), against `reference` (default scalar 8x8), with the floor unless `with_floor` is False.
     keep_pairs: keep each pair's heat map (for `write_heat_video`). progress(settings) after each render.
-    renderer: render on it (else the process's renderer of `backend`); cancel: passed to every render."""
+    renderer: render on it (else the process's renderer of `backend`); cancel: passed to every render.
+    accumulate: each stochastic mode's frame is the mean of that many frame indices (`pane_image`)."""
     reference = reference or RenderSettings.parse(DEFAULT_REFERENCE)
     if not settings:
         raise GBViewerError("no modes given")
@@ -165,7 +173,7 @@ def measure_flicker(scene: Scene, path: Sequence[PathFrame], settings: Sequence[
 
     def image(s: RenderSettings, i: int) -> np.ndarray:
         if (s, i) not in cache:
-            cache[s, i] = pane_image(renderer, path[i], s, cancel)
+            cache[s, i] = pane_image(renderer, path[i], s, cancel, accumulate)
             if progress is not None:
                 progress(s)
         return cache[s, i]
@@ -253,7 +261,7 @@ def write_heat_video(out: str | Path, report: FlickerReport, path: Sequence[Path
             yield np.asarray(compose_grid([cells], w, h, GAP, captions="below", even=True,
                                           lines=lambda c: [c.mode_label, caption]))
 
-    write_mp4(out, images(), len(report.starts), fps=fps, force=force)
+    write_video(out, images(), len(report.starts), fps=fps, force=force)
     return Path(out)
 
 

@@ -15,7 +15,7 @@ cd "$(dirname "$0")/.."
 PY=${1:-${PYTHON:-python3}}
 step() { echo "build_wheel: $*"; }
 fail() { echo "build_wheel: $*" >&2; exit 1; }
-[ "$(uname -s)" = Linux ] || fail "auditwheel repairs Linux wheels only; elsewhere use cibuildwheel (README, Install)"
+[ "$(uname -s)" = Linux ] || fail "auditwheel repairs Linux wheels only; elsewhere use cibuildwheel (docs/install.md#wheels)"
 
 tools=build/wheel-tools
 [ -x $tools/bin/auditwheel ] || {

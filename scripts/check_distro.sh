@@ -6,7 +6,7 @@
 #
 # Needs root (debootstrap, chroot, mounts) and the network to Debian's archive and the package index. The root is
 # made by `debootstrap --variant=minbase` on first use in GBVIEWER_DISTRO_ROOT (default
-# ~/.cache/gbviewer/distro-SUITE) and kept: a second run finds Debian's packages, the venv and the build there. Each
+# ~/.cache/gbviewer/distro-SUITE) and kept: a second run finds Debian's packages, pip's cache and the build there. Each
 # run copies this checkout's files (git's tracked and untracked-not-ignored ones) to /work/main inside, and ../shared
 # beside it when present, then runs, with a clean environment and no display:
 #   bash scripts/setup.sh && .venv/bin/gbviewer           (writes out/comparison.png and out/zoom.mp4)
@@ -51,10 +51,11 @@ mnt --bind /dev "$ROOTFS/dev"
 mnt -t devpts devpts "$ROOTFS/dev/pts"
 mnt -t tmpfs shm "$ROOTFS/dev/shm"
 
-# the checkout as a clone would have it; the venv and build folder of an earlier run stay (a second run is quick)
+# the checkout as a clone would have it, with no venv; the build folder of an earlier run stays, and so do pip's
+# cache and Debian's packages in the root (a second run is quick)
 work="$ROOTFS/work/main"
 mkdir -p "$work"
-find "$work" -mindepth 1 -maxdepth 1 ! -name .venv ! -name build -exec rm -rf {} +
+find "$work" -mindepth 1 -maxdepth 1 ! -name build -exec rm -rf {} +
 if git rev-parse --is-inside-work-tree >/dev/null 2>&1; then
   git ls-files -z --cached --others --exclude-standard | tar --null -T - -cf - | tar -C "$work" -xf -
 else

@@ -12,12 +12,17 @@
 // the image.
 //
 // Compiled once per mode and sampling: the driver defines BLEND_MODE_<MODE> (SCALAR, MIP, ANALYTIC,
-// GAUSSIAN_BLENDING, WSR or DUPLEX) and SUPERSAMPLED (0 or 1). wsr walks index-ordered lists with no early
-// termination; duplex walks cell-sorted lists, reads each splat's cell from `cell_of` and uses `oit`.
+// GAUSSIAN_BLENDING, WSR, DUPLEX, STOCHASTIC, STOCHASTIC_POPFREE, EVAL3D or STOPTHEPOP) and SUPERSAMPLED (0 or 1).
+// wsr walks index-ordered lists with no early termination; duplex walks cell-sorted lists, reads each splat's cell
+// from `cell_of` and uses `oit`; stochastic hashes each sample's (seed, frame, X, Y) with the splat's index
+// (stochastic.h). The per-pixel sorted modes (eval3d, stopthepop: resort.glsl) read the list directly, each pixel in
+// its own order, in one dispatch (the driver refuses lists too long for a driver's loop cap).
 #include "common.glsl"
 #include "mathf.glsl"
 #include "blend.glsl"
 #include "kernel.glsl"
+#include "ray3d.glsl"
+#include "resort.glsl"
 
 #if defined(BLEND_MODE_SCALAR)
 const int MODE = SCALAR;
@@ -31,6 +36,19 @@ const int MODE = GAUSSIAN_BLENDING;
 const int MODE = WSR;
 #elif defined(BLEND_MODE_DUPLEX)
 const int MODE = DUPLEX;
+#elif defined(BLEND_MODE_STOCHASTIC)
+const int MODE = STOCHASTIC;
+#elif defined(BLEND_MODE_STOCHASTIC_POPFREE)
+const int MODE = STOCHASTIC_POPFREE;
+#elif defined(BLEND_MODE_EVAL3D)
+const int MODE = EVAL3D;
+#elif defined(BLEND_MODE_STOPTHEPOP)
+const int MODE = STOPTHEPOP;
+#endif
+#if defined(BLEND_MODE_EVAL3D) || defined(BLEND_MODE_STOPTHEPOP)
+#define SORTED 1
+#else
+#define SORTED 0
 #endif
 
 layout(local_size_x = 16, local_size_y = 16) in;
@@ -42,6 +60,8 @@ layout(std430, binding = 4) writeonly buffer WindowOut { vec2 window_out[]; };
 layout(std430, binding = 5) buffer State { vec4 state[]; };  // BLEND_STATE_VEC4S per invocation
 layout(std430, binding = 6) buffer Accum { vec4 accum[]; };  // BLEND_ACCUM_VEC4S per invocation
 layout(std430, binding = 7) readonly buffer CellOf { int cell_of[]; };  // duplex: each splat's cell
+layout(std430, binding = 8) readonly buffer Planes { vec4 planes[]; };  // stochastic_popfree: each splat's depth plane
+layout(std430, binding = 9) readonly buffer Rays { vec4 rays[]; };  // eval3d, stopthepop: pack_ray per splat
 layout(rgba32f, binding = 0) uniform writeonly image2D out_image;  // rgb, alpha = 1 - T; row 0 = image top
 
 uniform ivec2 out_size;
@@ -58,6 +78,8 @@ uniform int store_state;
 uniform int load_accum;
 uniform int store_accum;
 uniform vec4 oit;  // OitParams: components OIT_* (interface.glsl)
+uniform uvec2 stochastic;  // stochastic: seed, frame index (stochastic.h)
+uniform int queue;  // stopthepop's K (0: the exact order)
 
 shared Splat2D batch[256];
 shared int done_count;
@@ -65,6 +87,59 @@ shared int done_count;
 shared vec4 sample_rgba[256];
 shared int sample_evals[256];
 shared vec2 sample_window[256];
+#endif
+
+#if SORTED
+Splat2D list_splat(uint id) {
+    const uint at = SPLAT_VEC4S * id;
+    return unpack_splat(splats[at], splats[at + 1u], splats[at + 2u], splats[at + 3u]);
+}
+
+// Entry i of the list starting at `first` as a fragment at pix (sorted_fragment).
+bool list_fragment(uint first, int i, vec2 pix, out Fragment f) {
+    const uint id = tile_vals[first + uint(i)];
+    const uint at = RAY_VEC4S * id;
+    const RaySplat ray = unpack_ray(rays[at], rays[at + 1u], rays[at + 2u], rays[at + 3u]);
+    f.entry = i;
+    return sorted_fragment(MODE, list_splat(id), ray, pix.x, pix.y, f.alpha, f.depth);
+}
+
+vec3 list_color(uint first, Fragment f) { return list_splat(tile_vals[first + uint(f.entry)]).color; }
+
+// One pixel of a per-pixel sorted mode (CUDA's sorted_kernel): the queue of K, or (K = 0) the exact order by
+// selection. Returns its evals: the list position where it stopped (+1), else n.
+int sorted_walk(uint first, int n, vec2 pix, inout float T, inout vec3 C) {
+    const int K = MODE == EVAL3D ? 0 : queue;
+    int ev = n;
+    if (K > 0) {
+        Fragment q[MAX_QUEUE];
+        int qn = 0;
+        bool done = false;
+        for (int i = 0; i < n && !done; ++i) {
+            Fragment f;
+            if (!list_fragment(first, i, pix, f)) continue;
+            if (qn == K) {
+                done = blend_fragment(q[0], list_color(first, q[0]), T, C);
+                queue_pop(q, qn);
+                if (done) ev = i + 1;
+            }
+            if (!done) queue_insert(q, qn, f);
+        }
+        for (int k = 0; k < qn && !done; ++k) done = blend_fragment(q[k], list_color(first, q[k]), T, C);
+    } else {
+        const float inf = uintBitsToFloat(0x7f800000u);
+        Fragment last = Fragment(-inf, 0.0, -1);
+        for (bool done = false; !done;) {
+            Fragment best = Fragment(inf, 0.0, n), f;
+            for (int i = 0; i < n; ++i)
+                if (list_fragment(first, i, pix, f) && fragment_before(last, f) && fragment_before(f, best)) best = f;
+            if (best.entry == n) break;
+            done = blend_fragment(best, list_color(first, best), T, C);
+            last = best;
+        }
+    }
+    return ev;
+}
 #endif
 
 void main() {
@@ -94,6 +169,10 @@ void main() {
         const int n = int(range.y - range.x);
         const int begin = min(n, chunk_begin), end = min(n, chunk_end);
         const vec2 pix = vec2(rpix) + 0.5;
+#if defined(BLEND_MODE_STOCHASTIC) || defined(BLEND_MODE_STOCHASTIC_POPFREE)
+        const uint key = stochastic_sample_key(stochastic_frame_key(stochastic.x, stochastic.y), uint(rpix.x),
+                                               uint(rpix.y));
+#endif
 #if defined(BLEND_MODE_GAUSSIAN_BLENDING)
         TransmittanceWindow win = TransmittanceWindow(1.0, pix, vec2(1.0, 1.0));
 #elif defined(BLEND_MODE_WSR)
@@ -102,6 +181,9 @@ void main() {
         DuplexState dst = DuplexState(1.0, 1.0, -1, 0.0, vec3(0.0));
 #else
         float T = 1.0;
+#endif
+#if defined(BLEND_MODE_STOCHASTIC_POPFREE)
+        float depth_key = uintBitsToFloat(0xff800000u);  // -inf: no fragment kept yet (stochastic.h)
 #endif
         vec3 C = vec3(0.0);
         int evals = 0;
@@ -120,6 +202,9 @@ void main() {
 #endif
             evals = floatBitsToInt(s2.x);
             done = s2.y != 0.0;
+#if defined(BLEND_MODE_STOCHASTIC_POPFREE)
+            depth_key = s2.z;
+#endif
         }
 
         memoryBarrierShared();
@@ -128,6 +213,9 @@ void main() {
         memoryBarrierShared();
         barrier();
         if (done) atomicAdd(done_count, 1);
+#if SORTED
+        if (!done) evals = sorted_walk(range.x, n, pix, T, C);
+#else
         for (int start = begin; start < end; start += 256) {
             memoryBarrierShared();
             barrier();  // everyone finished the previous batch (and its done_count increments)
@@ -139,6 +227,7 @@ void main() {
 #if defined(BLEND_MODE_DUPLEX)
                 batch[lid].cell = cell_of[s];
 #endif
+                batch[lid].id = int(s);
             }
             memoryBarrierShared();
             barrier();  // batch loaded; nobody changes done_count before everyone has read it
@@ -155,6 +244,11 @@ void main() {
                     const bool finished = blend_duplex(batch[j], pix, oit[OIT_ET_GRADE], dst);
 #elif defined(BLEND_MODE_ANALYTIC)
                     const bool finished = blend_analytic(batch[j], pix, T, C);
+#elif defined(BLEND_MODE_STOCHASTIC)
+                    const bool finished = blend_stochastic(batch[j], pix, key, T, C);
+#elif defined(BLEND_MODE_STOCHASTIC_POPFREE)
+                    blend_stochastic_popfree(batch[j], planes[batch[j].id], pix, key, T, depth_key, C);
+                    const bool finished = false;  // a nearer kept fragment may follow
 #else
                     const bool finished = blend_scalar(batch[j], pix, T, C);
 #endif
@@ -166,6 +260,7 @@ void main() {
                 }
             }
         }
+#endif
 #if defined(BLEND_MODE_GAUSSIAN_BLENDING)
         float T_final = win.T;
         const vec2 wh = win.wh;
@@ -193,7 +288,11 @@ void main() {
 #else
             state[at + 1u] = vec4(wxy, wh);
 #endif
+#if defined(BLEND_MODE_STOCHASTIC_POPFREE)
+            state[at + 2u] = vec4(intBitsToFloat(evals), done ? 1.0 : 0.0, depth_key, 0.0);
+#else
             state[at + 2u] = vec4(intBitsToFloat(evals), done ? 1.0 : 0.0, 0.0, 0.0);
+#endif
             continue;  // store_state is uniform, and the driver then gives this dispatch one render tile
         }
 #if defined(BLEND_MODE_WSR)

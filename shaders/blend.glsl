@@ -36,6 +36,50 @@ bool blend_scalar(Splat2D s, vec2 pix, inout float T, inout vec3 C) {
     return composite_scalar(alpha, s.color, T, C);
 }
 
+// port of stochastic.h: hash32, the keys and the fragment's uniform
+uint hash32(uint x) {
+    x ^= x >> 16u;
+    x *= 0x7feb352du;
+    x ^= x >> 15u;
+    x *= 0x846ca68bu;
+    x ^= x >> 16u;
+    return x;
+}
+uint stochastic_frame_key(uint seed, uint frame) { return hash32(hash32(seed ^ 0x9e3779b9u) ^ frame); }
+uint stochastic_sample_key(uint frame_key, uint X, uint Y) { return hash32(hash32(frame_key ^ X) ^ Y); }
+uint stochastic_splat_key(int id) { return hash32(uint(id) ^ 0x85ebca6bu); }
+float stochastic_uniform(uint sample_key, uint splat_key) {
+    return float(hash32(sample_key ^ splat_key) >> 8u) * (1.0 / 16777216.0);
+}
+
+// port of stochastic.h: blend_stochastic
+bool blend_stochastic(Splat2D s, vec2 pix, uint key, inout float T, inout vec3 C) {
+    const float power = gaussian_power(s, s.xy - pix);
+    if (!(power <= 0.0 && power >= s.log_min_alpha)) return false;  // NaN rejects
+    const float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
+    if (alpha < MIN_ALPHA_3DGS) return false;
+    if (!(stochastic_uniform(key, stochastic_splat_key(s.id)) < alpha)) return false;
+    C = s.color;
+    T = 0.0;
+    return true;
+}
+
+// port of stochastic.h: blend_stochastic_popfree (one pixel: T, the nearest kept fragment's depth key, C)
+void blend_stochastic_popfree(Splat2D s, vec4 plane, vec2 pix, uint key, inout float T, inout float depth_key,
+                              inout vec3 C) {
+    const float power = gaussian_power(s, s.xy - pix);
+    if (!(power <= 0.0 && power >= s.log_min_alpha)) return;  // NaN rejects
+    const float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
+    if (alpha < MIN_ALPHA_3DGS) return;
+    if (!(stochastic_uniform(key, stochastic_splat_key(s.id)) < alpha)) return;
+    float k = (plane.x * pix.x + plane.y * pix.y + plane.z) / plane.w;
+    if (isnan(k)) k = -3.402823466e38;  // a splat without a plane is behind every plane
+    if (!(k > depth_key)) return;
+    C = s.color;
+    T = 0.0;
+    depth_key = k;
+}
+
 // port of gaussian.h: approx_cdf
 float approx_cdf(float x) { return 1.0 / (1.0 + expf(-(1.6 * x + 0.07 * x * x * x))); }
 

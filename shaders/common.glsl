@@ -9,6 +9,13 @@ const int ANALYTIC = 2;
 const int GAUSSIAN_BLENDING = 3;
 const int WSR = 4;
 const int DUPLEX = 5;
+const int STOCHASTIC = 6;
+const int STOCHASTIC_POPFREE = 7;
+const int EVAL3D = 8;
+const int STOPTHEPOP = 9;
+
+// port of common.h: view_filtered
+bool view_filtered(int mode) { return mode == SCALAR || mode == STOCHASTIC || mode == STOCHASTIC_POPFREE; }
 
 const int PERSPECTIVE = 0;
 const int ORTHOGRAPHIC = 1;
@@ -34,6 +41,11 @@ const float WSR_FIXED_MAX = 64.0;
 const float DUPLEX_CELL_SIGMAS = 2.0;
 const float DUPLEX_T_STOP = 0.01;
 const float TWO_PI = 6.283185307179586;
+const int STOPTHEPOP_QUEUE = 4;
+const int MAX_QUEUE = 64;
+
+// port of common.h: per_pixel_sorted
+bool per_pixel_sorted(int m) { return m == EVAL3D || m == STOPTHEPOP; }
 
 // port of common.h: clampf, minf, maxf
 float clampf(float v, float lo, float hi) { return min(max(v, lo), hi); }
@@ -71,6 +83,7 @@ struct Splat2D {
     float log_min_alpha;
     float radius;
     int cell;
+    int id;
 };
 
 // port of common.h: OitParams

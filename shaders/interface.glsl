@@ -31,6 +31,7 @@ const uint RANGE_WORDS = 2u;         // a tile's [start, end) in its list: uvec2
 const uint WINDOW_WORDS = 2u;        // gaussian_blending's final window sides per output pixel: vec2
 const uint BLEND_STATE_VEC4S = 3u;   // blend.comp's per-invocation state between dispatches: C, T; xy, wh; evals, done
 const uint BLEND_ACCUM_VEC4S = 2u;   // blend.comp's per-invocation box sum: rgba; window sum, evals sum
+const uint RAY_VEC4S = 4u;           // RaySplat (eval3d, stopthepop) as pack_ray stores it (ray3d.glsl)
 
 // OitParams' fields in order: 0..3 the components of the `oit` vec4 uniform (depth_correct as 0.0 or 1.0), 4..7
 // those of preprocess.comp's `view_filter` vec4 uniform less 4 (the scalar mode's filter, compensate as 0.0 or 1.0),

@@ -11,8 +11,8 @@
 uint group_index() { return gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x; }
 
 // vec4 0: xy, depth, opacity; 1: conic, sigma1; 2: color, sigma2; 3: v1, log_min_alpha, radius. inv_sigma1/2 are
-// not stored (64 bytes per splat instead of 80): unpacking recomputes them with the same division as preprocess.
-// `cell` is not stored either: duplex reads it from the scene's per-splat cell buffer (unpack gives -1).
+// not stored (64 bytes per splat instead of 80): unpacking recomputes them with the same division as preprocess. `cell` and `id` are not stored either: duplex reads the cell from the scene's per-splat cell buffer,
+// blend.comp sets the id from the list entry (unpack gives -1 for both).
 void pack_splat(Splat2D s, out vec4 p0, out vec4 p1, out vec4 p2, out vec4 p3) {
     p0 = vec4(s.xy, s.depth, s.opacity);
     p1 = vec4(s.conic, s.sigma1);
@@ -35,6 +35,7 @@ Splat2D unpack_splat(vec4 p0, vec4 p1, vec4 p2, vec4 p3) {
     s.log_min_alpha = p3.z;
     s.radius = p3.w;
     s.cell = -1;
+    s.id = -1;  // blend.comp sets the splat's index
     return s;
 }
 

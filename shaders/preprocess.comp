@@ -1,9 +1,12 @@
 // The mode's finish of every splat's stored stage (finish_splat; the stage: stage.comp): store its Splat2D and tile
-// rectangle, flag survivors, count tile-splat pairs and the depth range.
+// rectangle, flag survivors, count tile-splat pairs and the depth range. The per-pixel sorted modes also store each
+// splat's ray data (finish_ray_splat: after finish_splat for stopthepop, instead of it for eval3d).
 #include "common.glsl"
 #include "mathf.glsl"
 #include "camera.glsl"
 #include "preprocess.glsl"
+#include "ray3d.glsl"
+#include "ray3d_finish.glsl"
 #include "kernel.glsl"
 
 layout(local_size_x = 256) in;
@@ -15,6 +18,8 @@ layout(std430, binding = 4) writeonly buffer Flags { uint flags[]; };
 layout(std430, binding = 5) buffer Totals { uint totals[]; };
 layout(std430, binding = 6) readonly buffer WeightSh { float weight_sh[]; };  // per splat: weight_k floats
 layout(std430, binding = 7) readonly buffer Stage { vec4 stage[]; };  // per splat: pack_stage's record
+layout(std430, binding = 8) writeonly buffer Planes { vec4 planes[]; };  // stochastic_popfree: depth plane per splat
+layout(std430, binding = 9) writeonly buffer Rays { vec4 rays[]; };  // eval3d, stopthepop: per splat, pack_ray's
 
 uniform uint num_splats;
 uniform int sh_k;    // SH coefficients per channel stored in the scene
@@ -55,7 +60,17 @@ void main() {
                                        stage[STAGE_VEC4S * i + 2u], kept);
     Splat2D s;
     TileRect r;
-    const bool valid = kept && finish_splat(in_, st, sh_deg, cam, mode, params, grid.x, grid.y, s, r);
+    bool valid = kept && (mode == EVAL3D || finish_splat(in_, st, sh_deg, cam, mode, params, grid.x, grid.y, s, r));
+    if (valid && per_pixel_sorted(mode)) {
+        RaySplat ray;
+        valid = finish_ray_splat(in_, st, cam, mode, grid.x, grid.y, s, r, ray);
+        vec4 q0, q1, q2, q3;
+        pack_ray(ray, q0, q1, q2, q3);
+        rays[RAY_VEC4S * i] = q0;
+        rays[RAY_VEC4S * i + 1u] = q1;
+        rays[RAY_VEC4S * i + 2u] = q2;
+        rays[RAY_VEC4S * i + 3u] = q3;
+    }
     flags[i] = valid ? 1u : 0u;
     if (!valid) {
         rects[i] = ivec4(0);
@@ -68,6 +83,7 @@ void main() {
     splats[SPLAT_VEC4S * i + 1u] = p1;
     splats[SPLAT_VEC4S * i + 2u] = p2;
     splats[SPLAT_VEC4S * i + 3u] = p3;
+    if (mode == STOCHASTIC_POPFREE) planes[i] = splat_popfree_plane(cam, in_);
     const uint area = uint((r.x1 - r.x0) * (r.y1 - r.y0));
     const uint before = atomicAdd(totals[TOTAL_PAIRS], area);
     if (before + area < before) atomicOr(totals[TOTAL_OVERFLOW], 1u);

@@ -175,7 +175,7 @@ bool preprocess_finish(SplatIn in_, StageSplat st, int sh_deg, CameraParams cam,
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
     float min_power = uintBitsToFloat(0xff800000u);
-    if (mode == SCALAR) {
+    if (view_filtered(mode) || mode == STOPTHEPOP) {
         if (!scalar_filter(oit, cov, opacity)) return false;
         min_power = support_power(oit);
     } else if (mode == MIP) {
@@ -236,6 +236,53 @@ bool stage_splat(SplatIn in_, int sh_deg, int rules, CameraParams cam, int grid_
     if (!preprocess_stage(in_, cam, rules, st) || !stage_on_screen(st, grid_x, grid_y, reach)) return false;
     stage_color(in_, sh_deg, rules, cam, st.color);
     return true;
+}
+
+// port of popfree.h: dot3_rn, minor_rn (vectors rather than strided pointers; `precise`: mul_rn's products)
+float dot3_rn(vec3 a, vec3 b) {
+    precise const float r = a.x * b.x + a.y * b.y + a.z * b.z;
+    return r;
+}
+float minor_rn(float a, float b, float c, float d) {
+    precise const float r = a * b - c * d;
+    return r;
+}
+
+// port of popfree.h: popfree_plane (DepthPlane as a vec4)
+vec4 popfree_plane(CameraParams cam, vec3 pv, float cov3[6]) {
+    const mat3 S = mat3(cov3[0], cov3[1], cov3[2], cov3[1], cov3[3], cov3[4], cov3[2], cov3[4], cov3[5]);
+    const vec3 R0 = vec3(cam.R[0], cam.R[1], cam.R[2]), R1 = vec3(cam.R[3], cam.R[4], cam.R[5]);
+    const vec3 R2 = vec3(cam.R[6], cam.R[7], cam.R[8]);
+    const vec3 rows[3] = vec3[3](R0, R1, R2);
+    vec3 RS[3];
+    for (int i = 0; i < 3; ++i) RS[i] = vec3(dot3_rn(rows[i], S[0]), dot3_rn(rows[i], S[1]), dot3_rn(rows[i], S[2]));
+    float V[9];
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) V[i * 3 + j] = dot3_rn(RS[i], rows[j]);
+    const vec3 adj0 = vec3(minor_rn(V[4], V[8], V[5], V[7]), minor_rn(V[2], V[7], V[1], V[8]),
+                           minor_rn(V[1], V[5], V[2], V[4]));
+    const vec3 adj1 = vec3(minor_rn(V[5], V[6], V[3], V[8]), minor_rn(V[0], V[8], V[2], V[6]),
+                           minor_rn(V[2], V[3], V[0], V[5]));
+    const vec3 adj2 = vec3(minor_rn(V[3], V[7], V[4], V[6]), minor_rn(V[1], V[6], V[0], V[7]),
+                           minor_rn(V[0], V[4], V[1], V[3]));
+    const bool ortho = cam.projection == ORTHOGRAPHIC;
+    const vec3 dir = ortho ? vec3(0.0, 0.0, 1.0) : pv;
+    const vec3 n = vec3(dot3_rn(adj0, dir), dot3_rn(adj1, dir), dot3_rn(adj2, dir));
+    const float c = dot3_rn(n, pv);
+    const float a = n.x / cam.fx, b = n.y / cam.fy;
+    precise const float k = (ortho ? -c : n.z) - a * cam.cx - b * cam.cy;
+    return vec4(a, b, k, ortho ? n.z : c);
+}
+
+// port of popfree.h: splat_popfree_plane (DepthPlane as a vec4)
+vec4 splat_popfree_plane(CameraParams cam, SplatIn in_) {
+    precise vec3 pv, s;
+    precise float opacity = 1.0;
+    precise float cov3[6];
+    view_point(cam, in_.mean, pv);
+    filter_3d_scales(in_, s, opacity);
+    covariance_3d(in_.quat, s, cov3);
+    return popfree_plane(cam, pv, cov3);
 }
 
 // port of preprocess.h: finish_splat (preprocess.comp)

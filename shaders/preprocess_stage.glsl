@@ -95,13 +95,8 @@ struct StageSplat {
 const int STAGE_DC_CLAMP = 1;
 const int STAGE_RADIAL = 2;
 
-// port of preprocess_stage.h: preprocess_stage (all but the colour; false behind the near plane)
-bool preprocess_stage(SplatIn in_, CameraParams cam, int rules, out StageSplat st) {
-    precise vec3 pv;
-    if (!view_point(cam, in_.mean, pv)) return false;
-    // Mip-Splatting 3D filter (applied in every mode when present): scales grow, opacity compensates.
-    precise vec3 s;
-    precise float opacity = in_.opacity;
+// port of preprocess_stage.h: filter_3d_scales (the Mip-Splatting 3D filter: scales grow, opacity compensates)
+void filter_3d_scales(SplatIn in_, precise out vec3 s, precise inout float opacity) {
     if (in_.filter_3d > 0.0) {
         precise const float f2 = in_.filter_3d * in_.filter_3d;
         precise float ratio = 1.0;
@@ -114,6 +109,15 @@ bool preprocess_stage(SplatIn in_, CameraParams cam, int rules, out StageSplat s
     } else {
         s = in_.scale;
     }
+}
+
+// port of preprocess_stage.h: preprocess_stage (all but the colour; false behind the near plane)
+bool preprocess_stage(SplatIn in_, CameraParams cam, int rules, out StageSplat st) {
+    precise vec3 pv;
+    if (!view_point(cam, in_.mean, pv)) return false;
+    precise vec3 s;
+    precise float opacity = in_.opacity;
+    filter_3d_scales(in_, s, opacity);
     precise float cov3[6];
     precise vec3 cov;
     covariance_3d(in_.quat, s, cov3);

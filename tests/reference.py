@@ -1,5 +1,5 @@
-"""Brute-force float64 reference renderer, written from the written spec (KERNELS.md §0, §2, §4-§6,
-gaussian-blending paper §3 and Appendix A-B; §7-§8 for wsr and duplex), independently of native/include/gbv/*.h.
+"""Brute-force float64 reference renderer, written from the written spec (docs/modes.md,
+the Gaussian Blending paper's §3 and Appendix A-B), independently of native/include/gbv/*.h.
 
 It is deliberately simple: preprocess is vectorised over splats, blending loops over the depth-sorted
 splats of each 16x16 tile and is vectorised over that tile's pixels (every pixel still runs its own

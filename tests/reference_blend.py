@@ -89,7 +89,7 @@ def blend_scalar_like(pre, idx, pix, mode, added=None):
 
 
 def blend_gb(pre, idx, pix, state=None, return_centre=False, added=None):
-    """Gaussian Blending transmittance window (KERNELS.md §6.3).
+    """Gaussian Blending transmittance window (docs/modes.md#gaussian-blending).
 
     Returns C (P,3), T (P,), window size (P,2), tie (P,) [, window centre (P,2)]. `state` = (T, centre, size)
     starts from a given window instead of (1, pixel centre, (1, 1)).
@@ -185,7 +185,7 @@ def blend_gb(pre, idx, pix, state=None, return_centre=False, added=None):
 
 
 def blend_wsr(pre, idx, pix, wbg, bg, added=None):
-    """LC-WSR (KERNELS.md §7.2) over the splats idx, in any order. Returns rgb (P,3), T' = wbg / total, tie."""
+    """LC-WSR (docs/modes.md#wsr) over the splats idx, in any order. Returns rgb (P,3), T' = wbg / total, tie."""
     P = pix.shape[0]
     C = np.zeros((P, 3))
     S = np.zeros(P)
@@ -207,7 +207,7 @@ def blend_wsr(pre, idx, pix, wbg, bg, added=None):
 
 
 def blend_duplex(pre, idx, cell_of, pix, et, wbg, bg, added=None):
-    """Duplex-GS (KERNELS.md §8.4) over a cell-sorted list idx. Returns rgb (P,3), T' = w_bg / total, tie."""
+    """Duplex-GS (docs/modes.md#duplex) over a cell-sorted list idx. Returns rgb (P,3), T' = w_bg / total, tie."""
     P = pix.shape[0]
     C = np.zeros((P, 3))
     S = np.zeros(P)

@@ -21,11 +21,11 @@ GB_MIN_VAR = 0.001
 
 MODES = ("scalar", "mip", "analytic", "gaussian_blending")
 OIT_MODES = ("wsr", "duplex")
-DUPLEX_STOP = 0.01  # CUMMULT_THRESHOLD (KERNELS.md §8.1)
+DUPLEX_STOP = 0.01  # CUMMULT_THRESHOLD (docs/modes.md#duplex)
 WSR_EMPTY = 1e-4
 WSR_TERM_MAX = 64.0  # wsr: alpha and each colour term are capped here (the renderer's int64 fixed-point bound)
 
-# Spherical-harmonics constants of 3DGS (KERNELS.md §0.5).
+# Spherical-harmonics constants of 3DGS (docs/modes.md#colour).
 SH_C1 = 0.4886025119029199
 SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
 SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
@@ -122,7 +122,7 @@ def view_dirs(cp: dict, means: np.ndarray) -> np.ndarray:
 
 
 def _sh_raw(c: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-    """A 1-channel SH (N,K) at unit dirs (N,3): the raw sum (sort-free GS's v_i, KERNELS.md §7.3)."""
+    """A 1-channel SH (N,K) at unit dirs (N,3): the raw sum (sort-free GS's v_i, docs/modes.md#wsr)."""
     k = c.shape[1]
     x, y, z = dirs.T
     res = SH_C0 * c[:, 0]
@@ -144,7 +144,7 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
                view_filter: dict | None = None) -> dict:
     """Per-splat screen-space quantities (float64). Arrays are indexed like the scene; `keep` marks survivors.
 
-    wsr / duplex (KERNELS.md §7.2, §8.3): as scalar (+0.3, radius 3 sqrt(lambda_max)), and the opacity becomes
+    wsr / duplex (docs/modes.md#wsr, #duplex): as scalar (+0.3, radius 3 sqrt(lambda_max)), and the opacity becomes
     o * v * (1 - z/sigma if depth_correct), with v the view-weight SH (raw) or 1; culled when z >= sigma
     (depth_correct) or v * correction <= 0.
 
@@ -258,7 +258,7 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
 
 
 def preprocess_cells(cells, cam, supersample: int = 1) -> dict:
-    """Cells as Duplex-GS projects them (KERNELS.md §8.3): near cull, EWA with +0.3, radius ceil(2 sqrt(lambda1))."""
+    """Cells as Duplex-GS projects them (docs/modes.md#duplex): near cull, EWA +0.3, radius ceil(2 sqrt(lambda1))."""
     cp = camera_params(cam, supersample)
     W, H, R, t = (cp[k] for k in ("W", "H", "R", "t"))
     means = np.asarray(cells.means, np.float64)

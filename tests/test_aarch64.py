@@ -1,4 +1,4 @@
-"""The aarch64 build (issue 26), cross-built here and run under qemu-aarch64 with an aarch64 Python
+"""The aarch64 build (docs/install.md#aarch64), cross-built here and run under qemu-aarch64 with an aarch64 Python
 (scripts/check_aarch64.sh; slow, CI runs it): NEON built and selected; renders of two shared scenes in five modes
 equal to x86-64's (this process's scalar path, the reference every vector path is held to) within the tolerance of
 native_builds.py; and test_simd.py's NEON tests (NEON against the scalar path of the same aarch64 module, the

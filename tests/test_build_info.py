@@ -1,4 +1,4 @@
-"""Never silently slow (issue 26): gb.build_info() and `gbviewer info` report the CPU module's build (the builds
+"""Never silently slow: gb.build_info() and `gbviewer info` report the CPU module's build (the builds
 of other configurations are in test_build_variants.py and test_aarch64.py)."""
 
 from __future__ import annotations

@@ -206,3 +206,19 @@ def test_cameras_json_projection(tmp_path):
     with pytest.raises(gb.CameraError, match="cameras.json: entry 1: 'projection': expected perspective or "
                                              "orthographic, got '3'"):
         gb.load_cameras_json(path)
+
+
+def test_robust_bounds_are_the_percentiles_over_the_splats(bundled_scene):
+    """Column by column, the very values np.percentile gives over axis 0 (the framing of every camera rests on them),
+    on the bundled scene and on spread, clustered and repeated coordinates."""
+    rng = np.random.default_rng(5)
+    cases = [bundled_scene.means, rng.normal(0, 1e3, (1001, 3)), np.round(rng.normal(0, 2, (999, 3))),
+             np.concatenate([rng.uniform(-1, 1, (500, 3)), np.full((7, 3), 1e30)])]
+    for means in cases:
+        scene = gb.Scene.from_arrays(means.astype(np.float32), np.full((len(means), 3), 0.1, np.float32),
+                                     np.tile(np.float32([1, 0, 0, 0]), (len(means), 1)),
+                                     np.full(len(means), 0.5, np.float32), np.zeros((len(means), 1, 3), np.float32))
+        for pct in (2.0, 0.0, 37.5):
+            want = np.percentile(scene.means.astype(np.float64), [pct, 100 - pct], axis=0).astype(np.float32)
+            got = scene.robust_bounds(pct)
+            assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])

@@ -1,7 +1,7 @@
-"""The one-way layers of DESIGN.md, checked by import-linter on the source tree: a lower layer importing a higher
-one, two modules importing each other, one CLI subcommand module importing another, or a module outside the viewer
-importing an optional extra's package other than through gbviewer.extras, fails here (and the check is shown to
-catch each)."""
+"""The one-way layers (docs/architecture.md#layers), checked by import-linter on the source tree: a lower layer
+importing a higher one, two modules importing each other, one CLI subcommand module importing another, or a module
+outside the viewer importing an optional extra's package other than through gbviewer.extras, fails here (and the
+check is shown to catch each)."""
 
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ def test_the_check_catches_violations(tmp_path, module, line, contract):
     target.write_text((target.read_text() if target.exists() else "") + line)
     out = lint(tmp_path)
     assert out.returncode != 0, out.stdout[-2000:]
-    name = {"layers": "One-way layers (DESIGN.md) BROKEN", "cycles": "No import cycles between sibling modules BROKEN",
+    name = {"layers": "One-way layers BROKEN", "cycles": "No import cycles between sibling modules BROKEN",
             "extras": "Optional extras only through gbviewer.extras BROKEN",
             "cli": "Independent subcommands (gbviewer.cli) BROKEN"}
     assert name[contract] in out.stdout

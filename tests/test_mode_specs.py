@@ -17,6 +17,7 @@ from gbviewer import cli
 from gbviewer.cli import main
 from gbviewer.errors import GBViewerError, RenderError
 from gbviewer.render import Mode, RenderSettings
+from gbviewer.render.modes import MAX_QUEUE, STOPTHEPOP_QUEUE
 from gbviewer.render.presets import PRESETS
 from gbviewer.render.view_filter import ViewFilter
 from helpers import random_scene
@@ -122,7 +123,11 @@ def specs(draw) -> tuple[str, RenderSettings]:
     name = draw(st.sampled_from([*MODES, "supersample"]))
     mode = Mode.SCALAR if name == "supersample" else Mode.parse(name)
     spelled = draw(st.sampled_from([name, name.upper(), name.replace("_", "-")]))
-    return spelled + tail, RenderSettings(mode, n, lod=lod)
+    if mode != Mode.STOPTHEPOP:
+        return spelled + tail, RenderSettings(mode, n, lod=lod)
+    queue = draw(st.integers(0, MAX_QUEUE))  # 'stopthepop:K[:N]': its queue length comes before the supersampling
+    explicit_k = queue != STOPTHEPOP_QUEUE or explicit_n or draw(st.booleans())
+    return spelled + (f":{queue}" if explicit_k else "") + tail, RenderSettings(mode, n, lod=lod, queue=queue)
 
 
 class Seen(GBViewerError):

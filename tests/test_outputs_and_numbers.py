@@ -144,9 +144,12 @@ def test_trace_json_is_strict_with_nulls_for_non_finite_numbers(work):
 
 
 def test_a_frame_beyond_the_memory_budget_is_refused_before_allocating(work, capsys, monkeypatch):
-    monkeypatch.setenv(BUDGET_ENV, "100M")
-    refused(["render", "scene.ply", "--width", "1024", "--height", "1024", "--supersample", "8", "--out", "x.png",
+    monkeypatch.setenv(BUDGET_ENV, "100M")  # duplex renders whole frames only: refused
+    refused(["render", "scene.ply", "--width", "1024", "--height", "1024", "--mode", "duplex:8", "--out", "x.png",
              "--backend", "cpu"], capsys, "needs at least 1.", f"0.0977 GiB budget ({BUDGET_ENV})", f"set {BUDGET_ENV}")
+    monkeypatch.setenv(BUDGET_ENV, "10M")  # the other modes render in parts, but not even the stitched image fits
+    refused(["render", "scene.ply", "--width", "1024", "--height", "1024", "--supersample", "8", "--out", "x.png",
+             "--backend", "cpu"], capsys, "parts need", f"0.00977 GiB budget ({BUDGET_ENV})", f"set {BUDGET_ENV}")
     assert not (work / "x.png").exists()
     for bad in ("lots", "1e3", "   ", "0.1", "0K", "-1G", "1.5X", "1.5GG", "1,5G"):
         monkeypatch.setenv(BUDGET_ENV, bad)

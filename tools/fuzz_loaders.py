@@ -2,10 +2,10 @@
 
     python tools/fuzz_loaders.py FORMAT [--seconds N] [--corpus DIR] [-- libFuzzer options]
 
-FORMAT is one of the seed folders in tests/io/fuzz/seeds (inria, compressed, spz, splat, sog, ..., the JSON readers
-cameras and keyframes, and the datasets and command lines of tools/fuzz_targets.py): its small seed files start the
-corpus, new inputs go to `--corpus` (default .fuzz/FORMAT, kept between runs). An input fails when loading it raises
-anything but a one-line GBViewerError, emits a numpy RuntimeWarning, or returns a scene with non-finite values;
+FORMAT is one of the seed folders in tests/io/fuzz/seeds (inria, compressed, spz, splat, sog, gltf, ..., the JSON
+readers cameras, keyframes and nerfstudio (camera_path.json), and the datasets and command lines of
+tools/fuzz_targets.py): its small seed files start the corpus, new inputs go to `--corpus` (default .fuzz/FORMAT, kept between runs). An input fails when loading
+it raises anything but a one-line GBViewerError, emits a numpy RuntimeWarning, or returns a scene with non-finite values;
 libFuzzer also flags inputs that take over 10 s (60 s for the targets of a child process or the CLI) or 2 GiB.
 Failing inputs are written to tests/io/fuzz/crashes/ where tests/io/test_fuzz_regressions.py replays them with
 `check_load` forever after.
@@ -57,7 +57,15 @@ def _keyframes(path: Path) -> list[np.ndarray]:
     return _camera_arrays([k.camera for k in keys]) + [np.array([k.rate for k in keys], np.float32)]
 
 
-READERS = {"cameras": _cameras, "keyframes": _keyframes, **fuzz_targets.READERS}  # the others: scene formats
+def _nerfstudio(path: Path) -> list[np.ndarray]:
+    from gbviewer.nerfstudio_paths import load_nerfstudio_path
+
+    p = load_nerfstudio_path(path)
+    return _camera_arrays([k.camera for k in p.keys] + list(p.frames)) + [np.array([p.fps, p.seconds], np.float32)]
+
+
+# the others: scene formats
+READERS = {"cameras": _cameras, "keyframes": _keyframes, "nerfstudio": _nerfstudio, **fuzz_targets.READERS}
 SLOW = set(fuzz_targets.READERS) - {"photo", "lod_entry"}  # a child process per COLMAP input (30 s deadline), or the CLI
 
 

@@ -1,4 +1,4 @@
-"""Viewer soak (issue 17): open, switch and close scenes, good and bad, a few hundred times in the real window under
+"""Viewer soak: open, switch and close scenes, good and bad, a few hundred times in the real window under
 an Xvfb server of its own, with renders, backend switches and videos in flight; report memory over time and that
 the app never died.
 

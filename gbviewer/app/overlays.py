@@ -13,6 +13,7 @@ from ..camera import format_rate
 from ..io.trained_as import describe
 from ..render import AUTO
 from ..render.presets import trained_spec
+from .accumulate import is_stochastic
 from .difference_views import shows_photo
 from .keys import hint
 from .layout import Rect, loupe_uv
@@ -83,11 +84,15 @@ def pane_label(app: ViewerApp, p: PaneState, part: str) -> str:
     ps = state.settings.panes[p.index]
     shown = p.parts[part]
     job = shown.job
-    if job is None:
-        return f"{p.name}  {ps.mode if part == 'a' else ps.split_mode}"
+    if job is None:  # nothing rendered yet: what it will be
+        w, h = p.render_size
+        return (f"{p.name}{chr(39) if part == 'b' else ''}  {ps.mode if part == 'a' else ps.split_mode}  "
+                f"{format_rate(state.settings.rate)}  {w}x{h}")
     label = job.settings.label_for(state.scene) if state.scene is not None else job.settings.label
     if state.scene is not None and job.settings.name == trained_spec(state.scene.meta):
         label += f" (as trained: {describe(state.scene.meta)})"
+    if is_stochastic(job.settings):  # the running mean's samples per pixel (accumulate)
+        label += f" {shown.accumulation.samples(job.settings.supersample)} spp"
     rate = format_rate(job.info.get("rate", state.settings.rate))
     w, h = job.info.get("full_size", (job.camera.width, job.camera.height))
     name = p.name + ("'" if part == "b" else "")
@@ -124,13 +129,17 @@ def part_box(r: Rect, split: bool, split_pos: float, part: str) -> Rect:
 
 
 def message(app: ViewerApp, p: PaneState, part: str) -> tuple[str, int] | None:
-    """A pane part's one message line: its error, else (the first pane, in fly mode) the fly keys, else its preview
-    or refining state, else its PSNR/SSIM line."""
+    """A pane part's one message line: its error, else (the first pane, in fly mode) the fly keys, else what it
+    waits for before its first tiles (`PaneRenders.progress`), else its preview or refining state, else its
+    PSNR/SSIM line."""
     shown, job = p.parts[part], p.parts[part].job
     if shown.error is not None:
         return shown.error.text, RED
     if app.state.fly and p.index == 0 and part == "a":
         return FLY_HINT.format(hint("toggle_fly")), ACCENT
+    waiting = app.panes.progress(p.index, part)
+    if waiting is not None:
+        return waiting, YELLOW
     if job is not None and job.info.get("preview", 1.0) < 1.0:
         fw, fh = job.info["full_size"]
         return f"moving: preview {job.camera.width}x{job.camera.height} (not {fw}x{fh})", YELLOW

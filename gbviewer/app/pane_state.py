@@ -11,6 +11,7 @@ from typing import Literal
 import numpy as np
 
 from ..render import Frame
+from .accumulate import Accumulation
 from .layout import Rect
 from .rates import PREVIEW_LOD_PX
 from .settings import PANE_NAMES
@@ -61,6 +62,7 @@ class Shown:
     progress: float | None = None  # fraction of a refining frame's tiles on screen; None once final
     stage: str = ""  # what is on screen: "preview", "quick" (x1 sample), "refining", "final"
     pacing: dict[str, float] = field(default_factory=dict)  # ms from a request to its "preview"/"tiles"/"final"
+    accumulation: Accumulation = field(default_factory=Accumulation)  # a stochastic mode's frames so far
 
 
 @dataclass
@@ -70,6 +72,7 @@ class PaneState:
     index: int
     parts: dict[str, Shown] = field(default_factory=lambda: {"a": Shown(), "b": Shown()})
     submitted: dict = field(default_factory=dict)  # part -> key of the last request
+    asked: dict = field(default_factory=dict)  # part -> the last request (RenderJob: what it waits for)
     fps: dict[str, RateMeter] = field(default_factory=lambda: {"a": RateMeter(), "b": RateMeter()})
     ms_per_px: dict = field(default_factory=dict)  # (part, mode, supersample, backend) -> cost of a full render
     rect: Rect = Rect(0, 0, 1, 1)
@@ -85,5 +88,6 @@ class PaneState:
         start at `preview_lod` (rates.first_preview_lod)."""
         self.parts = {"a": Shown(), "b": Shown()}
         self.submitted.clear()
+        self.asked.clear()
         self.ms_per_px.clear()
         self.preview_lod = preview_lod

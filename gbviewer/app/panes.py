@@ -1,11 +1,14 @@
 """The panes' renders: which requests go to the render thread this frame (one per pane part whose view changed, at a
-preview resolution while the camera moves; at full resolution, refining progressively, once it stops), frames
+preview resolution while the camera moves; at full resolution, refining progressively, once it stops; a large
+scene's first picture in a pane is a preview, the full frame refines over it), previews drawing the hierarchy's cut
+or, until it is there, the scene's sparse stand-in (never waiting for the hierarchy), frames
 uploaded to textures as they come (quick stage, finished tiles, final) or, on the GPU display path, drawn from the
 display texture they were rendered into (`display`), and their images queued for drawing."""
 
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import replace
 from typing import Callable
 
@@ -14,11 +17,14 @@ import numpy as np
 
 from ..camera import Camera
 from ..figure import to_uint8
+from ..lod import hierarchy_state
+from ..lod.sparse import stride
 from ..render import Frame, RenderSettings
+from .accumulate import is_stochastic
 from .blit import Blitter
 from .display import GpuFrame
 from .layout import split_parts
-from .rates import preview_factor, preview_lod
+from .rates import first_preview, preview_factor, preview_lod
 from .pane_state import PaneError, PaneState, Shown
 from .state import AppState
 from .views import visualize
@@ -63,7 +69,10 @@ class PaneRenders:
             for part in s.parts(p.index):
                 w, h = p.render_size
                 cost = p.ms_per_px.get((part, ps.mode if part == "a" else ps.split_mode, ps.supersample, backend))
-                f = preview_factor(w * h, cost, PREVIEW_BUDGET_MS * 2 / max(2, slots), moving)
+                shown = p.parts[part]
+                first = first_preview(s.scene.num_splats)  # a large scene's first picture: nothing of it shown yet
+                first = first if first < 1.0 and shown.job is None and shown.error is None else None
+                f = first or preview_factor(w * h, cost, PREVIEW_BUDGET_MS * 2 / max(2, slots), moving)
                 cam = s.pane_camera(p.index, f)
                 settings = s.settings_for(p.index, part)
                 samples = cam.width * cam.height * settings.supersample ** 2
@@ -77,28 +86,41 @@ class PaneRenders:
                     continue
                 if p.parts[part].error is not None and p.parts[part].error.kind == "too_large":
                     p.parts[part].error = None
-                display = "gpu" if ps.view == "color" and self.worker.display_path(backend)[0] == "gpu" else "copy"
-                key = (id(s.scene), view_key, (cam.width, cam.height), settings, backend, display)
+                stochastic = is_stochastic(settings)  # its running mean needs each frame's pixels: the copy path
+                gpu = ps.view == "color" and not stochastic and self.worker.display_path(backend)[0] == "gpu"
+                display = "gpu" if gpu else "copy"
+                key = base = (id(s.scene), view_key, (cam.width, cam.height), settings, backend, display)
+                if stochastic:  # still: the next frame index of its running mean (accumulate)
+                    settings = p.parts[part].accumulation.request(base, settings, moving or f < 1.0)
+                    if settings is None:
+                        continue
+                    key = base + (settings.frame,)
                 if moving and (os.cpu_count() or 1) > 1:  # leave a core to the UI thread while the camera moves
                     settings = replace(settings, threads=(os.cpu_count() or 2) - 1)
-                if f < 1.0 and settings.lod is None and s.scene.oit is None:  # a preview draws a cut (rates)
-                    settings = replace(settings, lod=p.preview_lod)
+                stand_in = False
+                if f < 1.0 and s.scene.oit is None:  # a preview draws a cut (rates), or the stand-in until it can
+                    if hierarchy_state(s.scene) == "ready" or stride(s.scene.num_splats) == 1:
+                        settings = replace(settings, lod=p.preview_lod) if settings.lod is None else settings
+                    else:
+                        settings, stand_in = replace(settings, lod=None), True
                 if p.submitted.get(part) == key:
                     continue
                 p.submitted[part] = key
-                shown = p.parts[part]
-                progressive = f == 1.0 and self.worker.capabilities(backend).progressive and ps.view == "color"
+                progressive = (f == 1.0 and self.worker.capabilities(backend).progressive and ps.view == "color"
+                               and settings.frame == 0)  # a later frame of a running mean arrives whole
                 est_ms = cost * w * h if cost else None
                 jobs.append(RenderJob(
                     (p.index, part), s.scene, cam, settings, backend,
-                    {"key": key, "preview": f, "rate": s.settings.rate, "full_size": (w, h)},
+                    {"key": key, "preview": f, "rate": s.settings.rate, "full_size": (w, h),
+                     "accumulate": base if stochastic else None, "first": first is not None},
                     priority=int(not moving and s.hover is not None and s.hover[0] == p.index),
                     preview=f < 1.0,
                     progressive=progressive,
                     underlay=shown.frame.rgb if progressive and shown.frame is not None and shown.view == "color"
                     else None,
                     quick=self._quick(p.index, settings, est_ms) if progressive else None,
-                    display=display))
+                    display=display, stand_in=stand_in))
+                p.asked[part] = jobs[-1]
         if jobs:
             self.worker.submit_all(jobs)
 
@@ -110,11 +132,42 @@ class PaneRenders:
             return None
         return self.state.pane_camera(i, min(1.0, 1.0 / rate)), replace(settings, supersample=1)
 
+    def progress(self, i: int, part: str) -> str | None:
+        """What pane i's part is waiting for while it has no image of the scene yet, or only its first preview: the
+        render thread, a preview (of the stand-in), the full frame's first tiles; and the hierarchy's build or read
+        in the background. None once its full frame's tiles come (its refining line), or with an earlier frame."""
+        s = self.state
+        p = s.panes[i]
+        shown, asked = p.parts[part], p.asked.get(part)
+        if asked is None or asked.scene is not s.scene or (shown.job is not None and not shown.job.info.get("first")):
+            return None
+        if shown.job is asked and not asked.preview:
+            return None  # its quick stage, tiles or frame are on screen
+        w, h = asked.camera.width, asked.camera.height
+        if shown.job is asked:  # the preview came this frame: the full frame is asked for after drawing it
+            doing = "rendering {}x{} next".format(*asked.info["full_size"])
+        elif not asked.started:
+            doing = "waiting for the render thread"
+        elif asked.preview:
+            k = stride(s.scene.num_splats)
+            doing = f"rendering a preview {w}x{h}" + (f" (1 splat in {k})" if asked.stand_in else "")
+        else:
+            doing = f"rendering {w}x{h}"
+        since = asked.started or asked.submitted
+        line = ("preview shown; " if shown.job is not None else "") + doing
+        line += "" if shown.job is asked else f" {time.perf_counter() - since:.1f} s"
+        lod = hierarchy_state(s.scene)
+        return line + (f" · {lod} level of detail" if lod in ("building", "reading") else "")
+
     def poll(self) -> None:
         """Take finished renders; re-colour frames whose pane view changed (a GPU frame's pane asks for a copy-path
         render instead: its texture holds colour only); hand the display textures of dropped frames back."""
         for res in self.worker.results():
             self._take(res)
+        s = self.state
+        if not s.pictured.is_set() and s.scene is not None and all(
+                p.parts[part].job is not None for p in s.visible for part in s.parts(p.index)):
+            s.pictured.set()  # every pane shows the scene: its hierarchy's build may begin (loading.prepare_lod)
         for p in self.state.visible:
             view = self.state.settings.panes[p.index].view
             for part, shown in p.parts.items():
@@ -186,7 +239,10 @@ class PaneRenders:
             key = (part, res.job.settings.name, res.job.settings.supersample, res.job.backend)
             p.ms_per_px[key] = total_ms / (cam.width * cam.height)
         p.fps[part].tick(res.finished)
-        self._upload(res.job.slot, shown, res.frame, s.settings.panes[i].view)
+        frame, base = res.frame, res.job.info.get("accumulate")
+        if base is not None:
+            frame = shown.accumulation.add(base, frame, res.job.settings.frame)
+        self._upload(res.job.slot, shown, frame, s.settings.panes[i].view)
         preview = res.job.info.get("preview", 1.0) < 1.0
         if preview and res.job.settings.lod == p.preview_lod and s.settings.panes[i].lod == 0:
             p.preview_lod = preview_lod(p.preview_lod, total_ms)

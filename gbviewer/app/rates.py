@@ -73,10 +73,21 @@ PREVIEW_MS = 60.0  # a preview render's budget (the panes' previews of one camer
 
 def first_preview_lod(num_splats: int) -> float:
     """A scene's first preview cut, before any preview of it has been timed: 8 px from 4 M splats, 4 from 2 M, 2 from
-    1 M, else PREVIEW_LOD_PX. preview_lod then adapts it; from 1 px a 6.1 M-splat scene's first orbit measured its
-    way up through previews of seconds (its cut draws 6.0 M splats at 1 px, 0.58 M at 8 at x1; 4-5 previews a
-    second over the first orbit, 12.5 over later ones)."""
+    1 M, else PREVIEW_LOD_PX. preview_lod then adapts it; starting from 1 px, a large scene's first orbit would work
+    its way up through previews of seconds (at x1 a 1 px cut of a capture keeps nearly all its splats)."""
     return float(min(8.0, max(PREVIEW_LOD_PX, 2.0 ** math.floor(math.log2(max(num_splats, 1) / 500_000)))))
+
+
+FIRST_PREVIEW_SPLATS = 2_000_000  # from this many splats a pane's first picture of a scene is a preview (at 1 M the
+# full frame's first tiles came about as soon as a preview, whose render then delayed the final frame)
+FIRST_PREVIEW = 0.25  # its fraction of the render resolution (per axis)
+
+
+def first_preview(num_splats: int) -> float:
+    """The resolution factor of a pane's first picture of a scene: FIRST_PREVIEW from FIRST_PREVIEW_SPLATS splats
+    (it shows within a second while the full frame takes seconds; then the full frame refines over it), else 1 (the
+    full frame at once)."""
+    return FIRST_PREVIEW if num_splats >= FIRST_PREVIEW_SPLATS else 1.0
 
 
 def preview_lod(tau: float, preview_ms: float) -> float:

@@ -1,4 +1,4 @@
-"""The viewer's zoom video, written by gbviewer.video.record_video in a thread."""
+"""The viewer's video (a zoom, or along its camera path), written by gbviewer.video.record_video in a thread."""
 
 from __future__ import annotations
 
@@ -7,24 +7,26 @@ import time
 import traceback
 from pathlib import Path
 
-from ..camera import Camera
+from ..camera_paths import PathFrame
 from ..cancel import CancelToken
 from ..errors import GBViewerError
 from ..render import RenderSettings
 from ..scene import Scene
 from .slot_thread import lower_priority
 
+VIDEO_CONTAINERS = {"h264": ".mp4", "h265": ".mp4", "vp9": ".webm", "av1": ".webm"}  # the Record button's codecs
+
 
 class VideoJob:
-    """A zoom video (x1 to x1/8, one column per mode) written by gbviewer.video.record_video in a thread."""
+    """A video along `path` (one column per mode) written by gbviewer.video.record_video in a thread, in `codec`
+    (the container: `out`'s extension)."""
 
-    def __init__(self, scene: Scene, camera: Camera, settings: list[RenderSettings], out: Path, frames: int = 90,
-                 fps: float = 30.0, backend: str = "cpu", start: float = 1.0, end: float = 0.125) -> None:
-        from ..camera_paths import zoom_path
+    def __init__(self, scene: Scene, path: list[PathFrame], settings: list[RenderSettings], out: Path,
+                 fps: float = 30.0, backend: str = "cpu", codec: str = "h264") -> None:
         from ..video import record_video
 
         self.out = Path(out)
-        self.done_frames, self.total = 0, frames
+        self.done_frames, self.total = 0, len(path)
         self.error = ""
         self.info = None
         self.started = time.perf_counter()
@@ -38,8 +40,7 @@ class VideoJob:
         def run() -> None:
             lower_priority()  # the window keeps its core while the video renders
             try:
-                path = zoom_path(camera, frames, start, end)
-                self.info = record_video(scene, path, settings, self.out, fps=fps, backend=backend,
+                self.info = record_video(scene, path, settings, self.out, fps=fps, backend=backend, codec=codec,
                                          progress=progress, cancel=self._cancel)
             except GBViewerError as exc:
                 self.error = str(exc)

@@ -33,13 +33,13 @@ def scaled_nearest(image: np.ndarray, width: int, height: int) -> np.ndarray:
 
 def companions(first: "Job", waiting: list) -> list:
     """Of the `waiting` jobs, those rendered in one `render_many` with `first`: frames of its kind (previews with a
-    preview, which share its cut's stage; final frames with a final frame) on the copy display path, of the same
-    scene, backend and camera."""
+    preview of the same splats, which share its cut's stage; final frames with a final frame) on the copy display
+    path, of the same scene, backend and camera."""
     if first.display == "gpu":
         return []
     key = camera_key(first.camera)
     return [j for j in waiting if j.scene is first.scene and j.backend == first.backend and j.preview == first.preview
-            and j.display != "gpu" and camera_key(j.camera) == key]
+            and j.stand_in == first.stand_in and j.display != "gpu" and camera_key(j.camera) == key]
 
 
 def _poster(job: "Job", partial: np.ndarray, post: Post) -> Callable[[int, int], None]:

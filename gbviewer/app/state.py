@@ -3,17 +3,20 @@ all of it is unit-tested without a window (tests/app/test_state.py); `window.Vie
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Literal
 
 from ..camera import Camera, load_cameras_json
+from ..camera_paths import zoom_path
 from ..errors import GBViewerError
 from ..io.datasets.backdrop import RGB, choose_background, format_rgb
 from ..io.trained_as import describe
 from ..render import Mode, RenderSettings
 from ..render.presets import trained_spec
+from ..render.spec import spec_parts
 from ..scene import Scene
 from .background import FIXED, PHOTOS
 from .camera_actions import CameraActions
@@ -23,7 +26,8 @@ from .layout import PANEL_W, Rect, dock_split, fit_aspect, pane_rects
 from .loading import SceneLoader
 from .pane_state import PaneState
 from .rates import clamp_rate, first_preview_lod, render_size, step_rate
-from .recording import VideoJob
+from .path_keys import PathKeys, is_nerfstudio_file
+from .recording import VIDEO_CONTAINERS, VideoJob
 from .screenshots import shot_name
 from .settings import MAX_PANES, MODE_NAMES, AppSettings, PaneSettings, add_recent
 
@@ -55,6 +59,7 @@ class AppState(CameraActions):
         self.cam_index = -1
         self.dataset = DatasetViews(self.message)  # the training photos, their views, the snapped one
         self.loader: SceneLoader | None = None
+        self.pictured = threading.Event()  # the scene's LoadResult.pictured: set once the panes show it
         self.load_error = self.load_error_short = ""
         self.fly = False
         self.show_help = False
@@ -71,6 +76,8 @@ class AppState(CameraActions):
         self.pending_cameras = cameras  # opened once the first scene is in
         self.video: VideoJob | None = None
         self.video_frames = 90
+        self.video_codec = "h264"
+        self.path_keys = PathKeys()  # the camera path the Record button follows once it has two keys
 
     def message(self, text: str, level: Level = "info") -> None:
         self.messages.append((time.perf_counter(), text, level))
@@ -81,6 +88,9 @@ class AppState(CameraActions):
     def open(self, path: str | Path) -> None:
         """Open a scene (in the background) or, for a .json, training cameras."""
         path = Path(path).expanduser()
+        if is_nerfstudio_file(path):
+            self.import_camera_path(path)
+            return
         if is_cameras_file(path):
             self.open_cameras(path)
             return
@@ -126,6 +136,7 @@ class AppState(CameraActions):
             self.dataset.drop_for_new_scene(ds is not None and bounds_fit_cameras(lo, hi, [v.camera for v in ds.views]))
             self.background_source = FIXED
         self.scene, self.scene_path = res.scene, res.path
+        self.pictured = res.pictured
         self.load_error = ""
         self.settings.recent = add_recent(self.settings.recent, res.path)
         self.cameras, self.cameras_path, self.cam_index = (res.cameras or []), res.cameras_path, -1
@@ -293,27 +304,69 @@ class AppState(CameraActions):
     def settings_for(self, i: int, part: str) -> RenderSettings:
         """What pane i's part ('a', or 'b' of a split) renders with."""
         ps: PaneSettings = self.settings.panes[i]
-        settings = RenderSettings.parse(ps.split_mode if part == "b" else ps.mode, supersample=ps.supersample,
-                                        background=self.background, lod=ps.lod if ps.lod > 0 else None)
+        spec = ps.split_mode if part == "b" else ps.mode
+        settings = RenderSettings.parse(spec, supersample=ps.supersample, background=self.background,
+                                        lod=ps.lod if ps.lod > 0 else None)
+        if "precision" not in spec_parts(str(spec)):  # interactive frames: fast unless the pane asks for exact
+            settings = replace(settings, precision="fast")
         debug = "window" if ps.view == "window" and settings.mode == Mode.GAUSSIAN_BLENDING else "none"
         return replace(settings, debug=debug)
 
     # ---- zoom video ---------------------------------------------------------------------------------------------
 
+    def video_camera(self) -> Camera:
+        """The current view at the video's pane size: VIDEO_PANE_W wide, the panes' aspect, even height."""
+        r = self.panes[0].rect
+        h = max(2, round(VIDEO_PANE_W * r.h / max(1, r.w) / 2) * 2)
+        return self.controller.camera(VIDEO_PANE_W, h)
+
     def record_video(self, frames: int | None = None, out: str | Path | None = None) -> VideoJob | None:
-        """Start the zoom video (x1 to x1/8) of the current view, one column per visible pane's mode, in the
-        background; 480 px wide panes with the panes' aspect."""
+        """Start the video, one column per visible pane's mode, in the background, in `video_codec`: along the
+        camera path once it has two keys (an imported one at its frame rate), else the zoom (x1 to x1/8) of the
+        current view; VIDEO_PANE_W px wide panes."""
         if self.scene is None or (self.video is not None and not self.video.finished()):
             return None
-        r = self.panes[0].rect
-        w = VIDEO_PANE_W
-        h = max(2, round(w * r.h / max(1, r.w) / 2) * 2)
-        cam = self.controller.camera(w, h)
         settings = [replace(self.settings_for(i, "a"), debug="none") for i in range(self.settings.pane_count)]
-        out = Path(out) if out else shot_name(self, "zoom").with_suffix(".mp4")
-        self.video = VideoJob(self.scene, cam, settings, out, frames or self.video_frames)
+        along = len(self.path_keys) >= 2
+        out = Path(out) if out else shot_name(self, "path" if along else "zoom",
+                                              VIDEO_CONTAINERS[self.video_codec])
+        try:
+            path = self.path_keys.frames(VIDEO_PANE_W) if along else zoom_path(self.video_camera(),
+                                                                               frames or self.video_frames)
+        except GBViewerError as exc:
+            self.message(f"video: {exc}", "error")
+            return None
+        fps = self.path_keys.frame_rate if along else 30.0
+        self.video = VideoJob(self.scene, path, settings, out, fps=fps, codec=self.video_codec)
         self.message(f"recording {out.name} ({self.video.total} frames) in the background")
         return self.video
+
+    def add_keyframe(self) -> None:
+        """A keyframe of the camera path at the current view."""
+        self.path_keys.add(self.video_camera())
+        self.message(f"camera path: {len(self.path_keys)} keyframes")
+
+    def import_camera_path(self, path: str | Path) -> None:
+        """Take nerfstudio's camera_path.json as the camera path; the view snaps to its first camera."""
+        try:
+            p = self.path_keys.import_file(path)
+        except GBViewerError as exc:
+            self.message(str(exc), "error")
+            return
+        first = p.frames[0] if p.frames else p.keys[0].camera
+        self._snap(first)
+        self.message(f"camera path {Path(path).name}: {len(p.keys)} keyframes, {len(p.frames)} frames "
+                     f"({p.size[0]}x{p.size[1]}, {p.frame_rate:g} fps)")
+
+    def export_camera_path(self, out: str | Path | None = None) -> Path | None:
+        """Write the camera path as nerfstudio's camera_path.json (into the screenshot folder by default)."""
+        try:
+            written = self.path_keys.export(Path(out) if out else shot_name(self, "camera_path", ".json"))
+        except GBViewerError as exc:
+            self.message(f"camera path: {exc}", "error")
+            return None
+        self.message(f"saved {written.name} (nerfstudio camera_path.json)")
+        return written
 
     def poll_video(self) -> None:
         """Say once how a finished video went."""

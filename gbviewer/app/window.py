@@ -210,6 +210,7 @@ class ViewerApp:
         if self.state.needs_reset:
             self.state.needs_reset = False
             self.state.reset_camera()
+            self.state.last_move = 0.0  # framing a scene just opened is no motion: its first pictures go out at once
         handle_input(self)
         draw_menu(self)
         draw_panel(self)

@@ -25,6 +25,7 @@ import numpy as np
 from ..camera import Camera
 from ..cancel import CancelToken
 from ..errors import BackendFailed, BackendUnavailable, GBViewerError, RenderCancelled, RenderError
+from ..lod import stand_in as sparse_stand_in
 from ..render import AUTO, BACKENDS, BackendChoice, Capabilities, Frame, Renderer, RenderSettings, create_gl_context
 from ..render.choice import FALLBACK, decide_measured
 from ..scene import Scene
@@ -50,7 +51,9 @@ class RenderJob:
     underlay: np.ndarray | None = None  # float RGB the refining frame starts from (scaled to the job's size)
     quick: tuple[Camera, RenderSettings] | None = None  # rendered and posted first: a cheap stand-in
     display: str = "copy"  # "gpu": into a display texture (a GpuFrame) where the backend's display path is gpu
+    stand_in: bool = False  # a preview of the scene's sparse stand-in (lod.stand_in): its hierarchy is not there yet
     submitted: float = 0.0  # set by the worker: perf_counter at submission
+    started: float = 0.0  # set by the render thread: perf_counter when it began the job (0: not yet)
 
 
 @dataclass(eq=False)
@@ -100,7 +103,8 @@ class RenderWorker(SlotThread):
         loop with it, so a frame or its first tiles are drawn at once)."""
         self._shared = shared
         self._classes = backends
-        self._renderers: dict[str, Renderer] = {}  # this thread's, with `_scene` uploaded
+        self._renderers: dict[tuple[str, bool], Renderer] = {}  # this thread's per (backend, stand-in), with `_scene`
+        # (or its stand-in) uploaded
         self._gl_ctx = None  # the context this thread's GL-context backends render in
         self._display_ctx = None  # the context shared with the window (GPU display path), current in this thread
         self._last_display = "copy"  # the display of the latest job: free display textures are kept while "gpu"
@@ -210,9 +214,10 @@ class RenderWorker(SlotThread):
             ok, why = False, f"{type(exc).__name__}: {exc}"
         return ("gpu", f"written into the window's texture through {name}-GL interop") if ok else ("copy", why)
 
-    def _renderer_of(self, name: str) -> Renderer:
-        """This thread's renderer of backend `name` with the current scene uploaded (made on first use)."""
-        if name not in self._renderers:
+    def _renderer_of(self, name: str, stand_in: bool = False) -> Renderer:
+        """This thread's renderer of backend `name` with the current scene (or its sparse stand-in: a renderer of
+        its own, so that neither is uploaded again for the other) uploaded (made on first use)."""
+        if (name, stand_in) not in self._renderers:
             if name not in self._classes:
                 raise RenderError(f"unknown backend {name!r}; expected one of {', '.join(self._classes)}")
             ok, why = self.backends.get(name, (False, "not checked"))
@@ -220,9 +225,9 @@ class RenderWorker(SlotThread):
                 raise (BackendFailed if name in self.failed else BackendUnavailable)(why)
             cls = self._classes[name]
             renderer = cls(ctx=self._gl_ctx) if cls.capabilities.gl_context else cls()
-            renderer.upload(self._scene)
-            self._renderers[name] = renderer
-        return self._renderers[name]
+            renderer.upload(sparse_stand_in(self._scene) if stand_in else self._scene)
+            self._renderers[(name, stand_in)] = renderer
+        return self._renderers[(name, stand_in)]
 
     def _release(self) -> None:
         """Free every renderer (and with them the scene and its GPU buffers), in this thread."""
@@ -234,11 +239,11 @@ class RenderWorker(SlotThread):
 
     def _failed(self, name: str, exc: BackendFailed) -> None:
         """Backend `name` stopped working: unusable from now on (with its renderer's reason), auto picks again."""
-        renderer = self._renderers.pop(name, None)
-        ok, why = renderer.usable() if renderer is not None else (True, "")
+        renderers = [self._renderers.pop(key) for key in [k for k in self._renderers if k[0] == name]]
+        ok, why = next((r.usable() for r in renderers), (True, ""))
         self.failed[name] = str(exc) if ok else why
         self.backends[name] = (False, f"stopped working: {self.failed[name]}")
-        if renderer is not None:
+        for renderer in renderers:
             free(renderer)
         self._decide()
 
@@ -289,12 +294,14 @@ class RenderWorker(SlotThread):
             self._scene = job.scene
 
         started = time.perf_counter()
+        for j in jobs:
+            j.started = started
 
         def each(**kw) -> list:
             return [RenderResult(j, None, finished=time.perf_counter(), started=started, **kw) for j in jobs]
 
         try:
-            renderer = self._renderer_of(job.backend)
+            renderer = self._renderer_of(job.backend, job.stand_in)
             if len(jobs) == 1 and job.display == "gpu" and self.display_path(job.backend)[0] == "gpu":
                 frames = [self._render_to_texture(renderer, job, cancel)]
             elif len(jobs) == 1 and not job.progressive:

@@ -24,7 +24,6 @@ from ..scene import Scene
 VERSION = 1  # bump when the layout of the file changes
 SPACING = 1.1  # grid step in units of the source's extent
 TILES = {"1m": 7, "6m": 40}  # of biker.compressed.ply (152,746 splats): 1,069,222 and 6,109,840 splats
-DEFAULT_SOURCE = Path("/work/shared/scenes/biker.compressed.ply")
 
 
 def cache_dir() -> Path:
@@ -88,7 +87,7 @@ def write_tiled(scene: Scene, tiles: int, path: Path) -> str:
     return digest.hexdigest()
 
 
-def tiled_scene(tiles: int, source: Path = DEFAULT_SOURCE, folder: Path | None = None, verify: bool = False,
+def tiled_scene(tiles: int, source: Path, folder: Path | None = None, verify: bool = False,
                 log=print) -> Path:
     """The path of `source` tiled `tiles` times with SH degree 3 in `folder` (default `cache_dir()`): reused when
     its record (source hash, tiles, version, size; with `verify` also the file's own hash) matches, else built."""

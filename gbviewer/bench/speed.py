@@ -137,7 +137,8 @@ def speed_cost(scene: Scene, cams: list[Camera], settings: list[RenderSettings],
 
 
 def ratios(rows: list[SpeedRow]) -> list[dict]:
-    """Per scene, backend, SIMD path, rate and size: gaussian_blending / scalar and supersample N x N /
+    """Per scene, backend, SIMD path, rate and size: gaussian_blending / scalar (and its fast precision's,
+    "gaussian_blending+fast / scalar", where measured) and supersample N x N /
     gaussian_blending (frame times); per mode, each vector SIMD path's blend-stage and frame speedup over the
     scalar path ("blend speedup avx2 over scalar": scalar's blend ms / avx2's)."""
     out = []
@@ -145,8 +146,11 @@ def ratios(rows: list[SpeedRow]) -> list[dict]:
     for (scene, backend, simd, rate, w, h, mode), r in index.items():
         where = {"scene": scene, "backend": backend, "simd": simd, "rate": rate, "width": w, "height": h}
         gb = index.get((scene, backend, simd, rate, w, h, "gaussian_blending"))
+        fast = index.get((scene, backend, simd, rate, w, h, "gaussian_blending+fast"))
         if mode == "scalar" and gb:
             out.append({**where, "ratio": "gaussian_blending / scalar", "value": gb.median_ms / r.median_ms})
+        if mode == "scalar" and fast:
+            out.append({**where, "ratio": "gaussian_blending+fast / scalar", "value": fast.median_ms / r.median_ms})
         if mode.startswith("scalar:") and gb:
             out.append({**where, "ratio": f"{mode} / gaussian_blending", "value": r.median_ms / gb.median_ms})
     for (scene, backend, simd, rate, w, h, mode), r in index.items():

@@ -13,10 +13,10 @@ from ..render import BACKENDS
 from ..io.outputs import refuse_collisions, refuse_inputs
 from .options import MAX_COUNT, add_lod_arg, check_render_size, progress_bar, settings_of
 
-BENCH_DEFAULTS = {"modes": "scalar,gaussian_blending,supersample:3", "rates": "1,1/8", "views": 2, "repeat": 2,
-                  "simd": None}
-BENCH_FULL = {"modes": "scalar,mip,analytic,gaussian_blending,supersample:3", "rates": "4,2,1,1/2,1/4,1/8",
-              "views": 3, "repeat": 3, "simd": "all"}
+BENCH_DEFAULTS = {"modes": "scalar,gaussian_blending,gaussian_blending+fast,supersample:3", "rates": "1,1/8",
+                  "views": 2, "repeat": 2, "simd": None}
+BENCH_FULL = {"modes": "scalar,mip,analytic,gaussian_blending,gaussian_blending+fast,supersample:3",
+              "rates": "4,2,1,1/2,1/4,1/8", "views": 3, "repeat": 3, "simd": "all"}
 
 
 def resolve_bench_options(args: argparse.Namespace) -> argparse.Namespace:

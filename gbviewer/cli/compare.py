@@ -12,8 +12,8 @@ from ..io import load
 from ..io.datasets.backdrop import choose_background
 from ..io.files import check_writable
 from ..render.presets import differences
-from .options import (add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_inset,
-                      check_render_size, settings_of)
+from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of, camera_from_args,
+                      check_inset, check_render_size, load_options, settings_of)
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
@@ -22,7 +22,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     background = choose_background(args.background, None)
     rates = args.rates
     check_writable(args.out, args.force, inputs=[args.scene, args.cameras], option="--out")
-    scene = load(args.scene)
+    scene = load(args.scene, **load_options(args))
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, rates, "--rates")
     check_inset(args.inset, cam.width, cam.height)
@@ -49,6 +49,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("compare", help="labelled grid of modes x sampling rates with PSNR (PNG)")
     p.add_argument("scene", type=Path)
+    add_load_args(p)
     add_camera_args(p)
     p.add_argument("--modes", default="scalar,supersample:3,gaussian_blending",
                    help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, the level-of-detail cut at PX)")

@@ -17,8 +17,8 @@ from ..io.files import check_writable
 from ..io.outputs import refuse_collisions
 from ..render import RenderSettings
 from ..video import MAX_FPS, MIN_FPS
-from .options import (MAX_COUNT, add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args,
-                      check_render_size, path_args, progress_bar, settings_of)
+from .options import (MAX_COUNT, add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of,
+                      camera_from_args, check_render_size, load_options, path_args, progress_bar, settings_of)
 
 FLICKER_PANE = (320, 240)  # default pane size
 VIDEO_NAME = "heat.mp4"
@@ -41,7 +41,7 @@ def cmd_flicker(args: argparse.Namespace) -> int:
     inputs = [args.scene, args.cameras, None if args.path in FLICKER_PATHS else args.path]
     for path in outputs:
         check_writable(path, args.force, inputs=inputs, option="--out")
-    scene = load(args.scene)
+    scene = load(args.scene, **load_options(args))
     cam = camera_from_args(scene, args)
     if args.path == "rate":
         check_render_size(cam.width, cam.height, [args.from_rate, args.to_rate], "--from/--to")
@@ -51,7 +51,8 @@ def cmd_flicker(args: argparse.Namespace) -> int:
     total = min(args.pairs, max(1, len(path) - 1)) * 2 * (len(settings) + 2)
     with progress_bar("flicker", total) as advance:
         report = measure_flicker(scene, path, settings, reference=reference, pairs=args.pairs, backend=backend,
-                                 keep_pairs=args.video, path_name=str(args.path), progress=lambda _: advance(1))
+                                 keep_pairs=args.video, path_name=str(args.path), progress=lambda _: advance(1),
+                                 accumulate=args.accumulate)
     print_report(report, cam.width, cam.height)
     written = write_table(out, report, args.force) + write_heat_maps(out, report, args.force)
     if args.video:
@@ -80,6 +81,7 @@ def print_report(report, width: int, height: int) -> None:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("flicker", help="temporal stability per mode along a camera path: table, heat maps, video")
     p.add_argument("scene", type=Path)
+    add_load_args(p)
     add_camera_args(p)
     p.add_argument("--modes", default="scalar,mip,analytic,gaussian_blending,supersample:3",
                    help="comma-separated MODE, MODE:N, supersample:N or preset:NAME, each with +lod[:PX] optionally")
@@ -102,6 +104,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-frames", type=count(), default=MAX_FRAMES, help="refuse longer paths")
     p.add_argument("--pairs", type=count(MAX_COUNT), default=DEFAULT_PAIRS,
                    help=f"pairs of consecutive frames measured, spread over the path (default {DEFAULT_PAIRS})")
+    p.add_argument("--accumulate", type=count(MAX_COUNT), default=1,
+                   help="stochastic modes: show each frame as the mean of this many frame indices, as a still "
+                        "viewer pane after that many frames (default 1: one sample per pixel per frame)")
     p.add_argument("--size", type=SIZE, metavar="WxH", help="pane size (default 320x240)")
     add_backend_arg(p)
     p.add_argument("--out", required=True, help="folder for flicker.csv, flicker.json, heat-MODE.png (and heat.mp4)")

@@ -22,6 +22,17 @@ from ..validate import integer
 MAX_COUNT = 10_000  # most views, repeats and flicker frames of a benchmark
 
 
+def add_load_args(p: argparse.ArgumentParser) -> None:
+    """--primitive: how the commands that load one scene read a glTF file."""
+    p.add_argument("--primitive", type=count(lo=0), metavar="N",
+                   help="glTF: load only the N-th splat primitive (default: all of them, as one scene)")
+
+
+def load_options(args: argparse.Namespace) -> dict:
+    """The `gbviewer.load` keywords that `add_load_args`'s options give."""
+    return {"primitive": args.primitive}
+
+
 def add_camera_args(p: argparse.ArgumentParser) -> None:
     """--cameras/--camera, --orbit, --width/--height, --up, --projection: shared by the commands that render."""
     p.add_argument("--cameras", type=Path, help="3DGS cameras.json")

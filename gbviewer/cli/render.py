@@ -13,16 +13,20 @@ from ..io.files import check_writable
 from ..io.trained_as import describe
 from ..render import Mode, get_renderer
 from ..render.presets import PRESETS, trained_spec
-from .options import (add_backend_arg, add_camera_args, add_lod_arg, backend_of, camera_from_args, check_render_size,
-                      settings_of)
+from ..render.tiles import render_tiled
+from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of, camera_from_args,
+                      check_render_size, load_options, progress_columns, settings_of)
 
 
 def cmd_render(args: argparse.Namespace) -> int:
+    """One image; beyond the memory budget the CPU backend renders it in parts (`render_tiled`), bit for bit."""
+    from rich.progress import Progress
+
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".npy"):
         raise GBViewerError(f"{out}: output must end in .png or .npy")
     check_writable(out, args.force, inputs=[args.scene, args.cameras], option="--out")
-    scene = load(args.scene)
+    scene = load(args.scene, **load_options(args))
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, [args.scale], "--scale")
     cam = cam.at_sampling_rate(args.scale)
@@ -34,7 +38,11 @@ def cmd_render(args: argparse.Namespace) -> int:
             raise
         raise RenderError(f"{exc}: {args.scene} says it was trained as {describe(scene.meta)}, so it renders as "
                           f"{trained} unless --mode says otherwise") from None
-    frame = get_renderer(scene, backend_of(args)).render(cam, settings)
+    renderer = get_renderer(scene, backend_of(args))
+    with Progress(*progress_columns(), transient=True) as bar:  # shown while a large frame renders in parts
+        task = bar.add_task("parts", total=None, visible=False)
+        frame = render_tiled(renderer, cam, settings, scene.num_splats,
+                             progress=lambda done, total: bar.update(task, completed=done, total=total, visible=True))
     save_image(out, frame.rgb, force=args.force)
     st = frame.stats
     how = f" (as trained: {describe(scene.meta)})" if args.mode is None and trained else ""
@@ -47,6 +55,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="render one image")
     p.add_argument("scene", type=Path)
+    add_load_args(p)
     add_camera_args(p)
     p.add_argument("--mode", help=f"MODE[:N][+lod[:PX]], MODE one of {', '.join(m.label for m in Mode)} or "
                    f"preset:NAME ({', '.join(PRESETS)}); default: the mode the file says the scene was trained with "

@@ -10,7 +10,8 @@ from ..errors import GBViewerError
 from ..io import load
 from ..io.files import check_writable
 from ..render import trace_pixel
-from .options import MAX_COUNT, add_camera_args, camera_from_args, check_render_size, settings_of
+from .options import (MAX_COUNT, add_camera_args, add_load_args, camera_from_args, check_render_size, load_options,
+                      settings_of)
 
 
 def cmd_trace(args: argparse.Namespace) -> int:
@@ -20,7 +21,7 @@ def cmd_trace(args: argparse.Namespace) -> int:
     if args.json:
         check_writable(args.json, args.force, inputs=[args.scene, args.cameras], option="--json")
     settings = settings_of(args)
-    scene = load(args.scene)
+    scene = load(args.scene, **load_options(args))
     cam = camera_from_args(scene, args)
     check_render_size(cam.width, cam.height, [args.scale], "--scale")
     cam = cam.at_sampling_rate(args.scale)
@@ -39,6 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("trace", help="what the CPU kernel did at one pixel, splat by splat, per mode: top "
                                      "contributors, rejections, colour and transmittance (tables; --json)")
     p.add_argument("scene", type=Path)
+    add_load_args(p)
     add_camera_args(p)
     p.add_argument("--pixel", type=PIXEL, required=True, metavar=PIXEL.metavar,
                    help="the output pixel, from 0 (x right, y down) in the image at --scale")

@@ -15,22 +15,26 @@ from ..scene import Scene, loaded_from
 from .compressed_ply import is_compressed_ply, load_compressed_ply
 from .duplex import is_duplex_ply, load_duplex
 from .files import file_stat
+from .gltf import is_glb, looks_like_gltf
+from .gltf_splats import load_gltf
 from .ply import check_sh_range, load_inria_ply, load_streamed_ply, read_ply
 from .progress import LoadProgress, Progress
 from .sog import ZIP_MAGIC, load_sog
 from .splat import load_splat, looks_like_splat
 from .spz import GZIP_MAGIC, MAGIC as SPZ_MAGIC, read_spz
 from .trained_as import ply_comments, resolve, signals_of
+from .save import WRITE_FORMATS, dropped, format_for, save
 from .write import write_inria_ply
 
-__all__ = ["load", "load_cameras_json", "write_inria_ply"]
+__all__ = ["WRITE_FORMATS", "dropped", "format_for", "load", "load_cameras_json", "save", "write_inria_ply"]
 
 SH_DTYPES = ("float32", "float16")
-FORMATS = ("INRIA (incl. sort-free GS), Duplex-GS or compressed .ply, .spz, .sog (zip, folder or meta.json) or .splat")
+FORMATS = ("INRIA (incl. sort-free GS), Duplex-GS or compressed .ply, .spz, .sog (zip, folder or meta.json), .splat or "
+           "glTF (.glb/.gltf with KHR_gaussian_splatting)")
 
 
 def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable | None = None,
-         sh_dtype: str = "float32") -> Scene:
+         sh_dtype: str = "float32", primitive: int | None = None) -> Scene:
     """Load a splat scene file or SOG folder; the format comes from the content, not the extension.
 
     `progress`: called as fn(done, total, unit) with unit "bytes" (read from the file), then "splats" (decoded),
@@ -41,7 +45,8 @@ def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable
     beyond float16's range); the renderers convert them to float32 at upload. `scene.meta["trained_as"]` and its
     source: the mode the file says it was trained with (gbviewer.io.trained_as). `scene.content`: the digest of
     the bytes read (every file of a multi-file format), hashed as they are read (what the hierarchy cache keys on);
-    None when the file changed during the load. The scene's arrays are read-only."""
+    None when the file changed during the load. The scene's arrays are read-only. `primitive`: for a glTF file,
+    load only its N-th splat primitive (all of them, as one scene, by default)."""
     path = Path(path)
     if sh_dtype not in SH_DTYPES:
         raise GBViewerError(f"sh_dtype {sh_dtype!r}; expected one of {', '.join(SH_DTYPES)}")
@@ -50,7 +55,7 @@ def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable
         reporter.check()
         before = file_stat(path)
         with np.errstate(all="ignore"):  # overflow in decoding is data: Scene drops non-finite splats with a warning
-            scene = _load(path, reporter, sh_dtype)
+            scene = _load(path, reporter, sh_dtype, primitive)
             scene.meta.update(resolve(signals_of(scene.meta, ply_comments(path) if path.is_file() else [])))
             if scene.sh.dtype != sh_dtype:  # formats decoded in float32: converted once whole
                 scene = replace(scene, sh=check_sh_range(scene.sh, np.dtype(sh_dtype)).astype(sh_dtype))
@@ -63,7 +68,15 @@ def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable
         raise SceneFormatError(path, str(exc).removeprefix(f"{path}: ")) from None
 
 
-def _load(path: Path, progress: LoadProgress, sh_dtype: str) -> Scene:
+def _load(path: Path, progress: LoadProgress, sh_dtype: str, primitive: int | None) -> Scene:
+    if primitive is not None:
+        head = b""
+        if path.is_file():
+            with open(path, "rb") as fh:
+                head = fh.read(1 << 16)
+        if not (is_glb(head) or looks_like_gltf(path, head)):
+            raise SceneFormatError(path, f"--primitive {primitive}: not a glTF file (only glTF has primitives)")
+        return load_gltf(path, progress, primitive)
     if path.is_dir():
         return load_sog(path, progress)
     if not path.is_file():
@@ -78,7 +91,13 @@ def _load(path: Path, progress: LoadProgress, sh_dtype: str) -> Scene:
         if is_compressed_ply(ply):
             return load_compressed_ply(path, ply, progress)
         return load_duplex(path, ply) if is_duplex_ply(ply) else load_inria_ply(path, ply, progress)
-    if head.startswith(ZIP_MAGIC) or head.lstrip().startswith(b"{"):
+    if is_glb(head):
+        return load_gltf(path, progress)
+    if head.lstrip().startswith(b"{"):
+        with open(path, "rb") as fh:
+            json_head = fh.read(1 << 16)
+        return load_gltf(path, progress) if looks_like_gltf(path, json_head) else load_sog(path, progress)
+    if head.startswith(ZIP_MAGIC):
         return load_sog(path, progress)
     if head.startswith(SPZ_MAGIC) or head.startswith(GZIP_MAGIC):
         return read_spz(path, progress)

@@ -1,4 +1,4 @@
-"""Trained Duplex-GS checkpoints (KERNELS.md §1.2, §8.2): an anchor ply plus TorchScript MLPs, decoded per view.
+"""Trained Duplex-GS checkpoints (docs/formats.md#duplex-gs): an anchor ply plus TorchScript MLPs, decoded per view.
 
 Layout (LiYukeee/Duplex-GS `save_ply`, `save_mlp_checkpoints`): `point_cloud.ply` with one vertex per anchor (cell):
 `x y z level extra_level info f_offset_* f_anchor_feat_* anchor_size_0..2 anchor_rot_0..3 anchor_shd_0 anchor_shv_*`,
@@ -43,6 +43,7 @@ from ..camera import NEAR_PLANE, Camera
 from ..cells import Cells
 from ..errors import SceneFormatError
 from ..scene import SH_C0, Scene
+from .transform import sh_basis
 
 MLP_FILES = {"opacity": "opacity_mlp.pt", "cov": "cov_mlp.pt", "color": "color_mlp.pt"}
 OPTIONAL_FILES = {"feature_bank": "feature_bank_mlp.pt", "appearance": "embedding_appearance.pt"}
@@ -278,22 +279,7 @@ class DuplexModel:
 def _eval_sh(coeffs: np.ndarray, dirs: np.ndarray) -> np.ndarray:
     """eval_sh of 3DGS for a 1-channel SH (A,K) at unit directions (A,3): the raw sum (no +0.5)."""
     c = np.asarray(coeffs, np.float64)
-    x, y, z = np.asarray(dirs, np.float64).T
-    k = c.shape[1]
-    basis = [np.full_like(x, SH_C0)]
-    if k > 1:
-        c1 = 0.4886025119029199
-        basis += [-c1 * y, c1 * z, -c1 * x]
-    if k > 4:
-        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-        basis += [1.0925484305920792 * xy, -1.0925484305920792 * yz, 0.31539156525252005 * (2 * zz - xx - yy),
-                  -1.0925484305920792 * xz, 0.5462742152960396 * (xx - yy)]
-    if k > 9:
-        basis += [-0.5900435899266435 * y * (3 * xx - yy), 2.890611442640554 * xy * z,
-                  -0.4570457994644658 * y * (4 * zz - xx - yy), 0.3731763325901154 * z * (2 * zz - 3 * xx - 3 * yy),
-                  -0.4570457994644658 * x * (4 * zz - xx - yy), 1.445305721320277 * z * (xx - yy),
-                  -0.5900435899266435 * x * (xx - 3 * yy)]
-    return (np.stack(basis, 1) * c).sum(1)
+    return (sh_basis(dirs, c.shape[1]) * c).sum(1)
 
 
 def load_duplex(path: Path, ply: plyfile.PlyData) -> Scene:

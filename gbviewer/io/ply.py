@@ -1,8 +1,8 @@
-"""INRIA 3DGS `.ply` (KERNELS.md §1.1): raw parameters per vertex, activated on load.
+"""INRIA 3DGS `.ply` (docs/formats.md#inria-3dgs-ply): raw parameters per vertex, activated on load.
 
-Also the sort-free GS layout (KERNELS.md §1.2): the INRIA columns plus `f_do_0`, `f_ro_*` (the view weight v_i as a
-raw 1-channel SH, kept as `Scene.oit.view_weight_sh`) and `info`, a column that carries the globals in its first rows:
-info[0] = weight_background, info[1] = sigma."""
+Also the sort-free GS layout (docs/formats.md#variant-layouts): the INRIA columns plus `f_do_0`, `f_ro_*` (the view
+weight v_i as a raw 1-channel SH, kept as `Scene.oit.view_weight_sh`) and `info`, a column that carries the globals in
+its first rows: info[0] = weight_background, info[1] = sigma."""
 
 from __future__ import annotations
 

@@ -3,7 +3,8 @@ from (`trained_as_source`, e.g. "antialiased: spz flag"), and `trained_as_confli
 
 Signals, each a convention some trainer writes:
 - PLY header `comment SplatRenderMode: mip|default` (Brush's exporter and reader; the same convention in gsplat
-  PR #1036 and nerfstudio PR #3773): mip = gsplat's `antialiased` rasterize mode, default = `classic` 3DGS;
+  PR #1036 and nerfstudio PR #3773): mip = gsplat's `antialiased` rasterize mode, default = `classic` 3DGS; a glTF
+  file's `asset.extras` {"SplatRenderMode": ...}, gbviewer's own use of that convention where glTF has no field;
 - the `.spz` header's antialiased flag (flags bit 0, Niantic's spz) and the SOG meta.json `antialias` field: set
   means antialiased, clear or absent says nothing (writers that do not know leave it clear);
 - a `filter_3D` column: Mip-Splatting's 3D filter is in the data (it trains with its 2D mip filter as well).
@@ -70,6 +71,10 @@ def signals_of(meta: dict, comments: list[str] | None = None) -> list[Signal]:
     """Every training-mode signal of a loaded scene's `meta` (and its PLY header `comments`), data first."""
     out = [Signal(MIP_3D, "filter_3D column")] if meta.get("filter_3D") else []
     out += comment_signals(comments or [])
+    declared = meta.get("splat_render_mode")
+    if isinstance(declared, str):
+        out.append(Signal(COMMENT_VALUES.get(declared.lower(), UNKNOWN),
+                          f"glTF asset.extras '{COMMENT_KEY}: {declared}'"))
     if meta.get("antialiased"):
         out.append(Signal(ANTIALIASED, "spz flag" if meta.get("format") == "spz" else "sog antialias field"))
     return out

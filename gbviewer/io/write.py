@@ -1,4 +1,4 @@
-"""Write a Scene as a standard INRIA 3DGS `.ply` (binary float32, KERNELS.md §1.1).
+"""Write a Scene as a standard INRIA 3DGS `.ply` (binary float32, docs/formats.md#inria-3dgs-ply).
 
 Raw parameters are chosen so that loading the file gives back the Scene bit for bit whenever such
 values exist (always for a Scene loaded from an INRIA `.ply`): log and logit are refined, by
@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import GBViewerError
 from .files import atomic_write
 from ..scene import Scene
 from .ply import activate_opacity, activate_scales
@@ -69,7 +70,7 @@ def inria_columns(scene: Scene) -> dict[str, np.ndarray]:
     cols["opacity"] = opacity
     oit = scene.oit
     vw = oit.view_weight_sh if oit is not None else None
-    if vw is not None:  # sort-free GS layout (KERNELS.md §1.2)
+    if vw is not None:  # sort-free GS layout (docs/formats.md#variant-layouts)
         cols["f_do_0"] = vw[:, 0]
         cols.update({f"f_ro_{i}": vw[:, i + 1] for i in range(vw.shape[1] - 1)})
     cols.update({f"scale_{i}": scale[:, i] for i in range(3)})
@@ -98,14 +99,17 @@ def trained_as_comments(scene: Scene) -> tuple[str, ...]:
     return (f"{COMMENT_KEY}: {value}",) if value else ()
 
 
+def refuse_neural(scene: Scene, what: str) -> None:
+    """Refuse a Duplex-GS checkpoint, whose splats only its MLPs give, per view."""
+    if scene.oit is not None and scene.oit.neural is not None:
+        raise GBViewerError(f"{scene.source}: a Duplex-GS checkpoint has no fixed splats (its MLPs decode them per "
+                            f"view), so it cannot be written as {what}")
+
+
 def write_inria_ply(scene: Scene, path: str | Path, force: bool = False) -> Path:
     """Write `scene` to `path` atomically, its known training mode as a `SplatRenderMode` comment; refuses to
     overwrite an existing file unless `force`."""
-    if scene.oit is not None and scene.oit.neural is not None:
-        from ..errors import GBViewerError
-
-        raise GBViewerError(f"{scene.source}: a Duplex-GS checkpoint has no fixed splats (its MLPs decode them per "
-                            "view), so it cannot be written as an INRIA ply")
+    refuse_neural(scene, "an INRIA ply")
     cols = inria_columns(scene)
     header = ply_header(scene.num_splats, list(cols), trained_as_comments(scene))
     body = np.stack(list(cols.values()), axis=1).astype("<f4")

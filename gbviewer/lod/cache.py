@@ -14,8 +14,9 @@ import threading
 import time
 import warnings
 import weakref
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -50,7 +51,8 @@ def cache_key(scene: Scene, rule: str) -> str | None:
 
 def cached_build(scene: Scene, rule: str, folder: Path | None = None) -> Hierarchy:
     """The scene's hierarchy from the cache, else built (and written there when the folder can be written)."""
-    tree, write = _lookup(scene, rule, folder)
+    with _working(scene):
+        tree, write = _lookup(scene, rule, folder)
     write()
     return tree
 
@@ -71,6 +73,7 @@ def _lookup(scene: Scene, rule: str, folder: Path | None = None) -> tuple[Hierar
         except ValueError:  # not this scene's after all (a key collision): its own tree
             pass
     if entry.exists():
+        _doing[scene] = "reading"
         try:
             tree = read_entry(entry, scene, rule)
             _touch(entry)
@@ -80,6 +83,7 @@ def _lookup(scene: Scene, rule: str, folder: Path | None = None) -> tuple[Hierar
         except Exception as exc:  # noqa: BLE001 - a damaged or hostile entry of any kind (entry.read_entry)
             warnings.warn(f"{entry}: damaged level-of-detail cache entry ({type(exc).__name__}: {exc}); rebuilt",
                           stacklevel=3)  # hierarchy_for or cached_build's caller
+    _doing[scene] = "building"
     tree = build(scene, rule)
     try:
         tree.check(scene)
@@ -151,6 +155,25 @@ _writing: dict[Path, Hierarchy] = {}  # entries being written, and their trees
 _writing_lock = threading.Lock()
 _memo: "weakref.WeakKeyDictionary[Scene, dict[str, Hierarchy]]" = weakref.WeakKeyDictionary()
 _lock = threading.Lock()
+_doing: "weakref.WeakKeyDictionary[Scene, str]" = weakref.WeakKeyDictionary()  # what hierarchy_for does for a scene
+
+
+def hierarchy_state(scene: Scene, rule: str = "depth") -> str:
+    """Where the scene's hierarchy is, without waiting for it: "ready" (`hierarchy_for` returns it at once),
+    "reading" (from the cache), "building", or "" (not asked for)."""
+    if rule in _memo.get(scene, {}):
+        return "ready"
+    return _doing.get(scene, "")
+
+
+@contextmanager
+def _working(scene: Scene) -> Iterator[None]:
+    """While a hierarchy of `scene` is looked up or built (`_lookup` says which: reading, building)."""
+    _doing[scene] = "building"
+    try:
+        yield
+    finally:
+        _doing.pop(scene, None)
 
 
 def hierarchy_for(scene: Scene, rule: str = "depth", cache: bool = True) -> Hierarchy:
@@ -165,7 +188,8 @@ def hierarchy_for(scene: Scene, rule: str = "depth", cache: bool = True) -> Hier
         per_scene = _memo.setdefault(scene, {})
         if rule in per_scene:
             return per_scene[rule]
-        tree, write = _lookup(scene, rule) if cache else (build(scene, rule), _nothing)
+        with _working(scene):
+            tree, write = _lookup(scene, rule) if cache else (build(scene, rule), _nothing)
         per_scene[rule] = tree
     try:
         write()

@@ -13,8 +13,8 @@ its leaves'; its opacity keeps the leaves' area-weighted optical depth, -ln(1 - 
 alpha A_node = sum a A. `rule="opacity"` is "depth" with the leaves weighted by a alone (measured against, not
 used). `radius`: a sphere about the mean holding every leaf's centre; `size`: the merged Gaussian's world
 footprint, 2 sqrt(largest eigenvalue). A light, wide child may be larger than its parent, which then stands for it
-in the cut (measured: taking the largest child's size instead drew 969 k rather than 540 k nodes of the 6.1 M scene
-at x1/8 and lost 0.7 dB against the zoom-out reference).
+in the cut (taking the largest child's size instead draws far more nodes at zoom-out and loses PSNR against the
+zoom-out reference; bench/RESULTS.md).
 """
 
 from __future__ import annotations

@@ -23,16 +23,17 @@ SUFFIXES = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 BUDGET_RE = re.compile(r"(\d{1,20}(?:\.\d{1,20})?|\.\d{1,20})\s*([KMGT]?)", re.IGNORECASE)
 
 
-def frame_bytes(camera: Camera, settings: RenderSettings, splats: int) -> int:
+def frame_bytes(camera: Camera, settings: RenderSettings, splats: int, size: tuple[int, int] | None = None) -> int:
     """A lower bound of the bytes one frame allocates: its sample buffers at the supersampled size, the output
     pixels, the per-tile and per-splat buffers (the tile lists grow beyond one entry per splat with the
-    footprints, known only after projecting)."""
+    footprints, known only after projecting). `size`: the (width, height) of the part of the image rendered (a
+    region of the CPU renderer), by default all of it."""
     n = settings.supersample
-    samples = camera.width * camera.height * n * n
-    tiles = -(-camera.width * n // TILE) * -(-camera.height * n // TILE)
+    w, h = size or (camera.width, camera.height)
+    samples = w * h * n * n
+    tiles = -(-w * n // TILE) * -(-h * n // TILE)
     window = WINDOW_BYTES if settings.mode == Mode.GAUSSIAN_BLENDING else 0
-    return (samples * (SAMPLE_BYTES + window) + camera.width * camera.height * PIXEL_BYTES + tiles * TILE_BYTES
-            + splats * SPLAT_BYTES)
+    return samples * (SAMPLE_BYTES + window) + w * h * PIXEL_BYTES + tiles * TILE_BYTES + splats * SPLAT_BYTES
 
 
 def _available() -> tuple[int, str]:
@@ -75,11 +76,14 @@ def gib(n: int) -> str:
     return f"{n / (1 << 30):.3g} GiB"
 
 
-def check_frame_memory(camera: Camera, settings: RenderSettings, splats: int) -> None:
-    """Raise a one-line `RenderError` when the frame's buffers (`frame_bytes`) exceed the memory budget."""
-    need = frame_bytes(camera, settings, splats)
+def check_frame_memory(camera: Camera, settings: RenderSettings, splats: int,
+                       size: tuple[int, int] | None = None) -> None:
+    """Raise a one-line `RenderError` when the frame's buffers (`frame_bytes`, of the part `size`) exceed the
+    memory budget."""
+    need = frame_bytes(camera, settings, splats, size)
     budget, source = memory_budget()
     if need > budget:
-        raise RenderError(f"{camera.width}x{camera.height} at supersample {settings.supersample} needs at least "
+        w, h = size or (camera.width, camera.height)
+        raise RenderError(f"{w}x{h} at supersample {settings.supersample} needs at least "
                           f"{gib(need)} for its buffers, more than the {gib(budget)} budget ({source}); render "
                           f"smaller or set {BUDGET_ENV} (e.g. {BUDGET_ENV}=64G) to raise it")

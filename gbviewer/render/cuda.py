@@ -154,9 +154,10 @@ class CudaRenderer(NativeUploads, Renderer):
             self._sync(prep)
             control.step(0, 1)
             lead = tuple(self._textures.claim(x) for x in lead)
-            out = self._native(method, *lead, *camera_args(camera), int(settings.mode), settings.supersample,
+            out = self._native(method, *lead, *camera_args(camera), settings.native_mode, settings.supersample,
                              settings.sh_degree, np.asarray(settings.background, np.float32), *extra,
-                             *(prep.oit or ()), view_filter=settings.view_filter.native())
+                             *(prep.oit or ()), view_filter=settings.view_filter.native(), seed=settings.seed,
+                             frame=settings.frame)
             control.step(1, 1)
         return out, prep, t0
 

@@ -4,7 +4,7 @@ camera), the level-of-detail cut, the wsr / duplex globals and cells, the camera
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -69,25 +69,29 @@ MAX_SAMPLES = 2**31 - 1  # sub-samples of one frame: the native modules and shad
 
 
 def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backend: str,
-            lod_in_place: bool = False, flag: np.ndarray | None = None) -> Prepared:
+            lod_in_place: bool = False, flag: np.ndarray | None = None,
+            size: tuple[int, int] | None = None) -> Prepared:
     """The frame's inputs for `backend` from its uploaded scene (None: nothing uploaded, an error). A
     level-of-detail frame gets the cut's Scene, or with `lod_in_place` (the CPU renderer; not duplex) the hierarchy
     and cut arguments to draw the same cut from the uploaded scene. `flag`: the render's cancel flag
-    (RenderControl.flag), which stops the cut of a gathered cut Scene (RenderCancelled)."""
+    (RenderControl.flag), which stops the cut of a gathered cut Scene (RenderCancelled). `size`: the (width,
+    height) of the part of the image rendered (the CPU renderer's regions), by default all of it."""
     if scene is None:
         raise RenderError(f"{backend} renderer: upload(scene) before render()")
-    samples = camera.width * camera.height * settings.supersample**2
+    w, h = size or (camera.width, camera.height)
+    samples = w * h * settings.supersample**2
     if samples > MAX_SAMPLES:
-        raise RenderError(f"{camera.width}x{camera.height} at supersample {settings.supersample}: {samples} samples, "
+        raise RenderError(f"{w}x{h} at supersample {settings.supersample}: {samples} samples, "
                           f"more than the {MAX_SAMPLES} one frame can hold")
-    check_frame_memory(camera, settings, scene.num_splats)
+    check_frame_memory(camera, settings, scene.num_splats, size)
     t0 = time.perf_counter()
     view = view_scene(scene, camera)
     decode_ms = (time.perf_counter() - t0) * 1e3 if view is not scene else None
     tree = lod = None
     if settings.lod is not None:
         try:
-            if lod_in_place and settings.mode != Mode.DUPLEX:  # duplex builds its cells of the cut's own splats
+            # duplex builds its cells of the cut's own splats; stochastic_popfree's depth plane reads the cut's
+            if lod_in_place and settings.mode not in (Mode.DUPLEX, Mode.STOCHASTIC_POPFREE):
                 check_plain(view)
                 tree, lod = hierarchy_for(view), cut_view(camera, settings.lod)
             else:
@@ -155,9 +159,12 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
                 evaluations: int, cells_visible: int | None = None, cell_misses: int | None = None,
                 simd: str | None = None, stage_reused: bool | None = None, order_reused: bool | None = None,
                 stage_ms: float | None = None, order_ms: float | None = None,
-                lod_splats: int | None = None) -> FrameStats:
+                lod_splats: int | None = None, fast: bool = False) -> FrameStats:
     """The frame's stats from a backend's counts and stage times; t0: when the render began; lod_splats: the
-    level-of-detail cut a backend drew in place (else a cut's Scene says)."""
+    level-of-detail cut a backend drew in place (else a cut's Scene says); fast: the backend ran the fast precision
+    the settings ask for (a backend without that kernel renders, and says, exact)."""
+    if settings.precision == "fast" and not fast:
+        settings = replace(settings, precision="exact")
     counts = None  # the cut's (drawn, of)
     if settings.lod is not None:
         counts = prep.scene.meta.get("lod") if lod_splats is None else (lod_splats, prep.scene.num_splats)
@@ -167,7 +174,7 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
         total_ms=(time.perf_counter() - t0) * 1e3, visible=int(visible), sort_length=int(sort_length),
         sort_bytes=int(sort_length) * SORT_ENTRY_BYTES, pairs=int(pairs), evaluations=int(evaluations),
         evals_per_pixel=int(evaluations) / (camera.width * camera.height), backend=backend,
-        mode=settings.label_for(prep.scene, counts), simd=simd,
+        mode=settings.label_for(prep.scene, counts), simd=simd, precision=settings.precision,
         cells=prep.cells.num_cells if prep.cells is not None else None,
         cells_visible=None if cells_visible is None else int(cells_visible),
         cell_misses=None if cell_misses is None else int(cell_misses), decode_ms=prep.decode_ms,
@@ -191,17 +198,21 @@ def native_stats(out: dict, prep: Prepared, camera: Camera, settings: RenderSett
         evaluations=out["evaluations"], cells_visible=out["cells_visible"] if duplex else None,
         cell_misses=out["cell_misses"] if duplex else None, simd=str(out["simd"]) if "simd" in out else None,
         stage_reused=out.get("stage_reused"), order_reused=out.get("order_reused"), stage_ms=out.get("stage_ms"),
-        order_ms=out.get("order_ms"), lod_splats=out.get("lod_splats"),
+        order_ms=out.get("order_ms"), lod_splats=out.get("lod_splats"), fast=bool(out.get("fast", False)),
     )
 
 
 def native_frame(out: dict, prep: Prepared, camera: Camera, settings: RenderSettings, backend: str,
-                 t0: float) -> Frame:
-    """A Frame from a native module's result dict: rgb, alpha, evals, window? and `native_stats`' fields."""
+                 t0: float, region: tuple[int, int, int, int] | None = None) -> Frame:
+    """A Frame from a native module's result dict: rgb, alpha, evals, window? and `native_stats`' fields (of the
+    region's pixels when only a region (x, y, w, h) was rendered)."""
     debug = {"evals": out["evals"]}
     if "window" in out:
         debug["window"] = out["window"]
-    return Frame(out["rgb"], out["alpha"], native_stats(out, prep, camera, settings, backend, t0), debug)
+    stats = native_stats(out, prep, camera, settings, backend, t0)
+    if region is not None:
+        stats = replace(stats, evals_per_pixel=stats.evaluations / (region[2] * region[3]))
+    return Frame(out["rgb"], out["alpha"], stats, debug)
 
 
 def check_display_texture(texture, camera: Camera, backend: str) -> None:

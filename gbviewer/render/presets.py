@@ -27,6 +27,12 @@ mode's). The rules beyond the 2D filter (ViewFilter's dc_clamp, support, sort_ra
 | spark | sparkjsdev/spark: src/SparkRenderer.ts (preBlurAmount ?? 0.0, blurAmount ?? 0.3), src/shaders/splatVertex.glsl
   (a += preBlurAmount; detOrig; a += blurAmount; alpha *= sqrt(max(0, detOrig / det))) | as gsplat-antialiased, base
   colour clamped, support sqrt(8), radial sort |
+| supersplat-stochastic | playcanvas/engine: src/scene/shader-lib/glsl/chunks/gsplat/frag/gsplat.js (opacityDither with
+  the splat id * 0.013 as offset), src/scene/shader-lib/glsl/chunks/standard/frag/opacity-dither.js (discard when
+  alpha < the dither's noise) | the stochastic mode with supersplat's filter and rules |
+| spark-stochastic | sparkjsdev/spark: src/shaders/splatFragment.glsl (#ifdef STOCHASTIC: uniform from a hash of time,
+  pixel and splat index; kept when below alpha, written opaque; SparkViewpoint.stochastic) | the stochastic mode with
+  spark's filter and rules |
 | antimatter15 | antimatter15/splat: main.js (the vertex shader adds nothing to cov2d; .splat rows hold an 8-bit colour,
   no SH) | +0, SH 0, base colour clamped, support sqrt(8) |
 """
@@ -60,6 +66,8 @@ class Preset:
 
 
 QUAD_SIGMAS = math.sqrt(8.0)  # the quad's half side in sigmas in Spark, PlayCanvas and antimatter15 (module docstring)
+# The modes a preset's 2D filter applies to: those whose alpha is 3DGS's at the pixel centre.
+FILTERED_MODES = ("scalar", "stochastic", "stochastic_popfree")
 
 PRESETS = {p.name: p for p in (
     Preset("inria", "scalar", 3, ViewFilter(),
@@ -81,6 +89,18 @@ PRESETS = {p.name: p for p in (
            "(rgbMin 0, rgbMax 1)",
            "minAlpha 0.5/255, no 0.99 alpha cap, clipXY 1.4, the rest of the packed encoding (8-bit colour and "
            "opacity, log-encoded scales, float16 centres, quantised SH bands)"),
+    Preset("supersplat-stochastic", "stochastic", 3, ViewFilter(0.3, cull_lambda=0.5, support=QUAD_SIGMAS),
+           "playcanvas/engine src/scene/shader-lib/glsl/chunks/gsplat/frag/gsplat.js (opacityDither(alpha, "
+           "id * 0.013): the splat id offsets the dither), src/scene/shader-lib/glsl/chunks/standard/frag/"
+           "opacity-dither.js (discard when alpha < noise), the supersplat preset's filter and rules",
+           "its blue-noise (or Bayer) dither texture and per-frame jitter (ours: stochastic.h's white-noise hash), "
+           "the supersplat preset's list"),
+    Preset("spark-stochastic", "stochastic", 3, ViewFilter(0.3, pre_dilation=0.0, compensate=True, dc_clamp=True,
+                                                       support=QUAD_SIGMAS, sort_radial=True),
+           "sparkjsdev/spark src/shaders/splatFragment.glsl (STOCHASTIC: a hash of time, gl_FragCoord and the splat "
+           "index; rand < alpha writes the colour opaque, else discard), the spark preset's filter and rules",
+           "its PCG-style hash (ours is stochastic.h's), a time-based rather than frame-index seed, the spark "
+           "preset's list"),
     Preset("antimatter15", "scalar", 0, ViewFilter(0.0, dc_clamp=True, support=QUAD_SIGMAS),
            "antimatter15/splat main.js (no term added to cov2d; .splat colour only, clamped to 8 bits; quad "
            "2 sqrt(2 lambda), discard when A < -4)",

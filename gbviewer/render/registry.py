@@ -177,7 +177,7 @@ def render(
     """Render `scene` from `camera` in `mode` (a RenderSettings, which says everything; or any spec
     `RenderSettings.parse` takes, `supersample`, `sh_degree` and `options` filling what it leaves unset and agreeing
     with what it sets) on `backend` (cpu, glsl, cuda, or auto: `choose_backend()`'s pick); `options`: depth_correct,
-    et_grade, cell_size, threads, lod.
+    et_grade, cell_size, threads, lod, seed and frame (stochastic).
     `cancel`: a gbviewer.CancelToken (or a threading.Event); once set, the call raises RenderCancelled within one
     tile batch. `on_progress`: called as fn(done_tiles, total_tiles) from the rendering thread (an exception it raises
     cancels the render: CallbackError, chained to it). `partial`: a float32 (height, width, 3) array that receives

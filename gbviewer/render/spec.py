@@ -10,15 +10,21 @@ from .presets import PRESETS
 from .view_filter import ViewFilter
 
 
+PRECISIONS = ("exact", "fast")  # gaussian_blending's kernels (gbv/blend.h: blend_gaussian's Fast)
+
+
 def spec_parts(spec: str) -> dict:
     """The RenderSettings fields a mode spec sets (see `RenderSettings.parse`), the mode as its name."""
-    body, plus, suffix = spec.partition("+")
+    body, *suffixes = spec.split("+")
     parts: dict = {}
-    if plus:
+    for suffix in suffixes:
         kind, _, tau = suffix.partition(":")
-        if kind.strip().lower() != "lod":
-            raise RenderError(f"mode {spec!r}: expected MODE[:N][+lod[:TAU]]")
-        parts["lod"] = _spec_number(tau, float, spec, "LOD pixels") if tau.strip() else 1.0
+        kind = kind.strip().lower()
+        key = "precision" if kind in PRECISIONS else kind
+        if key not in ("lod", "precision") or key in parts or (kind in PRECISIONS and tau):
+            raise RenderError(f"mode {spec!r}: expected MODE[:N][+fast|+exact][+lod[:TAU]]")
+        parts[key] = kind if kind in PRECISIONS else \
+            _spec_number(tau, float, spec, "LOD pixels") if tau.strip() else 1.0
     name, _, n = body.strip().partition(":")
     name = name.strip().lower()
     if name == "preset":
@@ -30,6 +36,9 @@ def spec_parts(spec: str) -> dict:
                      sh_degree=preset.sh_degree)
     else:
         parts["mode"] = "scalar" if name == "supersample" else name  # RenderSettings parses (and checks) it
+        if name == "stopthepop" and n.strip():  # 'stopthepop:K[:N]': K, its queue length, comes first
+            queue, _, n = n.partition(":")
+            parts["queue"] = _spec_number(queue, int, spec, "queue length")
     if n.strip():
         parts["supersample"] = _spec_number(n, int, spec, "supersampling factor")
     return parts

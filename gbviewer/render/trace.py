@@ -31,6 +31,8 @@ SKIP_REASONS = (
     "early_stop",  # T (1 - alpha) < 1e-4: the pixel stops without this splat
     "cell_stop",  # duplex: a new cell entered with T < 0.01: the pixel stops
     "terminated",  # after the pixel stopped: not evaluated
+    "discarded",  # stochastic: the fragment's uniform is not below its alpha
+    "depth_test",  # stochastic_popfree: kept, but behind the nearest fragment kept so far
 )
 _FALLBACK, _STOPPED = 1, 2  # native flags
 

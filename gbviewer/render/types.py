@@ -1,12 +1,11 @@
-"""The render layer's types: Mode, RenderSettings, Frame and its FrameStats, the Renderer contract and its
-Capabilities, constants.
+"""The render layer's types: RenderSettings, Frame and its FrameStats, the Renderer contract and its Capabilities,
+constants; Mode and its groups re-exported from gbviewer.render.modes.
 
 Imports no backend."""
 
 from __future__ import annotations
 
 import abc
-import enum
 import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -19,45 +18,15 @@ from ..cancel import Cancellable
 from ..errors import BackendFailed, InvalidValue, RenderError
 from ..scene import Scene
 from ..validate import array, distinct_items, integer, real
-from .presets import PRESETS
-from .spec import shortest, shown, spec_parts
+# Mode and its groups live in .modes; imported here too so that `from .types import Mode, ...` keeps working
+from .modes import MAX_QUEUE, ORDER_INDEPENDENT, PER_PIXEL_SORTED, STOPTHEPOP_QUEUE, Mode
+from .presets import FILTERED_MODES, PRESETS
+from .spec import PRECISIONS, shortest, shown, spec_parts
 from .view_filter import ViewFilter
 
 
-class Mode(enum.IntEnum):
-    """Blending modes; values match `gbv::Mode` in native/include/gbv/common.h."""
-
-    SCALAR = 0  # 3DGS: alpha at the pixel centre, +0.3 px^2 dilation
-    MIP = 1  # Mip-Splatting 2D filter (0.1 px^2 with opacity compensation)
-    ANALYTIC = 2  # Analytic-Splatting: alpha integrated over the pixel, scalar transmittance
-    GAUSSIAN_BLENDING = 3  # spatial transmittance window (Gaussian Blending)
-    WSR = 4  # sort-free weighted sum (LC-WSR, Hou et al.): order independent, no sort
-    DUPLEX = 5  # Duplex-GS: cells sorted, weighted sum inside a cell, cell transmittance and early termination
-
-    @classmethod
-    def parse(cls, value: "str | int | Mode") -> "Mode":
-        if isinstance(value, cls):
-            return value
-        if isinstance(value, str):
-            try:
-                return cls[value.strip().upper().replace("-", "_")]
-            except KeyError:
-                names = ", ".join(m.name.lower() for m in cls)
-                raise RenderError(f"unknown mode {value!r}; expected one of {names}") from None
-        try:
-            return cls(int(value))
-        except ValueError:
-            raise RenderError(f"unknown mode {value!r}") from None
-
-    @property
-    def label(self) -> str:
-        return self.name.lower()
-
-
 DEBUG_OUTPUTS = ("none", "window")
-
-ORDER_INDEPENDENT = (Mode.WSR, Mode.DUPLEX)
-DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (KERNELS.md §8.1)
+DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (docs/modes.md#duplex)
 DEFAULT_SIGMA = 10.0  # sort-free GS's initial sigma, for depth correction on scenes without a trained one
 MAX_SUPERSAMPLE = 8
 MAX_THREADS = 1024
@@ -68,20 +37,30 @@ SORT_ENTRY_BYTES = 24  # per sorted key: 8-byte key + 4-byte value, input and ou
 
 @dataclass(frozen=True)
 class RenderSettings:
-    """How to render: mode, N x N supersampling (1..8), background colour (float32), SH degree cap (0..3), debug
-    planes.
+    """How to render, field by field (every number checked in __post_init__; docs/modes.md has each mode's rule).
 
-    `debug="window"` adds the final Gaussian Blending window size per pixel (H, W, 2) to `Frame.debug`.
-
-    scalar: `view_filter` is the 2D filter (default 3DGS's +0.3 px^2); `preset` names the viewer preset it came from
-    (gbviewer.render.presets, parsed from 'preset:NAME').
-
-    wsr and duplex: `depth_correct` multiplies each splat's weight by LC-WSR's max(0, 1 - z/sigma) (sigma: the
-    scene's trained value, else 10); `et_grade` is Duplex-GS's E (None: the scene's trained value, else 4.0, the
-    published final value); `cell_size` is the number of splats per cell built for scenes without cells.
-
-    `lod` (pixels >= 0): render the cut of the scene's splat hierarchy at that projected size (gbviewer.lod) in any
-    mode; None renders every splat.
+    mode: the blending mode (`Mode`, or its name).
+    supersample: N x N samples per pixel (1..8), box-averaged.
+    background: RGB the final transmittance shows (float32).
+    sh_degree: cap on the SH degree evaluated (0..3).
+    debug: "none", or "window" to add the final Gaussian Blending window size per pixel (H, W, 2) to `Frame.debug`.
+    threads: CPU threads (0: all).
+    depth_correct (wsr, duplex): multiply each splat's weight by LC-WSR's max(0, 1 - z/sigma) (sigma: the scene's
+        trained value, else 10).
+    et_grade (duplex): Duplex-GS's E (None: the scene's trained value, else 4.0, the published final value).
+    cell_size (duplex): splats per cell built for scenes without cells.
+    lod: render the cut of the scene's splat hierarchy at this projected size in pixels (>= 0; gbviewer.lod,
+        docs/lod.md) in any mode; None renders every splat.
+    view_filter (scalar, stochastic, stochastic_popfree): the 2D filter and the presets' rules (default 3DGS's
+        +0.3 px^2).
+    preset: the viewer preset the settings came from ('preset:NAME', gbviewer.render.presets), or "".
+    seed, frame (stochastic modes): the keep decisions' hash seed and frame index (uint32; same seed and frame, same
+        bits; another frame, another sample).
+    queue (stopthepop): the per-pixel queue length K (0..64; 0: unbounded, the exact per-pixel sort; default 4, as
+        published), spelled 'stopthepop:K' (and 'stopthepop:K:N' with N x N supersampling).
+    precision (gaussian_blending): "exact", or "fast" (spec suffix '+fast'): the fast kernel stays within 1/1024 of
+        the exact one per channel and in alpha (tests/render/test_gb_fast.py); the library renders exact unless asked,
+        the viewer's panes fast. Other modes have one kernel: their precision is always "exact".
     """
 
     mode: Mode = Mode.SCALAR
@@ -96,11 +75,19 @@ class RenderSettings:
     lod: float | None = None  # level of detail: draw the hierarchy's cut at this many pixels (None: every splat)
     view_filter: ViewFilter = ViewFilter()
     preset: str = ""
+    seed: int = 0  # stochastic modes: the keep decisions' hash seed (gbv/stochastic.h); same seed and frame, same bits
+    frame: int = 0  # stochastic modes: the frame index (another index, another sample)
+    queue: int = STOPTHEPOP_QUEUE
+    precision: str = "exact"  # gaussian_blending: "fast" within the stated bound of "exact"
 
     def __post_init__(self) -> None:
         """Every number checked through gbviewer.validate (the native renderers take them as int32 and float32);
         a bad one is a one-line RenderError naming the field."""
         object.__setattr__(self, "mode", Mode.parse(self.mode))
+        if self.precision not in PRECISIONS:
+            raise RenderError(f"precision {self.precision!r}; expected one of {', '.join(PRECISIONS)}")
+        if self.mode != Mode.GAUSSIAN_BLENDING:
+            object.__setattr__(self, "precision", "exact")
         if self.debug not in DEBUG_OUTPUTS:
             raise RenderError(f"debug output {self.debug!r}; expected one of {DEBUG_OUTPUTS}")
         try:
@@ -113,6 +100,8 @@ class RenderSettings:
                                                                     f32=True),
                 "cell_size": integer(self.cell_size, "cell_size", lo=1, hi=MAX_CELL_SIZE),
                 "lod": None if self.lod is None else real(self.lod, "lod", lo=0, hi=MAX_LOD, f32=True),
+                **{k: integer(getattr(self, k), k, lo=0, hi=2**32 - 1) for k in ("seed", "frame")},
+                "queue": integer(self.queue, "queue", lo=0, hi=MAX_QUEUE),
             }
         except InvalidValue as exc:
             raise RenderError(str(exc)) from None
@@ -121,9 +110,10 @@ class RenderSettings:
         object.__setattr__(self, "depth_correct", bool(self.depth_correct))
         if not isinstance(self.view_filter, ViewFilter):
             raise RenderError(f"view_filter {self.view_filter!r}; expected a gbviewer.render.ViewFilter")
-        if self.mode != Mode.SCALAR and not self.view_filter.is_default:
-            raise RenderError(f"view_filter {self.view_filter.describe()} applies to the scalar mode, not "
-                              f"{self.mode.label}")
+        if self.mode != Mode.STOPTHEPOP and self.queue != STOPTHEPOP_QUEUE:
+            raise RenderError(f"queue {self.queue} applies to the stopthepop mode, not {self.mode.label}")
+        if self.mode.label not in FILTERED_MODES and not self.view_filter.is_default:
+            raise RenderError(f"view_filter {self.view_filter.describe()} is not for {self.mode.label}")
         if self.preset:  # a name only: the settings must be the preset's, else they are labelled what they are not
             p = PRESETS.get(self.preset)
             if p is None or (Mode.parse(p.mode), p.view_filter, p.sh_degree) != \
@@ -154,13 +144,21 @@ class RenderSettings:
 
     @property
     def name(self) -> str:
-        """'scalar', 'preset:supersplat', ..."""
-        return f"preset:{self.preset}" if self.preset else self.mode.label
+        """'scalar', 'preset:supersplat', 'stopthepop:8' (a queue other than the published 4), ..."""
+        if self.preset:
+            return f"preset:{self.preset}"
+        return self.mode.label + (f":{self.queue}" if self.queue != STOPTHEPOP_QUEUE else "")
+
+    @property
+    def native_mode(self) -> int:
+        """The mode word the native renderers take: the Mode, stopthepop's queue length in the bits above 8."""
+        return int(self.mode) | (self.queue << 8 if self.mode == Mode.STOPTHEPOP else 0)
 
     @property
     def base_label(self) -> str:
-        """The label without the level of detail: 'scalar 3x3', ..."""
-        return self.name + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "")
+        """The label without the level of detail: 'scalar 3x3', 'gaussian_blending fast', ..."""
+        return self.name + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "") + \
+            (" fast" if self.precision == "fast" else "")
 
     @property
     def label(self) -> str:
@@ -168,15 +166,19 @@ class RenderSettings:
 
     @property
     def spec(self) -> str:
-        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1', ..."""
+        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1',
+        'gaussian_blending:2+fast', ..."""
         lod = f"+lod:{shortest(self.lod)}" if self.lod is not None else ""
-        return self.name + (f":{self.supersample}" if self.supersample > 1 else "") + lod
+        name = f"stopthepop:{self.queue}" if self.mode == Mode.STOPTHEPOP and self.supersample > 1 else self.name
+        fast = "+fast" if self.precision == "fast" else ""
+        return name + (f":{self.supersample}" if self.supersample > 1 else "") + fast + lod
 
     @classmethod
     def parse(cls, spec: "str | Mode", **options) -> "RenderSettings":
-        """'MODE' or 'MODE:N' (N x N supersampling); 'supersample:N' means scalar with N x N samples;
-        'preset:NAME[:N]' a viewer preset (gbviewer.render.presets: its mode, view filter and SH bands); a suffix
-        '+lod' or '+lod:TAU' draws the level-of-detail cut at TAU pixels (default 1).
+        """'MODE' or 'MODE:N' (N x N supersampling); 'stopthepop:K[:N]' (K: its queue length); 'supersample:N'
+        means scalar with N x N samples; 'preset:NAME[:N]' a viewer preset (gbviewer.render.presets: its mode, view
+        filter and SH bands); a suffix '+fast' or '+exact' sets the precision; '+lod' or '+lod:TAU' draws the
+        level-of-detail cut at TAU pixels (default 1).
 
         The one parser of every surface that takes a mode (commands, viewer panes, the library): `options`
         (RenderSettings fields; None: not given) fill what the spec leaves unset, and one that disagrees with a part
@@ -217,24 +219,32 @@ def settings_from(mode: "str | Mode | RenderSettings", where: str,
 
 @dataclass
 class FrameStats:
-    """What a render measured. Times in ms per stage; visible: splats that survive preprocess; sort_length: keys
-    sorted by depth (cpu: one per visible splat, the frame's global depth order, which it then bins in order; glsl
-    and cuda: tile-splat pairs; 0 for wsr, whose tile lists are only binned; tile-cell pairs for duplex);
-    sort_bytes: sort_length x SORT_ENTRY_BYTES; pairs: tile-list entries blended; evaluations: splat-pixel
-    evaluations, evals_per_pixel their mean; backend; mode: `RenderSettings.label_for` the scene.
+    """What a render measured, field by field (times in ms; None: not filled by this backend or mode).
 
-    Filled by some backends or modes only (None elsewhere): simd, the SIMD path the cpu backend's blend ran
-    ("scalar", "avx2" or "avx512", chosen by GBVIEWER_SIMD at load or gbviewer._native.testing.set_simd); duplex: cells,
-    cells_visible and cell_misses (splat-tile pairs outside their cell's tiles; not counted by glsl); decode_ms: the
-    MLPs of a trained Duplex-GS model, per view; lod_splats: the splats of the level-of-detail cut drawn
-    (`RenderSettings.lod`); with `Capabilities.shared_stage`: stage_reused, whether the frame used a per-camera
-    stage (the mode-independent preprocess; on cpu also the depth order) computed before, by an earlier render or
-    an earlier job of the same `render_many`, stage_ms, the time spent building the stage in this frame (0 when
-    reused; included in preprocess_ms); cpu only: order_reused, whether its tile lists were binned in a depth order
-    an earlier frame of that stage sorted (False where this frame sorted it, and for wsr and duplex, which bin
-    without it), and order_ms, the time spent sorting its depth order in this frame (0 when reused; included in
-    sort_ms, whose rest is the frame's own binning). A `render_many` frame's total_ms counts from the start of the
-    call, and on cpu its blend_ms is the time of the one tile loop all its frames share.
+    preprocess_ms, sort_ms, blend_ms: time per stage; total_ms: the whole render (a `render_many` frame's counts from
+        the start of the call; on cpu its blend_ms is the time of the one tile loop all its frames share).
+    visible: splats that survive preprocess.
+    sort_length: keys sorted by depth (cpu: one per visible splat, the frame's global depth order, which it then bins
+        in order; glsl and cuda: tile-splat pairs; duplex: tile-cell pairs; 0 for wsr, whose lists are only binned).
+    sort_bytes: sort_length x SORT_ENTRY_BYTES.
+    pairs: tile-list entries blended.
+    evaluations: splat-pixel evaluations; evals_per_pixel: their mean per output pixel.
+    backend: the backend's name; mode: `RenderSettings.label_for` the scene.
+    simd: the SIMD path the cpu blend ran ("scalar", "avx2", "avx512", "neon"; GBVIEWER_SIMD at load or
+        gbviewer._native.testing.set_simd).
+    cells, cells_visible: duplex's cells and those drawn; cell_misses: splat-tile pairs outside their cell's tiles
+        (not counted by glsl).
+    decode_ms: the MLPs of a trained Duplex-GS model, per view.
+    stage_reused (with `Capabilities.shared_stage`): whether the frame used a per-camera stage (the mode-independent
+        preprocess; on cpu also the depth order) computed earlier, by another render or job of the same `render_many`.
+    stage_ms: time spent building that stage in this frame (0 when reused; included in preprocess_ms).
+    order_reused (cpu): whether the tile lists were binned in a depth order an earlier frame of that stage sorted
+        (False where this frame sorted it, and for wsr and duplex, which bin without it).
+    order_ms (cpu): time spent sorting the depth order in this frame (0 when reused; included in sort_ms, whose rest is
+        the frame's own binning).
+    lod_splats: the splats of the level-of-detail cut drawn (`RenderSettings.lod`).
+    precision: the gaussian_blending kernel that ran ("exact" in every other mode, and on a backend without the fast
+        one).
     """
 
     preprocess_ms: float = 0.0
@@ -259,6 +269,7 @@ class FrameStats:
     stage_ms: float | None = None
     order_ms: float | None = None
     lod_splats: int | None = None
+    precision: str = "exact"
 
 
 @dataclass(eq=False)
@@ -277,22 +288,21 @@ class Frame:
 
 @dataclass(frozen=True)
 class Capabilities:
-    """What a backend does beyond `upload` and `render`: the app, video and bench ask these, never the backend's
-    name. Each flag names the methods it promises.
+    """What a backend does beyond `upload` and `render`, field by field: the app, video and bench ask these, never the
+    backend's name. Each flag names the methods it promises.
 
     progressive: `partial` receives each tile as it is blended and `on_progress` counts tiles (else the whole frame
-    arrives at the end, progress 0 then 1 of 1): worth showing while it refines.
+        arrives at the end, progress 0 then 1 of 1): worth showing while it refines.
     gl_texture: `render_to_texture(texture, camera, settings, cancel=, on_progress=) -> FrameStats` into a moderngl
-    RGBA32F texture; `release_texture(glo)` before such a texture is deleted.
-    gl_context: renders in an OpenGL context: the constructor takes `ctx=` (a moderngl context, current in the
-    calling thread, which the renderer then belongs to), `check_context(ctx) -> (usable, why)` says whether one will
-    do. Without it `gl_interop() -> (usable, why)` says whether `render_to_texture` can write into the textures of
-    the context current in this thread, and a renderer may be used from any thread, from several at once.
-    shared_stage: renders of one camera share the per-camera stage (the preprocess that does not depend on the
-    mode: view-space positions and depth, 2D covariances before the mode's filter, SH colours, culling) across
-    frames and settings while the scene is unchanged; `render_many` builds it once per distinct camera (and, on
-    progressive backends, blends its jobs' tiles interleaved); FrameStats.stage_reused and stage_ms say what was
-    reused (cpu, glsl, cuda; the cpu also shares the depth order).
+        RGBA32F texture; `release_texture(glo)` before such a texture is deleted.
+    gl_context: renders in an OpenGL context: the constructor takes `ctx=` (a moderngl context, current in the calling
+        thread, which the renderer then belongs to); `check_context(ctx) -> (usable, why)` says whether one will do.
+        Without it, `gl_interop() -> (usable, why)` says whether `render_to_texture` can write into the textures of the
+        context current in this thread, and a renderer may be used from any thread, from several at once.
+    shared_stage: renders of one camera share the per-camera stage (view-space positions and depth, 2D covariances
+        before the mode's filter, SH colours, culling) across frames and settings while the scene is unchanged;
+        `render_many` builds it once per distinct camera (progressive backends also blend its jobs' tiles
+        interleaved); FrameStats.stage_reused and stage_ms say what was reused (the cpu also shares the depth order).
     trace: `trace(camera, settings, x, y) -> PixelTrace` (gbviewer.render.trace).
     simd: `FrameStats.simd` names the blend's SIMD path, switched process-wide by gbviewer.bench.simd.
     host: renders on the host's CPU cores (`RenderSettings.threads` of them): rates per core mean something.

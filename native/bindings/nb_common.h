@@ -55,9 +55,14 @@ inline void check_view(const char* where, const FArr& R, const FArr& t, const FA
         fail(where, "R must be 3x3, t and background 3 floats");
 }
 
+// The mode word: the Mode in its low 8 bits, stopthepop's per-pixel queue length K (0..MAX_QUEUE, 0: unbounded) in
+// the bits above (gbviewer.render.RenderSettings.native_mode).
 inline Mode check_mode(const char* where, int mode) {
-    if (mode < SCALAR || mode > DUPLEX) fail(where, "unknown mode");
-    return (Mode)mode;
+    const int m = mode & 0xff, param = mode >> 8;
+    if (mode < 0 || m > STOPTHEPOP) fail(where, "unknown mode");
+    if (param != 0 && m != STOPTHEPOP) fail(where, "only stopthepop takes a mode parameter (its queue length)");
+    if (param > MAX_QUEUE) fail(where, "stopthepop's queue length must be 0..64");
+    return (Mode)m;
 }
 
 inline Projection check_projection(const char* where, int projection) {
@@ -112,6 +117,7 @@ inline RenderArgs parse_render_args(const char* where, const FArr& R, const FArr
     a.height = height;
     for (int c = 0; c < 3; ++c) a.bg[c] = background.data()[c];
     a.oit = OitParams{sigma, weight_background, et_grade, depth_correct ? 1 : 0};
+    if (md == STOPTHEPOP) a.queue = mode >> 8;
     return a;
 }
 
@@ -136,18 +142,20 @@ inline void set_view_filter(const char* where, RenderArgs& a, const std::optiona
     a.oit.sort_radial = v[6] != 0 ? 1 : 0;
 }
 
-// A render call's RenderArgs: parse_render_args' checks, then the SH degree cap, the window plane and the viewer
-// filter.
+// A render call's RenderArgs: parse_render_args' checks, then the SH degree cap, the window plane, the viewer
+// filter and the stochastic mode's seed and frame index.
 inline RenderArgs render_args(const char* where, const FArr& R, const FArr& t, float fx, float fy, float cx, float cy,
                               int width, int height, float near_plane, int projection, int mode, int supersample,
                               int sh_degree, const FArr& background, bool want_window, float sigma,
                               float weight_background, float et_grade, bool depth_correct,
-                              const std::optional<FArr>& view_filter) {
+                              const std::optional<FArr>& view_filter, uint32_t seed = 0, uint32_t frame = 0) {
     RenderArgs a = parse_render_args(where, R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
                                      supersample, background, sigma, weight_background, et_grade, depth_correct);
     a.sh_degree = sh_degree;
     a.want_window = want_window;
     set_view_filter(where, a, view_filter);
+    a.seed = seed;
+    a.frame = frame;
     return a;
 }
 

@@ -77,8 +77,11 @@ std::vector<nb::dict> run_frames(Renderer& r, const std::vector<RenderArgs>& fra
     if (!res.empty() && res[0].stopped && PyErr_Occurred()) throw nb::python_error();
     std::vector<nb::dict> out;
     for (size_t f = 0; f < res.size(); ++f) {
-        nb::dict d = result_dict(res[f].image, res[f].stats, (size_t)frames[f].height, (size_t)frames[f].width);
+        const RenderArgs& a = frames[f];
+        nb::dict d = result_dict(res[f].image, res[f].stats, (size_t)(a.rw ? a.rh : a.height),
+                                 (size_t)(a.rw ? a.rw : a.width));
         d["simd"] = res[f].simd;
+        d["fast"] = frames[f].fast && frames[f].mode == GAUSSIAN_BLENDING;  // the kernel that ran
         d["cancelled"] = res[f].cancelled;
         d["stage_ms"] = res[f].stats.stage_ms;
         d["order_ms"] = res[f].stats.order_ms;
@@ -90,14 +93,30 @@ std::vector<nb::dict> run_frames(Renderer& r, const std::vector<RenderArgs>& fra
     return out;
 }
 
+// A frame's part (x, y, w, h) in output pixels, or None: all of it (RenderArgs::rx .. rh).
+void set_region(const char* where, RenderArgs& a, nb::handle region) {
+    if (region.is_none()) return;
+    const nb::tuple r = nb::cast<nb::tuple>(region);
+    if (r.size() != 4) throw std::invalid_argument(std::string(where) + ": region must be (x, y, w, h)");
+    const int x = nb::cast<int>(r[0]), y = nb::cast<int>(r[1]), w = nb::cast<int>(r[2]), h = nb::cast<int>(r[3]);
+    if (x < 0 || y < 0 || w < 1 || h < 1 || x > a.width - w || y > a.height - h)
+        throw std::invalid_argument(std::string(where) + ": region must be (x, y, w, h) inside the image");
+    if ((int64_t)x * a.supersample % TILE || (int64_t)y * a.supersample % TILE)
+        throw std::invalid_argument(std::string(where) + ": region x and y times supersample must be multiples of " +
+                                    std::to_string(TILE));
+    a.rx = x, a.ry = y, a.rw = w, a.rh = h;
+}
+
 nb::dict render(Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                 float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                 bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct,
                 int threads, std::optional<LArr> cancel, std::optional<nb::callable> on_progress,
-                std::optional<PArr> partial, std::optional<FArr> view_filter, nb::handle lod) {
+                std::optional<PArr> partial, std::optional<FArr> view_filter, nb::handle lod, uint32_t seed,
+                uint32_t frame, bool fast) {
     RenderArgs a = render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
                                supersample, sh_degree, background, want_window, sigma, weight_background, et_grade,
-                               depth_correct, view_filter);
+                               depth_correct, view_filter, seed, frame);
+    a.fast = fast;
     a.lod = lod_args("render", lod);
     if (cancel && cancel->shape(0) < 1) throw std::invalid_argument("render: cancel must hold at least one int64");
     if (partial) check_partial("render", *partial, width, height);
@@ -109,8 +128,8 @@ nb::dict render(Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float
     return run_frames(r, {a}, c)[0];
 }
 
-// render()'s arguments R .. depth_correct, view_filter (None: 3DGS's) and lod (None: every splat) of each frame, as
-// one tuple per frame.
+// render()'s arguments R .. depth_correct, view_filter (None: 3DGS's), lod (None: every splat), seed and frame of
+// each frame, as one tuple per frame.
 std::vector<nb::dict> render_many(Renderer& r, const std::vector<nb::tuple>& frames, int threads,
                                   std::optional<LArr> cancel, std::optional<nb::callable> on_progress,
                                   std::optional<std::vector<std::optional<PArr>>> partials) {
@@ -122,8 +141,9 @@ std::vector<nb::dict> render_many(Renderer& r, const std::vector<nb::tuple>& fra
     cpu::Control c;
     for (size_t f = 0; f < frames.size(); ++f) {
         const nb::tuple& p = frames[f];
-        if (p.size() != 21)
-            throw std::invalid_argument("render_many: each frame is render()'s 19 frame arguments, view_filter and lod");
+        if (p.size() != 24 && p.size() != 25)
+            throw std::invalid_argument("render_many: each frame is render()'s 19 frame arguments, view_filter, lod, "
+                                        "seed, frame and fast, and optionally its region");
         std::optional<FArr> view_filter;
         if (!p[19].is_none()) view_filter = nb::cast<FArr>(p[19]);
         args.push_back(render_args(where, nb::cast<FArr>(p[0]), nb::cast<FArr>(p[1]), nb::cast<float>(p[2]),
@@ -132,9 +152,14 @@ std::vector<nb::dict> render_many(Renderer& r, const std::vector<nb::tuple>& fra
                                    nb::cast<int>(p[9]), nb::cast<int>(p[10]), nb::cast<int>(p[11]),
                                    nb::cast<int>(p[12]), nb::cast<FArr>(p[13]), nb::cast<bool>(p[14]),
                                    nb::cast<float>(p[15]), nb::cast<float>(p[16]), nb::cast<float>(p[17]),
-                                   nb::cast<bool>(p[18]), view_filter));
+                                   nb::cast<bool>(p[18]), view_filter, nb::cast<uint32_t>(p[21]),
+                                   nb::cast<uint32_t>(p[22])));
         args.back().lod = lod_args(where, p[20]);
+        args.back().fast = nb::cast<bool>(p[23]);
+        if (p.size() == 25) set_region(where, args.back(), p[24]);
         const std::optional<PArr>* part = partials ? &(*partials)[f] : nullptr;
+        if (part && *part && args.back().rw)
+            throw std::invalid_argument("render_many: a frame with a region has no partial frame");
         if (part && *part) check_partial(where, **part, args.back().width, args.back().height);
         c.partial.push_back(part && *part ? (*part)->data() : nullptr);
     }
@@ -322,18 +347,22 @@ NB_MODULE(_native, m) {
              nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false, nb::arg("threads") = 0,
              nb::arg("cancel").none() = nb::none(), nb::arg("on_progress").none() = nb::none(),
              nb::arg("partial").none() = nb::none(), nb::arg("view_filter").none() = nb::none(),
-             nb::arg("lod").none() = nb::none(),
+             nb::arg("lod").none() = nb::none(), nb::arg("seed") = 0, nb::arg("frame") = 0, nb::arg("fast") = false,
              "Render a frame of the uploaded scene. cancel: int64 array whose [0] stops the frame once nonzero (read "
              "by every worker); on_progress(done, total): called on this thread between tiles, at most every 5 ms, "
              "and at the end (an exception it raises stops the frame and is raised here); partial: float32 "
              "(height, width, 3) receiving each finished tile; view_filter: the scalar mode's [dilation, pre_dilation, "
-             "cull_lambda, compensate, dc_clamp, support, sort_radial] (none: 3DGS's); lod: (tau, band, eye, focal, orthographic) draws the cut "
-             "through the uploaded hierarchy in place (none: every splat). The dict's lod_splats: the cut's size.")
+             "cull_lambda, compensate, dc_clamp, support, sort_radial] (none: 3DGS's); lod: (tau, band, eye, focal, "
+             "orthographic) draws the cut through the uploaded hierarchy in place (none: every splat); seed, frame: "
+             "the stochastic mode's hash inputs; fast: gaussian_blending at the fast precision. The dict's lod_splats: the "
+             "cut's size.")
         .def("render_many", &render_many, nb::arg("frames"), nb::arg("threads") = 0,
              nb::arg("cancel").none() = nb::none(), nb::arg("on_progress").none() = nb::none(),
              nb::arg("partials").none() = nb::none(),
              "Render several frames of the uploaded scene in one call (each a tuple of render()'s arguments R .. "
-             "depth_correct, then view_filter and lod, each or None): the per-camera stage once per distinct camera and SH "
+             "depth_correct, then view_filter and lod, each or None, then seed, frame and fast, and optionally the "
+             "region (x, y, w, h) of output pixels rendered, x and y times supersample multiples of 16, or None): "
+             "the per-camera stage once per distinct camera and SH "
              "degree, then every frame's tiles interleaved in one parallel loop. cancel as render's; "
              "on_progress(frame, done, total); partials: one float32 (height, width, 3) array or None per frame. A "
              "list of render()'s dicts, which also hold stage_ms, order_ms, stage_reused and order_reused.")
@@ -342,11 +371,12 @@ NB_MODULE(_native, m) {
             [](Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                float sigma, float weight_background, float et_grade, bool depth_correct, int x, int y,
-               std::optional<FArr> view_filter, nb::handle lod) {
+               std::optional<FArr> view_filter, nb::handle lod, uint32_t seed, uint32_t frame, bool fast) {
                 RenderArgs a = render_args("trace", R, t, fx, fy, cx, cy, width, height, near_plane, projection,
                                            mode, supersample, sh_degree, background, false, sigma,
-                                           weight_background, et_grade, depth_correct, view_filter);
+                                           weight_background, et_grade, depth_correct, view_filter, seed, frame);
                 a.lod = lod_args("trace", lod);
+                a.fast = fast;
                 PixelTrace traced;
                 {
                     nb::gil_scoped_release release;
@@ -359,7 +389,8 @@ NB_MODULE(_native, m) {
             nb::arg("supersample"), nb::arg("sh_degree"), nb::arg("background"), nb::arg("sigma") = 10.0f,
             nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,
             nb::arg("x") = 0, nb::arg("y") = 0, nb::arg("view_filter").none() = nb::none(),
-            nb::arg("lod").none() = nb::none(), "The pixel trace (trace.h) of output pixel (x, y) of this frame.")
+            nb::arg("lod").none() = nb::none(), nb::arg("seed") = 0, nb::arg("frame") = 0,
+            nb::arg("fast") = false, "The pixel trace (trace.h) of output pixel (x, y) of this frame.")
         .def("release_buffers", &Renderer::release_buffers, nb::call_guard<nb::gil_scoped_release>(),
              "Free the per-frame buffers and per-camera stages kept for the next frame.")
         .def_prop_ro("buffer_bytes", [](const Renderer& r) {

@@ -87,7 +87,7 @@ void bin_splats(const std::vector<TileRect>& rects, const uint64_t* order,
     st.pairs += total;
 }
 
-// Duplex binning (KERNELS.md §8.3): each cell with at least one visible splat is projected as an ellipsoid; one
+// Duplex binning (docs/modes.md#duplex): each cell with at least one visible splat is projected as an ellipsoid; one
 // depth sort of the (tile, cell depth, cell index) keys orders each tile's cells front to back; each tile's list
 // is then its cells expanded to their visible splats, which follow a canonical order inside the cell
 // (splat_less) so that the image does not depend on how the scene orders a cell's splats.

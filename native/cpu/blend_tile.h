@@ -1,7 +1,7 @@
 // One tile's pixels, blended in groups of L::N lanes (a row segment of the tile): the splats of the tile's list go
 // front to back through the steps of gbv/blend.h for every lane at once, lanes drop out as they terminate, and the
 // group stops when none is left. Instantiated for Lanes1 (scalar path, blend_scalar.cpp) and for Highway's vector
-// lanes (blend_isa.cpp, once per instruction set). The TileJob interface is plain data, so the translation units
+// lanes (blend_isa.cpp, once per instruction set). The TileJob interface (tile_job.h) is plain data, so the units
 // built for different instruction sets share nothing but these types. A tracer type (gbv/trace.h) follows the walk:
 // renders use NoTrace; the pixel trace (trace.cpp) runs the Lanes1 instance on a one-pixel rectangle with a recorder.
 #pragma once
@@ -10,140 +10,13 @@
 #include <cmath>
 #include <limits>
 #include <type_traits>
-#include <vector>
 
-#include "gbv/blend.h"
+#include "blend_sorted.h"
+#include "gbv/stochastic.h"
+#include "tile_job.h"
 
 namespace gbv {
-
-// Box of pixel centres a splat can change in its mode: outside it the splat is skipped without evaluating it (an
-// exact test, with margin for float rounding; see splat_bounds in frame.cpp). Infinite where no such box is known.
-struct SplatBounds {
-    float x0, x1, y0, y1;
-};
-
-// gaussian_blending's SplatBounds: the window centres that can pass blend_gaussian's cut-off, before the group box
-// adds the lanes' half perimeters. A lane passes only if the point of its window box (lu x lv about the window centre
-// in the splat's eigen-frame) nearest the splat centre has (u is1)^2 + (v is2)^2 <= r2 = -2 log_min_alpha, i.e. lies
-// in the ellipse E whose screen bounding box has half sides sqrt(r2 (v1x^2 / is1^2 + v1y^2 / is2^2)) and
-// sqrt(r2 (v1y^2 / is1^2 + v1x^2 / is2^2)); that point is within half the window's diagonal <= half its perimeter
-// (w + h) / 2 of the centre. So the centre lies in E's box grown by the half perimeter, and (the reach test) within
-// radius + half perimeter of the splat centre: the box is the tighter of E's box and the radius square, in double,
-// widened for the lane's float rounding (1e-5 of the larger half side: r2's and the offsets' few ulp, in either
-// direction for a thin splat; plus 0.01 px and 1e-6 of the coordinates; the group box adds its own 1e-3 and 1e-6). Empty when opacity < min alpha (r2 < 0); the
-// radius square where a field is not finite (a NaN in the lane's test passes it).
-inline SplatBounds gaussian_blending_bounds(const Splat2D& s) {
-    constexpr float inf = std::numeric_limits<float>::infinity();
-    const double pos = 0.01 + 1e-6 * (fabs(s.xy.x) + fabs(s.xy.y));
-    double ex = (double)s.radius * (1.0 + 1e-6) + pos, ey = ex;
-    const double r2 = -2.0 * (double)s.log_min_alpha;
-    if (r2 < 0.0) return {inf, -inf, inf, -inf};
-    const double a = 1.0 / (double)s.inv_sigma1, b = 1.0 / (double)s.inv_sigma2;
-    const double vx = s.v1.x, vy = s.v1.y;
-    const double tx0 = std::sqrt(r2 * (vx * vx * a * a + vy * vy * b * b));
-    const double ty0 = std::sqrt(r2 * (vy * vy * a * a + vx * vx * b * b));
-    const double grow = 1e-5 * std::max(tx0, ty0) + pos;  // offsets round by ~4 ulp of |d| <= the larger half side
-    const double tx = tx0 + grow, ty = ty0 + grow;
-    if (std::isfinite(tx) && std::isfinite(ty)) {
-        ex = std::min(ex, tx);
-        ey = std::min(ey, ty);
-    }
-    return {(float)(s.xy.x - ex), (float)(s.xy.x + ex), (float)(s.xy.y - ey), (float)(s.xy.y + ey)};
-}
-
-// Row bands of a tile's list: for each pixel row of the tile, the list entries whose SplatBounds meet the band
-// [yc - margin, yc + margin] about the row's pixel centre yc, in list order (build_bands, blend_bands.h). A lane group
-// of that row whose box lies inside the band can walk the band instead of the whole list: every other entry's bounds
-// miss the box in y, so the walk's `outside` test would skip it anyway.
-struct Bands {
-    float lo[TILE], hi[TILE];  // row r's band
-    int64_t start[TILE + 1];   // row r's entries: idx[start[r] .. start[r + 1])
-    std::vector<int32_t> idx;
-    std::vector<int8_t> first, last;  // each entry's rows first .. last (none when last < first)
-};
-
-struct TileJob {
-    const Splat2D* list;        // the tile's splats in blend order
-    const SplatBounds* bounds;  // one per list entry
-    int n;
-    int x0, y0, x1, y1;  // pixel rectangle [x0, x1) x [y0, y1)
-    int width;           // row stride of the planes in pixels
-    Mode mode;
-    OitParams oit;
-    float bg[3];
-    float *rgb, *alpha, *window;  // image planes, at the rectangle's pixel (x0, y0); window may be null
-    int32_t* evals;
-    const Bands* bands;  // the list's row bands, or null: every group walks the whole list
-};
-
-using BlendTileFn = void (*)(const TileJob&);
-
 namespace tile {
-
-// The list entries a group visits, in order: its row's band while the group's box lies inside the band [lo, hi],
-// then (once a moving window leaves it) the whole list on from the last entry visited; or the whole list.
-struct Cursor {
-    const int32_t* band;  // null: the whole list
-    int band_n;
-    float lo, hi;
-    int j = 0, i = -1;
-    // The next entry, -1 after the last; [ya, yb]: the group's box now.
-    int next(int n, float ya, float yb) {
-        if (band && !(ya >= lo && yb <= hi)) band = nullptr;
-        if (band) return j < band_n ? (i = band[j++]) : -1;
-        return ++i < n ? i : -1;
-    }
-};
-
-// A lane group: N pixels of one row, `count` of them inside the tile. [xa, xb] x [ya, yb]: the box a splat's
-// SplatBounds must meet to matter to any lane (the lanes' pixel centres; for gaussian_blending the lanes' window
-// centres grown by their largest half perimeter, updated as the windows move).
-template <class L>
-struct Group {
-    typename L::F px, py;
-    typename L::M live;
-    float xa, xb, ya, yb;
-    int count;
-    Cursor entries;
-};
-
-static inline bool outside(const SplatBounds& b, float xa, float xb, float ya, float yb) {
-    return yb < b.y0 || ya > b.y1 || xb < b.x0 || xa > b.x1;
-}
-
-// Per-lane outputs of a group before they are written to the image.
-template <int N>
-struct Out {
-    float C[3][N], T[N], S[N], wx[N], wy[N];  // PixelSums per lane (S: wsr, duplex), window sides
-    int32_t evals[N];
-};
-
-// Walk the list for one group: `step(splat, live) -> stopped lanes`. A lane's evals is the list position where it
-// stopped (+1), else n: the same count as one pixel walking the list (skipped entries count as walked).
-template <class L, class Tr, class Step>
-void walk(const TileJob& job, const Group<L>& g, Out<L::N>& out, Step step) {
-    typename L::M live = g.live;
-    for (int i = 0; i < L::N; ++i) out.evals[i] = job.n;
-    Cursor entries = g.entries;
-    for (int i; (i = entries.next(job.n, g.ya, g.yb)) >= 0;) {
-        if (outside(job.bounds[i], g.xa, g.xb, g.ya, g.yb)) {
-            GBV_TRACE(Tr, entry(i, SKIP_BOX));
-            continue;
-        }
-        GBV_TRACE(Tr, entry(i, SKIP_NONE));
-        const typename L::M stop = step(job.list[i], live);
-        const uint32_t bits = L::bits(stop);
-        if (!bits) continue;
-        GBV_TRACE(Tr, stopped(stop));
-        for (int k = 0; k < L::N; ++k)
-            if ((bits >> k) & 1u) out.evals[k] = i + 1;
-        live = L::and_not(live, stop);
-        if (!L::any(live)) {
-            GBV_TRACE(Tr, unreached(i + 1, job.n));
-            break;
-        }
-    }
-}
 
 template <class L, class Tr>
 void group_alpha(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
@@ -215,7 +88,7 @@ struct Box {
 // miss one half's box cannot pass the cut-off in any of its lanes, so the other half takes it alone at half the work.
 // Bit-identical to stepping both halves: a step changes only lanes that pass the cut-off, and everything it decides
 // for the whole group (which branches run, the series length) depends on those lanes only.
-template <class L>
+template <class L, bool Fast>
 void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries, WindowState<L>& win,
                           Out<L::N>& out) {
     using H = typename HalfOf<L>::type;
@@ -234,14 +107,14 @@ void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries
         typename L::M stop;
         if (in[0] && in[1]) {
             typename L::M took = L::none();
-            stop = blend_gaussian<L>(job.list[i], live, win, &took);
+            stop = blend_gaussian<L, NoTrace, Fast>(job.list[i], live, win, &took);
             for (int k = 0; k < 2; ++k)
                 if (H::any(k ? took.b : took.a)) window_box<H>(get_half<H>(win, k), box[k]);
         } else {
             const int k = in[1];
             WindowState<H> half = get_half<H>(win, k);
             typename H::M took = H::none();
-            const typename H::M s = blend_gaussian<H>(job.list[i], k ? live.b : live.a, half, &took);
+            const typename H::M s = blend_gaussian<H, NoTrace, Fast>(job.list[i], k ? live.b : live.a, half, &took);
             set_half<H>(win, k, half);
             if (H::any(took)) window_box<H>(half, box[k]);
             stop = k ? typename L::M{H::none(), s} : typename L::M{s, H::none()};
@@ -257,17 +130,17 @@ void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries
     }
 }
 
-template <class L, class Tr>
+template <class L, class Tr, bool Fast>
 void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out) {
     const typename L::F one = L::set(1.0f), zero = L::set(0.0f);
     WindowState<L> win = {one, g.px, g.py, one, one, {zero, zero, zero}};
     if constexpr (!std::is_void_v<typename HalfOf<L>::type> && std::is_same_v<Tr, NoTrace>) {
-        walk_gaussian_halves<L>(job, g.live, g.entries, win, out);
+        walk_gaussian_halves<L, Fast>(job, g.live, g.entries, win, out);
     } else {
         window_box<L>(win, g);
         walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
             typename L::M took = L::none();
-            const typename L::M stop = blend_gaussian<L, Tr>(s, live, win, &took);
+            const typename L::M stop = blend_gaussian<L, Tr, Fast>(s, live, win, &took);
             if (L::any(took)) window_box<L>(win, g);
             GBV_TRACE(Tr, after(win));
             return stop;
@@ -277,6 +150,38 @@ void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out) {
     L::store(win.T, out.T);
     L::store(win.w, out.wx);
     L::store(win.h, out.wy);
+}
+
+// stochastic (gbv/stochastic.h): each lane's sample key once per group, then the list until every lane kept a
+// fragment.
+template <class L, class Tr>
+void group_stochastic(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
+    uint32_t keys[L::N];
+    for (int k = 0; k < L::N; ++k) keys[k] = stochastic_sample_key(job.frame_key, (uint32_t)(g.x + k), (uint32_t)g.y);
+    AlphaState<L> st = {L::set(1.0f), {L::set(0.0f), L::set(0.0f), L::set(0.0f)}};
+    walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
+        const typename L::M stop = blend_stochastic<L, Tr>(s, g.px, g.py, live, keys, st);
+        GBV_TRACE(Tr, after(st));
+        return stop;
+    });
+    for (int c = 0; c < 3; ++c) L::store(st.C[c], out.C[c]);
+    L::store(st.T, out.T);
+}
+
+// stochastic_popfree: the same keys; every lane walks the whole list, depth-testing its kept fragments.
+template <class L, class Tr>
+void group_popfree(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
+    uint32_t keys[L::N];
+    for (int k = 0; k < L::N; ++k) keys[k] = stochastic_sample_key(job.frame_key, (uint32_t)(g.x + k), (uint32_t)g.y);
+    const typename L::F zero = L::set(0.0f);
+    PopfreeState<L> st = {L::set(1.0f), L::set(-std::numeric_limits<float>::infinity()), {zero, zero, zero}};
+    walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
+        blend_stochastic_popfree<L, Tr>(s, job.planes[s.id], g.px, g.py, live, keys, st);
+        GBV_TRACE(Tr, after(st));
+        return L::none();
+    });
+    for (int c = 0; c < 3; ++c) L::store(st.C[c], out.C[c]);
+    L::store(st.T, out.T);
 }
 
 template <class L, class Tr>
@@ -293,6 +198,19 @@ void group_wsr(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
         out.T[k] = sums.T;
         out.S[k] = sums.S;
     }
+}
+
+// eval3d and stopthepop, one pixel after another (blend_sorted.h; the scalar path only: frame.cpp runs it for these
+// modes on every SIMD path).
+template <class L, class Tr>
+void group_sorted(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
+    static_assert(L::N == 1, "the per-pixel sorted modes have no vector lanes");
+    AlphaState<Lanes1> st = {1.0f, {0.0f, 0.0f, 0.0f}};
+    const int queue = job.mode == EVAL3D ? 0 : job.queue;
+    out.evals[0] = blend_sorted_pixel<Tr>(job.list, job.rays, job.n, job.mode, queue, L::reduce_max(g.px),
+                                          L::reduce_max(g.py), st);
+    for (int c = 0; c < 3; ++c) out.C[c][0] = st.C[c];
+    out.T[0] = st.T;
 }
 
 template <class L, class Tr>
@@ -323,6 +241,8 @@ void blend_tile(const TileJob& job) {
     for (int y = job.y0; y < job.y1; ++y) {
         for (int x = job.x0; x < job.x1; x += N) {
             tile::Group<L> g;
+            g.x = x;
+            g.y = y;
             g.count = job.x1 - x < N ? job.x1 - x : N;
             g.px = L::set((float)x) + lane_offset;  // x + k + 0.5 exactly, as one pixel computes it
             g.py = L::set((float)y + 0.5f);
@@ -339,9 +259,20 @@ void blend_tile(const TileJob& job) {
                 }
             }
             switch (job.mode) {
-                case GAUSSIAN_BLENDING: tile::group_gaussian<L, Tr>(job, g, out); break;
+                case GAUSSIAN_BLENDING:
+                    if (job.fast)
+                        tile::group_gaussian<L, Tr, true>(job, g, out);
+                    else
+                        tile::group_gaussian<L, Tr, false>(job, g, out);
+                    break;
                 case WSR: tile::group_wsr<L, Tr>(job, g, out); break;
                 case DUPLEX: tile::group_duplex<L, Tr>(job, g, out); break;
+                case STOCHASTIC: tile::group_stochastic<L, Tr>(job, g, out); break;
+                case STOCHASTIC_POPFREE: tile::group_popfree<L, Tr>(job, g, out); break;
+                case EVAL3D:
+                case STOPTHEPOP:
+                    if constexpr (L::N == 1) tile::group_sorted<L, Tr>(job, g, out);
+                    break;
                 default: tile::group_alpha<L, Tr>(job, g, out); break;
             }
             for (int k = 0; k < g.count; ++k) {

@@ -91,9 +91,10 @@ void splat_boxes(const std::vector<Splat2D>& splats, Mode mode, std::vector<Spla
 // One tile of one frame (blend_frames): copy its splats (and their boxes) into contiguous per-thread buffers, then
 // the selected SIMD path blends its pixels in lane groups.
 void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTileFn blend_tile,
-                    Plane<Splat2D>& local, Plane<SplatBounds>& bounds, Bands& bands, float* partial) {
-    const int W = f.cam->width, H = f.cam->height;
-    const int gx = (W + TILE - 1) / TILE;
+                    Plane<Splat2D>& local, Plane<SplatBounds>& bounds, Plane<RaySplat>& rays, Bands& bands,
+                    float* partial) {
+    const TileRegion& reg = f.reg;
+    const int gx = reg.gx();
     const FrameBuffers& b = *f.buf;
     const int64_t begin = b.tile_start[t], count = b.tile_start[t + 1] - begin;
     local.resize(count);
@@ -110,14 +111,21 @@ void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTile
         local[j] = b.splats[id];
         bounds[j] = b.boxes[id];
     }
+    const bool sorted = per_pixel_sorted(f.mode);
+    if (sorted) {
+        rays.resize(count);
+        for (int64_t j = 0; j < count; ++j) rays[j] = b.rays[b.ids[begin + j]];
+        blend_tile = blend_tile_scalar;  // one pixel at a time on every path (blend_sorted.h)
+    }
     TileJob job = shared;
     job.list = local.data();
     job.bounds = bounds.data();
+    job.rays = sorted ? rays.data() : nullptr;
     job.n = (int)count;
-    job.x0 = (t % gx) * TILE;
-    job.y0 = (t / gx) * TILE;
-    job.x1 = std::min(job.x0 + TILE, W);
-    job.y1 = std::min(job.y0 + TILE, H);
+    job.x0 = reg.x0 + (t % gx) * TILE;  // the whole image's pixel coordinates
+    job.y0 = reg.y0 + (t / gx) * TILE;
+    job.x1 = std::min(job.x0 + TILE, reg.x1);
+    job.y1 = std::min(job.y0 + TILE, reg.y1);
     // gaussian_blending's group box starts 1.001 px about the row and moves with its windows: a wider band (2 px)
     const float margin =
         f.mode == GAUSSIAN_BLENDING ? testing::gaussian_band_margin.load(std::memory_order_relaxed) : 0.0f;
@@ -125,13 +133,30 @@ void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTile
                         build_bands(job.bounds, job.n, job.y0, job.y1 - job.y0, margin, bands);
     job.bands = banded ? &bands : nullptr;
     Image& img = *f.img;
-    const size_t origin = (size_t)job.y0 * W + job.x0;
+    const size_t origin = (size_t)(job.y0 - reg.y0) * (reg.x1 - reg.x0) + (job.x0 - reg.x0);
     job.rgb = img.rgb.data() + origin * 3;
     job.alpha = img.alpha.data() + origin;
     job.window = img.window.empty() ? nullptr : img.window.data() + origin * 2;
     job.evals = img.evals.data() + origin;
     blend_tile(job);
-    if (partial) write_partial(img, f.N, job.x0, job.y0, job.x1, job.y1, partial);
+    if (partial) write_partial(img, f.N, job.x0 - reg.x0, job.y0 - reg.y0, job.x1 - reg.x0, job.y1 - reg.y0, partial);
+}
+
+// Each splat's tile rectangle (of the whole image's grid) within the region's tiles, in the region's tile
+// coordinates; empty (0, 0, 0, 0, as a splat that is not valid) where it misses them.
+void clip_rects(std::vector<TileRect>& rects, const TileRegion& reg, FrameRun& run) {
+    const int tx = reg.x0 / TILE, ty = reg.y0 / TILE, gx = reg.gx(), gy = reg.gy();
+    const int64_t n = (int64_t)rects.size();
+#pragma omp parallel for schedule(static)
+    for (int64_t b = 0; b < (n + BOX_BLOCK - 1) / BOX_BLOCK; ++b) {
+        if (run.cancelled()) continue;
+        for (int64_t i = b * BOX_BLOCK; i < std::min(n, (b + 1) * BOX_BLOCK); ++i) {
+            TileRect& r = rects[i];
+            const TileRect c{std::max(r.x0 - tx, 0), std::max(r.y0 - ty, 0), std::min(r.x1 - tx, gx),
+                             std::min(r.y1 - ty, gy)};
+            r = c.x1 > c.x0 && c.y1 > c.y0 ? c : TileRect{0, 0, 0, 0};
+        }
+    }
 }
 
 constexpr int64_t PREPROCESS_BLOCK = 256;  // splats per call of a path's stage or finish (a multiple of 16)
@@ -205,9 +230,9 @@ void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& pat
 }
 
 void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, const simd::Path& path,
-               FrameBuffers& buf, Stats& st, FrameRun& run) {
+               FrameBuffers& buf, Stats& st, FrameRun& run, const TileRegion& reg) {
     const CameraParams& cam = stage.key.cam;
-    const int gx = (cam.width + TILE - 1) / TILE, gy = (cam.height + TILE - 1) / TILE;
+    const int full_gx = (cam.width + TILE - 1) / TILE, full_gy = (cam.height + TILE - 1) / TILE;
     const int64_t n = (int64_t)stage.splats.size();  // the scene's splats, or a level-of-detail cut's
     if (stage.key.lod.on()) st.lod_drawn = n;
     Clock::time_point t0 = Clock::now();
@@ -220,15 +245,21 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
     splats.resize(n);
     rects.resize(n);
     valid.resize(n);
+    buf.planes.resize(mode == STOCHASTIC_POPFREE ? n : 0);
     // in blocks of PREPROCESS_BLOCK splats through the SIMD path's finish (bit-identical on every path)
-    const FinishJob job{sc.means, sc.weight_sh, sc.weight_k, mode == DUPLEX ? sc.cell_of.data() : nullptr,
-                        stage.key.sh_deg, cam, mode, oit, gx, gy, stage.splats.data(), stage.valid.data(),
-                        splats.data(), rects.data(), valid.data()};
-    for_blocks(n, run, [&](int64_t begin, int64_t end) { path.finish(job, begin, end); });
+    const FinishJob job{sc.means, sc.scales, sc.quats, sc.filter_3d, sc.weight_sh, sc.weight_k,
+                        mode == DUPLEX ? sc.cell_of.data() : nullptr,
+                        stage.key.sh_deg, cam, mode, oit, full_gx, full_gy, stage.splats.data(), stage.valid.data(),
+                        splats.data(), rects.data(), valid.data(),
+                        mode == STOCHASTIC_POPFREE ? buf.planes.data() : nullptr};
+    if (mode != EVAL3D) for_blocks(n, run, [&](int64_t begin, int64_t end) { path.finish(job, begin, end); });
+    if (per_pixel_sorted(mode) && !run.cancelled()) finish_rays(sc, stage, mode, buf, run);
     if (run.cancelled()) return;
     if (testing::capture.load(std::memory_order_relaxed))
         testing::record_preprocess(splats.data(), rects.data(), valid.data(), n);
     st.preprocess_ms += ms_since(t0);
+    const int gx = reg.gx(), gy = reg.gy();
+    if (gx != full_gx || gy != full_gy) clip_rects(rects, reg, run);
 
     std::vector<int64_t>& tile_start = buf.tile_start;
     std::vector<uint32_t>& ids = buf.ids;
@@ -267,11 +298,15 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
         splat_boxes(fr.buf->splats, fr.mode, fr.buf->boxes, run);
         TileJob& job = shared[f];
         job = {};
-        job.width = fr.cam->width;
+        job.width = fr.reg.x1 - fr.reg.x0;
         job.mode = fr.mode;
         job.oit = fr.oit;
+        job.frame_key = fr.frame_key;
+        job.fast = fr.fast;
+        job.planes = fr.buf->planes.empty() ? nullptr : fr.buf->planes.data();
+        job.queue = fr.queue;
         for (int c = 0; c < 3; ++c) job.bg[c] = fr.bg[c];
-        const int gx = (fr.cam->width + TILE - 1) / TILE;
+        const int gx = fr.reg.gx();
         const int num_tiles = (int)fr.buf->tile_start.size() - 1;
         const std::vector<int> order = centre_out_order(gx, num_tiles / gx);
         for (int i = 0; i < num_tiles; ++i) tiles.push_back({(i + 0.5) / num_tiles, {(int)f, order[i]}});
@@ -282,12 +317,13 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
         FlushDenormals ftz;
         Plane<Splat2D> local;  // each tile's entries are copied in before they are read
         Plane<SplatBounds> bounds;
+        Plane<RaySplat> rays;
         Bands bands;
 #pragma omp for schedule(dynamic, 1)
         for (int64_t i = 0; i < (int64_t)tiles.size(); ++i) {
             if (run.cancelled()) continue;  // a cancelled call skips its remaining tiles
             const int f = tiles[i].second.first;
-            blend_one_tile(frames[f], shared[f], tiles[i].second.second, blend_tile, local, bounds, bands,
+            blend_one_tile(frames[f], shared[f], tiles[i].second.second, blend_tile, local, bounds, rays, bands,
                            run.partial(f));
             run.tile_done(f);
             run.poll();
@@ -297,16 +333,18 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
     for (const BlendFrame& fr : frames) fr.st->blend_ms += ms;
 }
 
-PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
-                             const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N) {
+PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, int queue,
+                             uint32_t frame_key, bool fast, const float bg[3], const simd::Path& path,
+                             FrameBuffers& buf, int x, int y, int N) {
     Stats st;
     const Control none;
     FrameRun run(none, 1);
-    bin_frame(sc, stage, mode, oit, path, buf, st, run);
+    bin_frame(sc, stage, mode, oit, path, buf, st, run, TileRegion::whole(stage.key.cam));
     splat_boxes(buf.splats, mode, buf.boxes, run);
     const CameraParams& cam = stage.key.cam;
-    FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.ids.data(), cam.width,
-                        cam.height, mode, oit, {bg[0], bg[1], bg[2]}};
+    FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.ids.data(),
+                        per_pixel_sorted(mode) ? buf.rays.data() : nullptr, cam.width, cam.height, mode, oit, queue,
+                        {bg[0], bg[1], bg[2]}, frame_key, buf.planes.empty() ? nullptr : buf.planes.data(), fast};
     FlushDenormals ftz;
     return trace_pixel(lists, x, y, N);
 }

@@ -130,6 +130,8 @@ struct FrameBuffers {
     std::vector<uint32_t> ids;  // per tile list entry: its splat (4 bytes: half the traffic of a depth key)
     std::vector<SplatBounds> boxes;
     std::vector<RankedRect> ranked;  // bin_splats' scratch
+    std::vector<DepthPlane> planes;  // stochastic_popfree: per splat (others: empty)
+    std::vector<RaySplat> rays;      // eval3d, stopthepop: each splat's ray data (finish_rays)
 };
 
 // A running call's cancel state and progress (Control) for its frames: the caller's flag or a report that asked to
@@ -210,14 +212,30 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
                 std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids, Stats& st, FrameRun& run);
 
+// rays.cpp: the per-pixel sorted modes' finish after (stopthepop) or instead of (eval3d) the SIMD path's: every
+// splat's ray data (gbv/ray3d.h) into buf.rays; eval3d also sets splats, rects and valid from the stage: the splat
+// as the stage has it (no 2D filter), the tiles its 3D footprint (ray_footprint) touches. stopthepop drops a valid
+// splat whose ray data is degenerate.
+void finish_rays(const SceneView& sc, const Stage& stage, Mode mode, FrameBuffers& buf, FrameRun& run);
+
 // frame.cpp: the stage of `key` into `stage` (every splat, or the level-of-detail cut's; stops early once cancelled,
 // leaving it not ready).
 void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& path, Stage& stage, Stats& st,
                  FrameRun& run);
-// The mode's finish of a ready stage and the binning of one image at the camera's resolution into `buf`, in the
-// stage's depth order (sorted here when not ready yet); stops early once cancelled.
+// The rectangle of the camera's image (at its resolution: supersampled) that a frame renders: [x0, x1) x [y0, y1),
+// x0 and y0 multiples of TILE, so that its tiles are tiles of the whole image's grid.
+struct TileRegion {
+    int x0, y0, x1, y1;
+    int gx() const { return (x1 - x0 + TILE - 1) / TILE; }
+    int gy() const { return (y1 - y0 + TILE - 1) / TILE; }
+    static TileRegion whole(const CameraParams& cam) { return {0, 0, cam.width, cam.height}; }
+};
+
+// The mode's finish of a ready stage and the binning of the tiles of `reg` (of the image at the camera's
+// resolution) into `buf`, in the stage's depth order (sorted here when not ready yet); stops early once cancelled.
+// Each tile's list is the whole image's list of that tile.
 void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, const simd::Path& path,
-               FrameBuffers& buf, Stats& st, FrameRun& run);
+               FrameBuffers& buf, Stats& st, FrameRun& run, const TileRegion& reg);
 
 // One frame of a call's joint blend: its binned buffers, how to blend them, and the image (at the stage camera's
 // resolution; N: supersampling factor, for the partial frame).
@@ -226,16 +244,21 @@ struct BlendFrame {
     const CameraParams* cam;
     Mode mode;
     OitParams oit;
+    int queue;  // stopthepop's K
     const float* bg;
     Image* img;
     int N;
     Stats* st;
+    uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
+    TileRegion reg;      // what of the camera's image `img` holds (bin_frame's region)
+    bool fast;           // gaussian_blending's fast precision
 };
 // Blend every frame's tiles in one parallel loop, interleaved (each frame's tiles centre out, the frames' i-th tiles
 // together, in proportion to their tile counts); each frame's blend_ms is the loop's time.
 void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile, FrameRun& run);
 // The pixel trace of output pixel (x, y) at N x N samples from a ready stage (the sub-sample grid's camera).
-PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit,
-                             const float bg[3], const simd::Path& path, FrameBuffers& buf, int x, int y, int N);
+PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oit, int queue,
+                             uint32_t frame_key, bool fast, const float bg[3], const simd::Path& path,
+                             FrameBuffers& buf, int x, int y, int N);
 
 }  // namespace gbv::cpu

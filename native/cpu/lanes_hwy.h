@@ -125,8 +125,8 @@ struct LanesOf {
 using LanesHwy = LanesOf<hn::ScalableTag<float>>;
 
 // The preprocess's lanes: 8 floats on x86 (AVX-512 too: its stage and finish move records of 8 floats in and out by
-// the 8 x 8 transposes, and 16 lanes moved float by float ran its stage at half AVX2's speed, 222 against 112 ms at
-// 6.1 M splats), all of a vector elsewhere.
+// the 8 x 8 transposes, which 16 lanes moved float by float were slower than; bench/RESULTS.md), all of a vector
+// elsewhere.
 #if HWY_TARGET == HWY_AVX2 || HWY_TARGET == HWY_AVX3
 using PreprocessLanes = LanesOf<hn::CappedTag<float, 8>>;
 #else

@@ -318,8 +318,8 @@ Tree build(const Splats& s, OpacityRule rule, int threads) {
     for (size_t l = 2; l < t.levels.size(); ++l) {
         const int64_t first = t.levels[l - 1], count = t.levels[l] - first, below = first - t.levels[l - 2];
         cur.resize(count);
-        // one contiguous part of the level per thread: each sweeps its own stretch of the Morton order (measured
-        // 0.70 against 0.73 s at 6.1 M with blocks of 256 nodes handed out in turn)
+        // one contiguous part of the level per thread: each sweeps its own stretch of the Morton order (faster than
+        // blocks of nodes handed out in turn; bench/RESULTS.md)
 #pragma omp parallel for num_threads(nt) schedule(static)
         for (int64_t q = 0; q < count; ++q) {
             const int64_t c0 = q * BRANCHING, cn = std::min<int64_t>(BRANCHING, below - c0);

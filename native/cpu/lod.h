@@ -1,4 +1,4 @@
-// Level of detail (issue 24): an 8-ary splat hierarchy over the Morton order of the splat centres, interior nodes
+// Level of detail (docs/lod.md): an 8-ary splat hierarchy over the Morton order of the splat centres, interior nodes
 // moment-matched Gaussians of their leaves, and the per-camera cut through it (lod.cpp; bound in lod_bind.cpp).
 #pragma once
 

@@ -10,6 +10,7 @@
 #include <cstddef>
 #include <cstring>
 
+#include "gbv/popfree.h"
 #include "gbv/preprocess.h"
 
 namespace gbv {
@@ -63,6 +64,7 @@ struct StageJob {
 // One mode's finish of a stored stage: the view weights (wsr, duplex) and cells, and the per-splat outputs.
 struct FinishJob {
     const float* means;
+    const float *scales, *quats, *filter_3d;  // stochastic_popfree's depth planes (filter_3d may be null)
     const float* weight_sh;  // (n, weight_k) or null
     int weight_k;
     const int32_t* cell_of;  // duplex: each splat's cell; null: -1
@@ -76,6 +78,7 @@ struct FinishJob {
     Splat2D* splats;
     TileRect* rects;  // empty (0, 0, 0, 0) where not valid
     uint8_t* valid;
+    DepthPlane* planes;  // stochastic_popfree: each valid splat's depth plane; null in the other modes
 };
 
 // Splats [begin, end) of a job.
@@ -361,6 +364,12 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
             s.log_min_alpha = out.log_min_alpha(o[3][j]);
             s.radius = o[13][j];
             s.cell = job.cell_of ? job.cell_of[i] : -1;
+            s.id = (int32_t)i;
+            if (job.planes) {
+                const SplatIn in{job.means + 3 * i, job.scales + 3 * i, job.quats + 4 * i, 0.0f, nullptr,
+                                 job.filter_3d ? job.filter_3d[i] : 0.0f, nullptr, 0, -1};
+                job.planes[i] = splat_popfree_plane(job.cam, in);
+            }
             job.rects[i] = TileRect{rb[0][j], rb[1][j], rb[2][j], rb[3][j]};
         }
     }

@@ -159,6 +159,9 @@ int sh_degree_of(const RenderArgs& a, const SceneView& sc) {
 // would index by the cut's splats (duplex's cells, wsr's view weights; cells uploaded for a duplex frame of the
 // same scene are not read by the other modes).
 void check_uploads(const RenderArgs& a, const SceneView& sc, const char* where) {
+    if (a.rw && a.mode == DUPLEX)
+        throw std::invalid_argument(std::string(where) + ": duplex renders whole images only (its cells cull by "
+                                    "the image's tiles)");
     if (a.mode == DUPLEX && sc.cell_of.size() != (size_t)sc.n)
         throw std::invalid_argument(std::string(where) + ": duplex needs the scene's cells (upload_cells)");
     if (!a.lod.on()) return;
@@ -167,6 +170,13 @@ void check_uploads(const RenderArgs& a, const SceneView& sc, const char* where) 
     if (a.mode == DUPLEX || (a.mode == WSR && sc.weight_sh))
         throw std::invalid_argument(std::string(where) + ": level of detail is for plain splat scenes, not duplex "
                                     "or wsr with view weights");
+}
+
+// The part of the stage camera's image a frame renders (RenderArgs::rx .. rh at its supersampled resolution).
+TileRegion region_of(const RenderArgs& a) {
+    if (a.rw == 0) return TileRegion::whole(a.cam);
+    const int N = a.supersample;
+    return {a.rx * N, a.ry * N, (a.rx + a.rw) * N, (a.ry + a.rh) * N};
 }
 
 // The StageKey of a frame: everything its stage depends on (add a field here and to StageKey::operator==).
@@ -196,7 +206,8 @@ std::vector<RenderResult> Renderer::render_many(const std::vector<RenderArgs>& f
         const StageKey key = stage_key(a, sc, impl_->generation);
         stage_of[f] = (int)(std::find(keys.begin(), keys.end(), key) - keys.begin());
         if (stage_of[f] == (int)keys.size()) keys.push_back(key);
-        run.start(f, (int64_t)((a.cam.width + TILE - 1) / TILE) * ((a.cam.height + TILE - 1) / TILE));
+        const TileRegion reg = region_of(a);
+        run.start(f, (int64_t)reg.gx() * reg.gy());
     }
     std::vector<Stage> stages = impl_->take_stages(keys);
     impl_->buffers.resize(count);  // the per-frame buffers of frames beyond this call's are freed
@@ -206,8 +217,9 @@ std::vector<RenderResult> Renderer::render_many(const std::vector<RenderArgs>& f
     for (int f = 0; f < count; ++f) {
         const RenderArgs& a = frames[f];
         const bool window = a.want_window && a.mode == GAUSSIAN_BLENDING;
-        res[f].image.resize(a.width, a.height, window, poison);
-        if (a.supersample > 1) hi[f].resize(a.width * a.supersample, a.height * a.supersample, window, poison);
+        const int w = a.rw ? a.rw : a.width, h = a.rw ? a.rh : a.height;
+        res[f].image.resize(w, h, window, poison);
+        if (a.supersample > 1) hi[f].resize(w * a.supersample, h * a.supersample, window, poison);
     }
     std::vector<BlendFrame> blend;
     for (int f = 0; f < count && !run.cancelled(); ++f) {
@@ -217,9 +229,11 @@ std::vector<RenderResult> Renderer::render_many(const std::vector<RenderArgs>& f
         r.stats.stage_reused = stage.ready;
         if (!stage.ready) build_stage(sc, keys[stage_of[f]], path, stage, r.stats, run);
         if (run.cancelled()) break;
-        bin_frame(sc, stage, a.mode, a.oit, path, impl_->buffers[f], r.stats, run);
+        const TileRegion reg = region_of(a);
+        bin_frame(sc, stage, a.mode, a.oit, path, impl_->buffers[f], r.stats, run, reg);
         Image* img = a.supersample > 1 ? &hi[f] : &r.image;
-        blend.push_back({&impl_->buffers[f], &stage.key.cam, a.mode, a.oit, a.bg, img, a.supersample, &r.stats});
+        blend.push_back({&impl_->buffers[f], &stage.key.cam, a.mode, a.oit, a.queue, a.bg, img, a.supersample,
+                         &r.stats, stochastic_frame_key(a.seed, a.frame), reg, a.fast});
     }
     if (!run.cancelled()) blend_frames(blend, path.blend_tile, run);
     for (int f = 0; f < count; ++f) {
@@ -254,8 +268,8 @@ PixelTrace Renderer::trace(const RenderArgs& a, int x, int y) {
         build_stage(sc, key, path, stages[0], st, run);
     }
     impl_->buffers.resize(1);
-    PixelTrace t = trace_frame_pixel(sc, stages[0], a.mode, a.oit, a.bg, path, impl_->buffers[0], x, y,
-                                     a.supersample);
+    PixelTrace t = trace_frame_pixel(sc, stages[0], a.mode, a.oit, a.queue, stochastic_frame_key(a.seed, a.frame),
+                                     a.fast, a.bg, path, impl_->buffers[0], x, y, a.supersample);
     const Plane<int32_t>& rows = stages[0].rows;  // a level-of-detail cut drawn in place: entry i is row rows[i]
     if (!rows.empty())
         for (TraceStep& s : t.steps) s.index = rows[s.index];  // the scene's splat, or n + an interior node's index
@@ -277,7 +291,7 @@ size_t Renderer::buffer_bytes() const {
     for (const FrameBuffers& b : impl_->buffers)
         bytes += b.splats.capacity() * sizeof(Splat2D) + b.rects.capacity() * sizeof(TileRect) + b.valid.capacity() +
                  b.tile_start.capacity() * sizeof(int64_t) + b.ids.capacity() * sizeof(uint32_t) +
-                 b.boxes.capacity() * sizeof(SplatBounds);
+                 b.boxes.capacity() * sizeof(SplatBounds) + b.planes.capacity() * sizeof(DepthPlane);
     for (const Stage& s : impl_->stages) bytes += s.bytes();
     return bytes;
 }

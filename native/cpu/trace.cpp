@@ -62,6 +62,7 @@ struct PixelTracer {
         for (int k = 0; k < 4; ++k) log->window[k] = log->last().window[k] = win[k];
         log->T = log->last().T_after = w.T;
     }
+    static void after(const PopfreeState<Lanes1>& st) { log->T = log->last().T_after = st.T; }
     static void after(const DuplexLanes<Lanes1>& d) {
         log->T = log->last().T_after = d.T;
         log->T_cell = log->last().T_cell = d.T_cell;
@@ -83,6 +84,7 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
     std::vector<Splat2D> list;
     std::vector<SplatBounds> bounds;
     std::vector<uint32_t> ids;
+    std::vector<RaySplat> rays;
     for (int sy = 0; sy < N; ++sy) {
         for (int sx = 0; sx < N; ++sx) {
             const int hx = x * N + sx, hy = y * N + sy;
@@ -96,10 +98,15 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
                 list[j] = f.splats[ids[j]];
                 bounds[j] = f.boxes[ids[j]];
             }
+            if (f.rays) {
+                rays.resize(count);
+                for (int64_t j = 0; j < count; ++j) rays[j] = f.rays[ids[j]];
+            }
             const size_t q = (size_t)sy * N + sx;
             TileJob job = {};
             job.list = list.data();
             job.bounds = bounds.data();
+            job.rays = f.rays ? rays.data() : nullptr;
             job.n = (int)count;
             job.x0 = hx;
             job.y0 = hy;
@@ -108,6 +115,10 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
             job.width = N;
             job.mode = f.mode;
             job.oit = f.oit;
+            job.frame_key = f.frame_key;
+            job.planes = f.planes;
+            job.queue = f.queue;
+            job.fast = f.fast;
             for (int c = 0; c < 3; ++c) job.bg[c] = f.bg[c];
             job.rgb = out.samples.rgb.data() + q * 3;
             job.alpha = out.samples.alpha.data() + q;

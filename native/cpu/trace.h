@@ -18,10 +18,15 @@ struct FrameLists {
     const SplatBounds* boxes;
     const int64_t* tile_start;
     const uint32_t* ids;
+    const RaySplat* rays;  // eval3d, stopthepop: per splat (else null)
     int width, height;
     Mode mode;
     OitParams oit;
+    int queue;
     float bg[3];
+    uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
+    const DepthPlane* planes;  // stochastic_popfree: per splat, or null
+    bool fast;                 // gaussian_blending's fast precision
 };
 
 // One list entry at one sub-sample: the splat as the blend saw it and what it did there. alpha and weight are 0

@@ -24,22 +24,31 @@ __global__ void __launch_bounds__(THREADS)
     stage_ok[i] = stage_splat(in, sh_deg, rules, cam, gx, gy, reach, &stage[i]) ? 1 : 0;
 }
 
-// The mode's finish of every splat's stage (finish_splat): Splat2D, tile rectangle, touched tile count.
+// The mode's finish of every splat's stage (finish_splat; the per-pixel sorted modes: finish_ray_splat after it for
+// stopthepop, instead of it for eval3d, with their ray data): Splat2D, tile rectangle, touched tile count; and where
+// `planes` is given (stochastic_popfree) each splat's depth plane (popfree.h) from its mean, scale, quat and 3D filter.
 __global__ void __launch_bounds__(THREADS)
-    finish_kernel(int64_t n, const float* means, const StageSplat* stage, const unsigned char* stage_ok, int sh_deg,
+    finish_kernel(int64_t n, const float* means, const float* scales, const float* quats, const float* filter_3d,
+                  DepthPlane* planes, const StageSplat* stage, const unsigned char* stage_ok, int sh_deg,
                   const float* weight_sh, int weight_k, const int32_t* cell_of, OitParams oit, CameraParams cam,
-                  Mode mode, int gx, int gy, Splat2D* splats, TileRect* rects, uint32_t* touched,
+                  Mode mode, int gx, int gy, Splat2D* splats, RaySplat* rays, TileRect* rects, uint32_t* touched,
                   unsigned long long* visible) {
     const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     bool valid = false;
     if (i < n) {
         uint32_t count = 0;
         if (stage_ok[i]) {
-            const SplatIn in{means + 3 * i, nullptr, nullptr, 0.0f, nullptr, 0.0f,
+            const SplatIn in{means + 3 * i, scales + 3 * i, quats + 4 * i, 0.0f, nullptr,
+                             filter_3d ? filter_3d[i] : 0.0f,
                              weight_sh ? weight_sh + (size_t)weight_k * i : nullptr, sh_degree_for_coeffs(weight_k),
                              cell_of ? cell_of[i] : -1};
             TileRect r;
-            if (finish_splat(in, stage[i], sh_deg, cam, mode, oit, gx, gy, &splats[i], &r)) {
+            bool ok = mode == EVAL3D || finish_splat(in, stage[i], sh_deg, cam, mode, oit, gx, gy, &splats[i], &r);
+            if (ok && per_pixel_sorted(mode))
+                ok = finish_ray_splat(in, stage[i], cam, mode, gx, gy, &splats[i], &r, &rays[i]);
+            if (ok) {
+                splats[i].id = (int32_t)i;
+                if (planes) planes[i] = splat_popfree_plane(cam, in);
                 count = (uint32_t)((r.x1 - r.x0) * (r.y1 - r.y0));
                 rects[i] = r;
                 valid = true;
@@ -176,6 +185,7 @@ void State::run(const RenderArgs& a, RenderResult& res) {
     const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE, num_tiles = gx * gy;
     const int sh_deg = std::max(0, std::min(a.sh_degree, sh_degree_for_coeffs(k)));  // no reads past k coeffs
     splats.ensure(std::max<int64_t>(n, 1));
+    if (per_pixel_sorted(a.mode)) rays.ensure(std::max<int64_t>(n, 1));
     rects.ensure(std::max<int64_t>(n, 1));
     touched.ensure(std::max<int64_t>(n, 1));
     offsets.ensure(std::max<int64_t>(n, 1));
@@ -202,10 +212,14 @@ void State::run(const RenderArgs& a, RenderResult& res) {
     }
     CUDA_CHECK(cudaEventRecord(ev_stage.e));
     if (n > 0) {
-        finish_kernel<<<blocks(n), THREADS>>>(n, means.ptr, stage.ptr, stage_ok.ptr, sh_deg,
+        const bool popfree = a.mode == STOCHASTIC_POPFREE;
+        if (popfree) planes.ensure(n);
+        finish_kernel<<<blocks(n), THREADS>>>(n, means.ptr, scales.ptr, quats.ptr, has_filter ? filter_3d.ptr : nullptr,
+                                              popfree ? planes.ptr : nullptr, stage.ptr, stage_ok.ptr, sh_deg,
                                               weight_k ? weight_sh.ptr : nullptr, weight_k,
                                               a.mode == DUPLEX ? cell_of.ptr : nullptr, a.oit, cam, a.mode, gx, gy,
-                                              splats.ptr, rects.ptr, touched.ptr, counters.ptr + VISIBLE);
+                                              splats.ptr, per_pixel_sorted(a.mode) ? rays.ptr : nullptr, rects.ptr,
+                                              touched.ptr, counters.ptr + VISIBLE);
         launched("finish_kernel");
     }
     CUDA_CHECK(cudaEventRecord(ev[1].e));

@@ -3,6 +3,9 @@
 // blockIdx.x), so any image the arguments allow (2^31 - 1 pixels) fits CUDA's grid: its y and z dimensions stop
 // at 65,535 blocks, 1,048,560 pixels of height.
 #include "gbv/blend.h"
+#include "gbv/ray3d.h"
+#include "gbv/resort.h"
+#include "gbv/stochastic.h"
 #include "state.h"
 
 namespace gbv::cuda {
@@ -14,7 +17,8 @@ constexpr int BLOCK = TILE * TILE;
 template <int M>
 __global__ void __launch_bounds__(BLOCK)
     render_kernel(const uint2* ranges, const uint32_t* values, const Splat2D* splats, int W, int H, int gx,
-                  float3 bg, OitParams oit, float* rgb, float* alpha, int32_t* evals, float* window) {
+                  float3 bg, OitParams oit, uint32_t frame_key, const DepthPlane* planes, float* rgb, float* alpha, int32_t* evals,
+                  float* window) {
     __shared__ Splat2D batch[BLOCK];
     const int tile = blockIdx.x;
     const int x = (tile % gx) * TILE + threadIdx.x, y = (tile / gx) * TILE + threadIdx.y;
@@ -27,6 +31,8 @@ __global__ void __launch_bounds__(BLOCK)
     TransmittanceWindow win = {1.0f, pix, {1.0f, 1.0f}};
     WsrSums wsr = {{0, 0, 0}, 0};
     DuplexState dst = {1.0f, 1.0f, -1, 0.0f, {0.0f, 0.0f, 0.0f}};
+    const uint32_t key = stochastic_sample_key(frame_key, x, y);
+    float depth_key = -INFINITY;  // stochastic_popfree: the nearest kept fragment's (stochastic.h)
     int32_t ev = 0;
     for (uint32_t start = range.x; start < range.y; start += BLOCK) {
         if (__syncthreads_count(done) == BLOCK) break;
@@ -41,6 +47,10 @@ __global__ void __launch_bounds__(BLOCK)
                 done = blend_wsr(batch[j], pix, wsr);
             else if (M == DUPLEX)
                 done = blend_duplex(batch[j], pix, oit.et_grade, dst);
+            else if (M == STOCHASTIC)
+                done = blend_stochastic(batch[j], pix, key, T, C);
+            else if (M == STOCHASTIC_POPFREE)
+                blend_stochastic_popfree(batch[j], planes[batch[j].id], pix, key, T, depth_key, C);
             else if (M == ANALYTIC)
                 done = blend_analytic(batch[j], pix, T, C);
             else
@@ -59,6 +69,62 @@ __global__ void __launch_bounds__(BLOCK)
         window[p * 2] = win.wh.x;
         window[p * 2 + 1] = win.wh.y;
     }
+}
+
+// The per-pixel sorted modes (eval3d, stopthepop: gbv/resort.h), one thread per pixel of a 16x16 block: the tile's
+// fragments in list order through the queue of K = `queue` in registers and local memory; K = 0 (and eval3d): the
+// exact order by selection, each pass taking the nearest fragment after the last one blended (depth, then list
+// position) until the pixel stops. evals as the CPU's: the list position where it stopped (+1), else the list length.
+__global__ void __launch_bounds__(BLOCK)
+    sorted_kernel(const uint2* ranges, const uint32_t* values, const Splat2D* splats, const RaySplat* rays, Mode mode,
+                  int queue, int W, int H, int gx, float3 bg, OitParams oit, float* rgb, float* alpha,
+                  int32_t* evals) {
+    const int tile = blockIdx.x;
+    const int x = (tile % gx) * TILE + threadIdx.x, y = (tile / gx) * TILE + threadIdx.y;
+    if (x >= W || y >= H) return;
+    const float px = x + 0.5f, py = y + 0.5f;
+    const uint2 range = ranges[tile];
+    const int n = (int)(range.y - range.x);
+    AlphaState<Lanes1> st = {1.0f, {0.0f, 0.0f, 0.0f}};
+    const int K = mode == EVAL3D ? 0 : queue;
+    const auto fragment = [&](int i, Fragment& f) {
+        const uint32_t id = values[range.x + i];
+        f.entry = i;
+        return sorted_fragment(mode, splats[id], rays[id], px, py, &f.alpha, &f.depth);
+    };
+    const auto color = [&](const Fragment& f) { return splats[values[range.x + f.entry]].color; };
+    int32_t ev = n;
+    if (K > 0) {
+        Fragment q[MAX_QUEUE];
+        int qn = 0;
+        bool done = false;
+        for (int i = 0; i < n && !done; ++i) {
+            Fragment f;
+            if (!fragment(i, f)) continue;
+            if (qn == K) {
+                done = blend_fragment<NoTrace>(q[0], color(q[0]), st);
+                queue_pop(q, qn);
+                if (done) ev = i + 1;
+            }
+            if (!done) queue_insert(q, qn, f);
+        }
+        for (int k = 0; k < qn && !done; ++k) done = blend_fragment<NoTrace>(q[k], color(q[k]), st);
+    } else {
+        Fragment last = {-INFINITY, 0.0f, -1};
+        for (bool done = false; !done;) {
+            Fragment best = {INFINITY, 0.0f, n}, f;
+            for (int i = 0; i < n; ++i)
+                if (fragment(i, f) && fragment_before(last, f) && fragment_before(f, best)) best = f;
+            if (best.entry == n) break;
+            done = blend_fragment<NoTrace>(best, color(best), st);
+            last = best;
+        }
+    }
+    const PixelSums sums = {{st.C[0], st.C[1], st.C[2]}, st.T, 0.0f};
+    const size_t p = (size_t)y * W + x;
+    const float bgc[3] = {bg.x, bg.y, bg.z};
+    resolve_pixel(mode, sums, oit.weight_background, bgc, rgb + p * 3, alpha + p);
+    evals[p] = ev;
 }
 
 // Box-average N x N blocks (supersampling), one thread per output pixel; evaluations are summed, window sizes
@@ -101,8 +167,10 @@ __global__ void pack_rgba_kernel(int64_t n, const float* rgb, const float* alpha
 
 template <int M>
 void launch_blend(const State& s, int num_tiles, const uint32_t* values, int W, int H, int gx, float3 bg,
-                  const OitParams& oit, float* win) {
-    render_kernel<M><<<num_tiles, dim3(TILE, TILE)>>>(s.ranges.ptr, values, s.splats.ptr, W, H, gx, bg, oit,
+                  const RenderArgs& a, float* win) {
+    const uint32_t frame_key = stochastic_frame_key(a.seed, a.frame);
+    render_kernel<M><<<num_tiles, dim3(TILE, TILE)>>>(s.ranges.ptr, values, s.splats.ptr, W, H, gx, bg, a.oit,
+                                                       frame_key, M == STOCHASTIC_POPFREE ? s.planes.ptr : nullptr,
                                                        s.rgb.ptr, s.alpha.ptr, s.evals.ptr, win);
 }
 
@@ -121,13 +189,20 @@ void State::blend(const RenderArgs& a, int gx, int gy, const uint32_t* tile_valu
     float* win = window_on ? window.ptr : nullptr;
     const int num_tiles = gx * gy;
     switch (a.mode) {
-        case GAUSSIAN_BLENDING: launch_blend<GAUSSIAN_BLENDING>(*this, num_tiles, v, W, H, gx, bgc, a.oit, win); break;
-        case ANALYTIC: launch_blend<ANALYTIC>(*this, num_tiles, v, W, H, gx, bgc, a.oit, win); break;
-        case WSR: launch_blend<WSR>(*this, num_tiles, v, W, H, gx, bgc, a.oit, win); break;
-        case DUPLEX: launch_blend<DUPLEX>(*this, num_tiles, v, W, H, gx, bgc, a.oit, win); break;
-        default: launch_blend<SCALAR>(*this, num_tiles, v, W, H, gx, bgc, a.oit, win);
+        case EVAL3D:
+        case STOPTHEPOP:
+            sorted_kernel<<<num_tiles, dim3(TILE, TILE)>>>(ranges.ptr, v, splats.ptr, rays.ptr, a.mode, a.queue, W, H,
+                                                            gx, bgc, a.oit, rgb.ptr, alpha.ptr, evals.ptr);
+            break;
+        case GAUSSIAN_BLENDING: launch_blend<GAUSSIAN_BLENDING>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case ANALYTIC: launch_blend<ANALYTIC>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case WSR: launch_blend<WSR>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case DUPLEX: launch_blend<DUPLEX>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case STOCHASTIC: launch_blend<STOCHASTIC>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case STOCHASTIC_POPFREE: launch_blend<STOCHASTIC_POPFREE>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        default: launch_blend<SCALAR>(*this, num_tiles, v, W, H, gx, bgc, a, win);
     }
-    launched("render_kernel");
+    launched(per_pixel_sorted(a.mode) ? "sorted_kernel" : "render_kernel");
     if (N > 1) {
         const int w = W / N, h = H / N;
         const int64_t out_px = (int64_t)w * h;

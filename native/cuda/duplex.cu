@@ -1,5 +1,5 @@
-// Duplex binning (KERNELS.md §8.3): each cell's visible splats in the CPU's canonical order (a segmented radix sort
-// by depth, then runs of equal depth sorted by splat_less: gbv/order.h), cells with a visible splat projected, one
+// Duplex binning (docs/modes.md#duplex): each cell's visible splats in the CPU's canonical order (a segmented radix
+// sort by depth, then runs of equal depth sorted by splat_less: gbv/order.h), cells with a visible splat projected, one
 // sort of (tile, cell depth), each tile's cells expanded to their splats.
 #include <thrust/iterator/counting_iterator.h>
 

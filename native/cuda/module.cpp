@@ -24,7 +24,7 @@ namespace {
         nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"), nb::arg("supersample"), \
         nb::arg("sh_degree"), nb::arg("background"), nb::arg("want_window") = false, nb::arg("sigma") = 10.0f,    \
         nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,      \
-        nb::arg("view_filter").none() = nb::none()
+        nb::arg("view_filter").none() = nb::none(), nb::arg("seed") = 0, nb::arg("frame") = 0
 
 // A render's dict with the per-camera stage's stats (stage_reused, stage_ms), as the CPU module's.
 nb::dict with_stage(nb::dict d, const cuda::RenderResult& res) {
@@ -53,10 +53,11 @@ NB_MODULE(_native_cuda, m) {
         "check_render_args",
         [](FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height, float near_plane,
            int projection, int mode, int supersample, int sh_degree, FArr background, bool want_window, float sigma,
-           float weight_background, float et_grade, bool depth_correct, std::optional<FArr> view_filter) {
+           float weight_background, float et_grade, bool depth_correct, std::optional<FArr> view_filter, uint32_t seed,
+           uint32_t frame) {
             render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode, supersample,
                         sh_degree, background, want_window, sigma, weight_background, et_grade, depth_correct,
-                        view_filter);
+                        view_filter, seed, frame);
         },
         GBV_RENDER_ARGS, "Renderer.render's argument checks, without a device: raises ValueError as render would.");
     m.def(
@@ -103,10 +104,11 @@ NB_MODULE(_native_cuda, m) {
              [](cuda::Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                 float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                 bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct,
-                std::optional<FArr> view_filter) {
+                std::optional<FArr> view_filter, uint32_t seed, uint32_t frame) {
                  const RenderArgs a = render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane,
                                                   projection, mode, supersample, sh_degree, background, want_window,
-                                                  sigma, weight_background, et_grade, depth_correct, view_filter);
+                                                  sigma, weight_background, et_grade, depth_correct, view_filter,
+                                                  seed, frame);
                  cuda::RenderResult res;
                  {
                      nb::gil_scoped_release release;
@@ -119,11 +121,11 @@ NB_MODULE(_native_cuda, m) {
              [](cuda::Renderer& r, unsigned int texture, FArr R, FArr t, float fx, float fy, float cx, float cy,
                 int width, int height, float near_plane, int projection, int mode, int supersample, int sh_degree,
                 FArr background, bool want_window, float sigma, float weight_background, float et_grade,
-                bool depth_correct, std::optional<FArr> view_filter) {
+                bool depth_correct, std::optional<FArr> view_filter, uint32_t seed, uint32_t frame) {
                  const RenderArgs a = render_args("render_to_gl_texture", R, t, fx, fy, cx, cy, width, height,
                                                   near_plane, projection, mode, supersample, sh_degree, background,
                                                   want_window, sigma, weight_background, et_grade, depth_correct,
-                                                  view_filter);
+                                                  view_filter, seed, frame);
                  cuda::RenderResult res;
                  {
                      nb::gil_scoped_release release;

@@ -15,7 +15,9 @@
 #include "buffers.h"
 #include "gbv/args.h"
 #include "gbv/common.h"
+#include "gbv/popfree.h"
 #include "gbv/preprocess.h"
+#include "gbv/ray3d.h"
 #include "renderer.h"
 
 namespace gbv::cuda {
@@ -74,6 +76,8 @@ struct State {
     detail::Event ev_stage;
     // per frame
     Buf<Splat2D> splats;
+    Buf<DepthPlane> planes;  // stochastic_popfree: per splat (popfree.h)
+    Buf<RaySplat> rays;  // eval3d, stopthepop
     Buf<TileRect> rects;
     Buf<uint32_t> touched, values_in, values_out;
     Buf<uint64_t> offsets, keys_in, keys_out;
@@ -102,9 +106,9 @@ struct State {
         free(means, scales, quats, opacities, sh, filter_3d, weight_sh, cmeans, cscales, cquats, coffsets, cmembers,
              cell_of, mkeys_in, mkeys_out, mvalues_in, mvalues_out, vis, vis_count, cell_touched, pair_counts, list,
              run_flags, run_slots, run_heads, run_keys[0], run_keys[1], run_perm[0], run_perm[1], run_numbers,
-             cell_offsets, pair_ends, cells, crects, cell_ranges, stage, stage_ok, splats, rects, touched, values_in,
-             values_out, offsets, keys_in, keys_out, ranges, temp, counters, rgb, alpha, window, o_rgb, o_alpha,
-             o_window, evals, o_evals, rgba, evals_total);
+             cell_offsets, pair_ends, cells, crects, cell_ranges, stage, stage_ok, splats, planes, rays, rects,
+             touched, values_in, values_out, offsets, keys_in, keys_out, ranges, temp, counters, rgb, alpha, window,
+             o_rgb, o_alpha, o_window, evals, o_evals, rgba, evals_total);
     }
 
     // binning.cu

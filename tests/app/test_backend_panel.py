@@ -1,4 +1,4 @@
-"""The Backend panel's SIMD line (issue 26): what gb.build_info() reports, the compiler line as its tooltip, in the
+"""The Backend panel's SIMD line: what gb.build_info() reports, the compiler line as its tooltip, in the
 warning colour when the blend runs scalar. Drawn against a recording stand-in for imgui (no window needed)."""
 
 from __future__ import annotations

@@ -149,12 +149,17 @@ def test_pane_lod_setting_is_normalised():
     assert state.settings_for(0, "a").lod is None
 
 
-def test_the_loader_builds_the_hierarchy_in_the_background(monkeypatch):
+def test_the_loader_builds_the_hierarchy_in_the_background_after_the_first_pictures(monkeypatch):
     built = []
     monkeypatch.setattr(loading, "hierarchy_for", built.append)
     loader = loading.SceneLoader(gb.DEFAULT_SCENE)
     t0 = time.time()
+    while loader.poll() is None:
+        assert time.time() - t0 < 30
+        time.sleep(0.01)
+    assert built == []  # it waits for the panes' first pictures of the scene
+    loader.poll().pictured.set()
     while not built:
-        assert time.time() - t0 < 30, loader.poll()
+        assert time.time() - t0 < 30
         time.sleep(0.01)
     assert built == [loader.poll().scene]

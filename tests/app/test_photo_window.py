@@ -79,12 +79,13 @@ def test_photo_pane_beside_scalar_and_gaussian_blending(photo_app):
     rows = rows[rows >= LABEL_BAND]  # under the label
     assert agree(got[rows][:, cols], expected[rows][:, cols]) > 0.995
     assert agree(got[LABEL_BAND:], pane_pixels(before, a.rect)[LABEL_BAND:]) < 0.9  # not what it showed before
-    for i, mode in ((1, "scalar"), (2, "gaussian_blending")):
+    # the panes render gaussian_blending at the fast precision (the viewer's default), and say so
+    for i, mode, spec in ((1, "scalar", "scalar"), (2, "gaussian_blending fast", "gaussian_blending+fast")):
         p = state.panes[i]
         assert (p.parts["a"].job.camera.width, p.parts["a"].job.camera.height) == (32, 25)
         assert overlays.pane_label(app, p, "a") == f"{p.name}  {mode}  x1/4  32x25"
         assert abs(p.rect.w / p.rect.h - 32 / 25) < 0.02
-        psnr = metrics.psnr(gb.render(state.scene, cam, mode, background=state.background).rgb, gt)
+        psnr = metrics.psnr(gb.render(state.scene, cam, spec, background=state.background).rgb, gt)
         text, stale = app.analysis.fidelity_line((i, "a"))  # on the photos' backdrop: black, as their borders
         assert not stale and text.startswith(f"PSNR {psnr:.2f} dB") and text.endswith("vs photo (bg 0.00 0.00 0.00)")
         line = next(i for i in app.placed if i.full == text)  # the pane's message line: white text on its dark box

@@ -169,3 +169,36 @@ def test_bad_file_and_new_scene_while_a_load_and_renders_are_in_flight(app, tmp_
     app.state.open(good)  # while the panes render the previous scene
     wait(app)
     assert app.state.scene_path == good and app.state.scene is not scene
+
+
+def test_camera_path_keys_export_import_and_path_video(app, tmp_path, monkeypatch):
+    """Keyframes added from the view export as nerfstudio's camera_path.json, which the Open path imports (the
+    view snaps to its first camera); Record then follows the path in the chosen codec."""
+    from gbviewer.app import path_keys
+    from gbviewer.nerfstudio_paths import load_nerfstudio_path
+
+    monkeypatch.setattr(path_keys, "PATH_FPS", 2.0)
+    wait(app)
+    app.state.add_keyframe()
+    app.state.controller.orbit(40.0, 10.0)
+    app.state.add_keyframe()
+    out = app.state.export_camera_path(tmp_path / "camera_path.json")
+    p = load_nerfstudio_path(out)
+    assert len(p.keys) == 2 and len(p.frames) == 4 and p.seconds == path_keys.SECONDS_PER_KEY
+    app.state.path_keys.clear()
+    app.state.open(out)
+    assert app.state.path_keys.source == out and len(app.state.path_keys) == 4
+    np.testing.assert_allclose(app.state.controller.R, p.frames[0].R, atol=1e-6)
+    app.run_frames(2)
+    shot(app, "viewer-camera-path")
+    app.state.video_codec = "vp9"
+    job = app.state.record_video(out=tmp_path / "path.webm")
+    t0 = time.time()
+    while not job.finished() and time.time() - t0 < 180:
+        app.step()
+        time.sleep(0.02)
+    assert job.error == "" and job.info.frames == 4 and job.info.width >= 480
+    import imageio_ffmpeg
+
+    meta = next(imageio_ffmpeg.read_frames(str(tmp_path / "path.webm")))
+    assert meta["codec"] == "vp9" and imageio_ffmpeg.count_frames_and_secs(str(tmp_path / "path.webm"))[0] == 4

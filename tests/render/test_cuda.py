@@ -182,7 +182,7 @@ DUPLEX, WSR = int(gb.Mode.DUPLEX), int(gb.Mode.WSR)
 BAD_ARGS = [
     (dict(R=np.eye(2, dtype=np.float32)), "R must be 3x3"),
     (dict(background=np.zeros(2, np.float32)), "background 3 floats"),
-    (dict(mode=6), "unknown mode"),
+    (dict(mode=len(gb.Mode)), "unknown mode"),  # one past the last
     (dict(mode=-1), "unknown mode"),
     (dict(supersample=0), "supersample must be 1..8"),
     (dict(supersample=9), "supersample must be 1..8"),

@@ -1,7 +1,8 @@
 """CUDA fixes that only a GPU can run (they skip elsewhere, saying why; bench/gpu_session.sh runs them): images
 taller than CUDA's grid rows, uploads of other scenes racing cell uploads, a large cell of splats at one depth
 (the canonical order's former quadratic case), the caller's current device left alone (and no context made on
-device 0 for a thread that never chose it), and release() freeing the device memory."""
+device 0 for a thread that never chose it), release() freeing the device memory, and the per-pixel sorted modes
+(eval3d, stopthepop) as on the CPU."""
 
 from __future__ import annotations
 
@@ -161,3 +162,13 @@ def test_cuda_release_frees_the_device_memory():
     r.upload(scene)
     again = r.render(cam, gb.RenderSettings("gaussian_blending"))
     close(first, again)
+
+
+@pytest.mark.parametrize("spec", ["eval3d", "eval3d:2", "stopthepop", "stopthepop:0", "stopthepop:16:2"])
+def test_cuda_sorted_modes_render_as_on_the_cpu(spec):
+    """The same fragments and order rules (gbv/ray3d.h, gbv/resort.h; the exact order by selection on the GPU, by a
+    stable sort on the CPU): the CPU's image up to the exp's last bits, with every awkward kind of splat."""
+    from helpers import random_view
+
+    scene, cam = random_view(5, n=300, W=61, H=37)
+    close(gb.render(scene, cam, spec, backend="cuda"), gb.render(scene, cam, spec, backend="cpu"))

@@ -1,4 +1,4 @@
-"""Preprocess decisions are bit-identical whatever the compiler fuses (issue 18, item 1).
+"""Preprocess decisions are bit-identical whatever the compiler fuses.
 
 Compilers contract a * b + c into one fused multiply-add where they choose: g++ does by default
 (-ffp-contract=fast) when the target has FMA instructions, nvcc does by default, GLSL drivers do. A fused sum differs

@@ -96,6 +96,7 @@ NOT_PORTED = {
     "same_depth_run": "CUDA's linear canonical order (as in_depth_run)",
     "run_pass_key": "CUDA's linear canonical order (as in_depth_run)",
     "mul_rn": "GLSL declares the values that C++ multiplies through it `precise` (test_preprocess_is_not_contracted)",
+    "dmul_rn": "the double mul_rn of ray3d.h's footprint: GLSL declares those values `precise` (ray3d.glsl)",
     "to_fixed": "GLSL 4.30 core has no 64-bit integers: the wsr sums stay in float there (blend.glsl)",
     "wsr_pixel_sums": "converts the fixed-point wsr sums, which GLSL keeps in float (blend.glsl)",
     "tiles_outside": "duplex's cell_misses statistic, which the GLSL backend does not report",

@@ -80,7 +80,7 @@ def test_sh_bands_follow_the_preset():
     np.testing.assert_allclose(full, (dc + 0.4886025119029199 * 0.4) * 0.5, atol=2e-6)
 
 
-@pytest.mark.parametrize("name", list(PRESETS))
+@pytest.mark.parametrize("name", [n for n, p in PRESETS.items() if p.mode == "scalar"])  # stochastic: its own test
 @pytest.mark.parametrize("seed", [31, 32])
 def test_presets_match_the_float64_reference(name, seed):
     preset = PRESETS[name]

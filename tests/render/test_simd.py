@@ -141,7 +141,7 @@ def test_reference_gaussian_blending_each_path(path):
 # captured_preprocess(): per splat its valid byte, then (when valid) Splat2D and TileRect, zeros when culled
 SPLAT2D = np.dtype([("xy", "<u4", 2), ("depth", "<u4"), ("opacity", "<u4"), ("conic", "<u4", 3), ("color", "<u4", 3),
                     ("v1", "<u4", 2), ("sigma", "<u4", 2), ("inv_sigma", "<u4", 2), ("log_min_alpha", "<u4"),
-                    ("radius", "<u4"), ("cell", "<i4")])
+                    ("radius", "<u4"), ("cell", "<i4"), ("id", "<i4")])
 PREPROCESS_RECORD = np.dtype([("valid", "u1"), ("splat", SPLAT2D), ("rect", "<i4", 4)])
 
 

@@ -1,5 +1,5 @@
 """Zoom-out consistency on real scenes: at x1/8, Gaussian Blending is closer than scalar blending to the
-x1 render box-downsampled by 8 (the multi-scale Blender construction, DESIGN.md)."""
+x1 render box-downsampled by 8 (the multi-scale Blender construction, docs/cli.md)."""
 
 from __future__ import annotations
 

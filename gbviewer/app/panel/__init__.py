@@ -23,7 +23,8 @@ def sections(app: ViewerApp) -> tuple[tuple[str, Callable[[], None]], ...]:
             ("Difference and error", partial(differences.draw, s, app.analysis)),
             ("Dataset", partial(dataset.draw, s, app.dialogs)), ("Background", partial(background.draw, s)),
             ("Camera", partial(camera.draw, s, app.open_dialog)),
-            ("Magnifier and output", partial(output.draw, s, app.screenshot_window, app.screenshot_pane)),
+            ("Magnifier and output", partial(output.draw, s, app.screenshot_window, app.screenshot_pane,
+                                               app.open_dialog)),
             ("Backend", partial(backend.draw, s, app.worker)),
             ("Timings", partial(timings.draw, s, app.worker, app.ui_fps)))
 

@@ -38,7 +38,7 @@ def bin_splats(gpu: Gpu, mode: Mode, visible: int, pairs: int, dmin: int, dmax: 
 
 
 def bin_duplex(gpu: Gpu, cells: Cells, cam_uniforms: dict, num_tiles: int):
-    """Duplex binning (KERNELS.md §8.3): project the cells with a visible splat, sort them by depth, one pair per
+    """Duplex binning (docs/modes.md#duplex): project the cells with a visible splat, sort them by depth, one pair per
     (tile, cell), sort the pairs by tile, expand every pair to its cell's visible splats. Returns the splat list,
     the tile ranges in it, the tile-cell pairs (the sort length), the list length and the visible cells."""
     m = cells.num_cells

@@ -62,11 +62,29 @@ def plan_blend(supersample: int, longest: int, limit: int | None) -> list[tuple[
     return [(t, t + 1, c, c + chunk) for t in range(tiles) for c in range(0, longest, chunk)]
 
 
-def blend_plan(gpu: Gpu, supersample: int, ranges, num_tiles: int, pairs: int) -> tuple[list, int]:
-    """The blend dispatches for this frame and its longest tile list (0 when the context has no cap: not measured)."""
+def plan_sorted(supersample: int, longest: int, limit: int | None, queue: int) -> list[tuple[int, int, int, int]]:
+    """The one blend dispatch of a per-pixel sorted mode (its queue is not carried between dispatches), when its loops
+    fit under `limit`: per render tile, a queue of K > 0 costs up to K + 2 iterations per splat (the insertion's
+    shifts) and K at the end, the exact order (K = 0) a pass over the list per blended splat."""
+    tiles = supersample * supersample
+    if limit is not None:
+        per_tile = longest * (queue + 2) + queue + 8 if queue > 0 else (longest + 1) * (longest + 2) + 8
+        if tiles * per_tile + 2 * tiles + 1024 > limit:
+            raise RenderError(f"glsl backend: a per-pixel sorted frame with tile lists of {longest} splats needs up to "
+                              f"{tiles * per_tile} loop iterations per pixel, more than this driver allows ({limit}); "
+                              "use the cpu or cuda backend")
+    return [(0, tiles, 0, FULL)]
+
+
+def blend_plan(gpu: Gpu, supersample: int, ranges, num_tiles: int, pairs: int, queue: int | None = None
+               ) -> tuple[list, int]:
+    """The blend dispatches for this frame and its longest tile list (0 when the context has no cap: not measured);
+    `queue`: a per-pixel sorted mode's queue length (0: the exact order; None: not such a mode)."""
     limit = loop_limit(gpu.ctx)
     longest = 0
     if limit is not None and pairs > 0:
         gpu.run("list_max.comp", -(-num_tiles // WG), (ranges, gpu.buffers["totals"]), n=num_tiles)
         longest = int(np.frombuffer(gpu.buffers["totals"].read(size=gi.TOTALS_BYTES), np.uint32)[gi.TOTAL_MAX_LIST])
+    if queue is not None:
+        return plan_sorted(supersample, longest, limit, queue), longest
     return plan_blend(supersample, longest, limit), longest

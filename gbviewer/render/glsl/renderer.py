@@ -14,8 +14,8 @@ same function names and constants):
    keys with its low (depth) digits done before duplication, where they are the same for all of a splat's pairs.
 4. gather_counts + scan + duplicate.comp: one (tile, splat) pair per touched tile, in depth order (one invocation
    per pair, which finds its splat by binary search).
-5. radix sort of the pairs by tile (stable): every tile's list is ordered by (depth, splat index), exactly as the
-   CPU driver's per-tile std::sort of (depth bits, index) keys.
+5. radix sort of the pairs by tile (stable): every tile's list is ordered by (depth, splat index), the same order
+   as the CPU driver's tile lists, which it bins in one global depth order (docs/modes.md#order).
 6. tile_ranges.comp, then blend.comp: one work group per 16x16 output block; supersampling blends the N x N
    render tiles of the block and box-averages them in shared memory.
 
@@ -54,7 +54,8 @@ from ...errors import BackendUnavailable, RenderError
 from ...scene import Scene
 from ..control import Progress, RenderControl
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
-from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
+from ..presets import FILTERED_MODES
+from ..types import PER_PIXEL_SORTED, Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
 from ..view_filter import DILATION_3DGS
 from .binning import bin_duplex, bin_splats, read_totals
 from .context import check_context, standalone_context
@@ -283,9 +284,11 @@ class GlslRenderer(Renderer):
         )
         weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", VEC4)
         stage, stage_reused, stage_ms = self._stage(settings, n, sh_deg, cam_uniforms)
+        rays = gpu.ensure("rays", n * gi.RAY_VEC4S * VEC4, "ray data") if mode in PER_PIXEL_SORTED else None
         gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,
-                weight, stage), num_splats=n, sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k,
-                oit=oit, view_filter=gi.view_filter_uniform(*settings.view_filter.native()[:4]),
+                weight, stage, self._planes(settings, n), rays or gpu.ensure("dummy", VEC4)), num_splats=n,
+                sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k, oit=oit,
+                view_filter=gi.view_filter_uniform(*settings.view_filter.native()[:4]),
                 view_rules=gi.view_rules_uniform(*settings.view_filter.native()[4:]), **cam_uniforms)
         scan(gpu, flags, n, total_slot=gi.TOTAL_VISIBLE)
         gpu.run("compact.comp", -(-n // WG), (splats, rects, flags, totals, dkeys[0], dvals[0]), num_splats=n)
@@ -303,11 +306,12 @@ class GlslRenderer(Renderer):
         else:
             tvals, ranges = bin_splats(gpu, mode, visible, pairs, dmin, dmax, num_tiles, gx)
             sort_length = 0 if mode == Mode.WSR else pairs
-        plan, longest = blend_plan(gpu, N, ranges, num_tiles, pairs)
+        queue = (0 if mode == Mode.EVAL3D else settings.queue) if mode in PER_PIXEL_SORTED else None
+        plan, longest = blend_plan(gpu, N, ranges, num_tiles, pairs, queue)
         self.ctx.finish()
         t2 = time.perf_counter()
         control.check()
-        self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, oit, control, target)
+        self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, rays, oit, control, target)
         self.ctx.finish()
         return dict(preprocess_ms=(t1 - t0) * 1e3, sort_ms=(t2 - t1) * 1e3, blend_ms=(time.perf_counter() - t2) * 1e3,
                     visible=visible, sort_length=sort_length, pairs=pairs, stage_reused=stage_reused,
@@ -321,9 +325,11 @@ class GlslRenderer(Renderer):
         (stage_rules) changed."""
         gpu = self.gpu
         stage = gpu.ensure("stage", n * gi.STAGE_VEC4S * VEC4, "per-camera stage")
-        vf = settings.view_filter.native() if settings.mode == Mode.SCALAR else np.zeros(2, np.float32)
+        vf = settings.view_filter.native() if settings.mode.label in FILTERED_MODES else np.zeros(2, np.float32)
         reach = float(max(np.float32(DILATION_3DGS), vf[0] + vf[1]))  # gbv::stage_reach, in float32
-        rules = settings.view_filter.stage_rules if settings.mode == Mode.SCALAR else 0
+        rules = settings.view_filter.stage_rules if settings.mode.label in FILTERED_MODES else 0
+        if settings.mode == Mode.EVAL3D:
+            reach = 1e30  # eval3d: its footprint is the ray's: the stage keeps every splat in front of the plane
         camera_bytes = tuple(np.asarray(v).tobytes() for v in cam_uniforms.values())
         key = (self._generation, camera_bytes, sh_deg, reach, rules)
         if key == self._stage_key:
@@ -336,10 +342,17 @@ class GlslRenderer(Renderer):
         self._stage_key = key
         return stage, False, (time.perf_counter() - t0) * 1e3
 
+    def _planes(self, settings: RenderSettings, n: int | None = None):
+        """stochastic_popfree's per-splat depth planes (popfree.h), sized for n splats (None: as preprocess sized
+        them); a dummy in the other modes."""
+        if settings.mode != Mode.STOCHASTIC_POPFREE:
+            return self.gpu.ensure("dummy", VEC4)
+        return self.gpu.buffers["planes"] if n is None else self.gpu.ensure("planes", n * VEC4, "depth planes")
+
     def _blend(self, camera: Camera, settings: RenderSettings, want_window: bool, plan, longest: int, splats, tvals,
-               ranges, oit: tuple, control: RenderControl, target=None) -> None:
+               ranges, rays, oit: tuple, control: RenderControl, target=None) -> None:
         """blend.comp into `target` or the output texture, in the dispatches of `plan` (one unless the driver caps
-        loops)."""
+        loops); `rays`: the per-pixel sorted modes' ray data (else None)."""
         gpu = self.gpu
         N = settings.supersample
         W, H = camera.width, camera.height
@@ -354,9 +367,12 @@ class GlslRenderer(Renderer):
         accum = gpu.ensure("blend_accum", invocations * gi.BLEND_ACCUM_VEC4S * VEC4, "blend sums")
         prog = gpu.program("blend.comp", **{f"BLEND_MODE_{settings.mode.name}": 1, "SUPERSAMPLED": int(N > 1)})
         gpu.set(prog, out_size=(W, H), supersample=N, grid=(gx, gy), background=tuple(settings.background),
-                  want_window=int(want_window), oit=oit)
+                  want_window=int(want_window), oit=oit, stochastic=(settings.seed, settings.frame),
+                  queue=settings.queue)
         cell_of = gpu.buffers["cell_of"] if settings.mode == Mode.DUPLEX else gpu.ensure("dummy", VEC4)
-        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of)):
+        planes = self._planes(settings)
+        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of, planes,
+                                 rays or gpu.ensure("dummy", VEC4))):
             buf.bind_to_storage_buffer(i)
         tex.bind_to_image(0, read=False, write=True)
         tiles = N * N

@@ -31,7 +31,7 @@ struct AlphaState {
     typename L::F T, C[3];
 };
 
-// Scalar front-to-back compositing of one alpha per lane (3DGS renderCUDA, KERNELS.md §0.7): skip below
+// Scalar front-to-back compositing of one alpha per lane (3DGS renderCUDA, docs/modes.md#scalar): skip below
 // min_alpha; stop without adding the splat when T(1 - alpha) < 1e-4. Returns the lanes that stopped.
 template <class L, class Tr = NoTrace>
 GBV_HD typename L::M composite_scalar(typename L::M pass, typename L::F alpha, const float color[3],
@@ -95,11 +95,14 @@ struct WindowState {
 
 // `gaussian_blending`: blend one splat onto the window and replace the window by the uniform one
 // with the same mass, mean and variance of T(x)(1 - alpha(x)) (eqs. 8-11, Appendix A), as the
-// authors' renderCUDA does it (KERNELS.md §6.3), with the moments taken about the window centre (more accurate
-// than the published float32 form, see window_side_moments): window sides go to the eigen-axis within 45 degrees,
-// a window outside [0.1, 1e6] sigma falls back to scalar alpha at the window centre, and the pixel
-// stops after adding a splat that leaves T < 1e-4. `took`, when given, receives the lanes whose window changed.
-template <class L, class Tr = NoTrace>
+// authors' renderCUDA does it (docs/modes.md#gaussian-blending), with the moments taken about the window centre (more
+// accurate than the published float32 form, see window_side_moments): window sides go to the eigen-axis within 45
+// degrees, a window outside [0.1, 1e6] sigma falls back to scalar alpha at the window centre, and the pixel stops after
+// adding a splat that leaves T < 1e-4. `took`, when given, receives the lanes whose window changed.
+// Fast: the `fast` precision (RenderSettings.precision): shorter series and one exp for both sides' factors
+// (window_side_moments), within the error bound tests/render/test_gb_fast.py asserts; every test and branch is the
+// exact path's.
+template <class L, class Tr = NoTrace, bool Fast = false>
 GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, WindowState<L>& win,
                                     typename L::M* took = nullptr) {
     using F = typename L::F;
@@ -157,11 +160,18 @@ GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, Window
     // Moments of T(x)(1 - alpha(x)) over the window (eqs. 10-11) about the window centre, in the splat's eigen-frame:
     // side integrals in sigma units (window_side_moments), scaled to pixels by sigma, sigma^2, sigma^3.
     const F s1 = L::set(s.sigma1), s2 = L::set(s.sigma2);
-    const SideMoments<L> mu_ = window_side_moments<L>(u * is1, half * lu * is1, inside);
-    const SideMoments<L> mv_ = window_side_moments<L>(v * is2, half * lv * is2, inside);
+    const F cu = u * is1, hu = half * lu * is1, cv = v * is2, hv = half * lv * is2;
+    const SideMoments<L> mu_ = window_side_moments<L, Fast>(cu, hu, inside);
+    const SideMoments<L> mv_ = window_side_moments<L, Fast>(cv, hv, inside);
     const F i0u = s1 * mu_.I0, i0v = s2 * mv_.I0;
     const F inv_area = L::select(inside, L::set(1.0f) / (lu * lv), zero);
-    const F o = L::set(s.opacity);
+    F o = L::set(s.opacity);
+    if constexpr (Fast) {  // the series sides' factors e(c) (window_side_moments), in one exp
+        const F series = L::set(GB_SERIES_MAX_HALF_WIDTH);
+        const F q = L::select(L::and_(inside, hu <= series), cu * cu, zero) +
+                    L::select(L::and_(inside, hv <= series), cv * cv, zero);
+        o = o * L::exp(L::set(-0.5f) * q);
+    }
     const F alpha = L::min(o * i0u * i0v * inv_area, L::set(MAX_ALPHA));  // mean alpha over the window
     GBV_TRACE(Tr, alpha(inside, alpha));
     const M take = L::and_not(inside, alpha < L::set(MIN_ALPHA_GB));

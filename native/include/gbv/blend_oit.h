@@ -24,7 +24,7 @@ struct WsrSumsN {
 // that a sum of up to 2^21 - 1 terms (2M splats at one pixel) stays below 2^63: no signed overflow.
 GBV_HD int64_t to_fixed(float x) { return (int64_t)rintf(minf(x, WSR_FIXED_MAX) * WSR_FIXED_SCALE); }
 
-// `wsr`: sort-free weighted sum (KERNELS.md §7.2): alpha = o' exp(power), no 0.99 clamp, skipped below 1/255,
+// `wsr`: sort-free weighted sum (docs/modes.md#wsr): alpha = o' exp(power), no 0.99 clamp, skipped below 1/255,
 // C += c alpha, S += alpha; no transmittance and no early termination (never stops a lane). The weight alpha is
 // capped at WSR_FIXED_MAX (the fixed-point bound; only huge trained view weights reach it) before it multiplies
 // the colour, so a capped splat keeps its colour. The fixed-point sums are added lane by lane.
@@ -55,7 +55,7 @@ GBV_HD void blend_wsr(const Splat2D& s, typename L::F px, typename L::F py, type
     }
 }
 
-// Duplex-GS per-lane state (KERNELS.md §8.4): T = cummult, the product of (1 - alpha/E) over every splat blended
+// Duplex-GS per-lane state (docs/modes.md#duplex): T = cummult, the product of (1 - alpha/E) over every splat blended
 // so far; T_cell = T when the current cell was entered (anchor_correct); the weighted sums C and S.
 template <class L>
 struct DuplexLanes {

@@ -6,8 +6,9 @@
 namespace gbv {
 
 // R is row-major world-to-camera; the frustum limits follow gsplat's persp_proj, which equals the
-// published 1.3 * tan(fov/2) clamp for a centred principal point (KERNELS.md §3); an orthographic camera has no
-// use for them. `projection`: PERSPECTIVE or ORTHOGRAPHIC (fx, fy then in pixels per world unit).
+// published 1.3 * tan(fov/2) clamp for a centred principal point (docs/modes.md#covariance-and-projection); an
+// orthographic camera has no use for them. `projection`: PERSPECTIVE or ORTHOGRAPHIC (fx, fy then in pixels per world
+// unit).
 inline CameraParams make_camera(const float R[9], const float t[3], float fx, float fy, float cx, float cy,
                                 int width, int height, float near_plane, Projection projection) {
     CameraParams c;

@@ -25,12 +25,25 @@
 
 namespace gbv {
 
-// Blending modes; the integer values are the Python enum's values (gbviewer/render/types.py).
-enum Mode : int32_t { SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5 };
+// Blending modes; the integer values are the Python enum's values (gbviewer/render/modes.py).
+enum Mode : int32_t {
+    SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5, STOCHASTIC = 6,
+    STOCHASTIC_POPFREE = 7,
+    EVAL3D = 8, STOPTHEPOP = 9,  // per-pixel sorted along the ray (ray3d.h)
+};
+// The modes whose alpha is 3DGS's at the pixel centre, with the viewer presets' 2D filter (view_filter.h): scalar and
+// the stochastic modes, which keep fragments with that alpha (gbviewer.render.presets.FILTERED_MODES). stopthepop
+// blends 3DGS's 2D splats through the same filter (preprocess_finish), but only with its default, 3DGS's +0.3: no
+// preset or view filter takes it (gbviewer.render.RenderSettings refuses one).
+GBV_HD constexpr bool view_filtered(Mode mode) {
+    return mode == SCALAR || mode == STOCHASTIC || mode == STOCHASTIC_POPFREE;
+}
+// Modes that order each pixel's splats by the depth of their maximum along its ray (ray3d.h).
+GBV_HD bool per_pixel_sorted(Mode m) { return m == EVAL3D || m == STOPTHEPOP; }
 // Camera projections; the values are the indices of gbviewer.camera.PROJECTIONS.
 enum Projection : int32_t { PERSPECTIVE = 0, ORTHOGRAPHIC = 1 };
 
-constexpr int TILE = 16;                       // BLOCK_X = BLOCK_Y (KERNELS.md §0.4)
+constexpr int TILE = 16;                       // BLOCK_X = BLOCK_Y (docs/modes.md#culling-radius-tiles)
 constexpr float DILATION_3DGS = 0.3f;          // +0.3 px^2, no compensation (§0.3)
 constexpr float MIP_KERNEL_SIZE = 0.1f;        // Mip-Splatting 2D filter (§2)
 constexpr float MAX_ALPHA = 0.99f;
@@ -44,6 +57,7 @@ constexpr float GB_MAX_UV_DIFF = 1e6f;
 constexpr float GB_MIN_VAR = 0.001f;           // window variance floor
 constexpr float GB_SERIES_MAX_HALF_WIDTH = 1.0f;  // window moments: Hermite series up to this half side (sigmas)
 constexpr int GB_SERIES_TERMS = 12;
+constexpr int GB_FAST_SERIES_TERMS = 8;       // the fast precision's longest series (gaussian.h)
 constexpr float SQRT_PI_2 = 1.2533141373155003f;
 constexpr float WSR_EMPTY_SUM = 1e-4f;         // LC-WSR: a weight sum of exactly 0 becomes 1e-4 (§7.2)
 constexpr float WSR_FIXED_SCALE = 68719476736.0f;  // 2^36: CPU weighted sums in 64-bit fixed point (blend.h)
@@ -51,6 +65,10 @@ constexpr float WSR_FIXED_MAX = 64.0f;         // 2^6: per-term clamp; 2^21 - 1 
 constexpr float DUPLEX_CELL_SIGMAS = 2.0f;     // cell radius ceil(2 sqrt(lambda1)) (§8.3)
 constexpr float DUPLEX_T_STOP = 0.01f;         // CUMMULT_THRESHOLD: cell-level early termination (§8.1)
 constexpr float TWO_PI = 6.283185307179586f;
+// StopThePop's published per-pixel queue length (SortQueueSizes.per_pixel = 4; tile_4x4 = 64, tile_2x2 = 8:
+// r4dl/StopThePop-Rasterization diff_gaussian_rasterization/__init__.py).
+constexpr int STOPTHEPOP_QUEUE = 4;
+constexpr int MAX_QUEUE = 64;  // the longest per-pixel queue accepted (0: unbounded, the exact per-pixel sort)
 
 struct Vec2 {
     float x, y;
@@ -136,6 +154,7 @@ struct Splat2D {
     float log_min_alpha;   // ln(min_alpha / opacity): lowest log-Gaussian value that can give a visible alpha
     float radius;  // screen-space bounding radius in pixels (duplex rejects pixels outside this circle)
     int32_t cell;  // index of the splat's cell (duplex), -1 otherwise
+    int32_t id;    // the splat's index in the frame's splats (stochastic hashes it: stochastic.h)
 };
 
 // Per-frame mode globals. The order-independent modes (wsr, duplex): LC-WSR's depth correction max(0, 1 - z/sigma)

@@ -15,7 +15,7 @@ GBV_HD typename L::F gaussian_power(const Splat2D& s, typename L::F dx, typename
            L::set(s.conic[1]) * dx * dy;
 }
 
-// Analytic-Splatting's logistic approximation of the standard normal CDF (KERNELS.md §4):
+// Analytic-Splatting's logistic approximation of the standard normal CDF (docs/modes.md#analytic):
 // sigmoid(1.6x + 0.07x^3), written with exp (the published 0.5 tanh(z/2) + 0.5 is the same function).
 template <class L>
 GBV_HD typename L::F approx_cdf(typename L::F x) {
@@ -47,12 +47,17 @@ GBV_HD typename L::F gaussian_moment0(typename L::F x, typename L::F e) {
 // every c), because there the closed form (erf differences, A&S erf's 1.5e-7 absolute error) loses up to 2% in the
 // splat's tails. Wider windows use the closed form about the centre: J1 = e(a) - e(b) - c I0,
 // J2 = I0 - h (e(a) + e(b)) - c J1.
+//
+// Fast (Gaussian Blending's `fast` precision): the series from 4 to GB_FAST_SERIES_TERMS terms by h (absolute error of
+// the window mean and of the normalised J1, J2 < 7e-5 against float64, see tests/render/test_gb_fast.py), and the
+// series lanes' moments are returned without their factor e(c): the caller multiplies both sides' factors into one
+// exp (blend_gaussian), which every product of the update carries once.
 template <class L>
 struct SideMoments {
     typename L::F I0, J1, J2;
 };
 
-template <class L>
+template <class L, bool Fast = false>
 GBV_HD SideMoments<L> window_side_moments(typename L::F c, typename L::F h, typename L::M live) {
     using F = typename L::F;
     using M = typename L::M;
@@ -76,9 +81,11 @@ GBV_HD SideMoments<L> window_side_moments(typename L::F c, typename L::F h, type
         F he_prev = one, he = cc, p = hs;  // He_{n-1}, He_n, h^n/n! at n = 1
         F s0 = one, s1 = L::neg(p * he) * L::set(1.0f / 3.0f), s2 = L::set(1.0f / 3.0f);
         // terms for the widest lane: float accuracy (< 6e-7 relative) with 6 up to h = 1/4, 10 up to 1/2, 12 up to 1
-        const int terms = L::any(L::and_(series, hs > L::set(0.5f)))    ? GB_SERIES_TERMS
-                          : L::any(L::and_(series, hs > L::set(0.25f))) ? 10
-                                                                       : 6;
+        const int wide = L::any(L::and_(series, hs > L::set(0.5f)))    ? 2
+                         : L::any(L::and_(series, hs > L::set(0.25f))) ? 1
+                                                                      : 0;
+        const int terms = Fast ? (wide == 2 ? GB_FAST_SERIES_TERMS : wide == 1 ? 6 : 4)
+                               : (wide == 2 ? GB_SERIES_TERMS : wide == 1 ? 10 : 6);
         GBV_UNROLL
         for (int n = 2; n <= GB_SERIES_TERMS; ++n) {
             if (n > terms) break;
@@ -94,7 +101,8 @@ GBV_HD SideMoments<L> window_side_moments(typename L::F c, typename L::F h, type
                 s1 = s1 - p * he * L::set(1.0f / (float)(n + 2));
             }
         }
-        const F two_h_e = L::set(2.0f) * hs * L::exp(m * cc * cc);
+        F two_h_e = L::set(2.0f) * hs;
+        if constexpr (!Fast) two_h_e = two_h_e * L::exp(m * cc * cc);
         out.I0 = L::select(series, two_h_e * s0, out.I0);
         out.J1 = L::select(series, two_h_e * hs * s1, out.J1);
         out.J2 = L::select(series, two_h_e * hs * hs * s2, out.J2);

@@ -1,4 +1,4 @@
-// Canonical order of a Duplex-GS cell's splats (KERNELS.md §8.3): the blend walks a cell's visible splats in this
+// Canonical order of a Duplex-GS cell's splats (docs/modes.md#duplex): the blend walks a cell's visible splats in this
 // order, so an image does not depend on how the scene lists the members of a cell. The CPU module sorts each cell
 // with it; the CUDA driver sorts by depth bits on the device and orders equal depths with it (duplex.cu: the two
 // functions at the end, which tests/render/test_duplex_order.py runs on the host against the former quadratic rank).

@@ -1,5 +1,5 @@
 // Per-splat preprocess: cull, covariance, EWA projection, per-mode 2D filter, eigen-decomposition,
-// colour from SH, tile rectangle. One function for every backend (KERNELS.md §0, §2, §4, §6.2): the per-camera stage
+// colour from SH, tile rectangle (docs/modes.md#shared-pipeline). One function for every backend: the per-camera stage
 // (preprocess_stage.h, shared by every mode) and the mode's finish (preprocess_finish); for one splat stage_splat and
 // finish_splat, composed by preprocess_splat.
 #pragma once
@@ -16,11 +16,12 @@ namespace gbv {
 // Every step is written once, as a template over a lane type L (lanes.h) like blend.h's: L::F holds one float per
 // splat lane, L::M one flag per lane, so the same source compiles to the one-splat functions (Lanes1: CUDA, the GLSL
 // port's reference and the scalar CPU path) and to the CPU's vector preprocess (native/cpu/preprocess_isa.cpp, 8 or
-// 16 splats at once; the CPU stores the stage per camera and runs each mode's finish on it). Culling is a lane mask; a lane culled early computes on and is dropped at the end, and the work
-// stops when no lane is left. Every lane type computes the same IEEE operations in the same order (its mul_rn,
-// fmin/fmax, frexp and ceil are libm's, bit for bit), so the vector preprocess is bit-identical to the scalar one.
-// The one-splat wrappers keep the signatures CUDA and the GLSL port use. SH evaluation is sh.h, the 2D footprint
-// (eigen-decomposition, radius, cutoff box, tile rectangle) footprint.h.
+// 16 splats at once; the CPU stores the stage per camera and runs each mode's finish on it). Culling is a lane mask; a
+// lane culled early computes on and is dropped at the end, and the work stops when no lane is left. Every lane type
+// computes the same IEEE operations in the same order (its mul_rn, fmin/fmax, frexp and ceil are libm's, bit for bit),
+// so the vector preprocess is bit-identical to the scalar one. The one-splat wrappers keep the signatures CUDA and the
+// GLSL port use. SH evaluation is sh.h, the 2D footprint (eigen-decomposition, radius, cutoff box, tile rectangle)
+// footprint.h.
 
 // Outputs of L::N splats: Splat2D's fields but log_min_alpha (log_min_alpha(lane_opacity), one lane at a time, with
 // libm's logf as on one splat) and cell (the caller's). min_power: a preset's support cut (support_power); the blend
@@ -55,9 +56,9 @@ GBV_HD typename L::M screen_footprint(const CameraParams& cam, const typename L:
 
 // The mode's finish of one splat per lane from its stage st (the lanes `ok`; in: only mean, weight_sh and weight_deg
 // are read, for the view weight): everything but the colour, which the caller takes from the stage. Returns the lanes
-// that survive: a splat is culled when it is degenerate, invisible, or touching no tile. wsr and duplex (KERNELS.md
-// §7.2, §8.3) keep the 3DGS +0.3 dilation and 3-sigma radius and fold the view weight and the optional depth
-// correction into the opacity: o' = o * (v * (depth_correct ? 1 - z/sigma : 1)), culled when z >= sigma
+// that survive: a splat is culled when it is degenerate, invisible, or touching no tile. wsr and duplex
+// (docs/modes.md#wsr, #duplex) keep the 3DGS +0.3 dilation and 3-sigma radius and fold the view weight and the optional
+// depth correction into the opacity: o' = o * (v * (depth_correct ? 1 - z/sigma : 1)), culled when z >= sigma
 // (depth_correct), v * dc <= 0 or o' < 1/255. The outputs of culled lanes are unspecified.
 template <class L>
 GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLanes<L>& st, typename L::M ok,
@@ -71,7 +72,7 @@ GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLan
     float sigmas = RADIUS_SIGMAS_3DGS;
     float min_alpha = MIN_ALPHA_3DGS;
     float min_power = -INFINITY;
-    if (mode == SCALAR) {
+    if (view_filtered(mode) || mode == STOPTHEPOP) {  // stopthepop blends 3DGS's 2D splats in its own order
         scalar_filter<L>(oit, cov, opacity, ok);
         min_power = support_power(oit);
     } else if (mode == MIP) {
@@ -190,6 +191,7 @@ GBV_HD bool finish_splat(const SplatIn& in, const StageSplat& stage, int sh_deg,
     out->inv_sigma2 = o.inv_sigma2;
     out->radius = o.radius;
     out->cell = in.cell;
+    out->id = -1;  // the caller's (the splat's index)
     return true;
 }
 
@@ -217,7 +219,7 @@ struct Cell2D {
     float radius;
 };
 
-// Project a cell as Duplex-GS's preprocessCUDA_anchor does (KERNELS.md §8.3): near cull, EWA projection with
+// Project a cell as Duplex-GS's preprocessCUDA_anchor does (docs/modes.md#duplex): near cull, EWA projection with
 // the +0.3 dilation, radius ceil(2 sqrt(lambda1)) (the splats use 3), tile rectangle; false when culled.
 GBV_HD bool preprocess_cell(const CellIn& in, const CameraParams& cam, int grid_x, int grid_y, Cell2D* out,
                             TileRect* rect) {

@@ -16,10 +16,10 @@ namespace gbv {
 constexpr int STAGE_DC_CLAMP = 1;  // sh_to_rgb's dc_clamp
 constexpr int STAGE_RADIAL = 2;    // the depth (the sort key) is the distance from the eye (perspective)
 
-// The stage rules of a frame: OitParams' dc_clamp and sort_radial, the scalar mode's only (the presets'); 0 for every
-// other mode. Part of every backend's stage key, like stage_reach.
+// The stage rules of a frame: OitParams' dc_clamp and sort_radial, the presets' (of the modes their 2D filter applies
+// to: view_filtered); 0 for every other mode. Part of every backend's stage key, like stage_reach.
 GBV_HD int stage_rules(Mode mode, const OitParams& oit) {
-    if (mode != SCALAR) return 0;
+    if (!view_filtered(mode)) return 0;
     return (oit.dc_clamp ? STAGE_DC_CLAMP : 0) | (oit.sort_radial ? STAGE_RADIAL : 0);
 }
 
@@ -105,9 +105,29 @@ struct SplatInLanes {
     int weight_deg;
 };
 
-// View-space position R m + t of a world point; false behind the near plane (z <= 0.2, KERNELS.md §0.4). An
-// orthographic camera culls the same way: it sees what lies in front of its image plane (z = 0) by more than the
-// near distance, and sorts by the same view-space z.
+// Mip-Splatting 3D filter (applied in every mode when present): the scales grow to sqrt(s^2 + f^2), the opacity
+// scales by sqrt(prod s^2 / (s^2 + f^2)).
+template <class L>
+GBV_HD void filter_3d_scales(const SplatInLanes<L>& in, typename L::F s[3], typename L::F* opacity) {
+    using F = typename L::F;
+    const typename L::M filtered = in.filter_3d > L::set(0.0f);
+    if (L::any(filtered)) {
+        const F f2 = L::mul_rn(in.filter_3d, in.filter_3d);
+        F ratio = L::set(1.0f);
+        for (int i = 0; i < 3; ++i) {
+            const F s2 = L::mul_rn(in.scale[i], in.scale[i]);
+            s[i] = L::select(filtered, L::sqrt(s2 + f2), in.scale[i]);
+            ratio = ratio * (s2 / (s2 + f2));
+        }
+        *opacity = L::select(filtered, *opacity * L::sqrt(ratio), *opacity);
+    } else {
+        for (int i = 0; i < 3; ++i) s[i] = in.scale[i];
+    }
+}
+
+// View-space position R m + t of a world point; false behind the near plane (z <= 0.2,
+// docs/modes.md#culling-radius-tiles). An orthographic camera culls the same way: it sees what lies in front of its
+// image plane (z = 0) by more than the near distance, and sorts by the same view-space z.
 template <class L>
 GBV_HD typename L::M view_point(const CameraParams& cam, const typename L::F m[3], typename L::F pv[3]) {
     const float* R = cam.R;
@@ -170,22 +190,9 @@ GBV_HD typename L::M preprocess_stage(const SplatInLanes<L>& in, const CameraPar
     F pv[3];
     const typename L::M ok = view_point<L>(cam, in.mean, pv);
     if (!L::any(ok)) return ok;
-    // Mip-Splatting 3D filter (applied in every mode when present): scales grow, opacity compensates.
     F s[3];
     F opacity = in.opacity;
-    const typename L::M filtered = in.filter_3d > L::set(0.0f);
-    if (L::any(filtered)) {
-        const F f2 = L::mul_rn(in.filter_3d, in.filter_3d);
-        F ratio = L::set(1.0f);
-        for (int i = 0; i < 3; ++i) {
-            const F s2 = L::mul_rn(in.scale[i], in.scale[i]);
-            s[i] = L::select(filtered, L::sqrt(s2 + f2), in.scale[i]);
-            ratio = ratio * (s2 / (s2 + f2));
-        }
-        opacity = L::select(filtered, opacity * L::sqrt(ratio), opacity);
-    } else {
-        for (int i = 0; i < 3; ++i) s[i] = in.scale[i];
-    }
+    filter_3d_scales<L>(in, s, &opacity);
     F cov3[6];
     covariance_3d<L>(in.quat, s, cov3);
     project_covariance<L>(cam, cov3, pv, st->cov);
@@ -208,9 +215,11 @@ GBV_HD void stage_color(const SplatInLanes<L>& in, int sh_deg, int rules, const 
 
 // The reach a frame's stage serves (stage_on_screen, every backend's stage key): the largest diagonal the frame's
 // 2D filter adds, the scalar mode's view filter (dilation + pre-dilation), every other mode at most DILATION_3DGS
-// (preprocess_finish).
+// (preprocess_finish); eval3d infinite (every splat in front of the near plane is kept: the 2D covariance does not
+// bound its footprint).
 GBV_HD float stage_reach(Mode mode, const OitParams& oit) {
-    const float filter = mode == SCALAR ? oit.dilation + oit.pre_dilation : 0.0f;
+    if (mode == EVAL3D) return INFINITY;  // its footprint is the ray's (ray3d.h), not the 2D covariance's: keep all
+    const float filter = view_filtered(mode) ? oit.dilation + oit.pre_dilation : 0.0f;
     return filter > DILATION_3DGS ? filter : DILATION_3DGS;
 }
 

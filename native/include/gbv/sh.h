@@ -62,7 +62,7 @@ GBV_HD void sh_to_rgb(const typename L::F* sh, int deg, const typename L::F dir[
     }
 }
 
-// Sort-free GS's view-dependent weight v_i (KERNELS.md §7.3): a 1-channel SH w[K] (f_do_0, f_ro_*), the raw
+// Sort-free GS's view-dependent weight v_i (docs/modes.md#wsr): a 1-channel SH w[K] (f_do_0, f_ro_*), the raw
 // sum: no +0.5, no clamp (non-positive weights are culled by the caller).
 template <class L>
 GBV_HD typename L::F sh_to_weight(const typename L::F* w, int deg, const typename L::F dir[3]) {

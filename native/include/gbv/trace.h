@@ -30,6 +30,8 @@ enum Skip : int32_t {
     SKIP_STOP,       // T (1 - alpha) < 1e-4: the pixel stops without this splat
     SKIP_CELL_STOP,  // duplex: a new cell entered with T < 0.01: the pixel stops
     SKIP_DONE,       // the pixel had stopped before this entry: not evaluated
+    SKIP_DISCARD,    // stochastic: the fragment's uniform is not below its alpha (discarded)
+    SKIP_DEPTH,      // stochastic_popfree: kept, but behind the nearest fragment kept so far (depth test)
 };
 
 // The tracer of renders: records nothing. A recording tracer has `records = true` and these static functions (masks:

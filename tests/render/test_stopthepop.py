@@ -1,0 +1,186 @@
+"""stopthepop (per-pixel order by the depth of the ray maximum through StopThePop's K-entry queue) against the float64
+references of tests/reference_ray.py: an unbounded queue is the exact per-pixel sort, the published K = 4 differs
+from it only where the published queue does (a pixel built for it), a queue of one is 3DGS's global order (scalar,
+bit for bit); the mode grammar; and popping on an orbit over a scene whose two splats swap their centre order while
+their per-pixel order does not (gbviewer.flicker)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import gbviewer as gb
+from gbviewer import flicker as fl
+from gbviewer import lod
+from gbviewer.errors import RenderError
+from gbviewer.render import RenderSettings, create_renderer
+from gbviewer.render.view_filter import ViewFilter
+from gbviewer.scene import SH_C0
+from helpers import random_view
+from reference_ray import render_sorted
+from test_simd import ALL_PATHS
+from test_simd import render as render_on
+
+W, H = 48, 40
+
+
+def camera() -> gb.Camera:
+    return gb.Camera(W, H, 40.0, 40.0, 24.5, 20.5, np.eye(3), np.zeros(3))  # pixel (24, 20) looks down +z
+
+
+def random_scene(seed: int = 7, n: int = 40) -> gb.Scene:
+    rng = np.random.default_rng(seed)
+    means = np.stack([rng.uniform(-0.6, 0.6, n), rng.uniform(-0.5, 0.5, n), rng.uniform(2.0, 3.0, n)], 1)
+    return gb.Scene.from_arrays(means, np.exp(rng.uniform(-3.0, -0.8, (n, 3))), rng.normal(size=(n, 4)),
+                                rng.uniform(0.3, 1.0, n), rng.normal(0, 0.8, (n, 1, 3)))
+
+
+def crossing_splats() -> gb.Scene:
+    """Five long splats tilted 45 degrees about y whose axes all cross the ray of pixel (24, 20): in the order of
+    their centres' depths (2.0 .. 2.4) their maxima along that ray lie at depths 3.0, 2.9, 2.8, 2.7 and 1.9, so a
+    queue of four blends the fifth after the fourth (a fragment nearer than one already blended)."""
+    zc = np.array([2.0, 2.1, 2.2, 2.3, 2.4])
+    tstar = np.array([3.0, 2.9, 2.8, 2.7, 1.9])
+    means = np.stack([zc - tstar, np.zeros(5), zc], 1)  # axis (1, 0, 1) / sqrt 2 meets x = 0 at z = zc - x
+    quat = (math.cos(math.pi / 8), 0.0, math.sin(math.pi / 8), 0.0)  # 45 degrees about y: x axis -> (1, 0, -1)
+    quats = np.tile(quat, (5, 1))
+    quats[:, 2] *= -1  # x axis -> (1, 0, 1) / sqrt 2
+    colours = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [0.2, 0.2, 0.2]], np.float64)
+    return gb.Scene.from_arrays(means, np.tile([1.2, 0.03, 0.03], (5, 1)), quats, np.full(5, 0.8),
+                                ((colours - 0.5) / SH_C0)[:, None, :])
+
+
+def test_unbounded_queue_is_the_exact_per_pixel_sort():
+    scene, cam = random_scene(), camera()
+    rgb, alpha = render_sorted(scene, cam, "stopthepop", queue=0)
+    frame = gb.render(scene, cam, "stopthepop:0")
+    err = np.abs(frame.rgb - rgb).max(axis=2)
+    assert np.quantile(err, 0.995) < 1e-4 and err.max() < 5e-3
+    np.testing.assert_allclose(frame.alpha, alpha, atol=5e-3)
+    # a queue longer than any pixel's fragments (40 splats) is the same sort, bit for bit
+    assert np.array_equal(gb.render(scene, cam, "stopthepop:64").rgb, frame.rgb)
+    assert np.abs(render_sorted(scene, cam, "stopthepop", queue=1)[0] - rgb).max() > 0.05  # the order matters here
+
+
+def test_published_queue_differs_only_where_the_published_method_does():
+    scene, cam = crossing_splats(), camera()
+    exact = render_sorted(scene, cam, "stopthepop", queue=0)[0]
+    queued = render_sorted(scene, cam, "stopthepop", queue=4)[0]
+    frame = gb.render(scene, cam, "stopthepop")
+    np.testing.assert_allclose(frame.rgb, queued, atol=1e-4)  # the published queue, everywhere
+    np.testing.assert_allclose(gb.render(scene, cam, "stopthepop:0").rgb, exact, atol=1e-4)
+    assert np.abs(frame.rgb[20, 24] - exact[20, 24]).max() > 0.05  # the constructed pixel: out of order
+    assert np.abs(gb.render(scene, cam, "stopthepop:5").rgb[20, 24] - exact[20, 24]).max() < 1e-4
+
+
+def test_queue_of_one_is_the_global_order():
+    """On the scalar SIMD path (the vector paths' exp differs from libm's by an ulp in the scalar mode)."""
+    scene, cam = random_scene(3), camera()
+    assert np.array_equal(render_on("scalar", scene, cam, "stopthepop:1").rgb, render_on("scalar", scene, cam,
+                                                                                          "scalar").rgb)
+
+
+@pytest.mark.parametrize("path", ALL_PATHS[1:])
+@pytest.mark.parametrize("mode", ["eval3d", "stopthepop", "stopthepop:0"])
+def test_every_simd_path_is_bit_identical(path, mode):
+    """Every kind of awkward splat (behind, degenerate, huge, near the plane, off screen): the per-pixel walk is the
+    scalar path's on every path, and the preprocess is bitwise the same, so every pixel is too."""
+    for seed in (1, 2):
+        scene, cam = random_view(seed, n=200, W=45, H=37)
+        for supersample in (1, 2):
+            ref = render_on("scalar", scene, cam, mode, supersample)
+            vec = render_on(path, scene, cam, mode, supersample)
+            assert np.isfinite(ref.rgb).all() and ref.alpha.max() > 0
+            assert np.array_equal(vec.rgb, ref.rgb) and np.array_equal(vec.alpha, ref.alpha)
+            assert np.array_equal(vec.debug["evals"], ref.debug["evals"])
+
+
+def test_grammar():
+    s = RenderSettings.parse("stopthepop:8")
+    assert (s.mode, s.queue, s.supersample, s.spec, s.label) == (gb.Mode.STOPTHEPOP, 8, 1, "stopthepop:8",
+                                                                 "stopthepop:8")
+    s = RenderSettings.parse("stopthepop:4:2")
+    assert (s.queue, s.supersample, s.spec, s.label) == (4, 2, "stopthepop:4:2", "stopthepop 2x2")
+    assert RenderSettings.parse(s.spec) == s
+    assert RenderSettings.parse("stopthepop").queue == 4
+    assert RenderSettings.parse("eval3d:3").supersample == 3
+    for bad in ("stopthepop:x", "stopthepop:65", "stopthepop:-1"):
+        with pytest.raises(RenderError):
+            RenderSettings.parse(bad)
+    with pytest.raises(RenderError, match="queue"):
+        RenderSettings(gb.Mode.SCALAR, queue=8)
+
+
+@pytest.mark.parametrize("mode", ["stopthepop", "eval3d"])
+def test_no_view_filter_or_preset_rule(mode):
+    """stopthepop blends with 3DGS's own +0.3 (its queue of one is scalar, above); neither it nor eval3d takes a view
+    filter or a preset's rules (they are not among the modes a preset's filter applies to: FILTERED_MODES)."""
+    for vf in (ViewFilter(0.1), ViewFilter(dc_clamp=True), ViewFilter(support=3.0), ViewFilter(sort_radial=True)):
+        with pytest.raises(RenderError, match=f"is not for {mode}"):
+            RenderSettings(gb.Mode.parse(mode), view_filter=vf)
+
+
+def wall_and_ball() -> gb.Scene:
+    """A red wall (a flat splat in the plane z = 4) and a green ball in front of it, to the side: as the camera
+    orbits, the ball's centre goes from nearer than the wall's to farther, while along every ray that meets both the
+    ball stays in front."""
+    means = np.array([[0.0, 0.0, 4.0], [0.9, 0.0, 3.6]])
+    colours = np.array([[1.0, 0.1, 0.1], [0.1, 1.0, 0.1]])
+    return gb.Scene.from_arrays(means, np.array([[0.8, 0.8, 0.01], [0.2, 0.2, 0.2]]), np.tile([1.0, 0, 0, 0], (2, 1)),
+                                np.array([0.95, 0.95]), ((colours - 0.5) / SH_C0)[:, None, :])
+
+
+def test_stopthepop_does_not_pop_on_an_orbit():
+    """Flicker against the exact per-pixel sort at 4x4 samples (the default reference, scalar 8x8, pops itself):
+    scalar pops where the centre order swaps, stopthepop does not."""
+    scene = wall_and_ball()
+    base = gb.Camera(64, 48, 50.0, 50.0, 32, 24, np.eye(3), np.zeros(3))
+    path = fl.orbit_path(base, scene, 17, -60.0)
+    depths = [(pf.camera.R @ scene.means[1] + pf.camera.t)[2] - (pf.camera.R @ scene.means[0] + pf.camera.t)[2]
+              for pf in path]
+    assert min(depths) < 0 < max(depths)  # the centre order swaps along the path
+    modes = RenderSettings.parse_list("scalar,stopthepop")
+    rep = fl.measure_flicker(scene, path, modes, reference=RenderSettings.parse("stopthepop:0:4"), pairs=16,
+                             with_floor=False)
+    scalar, stp = rep.modes
+    assert scalar.flicker > 4 * stp.flicker, (scalar.flicker, stp.flicker)
+
+
+@pytest.mark.parametrize("spec, order", [("stopthepop", [3, 4, 2, 1, 0]), ("stopthepop:0", [4, 3, 2, 1, 0]),
+                                         ("eval3d", [4, 3, 2, 1, 0])])
+def test_trace_lists_the_pixel_blend_order(spec, order):
+    """The pixel trace walks the constructed pixel in its blend order (the queue's, or the exact sort's) and
+    gives the rendered colour."""
+    scene, cam = crossing_splats(), camera()
+    renderer = create_renderer("cpu")
+    renderer.upload(scene)
+    settings = RenderSettings.parse(spec)
+    tr = renderer.trace(cam, settings, 24, 20)
+    assert [s.index for s in tr.samples[0].steps] == order
+    np.testing.assert_array_equal(tr.color, renderer.render(cam, settings).rgb[20, 24])
+
+
+@pytest.mark.parametrize("spec, mode, queue", [("eval3d:2", "eval3d", None), ("stopthepop:4:2", "stopthepop", 4)])
+def test_supersampled_matches_the_reference(spec, mode, queue):
+    """N x N samples: the reference's sorted render at N times the resolution, box-averaged."""
+    scene, cam = random_scene(9, 30), gb.Camera(24, 20, 20.0, 20.0, 12.25, 10.25, np.eye(3), np.zeros(3))
+    rgb, _ = render_sorted(scene, cam, mode, queue, supersample=2)
+    err = np.abs(gb.render(scene, cam, spec).rgb - rgb).max(axis=2)
+    assert np.quantile(err, 0.99) < 1e-4 and err.max() < 5e-3
+
+
+@pytest.mark.parametrize("spec", ["eval3d", "stopthepop"])
+def test_level_of_detail_drawn_in_place_is_the_cut_scene(spec):
+    """The cut drawn in place (its rows of the scene and the hierarchy's interior nodes) gives the image of the cut
+    gathered into a scene of its own, bit for bit."""
+    rng = np.random.default_rng(4)
+    n = 3000
+    means = np.stack([rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(2, 6, n)], 1)
+    scene = gb.Scene.from_arrays(means, np.exp(rng.uniform(-4.0, -1.5, (n, 3))), rng.normal(size=(n, 4)),
+                                 rng.uniform(0.05, 1.0, n), rng.normal(0, 0.5, (n, 1, 3)))
+    cam = gb.Camera(64, 48, 60.0, 60.0, 32, 24, np.eye(3), np.zeros(3))
+    frame = gb.render(scene, cam, f"{spec}+lod:2")
+    assert frame.stats.lod_splats != n  # interior nodes drawn
+    assert np.array_equal(frame.rgb, gb.render(lod.cut_scene(scene, cam, 2.0), cam, spec).rgb)
