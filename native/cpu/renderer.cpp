@@ -258,6 +258,7 @@ PixelTrace Renderer::trace(const RenderArgs& a, int x, int y) {
     std::lock_guard<std::mutex> lock(impl_->mutex);
     const SceneView& sc = impl_->scene;
     check_uploads(a, sc, "trace");
+    ThreadCount threads(0);  // the stage it may build runs parallel regions: OpenMP's default team, capped
     const simd::Path& path = simd::current();
     const StageKey key = stage_key(a, sc, impl_->generation);
     std::vector<Stage> stages = impl_->take_stages({key});
