@@ -87,6 +87,18 @@ def test_settings_named_after_a_preset_are_that_preset():
     assert RenderSettings(preset="inria").spec == "preset:inria"
 
 
+def test_a_spec_with_an_exponent_reads_back():
+    """RenderSettings(lod=1e6).spec wrote 'scalar+lod:1e+06', whose '+' split the spec: eval (which hands its modes
+    to the workers as specs) refused its own --lod 1000000. A spec writes no '+' in a number, and reads one."""
+    for lod in (1e6, 1e-5, 123456.7):
+        s = RenderSettings(supersample=2, lod=lod)
+        assert "e+" not in s.spec and RenderSettings.parse(s.spec) == s
+    assert RenderSettings.parse("scalar+lod:1e+06") == RenderSettings.parse("scalar+lod:1e06") == RenderSettings(
+        lod=1e6)
+    with pytest.raises(RenderError, match="expected MODE"):
+        RenderSettings.parse("scalar+06")
+
+
 def test_render_and_trace_take_a_render_settings_alike():
     """trace_pixel took a RenderSettings as its mode while gb.render read its repr as a spec and refused it in a
     garbled line; both take one now, by one rule (it says everything: other options are refused)."""

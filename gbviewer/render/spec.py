@@ -4,6 +4,7 @@ the texts its `spec` and messages write. Sits below types (whose Mode the spec's
 from __future__ import annotations
 
 import enum
+import re
 
 from ..errors import RenderError
 from .presets import PRESETS
@@ -15,7 +16,7 @@ PRECISIONS = ("exact", "fast")  # gaussian_blending's kernels (gbv/blend.h: blen
 
 def spec_parts(spec: str) -> dict:
     """The RenderSettings fields a mode spec sets (see `RenderSettings.parse`), the mode as its name."""
-    body, *suffixes = spec.split("+")
+    body, *suffixes = re.split(r"(?<![0-9][eE])\+", spec)  # not an exponent's sign ('+lod:1e+06')
     parts: dict = {}
     for suffix in suffixes:
         kind, _, tau = suffix.partition(":")
@@ -53,8 +54,10 @@ def _spec_number(text: str, kind: type, spec: str, what: str) -> float | int:
 
 
 def shortest(x: float) -> str:
-    """A short text of `x` that reads back as it exactly ('40', '0.1', '12.3456789012')."""
-    return f"{x:g}" if float(f"{x:g}") == x else repr(float(x))
+    """A short text of `x` that reads back as it exactly ('40', '0.1', '12.3456789012', '1e06': no '+', which
+    separates a spec's parts)."""
+    text = f"{x:g}" if float(f"{x:g}") == x else repr(float(x))
+    return text.replace("e+", "e")
 
 
 def shown(value: object) -> str:
