@@ -47,8 +47,8 @@ def test_bad_lod_one_line_exit_2(cmd, value, capsys, monkeypatch):
     assert len(err.splitlines()) == 1 and err.startswith(f"gbviewer {cmd}: error: argument --lod: "), err
 
 
-@pytest.mark.parametrize("spec, says", [("scalar+lod:x", "LOD pixels 'x' is not a number"),
-                                         ("scalar+lod:-2", "lod"), ("scalar+fog", "expected MODE[:N][+fast|+exact][+lod[:TAU]]")])
+@pytest.mark.parametrize("spec, says", [("scalar+lod:x", "LOD pixels 'x' is not a number"), ("scalar+lod:-2", "lod"),
+                                         ("scalar+fog", "expected MODE[:N][+fast|+exact][+lod[:TAU]]")])
 def test_bad_lod_spec_one_line_exit_2(spec, says, tmp_path, capsys):
     argv = ["compare", str(gb.DEFAULT_SCENE), "--modes", spec, "--out", str(tmp_path / "c.png")]
     assert main(argv) == 2
