@@ -229,7 +229,7 @@ def test_pinned_traces_are_the_pixels_the_panes_show(inspected):
     settle(insp)
     entries = insp.entries()
     assert [e.name for e in entries] == ["A", "A'", "B"]
-    assert [e.trace.mode for e in entries] == ["scalar", "mip", "gaussian_blending 2x2"]
+    assert [e.trace.mode for e in entries] == ["scalar", "mip", "gaussian_blending 2x2 fast"]  # as the pane drew it
     for e in entries:
         shown = state.panes[e.slot[0]].parts[e.slot[1]]
         x, y = e.pixel

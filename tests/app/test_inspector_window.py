@@ -100,7 +100,7 @@ def test_pin_a_pixel_at_x1_8_and_inspect_it(app):
     ray = lambda c, px, py: np.array([(px + 0.5 - c.cx) / c.fx, (py + 0.5 - c.cy) / c.fy])  # noqa: E731
     assert np.abs(ray(new, X, Y) - ray(cam, x, y)).max() <= 0.5 / new.fx + 0.5 / cam.fx + 1e-9
     for e, frame in zip(entries, (a, b)):
-        assert e.pixel == (X, Y) and e.trace.mode == ("scalar", "gaussian_blending")[e.slot[0]]
+        assert e.pixel == (X, Y) and e.trace.mode == ("scalar", "gaussian_blending fast")[e.slot[0]]
         np.testing.assert_allclose(e.trace.color, frame.rgb[Y, X], atol=TOL, rtol=0)
         assert abs(e.trace.transmittance - (1 - frame.alpha[Y, X])) <= TOL
         # the pixel itself is on screen as rendered (the outline is drawn around it, the window elsewhere)
