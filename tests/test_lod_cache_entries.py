@@ -154,7 +154,7 @@ def test_flicker_over_a_repeated_leaf_entry_rebuilds_it(tmp_path):
     out = subprocess.run([sys.executable, "-m", "gbviewer", "flicker", str(tmp_path / "s.ply"), "--modes",
                           "scalar+lod:2,scalar+lod:4", "--pairs", "2", "--frames", "8", "--width", "64", "--height",
                           "48", "--backend", "cpu", "--out", str(tmp_path / "out")],
-                         capture_output=True, text=True, env=env, timeout=300)
+                         capture_output=True, cwd=tmp_path, text=True, env=env, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stderr.count("damaged level-of-detail cache entry") == 1
     assert "not a permutation" in out.stderr and str(folder / entry.name) in out.stderr
@@ -175,8 +175,8 @@ def test_the_native_cut_stays_in_bounds_whatever_order_it_is_given(tmp_path):
             "1.0, 0, None); assert out is not None; print('ok')")
     np.savez(tmp_path / "t.npz", means=tree.means, radius=tree.radius, size=tree.size, levels=tree.levels,
              order=order, eye=eye)
-    done = subprocess.run([sys.executable, "-c", code, str(tmp_path / "t.npz")], capture_output=True, text=True,
-                          timeout=120)
+    done = subprocess.run([sys.executable, "-c", code, str(tmp_path / "t.npz")], capture_output=True, cwd=tmp_path,
+                          text=True, timeout=120)
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-2000:]
     levels = tree.levels.copy()
     levels[2] += 1000  # interior arrays no longer match; the walk would index past them
@@ -235,7 +235,7 @@ def test_an_entry_that_is_not_a_regular_file_is_rebuilt_without_blocking(tmp_pat
         "import sys, warnings; from pathlib import Path; import gbviewer as gb; "
         "from gbviewer.lod.cache import cached_build; scene = gb.load(sys.argv[1]); "
         "warnings.simplefilter('always'); cached_build(scene, 'depth', Path(sys.argv[2]))"),
-        str(tmp_path / "s.ply"), str(entry.parent)], capture_output=True, text=True, timeout=120)
+        str(tmp_path / "s.ply"), str(entry.parent)], capture_output=True, cwd=tmp_path, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stderr.count("damaged level-of-detail cache entry") == 1 and "not a regular file" in out.stderr
     assert not entry.is_symlink() and entry.is_file()

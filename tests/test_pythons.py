@@ -74,6 +74,8 @@ def test_the_suite_part_passes_on(version, tmp_path):
     for part in ("gbviewer", "shaders", "assets", "tests", "tools"):
         shutil.copytree(ROOT / part, work / part, ignore=shutil.ignore_patterns("_native*", "__pycache__"))
     shutil.copy2(ROOT / "pyproject.toml", work)
+    if (ROOT.parent / "shared").is_dir():  # the shared scenes beside the checkout, as beside this one
+        (tmp_path / "shared").symlink_to(ROOT.parent / "shared")
     shutil.copy2(module, work / "gbviewer" / module.name)
     env = {k: v for k, v in cmake_env().items() if not k.startswith(("PYTHON", "VIRTUAL_ENV"))}
     env["PYTHONPATH"] = str(work)  # the staged package, for the tests' own child processes too

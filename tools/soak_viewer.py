@@ -22,6 +22,7 @@ import gc
 import json
 import os
 import random
+import select
 import shutil
 import signal
 import subprocess
@@ -49,20 +50,24 @@ def xvfb_display(width: int = 1280, height: int = 800) -> Iterator[str]:
     exe = shutil.which("Xvfb")
     if exe is None:
         raise RuntimeError("Xvfb is not installed (apt-get install xvfb; scripts/setup.sh installs it)")
-    n = next(n for n in range(91, 200)
-             if not Path(f"/tmp/.X11-unix/X{n}").exists() and not Path(f"/tmp/.X{n}-lock").exists())
-    proc = subprocess.Popen([exe, f":{n}", "-screen", "0", f"{width}x{height}x24", "-nolisten", "tcp", "-noreset"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    # Xvfb picks the first free display itself (-displayfd): a number whose lock file is absent here can still be
+    # taken by a server in another root or container sharing the abstract socket namespace
+    read_fd, write_fd = os.pipe()
+    proc = subprocess.Popen([exe, "-displayfd", str(write_fd), "-screen", "0", f"{width}x{height}x24", "-nolisten",
+                             "tcp", "-noreset"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            pass_fds=(write_fd,))
+    os.close(write_fd)
     old = os.environ.get("DISPLAY")
     try:
-        t0 = time.time()
-        while not Path(f"/tmp/.X11-unix/X{n}").exists():
-            if proc.poll() is not None or time.time() - t0 > 20:
-                raise RuntimeError(f"Xvfb :{n} did not start (exit {proc.poll()})")
-            time.sleep(0.05)
+        ready, _, _ = select.select([read_fd], [], [], 20)
+        number = os.read(read_fd, 32).decode().strip() if ready else ""
+        if not number.isdigit():
+            raise RuntimeError(f"Xvfb did not start (exit {proc.poll()})")
+        n = int(number)
         os.environ["DISPLAY"] = f":{n}"
         yield f":{n}"
     finally:
+        os.close(read_fd)
         if old is None:
             os.environ.pop("DISPLAY", None)
         else:
