@@ -28,7 +28,8 @@ if [ ! -e "$ROOTFS/.gbviewer-root" ]; then
   tmp="$ROOTFS.tmp"
   rm -rf "$tmp" && mkdir -p "$(dirname "$ROOTFS")"
   say "making a Debian $SUITE root in $ROOTFS (debootstrap, a few minutes)"
-  debootstrap --variant=minbase --include=ca-certificates "$SUITE" "$tmp" http://deb.debian.org/debian \
+  # git: the user cloned the checkout with it (and tests list its tracked files)
+  debootstrap --variant=minbase --include=ca-certificates,git "$SUITE" "$tmp" http://deb.debian.org/debian \
     > "$tmp.log" 2>&1 || { tail -5 "$tmp.log"; say "debootstrap failed ($tmp.log)"; exit 1; }
   touch "$tmp/.gbviewer-root" && rm -rf "$ROOTFS" && mv "$tmp" "$ROOTFS" && rm -f "$tmp.log"
 fi
@@ -40,6 +41,9 @@ if compgen -G "/usr/local/share/ca-certificates/*.crt" >/dev/null; then
   cp /usr/local/share/ca-certificates/*.crt "$ROOTFS/usr/local/share/ca-certificates/"
   chroot "$ROOTFS" update-ca-certificates >/dev/null 2>&1 || { say "update-ca-certificates failed in the root"; exit 1; }
 fi
+
+[ -x "$ROOTFS/usr/bin/git" ] || chroot "$ROOTFS" /usr/bin/env -i PATH=/usr/bin:/bin DEBIAN_FRONTEND=noninteractive \
+  bash -c "apt-get update -qq && apt-get install -y -qq git" >/dev/null 2>&1 || { say "could not install git in the root"; exit 1; }
 
 mounted=()
 cleanup() { for ((i = ${#mounted[@]} - 1; i >= 0; i--)); do umount -l "${mounted[i]}" 2>/dev/null || true; done; }
