@@ -65,6 +65,10 @@ if git rev-parse --is-inside-work-tree >/dev/null 2>&1; then
 else
   tar --exclude=./.venv --exclude=./build --exclude=./out -cf - . | tar -C "$work" -xf -
 fi
+# a git repository with those files, as a clone is (tests list its tracked files)
+git -C "$work" init -q && git -C "$work" add -A &&
+  git -C "$work" -c user.name=check_distro -c user.email=check_distro@localhost commit -qm "the checkout" ||
+  { say "could not make the checkout's copy a git repository"; exit 1; }
 rm -rf "$ROOTFS/work/shared"
 [ -d ../shared ] && cp -a ../shared "$ROOTFS/work/shared"
 
