@@ -30,7 +30,7 @@ def test_readme_commands_on_debian_13():
         skip_or_fail(report.strip())
     assert proc.returncode == 0, report
     assert "wrote out/comparison.png" in report and "wrote out/zoom.mp4" in report, report
-    assert re.search(r"Python 3\.13\.\d+; .*g\+\+.* 14\.\d.*; Highway 1\.2\.", report), report
+    assert re.search(r"Python 3\.13\.\d+; c\+\+ .* 14\.\d+\.\d+; Highway 1\.2\.", report), report
     assert re.search(r"check_distro: SIMD (avx2|avx512|neon) .*; the venv after the first command: ", report), report
     summary = [ln for ln in report.splitlines() if re.match(r"check_distro: \d+ passed", ln)]
     assert summary and " failed" not in summary[-1], report
