@@ -19,8 +19,8 @@ from pathlib import Path
 import gbviewer as gb
 from gbviewer import lod
 from gbviewer.bench.scale import scene_bytes
-from gbviewer.camera import orbit_camera, parse_rates
-from gbviewer.metrics import psnr, reference_psnr
+from gbviewer.model.camera import orbit_camera, parse_rates
+from gbviewer.outputs.metrics import psnr, reference_psnr
 
 RULES = lod.tree.RULES
 OTHERS = ("scalar", "gaussian_blending", "scalar:3")

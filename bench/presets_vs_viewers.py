@@ -27,7 +27,7 @@ import numpy as np
 from PIL import Image
 
 import gbviewer as gb
-from gbviewer.camera import orbit_camera
+from gbviewer.model.camera import orbit_camera
 from gbviewer.render import RenderSettings
 from gbviewer.render.presets import PRESETS
 

@@ -30,8 +30,8 @@ import viewer_pacing  # noqa: E402
 
 import gbviewer as gb  # noqa: E402
 from gbviewer import bench  # noqa: E402
-from gbviewer.camera import format_rate  # noqa: E402
-from gbviewer.io.files import atomic_write  # noqa: E402
+from gbviewer.model.camera import format_rate  # noqa: E402
+from gbviewer.core.files import atomic_write  # noqa: E402
 from gbviewer.render import BACKENDS, RenderSettings  # noqa: E402
 
 MODES = "scalar,mip,analytic,gaussian_blending,supersample:3,gaussian_blending:2"

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 import gbviewer as gb
-from gbviewer.scene import SH_C0
+from gbviewer.model.scene import SH_C0
 
 
 def _frame_quats(normals: np.ndarray) -> np.ndarray:

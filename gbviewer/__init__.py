@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .camera import Camera, load_cameras_json, orbit_camera
-from .cancel import CancelToken
-from .errors import (BackendUnavailable, CallbackError, CameraError, Cancelled, GBViewerError, LoadCancelled,
+from .model.camera import Camera, load_cameras_json, orbit_camera
+from .core.cancel import CancelToken
+from .core.errors import (BackendUnavailable, CallbackError, CameraError, Cancelled, GBViewerError, LoadCancelled,
                      RenderCancelled, RenderError, SceneFormatError, VideoCancelled)
 from .io import load, save
 from .render import (BackendChoice, Frame, FrameStats, Mode, PixelTrace, Renderer, RenderSettings, choose_backend,
                      build_info, get_renderer, render, trace_pixel)
-from .scene import Scene
+from .model.scene import Scene
 
 ASSETS = Path(__file__).parent / "assets"  # installed; a source checkout has it at the top level
 if not ASSETS.is_dir():

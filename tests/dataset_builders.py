@@ -13,8 +13,8 @@ import pytest
 from PIL import Image
 
 import gbviewer as gb
-from gbviewer.camera import frame_box, orbit_direction
-from gbviewer.figure import to_uint8
+from gbviewer.model.camera import frame_box, orbit_direction
+from gbviewer.outputs.figure import to_uint8
 
 W, H = 130, 100  # not multiples of 8: the ragged edges box-downsampling crops
 VIEWS = 9  # names v00..v08: v00 and v08 are the capture's test views (every 8th)

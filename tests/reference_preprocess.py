@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
-from gbviewer.camera import NEAR_PLANE
-from gbviewer.scene import SH_C0
+from gbviewer.model.camera import NEAR_PLANE
+from gbviewer.model.scene import SH_C0
 
 TILE = 16
 MIN_ALPHA_3DGS = 1.0 / 255.0

@@ -12,7 +12,7 @@ import pkgutil
 import numpy as np
 
 import gbviewer as gb
-from gbviewer.keyframes import Keyframe
+from gbviewer.model.keyframes import Keyframe
 
 # field types whose == is elementwise or undefined: a dataclass holding one needs its own __eq__ or eq=False
 _ARRAYISH = ("ndarray", "np.", "Scene", "Frame", "Hierarchy", "Cut", "FrameStats", "Any", "object")

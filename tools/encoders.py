@@ -19,7 +19,7 @@ import numpy as np
 import zstandard
 from PIL import Image
 
-from gbviewer.scene import SH_C0
+from gbviewer.model.scene import SH_C0
 
 FLIP_XYZ = np.array([1.0, -1.0, -1.0])
 FLIP_SH = np.array([-1, -1, 1, -1, 1, 1, -1, 1, -1, 1, -1, -1, 1, -1, 1], dtype=np.float64)

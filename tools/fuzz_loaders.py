@@ -49,7 +49,7 @@ def _cameras(path: Path) -> list[np.ndarray]:
 
 def _keyframes(path: Path) -> list[np.ndarray]:
     import gbviewer as gb
-    from gbviewer.keyframes import load_keyframes
+    from gbviewer.model.keyframes import load_keyframes
 
     scene = gb.Scene.from_arrays(np.eye(3), np.full((3, 3), 0.1), np.tile([1.0, 0, 0, 0], (3, 1)), np.ones(3),
                                  np.zeros((3, 1, 3)))
@@ -58,7 +58,7 @@ def _keyframes(path: Path) -> list[np.ndarray]:
 
 
 def _nerfstudio(path: Path) -> list[np.ndarray]:
-    from gbviewer.nerfstudio_paths import load_nerfstudio_path
+    from gbviewer.model.nerfstudio_paths import load_nerfstudio_path
 
     p = load_nerfstudio_path(path)
     return _camera_arrays([k.camera for k in p.keys] + list(p.frames)) + [np.array([p.fps, p.seconds], np.float32)]
@@ -107,7 +107,7 @@ def main() -> None:
         import PIL.PngImagePlugin  # noqa: F401
 
         import gbviewer.io  # noqa: F401  (instrumented for coverage)
-        import gbviewer.keyframes  # noqa: F401
+        import gbviewer.model.keyframes  # noqa: F401
         import gbviewer.cli  # noqa: F401
         import gbviewer.io.datasets  # noqa: F401
     scratch = Path(tempfile.mkdtemp(prefix="gbv-fuzz-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None))

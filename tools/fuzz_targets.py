@@ -109,7 +109,7 @@ def _child_doc(path: Path, read_colmap) -> dict:
     """The input parsed as read_colmap parses the child's output (NaN and Infinity kept)."""
     import json
 
-    from gbviewer.errors import DatasetError
+    from gbviewer.core.errors import DatasetError
 
     try:
         doc = json.loads(path.read_bytes())

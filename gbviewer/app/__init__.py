@@ -1,11 +1,10 @@
 """The desktop viewer (`gbviewer [SCENE]`). `window` (glfw + imgui-bundle + moderngl; imported only when a window is
-opened) composes `state` (scene, panes, settings and the actions on them), `keys` (the key map), `panes` (render
-requests and textures), `display` (frames drawn from GPU memory or copied through host memory), `input`, `menu`,
-`panel/` (one module per section), `overlays`, `difference_overlay`, `dialogs` and `screenshots`. Without a window:
-`camera_control`, `rates`, `layout`, `views`, `settings`, `difference_views` (the difference, error and photo views),
-`dataset` (the training dataset's views, the snapped one), and the threads in `worker` (renders), `difference_thread`
-(differences, references, photos, PSNR/SSIM), `loading` (scenes), `dataset` (datasets) and `recording` (zoom
-videos)."""
+opened) composes `state` (scene, panes, settings and the actions on them), `ui/` (key map, input, dialogs, layout,
+text placement, blits), `panes` (render requests and textures), `frames/` (what a pane shows, rates, display
+paths), `menu`, `panel/` (one module per section), `overlays/` (labels, the difference views' bars) and
+`screenshots`. Without a window: `camera/` (control, path, recording), `settings`, `difference/` (the difference,
+error and photo views and their thread), `inspector/`, `dataset` (the training dataset's views, the snapped one),
+and the threads in `threads/` (renders, scene loading)."""
 
 from __future__ import annotations
 
@@ -31,8 +30,8 @@ def open_window(scene: str | Path | None = None, cameras: str | Path | None = No
     ok, why = has_display_env()
     if not ok:
         return False, why
-    from ..errors import GBViewerError
-    from ..extras import require
+    from ..core.errors import GBViewerError
+    from ..core.extras import require
 
     for module in ("imgui_bundle", "glfw"):  # imgui_bundle first: it points pyGLFW at its own libglfw
         require("viewer", module, "the viewer")

@@ -9,10 +9,10 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from ..camera import UP_AXES, Camera
-from .layout import Rect, fit_aspect
-from ..scene import Scene
-from .camera_control import CameraController
+from ..model.camera import UP_AXES, Camera
+from .ui.layout import Rect, fit_aspect
+from ..model.scene import Scene
+from .camera.control import CameraController
 from .dataset import DatasetViews
 from .settings import AppSettings
 

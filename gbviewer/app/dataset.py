@@ -13,8 +13,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..camera import Camera, camera_key, format_rate
-from ..errors import GBViewerError
+from ..model.camera import Camera, camera_key, format_rate
+from ..core.errors import GBViewerError
 from ..eval import camera_for_rate
 from ..io.datasets import SPLITS, Dataset, View, load_dataset
 from ..io.datasets.backdrop import Backdrop, estimate_backdrop

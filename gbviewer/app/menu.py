@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from .keys import hint, label
+from .ui.keys import hint, label
 from .panel.dataset import open_dataset_dialog
 
 if TYPE_CHECKING:

@@ -11,11 +11,11 @@ from typing import Literal
 import numpy as np
 
 from ..render import Frame
-from .accumulate import Accumulation
-from .layout import Rect
-from .rates import PREVIEW_LOD_PX
+from .frames.accumulate import Accumulation
+from .ui.layout import Rect
+from .frames.rates import PREVIEW_LOD_PX
 from .settings import PANE_NAMES
-from .worker import RenderJob
+from .threads.worker import RenderJob
 
 
 class RateMeter:

@@ -15,20 +15,20 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from ..camera import Camera
-from ..figure import to_uint8
+from ..model.camera import Camera
+from ..outputs.figure import to_uint8
 from ..lod import hierarchy_state
 from ..lod.sparse import stride
 from ..render import Frame, RenderSettings
-from .accumulate import is_stochastic
-from .blit import Blitter
-from .display import GpuFrame
-from .layout import split_parts
-from .rates import first_preview, preview_factor, preview_lod
+from .frames.accumulate import is_stochastic
+from .ui.blit import Blitter
+from .frames.display import GpuFrame
+from .ui.layout import split_parts
+from .frames.rates import first_preview, preview_factor, preview_lod
 from .pane_state import PaneError, PaneState, Shown
 from .state import AppState
-from .views import visualize
-from .worker import RenderJob, RenderResult, RenderWorker
+from .frames.views import visualize
+from .threads.worker import RenderJob, RenderResult, RenderWorker
 
 MAX_SAMPLES = 96_000_000  # per render (pixels x supersampling^2): bounds memory and time at x8 with 8x8
 PREVIEW_BUDGET_MS = 60.0  # per UI frame while the camera moves, shared by the panes

@@ -8,9 +8,9 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from ..io.files import atomic_write
+from ..core.files import atomic_write
 from .settings import PANE_NAMES
-from .views import encode_png16, visualize
+from .frames.views import encode_png16, visualize
 
 if TYPE_CHECKING:
     from ..render import Frame

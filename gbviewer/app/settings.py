@@ -8,15 +8,15 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Container
 
-from ..camera import PROJECTIONS, UP_AXES
-from ..errors import InvalidValue
+from ..model.camera import PROJECTIONS, UP_AXES
+from ..core.errors import InvalidValue
 from ..render import AUTO, BACKEND_NAMES, Mode
 from ..render.presets import PRESETS
-from ..validate import array, integer, read_json, real
-from .camera_control import CameraController
-from .layout import LAYOUTS
-from .rates import clamp_rate
-from .views import VIEWS
+from ..core.validate import array, integer, read_json, real
+from .camera.control import CameraController
+from .ui.layout import LAYOUTS
+from .frames.rates import clamp_rate
+from .frames.views import VIEWS
 
 MODE_NAMES = tuple(m.label for m in Mode) + tuple(f"preset:{name}" for name in PRESETS)
 MAX_PANES = 4
@@ -161,7 +161,7 @@ def load_settings(path: Path | None = None) -> tuple[AppSettings, str]:
 
 
 def save_settings(settings: AppSettings, path: Path | None = None) -> Path:
-    from ..io.files import atomic_write
+    from ..core.files import atomic_write
 
     path = path or settings_path()
     text = settings.normalised().to_json()

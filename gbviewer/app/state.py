@@ -9,25 +9,25 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Literal
 
-from ..camera import Camera, load_cameras_json
-from ..camera_paths import zoom_path
-from ..errors import GBViewerError
+from ..model.camera import Camera, load_cameras_json
+from ..model.camera_paths import zoom_path
+from ..core.errors import GBViewerError
 from ..io.datasets.backdrop import RGB, choose_background, format_rgb
 from ..io.trained_as import describe
 from ..render import Mode, RenderSettings
 from ..render.presets import trained_spec
 from ..render.spec import spec_parts
-from ..scene import Scene
+from ..model.scene import Scene
 from .background import FIXED, PHOTOS
 from .camera_actions import CameraActions
-from .camera_control import CameraController
+from .camera.control import CameraController
 from .dataset import DatasetViews, bounds_fit_cameras
-from .layout import PANEL_W, Rect, dock_split, fit_aspect, pane_rects
-from .loading import SceneLoader
+from .ui.layout import PANEL_W, Rect, dock_split, fit_aspect, pane_rects
+from .threads.loading import SceneLoader
 from .pane_state import PaneState
-from .rates import clamp_rate, first_preview_lod, render_size, step_rate
-from .path_keys import PathKeys, is_nerfstudio_file
-from .recording import VIDEO_CONTAINERS, VideoJob
+from .frames.rates import clamp_rate, first_preview_lod, render_size, step_rate
+from .camera.path_keys import PathKeys, is_nerfstudio_file
+from .camera.recording import VIDEO_CONTAINERS, VideoJob
 from .screenshots import shot_name
 from .settings import MAX_PANES, MODE_NAMES, AppSettings, PaneSettings, add_recent
 

@@ -22,26 +22,27 @@ import glfw  # noqa: E402  (after imgui_bundle, see above)
 import moderngl  # noqa: E402
 
 from .. import DEFAULT_SCENE  # noqa: E402
-from ..errors import GBViewerError  # noqa: E402
+from ..core.errors import GBViewerError  # noqa: E402
 from ..render.glsl.context import release_current  # noqa: E402
-from . import overlays, screenshots  # noqa: E402
-from .difference_views import PaneAnalysis  # noqa: E402
-from .difference_overlay import draw_analysis_overlays  # noqa: E402
-from .blit import Blitter  # noqa: E402
-from .dialogs import FileDialogs, draw_help  # noqa: E402
-from .display import SharedContext, requested_path  # noqa: E402
-from .input import handle_input  # noqa: E402
-from .keys import action_table  # noqa: E402
-from .inspector import Inspector  # noqa: E402
-from .inspector_view import dock_side, draw_inspector  # noqa: E402
+from .overlays import labels as overlays
+from . import screenshots  # noqa: E402
+from .difference.views import PaneAnalysis  # noqa: E402
+from .overlays.difference import draw_analysis_overlays  # noqa: E402
+from .ui.blit import Blitter  # noqa: E402
+from .ui.dialogs import FileDialogs, draw_help  # noqa: E402
+from .frames.display import SharedContext, requested_path  # noqa: E402
+from .ui.input import handle_input  # noqa: E402
+from .ui.keys import action_table  # noqa: E402
+from .inspector.state import Inspector  # noqa: E402
+from .inspector.view import dock_side, draw_inspector  # noqa: E402
 from .menu import draw_menu  # noqa: E402
 from .panel import draw_panel  # noqa: E402
 from .panes import PaneRenders  # noqa: E402
 from .settings import AppSettings, load_settings, save_settings  # noqa: E402
 from .pane_state import RateMeter  # noqa: E402
-from .pane_text import Item  # noqa: E402
+from .ui.text import Item  # noqa: E402
 from .state import AppState  # noqa: E402
-from .worker import RenderWorker  # noqa: E402
+from .threads.worker import RenderWorker  # noqa: E402
 
 WAITING_FPS = 10  # UI frames a second while renders refine or a load runs (each posted result wakes it at once)
 
@@ -74,7 +75,7 @@ class ViewerApp:
         self.closed = False
         self.last_screenshot: Path | None = None
         self._pending_screenshot: Path | None = None
-        self.placed: list[Item] = []  # the texts the overlays placed over the panes this frame (pane_text)
+        self.placed: list[Item] = []  # the texts the overlays placed over the panes this frame (ui.text)
         self.part_tops: dict[tuple[int, str], float] = {}  # each pane part's y below its label and message lines
         self.dialogs = FileDialogs(self.state.open)
         self._init_window(visible)

@@ -1,5 +1,5 @@
 """Benchmarks: speed per mode, backend, sampling rate and SIMD path of the CPU backend; zoom fidelity (PSNR/SSIM)
-against box-downsampled references; flicker along a zoom (gbviewer.flicker); sorted against order-independent
+against box-downsampled references; flicker along a zoom (gbviewer.outputs.flicker); sorted against order-independent
 modes. Everything measured in one run (`run_bench`), reported as tables, JSON and plots (`report`)."""
 
 from .fidelity import FidelityRow, fidelity_cost, measure_fidelity

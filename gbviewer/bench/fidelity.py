@@ -7,10 +7,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import Camera
-from ..metrics import box_downsample, psnr, ssim, zoom_factor
+from ..model.camera import Camera
+from ..outputs.metrics import box_downsample, psnr, ssim, zoom_factor
 from ..render import Mode, RenderSettings, get_renderer
-from ..scene import Scene
+from ..model.scene import Scene
 from .speed import render_cost
 
 

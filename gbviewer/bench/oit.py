@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import Camera, orbit_camera
-from ..metrics import flicker, psnr
+from ..model.camera import Camera, orbit_camera
+from ..outputs.metrics import flicker, psnr
 from ..render import Mode, RenderSettings, get_renderer
-from ..scene import Scene
+from ..model.scene import Scene
 from .speed import STAGES, render_cost
 
 

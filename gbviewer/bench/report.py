@@ -11,12 +11,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import format_rate
-from ..extras import require
+from ..model.camera import format_rate
+from ..core.extras import require
 from ..io.datasets.backdrop import choose_background
-from ..io.files import atomic_write
+from ..core.files import atomic_write
 from ..render import BACKENDS
-from ..validate import dumps_json
+from ..core.validate import dumps_json
+from ..outputs.console import wide_console
 from .fidelity import FidelityRow
 from .oit import OitRow
 from .simd import SIMD_NAMES, simd_summary
@@ -24,14 +25,6 @@ from .stability import FlickerRow
 from .speed import SpeedRow, ratios
 
 BENCH_BACKGROUND = choose_background(None, None)  # the one rule without photos: every bench render is on black
-
-
-def wide_console():
-    """A rich console; into a file or pipe 200 columns wide, so that no number is cut short."""
-    from rich.console import Console
-
-    term = Console()
-    return term if term.is_terminal else Console(width=max(term.width, 200))
 
 
 def print_oit(rows: list[OitRow]) -> None:
@@ -53,7 +46,7 @@ def print_oit(rows: list[OitRow]) -> None:
 
 
 def print_flicker(rows: list[FlickerRow]) -> None:
-    """Flicker and change per mode (gbviewer.flicker), and each scene's floor."""
+    """Flicker and change per mode (gbviewer.outputs.flicker), and each scene's floor."""
     from rich.table import Table
 
     t = Table(title="Flicker along a zoom x1 -> x1/4 (8-bit levels: frame-to-frame change minus the reference's; "

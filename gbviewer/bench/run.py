@@ -8,13 +8,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
-from ..camera import Camera, load_cameras_json, orbit_camera
-from ..errors import GBViewerError
+from ..model.camera import Camera, load_cameras_json, orbit_camera
+from ..core.errors import GBViewerError
 from ..io import load
-from ..io.files import check_writable
+from ..core.files import check_writable
 from ..render import BACKENDS, Mode, RenderSettings
-from ..scene import Scene
-from ..validate import integer
+from ..model.scene import Scene
+from ..core.validate import integer
 from .fidelity import FidelityRow, fidelity_cost, measure_fidelity
 from .oit import OitRow, measure_oit, oit_cost
 from .simd import parse_simd, simd_info

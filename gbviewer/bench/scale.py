@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Camera, orbit_camera
-from ..cancel import CancelToken
-from ..errors import RenderCancelled
+from ..model.camera import Camera, orbit_camera
+from ..core.cancel import CancelToken
+from ..core.errors import RenderCancelled
 from ..io import load
 from ..render import RenderSettings, get_renderer
-from ..scene import Scene
+from ..model.scene import Scene
 
 
 def scene_bytes(scene: Scene) -> int:

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from ..io import load
-from ..io.files import atomic_write
+from ..core.files import atomic_write
 from ..io.write import inria_columns, ply_header
-from ..scene import Scene
+from ..model.scene import Scene
 
 VERSION = 1  # bump when the layout of the file changes
 SPACING = 1.1  # grid step in units of the source's extent

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import os
 
-from ..errors import GBViewerError
+from ..core.errors import GBViewerError
 
 SIMD_NAMES = ("scalar", "avx2", "avx512")  # the CPU module's blend paths (GBVIEWER_SIMD)
 EXP_RATE_N = 1 << 22  # exp evaluations per exp_rate call

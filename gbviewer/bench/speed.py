@@ -9,9 +9,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import Camera
+from ..model.camera import Camera
 from ..render import BACKENDS, Mode, RenderSettings, get_renderer
-from ..scene import Scene
+from ..model.scene import Scene
 from .simd import current_simd, set_simd
 
 STAGES = ("preprocess_ms", "sort_ms", "blend_ms", "total_ms")

@@ -1,14 +1,14 @@
-"""Temporal stability in the benchmark: every mode's flicker (gbviewer.flicker) along a zoom-out from the first
+"""Temporal stability in the benchmark: every mode's flicker (gbviewer.outputs.flicker) along a zoom-out from the first
 bench view, small and short so that it stays cheap, with the floor of the supersampled reference."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..camera import Camera
-from ..flicker import DEFAULT_REFERENCE, flicker_path, floor_settings, measure_flicker, pair_starts
+from ..model.camera import Camera
+from ..outputs.flicker import DEFAULT_REFERENCE, flicker_path, floor_settings, measure_flicker, pair_starts
 from ..render import RenderSettings
-from ..scene import Scene
+from ..model.scene import Scene
 from .speed import render_cost
 
 ZOOM = (1.0, 0.25)  # the path: x1 to x1/4 over FRAMES frames (4 s at 30 fps, as gbviewer video's default)
@@ -17,7 +17,7 @@ FRAMES = 120
 
 @dataclass
 class FlickerRow:
-    """One mode's flicker and change (8-bit levels, see gbviewer.flicker) on one scene; floor: the reference at
+    """One mode's flicker and change (8-bit levels, see gbviewer.outputs.flicker) on one scene; floor: the reference at
     half its samples per axis against it, the smallest flicker the measure resolves."""
 
     scene: str

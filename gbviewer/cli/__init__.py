@@ -9,8 +9,8 @@ import sys
 import threading
 from contextlib import contextmanager
 
-from ..argtypes import Parser
-from ..errors import GBViewerError
+from .argtypes import Parser
+from ..core.errors import GBViewerError
 from ..render.budget import BUDGET_ENV
 from . import bench, compare, flicker, info, render, trace, video, view
 from . import eval as evaluation

@@ -5,12 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..argtypes import SIZE, Rate, count, positive
-from ..camera import parse_rates
-from ..errors import GBViewerError
-from ..extras import require
+from .argtypes import SIZE, Rate, count, positive
+from ..model.camera import parse_rates
+from ..core.errors import GBViewerError
+from ..core.extras import require
 from ..render import BACKENDS
-from ..io.outputs import refuse_collisions, refuse_inputs
+from ..core.outputs import refuse_collisions, refuse_inputs
 from .options import MAX_COUNT, add_lod_arg, check_render_size, progress_bar, settings_of
 
 BENCH_DEFAULTS = {"modes": "scalar,gaussian_blending,gaussian_blending+fast,supersample:3", "rates": "1,1/8",

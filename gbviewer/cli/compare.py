@@ -5,12 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..argtypes import BACKGROUND, INSET, Rate
-from ..camera import format_rate
-from ..figure import DIFFS, write_comparison
+from .argtypes import BACKGROUND, INSET, Rate
+from ..model.camera import format_rate
+from ..outputs.figure import DIFFS, write_comparison
 from ..io import load
 from ..io.datasets.backdrop import choose_background
-from ..io.files import check_writable
+from ..core.files import check_writable
 from ..render.presets import differences
 from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of, camera_from_args,
                       check_inset, check_render_size, load_options, settings_of)

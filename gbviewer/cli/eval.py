@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from ..eval.options import add_eval_args, scene_pairs
-from ..extras import require
-from ..io.files import check_writable
-from ..io.outputs import refuse_collisions
+from .eval_args import add_eval_args, scene_pairs
+from ..core.extras import require
+from ..core.files import check_writable
+from ..core.outputs import refuse_collisions
 from .options import add_lod_arg, progress_bar, settings_of
 
 

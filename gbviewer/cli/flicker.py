@@ -1,22 +1,22 @@
-"""`gbviewer flicker`: shimmer as a number, per mode, along a camera path (gbviewer.flicker)."""
+"""`gbviewer flicker`: shimmer as a number, per mode, along a camera path (gbviewer.outputs.flicker)."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from ..argtypes import SIZE, Number, Rate, count, positive
-from ..bench.report import wide_console
-from ..camera_paths import MAX_FRAMES
-from ..errors import GBViewerError
-from ..extras import require
-from ..flicker import (DEFAULT_DEGREES, DEFAULT_PAIRS, DEFAULT_REFERENCE, FLICKER_PATHS, flicker_path, heat_file,
+from .argtypes import SIZE, Number, Rate, count, positive
+from ..outputs.console import wide_console
+from ..model.camera_paths import MAX_FRAMES
+from ..core.errors import GBViewerError
+from ..core.extras import require
+from ..outputs.flicker import (DEFAULT_DEGREES, DEFAULT_PAIRS, DEFAULT_REFERENCE, FLICKER_PATHS, flicker_path, heat_file,
                        measure_flicker, write_heat_maps, write_heat_video, write_table)
 from ..io import load
-from ..io.files import check_writable
-from ..io.outputs import refuse_collisions
+from ..core.files import check_writable
+from ..core.outputs import refuse_collisions
 from ..render import RenderSettings
-from ..video import MAX_FPS, MIN_FPS
+from ..outputs.video import MAX_FPS, MIN_FPS
 from .options import (MAX_COUNT, add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of,
                       camera_from_args, check_render_size, load_options, path_args, progress_bar, settings_of)
 

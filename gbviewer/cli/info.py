@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 from ..io import WRITE_FORMATS, dropped, format_for, load, save
-from ..io.files import check_writable
+from ..core.files import check_writable
 from ..io.trained_as import describe
 from ..render import build_info, compiler_line, simd_line
 from .options import add_load_args, load_options

@@ -10,14 +10,14 @@ from pathlib import Path
 
 from dataclasses import replace
 
-from ..argtypes import MAX_SIDE, ORBIT, SIDE, Number, count
-from ..camera import PROJECTIONS, Camera, load_cameras_json, orbit_camera
-from ..camera_paths import scene_focus_depth
-from ..errors import GBViewerError
+from .argtypes import MAX_SIDE, ORBIT, SIDE, Number, count
+from ..model.camera import PROJECTIONS, Camera, load_cameras_json, orbit_camera
+from ..model.camera_paths import scene_focus_depth
+from ..core.errors import GBViewerError
 from ..render import AUTO, BACKEND_NAMES, RenderSettings, choose_backend
 from ..render.types import MAX_LOD
-from ..scene import Scene
-from ..validate import integer
+from ..model.scene import Scene
+from ..core.validate import integer
 
 MAX_COUNT = 10_000  # most views, repeats and flicker frames of a benchmark
 

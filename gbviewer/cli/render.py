@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..argtypes import BACKGROUND, Rate, count
-from ..errors import GBViewerError, RenderError
-from ..figure import save_image
+from .argtypes import BACKGROUND, Rate, count
+from ..core.errors import GBViewerError, RenderError
+from ..outputs.figure import save_image
 from ..io import load
-from ..io.files import check_writable
+from ..core.files import check_writable
 from ..io.trained_as import describe
 from ..render import Mode, get_renderer
 from ..render.presets import PRESETS, trained_spec

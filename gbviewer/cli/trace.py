@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..argtypes import BACKGROUND, PIXEL, Rate, count
-from ..errors import GBViewerError
+from .argtypes import BACKGROUND, PIXEL, Rate, count
+from ..core.errors import GBViewerError
 from ..io import load
-from ..io.files import check_writable
+from ..core.files import check_writable
 from ..render import trace_pixel
 from .options import (MAX_COUNT, add_camera_args, add_load_args, camera_from_args, check_render_size, load_options,
                       settings_of)
@@ -16,7 +16,7 @@ from .options import (MAX_COUNT, add_camera_args, add_load_args, camera_from_arg
 
 def cmd_trace(args: argparse.Namespace) -> int:
     """Pixel traces of the CPU kernel, one rich table per mode; --json writes them all."""
-    from ..trace_report import print_traces, write_traces
+    from ..outputs.trace_report import print_traces, write_traces
 
     if args.json:
         check_writable(args.json, args.force, inputs=[args.scene, args.cameras], option="--json")

@@ -5,14 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..argtypes import INSET, SIZE, Number, Rate, count, positive
-from ..camera_paths import MAX_FRAMES, PATHS, camera_path, nerfstudio_frames
-from ..errors import GBViewerError
-from ..extras import require
+from .argtypes import INSET, SIZE, Number, Rate, count, positive
+from ..model.camera_paths import MAX_FRAMES, PATHS, camera_path, nerfstudio_frames
+from ..core.errors import GBViewerError
+from ..core.extras import require
 from ..io import load
-from ..io.files import check_writable
-from ..nerfstudio_paths import load_nerfstudio_path
-from ..video import CODECS, CONTAINERS, MAX_FPS, MIN_FPS, record_video, video_encoder
+from ..core.files import check_writable
+from ..model.nerfstudio_paths import load_nerfstudio_path
+from ..outputs.video import CODECS, CONTAINERS, MAX_FPS, MIN_FPS, record_video, video_encoder
 from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of, camera_from_args,
                       check_inset, check_render_size, load_options, path_args, settings_of)
 
@@ -90,7 +90,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     route = p.add_mutually_exclusive_group()
     route.add_argument("--path",
                    help="zoom (focal length), dolly (camera along its axis), rate (same view, rendered at the rate "
-                   "and nearest-upscaled) or a keyframes FILE.json (see gbviewer.keyframes.load_keyframes); default "
+                   "and nearest-upscaled) or a keyframes FILE.json (see gbviewer.model.keyframes.load_keyframes); default "
                    "zoom")
     route.add_argument("--camera-path", type=Path, metavar="FILE.json",
                        help="nerfstudio's camera_path.json (its viewer's export, ns-render's input): its frames at its "

@@ -7,17 +7,17 @@ import os
 from pathlib import Path
 
 from .. import DEFAULT_SCENE
-from ..camera_paths import zoom_path
-from ..errors import GBViewerError
-from ..eval.options import add_dataset_args
-from ..extras import require
-from ..argtypes import BACKGROUND
-from ..figure import compose_grid, render_grid, save_image
+from ..model.camera_paths import zoom_path
+from ..core.errors import GBViewerError
+from .eval_args import add_dataset_args
+from ..core.extras import require
+from .argtypes import BACKGROUND
+from ..outputs.figure import compose_grid, render_grid, save_image
 from ..io import load
 from ..io.datasets import load_dataset
-from ..io.files import check_writable
+from ..core.files import check_writable
 from ..render import Mode, RenderSettings
-from ..video import record_video
+from ..outputs.video import record_video
 from .options import add_backend_arg, add_camera_args, backend_of, camera_from_args
 
 

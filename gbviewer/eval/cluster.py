@@ -13,8 +13,8 @@ from contextlib import contextmanager
 from dataclasses import replace
 from typing import Callable, Iterator
 
-from ..errors import GBViewerError
-from ..extras import require
+from ..core.errors import GBViewerError
+from ..core.extras import require
 from ..render import AUTO, BACKENDS
 from .tasks import ViewResult, ViewTask, run_task
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from ..errors import GBViewerError
+from ..core.errors import GBViewerError
 from ..io.datasets import View
 from ..render import RenderSettings
 from ..render.budget import BUDGET_ENV, frame_bytes, gib, memory_budget

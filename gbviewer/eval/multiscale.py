@@ -10,12 +10,12 @@ from typing import Sequence
 
 import numpy as np
 
-from ..camera import Camera, format_rate
-from ..errors import GBViewerError
+from ..model.camera import Camera, format_rate
+from ..core.errors import GBViewerError
 from ..io.datasets import View, read_photo
-from ..io.files import atomic_write
-from ..metrics import composite, premultiplied_box_downsample, zoom_factor
-from ..validate import open_regular, read_npy
+from ..core.files import atomic_write
+from ..outputs.metrics import composite, premultiplied_box_downsample, zoom_factor
+from ..core.validate import open_regular, read_npy
 
 CACHE_VERSION = 2  # part of every key: a change of what is stored (or of the key) invalidates the old entries
 DIGEST_CHUNK = 1 << 20  # bytes of a photo hashed at a time

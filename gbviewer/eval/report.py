@@ -5,10 +5,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..bench.report import machine_description, plot_path, pyplot, save_figure, wide_console
-from ..camera import format_rate
-from ..io.files import atomic_write
-from ..validate import dumps_json
+from ..bench.report import machine_description, plot_path, pyplot, save_figure
+from ..outputs.console import wide_console
+from ..model.camera import format_rate
+from ..core.files import atomic_write
+from ..core.validate import dumps_json
 from .run import EvalResult, mean
 
 Table = dict[tuple[str, float], dict[str, float | None]]  # (mode, rate) -> psnr, ssim, render_ms

@@ -14,10 +14,10 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..errors import GBViewerError
+from ..core.errors import GBViewerError
 from ..io.datasets import View, load_dataset
 from ..io.datasets.backdrop import Background, choose_background, estimate_backdrop
-from ..io.files import check_writable
+from ..core.files import check_writable
 from ..render import RenderSettings
 from .memory import check_view_memory
 from .multiscale import rate_factor

@@ -8,12 +8,12 @@ from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 
-from ..errors import GBViewerError
+from ..core.errors import GBViewerError
 from ..io import load
 from ..io.datasets import View
-from ..metrics import psnr, ssim
+from ..outputs.metrics import psnr, ssim
 from ..render import AUTO, RenderSettings, choose_backend, get_renderer
-from ..scene import Scene
+from ..model.scene import Scene
 from .multiscale import camera_for_rate, ground_truths
 
 

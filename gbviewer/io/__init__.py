@@ -8,13 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import load_cameras_json
-from ..cancel import Cancellable
-from ..errors import CallbackError, GBViewerError, LoadCancelled, SceneFormatError
-from ..scene import Scene, loaded_from
+from ..model.camera import load_cameras_json
+from ..core.cancel import Cancellable
+from ..core.errors import CallbackError, GBViewerError, LoadCancelled, SceneFormatError
+from ..model.scene import Scene, loaded_from
 from .compressed_ply import is_compressed_ply, load_compressed_ply
 from .duplex import is_duplex_ply, load_duplex
-from .files import file_stat
+from ..core.files import file_stat
 from .gltf import is_glb, looks_like_gltf
 from .gltf_splats import load_gltf
 from .ply import check_sh_range, load_inria_ply, load_streamed_ply, read_ply

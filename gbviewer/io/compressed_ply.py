@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import plyfile
 
-from ..errors import SceneFormatError
-from ..scene import Scene
-from ..scene import SH_C0
+from ..core.errors import SceneFormatError
+from ..model.scene import Scene
+from ..model.scene import SH_C0
 from .packing import smallest_three
 from .progress import LoadProgress, decode_in_chunks
 

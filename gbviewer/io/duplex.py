@@ -39,10 +39,10 @@ from pathlib import Path
 import numpy as np
 import plyfile
 
-from ..camera import NEAR_PLANE, Camera
-from ..cells import Cells
-from ..errors import SceneFormatError
-from ..scene import SH_C0, Scene
+from ..model.camera import NEAR_PLANE, Camera
+from ..model.cells import Cells
+from ..core.errors import SceneFormatError
+from ..model.scene import SH_C0, Scene
 from .transform import sh_basis
 
 MLP_FILES = {"opacity": "opacity_mlp.pt", "cov": "cov_mlp.pt", "color": "color_mlp.pt"}
@@ -132,7 +132,7 @@ def load_mlps(path: Path, torch) -> dict:
 
 class DuplexModel:
     """Anchors, MLPs and globals of a trained Duplex-GS model; `decode(camera)` gives the per-view splats and cells
-    (a `gbviewer.scene.ViewDecoder`)."""
+    (a `gbviewer.model.scene.ViewDecoder`)."""
 
     def __init__(self, path: Path, anchors, levels, extra_levels, offsets, feats, anchor_scales, sh_vi, info, mlps,
                  torch):

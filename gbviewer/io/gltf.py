@@ -18,8 +18,8 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from ..errors import InvalidValue, SceneFormatError
-from ..validate import parse_json
+from ..core.errors import InvalidValue, SceneFormatError
+from ..core.validate import parse_json
 from .progress import LoadProgress
 
 GLB_MAGIC = b"glTF"

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cells import rotation_matrices
-from ..errors import SceneFormatError
-from ..scene import SH_C0, Scene
+from ..model.cells import rotation_matrices
+from ..core.errors import SceneFormatError
+from ..model.scene import SH_C0, Scene
 from .gltf import FLOAT, UBYTE, USHORT, Gltf, read_gltf
 from .packing import MAX_SPLATS
 from .progress import LoadProgress

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SceneFormatError
+from ..core.errors import SceneFormatError
 
 MAX_SPLATS = 1 << 28  # refuse header counts beyond this before allocating anything
 

@@ -20,9 +20,9 @@ from typing import BinaryIO, Callable, Iterator
 import numpy as np
 import plyfile
 
-from ..errors import GBViewerError, InvalidValue, SceneFormatError
-from ..scene import MAX_SCALE, MAX_SH, Checked, Scene
-from ..validate import declared_count
+from ..core.errors import GBViewerError, InvalidValue, SceneFormatError
+from ..model.scene import MAX_SCALE, MAX_SH, Checked, Scene
+from ..core.validate import declared_count
 from . import progress as load_progress
 from .progress import LoadProgress
 

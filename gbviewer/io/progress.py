@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cancel import Cancellable, cancel_problem
-from ..errors import CallbackError, InvalidValue, LoadCancelled
+from ..core.cancel import Cancellable, cancel_problem
+from ..core.errors import CallbackError, InvalidValue, LoadCancelled
 
 Progress = Callable[[int, int, str], None]
 REPORTS = 100  # chunks per phase at most

@@ -7,9 +7,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from ..errors import GBViewerError
-from ..scene import Scene
-from .files import atomic_write
+from ..core.errors import GBViewerError
+from ..model.scene import Scene
+from ..core.files import atomic_write
 from .trained_as import UNKNOWN
 from .write import refuse_neural, write_inria_ply
 from .write_gltf import glb_bytes

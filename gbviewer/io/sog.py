@@ -20,9 +20,9 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 from PIL import Image, features
 
-from ..errors import InvalidValue, SceneFormatError
-from ..scene import Scene
-from ..validate import open_regular, parse_json
+from ..core.errors import InvalidValue, SceneFormatError
+from ..model.scene import Scene
+from ..core.validate import open_regular, parse_json
 from .packing import MAX_SPLATS, smallest_three
 from .progress import LoadProgress
 

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SceneFormatError
-from ..scene import Scene
-from ..scene import SH_C0
+from ..core.errors import SceneFormatError
+from ..model.scene import Scene
+from ..model.scene import SH_C0
 from .packing import check_count
 from .progress import LoadProgress, decode_in_chunks
 

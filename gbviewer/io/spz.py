@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 import zstandard
 
-from ..errors import SceneFormatError
-from ..scene import Scene
+from ..core.errors import SceneFormatError
+from ..model.scene import Scene
 from .packing import MAX_SPLATS, smallest_three
 from .progress import LoadProgress, decode_in_chunks
 

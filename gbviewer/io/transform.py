@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..cells import quats_from_matrices, rotation_matrices
-from ..scene import SH_C0
+from ..model.cells import quats_from_matrices, rotation_matrices
+from ..model.scene import SH_C0
 
 SIMILAR = 1e-6  # relative spread of A's singular values below which A is treated as a similarity
 _BANDS = {1: slice(1, 4), 2: slice(4, 9), 3: slice(9, 16)}

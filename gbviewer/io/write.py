@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import GBViewerError
-from .files import atomic_write
-from ..scene import Scene
+from ..core.errors import GBViewerError
+from ..core.files import atomic_write
+from ..model.scene import Scene
 from .ply import activate_opacity, activate_scales
 from .trained_as import COMMENT_KEY, WRITTEN
 

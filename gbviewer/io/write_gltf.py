@@ -16,7 +16,7 @@ import struct
 
 import numpy as np
 
-from ..scene import SH_C0, Scene
+from ..model.scene import SH_C0, Scene
 from .gltf import BIN_CHUNK, FLOAT, GLB_HEADER, GLB_MAGIC, JSON_CHUNK, UBYTE
 from .gltf_splats import EXT, FLIP_SH, FLIP_XYZ, PREFIX, QUAT_FLIP, SH_PER_DEGREE, SPZ_EXT
 from .trained_as import COMMENT_KEY, WRITTEN

@@ -17,7 +17,7 @@ import gzip
 
 import numpy as np
 
-from ..scene import SH_C0, Scene
+from ..model.scene import SH_C0, Scene
 from .spz import COLOR_SCALE, FLIP_SH, FLIP_XYZ, LEGACY_HEADER, MAGIC
 from .splat import RECORD
 from .trained_as import ANTIALIASED, MIP_3D

@@ -24,7 +24,7 @@ import zipfile
 import numpy as np
 from PIL import Image
 
-from ..scene import SH_C0, Scene
+from ..model.scene import SH_C0, Scene
 from .compressed_ply import CHUNK_SIZE, COLOR_PROPS, PACKED_PROPS, RANGE_PROPS
 from .write import trained_as_comments
 from .write_packed import antialiased_mode, u8

@@ -20,9 +20,9 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from ..errors import GBViewerError
-from ..io.files import atomic_write
-from ..scene import Scene
+from ..core.errors import GBViewerError
+from ..core.files import atomic_write
+from ..model.scene import Scene
 from .entry import read_entry
 from .tree import Hierarchy, build
 

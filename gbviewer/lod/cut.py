@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import Camera
-from ..errors import GBViewerError, RenderCancelled
-from ..scene import Scene
+from ..model.camera import Camera
+from ..core.errors import GBViewerError, RenderCancelled
+from ..model.scene import Scene
 from .cache import hierarchy_for
 from .tree import Hierarchy
 

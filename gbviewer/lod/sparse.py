@@ -12,7 +12,7 @@ import weakref
 
 import numpy as np
 
-from ..scene import Scene
+from ..model.scene import Scene
 
 STAND_IN_SPLATS = 200_000  # at most: a low-resolution preview of this many splats takes tenths of a second
 

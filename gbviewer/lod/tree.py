@@ -23,8 +23,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..errors import GBViewerError
-from ..scene import MAX_SH, Scene
+from ..core.errors import GBViewerError
+from ..model.scene import MAX_SH, Scene
 
 RULES = ("depth", "sum", "opacity")  # lod.h OpacityRule, in its order
 BRANCHING = 8

@@ -8,8 +8,8 @@ import os
 import re
 import resource
 
-from ..camera import Camera
-from ..errors import RenderError
+from ..model.camera import Camera
+from ..core.errors import RenderError
 from .types import Mode, RenderSettings
 
 BUDGET_ENV = "GBVIEWER_MEMORY_BUDGET"  # bytes, or with a K, M, G or T suffix (powers of 1024)

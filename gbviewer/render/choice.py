@@ -13,7 +13,7 @@ import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from ..errors import BackendUnavailable
+from ..core.errors import BackendUnavailable
 from .cuda import CudaRenderer
 from .glsl.context import GL_REQUIRED, create_context
 

@@ -16,8 +16,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..cancel import CancelToken, Cancellable, cancel_problem
-from ..errors import CallbackError, RenderCancelled, RenderError
+from ..core.cancel import CancelToken, Cancellable, cancel_problem
+from ..core.errors import CallbackError, RenderCancelled, RenderError
 
 Progress = Callable[[int, int], None]
 

@@ -7,11 +7,11 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from ..camera import Camera
-from ..cancel import Cancellable
-from ..cells import Cells
-from ..errors import BackendUnavailable, RenderError
-from ..scene import Scene
+from ..model.camera import Camera
+from ..core.cancel import Cancellable
+from ..model.cells import Cells
+from ..core.errors import BackendUnavailable, RenderError
+from ..model.scene import Scene
 from .control import FrameLock, Progress, RenderControl
 from .prepare import NativeUploads, OitParams, Prepared, camera_args, native_frame, prepare
 from .trace import PixelTrace, from_native

@@ -7,11 +7,11 @@ import time
 
 import numpy as np
 
-from ..camera import Camera
-from ..cancel import Cancellable
-from ..cells import Cells
-from ..errors import BackendFailed, BackendUnavailable, RenderError
-from ..scene import Scene
+from ..model.camera import Camera
+from ..core.cancel import Cancellable
+from ..model.cells import Cells
+from ..core.errors import BackendFailed, BackendUnavailable, RenderError
+from ..model.scene import Scene
 from .control import Progress, RenderControl
 from .cuda_textures import TextureRegistrations
 from .prepare import NativeUploads, camera_args, check_display_texture, native_frame, native_stats, prepare

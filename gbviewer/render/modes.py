@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import enum
 
-from ..errors import RenderError
+from ..core.errors import RenderError
 
 
 class Mode(enum.IntEnum):

@@ -9,11 +9,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..camera import Camera
-from ..cells import Cells, cells_for
-from ..errors import GBViewerError, RenderCancelled, RenderError
+from ..model.camera import Camera
+from ..model.cells import Cells, cells_for
+from ..core.errors import GBViewerError, RenderCancelled, RenderError
 from ..lod import Hierarchy, check_plain, cut_scene, cut_view, hierarchy_for
-from ..scene import Scene
+from ..model.scene import Scene
 from .budget import check_frame_memory
 from .types import (DEFAULT_ET_GRADE, DEFAULT_SIGMA, ORDER_INDEPENDENT, SORT_ENTRY_BYTES, Frame, FrameStats, Mode,
                     RenderSettings)

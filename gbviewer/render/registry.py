@@ -10,10 +10,10 @@ from collections.abc import Callable, Iterator, Mapping
 
 import numpy as np
 
-from ..camera import Camera
-from ..cancel import Cancellable
-from ..errors import InvalidValue, RenderError
-from ..scene import Scene
+from ..model.camera import Camera
+from ..core.cancel import Cancellable
+from ..core.errors import InvalidValue, RenderError
+from ..model.scene import Scene
 from .choice import AUTO, choose_backend
 from .control import FrameLock
 from .types import Frame, Mode, Renderer, RenderSettings, settings_from

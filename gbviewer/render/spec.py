@@ -6,7 +6,7 @@ from __future__ import annotations
 import enum
 import re
 
-from ..errors import RenderError
+from ..core.errors import RenderError
 from .presets import PRESETS
 from .view_filter import ViewFilter
 

@@ -20,9 +20,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..camera import Camera
-from ..cancel import Cancellable
-from ..errors import RenderCancelled, RenderError
+from ..model.camera import Camera
+from ..core.cancel import Cancellable
+from ..core.errors import RenderCancelled, RenderError
 from .budget import BUDGET_ENV, frame_bytes, gib, memory_budget
 from .cpu import REGION_ALIGN, Region
 from .types import Frame, FrameStats, Mode, Renderer, RenderSettings

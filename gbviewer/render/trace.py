@@ -13,10 +13,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..camera import Camera
-from ..errors import InvalidValue, RenderError
-from ..scene import Scene
-from ..validate import dumps_json, integer
+from ..model.camera import Camera
+from ..core.errors import InvalidValue, RenderError
+from ..model.scene import Scene
+from ..core.validate import dumps_json, integer
 from .registry import capable, get_renderer
 from .types import Mode, RenderSettings, settings_from
 

@@ -13,11 +13,11 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..camera import Camera, camera_key
-from ..cancel import Cancellable
-from ..errors import BackendFailed, InvalidValue, RenderError
-from ..scene import Scene
-from ..validate import array, distinct_items, integer, real
+from ..model.camera import Camera, camera_key
+from ..core.cancel import Cancellable
+from ..core.errors import BackendFailed, InvalidValue, RenderError
+from ..model.scene import Scene
+from ..core.validate import array, distinct_items, integer, real
 # Mode and its groups live in .modes; imported here too so that `from .types import Mode, ...` keeps working
 from .modes import MAX_QUEUE, ORDER_INDEPENDENT, PER_PIXEL_SORTED, STOPTHEPOP_QUEUE, Mode
 from .presets import FILTERED_MODES, PRESETS
@@ -81,7 +81,7 @@ class RenderSettings:
     precision: str = "exact"  # gaussian_blending: "fast" within the stated bound of "exact"
 
     def __post_init__(self) -> None:
-        """Every number checked through gbviewer.validate (the native renderers take them as int32 and float32);
+        """Every number checked through gbviewer.core.validate (the native renderers take them as int32 and float32);
         a bad one is a one-line RenderError naming the field."""
         object.__setattr__(self, "mode", Mode.parse(self.mode))
         if self.precision not in PRECISIONS:

@@ -10,8 +10,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..errors import InvalidValue, RenderError
-from ..validate import real
+from ..core.errors import InvalidValue, RenderError
+from ..core.validate import real
 
 DILATION_3DGS = 0.3  # gbv::DILATION_3DGS (px^2)
 

@@ -179,7 +179,7 @@ inline int64_t check_cell_arrays(const char* where, const FArr& means, const FAr
 
 // The cell of each of n splats (-1: none) for cells whose cell c holds members[offsets[c] .. offsets[c+1]). Throws
 // unless that is a partition: offsets from 0 to num_members, not decreasing, each member a splat of at most one
-// cell. gbviewer.cells.Cells validates the same in Python; this guards the native reads (O(M + members)).
+// cell. gbviewer.model.cells.Cells validates the same in Python; this guards the native reads (O(M + members)).
 inline std::vector<int32_t> partition_cell_of(const char* where, const int32_t* offsets, const int32_t* members,
                                               int64_t m, int64_t num_members, int64_t n) {
     std::vector<int32_t> cell_of(n, -1);

@@ -9,7 +9,7 @@ import pytest
 
 import gbviewer as gb
 from gbviewer.app.settings import AppSettings, load_settings
-from gbviewer.app.worker import RenderWorker
+from gbviewer.app.threads.worker import RenderWorker
 from gbviewer.render.choice import BackendChoice, GlProbe, decide
 
 

@@ -16,15 +16,15 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer import metrics
+from gbviewer.outputs import metrics
 from gbviewer.app.background import FIXED, PHOTOS
 from gbviewer.io.datasets.backdrop import border, estimate_backdrop
 from gbviewer.app.dataset import bounds_fit_cameras
-from gbviewer.app.difference_views import PaneAnalysis
-from gbviewer.app.overlays import stats_lines
+from gbviewer.app.difference.views import PaneAnalysis
+from gbviewer.app.overlays.labels import stats_lines
 from gbviewer.app.screenshots import save_pane
-from gbviewer.app.views import encode_png16
-from gbviewer.differences import signed_difference
+from gbviewer.app.frames.views import encode_png16
+from gbviewer.outputs.differences import signed_difference
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
 from gbviewer.eval import camera_for_rate, ground_truth

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.app.camera_control import CameraController
-from gbviewer.camera import fov_of
+from gbviewer.app.camera.control import CameraController
+from gbviewer.model.camera import UP_AXES, fov_of
 
 
 def framed(up: str = "-y") -> CameraController:
@@ -28,7 +28,7 @@ def test_default_framing_looks_at_the_centre_upright(up):
     c = framed(up)
     cam = c.camera(640, 480)
     assert project(cam, c.centre) == pytest.approx([320, 240], abs=1e-6)
-    up_v = np.array(gb.camera.UP_AXES[up])
+    up_v = np.array(UP_AXES[up])
     above = project(cam, c.centre + 0.5 * up_v)
     assert above[1] < 240  # the scene's up is up on screen
     # same pose as gbviewer.orbit_camera for the same box

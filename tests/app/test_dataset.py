@@ -15,14 +15,14 @@ from pathlib import Path
 import numpy as np
 
 import gbviewer as gb
-from gbviewer import metrics
-from gbviewer.camera import camera_key
+from gbviewer.outputs import metrics
+from gbviewer.model.camera import camera_key
 from gbviewer.app import dataset as app_dataset
-from gbviewer.app.difference_views import PaneAnalysis
-from gbviewer.app.layout import Rect, fit_aspect
+from gbviewer.app.difference.views import PaneAnalysis
+from gbviewer.app.ui.layout import Rect, fit_aspect
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
-from gbviewer.app.worker import RenderJob
+from gbviewer.app.threads.worker import RenderJob
 from gbviewer.eval import camera_for_rate, ground_truth
 from test_difference_views import settle
 from test_state import laid_out, loaded

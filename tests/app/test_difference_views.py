@@ -1,5 +1,5 @@
 """The difference and error views without a window: what the analysis thread computes for a pane part's frame, what
-the pane shows of it, the PSNR/SSIM labels (equal to gbviewer.metrics on the same images) and their staleness."""
+the pane shows of it, the PSNR/SSIM labels (equal to gbviewer.outputs.metrics on the same images) and their staleness."""
 
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer import differences, flicker, metrics
-from gbviewer.app.difference_views import PaneAnalysis
-from gbviewer.app.difference_thread import AnalysisThread, Request, Spec
+from gbviewer.outputs import differences, flicker, metrics
+from gbviewer.app.difference.views import PaneAnalysis
+from gbviewer.app.difference.thread import AnalysisThread, Request, Spec
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
-from gbviewer.app.worker import RenderJob
+from gbviewer.app.threads.worker import RenderJob
 
 
 def wait_results(thread: AnalysisThread, n: int = 1, timeout: float = 60.0) -> list:

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer import differences, metrics
-from gbviewer.app.difference_overlay import BAR_H
-from gbviewer.figure import to_uint8, upscale_nearest
+from gbviewer.outputs import differences, metrics
+from gbviewer.app.overlays.difference import BAR_H
+from gbviewer.outputs.figure import to_uint8, upscale_nearest
 from window_helpers import LABEL_BAND, agree, expected_pane, pane_pixels, press, shot, wait
 
 pytestmark = pytest.mark.display

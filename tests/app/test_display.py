@@ -1,4 +1,4 @@
-"""The display paths (gbviewer/app/display.py) in the real window under Xvfb (Mesa llvmpipe): the GPU display path,
+"""The display paths (gbviewer/app/frames/display.py) in the real window under Xvfb (Mesa llvmpipe): the GPU display path,
 forced there with GBVIEWER_DISPLAY_PATH=gpu, draws glsl frames from the textures they were rendered into, with no
 readback, and the same pixels as the CPU render; the copy path (auto on llvmpipe, or forced) is unchanged; the
 display textures go when the backend changes and stay bounded while scenes and views change. The cuda display path
@@ -16,8 +16,8 @@ from helpers import skip_or_fail
 from window_helpers import LABEL_BAND, agree, expected_pane, pane_pixels, shot, wait
 
 import gbviewer as gb
-from gbviewer.app.display import MAX_FREE, GpuFrame, is_software, requested_path
-from gbviewer.app.views import decode_png16
+from gbviewer.app.frames.display import MAX_FREE, GpuFrame, is_software, requested_path
+from gbviewer.app.frames.views import decode_png16
 from gbviewer.render import Frame
 
 pytestmark = pytest.mark.display

@@ -15,11 +15,13 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.app import loading, panes as panes_module, rates
+from gbviewer.app.threads import loading
+from gbviewer.app import panes as panes_module
+from gbviewer.app.frames import rates
 from gbviewer.app.panes import PaneRenders
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
-from gbviewer.app.worker import RenderResult
+from gbviewer.app.threads.worker import RenderResult
 from gbviewer.lod import cache, sparse
 from gbviewer.render.glsl.context import standalone_context
 from test_lod_previews import FakeWorker, opened

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.app.inspector import (Inspector, TraceRequest, TraceThread, ellipse_points, pixel_box, render_pixel,
+from gbviewer.app.inspector.state import (Inspector, TraceRequest, TraceThread, ellipse_points, pixel_box, render_pixel,
                                     snap)
-from gbviewer.app.rates import RATE_STEPS
+from gbviewer.app.frames.rates import RATE_STEPS
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
-from gbviewer.app.worker import RenderJob
-from gbviewer.figure import upscale_nearest
-from gbviewer.trace_report import CSV_COLUMNS
+from gbviewer.app.threads.worker import RenderJob
+from gbviewer.outputs.figure import upscale_nearest
+from gbviewer.outputs.trace_report import CSV_COLUMNS
 
 TOL = 1e-5
 

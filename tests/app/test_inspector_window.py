@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from gbviewer.figure import to_uint8
+from gbviewer.outputs.figure import to_uint8
 from window_helpers import LABEL_BAND, press, shot, wait
 
 pytestmark = pytest.mark.display

@@ -10,12 +10,12 @@ from types import SimpleNamespace
 
 import pytest
 
-from gbviewer.app import keys
-from gbviewer.app.difference_views import PaneAnalysis
-from gbviewer.app.inspector import Inspector
+from gbviewer.app.ui import keys
+from gbviewer.app.difference.views import PaneAnalysis
+from gbviewer.app.inspector.state import Inspector
 from gbviewer.app.state import AppState
 
-APP = Path(keys.__file__).resolve().parent
+APP = Path(keys.__file__).resolve().parents[1]  # gbviewer/app
 
 
 def window_actions() -> set[str]:
@@ -95,8 +95,8 @@ def test_help_covers_the_keys_the_issue_names():
 
 def test_menus_help_and_panel_take_key_names_from_the_table():
     """No key name is spelled out in the UI code: menu hints go through keys.hint, the help lists SHORTCUTS."""
-    for path in [APP / "menu.py", APP / "dialogs.py", *(APP / "panel").glob("*.py")]:
+    for path in [APP / "menu.py", APP / "ui" / "dialogs.py", *(APP / "panel").glob("*.py")]:
         src = path.read_text()
         for text in ('"Ctrl+', '"F12"', '"F1"', "(R)", "(F)", "(U)", "(L)", "(F12)"):
             assert text not in src, f"{path.name} spells out {text}"
-    assert "SHORTCUTS" in (APP / "dialogs.py").read_text() and "hint(" in (APP / "menu.py").read_text()
+    assert "SHORTCUTS" in (APP / "ui" / "dialogs.py").read_text() and "hint(" in (APP / "menu.py").read_text()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from gbviewer.app.layout import grid_shape, loupe_uv, pane_rects, split_parts
+from gbviewer.app.ui.layout import grid_shape, loupe_uv, pane_rects, split_parts
 
 
 @pytest.mark.parametrize("n,layout,shape", [(1, "row", (1, 1)), (2, "row", (1, 2)), (4, "row", (1, 4)),

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from gbviewer.app.keys import hint
-from gbviewer.app.overlays import FLY_HINT, part_box
+from gbviewer.app.ui.keys import hint
+from gbviewer.app.overlays.labels import FLY_HINT, part_box
 from helpers import skip_or_fail
 from soak_viewer import xvfb_display
 from window_helpers import press

@@ -13,7 +13,7 @@ import plyfile
 import pytest
 
 import gbviewer as gb
-from gbviewer.app.loading import SceneLoader
+from gbviewer.app.threads.loading import SceneLoader
 
 
 def gated_load(gate: threading.Event):
@@ -107,7 +107,7 @@ def test_scene_loader_progress_is_determinate_and_cancel_stops_it():
 @pytest.mark.display
 def test_viewer_bar_is_determinate_and_esc_cancels_keeping_the_scene(xvfb, tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
-    from gbviewer.app.keys import KEYS
+    from gbviewer.app.ui.keys import KEYS
     from gbviewer.app.window import ViewerApp
 
     gate = threading.Event()

@@ -7,12 +7,13 @@ from __future__ import annotations
 import time
 
 import gbviewer as gb
-from gbviewer.app import loading, rates
+from gbviewer.app.threads import loading
+from gbviewer.app.frames import rates
 from gbviewer.app.panes import PaneRenders
 from gbviewer.app.settings import AppSettings, PaneSettings
 from gbviewer.app import state as state_module
 from gbviewer.app.state import AppState
-from gbviewer.app.worker import RenderResult
+from gbviewer.app.threads.worker import RenderResult
 from gbviewer.render import BACKENDS
 from gbviewer.render.glsl.context import standalone_context
 from test_state import loaded

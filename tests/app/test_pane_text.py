@@ -1,4 +1,4 @@
-"""The layout rule for text over panes (app/pane_text.py), without a window: one label and at most one message line
+"""The layout rule for text over panes (app/ui/text.py), without a window: one label and at most one message line
 per pane part inside its box, information lines from the bottom only where they fit, elided with '…' by measured
 width, never overlapping; banners wrap inside the panes."""
 
@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import itertools
 
-from gbviewer.app.layout import Rect
-from gbviewer.app.overlays import part_box
-from gbviewer.app.pane_text import ELLIPSIS, elide, lay_out_banner, lay_out_part, wrap
+from gbviewer.app.ui.layout import Rect
+from gbviewer.app.overlays.labels import part_box
+from gbviewer.app.ui.text import ELLIPSIS, elide, lay_out_banner, lay_out_part, wrap
 
 
 def measure(s: str) -> tuple[float, float]:

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer import metrics
-from gbviewer.app import overlays
+from gbviewer.outputs import metrics
+from gbviewer.app.overlays import labels as overlays
 from gbviewer.eval import camera_for_rate, ground_truth
-from gbviewer.figure import to_uint8, upscale_nearest
+from gbviewer.outputs.figure import to_uint8, upscale_nearest
 from test_difference_window import wait_analysed
 from window_helpers import GBVIEWER_ROOT, LABEL_BAND, agree, pane_pixels, press, shot, wait
 

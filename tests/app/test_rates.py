@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 import gbviewer as gb
-from gbviewer.app import rates
+from gbviewer.app.frames import rates
 
 
 def test_rate_steps_walk_every_step_both_ways():

@@ -7,7 +7,7 @@ import threading
 import time
 from dataclasses import dataclass
 
-from gbviewer.app.slot_thread import SlotThread
+from gbviewer.app.threads.slots import SlotThread
 
 
 @dataclass
@@ -91,8 +91,8 @@ def test_the_render_thread_renders_the_panes_of_one_camera_together(bundled_scen
     import numpy as np
 
     import gbviewer as gb
-    from gbviewer.app.refine import companions
-    from gbviewer.app.worker import RenderJob, RenderWorker
+    from gbviewer.app.frames.refine import companions
+    from gbviewer.app.threads.worker import RenderJob, RenderWorker
     from gbviewer.render import RenderSettings
 
     cam = gb.orbit_camera(bundled_scene, width=640, height=480)

@@ -9,7 +9,7 @@ import time
 import pytest
 
 import gbviewer as gb
-from gbviewer.app.layout import PANEL_W
+from gbviewer.app.ui.layout import PANEL_W
 from gbviewer.app.settings import MODE_NAMES, AppSettings
 from gbviewer.app.pane_state import RateMeter
 from gbviewer.app.state import AppState, is_cameras_file

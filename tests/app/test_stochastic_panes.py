@@ -10,10 +10,10 @@ import numpy as np
 from test_lod_previews import FakeWorker, opened
 
 import gbviewer as gb
-from gbviewer.app import accumulate
-from gbviewer.app.overlays import pane_label
+from gbviewer.app.frames import accumulate
+from gbviewer.app.overlays.labels import pane_label
 from gbviewer.app.panes import PaneRenders
-from gbviewer.app.worker import RenderResult
+from gbviewer.app.threads.worker import RenderResult
 from gbviewer.render.glsl.context import standalone_context
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.app import views
+from gbviewer.app.frames import views
 
 
 def test_debug_views():

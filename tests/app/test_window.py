@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.app.rates import render_size
-from gbviewer.app.views import decode_png16
+from gbviewer.app.frames.rates import render_size
+from gbviewer.app.frames.views import decode_png16
 from window_helpers import LABEL_BAND, agree, expected_pane, pane_pixels, press, shot, wait
 
 pytestmark = pytest.mark.display

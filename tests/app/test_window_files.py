@@ -174,8 +174,8 @@ def test_bad_file_and_new_scene_while_a_load_and_renders_are_in_flight(app, tmp_
 def test_camera_path_keys_export_import_and_path_video(app, tmp_path, monkeypatch):
     """Keyframes added from the view export as nerfstudio's camera_path.json, which the Open path imports (the
     view snaps to its first camera); Record then follows the path in the chosen codec."""
-    from gbviewer.app import path_keys
-    from gbviewer.nerfstudio_paths import load_nerfstudio_path
+    from gbviewer.app.camera import path_keys
+    from gbviewer.model.nerfstudio_paths import load_nerfstudio_path
 
     monkeypatch.setattr(path_keys, "PATH_FPS", 2.0)
     wait(app)

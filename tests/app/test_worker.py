@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.app.inspector import TraceRequest, TraceThread
+from gbviewer.app.inspector.state import TraceRequest, TraceThread
 from gbviewer.app.panes import PaneRenders
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
-from gbviewer.app.worker import RENDER_NICE, RenderJob, RenderPolicy, RenderWorker
+from gbviewer.app.threads.worker import RENDER_NICE, RenderJob, RenderPolicy, RenderWorker
 from gbviewer.render import BACKENDS, CpuRenderer, RenderSettings
 from gbviewer.render.glsl.context import standalone_context
 from test_state import loaded

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 
 import gbviewer as gb
-from gbviewer.app.views import visualize
-from gbviewer.figure import to_uint8, upscale_nearest
+from gbviewer.app.frames.views import visualize
+from gbviewer.outputs.figure import to_uint8, upscale_nearest
 
 OUTPUT = Path(__file__).resolve().parents[1] / "output"
 GBVIEWER_ROOT = str(Path(gb.__file__).resolve().parents[1])  # subprocesses import the gbviewer under test

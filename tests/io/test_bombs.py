@@ -18,7 +18,7 @@ from encoders import encode_spz, random_params, sog_files
 from PIL import Image
 
 import gbviewer as gb
-from gbviewer.errors import SceneFormatError
+from gbviewer.core.errors import SceneFormatError
 
 PEAK = """
 import resource, sys

@@ -16,7 +16,7 @@ import pytest
 from PIL import Image
 
 from gbviewer import cli
-from gbviewer.errors import DatasetError
+from gbviewer.core.errors import DatasetError
 from gbviewer.io.datasets import load_dataset, photos, read_photo
 
 pycolmap = pytest.importorskip("pycolmap")

@@ -15,7 +15,7 @@ import pytest
 
 import gbviewer as gb
 from gbviewer import cli
-from gbviewer.errors import DatasetError
+from gbviewer.core.errors import DatasetError
 from gbviewer.io.datasets import colmap, load_dataset, read_photo
 from dataset_builders import H, W, save_rgb, shots, write_blender, write_cameras_json, write_colmap
 

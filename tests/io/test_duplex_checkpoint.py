@@ -19,8 +19,8 @@ import pytest
 
 import gbviewer as gb
 from helpers import skip_or_fail
-from gbviewer.errors import SceneFormatError
-from gbviewer.scene import SH_C0
+from gbviewer.core.errors import SceneFormatError
+from gbviewer.model.scene import SH_C0
 
 torch = pytest.importorskip("torch", reason="Duplex-GS checkpoints need torch (pip install 'gbviewer[duplex]')")
 nn = torch.nn

@@ -8,7 +8,7 @@ import stat
 import pytest
 
 import gbviewer as gb
-from gbviewer.io.files import atomic_write
+from gbviewer.core.files import atomic_write
 
 
 def test_writes_with_umask_permissions(tmp_path):

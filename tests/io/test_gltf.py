@@ -13,7 +13,7 @@ from fuzz_loaders import check_load
 from gltf_files import P, GltfFile, quantise
 
 import gbviewer as gb
-from gbviewer.cells import rotation_matrices
+from gbviewer.model.cells import rotation_matrices
 from gbviewer.cli import main
 from gbviewer.io.transform import sh_basis
 

@@ -21,7 +21,7 @@ CHILD = r"""
 import ctypes, gc, json, sys
 import gbviewer as gb
 from gbviewer.bench.scale import peak_rss_bytes, rss_bytes, scene_bytes
-from gbviewer.camera import orbit_camera
+from gbviewer.model.camera import orbit_camera
 from gbviewer.render import RenderSettings, get_renderer
 path, small, render = sys.argv[1], sys.argv[2], sys.argv[3] == "1"
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from gbviewer.errors import DatasetError
+from gbviewer.core.errors import DatasetError
 from gbviewer.io.datasets import load_dataset, read_photo
 from gbviewer.io.datasets import photos
 from dataset_builders import H, W, save_rgb, shots, write_cameras_json, write_colmap

@@ -12,7 +12,7 @@ import pytest
 from encoders import encode_compressed_ply, encode_splat, encode_spz, random_params, sog_files
 
 import gbviewer as gb
-from gbviewer.errors import SceneFormatError
+from gbviewer.core.errors import SceneFormatError
 
 
 def _inria(s: dict, tmp_path) -> bytes:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.camera import orbit_camera
+from gbviewer.model.camera import orbit_camera
 from gbviewer.io.write import ply_header
 from gbviewer.render import Mode, RenderSettings, get_renderer
 

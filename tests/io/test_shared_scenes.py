@@ -12,7 +12,7 @@ import pytest
 
 import gbviewer as gb
 from helpers import IN_CI
-from gbviewer.scene import SH_C0
+from gbviewer.model.scene import SH_C0
 
 SCENES = Path(__file__).resolve().parents[2].parent / "shared" / "scenes"
 needs_scenes = pytest.mark.skipif(not SCENES.is_dir() and not IN_CI, reason=f"{SCENES} absent (shared/ is not beside the repo)")

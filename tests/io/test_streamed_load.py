@@ -286,7 +286,7 @@ def test_float16_refusals_name_the_same_coefficient(tmp_path, where, big, chunks
 def test_quaternion_norms_sum_in_einsums_order():
     """The native scatter and Scene.from_arrays sum |q|^2 as (w^2 + x^2) + (y^2 + z^2): numpy's einsum, which
     normalised the quaternions before them, gives the same bits."""
-    from gbviewer.scene import _norms
+    from gbviewer.model.scene import _norms
 
     q = np.concatenate([np.random.default_rng(1).normal(0, 1, (200_000, 4)) * np.logspace(-20, 19, 200_000)[:, None],
                         QUATS[np.isfinite(QUATS).all(axis=1)]]).astype(np.float32)

@@ -17,7 +17,7 @@ import gbviewer as gb
 from gbviewer.cli import main
 from gbviewer.io.write_packed import fractional_bits
 from gbviewer.io.write_playcanvas import codebook, order
-from gbviewer.scene import SH_C0
+from gbviewer.model.scene import SH_C0
 from helpers import skip_or_fail
 
 SCENES = Path(__file__).resolve().parents[2].parent / "shared" / "scenes"

@@ -10,7 +10,7 @@ import pytest
 
 import gbviewer as gb
 from helpers import skip_or_fail
-from gbviewer.errors import RenderError
+from gbviewer.core.errors import RenderError
 from gbviewer.render import choice, registry
 from gbviewer.render.choice import BackendChoice, GlProbe, decide
 

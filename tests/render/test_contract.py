@@ -12,7 +12,7 @@ import pytest
 
 import gbviewer as gb
 from gbviewer.bench import SIMD_NAMES
-from gbviewer.errors import BackendFailed, RenderCancelled, RenderError
+from gbviewer.core.errors import BackendFailed, RenderCancelled, RenderError
 from gbviewer.render import BACKENDS, Capabilities, Renderer, RenderSettings, capable, create_gl_context, get_renderer
 from gbviewer.render.glsl.context import standalone_context
 from helpers import run_threads

@@ -18,7 +18,7 @@ import pytest
 
 import gbviewer as gb
 from helpers import front_camera, random_scene, shared_scene
-from gbviewer.cells import Cells, build_cells
+from gbviewer.model.cells import Cells, build_cells
 from gbviewer.render import CudaRenderer
 from test_render import check_concurrent_renders
 

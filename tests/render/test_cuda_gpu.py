@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.cells import Cells, build_cells
+from gbviewer.model.cells import Cells, build_cells
 from gbviewer.render import CudaRenderer
 from helpers import front_camera, random_scene, run_threads
 

@@ -12,7 +12,7 @@ import gbviewer as gb
 from cuda_fakes import TIMEOUT, FakeNative, fake_renderer
 from helpers import front_camera, random_scene
 from gbviewer.cli import main
-from gbviewer.errors import BackendFailed, RenderError
+from gbviewer.core.errors import BackendFailed, RenderError
 from gbviewer.render.cuda import interop_status
 from gbviewer.render.cuda_textures import TextureRegistrations
 from gbviewer.render.prepare import prepare

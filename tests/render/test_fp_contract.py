@@ -27,8 +27,8 @@ import numpy as np
 import pytest
 from helpers import skip_or_fail
 
-from gbviewer.camera import NEAR_PLANE
-from gbviewer.scene import SH_C0
+from gbviewer.model.camera import NEAR_PLANE
+from gbviewer.model.scene import SH_C0
 
 REPO = Path(__file__).resolve().parents[2]
 SOURCE = Path(__file__).resolve().parent / "native" / "preprocess_parity.cpp"

@@ -13,7 +13,7 @@ from helpers import front_camera, random_scene
 
 import gbviewer as gb
 from gbviewer.cli import main
-from gbviewer.errors import BackendUnavailable, RenderError
+from gbviewer.core.errors import BackendUnavailable, RenderError
 from gbviewer.render import RenderSettings
 from gbviewer.render.glsl import GlslRenderer, gpu, standalone_context
 from gbviewer.render.glsl import context as gl_context

@@ -9,7 +9,7 @@ from glsl_helpers import awkward_scene, compare, gl  # noqa: F401 - fixture
 from helpers import front_camera
 
 import gbviewer as gb
-from gbviewer.errors import RenderError
+from gbviewer.core.errors import RenderError
 from gbviewer.render.glsl import limits
 
 pytestmark = pytest.mark.gl

@@ -18,8 +18,8 @@ from helpers import random_view
 from reference import reference_render_oit
 
 import gbviewer as gb
-from gbviewer.cells import Cells, build_cells, cells_for
-from gbviewer.scene import OitData
+from gbviewer.model.cells import Cells, build_cells, cells_for
+from gbviewer.model.scene import OitData
 
 TOL = 1e-4
 MAX_TIE_PIXELS = 12  # of 1920 output pixels

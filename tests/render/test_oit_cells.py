@@ -10,8 +10,8 @@ import pytest
 from helpers import random_scene, random_view
 
 import gbviewer as gb
-from gbviewer.cells import Cells, build_cells, cells_for
-from gbviewer.errors import GBViewerError, SceneFormatError
+from gbviewer.model.cells import Cells, build_cells, cells_for
+from gbviewer.core.errors import GBViewerError, SceneFormatError
 from gbviewer.io import load, write_inria_ply
 from test_oit import with_view_weights
 
@@ -71,7 +71,7 @@ def test_cells_cover_members():
     assert (sizes == 5).sum() >= cells.num_cells - 1 and sizes.sum() == scene.num_splats
     st = cells.stats()
     assert st["cells"] == 100 and st["members_max"] == 5 and "build_ms" in st
-    from gbviewer.cells import rotation_matrices
+    from gbviewer.model.cells import rotation_matrices
 
     Rc = rotation_matrices(cells.quats)
     Rs = rotation_matrices(scene.quats)
@@ -93,7 +93,7 @@ def test_mode_labels_and_settings():
     assert "approx" not in s.label_for(with_view_weights(scene, 1))
     assert "K=5" in gb.RenderSettings.parse("duplex").label_for(scene)
     assert [x.mode.label for x in gb.RenderSettings.parse_list("scalar,wsr,duplex:2")] == ["scalar", "wsr", "duplex"]
-    with pytest.raises(gb.errors.RenderError):
+    with pytest.raises(gb.RenderError):
         gb.RenderSettings("duplex", et_grade=0.0)
     f = gb.render(scene, cam, "duplex")
     assert "built cells" in f.stats.mode and f.stats.sort_bytes == 24 * f.stats.sort_length
@@ -175,7 +175,7 @@ def test_cells_follow_dropped_splats():
 def test_the_shared_cells_are_read_only():
     """cells_for hands every backend the scene's one Cells, whose members are checked once (validate) and then
     indexed unchecked: an edit after the check (cells.members[1] = cells.members[0]) went unseen."""
-    from gbviewer.cells import cells_for
+    from gbviewer.model.cells import cells_for
 
     scene = random_scene(400, seed=12)
     cells = cells_for(scene)

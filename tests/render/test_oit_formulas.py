@@ -11,8 +11,8 @@ from helpers import random_view
 from reference import reference_render_oit
 
 import gbviewer as gb
-from gbviewer.cells import Cells
-from gbviewer.scene import SH_C0
+from gbviewer.model.cells import Cells
+from gbviewer.model.scene import SH_C0
 from test_oit import BACKGROUND, check, oit
 
 

@@ -17,7 +17,7 @@ from test_render_reference import BACKGROUND, SCENES, _check_strict
 from test_simd import preprocessed
 
 import gbviewer as gb
-from gbviewer.cells import cells_for
+from gbviewer.model.cells import cells_for
 
 
 def f32(bits: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ import gbviewer as gb
 from gbviewer.render import RenderSettings
 from gbviewer.render.view_filter import ViewFilter
 from gbviewer.render.presets import PRESETS, QUAD_SIGMAS
-from gbviewer.scene import SH_C0
+from gbviewer.model.scene import SH_C0
 
 SH_C1 = 0.4886025119029199
 TOL = 1e-4  # as test_presets.py

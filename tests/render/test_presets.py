@@ -17,7 +17,7 @@ from reference import reference_render
 import gbviewer as gb
 from gbviewer.render import RenderSettings, create_renderer
 from gbviewer.render.presets import PRESETS, differences
-from gbviewer.scene import SH_C0
+from gbviewer.model.scene import SH_C0
 
 TOL = 1e-4  # as tests/render/test_render_reference.py (float32 noise is ~1e-6; a wrong rule shows at >= 1e-3)
 BACKGROUND = (0.1, 0.5, 0.9)

@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.scene import SH_C0
+from gbviewer.model.scene import SH_C0
 from helpers import random_view
 from reference import MODES, reference_render
 

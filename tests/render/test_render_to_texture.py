@@ -10,7 +10,7 @@ import pytest
 from helpers import skip_or_fail
 
 import gbviewer as gb
-from gbviewer.errors import RenderError
+from gbviewer.core.errors import RenderError
 from gbviewer.render import CudaRenderer, RenderSettings
 
 SPECS = ["scalar", "gaussian_blending", "analytic:2", "wsr", "duplex"]

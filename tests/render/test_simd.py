@@ -27,7 +27,7 @@ import pytest
 
 import gbviewer as gb
 from gbviewer import _native, lod
-from gbviewer.cells import build_cells
+from gbviewer.model.cells import build_cells
 from gbviewer.render import create_renderer
 from helpers import random_view, skip_or_fail
 from test_render_reference import BACKGROUND, SCENES, _check_strict

@@ -2,7 +2,7 @@
 references of tests/reference_ray.py: an unbounded queue is the exact per-pixel sort, the published K = 4 differs
 from it only where the published queue does (a pixel built for it), a queue of one is 3DGS's global order (scalar,
 bit for bit); the mode grammar; and popping on an orbit over a scene whose two splats swap their centre order while
-their per-pixel order does not (gbviewer.flicker)."""
+their per-pixel order does not (gbviewer.outputs.flicker)."""
 
 from __future__ import annotations
 
@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer import flicker as fl
+from gbviewer.outputs import flicker as fl
 from gbviewer import lod
-from gbviewer.errors import RenderError
+from gbviewer.core.errors import RenderError
 from gbviewer.render import RenderSettings, create_renderer
 from gbviewer.render.view_filter import ViewFilter
-from gbviewer.scene import SH_C0
+from gbviewer.model.scene import SH_C0
 from helpers import random_view
 from reference_ray import render_sorted
 from test_simd import ALL_PATHS

@@ -12,8 +12,8 @@ import pytest
 
 import gbviewer as gb
 from gbviewer import _native
-from gbviewer.cells import cells_for
-from gbviewer.errors import RenderError
+from gbviewer.model.cells import cells_for
+from gbviewer.core.errors import RenderError
 from gbviewer.render import Mode, RenderSettings
 from gbviewer.render.prepare import oit_params
 from gbviewer.render.trace import SKIP_REASONS

@@ -7,7 +7,7 @@ import pytest
 
 import gbviewer as gb
 from helpers import shared_scene
-from gbviewer.metrics import box_downsample, psnr
+from gbviewer.outputs.metrics import box_downsample, psnr
 
 
 @pytest.mark.parametrize("scene_name", ["bundled", "v3dg-donut.fused.ply"])

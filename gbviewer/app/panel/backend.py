@@ -9,11 +9,11 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ...render import AUTO, BACKEND_NAMES, build_info, compiler_line, simd_line
-from ..display import describe
+from ..frames.display import describe
 
 if TYPE_CHECKING:
     from ..state import AppState
-    from ..worker import RenderWorker
+    from ..threads.worker import RenderWorker
 
 
 def draw(state: AppState, worker: RenderWorker) -> None:

@@ -6,9 +6,9 @@ from typing import TYPE_CHECKING, Callable
 
 from imgui_bundle import imgui
 
-from ...camera import UP_AXES
-from ..camera_control import CameraController
-from ..keys import hint
+from ...model.camera import UP_AXES
+from ..camera.control import CameraController
+from ..ui.keys import hint
 
 if TYPE_CHECKING:
     from ..state import AppState

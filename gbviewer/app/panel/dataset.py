@@ -10,12 +10,12 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ...io.datasets import SPLITS
-from ..difference_thread import PHOTO
-from ..keys import hint
-from ..layout import PANEL_W
+from ..difference.thread import PHOTO
+from ..ui.keys import hint
+from ..ui.layout import PANEL_W
 
 if TYPE_CHECKING:
-    from ..dialogs import FileDialogs
+    from ..ui.dialogs import FileDialogs
     from ..state import AppState
 
 LIST_H = 150  # pixels of the views list

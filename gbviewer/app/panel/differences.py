@@ -8,12 +8,12 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from ...differences import ROBUST_PERCENTILE
-from ..difference_views import REFERENCE_KINDS
-from ..keys import hint
+from ...outputs.differences import ROBUST_PERCENTILE
+from ..difference.views import REFERENCE_KINDS
+from ..ui.keys import hint
 
 if TYPE_CHECKING:
-    from ..difference_views import PaneAnalysis
+    from ..difference.views import PaneAnalysis
     from ..state import AppState
 
 

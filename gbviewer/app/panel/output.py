@@ -6,10 +6,10 @@ from typing import TYPE_CHECKING, Callable
 
 from imgui_bundle import imgui
 
-from ..keys import hint
-from ..layout import PANEL_W
+from ..ui.keys import hint
+from ..ui.layout import PANEL_W
 from ..screenshots import shot_dir
-from ..recording import VIDEO_CONTAINERS
+from ..camera.recording import VIDEO_CONTAINERS
 
 if TYPE_CHECKING:
     from ..state import AppState

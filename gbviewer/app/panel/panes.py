@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ..settings import MAX_PANE_LOD, MODE_NAMES
-from ..views import VIEW_HELP, VIEWS
+from ..frames.views import VIEW_HELP, VIEWS
 
 if TYPE_CHECKING:
     from ..state import AppState

@@ -6,9 +6,9 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from ...camera import format_rate
-from ..layout import PANEL_W
-from ..rates import RATE_STEPS, rate_to_slider, slider_to_rate
+from ...model.camera import format_rate
+from ..ui.layout import PANEL_W
+from ..frames.rates import RATE_STEPS, rate_to_slider, slider_to_rate
 
 if TYPE_CHECKING:
     from ..state import AppState

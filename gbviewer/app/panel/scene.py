@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Callable
 
 from imgui_bundle import imgui
 
-from ..layout import PANEL_W
+from ..ui.layout import PANEL_W
 
 if TYPE_CHECKING:
     from ..state import AppState

@@ -11,7 +11,7 @@ from ..panes import pane_fps
 if TYPE_CHECKING:
     from ..pane_state import RateMeter
     from ..state import AppState
-    from ..worker import RenderWorker
+    from ..threads.worker import RenderWorker
 
 
 def draw(state: AppState, worker: RenderWorker, ui_fps: RateMeter) -> None:

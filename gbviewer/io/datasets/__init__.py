@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ...camera import load_cameras_json
-from ...errors import CameraError, DatasetError
+from ...model.camera import load_cameras_json
+from ...core.errors import CameraError, DatasetError
 from .blender import is_blender, load_blender
 from .colmap import load_colmap, model_folder
 from .dataset import HOLDOUT, SPLITS, Dataset, View, holdout_splits

@@ -10,7 +10,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ...errors import GBViewerError
+from ...core.errors import GBViewerError
 from .dataset import View
 from .photos import read_photo
 

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...camera import Camera
-from ...errors import CameraError, DatasetError, InvalidValue
-from ...validate import array, field, read_json, real
+from ...model.camera import Camera
+from ...core.errors import CameraError, DatasetError, InvalidValue
+from ...core.validate import array, field, read_json, real
 from .dataset import BOTH, Dataset, View
 from .photos import find_photo, missing_photos, photo_size
 

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...camera import Camera
-from ...errors import CameraError, DatasetError, InvalidValue
-from ...extras import require
-from ...validate import array, real
+from ...model.camera import Camera
+from ...core.errors import CameraError, DatasetError, InvalidValue
+from ...core.extras import require
+from ...core.validate import array, real
 from .colmap_text import check_text_model
 from .dataset import Dataset, View, holdout_splits
 from .photos import fit_to_photo, missing_photos, photo_path

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 from typing import Iterator
 
-from ...errors import DatasetError
+from ...core.errors import DatasetError
 
 PARAMS = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL": 5, "OPENCV": 8, "FULL_OPENCV": 12}
 OTHER_MODELS = {"SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE", "OPENCV_FISHEYE", "FOV", "THIN_PRISM_FISHEYE",

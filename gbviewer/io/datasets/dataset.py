@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from ...camera import Camera
-from ...errors import DatasetError
+from ...model.camera import Camera
+from ...core.errors import DatasetError
 
 SPLITS = ("train", "test", "all")
 BOTH = "train+test"  # the split of a view in both

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from ...camera import MAX_IMAGE_SIZE, Camera
-from ...errors import DatasetError
+from ...model.camera import MAX_IMAGE_SIZE, Camera
+from ...core.errors import DatasetError
 
 PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".JPG", ".JPEG", ".PNG")  # tried for a name given without one
 PIXELS_PER_BYTE = 4096  # beyond what PNG (deflate: < 1032:1) or JPEG can compress: a header claiming more is false

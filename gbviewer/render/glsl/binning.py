@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...cells import Cells
+from ...model.cells import Cells
 from ..types import Mode
 from . import interface as gi
 from .gpu import WG, Gpu

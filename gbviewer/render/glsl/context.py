@@ -6,7 +6,7 @@ import re
 import sys
 from pathlib import Path
 
-from ...errors import BackendUnavailable
+from ...core.errors import BackendUnavailable
 
 GL_REQUIRED = 430
 SHADER_DIR = Path(__file__).resolve().parents[2] / "shaders"  # installed: gbviewer/shaders (CMake puts them there)

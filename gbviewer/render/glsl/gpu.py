@@ -7,7 +7,7 @@ import weakref
 
 import numpy as np
 
-from ...errors import BackendUnavailable, RenderError
+from ...core.errors import BackendUnavailable, RenderError
 from .context import shader_source
 
 WG = 256  # work-group size of the 1D kernels

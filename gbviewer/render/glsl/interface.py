@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import BackendUnavailable
+from ...core.errors import BackendUnavailable
 from .context import SHADER_DIR
 
 WORD_BYTES = 4  # uint, int, float

@@ -12,7 +12,7 @@ import weakref
 
 import numpy as np
 
-from ...errors import RenderError
+from ...core.errors import RenderError
 from . import interface as gi
 from .context import shader_source
 from .gpu import WG, Gpu

@@ -47,11 +47,11 @@ import time
 import numpy as np
 
 from . import interface as gi
-from ...camera import Camera
-from ...cancel import Cancellable
-from ...cells import Cells
-from ...errors import BackendUnavailable, RenderError
-from ...scene import Scene
+from ...model.camera import Camera
+from ...core.cancel import Cancellable
+from ...model.cells import Cells
+from ...core.errors import BackendUnavailable, RenderError
+from ...model.scene import Scene
 from ..control import Progress, RenderControl
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
 from ..presets import FILTERED_MODES

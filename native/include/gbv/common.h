@@ -40,7 +40,7 @@ GBV_HD constexpr bool view_filtered(Mode mode) {
 }
 // Modes that order each pixel's splats by the depth of their maximum along its ray (ray3d.h).
 GBV_HD bool per_pixel_sorted(Mode m) { return m == EVAL3D || m == STOPTHEPOP; }
-// Camera projections; the values are the indices of gbviewer.camera.PROJECTIONS.
+// Camera projections; the values are the indices of gbviewer.model.camera.PROJECTIONS.
 enum Projection : int32_t { PERSPECTIVE = 0, ORTHOGRAPHIC = 1 };
 
 constexpr int TILE = 16;                       // BLOCK_X = BLOCK_Y (docs/modes.md#culling-radius-tiles)

@@ -1,0 +1,1 @@
+"""The viewer's camera: the orbit/fly control, the camera path and its video."""

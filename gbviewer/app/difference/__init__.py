@@ -1,0 +1,1 @@
+"""The difference and error views: what each pane compares and the thread that computes it."""

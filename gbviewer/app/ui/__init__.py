@@ -1,0 +1,1 @@
+"""The window's building blocks: the key map, input, dialogs, layout, text placement and image blits."""
