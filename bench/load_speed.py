@@ -83,8 +83,8 @@ def main() -> None:
             degree, write = WRITERS[name]
             path = write(scenes[degree], folder / name)
             size = raw_read(path)
-            t_raw = best(lambda: raw_read(path), args.repeat)
-            t_load = best(lambda: gb.load(path), args.repeat)
+            t_raw = best(lambda p=path: raw_read(p), args.repeat)
+            t_load = best(lambda p=path: gb.load(p), args.repeat)
             assert gb.load(path).num_splats == args.n
             print(f"{name:<20}{size / 1e6:>8.1f}{t_raw * 1e3:>13.1f}{t_load * 1e3:>10.1f}{t_load / t_raw:>10.1f}")
 

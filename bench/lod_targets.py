@@ -60,9 +60,9 @@ def measure(path: Path, size: tuple[int, int], rates: list[float], tau: float, r
     ref_x1 = renderer.render(cam, gb.RenderSettings()).rgb
     for rate in rates:
         view = cam.at_sampling_rate(rate)
-        full_ms, full = best(lambda: renderer.render(view, gb.RenderSettings()), repeat)
-        lod_ms, frame = best(lambda: renderer.render(view, gb.RenderSettings(lod=tau)), repeat)
-        cut_ms, c = best(lambda: lod.cut(tree, view, tau), repeat)
+        full_ms, full = best(lambda v=view: renderer.render(v, gb.RenderSettings()), repeat)
+        lod_ms, frame = best(lambda v=view: renderer.render(v, gb.RenderSettings(lod=tau)), repeat)
+        cut_ms, c = best(lambda v=view: lod.cut(tree, v, tau), repeat)
         cams = [orbit_camera(scene, 30.0 + 0.01 * k, width=size[0], height=size[1]).at_sampling_rate(rate)
                 for k in range(repeat + 1)]
         r = {"rate": rate, "full_ms": full_ms, "lod_ms": lod_ms, "cut_ms": cut_ms, "drawn": c.num_drawn, "psnr": {},

@@ -43,7 +43,7 @@ def main() -> None:
         return
     print(f"cpu count {os.cpu_count()}, load average {os.getloadavg()[0]:.1f}")
     results = []
-    for s, p in paths.items():
+    for p in paths.values():
         r = run_scale(p, args.repeat, args.modes.split(","), [float(x) for x in args.rates.split(",")],
                       [float(x) for x in args.cancel_at.split(",")])
         r["load_average"] = os.getloadavg()[0]

@@ -70,7 +70,7 @@ def measure_oit(scene: Scene, name: str, cams: list[Camera], settings: list[Rend
     wanted = oit_settings(settings)
     renderer = get_renderer(scene, backend)
     rows = []
-    for mode, s in wanted.items():
+    for _mode, s in wanted.items():
         acc: dict[str, list] = {}
         last = None
         for cam in cams:

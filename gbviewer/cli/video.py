@@ -7,7 +7,6 @@ from pathlib import Path
 
 from .argtypes import INSET, SIZE, Number, Rate, count, positive
 from ..model.camera_paths import MAX_FRAMES, PATHS, camera_path, nerfstudio_frames
-from ..core.errors import GBViewerError
 from ..core.extras import require
 from ..io import load
 from ..core.files import check_writable

@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 
 from ..model.cells import rotation_matrices
-from ..core.errors import SceneFormatError
 from ..model.scene import SH_C0, Scene
 from .gltf import FLOAT, UBYTE, USHORT, Gltf, read_gltf
 from .packing import MAX_SPLATS

@@ -88,7 +88,7 @@ def inria_columns(scene: Scene) -> dict[str, np.ndarray]:
 
 def ply_header(n: int, names: list[str], comments: tuple[str, ...] = ()) -> bytes:
     """The header of a binary little-endian PLY with `n` vertices of float32 properties `names`."""
-    return (f"ply\nformat binary_little_endian 1.0\n" + "".join(f"comment {c}\n" for c in comments)
+    return ("ply\nformat binary_little_endian 1.0\n" + "".join(f"comment {c}\n" for c in comments)
             + f"element vertex {n}\n" + "".join(f"property float {name}\n" for name in names)
             + "end_header\n").encode("ascii")
 

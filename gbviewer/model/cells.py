@@ -163,7 +163,8 @@ def kd_groups(points: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         frac = (coord - lo[seg, axis[seg]]) / np.where(span > 0, span, 1.0)[seg]
         key = seg + 0.5 * np.clip(frac, 0.0, 1.0) * big[seg]  # small groups keep their order
         order = order[np.argsort(key, kind="stable")]
-        left = k * -(-(-(-sizes // k)) // 2)  # a multiple of k near the middle
+        groups = -(-sizes // k)  # ceil(sizes / k)
+        left = k * -(-groups // 2)  # a multiple of k near the middle
         new_starts = np.concatenate([starts, (starts + left)[big]])
         starts = np.sort(new_starts)
         sizes = np.diff(np.append(starts, n))

@@ -259,7 +259,7 @@ def write_heat_video(out: str | Path, report: FlickerReport, path: Sequence[Path
             cells = [_cell(m, heat_colours(m.per_pair[k], scale)) for m in report.modes]
             caption = f"frames {i}-{i + 1}, rate {format_rate(path[i].rate)}, red {scale:.3g} levels"
             yield np.asarray(compose_grid([cells], w, h, GAP, captions="below", even=True,
-                                          lines=lambda c: [c.mode_label, caption]))
+                                          lines=lambda c, caption=caption: [c.mode_label, caption]))
 
     write_video(out, images(), len(report.starts), fps=fps, force=force)
     return Path(out)

@@ -145,7 +145,7 @@ class CpuRenderer(NativeUploads, Renderer):
                       settings.precision == "fast", regions[i])
                      for i, (camera, settings) in zip(run, jobs[run.start:run.stop])],
                     threads=jobs[run.start][1].threads, cancel=control.flag,
-                    on_progress=None if hook is None else (lambda job, done, total, b=run.start: hook(b + job, done,
+                    on_progress=None if hook is None else (lambda job, done, total, b=run.start, h=hook: h(b + job, done,
                                                                                                      total)),
                     partials=parts[run.start:run.stop])
                 # the native render skipped its remaining work once it saw the flag (even if cleared since)

@@ -15,7 +15,8 @@ from ..core.errors import GBViewerError, RenderCancelled, RenderError
 from ..lod import Hierarchy, check_plain, cut_scene, cut_view, hierarchy_for
 from ..model.scene import Scene
 from .budget import check_frame_memory
-from .types import (DEFAULT_ET_GRADE, DEFAULT_SIGMA, ORDER_INDEPENDENT, SORT_ENTRY_BYTES, Frame, FrameStats, Mode,
+from .modes import ORDER_INDEPENDENT
+from .types import (DEFAULT_ET_GRADE, DEFAULT_SIGMA, SORT_ENTRY_BYTES, Frame, FrameStats, Mode,
                     RenderSettings)
 
 

@@ -18,8 +18,7 @@ from ..core.cancel import Cancellable
 from ..core.errors import BackendFailed, InvalidValue, RenderError
 from ..model.scene import Scene
 from ..core.validate import array, distinct_items, integer, real
-# Mode and its groups live in .modes; imported here too so that `from .types import Mode, ...` keeps working
-from .modes import MAX_QUEUE, ORDER_INDEPENDENT, PER_PIXEL_SORTED, STOPTHEPOP_QUEUE, Mode
+from .modes import MAX_QUEUE, STOPTHEPOP_QUEUE, Mode
 from .presets import FILTERED_MODES, PRESETS
 from .spec import PRECISIONS, shortest, shown, spec_parts
 from .view_filter import ViewFilter
@@ -383,7 +382,7 @@ class Renderer(abc.ABC):
         textures of the OpenGL context current in this thread."""
         return False, f"the {cls.name} backend cannot write OpenGL textures"
 
-    def release_texture(self, glo: int) -> None:
+    def release_texture(self, glo: int) -> None:  # noqa: B027 (a no-op unless the backend keeps something)
         """Forget what the renderer keeps for GL texture `glo` before the texture is deleted (nothing by default)."""
 
 

@@ -157,7 +157,7 @@ def test_a_progressive_job_posts_its_quick_stage_then_tiles_equal_to_the_final_f
         np.testing.assert_array_equal(final.rgb, ref.rgb)
         assert snapshots and all(0 < p < 1 for p, _ in snapshots)
         quick_up = out[0].frame.rgb.repeat(2, 0).repeat(2, 1)  # the quick stage, scaled: what is not refined yet
-        for progress, snap in snapshots:  # copied while the render went on: tiles in flight may be half done
+        for _progress, snap in snapshots:  # copied while the render went on: tiles in flight may be half done
             done = (snap != quick_up).any(axis=2)
             wrong = (done & (snap != final.rgb).any(axis=2)).reshape(60, 8, 80, 8).any(axis=(1, 3))
             assert wrong.sum() <= (os.cpu_count() or 1)  # 8x8 output pixels = one 16x16 tile of samples

@@ -127,7 +127,7 @@ def test_measure_speed_compares_every_path_and_restores_the_one_in_use(bundled_s
         if r.simd_requested == "scalar":
             assert r.simd == "scalar"
     by = {(r.simd_requested, r.mode, r.rate): r for r in rows}
-    for (p, mode, rate), r in by.items():  # the paths differ in the blend only: same splats, same tile lists
+    for (_p, mode, rate), r in by.items():  # the paths differ in the blend only: same splats, same tile lists
         assert (r.visible, r.sort_length) == (by["scalar", mode, rate].visible, by["scalar", mode, rate].sort_length)
     speedups = [x for x in bench.ratios(rows) if x["ratio"].startswith("blend speedup")]
     assert {(x["simd"], x["mode"], x["rate"]) for x in speedups} == {(p, s.spec, k) for p in paths[1:]

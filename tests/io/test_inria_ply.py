@@ -9,7 +9,6 @@ import pytest
 from plyfile import PlyData, PlyElement
 
 import gbviewer as gb
-from gbviewer.model.scene import SH_C0
 
 
 def write_inria(path, n=5, degree=3, seed=0, extra=(), drop=(), filter_3d=None, values=None):

@@ -285,7 +285,8 @@ def test_cache_key_follows_the_file(tmp_path):
     write_inria_ply(random_scene(300, seed=10), path, force=True)  # rewritten after the load, same layout
     os.utime(path, ns=(os.stat(path).st_atime_ns, os.stat(path).st_mtime_ns + 10**9))
     # keyed by the bytes it was loaded from: its tree is the loaded splats', never the new file's
-    assert None != cache_key(loaded, "depth") != cache_key(gb.load(path), "depth") is not None
+    key = cache_key(loaded, "depth")
+    assert key is not None and key != cache_key(gb.load(path), "depth") is not None
 
 
 def test_a_truncated_cache_entry_is_rebuilt_with_one_warning(tmp_path):

@@ -248,7 +248,7 @@ def test_the_shared_tree_is_read_only():
     what later cuts gathered (the GLSL and CUDA frames, a re-upload) while the uploaded copy stayed as it was."""
     scene = random_scene(300, seed=9)
     tree = lod.hierarchy_for(scene)
-    for name, a in tree.arrays().items():
+    for _name, a in tree.arrays().items():
         with pytest.raises(ValueError, match="read-only"):
             a[0] = 0
     assert lod.hierarchy_for(scene) is tree

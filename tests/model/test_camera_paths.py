@@ -9,7 +9,7 @@ import pytest
 
 import gbviewer as gb
 from gbviewer.model import camera_paths
-from helpers import OUTPUT_H as H, OUTPUT_W as W
+from helpers import OUTPUT_W as W
 
 
 def test_zoom_and_dolly_scale_the_content(bundled_scene, output_view):

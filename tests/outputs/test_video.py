@@ -21,7 +21,6 @@ from gbviewer.outputs import video
 from gbviewer.model.camera_paths import PathFrame, camera_path, zoom_path
 from gbviewer.cli import main
 from gbviewer.outputs.figure import to_uint8, upscale_nearest
-from helpers import OUTPUT_H as H, OUTPUT_W as W
 
 MAX_ERR, MEAN_ERR = 16, 2.5  # codec tolerance at crf 0 (see the module docstring)
 

@@ -29,7 +29,8 @@ def one_splat(mean, scales, quat=(1.0, 0.0, 0.0, 0.0), opacity=0.9) -> gb.Scene:
                                 np.full((1, 1, 3), 1.0, np.float32))
 
 
-def camera(R=np.eye(3), t=np.zeros(3), f=40.0, projection="perspective") -> gb.Camera:
+def camera(R=None, t=None, f=40.0, projection="perspective") -> gb.Camera:
+    R, t = np.eye(3) if R is None else R, np.zeros(3) if t is None else t
     return gb.Camera(W, H, f, f * 1.1, W / 2 + 1.3, H / 2 - 0.7, R, t, projection=projection)
 
 

@@ -76,7 +76,7 @@ def builds(tmp_path_factory) -> dict[str, Path]:
         cmd = [cxx, "-std=c++17", "-O2", *flags, "-I", str(REPO / "native" / "include"), str(SOURCE), "-o",
                str(out / name)]
         procs[name] = (cmd, subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True))
-    for name, (cmd, p) in procs.items():
+    for cmd, p in procs.values():
         log = p.communicate()[0]
         assert p.returncode == 0, f"{' '.join(cmd)} failed:\n{log}"
     return {name: out / name for name in variants}

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from glsl_helpers import MODES, awkward_scene, compare, gl  # noqa: F401 - gl: fixture
+from glsl_helpers import MODES, awkward_scene, compare
 from helpers import front_camera, random_view, shared_scene
 from reference import MODES as REFERENCE_MODES
 from test_render_reference import BACKGROUND, SCENES, _check_strict

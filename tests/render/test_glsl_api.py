@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 import pytest
-from glsl_helpers import MAX_TOL, MEAN_TOL, awkward_scene, compare, gl  # noqa: F401 - gl: fixture
+from glsl_helpers import MAX_TOL, MEAN_TOL, awkward_scene, compare
 from helpers import front_camera, random_scene
 
 import gbviewer as gb

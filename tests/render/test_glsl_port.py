@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from glsl_helpers import gl  # noqa: F401 - fixture
 from helpers import skip_or_fail
 
 import gbviewer as gb

@@ -5,7 +5,7 @@ loop cap; the cap's refusal in one line where the lists are too long (the sorted
 from __future__ import annotations
 
 import pytest
-from glsl_helpers import awkward_scene, compare, gl  # noqa: F401 - fixture
+from glsl_helpers import awkward_scene, compare
 from helpers import front_camera
 
 import gbviewer as gb

@@ -10,7 +10,6 @@ from dataclasses import asdict, replace
 
 import numpy as np
 import pytest
-from glsl_helpers import gl  # noqa: F401 (the fixture)
 from reference import reference_render
 
 import gbviewer as gb

@@ -10,7 +10,7 @@ from dataclasses import asdict, replace
 
 import numpy as np
 import pytest
-from glsl_helpers import compare, gl  # noqa: F401 (gl: the fixture)
+from glsl_helpers import compare
 from helpers import random_view
 from reference import reference_render
 

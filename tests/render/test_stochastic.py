@@ -12,7 +12,6 @@ import pytest
 from helpers import random_view
 from reference import box_down
 from reference_stochastic import expectation
-from glsl_helpers import gl  # noqa: F401 (fixture)
 from test_simd import VECTOR_PATHS, render
 
 import gbviewer as gb

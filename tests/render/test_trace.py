@@ -17,7 +17,7 @@ from gbviewer.core.errors import RenderError
 from gbviewer.render import Mode, RenderSettings
 from gbviewer.render.prepare import oit_params
 from gbviewer.render.trace import SKIP_REASONS
-from gbviewer.render.types import PER_PIXEL_SORTED
+from gbviewer.render.modes import PER_PIXEL_SORTED
 from helpers import random_view
 from reference import pixel_contributors
 

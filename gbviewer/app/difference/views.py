@@ -168,7 +168,7 @@ class PaneAnalysis:
                         continue  # pane A's frame is on its way: wait for it rather than render it twice
                 for frame in (shown.frame, same_a):  # a frame drawn from GPU memory is read back here, in the UI
                     if frame is not None:                 # thread (the analysis thread may not touch its texture)
-                        frame.rgb
+                        _ = frame.rgb
                 self._asked[slot] = (shown.frame, spec)
                 self.thread.submit(Request(slot, s.scene, shown.frame, shown.job.camera,
                                            shown.job.info.get("rate", s.settings.rate), shown.job.settings, spec,

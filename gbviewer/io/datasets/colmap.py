@@ -70,7 +70,7 @@ def read_colmap(model: Path) -> dict:
             out = subprocess.run([sys.executable, str(child), tmp, str(limit)], capture_output=True, timeout=seconds,
                                  env={**os.environ, **SINGLE_THREADED})
         except subprocess.TimeoutExpired:
-            raise DatasetError(f"{model}: unreadable COLMAP model (pycolmap still reading after {seconds:.0f} s)")
+            raise DatasetError(f"{model}: unreadable COLMAP model (pycolmap still reading after {seconds:.0f} s)") from None
     if out.returncode != 0 or not out.stdout:
         why = (out.stderr.decode(errors="replace").strip().splitlines() or [f"exit status {out.returncode}"])[-1]
         raise DatasetError(f"{model}: unreadable COLMAP model (pycolmap: {why[:200]})")

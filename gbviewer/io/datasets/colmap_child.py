@@ -42,6 +42,6 @@ if __name__ == "__main__":
     limit_memory(int(sys.argv[2]))
     try:
         doc = describe(sys.argv[1])
-    except Exception as exc:  # pycolmap raises ValueError, IndexError, MemoryError, ... for bad files
+    except Exception as exc:  # noqa: BLE001 (pycolmap raises ValueError, IndexError, MemoryError, ... for bad files)
         doc = {"error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}
     json.dump(doc, sys.stdout)

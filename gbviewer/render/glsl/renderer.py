@@ -55,7 +55,8 @@ from ...model.scene import Scene
 from ..control import Progress, RenderControl
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
 from ..presets import FILTERED_MODES
-from ..types import PER_PIXEL_SORTED, Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
+from ..modes import PER_PIXEL_SORTED
+from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
 from ..view_filter import DILATION_3DGS
 from .binning import bin_duplex, bin_splats, read_totals
 from .context import check_context, standalone_context
