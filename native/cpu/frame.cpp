@@ -163,7 +163,7 @@ constexpr int64_t PREPROCESS_BLOCK = 256;  // splats per call of a path's stage 
 
 // fn(begin, end) over the blocks of n splats in parallel; a cancelled frame stops here too, not only between tiles.
 // Handed out BLOCKS_PER_GRAB at a time: a level-of-detail cut's rows cost unevenly (scattered leaves, then denser
-// interior nodes), and halves fixed in advance left one core waiting 10 % of the stage.
+// interior nodes), and halves fixed in advance leave one core waiting.
 constexpr int BLOCKS_PER_GRAB = 8;
 template <class Fn>
 void for_blocks(int64_t n, FrameRun& run, Fn fn) {

@@ -38,7 +38,7 @@ constexpr double SURE = 1e-9;
 // focal, gap = |d| - radius, p infinite where gap <= 0), so with hi = tau (1 + band), s >= 0 and radius >= 0 (as
 // built): p >= hi (o = 1) iff |d| hi <= s + radius hi, and p <= tau (o = 0) iff |d| tau >= s + radius tau. Both
 // are decided squared, without a square root or a division, where they hold by the margin SURE and no square
-// overflows (most nodes; 8 % of the 6.1 M scene's x1/8 cut), else by the exact form. (A negative radius could
+// overflows (most nodes), else by the exact form. (A negative radius could
 // cancel s + radius tau below its rounding, an overflowing square the margin.)
 float opening(const float* means, const float* radius, const float* size, int64_t i, const View& v, double tau,
               double band) {

@@ -118,7 +118,7 @@ void stage_colors(const StageJob& job, const int64_t* ids, int count) {
     for (int g = 0; g < count; g += N) {
         const int c = count - g < N ? count - g : N;
         // ask for the SH rows ahead: a level-of-detail cut's scattered rows two groups ahead, the scene's four (the
-        // stream's hardware prefetch alone left a 6.1 M scene's stage 10-15 % slower)
+        // hardware prefetcher alone lets a large scene's stage wait on them)
         const int ahead = job.rows ? 2 : 4;
         for (int a = g + ahead * N; a < std::min(g + (ahead + 1) * N, count); ++a) {
             const char* p = (const char*)job.at(job.sh, job.node_sh, job.k * 3, job.row(ids[a]));
@@ -260,8 +260,8 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
     alignas(64) int32_t rb[4][N];
     F w[16];
     int64_t ids[N];
-    // written whole for a group with a valid lane, not read for the others: zeroed once here, not per group (576
-    // bytes a group on AVX2 were 11 % of the finish)
+    // written whole for a group with a valid lane, not read for the others: zeroed once here, not per group (a
+    // group's zeroing is a visible part of the finish's cost)
     Splat2DLanes<L> out{};
     TileRectLanes<L> rect{};
     typename L::F cols[N], color[N];  // with transposes: the stage's records as lanes
