@@ -28,11 +28,18 @@ float gaussian_at(Splat2D s, vec2 d) {
     return power <= 0.0 ? expf(power) : 0.0;
 }
 
-// port of blend.h: blend_scalar
-bool blend_scalar(Splat2D s, vec2 pix, inout float T, inout vec3 C) {
+// port of blend.h: centre_alpha (one pixel; false when the power test rejects it, alpha then unset)
+bool centre_alpha(Splat2D s, vec2 pix, out float alpha) {
     const float power = gaussian_power(s, s.xy - pix);
     if (!(power <= 0.0 && power >= s.log_min_alpha)) return false;  // NaN rejects
-    const float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
+    alpha = minf(s.opacity * expf(power), MAX_ALPHA);
+    return true;
+}
+
+// port of blend.h: blend_scalar
+bool blend_scalar(Splat2D s, vec2 pix, inout float T, inout vec3 C) {
+    float alpha;
+    if (!centre_alpha(s, pix, alpha)) return false;
     return composite_scalar(alpha, s.color, T, C);
 }
 
@@ -52,13 +59,16 @@ float stochastic_uniform(uint sample_key, uint splat_key) {
     return float(hash32(sample_key ^ splat_key) >> 8u) * (1.0 / 16777216.0);
 }
 
+// port of stochastic.h: stochastic_keep (one pixel, its sample key)
+bool stochastic_keep(Splat2D s, vec2 pix, uint key) {
+    float alpha;
+    if (!centre_alpha(s, pix, alpha) || alpha < MIN_ALPHA_3DGS) return false;
+    return stochastic_uniform(key, stochastic_splat_key(s.id)) < alpha;
+}
+
 // port of stochastic.h: blend_stochastic
 bool blend_stochastic(Splat2D s, vec2 pix, uint key, inout float T, inout vec3 C) {
-    const float power = gaussian_power(s, s.xy - pix);
-    if (!(power <= 0.0 && power >= s.log_min_alpha)) return false;  // NaN rejects
-    const float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
-    if (alpha < MIN_ALPHA_3DGS) return false;
-    if (!(stochastic_uniform(key, stochastic_splat_key(s.id)) < alpha)) return false;
+    if (!stochastic_keep(s, pix, key)) return false;
     C = s.color;
     T = 0.0;
     return true;
@@ -67,11 +77,7 @@ bool blend_stochastic(Splat2D s, vec2 pix, uint key, inout float T, inout vec3 C
 // port of stochastic.h: blend_stochastic_popfree (one pixel: T, the nearest kept fragment's depth key, C)
 void blend_stochastic_popfree(Splat2D s, vec4 plane, vec2 pix, uint key, inout float T, inout float depth_key,
                               inout vec3 C) {
-    const float power = gaussian_power(s, s.xy - pix);
-    if (!(power <= 0.0 && power >= s.log_min_alpha)) return;  // NaN rejects
-    const float alpha = minf(s.opacity * expf(power), MAX_ALPHA);
-    if (alpha < MIN_ALPHA_3DGS) return;
-    if (!(stochastic_uniform(key, stochastic_splat_key(s.id)) < alpha)) return;
+    if (!stochastic_keep(s, pix, key)) return;
     float k = (plane.x * pix.x + plane.y * pix.y + plane.z) / plane.w;
     if (isnan(k)) k = -3.402823466e38;  // a splat without a plane is behind every plane
     if (!(k > depth_key)) return;

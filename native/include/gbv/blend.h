@@ -52,19 +52,29 @@ GBV_HD typename L::M composite_scalar(typename L::M pass, typename L::F alpha, c
     return L::and_(pass, low);
 }
 
-// `scalar` and `mip`: alpha at the pixel centre (eq. 5). Offsets whose power is below
-// log_min_alpha = ln((1/255) / opacity) would give alpha < 1/255 and are skipped before the exp.
+// Alpha at the pixel centre (eq. 5, clamped to MAX_ALPHA) on the lanes `pass` of `live` whose power is <= 0 and at
+// least log_min_alpha = ln((1/255) / opacity) (below it alpha < 1/255: skipped before the exp). False when no lane
+// passes (alpha not computed). The centre alpha of `scalar`, `mip` and the stochastic modes (stochastic.h).
+template <class L, class Tr = NoTrace>
+GBV_HD bool centre_alpha(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
+                         typename L::M& pass, typename L::F& alpha) {
+    using F = typename L::F;
+    const F power = gaussian_power<L>(s, L::set(s.xy.x) - px, L::set(s.xy.y) - py);
+    pass = L::and_(live, L::and_(power <= L::set(0.0f), power >= L::set(s.log_min_alpha)));
+    GBV_TRACE(Tr, skip(L::and_not(live, power <= L::set(0.0f)), SKIP_POWER));
+    GBV_TRACE(Tr, skip(L::and_not(live, pass), SKIP_CUTOFF));
+    if (!L::any(pass)) return false;
+    alpha = L::min(L::set(s.opacity) * L::exp(L::select(pass, power, L::set(0.0f))), L::set(MAX_ALPHA));
+    return true;
+}
+
+// `scalar` and `mip`: alpha at the pixel centre, composited.
 template <class L, class Tr = NoTrace>
 GBV_HD typename L::M blend_scalar(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
                                   AlphaState<L>& st) {
-    using F = typename L::F;
-    using M = typename L::M;
-    const F power = gaussian_power<L>(s, L::set(s.xy.x) - px, L::set(s.xy.y) - py);
-    const M pass = L::and_(live, L::and_(power <= L::set(0.0f), power >= L::set(s.log_min_alpha)));
-    GBV_TRACE(Tr, skip(L::and_not(live, power <= L::set(0.0f)), SKIP_POWER));
-    GBV_TRACE(Tr, skip(L::and_not(live, pass), SKIP_CUTOFF));
-    if (!L::any(pass)) return L::none();
-    const F alpha = L::min(L::set(s.opacity) * L::exp(L::select(pass, power, L::set(0.0f))), L::set(MAX_ALPHA));
+    typename L::M pass;
+    typename L::F alpha;
+    if (!centre_alpha<L, Tr>(s, px, py, live, pass, alpha)) return L::none();
     return composite_scalar<L, Tr>(pass, alpha, s.color, st);
 }
 

@@ -58,31 +58,36 @@ GBV_HD float stochastic_uniform(uint32_t sample_key, uint32_t splat_key) {
     return (float)(hash32(sample_key ^ splat_key) >> 8) * (1.0f / 16777216.0f);
 }
 
-// One splat on the lanes `live` (keys: each lane's sample key). alpha as blend_scalar's; the lanes whose u < alpha
-// keep the fragment: colour = the splat's, T = 0, and stop (the nearest kept fragment in a depth-ordered list).
-// Returns those lanes. The uniforms are computed one lane at a time, so every lane type gives the same bits.
+// The keep decision of both stochastic modes for one splat on the lanes `live` (keys: each lane's sample key): the
+// lanes whose centre alpha (centre_alpha, the 1/255 cut-off) exceeds the fragment's uniform. False when none keeps
+// it. The uniforms are computed one lane at a time, so every lane type gives the same bits.
 template <class L, class Tr = NoTrace>
-GBV_HD typename L::M blend_stochastic(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
-                                      const uint32_t* keys, AlphaState<L>& st) {
-    using F = typename L::F;
-    using M = typename L::M;
-    const F power = gaussian_power<L>(s, L::set(s.xy.x) - px, L::set(s.xy.y) - py);
-    M pass = L::and_(live, L::and_(power <= L::set(0.0f), power >= L::set(s.log_min_alpha)));
-    GBV_TRACE(Tr, skip(L::and_not(live, power <= L::set(0.0f)), SKIP_POWER));
-    GBV_TRACE(Tr, skip(L::and_not(live, pass), SKIP_CUTOFF));
-    if (!L::any(pass)) return L::none();
-    const F alpha = L::min(L::set(s.opacity) * L::exp(L::select(pass, power, L::set(0.0f))), L::set(MAX_ALPHA));
+GBV_HD bool stochastic_keep(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
+                            const uint32_t* keys, typename L::M& kept) {
+    typename L::M pass;
+    typename L::F alpha;
+    if (!centre_alpha<L, Tr>(s, px, py, live, pass, alpha)) return false;
     GBV_TRACE(Tr, alpha(pass, alpha));
     GBV_TRACE(Tr, skip(L::and_(pass, alpha < L::set(MIN_ALPHA_3DGS)), SKIP_ALPHA));
     pass = L::and_not(pass, alpha < L::set(MIN_ALPHA_3DGS));
     const uint32_t bits = L::bits(pass);
-    if (!bits) return L::none();
+    if (!bits) return false;
     const uint32_t splat_key = stochastic_splat_key(s.id);
     float u[L::N];
     GBV_UNROLL
     for (int k = 0; k < L::N; ++k) u[k] = (bits >> k) & 1u ? stochastic_uniform(keys[k], splat_key) : 1.0f;
-    const M kept = L::and_(pass, L::load(u) < alpha);
+    kept = L::and_(pass, L::load(u) < alpha);
     GBV_TRACE(Tr, skip(L::and_not(pass, kept), SKIP_DISCARD));
+    return true;
+}
+
+// `stochastic`, one splat: the kept lanes take colour = the splat's, T = 0, and stop (the nearest kept fragment in
+// a depth-ordered list). Returns those lanes.
+template <class L, class Tr = NoTrace>
+GBV_HD typename L::M blend_stochastic(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
+                                      const uint32_t* keys, AlphaState<L>& st) {
+    typename L::M kept;
+    if (!stochastic_keep<L, Tr>(s, px, py, live, keys, kept)) return L::none();
     GBV_TRACE(Tr, weight(kept, st.T));
     for (int c = 0; c < 3; ++c) st.C[c] = L::select(kept, L::set(s.color[c]), st.C[c]);
     st.T = L::select(kept, L::set(0.0f), st.T);
@@ -96,30 +101,15 @@ struct PopfreeState {
     typename L::F T, key, C[3];
 };
 
-// One splat of stochastic_popfree: blend_stochastic's keep decision, then the depth test against the lane's nearest
-// kept fragment at the pixel's point of the splat's depth plane. Never stops a lane.
+// One splat of stochastic_popfree: the keep decision, then the depth test against the lane's nearest kept fragment
+// at the pixel's point of the splat's depth plane. Never stops a lane.
 template <class L, class Tr = NoTrace>
 GBV_HD void blend_stochastic_popfree(const Splat2D& s, const DepthPlane& plane, typename L::F px, typename L::F py,
                                      typename L::M live, const uint32_t* keys, PopfreeState<L>& st) {
     using F = typename L::F;
     using M = typename L::M;
-    const F power = gaussian_power<L>(s, L::set(s.xy.x) - px, L::set(s.xy.y) - py);
-    M pass = L::and_(live, L::and_(power <= L::set(0.0f), power >= L::set(s.log_min_alpha)));
-    GBV_TRACE(Tr, skip(L::and_not(live, power <= L::set(0.0f)), SKIP_POWER));
-    GBV_TRACE(Tr, skip(L::and_not(live, pass), SKIP_CUTOFF));
-    if (!L::any(pass)) return;
-    const F alpha = L::min(L::set(s.opacity) * L::exp(L::select(pass, power, L::set(0.0f))), L::set(MAX_ALPHA));
-    GBV_TRACE(Tr, alpha(pass, alpha));
-    GBV_TRACE(Tr, skip(L::and_(pass, alpha < L::set(MIN_ALPHA_3DGS)), SKIP_ALPHA));
-    pass = L::and_not(pass, alpha < L::set(MIN_ALPHA_3DGS));
-    const uint32_t bits = L::bits(pass);
-    if (!bits) return;
-    const uint32_t splat_key = stochastic_splat_key(s.id);
-    float u[L::N];
-    GBV_UNROLL
-    for (int k = 0; k < L::N; ++k) u[k] = (bits >> k) & 1u ? stochastic_uniform(keys[k], splat_key) : 1.0f;
-    const M kept = L::and_(pass, L::load(u) < alpha);
-    GBV_TRACE(Tr, skip(L::and_not(pass, kept), SKIP_DISCARD));
+    M kept;
+    if (!stochastic_keep<L, Tr>(s, px, py, live, keys, kept)) return;
     // 1/z or -z on the plane; NaN (a splat without a plane: a needle, c = 0) is behind every plane
     F key = (L::set(plane.a) * px + L::set(plane.b) * py + L::set(plane.c)) / L::set(plane.d);
     key = L::select(key == key, key, L::set(-3.402823466e38f));
