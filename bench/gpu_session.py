@@ -40,7 +40,7 @@ CUDA_TEST_FILES = ("tests/render/test_cuda.py", "tests/render/test_cuda_gpu.py",
 GLSL_TEST_FILES = ("tests/render/test_glsl.py",)
 PIECES = ("cuda tests", "cuda vs cpu", "glsl on the EGL driver", "glsl vs cpu", "display path + interop", "timings")
 CUDA_PIECES = ("cuda tests", "cuda vs cpu", "timings")  # the others need an OpenGL 4.3 context (any EGL driver)
-MODES = ("scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex")
+MODES = (*(m.label for m in gb.Mode), "stopthepop:0")  # every mode; stopthepop also with the exact per-pixel sort
 CUDA_TOL = dict(mean=1e-4, frac=0.002, counts="exact")  # tests/render/test_cuda.py
 GLSL_TOL = dict(mean=1e-3, frac=0.002, counts=1e-4)  # tests/render/test_glsl.py (counts: relative slack)
 # Gaussian Blending paper, Table 5 (multi-scale Blender, x1): 3DGS 131.80 FPS, Gaussian Blending-30K 123.08 FPS
@@ -169,9 +169,9 @@ def compare_piece(s: Session, name: str, scenes: list[Path], make, tol: dict, su
         cam = gb.orbit_camera(scene, 40, 15, width=320, height=240)
         for mode in MODES:
             for ss in supersamples:
-                settings = RenderSettings(gb.Mode.parse(mode), ss)
+                settings = RenderSettings.parse(mode, supersample=ss)
                 try:
-                    m = diff(other.render(cam, settings), gb.render(scene, cam, mode, supersample=ss, backend="cpu"))
+                    m = diff(other.render(cam, settings), gb.render(scene, cam, settings, backend="cpu"))
                 except gb.GBViewerError as exc:
                     m = dict(mean=float("nan"), max=float("nan"), frac=float("nan"), visible=(0, 1),
                              pairs=(0, 1), error=str(exc))
@@ -230,7 +230,7 @@ def time_scene(r, scene: gb.Scene, label: str, repeat: int = 5, modes: tuple[str
     cam = gb.orbit_camera(scene, 30, 10, width=SIZE[0], height=SIZE[1])
     rows = []
     for mode in modes:
-        settings = RenderSettings(gb.Mode.parse(mode))
+        settings = RenderSettings.parse(mode)
         r.render(cam, settings)  # warm-up: buffers sized, cells built
         wall, gpu = [], []
         for _ in range(repeat):
@@ -260,7 +260,7 @@ def timing_piece(s: Session, scenes: list[Path], budget_end: float) -> None:
         from synthetic import make_scene
 
         rows += time_scene(r, make_scene(LARGE_SPLATS), f"synthetic {LARGE_SPLATS // 10**6} M", repeat=3,
-                           modes=MODES[:-1])
+                           modes=tuple(m for m in MODES if m != "duplex"))
         large = "; duplex not timed on it (its cells would be built on the CPU first)"
     else:
         large = "; the 6 M-splat scene not timed (time budget)"

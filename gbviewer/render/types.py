@@ -236,7 +236,8 @@ class FrameStats:
     evaluations: splat-pixel evaluations; evals_per_pixel: their mean per output pixel.
     backend: the backend's name; mode: `RenderSettings.label_for` the scene.
     simd: the SIMD path the cpu blend ran ("scalar", "avx2", "avx512", "neon"; GBVIEWER_SIMD at load or
-        gbviewer._native.testing.set_simd).
+        gbviewer._native.testing.set_simd); "scalar" for eval3d and stopthepop on every path (their per-pixel walk has
+        no vector lanes).
     cells, cells_visible: duplex's cells and those drawn; cell_misses: splat-tile pairs outside their cell's tiles
         (not counted by glsl).
     decode_ms: the MLPs of a trained Duplex-GS model, per view.
