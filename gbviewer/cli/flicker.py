@@ -89,7 +89,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_lod_arg(p)
     add_stochastic_args(p)
     p.add_argument("--reference", default=DEFAULT_REFERENCE,
-                   help=f"the dense reference whose change is subtracted (default {DEFAULT_REFERENCE}); the floor "
+                   help=f"the dense reference whose change is subtracted (default {DEFAULT_REFERENCE}, sorted by "
+                   "centre depth as scalar is; stopthepop:0:8 is popping-free: the exact per-pixel order); the floor "
                    "is it at half its samples per axis")
     p.add_argument("--path", default="zoom",
                    help="zoom, dolly, rate (as gbviewer video), orbit (about the scene's centre, --degrees) or a "
