@@ -11,7 +11,6 @@ fidelity table, through eval's tables and plots."""
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -20,9 +19,9 @@ REPO = Path(__file__).resolve().parents[1]
 if any((REPO / "gbviewer").glob("_native*")):  # the checkout's build, else the installed package
     sys.path.insert(0, str(REPO))
 
-import gbviewer as gb  # noqa: E402
-from gbviewer.argtypes import SIZE, Parser, count  # noqa: E402
-from gbviewer.figure import save_image  # noqa: E402
+import gbviewer as gb
+from gbviewer.argtypes import SIZE, Parser, count
+from gbviewer.figure import save_image
 
 ELEVATION = 20.0
 
