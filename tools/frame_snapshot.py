@@ -25,7 +25,7 @@ import gbviewer as gb
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared" / "scenes"
 DEFAULT_SCENES = ("fruit_drops_minimal.ply", "plant.splat", "st-peter.sog", "v3dg-donut.fused.ply")
-MODES = ("scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex")
+MODES = (*(m.label for m in gb.Mode), "stopthepop:0")  # every mode; stopthepop also with the exact per-pixel sort
 PIXELS = ((28, 20), (10, 33))
 BACKGROUND = (0.1, 0.2, 0.3)
 

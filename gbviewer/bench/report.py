@@ -97,6 +97,17 @@ def plot_path(out_dir: Path, scene: str) -> Path:
     return out_dir / (re.sub(r"[^A-Za-z0-9._-]+", "_", Path(scene).stem) + ".png")
 
 
+MARKERS = "os^Dv"  # a mode past matplotlib's 10 cycle colours gets another marker and dash (line_style)
+DASHES = ("-", "--", ":", "-.")
+
+
+def line_style(i: int) -> dict:
+    """The plot line of the i-th mode: matplotlib's 10 cycle colours, then the same colours with another marker and
+    dash, so that every mode of a plot stays distinguishable in its legend however many modes it has."""
+    k = i // 10
+    return {"color": f"C{i % 10}", "marker": MARKERS[k % len(MARKERS)], "linestyle": DASHES[k % len(DASHES)]}
+
+
 def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = False) -> list[Path]:
     """PSNR vs sampling rate per mode, time per mode, and quality against cost (zoom-out PSNR against frame time,
     one line per mode through its rates): one figure per scene, as PNG; existing plots are only replaced with
@@ -107,9 +118,10 @@ def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow
     for scene in sorted({r.scene for r in speed} | {r.scene for r in fidelity}):
         fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(18, 4.5))
         fid = [r for r in fidelity if r.scene == scene]
-        for mode in dict.fromkeys(r.mode for r in fid):
+        styles = {mode: line_style(i) for i, mode in enumerate(dict.fromkeys(r.mode for r in fid))}
+        for mode, style in styles.items():
             pts = sorted((r.rate, r.psnr) for r in fid if r.mode == mode)
-            ax1.plot([p[0] for p in pts], [p[1] for p in pts], "o-", label=mode)
+            ax1.plot([p[0] for p in pts], [p[1] for p in pts], label=mode, **style)
         ax1.set_xscale("log", base=2)
         ax1.set_xlabel("sampling rate")
         ax1.set_ylabel("PSNR (dB)")
@@ -126,7 +138,7 @@ def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow
         ax2.set_title(f"{scene}: time per mode")
         ax2.legend(fontsize=8)
         ax2.tick_params(axis="x", labelsize=7)
-        quality_cost(ax3, scene, [r for r in speed if r.scene == scene], fid)
+        quality_cost(ax3, scene, [r for r in speed if r.scene == scene], fid, styles)
         fig.tight_layout()
         path = plot_path(out_dir, scene)
         save_figure(fig, path, force)
@@ -134,9 +146,9 @@ def write_plots(out_dir: Path, speed: list[SpeedRow], fidelity: list[FidelityRow
     return written
 
 
-def quality_cost(ax, scene: str, speed: list[SpeedRow], fidelity: list[FidelityRow]) -> None:
+def quality_cost(ax, scene: str, speed: list[SpeedRow], fidelity: list[FidelityRow], styles: dict[str, dict]) -> None:
     """Zoom-out PSNR against the frame time (the fastest path measured) of each mode, a line through its rates
-    labelled x1/k."""
+    labelled x1/k, drawn in its `styles` entry (`line_style`)."""
     for mode in dict.fromkeys(r.mode for r in fidelity if r.kind == "zoom-out"):
         pts = []
         for f in sorted((r for r in fidelity if r.mode == mode and r.kind == "zoom-out"), key=lambda r: r.rate):
@@ -144,7 +156,7 @@ def quality_cost(ax, scene: str, speed: list[SpeedRow], fidelity: list[FidelityR
             if ms:
                 pts.append((min(ms), f.psnr, f.rate))
         if pts:
-            (line,) = ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", label=mode)
+            (line,) = ax.plot([p[0] for p in pts], [p[1] for p in pts], label=mode, **styles[mode])
             for ms, db, rate in pts:
                 ax.annotate(f"x1/{round(1 / rate)}", (ms, db), fontsize=6, color=line.get_color(),
                             xytext=(3, 3), textcoords="offset points")

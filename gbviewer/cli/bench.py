@@ -11,7 +11,7 @@ from ..core.errors import GBViewerError
 from ..core.extras import require
 from ..render import BACKENDS
 from ..core.outputs import refuse_collisions, refuse_inputs
-from .options import MAX_COUNT, add_lod_arg, check_render_size, progress_bar, settings_of
+from .options import MAX_COUNT, add_lod_arg, add_stochastic_args, check_render_size, progress_bar, settings_of
 
 BENCH_DEFAULTS = {"modes": "scalar,gaussian_blending,gaussian_blending+fast,supersample:3", "rates": "1,1/8",
                   "views": 2, "repeat": 2, "simd": None}
@@ -84,6 +84,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "with wsr or duplex the sort length, cells, PSNR vs scalar and flicker are measured too "
                    f"(default {BENCH_DEFAULTS['modes']})")
     add_lod_arg(p)
+    add_stochastic_args(p)
     p.add_argument("--backends", default="cpu")
     p.add_argument("--rates", type=Rate(many=True),
                    help=f"sampling rates, e.g. 8,4,2,1,1/2,1/4,1/8 (default {BENCH_DEFAULTS['rates']})")

@@ -12,8 +12,8 @@ from ..io import load
 from ..io.datasets.backdrop import choose_background
 from ..core.files import check_writable
 from ..render.presets import differences
-from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of, camera_from_args,
-                      check_inset, check_render_size, load_options, settings_of)
+from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, add_stochastic_args, backend_of,
+                      camera_from_args, check_inset, check_render_size, load_options, settings_of)
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
@@ -54,6 +54,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--modes", default="scalar,supersample:3,gaussian_blending",
                    help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, the level-of-detail cut at PX)")
     add_lod_arg(p)
+    add_stochastic_args(p)
     p.add_argument("--rates", type=Rate(many=True), default="1,1/2,1/4,1/8",
                    help="sampling rates, e.g. 1,1/2,1/4,1/8")
     add_backend_arg(p)

@@ -8,7 +8,7 @@ from .eval_args import add_eval_args, scene_pairs
 from ..core.extras import require
 from ..core.files import check_writable
 from ..core.outputs import refuse_collisions
-from .options import add_lod_arg, progress_bar, settings_of
+from .options import add_lod_arg, add_stochastic_args, progress_bar, settings_of
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
@@ -41,4 +41,5 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                     "photos (COLMAP, Blender or cameras.json datasets), the paper's tables")
     add_eval_args(p)
     add_lod_arg(p)
+    add_stochastic_args(p)
     p.set_defaults(func=cmd_eval)

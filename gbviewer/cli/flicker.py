@@ -17,8 +17,9 @@ from ..core.files import check_writable
 from ..core.outputs import refuse_collisions
 from ..render import RenderSettings
 from ..outputs.video import MAX_FPS, MIN_FPS
-from .options import (MAX_COUNT, add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of,
-                      camera_from_args, check_render_size, load_options, path_args, progress_bar, settings_of)
+from .options import (MAX_COUNT, add_backend_arg, add_camera_args, add_load_args, add_lod_arg, add_stochastic_args,
+                      backend_of, camera_from_args, check_render_size, load_options, path_args, progress_bar,
+                      settings_of)
 
 FLICKER_PANE = (320, 240)  # default pane size
 VIDEO_NAME = "heat.mp4"
@@ -86,8 +87,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--modes", default="scalar,mip,analytic,gaussian_blending,supersample:3",
                    help="comma-separated MODE, MODE:N, supersample:N or preset:NAME, each with +lod[:PX] optionally")
     add_lod_arg(p)
+    add_stochastic_args(p)
     p.add_argument("--reference", default=DEFAULT_REFERENCE,
-                   help=f"the dense reference whose change is subtracted (default {DEFAULT_REFERENCE}); the floor "
+                   help=f"the dense reference whose change is subtracted (default {DEFAULT_REFERENCE}, sorted by "
+                   "centre depth as scalar is; stopthepop:0:8 is popping-free: the exact per-pixel order); the floor "
                    "is it at half its samples per axis")
     p.add_argument("--path", default="zoom",
                    help="zoom, dolly, rate (as gbviewer video), orbit (about the scene's centre, --degrees) or a "

@@ -15,6 +15,7 @@ from ..model.camera import PROJECTIONS, Camera, load_cameras_json, orbit_camera
 from ..model.camera_paths import scene_focus_depth
 from ..core.errors import GBViewerError
 from ..render import AUTO, BACKEND_NAMES, RenderSettings, choose_backend
+from ..render.modes import MAX_SEED, STOCHASTIC_MODES
 from ..render.types import MAX_LOD
 from ..model.scene import Scene
 from ..core.validate import integer
@@ -99,6 +100,32 @@ def with_lod(settings: list[RenderSettings], lod: float | None) -> list[RenderSe
     return list(out.values())
 
 
+STOCHASTIC_OPTIONS = ("seed", "frame")  # add_stochastic_args: applied to the stochastic modes only
+
+
+def add_stochastic_args(p: argparse.ArgumentParser) -> None:
+    """--seed and --frame: the stochastic modes' keep decisions (RenderSettings.seed, .frame)."""
+    p.add_argument("--seed", type=count(MAX_SEED, lo=0), metavar="0..2^32-1",
+                   help="stochastic modes: the seed of the keep decisions' hash (default 0)")
+    p.add_argument("--frame", type=count(MAX_SEED, lo=0), metavar="0..2^32-1",
+                   help="stochastic modes: the frame index (default 0); another index is another sample, the same "
+                   "seed and index the same image bit for bit")
+
+
+def with_stochastic(settings: list[RenderSettings], args: argparse.Namespace) -> list[RenderSettings]:
+    """`settings` with the stochastic ones at --seed and --frame (those given); either given without a stochastic
+    mode among `settings` is one line (it would change nothing)."""
+    given = {k: v for k in STOCHASTIC_OPTIONS if (v := getattr(args, k, None)) is not None}
+    if not given:
+        return settings
+    if not any(s.mode in STOCHASTIC_MODES for s in settings):
+        option = " and ".join(f"--{k} {v}" for k, v in given.items())
+        names = ", ".join(m.label for m in STOCHASTIC_MODES)
+        raise GBViewerError(f"{option} applies to the stochastic modes ({names} and their presets); the modes "
+                            f"given ({', '.join(s.spec for s in settings)}) have none")
+    return [replace(s, **given) if s.mode in STOCHASTIC_MODES else s for s in settings]
+
+
 MODE_OPTIONS = ("supersample", "sh_degree", "background")  # the options some commands have beside their modes
 
 
@@ -106,11 +133,14 @@ def settings_of(args: argparse.Namespace, default: str = "scalar") -> list[Rende
     """What a command renders: its --modes, or its one --mode (`default` when not given, at --lod), each parsed by
     `RenderSettings.parse` with the command's --supersample, --sh-degree and --background filling what the spec leaves
     unset (one disagreeing with the spec is one line); --lod with --modes adds each mode's cut beside it
-    (`with_lod`). The one way every command reads its modes."""
+    (`with_lod`); --seed and --frame set the stochastic ones (`with_stochastic`). The one way every command reads its
+    modes."""
     fill = {key: getattr(args, key, None) for key in MODE_OPTIONS}
     if hasattr(args, "modes"):
-        return with_lod(RenderSettings.parse_list(args.modes, **fill), getattr(args, "lod", None))
-    return [RenderSettings.parse(args.mode or default, lod=args.lod, **fill)]
+        parsed = with_lod(RenderSettings.parse_list(args.modes, **fill), getattr(args, "lod", None))
+    else:
+        parsed = [RenderSettings.parse(args.mode or default, lod=args.lod, **fill)]
+    return with_stochastic(parsed, args)
 
 
 def path_args(args: argparse.Namespace, paths: tuple[str, ...], pane: tuple[int, int]) -> None:

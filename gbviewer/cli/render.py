@@ -14,8 +14,8 @@ from ..io.trained_as import describe
 from ..render import Mode, get_renderer
 from ..render.presets import PRESETS, trained_spec
 from ..render.tiles import render_tiled
-from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of, camera_from_args,
-                      check_render_size, load_options, progress_columns, settings_of)
+from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, add_stochastic_args, backend_of,
+                      camera_from_args, check_render_size, load_options, progress_columns, settings_of)
 
 
 def cmd_render(args: argparse.Namespace) -> int:
@@ -63,6 +63,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--supersample", type=count(8), metavar="1..8",
                    help="N x N samples per pixel where --mode gives no :N (default 1)")
     add_lod_arg(p, many=False)
+    add_stochastic_args(p)
     p.add_argument("--scale", type=Rate(), default=1.0, help="sampling rate: 8, 1, 0.125 or 1/8")
     add_backend_arg(p)
     p.add_argument("--background", type=BACKGROUND, default=(0.0, 0.0, 0.0), metavar=BACKGROUND.metavar,

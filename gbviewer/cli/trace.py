@@ -10,8 +10,8 @@ from ..core.errors import GBViewerError
 from ..io import load
 from ..core.files import check_writable
 from ..render import trace_pixel
-from .options import (MAX_COUNT, add_camera_args, add_load_args, camera_from_args, check_render_size, load_options,
-                      settings_of)
+from .options import (MAX_COUNT, add_camera_args, add_load_args, add_stochastic_args, camera_from_args,
+                      check_render_size, load_options, settings_of)
 
 
 def cmd_trace(args: argparse.Namespace) -> int:
@@ -49,6 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "preset:NAME; the level-of-detail cut at PX)")
     p.add_argument("--supersample", type=count(8), metavar="1..8",
                    help="N x N samples for the modes given without :N (one with another :N is refused)")
+    add_stochastic_args(p)
     p.add_argument("--scale", type=Rate(), default=1.0, help="sampling rate: 8, 1, 0.125 or 1/8")
     p.add_argument("--background", type=BACKGROUND, default=(0.0, 0.0, 0.0), metavar=BACKGROUND.metavar,
                    help="background colour, each in 0..1")

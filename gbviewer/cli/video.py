@@ -12,8 +12,8 @@ from ..io import load
 from ..core.files import check_writable
 from ..model.nerfstudio_paths import load_nerfstudio_path
 from ..outputs.video import CODECS, CONTAINERS, MAX_FPS, MIN_FPS, record_video, video_encoder
-from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, backend_of, camera_from_args,
-                      check_inset, check_render_size, load_options, path_args, settings_of)
+from .options import (add_backend_arg, add_camera_args, add_load_args, add_lod_arg, add_stochastic_args, backend_of,
+                      camera_from_args, check_inset, check_render_size, load_options, path_args, settings_of)
 
 VIDEO_PANE = (480, 360)  # default pane size of `gbviewer video`
 
@@ -86,6 +86,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, supersample:N = scalar:N; the "
                    "level-of-detail cut at PX)")
     add_lod_arg(p)
+    add_stochastic_args(p)
     route = p.add_mutually_exclusive_group()
     route.add_argument("--path",
                    help="zoom (focal length), dolly (camera along its axis), rate (same view, rendered at the rate "

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..bench.report import machine_description, plot_path, pyplot, save_figure
+from ..bench.report import line_style, machine_description, plot_path, pyplot, save_figure
 from ..outputs.console import wide_console
 from ..model.camera import format_rate
 from ..core.files import atomic_write
@@ -113,9 +113,9 @@ def write_plots(out_dir: Path, result: EvalResult, force: bool = False) -> list[
     for table, title, path in zip(tables, titles, plot_paths(out_dir, pairs)):
         fig, axes = plt.subplots(1, 2, figsize=(11, 4))
         for ax, metric in zip(axes, ("psnr", "ssim")):
-            for m in result.modes:
+            for i, m in enumerate(result.modes):
                 pts = sorted((r, table[m, r][metric]) for r in result.rates if table[m, r][metric] is not None)
-                ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", label=m)
+                ax.plot([p[0] for p in pts], [p[1] for p in pts], label=m, **line_style(i))
             ax.set_xscale("log", base=2)
             ax.set_xticks(sorted(result.rates), [format_rate(r) for r in sorted(result.rates)])
             ax.set_xlabel("sampling rate (x1: the photos)")

@@ -15,7 +15,8 @@ as well as R. Summary per mode: the mean over pairs and pixels (`ModeFlicker.fli
 pairs per pixel (`ModeFlicker.heat`).
 
 The floor is what the measure cannot resolve: R at half its samples per axis measured against R (scalar 4x4
-against 8x8); R's own residual is below it.
+against 8x8); R's own residual is below it. The default R pops as scalar does (one global order by centre depth), so
+that popping cancels; R = stopthepop:0:8 (the exact per-pixel order) is popping-free and charges it to the mode.
 """
 
 from __future__ import annotations

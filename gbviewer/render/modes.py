@@ -47,3 +47,4 @@ STOCHASTIC_MODES = (Mode.STOCHASTIC, Mode.STOCHASTIC_POPFREE)  # another frame i
 PER_PIXEL_SORTED = (Mode.EVAL3D, Mode.STOPTHEPOP)  # each pixel in its own order (gbv::per_pixel_sorted)
 STOPTHEPOP_QUEUE = 4  # StopThePop's published per-pixel queue (gbv::STOPTHEPOP_QUEUE)
 MAX_QUEUE = 64  # the longest per-pixel queue (0: unbounded, the exact per-pixel sort)
+MAX_SEED = 2**32 - 1  # the stochastic modes' seed and frame index are uint32 (gbv/stochastic.h)

@@ -214,8 +214,8 @@ def trace_pixel(scene: Scene, camera: Camera, x: int, y: int, mode: str | Mode |
                 sh_degree: int | None = None, **options) -> PixelTrace:
     """The trace of pixel (x, y) of `camera`'s image rendered in `mode` (a RenderSettings, or a spec parsed as
     `gbviewer.render` parses it, with N x N `supersample`, `sh_degree` and `options`: depth_correct, et_grade,
-    cell_size, lod), by the kernel of the first backend that traces pixels (`Capabilities.trace`: the CPU backend; the
-    others are held to it by their tests)."""
+    cell_size, lod, seed and frame (stochastic)), by the kernel of the first backend that traces pixels
+    (`Capabilities.trace`: the CPU backend; the others are held to it by their tests)."""
     settings = settings_from(mode, "trace_pixel", background, supersample=supersample, sh_degree=sh_degree,
                              **options)
     xi, yi = check_pixel(camera, x, y)

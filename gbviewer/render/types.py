@@ -18,7 +18,7 @@ from ..core.cancel import Cancellable
 from ..core.errors import BackendFailed, InvalidValue, RenderError
 from ..model.scene import Scene
 from ..core.validate import array, distinct_items, integer, real
-from .modes import MAX_QUEUE, STOPTHEPOP_QUEUE, Mode
+from .modes import MAX_QUEUE, MAX_SEED, STOCHASTIC_MODES, STOPTHEPOP_QUEUE, Mode
 from .presets import FILTERED_MODES, PRESETS
 from .spec import PRECISIONS, shortest, shown, spec_parts
 from .view_filter import ViewFilter
@@ -53,8 +53,8 @@ class RenderSettings:
     view_filter (scalar, stochastic, stochastic_popfree): the 2D filter and the presets' rules (default 3DGS's
         +0.3 px^2).
     preset: the viewer preset the settings came from ('preset:NAME', gbviewer.render.presets), or "".
-    seed, frame (stochastic modes): the keep decisions' hash seed and frame index (uint32; same seed and frame, same
-        bits; another frame, another sample).
+    seed, frame (stochastic modes; other modes refuse anything but 0): the keep decisions' hash seed and frame index
+        (uint32; same seed and frame, same bits; another frame, another sample).
     queue (stopthepop): the per-pixel queue length K (0..64; 0: unbounded, the exact per-pixel sort; default 4, as
         published), spelled 'stopthepop:K' (and 'stopthepop:K:N' with N x N supersampling).
     precision (gaussian_blending): "exact", or "fast" (spec suffix '+fast'): the fast kernel stays within 1/1024 of
@@ -99,7 +99,7 @@ class RenderSettings:
                                                                     f32=True),
                 "cell_size": integer(self.cell_size, "cell_size", lo=1, hi=MAX_CELL_SIZE),
                 "lod": None if self.lod is None else real(self.lod, "lod", lo=0, hi=MAX_LOD, f32=True),
-                **{k: integer(getattr(self, k), k, lo=0, hi=2**32 - 1) for k in ("seed", "frame")},
+                **{k: integer(getattr(self, k), k, lo=0, hi=MAX_SEED) for k in ("seed", "frame")},
                 "queue": integer(self.queue, "queue", lo=0, hi=MAX_QUEUE),
             }
         except InvalidValue as exc:
@@ -111,6 +111,10 @@ class RenderSettings:
             raise RenderError(f"view_filter {self.view_filter!r}; expected a gbviewer.render.ViewFilter")
         if self.mode != Mode.STOPTHEPOP and self.queue != STOPTHEPOP_QUEUE:
             raise RenderError(f"queue {self.queue} applies to the stopthepop mode, not {self.mode.label}")
+        for key in ("seed", "frame"):
+            if self.mode not in STOCHASTIC_MODES and getattr(self, key):
+                raise RenderError(f"{key} {getattr(self, key)} applies to the stochastic modes "
+                                  f"({', '.join(m.label for m in STOCHASTIC_MODES)}), not {self.mode.label}")
         if self.mode.label not in FILTERED_MODES and not self.view_filter.is_default:
             raise RenderError(f"view_filter {self.view_filter.describe()} is not for {self.mode.label}")
         if self.preset:  # a name only: the settings must be the preset's, else they are labelled what they are not
@@ -230,7 +234,8 @@ class FrameStats:
     evaluations: splat-pixel evaluations; evals_per_pixel: their mean per output pixel.
     backend: the backend's name; mode: `RenderSettings.label_for` the scene.
     simd: the SIMD path the cpu blend ran ("scalar", "avx2", "avx512", "neon"; GBVIEWER_SIMD at load or
-        gbviewer._native.testing.set_simd).
+        gbviewer._native.testing.set_simd); "scalar" for eval3d and stopthepop on every path (their per-pixel walk has
+        no vector lanes).
     cells, cells_visible: duplex's cells and those drawn; cell_misses: splat-tile pairs outside their cell's tiles
         (not counted by glsl).
     decode_ms: the MLPs of a trained Duplex-GS model, per view.

@@ -243,8 +243,10 @@ std::vector<RenderResult> Renderer::render_many(const std::vector<RenderArgs>& f
         res[f].stats.blend_ms += ms_since(t0);
     }
     if (!run.cancelled()) run.report();  // the last counts
-    for (RenderResult& r : res) {
-        r.simd = path.name;
+    for (int f = 0; f < count; ++f) {
+        RenderResult& r = res[f];
+        // the per-pixel sorted modes blend one pixel at a time on every path (blend_one_tile): their blend ran scalar
+        r.simd = per_pixel_sorted(frames[f].mode) ? "scalar" : path.name;
         r.cancelled = run.cancelled();
         r.stopped = run.stopped();
     }

@@ -17,7 +17,7 @@ import gbviewer as gb
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "bench"))
-from gpu_session import CUDA_PIECES, CUDA_TEST_FILES, GLSL_TEST_FILES, PIECES  # noqa: E402
+from gpu_session import CUDA_PIECES, CUDA_TEST_FILES, GLSL_TEST_FILES, MODES, PIECES  # noqa: E402
 
 QUICK = "glsl vs cpu,display path + interop"  # the GLSL pieces that take seconds on llvmpipe
 
@@ -51,7 +51,7 @@ def test_no_gpu_session_runs_the_glsl_pieces(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert_no_gpu_report(pieces, "--no-gpu given")
     assert f"scenes: {scenes}" in pieces["paths"]["detail"]
-    assert len(pieces["glsl vs cpu"]["data"]) == 6  # every mode on the bundled scene
+    assert len(pieces["glsl vs cpu"]["data"]) == len(MODES)  # every mode on the bundled scene
 
 
 def test_session_on_a_clone_with_nothing_installed(tmp_path):

@@ -19,7 +19,7 @@ import gbviewer as gb
 from gbviewer import cli
 from gbviewer.model.camera import parse_rates
 from gbviewer import eval as ev
-from gbviewer.eval import multiscale as gt_module
+from gbviewer.eval import multiscale as gt_module, report as report_module
 from gbviewer.eval.memory import view_bytes
 from gbviewer.cli.eval_args import scene_pairs
 from gbviewer.io.datasets import load_dataset, read_photo
@@ -149,6 +149,31 @@ def test_several_scenes_give_a_table_each_and_their_mean(blender, capture, tmp_p
     assert [p.name for p in paths] == [f"fruit_drops_minimal_vs_{capture.name}.png",
                                        f"fruit_drops_minimal_vs_{blender.name}.png", "mean.png"]
     assert all(p.is_file() for p in paths)
+
+
+NEW_MODES = "scalar,mip,analytic,gaussian_blending,scalar:2,stochastic,stochastic:2,stochastic_popfree,eval3d," \
+    "stopthepop,stopthepop:0,preset:spark-stochastic"
+
+
+def test_every_mode_has_its_rows_and_its_own_line(blender, tmp_path, monkeypatch):
+    """The newer modes are evaluated under their own specs (stopthepop's queue, a stochastic preset) and each of
+    more modes than matplotlib has cycle colours is drawn in a line no other mode shares."""
+    settings = RenderSettings.parse_list(NEW_MODES, background=WHITE)
+    result = ev.run_eval([(gb.DEFAULT_SCENE, blender)], settings, [1.0, 1 / 8], background=WHITE, backend="cpu",
+                         cache=tmp_path / "cache")
+    doc = ev.to_json(result)
+    assert doc["modes"] == NEW_MODES.split(",")
+    assert [(r["mode"], r["rate"]) for r in doc["scenes"][0]["table"]] == \
+        [(m, r) for m in NEW_MODES.split(",") for r in (1.0, 1 / 8)]
+    assert all(r["psnr"] is not None for r in doc["scenes"][0]["table"])
+    figures = []
+    monkeypatch.setattr(report_module, "save_figure", lambda fig, path, force: figures.append(fig))
+    ev.write_plots(tmp_path / "plots", result)
+    for ax in figures[0].axes:
+        lines = ax.get_lines()
+        assert [line.get_label() for line in lines] == NEW_MODES.split(",")
+        styles = {(line.get_color(), line.get_marker(), line.get_linestyle()) for line in lines}
+        assert len(styles) == len(lines)
 
 
 def test_scene_pairs(tmp_path):

@@ -87,6 +87,16 @@ def test_paths_and_stats():
     assert gb.render(scene, cam).stats.simd == _native.simd()
 
 
+@pytest.mark.parametrize("mode, ran", [("stopthepop", "scalar"), ("stopthepop:0", "scalar"), ("eval3d", "scalar"),
+                                       ("stochastic_popfree", None), ("stochastic", None), ("gaussian_blending", None)])
+def test_stats_name_the_path_the_blend_ran(mode, ran):
+    """FrameStats.simd is the path the blend ran: the per-pixel sorted modes walk one pixel at a time (no vector
+    lanes) whichever path is selected; the others run the selected one."""
+    scene, cam = random_view(1, n=40)
+    for path in _native.simd_paths():
+        assert render(path, scene, cam, mode).stats.simd == (ran or path), (mode, path)
+
+
 def _cpu_flags() -> set[str]:
     try:
         text = open("/proc/cpuinfo").read()

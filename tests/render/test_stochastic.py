@@ -110,6 +110,17 @@ def test_settings_and_spec():
         RenderSettings(Mode.STOCHASTIC, frame=2**32)
 
 
+@pytest.mark.parametrize("mode", ["scalar", "stopthepop", "eval3d", "gaussian_blending"])
+def test_seed_and_frame_are_refused_where_they_change_nothing(mode):
+    """Like stopthepop's queue: a seed or frame index on a mode without keep decisions is one line, not ignored."""
+    scene, cam = _scene()
+    for key in ("seed", "frame"):
+        with pytest.raises(gb.RenderError, match=f"{key} 3 applies to the stochastic modes .*not {mode}"):
+            gb.render(scene, cam, mode=mode, **{key: 3})
+    assert RenderSettings.parse(mode, seed=0, frame=0) == RenderSettings.parse(mode)
+    assert RenderSettings.parse("preset:spark-stochastic", frame=3).frame == 3
+
+
 @pytest.mark.parametrize("name", ["spark-stochastic", "supersplat-stochastic"])
 def test_stochastic_presets_are_the_expectation_with_their_filter(name):
     """A stochastic preset keeps fragments with its viewer's filtered alpha: its mean over frames is the expectation
