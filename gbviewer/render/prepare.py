@@ -12,7 +12,7 @@ import numpy as np
 from ..model.camera import Camera
 from ..model.cells import Cells, cells_for
 from ..core.errors import GBViewerError, RenderCancelled, RenderError
-from ..lod import Hierarchy, check_plain, cut_scene, cut_view, hierarchy_for
+from ..lod import Hierarchy, check_plain, cut_rows, cut_scene, cut_view, hierarchy_for
 from ..model.scene import Scene
 from .budget import check_frame_memory
 from .modes import ORDER_INDEPENDENT
@@ -104,6 +104,43 @@ def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backe
     oit = oit_params(view, settings) if settings.mode in ORDER_INDEPENDENT else None
     cells = cells_for(view, settings.cell_size) if settings.mode == Mode.DUPLEX else None
     return Prepared(view, decode_ms, oit, cells, tree, lod)
+
+
+class CutRows:
+    """The level-of-detail cut a GPU backend draws in place, kept between frames so that a still camera, and every
+    pane of one camera, costs no cut and no upload: `rows` (int32, into the scene's rows followed by the hierarchy's
+    interior nodes) and `weights` (float32 opacity multipliers) of the last cut, and `generation`, which counts the
+    changes of rows or weights (what the device must receive again, and a stage built over them be rebuilt for)."""
+
+    def __init__(self) -> None:
+        self.key: tuple | None = None  # (tree, tau, band, eye bytes, focal, orthographic) of the kept cut
+        self.rows: np.ndarray | None = None
+        self.weights: np.ndarray | None = None
+        self.generation = 0
+
+    def forget(self) -> None:
+        """Nothing kept: the next `update` counts as a change (a new tree went up, whose rows mean other nodes)."""
+        self.key = self.rows = self.weights = None
+
+    def update(self, tree: Hierarchy, view: tuple, threads: int = 0, flag: np.ndarray | None = None) -> bool:
+        """Cut `tree` for `view` (`cut_view`'s tuple) unless it is the kept cut's; whether rows or weights changed."""
+        tau, band, eye, focal, ortho = view
+        key = (tree, tau, band, np.asarray(eye, np.float32).tobytes(), focal, ortho)
+        if self.key is not None and key == self.key:
+            return False
+        self.key = None
+        rows, weights = cut_rows(tree, view, threads, flag)
+        changed = not (self.rows is not None and np.array_equal(rows, self.rows) and
+                       np.array_equal(weights, self.weights))
+        if changed:
+            self.rows, self.weights = rows, weights
+            self.generation += 1
+        self.key = key
+        return changed
+
+    @property
+    def count(self) -> int:
+        return 0 if self.rows is None else len(self.rows)
 
 
 class NativeUploads:
