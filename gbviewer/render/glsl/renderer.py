@@ -30,7 +30,9 @@ see `limits`. Buffers, programs and dispatch are `gpu.Gpu`; the scan, radix sort
 lists of steps 3-5 in `binning`. Counter slots, record sizes and the `oit` uniform's layout are the shaders' own
 (shaders/interface.glsl, read by `interface`).
 
-The scene is uploaded once (`upload`); per frame the camera goes up as uniforms, the counter buffer comes back
+The scene is uploaded once (`upload`), a level-of-detail cut's hierarchy once after it and the cut's rows when they
+change (`lod`: stage.comp and preprocess.comp read splat i from row lod_rows[i]); per frame the camera goes up as
+uniforms, the counter buffer comes back
 (visible splats, pairs and depth range: they size the pair buffers and the number of radix passes; with a loop cap
 also the longest tile list), and `render` reads the image back; `render_to_texture` leaves it in a texture of the
 caller's (the viewer draws it from there). Buffers grow (by 1.5x) when a frame needs more
@@ -51,10 +53,9 @@ from ...model.camera import Camera
 from ...core.cancel import Cancellable
 from ...model.cells import Cells
 from ...core.errors import BackendUnavailable, RenderError
-from ...lod import Hierarchy
 from ...model.scene import Scene
 from ..control import Progress, RenderControl
-from ..prepare import CutRows, Prepared, check_display_texture, frame_stats, prepare
+from ..prepare import Prepared, check_display_texture, frame_stats, prepare
 from ..presets import FILTERED_MODES
 from ..modes import PER_PIXEL_SORTED
 from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
@@ -63,6 +64,7 @@ from .binning import bin_duplex, bin_splats, read_totals
 from .context import check_context, standalone_context
 from .gpu import WG, Gpu
 from .limits import blend_plan
+from .lod import GpuCut
 from .sort import SCAN_BLOCK, scan
 
 NO_OIT = gi.oit_uniform(0.0, 0.0, 1.0, False)  # the shaders' oit uniform outside wsr and duplex
@@ -91,8 +93,7 @@ class GlslRenderer(Renderer):
         self._sh_k = 1
         self._weight_k = 0
         self._cells: Cells | None = None
-        self._tree: Hierarchy | None = None  # the hierarchy whose interior nodes follow the scene's rows on the GPU
-        self._cut = CutRows()  # the level-of-detail cut in the `lod_rows` buffer
+        self._lod = GpuCut()  # a level-of-detail cut drawn in place: its hierarchy and rows on the GPU
         self._generation = 0  # of the splats on the GPU: every upload starts a new one
         self._stage_key: tuple | None = None  # what the `stage` buffer holds (None: nothing usable)
 
@@ -152,8 +153,7 @@ class GlslRenderer(Renderer):
     def _upload_splats(self, scene: Scene) -> None:
         self._uploaded = None  # nothing on the GPU is this scene's (or a stage of it) until every buffer is up
         self._stage_key = None
-        self._tree = None
-        self._cut.forget()
+        self._lod.forget()
         n = scene.num_splats
         f3d = scene.filter_3d if scene.filter_3d is not None else np.zeros(n, np.float32)
         geom = gi.records(gi.GEOM_VEC4S, scene.means, scene.opacities, scene.scales, f3d, scene.quats)
@@ -189,28 +189,8 @@ class GlslRenderer(Renderer):
             self._upload_splats(prep.scene)
         if prep.cells is not None and prep.cells is not self._cells:
             self._upload_cells(prep.cells, prep.scene.num_splats)
-        if prep.tree is None:
-            return
-        if prep.tree is not self._tree:
-            self._upload_tree(prep.tree, prep.scene)
-        if self._cut.update(prep.tree, prep.lod, settings.threads, flag):
-            c = self._cut
-            rows = np.column_stack((c.rows.view(np.uint32), c.weights.view(np.uint32)))  # lod_rows.glsl's uvec2
-            self.gpu.upload("lod_rows", rows, "level-of-detail rows")
-
-    def _upload_tree(self, tree: Hierarchy, scene: Scene) -> None:
-        """The hierarchy's interior nodes as rows N.. of the scene's geometry and SH (SH rounded to the scene's
-        dtype, as the gathered cut's)."""
-        self._tree = None
-        self._cut.forget()
-        self._stage_key = None
-        m, n = tree.num_interior, scene.num_splats
-        f3d = tree.filter_3d if tree.filter_3d is not None else np.zeros(m, np.float32)
-        geom = gi.records(gi.GEOM_VEC4S, tree.means, tree.opacities, tree.scales, f3d, tree.quats)
-        sh = np.ascontiguousarray(tree.sh.astype(scene.sh.dtype, copy=False), np.float32)
-        self.gpu.upload_after("geom", n * gi.GEOM_VEC4S * VEC4, geom, "level-of-detail node geometry")
-        self.gpu.upload_after("sh", n * self._sh_k * 3 * WORD, sh, "level-of-detail node SH")
-        self._tree = tree
+        if prep.tree is not None:
+            self._lod.sync(self.gpu, prep, settings.threads, flag)
 
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: Cancellable | None = None,
                on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
@@ -272,8 +252,8 @@ class GlslRenderer(Renderer):
         """Free the GPU buffers and the output texture (also done when the renderer is garbage-collected)."""
         self.gpu.release()
         self._scene = self._uploaded = None
-        self._cells = self._tree = None
-        self._cut.forget()
+        self._cells = None
+        self._lod.forget()
         self._stage_key = None
 
     # ---- pipeline ------------------------------------------------------------------------------------------------
@@ -286,7 +266,7 @@ class GlslRenderer(Renderer):
         mode = settings.mode
         oit = NO_OIT if prep.oit is None else gi.oit_uniform(*prep.oit[:3], prep.oit.depth_correct)
         in_place = prep.tree is not None  # a level-of-detail cut: splat i is row lod_rows[i] (lod_rows.glsl)
-        n, N = self._cut.count if in_place else self._n, settings.supersample
+        n, N = self._lod.cut.count if in_place else self._n, settings.supersample
         W, H = camera.width, camera.height
         RW, RH = W * N, H * N
         gx, gy = -(-RW // gi.TILE), -(-RH // gi.TILE)
@@ -365,7 +345,7 @@ class GlslRenderer(Renderer):
         if settings.mode == Mode.EVAL3D:
             reach = 1e30  # eval3d: its footprint is the ray's: the stage keeps every splat in front of the plane
         camera_bytes = tuple(np.asarray(v).tobytes() for v in cam_uniforms.values())
-        key = (self._generation, self._cut.generation if lod["lod_in_place"] else None, camera_bytes, sh_deg, reach,
+        key = (self._generation, self._lod.cut.generation if lod["lod_in_place"] else None, camera_bytes, sh_deg, reach,
                rules)
         if key == self._stage_key:
             return stage, True, 0.0
