@@ -144,8 +144,9 @@ class CutRows:
 
 
 class NativeUploads:
-    """What the native renderers (CPU, CUDA) share: the scene and duplex cells uploaded to `self._impl` once, and
-    again only where the frame's differ; `_native(method, *args)` calls it. Called with the renderer's lock held."""
+    """What the native renderers (CPU, CUDA) share: the scene, duplex cells and a level-of-detail hierarchy uploaded
+    to `self._impl` once, and again only where the frame's differ (`uploads` counts them); `_native(method, *args)`
+    calls it. Called with the renderer's lock held."""
 
     _uploaded: Scene | None = None
     _cells: Cells | None = None
@@ -154,14 +155,25 @@ class NativeUploads:
     def _native(self, method: str, *args):
         return getattr(self._impl, method)(*args)
 
+    def _send(self, method: str, *args) -> None:
+        """An upload: `_native(method, *args)`, counted in `uploads` once done."""
+        self._native(method, *args)
+        self.uploads += 1
+
     def _upload(self, scene: Scene) -> None:
         """Forget what is uploaded first: a failed upload (out of memory) leaves no scene there."""
         self._uploaded = self._cells = self._tree = None
-        self._native("upload", scene.means, scene.scales, scene.quats, scene.opacities,
-                     np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d)  # float16 SH: a float32 copy
+        self._send("upload", scene.means, scene.scales, scene.quats, scene.opacities,
+                   np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d)  # float16 SH: a float32 copy
         if scene.oit is not None and scene.oit.view_weight_sh is not None:
-            self._native("upload_weights", np.ascontiguousarray(scene.oit.view_weight_sh, np.float32))
+            self._send("upload_weights", np.ascontiguousarray(scene.oit.view_weight_sh, np.float32))
         self._uploaded = scene
+
+    def _upload_tree(self, t: Hierarchy, sh: np.ndarray) -> None:
+        """The hierarchy as the CPU module walks it (`sh`: its SH as the scene's dtype gives them, float32): the
+        interior nodes and what its cut reads."""
+        self._send("upload_lod", t.means, t.scales, t.quats, t.opacities, sh, t.filter_3d, t.radius, t.size, t.levels,
+                   t.order)
 
     def _sync(self, prep: Prepared) -> None:
         """Upload the view's splats, duplex cells and (a level-of-detail frame drawn in place) the scene's hierarchy
@@ -173,16 +185,15 @@ class NativeUploads:
             t = prep.tree
             sh = np.ascontiguousarray(t.sh.astype(scene.sh.dtype, copy=False), np.float32)  # float16 scene: so too
             try:
-                self._native("upload_lod", t.means, t.scales, t.quats, t.opacities, sh, t.filter_3d, t.radius,
-                             t.size, t.levels, t.order)
+                self._upload_tree(t, sh)
             except ValueError as exc:  # a Scene made of values its renders drop (NaN): Scene.from_arrays drops them
                 raise RenderError(f"{scene.source}: level of detail: {exc} (the scene holds splats with non-finite "
                                   "values or beyond float32; Scene.from_arrays drops those)") from None
             self._tree = t
         if cells is not None and cells is not self._cells:
             self._cells = None
-            self._native("upload_cells", cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
-                         cells.cell_of(scene.num_splats))
+            self._send("upload_cells", cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
+                       cells.cell_of(scene.num_splats))
             self._cells = cells
 
 

@@ -30,13 +30,12 @@ see `limits`. Buffers, programs and dispatch are `gpu.Gpu`; the scan, radix sort
 lists of steps 3-5 in `binning`. Counter slots, record sizes and the `oit` uniform's layout are the shaders' own
 (shaders/interface.glsl, read by `interface`).
 
-The scene is uploaded once (`upload`), a level-of-detail cut's hierarchy once after it and the cut's rows when they
-change (`lod`: stage.comp and preprocess.comp read splat i from row lod_rows[i]); per frame the camera goes up as
-uniforms, the counter buffer comes back
-(visible splats, pairs and depth range: they size the pair buffers and the number of radix passes; with a loop cap
-also the longest tile list), and `render` reads the image back; `render_to_texture` leaves it in a texture of the
-caller's (the viewer draws it from there). Buffers grow (by 1.5x) when a frame needs more
-and are reused otherwise; `allocations` counts (re)allocations.
+The scene is uploaded once (`upload`), a level-of-detail cut's hierarchy after it and the cut's rows as they change
+(`lod`); per frame the camera goes up as uniforms, the counter buffer comes back (visible splats, pairs and depth
+range: they size the pair buffers and the number of radix passes; with a loop cap also the longest tile list), and
+`render` reads the image back; `render_to_texture` leaves it in a texture of the caller's (the viewer draws it from
+there). Buffers grow (by 1.5x) when a frame needs more and are reused otherwise; `allocations` counts
+(re)allocations, `uploads` the data written from the host.
 
 Contexts: by default a headless EGL context shared by every renderer of the process
 (`moderngl.create_context(standalone=True, backend="egl")`); or pass the app's `moderngl.Context`.
@@ -101,6 +100,8 @@ class GlslRenderer(Renderer):
     def allocations(self) -> int:
         """Buffer and texture (re)allocations since creation."""
         return self.gpu.allocations
+
+    uploads = property(lambda self: self.gpu.uploads, doc="Data writes from the host since creation (Gpu.uploads).")
 
     # ---- protocol ------------------------------------------------------------------------------------------------
 
@@ -182,9 +183,8 @@ class GlslRenderer(Renderer):
         self._cells = cells
 
     def _sync(self, prep: Prepared, settings: RenderSettings, flag: np.ndarray) -> None:
-        """Put the view's splats (a trained Duplex-GS model's, every frame), duplex cells and, for a level-of-detail
-        cut drawn in place, the hierarchy's interior nodes (once per scene) and the cut's rows (when they changed)
-        on the GPU."""
+        """Put the view's splats (a trained Duplex-GS model's, every frame), duplex cells and a level-of-detail cut
+        drawn in place (`lod`) on the GPU."""
         if prep.scene is not self._uploaded or not prep.scene.intact:  # maybe edited since: its stage too
             self._upload_splats(prep.scene)
         if prep.cells is not None and prep.cells is not self._cells:
