@@ -31,7 +31,11 @@ class GpuCut:
             upload_tree(gpu, prep.tree, prep.scene)
             self.tree = prep.tree
         if self.cut.update(prep.tree, prep.lod, threads, flag):
-            upload_rows(gpu, self.cut)
+            try:
+                upload_rows(gpu, self.cut)
+            except BaseException:
+                self.cut.forget()  # not on the GPU: the next frame uploads it again
+                raise
 
 
 def upload_tree(gpu: Gpu, tree: Hierarchy, scene: Scene) -> None:
