@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from glsl_helpers import gl  # noqa: F401 - gl: fixture
 from helpers import random_scene
 
 import gbviewer as gb
