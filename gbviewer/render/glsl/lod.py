@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import interface as gi
 from ...lod import Hierarchy
 from ...model.scene import Scene
 from ..prepare import CutRows, Prepared
+from . import interface as gi
 from .gpu import Gpu
 
 
