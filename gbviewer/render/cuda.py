@@ -12,9 +12,9 @@ from ..core.cancel import Cancellable
 from ..model.cells import Cells
 from ..core.errors import BackendFailed, BackendUnavailable, RenderError
 from ..model.scene import Scene
+from ..lod import Hierarchy
 from .control import Progress, RenderControl
 from .cuda_textures import TextureRegistrations
-from ..lod import Hierarchy
 from .prepare import (CutRows, NativeUploads, Prepared, camera_args, check_display_texture, native_frame, native_stats,
                       prepare)
 from .types import Capabilities, Frame, FrameStats, Renderer, RenderSettings

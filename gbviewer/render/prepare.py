@@ -73,10 +73,11 @@ def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backe
             lod_in_place: bool = False, flag: np.ndarray | None = None,
             size: tuple[int, int] | None = None) -> Prepared:
     """The frame's inputs for `backend` from its uploaded scene (None: nothing uploaded, an error). A
-    level-of-detail frame gets the cut's Scene, or with `lod_in_place` (the CPU renderer; not duplex) the hierarchy
-    and cut arguments to draw the same cut from the uploaded scene. `flag`: the render's cancel flag
-    (RenderControl.flag), which stops the cut of a gathered cut Scene (RenderCancelled). `size`: the (width,
-    height) of the part of the image rendered (the CPU renderer's regions), by default all of it."""
+    level-of-detail frame gets the cut's Scene, or with `lod_in_place` (every backend; not duplex or
+    stochastic_popfree) the hierarchy and cut arguments to draw the same cut from the uploaded scene. `flag`: the
+    render's cancel flag (RenderControl.flag), which stops the cut of a gathered cut Scene (RenderCancelled).
+    `size`: the (width, height) of the part of the image rendered (the CPU renderer's regions), by default all of
+    it."""
     if scene is None:
         raise RenderError(f"{backend} renderer: upload(scene) before render()")
     w, h = size or (camera.width, camera.height)
