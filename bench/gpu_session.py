@@ -38,7 +38,8 @@ from gbviewer.render import CudaRenderer, RenderSettings  # noqa: E402
 # that they exist.
 CUDA_TEST_FILES = ("tests/render/test_cuda.py", "tests/render/test_cuda_gpu.py", "tests/render/test_cuda_native.py",
                    "tests/render/test_cuda_host.py", "tests/render/test_cuda_wrapper.py",
-                   "tests/render/test_render_to_texture.py", "tests/render/test_duplex_order.py")
+                   "tests/render/test_render_to_texture.py", "tests/render/test_duplex_order.py",
+                   "tests/render/test_gpu_lod.py")
 GLSL_TEST_FILES = ("tests/render/test_glsl.py",)
 PIECES = ("cuda tests", "cuda vs cpu", "glsl on the EGL driver", "glsl vs cpu", "display path + interop", "timings")
 CUDA_PIECES = ("cuda tests", "cuda vs cpu", "timings")  # the others need an OpenGL 4.3 context (any EGL driver)

@@ -20,6 +20,8 @@ layout(std430, binding = 6) readonly buffer WeightSh { float weight_sh[]; };  //
 layout(std430, binding = 7) readonly buffer Stage { vec4 stage[]; };  // per splat: pack_stage's record
 layout(std430, binding = 8) writeonly buffer Planes { vec4 planes[]; };  // stochastic_popfree: depth plane per splat
 layout(std430, binding = 9) writeonly buffer Rays { vec4 rays[]; };  // eval3d, stopthepop: per splat, pack_ray's
+#define LOD_ROWS_BINDING 10
+#include "lod_rows.glsl"
 
 uniform uint num_splats;
 uniform int sh_k;    // SH coefficients per channel stored in the scene
@@ -38,7 +40,7 @@ uniform vec4 view_filter;  // OitParams' scalar filter: components OIT_* - 4 (in
 uniform vec3 view_rules;   // OitParams' preset rules: components OIT_* - 8 (interface.glsl)
 
 float load_sh(uint splat, int coeff, int channel) {
-    return sh_data[splat * uint(3 * sh_k) + uint(coeff * 3 + channel)];
+    return sh_data[splat_row(splat) * uint(3 * sh_k) + uint(coeff * 3 + channel)];
 }
 
 float load_weight_sh(uint splat, int coeff) { return weight_sh[splat * uint(weight_k) + uint(coeff)]; }
@@ -48,8 +50,10 @@ void main() {
     if (i >= num_splats) return;
     const CameraParams cam = make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y,
                                          cam_near, cam_projection);
-    const vec4 g0 = geom[GEOM_VEC4S * i], g1 = geom[GEOM_VEC4S * i + 1u], g2 = geom[GEOM_VEC4S * i + 2u];
-    const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, g0.w, i, g1.w, weight_k > 0, sh_degree_for_coeffs(weight_k), -1);
+    const uint row = splat_row(i);
+    const vec4 g0 = geom[GEOM_VEC4S * row], g1 = geom[GEOM_VEC4S * row + 1u], g2 = geom[GEOM_VEC4S * row + 2u];
+    precise const float opacity = g0.w * splat_weight(i);  // in float32 as the gathered cut's (lod gather)
+    const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, opacity, i, g1.w, weight_k > 0, sh_degree_for_coeffs(weight_k), -1);
     const OitParams params = OitParams(oit[OIT_SIGMA], oit[OIT_WEIGHT_BACKGROUND], oit[OIT_ET_GRADE],
                                         int(oit[OIT_DEPTH_CORRECT]), view_filter[OIT_DILATION - 4],
                                         view_filter[OIT_PRE_DILATION - 4], view_filter[OIT_CULL_LAMBDA - 4],

@@ -10,6 +10,8 @@ layout(local_size_x = 256) in;
 layout(std430, binding = 0) readonly buffer Geom { vec4 geom[]; };  // per splat: mean+opacity, scale+filter, quat
 layout(std430, binding = 1) readonly buffer Sh { float sh_data[]; };  // per splat: K x 3 floats
 layout(std430, binding = 2) writeonly buffer Stage { vec4 stage[]; };
+#define LOD_ROWS_BINDING 3
+#include "lod_rows.glsl"
 
 uniform uint num_splats;
 uniform int sh_k;    // SH coefficients per channel stored in the scene
@@ -25,7 +27,7 @@ uniform float cam_near;
 uniform int cam_projection;  // PERSPECTIVE or ORTHOGRAPHIC
 
 float load_sh(uint splat, int coeff, int channel) {
-    return sh_data[splat * uint(3 * sh_k) + uint(coeff * 3 + channel)];
+    return sh_data[splat_row(splat) * uint(3 * sh_k) + uint(coeff * 3 + channel)];
 }
 
 float load_weight_sh(uint splat, int coeff) { return 0.0; }  // the finish's (view weights)
@@ -35,8 +37,10 @@ void main() {
     if (i >= num_splats) return;
     const CameraParams cam = make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y,
                                          cam_near, cam_projection);
-    const vec4 g0 = geom[GEOM_VEC4S * i], g1 = geom[GEOM_VEC4S * i + 1u], g2 = geom[GEOM_VEC4S * i + 2u];
-    const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, g0.w, i, g1.w, false, 0, -1);
+    const uint row = splat_row(i);
+    const vec4 g0 = geom[GEOM_VEC4S * row], g1 = geom[GEOM_VEC4S * row + 1u], g2 = geom[GEOM_VEC4S * row + 2u];
+    precise const float opacity = g0.w * splat_weight(i);  // in float32 as the gathered cut's (lod gather)
+    const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, opacity, i, g1.w, false, 0, -1);
     StageSplat st = StageSplat(vec2(0.0), 0.0, 0.0, vec3(0.0), vec3(0.0));
     const bool kept = stage_splat(in_, sh_deg, rules, cam, grid.x, grid.y, reach, st);
     vec4 p0, p1, p2;

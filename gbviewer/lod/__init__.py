@@ -4,9 +4,9 @@ scene's sparse stand-in for the previews before its hierarchy is there (`sparse`
 and camera only."""
 
 from .cache import hierarchy_for, hierarchy_state
-from .cut import DEFAULT_BAND, Cut, check_plain, check_tau, cut, cut_scene, cut_view
+from .cut import DEFAULT_BAND, Cut, check_plain, check_tau, cut, cut_rows, cut_scene, cut_view
 from .sparse import stand_in
 from .tree import Hierarchy, build
 
-__all__ = ["DEFAULT_BAND", "Cut", "Hierarchy", "build", "check_plain", "check_tau", "cut", "cut_scene", "cut_view",
-           "hierarchy_for", "hierarchy_state", "stand_in"]
+__all__ = ["DEFAULT_BAND", "Cut", "Hierarchy", "build", "check_plain", "check_tau", "cut", "cut_rows", "cut_scene",
+           "cut_view", "hierarchy_for", "hierarchy_state", "stand_in"]

@@ -61,15 +61,30 @@ def cut(tree: Hierarchy, camera: Camera, tau: float, band: float = DEFAULT_BAND,
         flag: np.ndarray | None = None) -> Cut:
     """The nodes drawn for `camera` at tau pixels (band 0: a hard cut, every weight 1). `flag`: a render's cancel
     flag (int64 array, RenderControl.flag), read while the cut runs: RenderCancelled once it is nonzero."""
+    rows, weights, nl = _cut_of_view(tree, cut_view(camera, tau, band), threads, flag)
+    return Cut(rows[:nl], weights[:nl], rows[nl:], weights[nl:])
+
+
+def cut_rows(tree: Hierarchy, view: tuple, threads: int = 0,
+             flag: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The cut of `view` (`cut_view`'s tuple) as a renderer draws it in place over the scene's rows followed by the
+    tree's interior nodes (interior node q at row N + q): int32 rows in the order `cut_scene` gathers them, float32
+    opacity multipliers. `flag`: as cut's."""
+    rows, weights, nl = _cut_of_view(tree, view, threads, flag)
+    rows[nl:] += tree.num_leaves
+    return rows, weights
+
+
+def _cut_of_view(tree: Hierarchy, view: tuple, threads: int, flag: np.ndarray | None) -> tuple:
+    """The native cut's (rows, weights, leaves) for `cut_view`'s tuple; RenderCancelled once `flag` is set."""
     from .._native import lod as native
 
-    tau, band, eye, focal, ortho = cut_view(camera, tau, band)
+    tau, band, eye, focal, ortho = view
     out = native.cut(tree.means, tree.radius, tree.size, tree.levels, tree.order, eye, focal, ortho, tau, band,
                      threads, flag)
     if out is None:
         raise RenderCancelled("render cancelled")
-    rows, weights, nl = out
-    return Cut(rows[:nl], weights[:nl], rows[nl:], weights[nl:])
+    return out
 
 
 def check_plain(scene: Scene) -> None:

@@ -12,14 +12,18 @@ from ..core.cancel import Cancellable
 from ..model.cells import Cells
 from ..core.errors import BackendFailed, BackendUnavailable, RenderError
 from ..model.scene import Scene
+from ..lod import Hierarchy
 from .control import Progress, RenderControl
 from .cuda_textures import TextureRegistrations
-from .prepare import NativeUploads, camera_args, check_display_texture, native_frame, native_stats, prepare
+from .prepare import (CutRows, NativeUploads, Prepared, camera_args, check_display_texture, native_frame, native_stats,
+                      prepare)
 from .types import Capabilities, Frame, FrameStats, Renderer, RenderSettings
 
 
 class CudaRenderer(NativeUploads, Renderer):
     """Native CUDA backend: the scene stays on the device (a trained Duplex-GS model's view is uploaded per frame).
+    A level-of-detail cut is drawn in place: the hierarchy's interior nodes go up once after the scene's rows, and a
+    cut's row list (made here: `CutRows`) only when it changes.
 
     Threads may share one renderer: uploads and renders are serialised (a lock here around the scene and cells on
     the device, and a mutex in the native renderer around its buffers).
@@ -54,6 +58,7 @@ class CudaRenderer(NativeUploads, Renderer):
         self._scene: Scene | None = None
         self._uploaded: Scene | None = None
         self._cells: Cells | None = None
+        self._cut = CutRows()
         self._textures = TextureRegistrations(self._release)
 
     def _native(self, method: str, *args, **kwargs):
@@ -150,16 +155,33 @@ class CudaRenderer(NativeUploads, Renderer):
         after it; its result dict, the frame's inputs and the start time."""
         t0 = time.perf_counter()
         with self._lock, control:
-            prep = prepare(self._scene, camera, settings, self.name, flag=control.flag)
+            prep = prepare(self._scene, camera, settings, self.name, lod_in_place=True, flag=control.flag)
             self._sync(prep)
+            self._sync_cut(prep, settings.threads, control.flag)
             control.step(0, 1)
             lead = tuple(self._textures.claim(x) for x in lead)
             out = self._native(method, *lead, *camera_args(camera), settings.native_mode, settings.supersample,
                              settings.sh_degree, np.asarray(settings.background, np.float32), *extra,
                              *(prep.oit or ()), view_filter=settings.view_filter.native(), seed=settings.seed,
-                             frame=settings.frame)
+                             frame=settings.frame, cut=prep.tree is not None)
             control.step(1, 1)
+        if prep.tree is not None:
+            out["lod_splats"] = self._cut.count
         return out, prep, t0
+
+    def _upload_tree(self, t: Hierarchy, sh: np.ndarray) -> None:
+        """The hierarchy's interior nodes, rows N.. after the scene's on the device (its cuts are made here)."""
+        self._cut.forget()
+        self._send("upload_lod", t.means, t.scales, t.quats, t.opacities, sh, t.filter_3d)
+
+    def _sync_cut(self, prep: Prepared, threads: int, flag: np.ndarray) -> None:
+        """Upload the frame's level-of-detail cut where it changed (the render then draws it: `cut`)."""
+        if prep.tree is not None and self._cut.update(prep.tree, prep.lod, threads, flag):
+            try:
+                self._send("upload_cut", self._cut.rows, self._cut.weights)
+            except BaseException:
+                self._cut.forget()  # not on the device: the next frame uploads it again
+                raise
 
 
 def interop_status(gl_devices: list[int], device: int) -> tuple[bool, str]:

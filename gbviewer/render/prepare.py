@@ -12,7 +12,7 @@ import numpy as np
 from ..model.camera import Camera
 from ..model.cells import Cells, cells_for
 from ..core.errors import GBViewerError, RenderCancelled, RenderError
-from ..lod import Hierarchy, check_plain, cut_scene, cut_view, hierarchy_for
+from ..lod import Hierarchy, check_plain, cut_rows, cut_scene, cut_view, hierarchy_for
 from ..model.scene import Scene
 from .budget import check_frame_memory
 from .modes import ORDER_INDEPENDENT
@@ -73,10 +73,11 @@ def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backe
             lod_in_place: bool = False, flag: np.ndarray | None = None,
             size: tuple[int, int] | None = None) -> Prepared:
     """The frame's inputs for `backend` from its uploaded scene (None: nothing uploaded, an error). A
-    level-of-detail frame gets the cut's Scene, or with `lod_in_place` (the CPU renderer; not duplex) the hierarchy
-    and cut arguments to draw the same cut from the uploaded scene. `flag`: the render's cancel flag
-    (RenderControl.flag), which stops the cut of a gathered cut Scene (RenderCancelled). `size`: the (width,
-    height) of the part of the image rendered (the CPU renderer's regions), by default all of it."""
+    level-of-detail frame gets the cut's Scene, or with `lod_in_place` (every backend; not duplex or
+    stochastic_popfree) the hierarchy and cut arguments to draw the same cut from the uploaded scene. `flag`: the
+    render's cancel flag (RenderControl.flag), which stops the cut of a gathered cut Scene (RenderCancelled).
+    `size`: the (width, height) of the part of the image rendered (the CPU renderer's regions), by default all of
+    it."""
     if scene is None:
         raise RenderError(f"{backend} renderer: upload(scene) before render()")
     w, h = size or (camera.width, camera.height)
@@ -106,9 +107,47 @@ def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backe
     return Prepared(view, decode_ms, oit, cells, tree, lod)
 
 
+class CutRows:
+    """The level-of-detail cut a GPU backend draws in place, kept between frames so that a still camera, and every
+    pane of one camera, costs no cut and no upload: `rows` (int32, into the scene's rows followed by the hierarchy's
+    interior nodes) and `weights` (float32 opacity multipliers) of the last cut, and `generation`, which counts the
+    changes of rows or weights (what the device must receive again, and a stage built over them be rebuilt for)."""
+
+    def __init__(self) -> None:
+        self.key: tuple | None = None  # (tree, tau, band, eye bytes, focal, orthographic) of the kept cut
+        self.rows: np.ndarray | None = None
+        self.weights: np.ndarray | None = None
+        self.generation = 0
+
+    def forget(self) -> None:
+        """Nothing kept: the next `update` counts as a change (a new tree went up, whose rows mean other nodes)."""
+        self.key = self.rows = self.weights = None
+
+    def update(self, tree: Hierarchy, view: tuple, threads: int = 0, flag: np.ndarray | None = None) -> bool:
+        """Cut `tree` for `view` (`cut_view`'s tuple) unless it is the kept cut's; whether rows or weights changed."""
+        tau, band, eye, focal, ortho = view
+        key = (tree, tau, band, np.asarray(eye, np.float32).tobytes(), focal, ortho)
+        if self.key is not None and key == self.key:
+            return False
+        self.key = None
+        rows, weights = cut_rows(tree, view, threads, flag)
+        changed = not (self.rows is not None and np.array_equal(rows, self.rows) and
+                       np.array_equal(weights, self.weights))
+        if changed:
+            self.rows, self.weights = rows, weights
+            self.generation += 1
+        self.key = key
+        return changed
+
+    @property
+    def count(self) -> int:
+        return 0 if self.rows is None else len(self.rows)
+
+
 class NativeUploads:
-    """What the native renderers (CPU, CUDA) share: the scene and duplex cells uploaded to `self._impl` once, and
-    again only where the frame's differ; `_native(method, *args)` calls it. Called with the renderer's lock held."""
+    """What the native renderers (CPU, CUDA) share: the scene, duplex cells and a level-of-detail hierarchy uploaded
+    to `self._impl` once, and again only where the frame's differ (`uploads` counts them); `_native(method, *args)`
+    calls it. Called with the renderer's lock held."""
 
     _uploaded: Scene | None = None
     _cells: Cells | None = None
@@ -117,14 +156,25 @@ class NativeUploads:
     def _native(self, method: str, *args):
         return getattr(self._impl, method)(*args)
 
+    def _send(self, method: str, *args) -> None:
+        """An upload: `_native(method, *args)`, counted in `uploads` once done."""
+        self._native(method, *args)
+        self.uploads += 1
+
     def _upload(self, scene: Scene) -> None:
         """Forget what is uploaded first: a failed upload (out of memory) leaves no scene there."""
         self._uploaded = self._cells = self._tree = None
-        self._native("upload", scene.means, scene.scales, scene.quats, scene.opacities,
-                     np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d)  # float16 SH: a float32 copy
+        self._send("upload", scene.means, scene.scales, scene.quats, scene.opacities,
+                   np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d)  # float16 SH: a float32 copy
         if scene.oit is not None and scene.oit.view_weight_sh is not None:
-            self._native("upload_weights", np.ascontiguousarray(scene.oit.view_weight_sh, np.float32))
+            self._send("upload_weights", np.ascontiguousarray(scene.oit.view_weight_sh, np.float32))
         self._uploaded = scene
+
+    def _upload_tree(self, t: Hierarchy, sh: np.ndarray) -> None:
+        """The hierarchy as the CPU module walks it (`sh`: its SH as the scene's dtype gives them, float32): the
+        interior nodes and what its cut reads."""
+        self._send("upload_lod", t.means, t.scales, t.quats, t.opacities, sh, t.filter_3d, t.radius, t.size, t.levels,
+                   t.order)
 
     def _sync(self, prep: Prepared) -> None:
         """Upload the view's splats, duplex cells and (a level-of-detail frame drawn in place) the scene's hierarchy
@@ -136,16 +186,15 @@ class NativeUploads:
             t = prep.tree
             sh = np.ascontiguousarray(t.sh.astype(scene.sh.dtype, copy=False), np.float32)  # float16 scene: so too
             try:
-                self._native("upload_lod", t.means, t.scales, t.quats, t.opacities, sh, t.filter_3d, t.radius,
-                             t.size, t.levels, t.order)
+                self._upload_tree(t, sh)
             except ValueError as exc:  # a Scene made of values its renders drop (NaN): Scene.from_arrays drops them
                 raise RenderError(f"{scene.source}: level of detail: {exc} (the scene holds splats with non-finite "
                                   "values or beyond float32; Scene.from_arrays drops those)") from None
             self._tree = t
         if cells is not None and cells is not self._cells:
             self._cells = None
-            self._native("upload_cells", cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
-                         cells.cell_of(scene.num_splats))
+            self._send("upload_cells", cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
+                       cells.cell_of(scene.num_splats))
             self._cells = cells
 
 

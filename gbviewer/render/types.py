@@ -328,6 +328,7 @@ class Renderer(abc.ABC):
     name: ClassVar[str]
     capabilities: ClassVar[Capabilities] = Capabilities()
     _failure: str | None = None  # set by `failed`: why this renderer stopped working
+    uploads: int = 0  # copies of scene data to the backend (splats, cells, a hierarchy, a cut's rows) since creation
 
     @classmethod
     @abc.abstractmethod

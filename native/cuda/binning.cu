@@ -12,23 +12,33 @@ namespace gbv::cuda {
 using namespace detail;
 namespace {
 
+// The row of the scene's arrays that frame splat i reads: cut_rows[i] for a level-of-detail cut drawn in place.
+__device__ inline int64_t splat_row(const int32_t* rows, int64_t i) { return rows ? rows[i] : i; }
+
 // The per-camera stage of every splat (stage_splat): kept while State::stage_key holds, shared by every mode's finish.
+// rows, weights: a level-of-detail cut drawn in place (splat i is row rows[i], its opacity times weights[i], rounded
+// as the gathered cut's: never fused into a later operation), else null.
 __global__ void __launch_bounds__(THREADS)
-    stage_kernel(int64_t n, const float* means, const float* scales, const float* quats, const float* opacities,
-                 const float* sh, const float* filter_3d, int k, int sh_deg, CameraParams cam, int gx, int gy,
-                 float reach, int rules, StageSplat* stage, unsigned char* stage_ok) {
+    stage_kernel(int64_t n, const int32_t* rows, const float* weights, const float* means, const float* scales,
+                 const float* quats, const float* opacities, const float* sh, const float* filter_3d, int k,
+                 int sh_deg, CameraParams cam, int gx, int gy, float reach, int rules, StageSplat* stage,
+                 unsigned char* stage_ok) {
     const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     if (i >= n) return;
-    const SplatIn in{means + 3 * i, scales + 3 * i, quats + 4 * i, opacities[i], sh + (size_t)k * 3 * i,
-                     filter_3d ? filter_3d[i] : 0.0f, nullptr, 0, -1};
+    const int64_t row = splat_row(rows, i);
+    const float opacity = weights ? __fmul_rn(opacities[row], weights[i]) : opacities[row];
+    const SplatIn in{means + 3 * row, scales + 3 * row, quats + 4 * row, opacity, sh + (size_t)k * 3 * row,
+                     filter_3d ? filter_3d[row] : 0.0f, nullptr, 0, -1};
     stage_ok[i] = stage_splat(in, sh_deg, rules, cam, gx, gy, reach, &stage[i]) ? 1 : 0;
 }
 
 // The mode's finish of every splat's stage (finish_splat; the per-pixel sorted modes: finish_ray_splat after it for
 // stopthepop, instead of it for eval3d, with their ray data): Splat2D, tile rectangle, touched tile count; and where
 // `planes` is given (stochastic_popfree) each splat's depth plane (popfree.h) from its mean, scale, quat and 3D filter.
+// rows: as stage_kernel's.
 __global__ void __launch_bounds__(THREADS)
-    finish_kernel(int64_t n, const float* means, const float* scales, const float* quats, const float* filter_3d,
+    finish_kernel(int64_t n, const int32_t* rows, const float* means, const float* scales, const float* quats,
+                  const float* filter_3d,
                   DepthPlane* planes, const StageSplat* stage, const unsigned char* stage_ok, int sh_deg,
                   const float* weight_sh, int weight_k, const int32_t* cell_of, OitParams oit, CameraParams cam,
                   Mode mode, int gx, int gy, Splat2D* splats, RaySplat* rays, TileRect* rects, uint32_t* touched,
@@ -38,10 +48,11 @@ __global__ void __launch_bounds__(THREADS)
     if (i < n) {
         uint32_t count = 0;
         if (stage_ok[i]) {
-            const SplatIn in{means + 3 * i, scales + 3 * i, quats + 4 * i, 0.0f, nullptr,
-                             filter_3d ? filter_3d[i] : 0.0f,
-                             weight_sh ? weight_sh + (size_t)weight_k * i : nullptr, sh_degree_for_coeffs(weight_k),
-                             cell_of ? cell_of[i] : -1};
+            const int64_t row = splat_row(rows, i);
+            const SplatIn in{means + 3 * row, scales + 3 * row, quats + 4 * row, 0.0f, nullptr,
+                             filter_3d ? filter_3d[row] : 0.0f,
+                             weight_sh ? weight_sh + (size_t)weight_k * row : nullptr, sh_degree_for_coeffs(weight_k),
+                             cell_of ? cell_of[row] : -1};
             TileRect r;
             bool ok = mode == EVAL3D || finish_splat(in, stage[i], sh_deg, cam, mode, oit, gx, gy, &splats[i], &r);
             if (ok && per_pixel_sorted(mode))
@@ -126,8 +137,8 @@ void sorted_tile_lists(State& s, int64_t count, const Item* items, const TileRec
 }  // namespace
 
 void State::forget_scene() {
-    has_scene = has_cells = false;
-    n = m = num_members = 0;
+    has_scene = has_cells = has_lod = has_cut = false;
+    n = m = num_members = lod_m = cut_count = 0;
     k = 1;
     weight_k = 0;
     has_filter = false;
@@ -177,49 +188,56 @@ void State::tile_lists(int64_t count, const Cell2D* items, const TileRect* item_
     sorted_tile_lists(*this, count, items, item_rects, item_touched, ends, gx, bits, by_depth, total, out_ranges);
 }
 
-void State::run(const RenderArgs& a, RenderResult& res) {
+void State::run(const RenderArgs& a, RenderResult& res, bool cut) {
     if (!has_scene) throw std::runtime_error("CUDA renderer: no scene uploaded (or its upload failed)");
     if (a.mode == DUPLEX && !has_cells) throw std::runtime_error("CUDA renderer: duplex needs cells (upload_cells)");
+    if (cut && !has_cut) throw std::runtime_error("CUDA renderer: no level-of-detail cut uploaded (upload_cut)");
+    if (a.mode == DUPLEX && cut)  // its cells are of the scene's splats: it draws a cut's gathered Scene
+        throw std::runtime_error("CUDA renderer: duplex draws no level-of-detail cut in place");
+    const bool in_cut = cut;
+    const int64_t drawn = in_cut ? cut_count : n;  // the frame's splats
+    const int32_t* rows = in_cut ? cut_rows.ptr : nullptr;
     const CameraParams& cam = a.cam;
     const int W = cam.width, H = cam.height;
     const int gx = (W + TILE - 1) / TILE, gy = (H + TILE - 1) / TILE, num_tiles = gx * gy;
     const int sh_deg = std::max(0, std::min(a.sh_degree, sh_degree_for_coeffs(k)));  // no reads past k coeffs
-    splats.ensure(std::max<int64_t>(n, 1));
-    if (per_pixel_sorted(a.mode)) rays.ensure(std::max<int64_t>(n, 1));
-    rects.ensure(std::max<int64_t>(n, 1));
-    touched.ensure(std::max<int64_t>(n, 1));
-    offsets.ensure(std::max<int64_t>(n, 1));
+    splats.ensure(std::max<int64_t>(drawn, 1));
+    if (per_pixel_sorted(a.mode)) rays.ensure(std::max<int64_t>(drawn, 1));
+    rects.ensure(std::max<int64_t>(drawn, 1));
+    touched.ensure(std::max<int64_t>(drawn, 1));
+    offsets.ensure(std::max<int64_t>(drawn, 1));
     counters.ensure(NUM_COUNTERS);
     ranges.ensure(num_tiles);
     CUDA_CHECK(cudaMemsetAsync(counters.ptr, 0, NUM_COUNTERS * sizeof(unsigned long long)));
     CUDA_CHECK(cudaMemsetAsync(ranges.ptr, 0, sizeof(uint2) * num_tiles));
 
     CUDA_CHECK(cudaEventRecord(ev[0].e));
-    // the stage: kept while its key holds (scene generation, camera, SH degree, the on-screen cull's reach, the
-    // presets' stage rules)
-    const StageKey key{generation, cam, sh_deg, stage_reach(a.mode, a.oit), stage_rules(a.mode, a.oit)};
+    // the stage: kept while its key holds (scene generation, the cut drawn in place, camera, SH degree, the
+    // on-screen cull's reach, the presets' stage rules)
+    const StageKey key{generation, in_cut ? cut_generation : 0, cam, sh_deg, stage_reach(a.mode, a.oit),
+                       stage_rules(a.mode, a.oit)};
     res.stage_reused = stage_ready && stage_key == key;
-    if (n > 0 && !res.stage_reused) {
+    if (drawn > 0 && !res.stage_reused) {
         stage_ready = false;
-        stage.ensure(n);
-        stage_ok.ensure(n);
-        stage_kernel<<<blocks(n), THREADS>>>(n, means.ptr, scales.ptr, quats.ptr, opacities.ptr, sh.ptr,
-                                             has_filter ? filter_3d.ptr : nullptr, k, sh_deg, cam, gx, gy, key.reach,
-                                             key.rules, stage.ptr, stage_ok.ptr);
+        stage.ensure(drawn);
+        stage_ok.ensure(drawn);
+        stage_kernel<<<blocks(drawn), THREADS>>>(drawn, rows, in_cut ? cut_weights.ptr : nullptr, means.ptr,
+                                                 scales.ptr, quats.ptr, opacities.ptr, sh.ptr,
+                                                 has_filter ? filter_3d.ptr : nullptr, k, sh_deg, cam, gx, gy,
+                                                 key.reach, key.rules, stage.ptr, stage_ok.ptr);
         launched("stage_kernel");
         stage_key = key;
         stage_ready = true;
     }
     CUDA_CHECK(cudaEventRecord(ev_stage.e));
-    if (n > 0) {
+    if (drawn > 0) {
         const bool popfree = a.mode == STOCHASTIC_POPFREE;
-        if (popfree) planes.ensure(n);
-        finish_kernel<<<blocks(n), THREADS>>>(n, means.ptr, scales.ptr, quats.ptr, has_filter ? filter_3d.ptr : nullptr,
-                                              popfree ? planes.ptr : nullptr, stage.ptr, stage_ok.ptr, sh_deg,
-                                              weight_k ? weight_sh.ptr : nullptr, weight_k,
-                                              a.mode == DUPLEX ? cell_of.ptr : nullptr, a.oit, cam, a.mode, gx, gy,
-                                              splats.ptr, per_pixel_sorted(a.mode) ? rays.ptr : nullptr, rects.ptr,
-                                              touched.ptr, counters.ptr + VISIBLE);
+        if (popfree) planes.ensure(drawn);
+        finish_kernel<<<blocks(drawn), THREADS>>>(
+            drawn, rows, means.ptr, scales.ptr, quats.ptr, has_filter ? filter_3d.ptr : nullptr,
+            popfree ? planes.ptr : nullptr, stage.ptr, stage_ok.ptr, sh_deg, weight_k ? weight_sh.ptr : nullptr,
+            weight_k, a.mode == DUPLEX ? cell_of.ptr : nullptr, a.oit, cam, a.mode, gx, gy, splats.ptr,
+            per_pixel_sorted(a.mode) ? rays.ptr : nullptr, rects.ptr, touched.ptr, counters.ptr + VISIBLE);
         launched("finish_kernel");
     }
     CUDA_CHECK(cudaEventRecord(ev[1].e));
@@ -230,7 +248,7 @@ void State::run(const RenderArgs& a, RenderResult& res) {
     if (a.mode == DUPLEX) {
         bin_duplex(cam, gx, gy, num_tiles, bits, total, sort_length);
     } else {
-        bin_splats(a.mode, gx, bits, total);
+        bin_splats(drawn, a.mode, gx, bits, total);
         sort_length = a.mode == WSR ? 0 : total;
     }
     CUDA_CHECK(cudaEventRecord(ev[2].e));
@@ -256,16 +274,16 @@ void State::run(const RenderArgs& a, RenderResult& res) {
 }
 
 // One wait: the number of pairs, to size the key buffers.
-void State::bin_splats(Mode mode, int gx, int bits, uint64_t& total) {
+void State::bin_splats(int64_t count, Mode mode, int gx, int bits, uint64_t& total) {
     total = 0;
-    if (n == 0) return;
-    inclusive_sum(touched.ptr, offsets.ptr, (int)n, "cub::DeviceScan::InclusiveSum (tile-splat pairs)");
-    CUDA_CHECK(cudaMemcpyAsync(totals.p, offsets.ptr + (n - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
+    if (count == 0) return;
+    inclusive_sum(touched.ptr, offsets.ptr, (int)count, "cub::DeviceScan::InclusiveSum (tile-splat pairs)");
+    CUDA_CHECK(cudaMemcpyAsync(totals.p, offsets.ptr + (count - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
     CUDA_CHECK(cudaStreamSynchronize(0));
     total = totals.p[0];
     if (total >= (1ull << 31)) throw std::runtime_error("CUDA renderer: more than 2^31 tile-splat pairs");
     if (total == 0) return;
-    tile_lists(n, splats.ptr, rects.ptr, touched.ptr, offsets.ptr, gx, bits, mode != WSR, total, ranges.ptr);
+    tile_lists(count, splats.ptr, rects.ptr, touched.ptr, offsets.ptr, gx, bits, mode != WSR, total, ranges.ptr);
 }
 
 }  // namespace gbv::cuda

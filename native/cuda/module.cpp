@@ -100,11 +100,31 @@ NB_MODULE(_native_cuda, m) {
                  r.upload_cells(means.data(), scales.data(), quats.data(), offsets.data(), members.data(),
                                 cell_of.data(), m, (int64_t)members.size(), scene.generation);
              })
+        .def("upload_lod",
+             [](cuda::Renderer& r, FArr means, FArr scales, FArr quats, FArr opacities, FArr sh,
+                std::optional<FArr> filter_3d) {
+                 const int64_t m = check_scene("upload_lod", means, scales, quats, opacities, sh, filter_3d);
+                 nb::gil_scoped_release release;
+                 r.upload_lod(means.data(), scales.data(), quats.data(), opacities.data(), sh.data(),
+                              filter_3d ? filter_3d->data() : nullptr, m, (int)sh.shape(1), r.scene().generation);
+             },
+             nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"),
+             nb::arg("filter_3d").none(),
+             "A level-of-detail hierarchy's interior nodes (as upload's arrays), rows N.. after the scene's.")
+        .def("upload_cut",
+             [](cuda::Renderer& r, IArr rows, FArr weights) {
+                 if (rows.size() != weights.size()) fail("upload_cut", "one weight per row expected");
+                 nb::gil_scoped_release release;
+                 r.upload_cut(rows.data(), weights.data(), (int64_t)rows.size(), r.scene().generation);
+             },
+             nb::arg("rows"), nb::arg("weights"),
+             "The cut a render with cut=True draws in place: frame splat i is row rows[i] (scene, then nodes), its "
+             "opacity times weights[i].")
         .def("render",
              [](cuda::Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                 float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                 bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct,
-                std::optional<FArr> view_filter, uint32_t seed, uint32_t frame) {
+                std::optional<FArr> view_filter, uint32_t seed, uint32_t frame, bool cut) {
                  const RenderArgs a = render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane,
                                                   projection, mode, supersample, sh_degree, background, want_window,
                                                   sigma, weight_background, et_grade, depth_correct, view_filter,
@@ -112,16 +132,16 @@ NB_MODULE(_native_cuda, m) {
                  cuda::RenderResult res;
                  {
                      nb::gil_scoped_release release;
-                     res = r.render(a);
+                     res = r.render(a, cut);
                  }
                  return with_stage(result_dict(res, res, (size_t)a.height, (size_t)a.width), res);
              },
-             GBV_RENDER_ARGS)
+             GBV_RENDER_ARGS, nb::arg("cut") = false)
         .def("render_to_gl_texture",
              [](cuda::Renderer& r, unsigned int texture, FArr R, FArr t, float fx, float fy, float cx, float cy,
                 int width, int height, float near_plane, int projection, int mode, int supersample, int sh_degree,
                 FArr background, bool want_window, float sigma, float weight_background, float et_grade,
-                bool depth_correct, std::optional<FArr> view_filter, uint32_t seed, uint32_t frame) {
+                bool depth_correct, std::optional<FArr> view_filter, uint32_t seed, uint32_t frame, bool cut) {
                  const RenderArgs a = render_args("render_to_gl_texture", R, t, fx, fy, cx, cy, width, height,
                                                   near_plane, projection, mode, supersample, sh_degree, background,
                                                   want_window, sigma, weight_background, et_grade, depth_correct,
@@ -129,11 +149,11 @@ NB_MODULE(_native_cuda, m) {
                  cuda::RenderResult res;
                  {
                      nb::gil_scoped_release release;
-                     res = r.render_to_gl_texture(texture, a);
+                     res = r.render_to_gl_texture(texture, a, cut);
                  }
                  return with_stage(stats_dict(res, res.evaluations), res);
              },
-             nb::arg("texture"), GBV_RENDER_ARGS,
+             nb::arg("texture"), GBV_RENDER_ARGS, nb::arg("cut") = false,
              "Render into an existing GL_RGBA32F texture of the output size (its GL context, or one sharing it, "
              "current on this thread); returns the stats (as render's dict, without the image planes; want_window "
              "is ignored). The texture stays registered with CUDA until release_gl_texture(texture): call that "

@@ -32,6 +32,20 @@ void put(DeviceBuffer<T>& buf, const T* src, size_t count) {
     if (count) CUDA_CHECK(cudaMemcpy(buf.ptr, src, count * sizeof(T), cudaMemcpyHostToDevice));
 }
 
+// count elements from host memory into buf after its first `keep`, which stay (copied on the device into a new
+// buffer where it grows).
+template <class T>
+void put_after(DeviceBuffer<T>& buf, size_t keep, const T* src, size_t count) {
+    if (keep + count > buf.capacity) {
+        DeviceBuffer<T> grown;
+        grown.ensure(std::max<size_t>(keep + count, 1));
+        if (keep) CUDA_CHECK(cudaMemcpy(grown.ptr, buf.ptr, keep * sizeof(T), cudaMemcpyDeviceToDevice));
+        std::swap(buf.ptr, grown.ptr);  // the old allocation goes with `grown`
+        std::swap(buf.capacity, grown.capacity);
+    }
+    if (count) CUDA_CHECK(cudaMemcpy(buf.ptr + keep, src, count * sizeof(T), cudaMemcpyHostToDevice));
+}
+
 // count elements from device memory into a host vector.
 template <class T>
 void get(std::vector<T>& out, const T* src, size_t count) {
@@ -135,11 +149,58 @@ void Renderer::upload_cells(const float* means, const float* scales, const float
     });
 }
 
-RenderResult Renderer::render(const RenderArgs& a) {
+void Renderer::upload_lod(const float* means, const float* scales, const float* quats, const float* opacities,
+                          const float* sh, const float* filter_3d, int64_t m, int k, uint64_t generation) {
+    State& s = *state_;
+    call(s, [&] {
+        host::replace_derived(
+            s.has_scene, s.generation, generation, "level-of-detail nodes",
+            [&] {
+                s.has_lod = s.has_cut = false;
+                s.lod_m = s.cut_count = 0;
+            },
+            [&] {
+                if (k != s.k || (filter_3d != nullptr) != s.has_filter)
+                    throw std::runtime_error("CUDA renderer: level-of-detail nodes need the scene's SH size and 3D "
+                                             "filter");
+                if (s.n + m >= (1ll << 31)) throw std::runtime_error("CUDA renderer: more than 2^31 - 1 rows");
+                const size_t n = (size_t)s.n;
+                put_after(s.means, n * 3, means, m * 3);
+                put_after(s.scales, n * 3, scales, m * 3);
+                put_after(s.quats, n * 4, quats, m * 4);
+                put_after(s.opacities, n, opacities, m);
+                put_after(s.sh, n * k * 3, sh, (size_t)m * k * 3);
+                if (filter_3d) put_after(s.filter_3d, n, filter_3d, m);
+                s.lod_m = m;
+                s.has_lod = true;
+            });
+    });
+}
+
+void Renderer::upload_cut(const int32_t* rows, const float* weights, int64_t count, uint64_t generation) {
+    State& s = *state_;
+    call(s, [&] {
+        host::check_generation(s.has_scene, s.generation, generation, "level-of-detail cut");
+        if (!s.has_lod) throw std::runtime_error("CUDA renderer: upload_lod before upload_cut");
+        const int64_t total = s.n + s.lod_m;
+        for (int64_t i = 0; i < count; ++i)
+            if (rows[i] < 0 || rows[i] >= total)
+                throw std::invalid_argument("upload_cut: rows must index the scene's splats and the hierarchy's nodes");
+        s.has_cut = false;
+        s.cut_count = 0;
+        put(s.cut_rows, rows, count);
+        put(s.cut_weights, weights, count);
+        s.cut_count = count;
+        s.has_cut = true;
+        ++s.cut_generation;
+    });
+}
+
+RenderResult Renderer::render(const RenderArgs& a, bool cut) {
     State& s = *state_;
     return call(s, [&] {
         RenderResult res;
-        s.run(a, res);
+        s.run(a, res, cut);
         const bool ss = a.supersample > 1;
         const size_t px = (size_t)a.width * a.height;
         get(res.rgb, ss ? s.o_rgb.ptr : s.rgb.ptr, px * 3);
@@ -151,7 +212,7 @@ RenderResult Renderer::render(const RenderArgs& a) {
     });
 }
 
-RenderResult Renderer::render_to_gl_texture(unsigned int texture, const RenderArgs& a) {
+RenderResult Renderer::render_to_gl_texture(unsigned int texture, const RenderArgs& a, bool cut) {
     State& s = *state_;
     return call(s, [&] {
         const std::vector<int> gl = gl_devices();
@@ -165,7 +226,7 @@ RenderResult Renderer::render_to_gl_texture(unsigned int texture, const RenderAr
         RenderArgs plain = a;
         plain.want_window = false;
         RenderResult res;
-        s.run(plain, res);
+        s.run(plain, res, cut);
         const bool ss = a.supersample > 1;
         const int64_t px = (int64_t)a.width * a.height;
         s.pack_rgba(px, ss ? s.o_rgb.ptr : s.rgb.ptr, ss ? s.o_alpha.ptr : s.alpha.ptr);

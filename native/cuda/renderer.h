@@ -99,8 +99,20 @@ public:
                       const int32_t* members, const int32_t* cell_of, int64_t num_cells, int64_t num_members,
                       uint64_t generation);
 
-    // Render at a.cam's resolution (supersample x the output size per axis) and box-average back.
-    RenderResult render(const RenderArgs& a);
+    // A level-of-detail hierarchy's m interior nodes of the scene `generation` (as upload_weights), k SH coefficients
+    // and a 3D filter as the scene's: rows n .. n + m - 1 after the scene's splats (the scene's rows stay on the
+    // device). Forgets the previous nodes and cut first.
+    void upload_lod(const float* means, const float* scales, const float* quats, const float* opacities,
+                    const float* sh, const float* filter_3d, int64_t m, int k, uint64_t generation);
+
+    // A cut through the uploaded hierarchy that renders with `cut` draw in place, of the scene `generation`: frame
+    // splat i is row rows[i] (each within the scene's and the nodes' rows: checked here) with its opacity times
+    // weights[i].
+    void upload_cut(const int32_t* rows, const float* weights, int64_t count, uint64_t generation);
+
+    // Render at a.cam's resolution (supersample x the output size per axis) and box-average back; `cut`: the
+    // uploaded cut (upload_cut) in place of the scene's splats (not duplex, whose cells are the scene's).
+    RenderResult render(const RenderArgs& a, bool cut = false);
 
     // Render and write RGBA (rgb, alpha) into an OpenGL texture (GL_RGBA32F, the output size, row 0 the image top)
     // through CUDA-GL interop, without a round trip through host memory; returns the stats (rgb/alpha/evals empty,
@@ -109,7 +121,7 @@ public:
     // whose array no longer has the texture's size is made again. Throws when the current GL context runs on
     // another CUDA device than this renderer's. The CUDA writes have finished and the texture is unmapped when it
     // returns (the caller flushes GL before another context samples it).
-    RenderResult render_to_gl_texture(unsigned int texture, const RenderArgs& a);
+    RenderResult render_to_gl_texture(unsigned int texture, const RenderArgs& a, bool cut = false);
 
     // Drop the CUDA registration of a texture (no-op when it has none); its GL context must be current.
     void release_gl_texture(unsigned int texture);

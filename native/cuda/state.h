@@ -45,6 +45,13 @@ struct State {
     Buf<float> means, scales, quats, opacities, sh, filter_3d, weight_sh;
     bool has_filter = false;
     int weight_k = 0;
+    // a level-of-detail cut drawn in place (upload_lod, upload_cut): the hierarchy's lod_m interior nodes are rows
+    // n.. of the scene's arrays above; frame splat i is row cut_rows[i] with its opacity times cut_weights[i]
+    int64_t lod_m = 0, cut_count = 0;
+    bool has_lod = false, has_cut = false;
+    uint64_t cut_generation = 0;  // of the uploaded cut rows: every upload_cut starts a new one
+    Buf<int32_t> cut_rows;
+    Buf<float> cut_weights;
     // duplex cells (upload_cells) and their per-frame state
     int64_t m = 0, num_members = 0;
     Buf<float> cmeans, cscales, cquats;
@@ -61,12 +68,13 @@ struct State {
     // the per-camera stage (binning.cu: stage_kernel), valid while stage_ready and its key holds
     struct StageKey {
         uint64_t scene = 0;
+        uint64_t cut = 0;  // the cut_generation drawn in place, 0: the scene's rows
         CameraParams cam = {};
         int sh_deg = 0;
         float reach = 0;
         int rules = 0;  // stage_rules
         bool operator==(const StageKey& o) const {
-            return scene == o.scene && sh_deg == o.sh_deg && reach == o.reach && rules == o.rules &&
+            return scene == o.scene && cut == o.cut && sh_deg == o.sh_deg && reach == o.reach && rules == o.rules &&
                    std::memcmp(&cam, &o.cam, sizeof cam) == 0;
         }
     } stage_key;
@@ -108,7 +116,7 @@ struct State {
              run_flags, run_slots, run_heads, run_keys[0], run_keys[1], run_perm[0], run_perm[1], run_numbers,
              cell_offsets, pair_ends, cells, crects, cell_ranges, stage, stage_ok, splats, planes, rays, rects,
              touched, values_in, values_out, offsets, keys_in, keys_out, ranges, temp, counters, rgb, alpha, window,
-             o_rgb, o_alpha, o_window, evals, o_evals, rgba, evals_total);
+             o_rgb, o_alpha, o_window, evals, o_evals, rgba, evals_total, cut_rows, cut_weights);
     }
 
     // binning.cu
@@ -118,9 +126,11 @@ struct State {
     int64_t sum_evals(const int32_t* counts, int64_t count);
     // Sort (keys_in, values_in) into (keys_out, values_out) by bits [begin_bit, end_bit) of the keys (stable).
     void sort_pairs(int64_t count, int begin_bit, int end_bit);
-    // Render into the device output buffers (o_* when supersampling, else the full-resolution ones).
-    void run(const RenderArgs& a, RenderResult& res);
-    void bin_splats(Mode mode, int gx, int bits, uint64_t& total);
+    // Render into the device output buffers (o_* when supersampling, else the full-resolution ones); `cut`: the
+    // uploaded level-of-detail cut in place of the scene's splats.
+    void run(const RenderArgs& a, RenderResult& res, bool cut);
+    // The tile lists of the frame's `count` splats.
+    void bin_splats(int64_t count, Mode mode, int gx, int bits, uint64_t& total);
     // The sorted tile lists of `count` items (splats or cells) that touch `total` tiles: keys (tile, depth bits;
     // tile alone without by_depth) into keys_in, values (item indices) into values_in, sorted into keys_out and
     // values_out, tile ranges into `out_ranges`. ends: inclusive scan of `touched`.

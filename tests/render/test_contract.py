@@ -254,3 +254,31 @@ def test_render_many_equals_render_per_job(renderer, bundled_scene):
         assert np.array_equal(f.rgb, ref.rgb) and np.array_equal(f.alpha, ref.alpha), f"{renderer.name} {s.spec}"
         assert (f.stats.visible, f.stats.pairs) == (ref.stats.visible, ref.stats.pairs)
     assert not renderer.capabilities.progressive or seen == {0, 1, 2}
+
+
+def test_a_still_level_of_detail_camera_uploads_nothing(renderer, bundled_scene):
+    """A level-of-detail frame draws its cut over the uploaded scene (the hierarchy goes up once): rendering a still
+    camera again, and other panes of it (another mode; another supersampling), copies nothing to the backend
+    (`Renderer.uploads`), the panes of one sampling grid share the per-camera stage, and every frame equals the
+    cut's gathered Scene rendered by a renderer of the same backend."""
+    cam = view(bundled_scene)
+    specs = ("gaussian_blending+lod:2", "scalar+lod:2", "gaussian_blending:2+lod:2", "gaussian_blending+lod:2")
+    first = renderer.render(cam, RenderSettings.parse(specs[0]))
+    before = renderer.uploads
+    assert before >= 1
+    frames = [renderer.render(cam, RenderSettings.parse(s)) for s in specs]
+    assert renderer.uploads == before
+    gathered = gb.lod.cut_scene(bundled_scene, cam, 2.0)
+    assert gathered.meta["lod"][0] < bundled_scene.num_splats  # the cut merged splats: not the scene itself
+    ref = type(renderer)()
+    ref.upload(gathered)
+    try:
+        for spec, frame in zip(specs, frames):
+            want = ref.render(cam, RenderSettings.parse(spec.split("+")[0]))
+            assert np.array_equal(frame.rgb, want.rgb) and np.array_equal(frame.alpha, want.alpha), spec
+            assert frame.stats.lod_splats == gathered.meta["lod"][0], spec
+    finally:
+        ref.release()
+    assert np.array_equal(frames[-1].rgb, first.rgb)
+    if renderer.capabilities.shared_stage:
+        assert [f.stats.stage_reused for f in frames] == [True, True, False, False]

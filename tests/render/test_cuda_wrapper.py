@@ -1,7 +1,8 @@
 """The CUDA backend's Python wrapper without a GPU, on a stand-in native renderer (cuda_fakes): state after failed
 uploads, release freeing the device buffers, a failed device (BackendFailed, usable(), the CLI's one line; the
 registry's replacement is tested by tests/render/test_contract.py), the texture registrations (a GL name reused by
-another texture), the GL finish after interop, and which GL device interop accepts."""
+another texture), the GL finish after interop, which GL device interop accepts, and what a level-of-detail cut
+drawn in place uploads."""
 
 from __future__ import annotations
 
@@ -180,3 +181,32 @@ def test_fake_render_returns_a_frame():
     r.upload(random_scene(10, seed=6))
     f = r.render(front_camera(16, 12), gb.RenderSettings())
     assert f.rgb.shape == (12, 16, 3) and f.stats.visible == 5 and np.all(f.alpha == 0)
+
+
+def test_a_level_of_detail_cut_goes_up_when_it_changes():
+    """The wrapper draws a level-of-detail cut in place: the hierarchy's nodes go up once after the scene, the cut's
+    rows (the scene's splats, then interior node q as row N + q, in the gathered Scene's order) only when they change,
+    so a still camera and its other panes upload nothing; a frame without level of detail draws the scene's rows;
+    duplex renders the gathered cut's Scene (its cells are of that Scene's splats)."""
+    scene = random_scene(2000, seed=8, spread=3.0)
+    fake = FakeNative()
+    r = fake_renderer(fake)
+    r.upload(scene)
+    near, far = front_camera(f=20.0), front_camera(f=5.0)
+    lod2 = gb.RenderSettings.parse("gaussian_blending+lod:2")
+    frame = r.render(near, lod2)
+    r.render(near, lod2)
+    r.render(near, gb.RenderSettings.parse("scalar+lod:2"))
+    assert fake.calls == ["upload", "upload_lod", "upload_cut"] + ["render cut"] * 3 and r.uploads == 3
+    tree = gb.lod.hierarchy_for(scene)
+    for cam in (near, far):
+        c = gb.lod.cut(tree, cam, 2.0)
+        assert r.render(cam, lod2).stats.lod_splats == c.num_drawn
+        rows, weights = fake.cut
+        assert len(c.nodes) and np.array_equal(rows, np.concatenate([c.leaves, c.nodes + scene.num_splats]))
+        assert np.array_equal(weights, np.concatenate([c.leaf_weights, c.node_weights]))
+    assert frame.stats.lod_splats != c.num_drawn  # the far camera's cut is another one, which went up
+    assert fake.calls[-3:] == ["render cut", "upload_cut", "render cut"]
+    r.render(far, gb.RenderSettings())
+    r.render(far, gb.RenderSettings.parse("duplex+lod:2"))
+    assert fake.calls[-4:] == ["render", "upload", "upload_cells", "render"] and r.uploads == 6

@@ -132,8 +132,8 @@ def test_cuda_wrapper_passes_the_texture_and_the_render_arguments(bundled_scene,
     from cuda_fakes import FakeNative, fake_renderer
 
     class Native(FakeNative):
-        def render_to_gl_texture(self, texture, *args, view_filter=None, seed=0, frame=0):
-            assert texture == 7 and len(args) == (19 if spec == "duplex" else 15)  # + the oit globals
+        def render_to_gl_texture(self, texture, *args, view_filter=None, seed=0, frame=0, cut=False):
+            assert texture == 7 and len(args) == (19 if spec == "duplex" else 15) and not cut  # + the oit globals
             _native_cuda.check_render_args(*args, view_filter=view_filter, seed=seed, frame=frame)
             return super().render_to_gl_texture(texture, *args, view_filter=view_filter, seed=seed, frame=frame)
 

@@ -19,12 +19,14 @@ _program_cache: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 class Gpu:
     """Named buffers and programs on one moderngl context. Buffers grow (by GROWTH) when a frame needs more and are
-    reused otherwise; `allocations` counts (re)allocations. `precise_math` selects the shaders' ~1-ulp expf/logf."""
+    reused otherwise; `allocations` counts (re)allocations, `uploads` the writes of data from the host (`upload`,
+    `upload_after`). `precise_math` selects the shaders' ~1-ulp expf/logf."""
 
     def __init__(self, ctx, precise_math: bool) -> None:
         self.ctx = ctx
         self.precise_math = bool(precise_math)
         self.allocations = 0
+        self.uploads = 0
         self.buffers: dict[str, object] = {}
         self.texture = None
         self.max_block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 1 << 27)
@@ -76,6 +78,24 @@ class Gpu:
 
     def upload(self, name: str, data: np.ndarray, what: str) -> None:
         self.ensure(name, data.nbytes, what).write(data.tobytes())
+        self.uploads += 1
+
+    def upload_after(self, name: str, keep: int, data: np.ndarray, what: str) -> None:
+        """Write `data` into buffer `name` after its first `keep` bytes (which it holds), which stay (copied on the
+        GPU into the new buffer where it grows)."""
+        old = self.buffers.pop(name, None)
+        if old is not None and old.size >= keep + data.nbytes:
+            self.buffers[name] = old
+        else:
+            try:
+                new = self.ensure(name, keep + data.nbytes, what)
+                if keep:
+                    self.ctx.copy_buffer(new, old, keep)
+            finally:
+                if old is not None:
+                    old.release()
+        self.buffers[name].write(data.tobytes(), offset=keep)
+        self.uploads += 1
 
     def ensure_texture(self, W: int, H: int):
         """The RGBA32F output image of W x H (row 0: the image top)."""

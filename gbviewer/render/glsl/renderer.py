@@ -30,11 +30,12 @@ see `limits`. Buffers, programs and dispatch are `gpu.Gpu`; the scan, radix sort
 lists of steps 3-5 in `binning`. Counter slots, record sizes and the `oit` uniform's layout are the shaders' own
 (shaders/interface.glsl, read by `interface`).
 
-The scene is uploaded once (`upload`); per frame the camera goes up as uniforms, the counter buffer comes back
-(visible splats, pairs and depth range: they size the pair buffers and the number of radix passes; with a loop cap
-also the longest tile list), and `render` reads the image back; `render_to_texture` leaves it in a texture of the
-caller's (the viewer draws it from there). Buffers grow (by 1.5x) when a frame needs more
-and are reused otherwise; `allocations` counts (re)allocations.
+The scene is uploaded once (`upload`), a level-of-detail cut's hierarchy after it and the cut's rows as they change
+(`lod`); per frame the camera goes up as uniforms, the counter buffer comes back (visible splats, pairs and depth
+range: they size the pair buffers and the number of radix passes; with a loop cap also the longest tile list), and
+`render` reads the image back; `render_to_texture` leaves it in a texture of the caller's (the viewer draws it from
+there). Buffers grow (by 1.5x) when a frame needs more and are reused otherwise; `allocations` counts
+(re)allocations, `uploads` the data written from the host.
 
 Contexts: by default a headless EGL context shared by every renderer of the process
 (`moderngl.create_context(standalone=True, backend="egl")`); or pass the app's `moderngl.Context`.
@@ -62,6 +63,7 @@ from .binning import bin_duplex, bin_splats, read_totals
 from .context import check_context, standalone_context
 from .gpu import WG, Gpu
 from .limits import blend_plan
+from .lod import GpuCut
 from .sort import SCAN_BLOCK, scan
 
 NO_OIT = gi.oit_uniform(0.0, 0.0, 1.0, False)  # the shaders' oit uniform outside wsr and duplex
@@ -90,6 +92,7 @@ class GlslRenderer(Renderer):
         self._sh_k = 1
         self._weight_k = 0
         self._cells: Cells | None = None
+        self._lod = GpuCut()  # a level-of-detail cut drawn in place: its hierarchy and rows on the GPU
         self._generation = 0  # of the splats on the GPU: every upload starts a new one
         self._stage_key: tuple | None = None  # what the `stage` buffer holds (None: nothing usable)
 
@@ -97,6 +100,8 @@ class GlslRenderer(Renderer):
     def allocations(self) -> int:
         """Buffer and texture (re)allocations since creation."""
         return self.gpu.allocations
+
+    uploads = property(lambda self: self.gpu.uploads, doc="Data writes from the host since creation (Gpu.uploads).")
 
     # ---- protocol ------------------------------------------------------------------------------------------------
 
@@ -149,6 +154,7 @@ class GlslRenderer(Renderer):
     def _upload_splats(self, scene: Scene) -> None:
         self._uploaded = None  # nothing on the GPU is this scene's (or a stage of it) until every buffer is up
         self._stage_key = None
+        self._lod.forget()
         n = scene.num_splats
         f3d = scene.filter_3d if scene.filter_3d is not None else np.zeros(n, np.float32)
         geom = gi.records(gi.GEOM_VEC4S, scene.means, scene.opacities, scene.scales, f3d, scene.quats)
@@ -176,12 +182,15 @@ class GlslRenderer(Renderer):
         self.gpu.upload("cell_of", cells.cell_of(n), "splat cells")
         self._cells = cells
 
-    def _sync(self, prep: Prepared) -> None:
-        """Put the view's splats (a trained Duplex-GS model's, every frame) and duplex cells on the GPU."""
+    def _sync(self, prep: Prepared, settings: RenderSettings, flag: np.ndarray) -> None:
+        """Put the view's splats (a trained Duplex-GS model's, every frame), duplex cells and a level-of-detail cut
+        drawn in place (`lod`) on the GPU."""
         if prep.scene is not self._uploaded or not prep.scene.intact:  # maybe edited since: its stage too
             self._upload_splats(prep.scene)
         if prep.cells is not None and prep.cells is not self._cells:
             self._upload_cells(prep.cells, prep.scene.num_splats)
+        if prep.tree is not None:
+            self._lod.sync(self.gpu, prep, settings.threads, flag)
 
     def render(self, camera: Camera, settings: RenderSettings, *, cancel: Cancellable | None = None,
                on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
@@ -218,8 +227,8 @@ class GlslRenderer(Renderer):
         """One frame into `target` (None: the renderer's own output texture); its inputs, counts and start time."""
         self._make_current()
         t0 = time.perf_counter()
-        prep = prepare(self._scene, camera, settings, self.name, flag=control.flag)
-        self._sync(prep)
+        prep = prepare(self._scene, camera, settings, self.name, lod_in_place=True, flag=control.flag)
+        self._sync(prep, settings, control.flag)
         with control:
             counts = self._frame(camera, settings, prep, want_window, control, target)
         return prep, counts, t0
@@ -244,6 +253,7 @@ class GlslRenderer(Renderer):
         self.gpu.release()
         self._scene = self._uploaded = None
         self._cells = None
+        self._lod.forget()
         self._stage_key = None
 
     # ---- pipeline ------------------------------------------------------------------------------------------------
@@ -255,7 +265,8 @@ class GlslRenderer(Renderer):
         gpu = self.gpu
         mode = settings.mode
         oit = NO_OIT if prep.oit is None else gi.oit_uniform(*prep.oit[:3], prep.oit.depth_correct)
-        n, N = self._n, settings.supersample
+        in_place = prep.tree is not None  # a level-of-detail cut: splat i is row lod_rows[i] (lod_rows.glsl)
+        n, N = self._lod.cut.count if in_place else self._n, settings.supersample
         W, H = camera.width, camera.height
         RW, RH = W * N, H * N
         gx, gy = -(-RW // gi.TILE), -(-RH // gi.TILE)
@@ -284,13 +295,15 @@ class GlslRenderer(Renderer):
             cam_size=(RW, RH), cam_near=float(f32(camera.near)), cam_projection=camera.projection_code,
         )
         weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", VEC4)
-        stage, stage_reused, stage_ms = self._stage(settings, n, sh_deg, cam_uniforms)
+        lod = dict(lod_in_place=int(in_place))
+        rows = gpu.buffers["lod_rows"] if in_place else gpu.ensure("dummy", VEC4)
+        stage, stage_reused, stage_ms = self._stage(settings, n, sh_deg, cam_uniforms, rows, lod)
         rays = gpu.ensure("rays", n * gi.RAY_VEC4S * VEC4, "ray data") if mode in PER_PIXEL_SORTED else None
         gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,
-                weight, stage, self._planes(settings, n), rays or gpu.ensure("dummy", VEC4)), num_splats=n,
+                weight, stage, self._planes(settings, n), rays or gpu.ensure("dummy", VEC4), rows), num_splats=n,
                 sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k, oit=oit,
                 view_filter=gi.view_filter_uniform(*settings.view_filter.native()[:4]),
-                view_rules=gi.view_rules_uniform(*settings.view_filter.native()[4:]), **cam_uniforms)
+                view_rules=gi.view_rules_uniform(*settings.view_filter.native()[4:]), **lod, **cam_uniforms)
         scan(gpu, flags, n, total_slot=gi.TOTAL_VISIBLE)
         gpu.run("compact.comp", -(-n // WG), (splats, rects, flags, totals, dkeys[0], dvals[0]), num_splats=n)
         t = read_totals(gpu)
@@ -316,14 +329,14 @@ class GlslRenderer(Renderer):
         self.ctx.finish()
         return dict(preprocess_ms=(t1 - t0) * 1e3, sort_ms=(t2 - t1) * 1e3, blend_ms=(time.perf_counter() - t2) * 1e3,
                     visible=visible, sort_length=sort_length, pairs=pairs, stage_reused=stage_reused,
-                    stage_ms=stage_ms, **counts)
+                    stage_ms=stage_ms, lod_splats=n if in_place else None, **counts)
 
-    def _stage(self, settings: RenderSettings, n: int, sh_deg: int, cam_uniforms: dict) -> tuple:
+    def _stage(self, settings: RenderSettings, n: int, sh_deg: int, cam_uniforms: dict, rows, lod: dict) -> tuple:
         """The `stage` buffer for this frame's camera (at its sampling grid), whether it was kept from an earlier
         frame and the ms spent building it: stage.comp runs (and the GL work finishes, for that time) only when the
         scene's generation, the camera, the SH degree or the on-screen cull's reach (the largest diagonal the
-        frame's 2D filter adds, at least 3DGS's +0.3: stage_reach in preprocess_stage.h) or the presets' stage rules
-        (stage_rules) changed."""
+        frame's 2D filter adds, at least 3DGS's +0.3: stage_reach in preprocess_stage.h), the presets' stage rules
+        (stage_rules) or the level-of-detail rows drawn in place (`rows`, `lod`: its uniform) changed."""
         gpu = self.gpu
         stage = gpu.ensure("stage", n * gi.STAGE_VEC4S * VEC4, "per-camera stage")
         vf = settings.view_filter.native() if settings.mode.label in FILTERED_MODES else np.zeros(2, np.float32)
@@ -332,13 +345,14 @@ class GlslRenderer(Renderer):
         if settings.mode == Mode.EVAL3D:
             reach = 1e30  # eval3d: its footprint is the ray's: the stage keeps every splat in front of the plane
         camera_bytes = tuple(np.asarray(v).tobytes() for v in cam_uniforms.values())
-        key = (self._generation, camera_bytes, sh_deg, reach, rules)
+        key = (self._generation, self._lod.cut.generation if lod["lod_in_place"] else None, camera_bytes, sh_deg, reach,
+               rules)
         if key == self._stage_key:
             return stage, True, 0.0
         self._stage_key = None
         t0 = time.perf_counter()
-        gpu.run("stage.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], stage), num_splats=n,
-                sh_k=self._sh_k, sh_deg=sh_deg, reach=reach, rules=rules, **cam_uniforms)
+        gpu.run("stage.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], stage, rows), num_splats=n,
+                sh_k=self._sh_k, sh_deg=sh_deg, reach=reach, rules=rules, **lod, **cam_uniforms)
         self.ctx.finish()
         self._stage_key = key
         return stage, False, (time.perf_counter() - t0) * 1e3
