@@ -69,6 +69,7 @@ struct TileJob {
     Mode mode;
     OitParams oit;
     int queue;  // stopthepop's K (0: unbounded)
+    int tile_x0, tile_y0;  // the tile's first pixel (stopthepop's sub-tiles), whatever rectangle is blended
     float bg[3];
     float *rgb, *alpha, *window;  // image planes, at the rectangle's pixel (x0, y0); window may be null
     int32_t* evals;
