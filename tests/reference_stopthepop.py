@@ -7,7 +7,7 @@ written from those rules as a chain of streams, independently of native/include/
 Pixel coordinates: pixel i's centre is i + 0.5 (the published kernel's integer centres, shifted). The fragments are
 3DGS's 2D splats (conic with +0.3, scalar's tile rectangles and centre-depth order) as in reference_ray.py.
 1. tile: the tile's splats (centre-depth order) stably sorted by the depth along the unit ray through the point of the
-   tile's pixel-centre rectangle the rectangle rule picks, floored at -8.
+   tile's pixel-centre rectangle the rectangle rule picks, plus 8, floored at 0 (in float64: no ties by rounding).
 2. 4x4: per load of 32 entries, the entries whose alpha at the 4x4 rectangle's picked point is >= 1/255 are merged
    into the queue by the depth at the 4x4 centre ray (old entries first on ties); while it holds more than 32 its 16
    nearest go on, in groups of 4; at the end the rest, in groups of 4.
@@ -25,7 +25,7 @@ from reference import box_down
 from reference_preprocess import MIN_ALPHA_3DGS, TILE, camera_params, preprocess
 from reference_ray import STOPTHEPOP_MIN_SCALE, _composite, pixel_ray, precisions, ray_maximum
 
-KEY_FLOOR = -8.0
+KEY_OFFSET = 8.0
 LOAD, PULL, GROUP = 32, 16, 4
 
 
@@ -61,7 +61,7 @@ def _depth_at(ids, P, mu, cp, qx, qy, unit=False):
 def _tile_stream(ids, pre, P, mu, cp, tx, ty) -> list[int]:
     x0, y0 = tx * TILE + 0.5, ty * TILE + 0.5
     qx, qy, _ = rect_point(pre["xy"][ids], pre["conic"][ids], x0, y0, TILE - 1.0, TILE - 1.0)
-    key = np.maximum(_depth_at(ids, P, mu, cp, qx, qy, unit=True), KEY_FLOOR)
+    key = np.maximum(_depth_at(ids, P, mu, cp, qx, qy, unit=True) + KEY_OFFSET, 0.0)
     return ids[np.argsort(key, kind="stable")].tolist()
 
 

@@ -5,7 +5,8 @@
 // SortQueueSizes and configs/hierarchical.json of r4dl/StopThePop: 4x4 queue 64, 2x2 queue 8, per pixel 4):
 //  1. tile: the tile's list sorted by the splat's depth along the ray through the point of the tile's pixel-centre
 //     rectangle where its 2D Gaussian is largest (PER_TILE_DEPTH_MAXPOS: duplicateWithKeys_extended and
-//     max_contrib_power_rect_gaussian_float in stopthepop_common.cuh), as tile_depth_key;
+//     max_contrib_power_rect_gaussian_float in stopthepop_common.cuh), as tile_depth_key (ties in centre-depth
+//     order; the published radix sort leaves them in splat index order);
 //  2. 4x4 sub-tile: the sorted list is loaded 32 entries at a time; entries whose largest alpha over the sub-tile's
 //     pixel centres is below 1/255 are culled (hierarchical_4x4_culling), the rest merged into a queue sorted by the
 //     depth along the sub-tile's centre ray (behind queued entries of equal depth); while it holds more than 32, its
@@ -78,8 +79,8 @@ constexpr int HIER_MID = 8;
 constexpr int HIER_LOAD = 32;
 constexpr int HIER_PULL = 16;
 constexpr int HIER_GROUP = 4;
-// The tile sort's key is max(0, depth + 8) (duplicateWithKeys_extended): depths below -8 tie.
-constexpr float TILE_KEY_FLOOR = -8.0f;
+// The tile sort's key is max(0, depth + 8) in float (duplicateWithKeys_extended): depths below -8 tie.
+constexpr float TILE_KEY_OFFSET = 8.0f;
 
 // max_contrib_power_rect_gaussian_float (stopthepop_common.cuh): the point (*mx, *my) of the rectangle
 // [x0, x0 + w] x [y0, y0 + h] of pixel centres taken as the splat's 2D Gaussian's largest there, and its
@@ -113,7 +114,8 @@ GBV_HD float ray_depth(const Splat2D& s, const RaySplat& r, float qx, float qy) 
 
 // Stage 1's key of a splat in the tile whose first pixel centre is (x0, y0): its depth along the unit ray through
 // the rectangle point of rect_max_power (perspective: t* times the length of the ray direction (u, v, 1), with
-// (cx, cy, fx, fy) the camera's intrinsics), floored at TILE_KEY_FLOOR.
+// (cx, cy, fx, fy) the camera's intrinsics), plus TILE_KEY_OFFSET, floored at 0 (never negative: the GPU binning
+// sorts its float bits).
 GBV_HD float tile_depth_key(const Splat2D& s, const RaySplat& r, float x0, float y0, float cx, float cy, float fx,
                             float fy) {
     float mx, my;
@@ -123,7 +125,8 @@ GBV_HD float tile_depth_key(const Splat2D& s, const RaySplat& r, float x0, float
         const float u = (mx - cx) / fx, v = (my - cy) / fy;
         t = mul_rn(t, sqrtf(mul_rn(u, u) + mul_rn(v, v) + 1.0f));
     }
-    return t > TILE_KEY_FLOOR ? t : TILE_KEY_FLOOR;
+    const float key = t + TILE_KEY_OFFSET;
+    return key > 0.0f ? key : 0.0f;
 }
 
 // Stage 2's cull: the splat's largest alpha over the 4x4 sub-tile whose first pixel centre is (x0, y0) is below 1/255.
@@ -181,10 +184,10 @@ GBV_HD void hier_group(const Src& src, int first, int count, int K, const HierPi
         const Fragment f = {ray_depth(src.splat(e), src.ray(e), g.mx, g.my), 0.0f, e};
         queue_insert(m, mn, f);
     }
-    const int out = h.mn < 0 ? 0 : (mn < HIER_GROUP ? mn : HIER_GROUP);
+    const int gone = h.mn < 0 ? 0 : (mn < HIER_GROUP ? mn : HIER_GROUP);
     h.mn = 0;
-    for (int k = out; k < mn; ++k) h.mid[h.mn++] = m[k];
-    for (int k = 0; k < out; ++k) hier_to_pixel<Src, Tr>(src, m[k].entry, K, g, h, st);
+    for (int k = gone; k < mn; ++k) h.mid[h.mn++] = m[k];
+    for (int k = 0; k < gone; ++k) hier_to_pixel<Src, Tr>(src, m[k].entry, K, g, h, st);
 }
 
 // Stage 2's release of the 4x4 queue's `count` nearest entries, a group at a time.
