@@ -120,7 +120,7 @@ struct State {
     void sort_pairs(int64_t count, int begin_bit, int end_bit);
     // Render into the device output buffers (o_* when supersampling, else the full-resolution ones).
     void run(const RenderArgs& a, RenderResult& res);
-    void bin_splats(Mode mode, int gx, int bits, uint64_t& total);
+    void bin_splats(Mode mode, int queue, const CameraParams& cam, int gx, int bits, uint64_t& total);
     // The sorted tile lists of `count` items (splats or cells) that touch `total` tiles: keys (tile, depth bits;
     // tile alone without by_depth) into keys_in, values (item indices) into values_in, sorted into keys_out and
     // values_out, tile ranges into `out_ranges`. ends: inclusive scan of `touched`.
