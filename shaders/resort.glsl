@@ -98,21 +98,31 @@ HierPixel hier_pixel_at(int tx0, int ty0, int x, int y) {
 Splat2D hier_splat(uint first, int i);
 RaySplat hier_ray(uint first, int i);
 
-// port of resort.h: hier_to_pixel
-void hier_to_pixel(uint first, int entry, int K, HierPixel g, inout HierState h, inout float T, inout vec3 C) {
+// port of resort.h: hier_arrive
+void hier_arrive(uint first, int entry, int loaded, int K, HierPixel g, inout HierState h, inout float T, inout vec3 C,
+                 inout int ev) {
     if (h.done) return;
     if (h.qn == K) {
         h.done = blend_fragment(h.q[0], hier_splat(first, h.q[0].entry).color, T, C);
         queue_pop(h.q, h.qn);
-        if (h.done) return;
+        if (h.done) {
+            ev = loaded;
+            return;
+        }
     }
     Fragment f = Fragment(0.0, 0.0, entry);
     if (sorted_fragment(STOPTHEPOP, hier_splat(first, entry), hier_ray(first, entry), g.px, g.py, f.alpha, f.depth))
         queue_insert(h.q, h.qn, f);
 }
 
-// port of resort.h: hier_group
-void hier_group(uint first, int from, int count, int K, HierPixel g, inout HierState h, inout float T, inout vec3 C) {
+// port of resort.h: hier_finish
+void hier_finish(uint first, inout HierState h, inout float T, inout vec3 C) {
+    for (int k = 0; k < h.qn && !h.done; ++k) h.done = blend_fragment(h.q[k], hier_splat(first, h.q[k].entry).color, T, C);
+}
+
+// port of resort.h: hier_group (what goes on goes to the pixel: hier_arrive, as hier_walk's emit)
+void hier_group(uint first, int from, int count, int loaded, int K, HierPixel g, inout HierState h, inout float T,
+                inout vec3 C, inout int ev) {
     if (h.done) return;
     Fragment m[HIER_MID];
     int mn = 0;
@@ -124,12 +134,14 @@ void hier_group(uint first, int from, int count, int K, HierPixel g, inout HierS
     const int gone = h.mn < 0 ? 0 : min(mn, HIER_GROUP);
     h.mn = 0;
     for (int k = gone; k < mn; ++k) h.mid[h.mn++] = m[k];
-    for (int k = 0; k < gone; ++k) hier_to_pixel(first, m[k].entry, K, g, h, T, C);
+    for (int k = 0; k < gone; ++k) hier_arrive(first, m[k].entry, loaded, K, g, h, T, C, ev);
 }
 
 // port of resort.h: hier_release
-void hier_release(uint first, int count, int K, HierPixel g, inout HierState h, inout float T, inout vec3 C) {
-    for (int k = 0; k < count; k += HIER_GROUP) hier_group(first, k, min(count - k, HIER_GROUP), K, g, h, T, C);
+void hier_release(uint first, int count, int loaded, int K, HierPixel g, inout HierState h, inout float T,
+                  inout vec3 C, inout int ev) {
+    for (int k = 0; k < count; k += HIER_GROUP)
+        hier_group(first, k, min(count - k, HIER_GROUP), loaded, K, g, h, T, C, ev);
     queue_drop(h.tail, h.tn, count);
 }
 
@@ -140,23 +152,28 @@ void hier_load(uint first, int i, HierPixel g, inout HierState h) {
     queue_insert(h.tail, h.tn, Fragment(ray_depth(s, hier_ray(first, i), g.sx + 1.5, g.sy + 1.5), 0.0, i));
 }
 
+// port of resort.h: hier_stream (emitting to the pixel)
+void hier_stream(uint first, int n, int K, HierPixel g, inout HierState h, inout float T, inout vec3 C,
+                 inout int ev) {
+    h.tn = 0;
+    h.mn = -1;
+    for (int base = 0; base < n && !h.done; base += HIER_LOAD) {
+        const int end = min(base + HIER_LOAD, n);
+        for (int i = base; i < end; ++i) hier_load(first, i, g, h);
+        while (h.tn > HIER_LOAD && !h.done) hier_release(first, HIER_PULL, end, K, g, h, T, C, ev);
+    }
+    hier_release(first, h.tn, n, K, g, h, T, C, ev);
+    for (int k = 0; k < h.mn && !h.done; ++k) hier_arrive(first, h.mid[k].entry, n, K, g, h, T, C, ev);
+}
+
 // port of resort.h: hier_walk
 int hier_walk(uint first, int n, int K, int tx0, int ty0, int x, int y, inout float T, inout vec3 C) {
     HierState h;
-    h.tn = 0;
-    h.mn = -1;
     h.qn = 0;
     h.done = false;
     const HierPixel g = hier_pixel_at(tx0, ty0, x, y);
     int ev = n;
-    for (int base = 0; base < n && !h.done; base += HIER_LOAD) {
-        const int end = min(base + HIER_LOAD, n);
-        for (int i = base; i < end; ++i) hier_load(first, i, g, h);
-        while (h.tn > HIER_LOAD && !h.done) hier_release(first, HIER_PULL, K, g, h, T, C);
-        if (h.done) ev = end;
-    }
-    hier_release(first, h.tn, K, g, h, T, C);
-    for (int k = 0; k < h.mn; ++k) hier_to_pixel(first, h.mid[k].entry, K, g, h, T, C);
-    for (int k = 0; k < h.qn && !h.done; ++k) h.done = blend_fragment(h.q[k], hier_splat(first, h.q[k].entry).color, T, C);
+    hier_stream(first, n, K, g, h, T, C, ev);
+    hier_finish(first, h, T, C);
     return ev;
 }

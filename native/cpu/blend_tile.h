@@ -209,7 +209,7 @@ void group_sorted(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     const int queue = job.mode == EVAL3D ? 0 : job.queue;
     const int x = (int)floorf(L::reduce_max(g.px)), y = (int)floorf(L::reduce_max(g.py));
     out.evals[0] = blend_sorted_pixel<Tr>(job.list, job.rays, job.n, job.mode, queue, job.tile_x0, job.tile_y0, x,
-                                          y, st);
+                                          y, job.hier, st);
     for (int c = 0; c < 3; ++c) out.C[c][0] = st.C[c];
     out.T[0] = st.T;
 }

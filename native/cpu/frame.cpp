@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "blend_bands.h"
+#include "blend_sorted.h"
 #include "frame.h"
 #include "lod.h"
 #include "plane.h"
@@ -120,8 +121,12 @@ void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTile
     if (sorted) {
         rays.resize(count);
         for (int64_t j = 0; j < count; ++j) rays[j] = b.rays[b.ids[begin + j]];
-        if (f.mode == STOPTHEPOP && f.queue > 0)
+        if (f.mode == STOPTHEPOP && f.queue > 0) {
             tile_depth_order(*f.cam, job.x0, job.y0, count, local.data(), bounds.data(), rays.data(), nullptr);
+            thread_local tile::HierCache hier;
+            hier.reset();
+            job.hier = &hier;
+        }
         blend_tile = blend_tile_scalar;  // one pixel at a time on every path (blend_sorted.h)
     }
     job.list = local.data();

@@ -156,25 +156,36 @@ GBV_HD HierPixel hier_pixel_at(int tx0, int ty0, int x, int y) {
     return {x + 0.5f, y + 0.5f, x4 + 0.5f, y4 + 0.5f, x2 + 1.0f, y2 + 1.0f};
 }
 
-// Stage 4: list entry `entry` reaches the pixel (the splats and rays of the list through src.splat(i), src.ray(i)).
+// Stage 4: list entry `entry` reaches the pixel (the splats and rays of the list through src.splat(i), src.ray(i)),
+// emitted when `loaded` list entries had been loaded; *ev = loaded where the pixel stops.
 template <class Src, class Tr>
-GBV_HD void hier_to_pixel(const Src& src, int entry, int K, const HierPixel& g, HierState& h,
-                          AlphaState<Lanes1>& st) {
+GBV_HD void hier_arrive(const Src& src, int entry, int loaded, int K, const HierPixel& g, HierState& h,
+                        AlphaState<Lanes1>& st, int* ev) {
     if (h.done) return;
     if (h.qn == K) {
         h.done = blend_fragment<Tr>(h.q[0], src.splat(h.q[0].entry).color, st);
         queue_pop(h.q, h.qn);
-        if (h.done) return;
+        if (h.done) {
+            *ev = loaded;
+            return;
+        }
     }
     Fragment f = {0.0f, 0.0f, entry};
     if (sorted_fragment(STOPTHEPOP, src.splat(entry), src.ray(entry), g.px, g.py, &f.alpha, &f.depth))
         queue_insert(h.q, h.qn, f);
 }
 
-// Stage 3: the 4x4 queue's entries tail[first .. first + count) as one group through the 2x2 queue.
+// Stage 4's end: the pixel's queue blended in order.
 template <class Src, class Tr>
-GBV_HD void hier_group(const Src& src, int first, int count, int K, const HierPixel& g, HierState& h,
-                       AlphaState<Lanes1>& st) {
+GBV_HD void hier_finish(const Src& src, HierState& h, AlphaState<Lanes1>& st) {
+    for (int k = 0; k < h.qn && !h.done; ++k) h.done = blend_fragment<Tr>(h.q[k], src.splat(h.q[k].entry).color, st);
+}
+
+// Stage 3: the 4x4 queue's entries tail[first .. first + count) as one group through the 2x2 queue; what goes on
+// is emit(entry, loaded).
+template <class Src, class Emit>
+GBV_HD void hier_group(const Src& src, int first, int count, int loaded, const HierPixel& g, HierState& h,
+                       Emit& emit) {
     if (h.done) return;
     Fragment m[HIER_MID];
     int mn = 0;
@@ -187,15 +198,14 @@ GBV_HD void hier_group(const Src& src, int first, int count, int K, const HierPi
     const int gone = h.mn < 0 ? 0 : (mn < HIER_GROUP ? mn : HIER_GROUP);
     h.mn = 0;
     for (int k = gone; k < mn; ++k) h.mid[h.mn++] = m[k];
-    for (int k = 0; k < gone; ++k) hier_to_pixel<Src, Tr>(src, m[k].entry, K, g, h, st);
+    for (int k = 0; k < gone; ++k) emit(m[k].entry, loaded);
 }
 
 // Stage 2's release of the 4x4 queue's `count` nearest entries, a group at a time.
-template <class Src, class Tr>
-GBV_HD void hier_release(const Src& src, int count, int K, const HierPixel& g, HierState& h,
-                         AlphaState<Lanes1>& st) {
+template <class Src, class Emit>
+GBV_HD void hier_release(const Src& src, int count, int loaded, const HierPixel& g, HierState& h, Emit& emit) {
     for (int k = 0; k < count; k += HIER_GROUP)
-        hier_group<Src, Tr>(src, k, count - k < HIER_GROUP ? count - k : HIER_GROUP, K, g, h, st);
+        hier_group(src, k, count - k < HIER_GROUP ? count - k : HIER_GROUP, loaded, g, h, emit);
     queue_drop(h.tail, h.tn, count);
 }
 
@@ -208,26 +218,33 @@ GBV_HD void hier_load(const Src& src, int i, const HierPixel& g, HierState& h) {
     queue_insert(h.tail, h.tn, f);
 }
 
+// Stages 2 and 3 over a tile list already in stage 1's order (n entries) for the 2x2 block of g: every entry that
+// goes on to the block's pixels, in order, as emit(entry, loaded); stops loading once h.done.
+template <class Src, class Emit>
+GBV_HD void hier_stream(const Src& src, int n, const HierPixel& g, HierState& h, Emit& emit) {
+    h.tn = 0;
+    h.mn = -1;
+    for (int base = 0; base < n && !h.done; base += HIER_LOAD) {
+        const int end = base + HIER_LOAD < n ? base + HIER_LOAD : n;
+        for (int i = base; i < end; ++i) hier_load(src, i, g, h);
+        while (h.tn > HIER_LOAD && !h.done) hier_release(src, HIER_PULL, end, g, h, emit);
+    }
+    hier_release(src, h.tn, n, g, h, emit);
+    for (int k = 0; k < h.mn && !h.done; ++k) emit(h.mid[k].entry, n);
+}
+
 // One pixel of stopthepop:K (K > 0) over a tile list already in stage 1's order: blends into st and returns the
 // pixel's evals (the list entries loaded when it stopped, else n).
 template <class Src, class Tr>
 GBV_HD int hier_walk(const Src& src, int n, int K, int tx0, int ty0, int x, int y, AlphaState<Lanes1>& st) {
     HierState h;
-    h.tn = 0;
-    h.mn = -1;
     h.qn = 0;
     h.done = false;
     const HierPixel g = hier_pixel_at(tx0, ty0, x, y);
     int ev = n;
-    for (int base = 0; base < n && !h.done; base += HIER_LOAD) {
-        const int end = base + HIER_LOAD < n ? base + HIER_LOAD : n;
-        for (int i = base; i < end; ++i) hier_load(src, i, g, h);
-        while (h.tn > HIER_LOAD && !h.done) hier_release<Src, Tr>(src, HIER_PULL, K, g, h, st);
-        if (h.done) ev = end;
-    }
-    hier_release<Src, Tr>(src, h.tn, K, g, h, st);
-    for (int k = 0; k < h.mn; ++k) hier_to_pixel<Src, Tr>(src, h.mid[k].entry, K, g, h, st);
-    for (int k = 0; k < h.qn && !h.done; ++k) h.done = blend_fragment<Tr>(h.q[k], src.splat(h.q[k].entry).color, st);
+    auto to_pixel = [&](int entry, int loaded) { hier_arrive<Src, Tr>(src, entry, loaded, K, g, h, st, &ev); };
+    hier_stream(src, n, g, h, to_pixel);
+    hier_finish<Src, Tr>(src, h, st);
     return ev;
 }
 
