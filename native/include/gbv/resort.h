@@ -4,11 +4,11 @@
 // cuda_rasterizer/stopthepop/hierarchical_render.cuh: sortGaussiansRayHierarchicaEvaluation, with the queue sizes of
 // SortQueueSizes and configs/hierarchical.json of r4dl/StopThePop: 4x4 queue 64, 2x2 queue 8, per pixel 4):
 //  1. tile: the tile's list sorted by the splat's depth along the ray through the point of the tile's pixel-centre
-//     rectangle where its 2D Gaussian is largest (PER_TILE_DEPTH_MAXPOS: duplicateWithKeys_extended and
-//     max_contrib_power_rect_gaussian_float in stopthepop_common.cuh), as tile_depth_key (ties in centre-depth
-//     order; the published radix sort leaves them in splat index order);
-//  2. 4x4 sub-tile: the sorted list is loaded 32 entries at a time; entries whose largest alpha over the sub-tile's
-//     pixel centres is below 1/255 are culled (hierarchical_4x4_culling), the rest merged into a queue sorted by the
+//     rectangle that the rectangle rule takes as its 2D Gaussian's largest (rect_max_power; PER_TILE_DEPTH_MAXPOS:
+//     duplicateWithKeys_extended and max_contrib_power_rect_gaussian_float in stopthepop_common.cuh), as
+//     tile_depth_key (ties in centre-depth order; the published radix sort leaves them in splat index order);
+//  2. 4x4 sub-tile: the sorted list is loaded 32 entries at a time; entries whose alpha at the sub-tile rectangle's
+//     point (the same rule) is below 1/255 are culled (hierarchical_4x4_culling), the rest merged into a queue by the
 //     depth along the sub-tile's centre ray (behind queued entries of equal depth); while it holds more than 32, its
 //     16 nearest go on, 4 at a time; at the end of the list the rest goes on in order, 4 at a time;
 //  3. 2x2 sub-tile: each group of 4 is sorted by the depth along the 2x2 block's centre ray and merged with the 4 it
@@ -20,8 +20,8 @@
 //     is blended in order at the end.
 // Each stage's depths compare along one ray, so t* (view z) orders them as the published distance along the unit
 // ray does; the tile stage compares different rays and uses that distance. The CPU (native/cpu/blend_sorted.h),
-// CUDA (native/cuda/blend.cu) and GLSL (shaders/resort.glsl) walks share these steps; the tile sort is the binning's
-// (CPU: per tile, stable over the centre-depth list).
+// CUDA (native/cuda/blend.cu) and GLSL (shaders/resort.glsl) walks share these steps (the CPU builds stages 2 and 3
+// once per 2x2 block); the tile sort is the binning's (CPU: per tile, stable over the centre-depth list).
 #pragma once
 
 #include "blend.h"
