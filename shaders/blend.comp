@@ -90,6 +90,17 @@ shared int sample_evals[256];
 shared vec2 sample_window[256];
 #endif
 
+// resort.glsl's list access (every variant links them; only the sorted ones call them)
+Splat2D hier_splat(uint first, int i) {
+    const uint at = SPLAT_VEC4S * tile_vals[first + uint(i)];
+    return unpack_splat(splats[at], splats[at + 1u], splats[at + 2u], splats[at + 3u]);
+}
+
+RaySplat hier_ray(uint first, int i) {
+    const uint at = RAY_VEC4S * tile_vals[first + uint(i)];
+    return unpack_ray(rays[at], rays[at + 1u], rays[at + 2u], rays[at + 3u]);
+}
+
 #if SORTED
 Splat2D list_splat(uint id) {
     const uint at = SPLAT_VEC4S * id;
@@ -107,12 +118,6 @@ bool list_fragment(uint first, int i, vec2 pix, out Fragment f) {
 
 vec3 list_color(uint first, Fragment f) { return list_splat(tile_vals[first + uint(f.entry)]).color; }
 
-Splat2D hier_splat(uint first, int i) { return list_splat(tile_vals[first + uint(i)]); }
-
-RaySplat hier_ray(uint first, int i) {
-    const uint at = RAY_VEC4S * tile_vals[first + uint(i)];
-    return unpack_ray(rays[at], rays[at + 1u], rays[at + 2u], rays[at + 3u]);
-}
 
 // One pixel (rpix; its render tile's first pixel: corner) of a per-pixel sorted mode (CUDA's sorted_kernel):
 // stopthepop's hierarchy ending in a queue of K over the list in its tile order (the binning's), or (K = 0) the
