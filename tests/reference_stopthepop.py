@@ -20,10 +20,15 @@ With `hierarchy=False` only stage 4 runs, over the centre-depth list (the per-pi
 from __future__ import annotations
 
 import numpy as np
-
 from reference import box_down
 from reference_preprocess import MIN_ALPHA_3DGS, TILE, camera_params, preprocess
-from reference_ray import STOPTHEPOP_MIN_SCALE, _composite, pixel_ray, precisions, ray_maximum
+from reference_ray import (
+    STOPTHEPOP_MIN_SCALE,
+    _composite,
+    pixel_ray,
+    precisions,
+    ray_maximum,
+)
 
 KEY_OFFSET = 8.0
 LOAD, PULL, GROUP = 32, 16, 4

@@ -10,13 +10,13 @@ import math
 
 import numpy as np
 import pytest
+from reference_ray import render_sorted
+from reference_stopthepop import render_hierarchical
+from test_stopthepop import camera, crossing_splats, random_scene
 
 import gbviewer as gb
 from gbviewer.render import RenderSettings, create_renderer
 from gbviewer.scene import SH_C0
-from reference_ray import render_sorted
-from reference_stopthepop import render_hierarchical
-from test_stopthepop import camera, crossing_splats, random_scene
 
 
 def late_near_splat(walls: int = 66) -> gb.Scene:
