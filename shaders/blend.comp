@@ -22,6 +22,7 @@
 #include "blend.glsl"
 #include "kernel.glsl"
 #include "ray3d.glsl"
+#include "resort_key.glsl"
 #include "resort.glsl"
 
 #if defined(BLEND_MODE_SCALAR)
@@ -89,6 +90,17 @@ shared int sample_evals[256];
 shared vec2 sample_window[256];
 #endif
 
+// resort.glsl's list access (every variant links them; only the sorted ones call them)
+Splat2D hier_splat(uint first, int i) {
+    const uint at = SPLAT_VEC4S * tile_vals[first + uint(i)];
+    return unpack_splat(splats[at], splats[at + 1u], splats[at + 2u], splats[at + 3u]);
+}
+
+RaySplat hier_ray(uint first, int i) {
+    const uint at = RAY_VEC4S * tile_vals[first + uint(i)];
+    return unpack_ray(rays[at], rays[at + 1u], rays[at + 2u], rays[at + 3u]);
+}
+
 #if SORTED
 Splat2D list_splat(uint id) {
     const uint at = SPLAT_VEC4S * id;
@@ -106,26 +118,16 @@ bool list_fragment(uint first, int i, vec2 pix, out Fragment f) {
 
 vec3 list_color(uint first, Fragment f) { return list_splat(tile_vals[first + uint(f.entry)]).color; }
 
-// One pixel of a per-pixel sorted mode (CUDA's sorted_kernel): the queue of K, or (K = 0) the exact order by
-// selection. Returns its evals: the list position where it stopped (+1), else n.
-int sorted_walk(uint first, int n, vec2 pix, inout float T, inout vec3 C) {
+
+// One pixel (rpix; its render tile's first pixel: corner) of a per-pixel sorted mode (CUDA's sorted_kernel):
+// stopthepop's hierarchy ending in a queue of K over the list in its tile order (the binning's), or (K = 0) the
+// exact order by selection. Returns its evals (hier_walk's; the exact order: n).
+int sorted_walk(uint first, int n, ivec2 rpix, ivec2 corner, inout float T, inout vec3 C) {
     const int K = MODE == EVAL3D ? 0 : queue;
+    const vec2 pix = vec2(rpix) + 0.5;
     int ev = n;
     if (K > 0) {
-        Fragment q[MAX_QUEUE];
-        int qn = 0;
-        bool done = false;
-        for (int i = 0; i < n && !done; ++i) {
-            Fragment f;
-            if (!list_fragment(first, i, pix, f)) continue;
-            if (qn == K) {
-                done = blend_fragment(q[0], list_color(first, q[0]), T, C);
-                queue_pop(q, qn);
-                if (done) ev = i + 1;
-            }
-            if (!done) queue_insert(q, qn, f);
-        }
-        for (int k = 0; k < qn && !done; ++k) done = blend_fragment(q[k], list_color(first, q[k]), T, C);
+        ev = hier_walk(first, n, K, corner.x, corner.y, rpix.x, rpix.y, T, C);
     } else {
         const float inf = uintBitsToFloat(0x7f800000u);
         Fragment last = Fragment(-inf, 0.0, -1);
@@ -214,7 +216,7 @@ void main() {
         barrier();
         if (done) atomicAdd(done_count, 1);
 #if SORTED
-        if (!done) evals = sorted_walk(range.x, n, pix, T, C);
+        if (!done) evals = sorted_walk(range.x, n, rpix, tile * TILE, T, C);
 #else
         for (int start = begin; start < end; start += 256) {
             memoryBarrierShared();

@@ -8,8 +8,8 @@ maximum is the textbook closed form, and a brute-force 1D minimisation along the
   plane, no tile culling; each pixel in the order of max(t*, 0) (ties: the global order by centre depth).
 - stopthepop (r4dl/StopThePop-Rasterization): 3DGS's 2D alpha (+0.3 dilation) of the splats whose 3DGS tile
   rectangle holds the pixel, in the global order by centre depth, dropped where t* < 0 (scales clamped to >= 1e-3
-  for t*); a queue of K fragments sorted by t* (full: the nearest is blended before the next goes in); K = 0 the
-  exact per-pixel sort.
+  for t*); K = 0 the exact per-pixel sort; K > 0 a queue of K fragments alone, sorted by t* (full: the nearest is
+  blended before the next valid one goes in; the published hierarchy before it: reference_stopthepop.py).
 Both composite as 3DGS: stop where T (1 - alpha) < 1e-4.
 """
 

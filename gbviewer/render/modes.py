@@ -20,7 +20,7 @@ class Mode(enum.IntEnum):
     STOCHASTIC = 6  # stochastic transparency (StochasticSplats ST): fragments kept with probability alpha, opaque
     STOCHASTIC_POPFREE = 7  # its pop-free variant (ST-popfree): depth-tested on each splat's per-pixel depth plane
     EVAL3D = 8  # 3DGUT: each splat at its maximum along the pixel's ray, per pixel in that depth's order
-    STOPTHEPOP = 9  # StopThePop: 3DGS's 2D splats, per pixel by depth along the ray through a K-entry queue
+    STOPTHEPOP = 9  # StopThePop: 3DGS's 2D splats by depth along the ray: tile, 4x4, 2x2 and K-entry pixel queues
 
     @classmethod
     def parse(cls, value: "str | int | Mode") -> "Mode":

@@ -55,8 +55,9 @@ class RenderSettings:
     preset: the viewer preset the settings came from ('preset:NAME', gbviewer.render.presets), or "".
     seed, frame (stochastic modes; other modes refuse anything but 0): the keep decisions' hash seed and frame index
         (uint32; same seed and frame, same bits; another frame, another sample).
-    queue (stopthepop): the per-pixel queue length K (0..64; 0: unbounded, the exact per-pixel sort; default 4, as
-        published), spelled 'stopthepop:K' (and 'stopthepop:K:N' with N x N supersampling).
+    queue (stopthepop): the per-pixel queue length K after StopThePop's tile, 4x4 and 2x2 stages (0..64; 0:
+        unbounded, the exact per-pixel sort without the hierarchy; default 4, as published), spelled 'stopthepop:K'
+        (and 'stopthepop:K:N' with N x N supersampling).
     precision (gaussian_blending): "exact", or "fast" (spec suffix '+fast'): the fast kernel stays within 1/1024 of
         the exact one per channel and in alpha (tests/render/test_gb_fast.py); the library renders exact unless asked,
         the viewer's panes fast. Other modes have one kernel: their precision is always "exact".

@@ -207,8 +207,9 @@ void group_sorted(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     static_assert(L::N == 1, "the per-pixel sorted modes have no vector lanes");
     AlphaState<Lanes1> st = {1.0f, {0.0f, 0.0f, 0.0f}};
     const int queue = job.mode == EVAL3D ? 0 : job.queue;
-    out.evals[0] = blend_sorted_pixel<Tr>(job.list, job.rays, job.n, job.mode, queue, L::reduce_max(g.px),
-                                          L::reduce_max(g.py), st);
+    const int x = (int)floorf(L::reduce_max(g.px)), y = (int)floorf(L::reduce_max(g.py));
+    out.evals[0] = blend_sorted_pixel<Tr>(job.list, job.rays, job.n, job.mode, queue, job.tile_x0, job.tile_y0, x,
+                                          y, job.hier, st);
     for (int c = 0; c < 3; ++c) out.C[c][0] = st.C[c];
     out.T[0] = st.T;
 }

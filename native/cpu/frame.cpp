@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "blend_bands.h"
+#include "blend_sorted.h"
 #include "frame.h"
 #include "lod.h"
 #include "plane.h"
@@ -111,19 +112,27 @@ void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTile
         local[j] = b.splats[id];
         bounds[j] = b.boxes[id];
     }
+    TileJob job = shared;
+    job.x0 = reg.x0 + (t % gx) * TILE;  // the whole image's pixel coordinates
+    job.y0 = reg.y0 + (t / gx) * TILE;
+    job.tile_x0 = job.x0;
+    job.tile_y0 = job.y0;
     const bool sorted = per_pixel_sorted(f.mode);
     if (sorted) {
         rays.resize(count);
         for (int64_t j = 0; j < count; ++j) rays[j] = b.rays[b.ids[begin + j]];
+        if (f.mode == STOPTHEPOP && f.queue > 0) {
+            tile_depth_order(*f.cam, job.x0, job.y0, count, local.data(), bounds.data(), rays.data(), nullptr);
+            thread_local tile::HierCache hier;
+            hier.reset();
+            job.hier = &hier;
+        }
         blend_tile = blend_tile_scalar;  // one pixel at a time on every path (blend_sorted.h)
     }
-    TileJob job = shared;
     job.list = local.data();
     job.bounds = bounds.data();
     job.rays = sorted ? rays.data() : nullptr;
     job.n = (int)count;
-    job.x0 = reg.x0 + (t % gx) * TILE;  // the whole image's pixel coordinates
-    job.y0 = reg.y0 + (t / gx) * TILE;
     job.x1 = std::min(job.x0 + TILE, reg.x1);
     job.y1 = std::min(job.y0 + TILE, reg.y1);
     // gaussian_blending's group box starts 1.001 px about the row and moves with its windows: a wider band (2 px)
@@ -344,7 +353,8 @@ PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const
     const CameraParams& cam = stage.key.cam;
     FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.ids.data(),
                         per_pixel_sorted(mode) ? buf.rays.data() : nullptr, cam.width, cam.height, mode, oit, queue,
-                        {bg[0], bg[1], bg[2]}, frame_key, buf.planes.empty() ? nullptr : buf.planes.data(), fast};
+                        {bg[0], bg[1], bg[2]}, frame_key, buf.planes.empty() ? nullptr : buf.planes.data(), fast,
+                        &cam};
     FlushDenormals ftz;
     return trace_pixel(lists, x, y, N);
 }

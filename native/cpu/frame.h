@@ -217,6 +217,10 @@ void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<
 // as the stage has it (no 2D filter), the tiles its 3D footprint (ray_footprint) touches. stopthepop drops a valid
 // splat whose ray data is degenerate.
 void finish_rays(const SceneView& sc, const Stage& stage, Mode mode, FrameBuffers& buf, FrameRun& run);
+// rays.cpp: stopthepop:K's stage 1 (gbv/resort.h): the tile list of `count` entries (and their boxes, rays and, when
+// not null, splat ids) of the tile whose first pixel is (tx0, ty0) in the order of tile_depth_key, stable.
+void tile_depth_order(const CameraParams& cam, int tx0, int ty0, int64_t count, Splat2D* list, SplatBounds* bounds,
+                      RaySplat* rays, uint32_t* ids);
 
 // frame.cpp: the stage of `key` into `stage` (every splat, or the level-of-detail cut's; stops early once cancelled,
 // leaving it not ready).

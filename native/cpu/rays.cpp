@@ -1,7 +1,12 @@
 // The per-pixel sorted modes' finish (frame.h: finish_rays), one splat after another through gbv/ray3d.h's
 // finish_ray_splat.
+#include <algorithm>
+#include <type_traits>
+#include <vector>
+
 #include "frame.h"
 #include "gbv/ray3d.h"
+#include "gbv/resort.h"
 
 namespace gbv::cpu {
 
@@ -35,6 +40,25 @@ void finish_rays(const SceneView& sc, const Stage& stage, Mode mode, FrameBuffer
             if (!ok) buf.rects[i] = {0, 0, 0, 0};
         }
     }
+}
+
+void tile_depth_order(const CameraParams& cam, int tx0, int ty0, int64_t count, Splat2D* list, SplatBounds* bounds,
+                      RaySplat* rays, uint32_t* ids) {
+    thread_local std::vector<std::pair<float, int64_t>> keyed;
+    keyed.resize(count);
+    for (int64_t j = 0; j < count; ++j)
+        keyed[j] = {tile_depth_key(list[j], rays[j], tx0 + 0.5f, ty0 + 0.5f, cam.cx, cam.cy, cam.fx, cam.fy), j};
+    std::stable_sort(keyed.begin(), keyed.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    const auto permute = [&](auto* a) {
+        if (!a) return;
+        thread_local std::vector<std::remove_pointer_t<decltype(a)>> tmp;
+        tmp.assign(a, a + count);
+        for (int64_t j = 0; j < count; ++j) a[j] = tmp[keyed[j].second];
+    };
+    permute(list);
+    permute(bounds);
+    permute(rays);
+    permute(ids);
 }
 
 }  // namespace gbv::cpu

@@ -14,6 +14,10 @@
 
 namespace gbv {
 
+namespace tile {
+struct HierCache;
+}
+
 // Box of pixel centres a splat can change in its mode: outside it the splat is skipped without evaluating it (an
 // exact test, with margin for float rounding; see splat_bounds in frame.cpp). Infinite where no such box is known.
 struct SplatBounds {
@@ -69,6 +73,8 @@ struct TileJob {
     Mode mode;
     OitParams oit;
     int queue;  // stopthepop's K (0: unbounded)
+    int tile_x0, tile_y0;  // the tile's first pixel (stopthepop's sub-tiles), whatever rectangle is blended
+    tile::HierCache* hier;  // stopthepop:K: the tile's 2x2 streams (blend_sorted.h), or null: each pixel walks alone
     float bg[3];
     float *rgb, *alpha, *window;  // image planes, at the rectangle's pixel (x0, y0); window may be null
     int32_t* evals;

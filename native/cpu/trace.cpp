@@ -4,6 +4,7 @@
 
 #include <nanobind/ndarray.h>
 
+#include "frame.h"
 #include "trace_dict.h"
 
 #include "../bindings/nb_common.h"
@@ -98,9 +99,12 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
                 list[j] = f.splats[ids[j]];
                 bounds[j] = f.boxes[ids[j]];
             }
+            const int tx0 = hx / TILE * TILE, ty0 = hy / TILE * TILE;
             if (f.rays) {
                 rays.resize(count);
                 for (int64_t j = 0; j < count; ++j) rays[j] = f.rays[ids[j]];
+                if (f.mode == STOPTHEPOP && f.queue > 0)
+                    cpu::tile_depth_order(*f.cam, tx0, ty0, count, list.data(), bounds.data(), rays.data(), ids.data());
             }
             const size_t q = (size_t)sy * N + sx;
             TileJob job = {};
@@ -118,6 +122,8 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
             job.frame_key = f.frame_key;
             job.planes = f.planes;
             job.queue = f.queue;
+            job.tile_x0 = tx0;
+            job.tile_y0 = ty0;
             job.fast = f.fast;
             for (int c = 0; c < 3; ++c) job.bg[c] = f.bg[c];
             job.rgb = out.samples.rgb.data() + q * 3;

@@ -27,6 +27,7 @@ struct FrameLists {
     uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
     const DepthPlane* planes;  // stochastic_popfree: per splat, or null
     bool fast;                 // gaussian_blending's fast precision
+    const CameraParams* cam;   // stopthepop:K: the camera of the tile stage's key (tile_depth_order)
 };
 
 // One list entry at one sub-sample: the splat as the blend saw it and what it did there. alpha and weight are 0

@@ -6,6 +6,7 @@
 #include <cub/cub.cuh>
 
 #include "gbv/order.h"
+#include "gbv/resort.h"
 #include "state.h"
 
 namespace gbv::cuda {
@@ -89,6 +90,21 @@ __global__ void duplicate_kernel(int64_t n, const Item* items, const TileRect* r
             values[off] = (uint32_t)i;
             ++off;
         }
+}
+
+// stopthepop:K's tile stage (gbv/resort.h): the lists sorted by (tile, centre depth) in (keys, values) get the key
+// (tile, tile_depth_key) in (keys_to, values_to); a stable sort of those keeps centre-depth order among equal keys, as
+// the CPU's tile_depth_order.
+__global__ void tile_depth_keys_kernel(int64_t total, const uint64_t* keys, const uint32_t* values,
+                                       const Splat2D* splats, const RaySplat* rays, CameraParams cam, int gx,
+                                       uint64_t* keys_to, uint32_t* values_to) {
+    const int64_t j = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
+    if (j >= total) return;
+    const uint32_t tile = (uint32_t)(keys[j] >> 32), s = values[j];
+    const float x0 = (float)((int)tile % gx * TILE) + 0.5f, y0 = (float)((int)tile / gx * TILE) + 0.5f;
+    const float key = tile_depth_key(splats[s], rays[s], x0, y0, cam.cx, cam.cy, cam.fx, cam.fy);
+    keys_to[j] = ((uint64_t)tile << 32) | float_bits(key);
+    values_to[j] = s;
 }
 
 __global__ void ranges_kernel(int64_t total, const uint64_t* keys, uint2* ranges) {
@@ -248,7 +264,7 @@ void State::run(const RenderArgs& a, RenderResult& res, bool cut) {
     if (a.mode == DUPLEX) {
         bin_duplex(cam, gx, gy, num_tiles, bits, total, sort_length);
     } else {
-        bin_splats(drawn, a.mode, gx, bits, total);
+        bin_splats(drawn, a.mode, a.queue, cam, gx, bits, total);
         sort_length = a.mode == WSR ? 0 : total;
     }
     CUDA_CHECK(cudaEventRecord(ev[2].e));
@@ -274,7 +290,8 @@ void State::run(const RenderArgs& a, RenderResult& res, bool cut) {
 }
 
 // One wait: the number of pairs, to size the key buffers.
-void State::bin_splats(int64_t count, Mode mode, int gx, int bits, uint64_t& total) {
+void State::bin_splats(int64_t count, Mode mode, int queue, const CameraParams& cam, int gx, int bits,
+                       uint64_t& total) {
     total = 0;
     if (count == 0) return;
     inclusive_sum(touched.ptr, offsets.ptr, (int)count, "cub::DeviceScan::InclusiveSum (tile-splat pairs)");
@@ -284,6 +301,13 @@ void State::bin_splats(int64_t count, Mode mode, int gx, int bits, uint64_t& tot
     if (total >= (1ull << 31)) throw std::runtime_error("CUDA renderer: more than 2^31 tile-splat pairs");
     if (total == 0) return;
     tile_lists(count, splats.ptr, rects.ptr, touched.ptr, offsets.ptr, gx, bits, mode != WSR, total, ranges.ptr);
+    if (mode == STOPTHEPOP && queue > 0) {
+        tile_depth_keys_kernel<<<blocks((int64_t)total), THREADS>>>((int64_t)total, keys_out.ptr, values_out.ptr,
+                                                                    splats.ptr, rays.ptr, cam, gx, keys_in.ptr,
+                                                                    values_in.ptr);
+        launched("tile_depth_keys_kernel");
+        sort_pairs((int64_t)total, 0, 32 + bits);
+    }
 }
 
 }  // namespace gbv::cuda

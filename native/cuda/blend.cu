@@ -71,10 +71,20 @@ __global__ void __launch_bounds__(BLOCK)
     }
 }
 
-// The per-pixel sorted modes (eval3d, stopthepop: gbv/resort.h), one thread per pixel of a 16x16 block: the tile's
-// fragments in list order through the queue of K = `queue` in registers and local memory; K = 0 (and eval3d): the
-// exact order by selection, each pass taking the nearest fragment after the last one blended (depth, then list
-// position) until the pixel stops. evals as the CPU's: the list position where it stopped (+1), else the list length.
+// The list of a tile as gbv/resort.h's walk reads it: entry i is splat values[first + i].
+struct DeviceListSource {
+    const uint32_t* values;
+    const Splat2D* splats;
+    const RaySplat* rays;
+    uint32_t first;
+    __device__ const Splat2D& splat(int i) const { return splats[values[first + i]]; }
+    __device__ const RaySplat& ray(int i) const { return rays[values[first + i]]; }
+};
+
+// The per-pixel sorted modes (eval3d, stopthepop: gbv/resort.h), one thread per pixel of a 16x16 block: stopthepop's
+// hierarchy ending in the queue of K = `queue` (hier_walk, the list in the tile stage's order: bin_splats), in
+// registers and local memory; K = 0 (and eval3d): the exact order by selection, each pass taking the nearest fragment
+// after the last one blended (depth, then list position) until the pixel stops. evals as the CPU's.
 __global__ void __launch_bounds__(BLOCK)
     sorted_kernel(const uint2* ranges, const uint32_t* values, const Splat2D* splats, const RaySplat* rays, Mode mode,
                   int queue, int W, int H, int gx, float3 bg, OitParams oit, float* rgb, float* alpha,
@@ -95,20 +105,8 @@ __global__ void __launch_bounds__(BLOCK)
     const auto color = [&](const Fragment& f) { return splats[values[range.x + f.entry]].color; };
     int32_t ev = n;
     if (K > 0) {
-        Fragment q[MAX_QUEUE];
-        int qn = 0;
-        bool done = false;
-        for (int i = 0; i < n && !done; ++i) {
-            Fragment f;
-            if (!fragment(i, f)) continue;
-            if (qn == K) {
-                done = blend_fragment<NoTrace>(q[0], color(q[0]), st);
-                queue_pop(q, qn);
-                if (done) ev = i + 1;
-            }
-            if (!done) queue_insert(q, qn, f);
-        }
-        for (int k = 0; k < qn && !done; ++k) done = blend_fragment<NoTrace>(q[k], color(q[k]), st);
+        const DeviceListSource src = {values, splats, rays, range.x};
+        ev = hier_walk<DeviceListSource, NoTrace>(src, n, K, (tile % gx) * TILE, (tile / gx) * TILE, x, y, st);
     } else {
         Fragment last = {-INFINITY, 0.0f, -1};
         for (bool done = false; !done;) {

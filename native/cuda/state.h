@@ -129,8 +129,8 @@ struct State {
     // Render into the device output buffers (o_* when supersampling, else the full-resolution ones); `cut`: the
     // uploaded level-of-detail cut in place of the scene's splats.
     void run(const RenderArgs& a, RenderResult& res, bool cut);
-    // The tile lists of the frame's `count` splats.
-    void bin_splats(int64_t count, Mode mode, int gx, int bits, uint64_t& total);
+    // The tile lists of the frame's `count` splats (stopthepop: each tile's list sorted by its tile key).
+    void bin_splats(int64_t count, Mode mode, int queue, const CameraParams& cam, int gx, int bits, uint64_t& total);
     // The sorted tile lists of `count` items (splats or cells) that touch `total` tiles: keys (tile, depth bits;
     // tile alone without by_depth) into keys_in, values (item indices) into values_in, sorted into keys_out and
     // values_out, tile ranges into `out_ranges`. ends: inclusive scan of `touched`.

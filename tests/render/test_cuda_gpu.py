@@ -164,7 +164,8 @@ def test_cuda_release_frees_the_device_memory():
     close(first, again)
 
 
-@pytest.mark.parametrize("spec", ["eval3d", "eval3d:2", "stopthepop", "stopthepop:0", "stopthepop:16:2"])
+@pytest.mark.parametrize("spec", ["eval3d", "eval3d:2", "stopthepop", "stopthepop:0", "stopthepop:1",
+                                  "stopthepop:16:2"])
 def test_cuda_sorted_modes_render_as_on_the_cpu(spec):
     """The same fragments and order rules (gbv/ray3d.h, gbv/resort.h; the exact order by selection on the GPU, by a
     stable sort on the CPU): the CPU's image up to the exp's last bits, with every awkward kind of splat."""
@@ -172,3 +173,15 @@ def test_cuda_sorted_modes_render_as_on_the_cpu(spec):
 
     scene, cam = random_view(5, n=300, W=61, H=37)
     close(gb.render(scene, cam, spec, backend="cuda"), gb.render(scene, cam, spec, backend="cpu"))
+
+
+def test_cuda_stopthepop_hierarchy_pixel_as_on_the_cpu():
+    """The pixel the published hierarchy blends out of order (test_stopthepop_hier.late_near_splat: the tile stage's
+    sort in bin_splats, the 4x4 and 2x2 queues) as on the CPU."""
+    from test_stopthepop import camera
+    from test_stopthepop_hier import late_near_splat
+
+    scene, cam = late_near_splat(), camera()
+    a, b = gb.render(scene, cam, "stopthepop", backend="cuda"), gb.render(scene, cam, "stopthepop", backend="cpu")
+    close(a, b)
+    assert np.abs(a.rgb[20, 28] - b.rgb[20, 28]).max() < 1e-4

@@ -4,12 +4,16 @@ loop cap; the cap's refusal in one line where the lists are too long (the sorted
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from glsl_helpers import awkward_scene, compare
 from helpers import front_camera
+from test_stopthepop import camera, crossing_splats
+from test_stopthepop_hier import late_near_splat
 
 import gbviewer as gb
 from gbviewer.core.errors import RenderError
+from gbviewer.render import RenderSettings
 from gbviewer.render.glsl import limits
 
 pytestmark = pytest.mark.gl
@@ -37,3 +41,15 @@ def test_loop_cap_refuses_lists_too_long_for_one_dispatch():
         limits.plan_sorted(1, 300, 65535, 0)
     with pytest.raises(RenderError, match="65535"):
         limits.plan_sorted(4, 4000, 65535, 4)
+
+
+@pytest.mark.parametrize("scene_fn, pixel", [(lambda: crossing_splats(0.002), (24, 20)), (late_near_splat, (28, 20))])
+def test_hierarchy_pixels_match_the_cpu(gl, scene_fn, pixel):
+    """stopthepop's constructed pixels (test_stopthepop_hier.py): the tile stage's sort (tile_keys.comp), the 4x4
+    and 2x2 queues and the pixel's as on the CPU, where each of them changes the pixel."""
+    scene, cam = scene_fn(), camera()
+    compare(scene, cam, "stopthepop")
+    cpu = gb.get_renderer(scene, "cpu").render(cam, RenderSettings.parse("stopthepop")).rgb
+    out = gb.get_renderer(scene, "glsl").render(cam, RenderSettings.parse("stopthepop")).rgb
+    x, y = pixel
+    assert np.abs(out[y, x] - cpu[y, x]).max() < 1e-4

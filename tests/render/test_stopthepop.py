@@ -1,8 +1,7 @@
-"""stopthepop (per-pixel order by the depth of the ray maximum through StopThePop's K-entry queue) against the float64
-references of tests/reference_ray.py: an unbounded queue is the exact per-pixel sort, the published K = 4 differs
-from it only where the published queue does (a pixel built for it), a queue of one is 3DGS's global order (scalar,
-bit for bit); the mode grammar; and popping on an orbit over a scene whose two splats swap their centre order while
-their per-pixel order does not (gbviewer.outputs.flicker)."""
+"""stopthepop (per-pixel order by the depth of the ray maximum, through StopThePop's hierarchy ending in a K-entry
+queue) against the float64 references of tests/reference_ray.py: an unbounded queue is the exact per-pixel sort;
+the mode grammar; and popping on an orbit over a scene whose two splats swap their centre order while their per-pixel
+order does not (gbviewer.outputs.flicker). The hierarchy against its own reference: test_stopthepop_hier.py."""
 
 from __future__ import annotations
 
@@ -20,6 +19,7 @@ from gbviewer.render.view_filter import ViewFilter
 from gbviewer.model.scene import SH_C0
 from helpers import random_view
 from reference_ray import render_sorted
+from reference_stopthepop import render_hierarchical
 from test_simd import ALL_PATHS
 from test_simd import render as render_on
 
@@ -37,13 +37,13 @@ def random_scene(seed: int = 7, n: int = 40) -> gb.Scene:
                                 rng.uniform(0.3, 1.0, n), rng.normal(0, 0.8, (n, 1, 3)))
 
 
-def crossing_splats() -> gb.Scene:
-    """Five long splats tilted 45 degrees about y whose axes all cross the ray of pixel (24, 20): in the order of
-    their centres' depths (2.0 .. 2.4) their maxima along that ray lie at depths 3.0, 2.9, 2.8, 2.7 and 1.9, so a
-    queue of four blends the fifth after the fourth (a fragment nearer than one already blended)."""
+def crossing_splats(y: float = 0.0) -> gb.Scene:
+    """Five long splats tilted 45 degrees about y whose axes all cross the ray of pixel (24, 20) (at height y): in the
+    order of their centres' depths (2.0 .. 2.4) their maxima along that ray lie at depths 3.0, 2.9, 2.8, 2.7 and 1.9,
+    so a queue of four alone blends the fifth after the fourth (a fragment nearer than one already blended)."""
     zc = np.array([2.0, 2.1, 2.2, 2.3, 2.4])
     tstar = np.array([3.0, 2.9, 2.8, 2.7, 1.9])
-    means = np.stack([zc - tstar, np.zeros(5), zc], 1)  # axis (1, 0, 1) / sqrt 2 meets x = 0 at z = zc - x
+    means = np.stack([zc - tstar, np.full(5, y), zc], 1)  # axis (1, 0, 1) / sqrt 2 meets x = 0 at z = zc - x
     quat = (math.cos(math.pi / 8), 0.0, math.sin(math.pi / 8), 0.0)  # 45 degrees about y: x axis -> (1, 0, -1)
     quats = np.tile(quat, (5, 1))
     quats[:, 2] *= -1  # x axis -> (1, 0, 1) / sqrt 2
@@ -62,24 +62,6 @@ def test_unbounded_queue_is_the_exact_per_pixel_sort():
     # a queue longer than any pixel's fragments (40 splats) is the same sort, bit for bit
     assert np.array_equal(gb.render(scene, cam, "stopthepop:64").rgb, frame.rgb)
     assert np.abs(render_sorted(scene, cam, "stopthepop", queue=1)[0] - rgb).max() > 0.05  # the order matters here
-
-
-def test_published_queue_differs_only_where_the_published_method_does():
-    scene, cam = crossing_splats(), camera()
-    exact = render_sorted(scene, cam, "stopthepop", queue=0)[0]
-    queued = render_sorted(scene, cam, "stopthepop", queue=4)[0]
-    frame = gb.render(scene, cam, "stopthepop")
-    np.testing.assert_allclose(frame.rgb, queued, atol=1e-4)  # the published queue, everywhere
-    np.testing.assert_allclose(gb.render(scene, cam, "stopthepop:0").rgb, exact, atol=1e-4)
-    assert np.abs(frame.rgb[20, 24] - exact[20, 24]).max() > 0.05  # the constructed pixel: out of order
-    assert np.abs(gb.render(scene, cam, "stopthepop:5").rgb[20, 24] - exact[20, 24]).max() < 1e-4
-
-
-def test_queue_of_one_is_the_global_order():
-    """On the scalar SIMD path (the vector paths' exp differs from libm's by an ulp in the scalar mode)."""
-    scene, cam = random_scene(3), camera()
-    assert np.array_equal(render_on("scalar", scene, cam, "stopthepop:1").rgb, render_on("scalar", scene, cam,
-                                                                                          "scalar").rgb)
 
 
 @pytest.mark.parametrize("path", ALL_PATHS[1:])
@@ -148,11 +130,10 @@ def test_stopthepop_does_not_pop_on_an_orbit():
     assert scalar.flicker > 4 * stp.flicker, (scalar.flicker, stp.flicker)
 
 
-@pytest.mark.parametrize("spec, order", [("stopthepop", [3, 4, 2, 1, 0]), ("stopthepop:0", [4, 3, 2, 1, 0]),
-                                         ("eval3d", [4, 3, 2, 1, 0])])
+@pytest.mark.parametrize("spec, order", [("stopthepop:0", [4, 3, 2, 1, 0]), ("eval3d", [4, 3, 2, 1, 0])])
 def test_trace_lists_the_pixel_blend_order(spec, order):
-    """The pixel trace walks the constructed pixel in its blend order (the queue's, or the exact sort's) and
-    gives the rendered colour."""
+    """The pixel trace walks the constructed pixel in its blend order (the exact sort's; the hierarchy's:
+    test_stopthepop_hier.py) and gives the rendered colour."""
     scene, cam = crossing_splats(), camera()
     renderer = create_renderer("cpu")
     renderer.upload(scene)
@@ -162,11 +143,14 @@ def test_trace_lists_the_pixel_blend_order(spec, order):
     np.testing.assert_array_equal(tr.color, renderer.render(cam, settings).rgb[20, 24])
 
 
-@pytest.mark.parametrize("spec, mode, queue", [("eval3d:2", "eval3d", None), ("stopthepop:4:2", "stopthepop", 4)])
-def test_supersampled_matches_the_reference(spec, mode, queue):
-    """N x N samples: the reference's sorted render at N times the resolution, box-averaged."""
+@pytest.mark.parametrize("spec", ["eval3d:2", "stopthepop:4:2"])
+def test_supersampled_matches_the_reference(spec):
+    """N x N samples: the reference's render at N times the resolution, box-averaged."""
     scene, cam = random_scene(9, 30), gb.Camera(24, 20, 20.0, 20.0, 12.25, 10.25, np.eye(3), np.zeros(3))
-    rgb, _ = render_sorted(scene, cam, mode, queue, supersample=2)
+    if spec == "eval3d:2":
+        rgb, _ = render_sorted(scene, cam, "eval3d", supersample=2)
+    else:
+        rgb, _ = render_hierarchical(scene, cam, 4, supersample=2)
     err = np.abs(gb.render(scene, cam, spec).rgb - rgb).max(axis=2)
     assert np.quantile(err, 0.99) < 1e-4 and err.max() < 5e-3
 

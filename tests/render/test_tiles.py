@@ -35,7 +35,7 @@ def cpu(bundled_scene):
     ("gaussian_blending:2", "perspective"), ("mip", "perspective"), ("analytic", "perspective"),
     ("wsr", "perspective"), ("stochastic", "perspective"), ("stochastic_popfree:2", "perspective"),
     ("scalar+lod:4", "perspective"), ("gaussian_blending:2+lod:4", "perspective"),
-    ("scalar", "orthographic"), ("gaussian_blending:4", "orthographic"),
+    ("scalar", "orthographic"), ("gaussian_blending:4", "orthographic"), ("stopthepop:4:2", "perspective"),
 ])
 def test_parts_equal_the_whole_frame_bit_for_bit(bundled_scene, cpu, spec, projection):
     cam = gb.orbit_camera(bundled_scene, 30, 20, width=W, height=H, projection=projection)

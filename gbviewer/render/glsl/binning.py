@@ -20,8 +20,10 @@ def read_totals(gpu: Gpu) -> np.ndarray:
     return np.frombuffer(gpu.buffers["totals"].read(size=gi.TOTALS_BYTES), np.uint32).astype(np.int64)
 
 
-def bin_splats(gpu: Gpu, mode: Mode, visible: int, pairs: int, dmin: int, dmax: int, num_tiles: int, gx: int):
-    """Tile lists of splats: by (tile, depth, index), or for wsr by (tile, index) with no depth sort."""
+def bin_splats(gpu: Gpu, mode: Mode, visible: int, pairs: int, dmin: int, dmax: int, num_tiles: int, gx: int,
+               tile_depth_cam: tuple | None = None):
+    """Tile lists of splats: by (tile, depth, index), or for wsr by (tile, index) with no depth sort; with
+    `tile_depth_cam` (stopthepop:K, the render resolution's fx, fy, cx, cy) then by StopThePop's tile key."""
     dkeys = [gpu.buffers[f"depth_keys{i}"] for i in (0, 1)]
     dvals = [gpu.buffers[f"depth_vals{i}"] for i in (0, 1)]
     ranges = gpu.ensure("ranges", num_tiles * RANGE_BYTES, "tile ranges")
@@ -32,9 +34,24 @@ def bin_splats(gpu: Gpu, mode: Mode, visible: int, pairs: int, dmin: int, dmax: 
         order = dvals[0]  # survivors in splat-index order: binning only
     else:
         _, order = radix_sort(gpu, dkeys[0], dvals[0], dkeys[1], dvals[1], visible, (dmax - dmin).bit_length())
-    tvals = pairs_by_tile(gpu, order, gpu.buffers["rects"], gpu.buffers["pair_counts"], visible, pairs, gx,
-                          num_tiles, ranges, "tile-splat pairs")
+    tkeys, tvals = pairs_by_tile(gpu, order, gpu.buffers["rects"], gpu.buffers["pair_counts"], visible, pairs, gx,
+                                 num_tiles, ranges, "tile-splat pairs")
+    if tile_depth_cam is not None and pairs > 0:
+        tvals = tile_depth_resort(gpu, tkeys, tvals, pairs, num_tiles, gx, tile_depth_cam)
     return tvals, ranges
+
+
+def tile_depth_resort(gpu: Gpu, tkeys, tvals, pairs: int, num_tiles: int, gx: int, cam_f: tuple):
+    """stopthepop:K's tile stage (gbv/resort.h): every tile's list, in (centre depth, index) order, stably sorted by
+    its splats' tile keys (tile_keys.comp): an LSD sort by the key, then by the tile. Returns the list buffer."""
+    dk = [gpu.ensure(f"pair_depth_keys{i}", pairs * WORD, "tile depth keys") for i in (0, 1)]
+    pos = [gpu.ensure(f"pair_positions{i}", pairs * WORD, "tile depth order") for i in (0, 1)]
+    gpu.run("tile_keys.comp", -(-pairs // WG), (gpu.buffers["splats"], gpu.buffers["rays"], tkeys, tvals, dk[0],
+            pos[0]), n=pairs, grid_x=gx, cam_f=cam_f)
+    _, order = radix_sort(gpu, dk[0], pos[0], dk[1], pos[1], pairs, 32)
+    gpu.run("gather_pairs.comp", -(-pairs // WG), (order, tkeys, tvals, dk[0], dk[1]), n=pairs)
+    _, out = radix_sort(gpu, dk[0], dk[1], tkeys, tvals, pairs, (num_tiles - 1).bit_length())
+    return out
 
 
 def bin_duplex(gpu: Gpu, cells: Cells, cam_uniforms: dict, num_tiles: int):
@@ -67,7 +84,7 @@ def bin_duplex(gpu: Gpu, cells: Cells, cam_uniforms: dict, num_tiles: int):
     if ncells > 0 and cell_pairs > 0:
         _, order = radix_sort(gpu, ckeys[0], cvals[0], ckeys[1], cvals[1], ncells, (cmax - cmin).bit_length())
         counts = gpu.ensure("cell_pair_counts", ncells * WORD, "cell tile counts")
-        tvals = pairs_by_tile(gpu, order, cell_rects, counts, ncells, cell_pairs, gx, num_tiles, cell_ranges,
+        _, tvals = pairs_by_tile(gpu, order, cell_rects, counts, ncells, cell_pairs, gx, num_tiles, cell_ranges,
                               "tile-cell pairs")
         offs = gpu.ensure("expand_offsets", cell_pairs * WORD, "expanded list offsets")
         groups = -(-cell_pairs // WG)

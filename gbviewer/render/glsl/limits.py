@@ -64,11 +64,12 @@ def plan_blend(supersample: int, longest: int, limit: int | None) -> list[tuple[
 
 def plan_sorted(supersample: int, longest: int, limit: int | None, queue: int) -> list[tuple[int, int, int, int]]:
     """The one blend dispatch of a per-pixel sorted mode (its queue is not carried between dispatches), when its loops
-    fit under `limit`: per render tile, a queue of K > 0 costs up to K + 2 iterations per splat (the insertion's
-    shifts) and K at the end, the exact order (K = 0) a pass over the list per blended splat."""
+    fit under `limit`: per render tile, stopthepop's hierarchy with a queue of K > 0 (resort.glsl: hier_walk) costs up
+    to K + 80 iterations per splat (the 4x4 queue's insertion shifts and drops, the 2x2 merge, the pixel queue's
+    shifts) and 2 K + 160 at the end, the exact order (K = 0) a pass over the list per blended splat."""
     tiles = supersample * supersample
     if limit is not None:
-        per_tile = longest * (queue + 2) + queue + 8 if queue > 0 else (longest + 1) * (longest + 2) + 8
+        per_tile = longest * (queue + 80) + 2 * queue + 160 if queue > 0 else (longest + 1) * (longest + 2) + 8
         if tiles * per_tile + 2 * tiles + 1024 > limit:
             raise RenderError(f"glsl backend: a per-pixel sorted frame with tile lists of {longest} splats needs up to "
                               f"{tiles * per_tile} loop iterations per pixel, more than this driver allows ({limit}); "

@@ -318,7 +318,9 @@ class GlslRenderer(Renderer):
             tvals, ranges, sort_length, pairs, counts["cells_visible"] = bin_duplex(gpu, prep.cells, cam_uniforms,
                                                                                     num_tiles)
         else:
-            tvals, ranges = bin_splats(gpu, mode, visible, pairs, dmin, dmax, num_tiles, gx)
+            resort = mode == Mode.STOPTHEPOP and settings.queue > 0
+            tvals, ranges = bin_splats(gpu, mode, visible, pairs, dmin, dmax, num_tiles, gx,
+                                       cam_uniforms["cam_f"] if resort else None)
             sort_length = 0 if mode == Mode.WSR else pairs
         queue = (0 if mode == Mode.EVAL3D else settings.queue) if mode in PER_PIXEL_SORTED else None
         plan, longest = blend_plan(gpu, N, ranges, num_tiles, pairs, queue)

@@ -49,8 +49,8 @@ def fill(gpu: Gpu, buf, n: int, value: int) -> None:
 
 def pairs_by_tile(gpu: Gpu, order, rects, counts, n: int, pairs: int, gx: int, num_tiles: int, ranges, what: str):
     """One (tile, item) pair for every tile each of the n ordered items touches (`rects`), stably radix-sorted by
-    tile, so every tile keeps the items' order; writes each tile's [start, end) into `ranges` and returns the items
-    in tile order."""
+    tile, so every tile keeps the items' order; writes each tile's [start, end) into `ranges` and returns the pairs'
+    tiles and items in tile order."""
     keys0, vals0, keys1, vals1 = (gpu.ensure(f"tile_{k}{i}", pairs * gi.WORD_BYTES, what) for i in (0, 1)
                                   for k in ("keys", "vals"))
     gpu.run("gather_counts.comp", -(-n // WG), (order, rects, counts), n=n)
@@ -59,4 +59,4 @@ def pairs_by_tile(gpu: Gpu, order, rects, counts, n: int, pairs: int, gx: int, n
             grid_x=gx)
     tkeys, tvals = radix_sort(gpu, keys0, vals0, keys1, vals1, pairs, (num_tiles - 1).bit_length())
     gpu.run("tile_ranges.comp", -(-pairs // WG), (tkeys, ranges), n=pairs)
-    return tvals
+    return tkeys, tvals

@@ -65,7 +65,7 @@ constexpr float DUPLEX_CELL_SIGMAS = 2.0f;     // cell radius ceil(2 sqrt(lambda
 constexpr float DUPLEX_T_STOP = 0.01f;         // CUMMULT_THRESHOLD: cell-level early termination (§8.1)
 constexpr float TWO_PI = 6.283185307179586f;
 // StopThePop's published per-pixel queue length (SortQueueSizes.per_pixel = 4; tile_4x4 = 64, tile_2x2 = 8:
-// r4dl/StopThePop-Rasterization diff_gaussian_rasterization/__init__.py).
+// r4dl/StopThePop-Rasterization diff_gaussian_rasterization/__init__.py; the sub-tile queues: resort.h).
 constexpr int STOPTHEPOP_QUEUE = 4;
 constexpr int MAX_QUEUE = 64;  // the longest per-pixel queue accepted (0: unbounded, the exact per-pixel sort)
 
