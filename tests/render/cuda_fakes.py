@@ -45,13 +45,13 @@ class FakeNative:
     def upload_cells(self, *args):
         self._call("upload_cells")
 
-    def render(self, *args, view_filter=None, seed=0, frame=0):
+    def render(self, *args, view_filter=None, seed=0, frame=0, fast=False):
         self._call("render")
         w, h = args[6], args[7]
         return dict(rgb=np.zeros((h, w, 3), np.float32), alpha=np.zeros((h, w), np.float32),
                     evals=np.zeros((h, w), np.int32), **STATS)
 
-    def render_to_gl_texture(self, texture, *args, view_filter=None, seed=0, frame=0):
+    def render_to_gl_texture(self, texture, *args, view_filter=None, seed=0, frame=0, fast=False):
         self._call("render_to_gl_texture")
         return dict(STATS)
 
