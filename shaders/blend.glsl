@@ -193,20 +193,19 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C, bool
     const SideMoments mv_ = window_side_moments(cv, hv, fast);
     const float i0u = s.sigma1 * mu_.I0, i0v = s.sigma2 * mv_.I0;
     const float inv_area = 1.0 / (lu * lv);
-    float o = s.opacity;
-    if (fast) {  // the series sides' factors e(c), in one exp
+    if (fast) {  // the series sides' factors e(c) (window_side_moments), in one exp: blend.h's o, in s.opacity
         const float q =
             (hu <= GB_SERIES_MAX_HALF_WIDTH ? cu * cu : 0.0) + (hv <= GB_SERIES_MAX_HALF_WIDTH ? cv * cv : 0.0);
-        o = o * expf(-0.5 * q);
+        s.opacity = s.opacity * expf(-0.5 * q);
     }
-    const float alpha = minf(o * i0u * i0v * inv_area, MAX_ALPHA);
+    const float alpha = minf(s.opacity * i0u * i0v * inv_area, MAX_ALPHA);
     if (alpha < MIN_ALPHA_GB) return false;
     const float weight = win.T * alpha;
     C[0] += s.color[0] * weight;
     C[1] += s.color[1] * weight;
     C[2] += s.color[2] * weight;
 
-    const float k = win.T * inv_area * o;
+    const float k = win.T * inv_area * s.opacity;
     const float m0 = win.T - weight;
     const float m1u = -(k * (s.sigma1 * s.sigma1 * mu_.J1) * i0v), m1v = -(k * i0u * (s.sigma2 * s.sigma2 * mv_.J1));
     const float m2u = win.T * lu * lu * (1.0 / 12.0) - k * (s.sigma1 * s.sigma1 * s.sigma1 * mu_.J2) * i0v;
