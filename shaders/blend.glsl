@@ -193,7 +193,9 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C, bool
     const SideMoments mv_ = window_side_moments(cv, hv, fast);
     const float i0u = s.sigma1 * mu_.I0, i0v = s.sigma2 * mv_.I0;
     const float inv_area = 1.0 / (lu * lv);
-    if (fast) {  // the series sides' factors e(c) (window_side_moments), in one exp: blend.h's o, in s.opacity
+    // fast: the series sides' factors e(c) (window_side_moments) in one exp, blend.h's o, kept in the copy s.opacity:
+    // naming o changes how Mesa compiles the exact variant's products, whose frames must stay bit for bit
+    if (fast) {
         const float q =
             (hu <= GB_SERIES_MAX_HALF_WIDTH ? cu * cu : 0.0) + (hv <= GB_SERIES_MAX_HALF_WIDTH ? cv * cv : 0.0);
         s.opacity = s.opacity * expf(-0.5 * q);
