@@ -12,13 +12,13 @@ import textwrap
 
 import numpy as np
 import pytest
+from helpers import front_camera, random_scene, run_threads, shared_scene
+from hypothesis import HealthCheck, given, settings
+from test_gb_fast import FAST, GENERATED, RATES, check_bound, check_generated
 
 import gbviewer as gb
 from gbviewer.model.cells import Cells, build_cells
 from gbviewer.render import CudaRenderer
-from helpers import front_camera, random_scene, run_threads, shared_scene
-from hypothesis import HealthCheck, given, settings
-from test_gb_fast import FAST, GENERATED, RATES, check_bound, check_generated
 
 CUDA_OK, CUDA_WHY = CudaRenderer.available()
 pytestmark = pytest.mark.skipif(not CUDA_OK, reason=f"no CUDA runtime here: {CUDA_WHY}")

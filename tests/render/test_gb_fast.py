@@ -95,8 +95,8 @@ def _splats(n: int, xy: np.ndarray, depth: np.ndarray, log_scales: np.ndarray, o
 
 
 # generated_scene's arguments and the sampling rate: sizes from sub-pixel to covering the image
-GENERATED = dict(n=st.integers(1, 60), seed=st.integers(0, 2**31 - 1), log_scale=st.floats(-5.5, -0.5),
-                 rate=st.sampled_from((8.0, 2.0, 1.0, 0.5, 1 / 8)), layered=st.booleans())
+GENERATED = {"n": st.integers(1, 60), "seed": st.integers(0, 2**31 - 1), "log_scale": st.floats(-5.5, -0.5),
+             "rate": st.sampled_from((8.0, 2.0, 1.0, 0.5, 1 / 8)), "layered": st.booleans()}
 
 
 def check_generated(n: int, seed: int, log_scale: float, rate: float, layered: bool, backend: str = "cpu") -> None:

@@ -10,7 +10,15 @@ import pytest
 from glsl_helpers import awkward_scene, compare, gl  # noqa: F401 - fixture
 from helpers import front_camera, shared_scene
 from hypothesis import HealthCheck, given, settings
-from test_gb_fast import EXACT, FAST, GENERATED, RATES, SCENES, check_bound, check_generated
+from test_gb_fast import (
+    EXACT,
+    FAST,
+    GENERATED,
+    RATES,
+    SCENES,
+    check_bound,
+    check_generated,
+)
 
 import gbviewer as gb
 from gbviewer.render import create_renderer
