@@ -11,9 +11,9 @@ from test_lod_previews import FakeWorker, opened
 from test_stochastic_panes import FakeApp
 
 import gbviewer as gb
-from gbviewer.app.overlays import pane_label
+from gbviewer.app.overlays.labels import pane_label
 from gbviewer.app.panes import PaneRenders
-from gbviewer.app.worker import RenderResult
+from gbviewer.app.threads.worker import RenderResult
 from gbviewer.render import BACKENDS
 from gbviewer.render.glsl import GlslRenderer
 from gbviewer.render.glsl.context import standalone_context

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from glsl_helpers import awkward_scene, compare, gl  # noqa: F401 - fixture
+from glsl_helpers import awkward_scene, compare
 from helpers import front_camera, shared_scene
 from hypothesis import HealthCheck, given, settings
 from test_gb_fast import (
