@@ -66,13 +66,13 @@ from .limits import blend_plan
 from .sort import SCAN_BLOCK, scan
 
 NO_OIT = gi.oit_uniform(0.0, 0.0, 1.0, False)  # the shaders' oit uniform outside wsr and duplex
+WORD, VEC4 = gi.WORD_BYTES, gi.VEC4_BYTES
 
 
 def blend_defines(mode: Mode, supersample: int, precision: str = "exact") -> dict[str, int]:
     """The defines of blend.comp's variant for a frame (its header lists them); precision as RenderSettings'."""
     fast = {"GB_FAST": 1} if precision == "fast" and mode == Mode.GAUSSIAN_BLENDING else {}
     return {f"BLEND_MODE_{mode.name}": 1, "SUPERSAMPLED": int(supersample > 1), **fast}
-WORD, VEC4 = gi.WORD_BYTES, gi.VEC4_BYTES
 
 
 class GlslRenderer(Renderer):
