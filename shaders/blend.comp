@@ -12,7 +12,8 @@
 // the image.
 //
 // Compiled once per mode and sampling: the driver defines BLEND_MODE_<MODE> (SCALAR, MIP, ANALYTIC,
-// GAUSSIAN_BLENDING, WSR, DUPLEX, STOCHASTIC, STOCHASTIC_POPFREE, EVAL3D or STOPTHEPOP) and SUPERSAMPLED (0 or 1).
+// GAUSSIAN_BLENDING, WSR, DUPLEX, STOCHASTIC, STOCHASTIC_POPFREE, EVAL3D or STOPTHEPOP) and SUPERSAMPLED (0 or 1);
+// gaussian_blending's fast precision defines GB_FAST 1 (blend.glsl: blend_gaussian's `fast`).
 // wsr walks index-ordered lists with no early termination; duplex walks cell-sorted lists, reads each splat's cell
 // from `cell_of` and uses `oit`; stochastic hashes each sample's (seed, frame, X, Y) with the splat's index
 // (stochastic.h). The per-pixel sorted modes (eval3d, stopthepop: resort.glsl) read the list directly, each pixel in
@@ -45,6 +46,11 @@ const int MODE = STOCHASTIC_POPFREE;
 const int MODE = EVAL3D;
 #elif defined(BLEND_MODE_STOPTHEPOP)
 const int MODE = STOPTHEPOP;
+#endif
+#if defined(GB_FAST) && GB_FAST
+const bool FAST = true;
+#else
+const bool FAST = false;
 #endif
 #if defined(BLEND_MODE_EVAL3D) || defined(BLEND_MODE_STOPTHEPOP)
 #define SORTED 1
@@ -239,7 +245,7 @@ void main() {
                 for (int j = 0; j < count; ++j) {
                     ++evals;
 #if defined(BLEND_MODE_GAUSSIAN_BLENDING)
-                    const bool finished = blend_gaussian(batch[j], win, C);
+                    const bool finished = blend_gaussian(batch[j], win, C, FAST);
 #elif defined(BLEND_MODE_WSR)
                     const bool finished = blend_wsr(batch[j], pix, acc_wsr);
 #elif defined(BLEND_MODE_DUPLEX)

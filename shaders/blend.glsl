@@ -110,14 +110,14 @@ float gaussian_moment0(float x, float e) {
     return SQRT_PI_2 * (x < 0.0 ? -erf_abs : erf_abs);
 }
 
-// port of gaussian.h: SideMoments, window_side_moments (one pixel: no lane mask)
+// port of gaussian.h: SideMoments, window_side_moments (one pixel: no lane mask; fast: its Fast, a constant)
 struct SideMoments {
     float I0;
     float J1;
     float J2;
 };
 
-SideMoments window_side_moments(float c, float h) {
+SideMoments window_side_moments(float c, float h, bool fast) {
     if (h > GB_SERIES_MAX_HALF_WIDTH) {
         const float a = c - h, b = c + h;
         const float ea = expf(-0.5 * a * a), eb = expf(-0.5 * b * b);
@@ -127,23 +127,29 @@ SideMoments window_side_moments(float c, float h) {
     }
     float he_prev = 1.0, he = c, p = h;  // He_{n-1}, He_n, h^n/n! at n = 1
     float s0 = 1.0, s1 = -(p * he) * (1.0 / 3.0), s2 = 1.0 / 3.0;
-    // Every term, unlike gaussian.h (which stops at 6 or 10 for narrower windows; the sums agree to ~1e-7): a loop
-    // with a data-dependent bound is not unrolled and would count towards llvmpipe's loop cap (see
-    // gbviewer/render/glsl/limits.py).
-    for (int n = 2; n <= GB_SERIES_TERMS; ++n) {
-        const float he_next = c * he - float(n - 1) * he_prev;
-        he_prev = he;
-        he = he_next;
-        p = p * h * (1.0 / float(n));
-        if (n % 2 == 0) {
-            const float b = p * he;
-            s0 = s0 + b * (1.0 / float(n + 1));
-            s2 = s2 + b * (1.0 / float(n + 3));
-        } else {
-            s1 = s1 - p * he * (1.0 / float(n + 2));
+    // The exact precision takes every term, unlike gaussian.h (which stops at 6 or 10 for narrower windows; the sums
+    // agree to ~1e-7): a loop with a data-dependent bound is not unrolled and would count towards llvmpipe's loop cap
+    // (see gbviewer/render/glsl/limits.py). The fast one stops where gaussian.h's one-lane Fast does (its sums are
+    // within its bound only, so they must match the other backends' term for term): a test in a loop of constant
+    // bound once `fast` is folded.
+    const int last = fast ? GB_FAST_SERIES_TERMS : GB_SERIES_TERMS;
+    const int terms = !fast ? GB_SERIES_TERMS : h > 0.5 ? GB_FAST_SERIES_TERMS : h > 0.25 ? 6 : 4;
+    for (int n = 2; n <= last; ++n) {
+        if (n <= terms) {
+            const float he_next = c * he - float(n - 1) * he_prev;
+            he_prev = he;
+            he = he_next;
+            p = p * h * (1.0 / float(n));
+            if (n % 2 == 0) {
+                const float b = p * he;
+                s0 = s0 + b * (1.0 / float(n + 1));
+                s2 = s2 + b * (1.0 / float(n + 3));
+            } else {
+                s1 = s1 - p * he * (1.0 / float(n + 2));
+            }
         }
     }
-    const float two_h_e = 2.0 * h * expf(-0.5 * c * c);
+    const float two_h_e = fast ? 2.0 * h : 2.0 * h * expf(-0.5 * c * c);  // fast: blend_gaussian multiplies e(c)
     return SideMoments(two_h_e * s0, two_h_e * h * s1, two_h_e * h * h * s2);
 }
 
@@ -154,8 +160,8 @@ struct TransmittanceWindow {
     vec2 wh;
 };
 
-// port of blend.h: blend_gaussian
-bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
+// port of blend.h: blend_gaussian (the one-pixel wrapper's `fast`)
+bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C, bool fast) {
     const vec2 d = win.xy - s.xy;
     const float reach = s.radius + 0.5 * (win.wh.x + win.wh.y);
     if (dot(d, d) > reach * reach) return false;
@@ -181,10 +187,19 @@ bool blend_gaussian(Splat2D s, inout TransmittanceWindow win, inout vec3 C) {
         win.T -= w;
         return win.T < T_STOP;
     }
-    const SideMoments mu_ = window_side_moments(u * s.inv_sigma1, 0.5 * lu * s.inv_sigma1);
-    const SideMoments mv_ = window_side_moments(v * s.inv_sigma2, 0.5 * lv * s.inv_sigma2);
+    const float cu = u * s.inv_sigma1, hu = 0.5 * lu * s.inv_sigma1;
+    const float cv = v * s.inv_sigma2, hv = 0.5 * lv * s.inv_sigma2;
+    const SideMoments mu_ = window_side_moments(cu, hu, fast);
+    const SideMoments mv_ = window_side_moments(cv, hv, fast);
     const float i0u = s.sigma1 * mu_.I0, i0v = s.sigma2 * mv_.I0;
     const float inv_area = 1.0 / (lu * lv);
+    // fast: the series sides' factors e(c) (window_side_moments) in one exp, blend.h's o, kept in the copy s.opacity:
+    // naming o changes how Mesa compiles the exact variant's products, whose frames must stay bit for bit
+    if (fast) {
+        const float q =
+            (hu <= GB_SERIES_MAX_HALF_WIDTH ? cu * cu : 0.0) + (hv <= GB_SERIES_MAX_HALF_WIDTH ? cv * cv : 0.0);
+        s.opacity = s.opacity * expf(-0.5 * q);
+    }
     const float alpha = minf(s.opacity * i0u * i0v * inv_area, MAX_ALPHA);
     if (alpha < MIN_ALPHA_GB) return false;
     const float weight = win.T * alpha;

@@ -34,6 +34,7 @@ const float GB_MAX_UV_DIFF = 1e6;
 const float GB_MIN_VAR = 0.001;
 const float GB_SERIES_MAX_HALF_WIDTH = 1.0;
 const int GB_SERIES_TERMS = 12;
+const int GB_FAST_SERIES_TERMS = 8;
 const float SQRT_PI_2 = 1.2533141373155003;
 const float WSR_EMPTY_SUM = 1e-4;
 const float WSR_FIXED_SCALE = 68719476736.0;

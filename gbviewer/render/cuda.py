@@ -163,7 +163,7 @@ class CudaRenderer(NativeUploads, Renderer):
             out = self._native(method, *lead, *camera_args(camera), settings.native_mode, settings.supersample,
                              settings.sh_degree, np.asarray(settings.background, np.float32), *extra,
                              *(prep.oit or ()), view_filter=settings.view_filter.native(), seed=settings.seed,
-                             frame=settings.frame, cut=prep.tree is not None)
+                             frame=settings.frame, cut=prep.tree is not None, fast=settings.precision == "fast")
             control.step(1, 1)
         if prep.tree is not None:
             out["lod_splats"] = self._cut.count

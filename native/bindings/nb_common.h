@@ -143,12 +143,13 @@ inline void set_view_filter(const char* where, RenderArgs& a, const std::optiona
 }
 
 // A render call's RenderArgs: parse_render_args' checks, then the SH degree cap, the window plane, the viewer
-// filter and the stochastic mode's seed and frame index.
+// filter, the stochastic mode's seed and frame index and gaussian_blending's precision.
 inline RenderArgs render_args(const char* where, const FArr& R, const FArr& t, float fx, float fy, float cx, float cy,
                               int width, int height, float near_plane, int projection, int mode, int supersample,
                               int sh_degree, const FArr& background, bool want_window, float sigma,
                               float weight_background, float et_grade, bool depth_correct,
-                              const std::optional<FArr>& view_filter, uint32_t seed = 0, uint32_t frame = 0) {
+                              const std::optional<FArr>& view_filter, uint32_t seed = 0, uint32_t frame = 0,
+                              bool fast = false) {
     RenderArgs a = parse_render_args(where, R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode,
                                      supersample, background, sigma, weight_background, et_grade, depth_correct);
     a.sh_degree = sh_degree;
@@ -156,6 +157,7 @@ inline RenderArgs render_args(const char* where, const FArr& R, const FArr& t, f
     set_view_filter(where, a, view_filter);
     a.seed = seed;
     a.frame = frame;
+    a.fast = fast;
     return a;
 }
 

@@ -14,7 +14,8 @@ namespace {
 
 constexpr int BLOCK = TILE * TILE;
 
-template <int M>
+// Fast: gaussian_blending at the fast precision (blend_gaussian's Fast).
+template <int M, bool Fast>
 __global__ void __launch_bounds__(BLOCK)
     render_kernel(const uint2* ranges, const uint32_t* values, const Splat2D* splats, int W, int H, int gx,
                   float3 bg, OitParams oit, uint32_t frame_key, const DepthPlane* planes, float* rgb, float* alpha, int32_t* evals,
@@ -42,7 +43,7 @@ __global__ void __launch_bounds__(BLOCK)
         for (int j = 0; j < count && !done; ++j) {
             ++ev;
             if (M == GAUSSIAN_BLENDING)
-                done = blend_gaussian(batch[j], win, C);
+                done = blend_gaussian(batch[j], win, C, Fast);
             else if (M == WSR)
                 done = blend_wsr(batch[j], pix, wsr);
             else if (M == DUPLEX)
@@ -163,11 +164,11 @@ __global__ void pack_rgba_kernel(int64_t n, const float* rgb, const float* alpha
     if (i < n) out[i] = make_float4(rgb[i * 3], rgb[i * 3 + 1], rgb[i * 3 + 2], alpha[i]);
 }
 
-template <int M>
+template <int M, bool Fast = false>
 void launch_blend(const State& s, int num_tiles, const uint32_t* values, int W, int H, int gx, float3 bg,
                   const RenderArgs& a, float* win) {
     const uint32_t frame_key = stochastic_frame_key(a.seed, a.frame);
-    render_kernel<M><<<num_tiles, dim3(TILE, TILE)>>>(s.ranges.ptr, values, s.splats.ptr, W, H, gx, bg, a.oit,
+    render_kernel<M, Fast><<<num_tiles, dim3(TILE, TILE)>>>(s.ranges.ptr, values, s.splats.ptr, W, H, gx, bg, a.oit,
                                                        frame_key, M == STOCHASTIC_POPFREE ? s.planes.ptr : nullptr,
                                                        s.rgb.ptr, s.alpha.ptr, s.evals.ptr, win);
 }
@@ -192,7 +193,12 @@ void State::blend(const RenderArgs& a, int gx, int gy, const uint32_t* tile_valu
             sorted_kernel<<<num_tiles, dim3(TILE, TILE)>>>(ranges.ptr, v, splats.ptr, rays.ptr, a.mode, a.queue, W, H,
                                                             gx, bgc, a.oit, rgb.ptr, alpha.ptr, evals.ptr);
             break;
-        case GAUSSIAN_BLENDING: launch_blend<GAUSSIAN_BLENDING>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
+        case GAUSSIAN_BLENDING:
+            if (a.fast)
+                launch_blend<GAUSSIAN_BLENDING, true>(*this, num_tiles, v, W, H, gx, bgc, a, win);
+            else
+                launch_blend<GAUSSIAN_BLENDING>(*this, num_tiles, v, W, H, gx, bgc, a, win);
+            break;
         case ANALYTIC: launch_blend<ANALYTIC>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
         case WSR: launch_blend<WSR>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
         case DUPLEX: launch_blend<DUPLEX>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;

@@ -24,10 +24,13 @@ namespace {
         nb::arg("height"), nb::arg("near_plane"), nb::arg("projection"), nb::arg("mode"), nb::arg("supersample"), \
         nb::arg("sh_degree"), nb::arg("background"), nb::arg("want_window") = false, nb::arg("sigma") = 10.0f,    \
         nb::arg("weight_background") = 1.0f, nb::arg("et_grade") = 4.0f, nb::arg("depth_correct") = false,      \
-        nb::arg("view_filter").none() = nb::none(), nb::arg("seed") = 0, nb::arg("frame") = 0
+        nb::arg("view_filter").none() = nb::none(), nb::arg("seed") = 0, nb::arg("frame") = 0,                    \
+        nb::arg("fast") = false
 
-// A render's dict with the per-camera stage's stats (stage_reused, stage_ms), as the CPU module's.
-nb::dict with_stage(nb::dict d, const cuda::RenderResult& res) {
+// A render's dict with the per-camera stage's stats (stage_reused, stage_ms) and the kernel that ran (fast), as the CPU
+// module's.
+nb::dict with_stage(nb::dict d, const cuda::RenderResult& res, const RenderArgs& a) {
+    d["fast"] = a.fast && a.mode == GAUSSIAN_BLENDING;
     d["stage_reused"] = res.stage_reused;
     d["stage_ms"] = res.stage_ms;
     return d;
@@ -54,10 +57,10 @@ NB_MODULE(_native_cuda, m) {
         [](FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height, float near_plane,
            int projection, int mode, int supersample, int sh_degree, FArr background, bool want_window, float sigma,
            float weight_background, float et_grade, bool depth_correct, std::optional<FArr> view_filter, uint32_t seed,
-           uint32_t frame) {
+           uint32_t frame, bool fast) {
             render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane, projection, mode, supersample,
                         sh_degree, background, want_window, sigma, weight_background, et_grade, depth_correct,
-                        view_filter, seed, frame);
+                        view_filter, seed, frame, fast);
         },
         GBV_RENDER_ARGS, "Renderer.render's argument checks, without a device: raises ValueError as render would.");
     m.def(
@@ -124,34 +127,35 @@ NB_MODULE(_native_cuda, m) {
              [](cuda::Renderer& r, FArr R, FArr t, float fx, float fy, float cx, float cy, int width, int height,
                 float near_plane, int projection, int mode, int supersample, int sh_degree, FArr background,
                 bool want_window, float sigma, float weight_background, float et_grade, bool depth_correct,
-                std::optional<FArr> view_filter, uint32_t seed, uint32_t frame, bool cut) {
+                std::optional<FArr> view_filter, uint32_t seed, uint32_t frame, bool fast, bool cut) {
                  const RenderArgs a = render_args("render", R, t, fx, fy, cx, cy, width, height, near_plane,
                                                   projection, mode, supersample, sh_degree, background, want_window,
                                                   sigma, weight_background, et_grade, depth_correct, view_filter,
-                                                  seed, frame);
+                                                  seed, frame, fast);
                  cuda::RenderResult res;
                  {
                      nb::gil_scoped_release release;
                      res = r.render(a, cut);
                  }
-                 return with_stage(result_dict(res, res, (size_t)a.height, (size_t)a.width), res);
+                 return with_stage(result_dict(res, res, (size_t)a.height, (size_t)a.width), res, a);
              },
              GBV_RENDER_ARGS, nb::arg("cut") = false)
         .def("render_to_gl_texture",
              [](cuda::Renderer& r, unsigned int texture, FArr R, FArr t, float fx, float fy, float cx, float cy,
                 int width, int height, float near_plane, int projection, int mode, int supersample, int sh_degree,
                 FArr background, bool want_window, float sigma, float weight_background, float et_grade,
-                bool depth_correct, std::optional<FArr> view_filter, uint32_t seed, uint32_t frame, bool cut) {
+                bool depth_correct, std::optional<FArr> view_filter, uint32_t seed, uint32_t frame, bool fast,
+                bool cut) {
                  const RenderArgs a = render_args("render_to_gl_texture", R, t, fx, fy, cx, cy, width, height,
                                                   near_plane, projection, mode, supersample, sh_degree, background,
                                                   want_window, sigma, weight_background, et_grade, depth_correct,
-                                                  view_filter, seed, frame);
+                                                  view_filter, seed, frame, fast);
                  cuda::RenderResult res;
                  {
                      nb::gil_scoped_release release;
                      res = r.render_to_gl_texture(texture, a, cut);
                  }
-                 return with_stage(stats_dict(res, res.evaluations), res);
+                 return with_stage(stats_dict(res, res.evaluations), res, a);
              },
              nb::arg("texture"), GBV_RENDER_ARGS, nb::arg("cut") = false,
              "Render into an existing GL_RGBA32F texture of the output size (its GL context, or one sharing it, "

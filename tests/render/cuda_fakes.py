@@ -52,13 +52,13 @@ class FakeNative:
         self._call("upload_cut")
         self.cut = (rows.copy(), weights.copy())
 
-    def render(self, *args, view_filter=None, seed=0, frame=0, cut=False):
+    def render(self, *args, view_filter=None, seed=0, frame=0, fast=False, cut=False):
         self._call("render cut" if cut else "render")
         w, h = args[6], args[7]
         return dict(rgb=np.zeros((h, w, 3), np.float32), alpha=np.zeros((h, w), np.float32),
                     evals=np.zeros((h, w), np.int32), **STATS)
 
-    def render_to_gl_texture(self, texture, *args, view_filter=None, seed=0, frame=0, cut=False):
+    def render_to_gl_texture(self, texture, *args, view_filter=None, seed=0, frame=0, fast=False, cut=False):
         self._call("render_to_gl_texture")
         return dict(STATS)
 

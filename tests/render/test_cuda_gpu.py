@@ -1,8 +1,8 @@
 """CUDA fixes that only a GPU can run (they skip elsewhere, saying why; bench/gpu_session.sh runs them): images
 taller than CUDA's grid rows, uploads of other scenes racing cell uploads, a large cell of splats at one depth
 (the canonical order's former quadratic case), the caller's current device left alone (and no context made on
-device 0 for a thread that never chose it), release() freeing the device memory, and the per-pixel sorted modes
-(eval3d, stopthepop) as on the CPU."""
+device 0 for a thread that never chose it), release() freeing the device memory, the per-pixel sorted modes
+(eval3d, stopthepop) as on the CPU, and gaussian_blending's fast precision (test_gb_fast.py's bound, as on the CPU)."""
 
 from __future__ import annotations
 
@@ -12,11 +12,13 @@ import textwrap
 
 import numpy as np
 import pytest
+from helpers import front_camera, random_scene, run_threads, shared_scene
+from hypothesis import HealthCheck, given, settings
+from test_gb_fast import FAST, GENERATED, RATES, check_bound, check_generated
 
 import gbviewer as gb
 from gbviewer.model.cells import Cells, build_cells
 from gbviewer.render import CudaRenderer
-from helpers import front_camera, random_scene, run_threads
 
 CUDA_OK, CUDA_WHY = CudaRenderer.available()
 pytestmark = pytest.mark.skipif(not CUDA_OK, reason=f"no CUDA runtime here: {CUDA_WHY}")
@@ -185,3 +187,24 @@ def test_cuda_stopthepop_hierarchy_pixel_as_on_the_cpu():
     a, b = gb.render(scene, cam, "stopthepop", backend="cuda"), gb.render(scene, cam, "stopthepop", backend="cpu")
     close(a, b)
     assert np.abs(a.rgb[20, 28] - b.rgb[20, 28]).max() < 1e-4
+
+
+@pytest.mark.parametrize("name", ["plant.splat", "biker.compressed.ply", "st-peter.sog"])
+def test_cuda_fast_gaussian_blending(name):
+    """render_kernel's Fast (the one-pixel blend_gaussian's): within 1/1024 of CUDA's exact frames at x8 .. x1/8, as
+    close to the CPU's fast frames as the exact ones are, and FrameStats saying which precision ran."""
+    scene = gb.load(shared_scene(name))
+    r = CudaRenderer()
+    r.upload(scene)
+    for rate in RATES:
+        cam = gb.orbit_camera(scene, 30, 20, width=80, height=60).at_sampling_rate(rate)
+        check_bound(scene, cam, f"cuda {name} x{rate:g}", renderer=r)
+        fast = r.render(cam, FAST)
+        close(fast, gb.render(scene, cam, FAST.spec, backend="cpu"))
+        assert (fast.stats.precision, fast.stats.mode) == ("fast", "gaussian_blending fast")
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(**GENERATED)
+def test_cuda_fast_within_bound_on_generated_scenes(n, seed, log_scale, rate, layered):
+    check_generated(n, seed, log_scale, rate, layered, "cuda")

@@ -44,9 +44,13 @@ def explained(scene: gb.Scene, cam: gb.Camera, x: int, y: int) -> bool:
     return bool(near) and (parted is None or parted in near)
 
 
-def check_bound(scene: gb.Scene, cam: gb.Camera, what: str) -> float:
-    r = create_renderer("cpu")
-    r.upload(scene)
+def check_bound(scene: gb.Scene, cam: gb.Camera, what: str, backend: str = "cpu", renderer=None) -> float:
+    """Max error of `backend`'s fast frame against its exact one (by `renderer`, holding `scene`, when given),
+    asserting the bound; pixels beyond it are explained by the CPU's traces, which run the one-pixel kernel that
+    every backend's fast path shares."""
+    r = renderer or create_renderer(backend)
+    if renderer is None:
+        r.upload(scene)
     err = errors(r.render(cam, EXACT), r.render(cam, FAST))
     ys, xs = np.nonzero(err > BOUND)
     assert len(ys) <= 2 + RARE * err.size, f"{what}: {len(ys)} pixels beyond 1/1024 (max {err.max() * 1024:.2f}/1024)"
@@ -71,6 +75,18 @@ def test_a_crossing_is_what_the_check_explains():
     assert check_bound(scene, cam, "biker x8") > BOUND
 
 
+def generated_scene(n: int, seed: int, log_scale: float, layered: bool) -> gb.Scene:
+    """n splats over one spot (layered) or scattered, of sizes around exp(log_scale), anisotropic and rotated,
+    opacities up to 0.99, colours up to 1."""
+    rng = np.random.default_rng(seed)
+    spread = 0.02 if layered else 0.4
+    xy = rng.uniform(-spread, spread, (n, 2))
+    depth = np.sort(rng.uniform(2.0, 6.0, n))
+    log_scales = log_scale + rng.uniform(-1.5, 1.5, (n, 3))
+    return _splats(n, xy, depth, log_scales, rng.uniform(0.01, 0.99, n), rng.uniform(0, 1, (n, 3)),
+                   rng.normal(size=4))
+
+
 def _splats(n: int, xy: np.ndarray, depth: np.ndarray, log_scales: np.ndarray, opacities: np.ndarray,
             colors: np.ndarray, quat: np.ndarray) -> gb.Scene:
     means = np.concatenate([xy, depth[:, None]], axis=1)
@@ -78,21 +94,21 @@ def _splats(n: int, xy: np.ndarray, depth: np.ndarray, log_scales: np.ndarray, o
     return gb.Scene.from_arrays(means, np.exp(log_scales), np.repeat(quat[None], n, 0), opacities, sh)
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(n=st.integers(1, 60), seed=st.integers(0, 2**31 - 1), log_scale=st.floats(-5.5, -0.5),
-       rate=st.sampled_from((8.0, 2.0, 1.0, 0.5, 1 / 8)), layered=st.booleans())
-def test_fast_within_bound_on_generated_scenes(n, seed, log_scale, rate, layered):
-    """One splat, or up to 60: a stack of layers over one spot (layered) or scattered, of sizes from sub-pixel to
-    covering the image, anisotropic and rotated, opacities up to 0.99, colours up to 1."""
-    rng = np.random.default_rng(seed)
-    spread = 0.02 if layered else 0.4
-    xy = rng.uniform(-spread, spread, (n, 2))
-    depth = np.sort(rng.uniform(2.0, 6.0, n))
-    log_scales = log_scale + rng.uniform(-1.5, 1.5, (n, 3))
-    scene = _splats(n, xy, depth, log_scales, rng.uniform(0.01, 0.99, n), rng.uniform(0, 1, (n, 3)),
-                    rng.normal(size=4))
+# generated_scene's arguments and the sampling rate: sizes from sub-pixel to covering the image
+GENERATED = {"n": st.integers(1, 60), "seed": st.integers(0, 2**31 - 1), "log_scale": st.floats(-5.5, -0.5),
+             "rate": st.sampled_from((8.0, 2.0, 1.0, 0.5, 1 / 8)), "layered": st.booleans()}
+
+
+def check_generated(n: int, seed: int, log_scale: float, rate: float, layered: bool, backend: str = "cpu") -> None:
     cam = front_camera(48, 40, 60.0).at_sampling_rate(rate)
-    check_bound(scene, cam, f"n={n} seed={seed} x{rate:g}")
+    check_bound(generated_scene(n, seed, log_scale, layered), cam, f"{backend} n={n} seed={seed} x{rate:g}", backend)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(**GENERATED)
+def test_fast_within_bound_on_generated_scenes(n, seed, log_scale, rate, layered):
+    """One splat, or up to 60 (generated_scene)."""
+    check_generated(n, seed, log_scale, rate, layered)
 
 
 @pytest.mark.parametrize("path", VECTOR_PATHS)

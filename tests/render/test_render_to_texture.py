@@ -13,8 +13,8 @@ import gbviewer as gb
 from gbviewer.core.errors import RenderError
 from gbviewer.render import CudaRenderer, RenderSettings
 
-SPECS = ["scalar", "gaussian_blending", "analytic:2", "wsr", "duplex"]
-SAME_STATS = ("visible", "sort_length", "pairs", "evaluations", "evals_per_pixel", "backend", "mode")
+SPECS = ["scalar", "gaussian_blending", "gaussian_blending+fast", "analytic:2", "wsr", "duplex"]
+SAME_STATS = ("visible", "sort_length", "pairs", "evaluations", "evals_per_pixel", "backend", "mode", "precision")
 
 
 @pytest.fixture(scope="module")
@@ -132,10 +132,11 @@ def test_cuda_wrapper_passes_the_texture_and_the_render_arguments(bundled_scene,
     from cuda_fakes import FakeNative, fake_renderer
 
     class Native(FakeNative):
-        def render_to_gl_texture(self, texture, *args, view_filter=None, seed=0, frame=0, cut=False):
+        def render_to_gl_texture(self, texture, *args, view_filter=None, seed=0, frame=0, fast=False, cut=False):
             assert texture == 7 and len(args) == (19 if spec == "duplex" else 15) and not cut  # + the oit globals
-            _native_cuda.check_render_args(*args, view_filter=view_filter, seed=seed, frame=frame)
-            return super().render_to_gl_texture(texture, *args, view_filter=view_filter, seed=seed, frame=frame)
+            _native_cuda.check_render_args(*args, view_filter=view_filter, seed=seed, frame=frame, fast=fast)
+            return super().render_to_gl_texture(texture, *args, view_filter=view_filter, seed=seed, frame=frame,
+                                                fast=fast)
 
     class Texture:
         glo, size, components, dtype = 7, (32, 24), 4, "f4"

@@ -17,7 +17,8 @@ same function names and constants):
 5. radix sort of the pairs by tile (stable): every tile's list is ordered by (depth, splat index), the same order
    as the CPU driver's tile lists, which it bins in one global depth order (docs/modes.md#order).
 6. tile_ranges.comp, then blend.comp: one work group per 16x16 output block; supersampling blends the N x N
-   render tiles of the block and box-averages them in shared memory.
+   render tiles of the block and box-averages them in shared memory; gaussian_blending's fast precision is a variant
+   of its own (`blend_defines`).
 
 wsr skips the depth sort of step 3: its tile lists are binned by a radix sort of the tile alone and stay in
 splat-index order (stats sort_length 0, as on the CPU), and blend.comp sums the weights in float. duplex replaces
@@ -68,6 +69,12 @@ from .sort import SCAN_BLOCK, scan
 
 NO_OIT = gi.oit_uniform(0.0, 0.0, 1.0, False)  # the shaders' oit uniform outside wsr and duplex
 WORD, VEC4 = gi.WORD_BYTES, gi.VEC4_BYTES
+
+
+def blend_defines(mode: Mode, supersample: int, precision: str = "exact") -> dict[str, int]:
+    """The defines of blend.comp's variant for a frame (its header lists them); precision as RenderSettings'."""
+    fast = {"GB_FAST": 1} if precision == "fast" and mode == Mode.GAUSSIAN_BLENDING else {}
+    return {f"BLEND_MODE_{mode.name}": 1, "SUPERSAMPLED": int(supersample > 1), **fast}
 
 
 class GlslRenderer(Renderer):
@@ -331,7 +338,7 @@ class GlslRenderer(Renderer):
         self.ctx.finish()
         return dict(preprocess_ms=(t1 - t0) * 1e3, sort_ms=(t2 - t1) * 1e3, blend_ms=(time.perf_counter() - t2) * 1e3,
                     visible=visible, sort_length=sort_length, pairs=pairs, stage_reused=stage_reused,
-                    stage_ms=stage_ms, lod_splats=n if in_place else None, **counts)
+                    stage_ms=stage_ms, lod_splats=n if in_place else None, fast=settings.precision == "fast", **counts)
 
     def _stage(self, settings: RenderSettings, n: int, sh_deg: int, cam_uniforms: dict, rows, lod: dict) -> tuple:
         """The `stage` buffer for this frame's camera (at its sampling grid), whether it was kept from an earlier
@@ -382,7 +389,7 @@ class GlslRenderer(Renderer):
         invocations = bx * by * gi.TILE * gi.TILE if len(plan) > 1 else 0  # state kept between dispatches
         state = gpu.ensure("blend_state", invocations * gi.BLEND_STATE_VEC4S * VEC4, "blend state")
         accum = gpu.ensure("blend_accum", invocations * gi.BLEND_ACCUM_VEC4S * VEC4, "blend sums")
-        prog = gpu.program("blend.comp", **{f"BLEND_MODE_{settings.mode.name}": 1, "SUPERSAMPLED": int(N > 1)})
+        prog = gpu.program("blend.comp", **blend_defines(settings.mode, N, settings.precision))
         gpu.set(prog, out_size=(W, H), supersample=N, grid=(gx, gy), background=tuple(settings.background),
                   want_window=int(want_window), oit=oit, stochastic=(settings.seed, settings.frame),
                   queue=settings.queue)

@@ -278,9 +278,10 @@ GBV_HD bool blend_analytic(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
     return blend_alpha_pixel<true>(s, pix, T, C);
 }
 
-GBV_HD bool blend_gaussian(const Splat2D& s, TransmittanceWindow& win, float C[3]) {
+// fast: the `fast` precision (blend_gaussian's Fast); kernels pass a compile-time constant, which the compiler folds.
+GBV_HD bool blend_gaussian(const Splat2D& s, TransmittanceWindow& win, float C[3], bool fast = false) {
     WindowState<Lanes1> st = {win.T, win.xy.x, win.xy.y, win.wh.x, win.wh.y, {C[0], C[1], C[2]}};
-    const bool stop = blend_gaussian<Lanes1>(s, true, st);
+    const bool stop = fast ? blend_gaussian<Lanes1, NoTrace, true>(s, true, st) : blend_gaussian<Lanes1>(s, true, st);
     win = {st.T, {st.x, st.y}, {st.w, st.h}};
     for (int c = 0; c < 3; ++c) C[c] = st.C[c];
     return stop;

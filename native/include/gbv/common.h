@@ -57,6 +57,7 @@ constexpr float GB_MAX_UV_DIFF = 1e6f;
 constexpr float GB_MIN_VAR = 0.001f;           // window variance floor
 constexpr float GB_SERIES_MAX_HALF_WIDTH = 1.0f;  // window moments: Hermite series up to this half side (sigmas)
 constexpr int GB_SERIES_TERMS = 12;
+constexpr int GB_FAST_SERIES_TERMS = 8;        // the fast precision's longest series (window_side_moments' Fast)
 constexpr float SQRT_PI_2 = 1.2533141373155003f;
 constexpr float WSR_EMPTY_SUM = 1e-4f;         // LC-WSR: a weight sum of exactly 0 becomes 1e-4 (§7.2)
 constexpr float WSR_FIXED_SCALE = 68719476736.0f;  // 2^36: CPU weighted sums in 64-bit fixed point (blend.h)

@@ -39,9 +39,6 @@ GBV_HD typename L::F gaussian_moment0(typename L::F x, typename L::F e) {
     return L::set(SQRT_PI_2) * L::select(x < L::set(0.0f), L::neg(erf_abs), erf_abs);
 }
 
-// The fast precision's longest series (window_side_moments' Fast): CPU only, so not in common.h's GLSL-ported set.
-constexpr int GB_FAST_SERIES_TERMS = 8;
-
 // Moments of exp(-t^2/2) over one window side [c - h, c + h] (splat sigma units), taken about the window centre c:
 // I0 = int e, J1 = int (t - c) e, J2 = int (t - c)^2 e. About the centre, the variance of the update is no longer a
 // difference of ~u^2-sized terms (the published form cancels ~log10(12 u^2) digits); and for windows up to 2 sigma

@@ -1,0 +1,70 @@
+"""The house style, enforced: ruff (lint and format, `[tool.ruff]` in pyproject.toml) on every Python file and
+clang-format (`.clang-format`) on the C++, CUDA and GLSL sources. A file either would change fails here, naming it;
+`ruff check --fix . && ruff format . && clang-format -i FILES` fixes it (docs/architecture.md#style)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+NATIVE = ("*.h", "*.cpp", "*.cu")
+GLSL = ("*.glsl", "*.comp")
+
+
+def tool(name: str) -> str:
+    path = BIN / name
+    if not path.exists():
+        pytest.fail(f"{path} missing: {name} is a test dependency (pip install -e '.[dev]')")
+    return str(path)
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(args, cwd=REPO, capture_output=True, text=True, timeout=300)
+
+
+def c_sources() -> list[Path]:
+    files = [p for pat in NATIVE for p in (REPO / "native").rglob(pat)]
+    files += [p for pat in GLSL for p in (REPO / "shaders").glob(pat)]
+    files += [p for pat in NATIVE for p in (REPO / "tests").rglob(pat)]
+    return sorted(files)
+
+
+def test_ruff_lint():
+    out = run(tool("ruff"), "check", "--no-cache", ".")
+    assert out.returncode == 0, out.stdout[-4000:] + out.stderr[-2000:]
+
+
+def test_ruff_format():
+    out = run(tool("ruff"), "format", "--no-cache", "--check", ".")
+    assert out.returncode == 0, out.stdout[-4000:] + out.stderr[-2000:]
+
+
+def test_clang_format():
+    files = c_sources()
+    assert len(files) > 50, files  # the sources were found
+    # GLSL is formatted as C++ (clang-format has no GLSL mode); the shaders share the headers' style
+    bad = [str(f.relative_to(REPO)) for f in files
+           if run(tool("clang-format"), "--dry-run", "-Werror", f"--assume-filename={f.stem}.cpp", str(f)).returncode]
+    assert not bad, f"clang-format would change: {', '.join(bad)}"
+
+
+@pytest.mark.parametrize("text,check", [("x = [1,2]\n", "format"), ("import os\n", "lint")])
+def test_the_check_catches_violations(tmp_path, text, check):
+    (tmp_path / "pyproject.toml").write_text((REPO / "pyproject.toml").read_text())
+    (tmp_path / "bad.py").write_text(text)
+    args = ["format", "--check"] if check == "format" else ["check"]
+    out = subprocess.run([tool("ruff"), *args, "--no-cache", "bad.py"], cwd=tmp_path, capture_output=True, text=True)
+    assert out.returncode != 0, out.stdout
+
+
+def test_clang_format_catches_a_violation(tmp_path):
+    (tmp_path / ".clang-format").write_text((REPO / ".clang-format").read_text())
+    bad = tmp_path / "bad.cpp"
+    bad.write_text("int f( int a ){return a;}\n")
+    out = subprocess.run([tool("clang-format"), "--dry-run", "-Werror", str(bad)], cwd=tmp_path, capture_output=True)
+    assert out.returncode != 0
