@@ -18,7 +18,10 @@ from .ui.layout import LAYOUTS
 from .frames.rates import clamp_rate
 from .frames.views import VIEWS
 
-MODE_NAMES = tuple(m.label for m in Mode) + tuple(f"preset:{name}" for name in PRESETS)
+# Panes render Gaussian Blending at the fast precision (AppState.settings_for); "+exact" is the reference kernel, to
+# put beside it (the difference view shows what the precision changes).
+MODE_NAMES = (tuple(m.label for m in Mode) + ("gaussian_blending+exact",)
+              + tuple(f"preset:{name}" for name in PRESETS))
 MAX_PANES = 4
 MAX_RECENT = 10
 VERSION = 2  # of the settings file; 2: backend "auto"

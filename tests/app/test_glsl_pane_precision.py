@@ -11,7 +11,7 @@ from test_lod_previews import FakeWorker, opened
 from test_stochastic_panes import FakeApp
 
 import gbviewer as gb
-from gbviewer.app.overlays.labels.labels import pane_label
+from gbviewer.app.overlays.labels import pane_label
 from gbviewer.app.panes import PaneRenders
 from gbviewer.app.threads.worker import RenderResult
 from gbviewer.render import BACKENDS
@@ -49,3 +49,16 @@ def test_a_glsl_pane_says_which_precision_rendered(monkeypatch):
         assert (exact.stats.precision, exact.stats.mode) == ("exact", "gaussian_blending")  # kernels: test_gb_fast_glsl
     finally:
         panes.release()
+
+
+def test_a_pane_can_be_switched_to_the_exact_kernel(monkeypatch):
+    """'gaussian_blending+exact' is one of the panes' modes: it renders (and says) exact, beside a fast pane, and
+    survives the settings file."""
+    state = opened(monkeypatch, [False])
+    state.set_pane(0, mode="gaussian_blending")
+    state.set_pane(1, mode="gaussian_blending+exact")
+    assert state.settings_for(0, "a").precision == "fast"
+    assert state.settings_for(1, "a").precision == "exact"
+    assert state.settings.panes[1].normalised().mode == "gaussian_blending+exact"
+    frame = gb.render(state.scene, state.pane_camera(1), state.settings_for(1, "a"))
+    assert (frame.stats.precision, frame.stats.mode) == ("exact", "gaussian_blending")
