@@ -12,9 +12,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+from gpu_session import CUDA_TEST_FILES
+
 import gbviewer as gb
 from gbviewer.render import CudaRenderer
-from gpu_session import CUDA_TEST_FILES
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -31,9 +32,27 @@ def main(argv: list[str]) -> int:
     if tests.returncode != 0:
         return tests.returncode
     scenes = argv or [str(gb.DEFAULT_SCENE)]
-    return subprocess.run([sys.executable, "-m", "gbviewer", "bench", *scenes, "--backends", "cpu,cuda",
-                           "--modes", "scalar,mip,analytic,gaussian_blending,supersample:3", "--size", "800x800",
-                           "--views", "3", "--repeat", "10", "--rates", "1,1/2,1/4,1/8"]).returncode
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "gbviewer",
+            "bench",
+            *scenes,
+            "--backends",
+            "cpu,cuda",
+            "--modes",
+            "scalar,mip,analytic,gaussian_blending,supersample:3",
+            "--size",
+            "800x800",
+            "--views",
+            "3",
+            "--repeat",
+            "10",
+            "--rates",
+            "1,1/2,1/4,1/8",
+        ]
+    ).returncode
 
 
 if __name__ == "__main__":

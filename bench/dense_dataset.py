@@ -19,15 +19,16 @@ REPO = Path(__file__).resolve().parents[1]
 if any((REPO / "gbviewer").glob("_native*")):  # the checkout's build, else the installed package
     sys.path.insert(0, str(REPO))
 
-import gbviewer as gb
-from gbviewer.cli.argtypes import SIZE, Parser, count
-from gbviewer.outputs.figure import save_image
+import gbviewer as gb  # noqa: E402 (after the sys.path choice above)
+from gbviewer.cli.argtypes import SIZE, Parser, count  # noqa: E402 (after the sys.path choice above)
+from gbviewer.outputs.figure import save_image  # noqa: E402 (after the sys.path choice above)
 
 ELEVATION = 20.0
 
 
-def write_dataset(scene_path: Path, out: Path, views: int, size: tuple[int, int], reference: str,
-                  up: str = "-y") -> Path:
+def write_dataset(
+    scene_path: Path, out: Path, views: int, size: tuple[int, int], reference: str, up: str = "-y"
+) -> Path:
     """cameras.json and images/ in `out` (see the module's docstring); returns the cameras.json."""
     scene = gb.load(scene_path)
     settings = gb.RenderSettings.parse(reference)
@@ -37,8 +38,18 @@ def write_dataset(scene_path: Path, out: Path, views: int, size: tuple[int, int]
         name = f"v{k:02d}"
         save_image(out / "images" / f"{name}.png", gb.render(scene, cam, settings).rgb, force=True)
         centre = -cam.R.T @ cam.t
-        entries.append({"id": k, "img_name": name, "width": cam.width, "height": cam.height, "fx": cam.fx,
-                        "fy": cam.fy, "rotation": cam.R.T.tolist(), "position": centre.tolist()})
+        entries.append(
+            {
+                "id": k,
+                "img_name": name,
+                "width": cam.width,
+                "height": cam.height,
+                "fx": cam.fx,
+                "fy": cam.fy,
+                "rotation": cam.R.T.tolist(),
+                "position": centre.tolist(),
+            }
+        )
     path = out / "cameras.json"
     path.write_text(json.dumps(entries, indent=1))
     return path

@@ -36,10 +36,16 @@ from gbviewer.render import CudaRenderer, RenderSettings  # noqa: E402
 
 # The test files only a GPU runs in full (bench/cuda_check.py runs them too); tests/bench/test_gpu_session.py checks
 # that they exist.
-CUDA_TEST_FILES = ("tests/render/test_cuda.py", "tests/render/test_cuda_gpu.py", "tests/render/test_cuda_native.py",
-                   "tests/render/test_cuda_host.py", "tests/render/test_cuda_wrapper.py",
-                   "tests/render/test_render_to_texture.py", "tests/render/test_duplex_order.py",
-                   "tests/render/test_gpu_lod.py")
+CUDA_TEST_FILES = (
+    "tests/render/test_cuda.py",
+    "tests/render/test_cuda_gpu.py",
+    "tests/render/test_cuda_native.py",
+    "tests/render/test_cuda_host.py",
+    "tests/render/test_cuda_wrapper.py",
+    "tests/render/test_render_to_texture.py",
+    "tests/render/test_duplex_order.py",
+    "tests/render/test_gpu_lod.py",
+)
 GLSL_TEST_FILES = ("tests/render/test_glsl.py",)
 PIECES = ("cuda tests", "cuda vs cpu", "glsl on the EGL driver", "glsl vs cpu", "display path + interop", "timings")
 CUDA_PIECES = ("cuda tests", "cuda vs cpu", "timings")  # the others need an OpenGL 4.3 context (any EGL driver)
@@ -79,8 +85,10 @@ class Session:
         for p in self.pieces:
             if isinstance(p["data"], list) and p["data"] and isinstance(p["data"][0], dict):
                 lines += ["", f"## {p['name']}", *table(p["data"])]
-        for name, text in (("report.json", json.dumps(report, indent=1, default=str)), ("report.txt",
-                                                                                         "\n".join(lines) + "\n")):
+        for name, text in (
+            ("report.json", json.dumps(report, indent=1, default=str)),
+            ("report.txt", "\n".join(lines) + "\n"),
+        ):
             tmp = self.out / f".{name}.tmp"
             tmp.write_text(text)
             os.replace(tmp, self.out / name)
@@ -89,14 +97,21 @@ class Session:
 def table(rows: list[dict]) -> list[str]:
     keys = list(rows[0])
     fmt = lambda v: f"{v:.3g}" if isinstance(v, float) else str(v)  # noqa: E731
-    return [" | ".join(keys), " | ".join("---" for _ in keys), *(" | ".join(fmt(r.get(k, "")) for k in keys)
-                                                               for r in rows)]
+    return [
+        " | ".join(keys),
+        " | ".join("---" for _ in keys),
+        *(" | ".join(fmt(r.get(k, "")) for k in keys) for r in rows),
+    ]
 
 
 def machine() -> dict:
     smi = run_quiet(["nvidia-smi", "--query-gpu=name,driver_version,memory.total", "--format=csv,noheader"])
-    return dict(python=platform.python_version(), host=platform.node(), gpu=smi or "nvidia-smi: none",
-                cuda=CudaRenderer.available())
+    return dict(
+        python=platform.python_version(),
+        host=platform.node(),
+        gpu=smi or "nvidia-smi: none",
+        cuda=CudaRenderer.available(),
+    )
 
 
 def run_quiet(cmd: list[str]) -> str:
@@ -113,8 +128,11 @@ def check_paths(s: Session, scenes_dir: Path) -> list[Path]:
     scenes, where = found(scenes_dir), f"{scenes_dir}"
     if not scenes:
         scenes, where = found(gb.DEFAULT_SCENE.parent), f"the bundled scene only ({scenes_dir} has none)"
-    s.add("paths", "missing: " + ", ".join(missing) if missing else "ok",
-          f"{len(CUDA_TEST_FILES) + len(GLSL_TEST_FILES)} test files, {len(scenes)} scenes: {where}")
+    s.add(
+        "paths",
+        "missing: " + ", ".join(missing) if missing else "ok",
+        f"{len(CUDA_TEST_FILES) + len(GLSL_TEST_FILES)} test files, {len(scenes)} scenes: {where}",
+    )
     return scenes
 
 
@@ -134,28 +152,42 @@ def pytest_piece(s: Session, name: str, files: tuple[str, ...], budget: float) -
     rows, failing = {}, []
     for case in ET.parse(xml).getroot().iter("testcase"):
         f = case.get("file") or case.get("classname", "?").replace(".", "/") + ".py"
-        kind = "failed" if case.find("failure") is not None or case.find("error") is not None else (
-            "skipped" if case.find("skipped") is not None else "passed")
+        kind = (
+            "failed"
+            if case.find("failure") is not None or case.find("error") is not None
+            else ("skipped" if case.find("skipped") is not None else "passed")
+        )
         rows.setdefault(f, dict(file=f, passed=0, failed=0, skipped=0))[kind] += 1
         if kind == "failed":
             failing.append(f"{case.get('classname')}::{case.get('name')}")
     total = {k: sum(r[k] for r in rows.values()) for k in ("passed", "failed", "skipped")}
-    s.add(name, "ok" if proc.returncode == 0 else "failed",
-          f"{total['passed']} passed, {total['failed']} failed, {total['skipped']} skipped"
-          + (f"; failing: {', '.join(failing[:8])}" if failing else ""), list(rows.values()))
+    s.add(
+        name,
+        "ok" if proc.returncode == 0 else "failed",
+        f"{total['passed']} passed, {total['failed']} failed, {total['skipped']} skipped"
+        + (f"; failing: {', '.join(failing[:8])}" if failing else ""),
+        list(rows.values()),
+    )
 
 
 def diff(a: gb.Frame, b: gb.Frame) -> dict:
     """Image differences and the counts that must agree across backends: visible splats and tile-list entries
     (pairs; sort_length differs by design, the cpu sorts one key per splat, the gpus one per pair)."""
     d = np.abs(a.rgb - b.rgb).max(axis=2)
-    return dict(mean=float(d.mean()), max=float(d.max()), frac=float((d > 1 / 255).mean()),
-                visible=(a.stats.visible, b.stats.visible), pairs=(a.stats.pairs, b.stats.pairs))
+    return dict(
+        mean=float(d.mean()),
+        max=float(d.max()),
+        frac=float((d > 1 / 255).mean()),
+        visible=(a.stats.visible, b.stats.visible),
+        pairs=(a.stats.pairs, b.stats.pairs),
+    )
 
 
 def within(m: dict, tol: dict) -> bool:
-    counts = all(x == y if tol["counts"] == "exact" else abs(x - y) <= tol["counts"] * max(y, 1)
-                 for x, y in (m["visible"], m["pairs"]))
+    counts = all(
+        x == y if tol["counts"] == "exact" else abs(x - y) <= tol["counts"] * max(y, 1)
+        for x, y in (m["visible"], m["pairs"])
+    )
     return m["mean"] < tol["mean"] and m["frac"] < tol["frac"] and counts
 
 
@@ -178,8 +210,7 @@ def compare_piece(s: Session, name: str, scenes: list[Path], make, tol: dict, su
                     m = diff(other.render(cam, settings), gb.render(scene, cam, settings, backend="cpu"))
                     ok = within(m, tol)
                 except gb.GBViewerError as exc:
-                    m = dict(mean=float("nan"), max=float("nan"), frac=float("nan"), visible=(0, 1),
-                             pairs=(0, 1))
+                    m = dict(mean=float("nan"), max=float("nan"), frac=float("nan"), visible=(0, 1), pairs=(0, 1))
                     error = str(exc)
                     # a one-line refusal (RenderError: e.g. llvmpipe's loop limit on the per-pixel sorted modes) is
                     # the backend's stated limit, reported apart (ok None); any other error fails the piece
@@ -187,13 +218,28 @@ def compare_piece(s: Session, name: str, scenes: list[Path], make, tol: dict, su
                 bad += ok is False
                 if ok is None:
                     refused.setdefault(error, []).append(f"{path.name} {settings.spec}")
-                rows.append(dict(scene=path.name, mode=mode, ss=ss, mean=m["mean"], max=m["max"], frac=m["frac"],
-                                 visible=f"{m['visible'][0]}/{m['visible'][1]}",
-                                 pairs=f"{m['pairs'][0]}/{m['pairs'][1]}", ok=ok, error=error))
+                rows.append(
+                    dict(
+                        scene=path.name,
+                        mode=mode,
+                        ss=ss,
+                        mean=m["mean"],
+                        max=m["max"],
+                        frac=m["frac"],
+                        visible=f"{m['visible'][0]}/{m['visible'][1]}",
+                        pairs=f"{m['pairs'][0]}/{m['pairs'][1]}",
+                        ok=ok,
+                        error=error,
+                    )
+                )
     why = "".join(f"; refused ({', '.join(what)}): {error}" for error, what in refused.items())
-    s.add(name, "failed" if bad else f"partial: {cut}" if cut else "ok",
-          f"{len(rows)} comparisons, {bad} outside mean < {tol['mean']}, >1/255 < {tol['frac']}, counts "
-          f"{tol['counts']}{why}", rows)
+    s.add(
+        name,
+        "failed" if bad else f"partial: {cut}" if cut else "ok",
+        f"{len(rows)} comparisons, {bad} outside mean < {tol['mean']}, >1/255 < {tol['frac']}, counts "
+        f"{tol['counts']}{why}",
+        rows,
+    )
 
 
 def interop_piece(s: Session, scene_path: Path, cuda: bool) -> None:
@@ -231,9 +277,13 @@ def interop_piece(s: Session, scene_path: Path, cuda: bool) -> None:
                     r.release_texture(tex.glo)
                 tex.release()
     good = all(r["same"] for r in rows) and (ok_interop or not cuda)
-    s.add("display path + interop", "ok" if good else "failed",
-          f"EGL on {gl}; cuda interop: {'yes' if ok_interop else why}; "
-          f"{sum(r['same'] for r in rows)}/{len(rows)} textures equal render()", rows)
+    s.add(
+        "display path + interop",
+        "ok" if good else "failed",
+        f"EGL on {gl}; cuda interop: {'yes' if ok_interop else why}; "
+        f"{sum(r['same'] for r in rows)}/{len(rows)} textures equal render()",
+        rows,
+    )
 
 
 def time_scene(r, scene: gb.Scene, label: str, repeat: int = 5, modes: tuple[str, ...] = MODES) -> list[dict]:
@@ -249,8 +299,15 @@ def time_scene(r, scene: gb.Scene, label: str, repeat: int = 5, modes: tuple[str
             f = r.render(cam, settings)
             wall.append((time.perf_counter() - t0) * 1e3)
             gpu.append(f.stats.preprocess_ms + f.stats.sort_ms + f.stats.blend_ms)
-        rows.append(dict(scene=label, splats=scene.num_splats, mode=mode, wall_ms=float(np.median(wall)),
-                         gpu_ms=float(np.median(gpu))))
+        rows.append(
+            dict(
+                scene=label,
+                splats=scene.num_splats,
+                mode=mode,
+                wall_ms=float(np.median(wall)),
+                gpu_ms=float(np.median(gpu)),
+            )
+        )
     by = {row["mode"]: row["gpu_ms"] for row in rows}
     for row in rows:
         row["gb_over_3dgs"] = by["gaussian_blending"] / by["scalar"] if row["mode"] == "gaussian_blending" else ""
@@ -270,17 +327,26 @@ def timing_piece(s: Session, scenes: list[Path], budget_end: float) -> None:
         sys.path.insert(0, str(REPO / "bench"))
         from synthetic import make_scene
 
-        rows += time_scene(r, make_scene(LARGE_SPLATS), f"synthetic {LARGE_SPLATS // 10**6} M", repeat=3,
-                           modes=tuple(m for m in MODES if m != "duplex"))
+        rows += time_scene(
+            r,
+            make_scene(LARGE_SPLATS),
+            f"synthetic {LARGE_SPLATS // 10**6} M",
+            repeat=3,
+            modes=tuple(m for m in MODES if m != "duplex"),
+        )
         large = "; duplex not timed on it (its cells would be built on the CPU first)"
     else:
         large = "; the 6 M-splat scene not timed (time budget)"
     ratios = [row["gb_over_3dgs"] for row in rows if row["gb_over_3dgs"] != ""]
-    s.add("timings", "ok" if rows and not cut else "failed",
-          f"ms per mode at {SIZE[0]}x{SIZE[1]} (median; gpu_ms = device events); GB/3DGS time ratio "
-          f"{min(ratios, default=float('nan')):.2f}..{max(ratios, default=float('nan')):.2f} here, "
-          f"{PAPER_GB_OVER_3DGS:.2f} in the paper (Table 5: 131.80 vs 123.08 FPS); no tiled-scene builder exists in "
-          f"the repository: bench/synthetic.py's scene of {LARGE_SPLATS:,} splats stands in{cut}{large}", rows)
+    s.add(
+        "timings",
+        "ok" if rows and not cut else "failed",
+        f"ms per mode at {SIZE[0]}x{SIZE[1]} (median; gpu_ms = device events); GB/3DGS time ratio "
+        f"{min(ratios, default=float('nan')):.2f}..{max(ratios, default=float('nan')):.2f} here, "
+        f"{PAPER_GB_OVER_3DGS:.2f} in the paper (Table 5: 131.80 vs 123.08 FPS); no tiled-scene builder exists in "
+        f"the repository: bench/synthetic.py's scene of {LARGE_SPLATS:,} splats stands in{cut}{large}",
+        rows,
+    )
 
 
 def main(argv: list[str]) -> int:
@@ -312,8 +378,15 @@ def main(argv: list[str]) -> int:
         no_gl = f"skipped: no OpenGL 4.3 context through EGL: {exc}"
 
     def runs(name: str) -> bool:
-        why_not = (no_cuda if name in CUDA_PIECES and not cuda else no_gl if name not in CUDA_PIECES and no_gl else
-                   "skipped: not selected (--pieces)" if name not in chosen else "")
+        why_not = (
+            no_cuda
+            if name in CUDA_PIECES and not cuda
+            else no_gl
+            if name not in CUDA_PIECES and no_gl
+            else "skipped: not selected (--pieces)"
+            if name not in chosen
+            else ""
+        )
         if why_not:
             s.add(name, why_not, "")
         return not why_not

@@ -19,8 +19,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tools"))
 
 import numpy as np  # noqa: E402
-from encoders import (encode_compressed_ply, encode_splat, encode_spz, random_params, sog_files,  # noqa: E402
-                      write_sog)
+from encoders import encode_compressed_ply, encode_splat, encode_spz, random_params, sog_files, write_sog  # noqa: E402
 
 import gbviewer as gb  # noqa: E402
 

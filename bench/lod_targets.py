@@ -49,12 +49,20 @@ def moving(render, cams: list) -> float:
     return min(ms)
 
 
-def measure(path: Path, size: tuple[int, int], rates: list[float], tau: float, repeat: int,
-            rules: tuple[str, ...] = RULES) -> dict:
+def measure(
+    path: Path, size: tuple[int, int], rates: list[float], tau: float, repeat: int, rules: tuple[str, ...] = RULES
+) -> dict:
     load_ms, scene = best(lambda: gb.load(path), repeat)
     build_ms, tree = best(lambda: lod.build(scene), repeat)
-    row = {"scene": path.name, "splats": scene.num_splats, "load_ms": load_ms, "build_ms": build_ms,
-           "tree_bytes": tree.nbytes, "scene_bytes": scene_bytes(scene), "rates": []}
+    row = {
+        "scene": path.name,
+        "splats": scene.num_splats,
+        "load_ms": load_ms,
+        "build_ms": build_ms,
+        "tree_bytes": tree.nbytes,
+        "scene_bytes": scene_bytes(scene),
+        "rates": [],
+    }
     cam = orbit_camera(scene, width=size[0], height=size[1])
     renderer = gb.get_renderer(scene, "cpu")
     ref_x1 = renderer.render(cam, gb.RenderSettings()).rgb
@@ -63,11 +71,20 @@ def measure(path: Path, size: tuple[int, int], rates: list[float], tau: float, r
         full_ms, full = best(lambda v=view: renderer.render(v, gb.RenderSettings()), repeat)
         lod_ms, frame = best(lambda v=view: renderer.render(v, gb.RenderSettings(lod=tau)), repeat)
         cut_ms, c = best(lambda v=view: lod.cut(tree, v, tau), repeat)
-        cams = [orbit_camera(scene, 30.0 + 0.01 * k, width=size[0], height=size[1]).at_sampling_rate(rate)
-                for k in range(repeat + 1)]
-        r = {"rate": rate, "full_ms": full_ms, "lod_ms": lod_ms, "cut_ms": cut_ms, "drawn": c.num_drawn, "psnr": {},
-             "moving_full_ms": moving(lambda v: renderer.render(v, gb.RenderSettings()), cams),
-             "moving_lod_ms": moving(lambda v: renderer.render(v, gb.RenderSettings(lod=tau)), cams)}
+        cams = [
+            orbit_camera(scene, 30.0 + 0.01 * k, width=size[0], height=size[1]).at_sampling_rate(rate)
+            for k in range(repeat + 1)
+        ]
+        r = {
+            "rate": rate,
+            "full_ms": full_ms,
+            "lod_ms": lod_ms,
+            "cut_ms": cut_ms,
+            "drawn": c.num_drawn,
+            "psnr": {},
+            "moving_full_ms": moving(lambda v: renderer.render(v, gb.RenderSettings()), cams),
+            "moving_lod_ms": moving(lambda v: renderer.render(v, gb.RenderSettings(lod=tau)), cams),
+        }
         for rule in rules:
             img = gb.get_renderer(lod.cut_scene(scene, view, tau, rule=rule), "cpu").render(view, gb.RenderSettings())
             r["psnr"][f"lod-{rule}"] = (psnr(img.rgb, full.rgb), reference_psnr(ref_x1, img.rgb, rate))
@@ -79,15 +96,19 @@ def measure(path: Path, size: tuple[int, int], rates: list[float], tau: float, r
 
 
 def show(row: dict) -> None:
-    print(f"\n{row['scene']}: {row['splats']:,} splats | load {row['load_ms']:.0f} ms, build {row['build_ms']:.0f} ms "
-          f"({row['build_ms'] / row['load_ms']:.0%}) | tree {row['tree_bytes'] / 2**20:.1f} MiB = "
-          f"{row['tree_bytes'] / row['scene_bytes']:.0%} of the splat arrays")
+    print(
+        f"\n{row['scene']}: {row['splats']:,} splats | load {row['load_ms']:.0f} ms, build {row['build_ms']:.0f} ms "
+        f"({row['build_ms'] / row['load_ms']:.0%}) | tree {row['tree_bytes'] / 2**20:.1f} MiB = "
+        f"{row['tree_bytes'] / row['scene_bytes']:.0%} of the splat arrays"
+    )
     for r in row["rates"]:
         # the still frame keeps its cut: the moving frame is the one that computes it
-        print(f"  x{r['rate']:g}: full {r['full_ms']:.0f} ms, lod {r['lod_ms']:.0f} ms ({r['full_ms'] / r['lod_ms']:.1f}x"
-              f" faster), cut {r['cut_ms']:.1f} ms ({r['cut_ms'] / r['moving_lod_ms']:.0%} of the moving lod frame), "
-              f"{r['drawn']:,} drawn; moving camera: full {r['moving_full_ms']:.0f} ms, lod {r['moving_lod_ms']:.0f} ms "
-              f"({r['moving_full_ms'] / r['moving_lod_ms']:.1f}x)")
+        print(
+            f"  x{r['rate']:g}: full {r['full_ms']:.0f} ms, lod {r['lod_ms']:.0f} ms ({r['full_ms'] / r['lod_ms']:.1f}x"
+            f" faster), cut {r['cut_ms']:.1f} ms ({r['cut_ms'] / r['moving_lod_ms']:.0%} of the moving lod frame), "
+            f"{r['drawn']:,} drawn; moving camera: full {r['moving_full_ms']:.0f} ms, lod {r['moving_lod_ms']:.0f} ms "
+            f"({r['moving_full_ms'] / r['moving_lod_ms']:.1f}x)"
+        )
         for name, (vs_full, vs_ref) in r["psnr"].items():
             ref = "" if vs_ref is None else f", {vs_ref:.2f} dB vs reference"
             print(f"    {name:<18} {vs_full:6.2f} dB vs full{ref}")

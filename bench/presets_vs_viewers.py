@@ -46,11 +46,14 @@ def missing_tools() -> list[str]:
 def ensure_packages(cache: Path, viewers: list[str]) -> None:
     """npm install the viewers' packages into `cache` (a directory outside the repository) where absent."""
     wanted = [p for v in viewers for p in PACKAGES[v]]
-    todo = [p for p in wanted if not (cache / "node_modules" / (p[:p.rfind("@")] if p.rfind("@") > 0 else p)).is_dir()]
+    todo = [p for p in wanted if not (cache / "node_modules" / (p[: p.rfind("@")] if p.rfind("@") > 0 else p)).is_dir()]
     if todo:
         cache.mkdir(parents=True, exist_ok=True)
-        subprocess.run(["npm", "install", "--no-audit", "--no-fund", "--prefix", str(cache), *todo], check=True,
-                       stdout=subprocess.DEVNULL)
+        subprocess.run(
+            ["npm", "install", "--no-audit", "--no-fund", "--prefix", str(cache), *todo],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
 
 
 def write_ply(scene: gb.Scene, path: Path) -> None:
@@ -58,27 +61,47 @@ def write_ply(scene: gb.Scene, path: Path) -> None:
     n, k = len(scene.means), scene.sh.shape[1]
     o = np.clip(np.asarray(scene.opacities, np.float64), 1e-7, 1 - 1e-7)
     sh = np.asarray(scene.sh, np.float32)
-    cols = [np.asarray(scene.means, np.float32), sh[:, 0], sh[:, 1:].transpose(0, 2, 1).reshape(n, -1),
-            np.log(o / (1 - o)).astype(np.float32)[:, None],
-            np.log(np.maximum(np.asarray(scene.scales, np.float64), 1e-12)).astype(np.float32),
-            np.asarray(scene.quats, np.float32)]
-    names = (["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(3 * (k - 1))]
-             + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    cols = [
+        np.asarray(scene.means, np.float32),
+        sh[:, 0],
+        sh[:, 1:].transpose(0, 2, 1).reshape(n, -1),
+        np.log(o / (1 - o)).astype(np.float32)[:, None],
+        np.log(np.maximum(np.asarray(scene.scales, np.float64), 1e-12)).astype(np.float32),
+        np.asarray(scene.quats, np.float32),
+    ]
+    names = (
+        ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"]
+        + [f"f_rest_{i}" for i in range(3 * (k - 1))]
+        + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    )
     header = "ply\nformat binary_little_endian 1.0\nelement vertex %d\n%send_header\n" % (
-        n, "".join(f"property float {c}\n" for c in names))
+        n,
+        "".join(f"property float {c}\n" for c in names),
+    )
     path.write_bytes(header.encode() + np.ascontiguousarray(np.concatenate(cols, 1), "<f4").tobytes())
 
 
 def cameras(scene: gb.Scene, count: int, width: int, height: int, fov_y: float = 50.0) -> list[gb.Camera]:
-    return [orbit_camera(scene, azimuth_deg=30.0 + 360.0 * i / count, elevation_deg=15.0, width=width,
-                         height=height, fov_y_deg=fov_y) for i in range(count)]
+    return [
+        orbit_camera(
+            scene, azimuth_deg=30.0 + 360.0 * i / count, elevation_deg=15.0, width=width, height=height, fov_y_deg=fov_y
+        )
+        for i in range(count)
+    ]
 
 
 def camera_json(cam: gb.Camera, fov_y: float) -> dict:
     """harness.js's camera: eye and the right / up / back axes (three.js and PlayCanvas look down -z, y up)."""
     R = np.asarray(cam.R, np.float64)
-    return dict(width=cam.width, height=cam.height, fov_y=fov_y, eye=cam.position.tolist(), right=R[0].tolist(),
-                up=(-R[1]).tolist(), back=(-R[2]).tolist())
+    return dict(
+        width=cam.width,
+        height=cam.height,
+        fov_y=fov_y,
+        eye=cam.position.tolist(),
+        right=R[0].tolist(),
+        up=(-R[1]).tolist(),
+        back=(-R[2]).tolist(),
+    )
 
 
 class Page(BaseHTTPRequestHandler):
@@ -97,14 +120,19 @@ class Page(BaseHTTPRequestHandler):
         path = self.path.split("?")[0]
         body = self.files.get(path)
         if body is None and path.startswith("/npm/") and ".." not in path:
-            body = self.npm / "node_modules" / path[len("/npm/"):]
+            body = self.npm / "node_modules" / path[len("/npm/") :]
         data = body if isinstance(body, bytes) else body.read_bytes() if body and body.is_file() else None
         if data is None:
             self.send_error(404)
             return
         self.send_response(200)
-        types = {".js": "text/javascript", ".mjs": "text/javascript", ".html": "text/html", ".json": "application/json",
-                 ".wasm": "application/wasm"}
+        types = {
+            ".js": "text/javascript",
+            ".mjs": "text/javascript",
+            ".html": "text/html",
+            ".json": "application/json",
+            ".wasm": "application/wasm",
+        }
         self.send_header("Content-Type", types.get(Path(path).suffix, "application/octet-stream"))
         self.end_headers()
         self.wfile.write(data)
@@ -125,15 +153,26 @@ class Page(BaseHTTPRequestHandler):
 def run_viewer(viewer: str, ply: Path, cams: list[dict], cache: Path, timeout: float) -> list[np.ndarray]:
     """The viewer's frames of `cams` (uint8 (H, W, 3) each); RuntimeError naming what failed."""
     job = dict(cameras=cams, settle_frames=12, settle_ms=150)
-    Page.files = {"/harness.html": HARNESS / "harness.html", "/harness.js": HARNESS / "harness.js",
-                  "/scene.ply": ply, "/job.json": json.dumps(job).encode()}
+    Page.files = {
+        "/harness.html": HARNESS / "harness.html",
+        "/harness.js": HARNESS / "harness.js",
+        "/scene.ply": ply,
+        "/job.json": json.dumps(job).encode(),
+    }
     Page.npm, Page.frames, Page.error = cache, {}, ""
     Page.finished.clear()
     server = ThreadingHTTPServer(("127.0.0.1", 0), Page)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     url = f"http://127.0.0.1:{server.server_port}/harness.html?viewer={viewer}"
-    flags = ["--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-             "--ignore-gpu-blocklist", "--disable-gpu-sandbox", f"--user-data-dir={cache / 'chromium-profile'}"]
+    flags = [
+        "--headless=new",
+        "--no-sandbox",
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
+        "--ignore-gpu-blocklist",
+        "--disable-gpu-sandbox",
+        f"--user-data-dir={cache / 'chromium-profile'}",
+    ]
     browser = subprocess.Popen(["chromium", *flags, url], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         done = Page.finished.wait(timeout)
@@ -142,8 +181,9 @@ def run_viewer(viewer: str, ply: Path, cams: list[dict], cache: Path, timeout: f
         browser.wait()
         server.shutdown()
     if Page.error or not done or len(Page.frames) != len(cams):
-        raise RuntimeError(Page.error.splitlines()[0] if Page.error else f"{len(Page.frames)} of {len(cams)} "
-                           f"frames in {timeout:g} s")
+        raise RuntimeError(
+            Page.error.splitlines()[0] if Page.error else f"{len(Page.frames)} of {len(cams)} frames in {timeout:g} s"
+        )
     return [Page.frames[i] for i in range(len(cams))]
 
 
@@ -159,7 +199,7 @@ def our_specs() -> dict[str, RenderSettings]:
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2)) / 255.0 ** 2
+    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2)) / 255.0**2
     return math.inf if mse == 0 else -10.0 * math.log10(mse)
 
 
@@ -191,8 +231,10 @@ def main(argv: list[str] | None = None) -> int:
         cams = cameras(scene, args.cameras, width, height)
         ply = args.cache / "scene.ply"
         write_ply(scene, ply)
-        ours = {k: [np.clip(np.rint(gb.get_renderer(scene, "cpu").render(c, s).rgb * 255), 0, 255) for c in cams]
-                for k, s in specs.items()}
+        ours = {
+            k: [np.clip(np.rint(gb.get_renderer(scene, "cpu").render(c, s).rgb * 255), 0, 255) for c in cams]
+            for k, s in specs.items()
+        }
         for viewer in viewers:
             try:
                 theirs = run_viewer(viewer, ply, [camera_json(c, 50.0) for c in cams], args.cache, args.timeout)

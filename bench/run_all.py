@@ -30,8 +30,8 @@ import viewer_pacing  # noqa: E402
 
 import gbviewer as gb  # noqa: E402
 from gbviewer import bench  # noqa: E402
-from gbviewer.model.camera import format_rate  # noqa: E402
 from gbviewer.core.files import atomic_write  # noqa: E402
+from gbviewer.model.camera import format_rate  # noqa: E402
 from gbviewer.render import BACKENDS, RenderSettings  # noqa: E402
 
 MODES = "scalar,mip,analytic,gaussian_blending,supersample:3,gaussian_blending:2"
@@ -74,8 +74,9 @@ def scene_benchmarks(quick: bool) -> tuple[list, list, list, list[str]]:
         speed += bench.measure_speed(scene, name, cams, settings, backends, [1.0, 0.125], 1 if quick else 3, exp=exp)
         fidelity += bench.measure_fidelity(scene, name, cams, settings, RATES, "cpu")
         big = bench.bench_views(scene, 1 if quick else 2, *SIMD_SIZE, up=up)
-        simd += bench.measure_speed(scene, name, big, simd_settings, ["cpu"], [1.0], 1 if quick else 3,
-                                    simd=simd_paths, exp=exp)
+        simd += bench.measure_speed(
+            scene, name, big, simd_settings, ["cpu"], [1.0], 1 if quick else 3, simd=simd_paths, exp=exp
+        )
         names.append(name)
         print(f"measured {name} in {time.perf_counter() - t0:.0f} s", flush=True)
     return speed, fidelity, simd, names
@@ -98,10 +99,13 @@ def targets(speed: list, fidelity: list, names: list[str], simd: list, in_use: s
     for n in names:
         gb_ms_, sc_ms, ss_ms = (t.get((n, m, 1.0)) for m in ("gaussian_blending", "scalar", "scalar:3"))
         gb8, sc8, ss8 = (f.get((n, m, 0.125)) for m in ("gaussian_blending", "scalar", "scalar:3"))
-        row = [n, f"{gb_ms_ / sc_ms:.2f} {'ok' if gb_ms_ <= 1.5 * sc_ms else 'MISSED'}",
-               f"{ss_ms / gb_ms_:.2f} {'ok' if ss_ms >= 3 * gb_ms_ else 'MISSED'}",
-               f"{gb8:.2f} vs {ss8:.2f} {'ok' if gb8 >= ss8 else 'MISSED'}",
-               f"{gb8 - sc8:+.2f} {'ok' if gb8 - sc8 >= 6 else 'MISSED'}"]
+        row = [
+            n,
+            f"{gb_ms_ / sc_ms:.2f} {'ok' if gb_ms_ <= 1.5 * sc_ms else 'MISSED'}",
+            f"{ss_ms / gb_ms_:.2f} {'ok' if ss_ms >= 3 * gb_ms_ else 'MISSED'}",
+            f"{gb8:.2f} vs {ss8:.2f} {'ok' if gb8 >= ss8 else 'MISSED'}",
+            f"{gb8 - sc8:+.2f} {'ok' if gb8 - sc8 >= 6 else 'MISSED'}",
+        ]
         for mode in ("gaussian_blending", "scalar"):
             base, vec = big.get((n, "scalar", mode)), big.get((n, in_use, mode))
             if in_use == "scalar" or base is None or vec is None:
@@ -123,11 +127,16 @@ def targets(speed: list, fidelity: list, names: list[str], simd: list, in_use: s
 def target_header(in_use: str | None = None) -> list[str]:
     w, h = SIMD_SIZE
     in_use = in_use or bench.current_simd()
-    return ["scene", "gaussian_blending / scalar (<= 1.5)", "scalar 3x3 / gaussian_blending (>= 3)",
-            "x1/8 PSNR: GB vs scalar 3x3 (GB >=)", "x1/8 PSNR: GB - scalar (>= +6 dB)",
-            f"GB blend speedup {in_use} over scalar at {w}x{h} (>= {BLEND_SPEEDUP_TARGET['gaussian_blending']:g})",
-            f"scalar blend speedup {in_use} over scalar at {w}x{h} (>= {BLEND_SPEEDUP_TARGET['scalar']:g})",
-            f"GB ms at {w}x{h}, {in_use} (median over the shared scenes <= {GB_MS_TARGET:g})"]
+    return [
+        "scene",
+        "gaussian_blending / scalar (<= 1.5)",
+        "scalar 3x3 / gaussian_blending (>= 3)",
+        "x1/8 PSNR: GB vs scalar 3x3 (GB >=)",
+        "x1/8 PSNR: GB - scalar (>= +6 dB)",
+        f"GB blend speedup {in_use} over scalar at {w}x{h} (>= {BLEND_SPEEDUP_TARGET['gaussian_blending']:g})",
+        f"scalar blend speedup {in_use} over scalar at {w}x{h} (>= {BLEND_SPEEDUP_TARGET['scalar']:g})",
+        f"GB ms at {w}x{h}, {in_use} (median over the shared scenes <= {GB_MS_TARGET:g})",
+    ]
 
 
 def kept_section(path: Path, heading: str) -> list[str]:
@@ -138,6 +147,11 @@ def kept_section(path: Path, heading: str) -> list[str]:
     start = lines.index(heading)
     end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
     return lines[start:end]
+
+
+def ns_per_eval(r: dict, cores: int | None) -> float:
+    """A scale row's blend time per splat-pixel evaluation and core, in ns."""
+    return r["blend_ms"] * 1e6 * (cores or 1) / max(r["evals_per_pixel"] * r["width"] * r["height"], 1)
 
 
 def main() -> int:
@@ -159,45 +173,105 @@ def main() -> int:
     atomic_write(out_dir / "scaling.json", lambda p: p.write_text(json.dumps(scale, indent=2)), force=True)
     times["scaling"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    load = subprocess.run([sys.executable, str(HERE / "load_speed.py"), "--n", "100000" if args.quick else "1000000"],
-                          capture_output=True, text=True)
+    load = subprocess.run(
+        [sys.executable, str(HERE / "load_speed.py"), "--n", "100000" if args.quick else "1000000"],
+        capture_output=True,
+        text=True,
+    )
     times["loading"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     pacing_json = out_dir / "viewer_pacing.json"
-    pacing = subprocess.run([sys.executable, str(HERE / "viewer_pacing.py"), "--json", str(pacing_json)]
-                            + (["--cycles", "1"] if args.quick else []), capture_output=True, text=True)
-    pacing_lines = (viewer_pacing.markdown(json.loads(pacing_json.read_text())) if pacing.returncode == 0
-                    else ["```", (pacing.stderr or pacing.stdout).strip()[-2000:], "```"])
+    pacing = subprocess.run(
+        [sys.executable, str(HERE / "viewer_pacing.py"), "--json", str(pacing_json)]
+        + (["--cycles", "1"] if args.quick else []),
+        capture_output=True,
+        text=True,
+    )
+    pacing_lines = (
+        viewer_pacing.markdown(json.loads(pacing_json.read_text()))
+        if pacing.returncode == 0
+        else ["```", (pacing.stderr or pacing.stdout).strip()[-2000:], "```"]
+    )
     times["viewer pacing"] = time.perf_counter() - t0
 
     machine = bench.machine_description()
     w, h = SIMD_SIZE
-    lines = ["# Benchmark results", "",
-             f"Regenerated by `.venv/bin/python bench/run_all.py`{' --quick' if args.quick else ''}. Machine: "
-             f"{machine['cpu']}, {machine['cores']} cores, Python {machine['python']}"
-             + "".join(f"; {k}: {v}" for k, v in machine.items() if k.endswith("_backend")) + ".",
-             f"{bench.simd_summary(info)}.",
-             "Times are medians over repeats and views; ratios come from the same run.", ""]
-    lines += [f"## Targets (CPU backend, 320x240 at x1, orbit views; SIMD comparison at {w}x{h})", "",
-              md_table(target_header(), targets(speed, fidelity, names, simd)), ""]
-    lines += [f"## SIMD paths of the CPU backend ({w}x{h} at x1)", "",
-              "Every path measured in the same run, taking turns render by render. Speedup: the scalar path's ms / "
-              "the path's. Mevals/s/core: splat-pixel evaluations per second per core in the blend stage; exp: "
-              "that path's exp evaluations per second on one core (`gbviewer._native.testing.exp_rate`). max abs diff: the "
-              "largest rgb difference from the scalar path's image.", ""]
+    lines = [
+        "# Benchmark results",
+        "",
+        f"Regenerated by `.venv/bin/python bench/run_all.py`{' --quick' if args.quick else ''}. Machine: "
+        f"{machine['cpu']}, {machine['cores']} cores, Python {machine['python']}"
+        + "".join(f"; {k}: {v}" for k, v in machine.items() if k.endswith("_backend"))
+        + ".",
+        f"{bench.simd_summary(info)}.",
+        "Times are medians over repeats and views; ratios come from the same run.",
+        "",
+    ]
+    lines += [
+        f"## Targets (CPU backend, 320x240 at x1, orbit views; SIMD comparison at {w}x{h})",
+        "",
+        md_table(target_header(), targets(speed, fidelity, names, simd)),
+        "",
+    ]
+    lines += [
+        f"## SIMD paths of the CPU backend ({w}x{h} at x1)",
+        "",
+        "Every path measured in the same run, taking turns render by render. Speedup: the scalar path's ms / "
+        "the path's. Mevals/s/core: splat-pixel evaluations per second per core in the blend stage; exp: "
+        "that path's exp evaluations per second on one core (`gbviewer._native.testing.exp_rate`). max abs diff: the "
+        "largest rgb difference from the scalar path's image.",
+        "",
+    ]
     header, rows = bench.simd_table(simd)
     exp_rate = info["exp_per_s_per_core"]
-    lines += [md_table(header, rows) if rows else "(this CPU runs the scalar path only)", "",
-              "exp per core: " + ", ".join(f"{p} {v / 1e6:.0f} M/s" for p, v in exp_rate.items()), ""]
-    lines += ["## Speed per mode (x1 and x1/8)", "",
-              md_table(["scene", "backend", "simd", "mode", "rate", "size", "ms", "preprocess", "sort", "blend",
-                        "evals/px", "Mevals/s/core", "blend Mevals/s/core", "exp M/s/core"],
-                       [[r.scene, r.backend, r.simd or "-", r.mode, format_rate(r.rate), f"{r.width}x{r.height}",
-                         f"{r.median_ms:.1f}", f"{r.stages_ms['preprocess_ms']:.1f}", f"{r.stages_ms['sort_ms']:.1f}",
-                         f"{r.stages_ms['blend_ms']:.1f}", f"{r.evals_per_pixel:.0f}",
-                         f"{r.mevals_per_s_per_core:.0f}", f"{r.blend_mevals_per_s_per_core:.0f}",
-                         "-" if r.exp_mevals_per_s_per_core is None else f"{r.exp_mevals_per_s_per_core:.0f}"]
-                        for r in speed]), ""]
+    lines += [
+        md_table(header, rows) if rows else "(this CPU runs the scalar path only)",
+        "",
+        "exp per core: " + ", ".join(f"{p} {v / 1e6:.0f} M/s" for p, v in exp_rate.items()),
+        "",
+    ]
+    lines += [
+        "## Speed per mode (x1 and x1/8)",
+        "",
+        md_table(
+            [
+                "scene",
+                "backend",
+                "simd",
+                "mode",
+                "rate",
+                "size",
+                "ms",
+                "preprocess",
+                "sort",
+                "blend",
+                "evals/px",
+                "Mevals/s/core",
+                "blend Mevals/s/core",
+                "exp M/s/core",
+            ],
+            [
+                [
+                    r.scene,
+                    r.backend,
+                    r.simd or "-",
+                    r.mode,
+                    format_rate(r.rate),
+                    f"{r.width}x{r.height}",
+                    f"{r.median_ms:.1f}",
+                    f"{r.stages_ms['preprocess_ms']:.1f}",
+                    f"{r.stages_ms['sort_ms']:.1f}",
+                    f"{r.stages_ms['blend_ms']:.1f}",
+                    f"{r.evals_per_pixel:.0f}",
+                    f"{r.mevals_per_s_per_core:.0f}",
+                    f"{r.blend_mevals_per_s_per_core:.0f}",
+                    "-" if r.exp_mevals_per_s_per_core is None else f"{r.exp_mevals_per_s_per_core:.0f}",
+                ]
+                for r in speed
+            ],
+        ),
+        "",
+    ]
     modes = list(dict.fromkeys(r.mode for r in fidelity))
     for kind, rates in (("zoom-out", [r for r in RATES if r < 1]), ("zoom-in", [r for r in RATES if r > 1])):
         ref = "the x1 scalar render box-downsampled" if kind == "zoom-out" else "the x1 render of the same mode"
@@ -206,19 +280,51 @@ def main() -> int:
         for n in names:
             for rate in rates:
                 vals = {r.mode: r for r in fidelity if r.scene == n and r.rate == rate and r.kind == kind}
-                rows.append([n, format_rate(rate)] + [f"{vals[m].psnr:.2f} ({vals[m].ssim:.3f})" if m in vals else ""
-                                                      for m in modes])
+                rows.append(
+                    [n, format_rate(rate)]
+                    + [f"{vals[m].psnr:.2f} ({vals[m].ssim:.3f})" if m in vals else "" for m in modes]
+                )
         lines += [md_table(["scene", "rate"] + modes, rows), ""]
-    lines += ["## Scaling (synthetic scenes, CPU backend)", "",
-              "Splat series at 640x480; pixel series at 300k splats. Peak RSS is the whole process. SIMD path: "
-              + ", ".join(sorted({str(r.get("simd")) for r in scale["splats"] + scale["pixels"]})) + ".", "",
-              md_table(["mode", "splats", "size", "ms", "preprocess", "sort", "blend", "sort length", "evals/px",
-                        "ns per evaluation x cores", "peak RSS MiB"],
-                       [[r["mode"], f"{r['splats']:,}", f"{r['width']}x{r['height']}", f"{r['total_ms']:.1f}",
-                         f"{r['preprocess_ms']:.1f}", f"{r['sort_ms']:.1f}", f"{r['blend_ms']:.1f}",
-                         f"{r['sort_length']:,}", f"{r['evals_per_pixel']:.0f}",
-                         f"{r['blend_ms'] * 1e6 * (machine['cores'] or 1) / max(r['evals_per_pixel'] * r['width'] * r['height'], 1):.1f}",
-                         f"{r['peak_rss_mib']:.0f}"] for r in scale["splats"] + scale["pixels"]]), ""]
+    lines += [
+        "## Scaling (synthetic scenes, CPU backend)",
+        "",
+        "Splat series at 640x480; pixel series at 300k splats. Peak RSS is the whole process. SIMD path: "
+        + ", ".join(sorted({str(r.get("simd")) for r in scale["splats"] + scale["pixels"]}))
+        + ".",
+        "",
+        md_table(
+            [
+                "mode",
+                "splats",
+                "size",
+                "ms",
+                "preprocess",
+                "sort",
+                "blend",
+                "sort length",
+                "evals/px",
+                "ns per evaluation x cores",
+                "peak RSS MiB",
+            ],
+            [
+                [
+                    r["mode"],
+                    f"{r['splats']:,}",
+                    f"{r['width']}x{r['height']}",
+                    f"{r['total_ms']:.1f}",
+                    f"{r['preprocess_ms']:.1f}",
+                    f"{r['sort_ms']:.1f}",
+                    f"{r['blend_ms']:.1f}",
+                    f"{r['sort_length']:,}",
+                    f"{r['evals_per_pixel']:.0f}",
+                    f"{ns_per_eval(r, machine['cores']):.1f}",
+                    f"{r['peak_rss_mib']:.0f}",
+                ]
+                for r in scale["splats"] + scale["pixels"]
+            ],
+        ),
+        "",
+    ]
     lines += ["## Loading speed", "", "```", (load.stdout or load.stderr).strip(), "```", ""]
     lines += ["## Viewer frame pacing", ""] + pacing_lines + [""]
     lines += kept_section(HERE / "RESULTS.md", "## Scale")  # bench/scale.py's, run on its own (minutes per scene)
@@ -227,8 +333,10 @@ def main() -> int:
     lines += ["## Run time", "", ", ".join(f"{k} {v / 60:.1f} min" for k, v in times.items()), ""]
     atomic_write(HERE / "RESULTS.md", lambda p: p.write_text("\n".join(lines)), force=True)
 
-    print(f"wrote {HERE / 'RESULTS.md'} in {times['total'] / 60:.1f} min "
-          f"({', '.join(f'{k} {v / 60:.1f}' for k, v in times.items() if k != 'total')})")
+    print(
+        f"wrote {HERE / 'RESULTS.md'} in {times['total'] / 60:.1f} min "
+        f"({', '.join(f'{k} {v / 60:.1f}' for k, v in times.items() if k != 'total')})"
+    )
     return 0
 
 

@@ -44,8 +44,13 @@ def main() -> None:
     print(f"cpu count {os.cpu_count()}, load average {os.getloadavg()[0]:.1f}")
     results = []
     for p in paths.values():
-        r = run_scale(p, args.repeat, args.modes.split(","), [float(x) for x in args.rates.split(",")],
-                      [float(x) for x in args.cancel_at.split(",")])
+        r = run_scale(
+            p,
+            args.repeat,
+            args.modes.split(","),
+            [float(x) for x in args.rates.split(",")],
+            [float(x) for x in args.cancel_at.split(",")],
+        )
         r["load_average"] = os.getloadavg()[0]
         print_scale(r)
         results.append(r)

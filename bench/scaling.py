@@ -36,18 +36,34 @@ def measure_point(n: int, width: int, height: int, mode: str, repeat: int) -> di
     settings = gb.RenderSettings(gb.Mode.parse(mode))
     renderer.render(cam, settings)
     frames = [renderer.render(cam, settings).stats for _ in range(repeat)]
-    med = {k: statistics.median(getattr(f, k) for f in frames)
-           for k in ("total_ms", "preprocess_ms", "sort_ms", "blend_ms")}
+    med = {
+        k: statistics.median(getattr(f, k) for f in frames)
+        for k in ("total_ms", "preprocess_ms", "sort_ms", "blend_ms")
+    }
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return {"splats": n, "width": width, "height": height, "mode": mode, **med,
-            "sort_length": frames[-1].sort_length, "evals_per_pixel": frames[-1].evals_per_pixel,
-            "simd": frames[-1].simd, "scene_rss_mib": rss_scene / 1024, "peak_rss_mib": peak / 1024}
+    return {
+        "splats": n,
+        "width": width,
+        "height": height,
+        "mode": mode,
+        **med,
+        "sort_length": frames[-1].sort_length,
+        "evals_per_pixel": frames[-1].evals_per_pixel,
+        "simd": frames[-1].simd,
+        "scene_rss_mib": rss_scene / 1024,
+        "peak_rss_mib": peak / 1024,
+    }
 
 
 def run_point(n: int, width: int, height: int, mode: str, repeat: int, simd: str | None = None) -> dict:
     env = dict(os.environ, **({"GBVIEWER_SIMD": simd} if simd else {}))
-    out = subprocess.run([sys.executable, __file__, "--point", str(n), str(width), str(height), mode, str(repeat)],
-                         capture_output=True, text=True, check=True, env=env)
+    out = subprocess.run(
+        [sys.executable, __file__, "--point", str(n), str(width), str(height), mode, str(repeat)],
+        capture_output=True,
+        text=True,
+        check=True,
+        env=env,
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 

@@ -40,10 +40,16 @@ def make_scene(n: int, seed: int = 0) -> gb.Scene:
     spacing = 2.0 / side
     cell = np.arange(n_plane)  # jittered grid: covered like a trained surface, no random gaps
     jitter = rng.uniform(-0.3, 0.3, (n_plane, 2)) * spacing
-    p = np.column_stack([-1 + (cell % side + 0.5) * spacing + jitter[:, 0],
-                         -1 + (cell // side + 0.5) * spacing + jitter[:, 1], np.zeros(n_plane)])
-    p_scale = np.column_stack([np.full(n_plane, spacing * 0.7), np.full(n_plane, spacing * 0.7),
-                               np.full(n_plane, spacing * 0.05)])
+    p = np.column_stack(
+        [
+            -1 + (cell % side + 0.5) * spacing + jitter[:, 0],
+            -1 + (cell // side + 0.5) * spacing + jitter[:, 1],
+            np.zeros(n_plane),
+        ]
+    )
+    p_scale = np.column_stack(
+        [np.full(n_plane, spacing * 0.7), np.full(n_plane, spacing * 0.7), np.full(n_plane, spacing * 0.05)]
+    )
     stripe = (np.floor(p[:, 0] / 0.02) % 2)[:, None]
     p_col = stripe * [0.9, 0.85, 0.75] + (1 - stripe) * [0.15, 0.2, 0.3]
     p_normal = np.tile([0.0, 0.0, 1.0], (n_plane, 1))
@@ -62,16 +68,18 @@ def make_scene(n: int, seed: int = 0) -> gb.Scene:
     k = np.arange(n_wire) % 12
     t = rng.uniform(-1, 1, n_wire)
     w = np.column_stack([t, -0.9 + 0.15 * k, np.full(n_wire, 1.1)])
-    w_scale = np.column_stack([np.full(n_wire, 2.4 / max(n_wire / 12, 1)), np.full(n_wire, 0.001),
-                               np.full(n_wire, 0.001)])
+    w_scale = np.column_stack(
+        [np.full(n_wire, 2.4 / max(n_wire / 12, 1)), np.full(n_wire, 0.001), np.full(n_wire, 0.001)]
+    )
     w_col = np.tile([1.0, 0.6, 0.1], (n_wire, 1))
     w_normal = np.tile([0.0, 0.0, 1.0], (n_wire, 1))
 
     # fence: 40 thin vertical posts along y = 0.9
     kp = np.arange(n_post) % 40
     f = np.column_stack([-0.975 + 0.05 * kp, np.full(n_post, 0.9), rng.uniform(0, 0.6, n_post)])
-    f_scale = np.column_stack([np.full(n_post, 0.004), np.full(n_post, 0.004),
-                               np.full(n_post, 0.6 * 40 / max(n_post, 1))])
+    f_scale = np.column_stack(
+        [np.full(n_post, 0.004), np.full(n_post, 0.004), np.full(n_post, 0.6 * 40 / max(n_post, 1))]
+    )
     f_col = np.tile([0.9, 0.9, 0.95], (n_post, 1))
     f_normal = np.tile([0.0, 0.0, 1.0], (n_post, 1))
 
@@ -81,8 +89,9 @@ def make_scene(n: int, seed: int = 0) -> gb.Scene:
     colors = np.concatenate([p_col, s_col, w_col, f_col]) + rng.normal(0, 0.02, (n, 3))
     opacities = np.clip(rng.normal(0.95, 0.05, n), 0.3, 0.999)
     sh = ((colors - 0.5) / SH_C0)[:, None, :]
-    return gb.Scene.from_arrays(means, scales, quats, opacities, sh, source=f"synthetic-{n}",
-                                meta={"format": "synthetic", "version": None})
+    return gb.Scene.from_arrays(
+        means, scales, quats, opacities, sh, source=f"synthetic-{n}", meta={"format": "synthetic", "version": None}
+    )
 
 
 def main(argv: list[str]) -> int:

@@ -18,9 +18,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import tempfile
 import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -72,8 +72,14 @@ def instrument(worker) -> tuple[dict, list[float], dict]:
     return asked, stale, previews
 
 
-def run(scene: str, cycles: int, orbit_s: float, settle_s: float, screenshot: Path | None = None,
-        window: tuple[int, int] = WINDOW) -> dict:
+def run(
+    scene: str,
+    cycles: int,
+    orbit_s: float,
+    settle_s: float,
+    screenshot: Path | None = None,
+    window: tuple[int, int] = WINDOW,
+) -> dict:
     from gbviewer.app.window import ViewerApp
 
     app = ViewerApp(scene, size=window, persist=False)
@@ -92,6 +98,7 @@ def run(scene: str, cycles: int, orbit_s: float, settle_s: float, screenshot: Pa
         first_tiles: list[float] = []
         breakdown: list[dict] = []  # where the time to the first tiles went, per cycle
         finals: list[float] = []
+
         def orbit(seconds: float) -> None:  # a steady drag: 4 px per UI frame
             t_end = time.perf_counter() + seconds
             orbiting.append((t_end - seconds, t_end))
@@ -112,15 +119,22 @@ def run(scene: str, cycles: int, orbit_s: float, settle_s: float, screenshot: Pa
                 app.wait_for_events()  # the window's own frame pacing (ViewerApp.run)
                 app.step(poll=False)
                 now = time.perf_counter()
-                current = [p.parts["a"] for p in s.visible  # showing the request made after the stop
-                           if p.parts["a"].job is not None and p.parts["a"].job.info["key"] == p.submitted.get("a")]
+                current = [
+                    p.parts["a"]
+                    for p in s.visible  # showing the request made after the stop
+                    if p.parts["a"].job is not None and p.parts["a"].job.info["key"] == p.submitted.get("a")
+                ]
                 if seen_tiles is None and any(sh.stage in ("refining", "final") for sh in current):
                     seen_tiles = now
                     first = next(sh for sh in current if sh.stage in ("refining", "final"))
                     posted = first.pacing.get("tiles", first.pacing.get("final", 0.0))  # request -> posted
-                    breakdown.append({"stop_to_request_ms": (first.job.submitted - t_stop) * 1e3,
-                                      "request_to_posted_ms": posted,
-                                      "posted_to_shown_ms": (now - first.job.submitted) * 1e3 - posted})
+                    breakdown.append(
+                        {
+                            "stop_to_request_ms": (first.job.submitted - t_stop) * 1e3,
+                            "request_to_posted_ms": posted,
+                            "posted_to_shown_ms": (now - first.job.submitted) * 1e3 - posted,
+                        }
+                    )
                 if not until_final and seen_tiles is not None and now - seen_tiles > 0.2:
                     return
                 if len(current) == len(s.visible) and all(sh.stage == "final" for sh in current):
@@ -142,23 +156,35 @@ def run(scene: str, cycles: int, orbit_s: float, settle_s: float, screenshot: Pa
             Image.fromarray(app.read_window()).save(screenshot)
         orbit(0.5)
         span = sum(b - a for a, b in orbiting)
-        rate = {str(slot): sum(any(a <= t <= b for a, b in orbiting) for t in times) / span
-                for slot, times in sorted(previews.items())}
+        rate = {
+            str(slot): sum(any(a <= t <= b for a, b in orbiting) for t in times) / span
+            for slot, times in sorted(previews.items())
+        }
         return {
-            "previews_per_s": rate, "preview_target_per_s": PREVIEWS_PER_S,
-            "scene": Path(scene).name, "pane_render_sizes": sizes, "cycles": cycles, "gl_renderer": app.gl_renderer,
-            "ui_frames": len(frame_ms), "ui_median_ms": statistics.median(frame_ms),
-            "ui_p95_ms": percentile(frame_ms, 0.95), "stale_renders": len(stale),
+            "previews_per_s": rate,
+            "preview_target_per_s": PREVIEWS_PER_S,
+            "scene": Path(scene).name,
+            "pane_render_sizes": sizes,
+            "cycles": cycles,
+            "gl_renderer": app.gl_renderer,
+            "ui_frames": len(frame_ms),
+            "ui_median_ms": statistics.median(frame_ms),
+            "ui_p95_ms": percentile(frame_ms, 0.95),
+            "stale_renders": len(stale),
             "stale_median_ms": statistics.median(stale) if stale else None,
             "stale_max_ms": max(stale) if stale else None,
-            "first_tiles_ms": first_tiles, "first_tiles_breakdown": breakdown, "final_ms": finals, "targets": TARGETS,
+            "first_tiles_ms": first_tiles,
+            "first_tiles_breakdown": breakdown,
+            "final_ms": finals,
+            "targets": TARGETS,
         }
     finally:
         app.close()
 
 
-def first_picture(scene: str, window: tuple[int, int], folder: Path, timeout: float, shots: Path | None = None,
-                  label: str = "") -> dict:
+def first_picture(
+    scene: str, window: tuple[int, int], folder: Path, timeout: float, shots: Path | None = None, label: str = ""
+) -> dict:
     """Open `scene` in a fresh window (panes A scalar, B gaussian_blending on the CPU backend) with the
     level-of-detail cache in `folder`, and step it as `ViewerApp.run` does: seconds from the start to the scene
     opened (the load), and from the open to each pane's first pixels on screen (whatever stage: preview, tiles,
@@ -204,10 +230,17 @@ def first_picture(scene: str, window: tuple[int, int], folder: Path, timeout: fl
             if any(not f.name.startswith(".") for f in folder.glob("*.npz")):
                 built = time.perf_counter() - opened if opened else None
             time.sleep(0.05)
-        return {"scene": Path(scene).name, "splats": s.scene.num_splats if s.scene else None,
-                "load_s": None if opened is None else opened - t0, "first_pixels_s": first, "first_stage": kinds,
-                "final_s": final, "lod_cached_s": built, "messages_before_pixels": said,
-                "load_average": os.getloadavg()[0]}
+        return {
+            "scene": Path(scene).name,
+            "splats": s.scene.num_splats if s.scene else None,
+            "load_s": None if opened is None else opened - t0,
+            "first_pixels_s": first,
+            "first_stage": kinds,
+            "final_s": final,
+            "lod_cached_s": built,
+            "messages_before_pixels": said,
+            "load_average": os.getloadavg()[0],
+        }
     finally:
         app.close()
 
@@ -220,37 +253,51 @@ def _save(app, path: Path) -> None:
 
 def markdown(r: dict) -> list[str]:
     """The RESULTS.md section: measured figures beside their targets."""
+
     def verdict(value: float | None, target: float) -> str:
         return "-" if value is None else ("met" if value <= target else "missed")
 
     first = statistics.median(r["first_tiles_ms"]) if r["first_tiles_ms"] else None
     final = statistics.median(r["final_ms"]) if r["final_ms"] else None
     sizes = ", ".join(f"{w}x{h}" for w, h in r["pane_render_sizes"])
-    rows = [("UI frame time while orbiting, p95", r["ui_p95_ms"], TARGETS["ui_p95_ms"]),
-            ("UI frame time while orbiting, median", r["ui_median_ms"], None),
-            ("stale render after a newer request, median", r["stale_median_ms"], TARGETS["stale_ms"]),
-            ("stale render after a newer request, max", r["stale_max_ms"], TARGETS["stale_ms"]),
-            ("camera stop -> first full-resolution tiles, median", first, TARGETS["first_tiles_ms"]),
-            ("camera stop -> final frames, median", final, None)]
-    lines = [f"Scene {r['scene']}, two gaussian_blending panes rendering {sizes} on the CPU backend, window drawn by "
-             f"{r['gl_renderer']} under Xvfb; {r['cycles']} orbit/stop cycles, {r['ui_frames']} UI frames while "
-             f"orbiting, {r['stale_renders']} stale renders cancelled. `bench/viewer_pacing.py`.", "",
-             "| measure | ms | target | |", "|---|---|---|---|"]
+    rows = [
+        ("UI frame time while orbiting, p95", r["ui_p95_ms"], TARGETS["ui_p95_ms"]),
+        ("UI frame time while orbiting, median", r["ui_median_ms"], None),
+        ("stale render after a newer request, median", r["stale_median_ms"], TARGETS["stale_ms"]),
+        ("stale render after a newer request, max", r["stale_max_ms"], TARGETS["stale_ms"]),
+        ("camera stop -> first full-resolution tiles, median", first, TARGETS["first_tiles_ms"]),
+        ("camera stop -> final frames, median", final, None),
+    ]
+    lines = [
+        f"Scene {r['scene']}, two gaussian_blending panes rendering {sizes} on the CPU backend, window drawn by "
+        f"{r['gl_renderer']} under Xvfb; {r['cycles']} orbit/stop cycles, {r['ui_frames']} UI frames while "
+        f"orbiting, {r['stale_renders']} stale renders cancelled. `bench/viewer_pacing.py`.",
+        "",
+        "| measure | ms | target | |",
+        "|---|---|---|---|",
+    ]
     for name, value, target in rows:
         shown = "-" if value is None else f"{value:.0f}"
-        lines.append(f"| {name} | {shown} | {'' if target is None else f'<= {target:.0f}'} | "
-                     f"{'' if target is None else verdict(value, target)} |")
+        lines.append(
+            f"| {name} | {shown} | {'' if target is None else f'<= {target:.0f}'} | "
+            f"{'' if target is None else verdict(value, target)} |"
+        )
     rates = ", ".join(f"{v:.1f}" for v in r["previews_per_s"].values()) or "none"
-    lines.append(f"| previews per second per pane while orbiting | {rates} | >= {PREVIEWS_PER_S:.0f} | "
-                 f"{'met' if r['previews_per_s'] and min(r['previews_per_s'].values()) >= PREVIEWS_PER_S else 'missed'} |")
+    lines.append(
+        f"| previews per second per pane while orbiting | {rates} | >= {PREVIEWS_PER_S:.0f} | "
+        f"{'met' if r['previews_per_s'] and min(r['previews_per_s'].values()) >= PREVIEWS_PER_S else 'missed'} |"
+    )
     parts = r.get("first_tiles_breakdown") or []
     if parts:
         med = {k: statistics.median(p[k] for p in parts) for k in parts[0]}
-        lines += ["", f"Where the time to the first tiles goes (medians over {len(parts)} stops): camera stop -> the "
-                  f"full-resolution request {med['stop_to_request_ms']:.0f} ms (the UI frame that notices the stop), "
-                  f"request -> first tiles posted by the render thread {med['request_to_posted_ms']:.0f} ms (the "
-                  f"stale preview stopping, preparation, preprocess, sort and the first centre tiles), posted -> on "
-                  f"screen {med['posted_to_shown_ms']:.0f} ms (upload and draw)."]
+        lines += [
+            "",
+            f"Where the time to the first tiles goes (medians over {len(parts)} stops): camera stop -> the "
+            f"full-resolution request {med['stop_to_request_ms']:.0f} ms (the UI frame that notices the stop), "
+            f"request -> first tiles posted by the render thread {med['request_to_posted_ms']:.0f} ms (the "
+            f"stale preview stopping, preparation, preprocess, sort and the first centre tiles), posted -> on "
+            f"screen {med['posted_to_shown_ms']:.0f} ms (upload and draw).",
+        ]
     return lines
 
 
@@ -261,14 +308,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--orbit", type=float, default=3.0, help="seconds of orbiting per cycle")
     ap.add_argument("--settle", type=float, default=30.0, help="at most this long for the final frames per cycle")
     ap.add_argument("--json", type=Path)
-    ap.add_argument("--screenshot", type=Path,
-                    help="a PNG of the window once the last stop's frames are final (--first-picture: a folder "
-                         "for PNGs of the window: a pane's first message line, and every pane's first pixels)")
-    ap.add_argument("--window", default=f"{WINDOW[0]}x{WINDOW[1]}",
-                    help="window size WxH (2900x800: two panes of about 1280x720 beside the panel)")
-    ap.add_argument("--first-picture", action="store_true",
-                    help="instead: open the scene twice, with an empty level-of-detail cache, then with the one the "
-                         "first open wrote; times from the open to each pane's first pixels and to the final frames")
+    ap.add_argument(
+        "--screenshot",
+        type=Path,
+        help="a PNG of the window once the last stop's frames are final (--first-picture: a folder "
+        "for PNGs of the window: a pane's first message line, and every pane's first pixels)",
+    )
+    ap.add_argument(
+        "--window",
+        default=f"{WINDOW[0]}x{WINDOW[1]}",
+        help="window size WxH (2900x800: two panes of about 1280x720 beside the panel)",
+    )
+    ap.add_argument(
+        "--first-picture",
+        action="store_true",
+        help="instead: open the scene twice, with an empty level-of-detail cache, then with the one the "
+        "first open wrote; times from the open to each pane's first pixels and to the final frames",
+    )
     ap.add_argument("--timeout", type=float, default=300.0, help="--first-picture: at most this long per open")
     args = ap.parse_args(argv)
     try:
@@ -280,8 +336,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.first_picture:
             with tempfile.TemporaryDirectory() as folder:
                 shots = args.screenshot
-                result = {cache: first_picture(args.scene, window, Path(folder), args.timeout, shots, f"{cache}-")
-                          for cache in ("cold", "warm")}
+                result = {
+                    cache: first_picture(args.scene, window, Path(folder), args.timeout, shots, f"{cache}-")
+                    for cache in ("cold", "warm")
+                }
         else:
             result = run(args.scene, args.cycles, args.orbit, args.settle, args.screenshot, window)
     text = json.dumps(result, indent=1)

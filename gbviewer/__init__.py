@@ -4,14 +4,36 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .model.camera import Camera, load_cameras_json, orbit_camera
 from .core.cancel import CancelToken
-from .core.errors import (BackendUnavailable, CallbackError, CameraError, Cancelled, GBViewerError, LoadCancelled,
-                     RenderCancelled, RenderError, SceneFormatError, VideoCancelled)
+from .core.errors import (
+    BackendUnavailable,
+    CallbackError,
+    CameraError,
+    Cancelled,
+    GBViewerError,
+    LoadCancelled,
+    RenderCancelled,
+    RenderError,
+    SceneFormatError,
+    VideoCancelled,
+)
 from .io import load, save
-from .render import (BackendChoice, Frame, FrameStats, Mode, PixelTrace, Renderer, RenderSettings, choose_backend,
-                     build_info, get_renderer, render, trace_pixel)
+from .model.camera import Camera, load_cameras_json, orbit_camera
 from .model.scene import Scene
+from .render import (
+    BackendChoice,
+    Frame,
+    FrameStats,
+    Mode,
+    PixelTrace,
+    Renderer,
+    RenderSettings,
+    build_info,
+    choose_backend,
+    get_renderer,
+    render,
+    trace_pixel,
+)
 
 ASSETS = Path(__file__).parent / "assets"  # installed; a source checkout has it at the top level
 if not ASSETS.is_dir():
@@ -19,9 +41,35 @@ if not ASSETS.is_dir():
 DEFAULT_SCENE = ASSETS / "fruit_drops_minimal.ply"
 
 __all__ = [
-    "ASSETS", "DEFAULT_SCENE", "BackendChoice", "BackendUnavailable", "CallbackError", "Camera", "CameraError",
-    "CancelToken", "Cancelled", "Frame", "FrameStats", "GBViewerError", "LoadCancelled", "Mode", "PixelTrace",
-    "RenderCancelled", "RenderError", "RenderSettings", "Renderer", "Scene", "SceneFormatError", "VideoCancelled",
-    "build_info", "choose_backend", "get_renderer", "load", "load_cameras_json", "orbit_camera", "render", "save",
+    "ASSETS",
+    "DEFAULT_SCENE",
+    "BackendChoice",
+    "BackendUnavailable",
+    "CallbackError",
+    "Camera",
+    "CameraError",
+    "CancelToken",
+    "Cancelled",
+    "Frame",
+    "FrameStats",
+    "GBViewerError",
+    "LoadCancelled",
+    "Mode",
+    "PixelTrace",
+    "RenderCancelled",
+    "RenderError",
+    "RenderSettings",
+    "Renderer",
+    "Scene",
+    "SceneFormatError",
+    "VideoCancelled",
+    "build_info",
+    "choose_backend",
+    "get_renderer",
+    "load",
+    "load_cameras_json",
+    "orbit_camera",
+    "render",
+    "save",
     "trace_pixel",
 ]

@@ -23,9 +23,27 @@ def pinned() -> str:
 
 def resolve(args: list[str]) -> list[dict]:
     """What `pip install args` would install here (pip's installation report), without installing it."""
-    proc = subprocess.run([sys.executable, "-m", "pip", "install", "--dry-run", "--ignore-installed", "--quiet",
-                           "--timeout", "15", "--retries", "1", "--report", "-", *args],
-                          capture_output=True, text=True, timeout=600)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--dry-run",
+            "--ignore-installed",
+            "--quiet",
+            "--timeout",
+            "15",
+            "--retries",
+            "1",
+            "--report",
+            "-",
+            *args,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     if proc.returncode:
         raise RuntimeError(proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else f"exit {proc.returncode}")
     return json.loads(proc.stdout)["install"]
@@ -47,8 +65,11 @@ def main() -> int:
     try:
         items = resolve(args)
     except (RuntimeError, subprocess.TimeoutExpired, json.JSONDecodeError) as exc:
-        print(f"setup: torch is not installed: pip could not resolve {pinned()} ({exc}); Duplex-GS checkpoints and "
-              "their tests need it", file=sys.stderr)
+        print(
+            f"setup: torch is not installed: pip could not resolve {pinned()} ({exc}); Duplex-GS checkpoints and "
+            "their tests need it",
+            file=sys.stderr,
+        )
         return 1
     torch = next(i for i in items if i["metadata"]["name"].lower() == "torch")
     cuda = [i for i in items if i["metadata"]["name"].lower().startswith(("nvidia-", "triton"))]
@@ -58,10 +79,13 @@ def main() -> int:
     url = torch["download_info"]["url"]
     total = sum(size(i["download_info"]["url"]) for i in [torch, *cuda])
     where = url.split("/packages/")[0] if "/packages/" in url else url.rsplit("/", 1)[0]
-    print(f"setup: torch is not installed: {pinned()} from {where} is its CUDA build ({len(cuda)} nvidia/triton "
-          f"packages, {total / 2**30:.1f} GiB to download): neither {CPU_INDEX} nor a local wheel gave a CPU "
-          "build; Duplex-GS checkpoints and their tests need it: pip install 'gbviewer[duplex]' takes the "
-          "CUDA build, or PIP_FIND_LINKS=DIR with a CPU wheel takes that", file=sys.stderr)
+    print(
+        f"setup: torch is not installed: {pinned()} from {where} is its CUDA build ({len(cuda)} nvidia/triton "
+        f"packages, {total / 2**30:.1f} GiB to download): neither {CPU_INDEX} nor a local wheel gave a CPU "
+        "build; Duplex-GS checkpoints and their tests need it: pip install 'gbviewer[duplex]' takes the "
+        "CUDA build, or PIP_FIND_LINKS=DIR with a CPU wheel takes that",
+        file=sys.stderr,
+    )
     return 1
 
 

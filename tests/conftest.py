@@ -15,10 +15,10 @@ if not any((_SRC / "gbviewer").glob("_native*")):
 sys.path.insert(0, str(_SRC / "tools"))  # developer tools the tests share with bench/: encoders, fuzz_loaders
 
 import pytest  # noqa: E402
-
-import gbviewer as gb  # noqa: E402
 from dataset_builders import shots, write_colmap  # noqa: E402
 from helpers import OUTPUT_H, OUTPUT_W  # noqa: E402
+
+import gbviewer as gb  # noqa: E402
 
 
 @pytest.fixture(scope="session")

@@ -60,8 +60,9 @@ def save_rgba(path: Path, rgb: np.ndarray, alpha: np.ndarray) -> None:
     Image.fromarray(rgba, "RGBA").save(path)
 
 
-def write_colmap(root: Path, views: list[Shot], text: bool = False, model: str | None = None,
-                 extra: tuple[float, ...] = ()) -> Path:
+def write_colmap(
+    root: Path, views: list[Shot], text: bool = False, model: str | None = None, extra: tuple[float, ...] = ()
+) -> Path:
     """root/sparse/0 (through pycolmap) and root/images/NAME.png: odd views use a PINHOLE camera, even ones a
     SIMPLE_PINHOLE (fx = fy); `model` with `extra` parameters (after f, cx, cy for SIMPLE_* models, else fx, fy,
     cx, cy) replaces the PINHOLE one."""
@@ -73,11 +74,9 @@ def write_colmap(root: Path, views: list[Shot], text: bool = False, model: str |
             params = [c.fx, c.cx, c.cy, *extra] if model.startswith("SIMPLE") else [c.fx, c.fy, c.cx, c.cy, *extra]
             cam = pycolmap.Camera(camera_id=i + 1, model=model, width=W, height=H, params=params)
         elif i % 2:
-            cam = pycolmap.Camera(camera_id=i + 1, model="PINHOLE", width=W, height=H,
-                                  params=[c.fx, c.fy, c.cx, c.cy])
+            cam = pycolmap.Camera(camera_id=i + 1, model="PINHOLE", width=W, height=H, params=[c.fx, c.fy, c.cx, c.cy])
         else:
-            cam = pycolmap.Camera(camera_id=i + 1, model="SIMPLE_PINHOLE", width=W, height=H,
-                                  params=[c.fx, c.cx, c.cy])
+            cam = pycolmap.Camera(camera_id=i + 1, model="SIMPLE_PINHOLE", width=W, height=H, params=[c.fx, c.cx, c.cy])
         rec.add_camera_with_trivial_rig(cam)
         image = pycolmap.Image(image_id=i + 1, name=f"{shot.name}.png", camera_id=i + 1)
         rec.add_image_with_trivial_frame(image, pycolmap.Rigid3d(pycolmap.Rotation3d(c.R), c.t))
@@ -109,8 +108,19 @@ def write_blender(root: Path, views: list[Shot], test: tuple[int, ...] = (0, 8))
 
 def write_cameras_json(root: Path, views: list[Shot]) -> Path:
     """A 3DGS cameras.json (rotation: camera-to-world, position: the eye) and images/NAME.png."""
-    entries = [{"id": k, "img_name": s.name, "width": W, "height": H, "fx": s.camera.fx, "fy": s.camera.fy,
-                "rotation": s.camera.R.T.tolist(), "position": s.eye.tolist()} for k, s in enumerate(views)]
+    entries = [
+        {
+            "id": k,
+            "img_name": s.name,
+            "width": W,
+            "height": H,
+            "fx": s.camera.fx,
+            "fy": s.camera.fy,
+            "rotation": s.camera.R.T.tolist(),
+            "position": s.eye.tolist(),
+        }
+        for k, s in enumerate(views)
+    ]
     root.mkdir(parents=True, exist_ok=True)
     (root / "cameras.json").write_text(json.dumps(entries))
     for s in views:

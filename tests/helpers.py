@@ -19,8 +19,10 @@ SHARED_SCENES = REPO.parent / "shared" / "scenes"
 IN_CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
 # The suite inside scripts/check_distro.sh's root: the checks of other builds and systems (other Highways, Pythons,
 # aarch64, the distro check itself) are the host suite's, which runs that one.
-HOST_ONLY = pytest.mark.skipif(os.environ.get("GBVIEWER_IN_DISTRO_CHECK") == "1",
-                               reason="a check of other builds and systems: the host's suite runs it")
+HOST_ONLY = pytest.mark.skipif(
+    os.environ.get("GBVIEWER_IN_DISTRO_CHECK") == "1",
+    reason="a check of other builds and systems: the host's suite runs it",
+)
 
 
 OUTPUT_W, OUTPUT_H = 96, 64  # the pane of the output-layer tests (video, figure, camera paths, keyframes)
@@ -90,8 +92,9 @@ def rotation(rng: np.random.Generator, max_angle: float) -> np.ndarray:
 ORTHO_DEPTH = 3.0  # random_view's orthographic camera has the perspective one's scale at this depth
 
 
-def random_view(seed, n=160, sh_degree=3, filter3d=False, W=48, H=40, max_px_sigma=None, kinds_p=None,
-                projection="perspective"):
+def random_view(
+    seed, n=160, sh_degree=3, filter3d=False, W=48, H=40, max_px_sigma=None, kinds_p=None, projection="perspective"
+):
     """Random scene with every awkward kind of splat, seen by an off-centre camera (fx != fy, rotated pose).
     projection="orthographic": the same scene, seen by the same pose as an orthographic camera with the perspective
     one's scale at depth ORTHO_DEPTH (so the splats spread a little beyond the image where they are deeper).

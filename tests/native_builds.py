@@ -49,22 +49,36 @@ def cmake_env(**extra: str) -> dict[str, str]:
     return {**{k: v for k, v in os.environ.items() if k not in drop}, **extra}
 
 
-def configure(build: Path, *args: str, env: dict[str, str] | None = None,
-              python: str = sys.executable) -> subprocess.CompletedProcess:
+def configure(
+    build: Path, *args: str, env: dict[str, str] | None = None, python: str = sys.executable
+) -> subprocess.CompletedProcess:
     """`cmake -S ROOT -B build` for the CPU module alone (no CUDA), with `python` (this one) and its nanobind; ccache
     when installed (the build tests rebuild the same sources)."""
     nb_dir = subprocess.check_output([python, "-m", "nanobind", "--cmake_dir"], text=True).strip()
     gen = ["-G", "Ninja"] if shutil.which("ninja") else []
     cache = ["-DCMAKE_CXX_COMPILER_LAUNCHER=ccache"] if shutil.which("ccache") else []
-    cmd = ["cmake", "-S", str(ROOT), "-B", str(build), *gen, *cache, "-DGBVIEWER_CUDA=OFF", f"-Dnanobind_DIR={nb_dir}",
-           f"-DPython_EXECUTABLE={python}", "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON", *args]
+    cmd = [
+        "cmake",
+        "-S",
+        str(ROOT),
+        "-B",
+        str(build),
+        *gen,
+        *cache,
+        "-DGBVIEWER_CUDA=OFF",
+        f"-Dnanobind_DIR={nb_dir}",
+        f"-DPython_EXECUTABLE={python}",
+        "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON",
+        *args,
+    ]
     return subprocess.run(cmd, capture_output=True, text=True, env=env or cmake_env(), timeout=300)
 
 
 def build(build_dir: Path) -> Path:
     """Build the module alone (two jobs) and return its file."""
-    proc = subprocess.run(["cmake", "--build", str(build_dir), "-j2", "--target", "_native"], capture_output=True,
-                          text=True, timeout=900)
+    proc = subprocess.run(
+        ["cmake", "--build", str(build_dir), "-j2", "--target", "_native"], capture_output=True, text=True, timeout=900
+    )
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     return next(build_dir.glob("_native.*"))
 
@@ -91,8 +105,10 @@ def fetch_highway(version: str, dest: Path) -> Path | str:
     once its SHA-256 matched; or, where no source gives it, why (a string)."""
     archive = CACHE / "highway" / f"highway-{version}.tar.gz"
     tried = []
-    for url in (f"https://github.com/google/highway/archive/refs/tags/{version}.tar.gz",
-                f"https://deb.debian.org/debian/pool/main/h/highway/highway_{version}.orig.tar.gz"):
+    for url in (
+        f"https://github.com/google/highway/archive/refs/tags/{version}.tar.gz",
+        f"https://deb.debian.org/debian/pool/main/h/highway/highway_{version}.orig.tar.gz",
+    ):
         if archive.exists() and hashlib.sha256(archive.read_bytes()).hexdigest() == HIGHWAY_RELEASES[version]:
             break
         archive.parent.mkdir(parents=True, exist_ok=True)
@@ -111,8 +127,9 @@ def fetch_highway(version: str, dest: Path) -> Path | str:
         if not archive.exists():
             return f"Highway {version} could not be fetched: {'; '.join(tried)}"
     with tarfile.open(archive) as tar:
-        tar.extractall(dest, members=[m for m in tar.getmembers() if m.name.startswith(f"highway-{version}/hwy/")],
-                       filter="data")
+        tar.extractall(
+            dest, members=[m for m in tar.getmembers() if m.name.startswith(f"highway-{version}/hwy/")], filter="data"
+        )
     return dest / f"highway-{version}"
 
 
@@ -125,12 +142,19 @@ def stage_package(module: Path, dest: Path) -> Path:
     return dest
 
 
-def run_child(python: list[str], pkg: Path, out: Path, scenes: list[Path], size: int, env: dict[str, str],
-              timeout: float) -> dict:
+def run_child(
+    python: list[str], pkg: Path, out: Path, scenes: list[Path], size: int, env: dict[str, str], timeout: float
+) -> dict:
     """Run CHILD with `python` (a command: an interpreter, or qemu and one) on pkg; its report."""
     out.mkdir(parents=True, exist_ok=True)
-    proc = subprocess.run([*python, "-c", CHILD, str(out), str(size), *map(str, scenes)], capture_output=True,
-                          text=True, timeout=timeout, cwd="/", env={**env, "PYTHONPATH": str(pkg)})
+    proc = subprocess.run(
+        [*python, "-c", CHILD, str(out), str(size), *map(str, scenes)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd="/",
+        env={**env, "PYTHONPATH": str(pkg)},
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
 from reference_blend import blend_duplex, blend_gb, blend_scalar_like, blend_wsr
 from reference_preprocess import MODES, TILE, preprocess, preprocess_cells
 
@@ -40,7 +39,7 @@ def _tile_lists(pre, mode: str, cam, supersample: int = 1, cells=None):
 
     if mode == "duplex":
         cpre = preprocess_cells(cells, cam, supersample)
-        members = [cells.members[cells.offsets[c]:cells.offsets[c + 1]] for c in range(len(cells.means))]
+        members = [cells.members[cells.offsets[c] : cells.offsets[c + 1]] for c in range(len(cells.means))]
         members = [mm[pre["keep"][mm]] for mm in members]
         ckeep = cpre["keep"] & np.array([len(mm) > 0 for mm in members], bool)
         cell_of = np.full(len(pre["keep"]), -1)
@@ -60,8 +59,9 @@ def _tile_lists(pre, mode: str, cam, supersample: int = 1, cells=None):
     return (lambda tx, ty: touching(order, rect, tx, ty)), None
 
 
-def pixel_contributors(scene, cam, mode: str, x: int, y: int, supersample: int = 1, oit: dict | None = None,
-                       cells=None) -> list[tuple[list[int], bool]]:
+def pixel_contributors(
+    scene, cam, mode: str, x: int, y: int, supersample: int = 1, oit: dict | None = None, cells=None
+) -> list[tuple[list[int], bool]]:
     """Per sub-sample of output pixel (x, y), row-major: the splats it adds, in blend order, and whether one of its
     threshold decisions was a tie; by this module's blend loops run on that sample alone."""
     n = int(supersample)
@@ -140,8 +140,9 @@ def render_oit(scene, cam, mode: str, oit: dict, cells=None, supersample: int = 
     return dict(rgb=rgb, T=Tout, tie=ties, pre=pre)
 
 
-def reference_render_oit(scene, cam, mode: str, oit: dict, cells=None, supersample: int = 1,
-                         background=(0.0, 0.0, 0.0)):
+def reference_render_oit(
+    scene, cam, mode: str, oit: dict, cells=None, supersample: int = 1, background=(0.0, 0.0, 0.0)
+):
     """(rgb, alpha = 1 - w_bg / total, tie mask) at output resolution, box-averaged like the renderer."""
     n = int(supersample)
     r = render_oit(scene, cam, mode, oit, cells, n, background)
@@ -156,8 +157,16 @@ def box_down(img: np.ndarray, n: int) -> np.ndarray:
     return img.reshape(h, n, w, n, *img.shape[2:]).mean(axis=(1, 3))
 
 
-def reference_render(scene, cam, mode: str, supersample: int = 1, background=(0.0, 0.0, 0.0),
-                     return_window: bool = False, return_ties: bool = False, view_filter: dict | None = None):
+def reference_render(
+    scene,
+    cam,
+    mode: str,
+    supersample: int = 1,
+    background=(0.0, 0.0, 0.0),
+    return_window: bool = False,
+    return_ties: bool = False,
+    view_filter: dict | None = None,
+):
     """Float64 brute-force render. Returns (rgb (H,W,3), alpha (H,W)), then optionally the final GB window
     size (H,W,2) (None unless supersample == 1) and the tie mask (H,W): output pixels where some
     threshold decision (alpha cut, early stop, GB fallback / extent test) lay within TIE_REL of its cut.

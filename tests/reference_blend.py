@@ -6,15 +6,24 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from reference_preprocess import (
+    DUPLEX_STOP,
+    GB_EXTENT,
+    GB_MAX_UV,
+    GB_MIN_UV,
+    GB_MIN_VAR,
+    MIN_ALPHA_3DGS,
+    MIN_ALPHA_GB,
+    T_STOP,
+    WSR_EMPTY,
+    WSR_TERM_MAX,
+)
 from scipy.special import erf
-
-from reference_preprocess import (DUPLEX_STOP, GB_EXTENT, GB_MAX_UV, GB_MIN_UV, GB_MIN_VAR, MIN_ALPHA_3DGS,
-                                  MIN_ALPHA_GB, T_STOP, WSR_EMPTY, WSR_TERM_MAX)
 
 
 def _phi_tilde(x):
     """Analytic-Splatting's CDF approximation sigmoid(1.6x + 0.07x^3)."""
-    return 1.0 / (1.0 + np.exp(-(1.6 * x + 0.07 * x ** 3)))
+    return 1.0 / (1.0 + np.exp(-(1.6 * x + 0.07 * x**3)))
 
 
 def _g0(x):
@@ -100,8 +109,9 @@ def blend_gb(pre, idx, pix, state=None, return_centre=False, added=None):
     Txy = pix.copy()
     Twh = np.ones((P, 2))
     if state is not None:
-        Tv, Txy, Twh = (np.array(np.broadcast_to(np.asarray(v, np.float64), sh))
-                        for v, sh in zip(state, [(P,), (P, 2), (P, 2)]))
+        Tv, Txy, Twh = (
+            np.array(np.broadcast_to(np.asarray(v, np.float64), sh)) for v, sh in zip(state, [(P,), (P, 2), (P, 2)])
+        )
     done = np.zeros(P, bool)
     tie = np.zeros(P, bool)
     for s in idx:
@@ -156,10 +166,10 @@ def blend_gb(pre, idx, pix, state=None, return_centre=False, added=None):
             g &= a >= MIN_ALPHA_GB
             _note(added, s, g)
             wgt = Tv * a
-            I1u = sg1 ** 2 * (_g1(U2) - _g1(U1))
-            I1v = sg2 ** 2 * (_g1(V2) - _g1(V1))
-            I2u = sg1 ** 3 * (_g2(U2) - _g2(U1))
-            I2v = sg2 ** 3 * (_g2(V2) - _g2(V1))
+            I1u = sg1**2 * (_g1(U2) - _g1(U1))
+            I1v = sg2**2 * (_g1(V2) - _g1(V1))
+            I2u = sg1**3 * (_g2(U2) - _g2(U1))
+            I2v = sg2**3 * (_g2(V2) - _g2(V1))
             k = Tv / area * o
             m0 = Tv - wgt
             m1u = Tv * u - k * I1u * I0v

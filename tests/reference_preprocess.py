@@ -28,8 +28,15 @@ WSR_TERM_MAX = 64.0  # wsr: alpha and each colour term are capped here (the rend
 # Spherical-harmonics constants of 3DGS (docs/modes.md#colour).
 SH_C1 = 0.4886025119029199
 SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
-SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-         -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+SH_C3 = (
+    -0.5900435899266435,
+    2.890611442640554,
+    -0.4570457994644658,
+    0.3731763325901154,
+    -0.4570457994644658,
+    1.445305721320277,
+    -0.5900435899266435,
+)
 
 
 def _get(scene, name):
@@ -44,18 +51,21 @@ def quat_to_rotmat(q: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(q, axis=1, keepdims=True)
     q = np.where(n > 1e-12, q / np.maximum(n, 1e-300), np.array([1.0, 0.0, 0.0, 0.0]))
     w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
 
 
 def sh_to_rgb(sh: np.ndarray, dirs: np.ndarray, dc_clamp: bool = False) -> np.ndarray:
     """Evaluate the 3DGS real SH basis; sh (N,K,3), dirs (N,3) unit. Returns max(0, sum + 0.5); with dc_clamp the
     base colour 0.5 + C0 dc is clamped to [0, 1] before the higher bands are added."""
     k = sh.shape[1]
-    x, y, z = (dirs[:, i:i + 1] for i in range(3))
+    x, y, z = (dirs[:, i : i + 1] for i in range(3))
     res = SH_C0 * sh[:, 0] + 0.5
     if dc_clamp:
         res = np.clip(res, 0.0, 1.0)
@@ -63,14 +73,25 @@ def sh_to_rgb(sh: np.ndarray, dirs: np.ndarray, dc_clamp: bool = False) -> np.nd
         res = res - SH_C1 * y * sh[:, 1] + SH_C1 * z * sh[:, 2] - SH_C1 * x * sh[:, 3]
     if k > 4:
         xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-        res = (res + SH_C2[0] * xy * sh[:, 4] + SH_C2[1] * yz * sh[:, 5]
-               + SH_C2[2] * (2 * zz - xx - yy) * sh[:, 6] + SH_C2[3] * xz * sh[:, 7]
-               + SH_C2[4] * (xx - yy) * sh[:, 8])
+        res = (
+            res
+            + SH_C2[0] * xy * sh[:, 4]
+            + SH_C2[1] * yz * sh[:, 5]
+            + SH_C2[2] * (2 * zz - xx - yy) * sh[:, 6]
+            + SH_C2[3] * xz * sh[:, 7]
+            + SH_C2[4] * (xx - yy) * sh[:, 8]
+        )
     if k > 9:
-        res = (res + SH_C3[0] * y * (3 * xx - yy) * sh[:, 9] + SH_C3[1] * xy * z * sh[:, 10]
-               + SH_C3[2] * y * (4 * zz - xx - yy) * sh[:, 11] + SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * sh[:, 12]
-               + SH_C3[4] * x * (4 * zz - xx - yy) * sh[:, 13] + SH_C3[5] * z * (xx - yy) * sh[:, 14]
-               + SH_C3[6] * x * (xx - 3 * yy) * sh[:, 15])
+        res = (
+            res
+            + SH_C3[0] * y * (3 * xx - yy) * sh[:, 9]
+            + SH_C3[1] * xy * z * sh[:, 10]
+            + SH_C3[2] * y * (4 * zz - xx - yy) * sh[:, 11]
+            + SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * sh[:, 12]
+            + SH_C3[4] * x * (4 * zz - xx - yy) * sh[:, 13]
+            + SH_C3[5] * z * (xx - yy) * sh[:, 14]
+            + SH_C3[6] * x * (xx - 3 * yy) * sh[:, 15]
+        )
     return np.maximum(res, 0.0)
 
 
@@ -78,9 +99,12 @@ def camera_params(cam, supersample: int = 1) -> dict:
     """Camera as float64, with the float32 rounding of R and t that the native call applies."""
     n = int(supersample)
     return dict(
-        W=int(cam.width) * n, H=int(cam.height) * n,
-        fx=float(np.float32(cam.fx)) * n, fy=float(np.float32(cam.fy)) * n,
-        cx=float(np.float32(cam.cx)) * n, cy=float(np.float32(cam.cy)) * n,
+        W=int(cam.width) * n,
+        H=int(cam.height) * n,
+        fx=float(np.float32(cam.fx)) * n,
+        fy=float(np.float32(cam.fy)) * n,
+        cx=float(np.float32(cam.cx)) * n,
+        cy=float(np.float32(cam.cy)) * n,
         R=np.asarray(cam.R, np.float32).astype(np.float64),
         t=np.asarray(cam.t, np.float32).astype(np.float64),
         near=float(getattr(cam, "near", NEAR_PLANE)),
@@ -104,9 +128,9 @@ def project(cp: dict, view: np.ndarray, Sigma: np.ndarray, keep: np.ndarray) -> 
         tx = np.clip(X / Zs, -(cx / fx + 0.3 * tan_x), (W - cx) / fx + 0.3 * tan_x) * Zs
         ty = np.clip(Y / Zs, -(cy / fy + 0.3 * tan_y), (H - cy) / fy + 0.3 * tan_y) * Zs
         J[:, 0, 0] = fx / Zs
-        J[:, 0, 2] = -fx * tx / Zs ** 2
+        J[:, 0, 2] = -fx * tx / Zs**2
         J[:, 1, 1] = fy / Zs
-        J[:, 1, 2] = -fy * ty / Zs ** 2
+        J[:, 1, 2] = -fy * ty / Zs**2
         xy = np.stack([fx * X / Zs + cx, fy * Y / Zs + cy], -1)
     T = J @ R  # J W
     return xy, T @ Sigma @ T.transpose(0, 2, 1)
@@ -130,18 +154,31 @@ def _sh_raw(c: np.ndarray, dirs: np.ndarray) -> np.ndarray:
         res = res - SH_C1 * y * c[:, 1] + SH_C1 * z * c[:, 2] - SH_C1 * x * c[:, 3]
     if k > 4:
         xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-        res = (res + SH_C2[0] * xy * c[:, 4] + SH_C2[1] * yz * c[:, 5] + SH_C2[2] * (2 * zz - xx - yy) * c[:, 6]
-               + SH_C2[3] * xz * c[:, 7] + SH_C2[4] * (xx - yy) * c[:, 8])
+        res = (
+            res
+            + SH_C2[0] * xy * c[:, 4]
+            + SH_C2[1] * yz * c[:, 5]
+            + SH_C2[2] * (2 * zz - xx - yy) * c[:, 6]
+            + SH_C2[3] * xz * c[:, 7]
+            + SH_C2[4] * (xx - yy) * c[:, 8]
+        )
     if k > 9:
-        res = (res + SH_C3[0] * y * (3 * xx - yy) * c[:, 9] + SH_C3[1] * xy * z * c[:, 10]
-               + SH_C3[2] * y * (4 * zz - xx - yy) * c[:, 11] + SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * c[:, 12]
-               + SH_C3[4] * x * (4 * zz - xx - yy) * c[:, 13] + SH_C3[5] * z * (xx - yy) * c[:, 14]
-               + SH_C3[6] * x * (xx - 3 * yy) * c[:, 15])
+        res = (
+            res
+            + SH_C3[0] * y * (3 * xx - yy) * c[:, 9]
+            + SH_C3[1] * xy * z * c[:, 10]
+            + SH_C3[2] * y * (4 * zz - xx - yy) * c[:, 11]
+            + SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * c[:, 12]
+            + SH_C3[4] * x * (4 * zz - xx - yy) * c[:, 13]
+            + SH_C3[5] * z * (xx - yy) * c[:, 14]
+            + SH_C3[6] * x * (xx - 3 * yy) * c[:, 15]
+        )
     return res
 
 
-def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = None,
-               view_filter: dict | None = None) -> dict:
+def preprocess(
+    scene, cam, mode: str, supersample: int = 1, oit: dict | None = None, view_filter: dict | None = None
+) -> dict:
     """Per-splat screen-space quantities (float64). Arrays are indexed like the scene; `keep` marks survivors.
 
     wsr / duplex (docs/modes.md#wsr, #duplex): as scalar (+0.3, radius 3 sqrt(lambda_max)), and the opacity becomes
@@ -172,7 +209,7 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
     # Mip-Splatting 3D filter (every mode when present)
     if f3d is not None:
         f2 = np.asarray(f3d, np.float64).reshape(-1) ** 2
-        s2 = scales ** 2
+        s2 = scales**2
         opac = opac * np.sqrt(np.prod(s2, axis=1) / np.prod(s2 + f2[:, None], axis=1))
         scales = np.sqrt(s2 + f2[:, None])
 
@@ -250,10 +287,22 @@ def preprocess(scene, cam, mode: str, supersample: int = 1, oit: dict | None = N
     with np.errstate(divide="ignore", invalid="ignore"):
         conic = np.stack([c / det, -b / det, a / det], -1)
     return dict(
-        keep=keep, xy=np.stack([x, y], -1), cov=np.stack([a, b, c], -1), conic=conic, opacity=opac,
-        depth=depth, min_power=min_power, color=color, rect=np.stack([x0, x1, y0, y1], -1), radius=radius,
-        lam=np.stack([lam1, lam2], -1), sigma=np.sqrt(np.abs(np.stack([lam1, lam2], -1))), v1=v1, v2=v2,
-        W=W, H=H,
+        keep=keep,
+        xy=np.stack([x, y], -1),
+        cov=np.stack([a, b, c], -1),
+        conic=conic,
+        opacity=opac,
+        depth=depth,
+        min_power=min_power,
+        color=color,
+        rect=np.stack([x0, x1, y0, y1], -1),
+        radius=radius,
+        lam=np.stack([lam1, lam2], -1),
+        sigma=np.sqrt(np.abs(np.stack([lam1, lam2], -1))),
+        v1=v1,
+        v2=v2,
+        W=W,
+        H=H,
     )
 
 

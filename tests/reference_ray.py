@@ -16,7 +16,6 @@ Both composite as 3DGS: stop where T (1 - alpha) < 1e-4.
 from __future__ import annotations
 
 import numpy as np
-
 from reference import box_down
 from reference_preprocess import MIN_ALPHA_3DGS, T_STOP, TILE, _get, camera_params, preprocess, quat_to_rotmat
 
@@ -93,8 +92,7 @@ def _queue_order(frags: list, depth: np.ndarray, queue: int) -> list:
     return out + q
 
 
-def render_sorted(scene, cam, mode: str, queue: int | None = None, supersample: int = 1,
-                  background=(0.0, 0.0, 0.0)):
+def render_sorted(scene, cam, mode: str, queue: int | None = None, supersample: int = 1, background=(0.0, 0.0, 0.0)):
     """(rgb (H,W,3), alpha (H,W)) of eval3d or stopthepop:queue, float64; `queue` (None: the mode's, exact for eval3d
     and 4 for stopthepop) is the per-pixel queue length, 0 the exact sort, 1 the centre-depth order."""
     queue = (0 if mode == "eval3d" else 4) if queue is None else queue
@@ -128,8 +126,7 @@ def render_sorted(scene, cam, mode: str, queue: int | None = None, supersample: 
             ok &= (power <= 0) & (al >= MIN_ALPHA_3DGS)
             dep = dict(zip(ids.tolist(), depth.tolist()))
             frags = [(int(i), float(v)) for i, v in zip(ids[ok], al[ok])]
-            rgb[y, x], alpha[y, x] = _composite(_queue_order(frags, dep, queue),
-                                                pre["color"], background)
+            rgb[y, x], alpha[y, x] = _composite(_queue_order(frags, dep, queue), pre["color"], background)
     if supersample > 1:
         return box_down(rgb, supersample), box_down(alpha, supersample)
     return rgb, alpha

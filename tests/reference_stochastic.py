@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
 from reference import _tile_lists
 from reference_preprocess import MIN_ALPHA_3DGS, TILE, _get, camera_params, preprocess, quat_to_rotmat
 
@@ -26,7 +25,7 @@ def depth_planes(scene, cam, supersample: int = 1) -> tuple[np.ndarray, np.ndarr
     scales = np.asarray(_get(scene, "scales"), np.float64)
     f3d = _get(scene, "filter_3d")
     if f3d is not None:
-        scales = np.sqrt(scales ** 2 + np.asarray(f3d, np.float64).reshape(-1, 1) ** 2)
+        scales = np.sqrt(scales**2 + np.asarray(f3d, np.float64).reshape(-1, 1) ** 2)
     M = R @ quat_to_rotmat(_get(scene, "quats")) * scales[:, None, :]  # R Rq S
     sigma_v = M @ M.transpose(0, 2, 1)
     d = np.broadcast_to([0.0, 0.0, 1.0], mu.shape) if cp["ortho"] else mu
@@ -44,8 +43,9 @@ def nearness(cp: dict, n: np.ndarray, c: float, pix: np.ndarray) -> np.ndarray:
     return (n[0] * u + n[1] * v + n[2]) / c
 
 
-def expectation(scene, cam, supersample: int = 1, background=(0.0, 0.0, 0.0), view_filter: dict | None = None,
-                popfree: bool = False):
+def expectation(
+    scene, cam, supersample: int = 1, background=(0.0, 0.0, 0.0), view_filter: dict | None = None, popfree: bool = False
+):
     """Per sample of the N x N supersampled grid: (mean rgb (H,W,3), variance (H,W,3)) of one stochastic sample
     (`view_filter`: a preset's 2D filter, as reference.render_full_res takes it)."""
     pre = preprocess(scene, cam, "scalar", supersample, view_filter=view_filter)
@@ -86,10 +86,10 @@ def expectation(scene, cam, supersample: int = 1, background=(0.0, 0.0, 0.0), vi
                 w = (a * T)[:, None]  # P(this fragment is the nearest kept one)
                 c = cols[order[k]]
                 m += w * c
-                m2 += w * c ** 2
+                m2 += w * c**2
                 T *= 1.0 - a
             m += T[:, None] * bg
-            m2 += T[:, None] * bg ** 2
+            m2 += T[:, None] * bg**2
             mean[i0:i1, j0:j1] = m.reshape(i1 - i0, j1 - j0, 3)
             second[i0:i1, j0:j1] = m2.reshape(i1 - i0, j1 - j0, 3)
-    return mean, np.maximum(second - mean ** 2, 0.0)
+    return mean, np.maximum(second - mean**2, 0.0)

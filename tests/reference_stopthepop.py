@@ -59,7 +59,7 @@ def _depth_at(ids, P, mu, cp, qx, qy, unit=False):
     t = np.empty(len(ids))
     for k, i in enumerate(ids):
         o, d = pixel_ray(cp, qx[k], qy[k])
-        t[k] = ray_maximum(P[i:i + 1], mu[i:i + 1], o, d)[1][0] * (np.linalg.norm(d) if unit else 1.0)
+        t[k] = ray_maximum(P[i : i + 1], mu[i : i + 1], o, d)[1][0] * (np.linalg.norm(d) if unit else 1.0)
     return t
 
 
@@ -79,12 +79,14 @@ def _groups_4x4(order, pre, P, mu, cp, x4, y4) -> list[list[int]]:
     depth = dict(zip(ids.tolist(), _depth_at(ids, P, mu, cp, x4 + 2.0, y4 + 2.0)))
     tail, out = [], []
     for base in range(0, len(ids), LOAD):
-        tail = sorted(tail + [int(i) for i, k in zip(ids[base:base + LOAD], kept[base:base + LOAD]) if k],
-                      key=depth.__getitem__)
+        tail = sorted(
+            tail + [int(i) for i, k in zip(ids[base : base + LOAD], kept[base : base + LOAD]) if k],
+            key=depth.__getitem__,
+        )
         while len(tail) > LOAD:
-            out += [tail[k:k + GROUP] for k in range(0, PULL, GROUP)]
+            out += [tail[k : k + GROUP] for k in range(0, PULL, GROUP)]
             tail = tail[PULL:]
-    return out + [tail[k:k + GROUP] for k in range(0, len(tail), GROUP)]
+    return out + [tail[k : k + GROUP] for k in range(0, len(tail), GROUP)]
 
 
 def _stream_2x2(groups, P, mu, cp, x2, y2) -> list[int]:
@@ -114,8 +116,15 @@ def _pixel_order(arrivals, frag: dict, queue: int) -> list:
     return [(i, frag[i][1]) for i in out + q]
 
 
-def render_hierarchical(scene, cam, queue: int = 4, supersample: int = 1, background=(0.0, 0.0, 0.0),
-                        hierarchy: bool = True, orders: dict | None = None):
+def render_hierarchical(
+    scene,
+    cam,
+    queue: int = 4,
+    supersample: int = 1,
+    background=(0.0, 0.0, 0.0),
+    hierarchy: bool = True,
+    orders: dict | None = None,
+):
     """(rgb (H,W,3), alpha (H,W)) of stopthepop:queue, float64 (queue > 0). `orders`: filled with each pixel's blend
     order (splat indices) when given."""
     cp = camera_params(cam, supersample)

@@ -24,8 +24,11 @@ def _package_dataclasses() -> list[type]:
         if info.name.endswith("__main__"):
             continue
         module = importlib.import_module(info.name)
-        found += [obj for obj in vars(module).values() if inspect.isclass(obj) and dataclasses.is_dataclass(obj)
-                  and obj.__module__ == module.__name__]
+        found += [
+            obj
+            for obj in vars(module).values()
+            if inspect.isclass(obj) and dataclasses.is_dataclass(obj) and obj.__module__ == module.__name__
+        ]
     return found
 
 

@@ -37,10 +37,26 @@ def offences(text: str) -> list[str]:
 
 def test_offences_are_found():
     """The patterns catch what they are for and leave code and public references alone."""
-    bad = ["see ../shared/KERNELS.md §6.3", "(KERNELS.md §8.1)", "DESIGN.md says", "/work/shared/scenes/x.ply",
-           "Level of detail (issue 24)", "as issues 18 and 29 found", "Issue #7"]
-    good = ["docs/modes.md#gaussian-blending", "gsplat PR #1036", "x = a[#i]", "see bench/RESULTS.md", "#define X 1",
-            "#include <cstdint>", "label `step 3/76: #12`", "shared_stage", "the shared headers"]
+    bad = [
+        "see ../shared/KERNELS.md §6.3",
+        "(KERNELS.md §8.1)",
+        "DESIGN.md says",
+        "/work/shared/scenes/x.ply",
+        "Level of detail (issue 24)",
+        "as issues 18 and 29 found",
+        "Issue #7",
+    ]
+    good = [
+        "docs/modes.md#gaussian-blending",
+        "gsplat PR #1036",
+        "x = a[#i]",
+        "see bench/RESULTS.md",
+        "#define X 1",
+        "#include <cstdint>",
+        "label `step 3/76: #12`",
+        "shared_stage",
+        "the shared headers",
+    ]
     assert all(offences(s) for s in bad), [s for s in bad if not offences(s)]
     assert not any(offences(s) for s in good), [offences(s) for s in good if offences(s)]
 
@@ -107,15 +123,21 @@ def broken_links(doc: Path) -> list[str]:
 
 
 def test_broken_links_are_found(tmp_path: Path):
-    (tmp_path / "a.md").write_text("# Title\n\n## Two words\n\n[ok](#two-words) [ok](b.md#b) [x](c.md) [y](b.md#nope) "
-                                   "[z](#title-2) [web](https://example.com)\n\n```\n[not a link](d.md)\n```\n")
+    (tmp_path / "a.md").write_text(
+        "# Title\n\n## Two words\n\n[ok](#two-words) [ok](b.md#b) [x](c.md) [y](b.md#nope) "
+        "[z](#title-2) [web](https://example.com)\n\n```\n[not a link](d.md)\n```\n"
+    )
     (tmp_path / "b.md").write_text("# B\n")
-    assert broken_links(tmp_path / "a.md") == ["c.md: no such file", "b.md#nope: no heading with that anchor in b.md",
-                                               "#title-2: no heading with that anchor in a.md"]
+    assert broken_links(tmp_path / "a.md") == [
+        "c.md: no such file",
+        "b.md#nope: no heading with that anchor in b.md",
+        "#title-2: no heading with that anchor in a.md",
+    ]
 
 
-@pytest.mark.parametrize("doc", [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))],
-                         ids=lambda p: str(p.relative_to(REPO)))
+@pytest.mark.parametrize(
+    "doc", [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))], ids=lambda p: str(p.relative_to(REPO))
+)
 def test_relative_links_resolve(doc: Path):
     broken = broken_links(doc)
     assert not broken, f"{doc.relative_to(REPO)}: " + "; ".join(broken)

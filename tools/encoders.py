@@ -34,8 +34,9 @@ def random_params(n: int, sh_degree: int = 0, seed: int = 0) -> dict[str, np.nda
         "scales": np.exp(rng.uniform(-7, 0, (n, 3))),
         "quats": q / np.linalg.norm(q, axis=1, keepdims=True),
         "opacities": rng.uniform(0.01, 0.99, n),
-        "sh": np.concatenate([rng.uniform(-1.5, 1.5, (n, 1, 3)),
-                              rng.uniform(-0.6, 0.6, (n, (sh_degree + 1) ** 2 - 1, 3))], axis=1),
+        "sh": np.concatenate(
+            [rng.uniform(-1.5, 1.5, (n, 1, 3)), rng.uniform(-0.6, 0.6, (n, (sh_degree + 1) ** 2 - 1, 3))], axis=1
+        ),
     }
 
 
@@ -44,8 +45,7 @@ def _u8(x: np.ndarray) -> np.ndarray:
 
 
 def encode_splat(s: dict) -> bytes:
-    rec = np.zeros(len(s["means"]), dtype=[("pos", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4),
-                                           ("rot", "u1", 4)])
+    rec = np.zeros(len(s["means"]), dtype=[("pos", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4), ("rot", "u1", 4)])
     rec["pos"], rec["scale"] = s["means"], s["scales"]
     rec["rgba"][:, :3] = _u8((0.5 + SH_C0 * s["sh"][:, 0]) * 255)
     rec["rgba"][:, 3] = _u8(s["opacities"] * 255)
@@ -81,13 +81,25 @@ def spz_arrays(s: dict, version: int, frac_bits: int = 12) -> list[bytes]:
         xyzw = xyzw * np.where(xyzw[:, 3:] < 0, -1.0, 1.0)
         rot = _u8(xyzw[:, :3] * 127.5 + 127.5).tobytes()
     flips = np.concatenate([FLIP_SH, np.ones(9)])  # degree-4 signs are not needed by the tests
-    rest = s["sh"][:, 1:] * flips[:s["sh"].shape[1] - 1, None]
-    return [pos, _u8(s["opacities"] * 255).tobytes(), _u8(s["sh"][:, 0] * 0.15 * 255 + 127.5).tobytes(),
-            _u8((np.log(s["scales"]) + 10) * 16).tobytes(), rot, _u8(rest * 128 + 128).tobytes()]
+    rest = s["sh"][:, 1:] * flips[: s["sh"].shape[1] - 1, None]
+    return [
+        pos,
+        _u8(s["opacities"] * 255).tobytes(),
+        _u8(s["sh"][:, 0] * 0.15 * 255 + 127.5).tobytes(),
+        _u8((np.log(s["scales"]) + 10) * 16).tobytes(),
+        rot,
+        _u8(rest * 128 + 128).tobytes(),
+    ]
 
 
-def encode_spz(s: dict, version: int = 3, frac_bits: int = 12, extensions: bytes = b"", gzipped: bool = True,
-               antialiased: bool = False) -> bytes:
+def encode_spz(
+    s: dict,
+    version: int = 3,
+    frac_bits: int = 12,
+    extensions: bytes = b"",
+    gzipped: bool = True,
+    antialiased: bool = False,
+) -> bytes:
     """A complete .spz file: gzip (or raw) legacy stream for v1-3, NGSP container with zstd for v4."""
     n, degree = len(s["means"]), int(round(math.sqrt(s["sh"].shape[1]))) - 1
     arrays = spz_arrays(s, version, frac_bits)
@@ -145,13 +157,25 @@ def encode_compressed_ply(s: dict, color_ranges: bool = True) -> bytes:
     """A SuperSplat compressed .ply, with an `sh` element when s has higher bands."""
     n, k = len(s["means"]), s["sh"].shape[1]
     chunk, packed = compressed_ply_columns(s, color_ranges)
-    names = ["min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_scale_x", "min_scale_y", "min_scale_z",
-             "max_scale_x", "max_scale_y", "max_scale_z"] + (
-        ["min_r", "min_g", "min_b", "max_r", "max_g", "max_b"] if color_ranges else [])
+    names = [
+        "min_x",
+        "min_y",
+        "min_z",
+        "max_x",
+        "max_y",
+        "max_z",
+        "min_scale_x",
+        "min_scale_y",
+        "min_scale_z",
+        "max_scale_x",
+        "max_scale_y",
+        "max_scale_z",
+    ] + (["min_r", "min_g", "min_b", "max_r", "max_g", "max_b"] if color_ranges else [])
     header = ["ply", "format binary_little_endian 1.0", f"element chunk {len(chunk)}"]
     header += [f"property float {p}" for p in names]
-    header += [f"element vertex {n}"] + [f"property uint {p}" for p in
-                                         ("packed_position", "packed_rotation", "packed_scale", "packed_color")]
+    header += [f"element vertex {n}"] + [
+        f"property uint {p}" for p in ("packed_position", "packed_rotation", "packed_scale", "packed_color")
+    ]
     body = chunk.tobytes() + np.stack(packed, axis=1).astype("<u4").tobytes()
     if k > 1:
         rest = s["sh"][:, 1:].transpose(0, 2, 1).reshape(n, -1)  # channel-major
@@ -164,10 +188,11 @@ def _webp(pixels: np.ndarray, width: int) -> bytes:
     """(N,4) uint8 pixels as a lossless RGBA WebP `width` wide (padded with zeros)."""
     h = -(-len(pixels) // width)
     img = np.zeros((h * width, 4), np.uint8)
-    img[:len(pixels)] = pixels
+    img[: len(pixels)] = pixels
     buf = io.BytesIO()
-    Image.fromarray(img.reshape(h, width, 4), "RGBA").save(buf, format="WEBP", lossless=True, exact=True, quality=0,
-                                                             method=0)
+    Image.fromarray(img.reshape(h, width, 4), "RGBA").save(
+        buf, format="WEBP", lossless=True, exact=True, quality=0, method=0
+    )
     return buf.getvalue()
 
 
@@ -185,29 +210,43 @@ def sog_files(s: dict, palette: np.ndarray | None = None, labels: np.ndarray | N
     largest = np.argmax(np.abs(q), axis=1)
     q = q * np.where(q[np.arange(n), largest] < 0, -1.0, 1.0)[:, None]
     others = np.take_along_axis(q, np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])[largest], axis=1)
-    quats = np.concatenate([_u8((others * math.sqrt(2) + 1) / 2 * 255), (252 + largest)[:, None].astype(np.uint8)],
-                           axis=1)
+    quats = np.concatenate(
+        [_u8((others * math.sqrt(2) + 1) / 2 * 255), (252 + largest)[:, None].astype(np.uint8)], axis=1
+    )
     log_s = np.log(s["scales"])
     s_book = np.linspace(log_s.min(), log_s.max(), 256)
     dc = s["sh"][:, 0]
     c_book = np.linspace(dc.min(), dc.max(), 256)
     scales = np.concatenate([_nearest(s_book, log_s), full], axis=1)
     sh0 = np.concatenate([_nearest(c_book, dc), _u8(s["opacities"] * 255)[:, None]], axis=1)
-    meta = {"version": 2, "count": n,
-            "means": {"mins": mins.tolist(), "maxs": maxs.tolist(), "files": ["means_l.webp", "means_u.webp"]},
-            "scales": {"codebook": s_book.tolist(), "files": ["scales.webp"]},
-            "quats": {"files": ["quats.webp"]},
-            "sh0": {"codebook": c_book.tolist(), "files": ["sh0.webp"]}}
-    files = {"means_l.webp": _webp(lo, width), "means_u.webp": _webp(hi, width), "quats.webp": _webp(quats, width),
-             "scales.webp": _webp(scales, width), "sh0.webp": _webp(sh0, width)}
+    meta = {
+        "version": 2,
+        "count": n,
+        "means": {"mins": mins.tolist(), "maxs": maxs.tolist(), "files": ["means_l.webp", "means_u.webp"]},
+        "scales": {"codebook": s_book.tolist(), "files": ["scales.webp"]},
+        "quats": {"files": ["quats.webp"]},
+        "sh0": {"codebook": c_book.tolist(), "files": ["sh0.webp"]},
+    }
+    files = {
+        "means_l.webp": _webp(lo, width),
+        "means_u.webp": _webp(hi, width),
+        "quats.webp": _webp(quats, width),
+        "scales.webp": _webp(scales, width),
+        "sh0.webp": _webp(sh0, width),
+    }
     if palette is not None:
         p, k = palette.shape[0], palette.shape[1]
         n_book = np.linspace(palette.min(), palette.max(), 256)
-        centroids = np.concatenate([_nearest(n_book, palette.reshape(-1, 3)), np.full((p * k, 1), 255, np.uint8)],
-                                   axis=1)
+        centroids = np.concatenate(
+            [_nearest(n_book, palette.reshape(-1, 3)), np.full((p * k, 1), 255, np.uint8)], axis=1
+        )
         lab = np.stack([labels & 255, labels >> 8, np.zeros(n, int), np.full(n, 255)], axis=1).astype(np.uint8)
-        meta["shN"] = {"count": p, "bands": {3: 1, 8: 2, 15: 3}[k], "codebook": n_book.tolist(),
-                       "files": ["shN_centroids.webp", "shN_labels.webp"]}
+        meta["shN"] = {
+            "count": p,
+            "bands": {3: 1, 8: 2, 15: 3}[k],
+            "codebook": n_book.tolist(),
+            "files": ["shN_centroids.webp", "shN_labels.webp"],
+        }
         files["shN_centroids.webp"] = _webp(centroids, 64 * k)
         files["shN_labels.webp"] = _webp(lab, width)
     files["meta.json"] = json.dumps(meta).encode()

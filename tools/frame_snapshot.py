@@ -37,9 +37,16 @@ def weighted_scene() -> gb.Scene:
     means = np.c_[rng.uniform(-1, 1, (n, 2)), rng.uniform(2, 6, n)]
     vw = rng.normal(0.0, 0.4, (n, 16))
     vw[:, 0] += 1.5
-    return gb.Scene.from_arrays(means, rng.uniform(0.02, 0.2, (n, 3)), rng.normal(size=(n, 4)),
-                                rng.uniform(0.1, 0.9, n), rng.uniform(-1, 1, (n, 9, 3)), view_weight_sh=vw,
-                                wsr_sigma=5.0, weight_background=0.3)
+    return gb.Scene.from_arrays(
+        means,
+        rng.uniform(0.02, 0.2, (n, 3)),
+        rng.normal(size=(n, 4)),
+        rng.uniform(0.1, 0.9, n),
+        rng.uniform(-1, 1, (n, 9, 3)),
+        view_weight_sh=vw,
+        wsr_sigma=5.0,
+        weight_background=0.3,
+    )
 
 
 def snapshot(paths: list[Path]) -> dict:
@@ -53,13 +60,17 @@ def snapshot(paths: list[Path]) -> dict:
             for ss in (1, 2, 3):
                 f = gb.render(scene, cam, mode, supersample=ss, debug="window", background=BACKGROUND)
                 s = f.stats
-                out[name, mode, ss] = {"rgb": f.rgb, "alpha": f.alpha, **f.debug,
-                                       "counts": (s.visible, s.pairs, s.sort_length, s.evaluations, s.cells_visible,
-                                                  s.cell_misses)}
+                out[name, mode, ss] = {
+                    "rgb": f.rgb,
+                    "alpha": f.alpha,
+                    **f.debug,
+                    "counts": (s.visible, s.pairs, s.sort_length, s.evaluations, s.cells_visible, s.cell_misses),
+                }
             for x, y in PIXELS:
                 for ss in (1, 2):
-                    out[name, mode, ss, x, y] = gb.trace_pixel(scene, cam, x, y, mode, supersample=ss,
-                                                               background=BACKGROUND).to_json()
+                    out[name, mode, ss, x, y] = gb.trace_pixel(
+                        scene, cam, x, y, mode, supersample=ss, background=BACKGROUND
+                    ).to_json()
     return out
 
 
@@ -81,8 +92,10 @@ def main(argv: list[str] | None = None) -> int:
         args.file.write_bytes(pickle.dumps(now))
         print(f"{len(now)} frames and traces saved to {args.file}")
         return 0
-    saved = pickle.loads(args.file.read_bytes())  # noqa: S301 - a file this tool wrote
-    differ = sorted(map(str, set(saved) ^ set(now))) + [str(k) for k in saved if k in now and not same(saved[k], now[k])]
+    saved = pickle.loads(args.file.read_bytes())
+    differ = sorted(map(str, set(saved) ^ set(now))) + [
+        str(k) for k in saved if k in now and not same(saved[k], now[k])
+    ]
     for k in differ:
         print("differs:", k)
     print(f"{len(saved)} compared, {len(differ)} differ")

@@ -4,12 +4,11 @@
 
 FORMAT is one of the seed folders in tests/io/fuzz/seeds (inria, compressed, spz, splat, sog, gltf, ..., the JSON
 readers cameras, keyframes and nerfstudio (camera_path.json), and the datasets and command lines of
-tools/fuzz_targets.py): its small seed files start the corpus, new inputs go to `--corpus` (default .fuzz/FORMAT, kept between runs). An input fails when loading
-it raises anything but a one-line GBViewerError, emits a numpy RuntimeWarning, or returns a scene with non-finite values;
-libFuzzer also flags inputs that take over 10 s (60 s for the targets of a child process or the CLI) or 2 GiB.
-Failing inputs are written to tests/io/fuzz/crashes/ where tests/io/test_fuzz_regressions.py replays them with
-`check_load` forever after.
-"""
+tools/fuzz_targets.py): its small seed files start the corpus, new inputs go to `--corpus` (default .fuzz/FORMAT, kept
+between runs). An input fails when loading it raises anything but a one-line GBViewerError, emits a numpy
+RuntimeWarning, or returns a scene with non-finite values; libFuzzer also flags inputs that take over 10 s (60 s for the
+targets of a child process or the CLI) or 2 GiB. Failing inputs are written to tests/io/fuzz/crashes/ where
+tests/io/test_fuzz_regressions.py replays them with `check_load` forever after."""
 
 from __future__ import annotations
 
@@ -21,9 +20,8 @@ import tempfile
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 import fuzz_targets
+import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 SEEDS = REPO / "tests" / "io" / "fuzz" / "seeds"
@@ -51,8 +49,9 @@ def _keyframes(path: Path) -> list[np.ndarray]:
     import gbviewer as gb
     from gbviewer.model.keyframes import load_keyframes
 
-    scene = gb.Scene.from_arrays(np.eye(3), np.full((3, 3), 0.1), np.tile([1.0, 0, 0, 0], (3, 1)), np.ones(3),
-                                 np.zeros((3, 1, 3)))
+    scene = gb.Scene.from_arrays(
+        np.eye(3), np.full((3, 3), 0.1), np.tile([1.0, 0, 0, 0], (3, 1)), np.ones(3), np.zeros((3, 1, 3))
+    )
     keys = load_keyframes(path, gb.orbit_camera(scene, width=64, height=48), scene)
     return _camera_arrays([k.camera for k in keys]) + [np.array([k.rate for k in keys], np.float32)]
 
@@ -66,7 +65,10 @@ def _nerfstudio(path: Path) -> list[np.ndarray]:
 
 # the others: scene formats
 READERS = {"cameras": _cameras, "keyframes": _keyframes, "nerfstudio": _nerfstudio, **fuzz_targets.READERS}
-SLOW = set(fuzz_targets.READERS) - {"photo", "lod_entry"}  # a child process per COLMAP input (30 s deadline), or the CLI
+SLOW = set(fuzz_targets.READERS) - {
+    "photo",
+    "lod_entry",
+}  # a child process per COLMAP input (30 s deadline), or the CLI
 
 
 def check_load(path: Path, kind: str = "scene") -> str:
@@ -103,13 +105,13 @@ def main() -> None:
     import atheris
 
     with atheris.instrument_imports(include=["gbviewer", "PIL"]):  # PIL: which of its errors reach us
-        import PIL.JpegImagePlugin  # noqa: F401
+        import PIL.JpegImagePlugin
         import PIL.PngImagePlugin  # noqa: F401
 
-        import gbviewer.io  # noqa: F401  (instrumented for coverage)
+        import gbviewer.cli
+        import gbviewer.io
+        import gbviewer.io.datasets
         import gbviewer.model.keyframes  # noqa: F401
-        import gbviewer.cli  # noqa: F401
-        import gbviewer.io.datasets  # noqa: F401
     scratch = Path(tempfile.mkdtemp(prefix="gbv-fuzz-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None))
     target = scratch / "input"
 
@@ -121,9 +123,17 @@ def main() -> None:
             (CRASHES / f"{args.format}-crash-{hashlib.sha1(data).hexdigest()}").write_bytes(data)
             raise
 
-    flags = [sys.argv[0], str(corpus), str(SEEDS / args.format), f"-max_total_time={args.seconds}",
-             f"-timeout={60 if args.format in SLOW else 10}",
-             "-rss_limit_mb=2048", f"-artifact_prefix={CRASHES}/{args.format}-", "-print_final_stats=1", *extra]
+    flags = [
+        sys.argv[0],
+        str(corpus),
+        str(SEEDS / args.format),
+        f"-max_total_time={args.seconds}",
+        f"-timeout={60 if args.format in SLOW else 10}",
+        "-rss_limit_mb=2048",
+        f"-artifact_prefix={CRASHES}/{args.format}-",
+        "-print_final_stats=1",
+        *extra,
+    ]
     atheris.Setup(flags, one_input)
     atheris.Fuzz()
 

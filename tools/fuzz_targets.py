@@ -39,7 +39,7 @@ def _photos(folder: Path, suffix: str = ".png", mode: str = "RGB") -> None:
 
     folder.mkdir(parents=True, exist_ok=True)
     for name in PHOTOS:
-        Image.new(mode, (8, 6), (40, 90, 200, 255)[:len(mode)]).save(folder / f"{name}{suffix}")
+        Image.new(mode, (8, 6), (40, 90, 200, 255)[: len(mode)]).save(folder / f"{name}{suffix}")
 
 
 def _fresh(path: Path) -> Path:
@@ -72,8 +72,8 @@ def colmap_bin(path: Path) -> list[np.ndarray]:
     n = struct.unpack("<I", data[:4])[0] if len(data) >= 4 else 0
     root = _fresh(path)
     (root / "sparse" / "0").mkdir(parents=True)
-    (root / "sparse" / "0" / "cameras.bin").write_bytes(data[4:4 + n])
-    (root / "sparse" / "0" / "images.bin").write_bytes(data[4 + n:])
+    (root / "sparse" / "0" / "cameras.bin").write_bytes(data[4 : 4 + n])
+    (root / "sparse" / "0" / "images.bin").write_bytes(data[4 + n :])
     _photos(root / "images")
     return _load(root)
 
@@ -123,18 +123,34 @@ def _child_doc(path: Path, read_colmap) -> dict:
 def _shaped(doc) -> bool:
     """Whether `doc` has the keys and types the child always prints (pycolmap's values in them are the target):
     cameras {id: model, width, height, params, names with cx, cy and f or fx, fy}, images [name, camera, q, R, t]."""
+
     def numbers(v, n):
         return isinstance(v, list) and len(v) == n and all(type(x) in (int, float) for x in v)
 
     cams_ok = isinstance(doc["cameras"], dict) and all(
-        isinstance(c["model"], str) and type(c["width"]) is int and type(c["height"]) is int
-        and numbers(c["params"], len(c["names"])) and all(isinstance(n, str) for n in c["names"])
-        and {"cx", "cy"} <= set(c["names"]) and ("f" in c["names"] or {"fx", "fy"} <= set(c["names"]))
-        for c in doc["cameras"].values())
-    return cams_ok and isinstance(doc["images"], list) and all(
-        isinstance(im["name"], str) and isinstance(im["camera"], str) and numbers(im["q"], 4) and numbers(im["t"], 3)
-        and isinstance(im["R"], list) and len(im["R"]) == 3 and all(numbers(r, 3) for r in im["R"])
-        for im in doc["images"])
+        isinstance(c["model"], str)
+        and type(c["width"]) is int
+        and type(c["height"]) is int
+        and numbers(c["params"], len(c["names"]))
+        and all(isinstance(n, str) for n in c["names"])
+        and {"cx", "cy"} <= set(c["names"])
+        and ("f" in c["names"] or {"fx", "fy"} <= set(c["names"]))
+        for c in doc["cameras"].values()
+    )
+    return (
+        cams_ok
+        and isinstance(doc["images"], list)
+        and all(
+            isinstance(im["name"], str)
+            and isinstance(im["camera"], str)
+            and numbers(im["q"], 4)
+            and numbers(im["t"], 3)
+            and isinstance(im["R"], list)
+            and len(im["R"]) == 3
+            and all(numbers(r, 3) for r in im["R"])
+            for im in doc["images"]
+        )
+    )
 
 
 def blender(path: Path) -> list[np.ndarray]:
@@ -200,8 +216,12 @@ def trace_args(path: Path) -> list[np.ndarray]:
     root = _fresh(path)
     rng = np.random.default_rng(0)
     means = np.column_stack([rng.uniform(-1, 1, (5, 2)), rng.uniform(2, 4, 5)])
-    write_inria_ply(gb.Scene.from_arrays(means, np.full((5, 3), 0.2), np.tile([1.0, 0, 0, 0], (5, 1)),
-                                         np.full(5, 0.8), np.zeros((5, 1, 3))), root / "tiny.ply")
+    write_inria_ply(
+        gb.Scene.from_arrays(
+            means, np.full((5, 3), 0.2), np.tile([1.0, 0, 0, 0], (5, 1)), np.full(5, 0.8), np.zeros((5, 1, 3))
+        ),
+        root / "tiny.ply",
+    )
     return _run_cli(["trace", "tiny.ply", *_argv(path)], root)
 
 
@@ -217,8 +237,13 @@ def _lod_scene(root: Path):
     rng = np.random.default_rng(4)
     n = LOD_SPLATS
     means = np.column_stack([rng.uniform(-1, 1, (n, 2)), rng.uniform(2, 4, n)])
-    scene = gb.Scene.from_arrays(means, rng.uniform(0.02, 0.2, (n, 3)), rng.normal(size=(n, 4)),
-                                 rng.uniform(0.1, 1.0, n), rng.normal(0, 0.5, (n, 4, 3)))
+    scene = gb.Scene.from_arrays(
+        means,
+        rng.uniform(0.02, 0.2, (n, 3)),
+        rng.normal(size=(n, 4)),
+        rng.uniform(0.1, 1.0, n),
+        rng.normal(0, 0.5, (n, 4, 3)),
+    )
     scene = gb.load(write_inria_ply(scene, root / "lod.ply"))
     return scene, gb.Camera(24, 16, 20.0, 20.0, 12.0, 8.0, np.eye(3), np.zeros(3))
 
@@ -235,15 +260,17 @@ def _fixed_crcs(data: bytes) -> bytes:
         return data
     count, _, at = struct.unpack_from("<HII", out, eocd + 10)
     for _ in range(count):
-        if at + 46 > len(out) or out[at:at + 4] != b"PK\x01\x02":
+        if at + 46 > len(out) or out[at : at + 4] != b"PK\x01\x02":
             break
-        method, size, name_len, extra_len, comment_len, local = (struct.unpack_from("<H", out, at + 10)[0],
-                                                                 *struct.unpack_from("<I", out, at + 20),
-                                                                 *struct.unpack_from("<HHH", out, at + 28),
-                                                                 *struct.unpack_from("<I", out, at + 42))
-        if method == 0 and local + 30 <= len(out) and out[local:local + 4] == b"PK\x03\x04":
+        method, size, name_len, extra_len, comment_len, local = (
+            struct.unpack_from("<H", out, at + 10)[0],
+            *struct.unpack_from("<I", out, at + 20),
+            *struct.unpack_from("<HHH", out, at + 28),
+            *struct.unpack_from("<I", out, at + 42),
+        )
+        if method == 0 and local + 30 <= len(out) and out[local : local + 4] == b"PK\x03\x04":
             begin = local + 30 + sum(struct.unpack_from("<HH", out, local + 26))
-            crc = zlib.crc32(out[begin:begin + size])
+            crc = zlib.crc32(out[begin : begin + size])
             struct.pack_into("<I", out, at + 16, crc)
             struct.pack_into("<I", out, local + 14, crc)
         at += 46 + name_len + extra_len + comment_len
@@ -278,5 +305,7 @@ def lod_entry(path: Path) -> list[np.ndarray]:
     return [frame.rgb, frame.alpha, *cut.arrays.values()]
 
 
-READERS = {f.__name__: f for f in (colmap_bin, colmap_txt, colmap_doc, blender, cameras_dataset, photo, eval_args,
-                                    trace_args, lod_entry)}
+READERS = {
+    f.__name__: f
+    for f in (colmap_bin, colmap_txt, colmap_doc, blender, cameras_dataset, photo, eval_args, trace_args, lod_entry)
+}

@@ -53,9 +53,12 @@ def xvfb_display(width: int = 1280, height: int = 800) -> Iterator[str]:
     # Xvfb picks the first free display itself (-displayfd): a number whose lock file is absent here can still be
     # taken by a server in another root or container sharing the abstract socket namespace
     read_fd, write_fd = os.pipe()
-    proc = subprocess.Popen([exe, "-displayfd", str(write_fd), "-screen", "0", f"{width}x{height}x24", "-nolisten",
-                             "tcp", "-noreset"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            pass_fds=(write_fd,))
+    proc = subprocess.Popen(
+        [exe, "-displayfd", str(write_fd), "-screen", "0", f"{width}x{height}x24", "-nolisten", "tcp", "-noreset"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        pass_fds=(write_fd,),
+    )
     os.close(write_fd)
     old = os.environ.get("DISPLAY")
     try:
@@ -119,7 +122,7 @@ def make_bad_files(folder: Path, good: Path) -> list[Path]:
         "garbage.sog": random.Random(2).randbytes(4096),
         "empty.ply": b"",
         "huge-count.ply": b"ply\nformat binary_little_endian 1.0\nelement vertex 1099511627776\n"
-                          b"property float x\nproperty float y\nproperty float z\nend_header\n" + bytes(64),
+        b"property float x\nproperty float y\nproperty float z\nend_header\n" + bytes(64),
     }
     for name, content in bad.items():
         (folder / name).write_bytes(content)
@@ -176,8 +179,10 @@ class Soak:
         if len(errors) == 1 and path.name in errors[0][1] and s.scene is scene and "\n" not in s.load_error:
             self.bad_messages += 1
         else:
-            self.problems.append(f"{path.name}: {len(errors)} error messages, load_error {s.load_error!r}, "
-                                 f"scene kept: {s.scene is scene} (messages before: {before})")
+            self.problems.append(
+                f"{path.name}: {len(errors)} error messages, load_error {s.load_error!r}, "
+                f"scene kept: {s.scene is scene} (messages before: {before})"
+            )
 
     def cycle(self, i: int) -> None:
         from gbviewer.app.settings import MODE_NAMES
@@ -204,8 +209,13 @@ class Soak:
             s.settings.layout = rng.choice(("row", "grid"))
             s.set_rate(rng.choice((1 / 8, 1 / 4, 1 / 2)))
             for k in range(s.settings.pane_count):
-                s.set_pane(k, mode=rng.choice(MODE_NAMES), split=rng.random() < 0.3,
-                           split_mode=rng.choice(MODE_NAMES), split_pos=rng.random())
+                s.set_pane(
+                    k,
+                    mode=rng.choice(MODE_NAMES),
+                    split=rng.random() < 0.3,
+                    split_mode=rng.choice(MODE_NAMES),
+                    split_pos=rng.random(),
+                )
         s.settings.backend = "glsl" if glsl else "cpu"
         self.tick(f"backend_{s.settings.backend}")
         for _ in range(rng.randint(2, 8)):  # camera moves: preview renders in flight
@@ -236,13 +246,19 @@ class Soak:
         w = self.app.worker
         rss = rss_kib()
         trim_malloc()
-        self.samples.append({
-            "cycle": i, "seconds": round(time.perf_counter() - started, 2),
-            "rss_kib": rss, "rss_trimmed_kib": rss_kib(),
-            "traced_kib": tracemalloc.get_traced_memory()[0] // 1024 if tracemalloc.is_tracing() else None,
-            "gl": gl_object_counts(), "renderers": len(w._renderers), "threads": threading.active_count(),
-            "scene": self.app.state.scene_path.name if self.app.state.scene_path else None,
-        })
+        self.samples.append(
+            {
+                "cycle": i,
+                "seconds": round(time.perf_counter() - started, 2),
+                "rss_kib": rss,
+                "rss_trimmed_kib": rss_kib(),
+                "traced_kib": tracemalloc.get_traced_memory()[0] // 1024 if tracemalloc.is_tracing() else None,
+                "gl": gl_object_counts(),
+                "renderers": len(w._renderers),
+                "threads": threading.active_count(),
+                "scene": self.app.state.scene_path.name if self.app.state.scene_path else None,
+            }
+        )
 
 
 def summarise(samples: list[dict], warmup: int) -> dict:
@@ -252,15 +268,21 @@ def summarise(samples: list[dict], warmup: int) -> dict:
     rss = np.array([r["rss_kib"] for r in after], float)
     trimmed = np.array([r["rss_trimmed_kib"] for r in after], float)
     slope, trimmed_slope = (float(np.polyfit(cycles, y, 1)[0]) if len(after) > 2 else 0.0 for y in (rss, trimmed))
-    out = {"rss_first_mib": samples[0]["rss_kib"] / 1024, "rss_last_mib": samples[-1]["rss_kib"] / 1024,
-           "rss_max_mib": max(r["rss_kib"] for r in samples) / 1024, "rss_slope_kib_per_cycle": slope,
-           "rss_trimmed_first_mib": samples[0]["rss_trimmed_kib"] / 1024,
-           "rss_trimmed_last_mib": samples[-1]["rss_trimmed_kib"] / 1024,
-           "rss_trimmed_slope_kib_per_cycle": trimmed_slope,
-           "rss_after_warmup_min_mib": rss.min() / 1024, "rss_after_warmup_max_mib": rss.max() / 1024,
-           "gl_after_warmup": after[0]["gl"], "gl_last": samples[-1]["gl"],
-           "gl_max": {k: max(r["gl"][k] for r in samples) for k in samples[0]["gl"]},
-           "threads_max": max(r["threads"] for r in samples)}
+    out = {
+        "rss_first_mib": samples[0]["rss_kib"] / 1024,
+        "rss_last_mib": samples[-1]["rss_kib"] / 1024,
+        "rss_max_mib": max(r["rss_kib"] for r in samples) / 1024,
+        "rss_slope_kib_per_cycle": slope,
+        "rss_trimmed_first_mib": samples[0]["rss_trimmed_kib"] / 1024,
+        "rss_trimmed_last_mib": samples[-1]["rss_trimmed_kib"] / 1024,
+        "rss_trimmed_slope_kib_per_cycle": trimmed_slope,
+        "rss_after_warmup_min_mib": rss.min() / 1024,
+        "rss_after_warmup_max_mib": rss.max() / 1024,
+        "gl_after_warmup": after[0]["gl"],
+        "gl_last": samples[-1]["gl"],
+        "gl_max": {k: max(r["gl"][k] for r in samples) for k in samples[0]["gl"]},
+        "threads_max": max(r["threads"] for r in samples),
+    }
     if samples[0]["traced_kib"] is not None:
         traced = np.array([r["traced_kib"] for r in after], float)
         out["traced_first_mib"] = samples[0]["traced_kib"] / 1024
@@ -269,8 +291,15 @@ def summarise(samples: list[dict], warmup: int) -> dict:
     return {k: round(v, 2) if isinstance(v, float) else v for k, v in out.items()}
 
 
-def run_soak(cycles: int, sample_every: int = 0, warmup: int = 30, seed: int = 0, trace: bool = True,
-             size: tuple[int, int] = (900, 600), progress: bool = False) -> dict:
+def run_soak(
+    cycles: int,
+    sample_every: int = 0,
+    warmup: int = 30,
+    seed: int = 0,
+    trace: bool = True,
+    size: tuple[int, int] = (900, 600),
+    progress: bool = False,
+) -> dict:
     """The soak in the current DISPLAY; the report as a dict (`ok`: alive, one message per bad file, GL objects
     back to their level after the warm-up). Samples every `sample_every` cycles, by default once per round of the
     good scenes (so that every sample is taken with the same scene open)."""
@@ -307,10 +336,19 @@ def run_soak(cycles: int, sample_every: int = 0, warmup: int = 30, seed: int = 0
     gl_back = all(summary["gl_last"][k] <= summary["gl_after_warmup"][k] for k in summary["gl_last"])
     return {
         "ok": alive and not soak.problems and soak.bad_messages == soak.bad_opened and gl_back,
-        "cycles": cycles, "seconds": round(time.perf_counter() - started, 1), "alive": alive, "crash": crash,
-        "bad_files_opened": soak.bad_opened, "bad_file_messages": soak.bad_messages, "problems": soak.problems,
-        "events": soak.counts, "scenes": [p.name for p in soak.good], "renders": app.worker.rendered,
-        "renders_dropped": app.worker.dropped, "summary": summary, "samples": soak.samples,
+        "cycles": cycles,
+        "seconds": round(time.perf_counter() - started, 1),
+        "alive": alive,
+        "crash": crash,
+        "bad_files_opened": soak.bad_opened,
+        "bad_file_messages": soak.bad_messages,
+        "problems": soak.problems,
+        "events": soak.counts,
+        "scenes": [p.name for p in soak.good],
+        "renders": app.worker.rendered,
+        "renders_dropped": app.worker.dropped,
+        "summary": summary,
+        "samples": soak.samples,
     }
 
 
@@ -318,8 +356,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cycles", type=int, default=300)
     ap.add_argument("--out", type=Path, default=Path("soak-report.json"))
-    ap.add_argument("--sample", type=int, default=0,
-                    help="record memory every N cycles (default: once per round of the scenes)")
+    ap.add_argument(
+        "--sample", type=int, default=0, help="record memory every N cycles (default: once per round of the scenes)"
+    )
     ap.add_argument("--warmup", type=int, default=30, help="cycles before the slope is fitted")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-tracemalloc", action="store_true", help="RSS only (tracemalloc slows allocations)")
@@ -330,8 +369,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.path.insert(0, str(REPO))
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # stop our Xvfb on the way out
     with xvfb_display():
-        report = run_soak(args.cycles, args.sample, args.warmup, args.seed, not args.no_tracemalloc,
-                           progress=True)
+        report = run_soak(args.cycles, args.sample, args.warmup, args.seed, not args.no_tracemalloc, progress=True)
     args.out.write_text(json.dumps(report, indent=1))
     print(json.dumps({k: v for k, v in report.items() if k != "samples"}, indent=1))
     return 0 if report["ok"] else 1

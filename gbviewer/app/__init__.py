@@ -20,9 +20,15 @@ def has_display_env(env: dict | None = None) -> tuple[bool, str]:
     return True, ""
 
 
-def open_window(scene: str | Path | None = None, cameras: str | Path | None = None,
-                projection: str | None = None, backend: str | None = None, data: str | Path | None = None,
-                images: str = "images", background: tuple[float, float, float] | None = None) -> "tuple[bool, str]":
+def open_window(
+    scene: str | Path | None = None,
+    cameras: str | Path | None = None,
+    projection: str | None = None,
+    backend: str | None = None,
+    data: str | Path | None = None,
+    images: str = "images",
+    background: tuple[float, float, float] | None = None,
+) -> "tuple[bool, str]":
     """Open the viewer and run it until closed: (True, '') or (False, why no window could be opened). `projection`:
     the camera's at the start (default: the saved settings'); `backend`: select it as the panel would (None: the saved
     one); `data`: a training dataset to open beside the scene, its photos in the folder `images`; `background`: the
@@ -39,8 +45,15 @@ def open_window(scene: str | Path | None = None, cameras: str | Path | None = No
     from .window import ViewerApp
 
     try:
-        app = ViewerApp(scene, cameras=cameras, projection=projection, backend=backend, data=data, images=images,
-                        background=background)
+        app = ViewerApp(
+            scene,
+            cameras=cameras,
+            projection=projection,
+            backend=backend,
+            data=data,
+            images=images,
+            background=background,
+        )
     except GBViewerError as exc:
         return False, str(exc)
     app.run()

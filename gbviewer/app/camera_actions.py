@@ -10,11 +10,11 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from ..model.camera import UP_AXES, Camera
-from .ui.layout import Rect, fit_aspect
 from ..model.scene import Scene
 from .camera.control import CameraController
 from .dataset import DatasetViews
 from .settings import AppSettings
+from .ui.layout import Rect, fit_aspect
 
 if TYPE_CHECKING:
     from .pane_state import PaneState

@@ -13,11 +13,11 @@ from typing import Callable
 
 import numpy as np
 
-from ..model.camera import Camera, camera_key, format_rate
 from ..core.errors import GBViewerError
 from ..eval import camera_for_rate
 from ..io.datasets import SPLITS, Dataset, View, load_dataset
 from ..io.datasets.backdrop import Backdrop, estimate_backdrop
+from ..model.camera import Camera, camera_key, format_rate
 
 Message = Callable[[str, str], None]  # (text, level): AppState.message
 
@@ -96,8 +96,11 @@ class DatasetViews:
         self.dataset, self.backdrop, self.index, self.snap_key = ld.dataset, ld.backdrop, -1, None
         self.set_aside = None
         test = sum(v.in_split("test") for v in ld.dataset.views)
-        self.message(f"dataset {ld.path.name}: {len(ld.dataset.views)} views ({test} test, {ld.dataset.format}) in "
-                     f"{ld.elapsed:.1f} s; [ ] step through the {self.split} views", "info")
+        self.message(
+            f"dataset {ld.path.name}: {len(ld.dataset.views)} views ({test} test, {ld.dataset.format}) in "
+            f"{ld.elapsed:.1f} s; [ ] step through the {self.split} views",
+            "info",
+        )
         return ld.dataset
 
     def close(self) -> Dataset | None:
@@ -115,8 +118,11 @@ class DatasetViews:
         self.close()
         if fits:
             self.set_aside = (d, b)
-            self.message(f"closed dataset {d.root.name} with the previous scene; the new scene fits its cameras: "
-                         "'Keep dataset' in the panel reopens it", "warn")
+            self.message(
+                f"closed dataset {d.root.name} with the previous scene; the new scene fits its cameras: "
+                "'Keep dataset' in the panel reopens it",
+                "warn",
+            )
         else:
             self.message(f"closed dataset {d.root.name}: it belongs to the previous scene", "info")
 
@@ -133,8 +139,7 @@ class DatasetViews:
         if self.dataset is None:
             return []
         f = self.name_filter.strip().lower()
-        return [k for k, v in enumerate(self.dataset.views)
-                if v.in_split(self.split) and f in v.name.lower()]
+        return [k for k, v in enumerate(self.dataset.views) if v.in_split(self.split) and f in v.name.lower()]
 
     def set_split(self, split: str) -> None:
         if split not in SPLITS:

@@ -7,8 +7,8 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from .ui.keys import hint, label
 from .panel.dataset import open_dataset_dialog
+from .ui.keys import hint, label
 
 if TYPE_CHECKING:
     from .window import ViewerApp

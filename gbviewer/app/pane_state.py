@@ -12,10 +12,10 @@ import numpy as np
 
 from ..render import Frame
 from .frames.accumulate import Accumulation
-from .ui.layout import Rect
 from .frames.rates import PREVIEW_LOD_PX
 from .settings import PANE_NAMES
 from .threads.worker import RenderJob
+from .ui.layout import Rect
 
 
 class RateMeter:

@@ -15,20 +15,20 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from ..model.camera import Camera
-from ..outputs.figure import to_uint8
 from ..lod import hierarchy_state
 from ..lod.sparse import stride
+from ..model.camera import Camera
+from ..outputs.figure import to_uint8
 from ..render import Frame, RenderSettings
 from .frames.accumulate import is_stochastic
-from .ui.blit import Blitter
 from .frames.display import GpuFrame
-from .ui.layout import split_parts
 from .frames.rates import first_preview, preview_factor, preview_lod
+from .frames.views import visualize
 from .pane_state import PaneError, PaneState, Shown
 from .state import AppState
-from .frames.views import visualize
 from .threads.worker import RenderJob, RenderResult, RenderWorker
+from .ui.blit import Blitter
+from .ui.layout import split_parts
 
 MAX_SAMPLES = 96_000_000  # per render (pixels x supersampling^2): bounds memory and time at x8 with 8x8
 PREVIEW_BUDGET_MS = 60.0  # per UI frame while the camera moves, shared by the panes
@@ -48,8 +48,13 @@ class PaneRenders:
     """Requests renders for the visible panes and shows what comes back. Owns one texture per pane part, reused
     across frames and scenes (a new scene's panes start without an image, and no texture outlives its part)."""
 
-    def __init__(self, state: AppState, worker: RenderWorker, ctx: moderngl.Context,
-                 colour: Callable[[tuple[int, str], Frame, str], tuple[np.ndarray, str]] | None = None) -> None:
+    def __init__(
+        self,
+        state: AppState,
+        worker: RenderWorker,
+        ctx: moderngl.Context,
+        colour: Callable[[tuple[int, str], Frame, str], tuple[np.ndarray, str]] | None = None,
+    ) -> None:
         self.state, self.worker, self.ctx = state, worker, ctx
         self.colour = colour or (lambda slot, frame, view: visualize(frame, view))  # image and legend of a view
         self._textures: dict[tuple[int, str], moderngl.Texture] = {}
@@ -75,13 +80,16 @@ class PaneRenders:
                 f = first or preview_factor(w * h, cost, PREVIEW_BUDGET_MS * 2 / max(2, slots), moving)
                 cam = s.pane_camera(p.index, f)
                 settings = s.settings_for(p.index, part)
-                samples = cam.width * cam.height * settings.supersample ** 2
+                samples = cam.width * cam.height * settings.supersample**2
                 if samples > MAX_SAMPLES:
-                    p.parts[part].error = PaneError("too_large", f"{cam.width}x{cam.height} with "
-                                                    f"{settings.supersample}x{settings.supersample} samples is "
-                                                    f"{samples / 1e6:.0f}M samples, over the "
-                                                    f"{MAX_SAMPLES // 1_000_000}M limit: lower the rate or "
-                                                    "supersampling")
+                    p.parts[part].error = PaneError(
+                        "too_large",
+                        f"{cam.width}x{cam.height} with "
+                        f"{settings.supersample}x{settings.supersample} samples is "
+                        f"{samples / 1e6:.0f}M samples, over the "
+                        f"{MAX_SAMPLES // 1_000_000}M limit: lower the rate or "
+                        "supersampling",
+                    )
                     p.submitted.pop(part, None)
                     continue
                 if p.parts[part].error is not None and p.parts[part].error.kind == "too_large":
@@ -106,20 +114,39 @@ class PaneRenders:
                 if p.submitted.get(part) == key:
                     continue
                 p.submitted[part] = key
-                progressive = (f == 1.0 and self.worker.capabilities(backend).progressive and ps.view == "color"
-                               and settings.frame == 0)  # a later frame of a running mean arrives whole
+                progressive = (
+                    f == 1.0
+                    and self.worker.capabilities(backend).progressive
+                    and ps.view == "color"
+                    and settings.frame == 0
+                )  # a later frame of a running mean arrives whole
                 est_ms = cost * w * h if cost else None
-                jobs.append(RenderJob(
-                    (p.index, part), s.scene, cam, settings, backend,
-                    {"key": key, "preview": f, "rate": s.settings.rate, "full_size": (w, h),
-                     "accumulate": base if stochastic else None, "first": first is not None},
-                    priority=int(not moving and s.hover is not None and s.hover[0] == p.index),
-                    preview=f < 1.0,
-                    progressive=progressive,
-                    underlay=shown.frame.rgb if progressive and shown.frame is not None and shown.view == "color"
-                    else None,
-                    quick=self._quick(p.index, settings, est_ms) if progressive else None,
-                    display=display, stand_in=stand_in))
+                jobs.append(
+                    RenderJob(
+                        (p.index, part),
+                        s.scene,
+                        cam,
+                        settings,
+                        backend,
+                        {
+                            "key": key,
+                            "preview": f,
+                            "rate": s.settings.rate,
+                            "full_size": (w, h),
+                            "accumulate": base if stochastic else None,
+                            "first": first is not None,
+                        },
+                        priority=int(not moving and s.hover is not None and s.hover[0] == p.index),
+                        preview=f < 1.0,
+                        progressive=progressive,
+                        underlay=shown.frame.rgb
+                        if progressive and shown.frame is not None and shown.view == "color"
+                        else None,
+                        quick=self._quick(p.index, settings, est_ms) if progressive else None,
+                        display=display,
+                        stand_in=stand_in,
+                    )
+                )
                 p.asked[part] = jobs[-1]
         if jobs:
             self.worker.submit_all(jobs)
@@ -165,8 +192,11 @@ class PaneRenders:
         for res in self.worker.results():
             self._take(res)
         s = self.state
-        if not s.pictured.is_set() and s.scene is not None and all(
-                p.parts[part].job is not None for p in s.visible for part in s.parts(p.index)):
+        if (
+            not s.pictured.is_set()
+            and s.scene is not None
+            and all(p.parts[part].job is not None for p in s.visible for part in s.parts(p.index))
+        ):
             s.pictured.set()  # every pane shows the scene: its hierarchy's build may begin (loading.prepare_lod)
         for p in self.state.visible:
             view = self.state.settings.panes[p.index].view
@@ -211,8 +241,12 @@ class PaneRenders:
             return
         p = s.panes[i]
         if res.cancelled:  # superseded: the newer request of its slot is queued
-            if (res.job.preview and res.started and res.job.settings.lod == p.preview_lod
-                    and s.settings.panes[i].lod == 0):
+            if (
+                res.job.preview
+                and res.started
+                and res.job.settings.lod == p.preview_lod
+                and s.settings.panes[i].lod == 0
+            ):
                 # a preview stopped by the camera's stop after rendering longer than its budget: the next motion's
                 # first preview draws a coarser cut (else a cut too fine for the scene is never measured, only
                 # cancelled); its time in the queue does not count
@@ -224,8 +258,9 @@ class PaneRenders:
             return
         if res.failed:  # the next request of this part goes to the backend auto picks now
             p.submitted.pop(part, None)
-            s.message(f"{res.job.backend} {res.error}; rendering on {self.worker.backend_for(res.job.backend)}",
-                      "error")
+            s.message(
+                f"{res.job.backend} {res.error}; rendering on {self.worker.backend_for(res.job.backend)}", "error"
+            )
             return
         shown.job = res.job
         if res.frame is None:

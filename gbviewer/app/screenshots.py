@@ -9,8 +9,8 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from ..core.files import atomic_write
-from .settings import PANE_NAMES
 from .frames.views import encode_png16, visualize
+from .settings import PANE_NAMES
 
 if TYPE_CHECKING:
     from ..render import Frame
@@ -54,8 +54,9 @@ def save_window(state: AppState, img: np.ndarray, path: Path) -> bool:
     return True
 
 
-def save_pane(state: AppState, i: int, path: str | Path | None = None, part: str = "a",
-              colour: Colour | None = None) -> Path | None:
+def save_pane(
+    state: AppState, i: int, path: str | Path | None = None, part: str = "a", colour: Colour | None = None
+) -> Path | None:
     """What the pane part shows (its render, a debug view, a difference or the photo: `colour`, the window's
     `PaneAnalysis.visualize`; default the plain views) at its render resolution, 16 bits per channel."""
     shown = state.panes[i].parts[part]

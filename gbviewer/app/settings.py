@@ -8,20 +8,19 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Container
 
-from ..model.camera import PROJECTIONS, UP_AXES
 from ..core.errors import InvalidValue
+from ..core.validate import array, integer, read_json, real
+from ..model.camera import PROJECTIONS, UP_AXES
 from ..render import AUTO, BACKEND_NAMES, Mode
 from ..render.presets import PRESETS
-from ..core.validate import array, integer, read_json, real
 from .camera.control import CameraController
-from .ui.layout import LAYOUTS
 from .frames.rates import clamp_rate
 from .frames.views import VIEWS
+from .ui.layout import LAYOUTS
 
 # Panes render Gaussian Blending at the fast precision (AppState.settings_for); "+exact" is the reference kernel, to
 # put beside it (the difference view shows what the precision changes).
-MODE_NAMES = (tuple(m.label for m in Mode) + ("gaussian_blending+exact",)
-              + tuple(f"preset:{name}" for name in PRESETS))
+MODE_NAMES = tuple(m.label for m in Mode) + ("gaussian_blending+exact",) + tuple(f"preset:{name}" for name in PRESETS)
 MAX_PANES = 4
 MAX_RECENT = 10
 VERSION = 2  # of the settings file; 2: backend "auto"
@@ -56,22 +55,32 @@ class PaneSettings:
     lod: float = 0.0  # the level-of-detail cut at this many pixels; 0: off (every splat)
 
     def normalised(self) -> "PaneSettings":
-        return PaneSettings(_choice(self.mode, MODE_NAMES, "scalar"), _number(self.supersample, 1, 1, 8, integral=True),
-                            _choice(self.view, VIEWS, "color"), bool(self.split),
-                            _choice(self.split_mode, MODE_NAMES, "gaussian_blending"),
-                            _number(self.split_pos, 0.5, 0.0, 1.0), _number(self.lod, 0.0, 0.0, MAX_PANE_LOD))
+        return PaneSettings(
+            _choice(self.mode, MODE_NAMES, "scalar"),
+            _number(self.supersample, 1, 1, 8, integral=True),
+            _choice(self.view, VIEWS, "color"),
+            bool(self.split),
+            _choice(self.split_mode, MODE_NAMES, "gaussian_blending"),
+            _number(self.split_pos, 0.5, 0.0, 1.0),
+            _number(self.lod, 0.0, 0.0, MAX_PANE_LOD),
+        )
 
 
-DEFAULT_PANES = [PaneSettings("scalar"), PaneSettings("gaussian_blending"), PaneSettings("scalar", 3),
-                 PaneSettings("mip")]
+DEFAULT_PANES = [
+    PaneSettings("scalar"),
+    PaneSettings("gaussian_blending"),
+    PaneSettings("scalar", 3),
+    PaneSettings("mip"),
+]
 
 
 @dataclass
 class AppSettings:
     """Everything that persists between runs (JSON in the user's config dir)."""
 
-    panes: list[PaneSettings] = field(default_factory=lambda: [PaneSettings(p.mode, p.supersample)
-                                                               for p in DEFAULT_PANES])
+    panes: list[PaneSettings] = field(
+        default_factory=lambda: [PaneSettings(p.mode, p.supersample) for p in DEFAULT_PANES]
+    )
     pane_count: int = 2
     layout: str = "row"
     rate: float = 1.0
@@ -90,16 +99,22 @@ class AppSettings:
 
     def normalised(self) -> "AppSettings":
         s = AppSettings()
-        panes = [PaneSettings(**{k: v for k, v in p.items() if k in PaneSettings.__dataclass_fields__})
-                 if isinstance(p, dict) else p for p in _listed(self.panes)][:MAX_PANES]
+        panes = [
+            PaneSettings(**{k: v for k, v in p.items() if k in PaneSettings.__dataclass_fields__})
+            if isinstance(p, dict)
+            else p
+            for p in _listed(self.panes)
+        ][:MAX_PANES]
         panes = [p.normalised() for p in panes if isinstance(p, PaneSettings)]
-        s.panes = panes + [PaneSettings(d.mode, d.supersample) for d in DEFAULT_PANES[len(panes):]]
+        s.panes = panes + [PaneSettings(d.mode, d.supersample) for d in DEFAULT_PANES[len(panes) :]]
         s.pane_count = _number(self.pane_count, 2, 1, MAX_PANES, integral=True)
         s.layout = _choice(self.layout, LAYOUTS, "row")
         s.rate = clamp_rate(_number(self.rate, 1.0))
         if isinstance(self.window, (list, tuple)) and len(self.window) == 2:
-            s.window = (_number(self.window[0], s.window[0], 640, 8192, integral=True),
-                        _number(self.window[1], s.window[1], 480, 8192, integral=True))
+            s.window = (
+                _number(self.window[0], s.window[0], 640, 8192, integral=True),
+                _number(self.window[1], s.window[1], 480, 8192, integral=True),
+            )
         s.backend = _choice(self.backend, BACKEND_NAMES, AUTO)
         s.fov_y_deg = float(_number(self.fov_y_deg, s.fov_y_deg, CameraController.MIN_FOV, CameraController.MAX_FOV))
         s.up = _choice(self.up, UP_AXES, "-y")

@@ -9,27 +9,27 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Literal
 
-from ..model.camera import Camera, load_cameras_json
-from ..model.camera_paths import zoom_path
 from ..core.errors import GBViewerError
 from ..io.datasets.backdrop import RGB, choose_background, format_rgb
 from ..io.trained_as import describe
+from ..model.camera import Camera, load_cameras_json
+from ..model.camera_paths import zoom_path
+from ..model.scene import Scene
 from ..render import Mode, RenderSettings
 from ..render.presets import trained_spec
 from ..render.spec import spec_parts
-from ..model.scene import Scene
 from .background import FIXED, PHOTOS
-from .camera_actions import CameraActions
 from .camera.control import CameraController
-from .dataset import DatasetViews, bounds_fit_cameras
-from .ui.layout import PANEL_W, Rect, dock_split, fit_aspect, pane_rects
-from .threads.loading import SceneLoader
-from .pane_state import PaneState
-from .frames.rates import clamp_rate, first_preview_lod, render_size, step_rate
 from .camera.path_keys import PathKeys, is_nerfstudio_file
 from .camera.recording import VIDEO_CONTAINERS, VideoJob
+from .camera_actions import CameraActions
+from .dataset import DatasetViews, bounds_fit_cameras
+from .frames.rates import clamp_rate, first_preview_lod, render_size, step_rate
+from .pane_state import PaneState
 from .screenshots import shot_name
 from .settings import MAX_PANES, MODE_NAMES, AppSettings, PaneSettings, add_recent
+from .threads.loading import SceneLoader
+from .ui.layout import PANEL_W, Rect, dock_split, fit_aspect, pane_rects
 
 VIDEO_PANE_W = 480
 Level = Literal["info", "warn", "error"]  # of a status-bar message
@@ -43,15 +43,13 @@ def is_cameras_file(path: str | Path) -> bool:
 class AppState(CameraActions):
     """Scene, cameras, panes and their settings, and the actions on them (the camera's in `CameraActions`)."""
 
-    def __init__(self, settings: AppSettings, cameras: str | Path | None = None,
-                 background: RGB | None = None) -> None:
+    def __init__(self, settings: AppSettings, cameras: str | Path | None = None, background: RGB | None = None) -> None:
         self.settings = settings
         if background is not None:
             settings.background = tuple(background)
         self.background_source = FIXED  # or PHOTOS: the open dataset's backdrop (`background`)
         self.background_given = background is not None  # on the command line: a dataset's photos do not override it
-        self.controller = CameraController(fov_y_deg=settings.fov_y_deg, up=settings.up,
-                                           projection=settings.projection)
+        self.controller = CameraController(fov_y_deg=settings.fov_y_deg, up=settings.up, projection=settings.projection)
         self.scene: Scene | None = None
         self.scene_path: Path | None = None
         self.cameras: list[Camera] = []
@@ -148,9 +146,11 @@ class AppState(CameraActions):
         if trained is not None:  # pane A, the reference of the differences, shows the scene as it was trained
             self.settings.panes[0].mode = trained
         self.needs_reset = True
-        self.message(f"opened {res.path.name}: {res.scene.num_splats:,} splats in {res.seconds:.2f} s"
-                     + (f", {len(self.cameras)} training cameras" if self.cameras else "")
-                     + (f"; pane A {trained}, as trained ({describe(res.scene.meta)})" if trained else ""))
+        self.message(
+            f"opened {res.path.name}: {res.scene.num_splats:,} splats in {res.seconds:.2f} s"
+            + (f", {len(self.cameras)} training cameras" if self.cameras else "")
+            + (f"; pane A {trained}, as trained ({describe(res.scene.meta)})" if trained else "")
+        )
         if self.pending_cameras is not None:
             path, self.pending_cameras = self.pending_cameras, None
             self.needs_reset = False
@@ -265,8 +265,15 @@ class AppState(CameraActions):
     def visible(self) -> list[PaneState]:
         return self.panes[: self.settings.pane_count]
 
-    def layout(self, width: float, height: float, top: float, bottom: float,
-               scale: tuple[float, float] = (1.0, 1.0), dock: str | None = None) -> None:
+    def layout(
+        self,
+        width: float,
+        height: float,
+        top: float,
+        bottom: float,
+        scale: tuple[float, float] = (1.0, 1.0),
+        dock: str | None = None,
+    ) -> None:
         """Place the panes in a window of width x height (minus the menu bar `top` and the status bar `bottom`),
         beside the docked inspector (`dock`: 'below', 'right' or None; its area: `dock_rect`)."""
         self.scale = scale
@@ -284,9 +291,11 @@ class AppState(CameraActions):
         change of rate or a snap between two layouts, so that the requests of that frame say the size they have."""
         photo = self.photo_camera()
         for p in self.panes:
-            p.render_size = ((photo.width, photo.height) if photo is not None else
-                             render_size(round(p.rect.w * self.scale[0]), round(p.rect.h * self.scale[1]),
-                                         self.settings.rate))
+            p.render_size = (
+                (photo.width, photo.height)
+                if photo is not None
+                else render_size(round(p.rect.w * self.scale[0]), round(p.rect.h * self.scale[1]), self.settings.rate)
+            )
 
     def pane_at(self, x: float, y: float) -> int | None:
         return next((p.index for p in self.visible if p.rect.contains(x, y)), None)
@@ -305,8 +314,9 @@ class AppState(CameraActions):
         """What pane i's part ('a', or 'b' of a split) renders with."""
         ps: PaneSettings = self.settings.panes[i]
         spec = ps.split_mode if part == "b" else ps.mode
-        settings = RenderSettings.parse(spec, supersample=ps.supersample, background=self.background,
-                                        lod=ps.lod if ps.lod > 0 else None)
+        settings = RenderSettings.parse(
+            spec, supersample=ps.supersample, background=self.background, lod=ps.lod if ps.lod > 0 else None
+        )
         if "precision" not in spec_parts(str(spec)):  # interactive frames: fast unless the pane asks for exact
             settings = replace(settings, precision="fast")
         debug = "window" if ps.view == "window" and settings.mode == Mode.GAUSSIAN_BLENDING else "none"
@@ -328,11 +338,13 @@ class AppState(CameraActions):
             return None
         settings = [replace(self.settings_for(i, "a"), debug="none") for i in range(self.settings.pane_count)]
         along = len(self.path_keys) >= 2
-        out = Path(out) if out else shot_name(self, "path" if along else "zoom",
-                                              VIDEO_CONTAINERS[self.video_codec])
+        out = Path(out) if out else shot_name(self, "path" if along else "zoom", VIDEO_CONTAINERS[self.video_codec])
         try:
-            path = self.path_keys.frames(VIDEO_PANE_W) if along else zoom_path(self.video_camera(),
-                                                                               frames or self.video_frames)
+            path = (
+                self.path_keys.frames(VIDEO_PANE_W)
+                if along
+                else zoom_path(self.video_camera(), frames or self.video_frames)
+            )
         except GBViewerError as exc:
             self.message(f"video: {exc}", "error")
             return None
@@ -355,8 +367,10 @@ class AppState(CameraActions):
             return
         first = p.frames[0] if p.frames else p.keys[0].camera
         self._snap(first)
-        self.message(f"camera path {Path(path).name}: {len(p.keys)} keyframes, {len(p.frames)} frames "
-                     f"({p.size[0]}x{p.size[1]}, {p.frame_rate:g} fps)")
+        self.message(
+            f"camera path {Path(path).name}: {len(p.keys)} keyframes, {len(p.frames)} frames "
+            f"({p.size[0]}x{p.size[1]}, {p.frame_rate:g} fps)"
+        )
 
     def export_camera_path(self, out: str | Path | None = None) -> Path | None:
         """Write the camera path as nerfstudio's camera_path.json (into the screenshot folder by default)."""

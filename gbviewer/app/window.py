@@ -14,35 +14,33 @@ import time
 from pathlib import Path
 from typing import Callable
 
+import glfw
+import moderngl
 import numpy as np
-
 from imgui_bundle import imgui  # must come before `import glfw`: it points pyGLFW at its own libglfw
 
-import glfw  # noqa: E402  (after imgui_bundle, see above)
-import moderngl  # noqa: E402
-
-from .. import DEFAULT_SCENE  # noqa: E402
-from ..core.errors import GBViewerError  # noqa: E402
-from ..render.glsl.context import release_current  # noqa: E402
+from .. import DEFAULT_SCENE
+from ..core.errors import GBViewerError
+from ..render.glsl.context import release_current
+from . import screenshots
+from .difference.views import PaneAnalysis
+from .frames.display import SharedContext, requested_path
+from .inspector.state import Inspector
+from .inspector.view import dock_side, draw_inspector
+from .menu import draw_menu
 from .overlays import labels as overlays
-from . import screenshots  # noqa: E402
-from .difference.views import PaneAnalysis  # noqa: E402
-from .overlays.difference import draw_analysis_overlays  # noqa: E402
-from .ui.blit import Blitter  # noqa: E402
-from .ui.dialogs import FileDialogs, draw_help  # noqa: E402
-from .frames.display import SharedContext, requested_path  # noqa: E402
-from .ui.input import handle_input  # noqa: E402
-from .ui.keys import action_table  # noqa: E402
-from .inspector.state import Inspector  # noqa: E402
-from .inspector.view import dock_side, draw_inspector  # noqa: E402
-from .menu import draw_menu  # noqa: E402
-from .panel import draw_panel  # noqa: E402
-from .panes import PaneRenders  # noqa: E402
-from .settings import AppSettings, load_settings, save_settings  # noqa: E402
-from .pane_state import RateMeter  # noqa: E402
-from .ui.text import Item  # noqa: E402
-from .state import AppState  # noqa: E402
-from .threads.worker import RenderWorker  # noqa: E402
+from .overlays.difference import draw_analysis_overlays
+from .pane_state import RateMeter
+from .panel import draw_panel
+from .panes import PaneRenders
+from .settings import AppSettings, load_settings, save_settings
+from .state import AppState
+from .threads.worker import RenderWorker
+from .ui.blit import Blitter
+from .ui.dialogs import FileDialogs, draw_help
+from .ui.input import handle_input
+from .ui.keys import action_table
+from .ui.text import Item
 
 WAITING_FPS = 10  # UI frames a second while renders refine or a load runs (each posted result wakes it at once)
 
@@ -52,11 +50,20 @@ class ViewerApp:
     opened beside it (`gbviewer SCENE --data DATASET --images images_4`); `background`: the panes' colour (saved;
     None: the saved one, or a dataset's photos' backdrop)."""
 
-    def __init__(self, scene_path: str | Path | None = None, settings_file: Path | None = None,
-                 size: tuple[int, int] | None = None, visible: bool = True, persist: bool = True,
-                 cameras: str | Path | None = None, projection: str | None = None,
-                 backend: str | None = None, data: str | Path | None = None, images: str = "images",
-                 background: tuple[float, float, float] | None = None) -> None:
+    def __init__(
+        self,
+        scene_path: str | Path | None = None,
+        settings_file: Path | None = None,
+        size: tuple[int, int] | None = None,
+        visible: bool = True,
+        persist: bool = True,
+        cameras: str | Path | None = None,
+        projection: str | None = None,
+        backend: str | None = None,
+        data: str | Path | None = None,
+        images: str = "images",
+        background: tuple[float, float, float] | None = None,
+    ) -> None:
         self.settings_file = settings_file
         self.persist = persist
         settings, warning = load_settings(settings_file)
@@ -83,8 +90,9 @@ class ViewerApp:
         self.analysis = PaneAnalysis(self.state, self.worker)  # difference and error views, PSNR/SSIM
         self.panes = PaneRenders(self.state, self.worker, self.ctx, self.analysis.visualize)
         self.inspector = Inspector(self.state)  # the pinned pixel's traces
-        self.actions = action_table({"window": self, "state": self.state, "analysis": self.analysis,
-                                     "inspector": self.inspector})
+        self.actions = action_table(
+            {"window": self, "state": self.state, "analysis": self.analysis, "inspector": self.inspector}
+        )
         self.state.open(scene_path or DEFAULT_SCENE)
         if data is not None:
             self.state.dataset.open(data, images)  # its views and photos (app/dataset.py)
@@ -184,8 +192,13 @@ class ViewerApp:
         while time.perf_counter() - t0 < timeout:
             self.step()
             s = self.state
-            if (s.loader is None and s.scene is not None and self.frame_count > 2 and not s.moving
-                    and self.panes.all_current()):
+            if (
+                s.loader is None
+                and s.scene is not None
+                and self.frame_count > 2
+                and not s.moving
+                and self.panes.all_current()
+            ):
                 self.step()
                 return True
             time.sleep(0.01)
@@ -205,8 +218,14 @@ class ViewerApp:
             imgui.push_font(self.font, 16.0)
         io = imgui.get_io()
         scale = (io.display_framebuffer_scale.x or 1.0, io.display_framebuffer_scale.y or 1.0)
-        self.state.layout(io.display_size.x, io.display_size.y, imgui.get_frame_height(),
-                          imgui.get_frame_height() + 6, scale, dock_side(self))
+        self.state.layout(
+            io.display_size.x,
+            io.display_size.y,
+            imgui.get_frame_height(),
+            imgui.get_frame_height() + 6,
+            scale,
+            dock_side(self),
+        )
         self.inspector.follow()
         if self.state.needs_reset:
             self.state.needs_reset = False

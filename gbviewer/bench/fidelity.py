@@ -8,9 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.camera import Camera
+from ..model.scene import Scene
 from ..outputs.metrics import box_downsample, psnr, ssim, zoom_factor
 from ..render import Mode, RenderSettings, get_renderer
-from ..model.scene import Scene
 from .speed import render_cost
 
 
@@ -30,8 +30,15 @@ def _referenced(rates: list[float]) -> list[float]:
     return [rate for rate in rates if rate != 1 and zoom_factor(rate) is not None]
 
 
-def measure_fidelity(scene: Scene, name: str, cams: list[Camera], settings: list[RenderSettings],
-                     rates: list[float], backend: str = "cpu", progress=None) -> list[FidelityRow]:
+def measure_fidelity(
+    scene: Scene,
+    name: str,
+    cams: list[Camera],
+    settings: list[RenderSettings],
+    rates: list[float],
+    backend: str = "cpu",
+    progress=None,
+) -> list[FidelityRow]:
     """Zoom-out: each mode at rate 1/k against the x1 scalar render box-downsampled by k.
     Zoom-in: each mode at rate k box-downsampled by k against the x1 render of the same mode. On the CPU backend
     with the SIMD path in use. progress(units) is called with render_cost units as renders finish."""
@@ -59,8 +66,18 @@ def measure_fidelity(scene: Scene, name: str, cams: list[Camera], settings: list
                 ran[s.spec, rate, kind] = f.stats.simd
                 if progress:
                     progress(render_cost(c, s, scene.num_splats))
-    return [FidelityRow(name, spec, rate, kind, float(np.mean([p for p, _ in v])), float(np.mean([q for _, q in v])),
-                        ran[spec, rate, kind]) for (spec, rate, kind), v in acc.items()]
+    return [
+        FidelityRow(
+            name,
+            spec,
+            rate,
+            kind,
+            float(np.mean([p for p, _ in v])),
+            float(np.mean([q for _, q in v])),
+            ran[spec, rate, kind],
+        )
+        for (spec, rate, kind), v in acc.items()
+    ]
 
 
 def fidelity_cost(scene: Scene, cams: list[Camera], settings: list[RenderSettings], rates: list[float]) -> float:
@@ -72,4 +89,3 @@ def fidelity_cost(scene: Scene, cams: list[Camera], settings: list[RenderSetting
             total += render_cost(cam, s, scene.num_splats)
             total += sum(render_cost(cam.at_sampling_rate(rate), s, scene.num_splats) for rate in _referenced(rates))
     return total
-

@@ -9,9 +9,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.camera import Camera, orbit_camera
+from ..model.scene import Scene
 from ..outputs.metrics import flicker, psnr
 from ..render import Mode, RenderSettings, get_renderer
-from ..model.scene import Scene
 from .speed import STAGES, render_cost
 
 
@@ -57,13 +57,27 @@ def oit_settings(settings: list[RenderSettings]) -> dict[Mode, RenderSettings]:
 def oit_cost(scene: Scene, cams: list[Camera], settings: list[RenderSettings], flicker_frames: int = 16) -> float:
     """The render_cost units measure_oit reports."""
     wanted = oit_settings(settings)
-    return sum(sum(2 * render_cost(c, s, scene.num_splats) + render_cost(c, wanted[Mode.SCALAR], scene.num_splats)
-                   for c in cams) + flicker_frames * render_cost(cams[0], s, scene.num_splats)
-               for s in wanted.values())
+    return sum(
+        sum(
+            2 * render_cost(c, s, scene.num_splats) + render_cost(c, wanted[Mode.SCALAR], scene.num_splats)
+            for c in cams
+        )
+        + flicker_frames * render_cost(cams[0], s, scene.num_splats)
+        for s in wanted.values()
+    )
 
 
-def measure_oit(scene: Scene, name: str, cams: list[Camera], settings: list[RenderSettings], backend: str = "cpu",
-                flicker_frames: int = 16, flicker_step: float = 0.1, up: str = "-y", progress=None) -> list[OitRow]:
+def measure_oit(
+    scene: Scene,
+    name: str,
+    cams: list[Camera],
+    settings: list[RenderSettings],
+    backend: str = "cpu",
+    flicker_frames: int = 16,
+    flicker_step: float = 0.1,
+    up: str = "-y",
+    progress=None,
+) -> list[OitRow]:
     """scalar, wsr and duplex (those of `settings` at 1 sample per pixel, plus scalar as the reference) on the bench
     views, and the flicker of each along an orbit of `flicker_frames` frames, `flicker_step` degrees apart.
     progress(units) is called with render_cost units as renders finish (oit_cost() in all)."""
@@ -78,23 +92,51 @@ def measure_oit(scene: Scene, name: str, cams: list[Camera], settings: list[Rend
             renderer.render(cam, s)  # warm-up (duplex: builds the cells once)
             f = renderer.render(cam, s)
             last = f.stats
-            for k in STAGES + ("visible", "sort_length", "sort_bytes", "pairs", "cells", "cells_visible",
-                               "cell_misses"):
+            for k in STAGES + (
+                "visible",
+                "sort_length",
+                "sort_bytes",
+                "pairs",
+                "cells",
+                "cells_visible",
+                "cell_misses",
+            ):
                 acc.setdefault(k, []).append(getattr(f.stats, k) or 0)
             acc.setdefault("psnr", []).append(psnr(f.rgb, ref))
             if progress:
-                progress(2 * render_cost(cam, s, scene.num_splats) + render_cost(cam, wanted[Mode.SCALAR],
-                                                                                 scene.num_splats))
+                progress(
+                    2 * render_cost(cam, s, scene.num_splats) + render_cost(cam, wanted[Mode.SCALAR], scene.num_splats)
+                )
         c0 = cams[0]
-        frames = [renderer.render(orbit_camera(scene, 30.0 + i * flicker_step, 20.0, width=c0.width,
-                                               height=c0.height, up=up), s).rgb for i in range(flicker_frames)]
+        frames = [
+            renderer.render(
+                orbit_camera(scene, 30.0 + i * flicker_step, 20.0, width=c0.width, height=c0.height, up=up), s
+            ).rgb
+            for i in range(flicker_frames)
+        ]
         if progress:
             progress(flicker_frames * render_cost(c0, s, scene.num_splats))
         fl, pops = flicker(frames)
         mean = {k: float(np.mean(v)) for k, v in acc.items()}
-        rows.append(OitRow(
-            name, backend, s.spec, last.mode, c0.width, c0.height, round(mean["visible"]),
-            round(mean["sort_length"]), mean["sort_bytes"] / 2**20, round(mean["pairs"]), round(mean["cells"]),
-            round(mean["cells_visible"]), round(mean["cell_misses"]),
-            {k: float(statistics.median(acc[k])) for k in STAGES}, mean["psnr"], fl, pops))
+        rows.append(
+            OitRow(
+                name,
+                backend,
+                s.spec,
+                last.mode,
+                c0.width,
+                c0.height,
+                round(mean["visible"]),
+                round(mean["sort_length"]),
+                mean["sort_bytes"] / 2**20,
+                round(mean["pairs"]),
+                round(mean["cells"]),
+                round(mean["cells_visible"]),
+                round(mean["cell_misses"]),
+                {k: float(statistics.median(acc[k])) for k in STAGES},
+                mean["psnr"],
+                fl,
+                pops,
+            )
+        )
     return rows

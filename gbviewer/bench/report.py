@@ -11,18 +11,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model.camera import format_rate
 from ..core.extras import require
-from ..io.datasets.backdrop import choose_background
 from ..core.files import atomic_write
-from ..render import BACKENDS
 from ..core.validate import dumps_json
+from ..io.datasets.backdrop import choose_background
+from ..model.camera import format_rate
 from ..outputs.console import wide_console
+from ..render import BACKENDS
 from .fidelity import FidelityRow
 from .oit import OitRow
 from .simd import SIMD_NAMES, simd_summary
-from .stability import FlickerRow
 from .speed import SpeedRow, ratios
+from .stability import FlickerRow
 
 BENCH_BACKGROUND = choose_background(None, None)  # the one rule without photos: every bench render is on black
 
@@ -30,18 +30,45 @@ BENCH_BACKGROUND = choose_background(None, None)  # the one rule without photos:
 def print_oit(rows: list[OitRow]) -> None:
     from rich.table import Table
 
-    t = Table(title="Sorted vs order-independent modes (mean over views; popping along a slow orbit: the frames' "
-                    "second difference, metrics.flicker, not the shimmer against a reference of `gbviewer flicker`)")
-    for col in ("scene", "mode", "visible", "cells vis/all", "sort length", "sort MB", "list entries", "preprocess",
-                "sort", "blend", "total ms", "PSNR vs scalar", "popping (2nd diff)", "pops %"):
+    t = Table(
+        title="Sorted vs order-independent modes (mean over views; popping along a slow orbit: the frames' "
+        "second difference, metrics.flicker, not the shimmer against a reference of `gbviewer flicker`)"
+    )
+    for col in (
+        "scene",
+        "mode",
+        "visible",
+        "cells vis/all",
+        "sort length",
+        "sort MB",
+        "list entries",
+        "preprocess",
+        "sort",
+        "blend",
+        "total ms",
+        "PSNR vs scalar",
+        "popping (2nd diff)",
+        "pops %",
+    ):
         t.add_column(col, justify="left" if col in ("scene", "mode") else "right")
     for r in rows:
         cells = f"{r.cells_visible}/{r.cells}" if r.cells else "-"
-        t.add_row(r.scene, r.label, str(r.visible), cells, str(r.sort_length), f"{r.sort_mb:.2f}", str(r.pairs),
-                  f"{r.stages_ms['preprocess_ms']:.1f}", f"{r.stages_ms['sort_ms']:.1f}",
-                  f"{r.stages_ms['blend_ms']:.1f}", f"{r.stages_ms['total_ms']:.1f}",
-                  "inf" if math.isinf(r.psnr_vs_scalar) else f"{r.psnr_vs_scalar:.2f}", f"{r.flicker:.3f}",
-                  f"{100 * r.pops:.3f}")
+        t.add_row(
+            r.scene,
+            r.label,
+            str(r.visible),
+            cells,
+            str(r.sort_length),
+            f"{r.sort_mb:.2f}",
+            str(r.pairs),
+            f"{r.stages_ms['preprocess_ms']:.1f}",
+            f"{r.stages_ms['sort_ms']:.1f}",
+            f"{r.stages_ms['blend_ms']:.1f}",
+            f"{r.stages_ms['total_ms']:.1f}",
+            "inf" if math.isinf(r.psnr_vs_scalar) else f"{r.psnr_vs_scalar:.2f}",
+            f"{r.flicker:.3f}",
+            f"{100 * r.pops:.3f}",
+        )
     wide_console().print(t)
 
 
@@ -49,14 +76,24 @@ def print_flicker(rows: list[FlickerRow]) -> None:
     """Flicker and change per mode (gbviewer.outputs.flicker), and each scene's floor."""
     from rich.table import Table
 
-    t = Table(title="Flicker along a zoom x1 -> x1/4 (8-bit levels: frame-to-frame change minus the reference's; "
-                    "floor: the reference at half its samples per axis against it)")
+    t = Table(
+        title="Flicker along a zoom x1 -> x1/4 (8-bit levels: frame-to-frame change minus the reference's; "
+        "floor: the reference at half its samples per axis against it)"
+    )
     for col in ("scene", "mode", "size", "pairs", "flicker", "change", "x floor", "floor", "reference"):
         t.add_column(col, justify="left" if col in ("scene", "mode", "reference") else "right")
     for r in rows:
-        t.add_row(r.scene, r.label, f"{r.width}x{r.height}", str(r.pairs), f"{r.flicker:.3f}", f"{r.change:.3f}",
-                  f"{r.flicker / r.floor:.2f}" if r.floor else "-", "-" if r.floor is None else f"{r.floor:.3f}",
-                  r.reference)
+        t.add_row(
+            r.scene,
+            r.label,
+            f"{r.width}x{r.height}",
+            str(r.pairs),
+            f"{r.flicker:.3f}",
+            f"{r.change:.3f}",
+            f"{r.flicker / r.floor:.2f}" if r.floor else "-",
+            "-" if r.floor is None else f"{r.floor:.3f}",
+            r.reference,
+        )
     wide_console().print(t)
 
 
@@ -78,13 +115,24 @@ def machine_description() -> dict:
     return desc
 
 
-def write_json(path: Path, speed: list[SpeedRow], fidelity: list[FidelityRow], force: bool = False,
-               oit: list[OitRow] | None = None, simd: dict | None = None, flicker: list[FlickerRow] | None = None
-               ) -> Path:
+def write_json(
+    path: Path,
+    speed: list[SpeedRow],
+    fidelity: list[FidelityRow],
+    force: bool = False,
+    oit: list[OitRow] | None = None,
+    simd: dict | None = None,
+    flicker: list[FlickerRow] | None = None,
+) -> Path:
     """Every number: machine, simd (simd_info()), speed, fidelity, ratios, flicker, order_independent."""
-    doc = {"machine": machine_description(), "simd": simd, "background": BENCH_BACKGROUND.to_json(),
-           "speed": [asdict(r) for r in speed],
-           "fidelity": [asdict(r) for r in fidelity], "ratios": ratios(speed)}
+    doc = {
+        "machine": machine_description(),
+        "simd": simd,
+        "background": BENCH_BACKGROUND.to_json(),
+        "speed": [asdict(r) for r in speed],
+        "fidelity": [asdict(r) for r in fidelity],
+        "ratios": ratios(speed),
+    }
     if flicker:
         doc["flicker"] = [asdict(r) for r in flicker]
     if oit:
@@ -158,8 +206,14 @@ def quality_cost(ax, scene: str, speed: list[SpeedRow], fidelity: list[FidelityR
         if pts:
             (line,) = ax.plot([p[0] for p in pts], [p[1] for p in pts], label=mode, **styles[mode])
             for ms, db, rate in pts:
-                ax.annotate(f"x1/{round(1 / rate)}", (ms, db), fontsize=6, color=line.get_color(),
-                            xytext=(3, 3), textcoords="offset points")
+                ax.annotate(
+                    f"x1/{round(1 / rate)}",
+                    (ms, db),
+                    fontsize=6,
+                    color=line.get_color(),
+                    xytext=(3, 3),
+                    textcoords="offset points",
+                )
     ax.set_xscale("log")
     ax.set_xlabel("ms per frame (median, fastest path)")
     ax.set_ylabel("PSNR vs reference (dB)")
@@ -203,16 +257,21 @@ def simd_table(rows: list[SpeedRow]) -> tuple[list[str], list[list[str]]]:
         row = [scene, mode, format_rate(rate), f"{w}x{h}"]
         for p in paths:
             r = g.get(p)
-            row.append("" if r is None else f"{r.stages_ms['blend_ms']:.1f}"
-                       + (f" (ran {r.simd})" if r.simd and r.simd != p else ""))
+            row.append(
+                ""
+                if r is None
+                else f"{r.stages_ms['blend_ms']:.1f}" + (f" (ran {r.simd})" if r.simd and r.simd != p else "")
+            )
         base = g.get("scalar")
         for p in vector:
             r = g.get(p)
             if r is None or base is None:
                 row += ["", ""]
             else:
-                row += [f"{base.stages_ms['blend_ms'] / max(r.stages_ms['blend_ms'], 1e-9):.2f}",
-                        f"{base.median_ms / r.median_ms:.2f}"]
+                row += [
+                    f"{base.stages_ms['blend_ms'] / max(r.stages_ms['blend_ms'], 1e-9):.2f}",
+                    f"{base.median_ms / r.median_ms:.2f}",
+                ]
         for p in paths:
             r = g.get(p)
             exp = f" ({r.exp_mevals_per_s_per_core:.0f})" if r is not None and r.exp_mevals_per_s_per_core else ""
@@ -232,24 +291,55 @@ def print_tables(speed: list[SpeedRow], fidelity: list[FidelityRow], simd: dict 
     if simd:
         out.print(simd_summary(simd), highlight=False)
     out.print(f"background {BENCH_BACKGROUND.describe()}", highlight=False)
-    t = Table(title="Speed (median over repeats and views; Mevals/s/core: splat-pixel evaluations per second per "
-                    "core over the frame / the blend stage, exp: that SIMD path's exp evaluations per second on a "
-                    "core)")
-    for col in ("scene", "backend", "simd", "mode", "rate", "size", "total ms", "min-max", "preprocess", "sort",
-                "blend", "evals/px", "Mevals/s/core", "blend Mevals/s/core", "exp M/s/core"):
+    t = Table(
+        title="Speed (median over repeats and views; Mevals/s/core: splat-pixel evaluations per second per "
+        "core over the frame / the blend stage, exp: that SIMD path's exp evaluations per second on a "
+        "core)"
+    )
+    for col in (
+        "scene",
+        "backend",
+        "simd",
+        "mode",
+        "rate",
+        "size",
+        "total ms",
+        "min-max",
+        "preprocess",
+        "sort",
+        "blend",
+        "evals/px",
+        "Mevals/s/core",
+        "blend Mevals/s/core",
+        "exp M/s/core",
+    ):
         t.add_column(col, justify="right" if col not in ("scene", "backend", "simd", "mode") else "left")
     for r in speed:
-        t.add_row(r.scene, r.backend, r.simd or "-", r.mode, format_rate(r.rate), f"{r.width}x{r.height}",
-                  f"{r.median_ms:.1f}", f"{r.min_ms:.1f}-{r.max_ms:.1f}", f"{r.stages_ms['preprocess_ms']:.1f}",
-                  f"{r.stages_ms['sort_ms']:.1f}", f"{r.stages_ms['blend_ms']:.1f}", f"{r.evals_per_pixel:.1f}",
-                  f"{r.mevals_per_s_per_core:.1f}", f"{r.blend_mevals_per_s_per_core:.1f}",
-                  "-" if r.exp_mevals_per_s_per_core is None else f"{r.exp_mevals_per_s_per_core:.0f}")
+        t.add_row(
+            r.scene,
+            r.backend,
+            r.simd or "-",
+            r.mode,
+            format_rate(r.rate),
+            f"{r.width}x{r.height}",
+            f"{r.median_ms:.1f}",
+            f"{r.min_ms:.1f}-{r.max_ms:.1f}",
+            f"{r.stages_ms['preprocess_ms']:.1f}",
+            f"{r.stages_ms['sort_ms']:.1f}",
+            f"{r.stages_ms['blend_ms']:.1f}",
+            f"{r.evals_per_pixel:.1f}",
+            f"{r.mevals_per_s_per_core:.1f}",
+            f"{r.blend_mevals_per_s_per_core:.1f}",
+            "-" if r.exp_mevals_per_s_per_core is None else f"{r.exp_mevals_per_s_per_core:.0f}",
+        )
     out.print(t)
     header, rows = simd_table(speed)
     if rows:
-        st = Table(title="SIMD paths of the CPU backend (same run, taking turns render by render; speedup: scalar's "
-                         "ms / the path's; exp: the path's exp evaluations per second on a core; max abs diff: largest "
-                         "rgb difference from the scalar path's image)")
+        st = Table(
+            title="SIMD paths of the CPU backend (same run, taking turns render by render; speedup: scalar's "
+            "ms / the path's; exp: the path's exp evaluations per second on a core; max abs diff: largest "
+            "rgb difference from the scalar path's image)"
+        )
         for col in header:
             st.add_column(col, justify="left" if col in ("scene", "mode") else "right")
         for row in rows:
@@ -260,8 +350,15 @@ def print_tables(speed: list[SpeedRow], fidelity: list[FidelityRow], simd: dict 
         rt.add_column(col)
     for r in ratios(speed):
         if "mode" not in r:
-            rt.add_row(r["scene"], r["backend"], r["simd"] or "-", format_rate(r["rate"]),
-                       f"{r['width']}x{r['height']}", r["ratio"], f"{r['value']:.2f}")
+            rt.add_row(
+                r["scene"],
+                r["backend"],
+                r["simd"] or "-",
+                format_rate(r["rate"]),
+                f"{r['width']}x{r['height']}",
+                r["ratio"],
+                f"{r['value']:.2f}",
+            )
     out.print(rt)
     if fidelity:
         ft = Table(title="Zoom fidelity (mean over views)")

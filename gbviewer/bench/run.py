@@ -8,18 +8,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
-from ..model.camera import Camera, load_cameras_json, orbit_camera
 from ..core.errors import GBViewerError
-from ..io import load
 from ..core.files import check_writable
-from ..render import BACKENDS, Mode, RenderSettings
-from ..model.scene import Scene
 from ..core.validate import integer
+from ..io import load
+from ..model.camera import Camera, load_cameras_json, orbit_camera
+from ..model.scene import Scene
+from ..render import BACKENDS, Mode, RenderSettings
 from .fidelity import FidelityRow, fidelity_cost, measure_fidelity
 from .oit import OitRow, measure_oit, oit_cost
 from .simd import parse_simd, simd_info
-from .stability import FlickerRow, measure_stability, stability_cost
 from .speed import SpeedRow, measure_speed, speed_cost
+from .stability import FlickerRow, measure_stability, stability_cost
 
 # progress(scene name, total render_cost units) -> a context that yields advance(units)
 Progress = Callable[[str, float], AbstractContextManager[Callable[[float], None]]]
@@ -36,8 +36,9 @@ class BenchResult:
     flicker: list[FlickerRow] = field(default_factory=list)
 
 
-def bench_views(scene: Scene, views: int, width: int, height: int, cameras: Path | None = None,
-                up: str = "-y", multiple: int = 1) -> list[Camera]:
+def bench_views(
+    scene: Scene, views: int, width: int, height: int, cameras: Path | None = None, up: str = "-y", multiple: int = 1
+) -> list[Camera]:
     """Training cameras (resized to width x height) when given, else `views` orbit views around the robust bounds.
     The size is rounded down to a multiple of `multiple` (the largest zoom factor), so that every box-downsampled
     reference covers exactly the pixels of the low-rate render."""
@@ -58,11 +59,26 @@ def select_backends(names: Sequence[str]) -> tuple[list[str], dict[str, str]]:
     return [b for b in names if b not in why], why
 
 
-def run_bench(scenes: Sequence[Path], settings: list[RenderSettings], rates: list[float], backends: list[str], *,
-              views: int, size: tuple[int, int], repeat: int, cameras: Path | None = None, up: str = "-y",
-              simd: str | None = None, flicker_frames: int = 16, flicker_step: float = 0.1,
-              flicker_pairs: int = 3, flicker_size: tuple[int, int] = (160, 120),
-              outputs: Sequence[Path] = (), force: bool = False, progress: Progress | None = None) -> BenchResult:
+def run_bench(
+    scenes: Sequence[Path],
+    settings: list[RenderSettings],
+    rates: list[float],
+    backends: list[str],
+    *,
+    views: int,
+    size: tuple[int, int],
+    repeat: int,
+    cameras: Path | None = None,
+    up: str = "-y",
+    simd: str | None = None,
+    flicker_frames: int = 16,
+    flicker_step: float = 0.1,
+    flicker_pairs: int = 3,
+    flicker_size: tuple[int, int] = (160, 120),
+    outputs: Sequence[Path] = (),
+    force: bool = False,
+    progress: Progress | None = None,
+) -> BenchResult:
     """Speed on every backend (the CPU backend on each SIMD path of `simd`, see parse_simd), fidelity on the first
     backend, flicker (`stability`; `flicker_pairs` pairs at `flicker_size`, 0 pairs: none) on the first backend,
     and with wsr or duplex among `settings` the order-independent measures, for every scene file.
@@ -86,17 +102,21 @@ def run_bench(scenes: Sequence[Path], settings: list[RenderSettings], rates: lis
         scene = load(path)
         name = Path(path).name
         cams = bench_views(scene, views, *size, cameras, up, multiple)
-        total = (speed_cost(scene, cams, settings, backends, rates, repeat, paths)
-                 + fidelity_cost(scene, cams, settings, rates)
-                 + (stability_cost(scene, cams[0], settings, flicker_pairs, flicker_size) if flicker_pairs else 0)
-                 + (oit_cost(scene, cams, settings, flicker_frames) if with_oit else 0))
+        total = (
+            speed_cost(scene, cams, settings, backends, rates, repeat, paths)
+            + fidelity_cost(scene, cams, settings, rates)
+            + (stability_cost(scene, cams[0], settings, flicker_pairs, flicker_size) if flicker_pairs else 0)
+            + (oit_cost(scene, cams, settings, flicker_frames) if with_oit else 0)
+        )
         with progress(name, total) if progress else nullcontext() as step:
             result.speed += measure_speed(scene, name, cams, settings, backends, rates, repeat, step, paths, exp)
             result.fidelity += measure_fidelity(scene, name, cams, settings, rates, backends[0], step)
             if flicker_pairs:
-                result.flicker += measure_stability(scene, name, cams[0], settings, flicker_pairs, flicker_size,
-                                                    backends[0], step)
+                result.flicker += measure_stability(
+                    scene, name, cams[0], settings, flicker_pairs, flicker_size, backends[0], step
+                )
             if with_oit:
-                result.oit += measure_oit(scene, name, cams, settings, backends[0], flicker_frames, flicker_step,
-                                          up, step)
+                result.oit += measure_oit(
+                    scene, name, cams, settings, backends[0], flicker_frames, flicker_step, up, step
+                )
     return result

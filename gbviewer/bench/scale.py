@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model.camera import Camera, orbit_camera
 from ..core.cancel import CancelToken
 from ..core.errors import RenderCancelled
 from ..io import load
-from ..render import RenderSettings, get_renderer
+from ..model.camera import Camera, orbit_camera
 from ..model.scene import Scene
+from ..render import RenderSettings, get_renderer
 
 
 def scene_bytes(scene: Scene) -> int:
@@ -57,14 +57,21 @@ def child_measure(kind: str, path: str) -> dict:
         scene = load(path)
         arrays = scene_bytes(scene)
     seconds = time.perf_counter() - t
-    return {"seconds": seconds, "rss_before": before, "rss_after": rss_bytes(), "peak_rss": peak_rss_bytes(), "arrays": arrays}
+    return {
+        "seconds": seconds,
+        "rss_before": before,
+        "rss_after": rss_bytes(),
+        "peak_rss": peak_rss_bytes(),
+        "arrays": arrays,
+    }
 
 
 def measure_in_child(kind: str, path: Path) -> dict:
     """`child_measure` in a new interpreter (so that its peak RSS is the measured step's alone)."""
     code = "import json,sys; from gbviewer.bench.scale import child_measure as m; print(json.dumps(m(*sys.argv[1:])))"
-    out = subprocess.run([sys.executable, "-P", "-c", code, kind, str(path)],
-                         check=True, capture_output=True, text=True)
+    out = subprocess.run(
+        [sys.executable, "-P", "-c", code, kind, str(path)], check=True, capture_output=True, text=True
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -75,10 +82,16 @@ def measure_load(path: Path, repeat: int) -> dict:
     loads = [measure_in_child("load", path) for _ in range(repeat)]
     best = min(loads, key=lambda r: r["seconds"])
     above = max(r["peak_rss"] - r["rss_before"] for r in loads)
-    return {"raw_s": raw["seconds"], "load_s": best["seconds"], "load_over_raw": best["seconds"] / raw["seconds"],
-            "arrays_bytes": best["arrays"], "baseline_rss": best["rss_before"], "peak_rss_above_baseline": above,
-            "peak_over_arrays": above / best["arrays"],
-            "after_over_arrays": (best["rss_after"] - best["rss_before"]) / best["arrays"]}
+    return {
+        "raw_s": raw["seconds"],
+        "load_s": best["seconds"],
+        "load_over_raw": best["seconds"] / raw["seconds"],
+        "arrays_bytes": best["arrays"],
+        "baseline_rss": best["rss_before"],
+        "peak_rss_above_baseline": above,
+        "peak_over_arrays": above / best["arrays"],
+        "after_over_arrays": (best["rss_after"] - best["rss_before"]) / best["arrays"],
+    }
 
 
 def scale_camera(scene: Scene, width: int = 1280, height: int = 720) -> Camera:
@@ -88,8 +101,15 @@ def scale_camera(scene: Scene, width: int = 1280, height: int = 720) -> Camera:
 
 def _stages(frame) -> dict:
     s = frame.stats
-    return {"preprocess_ms": s.preprocess_ms, "sort_ms": s.sort_ms, "blend_ms": s.blend_ms, "total_ms": s.total_ms,
-            "visible": s.visible, "sort_length": s.sort_length, "evals_per_pixel": s.evals_per_pixel}
+    return {
+        "preprocess_ms": s.preprocess_ms,
+        "sort_ms": s.sort_ms,
+        "blend_ms": s.blend_ms,
+        "total_ms": s.total_ms,
+        "visible": s.visible,
+        "sort_length": s.sort_length,
+        "evals_per_pixel": s.evals_per_pixel,
+    }
 
 
 def measure_stages(scene: Scene, cam: Camera, modes: list[str], rates: list[float], repeat: int) -> list[dict]:
@@ -128,12 +148,24 @@ def measure_two_pane(scene: Scene, cam: Camera, modes: tuple[str, str]) -> dict:
     for k, (m, f) in enumerate(zip(modes, frames)):
         shared = (f.stats.stage_ms or 0.0) + (f.stats.order_ms or 0.0)
         own = f.stats.preprocess_ms + f.stats.sort_ms - shared
-        panes.append({"mode": m, "first_tiles_ms": first_tiles.get(k), "stage_reused": f.stats.stage_reused,
-                      "order_reused": f.stats.order_reused, "shared_ms": shared, "own_ms": own, **_stages(f)})
+        panes.append(
+            {
+                "mode": m,
+                "first_tiles_ms": first_tiles.get(k),
+                "stage_reused": f.stats.stage_reused,
+                "order_reused": f.stats.order_reused,
+                "shared_ms": shared,
+                "own_ms": own,
+                **_stages(f),
+            }
+        )
     before_blend = [p["preprocess_ms"] + p["sort_ms"] for p in panes]
-    return {"panes": panes, "total_ms": total,
-            "second_over_first": panes[1]["shared_ms"] / max(panes[0]["shared_ms"], 1e-9),
-            "before_blend_ratio": before_blend[1] / max(before_blend[0], 1e-9)}
+    return {
+        "panes": panes,
+        "total_ms": total,
+        "second_over_first": panes[1]["shared_ms"] / max(panes[0]["shared_ms"], 1e-9),
+        "before_blend_ratio": before_blend[1] / max(before_blend[0], 1e-9),
+    }
 
 
 def measure_cancel(scene: Scene, cam: Camera, mode: str, moments_ms: list[float], supersample: int = 1) -> list[dict]:
@@ -143,8 +175,11 @@ def measure_cancel(scene: Scene, cam: Camera, mode: str, moments_ms: list[float]
     renderer = get_renderer(scene, "cpu")
     settings = RenderSettings.parse(mode, supersample=supersample)
     s = renderer.render(cam, settings).stats
-    stages = {"preprocess": s.preprocess_ms / 2, "order+bin": s.preprocess_ms + s.sort_ms / 2,
-              "blend": s.preprocess_ms + s.sort_ms + s.blend_ms / 2}
+    stages = {
+        "preprocess": s.preprocess_ms / 2,
+        "order+bin": s.preprocess_ms + s.sort_ms / 2,
+        "blend": s.preprocess_ms + s.sort_ms + s.blend_ms / 2,
+    }
     rows = []
     for stage, at in [*stages.items(), *(("", m) for m in moments_ms)]:
         token = CancelToken()
@@ -163,17 +198,33 @@ def measure_cancel(scene: Scene, cam: Camera, mode: str, moments_ms: list[float]
         except RenderCancelled:
             latency, finished = (time.perf_counter() - stamp[0]) * 1e3, False
         timer.cancel()
-        rows.append({"mode": mode, "supersample": supersample, "stage": stage, "set_at_ms": at,
-                     "latency_ms": latency, "finished": finished, "render_ms": (time.perf_counter() - t0) * 1e3})
+        rows.append(
+            {
+                "mode": mode,
+                "supersample": supersample,
+                "stage": stage,
+                "set_at_ms": at,
+                "latency_ms": latency,
+                "finished": finished,
+                "render_ms": (time.perf_counter() - t0) * 1e3,
+            }
+        )
     return rows
 
 
-def run_scale(path: Path, repeat: int, modes: list[str], rates: list[float], moments_ms: list[float],
-              width: int = 1280, height: int = 720, log=print) -> dict:
+def run_scale(
+    path: Path,
+    repeat: int,
+    modes: list[str],
+    rates: list[float],
+    moments_ms: list[float],
+    width: int = 1280,
+    height: int = 720,
+    log=print,
+) -> dict:
     """Every measurement of the scale benchmark on the tiled scene at `path`."""
     log(f"{path.name}: load")
-    result: dict = {"file": str(path), "file_bytes": path.stat().st_size,
-                    "load": measure_load(path, repeat)}
+    result: dict = {"file": str(path), "file_bytes": path.stat().st_size, "load": measure_load(path, repeat)}
     scene = load(path)
     result["splats"] = scene.num_splats
     cam = scale_camera(scene, width, height)
@@ -181,8 +232,9 @@ def run_scale(path: Path, repeat: int, modes: list[str], rates: list[float], mom
     result["stages"] = measure_stages(scene, cam, modes, rates, repeat)
     log(f"{path.name}: two panes, cancel")
     result["two_pane"] = measure_two_pane(scene, cam, (modes[0], modes[-1]))
-    result["cancel"] = (measure_cancel(scene, cam, modes[-1], moments_ms)
-                        + measure_cancel(scene, scale_camera(scene, width // 2, height // 2), modes[0], [], 4))
+    result["cancel"] = measure_cancel(scene, cam, modes[-1], moments_ms) + measure_cancel(
+        scene, scale_camera(scene, width // 2, height // 2), modes[0], [], 4
+    )
     return result
 
 
@@ -191,22 +243,34 @@ def print_scale(r: dict) -> None:
     ld = r["load"]
     print(f"\n{Path(r['file']).name}: {r['splats']:,} splats, {r['file_bytes'] / 1e9:.2f} GB")
     print(f"  raw read {ld['raw_s']:.2f} s | load {ld['load_s']:.2f} s | load/raw {ld['load_over_raw']:.2f}")
-    print(f"  splat arrays {ld['arrays_bytes'] / 2**30:.2f} GiB | peak RSS above baseline "
-          f"{ld['peak_rss_above_baseline'] / 2**30:.2f} GiB ({ld['peak_over_arrays']:.2f}x arrays) | after load "
-          f"{ld['after_over_arrays']:.2f}x | baseline {ld['baseline_rss'] / 2**20:.0f} MiB")
-    print(f"  {'mode':<18}{'rate':>6}{'size':>11}{'pre ms':>9}{'sort ms':>9}{'blend ms':>10}{'total ms':>10}"
-          f"{'sorted':>12}{'evals/px':>10}")
+    print(
+        f"  splat arrays {ld['arrays_bytes'] / 2**30:.2f} GiB | peak RSS above baseline "
+        f"{ld['peak_rss_above_baseline'] / 2**30:.2f} GiB ({ld['peak_over_arrays']:.2f}x arrays) | after load "
+        f"{ld['after_over_arrays']:.2f}x | baseline {ld['baseline_rss'] / 2**20:.0f} MiB"
+    )
+    print(
+        f"  {'mode':<18}{'rate':>6}{'size':>11}{'pre ms':>9}{'sort ms':>9}{'blend ms':>10}{'total ms':>10}"
+        f"{'sorted':>12}{'evals/px':>10}"
+    )
     for s in r["stages"]:
-        print(f"  {s['mode']:<18}{s['rate']:>6g}{s['width']:>6}x{s['height']:<4}{s['preprocess_ms']:>9.0f}"
-              f"{s['sort_ms']:>9.0f}{s['blend_ms']:>10.0f}{s['total_ms']:>10.0f}{s['sort_length']:>12,}"
-              f"{s['evals_per_pixel']:>10.0f}")
+        print(
+            f"  {s['mode']:<18}{s['rate']:>6g}{s['width']:>6}x{s['height']:<4}{s['preprocess_ms']:>9.0f}"
+            f"{s['sort_ms']:>9.0f}{s['blend_ms']:>10.0f}{s['total_ms']:>10.0f}{s['sort_length']:>12,}"
+            f"{s['evals_per_pixel']:>10.0f}"
+        )
     tp = r["two_pane"]
-    panes = ", ".join(f"{p['mode']} stage+order {p['shared_ms']:.0f} ms (stage "
-                      f"{'reused' if p['stage_reused'] else 'built'}, order {'reused' if p['order_reused'] else 'sorted'}) + own finish+bin {p['own_ms']:.0f} ms, "
-                      f"first tiles at {p['first_tiles_ms'] or 0:.0f} ms" for p in tp["panes"])
-    print(f"  two panes, one camera, one render_many: {panes}; both final at {tp['total_ms']:.0f} ms; second "
-          f"pane's stage+order / first's {tp['second_over_first']:.2f}, all its work before the blend / first's "
-          f"{tp['before_blend_ratio']:.2f}")
+    panes = ", ".join(
+        f"{p['mode']} stage+order {p['shared_ms']:.0f} ms (stage "
+        f"{'reused' if p['stage_reused'] else 'built'}, order {'reused' if p['order_reused'] else 'sorted'}) "
+        f"+ own finish+bin {p['own_ms']:.0f} ms, "
+        f"first tiles at {p['first_tiles_ms'] or 0:.0f} ms"
+        for p in tp["panes"]
+    )
+    print(
+        f"  two panes, one camera, one render_many: {panes}; both final at {tp['total_ms']:.0f} ms; second "
+        f"pane's stage+order / first's {tp['second_over_first']:.2f}, all its work before the blend / first's "
+        f"{tp['before_blend_ratio']:.2f}"
+    )
     for c in r["cancel"]:
         got = "finished first" if c["finished"] else f"RenderCancelled {c['latency_ms']:.1f} ms after the set"
         where = f" (mid {c['stage']})" if c["stage"] else ""

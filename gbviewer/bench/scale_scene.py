@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import load
 from ..core.files import atomic_write
+from ..io import load
 from ..io.write import inria_columns, ply_header
 from ..model.scene import Scene
 
@@ -48,8 +48,16 @@ def padded(scene: Scene, degree: int = 3) -> Scene:
         return scene
     sh = np.zeros((scene.num_splats, k, 3), np.float32)
     sh[:, : scene.sh.shape[1]] = scene.sh
-    return Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, sh, scene.filter_3d,
-                             source=scene.source, meta=scene.meta)
+    return Scene.from_arrays(
+        scene.means,
+        scene.scales,
+        scene.quats,
+        scene.opacities,
+        sh,
+        scene.filter_3d,
+        source=scene.source,
+        meta=scene.meta,
+    )
 
 
 def grid_offsets(scene: Scene, tiles: int) -> np.ndarray:
@@ -87,22 +95,31 @@ def write_tiled(scene: Scene, tiles: int, path: Path) -> str:
     return digest.hexdigest()
 
 
-def tiled_scene(tiles: int, source: Path, folder: Path | None = None, verify: bool = False,
-                log=print) -> Path:
+def tiled_scene(tiles: int, source: Path, folder: Path | None = None, verify: bool = False, log=print) -> Path:
     """The path of `source` tiled `tiles` times with SH degree 3 in `folder` (default `cache_dir()`): reused when
     its record (source hash, tiles, version, size; with `verify` also the file's own hash) matches, else built."""
     source = Path(source)
     folder = Path(folder) if folder is not None else cache_dir()
     path = folder / f"{source.name.split('.')[0]}-x{tiles}.ply"
     record_path = path.with_suffix(".json")
-    params = {"source": source.name, "source_sha256": _sha256(source), "tiles": tiles, "version": VERSION,
-              "sh_degree": 3}
+    params = {
+        "source": source.name,
+        "source_sha256": _sha256(source),
+        "tiles": tiles,
+        "version": VERSION,
+        "sh_degree": 3,
+    }
     try:
         record = json.loads(record_path.read_text())
     except (OSError, ValueError):
         record = None
-    if (isinstance(record, dict) and record.get("params") == params and path.is_file()
-            and path.stat().st_size == record.get("bytes") and (not verify or _sha256(path) == record.get("sha256"))):
+    if (
+        isinstance(record, dict)
+        and record.get("params") == params
+        and path.is_file()
+        and path.stat().st_size == record.get("bytes")
+        and (not verify or _sha256(path) == record.get("sha256"))
+    ):
         return path
     base = padded(load(source))
     log(f"building {path} ({base.num_splats * tiles:,} splats) ...")

@@ -16,8 +16,9 @@ def _native():
     from .. import _native
 
     if not hasattr(_native, "testing"):
-        raise GBViewerError(f"{_native.__file__} predates the renderer class (no _native.testing): rebuild "
-                            "it (pip install .)")
+        raise GBViewerError(
+            f"{_native.__file__} predates the renderer class (no _native.testing): rebuild it (pip install .)"
+        )
     return _native
 
 
@@ -57,8 +58,9 @@ def parse_simd(text: str | None) -> list[str]:
         raise GBViewerError("--simd: no SIMD path given")
     unknown = [w for w in wanted if w not in SIMD_NAMES]
     if unknown:
-        raise GBViewerError(f"--simd: unknown SIMD path(s) {unknown}; expected some of {', '.join(SIMD_NAMES)}, "
-                            "all or current")
+        raise GBViewerError(
+            f"--simd: unknown SIMD path(s) {unknown}; expected some of {', '.join(SIMD_NAMES)}, all or current"
+        )
     missing = [w for w in wanted if w not in avail]
     if missing:
         raise GBViewerError(f"--simd: this CPU cannot run {', '.join(missing)} (it runs {', '.join(avail)})")
@@ -74,13 +76,20 @@ def exp_rates(paths: list[str] | None = None, n: int = EXP_RATE_N, tries: int = 
 def simd_info(measured: list[str]) -> dict:
     """The CPU backend's SIMD paths: those this CPU runs, the one in use, GBVIEWER_SIMD, the ones measured, and the
     exp throughput of each path (per second, one core)."""
-    return {"paths": simd_paths(), "in_use": current_simd(), "env": os.environ.get("GBVIEWER_SIMD"),
-            "measured": list(measured), "exp_per_s_per_core": exp_rates()}
+    return {
+        "paths": simd_paths(),
+        "in_use": current_simd(),
+        "env": os.environ.get("GBVIEWER_SIMD"),
+        "measured": list(measured),
+        "exp_per_s_per_core": exp_rates(),
+    }
 
 
 def simd_summary(info: dict) -> str:
     """One line: 'SIMD scalar, avx2 (in use avx2; GBVIEWER_SIMD unset); exp per core: scalar 90M/s, avx2 400M/s'."""
     exp = ", ".join(f"{p} {v / 1e6:.0f}M/s" for p, v in info["exp_per_s_per_core"].items())
     env = info["env"] if info["env"] else "unset"
-    return (f"SIMD paths {', '.join(info['paths'])} (in use {info['in_use']}; GBVIEWER_SIMD {env}; measuring "
-            f"{', '.join(info['measured'])}); exp per core: {exp}")
+    return (
+        f"SIMD paths {', '.join(info['paths'])} (in use {info['in_use']}; GBVIEWER_SIMD {env}; measuring "
+        f"{', '.join(info['measured'])}); exp per core: {exp}"
+    )

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.camera import Camera
-from ..render import BACKENDS, Mode, RenderSettings, get_renderer
 from ..model.scene import Scene
+from ..render import BACKENDS, Mode, RenderSettings, get_renderer
 from .simd import current_simd, set_simd
 
 STAGES = ("preprocess_ms", "sort_ms", "blend_ms", "total_ms")
@@ -21,7 +21,6 @@ MODE_COST = {Mode.ANALYTIC: 8.0, Mode.GAUSSIAN_BLENDING: 3.0}  # rough cost per 
 def render_cost(cam: Camera, s: RenderSettings, splats: int) -> float:
     """A rough work estimate of one render (samples + splats, times a mode factor): the progress bar's unit."""
     return (cam.width * cam.height * s.supersample**2 + splats) * MODE_COST.get(s.mode, 1.0)
-
 
 
 @dataclass
@@ -58,9 +57,18 @@ class SpeedRow:
     simd_max_abs_diff: float | None = None
 
 
-def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[RenderSettings], backends: list[str],
-                  rates: list[float], repeat: int, progress=None, simd: list[str] | None = None,
-                  exp: dict[str, float] | None = None) -> list[SpeedRow]:
+def measure_speed(
+    scene: Scene,
+    name: str,
+    cams: list[Camera],
+    settings: list[RenderSettings],
+    backends: list[str],
+    rates: list[float],
+    repeat: int,
+    progress=None,
+    simd: list[str] | None = None,
+    exp: dict[str, float] | None = None,
+) -> list[SpeedRow]:
     """Median over `repeat` renders of every view, per backend, SIMD path, mode and rate (one warm-up render per
     path, mode and rate before the first view).
 
@@ -79,8 +87,10 @@ def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[Re
         try:
             for rate in rates:
                 for s in settings:
-                    acc = {p: {"totals": [], "stages": {k: [] for k in STAGES}, "evals": [], "last": None,
-                               "diff": None} for p in paths}
+                    acc = {
+                        p: {"totals": [], "stages": {k: [] for k in STAGES}, "evals": [], "last": None, "diff": None}
+                        for p in paths
+                    }
                     for i, cam in enumerate(cams):
                         c = cam.at_sampling_rate(rate)
                         cost = render_cost(c, s, scene.num_splats)
@@ -114,26 +124,54 @@ def measure_speed(scene: Scene, name: str, cams: list[Camera], settings: list[Re
                         # evaluation rates: all the timed renders' evaluations over all their time (views differ)
                         evals = sum(a["evals"]) * c.width * c.height
                         ran = last.simd if caps.simd else None
-                        rows.append(SpeedRow(
-                            name, backend, s.spec, rate, c.width, c.height, statistics.median(totals), min(totals),
-                            max(totals), med, last.visible, last.sort_length, float(np.mean(a["evals"])),
-                            evals / max(sum(totals), 1e-9) / 1e3 / per_core, ran, path,
-                            evals / max(sum(a["stages"]["blend_ms"]), 1e-9) / 1e3 / per_core,
-                            exp[ran] / 1e6 if exp and ran in exp else None, a["diff"]))
+                        rows.append(
+                            SpeedRow(
+                                name,
+                                backend,
+                                s.spec,
+                                rate,
+                                c.width,
+                                c.height,
+                                statistics.median(totals),
+                                min(totals),
+                                max(totals),
+                                med,
+                                last.visible,
+                                last.sort_length,
+                                float(np.mean(a["evals"])),
+                                evals / max(sum(totals), 1e-9) / 1e3 / per_core,
+                                ran,
+                                path,
+                                evals / max(sum(a["stages"]["blend_ms"]), 1e-9) / 1e3 / per_core,
+                                exp[ran] / 1e6 if exp and ran in exp else None,
+                                a["diff"],
+                            )
+                        )
         finally:
             if caps.simd and current_simd() != before:
                 set_simd(before)
     return rows
 
 
-
-def speed_cost(scene: Scene, cams: list[Camera], settings: list[RenderSettings], backends: list[str],
-               rates: list[float], repeat: int, simd: list[str] | None = None) -> float:
+def speed_cost(
+    scene: Scene,
+    cams: list[Camera],
+    settings: list[RenderSettings],
+    backends: list[str],
+    rates: list[float],
+    repeat: int,
+    simd: list[str] | None = None,
+) -> float:
     """The render_cost units measure_speed reports."""
-    per_backend = sum(render_cost(cam.at_sampling_rate(rate), s, scene.num_splats) * (repeat + (i == 0))
-                      for rate in rates for s in settings for i, cam in enumerate(cams))
-    return sum(per_backend * (len(dict.fromkeys(simd)) if BACKENDS[b].capabilities.simd and simd else 1)
-               for b in backends)
+    per_backend = sum(
+        render_cost(cam.at_sampling_rate(rate), s, scene.num_splats) * (repeat + (i == 0))
+        for rate in rates
+        for s in settings
+        for i, cam in enumerate(cams)
+    )
+    return sum(
+        per_backend * (len(dict.fromkeys(simd)) if BACKENDS[b].capabilities.simd and simd else 1) for b in backends
+    )
 
 
 def ratios(rows: list[SpeedRow]) -> list[dict]:
@@ -158,8 +196,12 @@ def ratios(rows: list[SpeedRow]) -> list[dict]:
         if simd in (None, "scalar") or base is None:
             continue
         where = {"scene": scene, "backend": backend, "simd": simd, "rate": rate, "width": w, "height": h, "mode": mode}
-        out.append({**where, "ratio": f"blend speedup {simd} over scalar",
-                    "value": base.stages_ms["blend_ms"] / max(r.stages_ms["blend_ms"], 1e-9)})
+        out.append(
+            {
+                **where,
+                "ratio": f"blend speedup {simd} over scalar",
+                "value": base.stages_ms["blend_ms"] / max(r.stages_ms["blend_ms"], 1e-9),
+            }
+        )
         out.append({**where, "ratio": f"frame speedup {simd} over scalar", "value": base.median_ms / r.median_ms})
     return out
-

@@ -6,9 +6,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..model.camera import Camera
+from ..model.scene import Scene
 from ..outputs.flicker import DEFAULT_REFERENCE, flicker_path, floor_settings, measure_flicker, pair_starts
 from ..render import RenderSettings
-from ..model.scene import Scene
 from .speed import render_cost
 
 ZOOM = (1.0, 0.25)  # the path: x1 to x1/4 over FRAMES frames (4 s at 30 fps, as gbviewer video's default)
@@ -36,8 +36,9 @@ def _reference() -> RenderSettings:
     return RenderSettings.parse(DEFAULT_REFERENCE)
 
 
-def stability_cost(scene: Scene, cam: Camera, settings: list[RenderSettings], pairs: int,
-                   size: tuple[int, int]) -> float:
+def stability_cost(
+    scene: Scene, cam: Camera, settings: list[RenderSettings], pairs: int, size: tuple[int, int]
+) -> float:
     """The render_cost units measure_stability reports: each distinct settings (the modes, the reference, the
     floor) on each frame of the pairs."""
     c = cam.with_size(*size)
@@ -48,16 +49,27 @@ def stability_cost(scene: Scene, cam: Camera, settings: list[RenderSettings], pa
     return frames * sum(render_cost(c, s, scene.num_splats) for s in measured)
 
 
-def measure_stability(scene: Scene, name: str, cam: Camera, settings: list[RenderSettings], pairs: int,
-                      size: tuple[int, int], backend: str = "cpu", progress=None) -> list[FlickerRow]:
+def measure_stability(
+    scene: Scene,
+    name: str,
+    cam: Camera,
+    settings: list[RenderSettings],
+    pairs: int,
+    size: tuple[int, int],
+    backend: str = "cpu",
+    progress=None,
+) -> list[FlickerRow]:
     """Flicker of every mode over `pairs` pairs of the zoom ZOOM (FRAMES frames) from `cam` at `size`.
     progress(units) is called with render_cost units as renders finish."""
     c = cam.with_size(*size)
     path = flicker_path("zoom", c, scene, FRAMES, *ZOOM)
     n = scene.num_splats
     step = None if progress is None else (lambda s: progress(render_cost(c, s, n)))
-    rep = measure_flicker(scene, path, settings, reference=_reference(), pairs=pairs, backend=backend,
-                          path_name="zoom", progress=step)
+    rep = measure_flicker(
+        scene, path, settings, reference=_reference(), pairs=pairs, backend=backend, path_name="zoom", progress=step
+    )
     floor = rep.floor.flicker if rep.floor is not None else None
-    return [FlickerRow(name, m.spec, m.label, c.width, c.height, len(rep.starts), rep.reference, m.flicker,
-                       m.change, floor) for m in rep.modes]
+    return [
+        FlickerRow(name, m.spec, m.label, c.width, c.height, len(rep.starts), rep.reference, m.flicker, m.change, floor)
+        for m in rep.modes
+    ]

@@ -9,11 +9,11 @@ import sys
 import threading
 from contextlib import contextmanager
 
-from .argtypes import Parser
 from ..core.errors import GBViewerError
 from ..render.budget import BUDGET_ENV
 from . import bench, compare, flicker, info, render, trace, video, view
 from . import eval as evaluation
+from .argtypes import Parser
 
 COMMANDS = (info, render, view, bench, evaluation, video, flicker, trace, compare)  # in the order --help lists them
 
@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
     first = next((a for a in argv if a != "--debug"), None)
     if first is None or (first not in commands and first not in ("-h", "--help")):
-        argv = ["view", *argv] if first is None else [*argv[:argv.index(first)], "view", *argv[argv.index(first):]]
+        argv = ["view", *argv] if first is None else [*argv[: argv.index(first)], "view", *argv[argv.index(first) :]]
     try:
         args, extra = parser.parse_known_args(argv)
         if extra:  # named by the command's own parser, whose --help lists what it takes
@@ -108,11 +108,13 @@ def main(argv: list[str] | None = None) -> int:
     except MemoryError as exc:  # beyond the estimate render.budget refuses before a frame (e.g. long tile lists)
         if args.debug:
             raise
-        print(f"gbviewer: error: out of memory ({one_line(str(exc)) or 'MemoryError'}); render smaller, or see "
-              f"{BUDGET_ENV}", file=sys.stderr)
+        print(
+            f"gbviewer: error: out of memory ({one_line(str(exc)) or 'MemoryError'}); render smaller, or see "
+            f"{BUDGET_ENV}",
+            file=sys.stderr,
+        )
         return 2
     except KeyboardInterrupt as exc:
         signum = exc.signum if isinstance(exc, Terminated) else signal.SIGINT
         print(f"gbviewer: interrupted ({signal.Signals(signum).name})", file=sys.stderr)
         return 128 + signum
-

@@ -12,9 +12,10 @@ import argparse
 from dataclasses import dataclass
 from typing import NoReturn
 
-from ..model.camera import MAX_IMAGE_SIZE as MAX_SIDE, parse_rate, parse_rates  # largest image width or height
 from ..core.errors import GBViewerError, InvalidValue
 from ..core.validate import integer, real
+from ..model.camera import MAX_IMAGE_SIZE as MAX_SIDE  # largest image width or height
+from ..model.camera import parse_rate, parse_rates
 
 
 class Parser(argparse.ArgumentParser):
@@ -106,5 +107,11 @@ SIZE = Numbers((Number(True, 1, MAX_SIDE, name="W"), Number(True, 1, MAX_SIDE, n
 ORBIT = Numbers((Number(f32=True, name="AZ"), Number(f32=True, name="EL"), Number(lo=0.0, f32=True, name="DIST")))
 BACKGROUND = Numbers(tuple(Number(lo=0.0, hi=1.0, name=c) for c in "RGB"))
 PIXEL = Numbers((Number(True, 0, MAX_SIDE - 1, name="X"), Number(True, 0, MAX_SIDE - 1, name="Y")))
-INSET = Numbers((Number(f32=True, name="X"), Number(f32=True, name="Y"),
-                 Number(lo=0.0, lo_open=True, f32=True, name="W"), Number(lo=0.0, lo_open=True, f32=True, name="H")))
+INSET = Numbers(
+    (
+        Number(f32=True, name="X"),
+        Number(f32=True, name="Y"),
+        Number(lo=0.0, lo_open=True, f32=True, name="W"),
+        Number(lo=0.0, lo_open=True, f32=True, name="H"),
+    )
+)

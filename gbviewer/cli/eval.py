@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from .eval_args import add_eval_args, scene_pairs
 from ..core.extras import require
 from ..core.files import check_writable
 from ..core.outputs import refuse_collisions
+from .eval_args import add_eval_args, scene_pairs
 from .options import add_lod_arg, add_stochastic_args, progress_bar, settings_of
 
 
@@ -24,9 +24,19 @@ def cmd_eval(args: argparse.Namespace) -> int:
     for path in outputs:
         check_writable(path, args.force, inputs=[p for pair in pairs for p in pair])
     result = evaluation.run_eval(
-        pairs, settings_of(args), args.rates, split=args.split, background=args.background,
-        images=args.images, backend=args.backend, workers=args.workers, ray=args.ray, threads=args.threads,
-        cache=args.cache or evaluation.default_cache(), progress=progress_bar)
+        pairs,
+        settings_of(args),
+        args.rates,
+        split=args.split,
+        background=args.background,
+        images=args.images,
+        backend=args.backend,
+        workers=args.workers,
+        ray=args.ray,
+        threads=args.threads,
+        cache=args.cache or evaluation.default_cache(),
+        progress=progress_bar,
+    )
     evaluation.print_tables(result)
     if args.json:
         print(f"wrote {evaluation.write_json(args.json, result, args.force)}")
@@ -37,8 +47,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("eval", help="PSNR and SSIM of every mode and sampling rate against a scene's training "
-                                    "photos (COLMAP, Blender or cameras.json datasets), the paper's tables")
+    p = sub.add_parser(
+        "eval",
+        help="PSNR and SSIM of every mode and sampling rate against a scene's training "
+        "photos (COLMAP, Blender or cameras.json datasets), the paper's tables",
+    )
     add_eval_args(p)
     add_lod_arg(p)
     add_stochastic_args(p)

@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .argtypes import BACKGROUND, Rate, count
 from ..core.errors import GBViewerError
 from ..io.datasets import SPLITS
 from ..render import BACKENDS
 from ..render.types import MAX_THREADS
+from .argtypes import BACKGROUND, Rate, count
 
 SCENE_SUFFIXES = (".ply", ".splat", ".spz", ".sog")
 MAX_WORKERS = 1024
@@ -17,36 +17,73 @@ MAX_WORKERS = 1024
 
 def add_dataset_args(p: argparse.ArgumentParser) -> None:
     """--data and --images: a scene's training dataset (`gbviewer eval`, and the viewer's photo pane)."""
-    p.add_argument("--data", type=Path, help="the dataset: a COLMAP capture (sparse/0 and images/), a Blender "
-                   "folder (transforms_train/test.json) or a 3DGS cameras.json (with its photos in --images)")
-    p.add_argument("--images", default="images", help="photo folder of a COLMAP capture or a cameras.json, beside "
-                   "it (default images; images_4 for quarter-size photos: x1 is the photos' resolution)")
+    p.add_argument(
+        "--data",
+        type=Path,
+        help="the dataset: a COLMAP capture (sparse/0 and images/), a Blender "
+        "folder (transforms_train/test.json) or a 3DGS cameras.json (with its photos in --images)",
+    )
+    p.add_argument(
+        "--images",
+        default="images",
+        help="photo folder of a COLMAP capture or a cameras.json, beside "
+        "it (default images; images_4 for quarter-size photos: x1 is the photos' resolution)",
+    )
 
 
 def add_eval_args(p: argparse.ArgumentParser) -> None:
     """The arguments of `gbviewer eval` (every number through argtypes)."""
-    p.add_argument("scenes", nargs="+", metavar="SCENE", help="a scene file (with --data), SCENE:DATASET, or a "
-                   "folder of scene files (with --data: a folder holding a dataset named as each scene)")
+    p.add_argument(
+        "scenes",
+        nargs="+",
+        metavar="SCENE",
+        help="a scene file (with --data), SCENE:DATASET, or a "
+        "folder of scene files (with --data: a folder holding a dataset named as each scene)",
+    )
     add_dataset_args(p)
-    p.add_argument("--modes", default="scalar,mip,analytic,gaussian_blending",
-                   help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, the level-of-detail cut at PX)")
-    p.add_argument("--rates", type=Rate(many=True), default="1,1/2,1/4,1/8",
-                   help="sampling rates 1/k: the photos box-downsampled by k are the ground truth (default "
-                   "1,1/2,1/4,1/8)")
-    p.add_argument("--split", default="test", choices=SPLITS, help="views to evaluate (default test: every 8th "
-                   "photo of a capture, transforms_test.json of a Blender set)")
-    p.add_argument("--background", type=BACKGROUND, metavar=BACKGROUND.metavar,
-                   help="background of the renders and of RGBA photos (1,1,1 for a Blender scene trained on white); "
-                   "default: the viewer's, the photos' backdrop (their borders' median colour) where every photo is "
-                   "opaque, else black; each table says which")
-    p.add_argument("--backend", default="auto", choices=["auto", *BACKENDS],
-                   help="auto (default): the backend auto picks in each worker (see gbviewer info)")
+    p.add_argument(
+        "--modes",
+        default="scalar,mip,analytic,gaussian_blending",
+        help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, the level-of-detail cut at PX)",
+    )
+    p.add_argument(
+        "--rates",
+        type=Rate(many=True),
+        default="1,1/2,1/4,1/8",
+        help="sampling rates 1/k: the photos box-downsampled by k are the ground truth (default 1,1/2,1/4,1/8)",
+    )
+    p.add_argument(
+        "--split",
+        default="test",
+        choices=SPLITS,
+        help="views to evaluate (default test: every 8th photo of a capture, transforms_test.json of a Blender set)",
+    )
+    p.add_argument(
+        "--background",
+        type=BACKGROUND,
+        metavar=BACKGROUND.metavar,
+        help="background of the renders and of RGBA photos (1,1,1 for a Blender scene trained on white); "
+        "default: the viewer's, the photos' backdrop (their borders' median colour) where every photo is "
+        "opaque, else black; each table says which",
+    )
+    p.add_argument(
+        "--backend",
+        default="auto",
+        choices=["auto", *BACKENDS],
+        help="auto (default): the backend auto picks in each worker (see gbviewer info)",
+    )
     runner = p.add_mutually_exclusive_group()
     runner.add_argument("--workers", type=count(MAX_WORKERS), default=1, help="local processes (default 1)")
-    runner.add_argument("--ray", metavar="ADDRESS", help="run on a Ray cluster (host:port, ray://host:port, auto; "
-                        "local: a Ray instance started for the run)")
-    p.add_argument("--threads", type=count(MAX_THREADS), help="CPU threads per render (default: the cores shared "
-                   "among --workers; on Ray 4 per task)")
+    runner.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="run on a Ray cluster (host:port, ray://host:port, auto; local: a Ray instance started for the run)",
+    )
+    p.add_argument(
+        "--threads",
+        type=count(MAX_THREADS),
+        help="CPU threads per render (default: the cores shared among --workers; on Ray 4 per task)",
+    )
     p.add_argument("--cache", type=Path, help="folder of box-downsampled photos (default: the user cache folder)")
     p.add_argument("--json", type=Path, help="write every view's numbers here")
     p.add_argument("--plots", type=Path, help="write PNG plots (PSNR and SSIM against the rate) into this folder")
@@ -55,8 +92,11 @@ def add_eval_args(p: argparse.ArgumentParser) -> None:
 
 def _folder_scenes(folder: Path) -> list[Path]:
     """The scene files (and SOG folders) in `folder`, by name."""
-    return [f for f in sorted(folder.iterdir())
-            if (f.is_file() and f.suffix.lower() in SCENE_SUFFIXES) or (f.is_dir() and (f / "meta.json").is_file())]
+    return [
+        f
+        for f in sorted(folder.iterdir())
+        if (f.is_file() and f.suffix.lower() in SCENE_SUFFIXES) or (f.is_dir() and (f / "meta.json").is_file())
+    ]
 
 
 def scene_pairs(scenes: list[str], data: Path | None) -> list[tuple[Path, Path]]:
@@ -71,8 +111,9 @@ def scene_pairs(scenes: list[str], data: Path | None) -> list[tuple[Path, Path]]
             if not scene.strip() or not dataset.strip():
                 raise GBViewerError(f"{arg}: expected SCENE:DATASET with both parts (no such file either)")
             if data is not None:
-                raise GBViewerError(f"{arg}: SCENE:DATASET names its dataset; --data {data} too is ambiguous "
-                                    "(give one of them)")
+                raise GBViewerError(
+                    f"{arg}: SCENE:DATASET names its dataset; --data {data} too is ambiguous (give one of them)"
+                )
             pairs.append((Path(scene), Path(dataset)))
         elif data is None:
             raise GBViewerError(f"{arg}: which dataset? give --data DATASET or {arg}:DATASET")

@@ -7,8 +7,8 @@ import argparse
 import json
 from pathlib import Path
 
-from ..io import WRITE_FORMATS, dropped, format_for, load, save
 from ..core.files import check_writable
+from ..io import WRITE_FORMATS, dropped, format_for, load, save
 from ..io.trained_as import describe
 from ..render import build_info, compiler_line, simd_line
 from .options import add_load_args, load_options
@@ -56,28 +56,39 @@ def cmd_convert(args: argparse.Namespace) -> int:
     check_writable(out, args.force, inputs=[args.scene], option="--out")
     scene = load(args.scene, **load_options(args))
     save(scene, out, force=args.force, fmt=fmt)
-    print(f"{out}: {fmt}, {scene.num_splats} splats, SH degree {scene.sh_degree}, from {scene.meta.get('format')} "
-          f"(version {scene.meta.get('version')})")
+    print(
+        f"{out}: {fmt}, {scene.num_splats} splats, SH degree {scene.sh_degree}, from {scene.meta.get('format')} "
+        f"(version {scene.meta.get('version')})"
+    )
     if lost := dropped(scene, fmt):
         print(f"{out}: {lost}")
     return 0
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("info", help="describe a scene file and this build (SIMD paths, OpenMP, compiler; alone "
-                                     "without a scene)")
+    p = sub.add_parser(
+        "info", help="describe a scene file and this build (SIMD paths, OpenMP, compiler; alone without a scene)"
+    )
     p.add_argument("scene", type=Path, nargs="?")
     p.add_argument("--json", action="store_true")
     add_load_args(p)
     p.set_defaults(func=cmd_info)
 
-    p = sub.add_parser("convert", help="write a scene in another format (by OUT's name: .ply INRIA, .compressed.ply, "
-                                        ".glb, .spz.glb, .spz, .splat, .sog)")
+    p = sub.add_parser(
+        "convert",
+        help="write a scene in another format (by OUT's name: .ply INRIA, .compressed.ply, "
+        ".glb, .spz.glb, .spz, .splat, .sog)",
+    )
     p.add_argument("scene", type=Path)
-    p.add_argument("out", type=Path, help="OUT.ply, OUT.compressed.ply, OUT.glb, OUT.spz.glb, OUT.spz, OUT.splat or "
-                   "OUT.sog")
-    p.add_argument("--format", choices=WRITE_FORMATS, help="the output format, whatever OUT's name (glb-spz: a .glb "
-                   "holding an SPZ stream, KHR_gaussian_splatting_compression_spz_2)")
+    p.add_argument(
+        "out", type=Path, help="OUT.ply, OUT.compressed.ply, OUT.glb, OUT.spz.glb, OUT.spz, OUT.splat or OUT.sog"
+    )
+    p.add_argument(
+        "--format",
+        choices=WRITE_FORMATS,
+        help="the output format, whatever OUT's name (glb-spz: a .glb "
+        "holding an SPZ stream, KHR_gaussian_splatting_compression_spz_2)",
+    )
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     add_load_args(p)
     p.set_defaults(func=cmd_convert)

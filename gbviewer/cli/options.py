@@ -6,27 +6,30 @@ from __future__ import annotations
 import argparse
 import sys
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 
-from dataclasses import replace
-
-from .argtypes import MAX_SIDE, ORBIT, SIDE, Number, count
+from ..core.errors import GBViewerError
+from ..core.validate import integer
 from ..model.camera import PROJECTIONS, Camera, load_cameras_json, orbit_camera
 from ..model.camera_paths import scene_focus_depth
-from ..core.errors import GBViewerError
+from ..model.scene import Scene
 from ..render import AUTO, BACKEND_NAMES, RenderSettings, choose_backend
 from ..render.modes import MAX_SEED, STOCHASTIC_MODES
 from ..render.types import MAX_LOD
-from ..model.scene import Scene
-from ..core.validate import integer
+from .argtypes import MAX_SIDE, ORBIT, SIDE, Number, count
 
 MAX_COUNT = 10_000  # most views, repeats and flicker frames of a benchmark
 
 
 def add_load_args(p: argparse.ArgumentParser) -> None:
     """--primitive: how the commands that load one scene read a glTF file."""
-    p.add_argument("--primitive", type=count(lo=0), metavar="N",
-                   help="glTF: load only the N-th splat primitive (default: all of them, as one scene)")
+    p.add_argument(
+        "--primitive",
+        type=count(lo=0),
+        metavar="N",
+        help="glTF: load only the N-th splat primitive (default: all of them, as one scene)",
+    )
 
 
 def load_options(args: argparse.Namespace) -> dict:
@@ -38,22 +41,34 @@ def add_camera_args(p: argparse.ArgumentParser) -> None:
     """--cameras/--camera, --orbit, --width/--height, --up, --projection: shared by the commands that render."""
     p.add_argument("--cameras", type=Path, help="3DGS cameras.json")
     p.add_argument("--camera", type=count(lo=0), default=0, help="index into --cameras (default 0)")
-    p.add_argument("--orbit", type=ORBIT, metavar=ORBIT.metavar,
-                   help="orbit camera: azimuth and elevation in degrees, distance in scene units (0: auto)")
+    p.add_argument(
+        "--orbit",
+        type=ORBIT,
+        metavar=ORBIT.metavar,
+        help="orbit camera: azimuth and elevation in degrees, distance in scene units (0: auto)",
+    )
     p.add_argument("--width", type=SIDE, help="image width (default 640, or the training camera's)")
     p.add_argument("--height", type=SIDE, help="image height (default 480, or the training camera's)")
     p.add_argument("--up", default="-y", choices=["-y", "+y", "+z", "-z"], help="scene up axis for orbit cameras")
-    p.add_argument("--projection", choices=PROJECTIONS,
-                   help="perspective (default: orbits; a --cameras entry keeps its own) or orthographic: an orbit "
-                   "keeps its eye with f / distance pixels per unit, a training camera is converted at the depth of "
-                   "the scene's centre; either way the scene appears at the same size")
+    p.add_argument(
+        "--projection",
+        choices=PROJECTIONS,
+        help="perspective (default: orbits; a --cameras entry keeps its own) or orthographic: an orbit "
+        "keeps its eye with f / distance pixels per unit, a training camera is converted at the depth of "
+        "the scene's centre; either way the scene appears at the same size",
+    )
 
 
 def add_backend_arg(p: argparse.ArgumentParser, default: str | None = AUTO, text: str = "") -> None:
     """--backend: cpu, glsl, cuda or auto."""
-    p.add_argument("--backend", default=default, choices=list(BACKEND_NAMES),
-                   help=text or "auto (default): CUDA where a device is usable, else GLSL on a hardware OpenGL 4.3 "
-                   "driver, else cpu; the choice and why go to stderr")
+    p.add_argument(
+        "--backend",
+        default=default,
+        choices=list(BACKEND_NAMES),
+        help=text
+        or "auto (default): CUDA where a device is usable, else GLSL on a hardware OpenGL 4.3 "
+        "driver, else cpu; the choice and why go to stderr",
+    )
 
 
 def camera_from_args(scene: Scene, args: argparse.Namespace) -> Camera:
@@ -69,8 +84,9 @@ def camera_from_args(scene: Scene, args: argparse.Namespace) -> Camera:
             cam = cam.with_size(w, h)
         if args.projection in (None, cam.projection):
             return cam
-        depth = scene_focus_depth(scene, cam, f"--projection {args.projection} on camera {args.camera}",
-                                  "give an --orbit")
+        depth = scene_focus_depth(
+            scene, cam, f"--projection {args.projection} on camera {args.camera}", "give an --orbit"
+        )
         return cam.with_projection(args.projection, depth)
     w, h = args.width or 640, args.height or 480
     projection = args.projection or "perspective"
@@ -83,8 +99,11 @@ def camera_from_args(scene: Scene, args: argparse.Namespace) -> Camera:
 def add_lod_arg(p: argparse.ArgumentParser, many: bool = True) -> None:
     """--lod PX: the level-of-detail cut at PX projected pixels (gbviewer.lod); with several modes each one is
     measured or shown with and without it."""
-    text = ("also render each mode given without its own +lod at this level of detail, beside it (MODE+lod:PX)"
-            if many else "render the level-of-detail cut at this many projected pixels (MODE+lod:PX)")
+    text = (
+        "also render each mode given without its own +lod at this level of detail, beside it (MODE+lod:PX)"
+        if many
+        else "render the level-of-detail cut at this many projected pixels (MODE+lod:PX)"
+    )
     p.add_argument("--lod", type=Number(lo=0, hi=MAX_LOD, f32=True), metavar="PX", help=text)
 
 
@@ -105,11 +124,19 @@ STOCHASTIC_OPTIONS = ("seed", "frame")  # add_stochastic_args: applied to the st
 
 def add_stochastic_args(p: argparse.ArgumentParser) -> None:
     """--seed and --frame: the stochastic modes' keep decisions (RenderSettings.seed, .frame)."""
-    p.add_argument("--seed", type=count(MAX_SEED, lo=0), metavar="0..2^32-1",
-                   help="stochastic modes: the seed of the keep decisions' hash (default 0)")
-    p.add_argument("--frame", type=count(MAX_SEED, lo=0), metavar="0..2^32-1",
-                   help="stochastic modes: the frame index (default 0); another index is another sample, the same "
-                   "seed and index the same image bit for bit")
+    p.add_argument(
+        "--seed",
+        type=count(MAX_SEED, lo=0),
+        metavar="0..2^32-1",
+        help="stochastic modes: the seed of the keep decisions' hash (default 0)",
+    )
+    p.add_argument(
+        "--frame",
+        type=count(MAX_SEED, lo=0),
+        metavar="0..2^32-1",
+        help="stochastic modes: the frame index (default 0); another index is another sample, the same "
+        "seed and index the same image bit for bit",
+    )
 
 
 def with_stochastic(settings: list[RenderSettings], args: argparse.Namespace) -> list[RenderSettings]:
@@ -121,8 +148,10 @@ def with_stochastic(settings: list[RenderSettings], args: argparse.Namespace) ->
     if not any(s.mode in STOCHASTIC_MODES for s in settings):
         option = " and ".join(f"--{k} {v}" for k, v in given.items())
         names = ", ".join(m.label for m in STOCHASTIC_MODES)
-        raise GBViewerError(f"{option} applies to the stochastic modes ({names} and their presets); the modes "
-                            f"given ({', '.join(s.spec for s in settings)}) have none")
+        raise GBViewerError(
+            f"{option} applies to the stochastic modes ({names} and their presets); the modes "
+            f"given ({', '.join(s.spec for s in settings)}) have none"
+        )
     return [replace(s, **given) if s.mode in STOCHASTIC_MODES else s for s in settings]
 
 
@@ -151,8 +180,10 @@ def path_args(args: argparse.Namespace, paths: tuple[str, ...], pane: tuple[int,
     elif not (args.width or args.height or args.cameras):
         args.width, args.height = pane
     if args.path not in paths and not Path(args.path).is_file():
-        raise GBViewerError(f"--path {args.path}: expected {', '.join(paths)} or a keyframes FILE.json, got "
-                            f"{'a folder' if Path(args.path).is_dir() else 'no such file'}")
+        raise GBViewerError(
+            f"--path {args.path}: expected {', '.join(paths)} or a keyframes FILE.json, got "
+            f"{'a folder' if Path(args.path).is_dir() else 'no such file'}"
+        )
 
 
 def backend_of(args: argparse.Namespace) -> str:
@@ -176,16 +207,24 @@ def check_inset(inset: tuple[float, float, float, float] | None, width: int, hei
     if inset is not None:
         x, y, w, h = inset
         if x < 0 or y < 0 or x + w > width or y + h > height:
-            raise GBViewerError(f"--inset {x:g},{y:g},{w:g},{h:g}: expected a region inside the {width}x{height} "
-                                f"x1 image (X >= 0, Y >= 0, X+W <= {width}, Y+H <= {height})")
+            raise GBViewerError(
+                f"--inset {x:g},{y:g},{w:g},{h:g}: expected a region inside the {width}x{height} "
+                f"x1 image (X >= 0, Y >= 0, X+W <= {width}, Y+H <= {height})"
+            )
 
 
 def progress_columns() -> tuple:
     """A rich progress bar with percentage, elapsed time and ETA."""
     from rich.progress import BarColumn, TaskProgressColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    return (TextColumn("{task.description}"), BarColumn(), TaskProgressColumn(), TimeElapsedColumn(),
-            TextColumn("eta"), TimeRemainingColumn())
+    return (
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TaskProgressColumn(),
+        TimeElapsedColumn(),
+        TextColumn("eta"),
+        TimeRemainingColumn(),
+    )
 
 
 @contextmanager

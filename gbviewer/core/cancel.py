@@ -28,8 +28,10 @@ def cancel_problem(cancel: object) -> str | None:
     `cancel` (the caller raises its own error with it)."""
     if cancel is None or (isinstance(cancel, Cancellable) and callable(cancel.is_set)):
         return None
-    return (f"cancel: expected a gbviewer.CancelToken, a threading.Event or an object with an is_set() method (or "
-            f"None), got {type(cancel).__name__}")
+    return (
+        f"cancel: expected a gbviewer.CancelToken, a threading.Event or an object with an is_set() method (or "
+        f"None), got {type(cancel).__name__}"
+    )
 
 
 class CancelToken:

@@ -1,8 +1,8 @@
 """The optional extras: `pip install gbviewer` is the library and the command line's renders; a feature whose
 third-party package comes with an extra imports it through `require`, which says in one line which extra to install.
 
-No module outside `gbviewer.app` imports an extra's package at import time (tests/core/test_extras.py imports the package
-with them blocked)."""
+No module outside `gbviewer.app` imports an extra's package at import time (tests/core/test_extras.py imports the
+package with them blocked)."""
 
 from __future__ import annotations
 
@@ -27,8 +27,9 @@ class MissingExtra(GBViewerError):
 
     def __init__(self, extra: str, module: str, feature: str, why: str) -> None:
         self.extra, self.module = extra, module
-        super().__init__(f"{feature} needs {module.split('.')[0]} ({' '.join(why.split())}): "
-                         f"pip install 'gbviewer[{extra}]'")
+        super().__init__(
+            f"{feature} needs {module.split('.')[0]} ({' '.join(why.split())}): pip install 'gbviewer[{extra}]'"
+        )
 
 
 def require(extra: str, module: str, feature: str, load: bool = True) -> ModuleType | None:

@@ -11,7 +11,6 @@ from pathlib import Path
 from .errors import GBViewerError
 from .outputs import PathLike, refuse_inputs
 
-
 NAME_MAX = 255  # bytes of one file or folder name (Linux, macOS and Windows file systems)
 TEMP_EXTRA = 10  # what atomic_write's temporary name adds to the file's: ".NAME-12345678" ("." "-" 8 letters)
 
@@ -39,12 +38,20 @@ def check_name_lengths(path: Path, folder: bool, option: str) -> None:
         limit = NAME_MAX - (0 if folder or i < len(parts) - 1 else TEMP_EXTRA)
         if len(os.fsencode(part)) > limit:
             what = "folder" if folder or i < len(parts) - 1 else "file"
-            raise GBViewerError(f"{option + ' ' if option else ''}{part[:40]}...: {what} name of "
-                                f"{len(os.fsencode(part))} bytes; expected at most {limit}")
+            raise GBViewerError(
+                f"{option + ' ' if option else ''}{part[:40]}...: {what} name of "
+                f"{len(os.fsencode(part))} bytes; expected at most {limit}"
+            )
 
 
-def check_writable(path: str | Path, force: bool = False, *, folder: bool = False,
-                   inputs: Iterable[PathLike | None] = (), option: str = "") -> Path:
+def check_writable(
+    path: str | Path,
+    force: bool = False,
+    *,
+    folder: bool = False,
+    inputs: Iterable[PathLike | None] = (),
+    option: str = "",
+) -> Path:
     """Raise now the error that writing `path` (a file; with `folder`, a folder to write files into) would raise
     after long work: an existing file without `force`, a folder where a file goes or the reverse, a place that
     cannot be created or may not be written in (probed with a temporary file, so read-only mounts count for root
@@ -75,8 +82,9 @@ def check_writable(path: str | Path, force: bool = False, *, folder: bool = Fals
 
 def atomic_write(path: str | Path, write: Callable[[Path], object], force: bool = False) -> Path:
     """Call write(tmp) for a temporary file beside `path`, flush it to disk, then move it into place and flush the
-    folder, so readers never see a partial file and a crash after the return does not lose it. Without `force` an existing file is refused, including one that appears while
-    writing (the final step links rather than renames). The file gets the usual umask permissions."""
+    folder, so readers never see a partial file and a crash after the return does not lose it. Without `force` an
+    existing file is refused, including one that appears while writing (the final step links rather than renames). The
+    file gets the usual umask permissions."""
     path = refuse_overwrite(path, force)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, name = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)

@@ -38,8 +38,10 @@ def refuse_inputs(outputs: Iterable[PathLike | None], inputs: Iterable[PathLike 
             same = out_real == src_real or (out_id is not None and out_id == src_id)
             if same or (out_id is not None and src_real.is_dir() and _inside(out_real, src_real)):
                 what = "is" if same else "lies inside"
-                raise GBViewerError(f"{out}: {what} the input {src}; choose another output (refused even with "
-                                    "--force, the input would be lost)")
+                raise GBViewerError(
+                    f"{out}: {what} the input {src}; choose another output (refused even with "
+                    "--force, the input would be lost)"
+                )
 
 
 def refuse_collisions(outputs: Iterable[PathLike], what: str = "outputs") -> None:
@@ -49,6 +51,8 @@ def refuse_collisions(outputs: Iterable[PathLike], what: str = "outputs") -> Non
     for out in map(Path, outputs):
         key = Path(os.path.realpath(out))
         if key in seen:
-            raise GBViewerError(f"{out}: two {what} would be written to this one file ({seen[key]} and {out}); "
-                                "rename a scene or write them to separate folders")
+            raise GBViewerError(
+                f"{out}: two {what} would be written to this one file ({seen[key]} and {out}); "
+                "rename a scene or write them to separate folders"
+            )
         seen[key] = out

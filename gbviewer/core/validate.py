@@ -32,8 +32,15 @@ def _describe(value: object) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def real(value: object, what: str, *, lo: float | None = None, hi: float | None = None, lo_open: bool = False,
-         f32: bool = False) -> float:
+def real(
+    value: object,
+    what: str,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    f32: bool = False,
+) -> float:
     """`value` as a finite float in [lo, hi] ((lo, hi] with lo_open); with f32 it must also fit a float32, and a
     value that must be > 0 must stay so as a normal float32 (a focal length of 1e-45 would become 0 or subnormal)."""
     if isinstance(value, bool):
@@ -48,8 +55,9 @@ def real(value: object, what: str, *, lo: float | None = None, hi: float | None 
     if lo is not None and (x <= lo if lo_open else x < lo):
         raise InvalidValue(f"{what}: expected {'>' if lo_open else '>='} {lo:g}, got {x:g}")
     if f32 and lo_open and lo == 0 and x < F32_TINY:
-        raise InvalidValue(f"{what}: expected >= {F32_TINY:.4g} (a positive float32 that does not underflow), got "
-                           f"{x:g}")
+        raise InvalidValue(
+            f"{what}: expected >= {F32_TINY:.4g} (a positive float32 that does not underflow), got {x:g}"
+        )
     if hi is not None and x > hi:
         raise InvalidValue(f"{what}: expected <= {hi:g}, got {x:g}")
     return x
@@ -125,8 +133,7 @@ def declared_count(value: object, what: str, *, item_bytes: int, available: int)
     `value` items of at least `item_bytes` each must fit in `available` bytes."""
     n = integer(value, what, lo=0)
     if n * max(item_bytes, 1) > available:
-        raise InvalidValue(f"{what}: declares {n} entries of >= {item_bytes} bytes but only {available} bytes "
-                           "follow")
+        raise InvalidValue(f"{what}: declares {n} entries of >= {item_bytes} bytes but only {available} bytes follow")
     return n
 
 
@@ -162,16 +169,18 @@ def _depth(doc: Any, limit: int) -> int:
     return deepest
 
 
-def parse_json(text: str | bytes, what: str, *, max_bytes: int = JSON_MAX_BYTES,
-               max_depth: int = JSON_MAX_DEPTH) -> Any:
+def parse_json(
+    text: str | bytes, what: str, *, max_bytes: int = JSON_MAX_BYTES, max_depth: int = JSON_MAX_DEPTH
+) -> Any:
     """A JSON document with its size, nesting depth and numbers bounded: `NaN`/`Infinity` and integers too long
     to convert are errors, as are documents over `max_bytes` or nested deeper than `max_depth`, and an object that
     gives one key two different values (JSON readers disagree on which one holds)."""
     if len(text) > max_bytes:
         raise InvalidValue(f"{what}: {len(text)} bytes of JSON, more than the {max_bytes} allowed")
     try:
-        doc = json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float,
-                         object_pairs_hook=_one_value_per_key)
+        doc = json.loads(
+            text, parse_constant=_reject_constant, parse_float=_finite_float, object_pairs_hook=_one_value_per_key
+        )
     except RecursionError:
         raise InvalidValue(f"{what}: JSON nested deeper than {max_depth} levels") from None
     except (ValueError, UnicodeDecodeError) as exc:
@@ -244,8 +253,10 @@ def read_npy(fh: BinaryIO, what: str, shapes: list[tuple[int, ...]], dtype: np.d
         raise ValueError(f"{what}: .npy format version {version}, expected 1.0 or 2.0")
     got_shape, fortran, got_dtype = NPY_HEADER_READERS[version](fh, max_header_size=1 << 12)
     if got_shape not in shapes or got_dtype != dtype or fortran:
-        raise ValueError(f"{what} is {got_dtype} {got_shape}{' (Fortran order)' if fortran else ''}, expected "
-                         f"{dtype} {' or '.join(map(str, shapes))}")
+        raise ValueError(
+            f"{what} is {got_dtype} {got_shape}{' (Fortran order)' if fortran else ''}, expected "
+            f"{dtype} {' or '.join(map(str, shapes))}"
+        )
     out = np.empty(got_shape, dtype)
     buf = memoryview(out.reshape(-1).view(np.uint8))
     got = 0

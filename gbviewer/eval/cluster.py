@@ -43,8 +43,10 @@ def check_address(address: str) -> None:
     try:
         socket.create_connection(infos[0][4][:2], timeout=CONNECT_TIMEOUT_S).close()
     except OSError as exc:
-        raise GBViewerError(f"{what}: nothing accepts a connection at {host} port {port} within "
-                            f"{CONNECT_TIMEOUT_S:g} s ({exc.strerror or exc}); is the Ray head running?") from None
+        raise GBViewerError(
+            f"{what}: nothing accepts a connection at {host} port {port} within "
+            f"{CONNECT_TIMEOUT_S:g} s ({exc.strerror or exc}); is the Ray head running?"
+        ) from None
 
 
 def renders_on_device(backend: str) -> bool:
@@ -130,8 +132,12 @@ def run_on_ray(tasks: list[ViewTask], address: str, advance: Callable[[int], Non
         try:
             notice.addFilter(quiet)
             try:
-                ray.init(address=None if address == "local" else address, include_dashboard=False,
-                         logging_level=logging.WARNING, configure_logging=True)
+                ray.init(
+                    address=None if address == "local" else address,
+                    include_dashboard=False,
+                    logging_level=logging.WARNING,
+                    configure_logging=True,
+                )
             except (ConnectionError, RuntimeError, ValueError) as exc:
                 raise GBViewerError(f"--ray {address}: cannot connect ({' '.join(str(exc).split())[:200]})") from None
             finally:

@@ -28,15 +28,18 @@ def view_bytes(view: View, settings: Sequence[RenderSettings], rates: Sequence[f
     return w * h * DECODE_BYTES + levels + largest * SSIM_BYTES + render
 
 
-def check_view_memory(view: View, settings: Sequence[RenderSettings], rates: Sequence[float], fmt: str,
-                      processes: int = 1) -> None:
+def check_view_memory(
+    view: View, settings: Sequence[RenderSettings], rates: Sequence[float], fmt: str, processes: int = 1
+) -> None:
     """A one-line `GBViewerError` when `processes` views at once (`view_bytes` each) exceed the memory budget."""
     need = view_bytes(view, settings, rates) * processes
     budget, source = memory_budget()
     if need > budget:
         smaller = "" if fmt == "blender" else " or evaluate downsampled photos (e.g. --images images_4)"
         each = f" ({processes} workers at once)" if processes > 1 else ""
-        raise GBViewerError(f"{view.image}: the {view.camera.width}x{view.camera.height} photo needs about "
-                            f"{gib(need)}{each} to evaluate (decode, ground truths, SSIM, renders), more than the "
-                            f"{gib(budget)} budget ({source}); set {BUDGET_ENV} (e.g. {BUDGET_ENV}=64G) to raise it"
-                            f"{smaller}")
+        raise GBViewerError(
+            f"{view.image}: the {view.camera.width}x{view.camera.height} photo needs about "
+            f"{gib(need)}{each} to evaluate (decode, ground truths, SSIM, renders), more than the "
+            f"{gib(budget)} budget ({source}); set {BUDGET_ENV} (e.g. {BUDGET_ENV}=64G) to raise it"
+            f"{smaller}"
+        )

@@ -10,12 +10,12 @@ from typing import Sequence
 
 import numpy as np
 
-from ..model.camera import Camera, format_rate
 from ..core.errors import GBViewerError
-from ..io.datasets import View, read_photo
 from ..core.files import atomic_write
-from ..outputs.metrics import composite, premultiplied_box_downsample, zoom_factor
 from ..core.validate import open_regular, read_npy
+from ..io.datasets import View, read_photo
+from ..model.camera import Camera, format_rate
+from ..outputs.metrics import composite, premultiplied_box_downsample, zoom_factor
 
 CACHE_VERSION = 2  # part of every key: a change of what is stored (or of the key) invalidates the old entries
 DIGEST_CHUNK = 1 << 20  # bytes of a photo hashed at a time
@@ -34,8 +34,12 @@ def rate_factor(rate: float) -> int:
     ones: point the dataset at the full-size photos instead)."""
     k = zoom_factor(rate) if rate <= 1 else None
     if k is None:
-        why = ("is finer than the photos (x1); evaluate a scene trained on downsampled photos against the full-size "
-               "ones for zoom-in" if rate > 1 else "is not 1/k for an integer k")
+        why = (
+            "is finer than the photos (x1); evaluate a scene trained on downsampled photos against the full-size "
+            "ones for zoom-in"
+            if rate > 1
+            else "is not 1/k for an integer k"
+        )
         raise GBViewerError(f"rate {format_rate(rate)} {why}")
     return k
 
@@ -45,8 +49,10 @@ def camera_for_rate(camera: Camera, rate: float) -> Camera:
     bottom edges that box_downsample crops cut off (intrinsics unchanged), then k times coarser."""
     k = rate_factor(rate)
     if k > min(camera.width, camera.height):
-        raise GBViewerError(f"rate {format_rate(rate)}: the photo {camera.name!r} ({camera.width}x{camera.height}) "
-                            f"is smaller than {k} pixels")
+        raise GBViewerError(
+            f"rate {format_rate(rate)}: the photo {camera.name!r} ({camera.width}x{camera.height}) "
+            f"is smaller than {k} pixels"
+        )
     cropped = replace(camera, width=camera.width // k * k, height=camera.height // k * k)
     return cropped.at_sampling_rate(1 / k) if k > 1 else cropped
 
@@ -82,8 +88,9 @@ def _cached(entry: Path, shape: tuple[int, int]) -> np.ndarray | None:
         return level if level.size and 0 <= level.min() and level.max() <= 1 else None  # NaN fails both
 
 
-def ground_truths(view: View, rates: Sequence[float], background: tuple[float, float, float],
-                  cache: Path | None = None) -> list[np.ndarray]:
+def ground_truths(
+    view: View, rates: Sequence[float], background: tuple[float, float, float], cache: Path | None = None
+) -> list[np.ndarray]:
     """float32 (H/k, W/k, 3) ground truth of `view` at each rate 1/k (x1: the photo), on `background` where the
     photo has alpha. The photo is decoded at most once; levels k > 1 are read from and written to `cache` (a
     folder; None: no cache). Sizes come from `camera_for_rate`."""
@@ -100,8 +107,10 @@ def ground_truths(view: View, rates: Sequence[float], background: tuple[float, f
     if missing:
         photo = read_photo(view.image)
         if photo.shape[:2] != (view.camera.height, view.camera.width):
-            raise GBViewerError(f"{view.image}: photo is now {photo.shape[1]}x{photo.shape[0]}; its camera is "
-                                f"{view.camera.width}x{view.camera.height}")
+            raise GBViewerError(
+                f"{view.image}: photo is now {photo.shape[1]}x{photo.shape[0]}; its camera is "
+                f"{view.camera.width}x{view.camera.height}"
+            )
         for k in missing:
             levels[k] = premultiplied_box_downsample(photo, k)
             if k > 1 and cache is not None:
@@ -109,8 +118,9 @@ def ground_truths(view: View, rates: Sequence[float], background: tuple[float, f
     return [composite(levels[k], background) for k in ks]
 
 
-def ground_truth(view: View, rate: float, background: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                 cache: Path | None = None) -> np.ndarray:
+def ground_truth(
+    view: View, rate: float, background: tuple[float, float, float] = (0.0, 0.0, 0.0), cache: Path | None = None
+) -> np.ndarray:
     """float32 (H, W, 3) ground truth of `view` at `rate` (see `ground_truths`); render `camera_for_rate(
     view.camera, rate)` to compare with it."""
     return ground_truths(view, [rate], background, cache)[0]

@@ -6,10 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..bench.report import line_style, machine_description, plot_path, pyplot, save_figure
-from ..outputs.console import wide_console
-from ..model.camera import format_rate
 from ..core.files import atomic_write
 from ..core.validate import dumps_json
+from ..model.camera import format_rate
+from ..outputs.console import wide_console
 from .run import EvalResult, mean
 
 Table = dict[tuple[str, float], dict[str, float | None]]  # (mode, rate) -> psnr, ssim, render_ms
@@ -44,9 +44,14 @@ def _print_table(title: str, table: Table, result: EvalResult) -> None:
     t.add_column(f"ms {format_rate(max(rates))}", justify="right")
     avg = averages(table, modes, rates)
     for m in modes:
-        t.add_row(m, *[_fmt(table[m, r]["psnr"], 2) for r in rates], _fmt(avg[m]["psnr"], 2),
-                  *[_fmt(table[m, r]["ssim"], 4) for r in rates], _fmt(avg[m]["ssim"], 4),
-                  _fmt(table[m, max(rates)]["render_ms"], 1))
+        t.add_row(
+            m,
+            *[_fmt(table[m, r]["psnr"], 2) for r in rates],
+            _fmt(avg[m]["psnr"], 2),
+            *[_fmt(table[m, r]["ssim"], 4) for r in rates],
+            _fmt(avg[m]["ssim"], 4),
+            _fmt(table[m, max(rates)]["render_ms"], 1),
+        )
     wide_console().print(t)
 
 
@@ -54,34 +59,63 @@ def print_tables(result: EvalResult) -> None:
     """One table per scene, then the mean over scenes where there are several."""
     for s in result.scenes:
         backends = ", ".join(sorted({v.backend for v in s.results}))
-        _print_table(f"{s.scene.name} against {s.dataset.name} ({s.format}, {result.split}: {len(s.views)} views, "
-                     f"{backends}; ms: mean render time; background {s.background.describe()})", s.table(), result)
+        _print_table(
+            f"{s.scene.name} against {s.dataset.name} ({s.format}, {result.split}: {len(s.views)} views, "
+            f"{backends}; ms: mean render time; background {s.background.describe()})",
+            s.table(),
+            result,
+        )
     if len(result.scenes) > 1:
-        _print_table(f"Mean over {len(result.scenes)} scenes", mean_table([s.table() for s in result.scenes]),
-                     result)
-    wide_console().print(f"{sum(len(s.views) for s in result.scenes)} views in {result.elapsed_s:.1f} s on "
-                    f"{result.runner}", highlight=False)
+        _print_table(f"Mean over {len(result.scenes)} scenes", mean_table([s.table() for s in result.scenes]), result)
+    wide_console().print(
+        f"{sum(len(s.views) for s in result.scenes)} views in {result.elapsed_s:.1f} s on {result.runner}",
+        highlight=False,
+    )
 
 
 def _rows(table: Table, result: EvalResult) -> dict:
     """A table and its averages as JSON rows."""
-    return {"table": [{"mode": m, "rate": r, "rate_label": format_rate(r), **v} for (m, r), v in table.items()],
-            "average": [{"mode": m, **v} for m, v in averages(table, result.modes, result.rates).items()]}
+    return {
+        "table": [{"mode": m, "rate": r, "rate_label": format_rate(r), **v} for (m, r), v in table.items()],
+        "average": [{"mode": m, **v} for m, v in averages(table, result.modes, result.rates).items()],
+    }
 
 
 def to_json(result: EvalResult) -> dict:
     """Every view's numbers, each scene's table and averages, their mean over scenes, and how it ran. Missing
     numbers (SSIM of an image under 11 pixels, identical images' PSNR) are null."""
-    scenes = [{"scene": str(s.scene), "dataset": str(s.dataset), "format": s.format,
-               "background": s.background.to_json(), **_rows(s.table(), result),
-               "views": [{"name": v.name, "image": str(v.image), "width": v.camera.width, "height": v.camera.height,
-                          "backend": r.backend, "results": r.results} for v, r in zip(s.views, s.results)]}
-              for s in result.scenes]
-    return {"modes": result.modes, "rates": result.rates, "split": result.split,
-            "background": None if result.background is None else list(result.background), "runner": result.runner,
-            "elapsed_s": result.elapsed_s,
-            "machine": machine_description(), "scenes": scenes,
-            "mean": _rows(mean_table([s.table() for s in result.scenes]), result)}
+    scenes = [
+        {
+            "scene": str(s.scene),
+            "dataset": str(s.dataset),
+            "format": s.format,
+            "background": s.background.to_json(),
+            **_rows(s.table(), result),
+            "views": [
+                {
+                    "name": v.name,
+                    "image": str(v.image),
+                    "width": v.camera.width,
+                    "height": v.camera.height,
+                    "backend": r.backend,
+                    "results": r.results,
+                }
+                for v, r in zip(s.views, s.results)
+            ],
+        }
+        for s in result.scenes
+    ]
+    return {
+        "modes": result.modes,
+        "rates": result.rates,
+        "split": result.split,
+        "background": None if result.background is None else list(result.background),
+        "runner": result.runner,
+        "elapsed_s": result.elapsed_s,
+        "machine": machine_description(),
+        "scenes": scenes,
+        "mean": _rows(mean_table([s.table() for s in result.scenes]), result),
+    }
 
 
 def write_json(path: Path, result: EvalResult, force: bool = False) -> Path:

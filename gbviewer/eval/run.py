@@ -15,9 +15,9 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..core.errors import GBViewerError
+from ..core.files import check_writable
 from ..io.datasets import View, load_dataset
 from ..io.datasets.backdrop import Background, choose_background, estimate_backdrop
-from ..core.files import check_writable
 from ..render import RenderSettings
 from .memory import check_view_memory
 from .multiscale import rate_factor
@@ -100,14 +100,27 @@ def _refuse_cache_in_datasets(cache: Path, datasets: Sequence[Path], images: str
     for data in datasets:
         root = data.resolve() if data.is_dir() else data.resolve().parent / images
         if where == root or root in where.parents:
-            raise GBViewerError(f"--cache {cache}: is inside the dataset {root}; the downsampled photos never go "
-                                "into a dataset (give a folder outside it)")
+            raise GBViewerError(
+                f"--cache {cache}: is inside the dataset {root}; the downsampled photos never go "
+                "into a dataset (give a folder outside it)"
+            )
 
 
-def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettings], rates: Sequence[float], *,
-             split: str = "test", background: tuple[float, float, float] | None = None, images: str = "images",
-             backend: str = "auto", workers: int = 1, ray: str | None = None, threads: int | None = None,
-             cache: Path | None = None, progress: Progress | None = None) -> EvalResult:
+def run_eval(
+    pairs: Sequence[tuple[Path, Path]],
+    settings: Sequence[RenderSettings],
+    rates: Sequence[float],
+    *,
+    split: str = "test",
+    background: tuple[float, float, float] | None = None,
+    images: str = "images",
+    backend: str = "auto",
+    workers: int = 1,
+    ray: str | None = None,
+    threads: int | None = None,
+    cache: Path | None = None,
+    progress: Progress | None = None,
+) -> EvalResult:
     """Evaluate each (scene file, dataset) pair: every view of `split` in every mode of `settings` at every rate
     1/k against the photos box-downsampled by k. workers > 1: a local process pool; `ray`: a Ray cluster's
     address (local: a Ray instance started here) instead. threads: CPU threads per render (default: the cores
@@ -138,8 +151,21 @@ def run_eval(pairs: Sequence[tuple[Path, Path]], settings: Sequence[RenderSettin
             check_view_memory(view, settings, rates, dataset.format, 1 if ray else min(workers, len(views)))
         chosen = choose_background(background, None if background is not None else estimate_backdrop(dataset.views))
         result.scenes.append(SceneEval(scene, data, dataset.format, views, [], chosen))
-        tasks += [ViewTask(str(scene), i, j, v, tuple(settings), tuple(rates), chosen.colour, backend, threads,
-                           str(cache) if cache is not None else None) for j, v in enumerate(views)]
+        tasks += [
+            ViewTask(
+                str(scene),
+                i,
+                j,
+                v,
+                tuple(settings),
+                tuple(rates),
+                chosen.colour,
+                backend,
+                threads,
+                str(cache) if cache is not None else None,
+            )
+            for j, v in enumerate(views)
+        ]
     t0 = time.perf_counter()
     with progress("eval", len(tasks)) if progress else nullcontext(lambda n: None) as advance:
         if ray:

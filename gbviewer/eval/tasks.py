@@ -11,9 +11,9 @@ from pathlib import Path
 from ..core.errors import GBViewerError
 from ..io import load
 from ..io.datasets import View
+from ..model.scene import Scene
 from ..outputs.metrics import psnr, ssim
 from ..render import AUTO, RenderSettings, choose_backend, get_renderer
-from ..model.scene import Scene
 from .multiscale import camera_for_rate, ground_truths
 
 
@@ -92,8 +92,15 @@ def evaluate_view(task: ViewTask) -> ViewResult:
         settings = replace(s, background=task.background, threads=task.threads)
         for rate, truth in zip(task.rates, truths):
             frame = renderer.render(camera_for_rate(task.view.camera, rate), settings)
-            out.results.append({"mode": s.spec, "rate": rate, "psnr": finite(psnr(frame.rgb, truth)),
-                                "ssim": finite(ssim(frame.rgb, truth)), "render_ms": frame.stats.total_ms})
+            out.results.append(
+                {
+                    "mode": s.spec,
+                    "rate": rate,
+                    "psnr": finite(psnr(frame.rgb, truth)),
+                    "ssim": finite(ssim(frame.rgb, truth)),
+                    "render_ms": frame.stats.total_ms,
+                }
+            )
     return out
 
 

@@ -8,33 +8,41 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model.camera import load_cameras_json
 from ..core.cancel import Cancellable
 from ..core.errors import CallbackError, GBViewerError, LoadCancelled, SceneFormatError
+from ..core.files import file_stat
+from ..model.camera import load_cameras_json
 from ..model.scene import Scene, loaded_from
 from .compressed_ply import is_compressed_ply, load_compressed_ply
 from .duplex import is_duplex_ply, load_duplex
-from ..core.files import file_stat
 from .gltf import is_glb, looks_like_gltf
 from .gltf_splats import load_gltf
 from .ply import check_sh_range, load_inria_ply, load_streamed_ply, read_ply
 from .progress import LoadProgress, Progress
+from .save import WRITE_FORMATS, dropped, format_for, save
 from .sog import ZIP_MAGIC, load_sog
 from .splat import load_splat, looks_like_splat
-from .spz import GZIP_MAGIC, MAGIC as SPZ_MAGIC, read_spz
+from .spz import GZIP_MAGIC, read_spz
+from .spz import MAGIC as SPZ_MAGIC
 from .trained_as import ply_comments, resolve, signals_of
-from .save import WRITE_FORMATS, dropped, format_for, save
 from .write import write_inria_ply
 
 __all__ = ["WRITE_FORMATS", "dropped", "format_for", "load", "load_cameras_json", "save", "write_inria_ply"]
 
 SH_DTYPES = ("float32", "float16")
-FORMATS = ("INRIA (incl. sort-free GS), Duplex-GS or compressed .ply, .spz, .sog (zip, folder or meta.json), .splat or "
-           "glTF (.glb/.gltf with KHR_gaussian_splatting)")
+FORMATS = (
+    "INRIA (incl. sort-free GS), Duplex-GS or compressed .ply, .spz, .sog (zip, folder or meta.json), .splat or "
+    "glTF (.glb/.gltf with KHR_gaussian_splatting)"
+)
 
 
-def load(path: str | Path, progress: Progress | None = None, cancel: Cancellable | None = None,
-         sh_dtype: str = "float32", primitive: int | None = None) -> Scene:
+def load(
+    path: str | Path,
+    progress: Progress | None = None,
+    cancel: Cancellable | None = None,
+    sh_dtype: str = "float32",
+    primitive: int | None = None,
+) -> Scene:
     """Load a splat scene file or SOG folder; the format comes from the content, not the extension.
 
     `progress`: called as fn(done, total, unit) with unit "bytes" (read from the file), then "splats" (decoded),

@@ -19,14 +19,25 @@ import numpy as np
 import plyfile
 
 from ..core.errors import SceneFormatError
-from ..model.scene import Scene
-from ..model.scene import SH_C0
+from ..model.scene import SH_C0, Scene
 from .packing import smallest_three
 from .progress import LoadProgress, decode_in_chunks
 
 CHUNK_SIZE = 256
-RANGE_PROPS = ["min_x", "min_y", "min_z", "max_x", "max_y", "max_z",
-               "min_scale_x", "min_scale_y", "min_scale_z", "max_scale_x", "max_scale_y", "max_scale_z"]
+RANGE_PROPS = [
+    "min_x",
+    "min_y",
+    "min_z",
+    "max_x",
+    "max_y",
+    "max_z",
+    "min_scale_x",
+    "min_scale_y",
+    "min_scale_z",
+    "max_scale_x",
+    "max_scale_y",
+    "max_scale_z",
+]
 COLOR_PROPS = ["min_r", "min_g", "min_b", "max_r", "max_g", "max_b"]
 PACKED_PROPS = ["packed_position", "packed_rotation", "packed_scale", "packed_color"]
 SH_COUNTS = {9: 1, 24: 2, 45: 3}
@@ -63,8 +74,9 @@ def load_compressed_ply(path: Path, ply: plyfile.PlyData, progress: LoadProgress
     if n == 0:
         raise SceneFormatError(path, "zero splats", field="vertex")
     if chunk.count != math.ceil(n / CHUNK_SIZE):
-        raise SceneFormatError(path, f"{chunk.count} chunks for {n} splats; expected {math.ceil(n / CHUNK_SIZE)}",
-                               field="chunk")
+        raise SceneFormatError(
+            path, f"{chunk.count} chunks for {n} splats; expected {math.ceil(n / CHUNK_SIZE)}", field="chunk"
+        )
     has_color = "min_r" in chunk.data.dtype.names
     ranges = np.stack(_columns(path, chunk, RANGE_PROPS + (COLOR_PROPS if has_color else []), "<f4"), axis=1)
     ranges = ranges.astype(np.float32)
@@ -75,16 +87,18 @@ def load_compressed_ply(path: Path, ply: plyfile.PlyData, progress: LoadProgress
         r = ranges[np.arange(rows.start, rows.stop) // CHUNK_SIZE]  # each splat's chunk ranges
 
         def lerp(lo: int, t: np.ndarray) -> np.ndarray:
-            return r[:, lo:lo + 3] + (r[:, lo + 3:lo + 6] - r[:, lo:lo + 3]) * t
+            return r[:, lo : lo + 3] + (r[:, lo + 3 : lo + 6] - r[:, lo : lo + 3]) * t
 
         means = lerp(0, _fractions(pos[rows].astype(np.uint32)))
         scales = np.exp(lerp(6, _fractions(scl[rows].astype(np.uint32))))
         packed = rot[rows].astype(np.uint32)
         comps = ((packed[:, None] >> np.array([20, 10, 0], np.uint32)) & 1023).astype(np.float32)
-        quats = smallest_three((comps / np.float32(1023) - np.float32(0.5)) * np.float32(math.sqrt(2)),
-                               (packed >> 30).astype(np.intp))
+        quats = smallest_three(
+            (comps / np.float32(1023) - np.float32(0.5)) * np.float32(math.sqrt(2)), (packed >> 30).astype(np.intp)
+        )
         rgba = ((col[rows].astype(np.uint32)[:, None] >> np.array([24, 16, 8, 0], np.uint32)) & 255).astype(
-            np.float32) / np.float32(255)
+            np.float32
+        ) / np.float32(255)
         rgb = lerp(12, rgba[:, :3]) if has_color else rgba[:, :3]
         sh = ((rgb - np.float32(0.5)) / np.float32(SH_C0))[:, None, :]
         if rest is not None:
@@ -101,8 +115,11 @@ def _sh_rest(path: Path, element: plyfile.PlyElement, n: int) -> Callable[[slice
     """The `sh` element's uint8 f_rest_*: rows -> (rows, K-1, 3) coefficients."""
     k3 = len(element.properties)
     if k3 not in SH_COUNTS or element.count != n:
-        raise SceneFormatError(path, f"{k3} properties x {element.count} rows; expected 9, 24 or 45 f_rest_* "
-                               f"properties and {n} rows", field="sh")
+        raise SceneFormatError(
+            path,
+            f"{k3} properties x {element.count} rows; expected 9, 24 or 45 f_rest_* properties and {n} rows",
+            field="sh",
+        )
     columns = _columns(path, element, [f"f_rest_{i}" for i in range(k3)], "u1")
     data = element.data
     if data.dtype.itemsize == k3 and list(data.dtype.names) == [f"f_rest_{i}" for i in range(k3)]:

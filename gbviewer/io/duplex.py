@@ -39,9 +39,9 @@ from pathlib import Path
 import numpy as np
 import plyfile
 
+from ..core.errors import SceneFormatError
 from ..model.camera import NEAR_PLANE, Camera
 from ..model.cells import Cells
-from ..core.errors import SceneFormatError
 from ..model.scene import SH_C0, Scene
 from .transform import sh_basis
 
@@ -64,15 +64,21 @@ def _import_torch(path: Path):
     try:
         import torch
     except ImportError as exc:
-        raise SceneFormatError(path, f"a Duplex-GS checkpoint needs PyTorch to run its MLPs ({exc}); install it with "
-                               "pip install 'gbviewer[duplex]'") from None
+        raise SceneFormatError(
+            path,
+            f"a Duplex-GS checkpoint needs PyTorch to run its MLPs ({exc}); install it with "
+            "pip install 'gbviewer[duplex]'",
+        ) from None
     return torch
 
 
 def _linear_shapes(module) -> list[tuple[int, int]]:
     """(in, out) of every weight matrix of a (scripted) module, in order."""
-    return [(int(p.shape[1]), int(p.shape[0])) for name, p in module.named_parameters()
-            if name.endswith("weight") and p.dim() == 2]
+    return [
+        (int(p.shape[1]), int(p.shape[0]))
+        for name, p in module.named_parameters()
+        if name.endswith("weight") and p.dim() == 2
+    ]
 
 
 def _rebuild(torch, state: dict, kind: str):
@@ -114,8 +120,13 @@ def load_mlps(path: Path, torch) -> dict:
             ckpt = torch.load(str(unite), map_location="cpu", weights_only=True)
         except Exception as exc:  # noqa: BLE001
             raise SceneFormatError(unite, f"cannot read the MLP checkpoint: {str(exc).splitlines()[0]}") from None
-        keys = {"opacity": "opacity_mlp", "cov": "cov_mlp", "color": "color_mlp", "feature_bank": "feature_bank_mlp",
-                "appearance": "appearance"}
+        keys = {
+            "opacity": "opacity_mlp",
+            "cov": "cov_mlp",
+            "color": "color_mlp",
+            "feature_bank": "feature_bank_mlp",
+            "appearance": "appearance",
+        }
         missing = [k for k in ("opacity_mlp", "cov_mlp", "color_mlp") if k not in ckpt]
         if missing:
             raise SceneFormatError(unite, f"missing state dicts {missing}")
@@ -125,17 +136,21 @@ def load_mlps(path: Path, torch) -> dict:
             raise SceneFormatError(unite, f"unexpected MLP state dict: {exc}") from None
     present = [f for f in MLP_FILES.values() if (path.parent / f).is_file()]
     missing = [f for f in MLP_FILES.values() if f not in present]
-    raise SceneFormatError(path.parent / missing[0], "missing: a Duplex-GS checkpoint needs "
-                           f"{', '.join(MLP_FILES.values())} (or {UNITE_FILE}) beside {path.name}; found "
-                           f"{present or 'none of them'}")
+    raise SceneFormatError(
+        path.parent / missing[0],
+        "missing: a Duplex-GS checkpoint needs "
+        f"{', '.join(MLP_FILES.values())} (or {UNITE_FILE}) beside {path.name}; found "
+        f"{present or 'none of them'}",
+    )
 
 
 class DuplexModel:
     """Anchors, MLPs and globals of a trained Duplex-GS model; `decode(camera)` gives the per-view splats and cells
     (a `gbviewer.model.scene.ViewDecoder`)."""
 
-    def __init__(self, path: Path, anchors, levels, extra_levels, offsets, feats, anchor_scales, sh_vi, info, mlps,
-                 torch):
+    def __init__(
+        self, path: Path, anchors, levels, extra_levels, offsets, feats, anchor_scales, sh_vi, info, mlps, torch
+    ):
         self.path, self.torch = path, torch
         self.anchors = anchors.astype(np.float64)
         self.levels, self.extra_levels = levels, extra_levels
@@ -163,9 +178,11 @@ class DuplexModel:
         if "feature_bank" in shapes:
             fin, fout = shapes["feature_bank"][0][0], shapes["feature_bank"][-1][1]
             if fout != 3 or fin not in (3, 4) or F % 4:
-                raise SceneFormatError(self.path.parent / OPTIONAL_FILES["feature_bank"],
-                                       f"feature bank maps {fin} inputs to {fout}; expected 3 (+1 level) -> 3 weights "
-                                       f"over {F} features (a multiple of 4)")
+                raise SceneFormatError(
+                    self.path.parent / OPTIONAL_FILES["feature_bank"],
+                    f"feature bank maps {fin} inputs to {fout}; expected 3 (+1 level) -> 3 weights "
+                    f"over {F} features (a multiple of 4)",
+                )
         outs = {"opacity": k, "cov": 7 * k, "color": 3 * k}
         self.extra = {}
         for kind, want_out in outs.items():
@@ -175,18 +192,25 @@ class DuplexModel:
             n_in, n_out = shapes[kind][0][0], shapes[kind][-1][1]
             base = feat_in + 3 + (self.app_dim if kind == "color" else 0)
             if n_out != want_out:
-                raise SceneFormatError(self.path.parent / fname, f"wrong output size {n_out}; the anchors have {k} "
-                                       f"offsets, so expected {want_out}")
+                raise SceneFormatError(
+                    self.path.parent / fname,
+                    f"wrong output size {n_out}; the anchors have {k} offsets, so expected {want_out}",
+                )
             if not base <= n_in <= base + 2:
-                raise SceneFormatError(self.path.parent / fname, f"wrong feature size: takes {n_in} inputs; the "
-                                       f"anchors have {F} features + 3 view direction"
-                                       + (f" + {self.app_dim} appearance" if kind == "color" and self.app_dim else "")
-                                       + f" (+1 distance, +1 level): expected {base}..{base + 2}")
+                raise SceneFormatError(
+                    self.path.parent / fname,
+                    f"wrong feature size: takes {n_in} inputs; the "
+                    f"anchors have {F} features + 3 view direction"
+                    + (f" + {self.app_dim} appearance" if kind == "color" and self.app_dim else "")
+                    + f" (+1 distance, +1 level): expected {base}..{base + 2}",
+                )
             self.extra[kind] = n_in - base
         self.level_input = 2 in self.extra.values()
         if self.level_input and 0 in self.extra.values():
-            raise SceneFormatError(self.path.parent / MLP_FILES["opacity"], "inconsistent MLP input sizes "
-                                   f"{self.extra}: the level input is shared by all MLPs")
+            raise SceneFormatError(
+                self.path.parent / MLP_FILES["opacity"],
+                f"inconsistent MLP input sizes {self.extra}: the level input is shared by all MLPs",
+            )
 
     def anchor_mask(self, camera: Camera) -> np.ndarray:
         """Anchors of this view: Octree-GS level of detail ('round') and in front of the near plane."""
@@ -201,13 +225,28 @@ class DuplexModel:
         """No anchor in this view: one transparent splat in one cell, which every mode and backend culls, so the
         frame is the background (a Scene cannot be empty)."""
         centre = (camera.position + 1.0 * camera.R[2]).astype(np.float32)[None]
-        cells = Cells(centre, np.ones((1, 3), np.float32), np.array([[1.0, 0, 0, 0]], np.float32),
-                      np.array([0, 1], np.int32), np.array([0], np.int32), "duplex-gs anchors (none in view)", 0.0)
-        return Scene.from_arrays(centre, np.full((1, 3), 1e-3), np.array([[1.0, 0, 0, 0]]), np.zeros(1),
-                                 np.zeros((1, 1, 3)), source=f"{self.path} @ view (no anchors)",
-                                 meta={"format": "duplex-gs decoded", "view_weights_in_opacity": True},
-                                 wsr_sigma=self.sigma if self.sigma > 0 else None,
-                                 weight_background=self.weight_background, et_grade=self.et_grade, cells=cells)
+        cells = Cells(
+            centre,
+            np.ones((1, 3), np.float32),
+            np.array([[1.0, 0, 0, 0]], np.float32),
+            np.array([0, 1], np.int32),
+            np.array([0], np.int32),
+            "duplex-gs anchors (none in view)",
+            0.0,
+        )
+        return Scene.from_arrays(
+            centre,
+            np.full((1, 3), 1e-3),
+            np.array([[1.0, 0, 0, 0]]),
+            np.zeros(1),
+            np.zeros((1, 1, 3)),
+            source=f"{self.path} @ view (no anchors)",
+            meta={"format": "duplex-gs decoded", "view_weights_in_opacity": True},
+            wsr_sigma=self.sigma if self.sigma > 0 else None,
+            weight_background=self.weight_background,
+            et_grade=self.et_grade,
+            cells=cells,
+        )
 
     def decode(self, camera: Camera) -> Scene:
         """The splats and cells of this view (see the module docstring)."""
@@ -231,8 +270,11 @@ class DuplexModel:
                 cat = torch.cat([tview, tlevel], 1) if self.level_input else tview
                 w = self.mlps["feature_bank"](cat).unsqueeze(1)  # (A, 1, 3)
                 f = feat.unsqueeze(-1)
-                feat = (f[:, ::4, :1].repeat([1, 4, 1]) * w[:, :, :1] + f[:, ::2, :1].repeat([1, 2, 1]) * w[:, :, 1:2]
-                        + f * w[:, :, 2:]).squeeze(-1)
+                feat = (
+                    f[:, ::4, :1].repeat([1, 4, 1]) * w[:, :, :1]
+                    + f[:, ::2, :1].repeat([1, 2, 1]) * w[:, :, 1:2]
+                    + f * w[:, :, 2:]
+                ).squeeze(-1)
 
             def inputs(kind: str):
                 parts = [feat, tview]
@@ -251,7 +293,7 @@ class DuplexModel:
             offsets = torch.as_tensor(self.offsets[idx].reshape(-1, 3), dtype=f32, device=dev)
             a_scale = torch.as_tensor(self.anchor_scales[idx], dtype=f32, device=dev).repeat_interleave(k, 0)
             a_pos = torch.as_tensor(anchor, dtype=f32, device=dev).repeat_interleave(k, 0)
-            ratio_max = (2.0 - torch.sqrt((offsets ** 2).sum(1, keepdim=True))) / 3.0
+            ratio_max = (2.0 - torch.sqrt((offsets**2).sum(1, keepdim=True))) / 3.0
             scaling = a_scale * torch.minimum(torch.sigmoid(scale_rot[:, :3]), ratio_max)
             rot = torch.nn.functional.normalize(scale_rot[:, 3:7])
             xyz = a_pos + offsets * a_scale
@@ -260,20 +302,43 @@ class DuplexModel:
             weights = (opacity * vi).clamp(min=0.0).reshape(-1, k)
             cell_rot = torch.nn.functional.normalize((rot.reshape(-1, k, 4) * weights.unsqueeze(2)).mean(1))
             opac = opacity * vi
-            out = {name: v.cpu().numpy() for name, v in (("xyz", xyz), ("scaling", scaling), ("rot", rot),
-                                                           ("color", color), ("opac", opac), ("cell_rot", cell_rot))}
+            out = {
+                name: v.cpu().numpy()
+                for name, v in (
+                    ("xyz", xyz),
+                    ("scaling", scaling),
+                    ("rot", rot),
+                    ("color", color),
+                    ("opac", opac),
+                    ("cell_rot", cell_rot),
+                )
+            }
         sh = ((out["color"] - 0.5) / SH_C0)[:, None, :]
         quats, cq = out["rot"], out["cell_rot"].astype(np.float32)
         for q in (quats, cq):
             q[np.linalg.norm(q, axis=1) < 1e-12] = (1.0, 0.0, 0.0, 0.0)
-        cells = Cells(anchor.astype(np.float32), self.anchor_scales[idx].astype(np.float32), cq,
-                      np.arange(0, A * k + 1, k, dtype=np.int32), np.arange(A * k, dtype=np.int32),
-                      "duplex-gs anchors", 0.0)
-        return Scene.from_arrays(out["xyz"], out["scaling"], quats, np.clip(out["opac"], 0.0, 1.0), sh,
-                                 source=f"{self.path} @ view", meta={"format": "duplex-gs decoded",
-                                                                     "view_weights_in_opacity": True},
-                                 wsr_sigma=self.sigma if self.sigma > 0 else None,
-                                 weight_background=self.weight_background, et_grade=self.et_grade, cells=cells)
+        cells = Cells(
+            anchor.astype(np.float32),
+            self.anchor_scales[idx].astype(np.float32),
+            cq,
+            np.arange(0, A * k + 1, k, dtype=np.int32),
+            np.arange(A * k, dtype=np.int32),
+            "duplex-gs anchors",
+            0.0,
+        )
+        return Scene.from_arrays(
+            out["xyz"],
+            out["scaling"],
+            quats,
+            np.clip(out["opac"], 0.0, 1.0),
+            sh,
+            source=f"{self.path} @ view",
+            meta={"format": "duplex-gs decoded", "view_weights_in_opacity": True},
+            wsr_sigma=self.sigma if self.sigma > 0 else None,
+            weight_background=self.weight_background,
+            et_grade=self.et_grade,
+            cells=cells,
+        )
 
 
 def _eval_sh(coeffs: np.ndarray, dirs: np.ndarray) -> np.ndarray:
@@ -294,18 +359,26 @@ def load_duplex(path: Path, ply: plyfile.PlyData) -> Scene:
         if field not in names:
             raise SceneFormatError(path, "missing Duplex-GS anchor property", field=field)
     if len(groups["f_offset_"]) == 0 or len(groups["f_offset_"]) % 3:
-        raise SceneFormatError(path, f"{len(groups['f_offset_'])} f_offset_* properties; expected 3 K (f_offset_0..)",
-                               field="f_offset")
+        raise SceneFormatError(
+            path, f"{len(groups['f_offset_'])} f_offset_* properties; expected 3 K (f_offset_0..)", field="f_offset"
+        )
     if len(groups["anchor_size_"]) != 3:
         raise SceneFormatError(path, "expected anchor_size_0..2", field="anchor_size")
     if len(groups["anchor_shv_"]) not in (0, 3, 8, 15):
-        raise SceneFormatError(path, f"{len(groups['anchor_shv_'])} anchor_shv_* properties; expected 0, 3, 8 or 15",
-                               field="anchor_shv")
+        raise SceneFormatError(
+            path, f"{len(groups['anchor_shv_'])} anchor_shv_* properties; expected 0, 3, 8 or 15", field="anchor_shv"
+        )
     if n < 5:
         raise SceneFormatError(path, f"{n} anchors; the info column needs 5 rows", field="info")
     torch = _import_torch(path)
-    wanted = (["x", "y", "z", "level", "extra_level", "info"] + groups["f_offset_"] + groups["f_anchor_feat_"]
-              + groups["anchor_size_"] + ["anchor_shd_0"] + groups["anchor_shv_"])
+    wanted = (
+        ["x", "y", "z", "level", "extra_level", "info"]
+        + groups["f_offset_"]
+        + groups["f_anchor_feat_"]
+        + groups["anchor_size_"]
+        + ["anchor_shd_0"]
+        + groups["anchor_shv_"]
+    )
     data = vertex_columns(path, ply, wanted)
     if not np.isfinite(data).all():
         raise SceneFormatError(path, "non-finite anchor values")
@@ -318,15 +391,43 @@ def load_duplex(path: Path, ply: plyfile.PlyData) -> Scene:
     offsets = take(groups["f_offset_"]).reshape(n, 3, k).transpose(0, 2, 1)  # channel-major in the file
     info = data[:5, pos["info"]]
     mlps = load_mlps(path, torch)
-    model = DuplexModel(path, take(["x", "y", "z"]), data[:, pos["level"]].astype(np.int64),
-                        data[:, pos["extra_level"]], offsets, take(groups["f_anchor_feat_"]), np.exp(take(groups["anchor_size_"])),
-                        take(["anchor_shd_0"] + groups["anchor_shv_"]), info, mlps, torch)
+    model = DuplexModel(
+        path,
+        take(["x", "y", "z"]),
+        data[:, pos["level"]].astype(np.int64),
+        data[:, pos["extra_level"]],
+        offsets,
+        take(groups["f_anchor_feat_"]),
+        np.exp(take(groups["anchor_size_"])),
+        take(["anchor_shd_0"] + groups["anchor_shv_"]),
+        info,
+        mlps,
+        torch,
+    )
     centres = (model.anchors[:, None, :] + model.offsets * model.anchor_scales[:, None, :]).reshape(-1, 3)
     m = len(centres)
-    meta = {"format": "duplex-gs", "version": None, "properties": names, "anchors": n, "offsets_per_anchor": k,
-            "features": model.feats.shape[1], "mlps": sorted(model.mlps), "et_grade": model.et_grade,
-            "sigma": model.sigma, "weight_background": model.weight_background}
-    return Scene.from_arrays(centres, np.repeat(model.anchor_scales, k, 0) / 3.0, np.tile([1.0, 0, 0, 0], (m, 1)),
-                             np.full(m, 0.5), np.zeros((m, 1, 3)), source=str(path), meta=meta, neural=model,
-                             wsr_sigma=model.sigma if model.sigma > 0 else None,
-                             weight_background=model.weight_background, et_grade=model.et_grade)
+    meta = {
+        "format": "duplex-gs",
+        "version": None,
+        "properties": names,
+        "anchors": n,
+        "offsets_per_anchor": k,
+        "features": model.feats.shape[1],
+        "mlps": sorted(model.mlps),
+        "et_grade": model.et_grade,
+        "sigma": model.sigma,
+        "weight_background": model.weight_background,
+    }
+    return Scene.from_arrays(
+        centres,
+        np.repeat(model.anchor_scales, k, 0) / 3.0,
+        np.tile([1.0, 0, 0, 0], (m, 1)),
+        np.full(m, 0.5),
+        np.zeros((m, 1, 3)),
+        source=str(path),
+        meta=meta,
+        neural=model,
+        wsr_sigma=model.sigma if model.sigma > 0 else None,
+        weight_background=model.weight_background,
+        et_grade=model.et_grade,
+    )

@@ -58,8 +58,9 @@ class Gltf:
         """doc[key][index], an object, or a one-line error naming `where` (the field that gave the index)."""
         items = self.doc.get(key, [])
         if not isinstance(items, list) or not _is_index(index) or index >= len(items):
-            raise self.error(f"index {index!r} is not one of the {len(items) if isinstance(items, list) else 0} "
-                             f"{key}", where)
+            raise self.error(
+                f"index {index!r} is not one of the {len(items) if isinstance(items, list) else 0} {key}", where
+            )
         item = items[index]
         if not isinstance(item, dict):
             raise self.error(f"{key}[{index}] is not a JSON object", where)
@@ -73,14 +74,16 @@ class Gltf:
         length = _count(self, view, "byteLength", f"bufferViews[{index}]")
         stride = _count(self, view, "byteStride", f"bufferViews[{index}]", 0)
         if offset + length > len(buffer):
-            raise self.error(f"bytes {offset}..{offset + length} lie beyond its buffer's {len(buffer)}",
-                             f"bufferViews[{index}]")
+            raise self.error(
+                f"bytes {offset}..{offset + length} lie beyond its buffer's {len(buffer)}", f"bufferViews[{index}]"
+            )
         if stride and not 4 <= stride <= MAX_STRIDE:
             raise self.error(f"byteStride {stride}; expected 4..{MAX_STRIDE}", f"bufferViews[{index}]")
-        return buffer[offset:offset + length], stride
+        return buffer[offset : offset + length], stride
 
-    def accessor(self, index: object, where: str, width: int, allowed: dict[int, tuple[bool, ...]],
-                 count: int | None = None) -> np.ndarray:
+    def accessor(
+        self, index: object, where: str, width: int, allowed: dict[int, tuple[bool, ...]], count: int | None = None
+    ) -> np.ndarray:
         """Accessor `index` as (count, width) float32 (normalised integers divided as glTF says, the others
         converted as they are), its type and componentType/normalized checked against `allowed`
         ({componentType: allowed normalized flags}) and, given `count`, its count."""
@@ -90,8 +93,11 @@ class Gltf:
         if not isinstance(kind, str) or WIDTHS.get(kind) != width:
             raise self.error(f"type {kind!r}; expected {_type_name(width)}", name)
         if not _is_index(ctype) or ctype not in allowed or not isinstance(norm, bool) or norm not in allowed[ctype]:
-            raise self.error(f"componentType {ctype!r}{' normalized' if norm is True else ''} is not allowed here; "
-                             f"expected {_allowed_text(allowed)}", name)
+            raise self.error(
+                f"componentType {ctype!r}{' normalized' if norm is True else ''} is not allowed here; "
+                f"expected {_allowed_text(allowed)}",
+                name,
+            )
         n = _count(self, acc, "count", name)
         if count is not None and n != count:
             raise self.error(f"count {n}; expected {count} (the POSITION count)", name)
@@ -101,8 +107,10 @@ class Gltf:
             raw = _strided(self, data, _count(self, acc, "byteOffset", name, 0), stride, n, width, dtype, name)
         else:  # all zeros, as glTF defines an accessor without a bufferView (sparse values may follow)
             if n > self.size:
-                raise self.error(f"count {n} without a bufferView: more elements than the file's {self.size} bytes "
-                                 "could describe", name)
+                raise self.error(
+                    f"count {n} without a bufferView: more elements than the file's {self.size} bytes could describe",
+                    name,
+                )
             raw = np.zeros((n, width), dtype)
         if "sparse" in acc:
             raw = self._sparse(acc["sparse"], raw, dtype, name)
@@ -114,8 +122,11 @@ class Gltf:
     def _sparse(self, sparse: object, base: np.ndarray, dtype: np.dtype, name: str) -> np.ndarray:
         """`base` with the rows a sparse substitution names replaced (indices strictly increasing, in range)."""
         where = f"{name}.sparse"
-        if not isinstance(sparse, dict) or not isinstance(sparse.get("indices"), dict) \
-                or not isinstance(sparse.get("values"), dict):
+        if (
+            not isinstance(sparse, dict)
+            or not isinstance(sparse.get("indices"), dict)
+            or not isinstance(sparse.get("values"), dict)
+        ):
             raise self.error("expected an object with count, indices and values", where)
         k = _count(self, sparse, "count", where)
         if not 1 <= k <= len(base):
@@ -126,12 +137,21 @@ class Gltf:
             raise self.error(f"componentType {itype!r}; expected 5121, 5123 or 5125", f"{where}.indices")
         idata, _ = self.view_bytes(ind.get("bufferView"), f"{where}.indices.bufferView")
         vdata, _ = self.view_bytes(val.get("bufferView"), f"{where}.values.bufferView")
-        rows = _strided(self, idata, _count(self, ind, "byteOffset", where, 0), 0, k, 1,
-                        np.dtype(COMPONENTS[itype]), f"{where}.indices")[:, 0].astype(np.int64)
+        rows = _strided(
+            self,
+            idata,
+            _count(self, ind, "byteOffset", where, 0),
+            0,
+            k,
+            1,
+            np.dtype(COMPONENTS[itype]),
+            f"{where}.indices",
+        )[:, 0].astype(np.int64)
         if (np.diff(rows) <= 0).any() or rows[-1] >= len(base):
             raise self.error(f"indices must increase strictly and stay below {len(base)}", f"{where}.indices")
-        values = _strided(self, vdata, _count(self, val, "byteOffset", where, 0), 0, k, base.shape[1], dtype,
-                          f"{where}.values")
+        values = _strided(
+            self, vdata, _count(self, val, "byteOffset", where, 0), 0, k, base.shape[1], dtype, f"{where}.values"
+        )
         out = np.array(base)
         out[rows] = values
         return out
@@ -158,8 +178,7 @@ def read_gltf(path: Path, progress: LoadProgress) -> Gltf:
     buffers = doc.get("buffers", [])
     if not isinstance(buffers, list):
         raise SceneFormatError(path, "expected a list", field="buffers")
-    return Gltf(path, doc, [_buffer(path, b, i, binary) for i, b in enumerate(buffers)], is_glb(data[:4]),
-                len(data))
+    return Gltf(path, doc, [_buffer(path, b, i, binary) for i, b in enumerate(buffers)], is_glb(data[:4]), len(data))
 
 
 def _glb_chunks(path: Path, data: memoryview) -> tuple[memoryview, memoryview | None]:
@@ -169,17 +188,19 @@ def _glb_chunks(path: Path, data: memoryview) -> tuple[memoryview, memoryview | 
     if version != 2:
         raise SceneFormatError(path, f"GLB version {version}; expected 2", field="header")
     if length > len(data):
-        raise SceneFormatError(path, f"header says {length} bytes, the file has {len(data)} (truncated?)",
-                               field="header")
+        raise SceneFormatError(
+            path, f"header says {length} bytes, the file has {len(data)} (truncated?)", field="header"
+        )
     chunks: list[tuple[int, memoryview]] = []
     pos = GLB_HEADER.size
     while pos + CHUNK_HEADER.size <= length:
         size, kind = CHUNK_HEADER.unpack_from(data, pos)
         pos += CHUNK_HEADER.size
         if pos + size > length:
-            raise SceneFormatError(path, f"chunk at {pos - 8} of {size} bytes overruns the file's {length}",
-                                   field="chunks")
-        chunks.append((kind, data[pos:pos + size]))
+            raise SceneFormatError(
+                path, f"chunk at {pos - 8} of {size} bytes overruns the file's {length}", field="chunks"
+            )
+        chunks.append((kind, data[pos : pos + size]))
         pos += size
     if not chunks or chunks[0][0] != JSON_CHUNK:
         raise SceneFormatError(path, "the first chunk must be the JSON chunk", field="chunks")
@@ -197,8 +218,9 @@ def _buffer(path: Path, buf: object, i: int, binary: memoryview | None) -> memor
     uri = buf.get("uri")
     if uri is None:
         if i != 0 or binary is None:
-            raise SceneFormatError(path, "no uri, and it is not the first buffer of a .glb with a BIN chunk",
-                                   field=where)
+            raise SceneFormatError(
+                path, "no uri, and it is not the first buffer of a .glb with a BIN chunk", field=where
+            )
         data = binary
     elif not isinstance(uri, str):
         raise SceneFormatError(path, f"uri {uri!r}; expected a string", field=where)
@@ -206,7 +228,7 @@ def _buffer(path: Path, buf: object, i: int, binary: memoryview | None) -> memor
         if (len(uri) - m.end()) * 3 // 4 < length:
             raise SceneFormatError(path, f"the data URI holds fewer than its byteLength {length} bytes", field=where)
         try:
-            data = memoryview(base64.b64decode(uri[m.end():], validate=True))
+            data = memoryview(base64.b64decode(uri[m.end() :], validate=True))
         except (binascii.Error, ValueError) as exc:
             raise SceneFormatError(path, f"bad base64 in the data URI: {exc}", field=where) from None
     else:
@@ -220,8 +242,7 @@ def _external(path: Path, uri: str, length: int, where: str) -> memoryview:
     """A buffer file beside the .gltf: a relative path that stays inside its folder, at least `length` bytes."""
     rel = PurePosixPath(uri)
     if rel.is_absolute() or ".." in rel.parts or ":" in uri.split("/")[0] or not uri:
-        raise SceneFormatError(path, f"uri {uri[:80]!r} must be a relative path inside the .gltf's folder",
-                               field=where)
+        raise SceneFormatError(path, f"uri {uri[:80]!r} must be a relative path inside the .gltf's folder", field=where)
     target = path.parent / rel
     try:
         with open(target, "rb") as fh:
@@ -231,8 +252,9 @@ def _external(path: Path, uri: str, length: int, where: str) -> memoryview:
     return memoryview(data)
 
 
-def _strided(gl: Gltf, data: memoryview, offset: int, stride: int, n: int, width: int, dtype: np.dtype,
-             where: str) -> np.ndarray:
+def _strided(
+    gl: Gltf, data: memoryview, offset: int, stride: int, n: int, width: int, dtype: np.dtype, where: str
+) -> np.ndarray:
     """(n, width) elements of `dtype` starting `offset` bytes into `data`, `stride` bytes apart (0: packed),
     checked to lie inside `data` before the view is made."""
     elem = width * dtype.itemsize
@@ -241,8 +263,11 @@ def _strided(gl: Gltf, data: memoryview, offset: int, stride: int, n: int, width
         raise gl.error(f"byteStride {stride} is shorter than the {elem}-byte element", where)
     end = offset + (n - 1) * step + elem if n else offset
     if end > len(data):
-        raise gl.error(f"{n} elements of {elem} bytes every {step} from byte {offset} need {end} bytes; the "
-                       f"bufferView has {len(data)}", where)
+        raise gl.error(
+            f"{n} elements of {elem} bytes every {step} from byte {offset} need {end} bytes; the "
+            f"bufferView has {len(data)}",
+            where,
+        )
     if n == 0:
         return np.zeros((0, width), dtype)
     return np.ndarray((n, width), dtype, buffer=data, offset=offset, strides=(step, dtype.itemsize))
@@ -271,6 +296,12 @@ def _type_name(width: int) -> str:
 
 
 def _allowed_text(allowed: dict[int, tuple[bool, ...]]) -> str:
-    names = {5120: "byte", UBYTE: "unsigned byte", 5122: "short", USHORT: "unsigned short", UINT: "unsigned int",
-             FLOAT: "float"}
+    names = {
+        5120: "byte",
+        UBYTE: "unsigned byte",
+        5122: "short",
+        USHORT: "unsigned short",
+        UINT: "unsigned int",
+        FLOAT: "float",
+    }
     return ", ".join(f"{names[c]}{' normalized' if n else ''}" for c, flags in allowed.items() for n in flags)

@@ -22,7 +22,9 @@ from ..model.scene import SH_C0, Scene
 from .gltf import FLOAT, UBYTE, USHORT, Gltf, read_gltf
 from .packing import MAX_SPLATS
 from .progress import LoadProgress
-from .spz import FLIP_SH as SPZ_FLIP_SH, FLIP_XYZ as SPZ_FLIP_XYZ, load_spz
+from .spz import FLIP_SH as SPZ_FLIP_SH
+from .spz import FLIP_XYZ as SPZ_FLIP_XYZ
+from .spz import load_spz
 from .trained_as import COMMENT_KEY
 from .transform import apply_matrix
 
@@ -30,18 +32,31 @@ EXT = "KHR_gaussian_splatting"
 SPZ_EXT = "KHR_gaussian_splatting_compression_spz_2"
 PREFIX = EXT + ":"
 POINTS = 0
-SUPPORTED = {"kernel": ("ellipse",), "projection": ("perspective",), "sortingMethod": ("cameraDistance",),
-             "colorSpace": ("srgb_rec709_display",)}
-DEFAULTS = {"kernel": "ellipse", "projection": "perspective", "sortingMethod": "cameraDistance",
-            "colorSpace": "srgb_rec709_display"}
+SUPPORTED = {
+    "kernel": ("ellipse",),
+    "projection": ("perspective",),
+    "sortingMethod": ("cameraDistance",),
+    "colorSpace": ("srgb_rec709_display",),
+}
+DEFAULTS = {
+    "kernel": "ellipse",
+    "projection": "perspective",
+    "sortingMethod": "cameraDistance",
+    "colorSpace": "srgb_rec709_display",
+}
 FLIP_XYZ = np.array([-1.0, -1.0, 1.0], np.float32)  # glTF <-> INRIA: 180 degrees about z
 # Sign of each SH coefficient (degree 1..3, 3DGS basis order) under (x, y, z) -> (-x, -y, z).
 FLIP_SH = np.array([-1, 1, -1, 1, -1, 1, -1, 1, -1, 1, -1, 1, -1, 1, -1], np.float32)
 QUAT_FLIP = np.array([1.0, -1.0, -1.0, 1.0], np.float32)  # (w, x, y, z) of the same turn
 # Component types each attribute may use (the extension's attribute table; POSITION as KHR_mesh_quantization).
 ALLOWED = {
-    "POSITION": {FLOAT: (False,), 5120: (False, True), UBYTE: (False, True), 5122: (False, True),
-                 USHORT: (False, True)},
+    "POSITION": {
+        FLOAT: (False,),
+        5120: (False, True),
+        UBYTE: (False, True),
+        5122: (False, True),
+        USHORT: (False, True),
+    },
     "ROTATION": {FLOAT: (False,), 5120: (True,), 5122: (True,)},
     "SCALE": {FLOAT: (False,), 5120: (False, True), 5122: (False, True)},
     "OPACITY": {FLOAT: (False,), UBYTE: (True,), USHORT: (True,)},
@@ -59,8 +74,9 @@ def load_gltf(path: Path, progress: LoadProgress, primitive: int | None = None) 
         raise gl.error(f"no mesh primitive with the {EXT} extension")
     if primitive is not None:
         if not 0 <= primitive < len(instances):
-            raise gl.error(f"--primitive {primitive}: the file has {len(instances)} splat primitives "
-                           f"(0..{len(instances) - 1})")
+            raise gl.error(
+                f"--primitive {primitive}: the file has {len(instances)} splat primitives (0..{len(instances) - 1})"
+            )
         instances = [instances[primitive]]
     budget = gl.size  # each splat needs data somewhere
     parts, exts, total = [], [], 0
@@ -77,18 +93,21 @@ def load_gltf(path: Path, progress: LoadProgress, primitive: int | None = None) 
         progress.check()
     means, scales, quats, opacities, sh = _join(gl, parts)
     degree = (sh.shape[1] > 1) + (sh.shape[1] > 4) + (sh.shape[1] > 9)
-    sh[:, 1:] *= FLIP_SH[:sh.shape[1] - 1, None]
-    meta = {"format": "glb" if gl.glb else "gltf", "version": "2.0",
-            "properties": sorted({k for p, _, _ in instances for k in p.get("attributes", {})}),
-            "compression": "spz_2" if any(SPZ_EXT in e.get("extensions", {}) for e in exts) else None,
-            "primitives": len(instances), "sh_degree_stored": degree}
+    sh[:, 1:] *= FLIP_SH[: sh.shape[1] - 1, None]
+    meta = {
+        "format": "glb" if gl.glb else "gltf",
+        "version": "2.0",
+        "properties": sorted({k for p, _, _ in instances for k in p.get("attributes", {})}),
+        "compression": "spz_2" if any(SPZ_EXT in e.get("extensions", {}) for e in exts) else None,
+        "primitives": len(instances),
+        "sh_degree_stored": degree,
+    }
     meta.update(_properties(path, exts))
     extras = gl.doc["asset"].get("extras")
     if isinstance(extras, dict) and isinstance(extras.get(COMMENT_KEY), str):
         meta["splat_render_mode"] = extras[COMMENT_KEY]
     if len(instances) > 1:
-        meta["note"] = (f"{len(instances)} splat primitives loaded as one scene (--primitive N loads the N-th "
-                        "alone)")
+        meta["note"] = f"{len(instances)} splat primitives loaded as one scene (--primitive N loads the N-th alone)"
         warnings.warn(f"{path}: {meta['note']}", stacklevel=3)
     return Scene.from_arrays(means * FLIP_XYZ, scales, quats * QUAT_FLIP, opacities, sh, source=str(path), meta=meta)
 
@@ -102,8 +121,9 @@ def _properties(path: Path, exts: list[dict]) -> dict:
         out[key] = values[0] if len(values) == 1 else values
         odd = [v for v in values if v not in SUPPORTED[key]]
         if odd:
-            warnings.warn(f"{path}: {EXT} {key} {', '.join(odd)} is not supported; rendered as "
-                          f"{SUPPORTED[key][0]}", stacklevel=4)
+            warnings.warn(
+                f"{path}: {EXT} {key} {', '.join(odd)} is not supported; rendered as {SUPPORTED[key][0]}", stacklevel=4
+            )
     return out
 
 
@@ -183,8 +203,11 @@ def _local(gl: Gltf, node: dict, index: int) -> np.ndarray:
 
 
 def _numbers(gl: Gltf, v: object, n: int, where: str) -> np.ndarray:
-    if not isinstance(v, list) or len(v) != n or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                                        for x in v):
+    if (
+        not isinstance(v, list)
+        or len(v) != n
+        or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+    ):
         raise gl.error(f"expected {n} numbers", where)
     return np.array(v, np.float64)
 
@@ -216,10 +239,11 @@ def _decode(gl: Gltf, prim: dict, where: str) -> tuple[tuple, dict]:
         names = [f"{PREFIX}SH_DEGREE_{degree}_COEF_{i}" for i in range(SH_PER_DEGREE[degree])]
         present = sum(name in attrs for name in names)
         if present not in (0, len(names)):
-            raise gl.error(f"SH degree {degree} is partly given ({present} of {len(names)} coefficients)",
-                           f"{where}.attributes")
+            raise gl.error(
+                f"SH degree {degree} is partly given ({present} of {len(names)} coefficients)", f"{where}.attributes"
+            )
         given.append(names if present else None)
-    if None in given and any(given[given.index(None):]):
+    if None in given and any(given[given.index(None) :]):
         raise gl.error(f"SH degree {given.index(None) + 1} is missing below a higher degree", f"{where}.attributes")
     coeffs += [read(name, 3, "SH", n) for names in given if names for name in names]
     quats = np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
@@ -251,7 +275,7 @@ def _decode_spz(gl: Gltf, prim: dict, compressed: object, where: str) -> tuple:
         if count != n:
             raise gl.error(f"POSITION count {count!r}; the SPZ stream holds {n} splats", where)
     sh = scene.sh.copy()
-    sh[:, 1:] *= SPZ_FLIP_SH[:sh.shape[1] - 1, None]
+    sh[:, 1:] *= SPZ_FLIP_SH[: sh.shape[1] - 1, None]
     flip_q = np.concatenate([[1.0], SPZ_FLIP_XYZ]).astype(np.float32)
     return scene.means * SPZ_FLIP_XYZ, scene.scales, scene.quats * flip_q, scene.opacities, sh
 

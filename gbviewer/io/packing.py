@@ -34,5 +34,8 @@ def check_count(path: Path, count: int, field: str, available_bytes: int, bytes_
         raise SceneFormatError(path, f"count {count} exceeds the supported maximum {MAX_SPLATS}", field=field)
     if count * bytes_per_splat > available_bytes:
         raise SceneFormatError(
-            path, f"count {count} needs at least {int(count * bytes_per_splat)} bytes of data but the file has "
-            f"{available_bytes}", field=field)
+            path,
+            f"count {count} needs at least {int(count * bytes_per_splat)} bytes of data but the file has "
+            f"{available_bytes}",
+            field=field,
+        )

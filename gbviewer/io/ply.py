@@ -21,8 +21,8 @@ import numpy as np
 import plyfile
 
 from ..core.errors import GBViewerError, InvalidValue, SceneFormatError
-from ..model.scene import MAX_SCALE, MAX_SH, Checked, Scene
 from ..core.validate import declared_count
+from ..model.scene import MAX_SCALE, MAX_SH, Checked, Scene
 from . import progress as load_progress
 from .progress import LoadProgress
 
@@ -31,11 +31,41 @@ SCATTER_BYTES = 4 << 20  # of rows a streamed load reads and scatters at a time 
 MAX_LOAD_WORKERS = 8  # a streamed load's threads at most (a SCATTER_BYTES buffer each)
 TRUNCATED = "truncated or malformed data: early end-of-file"
 USED_ELEMENTS = ("vertex", "chunk", "sh")  # what the loaders read; elements after the last of these stay unread
-TYPE_BYTES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
-              "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
+TYPE_BYTES = {
+    "char": 1,
+    "uchar": 1,
+    "int8": 1,
+    "uint8": 1,
+    "short": 2,
+    "ushort": 2,
+    "int16": 2,
+    "uint16": 2,
+    "int": 4,
+    "uint": 4,
+    "int32": 4,
+    "uint32": 4,
+    "float": 4,
+    "float32": 4,
+    "double": 8,
+    "float64": 8,
+}
 
-REQUIRED = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
-            "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+REQUIRED = [
+    "x",
+    "y",
+    "z",
+    "f_dc_0",
+    "f_dc_1",
+    "f_dc_2",
+    "opacity",
+    "scale_0",
+    "scale_1",
+    "scale_2",
+    "rot_0",
+    "rot_1",
+    "rot_2",
+    "rot_3",
+]
 REST_COUNTS = {0: 0, 9: 1, 24: 2, 45: 3}  # f_rest_* count -> SH degree
 REST_COUNTS_1 = {0: 0, 3: 1, 8: 2, 15: 3}  # f_ro_* count (1-channel view weight) -> SH degree
 
@@ -50,7 +80,7 @@ def _checked_header(path: Path, fh, progress: LoadProgress) -> tuple[int, plyfil
     check_element_counts(path, head, size)
     fh.seek(0)
     ply = plyfile.PlyData._parse_header(fh)
-    progress.digest.add("", 0, head[:fh.tell()])  # a header longer than `head` leaves a gap: no digest
+    progress.digest.add("", 0, head[: fh.tell()])  # a header longer than `head` leaves a gap: no digest
     return size, ply
 
 
@@ -80,8 +110,11 @@ def read_ply(path: Path, progress: LoadProgress | None = None) -> plyfile.PlyDat
             progress.report(size, size, "bytes")
         return ply
     except plyfile.PlyElementParseError as exc:
-        raise SceneFormatError(path, f"truncated or malformed data: {exc.message}",
-                               field=exc.element.name if exc.element is not None else None) from None
+        raise SceneFormatError(
+            path,
+            f"truncated or malformed data: {exc.message}",
+            field=exc.element.name if exc.element is not None else None,
+        ) from None
     except plyfile.PlyParseError as exc:
         raise SceneFormatError(path, f"malformed PLY header: {exc}") from None
     except (ValueError, UnicodeDecodeError) as exc:
@@ -96,8 +129,11 @@ def check_element_counts(path: Path, head: bytes, size: int) -> None:
     if end < 0:
         return  # no complete header: plyfile reports it
     lines = head[:end].decode("ascii", "replace").splitlines()
-    binary = any(line.split()[:2] in (["format", "binary_little_endian"], ["format", "binary_big_endian"])
-                 for line in lines if line.strip())
+    binary = any(
+        line.split()[:2] in (["format", "binary_little_endian"], ["format", "binary_big_endian"])
+        for line in lines
+        if line.strip()
+    )
     elements: list[list] = []  # [name, count, smallest row bytes]
     for line in lines:
         words = line.split()
@@ -158,8 +194,9 @@ def check_sh_magnitude(big: float, dtype: np.dtype) -> None:
     """float16 storage (`gb.load(..., sh_dtype="float16")`) refuses SH coefficients up to `big` in magnitude when that
     is beyond its largest finite value, rather than turning them into infinities."""
     if np.dtype(dtype) == np.float16 and big > float(np.finfo(np.float16).max):
-        raise GBViewerError(f"field 'sh': coefficients up to {big:.3g}, beyond float16's range (65504); load "
-                            "with sh_dtype='float32'")
+        raise GBViewerError(
+            f"field 'sh': coefficients up to {big:.3g}, beyond float16's range (65504); load with sh_dtype='float32'"
+        )
 
 
 def native_io():
@@ -170,8 +207,9 @@ def native_io():
     try:
         return importlib.import_module("gbviewer._native").io
     except ImportError as exc:
-        raise GBViewerError(f"the native module gbviewer._native does not import ({exc}); the .ply loader needs "
-                            "it") from None
+        raise GBViewerError(
+            f"the native module gbviewer._native does not import ({exc}); the .ply loader needs it"
+        ) from None
 
 
 def activate_opacity(raw: np.ndarray) -> np.ndarray:
@@ -210,22 +248,31 @@ def inria_layout(path: Path, names: list[str], n: int) -> InriaLayout:
     rest_idx = sorted(int(m.group(1)) for n in names if (m := re.fullmatch(r"f_rest_(\d+)", n)))
     if len(rest_idx) not in REST_COUNTS or rest_idx != list(range(len(rest_idx))):
         raise SceneFormatError(
-            path, f"{len(rest_idx)} f_rest_* properties (indices {rest_idx[:3]}...); expected f_rest_0.. with "
-            "0, 9, 24 or 45 of them (SH degree 0-3)", field="f_rest")
+            path,
+            f"{len(rest_idx)} f_rest_* properties (indices {rest_idx[:3]}...); expected f_rest_0.. with "
+            "0, 9, 24 or 45 of them (SH degree 0-3)",
+            field="f_rest",
+        )
     ro_idx = sorted(int(m.group(1)) for n in names if (m := re.fullmatch(r"f_ro_(\d+)", n)))
     weight_cols: list[str] = []
     if "f_do_0" in names or ro_idx:
         if "f_do_0" not in names or len(ro_idx) not in REST_COUNTS_1 or ro_idx != list(range(len(ro_idx))):
             raise SceneFormatError(
-                path, f"sort-free view weight: f_do_0 {'present' if 'f_do_0' in names else 'missing'} and "
+                path,
+                f"sort-free view weight: f_do_0 {'present' if 'f_do_0' in names else 'missing'} and "
                 f"{len(ro_idx)} f_ro_* properties; expected f_do_0 and f_ro_0.. with 0, 3, 8 or 15 of them",
-                field="f_ro")
+                field="f_ro",
+            )
         if "info" not in names:
-            raise SceneFormatError(path, "sort-free layout (f_do_0) without the 'info' column that holds "
-                                   "weight_background and sigma", field="info")
+            raise SceneFormatError(
+                path,
+                "sort-free layout (f_do_0) without the 'info' column that holds weight_background and sigma",
+                field="info",
+            )
         weight_cols = ["f_do_0"] + [f"f_ro_{i}" for i in ro_idx] + ["info"]
-    return InriaLayout(names, REST_COUNTS[len(rest_idx)], [f"f_rest_{i}" for i in rest_idx], "filter_3D" in names,
-                       weight_cols)
+    return InriaLayout(
+        names, REST_COUNTS[len(rest_idx)], [f"f_rest_{i}" for i in rest_idx], "filter_3D" in names, weight_cols
+    )
 
 
 class InriaArrays:
@@ -249,12 +296,22 @@ class InriaArrays:
         (`gbviewer._native.io.scatter_inria` on `threads` threads, 0: all; `keep` marks the splats it would keep).
         Calls for different rows may run at once. Returns the rows' largest |f_dc| and |f_rest| for `check_sh`."""
         sliced = [None if a is None else a[rows] for a in (self.filter_3d, self.weights)]
-        maxima = self._scatter(table, cols[:-1] if self.weights is not None else cols, self.means[rows],
-                               self.scales[rows], self.quats[rows], self.opacities[rows], self.sh[rows], *sliced,
-                               self.keep.view(np.uint8)[rows], MAX_SH, threads)
+        maxima = self._scatter(
+            table,
+            cols[:-1] if self.weights is not None else cols,
+            self.means[rows],
+            self.scales[rows],
+            self.quats[rows],
+            self.opacities[rows],
+            self.sh[rows],
+            *sliced,
+            self.keep.view(np.uint8)[rows],
+            MAX_SH,
+            threads,
+        )
         if self.weights is not None and rows.start < len(self.info):
             head = table[: len(self.info) - rows.start, cols[-1]]
-            self.info[rows.start:rows.start + len(head)] = head
+            self.info[rows.start : rows.start + len(head)] = head
         return maxima
 
     def check_sh(self, dc: float, rest: float) -> None:
@@ -276,21 +333,43 @@ class InriaArrays:
     def scene(self, path: Path) -> Scene:
         """The validated Scene of the filled, activated arrays."""
         layout, n = self.layout, self.n
-        meta = {"format": "inria-ply", "version": None, "properties": layout.names, "sh_degree": layout.degree,
-                "filter_3D": layout.has_filter}
+        meta = {
+            "format": "inria-ply",
+            "version": None,
+            "properties": layout.names,
+            "sh_degree": layout.degree,
+            "filter_3D": layout.has_filter,
+        }
         extra: dict = {}
         if self.weights is not None:
             if n < 2:
-                raise SceneFormatError(path, f"sort-free layout with {n} vertex; the info column needs 2 rows "
-                                       "(weight_background, sigma)", field="info")
+                raise SceneFormatError(
+                    path,
+                    f"sort-free layout with {n} vertex; the info column needs 2 rows (weight_background, sigma)",
+                    field="info",
+                )
             wbg, sigma = float(self.info[0]), float(self.info[1])
             if not (np.isfinite(wbg) and wbg >= 0 and np.isfinite(sigma) and sigma > 0):
-                raise SceneFormatError(path, f"info rows 0, 1 (weight_background, sigma) = {wbg}, {sigma}; expected "
-                                       "weight_background >= 0 and sigma > 0", field="info")
+                raise SceneFormatError(
+                    path,
+                    f"info rows 0, 1 (weight_background, sigma) = {wbg}, {sigma}; expected "
+                    "weight_background >= 0 and sigma > 0",
+                    field="info",
+                )
             extra = {"weight_background": wbg, "wsr_sigma": sigma, "view_weight_sh": self.weights}
             meta.update(format="sort-free-ply", sort_free=True)
-        return Scene.from_arrays(self.means, self.scales, self.quats, self.opacities, self.sh, self.filter_3d,
-                                 source=str(path), meta=meta, checked=Checked(self.keep), **extra)
+        return Scene.from_arrays(
+            self.means,
+            self.scales,
+            self.quats,
+            self.opacities,
+            self.sh,
+            self.filter_3d,
+            source=str(path),
+            meta=meta,
+            checked=Checked(self.keep),
+            **extra,
+        )
 
 
 def load_inria_ply(path: Path, ply: plyfile.PlyData, progress: LoadProgress | None = None) -> Scene:
@@ -315,8 +394,11 @@ def _streamable(ply: plyfile.PlyData) -> bool:
     if ply.text or not len(ply.elements) or ply.elements[0].name != "vertex":
         return False
     names = {p.name for p in ply.elements[0].properties}
-    return (not any(isinstance(p, plyfile.PlyListProperty) for p in ply.elements[0].properties)
-            and "chunk" not in {e.name for e in ply.elements} and "f_anchor_feat_0" not in names)
+    return (
+        not any(isinstance(p, plyfile.PlyListProperty) for p in ply.elements[0].properties)
+        and "chunk" not in {e.name for e in ply.elements}
+        and "f_anchor_feat_0" not in names
+    )
 
 
 def _read_at(fh: BinaryIO, lock: threading.Lock, buf: np.ndarray, offset: int) -> bool:

@@ -67,6 +67,7 @@ class ContentDigest:
             else:
                 h.update(data)
                 size[0] += len(data)
+
         return update
 
     def hexdigest(self) -> str | None:
@@ -127,7 +128,7 @@ class LoadProgress:
         got, at = 0, fh.tell()
         for begin, end in self.chunks(size, "bytes", MIN_BYTES):
             n = fh.readinto(view[begin:end])
-            self.digest.add("", at + begin, view[begin:begin + n])
+            self.digest.add("", at + begin, view[begin : begin + n])
             got += n
             if n < end - begin:
                 break
@@ -160,7 +161,7 @@ class LoadProgress:
         buf = memoryview(bytearray(_step(end - begin, MIN_BYTES)))
         fh.seek(begin)
         for a, b in _ranges(end - begin, MIN_BYTES):
-            got = fh.readinto(buf[:b - a])
+            got = fh.readinto(buf[: b - a])
             self.digest.add("", begin + a, buf[:got])
             self.report(begin + b, total, "bytes")
         fh.seek(end)

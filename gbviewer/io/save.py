@@ -8,8 +8,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..core.errors import GBViewerError
-from ..model.scene import Scene
 from ..core.files import atomic_write
+from ..model.scene import Scene
 from .trained_as import UNKNOWN
 from .write import refuse_neural, write_inria_ply
 from .write_gltf import glb_bytes
@@ -17,12 +17,24 @@ from .write_packed import encode_splat, encode_spz
 from .write_playcanvas import compressed_ply_bytes, sog_bytes
 
 ENCODERS: dict[str, Callable[[Scene], bytes]] = {
-    "compressed-ply": compressed_ply_bytes, "glb": glb_bytes, "glb-spz": lambda s: glb_bytes(s, spz=True),
-    "spz": encode_spz, "splat": encode_splat, "sog": sog_bytes}
+    "compressed-ply": compressed_ply_bytes,
+    "glb": glb_bytes,
+    "glb-spz": lambda s: glb_bytes(s, spz=True),
+    "spz": encode_spz,
+    "splat": encode_splat,
+    "sog": sog_bytes,
+}
 WRITE_FORMATS = ("ply", *ENCODERS)
 # longest name endings first: "x.compressed.ply" is a compressed ply, "x.spz.glb" an SPZ-compressed glb
-SUFFIXES = {".compressed.ply": "compressed-ply", ".spz.glb": "glb-spz", ".ply": "ply", ".glb": "glb", ".spz": "spz",
-            ".splat": "splat", ".sog": "sog"}
+SUFFIXES = {
+    ".compressed.ply": "compressed-ply",
+    ".spz.glb": "glb-spz",
+    ".ply": "ply",
+    ".glb": "glb",
+    ".spz": "spz",
+    ".splat": "splat",
+    ".sog": "sog",
+}
 CAN_SAY_TRAINED_AS = {"ply", "compressed-ply", "glb", "glb-spz", "spz", "sog"}
 
 
@@ -36,8 +48,9 @@ def format_for(path: str | Path, fmt: str | None = None) -> str:
     for suffix, found in SUFFIXES.items():
         if name.endswith(suffix):
             return found
-    raise GBViewerError(f"{path}: cannot tell the format from the name; expected a name ending in "
-                        f"{', '.join(SUFFIXES)} (or --format)")
+    raise GBViewerError(
+        f"{path}: cannot tell the format from the name; expected a name ending in {', '.join(SUFFIXES)} (or --format)"
+    )
 
 
 def dropped(scene: Scene, fmt: str) -> str | None:

@@ -21,8 +21,8 @@ import numpy as np
 from PIL import Image, features
 
 from ..core.errors import InvalidValue, SceneFormatError
-from ..model.scene import Scene
 from ..core.validate import open_regular, parse_json
+from ..model.scene import Scene
 from .packing import MAX_SPLATS, smallest_three
 from .progress import LoadProgress
 
@@ -47,14 +47,32 @@ def load_sog(path: Path, progress: LoadProgress | None = None) -> Scene:
             is_zip = fh.read(2) == ZIP_MAGIC
     if not is_zip:
         folder, meta_name = (path, "meta.json") if path.is_dir() else (path.parent, path.name)
-        return _load(path, lambda name, limit: _read_file(folder, name, limit), lambda name: _file_size(folder / name),
-                     False, progress, meta_name)
+        return _load(
+            path,
+            lambda name, limit: _read_file(folder, name, limit),
+            lambda name: _file_size(folder / name),
+            False,
+            progress,
+            meta_name,
+        )
     try:
         with zipfile.ZipFile(path) as zf:
-            return _load(path, lambda name, limit: _read_member(path, zf, name, limit),
-                         lambda name: _member_size(zf, name), True, progress)
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, NotImplementedError, RuntimeError,
-            ValueError) as exc:  # ValueError: member names that are not valid UTF-8, among others
+            return _load(
+                path,
+                lambda name, limit: _read_member(path, zf, name, limit),
+                lambda name: _member_size(zf, name),
+                True,
+                progress,
+            )
+    except (
+        zipfile.BadZipFile,
+        zipfile.LargeZipFile,
+        OSError,
+        EOFError,
+        NotImplementedError,
+        RuntimeError,
+        ValueError,
+    ) as exc:  # ValueError: member names that are not valid UTF-8, among others
         raise SceneFormatError(path, f"corrupt .sog zip: {exc}", field="zip") from None
 
 
@@ -107,8 +125,9 @@ def _read_member(path: Path, zf: zipfile.ZipFile, name: str, limit: int) -> byte
     return data
 
 
-def _load(where: Path, read: Reader, size: Sizer, bundled: bool, progress: LoadProgress,
-          meta_name: str = "meta.json") -> Scene:
+def _load(
+    where: Path, read: Reader, size: Sizer, bundled: bool, progress: LoadProgress, meta_name: str = "meta.json"
+) -> Scene:
     def hashed(name: str, limit: int) -> bytes:  # each file or member: a part of the load's digest
         data = read(name, limit)
         progress.digest.add(name, 0, data)
@@ -145,8 +164,9 @@ def _decode(where: Path, images: _Images, meta: dict, bundled: bool) -> Scene:
     q = images.get(meta["quats"]["files"][0])
     if (q[:, 3] < 252).any():
         raise SceneFormatError(where, "quaternion tag (alpha) below 252", field=meta["quats"]["files"][0])
-    quats = smallest_three((q[:, :3] / np.float32(127.5) - np.float32(1)) / np.float32(np.sqrt(2)),
-                           (q[:, 3] - 252).astype(np.intp))
+    quats = smallest_three(
+        (q[:, :3] / np.float32(127.5) - np.float32(1)) / np.float32(np.sqrt(2)), (q[:, 3] - 252).astype(np.intp)
+    )
 
     scales = np.exp(_codebook(where, meta["scales"], "scales")[images.get(meta["scales"]["files"][0])[:, :3]])
     c = images.get(meta["sh0"]["files"][0])
@@ -156,8 +176,13 @@ def _decode(where: Path, images: _Images, meta: dict, bundled: bool) -> Scene:
         sh = np.concatenate([sh, _sh_rest(where, images, meta["shN"], n)], axis=1)
 
     images.done()
-    info = {"format": "sog", "version": 2, "bundled": bundled, "antialiased": bool(meta.get("antialias", False)),
-            "properties": sorted(k for k in meta if isinstance(meta[k], dict) and "files" in meta[k])}
+    info = {
+        "format": "sog",
+        "version": 2,
+        "bundled": bundled,
+        "antialiased": bool(meta.get("antialias", False)),
+        "properties": sorted(k for k in meta if isinstance(meta[k], dict) and "files" in meta[k]),
+    }
     return Scene.from_arrays(means, scales, quats, opacities, sh, source=str(where), meta=info)
 
 
@@ -165,19 +190,24 @@ def _sh_rest(where: Path, images: "_Images", shn: dict, n: int) -> np.ndarray:
     """Higher SH bands from the palette: (N, K-1, 3)."""
     bands, palette = shn["bands"], shn["count"]
     if bands not in SH_COEFFS or not isinstance(palette, int) or not 0 < palette <= 65536:
-        raise SceneFormatError(where, f"bands {bands!r}, count {palette!r}; expected bands 1-3, count 1..65536",
-                               field="shN")
+        raise SceneFormatError(
+            where, f"bands {bands!r}, count {palette!r}; expected bands 1-3, count 1..65536", field="shN"
+        )
     k = SH_COEFFS[bands]
     centroids_name, labels_name = shn["files"][0], shn["files"][1]
     centroids, (width, _) = images.decode(centroids_name, palette * k)
     if width != 64 * k or len(centroids) < palette * k:
-        raise SceneFormatError(where, f"centroids image is {width} wide with {len(centroids)} pixels; expected "
-                               f"{64 * k} wide with at least {palette * k}", field=centroids_name)
+        raise SceneFormatError(
+            where,
+            f"centroids image is {width} wide with {len(centroids)} pixels; expected "
+            f"{64 * k} wide with at least {palette * k}",
+            field=centroids_name,
+        )
     labels = images.get(labels_name)
     index = labels[:, 0].astype(np.intp) | (labels[:, 1].astype(np.intp) << 8)
     if index.max() >= palette:
         raise SceneFormatError(where, f"label {index.max()} outside the palette of {palette}", field=labels_name)
-    entries = _codebook(where, shn, "shN")[centroids[:palette * k, :3]].reshape(palette, k, 3)
+    entries = _codebook(where, shn, "shN")[centroids[: palette * k, :3]].reshape(palette, k, 3)
     return entries[index]
 
 
@@ -214,8 +244,12 @@ class _Images:
         try:
             with Image.open(io.BytesIO(data)) as im:
                 if im.width * im.height > most:
-                    raise SceneFormatError(self.where, f"image is {im.width}x{im.height}; {needed or self.count} "
-                                           f"pixels are needed, at most {most} allowed", field=name)
+                    raise SceneFormatError(
+                        self.where,
+                        f"image is {im.width}x{im.height}; {needed or self.count} "
+                        f"pixels are needed, at most {most} allowed",
+                        field=name,
+                    )
                 rgba = np.asarray(im.convert("RGBA"))
         except (OSError, ValueError, Image.DecompressionBombError) as exc:
             raise SceneFormatError(self.where, f"cannot decode image: {exc}", field=name) from None
@@ -228,6 +262,9 @@ class _Images:
         if self.size is None:
             self.size = size
         if size != self.size or len(pixels) < self.count:
-            raise SceneFormatError(self.where, f"image is {size[0]}x{size[1]}; expected {self.size[0]}x{self.size[1]} "
-                                   f"holding {self.count} splats", field=name)
-        return pixels[:self.count]
+            raise SceneFormatError(
+                self.where,
+                f"image is {size[0]}x{size[1]}; expected {self.size[0]}x{self.size[1]} holding {self.count} splats",
+                field=name,
+            )
+        return pixels[: self.count]

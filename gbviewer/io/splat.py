@@ -12,8 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import SceneFormatError
-from ..model.scene import Scene
-from ..model.scene import SH_C0
+from ..model.scene import SH_C0, Scene
 from .packing import check_count
 from .progress import LoadProgress, decode_in_chunks
 
@@ -26,15 +25,22 @@ def looks_like_splat(data: bytes | memoryview) -> bool:
         return False
     head = np.frombuffer(data, dtype=RECORD, count=min(len(data) // RECORD.itemsize, 4096))
     with np.errstate(invalid="ignore"):
-        return bool(np.isfinite(head["pos"]).all() and np.isfinite(head["scale"]).all()
-                    and (head["scale"] >= 0).all() and (np.abs(head["pos"]) < 1e7).all())
+        return bool(
+            np.isfinite(head["pos"]).all()
+            and np.isfinite(head["scale"]).all()
+            and (head["scale"] >= 0).all()
+            and (np.abs(head["pos"]) < 1e7).all()
+        )
 
 
 def load_splat(path: Path, data: bytes | memoryview, progress: LoadProgress | None = None) -> Scene:
     """Decode a `.splat` buffer into a Scene; `progress`: splats decoded."""
     if len(data) % RECORD.itemsize:
-        raise SceneFormatError(path, f"size {len(data)} is not a multiple of the {RECORD.itemsize}-byte record "
-                               "(truncated?)", field="record")
+        raise SceneFormatError(
+            path,
+            f"size {len(data)} is not a multiple of the {RECORD.itemsize}-byte record (truncated?)",
+            field="record",
+        )
     n = len(data) // RECORD.itemsize
     check_count(path, n, "record", len(data), RECORD.itemsize)
     rec = np.frombuffer(data, dtype=RECORD, count=n)

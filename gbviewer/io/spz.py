@@ -48,15 +48,25 @@ FLIP_SH = np.array([-1, -1, 1, -1, 1, 1, -1, 1, -1, 1, -1, -1, 1, -1, 1], dtype=
 
 def _sizes(version: int, n: int, sh_degree: int) -> dict[str, int]:
     """Byte size of each attribute array, in file order."""
-    return {"positions": n * (6 if version == 1 else 9), "alphas": n, "colors": 3 * n, "scales": 3 * n,
-            "rotations": n * (4 if version >= 3 else 3), "sh": n * SH_DIM[sh_degree] * 3}
+    return {
+        "positions": n * (6 if version == 1 else 9),
+        "alphas": n,
+        "colors": 3 * n,
+        "scales": 3 * n,
+        "rotations": n * (4 if version >= 3 else 3),
+        "sh": n * SH_DIM[sh_degree] * 3,
+    }
 
 
 def _check_ratio(path: Path, declared: int, compressed: int) -> None:
     """Refuse, before inflating anything, a header whose attribute bytes the compressed bytes cannot plausibly hold."""
     if declared > MAX_COMPRESSION_RATIO * compressed:
-        raise SceneFormatError(path, f"{declared} bytes of attributes cannot come from {compressed} compressed bytes "
-                               f"(more than {MAX_COMPRESSION_RATIO}x); corrupt header", field="numPoints")
+        raise SceneFormatError(
+            path,
+            f"{declared} bytes of attributes cannot come from {compressed} compressed bytes "
+            f"(more than {MAX_COMPRESSION_RATIO}x); corrupt header",
+            field="numPoints",
+        )
 
 
 def _check_header(path: Path, version: int, n: int, sh_degree: int, known: range) -> None:
@@ -145,9 +155,12 @@ def _load_legacy(path: Path, payload: bytes | bytearray, container: str, progres
     streams = {}
     for name, size in sizes.items():
         if offset + size > len(payload):
-            raise SceneFormatError(path, f"truncated: {container} payload ends inside this array "
-                                   f"({len(payload) - offset} of {size} bytes)", field=name)
-        streams[name] = memoryview(payload)[offset:offset + size]
+            raise SceneFormatError(
+                path,
+                f"truncated: {container} payload ends inside this array ({len(payload) - offset} of {size} bytes)",
+                field=name,
+            )
+        streams[name] = memoryview(payload)[offset : offset + size]
         offset += size
     return _decode(path, version, n, sh_degree, frac_bits, flags, streams, progress)
 
@@ -160,12 +173,14 @@ def _load_ngsp(path: Path, data: bytes | bytearray, progress: LoadProgress) -> S
     sizes = {k: v for k, v in _sizes(version, n, sh_degree).items() if v}
     _check_ratio(path, sum(sizes.values()), len(data))
     if num_streams != len(sizes):
-        raise SceneFormatError(path, f"{num_streams} streams; SH degree {sh_degree} needs {len(sizes)}",
-                               field="numStreams")
+        raise SceneFormatError(
+            path, f"{num_streams} streams; SH degree {sh_degree} needs {len(sizes)}", field="numStreams"
+        )
     start = toc + num_streams * TOC_ENTRY.size
     if toc < NGSP_HEADER.size or start > len(data):
-        raise SceneFormatError(path, f"TOC at {toc} does not fit in the file ({len(data)} bytes)",
-                               field="tocByteOffset")
+        raise SceneFormatError(
+            path, f"TOC at {toc} does not fit in the file ({len(data)} bytes)", field="tocByteOffset"
+        )
     _check_extensions(path, data, toc)
     dctx = zstandard.ZstdDecompressor()
     streams = {}
@@ -175,10 +190,13 @@ def _load_ngsp(path: Path, data: bytes | bytearray, progress: LoadProgress) -> S
         if uncompressed != size:
             raise SceneFormatError(path, f"TOC says {uncompressed} bytes, expected {size}", field=where)
         if start + compressed > len(data):
-            raise SceneFormatError(path, f"truncated: needs {compressed} compressed bytes at {start}, the file "
-                                   f"has {len(data) - start}", field=where)
+            raise SceneFormatError(
+                path,
+                f"truncated: needs {compressed} compressed bytes at {start}, the file has {len(data) - start}",
+                field=where,
+            )
         progress.check()
-        frame = memoryview(data)[start:start + compressed]
+        frame = memoryview(data)[start : start + compressed]
         try:
             declared = zstandard.get_frame_parameters(frame).content_size
             if declared not in (size, zstandard.CONTENTSIZE_UNKNOWN):
@@ -205,8 +223,9 @@ def _check_extensions(path: Path, data: bytes, end: int) -> None:
             raise SceneFormatError(path, "extension record payload overruns the TOC", field="extensions")
 
 
-def _decode(path: Path, version: int, n: int, sh_degree: int, frac_bits: int, flags: int, streams: dict,
-            progress: LoadProgress) -> Scene:
+def _decode(
+    path: Path, version: int, n: int, sh_degree: int, frac_bits: int, flags: int, streams: dict, progress: LoadProgress
+) -> Scene:
     """Vectorised decode of the attribute arrays, then RUB -> RDF; chunks of splats, reported."""
     dim = SH_DIM[sh_degree]
     if dim > 15:
@@ -240,10 +259,16 @@ def _decode(path: Path, version: int, n: int, sh_degree: int, frac_bits: int, fl
             xyzw = np.concatenate([xyz, w[:, None]], axis=1)
         quats = np.concatenate([xyzw[:, 3:], xyzw[:, :3] * FLIP_XYZ], axis=1)
         rest = (rest_bytes[rows] - np.float32(128)) / np.float32(128)
-        sh = np.concatenate([dc[:, None, :], rest * FLIP_SH[:rest.shape[1], None]], axis=1)
+        sh = np.concatenate([dc[:, None, :], rest * FLIP_SH[: rest.shape[1], None]], axis=1)
         return means * FLIP_XYZ, scales, quats, alphas[rows] * np.float32(1 / 255), sh
 
     means, scales, quats, opacities, sh = decode_in_chunks(n, decode, progress)
-    meta = {"format": "spz", "version": version, "properties": list(streams), "sh_degree_stored": sh_degree,
-            "fractional_bits": frac_bits, "antialiased": bool(flags & ANTIALIASED_FLAG)}
+    meta = {
+        "format": "spz",
+        "version": version,
+        "properties": list(streams),
+        "sh_degree_stored": sh_degree,
+        "fractional_bits": frac_bits,
+        "antialiased": bool(flags & ANTIALIASED_FLAG),
+    }
     return Scene.from_arrays(means, scales, quats, opacities, sh, source=str(path), meta=meta)

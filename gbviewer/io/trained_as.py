@@ -52,8 +52,11 @@ def ply_comments(path: Path) -> list[str]:
         return []
     end = head.find(b"end_header")
     lines = head[: end if end >= 0 else len(head)].decode("latin-1").splitlines()
-    return [line.split(None, 1)[1] if len(line.split(None, 1)) > 1 else "" for line in lines
-            if line.split(None, 1)[:1] == ["comment"]]
+    return [
+        line.split(None, 1)[1] if len(line.split(None, 1)) > 1 else ""
+        for line in lines
+        if line.split(None, 1)[:1] == ["comment"]
+    ]
 
 
 def comment_signals(comments: list[str]) -> list[Signal]:
@@ -73,8 +76,9 @@ def signals_of(meta: dict, comments: list[str] | None = None) -> list[Signal]:
     out += comment_signals(comments or [])
     declared = meta.get("splat_render_mode")
     if isinstance(declared, str):
-        out.append(Signal(COMMENT_VALUES.get(declared.lower(), UNKNOWN),
-                          f"glTF asset.extras '{COMMENT_KEY}: {declared}'"))
+        out.append(
+            Signal(COMMENT_VALUES.get(declared.lower(), UNKNOWN), f"glTF asset.extras '{COMMENT_KEY}: {declared}'")
+        )
     if meta.get("antialiased"):
         out.append(Signal(ANTIALIASED, "spz flag" if meta.get("format") == "spz" else "sog antialias field"))
     return out

@@ -28,13 +28,23 @@ def sh_basis(dirs: np.ndarray, k: int) -> np.ndarray:
         basis += [-c1 * y, c1 * z, -c1 * x]
     if k > 4:
         xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-        basis += [1.0925484305920792 * xy, -1.0925484305920792 * yz, 0.31539156525252005 * (2 * zz - xx - yy),
-                  -1.0925484305920792 * xz, 0.5462742152960396 * (xx - yy)]
+        basis += [
+            1.0925484305920792 * xy,
+            -1.0925484305920792 * yz,
+            0.31539156525252005 * (2 * zz - xx - yy),
+            -1.0925484305920792 * xz,
+            0.5462742152960396 * (xx - yy),
+        ]
     if k > 9:
-        basis += [-0.5900435899266435 * y * (3 * xx - yy), 2.890611442640554 * xy * z,
-                  -0.4570457994644658 * y * (4 * zz - xx - yy), 0.3731763325901154 * z * (2 * zz - 3 * xx - 3 * yy),
-                  -0.4570457994644658 * x * (4 * zz - xx - yy), 1.445305721320277 * z * (xx - yy),
-                  -0.5900435899266435 * x * (xx - 3 * yy)]
+        basis += [
+            -0.5900435899266435 * y * (3 * xx - yy),
+            2.890611442640554 * xy * z,
+            -0.4570457994644658 * y * (4 * zz - xx - yy),
+            0.3731763325901154 * z * (2 * zz - 3 * xx - 3 * yy),
+            -0.4570457994644658 * x * (4 * zz - xx - yy),
+            1.445305721320277 * z * (xx - yy),
+            -0.5900435899266435 * x * (xx - 3 * yy),
+        ]
     return np.stack(basis[:k], 1)
 
 
@@ -53,8 +63,9 @@ def rotate_sh(sh: np.ndarray, q: np.ndarray) -> np.ndarray:
     return out.astype(sh.dtype)
 
 
-def apply_matrix(m: np.ndarray, means: np.ndarray, scales: np.ndarray, quats: np.ndarray,
-                 sh: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def apply_matrix(
+    m: np.ndarray, means: np.ndarray, scales: np.ndarray, quats: np.ndarray, sh: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Splats (quats (w,x,y,z)) moved by the 4x4 matrix `m`, in float64, returned as float32."""
     a, t = np.asarray(m, np.float64)[:3, :3], np.asarray(m, np.float64)[:3, 3]
     u, sing, vt = np.linalg.svd(a)
@@ -78,5 +89,12 @@ def _multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """The Hamilton product p q of one quaternion `p` and (N,4) `q`, all (w,x,y,z)."""
     w0, x0, y0, z0 = p
     w, x, y, z = q.T
-    return np.stack([w0 * w - x0 * x - y0 * y - z0 * z, w0 * x + x0 * w + y0 * z - z0 * y,
-                     w0 * y - x0 * z + y0 * w + z0 * x, w0 * z + x0 * y - y0 * x + z0 * w], 1)
+    return np.stack(
+        [
+            w0 * w - x0 * x - y0 * y - z0 * z,
+            w0 * x + x0 * w + y0 * z - z0 * y,
+            w0 * y - x0 * z + y0 * w + z0 * x,
+            w0 * z + x0 * y - y0 * x + z0 * w,
+        ],
+        1,
+    )

@@ -88,9 +88,13 @@ def inria_columns(scene: Scene) -> dict[str, np.ndarray]:
 
 def ply_header(n: int, names: list[str], comments: tuple[str, ...] = ()) -> bytes:
     """The header of a binary little-endian PLY with `n` vertices of float32 properties `names`."""
-    return ("ply\nformat binary_little_endian 1.0\n" + "".join(f"comment {c}\n" for c in comments)
-            + f"element vertex {n}\n" + "".join(f"property float {name}\n" for name in names)
-            + "end_header\n").encode("ascii")
+    return (
+        "ply\nformat binary_little_endian 1.0\n"
+        + "".join(f"comment {c}\n" for c in comments)
+        + f"element vertex {n}\n"
+        + "".join(f"property float {name}\n" for name in names)
+        + "end_header\n"
+    ).encode("ascii")
 
 
 def trained_as_comments(scene: Scene) -> tuple[str, ...]:
@@ -102,8 +106,10 @@ def trained_as_comments(scene: Scene) -> tuple[str, ...]:
 def refuse_neural(scene: Scene, what: str) -> None:
     """Refuse a Duplex-GS checkpoint, whose splats only its MLPs give, per view."""
     if scene.oit is not None and scene.oit.neural is not None:
-        raise GBViewerError(f"{scene.source}: a Duplex-GS checkpoint has no fixed splats (its MLPs decode them per "
-                            f"view), so it cannot be written as {what}")
+        raise GBViewerError(
+            f"{scene.source}: a Duplex-GS checkpoint has no fixed splats (its MLPs decode them per "
+            f"view), so it cannot be written as {what}"
+        )
 
 
 def write_inria_ply(scene: Scene, path: str | Path, force: bool = False) -> Path:

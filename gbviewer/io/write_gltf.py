@@ -32,7 +32,7 @@ def _pad(data: bytes, fill: bytes) -> bytes:
 def gltf_arrays(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """means, scales, quats (w,x,y,z), opacities and SH in glTF's axes."""
     sh = np.array(scene.sh, np.float32)
-    sh[:, 1:] *= FLIP_SH[:sh.shape[1] - 1, None]
+    sh[:, 1:] *= FLIP_SH[: sh.shape[1] - 1, None]
     return scene.means * FLIP_XYZ, scene.scales, scene.quats * QUAT_FLIP, scene.opacities, sh
 
 
@@ -41,15 +41,19 @@ def glb_bytes(scene: Scene, spz: bool = False) -> bytes:
     means, scales, quats, opacities, sh = gltf_arrays(scene)
     n = len(means)
     names = ["POSITION", "COLOR_0", PREFIX + "ROTATION", PREFIX + "SCALE", PREFIX + "OPACITY"]
-    names += [f"{PREFIX}SH_DEGREE_{d}_COEF_{i}" for d in range(4) for i in range(SH_PER_DEGREE[d])][:sh.shape[1]]
-    rgba = np.concatenate([u8((0.5 + SH_C0 * sh[:, 0].astype(np.float64)) * 255),
-                           u8(opacities.astype(np.float64) * 255)[:, None]], axis=1)
+    names += [f"{PREFIX}SH_DEGREE_{d}_COEF_{i}" for d in range(4) for i in range(SH_PER_DEGREE[d])][: sh.shape[1]]
+    rgba = np.concatenate(
+        [u8((0.5 + SH_C0 * sh[:, 0].astype(np.float64)) * 255), u8(opacities.astype(np.float64) * 255)[:, None]], axis=1
+    )
     columns = [means, rgba, np.concatenate([quats[:, 1:], quats[:, :1]], axis=1), scales, opacities[:, None]]
     columns += [sh[:, i] for i in range(sh.shape[1])]
     accessors, views, blobs, offset = [], [], [], 0
     for name, col in zip(names, columns):
-        acc = {"componentType": UBYTE if col.dtype == np.uint8 else FLOAT, "count": n,
-               "type": {1: "SCALAR", 3: "VEC3", 4: "VEC4"}[col.shape[1]]}
+        acc = {
+            "componentType": UBYTE if col.dtype == np.uint8 else FLOAT,
+            "count": n,
+            "type": {1: "SCALAR", 3: "VEC3", 4: "VEC4"}[col.shape[1]],
+        }
         if col.dtype == np.uint8:
             acc["normalized"] = True
         if name == "POSITION":
@@ -61,8 +65,12 @@ def glb_bytes(scene: Scene, spz: bool = False) -> bytes:
             blobs.append(_pad(data, b"\0"))
             offset += len(blobs[-1])
         accessors.append(acc)
-    ext: dict = {"kernel": "ellipse", "colorSpace": "srgb_rec709_display", "sortingMethod": "cameraDistance",
-                 "projection": "perspective"}
+    ext: dict = {
+        "kernel": "ellipse",
+        "colorSpace": "srgb_rec709_display",
+        "sortingMethod": "cameraDistance",
+        "projection": "perspective",
+    }
     used = [EXT]
     if spz:
         stream = spz_bytes(means, scales, quats, opacities, sh, antialiased_mode(scene))
@@ -74,10 +82,19 @@ def glb_bytes(scene: Scene, spz: bool = False) -> bytes:
     mode = WRITTEN.get(scene.meta.get("trained_as", ""))
     if mode:
         asset["extras"] = {COMMENT_KEY: mode}
-    doc = {"asset": asset, "extensionsUsed": used, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
-           "meshes": [{"primitives": [{"mode": 0, "attributes": {k: i for i, k in enumerate(names)},
-                                       "extensions": {EXT: ext}}]}],
-           "accessors": accessors, "bufferViews": views, "buffers": [{"byteLength": sum(map(len, blobs))}]}
+    doc = {
+        "asset": asset,
+        "extensionsUsed": used,
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [
+            {"primitives": [{"mode": 0, "attributes": {k: i for i, k in enumerate(names)}, "extensions": {EXT: ext}}]}
+        ],
+        "accessors": accessors,
+        "bufferViews": views,
+        "buffers": [{"byteLength": sum(map(len, blobs))}],
+    }
     if spz:
         doc["extensionsRequired"] = used
     body = _pad(json.dumps(doc, separators=(",", ":")).encode(), b" ")

@@ -18,8 +18,8 @@ import gzip
 import numpy as np
 
 from ..model.scene import SH_C0, Scene
-from .spz import COLOR_SCALE, FLIP_SH, FLIP_XYZ, LEGACY_HEADER, MAGIC
 from .splat import RECORD
+from .spz import COLOR_SCALE, FLIP_SH, FLIP_XYZ, LEGACY_HEADER, MAGIC
 from .trained_as import ANTIALIASED, MIP_3D
 
 SPZ_VERSION = 3
@@ -42,8 +42,9 @@ def fractional_bits(means: np.ndarray) -> int:
     return bits
 
 
-def spz_bytes(means: np.ndarray, scales: np.ndarray, quats: np.ndarray, opacities: np.ndarray, sh: np.ndarray,
-              antialiased: bool) -> bytes:
+def spz_bytes(
+    means: np.ndarray, scales: np.ndarray, quats: np.ndarray, opacities: np.ndarray, sh: np.ndarray, antialiased: bool
+) -> bytes:
     """A gzip SPZ v3 stream of splats given in the stream's own axes (quats (w,x,y,z))."""
     n, k = len(means), sh.shape[1]
     degree = {1: 0, 4: 1, 9: 2, 16: 3}[k]
@@ -57,21 +58,28 @@ def spz_bytes(means: np.ndarray, scales: np.ndarray, quats: np.ndarray, opacitie
     comp = largest.astype(np.uint32)
     for i in range(4):  # the lowest index first, so it ends up in the highest bits
         field = ((xyzw[:, i] < 0).astype(np.uint32) << 9) | np.round(511 * np.abs(xyzw[:, i]) / SQRT_HALF).astype(
-            np.uint32)
+            np.uint32
+        )
         comp = np.where(largest != i, (comp << 10) | field, comp)
     with np.errstate(divide="ignore"):
         log_scales = np.log(scales.astype(np.float64))
     rest = sh[:, 1:].astype(np.float64)  # coefficient-major, RGB inner
     header = LEGACY_HEADER.pack(MAGIC, SPZ_VERSION, n, degree, bits, 1 if antialiased else 0, 0)
-    body = [pos, u8(opacities.astype(np.float64) * 255), u8(sh[:, 0].astype(np.float64) * COLOR_SCALE * 255 + 127.5),
-            u8((log_scales + 10) * 16), comp.astype("<u4"), u8(rest * 128 + 128)]
+    body = [
+        pos,
+        u8(opacities.astype(np.float64) * 255),
+        u8(sh[:, 0].astype(np.float64) * COLOR_SCALE * 255 + 127.5),
+        u8((log_scales + 10) * 16),
+        comp.astype("<u4"),
+        u8(rest * 128 + 128),
+    ]
     return gzip.compress(header + b"".join(np.ascontiguousarray(a).tobytes() for a in body), compresslevel=6, mtime=0)
 
 
 def encode_spz(scene: Scene) -> bytes:
     """A `.spz` file: the scene turned from the INRIA frame into SPZ's RUB (y and z negated)."""
     sh = np.array(scene.sh, np.float32)
-    sh[:, 1:] *= FLIP_SH[:sh.shape[1] - 1, None]
+    sh[:, 1:] *= FLIP_SH[: sh.shape[1] - 1, None]
     quats = scene.quats * np.concatenate([[1.0], FLIP_XYZ]).astype(np.float32)
     return spz_bytes(scene.means * FLIP_XYZ, scene.scales, quats, scene.opacities, sh, antialiased_mode(scene))
 
@@ -89,4 +97,3 @@ def encode_splat(scene: Scene) -> bytes:
     rec["rgba"][:, 3] = u8(scene.opacities.astype(np.float64) * 255)
     rec["rot"] = u8(scene.quats.astype(np.float64) * 128 + 128)
     return rec.tobytes()
-

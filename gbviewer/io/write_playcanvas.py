@@ -125,7 +125,7 @@ def _webp(pixels: np.ndarray, width: int) -> bytes:
     """(N,4) uint8 pixels as a lossless RGBA WebP `width` wide (zero padded; RGB kept under zero alpha)."""
     rows = -(-len(pixels) // width)
     img = np.zeros((rows * width, 4), np.uint8)
-    img[:len(pixels)] = pixels
+    img[: len(pixels)] = pixels
     buf = io.BytesIO()
     Image.fromarray(img.reshape(rows, width, 4), "RGBA").save(buf, format="WEBP", lossless=True, exact=True)
     return buf.getvalue()
@@ -153,8 +153,9 @@ def _palette(rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _assign(flat: np.ndarray, centres: np.ndarray, rows: int = 2048) -> np.ndarray:
     """Nearest centre of each row (squared distances by matrix product, a block of rows at a time)."""
     norms = (centres * centres).sum(axis=1)
-    return np.concatenate([np.argmin(norms - 2 * flat[i:i + rows] @ centres.T, axis=1)
-                           for i in range(0, len(flat), rows)])
+    return np.concatenate(
+        [np.argmin(norms - 2 * flat[i : i + rows] @ centres.T, axis=1) for i in range(0, len(flat), rows)]
+    )
 
 
 def sog_bytes(scene: Scene) -> bytes:
@@ -168,30 +169,43 @@ def sog_bytes(scene: Scene) -> bytes:
     mins, maxs = t.min(axis=0), t.max(axis=0)
     v = np.round((t - mins) / np.where(maxs > mins, maxs - mins, 1) * 65535).astype(np.uint16)
     largest, others = _smallest_three(s["quats"])
-    quats = np.concatenate([u8((others * math.sqrt(2) + 1) / 2 * 255), (252 + largest)[:, None].astype(np.uint8)],
-                           axis=1)
+    quats = np.concatenate(
+        [u8((others * math.sqrt(2) + 1) / 2 * 255), (252 + largest)[:, None].astype(np.uint8)], axis=1
+    )
     s_book, s_idx = codebook(np.log(s["scales"].astype(np.float64)))
     c_book, c_idx = codebook(s["sh"][:, 0])
-    files = {"means_l.webp": _webp(np.concatenate([(v & 255).astype(np.uint8), opaque], axis=1), width),
-             "means_u.webp": _webp(np.concatenate([(v >> 8).astype(np.uint8), opaque], axis=1), width),
-             "quats.webp": _webp(quats, width),
-             "scales.webp": _webp(np.concatenate([s_idx.reshape(n, 3).astype(np.uint8), opaque], axis=1), width),
-             "sh0.webp": _webp(np.concatenate([c_idx.reshape(n, 3).astype(np.uint8),
-                                               u8(s["opacities"] * 255.0)[:, None]], axis=1), width)}
-    meta: dict = {"version": 2, "count": n, "antialias": antialiased_mode(scene),
-                  "means": {"mins": mins.tolist(), "maxs": maxs.tolist(), "files": ["means_l.webp", "means_u.webp"]},
-                  "scales": {"codebook": s_book.tolist(), "files": ["scales.webp"]},
-                  "quats": {"files": ["quats.webp"]},
-                  "sh0": {"codebook": c_book.tolist(), "files": ["sh0.webp"]}}
+    files = {
+        "means_l.webp": _webp(np.concatenate([(v & 255).astype(np.uint8), opaque], axis=1), width),
+        "means_u.webp": _webp(np.concatenate([(v >> 8).astype(np.uint8), opaque], axis=1), width),
+        "quats.webp": _webp(quats, width),
+        "scales.webp": _webp(np.concatenate([s_idx.reshape(n, 3).astype(np.uint8), opaque], axis=1), width),
+        "sh0.webp": _webp(
+            np.concatenate([c_idx.reshape(n, 3).astype(np.uint8), u8(s["opacities"] * 255.0)[:, None]], axis=1), width
+        ),
+    }
+    meta: dict = {
+        "version": 2,
+        "count": n,
+        "antialias": antialiased_mode(scene),
+        "means": {"mins": mins.tolist(), "maxs": maxs.tolist(), "files": ["means_l.webp", "means_u.webp"]},
+        "scales": {"codebook": s_book.tolist(), "files": ["scales.webp"]},
+        "quats": {"files": ["quats.webp"]},
+        "sh0": {"codebook": c_book.tolist(), "files": ["sh0.webp"]},
+    }
     if k > 1:
         palette, labels = _palette(s["sh"][:, 1:])
         p, coeffs = palette.shape[0], k - 1
         n_book, n_idx = codebook(palette)
-        centroids = np.concatenate([n_idx.reshape(p * coeffs, 3).astype(np.uint8), np.full((p * coeffs, 1), 255,
-                                                                                           np.uint8)], axis=1)
+        centroids = np.concatenate(
+            [n_idx.reshape(p * coeffs, 3).astype(np.uint8), np.full((p * coeffs, 1), 255, np.uint8)], axis=1
+        )
         lab = np.stack([labels & 255, labels >> 8, np.zeros(n, int), np.full(n, 255)], axis=1).astype(np.uint8)
-        meta["shN"] = {"count": p, "bands": SH_BANDS[k], "codebook": n_book.tolist(),
-                       "files": ["shN_centroids.webp", "shN_labels.webp"]}
+        meta["shN"] = {
+            "count": p,
+            "bands": SH_BANDS[k],
+            "codebook": n_book.tolist(),
+            "files": ["shN_centroids.webp", "shN_labels.webp"],
+        }
         files["shN_centroids.webp"] = _webp(centroids, 64 * coeffs)
         files["shN_labels.webp"] = _webp(lab, width)
     files["meta.json"] = json.dumps(meta).encode()

@@ -8,5 +8,18 @@ from .cut import DEFAULT_BAND, Cut, check_plain, check_tau, cut, cut_rows, cut_s
 from .sparse import stand_in
 from .tree import Hierarchy, build
 
-__all__ = ["DEFAULT_BAND", "Cut", "Hierarchy", "build", "check_plain", "check_tau", "cut", "cut_rows", "cut_scene",
-           "cut_view", "hierarchy_for", "hierarchy_state", "stand_in"]
+__all__ = [
+    "DEFAULT_BAND",
+    "Cut",
+    "Hierarchy",
+    "build",
+    "check_plain",
+    "check_tau",
+    "cut",
+    "cut_rows",
+    "cut_scene",
+    "cut_view",
+    "hierarchy_for",
+    "hierarchy_state",
+    "stand_in",
+]

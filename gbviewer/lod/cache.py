@@ -44,8 +44,10 @@ def cache_key(scene: Scene, rule: str) -> str | None:
     made from a loaded one by dataclasses.replace: no content; arrays made writable again: maybe edited)."""
     if scene.content is None or not scene.intact:
         return None
-    ident = (f"v{VERSION}|{scene.content}|{scene.num_splats}|{scene.sh.shape[1]}|{scene.sh.dtype}|"
-             f"{scene.filter_3d is not None}|{rule}")
+    ident = (
+        f"v{VERSION}|{scene.content}|{scene.num_splats}|{scene.sh.shape[1]}|{scene.sh.dtype}|"
+        f"{scene.filter_3d is not None}|{rule}"
+    )
     return hashlib.sha256(ident.encode()).hexdigest()[:32]
 
 
@@ -81,8 +83,9 @@ def _lookup(scene: Scene, rule: str, folder: Path | None = None) -> tuple[Hierar
         except FileNotFoundError:  # pruned by another process meanwhile: a miss
             pass
         except Exception as exc:  # noqa: BLE001 - a damaged or hostile entry of any kind (entry.read_entry)
-            warnings.warn(f"{entry}: damaged level-of-detail cache entry ({type(exc).__name__}: {exc}); rebuilt",
-                          stacklevel=3)  # hierarchy_for or cached_build's caller
+            warnings.warn(
+                f"{entry}: damaged level-of-detail cache entry ({type(exc).__name__}: {exc}); rebuilt", stacklevel=3
+            )  # hierarchy_for or cached_build's caller
     _doing[scene] = "building"
     tree = build(scene, rule)
     try:

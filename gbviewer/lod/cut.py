@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.camera import Camera
 from ..core.errors import GBViewerError, RenderCancelled
+from ..model.camera import Camera
 from ..model.scene import Scene
 from .cache import hierarchy_for
 from .tree import Hierarchy
@@ -53,20 +53,32 @@ def check_tau(tau: float, what: str = "lod") -> float:
 def cut_view(camera: Camera, tau: float, band: float = DEFAULT_BAND) -> tuple:
     """The cut's inputs as the native modules take them: (tau, band, eye float32, larger focal length,
     orthographic). The CPU renderer draws the cut of the same tuple in place (RenderSettings.lod)."""
-    return (check_tau(tau), float(band), np.asarray(camera.position, np.float32), float(max(camera.fx, camera.fy)),
-            bool(camera.orthographic))
+    return (
+        check_tau(tau),
+        float(band),
+        np.asarray(camera.position, np.float32),
+        float(max(camera.fx, camera.fy)),
+        bool(camera.orthographic),
+    )
 
 
-def cut(tree: Hierarchy, camera: Camera, tau: float, band: float = DEFAULT_BAND, threads: int = 0,
-        flag: np.ndarray | None = None) -> Cut:
+def cut(
+    tree: Hierarchy,
+    camera: Camera,
+    tau: float,
+    band: float = DEFAULT_BAND,
+    threads: int = 0,
+    flag: np.ndarray | None = None,
+) -> Cut:
     """The nodes drawn for `camera` at tau pixels (band 0: a hard cut, every weight 1). `flag`: a render's cancel
     flag (int64 array, RenderControl.flag), read while the cut runs: RenderCancelled once it is nonzero."""
     rows, weights, nl = _cut_of_view(tree, cut_view(camera, tau, band), threads, flag)
     return Cut(rows[:nl], weights[:nl], rows[nl:], weights[nl:])
 
 
-def cut_rows(tree: Hierarchy, view: tuple, threads: int = 0,
-             flag: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def cut_rows(
+    tree: Hierarchy, view: tuple, threads: int = 0, flag: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """The cut of `view` (`cut_view`'s tuple) as a renderer draws it in place over the scene's rows followed by the
     tree's interior nodes (interior node q at row N + q): int32 rows in the order `cut_scene` gathers them, float32
     opacity multipliers. `flag`: as cut's."""
@@ -80,8 +92,9 @@ def _cut_of_view(tree: Hierarchy, view: tuple, threads: int, flag: np.ndarray | 
     from .._native import lod as native
 
     tau, band, eye, focal, ortho = view
-    out = native.cut(tree.means, tree.radius, tree.size, tree.levels, tree.order, eye, focal, ortho, tau, band,
-                     threads, flag)
+    out = native.cut(
+        tree.means, tree.radius, tree.size, tree.levels, tree.order, eye, focal, ortho, tau, band, threads, flag
+    )
     if out is None:
         raise RenderCancelled("render cancelled")
     return out
@@ -90,12 +103,21 @@ def _cut_of_view(tree: Hierarchy, view: tuple, threads: int, flag: np.ndarray | 
 def check_plain(scene: Scene) -> None:
     """Refuse a scene level of detail does not apply to (one that carries wsr / duplex data)."""
     if scene.oit is not None:
-        raise GBViewerError(f"{scene.source}: level of detail is for plain splat scenes; this one carries wsr / "
-                            "duplex data (view weights, cells or a trained model)")
+        raise GBViewerError(
+            f"{scene.source}: level of detail is for plain splat scenes; this one carries wsr / "
+            "duplex data (view weights, cells or a trained model)"
+        )
 
 
-def cut_scene(scene: Scene, camera: Camera, tau: float, band: float = DEFAULT_BAND, threads: int = 0,
-              rule: str = "depth", flag: np.ndarray | None = None) -> Scene:
+def cut_scene(
+    scene: Scene,
+    camera: Camera,
+    tau: float,
+    band: float = DEFAULT_BAND,
+    threads: int = 0,
+    rule: str = "depth",
+    flag: np.ndarray | None = None,
+) -> Scene:
     """The Scene of the cut through the hierarchy merged by `rule`: the drawn leaves' splats, then the drawn interior
     nodes' Gaussians (SH as the scene's), opacities times the weights; meta["lod"] = (drawn, of). The scene itself
     when the cut is its leaves. `flag`: as cut's."""
@@ -116,5 +138,13 @@ def cut_scene(scene: Scene, camera: Camera, tau: float, band: float = DEFAULT_BA
     if not float_sh:  # float16 SH stays float16
         out["sh"] = np.concatenate([scene.sh[c.leaves], tree.sh[c.nodes].astype(np.float16)])
     meta = {**scene.meta, "lod": (c.num_drawn, scene.num_splats)}
-    return Scene(out["means"], out["scales"], out["quats"], out["opacities"], out["sh"], out.get("filter_3d"),
-                 source=scene.source, meta=meta)
+    return Scene(
+        out["means"],
+        out["scales"],
+        out["quats"],
+        out["opacities"],
+        out["sh"],
+        out.get("filter_3d"),
+        source=scene.source,
+        meta=meta,
+    )

@@ -13,8 +13,8 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..model.scene import Scene
 from ..core.validate import open_regular, read_npy
+from ..model.scene import Scene
 from .tree import Hierarchy, layout
 
 

@@ -36,11 +36,15 @@ def stand_in(scene: Scene, splats: int | None = None) -> Scene:
         made = _memo.get(scene)
         if made is None or made.meta.get("stand_in") != k:
             pick = slice(0, None, k)
-            made = Scene(np.ascontiguousarray(scene.means[pick]),
-                         np.ascontiguousarray(scene.scales[pick] * np.float32(k ** (1 / 3))),
-                         np.ascontiguousarray(scene.quats[pick]), np.ascontiguousarray(scene.opacities[pick]),
-                         np.ascontiguousarray(scene.sh[pick]),
-                         None if scene.filter_3d is None else np.ascontiguousarray(scene.filter_3d[pick]),
-                         source=scene.source, meta={**scene.meta, "stand_in": k})
+            made = Scene(
+                np.ascontiguousarray(scene.means[pick]),
+                np.ascontiguousarray(scene.scales[pick] * np.float32(k ** (1 / 3))),
+                np.ascontiguousarray(scene.quats[pick]),
+                np.ascontiguousarray(scene.opacities[pick]),
+                np.ascontiguousarray(scene.sh[pick]),
+                None if scene.filter_3d is None else np.ascontiguousarray(scene.filter_3d[pick]),
+                source=scene.source,
+                meta={**scene.meta, "stand_in": k},
+            )
             _memo[scene] = made
     return made

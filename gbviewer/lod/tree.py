@@ -132,9 +132,17 @@ def layout(scene: Scene) -> dict[str, tuple[tuple[int, ...], str]]:
     """The (shape, dtype) of each array of `scene`'s hierarchy (filter_3d only for a scene with a 3D filter)."""
     levels = level_offsets(scene.num_splats)
     n, m, k = scene.num_splats, levels[-1] - levels[1], scene.sh.shape[1]
-    out = {"order": ((n,), "int32"), "levels": ((len(levels),), "int64"), "means": ((m, 3), "float32"),
-           "scales": ((m, 3), "float32"), "quats": ((m, 4), "float32"), "opacities": ((m,), "float32"),
-           "sh": ((m, k, 3), "float32"), "radius": ((m,), "float32"), "size": ((m,), "float32")}
+    out = {
+        "order": ((n,), "int32"),
+        "levels": ((len(levels),), "int64"),
+        "means": ((m, 3), "float32"),
+        "scales": ((m, 3), "float32"),
+        "quats": ((m, 4), "float32"),
+        "opacities": ((m,), "float32"),
+        "sh": ((m, k, 3), "float32"),
+        "radius": ((m,), "float32"),
+        "size": ((m,), "float32"),
+    }
     if scene.filter_3d is not None:
         out["filter_3d"] = ((m,), "float32")
     return out
@@ -151,7 +159,14 @@ def build(scene: Scene, rule: str = "depth", threads: int = 0) -> Hierarchy:
     if not scene.num_splats:
         raise GBViewerError(f"{scene.source}: no splats to build a level-of-detail hierarchy of")
     t0 = time.perf_counter()
-    out = native.build(scene.means, scene.scales, scene.quats, scene.opacities,
-                            np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d, RULES.index(rule), threads)
+    out = native.build(
+        scene.means,
+        scene.scales,
+        scene.quats,
+        scene.opacities,
+        np.ascontiguousarray(scene.sh, np.float32),
+        scene.filter_3d,
+        RULES.index(rule),
+        threads,
+    )
     return Hierarchy(rule=rule, build_ms=(time.perf_counter() - t0) * 1e3, **out)
-

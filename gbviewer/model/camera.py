@@ -114,10 +114,12 @@ class Camera:
         who = f"camera {self.name!r:.60}"
         try:
             parse_projection(self.projection, f"{who}: projection")
-            checked = {"width": integer(self.width, f"{who}: width", lo=1, hi=MAX_IMAGE_SIZE),
-                       "height": integer(self.height, f"{who}: height", lo=1, hi=MAX_IMAGE_SIZE),
-                       "R": array(self.R, f"{who}: R", (3, 3), f32=True),
-                       "t": array(self.t, f"{who}: t", (3,), f32=True)}
+            checked = {
+                "width": integer(self.width, f"{who}: width", lo=1, hi=MAX_IMAGE_SIZE),
+                "height": integer(self.height, f"{who}: height", lo=1, hi=MAX_IMAGE_SIZE),
+                "R": array(self.R, f"{who}: R", (3, 3), f32=True),
+                "t": array(self.t, f"{who}: t", (3,), f32=True),
+            }
             for name in ("fx", "fy", "near"):
                 checked[name] = real(getattr(self, name), f"{who}: {name}", lo=0, lo_open=True, f32=True)
             for name in ("cx", "cy"):
@@ -190,8 +192,7 @@ class Camera:
         w, h = max(1, round(self.width * s)), max(1, round(self.height * s))
         sx, sy = w / self.width, h / self.height
         try:
-            return replace(self, width=w, height=h, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx,
-                           cy=self.cy * sy)
+            return replace(self, width=w, height=h, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy)
         except CameraError as exc:
             raise CameraError(f"{exc} at sampling rate {format_rate(s)}") from None
 
@@ -254,11 +255,13 @@ def orbit_camera(
     if up not in UP_AXES:
         raise CameraError(f"up axis {up!r}; expected one of {sorted(UP_AXES)}")
     try:  # checked before the framing divides by them
-        width, height = (integer(v, f"orbit {name}", lo=1, hi=MAX_IMAGE_SIZE) for v, name in ((width, "width"),
-                                                                                            (height, "height")))
+        width, height = (
+            integer(v, f"orbit {name}", lo=1, hi=MAX_IMAGE_SIZE) for v, name in ((width, "width"), (height, "height"))
+        )
         fov_y_deg = real(fov_y_deg, "orbit field of view (degrees)", lo=0, hi=180, lo_open=True)
-        azimuth_deg, elevation_deg = (real(v, f"orbit {name} (degrees)") for v, name in (
-            (azimuth_deg, "azimuth"), (elevation_deg, "elevation")))
+        azimuth_deg, elevation_deg = (
+            real(v, f"orbit {name} (degrees)") for v, name in ((azimuth_deg, "azimuth"), (elevation_deg, "elevation"))
+        )
         if distance is not None:
             distance = real(distance, "orbit distance", lo=0, lo_open=True, f32=True)
     except InvalidValue as exc:
@@ -268,8 +271,10 @@ def orbit_camera(
     distance = framing if distance is None else distance
     eye = centre + distance * orbit_direction(up_v, azimuth_deg, elevation_deg)
     if np.abs(eye).max() > F32_MAX:
-        raise CameraError(f"{scene.source}: an orbit camera around this scene ({2 * radius:.3g} across) would sit at "
-                          f"{np.abs(eye).max():.3g}, beyond float32; give a camera")
+        raise CameraError(
+            f"{scene.source}: an orbit camera around this scene ({2 * radius:.3g} across) would sit at "
+            f"{np.abs(eye).max():.3g}, beyond float32; give a camera"
+        )
     cam = Camera.look_at(eye, centre, up_v, width, height, fov_y_deg, name=f"orbit({azimuth_deg},{elevation_deg})")
     return cam.with_projection(projection, distance)
 
@@ -296,8 +301,10 @@ def _camera_entry(e: object, where: str, k: int) -> Camera:
     R = array(field(e, "rotation", where), f"{where}: 'rotation'", (3, 3), f32=True).T  # stored camera-to-world
     pos = array(field(e, "position", where), f"{where}: 'position'", (3,), f32=True)
     name = str(e.get("img_name", e.get("id", k)))  # type: ignore[union-attr]  (field() proved e a dict)
-    projection = parse_projection(e.get("projection", "perspective"),  # type: ignore[union-attr]
-                                  f"{where}: 'projection'")
+    projection = parse_projection(
+        e.get("projection", "perspective"),  # type: ignore[union-attr]
+        f"{where}: 'projection'",
+    )
     try:
         return Camera(w, h, fx, fy, w / 2, h / 2, R, -R @ pos, name=name, projection=projection)
     except CameraError as exc:
@@ -307,6 +314,15 @@ def _camera_entry(e: object, where: str, k: int) -> Camera:
 def camera_key(camera: Camera) -> tuple:
     """A hashable key equal for cameras that render the same pixels (size, intrinsics, pose, near plane,
     projection)."""
-    return (camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy,
-            np.asarray(camera.R, np.float32).tobytes(), np.asarray(camera.t, np.float32).tobytes(), camera.near,
-            camera.projection)
+    return (
+        camera.width,
+        camera.height,
+        camera.fx,
+        camera.fy,
+        camera.cx,
+        camera.cy,
+        np.asarray(camera.R, np.float32).tobytes(),
+        np.asarray(camera.t, np.float32).tobytes(),
+        camera.near,
+        camera.projection,
+    )

@@ -12,12 +12,12 @@ from typing import Sequence
 
 import numpy as np
 
-from .camera import Camera
 from ..core.errors import GBViewerError
+from ..core.validate import integer, real
+from .camera import Camera
 from .keyframes import Keyframe, interpolate_keyframes, key_times, load_keyframes
 from .nerfstudio_paths import NerfstudioPath
 from .scene import Scene
-from ..core.validate import integer, real
 
 PATHS = ("zoom", "dolly", "rate")
 DEFAULT_SECONDS = 4.0  # length of a path when neither frames nor seconds are given (and keyframes have no times)
@@ -68,19 +68,24 @@ def zoom_path(base: Camera, frames: int, start: float = 1.0, end: float = 1.0 / 
     geometrically; the pane size stays.
 
     At rate s the content appears s times its x1 size (about the principal point), so it is sampled at rate s."""
-    return [PathFrame(replace(base, fx=base.fx * s, fy=base.fy * s), s, base.width, base.height, s,
-                      (base.cx, base.cy)) for s in geometric_rates(start, end, frames)]
+    return [
+        PathFrame(replace(base, fx=base.fx * s, fy=base.fy * s), s, base.width, base.height, s, (base.cx, base.cy))
+        for s in geometric_rates(start, end, frames)
+    ]
 
 
-def dolly_path(base: Camera, frames: int, start: float = 1.0, end: float = 1.0 / 8.0,
-               focus_depth: float = 1.0) -> list[PathFrame]:
+def dolly_path(
+    base: Camera, frames: int, start: float = 1.0, end: float = 1.0 / 8.0, focus_depth: float = 1.0
+) -> list[PathFrame]:
     """The camera moves along its optical axis so that things at `focus_depth` (camera z of the base camera)
     appear s times their x1 size: it stands at depth focus_depth / s from them. Nearer and farther things scale
     differently (that is what distinguishes a dolly from a zoom). An orthographic camera's image does not change
     with its distance: an error (its zoom scales fx, fy)."""
     if base.orthographic:
-        raise GBViewerError("dolly: an orthographic camera sees the same image from any distance; use --path zoom "
-                            "(it scales the pixels per unit)")
+        raise GBViewerError(
+            "dolly: an orthographic camera sees the same image from any distance; use --path zoom "
+            "(it scales the pixels per unit)"
+        )
     focus_depth = real(focus_depth, "dolly: focus depth", lo=0.0, lo_open=True)
     out = []
     for s in geometric_rates(start, end, frames):
@@ -92,8 +97,10 @@ def dolly_path(base: Camera, frames: int, start: float = 1.0, end: float = 1.0 /
 def rate_path(base: Camera, frames: int, start: float = 1.0, end: float = 1.0 / 8.0) -> list[PathFrame]:
     """The view stays; frame i is rendered at sampling rate s_i (`Camera.at_sampling_rate`, so the image size
     changes in whole-pixel steps) and shown resized to the pane with nearest filtering."""
-    return [PathFrame(base.at_sampling_rate(s), s, base.width, base.height, 1.0, (base.cx, base.cy))
-            for s in geometric_rates(start, end, frames)]
+    return [
+        PathFrame(base.at_sampling_rate(s), s, base.width, base.height, 1.0, (base.cx, base.cy))
+        for s in geometric_rates(start, end, frames)
+    ]
 
 
 def scene_focus_depth(scene: Scene, camera: Camera, what: str = "dolly", hint: str = "use --path zoom") -> float:
@@ -116,13 +123,26 @@ def keyframe_path(keys: Sequence[Keyframe], frames: int) -> list[PathFrame]:
     out = []
     for key in interpolate_keyframes(keys, times):
         cam = key.camera
-        out.append(PathFrame(cam.at_sampling_rate(key.rate) if key.rate != 1 else cam, key.rate, cam.width,
-                             cam.height, 1.0, (cam.cx, cam.cy)))
+        out.append(
+            PathFrame(
+                cam.at_sampling_rate(key.rate) if key.rate != 1 else cam,
+                key.rate,
+                cam.width,
+                cam.height,
+                1.0,
+                (cam.cx, cam.cy),
+            )
+        )
     return out
 
 
-def path_length(frames: int | None, fps: float = 30.0, seconds: float | None = None,
-                keys: Sequence[Keyframe] | None = None, max_frames: int = MAX_FRAMES) -> int:
+def path_length(
+    frames: int | None,
+    fps: float = 30.0,
+    seconds: float | None = None,
+    keys: Sequence[Keyframe] | None = None,
+    max_frames: int = MAX_FRAMES,
+) -> int:
     """A path's frame count: `frames`; without it `seconds` x fps, or the keyframes' timed span x fps (+ 1, both
     ends), or DEFAULT_SECONDS x fps; more than `max_frames` is an error."""
     what = f"frames of the video (at most {max_frames}; --max-frames raises the limit)"
@@ -137,24 +157,39 @@ def path_length(frames: int | None, fps: float = 30.0, seconds: float | None = N
     return integer(frames, what, lo=1, hi=max_frames)
 
 
-def nerfstudio_frames(p: NerfstudioPath, frames: int | None = None, seconds: float | None = None,
-                      max_frames: int = MAX_FRAMES) -> list[PathFrame]:
+def nerfstudio_frames(
+    p: NerfstudioPath, frames: int | None = None, seconds: float | None = None, max_frames: int = MAX_FRAMES
+) -> list[PathFrame]:
     """The frames of a camera_path.json: its interpolated camera_path list as ns-render renders it, or without one
     its keyframes interpolated here (`keyframe_path`; length as `path_length`, at the file's fps). `frames` or
     `seconds` with a camera_path list is an error: the file sets them."""
     if p.frames:
         if frames is not None or seconds is not None:
             raise GBViewerError("the camera path file lists its frames; drop --frames and --seconds")
-        integer(len(p.frames), f"frames of the camera path (at most {max_frames}; --max-frames raises the limit)",
-                hi=max_frames)
+        integer(
+            len(p.frames),
+            f"frames of the camera path (at most {max_frames}; --max-frames raises the limit)",
+            hi=max_frames,
+        )
         return [PathFrame.of(c) for c in p.frames]
-    return keyframe_path(p.keys, path_length(frames, p.fps, seconds if seconds is not None else p.seconds,
-                                             p.keys, max_frames))
+    return keyframe_path(
+        p.keys, path_length(frames, p.fps, seconds if seconds is not None else p.seconds, p.keys, max_frames)
+    )
 
 
-def camera_path(kind: str | Path, base: Camera, frames: int | None, start: float = 1.0, end: float = 1.0 / 8.0,
-                scene: Scene | None = None, up: str = "-y", *, fps: float = 30.0,
-                seconds: float | None = None, max_frames: int = MAX_FRAMES) -> list[PathFrame]:
+def camera_path(
+    kind: str | Path,
+    base: Camera,
+    frames: int | None,
+    start: float = 1.0,
+    end: float = 1.0 / 8.0,
+    scene: Scene | None = None,
+    up: str = "-y",
+    *,
+    fps: float = 30.0,
+    seconds: float | None = None,
+    max_frames: int = MAX_FRAMES,
+) -> list[PathFrame]:
     """'zoom', 'dolly' (focus: the scene's centre) or 'rate' from `start` to `end`, or a keyframes JSON file.
 
     Length: `frames`; without it `seconds` x fps, or a keyframes file's timed span x fps (+ 1, both ends), or
@@ -174,4 +209,3 @@ def camera_path(kind: str | Path, base: Camera, frames: int | None, start: float
             raise GBViewerError("dolly: needs the scene (its centre sets the focus depth)")
         return dolly_path(base, frames, start, end, scene_focus_depth(scene, base))
     return rate_path(base, frames, start, end)
-

@@ -67,12 +67,16 @@ class Cells:
             object.__setattr__(self, name, np.ascontiguousarray(a, np.int32))
         m = self.means.shape[0] if self.means.ndim == 2 else -1
         if m < 0 or self.means.shape != (m, 3) or self.scales.shape != (m, 3) or self.quats.shape != (m, 4):
-            raise GBViewerError(f"{self._name}: means and scales must be (M,3), quats (M,4); got "
-                                f"{self.means.shape}, {self.scales.shape}, {self.quats.shape}")
+            raise GBViewerError(
+                f"{self._name}: means and scales must be (M,3), quats (M,4); got "
+                f"{self.means.shape}, {self.scales.shape}, {self.quats.shape}"
+            )
         off = self.offsets
         if off.shape != (m + 1,) or off[0] != 0 or off[-1] != len(self.members) or (np.diff(off) < 0).any():
-            raise GBViewerError(f"{self._name}: offsets must be {m + 1} non-decreasing values from 0 to "
-                                f"len(members) = {len(self.members)}")
+            raise GBViewerError(
+                f"{self._name}: offsets must be {m + 1} non-decreasing values from 0 to "
+                f"len(members) = {len(self.members)}"
+            )
         for name in ("means", "scales", "quats", "offsets", "members"):  # checked once (validate), then trusted
             view = getattr(self, name).view()
             view.flags.writeable = False
@@ -88,11 +92,13 @@ class Cells:
             return self
         mem = self.members
         if len(mem) and mem.max() >= num_splats:
-            raise GBViewerError(f"{self._name}: member index {int(mem.max())} outside the scene's splats "
-                                f"0..{num_splats - 1}")
+            raise GBViewerError(
+                f"{self._name}: member index {int(mem.max())} outside the scene's splats 0..{num_splats - 1}"
+            )
         if len(mem) and np.bincount(mem, minlength=num_splats).max() > 1:
-            raise GBViewerError(f"{self._name}: a splat is listed more than once in members (each splat belongs "
-                                "to at most one cell)")
+            raise GBViewerError(
+                f"{self._name}: a splat is listed more than once in members (each splat belongs to at most one cell)"
+            )
         object.__setattr__(self, "_valid_for", num_splats)
         return self
 
@@ -126,8 +132,16 @@ class Cells:
         return out
 
     @classmethod
-    def from_groups(cls, means, scales, quats, cell_of: np.ndarray, origin: str = "", build_ms: float = 0.0,
-                    info: dict | None = None) -> "Cells":
+    def from_groups(
+        cls,
+        means,
+        scales,
+        quats,
+        cell_of: np.ndarray,
+        origin: str = "",
+        build_ms: float = 0.0,
+        info: dict | None = None,
+    ) -> "Cells":
         """Cells from per-splat cell indices (-1: in no cell); members keep their splat order."""
         cell_of = np.asarray(cell_of, np.int64)
         m = len(means)
@@ -135,9 +149,16 @@ class Cells:
         order = inside[np.argsort(cell_of[inside], kind="stable")]
         counts = np.bincount(cell_of[inside], minlength=m)
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
-        return cls(np.ascontiguousarray(means, np.float32), np.ascontiguousarray(scales, np.float32),
-                   np.ascontiguousarray(quats, np.float32), offsets, order.astype(np.int32), origin, build_ms,
-                   dict(info or {}))
+        return cls(
+            np.ascontiguousarray(means, np.float32),
+            np.ascontiguousarray(scales, np.float32),
+            np.ascontiguousarray(quats, np.float32),
+            offsets,
+            order.astype(np.int32),
+            origin,
+            build_ms,
+            dict(info or {}),
+        )
 
 
 def kd_groups(points: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -180,28 +201,59 @@ def quats_from_matrices(R: np.ndarray) -> np.ndarray:
     q = np.empty((len(R), 4))
     s = np.sqrt(np.maximum(1.0 + 2.0 * cand[np.arange(len(R)), which] - tr, 1e-30)) * 2.0  # 4 * |component|
     w = which == 0
-    q[w] = np.stack([0.25 * s[w], (R[w, 2, 1] - R[w, 1, 2]) / s[w], (R[w, 0, 2] - R[w, 2, 0]) / s[w],
-                     (R[w, 1, 0] - R[w, 0, 1]) / s[w]], 1)
+    q[w] = np.stack(
+        [
+            0.25 * s[w],
+            (R[w, 2, 1] - R[w, 1, 2]) / s[w],
+            (R[w, 0, 2] - R[w, 2, 0]) / s[w],
+            (R[w, 1, 0] - R[w, 0, 1]) / s[w],
+        ],
+        1,
+    )
     x = which == 1
-    q[x] = np.stack([(R[x, 2, 1] - R[x, 1, 2]) / s[x], 0.25 * s[x], (R[x, 0, 1] + R[x, 1, 0]) / s[x],
-                     (R[x, 0, 2] + R[x, 2, 0]) / s[x]], 1)
+    q[x] = np.stack(
+        [
+            (R[x, 2, 1] - R[x, 1, 2]) / s[x],
+            0.25 * s[x],
+            (R[x, 0, 1] + R[x, 1, 0]) / s[x],
+            (R[x, 0, 2] + R[x, 2, 0]) / s[x],
+        ],
+        1,
+    )
     y = which == 2
-    q[y] = np.stack([(R[y, 0, 2] - R[y, 2, 0]) / s[y], (R[y, 0, 1] + R[y, 1, 0]) / s[y], 0.25 * s[y],
-                     (R[y, 1, 2] + R[y, 2, 1]) / s[y]], 1)
+    q[y] = np.stack(
+        [
+            (R[y, 0, 2] - R[y, 2, 0]) / s[y],
+            (R[y, 0, 1] + R[y, 1, 0]) / s[y],
+            0.25 * s[y],
+            (R[y, 1, 2] + R[y, 2, 1]) / s[y],
+        ],
+        1,
+    )
     z = which == 3
-    q[z] = np.stack([(R[z, 1, 0] - R[z, 0, 1]) / s[z], (R[z, 0, 2] + R[z, 2, 0]) / s[z],
-                     (R[z, 1, 2] + R[z, 2, 1]) / s[z], 0.25 * s[z]], 1)
+    q[z] = np.stack(
+        [
+            (R[z, 1, 0] - R[z, 0, 1]) / s[z],
+            (R[z, 0, 2] + R[z, 2, 0]) / s[z],
+            (R[z, 1, 2] + R[z, 2, 1]) / s[z],
+            0.25 * s[z],
+        ],
+        1,
+    )
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 def rotation_matrices(quats: np.ndarray) -> np.ndarray:
     """(N,4) unit (w,x,y,z) -> (N,3,3), the same formula as the kernels' covariance_3d."""
     w, x, y, z = np.asarray(quats, np.float64).T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
 
 
 def covering_ellipsoids(means, scales, quats, order: np.ndarray, starts: np.ndarray):
@@ -244,9 +296,16 @@ def build_cells(scene, k: int = DEFAULT_CELL_SIZE) -> Cells:
     build_ms = (time.perf_counter() - t0) * 1e3
     splat_scale = float(np.median(scene.scales.max(axis=1)))
     cell_scale = float(np.median(scales.max(axis=1)))
-    return Cells(centre.astype(np.float32), scales.astype(np.float32), quats.astype(np.float32),
-                 starts.astype(np.int32), order.astype(np.int32), f"k-d partition, K={k}", build_ms,
-                 {"median_cell_over_splat_scale": cell_scale / splat_scale if splat_scale > 0 else float("inf")})
+    return Cells(
+        centre.astype(np.float32),
+        scales.astype(np.float32),
+        quats.astype(np.float32),
+        starts.astype(np.int32),
+        order.astype(np.int32),
+        f"k-d partition, K={k}",
+        build_ms,
+        {"median_cell_over_splat_scale": cell_scale / splat_scale if splat_scale > 0 else float("inf")},
+    )
 
 
 _cache: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()

@@ -10,18 +10,23 @@ from typing import Sequence
 
 import numpy as np
 
+from ..core.errors import CameraError, GBViewerError, InvalidValue
+from ..core.validate import array, field, read_json, real
 from .camera import UP_AXES, Camera, focal_from_fov, orbit_camera, parse_projection, parse_rate
 from .cells import quats_from_matrices, rotation_matrices
-from ..core.errors import CameraError, GBViewerError, InvalidValue
 from .scene import Scene
-from ..core.validate import array, field, read_json, real
 
 MAX_FOV_DEG = 179.0
-POSES = {"R": ("R", "t"), "rotation": ("rotation", "position"), "look_at": ("position", "look_at", "up"),
-         "orbit": ("orbit",)}
+POSES = {
+    "R": ("R", "t"),
+    "rotation": ("rotation", "position"),
+    "look_at": ("position", "look_at", "up"),
+    "orbit": ("orbit",),
+}
 INTRINSICS = ("fx", "fy", "cx", "cy")
-FIELDS = frozenset({f for fs in POSES.values() for f in fs} | set(INTRINSICS)
-                   | {"time", "rate", "fov_y_deg", "projection"})
+FIELDS = frozenset(
+    {f for fs in POSES.values() for f in fs} | set(INTRINSICS) | {"time", "rate", "fov_y_deg", "projection"}
+)
 
 
 @dataclass(frozen=True)
@@ -50,8 +55,14 @@ def matrix_from_quat(q: np.ndarray) -> np.ndarray:
 def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     w1, x1, y1, z1 = a
     w2, x2, y2, z2 = b
-    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+    return np.array(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
+    )
 
 
 def _qconj(q: np.ndarray) -> np.ndarray:
@@ -133,8 +144,12 @@ def _segment(ts: np.ndarray, t: float) -> tuple[int, float]:
 def _hermite(ts: np.ndarray, p: np.ndarray, m: np.ndarray, k: int, h: float) -> np.ndarray:
     dt = ts[k + 1] - ts[k]
     h2, h3 = h * h, h * h * h
-    return ((2 * h3 - 3 * h2 + 1) * p[k] + (h3 - 2 * h2 + h) * dt * m[k] + (-2 * h3 + 3 * h2) * p[k + 1]
-            + (h3 - h2) * dt * m[k + 1])
+    return (
+        (2 * h3 - 3 * h2 + 1) * p[k]
+        + (h3 - 2 * h2 + h) * dt * m[k]
+        + (-2 * h3 + 3 * h2) * p[k + 1]
+        + (h3 - h2) * dt * m[k + 1]
+    )
 
 
 def key_times(keys: Sequence[Keyframe]) -> np.ndarray:
@@ -173,8 +188,9 @@ def interpolate_keyframes(keys: Sequence[Keyframe], times: Sequence[float]) -> l
         if np.dot(qs[i - 1], qs[i]) < 0:
             qs[i] = -qs[i]
     ctrl = _squad_controls(qs)
-    scal = np.stack([[math.log(k.rate), math.log(k.camera.fx), math.log(k.camera.fy), k.camera.cx, k.camera.cy]
-                     for k in keys])
+    scal = np.stack(
+        [[math.log(k.rate), math.log(k.camera.fx), math.log(k.camera.fy), k.camera.cx, k.camera.cy] for k in keys]
+    )
     m_pos, m_scal = _catmull_rom_tangents(ts, pos), _monotone_tangents(ts, scal)
     out = []
     for t in times:
@@ -184,8 +200,9 @@ def interpolate_keyframes(keys: Sequence[Keyframe], times: Sequence[float]) -> l
         q = slerp(slerp(qs[k], qs[k + 1], hh), slerp(ctrl[k], ctrl[k + 1], hh), 2 * hh * (1 - hh))
         lr, lfx, lfy, cx, cy = _hermite(ts, scal, m_scal, k, hh)
         R = matrix_from_quat(q)
-        cam = replace(keys[0].camera, R=R, t=-R @ c, fx=math.exp(lfx), fy=math.exp(lfy), cx=cx, cy=cy,
-                      name=f"keyframes@{t:g}")
+        cam = replace(
+            keys[0].camera, R=R, t=-R @ c, fx=math.exp(lfx), fy=math.exp(lfy), cx=cx, cy=cy, name=f"keyframes@{t:g}"
+        )
         out.append(Keyframe(cam, math.exp(lr), t))
     return out
 
@@ -210,7 +227,7 @@ def load_keyframes(path: str | Path, base: Camera, scene: Scene | None = None, u
     doc = read_json(path)
     entries = doc.get("keyframes") if isinstance(doc, dict) else doc
     if not isinstance(entries, list) or not entries:
-        raise InvalidValue(f"{path}: expected a non-empty list of keyframes (or {{\"keyframes\": [...]}})")
+        raise InvalidValue(f'{path}: expected a non-empty list of keyframes (or {{"keyframes": [...]}})')
     keys = []
     for i, e in enumerate(entries):
         where = f"{path}: keyframe {i}"
@@ -220,8 +237,10 @@ def load_keyframes(path: str | Path, base: Camera, scene: Scene | None = None, u
             raise InvalidValue(f"{where}: {exc}") from None
     for i, k in enumerate(keys):
         if k.camera.projection != keys[0].camera.projection:
-            raise InvalidValue(f"{path}: keyframe {i}: 'projection' {k.camera.projection} differs from keyframe 0's "
-                               f"({keys[0].camera.projection}); all keys share one projection")
+            raise InvalidValue(
+                f"{path}: keyframe {i}: 'projection' {k.camera.projection} differs from keyframe 0's "
+                f"({keys[0].camera.projection}); all keys share one projection"
+            )
     try:
         key_times(keys)
     except GBViewerError as exc:
@@ -254,11 +273,12 @@ def _keyframe(e: object, where: str, i: int, base: Camera, scene: Scene | None, 
             raise InvalidValue(f"{where}: 'orbit' keys need the scene")
         orbit = e["orbit"]
         if not isinstance(orbit, list) or len(orbit) not in (2, 3):
-            raise InvalidValue(f"{where}: 'orbit': expected [azimuth, elevation] or [azimuth, elevation, distance], "
-                               f"got {str(orbit):.40}")
+            raise InvalidValue(
+                f"{where}: 'orbit': expected [azimuth, elevation] or [azimuth, elevation, distance], "
+                f"got {str(orbit):.40}"
+            )
         az, el = (_number(v, f"{where}: 'orbit' {n}") for v, n in zip(orbit, ("azimuth", "elevation")))
-        dist = _number(orbit[2], f"{where}: 'orbit' distance") if len(orbit) == 3 and orbit[2] is not None \
-            else 0.0
+        dist = _number(orbit[2], f"{where}: 'orbit' distance") if len(orbit) == 3 and orbit[2] is not None else 0.0
         c = orbit_camera(scene, az, el, dist if dist > 0 else None, base.width, base.height, up=up)
         R, t = c.R, c.t
     else:
@@ -266,19 +286,27 @@ def _keyframe(e: object, where: str, i: int, base: Camera, scene: Scene | None, 
     intr = dict(fx=base.fx, fy=base.fy, cx=base.cx, cy=base.cy)
     projection = parse_projection(e.get("projection", base.projection), f"{where}: 'projection'")
     if projection != base.projection and not ("fx" in e and "fy" in e):
-        raise InvalidValue(f"{where}: 'projection' {projection} differs from the camera's ({base.projection}); "
-                           f"give 'fx' and 'fy' too")
+        raise InvalidValue(
+            f"{where}: 'projection' {projection} differs from the camera's ({base.projection}); give 'fx' and 'fy' too"
+        )
     if "fov_y_deg" in e and projection == "orthographic":
-        raise InvalidValue(f"{where}: 'fov_y_deg' has no meaning for an orthographic camera; give 'fx' and 'fy' "
-                           f"(pixels per world unit)")
+        raise InvalidValue(
+            f"{where}: 'fov_y_deg' has no meaning for an orthographic camera; give 'fx' and 'fy' "
+            f"(pixels per world unit)"
+        )
     given = [k for k in INTRINSICS if k in e]
     if "fov_y_deg" in e and given:
         raise InvalidValue(f"{where}: 'fov_y_deg' and '{given[0]}' both set the intrinsics; give one or the other")
     if "fov_y_deg" in e:
         f = focal_from_fov(num("fov_y_deg", lo=0, lo_open=True, hi=MAX_FOV_DEG), base.height)
         intr = dict(fx=f, fy=f, cx=base.width / 2, cy=base.height / 2)
-    intr.update({k: num(k, **({"lo": 0, "lo_open": True} if k in ("fx", "fy") else {}))
-                 for k in ("fx", "fy", "cx", "cy") if k in e})
+    intr.update(
+        {
+            k: num(k, **({"lo": 0, "lo_open": True} if k in ("fx", "fy") else {}))
+            for k in ("fx", "fy", "cx", "cy")
+            if k in e
+        }
+    )
     cam = replace(base, R=R, t=t, name=f"key{i}", projection=projection, **intr)
     rate = parse_rate(e.get("rate", 1), f"{where}: 'rate'")
     time_ = num("time") if e.get("time") is not None else None
@@ -295,8 +323,9 @@ def _check_fields(e: dict, where: str) -> None:
         raise InvalidValue(f"{where}: '{poses[0]}' and '{poses[1]}' are two poses; give one")
     stray = [f for fs in POSES.values() for f in fs if f in e and (not poses or f not in POSES[poses[0]])]
     if poses and stray:
-        raise InvalidValue(f"{where}: '{stray[0]}' does not belong to a '{poses[0]}' pose "
-                           f"(that takes {', '.join(POSES[poses[0]])})")
+        raise InvalidValue(
+            f"{where}: '{stray[0]}' does not belong to a '{poses[0]}' pose (that takes {', '.join(POSES[poses[0]])})"
+        )
 
 
 def _number(value: object, what: str, **bounds) -> float:
@@ -309,9 +338,19 @@ def _number(value: object, what: str, **bounds) -> float:
 def keyframes_to_json(keys: Sequence[Keyframe]) -> dict:
     """The JSON document `load_keyframes` reads back (world-to-camera R, t, the intrinsics and projection of every
     key)."""
-    return {"keyframes": [
-        {"R": k.camera.R.tolist(), "t": k.camera.t.tolist(), "fx": k.camera.fx, "fy": k.camera.fy,
-         "cx": k.camera.cx, "cy": k.camera.cy, "projection": k.camera.projection, "rate": k.rate,
-         **({"time": k.time} if k.time is not None else {})}
-        for k in keys]}
-
+    return {
+        "keyframes": [
+            {
+                "R": k.camera.R.tolist(),
+                "t": k.camera.t.tolist(),
+                "fx": k.camera.fx,
+                "fy": k.camera.fy,
+                "cx": k.camera.cx,
+                "cy": k.camera.cy,
+                "projection": k.camera.projection,
+                "rate": k.rate,
+                **({"time": k.time} if k.time is not None else {}),
+            }
+            for k in keys
+        ]
+    }

@@ -28,11 +28,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .camera import MAX_IMAGE_SIZE, Camera, focal_from_fov, fov_of
 from ..core.errors import CameraError, InvalidValue
 from ..core.files import atomic_write
-from .keyframes import MAX_FOV_DEG, Keyframe, interpolate_keyframes, key_times
 from ..core.validate import array, field, integer, read_json, real
+from .camera import MAX_IMAGE_SIZE, Camera, focal_from_fov, fov_of
+from .keyframes import MAX_FOV_DEG, Keyframe, interpolate_keyframes, key_times
 
 GL_TO_CV = np.diag([1.0, -1.0, -1.0])  # camera axes: OpenGL (y up, -z forward) <-> OpenCV (y down, +z forward)
 CAMERA_TYPES = ("perspective", "orthographic")
@@ -70,8 +70,7 @@ def camera_from_c2w(c2w: object, lens: float, width: int, height: int, projectio
     degrees (perspective) or the world units the height spans (orthographic)."""
     m = array(c2w, f"{where}: camera-to-world matrix", (16,), f32=True).reshape(4, 4)
     if np.abs(m[3] - [0.0, 0.0, 0.0, 1.0]).max() > 1e-6:
-        raise InvalidValue(f"{where}: camera-to-world matrix: expected a last row of 0, 0, 0, 1, got "
-                           f"{m[3].tolist()}")
+        raise InvalidValue(f"{where}: camera-to-world matrix: expected a last row of 0, 0, 0, 1, got {m[3].tolist()}")
     R = (m[:3, :3] @ GL_TO_CV).T  # rows: the OpenCV camera's axes in the world
     f = focal_from_fov(lens, height) if projection == "perspective" else height / lens
     try:
@@ -112,28 +111,42 @@ def load_nerfstudio_path(path: str | Path, size: tuple[int, int] | None = None) 
     path = Path(path)
     doc = read_json(path)
     if not is_nerfstudio_path(doc):
-        raise InvalidValue(f"{path}: expected nerfstudio's camera_path.json (an object with render_width, "
-                           f"render_height and camera_path or keyframes)")
+        raise InvalidValue(
+            f"{path}: expected nerfstudio's camera_path.json (an object with render_width, "
+            f"render_height and camera_path or keyframes)"
+        )
     kind = str(doc.get("camera_type", "perspective")).lower()
     if kind not in CAMERA_TYPES:
-        raise InvalidValue(f"{path}: camera_type {kind!r:.40}: gbviewer renders perspective or orthographic "
-                           f"cameras only")
+        raise InvalidValue(
+            f"{path}: camera_type {kind!r:.40}: gbviewer renders perspective or orthographic cameras only"
+        )
     if size is None:
-        size = tuple(integer(_whole(field(doc, k, str(path)), f"{path}: '{k}'"), f"{path}: '{k}'", lo=1,
-                             hi=MAX_IMAGE_SIZE) for k in ("render_width", "render_height"))
+        size = tuple(
+            integer(_whole(field(doc, k, str(path)), f"{path}: '{k}'"), f"{path}: '{k}'", lo=1, hi=MAX_IMAGE_SIZE)
+            for k in ("render_width", "render_height")
+        )
     fps = real(field(doc, "fps", str(path)), f"{path}: 'fps'", lo=0, lo_open=True)
     seconds = real(field(doc, "seconds", str(path)), f"{path}: 'seconds'", lo=0, lo_open=True)
-    frames = tuple(_entry_camera(e, "camera_to_world", f"{path}: camera_path {i}", size, kind)
-                   for i, e in enumerate(_list(doc, "camera_path", path)))
+    frames = tuple(
+        _entry_camera(e, "camera_to_world", f"{path}: camera_path {i}", size, kind)
+        for i, e in enumerate(_list(doc, "camera_path", path))
+    )
     entries = _list(doc, "keyframes", path)
     keys = [_entry_camera(e, "matrix", f"{path}: keyframe {i}", size, kind) for i, e in enumerate(entries)]
-    default_s = real(doc.get("default_transition_sec", DEFAULT_TRANSITION_S), f"{path}: 'default_transition_sec'",
-                     lo=0, lo_open=True)
+    default_s = real(
+        doc.get("default_transition_sec", DEFAULT_TRANSITION_S), f"{path}: 'default_transition_sec'", lo=0, lo_open=True
+    )
     times = [0.0]
     for i, e in enumerate(entries[1:] + (entries[:1] if doc.get("is_cycle") is True and entries else []), 1):
         s = e.get("override_transition_sec") if e.get("override_transition_enabled") is True else None
-        times.append(times[-1] + (default_s if s is None else real(
-            s, f"{path}: keyframe {i % len(entries)}: 'override_transition_sec'", lo=0, lo_open=True)))
+        times.append(
+            times[-1]
+            + (
+                default_s
+                if s is None
+                else real(s, f"{path}: keyframe {i % len(entries)}: 'override_transition_sec'", lo=0, lo_open=True)
+            )
+        )
     if doc.get("is_cycle") is True and keys:
         keys.append(keys[0])
     if not frames and not keys:
@@ -153,8 +166,7 @@ def _list(doc: dict, key: str, path: Path) -> list:
     return value
 
 
-def path_from_keyframes(keys: Sequence[Keyframe], fps: float = 30.0, seconds: float | None = None
-                        ) -> NerfstudioPath:
+def path_from_keyframes(keys: Sequence[Keyframe], fps: float = 30.0, seconds: float | None = None) -> NerfstudioPath:
     """A NerfstudioPath of our keyframes (times from key 0; untimed keys one second apart unless `seconds` spreads
     them): its frames sampled as nerfstudio's viewer does, int(fps x seconds) of them at i / fps."""
     if not keys:
@@ -181,9 +193,16 @@ def nerfstudio_json(p: NerfstudioPath) -> dict:
     return {
         "default_fov": lens_entry(cams[0]).get("fov", 50.0),
         "default_transition_sec": default,
-        "keyframes": [{"matrix": c2w_of(k.camera), **lens_entry(k.camera), "aspect": aspect,
-                       "override_transition_enabled": own[i], "override_transition_sec": gaps[i] if own[i] else None}
-                      for i, k in enumerate(p.keys)],
+        "keyframes": [
+            {
+                "matrix": c2w_of(k.camera),
+                **lens_entry(k.camera),
+                "aspect": aspect,
+                "override_transition_enabled": own[i],
+                "override_transition_sec": gaps[i] if own[i] else None,
+            }
+            for i, k in enumerate(p.keys)
+        ],
         "camera_type": cams[0].projection,
         "render_width": width,
         "render_height": height,
@@ -199,4 +218,3 @@ def save_nerfstudio_path(p: NerfstudioPath, out: str | Path, force: bool = False
     """Write `nerfstudio_json(p)` to `out` atomically (an existing file only with `force`)."""
     text = json.dumps(nerfstudio_json(p), indent=1)
     return atomic_write(out, lambda tmp: Path(tmp).write_text(text), force)
-

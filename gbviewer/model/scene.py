@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from .cells import Cells
 from ..core.errors import GBViewerError
+from .cells import Cells
 
 if TYPE_CHECKING:
     from .camera import Camera
@@ -31,8 +31,10 @@ def sh_degree_for(num_coeffs: int) -> int:
     raise GBViewerError(f"sh has {num_coeffs} coefficients per channel; expected one of 1, 4, 9, 16")
 
 
-READ_ONLY = ("a Scene's arrays are read-only (a renderer reuses what it derived from them for as long as the Scene "
-             "lives); edit a copy: arrays = scene.editable(), then dataclasses.replace(scene, **arrays)")
+READ_ONLY = (
+    "a Scene's arrays are read-only (a renderer reuses what it derived from them for as long as the Scene "
+    "lives); edit a copy: arrays = scene.editable(), then dataclasses.replace(scene, **arrays)"
+)
 
 
 class SceneArray(np.ndarray):
@@ -68,8 +70,7 @@ def read_only(a: np.ndarray | None, half: bool = False) -> np.ndarray | None:
     if a is None or isinstance(a, SceneArray) and sealed(a):
         return a
     a = np.asarray(a)
-    if not (a.flags.c_contiguous and (a.dtype == np.float32 or half and a.dtype == np.float16)) or \
-            not _array_memory(a):
+    if not (a.flags.c_contiguous and (a.dtype == np.float32 or half and a.dtype == np.float16)) or not _array_memory(a):
         a = np.array(a, np.float16 if half and a.dtype == np.float16 else np.float32, order="C")
     chain = a
     while isinstance(chain, np.ndarray):
@@ -278,8 +279,10 @@ class Scene:
             sh_degree_for(vw.shape[1])
         for name, val in (("wsr_sigma", wsr_sigma), ("weight_background", weight_background), ("et_grade", et_grade)):
             if val is not None and not (np.isfinite(val) and (val >= 0 if name == "weight_background" else val > 0)):
-                raise GBViewerError(f"{source}: {name} = {val!r}; expected a finite number "
-                                    + (">= 0" if name == "weight_background" else "> 0"))
+                raise GBViewerError(
+                    f"{source}: {name} = {val!r}; expected a finite number "
+                    + (">= 0" if name == "weight_background" else "> 0")
+                )
         if n == 0:
             raise GBViewerError(f"{source}: the scene has zero splats")
 
@@ -288,8 +291,9 @@ class Scene:
         elif checked.keep.shape == (n,) and checked.keep.dtype == bool:
             finite = checked.keep
         else:
-            raise GBViewerError(f"{source}: checked.keep is {checked.keep.dtype} {checked.keep.shape}; expected bool "
-                                f"({n},)")
+            raise GBViewerError(
+                f"{source}: checked.keep is {checked.keep.dtype} {checked.keep.shape}; expected bool ({n},)"
+            )
         dropped = int(n - finite.sum())
         if dropped:
             why = f"non-finite values (or scales over {MAX_SCALE:g}, SH over {MAX_SH:g})"
@@ -298,8 +302,15 @@ class Scene:
             warnings.warn(f"{source}: dropped {dropped} of {n} splats with {why}", stacklevel=2)
             arrays = {k: v[finite] for k, v in arrays.items()}
             if cells is not None:  # renumber the members, drop the removed splats from their cells
-                cells = Cells.from_groups(cells.means, cells.scales, cells.quats, cells.cell_of(n)[finite],
-                                          cells.origin, cells.build_ms, cells.info)
+                cells = Cells.from_groups(
+                    cells.means,
+                    cells.scales,
+                    cells.quats,
+                    cells.cell_of(n)[finite],
+                    cells.origin,
+                    cells.build_ms,
+                    cells.info,
+                )
 
         if checked is None:
             if (arrays["scales"] < 0).any():

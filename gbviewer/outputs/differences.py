@@ -11,13 +11,12 @@ Used by the viewer's difference and error views (`app/difference/views.py`) and 
 
 from __future__ import annotations
 
-
 import numpy as np
 
-from ..model.camera import Camera, format_rate
 from ..core.cancel import Cancellable
-from .metrics import box_downsample, psnr, ssim, zoom_out_factor
+from ..model.camera import Camera, format_rate
 from ..render import Mode, Renderer, RenderSettings
+from .metrics import box_downsample, psnr, ssim, zoom_out_factor
 
 REFERENCES = {"box": "x1 scalar box-downsampled", "dense": "scalar 8x8"}
 DENSE_SUPERSAMPLE = 8
@@ -27,10 +26,22 @@ MIN_SCALE = 1.0 / 255.0  # one 8-bit level: the scale of two equal images
 # Crameri's 'berlin' (as in matplotlib >= 3.10) at 11 evenly spaced points from -1 to +1: light blue for negative,
 # near-black at 0 (no difference reads as dark, like the viewer's background), light red for positive; its
 # lightness grows with |x| on both sides.
-DIVERGING = np.array([[0.6211, 0.6902, 0.9995], [0.3853, 0.6517, 0.8794], [0.1979, 0.5013, 0.6490],
-                      [0.1241, 0.3213, 0.4151], [0.0686, 0.1530, 0.1958], [0.0983, 0.0470, 0.0347],
-                      [0.2145, 0.0627, 0.0014], [0.3815, 0.1256, 0.0437], [0.5889, 0.2889, 0.2136],
-                      [0.7929, 0.4821, 0.4433], [0.9999, 0.6801, 0.6800]], np.float32)
+DIVERGING = np.array(
+    [
+        [0.6211, 0.6902, 0.9995],
+        [0.3853, 0.6517, 0.8794],
+        [0.1979, 0.5013, 0.6490],
+        [0.1241, 0.3213, 0.4151],
+        [0.0686, 0.1530, 0.1958],
+        [0.0983, 0.0470, 0.0347],
+        [0.2145, 0.0627, 0.0014],
+        [0.3815, 0.1256, 0.0437],
+        [0.5889, 0.2889, 0.2136],
+        [0.7929, 0.4821, 0.4433],
+        [0.9999, 0.6801, 0.6800],
+    ],
+    np.float32,
+)
 
 
 def signed_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -83,8 +94,9 @@ def reference_settings(kind: str, settings: RenderSettings | None = None) -> Ren
     if kind not in REFERENCES:
         raise ValueError(f"reference {kind!r}; expected one of {', '.join(REFERENCES)}")
     s = settings or RenderSettings()
-    return RenderSettings(Mode.SCALAR, DENSE_SUPERSAMPLE if kind == "dense" else 1, s.background, s.sh_degree,
-                          threads=s.threads)
+    return RenderSettings(
+        Mode.SCALAR, DENSE_SUPERSAMPLE if kind == "dense" else 1, s.background, s.sh_degree, threads=s.threads
+    )
 
 
 def reference_note(kind: str, rate: float) -> str:
@@ -94,9 +106,14 @@ def reference_note(kind: str, rate: float) -> str:
     return ""
 
 
-def reference_image(renderer: Renderer, camera: Camera, rate: float, kind: str,
-                    settings: RenderSettings | None = None, cancel: Cancellable | None = None
-                    ) -> np.ndarray | None:
+def reference_image(
+    renderer: Renderer,
+    camera: Camera,
+    rate: float,
+    kind: str,
+    settings: RenderSettings | None = None,
+    cancel: Cancellable | None = None,
+) -> np.ndarray | None:
     """The reference (H, W, 3) of a render at `camera`, the view at sampling rate `rate` (see the module's doc);
     None where `kind` has none at that rate (`reference_note` says why)."""
     ref = reference_settings(kind, settings)

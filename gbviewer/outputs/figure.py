@@ -12,18 +12,27 @@ from typing import Sequence
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from .differences import (MIN_SCALE, colour_bar, colour_difference, format_scale, reference_image, robust_scale,
-                       signed_difference)
-from ..model.camera import Camera, format_rate
 from ..core.errors import GBViewerError
 from ..core.files import atomic_write, refuse_overwrite
-from .metrics import psnr, reference_psnr
-from ..render import Frame, FrameStats, Mode, Renderer, RenderSettings, get_renderer
+from ..model.camera import Camera, format_rate
 from ..model.scene import Scene
+from ..render import Frame, FrameStats, Mode, Renderer, RenderSettings, get_renderer
+from .differences import (
+    MIN_SCALE,
+    colour_bar,
+    colour_difference,
+    format_scale,
+    reference_image,
+    robust_scale,
+    signed_difference,
+)
+from .metrics import psnr, reference_psnr
 
 GAP = 4  # pixels between cells
-DIFFS = {"first": "each mode minus the first mode at the same rate",
-         "ref": "each mode minus the dense reference (scalar 8x8) at the same rate"}
+DIFFS = {
+    "first": "each mode minus the first mode at the same rate",
+    "ref": "each mode minus the dense reference (scalar 8x8) at the same rate",
+}
 
 
 def to_uint8(rgb: np.ndarray) -> np.ndarray:
@@ -84,8 +93,9 @@ class Cell:
         return self.stats.total_ms
 
 
-def render_grid(scene: Scene, camera: Camera, settings: list[RenderSettings], rates: list[float],
-                backend: str = "cpu") -> list[list[Cell]]:
+def render_grid(
+    scene: Scene, camera: Camera, settings: list[RenderSettings], rates: list[float], backend: str = "cpu"
+) -> list[list[Cell]]:
     """Render every (rate, settings) pair: rows are rates, columns are settings."""
     renderer = get_renderer(scene, backend)
     cams = [camera.at_sampling_rate(rate) for rate in rates]
@@ -127,8 +137,12 @@ class GridLayout:
         return 0 if lines == 0 else lines * (font_size + 4) + 6
 
 
-def draw_inset(tile: Image.Image, box: tuple[float, float, float, float], frac: float = 0.4,
-               colour: tuple[int, int, int] = (255, 200, 0)) -> None:
+def draw_inset(
+    tile: Image.Image,
+    box: tuple[float, float, float, float],
+    frac: float = 0.4,
+    colour: tuple[int, int, int] = (255, 200, 0),
+) -> None:
     """Magnify the region box = (x, y, w, h) (pixels of `tile`) with nearest filtering into the bottom-right corner
     of `tile` (its longer side `frac` of the tile's shorter side), framed, and outline the region itself."""
     x0, y0 = max(0, int(np.floor(box[0]))), max(0, int(np.floor(box[1])))
@@ -152,9 +166,17 @@ def _default_lines(cell: Cell) -> list[str]:
     return [f"{cell.mode_label}  {format_rate(cell.rate)} ({w}x{h})", f"{cell.total_ms:.0f} ms"]
 
 
-def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = GAP, captions: str = "overlay",
-                 lines=None, inset: tuple[float, float, float, float] | None = None, even: bool = False,
-                 font_size: int | None = None) -> Image.Image:
+def compose_grid(
+    cells: list[list[Cell]],
+    width: int,
+    height: int,
+    gap: int = GAP,
+    captions: str = "overlay",
+    lines=None,
+    inset: tuple[float, float, float, float] | None = None,
+    even: bool = False,
+    font_size: int | None = None,
+) -> Image.Image:
     """Labelled grid: each cell nearest-upscaled to width x height.
 
     captions="overlay": mode, rate, size and time written over the cell's top-left corner (the demo's look).
@@ -169,8 +191,7 @@ def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = GA
     fs = font_size or caption_font_size(height)
     texts = [[[drawable(t) for t in lines(cell)] for cell in row] for row in cells] if captions == "below" else None
     n_lines = max((len(t) for row in texts for t in row), default=0) if texts else 0
-    layout = GridLayout(len(cells), len(cells[0]), width, height, gap, GridLayout.caption_height_for(n_lines, fs),
-                        even)
+    layout = GridLayout(len(cells), len(cells[0]), width, height, gap, GridLayout.caption_height_for(n_lines, fs), even)
     out = Image.new("RGB", layout.size, (40, 40, 40))
     font = _font(fs)
     if texts is not None:  # smaller text where a caption would not fit the cell (the strip keeps its height)
@@ -190,8 +211,7 @@ def compose_grid(cells: list[list[Cell]], width: int, height: int, gap: int = GA
             x, y = layout.origin(r, c)
             if texts is None:
                 h, w = cell.rgb.shape[:2]
-                draw_label(tile, f"{cell.settings.label}  {format_rate(cell.rate)} ({w}x{h})  "
-                                 f"{cell.total_ms:.0f} ms")
+                draw_label(tile, f"{cell.settings.label}  {format_rate(cell.rate)} ({w}x{h})  {cell.total_ms:.0f} ms")
             else:
                 strip = Image.new("RGB", (width, layout.caption_height), (0, 0, 0))
                 sdraw = ImageDraw.Draw(strip)
@@ -232,16 +252,21 @@ def difference_rows(renderer: Renderer, camera: Camera, cells: list[list[Cell]],
     """Per rate (a row of `cells`), each cell minus the row's first cell ('first') or minus the dense reference at
     that rate ('ref'), colour-mapped with one scale: the largest of the cells' robust scales (so that no cell clips
     more than 1 % of its pixels; the first cell's difference to itself left out)."""
-    refs = [row[0].rgb if kind == "first" else
-            reference_image(renderer, camera.at_sampling_rate(row[0].rate), row[0].rate, "dense", row[0].settings)
-            for row in cells]
+    refs = [
+        row[0].rgb
+        if kind == "first"
+        else reference_image(renderer, camera.at_sampling_rate(row[0].rate), row[0].rate, "dense", row[0].settings)
+        for row in cells
+    ]
     ds = [[signed_difference(c.rgb, ref) for c in row] for row, ref in zip(cells, refs)]
-    scale = max((robust_scale(d) for row in ds for k, d in enumerate(row) if kind == "ref" or k > 0),
-                default=MIN_SCALE)
-    return Differences(kind, [[replace(c, rgb=colour_difference(d, scale)) for c, d in zip(row, drow)]
-                              for row, drow in zip(cells, ds)],
-                       [[psnr(c.rgb, ref) for c in row] for row, ref in zip(cells, refs)], scale,
-                       [row[0].mode_label if kind == "first" else "scalar 8x8" for row in cells])
+    scale = max((robust_scale(d) for row in ds for k, d in enumerate(row) if kind == "ref" or k > 0), default=MIN_SCALE)
+    return Differences(
+        kind,
+        [[replace(c, rgb=colour_difference(d, scale)) for c, d in zip(row, drow)] for row, drow in zip(cells, ds)],
+        [[psnr(c.rgb, ref) for c in row] for row, ref in zip(cells, refs)],
+        scale,
+        [row[0].mode_label if kind == "first" else "scalar 8x8" for row in cells],
+    )
 
 
 def colour_bar_strip(width: int, title: str, scale: float, font_size: int) -> tuple[Image.Image, tuple]:
@@ -254,8 +279,11 @@ def colour_bar_strip(width: int, title: str, scale: float, font_size: int) -> tu
     strip.paste(Image.fromarray(to_uint8(colour_bar(bw, bh))), (x0, y0))
     draw = ImageDraw.Draw(strip)
     draw.text((x0, 4), title, fill=(255, 255, 255), font=font)
-    for text, x, align in ((f"-{format_scale(scale)}", x0, 0.0), ("0", x0 + bw / 2, 0.5),
-                           (f"+{format_scale(scale)}", x0 + bw, 1.0)):
+    for text, x, align in (
+        (f"-{format_scale(scale)}", x0, 0.0),
+        ("0", x0 + bw / 2, 0.5),
+        (f"+{format_scale(scale)}", x0 + bw, 1.0),
+    ):
         draw.text((x - align * draw.textlength(text, font=font), y0 + bh + 3), text, fill=(255, 255, 255), font=font)
     return strip, (x0, y0, bw, bh)
 
@@ -284,9 +312,15 @@ def _psnr_note(p: float | None, reference: str = "") -> str:
     return f"PSNR {p:.2f} dB" + (f" vs {reference}" if reference else "")
 
 
-def compare_figure(scene: Scene, camera: Camera, settings_list: Sequence[RenderSettings], rates: Sequence[float],
-                   backend: str = "cpu", inset: tuple[float, float, float, float] | None = None,
-                   diff: str | None = None) -> Comparison:
+def compare_figure(
+    scene: Scene,
+    camera: Camera,
+    settings_list: Sequence[RenderSettings],
+    rates: Sequence[float],
+    backend: str = "cpu",
+    inset: tuple[float, float, float, float] | None = None,
+    diff: str | None = None,
+) -> Comparison:
     """Grid of modes (columns) x rates (rows) like the paper's figures: each cell rendered at camera
     .at_sampling_rate(rate), nearest-upscaled to the camera's size, captioned below with mode, rate and size and
     with its PSNR against the zoom-out reference (`reference_psnr`) and render time. `inset` (x, y, w, h in x1
@@ -303,20 +337,32 @@ def compare_figure(scene: Scene, camera: Camera, settings_list: Sequence[RenderS
     if ref is None and any(r <= 1 for r in rates):
         ref = get_renderer(scene, backend).render(camera, ref_settings).rgb
     psnrs = [[reference_psnr(ref, c.rgb, c.rate) if ref is not None else None for c in row] for row in cells]
-    notes = {id(c): [f"{c.mode_label}  {format_rate(c.rate)} ({c.rgb.shape[1]}x{c.rgb.shape[0]})",
-                     f"{_psnr_note(p)}  {c.total_ms:.0f} ms"] for row, prow in zip(cells, psnrs)
-             for c, p in zip(row, prow)}
+    notes = {
+        id(c): [
+            f"{c.mode_label}  {format_rate(c.rate)} ({c.rgb.shape[1]}x{c.rgb.shape[0]})",
+            f"{_psnr_note(p)}  {c.total_ms:.0f} ms",
+        ]
+        for row, prow in zip(cells, psnrs)
+        for c, p in zip(row, prow)
+    }
     rows = cells
     diffs = difference_rows(get_renderer(scene, backend), camera, cells, diff) if diff is not None else None
     if diffs is not None:
         rows = [r for pair in zip(cells, diffs.cells) for r in pair]
-        notes.update({id(c): [f"{c.mode_label} - {name}  {format_rate(c.rate)}", _psnr_note(p, name)]
-                      for row, prow, name in zip(diffs.cells, diffs.psnr, diffs.reference) for c, p in zip(row, prow)})
-    img = compose_grid(rows, camera.width, camera.height, GAP, captions="below", lines=lambda c: notes[id(c)],
-                       inset=inset)
+        notes.update(
+            {
+                id(c): [f"{c.mode_label} - {name}  {format_rate(c.rate)}", _psnr_note(p, name)]
+                for row, prow, name in zip(diffs.cells, diffs.psnr, diffs.reference)
+                for c, p in zip(row, prow)
+            }
+        )
+    img = compose_grid(
+        rows, camera.width, camera.height, GAP, captions="below", lines=lambda c: notes[id(c)], inset=inset
+    )
     fs = caption_font_size(camera.height)
-    layout = GridLayout(len(rows), len(settings_list), camera.width, camera.height, GAP,
-                        GridLayout.caption_height_for(2, fs))
+    layout = GridLayout(
+        len(rows), len(settings_list), camera.width, camera.height, GAP, GridLayout.caption_height_for(2, fs)
+    )
     assert layout.size == img.size
     bar = None
     if diffs is not None:
@@ -328,9 +374,17 @@ def compare_figure(scene: Scene, camera: Camera, settings_list: Sequence[RenderS
     return Comparison(img, cells, psnrs, layout, diffs, bar)
 
 
-def write_comparison(out: str | Path, scene: Scene, camera: Camera, settings_list: Sequence[RenderSettings],
-                     rates: Sequence[float], backend: str = "cpu", inset: tuple[float, float, float, float] | None = None,
-                     force: bool = False, diff: str | None = None) -> Comparison:
+def write_comparison(
+    out: str | Path,
+    scene: Scene,
+    camera: Camera,
+    settings_list: Sequence[RenderSettings],
+    rates: Sequence[float],
+    backend: str = "cpu",
+    inset: tuple[float, float, float, float] | None = None,
+    force: bool = False,
+    diff: str | None = None,
+) -> Comparison:
     """`compare_figure` written to `out` as PNG, atomically; `out` is checked (.png, not overwritten without `force`)
     before anything is rendered."""
     out = refuse_overwrite(out, force)

@@ -30,16 +30,16 @@ from typing import Callable, Sequence
 import numpy as np
 from PIL import Image
 
+from ..core.errors import GBViewerError
+from ..core.files import atomic_write
+from ..core.validate import dumps_json, integer, real
 from ..model.camera import UP_AXES, Camera, format_rate
 from ..model.camera_paths import MAX_FRAMES, PATHS, PathFrame, camera_path, path_length
-from .differences import diverging, robust_scale
-from ..core.errors import GBViewerError
-from .figure import GAP, Cell, compose_grid, save_image, upscale_nearest
-from ..core.files import atomic_write
+from ..model.scene import Scene
 from ..render import FrameStats, Mode, RenderSettings, get_renderer
 from ..render.modes import STOCHASTIC_MODES
-from ..model.scene import Scene
-from ..core.validate import dumps_json, integer, real
+from .differences import diverging, robust_scale
+from .figure import GAP, Cell, compose_grid, save_image, upscale_nearest
 from .video import write_video
 
 FLICKER_PATHS = (*PATHS, "orbit")
@@ -80,19 +80,37 @@ class FlickerReport:
     def rows(self) -> list[dict]:
         """One dict per mode (CSV_COLUMNS); vs_floor: flicker / floor (None without a floor)."""
         floor = self.floor.flicker if self.floor is not None else None
-        return [{"mode": m.spec, "label": m.label, "flicker": m.flicker, "change": m.change,
-                 "vs_floor": m.flicker / floor if floor else None, "reference": self.reference, "floor": floor,
-                 "pairs": len(self.starts), "frames": self.frames, "path": self.path} for m in self.modes]
+        return [
+            {
+                "mode": m.spec,
+                "label": m.label,
+                "flicker": m.flicker,
+                "change": m.change,
+                "vs_floor": m.flicker / floor if floor else None,
+                "reference": self.reference,
+                "floor": floor,
+                "pairs": len(self.starts),
+                "frames": self.frames,
+                "path": self.path,
+            }
+            for m in self.modes
+        ]
 
     def to_json(self) -> dict:
-        return {"path": self.path, "frames": self.frames, "pair_starts": self.starts, "reference": self.reference,
-                "reference_change": self.reference_change,
-                "floor": None if self.floor is None else {"mode": self.floor.spec, "flicker": self.floor.flicker},
-                "modes": self.rows()}
+        return {
+            "path": self.path,
+            "frames": self.frames,
+            "pair_starts": self.starts,
+            "reference": self.reference,
+            "reference_change": self.reference_change,
+            "floor": None if self.floor is None else {"mode": self.floor.spec, "flicker": self.floor.flicker},
+            "modes": self.rows(),
+        }
 
 
-def orbit_path(base: Camera, scene: Scene, frames: int, degrees: float = DEFAULT_DEGREES, up: str = "-y"
-               ) -> list[PathFrame]:
+def orbit_path(
+    base: Camera, scene: Scene, frames: int, degrees: float = DEFAULT_DEGREES, up: str = "-y"
+) -> list[PathFrame]:
     """The base camera turned about the `up` axis through the centre of the scene's robust bounds, `degrees` of
     azimuth from the first frame to the last (both included), at rate 1."""
     frames = integer(frames, "frames of the path", lo=1)
@@ -111,16 +129,31 @@ def orbit_path(base: Camera, scene: Scene, frames: int, degrees: float = DEFAULT
     return out
 
 
-def flicker_path(kind: str | Path, base: Camera, scene: Scene, frames: int | None = None, start: float = 1.0,
-                 end: float = 1.0 / 8.0, *, degrees: float = DEFAULT_DEGREES, up: str = "-y", fps: float = 30.0,
-                 seconds: float | None = None, max_frames: int = MAX_FRAMES) -> list[PathFrame]:
+def flicker_path(
+    kind: str | Path,
+    base: Camera,
+    scene: Scene,
+    frames: int | None = None,
+    start: float = 1.0,
+    end: float = 1.0 / 8.0,
+    *,
+    degrees: float = DEFAULT_DEGREES,
+    up: str = "-y",
+    fps: float = 30.0,
+    seconds: float | None = None,
+    max_frames: int = MAX_FRAMES,
+) -> list[PathFrame]:
     """'orbit' (`orbit_path`), or any path `camera_paths.camera_path` makes (zoom, dolly, rate, keyframes FILE),
     of the length `gbviewer video` gives it (`frames`, or seconds x fps, or 4 s)."""
     if str(kind) != "orbit":
-        return camera_path(kind, base, frames, start, end, scene, up, fps=fps, seconds=seconds,
-                           max_frames=max_frames)
-    return orbit_path(base, scene, path_length(frames, real(fps, "fps", lo=0.0, lo_open=True), seconds,
-                                               max_frames=max_frames), degrees, up)
+        return camera_path(kind, base, frames, start, end, scene, up, fps=fps, seconds=seconds, max_frames=max_frames)
+    return orbit_path(
+        base,
+        scene,
+        path_length(frames, real(fps, "fps", lo=0.0, lo_open=True), seconds, max_frames=max_frames),
+        degrees,
+        up,
+    )
 
 
 def pair_starts(frames: int, pairs: int) -> list[int]:
@@ -143,19 +176,38 @@ def pane_image(renderer, pf: PathFrame, settings: RenderSettings, cancel=None, a
     k = integer(accumulate, "--accumulate", lo=1) if settings.mode in STOCHASTIC_MODES else 1
     rgb = renderer.render(pf.camera, settings, cancel=cancel).rgb
     if k > 1:
-        rgb = np.mean([rgb, *(renderer.render(pf.camera, replace(settings, frame=settings.frame + f),
-                                              cancel=cancel).rgb for f in range(1, k))], axis=0)
+        rgb = np.mean(
+            [
+                rgb,
+                *(
+                    renderer.render(pf.camera, replace(settings, frame=settings.frame + f), cancel=cancel).rgb
+                    for f in range(1, k)
+                ),
+            ],
+            axis=0,
+        )
     rgb = np.clip(rgb, 0.0, 1.0)
     if rgb.shape[:2] != (pf.height, pf.width):
         rgb = upscale_nearest(rgb, pf.height, pf.width)
     return rgb.astype(np.float32, copy=False)
 
 
-def measure_flicker(scene: Scene, path: Sequence[PathFrame], settings: Sequence[RenderSettings], *,
-                    reference: RenderSettings | None = None, pairs: int = DEFAULT_PAIRS, backend: str = "cpu",
-                    with_floor: bool = True, keep_pairs: bool = False, path_name: str = "",
-                    progress: Callable[[RenderSettings], None] | None = None, renderer=None,
-                    cancel=None, accumulate: int = 1) -> FlickerReport:
+def measure_flicker(
+    scene: Scene,
+    path: Sequence[PathFrame],
+    settings: Sequence[RenderSettings],
+    *,
+    reference: RenderSettings | None = None,
+    pairs: int = DEFAULT_PAIRS,
+    backend: str = "cpu",
+    with_floor: bool = True,
+    keep_pairs: bool = False,
+    path_name: str = "",
+    progress: Callable[[RenderSettings], None] | None = None,
+    renderer=None,
+    cancel=None,
+    accumulate: int = 1,
+) -> FlickerReport:
     """Flicker and change of every mode of `settings` over `pairs` pairs of consecutive frames of `path` (see the
     module's docstring), against `reference` (default scalar 8x8), with the floor unless `with_floor` is False.
     keep_pairs: keep each pair's heat map (for `write_heat_video`). progress(settings) after each render.
@@ -196,18 +248,42 @@ def measure_flicker(scene: Scene, path: Sequence[PathFrame], settings: Sequence[
             if keep_pairs:
                 per_pair[s].append(e.astype(np.float16))
     n = len(starts)
-    results = {s: ModeFlicker(s.spec, s.label_for(scene), float(heat[s].mean() / n), 255.0 * change[s] / n,
-                              (heat[s] / n).astype(np.float32), per_pair[s]) for s in measured}
-    return FlickerReport(path_name, len(path), starts, reference.spec, 255.0 * change[reference] / n,
-                         [results[s] for s in settings], results[floor] if floor is not None else None)
+    results = {
+        s: ModeFlicker(
+            s.spec,
+            s.label_for(scene),
+            float(heat[s].mean() / n),
+            255.0 * change[s] / n,
+            (heat[s] / n).astype(np.float32),
+            per_pair[s],
+        )
+        for s in measured
+    }
+    return FlickerReport(
+        path_name,
+        len(path),
+        starts,
+        reference.spec,
+        255.0 * change[reference] / n,
+        [results[s] for s in settings],
+        results[floor] if floor is not None else None,
+    )
 
 
-def view_flicker(renderer, scene: Scene, camera: Camera, settings: RenderSettings, degrees: float = VIEW_STEP,
-                 cancel=None) -> ModeFlicker:
+def view_flicker(
+    renderer, scene: Scene, camera: Camera, settings: RenderSettings, degrees: float = VIEW_STEP, cancel=None
+) -> ModeFlicker:
     """The flicker of one orbit step of `degrees` from `camera` in `settings` against the default reference (the
     viewer's flicker view), on `renderer`."""
-    return measure_flicker(scene, orbit_path(camera, scene, 2, degrees), [settings], pairs=1, with_floor=False,
-                           renderer=renderer, cancel=cancel).modes[0]
+    return measure_flicker(
+        scene,
+        orbit_path(camera, scene, 2, degrees),
+        [settings],
+        pairs=1,
+        with_floor=False,
+        renderer=renderer,
+        cancel=cancel,
+    ).modes[0]
 
 
 def heat_colours(heat: np.ndarray, scale: float) -> np.ndarray:
@@ -233,21 +309,25 @@ def _cell(m: ModeFlicker, rgb: np.ndarray) -> Cell:
 def heat_figure(m: ModeFlicker, scale: float, reference: str) -> Image.Image:
     """A mode's heat map captioned below with its label, flicker and change, and the colour scale."""
     h, w = m.heat.shape
-    lines = [m.label, f"flicker {m.flicker:.3f}, change {m.change:.3f} levels",
-             f"vs {reference}; black 0 .. red {scale:.3g} levels"]
-    return compose_grid([[_cell(m, heat_colours(m.heat, scale))]], w, h, GAP, captions="below",
-                        lines=lambda _: lines)
+    lines = [
+        m.label,
+        f"flicker {m.flicker:.3f}, change {m.change:.3f} levels",
+        f"vs {reference}; black 0 .. red {scale:.3g} levels",
+    ]
+    return compose_grid([[_cell(m, heat_colours(m.heat, scale))]], w, h, GAP, captions="below", lines=lambda _: lines)
 
 
 def write_heat_maps(out_dir: str | Path, report: FlickerReport, force: bool = False) -> list[Path]:
     """Every mode's `heat_figure` (one colour scale for all) as heat-SPEC.png in `out_dir`, atomically."""
     scale = heat_scale([m.heat for m in report.modes])
-    return [save_image(heat_file(out_dir, m.spec), heat_figure(m, scale, report.reference), force)
-            for m in report.modes]
+    return [
+        save_image(heat_file(out_dir, m.spec), heat_figure(m, scale, report.reference), force) for m in report.modes
+    ]
 
 
-def write_heat_video(out: str | Path, report: FlickerReport, path: Sequence[PathFrame], fps: float = 30.0,
-                     force: bool = False) -> Path:
+def write_heat_video(
+    out: str | Path, report: FlickerReport, path: Sequence[PathFrame], fps: float = 30.0, force: bool = False
+) -> Path:
     """The per-pair heat maps of every mode side by side, one video frame per pair, captioned with the mode and
     the pair (needs measure_flicker(keep_pairs=True)); one colour scale for the whole video."""
     if not report.modes or not report.modes[0].per_pair:
@@ -259,8 +339,17 @@ def write_heat_video(out: str | Path, report: FlickerReport, path: Sequence[Path
         for k, i in enumerate(report.starts):
             cells = [_cell(m, heat_colours(m.per_pair[k], scale)) for m in report.modes]
             caption = f"frames {i}-{i + 1}, rate {format_rate(path[i].rate)}, red {scale:.3g} levels"
-            yield np.asarray(compose_grid([cells], w, h, GAP, captions="below", even=True,
-                                          lines=lambda c, caption=caption: [c.mode_label, caption]))
+            yield np.asarray(
+                compose_grid(
+                    [cells],
+                    w,
+                    h,
+                    GAP,
+                    captions="below",
+                    even=True,
+                    lines=lambda c, caption=caption: [c.mode_label, caption],
+                )
+            )
 
     write_video(out, images(), len(report.starts), fps=fps, force=force)
     return Path(out)
@@ -276,6 +365,7 @@ def write_table(out_dir: str | Path, report: FlickerReport, force: bool = False)
             writer.writeheader()
             writer.writerows({k: ("" if v is None else v) for k, v in row.items()} for row in report.rows())
 
-    return [atomic_write(out_dir / "flicker.csv", write_csv, force),
-            atomic_write(out_dir / "flicker.json", lambda p: p.write_text(dumps_json(report.to_json(), indent=2)),
-                         force)]
+    return [
+        atomic_write(out_dir / "flicker.csv", write_csv, force),
+        atomic_write(out_dir / "flicker.json", lambda p: p.write_text(dumps_json(report.to_json(), indent=2)), force),
+    ]

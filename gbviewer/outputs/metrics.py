@@ -70,8 +70,11 @@ def ssim(a: np.ndarray, b: np.ndarray) -> float:
     a, b = np.clip(a, 0, 1).astype(np.float64), np.clip(b, 0, 1).astype(np.float64)
     if min(a.shape[:2]) < 11:  # the 11x11 Gaussian window (sigma 1.5) must fit
         return float("nan")
-    return float(structural_similarity(a, b, channel_axis=2, data_range=1.0, gaussian_weights=True, sigma=1.5,
-                                       use_sample_covariance=False))
+    return float(
+        structural_similarity(
+            a, b, channel_axis=2, data_range=1.0, gaussian_weights=True, sigma=1.5, use_sample_covariance=False
+        )
+    )
 
 
 def flicker(frames: list[np.ndarray]) -> tuple[float, float]:

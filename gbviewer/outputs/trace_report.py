@@ -7,10 +7,10 @@ from __future__ import annotations
 from collections import Counter
 from pathlib import Path
 
-from .console import wide_console
 from ..core.files import atomic_write
-from ..render import PixelTrace, TraceStep
 from ..core.validate import dumps_json
+from ..render import PixelTrace, TraceStep
+from .console import wide_console
 
 
 def _rgb(c: tuple[float, float, float]) -> str:
@@ -34,8 +34,11 @@ def trace_table(trace: PixelTrace, top: int):
     multi = trace.supersample > 1
     window = bool(steps) and steps[0].window_center is not None
     duplex = bool(steps) and steps[0].cell is not None
-    t = Table(title=f"{trace.mode}: pixel ({trace.x}, {trace.y}) of {trace.width}x{trace.height}, colour "
-                    f"{_rgb(trace.color)}, T {trace.transmittance:.4g}", title_justify="left")
+    t = Table(
+        title=f"{trace.mode}: pixel ({trace.x}, {trace.y}) of {trace.width}x{trace.height}, colour "
+        f"{_rgb(trace.color)}, T {trace.transmittance:.4g}",
+        title_justify="left",
+    )
     cols = ["sample"] if multi else []
     cols += ["splat", "depth", "alpha", "weight", "T before", "T after", "colour"]
     cols += ["window centre", "window size"] if window else []
@@ -44,16 +47,24 @@ def trace_table(trace: PixelTrace, top: int):
         t.add_column(col, justify="left" if col in ("colour", "window centre", "window size") else "right")
     for s in top_steps(trace, top):
         row = [str(s.sample)] if multi else []
-        row += [s.short, f"{s.depth:.4g}", f"{s.alpha:.4f}", f"{s.weight:.4f}",
-                f"{s.T_before:.4f}", f"{s.T_after:.4f}", _rgb(s.color)]
+        row += [
+            s.short,
+            f"{s.depth:.4g}",
+            f"{s.alpha:.4f}",
+            f"{s.weight:.4f}",
+            f"{s.T_before:.4f}",
+            f"{s.T_after:.4f}",
+            _rgb(s.color),
+        ]
         row += [_xy(s.window_center) + (" (fallback)" if s.fallback else ""), _xy(s.window_size)] if window else []
         row += [str(s.cell), f"{s.T_cell:.4f}"] if duplex else []
         t.add_row(*row)
     added = sum(1 for s in steps if not s.rejected)
     rejected = Counter(trace.rejected_counts()).most_common()
     samples = f" over {len(trace.samples)} samples" if multi else ""
-    t.caption = (f"{len(steps)} list entries{samples}: {added} added (top {min(top, added)} shown), rejected: "
-                 + (", ".join(f"{why} {k}" for why, k in rejected) or "none"))
+    t.caption = f"{len(steps)} list entries{samples}: {added} added (top {min(top, added)} shown), rejected: " + (
+        ", ".join(f"{why} {k}" for why, k in rejected) or "none"
+    )
     t.caption_justify = "left"
     return t
 
@@ -70,9 +81,13 @@ def print_traces(traces: list[PixelTrace], top: int) -> None:
         summary.add_column(col, justify="left" if col in ("mode", "colour") else "right")
     for trace in traces:
         best = top_steps(trace, 1)
-        summary.add_row(trace.mode, _rgb(trace.color), f"{trace.transmittance:.4g}",
-                        str(sum(1 for s in trace.steps if not s.rejected)),
-                        f"{best[0].weight:.4f} ({best[0].source})" if best else "-")
+        summary.add_row(
+            trace.mode,
+            _rgb(trace.color),
+            f"{trace.transmittance:.4g}",
+            str(sum(1 for s in trace.steps if not s.rejected)),
+            f"{best[0].weight:.4f} ({best[0].source})" if best else "-",
+        )
     console.print(summary)
 
 
@@ -84,10 +99,17 @@ def write_traces(path: Path, traces: list[PixelTrace], scene: str, force: bool =
 
 
 # TraceStep fields holding tuples: one CSV column per element, named field_suffix
-_SPLIT = {"color": ("r", "g", "b"), "mean": ("x", "y"), "conic": ("a", "b", "c"), "covariance": ("xx", "xy", "yy"),
-          "window_center": ("x", "y"), "window_size": ("w", "h")}
+_SPLIT = {
+    "color": ("r", "g", "b"),
+    "mean": ("x", "y"),
+    "conic": ("a", "b", "c"),
+    "covariance": ("xx", "xy", "yy"),
+    "window_center": ("x", "y"),
+    "window_size": ("w", "h"),
+}
 CSV_COLUMNS = ("pane", "mode", "x", "y", "supersample") + tuple(
-    f"{f}_{s}" if f in _SPLIT else f for f in TraceStep._fields for s in _SPLIT.get(f, ("",)))
+    f"{f}_{s}" if f in _SPLIT else f for f in TraceStep._fields for s in _SPLIT.get(f, ("",))
+)
 
 
 def csv_rows(traces: list[tuple[str, PixelTrace]]) -> list[list]:

@@ -15,16 +15,16 @@ from typing import Callable, Iterable, Iterator, Sequence
 import numpy as np
 from PIL import Image
 
-from ..model.camera import Camera, format_rate
-from ..model.camera_paths import PathFrame
 from ..core.errors import GBViewerError, RenderCancelled, VideoCancelled
 from ..core.extras import require
-from .figure import GAP, Cell, GridLayout, caption_font_size, compose_grid
 from ..core.files import atomic_write, refuse_overwrite
+from ..core.validate import integer, real
+from ..model.camera import Camera, format_rate
+from ..model.camera_paths import PathFrame
+from ..model.scene import Scene
 from ..render import RenderSettings, get_renderer
 from ..render.tiles import render_tiled
-from ..model.scene import Scene
-from ..core.validate import integer, real
+from .figure import GAP, Cell, GridLayout, caption_font_size, compose_grid
 
 
 @dataclass(frozen=True)
@@ -44,12 +44,19 @@ class Codec:
 # -crf 1..63 (its 0 means "unset"); ffmpeg's encoder documentation (ffmpeg-codecs, "Video Encoders")
 CODECS = {
     "h264": Codec(("libx264",), 0, 51, 18, {"libx264": ("-preset", "medium")}),
-    "h265": Codec(("libx265",), 0, 51, 20, {"libx265": ("-preset", "medium", "-tag:v", "hvc1", "-x265-params",
-                                                     "log-level=error")}),
-    "vp9": Codec(("libvpx-vp9",), 0, 63, 24, {"libvpx-vp9": ("-b:v", "0", "-deadline", "good", "-cpu-used", "4",
-                                                          "-row-mt", "1")}),
-    "av1": Codec(("libsvtav1", "libaom-av1"), 1, 63, 24, {"libsvtav1": ("-preset", "8"),
-                                                       "libaom-av1": ("-b:v", "0", "-cpu-used", "6", "-row-mt", "1")}),
+    "h265": Codec(
+        ("libx265",), 0, 51, 20, {"libx265": ("-preset", "medium", "-tag:v", "hvc1", "-x265-params", "log-level=error")}
+    ),
+    "vp9": Codec(
+        ("libvpx-vp9",), 0, 63, 24, {"libvpx-vp9": ("-b:v", "0", "-deadline", "good", "-cpu-used", "4", "-row-mt", "1")}
+    ),
+    "av1": Codec(
+        ("libsvtav1", "libaom-av1"),
+        1,
+        63,
+        24,
+        {"libsvtav1": ("-preset", "8"), "libaom-av1": ("-b:v", "0", "-cpu-used", "6", "-row-mt", "1")},
+    ),
 }
 CONTAINERS = {".mp4": ("h264", "h265", "vp9", "av1"), ".webm": ("vp9", "av1")}  # WebM holds VP8, VP9 and AV1 only
 MIN_FPS, MAX_FPS = 0.1, 1000.0  # frame rates of a video (the encoder's time base is fps to 1/1001)
@@ -72,21 +79,32 @@ def _frame_lines(pf: PathFrame) -> Callable[[Cell], list[str]]:
         h, w = cell.rgb.shape[:2]
         size = f"  (rendered {w}x{h})" if (w, h) != (pf.width, pf.height) else ""
         return [cell.mode_label, f"sampling rate {format_rate(pf.rate)}{size}"]
+
     return lines
 
 
-def compose_video_frame(cells: list[Cell], pf: PathFrame, inset: tuple[float, float, float, float] | None = None
-                        ) -> Image.Image:
+def compose_video_frame(
+    cells: list[Cell], pf: PathFrame, inset: tuple[float, float, float, float] | None = None
+) -> Image.Image:
     """The panes of one frame side by side, each captioned below with its mode and the sampling rate, the inset
     region (x1 pixels) following the content; even canvas size."""
-    return compose_grid([cells], pf.width, pf.height, GAP, captions="below", lines=_frame_lines(pf),
-                        inset=pf.map_box(inset) if inset is not None else None, even=True)
+    return compose_grid(
+        [cells],
+        pf.width,
+        pf.height,
+        GAP,
+        captions="below",
+        lines=_frame_lines(pf),
+        inset=pf.map_box(inset) if inset is not None else None,
+        even=True,
+    )
 
 
 def video_layout(pf: PathFrame, n_modes: int) -> GridLayout:
     """Where `compose_video_frame` puts the panes (GridLayout.origin(0, i) is pane i's top-left pixel)."""
-    return GridLayout(1, n_modes, pf.width, pf.height, GAP, GridLayout.caption_height_for(2, caption_font_size(
-        pf.height)), even=True)
+    return GridLayout(
+        1, n_modes, pf.width, pf.height, GAP, GridLayout.caption_height_for(2, caption_font_size(pf.height)), even=True
+    )
 
 
 def render_or_stop(renderer, camera: Camera, settings: RenderSettings, splats: int, cancel):
@@ -98,11 +116,21 @@ def render_or_stop(renderer, camera: Camera, settings: RenderSettings, splats: i
         raise VideoCancelled("video cancelled; nothing written") from None
 
 
-def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settings_list: Sequence[RenderSettings],
-                 out: str | Path, *, fps: float = 30.0, backend: str = "cpu",
-                 inset: tuple[float, float, float, float] | None = None, codec: str = "h264",
-                 crf: int | None = None, force: bool = False, progress: Callable[[int, int], None] | None = None,
-                 cancel=None) -> VideoInfo:
+def record_video(
+    scene: Scene,
+    camera_path: Sequence[PathFrame | Camera],
+    settings_list: Sequence[RenderSettings],
+    out: str | Path,
+    *,
+    fps: float = 30.0,
+    backend: str = "cpu",
+    inset: tuple[float, float, float, float] | None = None,
+    codec: str = "h264",
+    crf: int | None = None,
+    force: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+    cancel=None,
+) -> VideoInfo:
     """Render every frame of `camera_path` in every mode of `settings_list` side by side and write a video
     (`write_video`: `codec` in the container `out`'s extension names, quality `crf`, default the codec's).
 
@@ -153,10 +181,12 @@ def record_video(scene: Scene, camera_path: Sequence[PathFrame | Camera], settin
 def available_encoders() -> frozenset[str]:
     """The video encoders imageio-ffmpeg's ffmpeg has (`ffmpeg -encoders`), read once."""
     imageio_ffmpeg = require("video", "imageio_ffmpeg", "a video")
-    listing = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-encoders"], capture_output=True,
-                             text=True, check=False).stdout
-    return frozenset(line.split()[1] for line in listing.splitlines()
-                     if len(line.split()) > 1 and line.split()[0].startswith("V"))
+    listing = subprocess.run(
+        [imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-encoders"], capture_output=True, text=True, check=False
+    ).stdout
+    return frozenset(
+        line.split()[1] for line in listing.splitlines() if len(line.split()) > 1 and line.split()[0].startswith("V")
+    )
 
 
 def video_encoder(out: str | Path, codec: str, crf: int | None = None) -> tuple[str, int]:
@@ -170,8 +200,9 @@ def video_encoder(out: str | Path, codec: str, crf: int | None = None) -> tuple[
     if ext not in CONTAINERS:
         raise GBViewerError(f"{out}: output must end in {' or '.join(CONTAINERS)}")
     if codec not in CONTAINERS[ext]:
-        raise GBViewerError(f"{out}: a {ext[1:].upper()} file cannot hold {codec}; use "
-                            f"{', '.join(CONTAINERS[ext])} or write .mp4")
+        raise GBViewerError(
+            f"{out}: a {ext[1:].upper()} file cannot hold {codec}; use {', '.join(CONTAINERS[ext])} or write .mp4"
+        )
     c = CODECS[codec]
     crf = integer(c.default_crf if crf is None else crf, f"crf of {codec}", lo=c.min_crf, hi=c.max_crf)
     have = available_encoders()
@@ -182,8 +213,16 @@ def video_encoder(out: str | Path, codec: str, crf: int | None = None) -> tuple[
     return encoder, crf
 
 
-def write_video(out: str | Path, images: Iterable[np.ndarray], count: int, *, fps: float = 30.0,
-                codec: str = "h264", crf: int | None = None, force: bool = False) -> tuple[int, int]:
+def write_video(
+    out: str | Path,
+    images: Iterable[np.ndarray],
+    count: int,
+    *,
+    fps: float = 30.0,
+    codec: str = "h264",
+    crf: int | None = None,
+    force: bool = False,
+) -> tuple[int, int]:
     """Stream `count` uint8 (H, W, 3) images of one size to imageio-ffmpeg's ffmpeg (`video_encoder`'s encoder,
     yuv420p, constant quality `crf`) into `out`, atomically: written beside it and renamed at the end, so an
     exception raised by `images` (a cancel) leaves no file. Returns (width, height)."""
@@ -199,9 +238,15 @@ def write_video(out: str | Path, images: Iterable[np.ndarray], count: int, *, fp
                 if writer is None:
                     size[:] = [img.shape[1], img.shape[0]]
                     writer = imageio_ffmpeg.write_frames(
-                        str(tmp), tuple(size), fps=Fraction(fps).limit_denominator(1001), codec=encoder,
-                        pix_fmt_out="yuv420p", quality=None, macro_block_size=1,
-                        output_params=["-crf", str(crf), *CODECS[codec].options[encoder], *extra])
+                        str(tmp),
+                        tuple(size),
+                        fps=Fraction(fps).limit_denominator(1001),
+                        codec=encoder,
+                        pix_fmt_out="yuv420p",
+                        quality=None,
+                        macro_block_size=1,
+                        output_params=["-crf", str(crf), *CODECS[codec].options[encoder], *extra],
+                    )
                     writer.send(None)
                 writer.send(np.ascontiguousarray(img))
         finally:

@@ -7,14 +7,45 @@ from .build_info import build_info, compiler_line, simd_line
 from .choice import AUTO, BackendChoice, choose_backend
 from .cpu import CpuRenderer
 from .cuda import CudaRenderer
-from .registry import (BACKEND_NAMES, BACKENDS, capable, create_gl_context, create_renderer, get_renderer, render,
-                       resolve_backend)
+from .registry import (
+    BACKEND_NAMES,
+    BACKENDS,
+    capable,
+    create_gl_context,
+    create_renderer,
+    get_renderer,
+    render,
+    resolve_backend,
+)
 from .trace import PixelTrace, SampleTrace, TraceStep, trace_pixel
 from .types import SORT_ENTRY_BYTES, Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
 
 __all__ = [
-    "AUTO", "BACKENDS", "BACKEND_NAMES", "SORT_ENTRY_BYTES", "BackendChoice", "Capabilities", "CpuRenderer",
-    "CudaRenderer", "Frame", "FrameStats", "Mode", "PixelTrace", "RenderSettings", "Renderer", "SampleTrace",
-    "TraceStep", "build_info", "capable", "choose_backend", "compiler_line", "create_gl_context", "create_renderer",
-    "get_renderer", "render", "resolve_backend", "simd_line", "trace_pixel",
+    "AUTO",
+    "BACKENDS",
+    "BACKEND_NAMES",
+    "SORT_ENTRY_BYTES",
+    "BackendChoice",
+    "Capabilities",
+    "CpuRenderer",
+    "CudaRenderer",
+    "Frame",
+    "FrameStats",
+    "Mode",
+    "PixelTrace",
+    "RenderSettings",
+    "Renderer",
+    "SampleTrace",
+    "TraceStep",
+    "build_info",
+    "capable",
+    "choose_backend",
+    "compiler_line",
+    "create_gl_context",
+    "create_renderer",
+    "get_renderer",
+    "render",
+    "resolve_backend",
+    "simd_line",
+    "trace_pixel",
 ]

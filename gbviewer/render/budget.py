@@ -8,8 +8,8 @@ import os
 import re
 import resource
 
-from ..model.camera import Camera
 from ..core.errors import RenderError
+from ..model.camera import Camera
 from .types import Mode, RenderSettings
 
 BUDGET_ENV = "GBVIEWER_MEMORY_BUDGET"  # bytes, or with a K, M, G or T suffix (powers of 1024)
@@ -66,8 +66,10 @@ def memory_budget() -> tuple[int, str]:
     match = BUDGET_RE.fullmatch(text.strip())
     value = float(match[1]) * SUFFIXES.get(match[2].upper(), 1) if match else 0.0
     if value < 1:
-        raise RenderError(f"{BUDGET_ENV}: expected bytes >= 1, as a decimal number with an optional K, M, G or T "
-                          f"suffix (powers of 1024; 1.5G), got {text!r:.40}")
+        raise RenderError(
+            f"{BUDGET_ENV}: expected bytes >= 1, as a decimal number with an optional K, M, G or T "
+            f"suffix (powers of 1024; 1.5G), got {text!r:.40}"
+        )
     return int(value), BUDGET_ENV
 
 
@@ -76,14 +78,17 @@ def gib(n: int) -> str:
     return f"{n / (1 << 30):.3g} GiB"
 
 
-def check_frame_memory(camera: Camera, settings: RenderSettings, splats: int,
-                       size: tuple[int, int] | None = None) -> None:
+def check_frame_memory(
+    camera: Camera, settings: RenderSettings, splats: int, size: tuple[int, int] | None = None
+) -> None:
     """Raise a one-line `RenderError` when the frame's buffers (`frame_bytes`, of the part `size`) exceed the
     memory budget."""
     need = frame_bytes(camera, settings, splats, size)
     budget, source = memory_budget()
     if need > budget:
         w, h = size or (camera.width, camera.height)
-        raise RenderError(f"{w}x{h} at supersample {settings.supersample} needs at least "
-                          f"{gib(need)} for its buffers, more than the {gib(budget)} budget ({source}); render "
-                          f"smaller or set {BUDGET_ENV} (e.g. {BUDGET_ENV}=64G) to raise it")
+        raise RenderError(
+            f"{w}x{h} at supersample {settings.supersample} needs at least "
+            f"{gib(need)} for its buffers, more than the {gib(budget)} budget ({source}); render "
+            f"smaller or set {BUDGET_ENV} (e.g. {BUDGET_ENV}=64G) to raise it"
+        )

@@ -25,8 +25,10 @@ def simd_line(info: dict[str, Any]) -> str:
     """One line: the SIMD path in use and what was built, loud when scalar-only by choice or for lack of a path."""
     if not info["cpu_module"]:
         return f"CPU module unavailable: {info['reason']}"
-    line = f"SIMD {info['simd_selected']} (built: {', '.join(info['simd_built'])}; this CPU: " \
-           f"{', '.join(info['simd_usable'])})"
+    line = (
+        f"SIMD {info['simd_selected']} (built: {', '.join(info['simd_built'])}; this CPU: "
+        f"{', '.join(info['simd_usable'])})"
+    )
     if info["scalar_only"]:
         line += " - scalar-only build (GBVIEWER_SCALAR_ONLY): 3-5x slower blend"
     return line

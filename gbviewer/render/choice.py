@@ -101,16 +101,21 @@ def decide(cuda: tuple[bool, str], gl: GlProbe | None, failed: Mapping[str, str]
         why_not = gl.error.removeprefix("glsl backend unavailable: ") if gl else "OpenGL not probed"
         return BackendChoice(FALLBACK, f"{no_cuda}; {why_not}")
     if gl.software:
-        return BackendChoice(FALLBACK, f"{no_cuda}; OpenGL is {gl.renderer}, a software rasterizer slower than the "
-                                    "CPU backend")
+        return BackendChoice(
+            FALLBACK, f"{no_cuda}; OpenGL is {gl.renderer}, a software rasterizer slower than the CPU backend"
+        )
     if gl.version < GL_REQUIRED:
-        return BackendChoice(FALLBACK, f"{no_cuda}; OpenGL {gl.version / 100:.1f} on {gl.renderer} has no compute "
-                                    f"shaders ({GL_REQUIRED / 100:.1f} needed)")
+        return BackendChoice(
+            FALLBACK,
+            f"{no_cuda}; OpenGL {gl.version / 100:.1f} on {gl.renderer} has no compute "
+            f"shaders ({GL_REQUIRED / 100:.1f} needed)",
+        )
     return BackendChoice("glsl", f"{no_cuda}; OpenGL {gl.version / 100:.1f} on {gl.renderer}")
 
 
-def decide_measured(status: Mapping[str, tuple[bool, str]], ctx, failed: Mapping[str, str] | None = None
-                    ) -> BackendChoice:
+def decide_measured(
+    status: Mapping[str, tuple[bool, str]], ctx, failed: Mapping[str, str] | None = None
+) -> BackendChoice:
     """The choice from backends probed elsewhere: `status` name -> (usable, why) and `ctx` the OpenGL context
     they were probed in (None: none could be made), as the viewer's render thread measures them."""
     missing = (False, "not part of this installation")

@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..core.cancel import CancelToken, Cancellable, cancel_problem
+from ..core.cancel import Cancellable, CancelToken, cancel_problem
 from ..core.errors import CallbackError, RenderCancelled, RenderError
 
 Progress = Callable[[int, int], None]
@@ -25,8 +25,12 @@ Progress = Callable[[int, int], None]
 class RenderControl:
     """One render's cancel flag, progress and partial frame; `check()` raises RenderCancelled once cancelled."""
 
-    def __init__(self, cancel: Cancellable | None = None, on_progress: Callable[..., None] | None = None,
-                 partial: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        cancel: Cancellable | None = None,
+        on_progress: Callable[..., None] | None = None,
+        partial: np.ndarray | None = None,
+    ) -> None:
         if why := cancel_problem(cancel):
             raise RenderError(why)
         self.cancel, self.on_progress, self.partial = cancel, on_progress, partial
@@ -54,8 +58,9 @@ class RenderControl:
             try:
                 self.on_progress(*counts)
             except Exception as exc:
-                raise CallbackError(f"on_progress raised {type(exc).__name__}: {exc}; the render was cancelled") \
-                    from exc
+                raise CallbackError(
+                    f"on_progress raised {type(exc).__name__}: {exc}; the render was cancelled"
+                ) from exc
         self._forward()
 
     def _forward(self) -> None:
@@ -70,11 +75,17 @@ class RenderControl:
     def check_partial(self, width: int, height: int) -> None:
         """Refuse a partial frame buffer the render cannot write (before any work)."""
         p = self.partial
-        if p is not None and not (isinstance(p, np.ndarray) and p.dtype == np.float32 and p.shape == (height, width, 3)
-                                  and p.flags.c_contiguous and p.flags.writeable):
+        if p is not None and not (
+            isinstance(p, np.ndarray)
+            and p.dtype == np.float32
+            and p.shape == (height, width, 3)
+            and p.flags.c_contiguous
+            and p.flags.writeable
+        ):
             got = f"{p.dtype} {p.shape}" if isinstance(p, np.ndarray) else type(p).__name__
-            raise RenderError(f"partial: expected a writable C-contiguous float32 array of shape ({height}, {width}, 3),"
-                              f" got {got}")
+            raise RenderError(
+                f"partial: expected a writable C-contiguous float32 array of shape ({height}, {width}, 3), got {got}"
+            )
 
     def fill_partial(self, image: np.ndarray) -> None:
         """GPU backends: the whole frame at once."""
@@ -99,8 +110,10 @@ class FrameLock:
 
     def __enter__(self) -> FrameLock:
         if self._owner == threading.get_ident():
-            raise RenderError("a frame was started from inside a frame of the same renderer (its on_progress?): "
-                              "render there with a renderer of its own (gbviewer.render.create_renderer)")
+            raise RenderError(
+                "a frame was started from inside a frame of the same renderer (its on_progress?): "
+                "render there with a renderer of its own (gbviewer.render.create_renderer)"
+            )
         self._lock.acquire()
         self._owner = threading.get_ident()
         return self

@@ -7,16 +7,24 @@ import time
 
 import numpy as np
 
-from ..model.camera import Camera
 from ..core.cancel import Cancellable
-from ..model.cells import Cells
 from ..core.errors import BackendFailed, BackendUnavailable, RenderError
-from ..model.scene import Scene
 from ..lod import Hierarchy
+from ..model.camera import Camera
+from ..model.cells import Cells
+from ..model.scene import Scene
 from .control import Progress, RenderControl
 from .cuda_textures import TextureRegistrations
-from .prepare import (CutRows, NativeUploads, Prepared, camera_args, check_display_texture, native_frame, native_stats,
-                      prepare)
+from .prepare import (
+    CutRows,
+    NativeUploads,
+    Prepared,
+    camera_args,
+    check_display_texture,
+    native_frame,
+    native_stats,
+    prepare,
+)
 from .types import Capabilities, Frame, FrameStats, Renderer, RenderSettings
 
 
@@ -62,8 +70,8 @@ class CudaRenderer(NativeUploads, Renderer):
         self._textures = TextureRegistrations(self._release)
 
     def _native(self, method: str, *args, **kwargs):
-        """The native renderer's `method(*args, **kwargs)`: RuntimeError -> RenderError, DeviceFailed -> BackendFailed (and
-        the renderer unusable from then on)."""
+        """The native renderer's `method(*args, **kwargs)`: RuntimeError -> RenderError, DeviceFailed -> BackendFailed
+        (and the renderer unusable from then on)."""
         if self._failure is not None:
             raise BackendFailed(f"{self.name} backend stopped working: {self._failure}")
         try:
@@ -110,8 +118,15 @@ class CudaRenderer(NativeUploads, Renderer):
 
         return interop_status(_native_cuda.gl_devices(), _native_cuda.default_device())
 
-    def render(self, camera: Camera, settings: RenderSettings, *, cancel: Cancellable | None = None,
-               on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
+    def render(
+        self,
+        camera: Camera,
+        settings: RenderSettings,
+        *,
+        cancel: Cancellable | None = None,
+        on_progress: Progress | None = None,
+        partial: np.ndarray | None = None,
+    ) -> Frame:
         """One kernel sequence per frame: `cancel` is checked before and after it, progress is 0 then 1 of 1,
         `partial` receives the frame at the end."""
         control = RenderControl(cancel, on_progress, partial)
@@ -121,8 +136,15 @@ class CudaRenderer(NativeUploads, Renderer):
         control.fill_partial(frame.rgb)
         return frame
 
-    def render_to_texture(self, texture, camera: Camera, settings: RenderSettings, *,
-                          cancel: Cancellable | None = None, on_progress: Progress | None = None) -> FrameStats:
+    def render_to_texture(
+        self,
+        texture,
+        camera: Camera,
+        settings: RenderSettings,
+        *,
+        cancel: Cancellable | None = None,
+        on_progress: Progress | None = None,
+    ) -> FrameStats:
         """Render into `texture` (a moderngl RGBA32F texture of the camera's size whose context, or one sharing
         objects with it, is current in this thread and runs on this renderer's device) through CUDA-GL interop:
         rgb and alpha as `render`'s Frame, row 0 the image's top; the pixels never leave the device (the
@@ -130,8 +152,7 @@ class CudaRenderer(NativeUploads, Renderer):
         it returns. The texture stays registered with CUDA: `release_texture(texture.glo)` before deleting it."""
         check_display_texture(texture, camera, self.name)
         control = RenderControl(cancel, on_progress)
-        out, prep, t0 = self._run(camera, settings, control, "render_to_gl_texture", lead=(texture,),
-                                  extra=(False,))
+        out, prep, t0 = self._run(camera, settings, control, "render_to_gl_texture", lead=(texture,), extra=(False,))
         texture.ctx.finish()  # the CUDA writes are done; the unmap reaches GL before the UI context samples it
         return native_stats(out, prep, camera, settings, self.name, t0)
 
@@ -148,8 +169,15 @@ class CudaRenderer(NativeUploads, Renderer):
         except RuntimeError as exc:
             raise RenderError(f"cuda: {exc}") from None
 
-    def _run(self, camera: Camera, settings: RenderSettings, control: RenderControl, method: str, lead: tuple = (),
-             extra: tuple = ()) -> tuple:
+    def _run(
+        self,
+        camera: Camera,
+        settings: RenderSettings,
+        control: RenderControl,
+        method: str,
+        lead: tuple = (),
+        extra: tuple = (),
+    ) -> tuple:
         """The native renderer's `method(*lead, camera args, mode, ..., background, want_window, oit globals)` under
         the lock (a texture in `lead` passed by its GL name, its registration claimed), `control` checked before and
         after it; its result dict, the frame's inputs and the start time."""
@@ -160,10 +188,22 @@ class CudaRenderer(NativeUploads, Renderer):
             self._sync_cut(prep, settings.threads, control.flag)
             control.step(0, 1)
             lead = tuple(self._textures.claim(x) for x in lead)
-            out = self._native(method, *lead, *camera_args(camera), settings.native_mode, settings.supersample,
-                             settings.sh_degree, np.asarray(settings.background, np.float32), *extra,
-                             *(prep.oit or ()), view_filter=settings.view_filter.native(), seed=settings.seed,
-                             frame=settings.frame, cut=prep.tree is not None, fast=settings.precision == "fast")
+            out = self._native(
+                method,
+                *lead,
+                *camera_args(camera),
+                settings.native_mode,
+                settings.supersample,
+                settings.sh_degree,
+                np.asarray(settings.background, np.float32),
+                *extra,
+                *(prep.oit or ()),
+                view_filter=settings.view_filter.native(),
+                seed=settings.seed,
+                frame=settings.frame,
+                cut=prep.tree is not None,
+                fast=settings.precision == "fast",
+            )
             control.step(1, 1)
         if prep.tree is not None:
             out["lod_splats"] = self._cut.count
@@ -190,6 +230,8 @@ def interop_status(gl_devices: list[int], device: int) -> tuple[bool, str]:
     if not gl_devices:
         return False, "the OpenGL context current here does not run on a CUDA device (no CUDA-GL interop)"
     if device not in gl_devices:
-        return False, (f"the OpenGL context runs on CUDA device {', '.join(map(str, gl_devices))}, the cuda renderer "
-                       f"on device {device}: frames are copied")
+        return False, (
+            f"the OpenGL context runs on CUDA device {', '.join(map(str, gl_devices))}, the cuda renderer "
+            f"on device {device}: frames are copied"
+        )
     return True, ""

@@ -1,5 +1,6 @@
 """The per-frame preparation every backend shares: the view's splats (a trained Duplex-GS model decoded for the
-camera), the level-of-detail cut, the wsr / duplex globals and cells, the camera as the native modules take it, and the frame's stats."""
+camera), the level-of-detail cut, the wsr / duplex globals and cells, the camera as the native modules take it, and the
+frame's stats."""
 
 from __future__ import annotations
 
@@ -9,15 +10,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..model.camera import Camera
-from ..model.cells import Cells, cells_for
 from ..core.errors import GBViewerError, RenderCancelled, RenderError
 from ..lod import Hierarchy, check_plain, cut_rows, cut_scene, cut_view, hierarchy_for
+from ..model.camera import Camera
+from ..model.cells import Cells, cells_for
 from ..model.scene import Scene
 from .budget import check_frame_memory
 from .modes import ORDER_INDEPENDENT
-from .types import (DEFAULT_ET_GRADE, DEFAULT_SIGMA, SORT_ENTRY_BYTES, Frame, FrameStats, Mode,
-                    RenderSettings)
+from .types import DEFAULT_ET_GRADE, DEFAULT_SIGMA, SORT_ENTRY_BYTES, Frame, FrameStats, Mode, RenderSettings
 
 
 class OitParams(NamedTuple):
@@ -69,9 +69,15 @@ class Prepared:
 MAX_SAMPLES = 2**31 - 1  # sub-samples of one frame: the native modules and shaders index them with int32
 
 
-def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backend: str,
-            lod_in_place: bool = False, flag: np.ndarray | None = None,
-            size: tuple[int, int] | None = None) -> Prepared:
+def prepare(
+    scene: Scene | None,
+    camera: Camera,
+    settings: RenderSettings,
+    backend: str,
+    lod_in_place: bool = False,
+    flag: np.ndarray | None = None,
+    size: tuple[int, int] | None = None,
+) -> Prepared:
     """The frame's inputs for `backend` from its uploaded scene (None: nothing uploaded, an error). A
     level-of-detail frame gets the cut's Scene, or with `lod_in_place` (every backend; not duplex or
     stochastic_popfree) the hierarchy and cut arguments to draw the same cut from the uploaded scene. `flag`: the
@@ -83,8 +89,10 @@ def prepare(scene: Scene | None, camera: Camera, settings: RenderSettings, backe
     w, h = size or (camera.width, camera.height)
     samples = w * h * settings.supersample**2
     if samples > MAX_SAMPLES:
-        raise RenderError(f"{w}x{h} at supersample {settings.supersample}: {samples} samples, "
-                          f"more than the {MAX_SAMPLES} one frame can hold")
+        raise RenderError(
+            f"{w}x{h} at supersample {settings.supersample}: {samples} samples, "
+            f"more than the {MAX_SAMPLES} one frame can hold"
+        )
     check_frame_memory(camera, settings, scene.num_splats, size)
     t0 = time.perf_counter()
     view = view_scene(scene, camera)
@@ -131,8 +139,9 @@ class CutRows:
             return False
         self.key = None
         rows, weights = cut_rows(tree, view, threads, flag)
-        changed = not (self.rows is not None and np.array_equal(rows, self.rows) and
-                       np.array_equal(weights, self.weights))
+        changed = not (
+            self.rows is not None and np.array_equal(rows, self.rows) and np.array_equal(weights, self.weights)
+        )
         if changed:
             self.rows, self.weights = rows, weights
             self.generation += 1
@@ -164,8 +173,15 @@ class NativeUploads:
     def _upload(self, scene: Scene) -> None:
         """Forget what is uploaded first: a failed upload (out of memory) leaves no scene there."""
         self._uploaded = self._cells = self._tree = None
-        self._send("upload", scene.means, scene.scales, scene.quats, scene.opacities,
-                   np.ascontiguousarray(scene.sh, np.float32), scene.filter_3d)  # float16 SH: a float32 copy
+        self._send(
+            "upload",
+            scene.means,
+            scene.scales,
+            scene.quats,
+            scene.opacities,
+            np.ascontiguousarray(scene.sh, np.float32),
+            scene.filter_3d,
+        )  # float16 SH: a float32 copy
         if scene.oit is not None and scene.oit.view_weight_sh is not None:
             self._send("upload_weights", np.ascontiguousarray(scene.oit.view_weight_sh, np.float32))
         self._uploaded = scene
@@ -173,8 +189,9 @@ class NativeUploads:
     def _upload_tree(self, t: Hierarchy, sh: np.ndarray) -> None:
         """The hierarchy as the CPU module walks it (`sh`: its SH as the scene's dtype gives them, float32): the
         interior nodes and what its cut reads."""
-        self._send("upload_lod", t.means, t.scales, t.quats, t.opacities, sh, t.filter_3d, t.radius, t.size, t.levels,
-                   t.order)
+        self._send(
+            "upload_lod", t.means, t.scales, t.quats, t.opacities, sh, t.filter_3d, t.radius, t.size, t.levels, t.order
+        )
 
     def _sync(self, prep: Prepared) -> None:
         """Upload the view's splats, duplex cells and (a level-of-detail frame drawn in place) the scene's hierarchy
@@ -188,28 +205,65 @@ class NativeUploads:
             try:
                 self._upload_tree(t, sh)
             except ValueError as exc:  # a Scene made of values its renders drop (NaN): Scene.from_arrays drops them
-                raise RenderError(f"{scene.source}: level of detail: {exc} (the scene holds splats with non-finite "
-                                  "values or beyond float32; Scene.from_arrays drops those)") from None
+                raise RenderError(
+                    f"{scene.source}: level of detail: {exc} (the scene holds splats with non-finite "
+                    "values or beyond float32; Scene.from_arrays drops those)"
+                ) from None
             self._tree = t
         if cells is not None and cells is not self._cells:
             self._cells = None
-            self._send("upload_cells", cells.means, cells.scales, cells.quats, cells.offsets, cells.members,
-                       cells.cell_of(scene.num_splats))
+            self._send(
+                "upload_cells",
+                cells.means,
+                cells.scales,
+                cells.quats,
+                cells.offsets,
+                cells.members,
+                cells.cell_of(scene.num_splats),
+            )
             self._cells = cells
 
 
 def camera_args(camera: Camera) -> tuple:
     """Camera as the native modules take it: R (3x3), t, fx, fy, cx, cy, width, height, near, projection code."""
-    return (np.ascontiguousarray(camera.R, np.float32), np.ascontiguousarray(camera.t, np.float32), camera.fx,
-            camera.fy, camera.cx, camera.cy, camera.width, camera.height, camera.near, camera.projection_code)
+    return (
+        np.ascontiguousarray(camera.R, np.float32),
+        np.ascontiguousarray(camera.t, np.float32),
+        camera.fx,
+        camera.fy,
+        camera.cx,
+        camera.cy,
+        camera.width,
+        camera.height,
+        camera.near,
+        camera.projection_code,
+    )
 
 
-def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backend: str, t0: float, *,
-                preprocess_ms: float, sort_ms: float, blend_ms: float, visible: int, sort_length: int, pairs: int,
-                evaluations: int, cells_visible: int | None = None, cell_misses: int | None = None,
-                simd: str | None = None, stage_reused: bool | None = None, order_reused: bool | None = None,
-                stage_ms: float | None = None, order_ms: float | None = None,
-                lod_splats: int | None = None, fast: bool = False) -> FrameStats:
+def frame_stats(
+    prep: Prepared,
+    camera: Camera,
+    settings: RenderSettings,
+    backend: str,
+    t0: float,
+    *,
+    preprocess_ms: float,
+    sort_ms: float,
+    blend_ms: float,
+    visible: int,
+    sort_length: int,
+    pairs: int,
+    evaluations: int,
+    cells_visible: int | None = None,
+    cell_misses: int | None = None,
+    simd: str | None = None,
+    stage_reused: bool | None = None,
+    order_reused: bool | None = None,
+    stage_ms: float | None = None,
+    order_ms: float | None = None,
+    lod_splats: int | None = None,
+    fast: bool = False,
+) -> FrameStats:
     """The frame's stats from a backend's counts and stage times; t0: when the render began; lod_splats: the
     level-of-detail cut a backend drew in place (else a cut's Scene says); fast: the backend ran the fast precision
     the settings ask for (a backend without that kernel renders, and says, exact)."""
@@ -220,14 +274,24 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
         counts = prep.scene.meta.get("lod") if lod_splats is None else (lod_splats, prep.scene.num_splats)
         lod_splats = prep.scene.num_splats if counts is None else counts[0]
     return FrameStats(
-        preprocess_ms=float(preprocess_ms), sort_ms=float(sort_ms), blend_ms=float(blend_ms),
-        total_ms=(time.perf_counter() - t0) * 1e3, visible=int(visible), sort_length=int(sort_length),
-        sort_bytes=int(sort_length) * SORT_ENTRY_BYTES, pairs=int(pairs), evaluations=int(evaluations),
-        evals_per_pixel=int(evaluations) / (camera.width * camera.height), backend=backend,
-        mode=settings.label_for(prep.scene, counts), simd=simd, precision=settings.precision,
+        preprocess_ms=float(preprocess_ms),
+        sort_ms=float(sort_ms),
+        blend_ms=float(blend_ms),
+        total_ms=(time.perf_counter() - t0) * 1e3,
+        visible=int(visible),
+        sort_length=int(sort_length),
+        sort_bytes=int(sort_length) * SORT_ENTRY_BYTES,
+        pairs=int(pairs),
+        evaluations=int(evaluations),
+        evals_per_pixel=int(evaluations) / (camera.width * camera.height),
+        backend=backend,
+        mode=settings.label_for(prep.scene, counts),
+        simd=simd,
+        precision=settings.precision,
         cells=prep.cells.num_cells if prep.cells is not None else None,
         cells_visible=None if cells_visible is None else int(cells_visible),
-        cell_misses=None if cell_misses is None else int(cell_misses), decode_ms=prep.decode_ms,
+        cell_misses=None if cell_misses is None else int(cell_misses),
+        decode_ms=prep.decode_ms,
         stage_reused=None if stage_reused is None else bool(stage_reused),
         order_reused=None if order_reused is None else bool(order_reused),
         stage_ms=None if stage_ms is None else float(stage_ms),
@@ -236,24 +300,47 @@ def frame_stats(prep: Prepared, camera: Camera, settings: RenderSettings, backen
     )
 
 
-def native_stats(out: dict, prep: Prepared, camera: Camera, settings: RenderSettings, backend: str,
-                 t0: float) -> FrameStats:
+def native_stats(
+    out: dict, prep: Prepared, camera: Camera, settings: RenderSettings, backend: str, t0: float
+) -> FrameStats:
     """The stats of a native module's result dict (per-stage ms and counts, evaluations; duplex: cells_visible,
     cell_misses; the CPU module: simd, the SIMD path its blend ran, stage_reused, order_reused, stage_ms, order_ms
     and lod_splats)."""
     duplex = settings.mode == Mode.DUPLEX
     return frame_stats(
-        prep, camera, settings, backend, t0, preprocess_ms=out["preprocess_ms"], sort_ms=out["sort_ms"],
-        blend_ms=out["blend_ms"], visible=out["visible"], sort_length=out["sort_length"], pairs=out["pairs"],
-        evaluations=out["evaluations"], cells_visible=out["cells_visible"] if duplex else None,
-        cell_misses=out["cell_misses"] if duplex else None, simd=str(out["simd"]) if "simd" in out else None,
-        stage_reused=out.get("stage_reused"), order_reused=out.get("order_reused"), stage_ms=out.get("stage_ms"),
-        order_ms=out.get("order_ms"), lod_splats=out.get("lod_splats"), fast=bool(out.get("fast", False)),
+        prep,
+        camera,
+        settings,
+        backend,
+        t0,
+        preprocess_ms=out["preprocess_ms"],
+        sort_ms=out["sort_ms"],
+        blend_ms=out["blend_ms"],
+        visible=out["visible"],
+        sort_length=out["sort_length"],
+        pairs=out["pairs"],
+        evaluations=out["evaluations"],
+        cells_visible=out["cells_visible"] if duplex else None,
+        cell_misses=out["cell_misses"] if duplex else None,
+        simd=str(out["simd"]) if "simd" in out else None,
+        stage_reused=out.get("stage_reused"),
+        order_reused=out.get("order_reused"),
+        stage_ms=out.get("stage_ms"),
+        order_ms=out.get("order_ms"),
+        lod_splats=out.get("lod_splats"),
+        fast=bool(out.get("fast", False)),
     )
 
 
-def native_frame(out: dict, prep: Prepared, camera: Camera, settings: RenderSettings, backend: str,
-                 t0: float, region: tuple[int, int, int, int] | None = None) -> Frame:
+def native_frame(
+    out: dict,
+    prep: Prepared,
+    camera: Camera,
+    settings: RenderSettings,
+    backend: str,
+    t0: float,
+    region: tuple[int, int, int, int] | None = None,
+) -> Frame:
     """A Frame from a native module's result dict: rgb, alpha, evals, window? and `native_stats`' fields (of the
     region's pixels when only a region (x, y, w, h) was rendered)."""
     debug = {"evals": out["evals"]}
@@ -270,5 +357,7 @@ def check_display_texture(texture, camera: Camera, backend: str) -> None:
     size = getattr(texture, "size", None)
     kind = (getattr(texture, "components", None), getattr(texture, "dtype", None))
     if size != (camera.width, camera.height) or kind != (4, "f4"):
-        raise RenderError(f"{backend} render_to_texture: expected an RGBA32F (4 components, 'f4') texture of "
-                          f"{camera.width}x{camera.height}, got {size} with components/dtype {kind}")
+        raise RenderError(
+            f"{backend} render_to_texture: expected an RGBA32F (4 components, 'f4') texture of "
+            f"{camera.width}x{camera.height}, got {size} with components/dtype {kind}"
+        )

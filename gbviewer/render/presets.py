@@ -72,42 +72,82 @@ SPARK_FILTER = ViewFilter(0.3, pre_dilation=0.0, compensate=True, dc_clamp=True,
 # The modes a preset's 2D filter applies to: those whose alpha is 3DGS's at the pixel centre.
 FILTERED_MODES = ("scalar", "stochastic", "stochastic_popfree")
 
-PRESETS = {p.name: p for p in (
-    Preset("inria", "scalar", 3, ViewFilter(),
-           "graphdeco-inria/diff-gaussian-rasterization cuda_rasterizer/forward.cu (computeCov2D: +0.3); SIBR's "
-           "gaussian viewer renders with it", "nothing: the scalar mode is this rasterizer"),
-    Preset("gsplat-antialiased", "scalar", 3, ViewFilter(0.3, compensate=True),
-           "nerfstudio-project/gsplat gsplat/cuda/include/utils.cuh (add_blur), gsplat/rendering.py (eps2d=0.3, "
-           "rasterize_mode='antialiased')", "gsplat's 3-sigma radius and 1/255 cutoff are the scalar mode's already"),
-    Preset("supersplat", "scalar", 3, SUPERSPLAT_FILTER,
-           "playcanvas/engine src/scene/shader-lib/glsl/chunks/gsplat/vert/gsplatCorner.js (+0.3, 2 px early-out "
-           "minPixelSize 2, quad 2 sqrt(2 lambda)), frag/gsplat.js (discard beyond |uv| = 1); playcanvas/supersplat "
-           "src/ui/view-panel.ts (SH bands, default 3)",
-           "normExp's kernel (exp(-4A) - e^-4) / (1 - e^-4), the lambda2 floor of 0.1, the 1024 px / viewport clamp, "
-           "no 0.99 alpha cap, half-float colour and covariance, 8-bit output"),
-    Preset("spark", "scalar", 3, SPARK_FILTER,
-           "sparkjsdev/spark src/SparkRenderer.ts (preBlurAmount 0.0, blurAmount 0.3, maxStdDev sqrt(8), "
-           "sortRadial true), src/shaders/splatVertex.glsl, src/shaders/splatFragment.glsl, src/utils.ts "
-           "(rgbMin 0, rgbMax 1)",
-           "minAlpha 0.5/255, no 0.99 alpha cap, clipXY 1.4, the rest of the packed encoding (8-bit colour and "
-           "opacity, log-encoded scales, float16 centres, quantised SH bands)"),
-    Preset("supersplat-stochastic", "stochastic", 3, SUPERSPLAT_FILTER,
-           "playcanvas/engine src/scene/shader-lib/glsl/chunks/gsplat/frag/gsplat.js (opacityDither(alpha, "
-           "id * 0.013): the splat id offsets the dither), src/scene/shader-lib/glsl/chunks/standard/frag/"
-           "opacity-dither.js (discard when alpha < noise), the supersplat preset's filter and rules",
-           "its blue-noise (or Bayer) dither texture and per-frame jitter (ours: stochastic.h's white-noise hash), "
-           "the supersplat preset's list"),
-    Preset("spark-stochastic", "stochastic", 3, SPARK_FILTER,
-           "sparkjsdev/spark src/shaders/splatFragment.glsl (STOCHASTIC: a hash of time, gl_FragCoord and the splat "
-           "index; rand < alpha writes the colour opaque, else discard), the spark preset's filter and rules",
-           "its PCG-style hash (ours is stochastic.h's), a time-based rather than frame-index seed, the spark "
-           "preset's list"),
-    Preset("antimatter15", "scalar", 0, ViewFilter(0.0, dc_clamp=True, support=QUAD_SIGMAS),
-           "antimatter15/splat main.js (no term added to cov2d; .splat colour only, clamped to 8 bits; quad "
-           "2 sqrt(2 lambda), discard when A < -4)",
-           "no 1/255 cutoff or 0.99 cap, 8-bit colour steps, opacity and quaternion, float16 covariance, the 1024 px "
-           "axis clamp"),
-)}
+PRESETS = {
+    p.name: p
+    for p in (
+        Preset(
+            "inria",
+            "scalar",
+            3,
+            ViewFilter(),
+            "graphdeco-inria/diff-gaussian-rasterization cuda_rasterizer/forward.cu (computeCov2D: +0.3); SIBR's "
+            "gaussian viewer renders with it",
+            "nothing: the scalar mode is this rasterizer",
+        ),
+        Preset(
+            "gsplat-antialiased",
+            "scalar",
+            3,
+            ViewFilter(0.3, compensate=True),
+            "nerfstudio-project/gsplat gsplat/cuda/include/utils.cuh (add_blur), gsplat/rendering.py (eps2d=0.3, "
+            "rasterize_mode='antialiased')",
+            "gsplat's 3-sigma radius and 1/255 cutoff are the scalar mode's already",
+        ),
+        Preset(
+            "supersplat",
+            "scalar",
+            3,
+            SUPERSPLAT_FILTER,
+            "playcanvas/engine src/scene/shader-lib/glsl/chunks/gsplat/vert/gsplatCorner.js (+0.3, 2 px early-out "
+            "minPixelSize 2, quad 2 sqrt(2 lambda)), frag/gsplat.js (discard beyond |uv| = 1); playcanvas/supersplat "
+            "src/ui/view-panel.ts (SH bands, default 3)",
+            "normExp's kernel (exp(-4A) - e^-4) / (1 - e^-4), the lambda2 floor of 0.1, the 1024 px / viewport clamp, "
+            "no 0.99 alpha cap, half-float colour and covariance, 8-bit output",
+        ),
+        Preset(
+            "spark",
+            "scalar",
+            3,
+            SPARK_FILTER,
+            "sparkjsdev/spark src/SparkRenderer.ts (preBlurAmount 0.0, blurAmount 0.3, maxStdDev sqrt(8), "
+            "sortRadial true), src/shaders/splatVertex.glsl, src/shaders/splatFragment.glsl, src/utils.ts "
+            "(rgbMin 0, rgbMax 1)",
+            "minAlpha 0.5/255, no 0.99 alpha cap, clipXY 1.4, the rest of the packed encoding (8-bit colour and "
+            "opacity, log-encoded scales, float16 centres, quantised SH bands)",
+        ),
+        Preset(
+            "supersplat-stochastic",
+            "stochastic",
+            3,
+            SUPERSPLAT_FILTER,
+            "playcanvas/engine src/scene/shader-lib/glsl/chunks/gsplat/frag/gsplat.js (opacityDither(alpha, "
+            "id * 0.013): the splat id offsets the dither), src/scene/shader-lib/glsl/chunks/standard/frag/"
+            "opacity-dither.js (discard when alpha < noise), the supersplat preset's filter and rules",
+            "its blue-noise (or Bayer) dither texture and per-frame jitter (ours: stochastic.h's white-noise hash), "
+            "the supersplat preset's list",
+        ),
+        Preset(
+            "spark-stochastic",
+            "stochastic",
+            3,
+            SPARK_FILTER,
+            "sparkjsdev/spark src/shaders/splatFragment.glsl (STOCHASTIC: a hash of time, gl_FragCoord and the splat "
+            "index; rand < alpha writes the colour opaque, else discard), the spark preset's filter and rules",
+            "its PCG-style hash (ours is stochastic.h's), a time-based rather than frame-index seed, the spark "
+            "preset's list",
+        ),
+        Preset(
+            "antimatter15",
+            "scalar",
+            0,
+            ViewFilter(0.0, dc_clamp=True, support=QUAD_SIGMAS),
+            "antimatter15/splat main.js (no term added to cov2d; .splat colour only, clamped to 8 bits; quad "
+            "2 sqrt(2 lambda), discard when A < -4)",
+            "no 1/255 cutoff or 0.99 cap, 8-bit colour steps, opacity and quaternion, float16 covariance, the 1024 px "
+            "axis clamp",
+        ),
+    )
+}
 
 
 TRAINED_SPECS = {THREEDGS: "scalar", ANTIALIASED: "preset:gsplat-antialiased", MIP_3D: "mip"}

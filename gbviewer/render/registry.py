@@ -10,9 +10,9 @@ from collections.abc import Callable, Iterator, Mapping
 
 import numpy as np
 
-from ..model.camera import Camera
 from ..core.cancel import Cancellable
 from ..core.errors import InvalidValue, RenderError
+from ..model.camera import Camera
 from ..model.scene import Scene
 from .choice import AUTO, choose_backend
 from .control import FrameLock
@@ -133,8 +133,10 @@ class SharedRenderer:
 def _check_job(call: str, camera: object, settings: object) -> None:
     """A frame's camera and settings as a renderer takes them, else one line naming the call."""
     if not (isinstance(camera, Camera) and isinstance(settings, RenderSettings)):
-        raise InvalidValue(f"{call}: expected a gbviewer.Camera and a RenderSettings (RenderSettings.parse(spec)) "
-                           f"per frame, got {type(camera).__name__} and {type(settings).__name__}")
+        raise InvalidValue(
+            f"{call}: expected a gbviewer.Camera and a RenderSettings (RenderSettings.parse(spec)) "
+            f"per frame, got {type(camera).__name__} and {type(settings).__name__}"
+        )
 
 
 _renderers: dict[str, _Slot] = {}
@@ -146,8 +148,10 @@ def get_renderer(scene: Scene, backend: str = "cpu") -> SharedRenderer:
     from any thread). One renderer per backend, uploading only when the scene changes: it keeps the last scene
     alive, never every scene it has seen. One that stopped working (`usable()` False) is replaced by a new one."""
     if not isinstance(scene, Scene):
-        raise InvalidValue(f"get_renderer: the first argument is the scene (a gbviewer.Scene: gb.load(path)), "
-                           f"got {type(scene).__name__} {scene!r:.60}")
+        raise InvalidValue(
+            f"get_renderer: the first argument is the scene (a gbviewer.Scene: gb.load(path)), "
+            f"got {type(scene).__name__} {scene!r:.60}"
+        )
     backend = resolve_backend(backend)
     with _renderers_lock:
         slot = _renderers.get(backend)
@@ -183,7 +187,7 @@ def render(
     cancels the render: CallbackError, chained to it). `partial`: a float32 (height, width, 3) array that receives
     each tile's pixels as soon as it is blended (centre out), for showing a frame while it refines. Safe from any
     thread, with any scenes (each call renders its own scene)."""
-    settings = settings_from(mode, "render", background, debug, supersample=supersample, sh_degree=sh_degree,
-                             **options)
-    return get_renderer(scene, backend).render(camera, settings, cancel=cancel, on_progress=on_progress,
-                                                      partial=partial)
+    settings = settings_from(mode, "render", background, debug, supersample=supersample, sh_degree=sh_degree, **options)
+    return get_renderer(scene, backend).render(
+        camera, settings, cancel=cancel, on_progress=on_progress, partial=partial
+    )

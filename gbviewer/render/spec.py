@@ -10,7 +10,6 @@ from ..core.errors import RenderError
 from .presets import PRESETS
 from .view_filter import ViewFilter
 
-
 PRECISIONS = ("exact", "fast")  # gaussian_blending's kernels (gbv/blend.h: blend_gaussian's Fast)
 
 
@@ -24,8 +23,9 @@ def spec_parts(spec: str) -> dict:
         key = "precision" if kind in PRECISIONS else kind
         if key not in ("lod", "precision") or key in parts or (kind in PRECISIONS and tau):
             raise RenderError(f"mode {spec!r}: expected MODE[:N][+fast|+exact][+lod[:TAU]]")
-        parts[key] = kind if kind in PRECISIONS else \
-            _spec_number(tau, float, spec, "LOD pixels") if tau.strip() else 1.0
+        parts[key] = (
+            kind if kind in PRECISIONS else _spec_number(tau, float, spec, "LOD pixels") if tau.strip() else 1.0
+        )
     name, _, n = body.strip().partition(":")
     name = name.strip().lower()
     if name == "preset":
@@ -33,8 +33,7 @@ def spec_parts(spec: str) -> dict:
         preset = PRESETS.get(name.strip().lower())
         if preset is None:
             raise RenderError(f"mode {spec!r}: unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
-        parts.update(mode=preset.mode, view_filter=preset.view_filter, preset=preset.name,
-                     sh_degree=preset.sh_degree)
+        parts.update(mode=preset.mode, view_filter=preset.view_filter, preset=preset.name, sh_degree=preset.sh_degree)
     else:
         parts["mode"] = "scalar" if name == "supersample" else name  # RenderSettings parses (and checks) it
         if name == "stopthepop" and n.strip():  # 'stopthepop:K[:N]': K, its queue length, comes first
@@ -49,8 +48,9 @@ def _spec_number(text: str, kind: type, spec: str, what: str) -> float | int:
     try:
         return kind(text)
     except ValueError:
-        raise RenderError(f"mode {spec!r}: {what} {text!r} is not {'an integer' if kind is int else 'a number'}") \
-            from None
+        raise RenderError(
+            f"mode {spec!r}: {what} {text!r} is not {'an integer' if kind is int else 'a number'}"
+        ) from None
 
 
 def shortest(x: float) -> str:
@@ -64,5 +64,6 @@ def shown(value: object) -> str:
     """A field's value in a message: a mode's name, a view filter's parts, a number as written."""
     if isinstance(value, enum.Enum):
         return value.name.lower()
-    return value.describe() if isinstance(value, ViewFilter) else f"{value:g}" if isinstance(value, float) else \
-        str(value)
+    return (
+        value.describe() if isinstance(value, ViewFilter) else f"{value:g}" if isinstance(value, float) else str(value)
+    )

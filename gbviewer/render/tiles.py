@@ -20,9 +20,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..model.camera import Camera
 from ..core.cancel import Cancellable
 from ..core.errors import RenderCancelled, RenderError
+from ..model.camera import Camera
 from .budget import BUDGET_ENV, frame_bytes, gib, memory_budget
 from .cpu import REGION_ALIGN, Region
 from .types import Frame, FrameStats, Mode, Renderer, RenderSettings
@@ -37,8 +37,9 @@ def region_step(settings: RenderSettings) -> int:
     return REGION_ALIGN // gcd(REGION_ALIGN, settings.supersample)
 
 
-def plan_parts(camera: Camera, settings: RenderSettings, splats: int, budget: int,
-               source: str = "given") -> list[Region] | None:
+def plan_parts(
+    camera: Camera, settings: RenderSettings, splats: int, budget: int, source: str = "given"
+) -> list[Region] | None:
     """The parts (x, y, w, h) a frame renders in under `budget` bytes (None: whole, it fits), the stitched image
     counted; halves the longer side of the part (on `region_step`) until it fits. A one-line `RenderError` when
     not even the smallest part does (`source`: where the budget comes from, as `memory_budget` says)."""
@@ -50,9 +51,11 @@ def plan_parts(camera: Camera, settings: RenderSettings, splats: int, budget: in
     w, h = W, H
     while frame_bytes(camera, settings, splats, (w, h)) > budget - held:
         if w <= step and h <= step:
-            raise RenderError(f"{W}x{H} at supersample {settings.supersample}: even {w}x{h} parts need "
-                              f"{gib(frame_bytes(camera, settings, splats, (w, h)) + held)} with the stitched image, "
-                              f"more than the {gib(budget)} budget ({source}); set {BUDGET_ENV} to raise it")
+            raise RenderError(
+                f"{W}x{H} at supersample {settings.supersample}: even {w}x{h} parts need "
+                f"{gib(frame_bytes(camera, settings, splats, (w, h)) + held)} with the stitched image, "
+                f"more than the {gib(budget)} budget ({source}); set {BUDGET_ENV} to raise it"
+            )
         if w >= h:
             w = max(step, -(-w // 2 // step) * step)
         else:
@@ -60,9 +63,16 @@ def plan_parts(camera: Camera, settings: RenderSettings, splats: int, budget: in
     return [(x, y, min(w, W - x), min(h, H - y)) for y in range(0, H, h) for x in range(0, W, w)]
 
 
-def render_tiled(renderer: Renderer, camera: Camera, settings: RenderSettings, splats: int, *,
-                 cancel: Cancellable | None = None, progress: Callable[[int, int], None] | None = None,
-                 budget: int | None = None) -> Frame:
+def render_tiled(
+    renderer: Renderer,
+    camera: Camera,
+    settings: RenderSettings,
+    splats: int,
+    *,
+    cancel: Cancellable | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    budget: int | None = None,
+) -> Frame:
     """`renderer.render(camera, settings)` of a scene of `splats` splats, in parts when its buffers exceed the
     memory budget (`memory_budget`, or `budget` bytes) and the renderer renders parts (`render_region`; not
     duplex). progress(done, total) after each part; a cancel set between or during parts raises RenderCancelled.
@@ -81,12 +91,18 @@ def render_tiled(renderer: Renderer, camera: Camera, settings: RenderSettings, s
         if cancel is not None and cancel.is_set():
             raise RenderCancelled("render cancelled")
         f = renderer.render_region(camera, settings, (x, y, w, h), cancel=cancel)
-        rgb[y:y + h, x:x + w], alpha[y:y + h, x:x + w] = f.rgb, f.alpha
+        rgb[y : y + h, x : x + w], alpha[y : y + h, x : x + w] = f.rgb, f.alpha
         for name, plane in f.debug.items():
-            debug.setdefault(name, np.empty((H, W, *plane.shape[2:]), plane.dtype))[y:y + h, x:x + w] = plane
-        stats = f.stats if stats is None else replace(
-            stats, visible=max(stats.visible, f.stats.visible),
-            **{k: getattr(stats, k) + getattr(f.stats, k) for k in SUMMED})
+            debug.setdefault(name, np.empty((H, W, *plane.shape[2:]), plane.dtype))[y : y + h, x : x + w] = plane
+        stats = (
+            f.stats
+            if stats is None
+            else replace(
+                stats,
+                visible=max(stats.visible, f.stats.visible),
+                **{k: getattr(stats, k) + getattr(f.stats, k) for k in SUMMED},
+            )
+        )
         if progress is not None:
             progress(i + 1, len(parts))
     assert stats is not None  # at least one part

@@ -13,10 +13,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..model.camera import Camera
 from ..core.errors import InvalidValue, RenderError
-from ..model.scene import Scene
 from ..core.validate import dumps_json, integer
+from ..model.camera import Camera
+from ..model.scene import Scene
 from .registry import capable, get_renderer
 from .types import Mode, RenderSettings, settings_from
 
@@ -141,8 +141,16 @@ class PixelTrace:
 
     def to_dict(self) -> dict:
         """Plain data: the fields, each sample's fields with its steps as dicts."""
-        samples = [{"position": s.position, "color": s.color, "transmittance": s.transmittance, "total": s.total,
-                    "steps": [step._asdict() for step in s.steps]} for s in self.samples]
+        samples = [
+            {
+                "position": s.position,
+                "color": s.color,
+                "transmittance": s.transmittance,
+                "total": s.total,
+                "steps": [step._asdict() for step in s.steps],
+            }
+            for s in self.samples
+        ]
         fields = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "samples"}
         return {**fields, "samples": samples}
 
@@ -170,13 +178,26 @@ def from_native(out: dict, settings: RenderSettings, camera: Camera, x: int, y: 
     weight = out["weight"] / totals[out["sample"]]
     window = out["window"] / n
     cols = dict(
-        sample=out["sample"].tolist(), index=out["index"].tolist(), depth=out["depth"].tolist(),
-        rejected=[SKIP_REASONS[k] for k in out["skip"]], alpha=out["alpha"].tolist(), weight=weight.tolist(),
-        raw_weight=out["weight"].tolist(), T_before=out["T_before"].tolist(), T_after=out["T_after"].tolist(),
-        color=_rows(out["color"]), opacity=out["opacity"].tolist(), mean=_rows(xy), conic=_rows(conic),
-        covariance=_rows(cov), radius=(out["radius"] / n).tolist(), cutoff=cutoff.tolist(),
-        fallback=((out["flags"] & _FALLBACK) != 0).tolist(), stopped=((out["flags"] & _STOPPED) != 0).tolist(),
-        node=(out["index"] >= num_splats).tolist())
+        sample=out["sample"].tolist(),
+        index=out["index"].tolist(),
+        depth=out["depth"].tolist(),
+        rejected=[SKIP_REASONS[k] for k in out["skip"]],
+        alpha=out["alpha"].tolist(),
+        weight=weight.tolist(),
+        raw_weight=out["weight"].tolist(),
+        T_before=out["T_before"].tolist(),
+        T_after=out["T_after"].tolist(),
+        color=_rows(out["color"]),
+        opacity=out["opacity"].tolist(),
+        mean=_rows(xy),
+        conic=_rows(conic),
+        covariance=_rows(cov),
+        radius=(out["radius"] / n).tolist(),
+        cutoff=cutoff.tolist(),
+        fallback=((out["flags"] & _FALLBACK) != 0).tolist(),
+        stopped=((out["flags"] & _STOPPED) != 0).tolist(),
+        node=(out["index"] >= num_splats).tolist(),
+    )
     if mode == Mode.GAUSSIAN_BLENDING:
         cols.update(window_center=_rows(window[:, :2]), window_size=_rows(window[:, 2:]))
     if mode == Mode.DUPLEX:
@@ -190,11 +211,24 @@ def from_native(out: dict, settings: RenderSettings, camera: Camera, x: int, y: 
         while end < len(steps) and steps[end].sample == k:
             end += 1
         pos = ((x * n + k % n + 0.5) / n, (y * n + k // n + 0.5) / n)
-        samples.append(SampleTrace(pos, tuple(float(v) for v in rgb[k]), float(1.0 - alpha[k]), float(totals[k]),
-                                   tuple(steps[start:end])))
+        samples.append(
+            SampleTrace(
+                pos, tuple(float(v) for v in rgb[k]), float(1.0 - alpha[k]), float(totals[k]), tuple(steps[start:end])
+            )
+        )
         start = end
-    return PixelTrace(settings.label, x, y, n, camera.width, camera.height, tuple(settings.background),
-                      tuple(float(v) for v in out["pixel_rgb"]), float(1.0 - out["pixel_alpha"]), tuple(samples))
+    return PixelTrace(
+        settings.label,
+        x,
+        y,
+        n,
+        camera.width,
+        camera.height,
+        tuple(settings.background),
+        tuple(float(v) for v in out["pixel_rgb"]),
+        float(1.0 - out["pixel_alpha"]),
+        tuple(samples),
+    )
 
 
 def check_pixel(camera: Camera, x: object, y: object) -> tuple[int, int]:
@@ -204,23 +238,31 @@ def check_pixel(camera: Camera, x: object, y: object) -> tuple[int, int]:
     except InvalidValue as exc:
         raise RenderError(str(exc)) from None
     if not (0 <= xi < camera.width and 0 <= yi < camera.height):
-        raise RenderError(f"pixel ({xi}, {yi}) is outside the {camera.width}x{camera.height} image "
-                          f"(x in 0..{camera.width - 1}, y in 0..{camera.height - 1})")
+        raise RenderError(
+            f"pixel ({xi}, {yi}) is outside the {camera.width}x{camera.height} image "
+            f"(x in 0..{camera.width - 1}, y in 0..{camera.height - 1})"
+        )
     return xi, yi
 
 
-def trace_pixel(scene: Scene, camera: Camera, x: int, y: int, mode: str | Mode | RenderSettings = "scalar",
-                supersample: int | None = None, background: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                sh_degree: int | None = None, **options) -> PixelTrace:
+def trace_pixel(
+    scene: Scene,
+    camera: Camera,
+    x: int,
+    y: int,
+    mode: str | Mode | RenderSettings = "scalar",
+    supersample: int | None = None,
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    sh_degree: int | None = None,
+    **options,
+) -> PixelTrace:
     """The trace of pixel (x, y) of `camera`'s image rendered in `mode` (a RenderSettings, or a spec parsed as
     `gbviewer.render` parses it, with N x N `supersample`, `sh_degree` and `options`: depth_correct, et_grade,
     cell_size, lod, seed and frame (stochastic)), by the kernel of the first backend that traces pixels
     (`Capabilities.trace`: the CPU backend; the others are held to it by their tests)."""
-    settings = settings_from(mode, "trace_pixel", background, supersample=supersample, sh_degree=sh_degree,
-                             **options)
+    settings = settings_from(mode, "trace_pixel", background, supersample=supersample, sh_degree=sh_degree, **options)
     xi, yi = check_pixel(camera, x, y)
     return get_renderer(scene, capable("trace")[0]).trace(camera, settings, xi, yi)
 
 
-__all__ = ["SKIP_REASONS", "PixelTrace", "SampleTrace", "TraceStep", "check_pixel",
-           "from_native", "trace_pixel"]
+__all__ = ["SKIP_REASONS", "PixelTrace", "SampleTrace", "TraceStep", "check_pixel", "from_native", "trace_pixel"]

@@ -13,16 +13,15 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..model.camera import Camera, camera_key
 from ..core.cancel import Cancellable
 from ..core.errors import BackendFailed, InvalidValue, RenderError
-from ..model.scene import Scene
 from ..core.validate import array, distinct_items, integer, real
+from ..model.camera import Camera, camera_key
+from ..model.scene import Scene
 from .modes import MAX_QUEUE, MAX_SEED, STOCHASTIC_MODES, STOPTHEPOP_QUEUE, Mode
 from .presets import FILTERED_MODES, PRESETS
 from .spec import PRECISIONS, shortest, shown, spec_parts
 from .view_filter import ViewFilter
-
 
 DEBUG_OUTPUTS = ("none", "window")
 DEFAULT_ET_GRADE = 4.0  # Duplex-GS ET_grade_final, the value training ends with (docs/modes.md#duplex)
@@ -96,8 +95,9 @@ class RenderSettings:
                 "background": tuple(array(self.background, "background", (3,), f32=True).tolist()),
                 "sh_degree": integer(self.sh_degree, "sh_degree", lo=0, hi=3),
                 "threads": integer(self.threads, "threads", lo=0, hi=MAX_THREADS),
-                "et_grade": None if self.et_grade is None else real(self.et_grade, "et_grade", lo=0, lo_open=True,
-                                                                    f32=True),
+                "et_grade": None
+                if self.et_grade is None
+                else real(self.et_grade, "et_grade", lo=0, lo_open=True, f32=True),
                 "cell_size": integer(self.cell_size, "cell_size", lo=1, hi=MAX_CELL_SIZE),
                 "lod": None if self.lod is None else real(self.lod, "lod", lo=0, hi=MAX_LOD, f32=True),
                 **{k: integer(getattr(self, k), k, lo=0, hi=MAX_SEED) for k in ("seed", "frame")},
@@ -114,18 +114,28 @@ class RenderSettings:
             raise RenderError(f"queue {self.queue} applies to the stopthepop mode, not {self.mode.label}")
         for key in ("seed", "frame"):
             if self.mode not in STOCHASTIC_MODES and getattr(self, key):
-                raise RenderError(f"{key} {getattr(self, key)} applies to the stochastic modes "
-                                  f"({', '.join(m.label for m in STOCHASTIC_MODES)}), not {self.mode.label}")
+                raise RenderError(
+                    f"{key} {getattr(self, key)} applies to the stochastic modes "
+                    f"({', '.join(m.label for m in STOCHASTIC_MODES)}), not {self.mode.label}"
+                )
         if self.mode.label not in FILTERED_MODES and not self.view_filter.is_default:
             raise RenderError(f"view_filter {self.view_filter.describe()} is not for {self.mode.label}")
         if self.preset:  # a name only: the settings must be the preset's, else they are labelled what they are not
             p = PRESETS.get(self.preset)
-            if p is None or (Mode.parse(p.mode), p.view_filter, p.sh_degree) != \
-                    (self.mode, self.view_filter, self.sh_degree):
-                raise RenderError(f"preset {self.preset!r}: " + (
-                    f"unknown; expected one of {', '.join(PRESETS)}" if p is None else
-                    f"is {p.describe()}; these settings are not (make them with RenderSettings.parse"
-                    f"('preset:{p.name}'))"))
+            if p is None or (Mode.parse(p.mode), p.view_filter, p.sh_degree) != (
+                self.mode,
+                self.view_filter,
+                self.sh_degree,
+            ):
+                raise RenderError(
+                    f"preset {self.preset!r}: "
+                    + (
+                        f"unknown; expected one of {', '.join(PRESETS)}"
+                        if p is None
+                        else f"is {p.describe()}; these settings are not (make them with RenderSettings.parse"
+                        f"('preset:{p.name}'))"
+                    )
+                )
 
     def label_for(self, scene: Scene, lod_counts: tuple[int, int] | None = None) -> str:
         """The label with what the scene makes of the mode: wsr on a scene without trained view weights is an
@@ -161,8 +171,11 @@ class RenderSettings:
     @property
     def base_label(self) -> str:
         """The label without the level of detail: 'scalar 3x3', 'gaussian_blending fast', ..."""
-        return self.name + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "") + \
-            (" fast" if self.precision == "fast" else "")
+        return (
+            self.name
+            + (f" {self.supersample}x{self.supersample}" if self.supersample > 1 else "")
+            + (" fast" if self.precision == "fast" else "")
+        )
 
     @property
     def label(self) -> str:
@@ -196,8 +209,9 @@ class RenderSettings:
             theirs = getattr(replace(settings, preset="", **{key: given[key]}), key)  # the option as a field holds it
             if theirs != ours:
                 what = key.replace("_", " ")
-                raise RenderError(f"mode {text!r} sets {what} {shown(ours)}; {what} {shown(theirs)} disagrees "
-                                  "(give one of them)")
+                raise RenderError(
+                    f"mode {text!r} sets {what} {shown(ours)}; {what} {shown(theirs)} disagrees (give one of them)"
+                )
         return settings
 
     @classmethod
@@ -210,8 +224,13 @@ class RenderSettings:
             raise RenderError(str(exc)) from None
 
 
-def settings_from(mode: "str | Mode | RenderSettings", where: str,
-                  background: Sequence[float] = (0.0, 0.0, 0.0), debug: str = "none", **options) -> RenderSettings:
+def settings_from(
+    mode: "str | Mode | RenderSettings",
+    where: str,
+    background: Sequence[float] = (0.0, 0.0, 0.0),
+    debug: str = "none",
+    **options,
+) -> RenderSettings:
     """What a library call (`where`: render, trace_pixel) draws: `mode` a RenderSettings, which says everything
     (the call's other options then left at their defaults), else a spec `RenderSettings.parse` reads with them."""
     if isinstance(mode, RenderSettings):
@@ -341,8 +360,15 @@ class Renderer(abc.ABC):
         """Make `scene` the one later renders draw."""
 
     @abc.abstractmethod
-    def render(self, camera: Camera, settings: RenderSettings, *, cancel: Cancellable | None = None,
-               on_progress: Callable[[int, int], None] | None = None, partial: np.ndarray | None = None) -> Frame:
+    def render(
+        self,
+        camera: Camera,
+        settings: RenderSettings,
+        *,
+        cancel: Cancellable | None = None,
+        on_progress: Callable[[int, int], None] | None = None,
+        partial: np.ndarray | None = None,
+    ) -> Frame:
         """The frame; once `cancel` is set it raises RenderCancelled within one tile batch (GPU backends: one
         dispatch); `on_progress(done, total)` is called from the render as tiles (or dispatches) finish; `partial`
         (float32 (height, width, 3)) receives finished tiles as they are blended (`capabilities.progressive`; else
@@ -353,9 +379,14 @@ class Renderer(abc.ABC):
         """Free what the renderer holds for its scene (buffers, device memory); `upload` again before the next
         render. Calling it twice is harmless."""
 
-    def render_many(self, jobs: Sequence[tuple[Camera, RenderSettings]], *, cancel: Cancellable | None = None,
-                    on_progress: Callable[[int, int, int], None] | None = None,
-                    partials: Sequence[np.ndarray | None] | None = None) -> list[Frame]:
+    def render_many(
+        self,
+        jobs: Sequence[tuple[Camera, RenderSettings]],
+        *,
+        cancel: Cancellable | None = None,
+        on_progress: Callable[[int, int, int], None] | None = None,
+        partials: Sequence[np.ndarray | None] | None = None,
+    ) -> list[Frame]:
         """The frames of several (camera, settings) jobs, each what `render` gives it; `on_progress(job, done, total)`
         per job, `partials[job]` that job's partial frame (None: none); a cancel raises RenderCancelled and returns
         no frame. With `capabilities.shared_stage` the per-camera stage is built once per distinct camera and the jobs'
@@ -365,13 +396,19 @@ class Renderer(abc.ABC):
         jobs = list(jobs)
         parts = job_partials(partials, len(jobs))
         first: dict[tuple, int] = {}
-        order = sorted(range(len(jobs)), key=lambda i: first.setdefault(
-            (camera_key(jobs[i][0]), jobs[i][1].supersample), i))
+        order = sorted(
+            range(len(jobs)), key=lambda i: first.setdefault((camera_key(jobs[i][0]), jobs[i][1].supersample), i)
+        )
         frames: list[Frame | None] = [None] * len(jobs)
         for i in order:
             camera, settings = jobs[i]
-            frames[i] = self.render(camera, settings, cancel=cancel, partial=parts[i],
-                                    on_progress=None if on_progress is None else functools.partial(on_progress, i))
+            frames[i] = self.render(
+                camera,
+                settings,
+                cancel=cancel,
+                partial=parts[i],
+                on_progress=None if on_progress is None else functools.partial(on_progress, i),
+            )
         return frames  # type: ignore[return-value]
 
     def usable(self) -> tuple[bool, str]:

@@ -50,8 +50,18 @@ class ViewFilter:
     def native(self) -> np.ndarray:
         """The native renderers' `view_filter` argument: float32 [dilation, pre_dilation, cull_lambda, compensate,
         dc_clamp, support, sort_radial]."""
-        return np.array([self.dilation, self.pre_dilation, self.cull_lambda, float(self.compensate),
-                         float(self.dc_clamp), self.support, float(self.sort_radial)], np.float32)
+        return np.array(
+            [
+                self.dilation,
+                self.pre_dilation,
+                self.cull_lambda,
+                float(self.compensate),
+                float(self.dc_clamp),
+                self.support,
+                float(self.sort_radial),
+            ],
+            np.float32,
+        )
 
     @property
     def stage_rules(self) -> int:
@@ -61,14 +71,21 @@ class ViewFilter:
     def describe(self) -> str:
         """'+0.3 px^2, opacity compensated, cull lambda_max < 0.5 px^2', the parts that are set."""
         parts = ([f"+{self.pre_dilation:g} px^2 uncompensated"] if self.pre_dilation else []) + [
-            f"+{self.dilation:g} px^2" + (" opacity compensated" if self.compensate else "")]
+            f"+{self.dilation:g} px^2" + (" opacity compensated" if self.compensate else "")
+        ]
         if self.cull_lambda:
             parts.append(f"cull lambda_max < {self.cull_lambda:g} px^2")
-        parts += ["base colour clamped to [0, 1]"] * self.dc_clamp + [f"support {self.support:.3g} sigma"] * (
-            self.support > 0) + ["radial sort"] * self.sort_radial
+        parts += (
+            ["base colour clamped to [0, 1]"] * self.dc_clamp
+            + [f"support {self.support:.3g} sigma"] * (self.support > 0)
+            + ["radial sort"] * self.sort_radial
+        )
         return ", ".join(parts)
 
     def differences(self, other: "ViewFilter") -> list[str]:
         """'dilation 0.3 vs 0' for each field that differs."""
-        return [f"{f.name} {getattr(self, f.name):g} vs {getattr(other, f.name):g}" for f in fields(self)
-                if getattr(self, f.name) != getattr(other, f.name)]
+        return [
+            f"{f.name} {getattr(self, f.name):g} vs {getattr(other, f.name):g}"
+            for f in fields(self)
+            if getattr(self, f.name) != getattr(other, f.name)
+        ]

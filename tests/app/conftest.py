@@ -6,7 +6,6 @@ from __future__ import annotations
 import shutil
 
 import pytest
-
 from dataset_builders import shots, write_colmap
 from helpers import skip_or_fail
 from soak_viewer import xvfb_display

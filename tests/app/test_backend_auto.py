@@ -31,13 +31,16 @@ def test_worker_decides_auto_from_what_it_measured():
         w.stop()
 
 
-@pytest.mark.parametrize("doc, backend", [
-    ({"version": 1, "backend": "cpu"}, "auto"),  # cpu was version 1's default, saved whatever the machine had
-    ({"version": 1, "backend": "glsl"}, "glsl"),
-    ({"version": 2, "backend": "cpu"}, "cpu"),
-    ({"version": 2, "backend": "vulkan"}, "auto"),
-    ({}, "auto"),
-])
+@pytest.mark.parametrize(
+    "doc, backend",
+    [
+        ({"version": 1, "backend": "cpu"}, "auto"),  # cpu was version 1's default, saved whatever the machine had
+        ({"version": 1, "backend": "glsl"}, "glsl"),
+        ({"version": 2, "backend": "cpu"}, "cpu"),
+        ({"version": 2, "backend": "vulkan"}, "auto"),
+        ({}, "auto"),
+    ],
+)
 def test_settings_backend(tmp_path, doc, backend):
     path = tmp_path / "settings.json"
     path.write_text(json.dumps(doc))

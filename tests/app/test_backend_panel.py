@@ -10,8 +10,8 @@ import pytest
 
 pytest.importorskip("imgui_bundle", reason="the viewer extra (imgui-bundle) is not installed")
 
-from gbviewer.app.panel import backend  # noqa: E402
-from gbviewer.render import build_info, compiler_line, simd_line  # noqa: E402
+from gbviewer.app.panel import backend
+from gbviewer.render import build_info, compiler_line, simd_line
 
 
 def draw(monkeypatch, info: dict) -> mock.MagicMock:
@@ -21,8 +21,12 @@ def draw(monkeypatch, info: dict) -> mock.MagicMock:
     imgui.is_item_hovered.return_value = True
     monkeypatch.setattr(backend, "imgui", imgui)
     monkeypatch.setattr(backend, "build_info", lambda: info)
-    worker = SimpleNamespace(backend_status=lambda name: (True, ""), backend_for=lambda name: "cpu", auto=None,
-                             display_path=lambda name: ("copy", "no shared context"))
+    worker = SimpleNamespace(
+        backend_status=lambda name: (True, ""),
+        backend_for=lambda name: "cpu",
+        auto=None,
+        display_path=lambda name: ("copy", "no shared context"),
+    )
     backend.draw(SimpleNamespace(settings=SimpleNamespace(backend="cpu")), worker)
     return imgui
 
@@ -38,8 +42,13 @@ def test_the_simd_line_and_its_tooltip(monkeypatch):
 
 
 def test_a_scalar_only_build_is_shown_as_a_warning(monkeypatch):
-    info = {**build_info(), "scalar_only": True, "simd_built": ["scalar"], "simd_usable": ["scalar"],
-            "simd_selected": "scalar"}
+    info = {
+        **build_info(),
+        "scalar_only": True,
+        "simd_built": ["scalar"],
+        "simd_usable": ["scalar"],
+        "simd_selected": "scalar",
+    }
     imgui = draw(monkeypatch, info)
     warned = [c.args[-1] for c in imgui.text_colored.call_args_list]
     assert simd_line(info) in warned and "scalar-only build" in simd_line(info)

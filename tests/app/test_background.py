@@ -14,25 +14,25 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
-import gbviewer as gb
-from gbviewer.outputs import metrics
-from gbviewer.app.background import FIXED, PHOTOS
-from gbviewer.io.datasets.backdrop import border, estimate_backdrop
-from gbviewer.app.dataset import bounds_fit_cameras
-from gbviewer.app.difference.views import PaneAnalysis
-from gbviewer.app.overlays.labels import stats_lines
-from gbviewer.app.screenshots import save_pane
-from gbviewer.app.frames.views import encode_png16
-from gbviewer.outputs.differences import signed_difference
-from gbviewer.app.settings import AppSettings
-from gbviewer.app.state import AppState
-from gbviewer.eval import camera_for_rate, ground_truth
-from gbviewer.io.datasets import load_dataset
 from dataset_builders import shots, write_cameras_json
 from test_dataset import RATE, render_panes
 from test_difference_views import settle
 from test_state import loaded
+
+import gbviewer as gb
+from gbviewer.app.background import FIXED, PHOTOS
+from gbviewer.app.dataset import bounds_fit_cameras
+from gbviewer.app.difference.views import PaneAnalysis
+from gbviewer.app.frames.views import encode_png16
+from gbviewer.app.overlays.labels import stats_lines
+from gbviewer.app.screenshots import save_pane
+from gbviewer.app.settings import AppSettings
+from gbviewer.app.state import AppState
+from gbviewer.eval import camera_for_rate, ground_truth
+from gbviewer.io.datasets import load_dataset
+from gbviewer.io.datasets.backdrop import border, estimate_backdrop
+from gbviewer.outputs import metrics
+from gbviewer.outputs.differences import signed_difference
 
 GREY = 0.6
 

@@ -141,7 +141,7 @@ def test_orthographic_view_keeps_the_target_plane_and_zooms_with_the_wheel():
     for _ in range(40):
         c.dolly(1)
     zoomed = c.camera(640, 480)
-    assert zoomed.fx == pytest.approx(fx0 / 0.9 ** 40)
+    assert zoomed.fx == pytest.approx(fx0 / 0.9**40)
     depth = (zoomed.R @ c.centre + zoomed.t)[2]
     assert depth - c.radius > zoomed.near, "part of the scene's sphere is behind the near plane"
     assert project_any(zoomed, c.target) == pytest.approx([320, 240], abs=1e-6)
@@ -154,7 +154,8 @@ def test_snap_to_an_orthographic_camera_keeps_its_scale():
     c = framed()
     c.projection = "orthographic"
     train = gb.Camera.look_at([2.0, -1, -3], [0.1, 0, 0], (0, -1, 0), 800, 600, 40.0).with_projection(
-        "orthographic", 3.0)
+        "orthographic", 3.0
+    )
     c.snap_to(train)
     cam = c.camera(800, 600)
     assert cam.orthographic and cam.R == pytest.approx(train.R) and cam.fy == pytest.approx(train.fy)

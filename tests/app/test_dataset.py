@@ -13,19 +13,19 @@ import time
 from pathlib import Path
 
 import numpy as np
+from test_difference_views import settle
+from test_state import laid_out, loaded
 
 import gbviewer as gb
-from gbviewer.outputs import metrics
-from gbviewer.model.camera import camera_key
 from gbviewer.app import dataset as app_dataset
 from gbviewer.app.difference.views import PaneAnalysis
-from gbviewer.app.ui.layout import Rect, fit_aspect
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
 from gbviewer.app.threads.worker import RenderJob
+from gbviewer.app.ui.layout import Rect, fit_aspect
 from gbviewer.eval import camera_for_rate, ground_truth
-from test_difference_views import settle
-from test_state import laid_out, loaded
+from gbviewer.model.camera import camera_key
+from gbviewer.outputs import metrics
 
 RATE = 0.25
 
@@ -56,8 +56,9 @@ def render_panes(state: AppState) -> None:
         cam, settings = state.pane_camera(p.index), state.settings_for(p.index, "a")
         shown = p.parts["a"]
         shown.frame = gb.get_renderer(state.scene).render(cam, settings)
-        shown.job = RenderJob((p.index, "a"), state.scene, cam, settings, info={"preview": 1.0,
-                                                                               "rate": state.settings.rate})
+        shown.job = RenderJob(
+            (p.index, "a"), state.scene, cam, settings, info={"preview": 1.0, "rate": state.settings.rate}
+        )
         shown.stage = "final"
     state.last_move = 0.0  # at rest
 
@@ -127,8 +128,10 @@ def test_snapping_renders_the_photo_camera_at_the_rate_letterboxed(capture):
     assert state.dataset.view.name == "v05.png"
     state.dataset.name_filter = "nothing"
     state.step_camera(1)
-    assert state.dataset.view.name == "v05.png" and state.messages[-1][1] == \
-        "no train views named with 'nothing' in the dataset"
+    assert (
+        state.dataset.view.name == "v05.png"
+        and state.messages[-1][1] == "no train views named with 'nothing' in the dataset"
+    )
     # leaving the view: the panes render the orbit camera at their own size again
     state.controller.orbit(30, 0)
     state.layout(1240, 800, 20, 26)
@@ -188,8 +191,9 @@ def test_photo_view_and_psnr_against_the_photo(capture, tmp_path, monkeypatch):
 def run_gbviewer(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     env["PYTHONPATH"] = str(Path(gb.__file__).resolve().parents[1])
-    return subprocess.run([sys.executable, "-m", "gbviewer", *args], env=env, cwd=cwd, capture_output=True,
-                          text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "gbviewer", *args], env=env, cwd=cwd, capture_output=True, text=True, timeout=120
+    )
 
 
 def test_view_with_a_missing_dataset_is_one_line_exit_2(tmp_path):

@@ -1,5 +1,6 @@
 """The difference and error views without a window: what the analysis thread computes for a pane part's frame, what
-the pane shows of it, the PSNR/SSIM labels (equal to gbviewer.outputs.metrics on the same images) and their staleness."""
+the pane shows of it, the PSNR/SSIM labels (equal to gbviewer.outputs.metrics on the same images) and their
+staleness."""
 
 from __future__ import annotations
 
@@ -9,12 +10,12 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.outputs import differences, flicker, metrics
-from gbviewer.app.difference.views import PaneAnalysis
 from gbviewer.app.difference.thread import AnalysisThread, Request, Spec
+from gbviewer.app.difference.views import PaneAnalysis
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
 from gbviewer.app.threads.worker import RenderJob
+from gbviewer.outputs import differences, flicker, metrics
 
 
 def wait_results(thread: AnalysisThread, n: int = 1, timeout: float = 60.0) -> list:
@@ -39,7 +40,7 @@ def test_thread_computes_references_differences_and_psnr(thread, bundled_scene, 
     frame = gb.render(bundled_scene, cam, "gaussian_blending")
     scalar = gb.RenderSettings("scalar")
     thread.submit(Request("x", bundled_scene, frame, cam, 0.5, gbs, Spec("dense", scalar)))
-    (slot, a), = wait_results(thread)
+    ((slot, a),) = wait_results(thread)
     dense = gb.render(bundled_scene, cam, "scalar", supersample=8).rgb
     assert slot == "x" and a.frame is frame and a.note == ""
     assert a.psnr == metrics.psnr(frame.rgb, dense) and a.ssim == metrics.ssim(frame.rgb, dense)
@@ -48,16 +49,16 @@ def test_thread_computes_references_differences_and_psnr(thread, bundled_scene, 
     np.testing.assert_array_equal(a.diff, differences.signed_difference(frame.rgb, gb.render(bundled_scene, cam).rgb))
     # the box reference at x1/2: the x1 render box-downsampled; none at x2 (and it says why)
     thread.submit(Request("x", bundled_scene, frame, cam, 0.5, gbs, Spec("box")))
-    (_, a), = wait_results(thread)
+    ((_, a),) = wait_results(thread)
     box = metrics.box_downsample(gb.render(bundled_scene, cam.at_sampling_rate(2)).rgb, 2)
     assert a.psnr == pytest.approx(metrics.psnr(frame.rgb, box), abs=1e-9) and a.diff is None
     thread.submit(Request("x", bundled_scene, frame, cam, 2.0, gbs, Spec("box")))
-    (_, a), = wait_results(thread)
+    ((_, a),) = wait_results(thread)
     assert a.psnr is None and a.error is None and "dense" in a.note
     # pane A's own frame at the same camera is used as it is
     other = gb.Frame(np.zeros_like(frame.rgb), frame.alpha, frame.stats, {})
     thread.submit(Request("x", bundled_scene, frame, cam, 0.5, gbs, Spec(None, scalar), other))
-    (_, a), = wait_results(thread)
+    ((_, a),) = wait_results(thread)
     np.testing.assert_array_equal(a.diff, frame.rgb.clip(0, 1).mean(axis=2))
 
 
@@ -70,8 +71,13 @@ def test_flicker_view_is_the_heat_map_of_an_orbit_step(bundled_scene, output_vie
         state.set_pane(1, view="flicker")
         assert "computing" in an.visualize((1, "a"), b.frame, "flicker")[1]
         settle(an)
-        want = flicker.measure_flicker(bundled_scene, flicker.orbit_path(cam, bundled_scene, 2, flicker.VIEW_STEP),
-                                       [b.job.settings], pairs=1, with_floor=False).modes[0]
+        want = flicker.measure_flicker(
+            bundled_scene,
+            flicker.orbit_path(cam, bundled_scene, 2, flicker.VIEW_STEP),
+            [b.job.settings],
+            pairs=1,
+            with_floor=False,
+        ).modes[0]
         a = an.latest[(1, "a")]
         np.testing.assert_array_equal(a.heat, want.heat)
         assert a.flicker == want.flicker > 0 and a.heat.shape == b.frame.rgb.shape[:2]
@@ -147,8 +153,9 @@ def test_difference_view_and_psnr_labels(bundled_scene, output_view):
         assert an.shown_scale[(1, "a")] == scale and legend == "B - A (scalar): mode gaussian_blending vs scalar"
         assert b.view == ""  # the result asked the panes to re-colour it
         an.set_scale(False, 0.02)
-        np.testing.assert_array_equal(an.visualize((1, "a"), b.frame, "difference")[0],
-                                      differences.colour_difference(d, 0.02))
+        np.testing.assert_array_equal(
+            an.visualize((1, "a"), b.frame, "difference")[0], differences.colour_difference(d, 0.02)
+        )
         assert an.fidelity_line((1, "a")) is None  # labels off, no error view
         # PSNR / SSIM labels against the box reference: x1 scalar box-downsampled
         an.toggle_fidelity()

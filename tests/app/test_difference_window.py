@@ -8,12 +8,12 @@ import time
 
 import numpy as np
 import pytest
+from window_helpers import LABEL_BAND, agree, expected_pane, pane_pixels, press, shot, wait
 
 import gbviewer as gb
-from gbviewer.outputs import differences, metrics
 from gbviewer.app.overlays.difference import BAR_H
+from gbviewer.outputs import differences, metrics
 from gbviewer.outputs.figure import to_uint8, upscale_nearest
-from window_helpers import LABEL_BAND, agree, expected_pane, pane_pixels, press, shot, wait
 
 pytestmark = pytest.mark.display
 
@@ -58,9 +58,11 @@ def test_difference_and_error_views_and_psnr_labels(app):
     below = top + BAR_H + 30
     assert agree(got[below:], expected[below:]) > 0.995
     assert agree(got[below:], expected_pane(app, 1)[below:]) < 0.5  # not the plain render
-    assert agree(pane_pixels(img, state.panes[0].rect)[LABEL_BAND:],
-                 pane_pixels(before, state.panes[0].rect)[LABEL_BAND:]) > 0.995  # pane A unchanged
-    bar = got[top + 4:top + 14, 8:8 + 160]  # the colour bar: dark in the middle, light at both ends
+    assert (
+        agree(pane_pixels(img, state.panes[0].rect)[LABEL_BAND:], pane_pixels(before, state.panes[0].rect)[LABEL_BAND:])
+        > 0.995
+    )  # pane A unchanged
+    bar = got[top + 4 : top + 14, 8 : 8 + 160]  # the colour bar: dark in the middle, light at both ends
     assert bar[:, :8].mean() > 100 and bar[:, -8:].mean() > 100 and bar[:, 76:84].mean() < 60
     assert "B - A (scalar)" in b.parts["a"].legend
 

@@ -1,9 +1,9 @@
-"""The display paths (gbviewer/app/frames/display.py) in the real window under Xvfb (Mesa llvmpipe): the GPU display path,
-forced there with GBVIEWER_DISPLAY_PATH=gpu, draws glsl frames from the textures they were rendered into, with no
-readback, and the same pixels as the CPU render; the copy path (auto on llvmpipe, or forced) is unchanged; the
-display textures go when the backend changes and stay bounded while scenes and views change. The cuda display path
-(CUDA-GL interop) needs an NVIDIA OpenGL display and skips elsewhere (tests/render/test_render_to_texture.py has
-its render-level test)."""
+"""The display paths (gbviewer/app/frames/display.py) in the real window under Xvfb (Mesa llvmpipe): the GPU display
+path, forced there with GBVIEWER_DISPLAY_PATH=gpu, draws glsl frames from the textures they were rendered into, with no
+readback, and the same pixels as the CPU render; the copy path (auto on llvmpipe, or forced) is unchanged; the display
+textures go when the backend changes and stay bounded while scenes and views change. The cuda display path (CUDA-GL
+interop) needs an NVIDIA OpenGL display and skips elsewhere (tests/render/test_render_to_texture.py has its render-level
+test)."""
 
 from __future__ import annotations
 
@@ -90,8 +90,8 @@ def test_gpu_display_path_draws_glsl_frames_from_their_textures(gpu_app, tmp_pat
     # the window shows the CPU render's pixels (nearest-upscaled, within one level)
     half = app.state.panes[0].rect.w // 2
     split = pane_pixels(img, app.state.panes[0].rect)[LABEL_BAND:]
-    assert agree(split[:, :half - 6], expected_pane(app, 0, "a")[LABEL_BAND:, :half - 6]) > 0.995
-    assert agree(split[:, half + 6:], expected_pane(app, 0, "b")[LABEL_BAND:, half + 6:]) > 0.995
+    assert agree(split[:, : half - 6], expected_pane(app, 0, "a")[LABEL_BAND:, : half - 6]) > 0.995
+    assert agree(split[:, half + 6 :], expected_pane(app, 0, "b")[LABEL_BAND:, half + 6 :]) > 0.995
     got = pane_pixels(img, app.state.panes[1].rect)[LABEL_BAND:]
     assert agree(got, expected_pane(app, 1)[LABEL_BAND:]) > 0.995 and got.std() > 10
 

@@ -13,20 +13,20 @@ import time
 
 import numpy as np
 import pytest
+from test_lod_previews import FakeWorker, opened
+from test_state import loaded
+from window_helpers import shot
 
 import gbviewer as gb
-from gbviewer.app.threads import loading
 from gbviewer.app import panes as panes_module
 from gbviewer.app.frames import rates
 from gbviewer.app.panes import PaneRenders
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
+from gbviewer.app.threads import loading
 from gbviewer.app.threads.worker import RenderResult
 from gbviewer.lod import cache, sparse
 from gbviewer.render.glsl.context import standalone_context
-from test_lod_previews import FakeWorker, opened
-from test_state import loaded
-from window_helpers import shot
 
 
 @pytest.fixture
@@ -74,8 +74,9 @@ def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypa
     panes = PaneRenders(state, worker, standalone_context())
     try:
         panes.submit()  # even while the framing counts as a motion: nothing of the scene is on screen yet
-        assert [(j.preview, j.stand_in, j.settings.lod, j.info["first"], j.info["preview"]) for j in worker.jobs] \
-            == [(True, True, None, True, rates.FIRST_PREVIEW)] * 2
+        assert [(j.preview, j.stand_in, j.settings.lod, j.info["first"], j.info["preview"]) for j in worker.jobs] == [
+            (True, True, None, True, rates.FIRST_PREVIEW)
+        ] * 2
         assert panes.progress(0, "a").startswith("waiting for the render thread")
         for doing in ("building", "reading"):
             monkeypatch.setattr(panes_module, "hierarchy_state", lambda scene, doing=doing: doing)
@@ -84,13 +85,15 @@ def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypa
         jobs = list(worker.jobs)
         for j in jobs:  # the render thread takes them
             j.started = time.perf_counter()
-        assert f"rendering a preview {jobs[0].camera.width}x{jobs[0].camera.height} (1 splat in 4)" in \
-            panes.progress(0, "a")
+        assert f"rendering a preview {jobs[0].camera.width}x{jobs[0].camera.height} (1 splat in 4)" in panes.progress(
+            0, "a"
+        )
         state.last_move = 0.0
         panes.submit()
         assert worker.jobs == jobs  # the full frames wait for the previews
         frames = gb.get_renderer(sparse.stand_in(state.scene), "cpu").render_many(
-            [(j.camera, j.settings) for j in jobs])
+            [(j.camera, j.settings) for j in jobs]
+        )
         for j, frame in zip(jobs, frames):
             panes._take(RenderResult(j, frame, finished=time.perf_counter()))
         assert all(p.parts["a"].stage == "preview" for p in state.visible)
@@ -98,15 +101,24 @@ def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypa
         assert panes.progress(0, "a") == f"preview shown; rendering {w}x{h} next"
         panes.submit()
         full = worker.jobs[2:]
-        assert [(j.preview, j.stand_in, j.progressive, j.settings.lod) for j in full] == \
-            [(False, False, True, None)] * 2
+        assert [(j.preview, j.stand_in, j.progressive, j.settings.lod) for j in full] == [
+            (False, False, True, None)
+        ] * 2
         assert (full[0].camera.width, full[0].camera.height) == state.panes[0].render_size
         assert full[0].underlay is frames[0].rgb  # the tiles refine over the preview
         assert panes.progress(0, "a").startswith("preview shown; waiting for the render thread")
         full[0].started = time.perf_counter()
         assert panes.progress(0, "a").startswith(f"preview shown; rendering {w}x{h} ")
-        panes._take(RenderResult(full[0], None, stage="partial", partial=np.zeros((h, w, 3), np.float32),
-                                 progress=0.1, finished=time.perf_counter()))
+        panes._take(
+            RenderResult(
+                full[0],
+                None,
+                stage="partial",
+                partial=np.zeros((h, w, 3), np.float32),
+                progress=0.1,
+                finished=time.perf_counter(),
+            )
+        )
         assert panes.progress(0, "a") is None  # its tiles are on screen: the refining line
     finally:
         panes.release()
@@ -122,15 +134,17 @@ def test_moving_previews_draw_the_stand_in_until_the_hierarchy_is_there(monkeypa
     panes = PaneRenders(state, worker, standalone_context())
     try:
         panes.submit()
-        assert worker.jobs and all(j.preview and j.stand_in and j.settings.lod is None and not j.info["first"]
-                                   for j in worker.jobs)
+        assert worker.jobs and all(
+            j.preview and j.stand_in and j.settings.lod is None and not j.info["first"] for j in worker.jobs
+        )
         assert cache.hierarchy_state(state.scene) == ""  # nobody asked for it: nothing waits for it
         cache.hierarchy_for(state.scene)
         state.controller.orbit(5.0, 0.0)
         worker.jobs.clear()
         panes.submit()
-        assert worker.jobs and all(j.preview and not j.stand_in and j.settings.lod == state.panes[0].preview_lod
-                                   for j in worker.jobs)
+        assert worker.jobs and all(
+            j.preview and not j.stand_in and j.settings.lod == state.panes[0].preview_lod for j in worker.jobs
+        )
     finally:
         panes.release()
 
@@ -143,8 +157,9 @@ def test_previews_draw_the_cut_once_the_hierarchy_is_there(monkeypatch, large):
     panes = PaneRenders(state, worker, standalone_context())
     try:
         panes.submit()
-        assert worker.jobs and all(j.preview and not j.stand_in and j.settings.lod == state.panes[0].preview_lod
-                                   for j in worker.jobs)
+        assert worker.jobs and all(
+            j.preview and not j.stand_in and j.settings.lod == state.panes[0].preview_lod for j in worker.jobs
+        )
         assert "splat in" not in panes.progress(0, "a") and "level of detail" not in panes.progress(0, "a")
     finally:
         panes.release()
@@ -201,7 +216,8 @@ def test_panes_get_pictures_while_the_hierarchy_build_is_held_back(xvfb, tmp_pat
                     stages.setdefault(p.name, []).append(shown.stage)
                 if shown.stage in ("", "preview"):
                     lines.setdefault(p.name, []).extend(
-                        i.full for i in app.placed if i.role == "message" and p.rect.x <= i.x < p.rect.x + p.rect.w)
+                        i.full for i in app.placed if i.role == "message" and p.rect.x <= i.x < p.rect.x + p.rect.w
+                    )
                 if shown.stage == "preview" and p.name == "B" and "preview" not in stages["A"][:-1]:
                     shot(app, "first-picture-preview")
             time.sleep(0.01)

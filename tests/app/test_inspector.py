@@ -13,9 +13,16 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.app.inspector.state import (Inspector, TraceRequest, TraceThread, ellipse_points, pixel_box, render_pixel,
-                                    snap)
 from gbviewer.app.frames.rates import RATE_STEPS
+from gbviewer.app.inspector.state import (
+    Inspector,
+    TraceRequest,
+    TraceThread,
+    ellipse_points,
+    pixel_box,
+    render_pixel,
+    snap,
+)
 from gbviewer.app.settings import AppSettings
 from gbviewer.app.state import AppState
 from gbviewer.app.threads.worker import RenderJob
@@ -36,8 +43,13 @@ def show_final(state: AppState, i: int, part: str, camera: gb.Camera, frame, set
     """Pane i's part shows `frame` as its final frame, rendered at `camera`."""
     shown = state.panes[i].parts[part]
     shown.frame, shown.stage = frame, "final"
-    shown.job = RenderJob((i, part), state.scene, camera, settings or state.settings_for(i, part),
-                          info={"preview": 1.0, "rate": state.settings.rate})
+    shown.job = RenderJob(
+        (i, part),
+        state.scene,
+        camera,
+        settings or state.settings_for(i, part),
+        info={"preview": 1.0, "rate": state.settings.rate},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -98,8 +110,9 @@ def ray(cam: gb.Camera, u: float, v: float) -> np.ndarray:
 
 @pytest.mark.parametrize("projection", ["perspective", "orthographic"])
 @pytest.mark.parametrize("panes,layout,dock", [(1, "row", "right"), (2, "row", "below"), (4, "grid", "below")])
-def test_the_docked_inspector_shrinks_the_panes_and_the_pin_keeps_its_scene_point(idle_thread, panes, layout, dock,
-                                                                                   projection):
+def test_the_docked_inspector_shrinks_the_panes_and_the_pin_keeps_its_scene_point(
+    idle_thread, panes, layout, dock, projection
+):
     state = AppState(AppSettings())
     state.scene = object()
     state.set_pane_count(panes)
@@ -117,8 +130,9 @@ def test_the_docked_inspector_shrinks_the_panes_and_the_pin_keeps_its_scene_poin
     assert d is not None and v.x <= d.x and d.x + d.w <= v.x + v.w and v.y <= d.y and d.y + d.h <= v.y + v.h
     assert (d.w == v.w) == (dock == "below") and (d.h == v.h) == (dock == "right")
     for p in state.visible:  # the panes make room
-        assert not (p.rect.x < d.x + d.w and d.x < p.rect.x + p.rect.w and p.rect.y < d.y + d.h
-                    and d.y < p.rect.y + p.rect.h)
+        assert not (
+            p.rect.x < d.x + d.w and d.x < p.rect.x + p.rect.w and p.rect.y < d.y + d.h and d.y < p.rect.y + p.rect.h
+        )
     after = state.pane_camera(0)
     assert (after.width, after.height) != (before.width, before.height) and insp.pin != pin
     np.testing.assert_allclose(ray(after, *insp.pin), ray(before, *pin), rtol=0, atol=1e-12)
@@ -143,7 +157,7 @@ def test_snap_render_pixel_and_ellipse_points(bundled_scene, zoomed_out):
         d = pts - np.asarray(s.mean)
         a, b, c = s.conic
         q = a * d[:, 0] ** 2 + 2 * b * d[:, 0] * d[:, 1] + c * d[:, 1] ** 2
-        np.testing.assert_allclose(q, s.cutoff ** 2, rtol=1e-4)
+        np.testing.assert_allclose(q, s.cutoff**2, rtol=1e-4)
     assert ellipse_points((0, 0), (1, 0, -1), 3) is None and ellipse_points((0, 0), (np.inf, 0, 1), 3) is None
 
 
@@ -158,8 +172,10 @@ def test_the_newest_request_per_pane_part_wins():
 
     t = TraceThread(trace)
     try:
-        reqs = [TraceRequest(slot, None, None, None, None, k, 0) for k, slot in
-                enumerate([(0, "a"), (0, "a"), (0, "a"), (1, "a"), (0, "a")])]
+        reqs = [
+            TraceRequest(slot, None, None, None, None, k, 0)
+            for k, slot in enumerate([(0, "a"), (0, "a"), (0, "a"), (1, "a"), (0, "a")])
+        ]
         t.submit(reqs[0])
         assert entered.wait(30)
         for r in reqs[1:]:  # (0, a) waits three times: only the last stays, behind (1, a) which waited longer
@@ -179,16 +195,21 @@ def test_the_thread_traces_as_gb_trace_pixel(bundled_scene, zoomed_out):
     cam = zoomed_out
     t = TraceThread()
     try:
-        cases = [("scalar", 1, 40, 30), ("gaussian_blending", 1, 40, 30), ("analytic", 2, 12, 20),
-                 ("duplex", 1, 50, 33)]
+        cases = [
+            ("scalar", 1, 40, 30),
+            ("gaussian_blending", 1, 40, 30),
+            ("analytic", 2, 12, 20),
+            ("duplex", 1, 50, 33),
+        ]
         for k, (mode, n, x, y) in enumerate(cases):
             t.submit(TraceRequest(k, bundled_scene, None, cam, gb.RenderSettings(mode, n), x, y))
         results = []
         wait_until(lambda: results.extend(t.results()) or len(results) == len(cases))
         for res in results:
             mode, n, x, y = cases[res.request.slot]
-            assert res.error == "" and res.trace.to_json() == gb.trace_pixel(bundled_scene, cam, x, y, mode,
-                                                                               n).to_json()
+            assert (
+                res.error == "" and res.trace.to_json() == gb.trace_pixel(bundled_scene, cam, x, y, mode, n).to_json()
+            )
     finally:
         t.stop()
 
@@ -209,8 +230,9 @@ def inspected(bundled_scene, tmp_path):
         cam = state.pane_camera(p.index)
         for part in state.parts(p.index):
             settings = state.settings_for(p.index, part)
-            show_final(state, p.index, part, cam, gb.render(bundled_scene, cam, settings.mode, settings.supersample),
-                       settings)
+            show_final(
+                state, p.index, part, cam, gb.render(bundled_scene, cam, settings.mode, settings.supersample), settings
+            )
     insp = Inspector(state)
     yield state, insp
     insp.stop()
@@ -246,8 +268,9 @@ def test_pinned_traces_are_the_pixels_the_panes_show(inspected):
     t = insp.entries()[2].trace
     steps = t.steps
     by_weight = insp.order(t, True)
-    assert [steps[k].weight for k in by_weight] == sorted((s.weight for s in steps if s.rejected != "outside_box"),
-                                                          reverse=True)
+    assert [steps[k].weight for k in by_weight] == sorted(
+        (s.weight for s in steps if s.rejected != "outside_box"), reverse=True
+    )
     assert insp.order(t, False) == [k for k, s in enumerate(steps) if s.rejected != "outside_box"]
     insp.options.show_all = True
     assert insp.order(t, False) == list(range(len(steps)))

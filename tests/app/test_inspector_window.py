@@ -9,9 +9,9 @@ import time
 
 import numpy as np
 import pytest
+from window_helpers import LABEL_BAND, press, shot, wait
 
 from gbviewer.outputs.figure import to_uint8
-from window_helpers import LABEL_BAND, press, shot, wait
 
 pytestmark = pytest.mark.display
 TOL = 1e-5
@@ -108,7 +108,7 @@ def test_pin_a_pixel_at_x1_8_and_inspect_it(app):
         cx, cy = int(p.x + (X + 0.5) / w * p.w), int(p.y + (Y + 0.5) / h * p.h)
         assert not (box[0] <= cx <= box[2] and box[1] <= cy <= box[3])
         assert np.abs(img[cy, cx].astype(int) - to_uint8(frame.rgb[Y, X]).astype(int)).max() <= 1
-        above = img[cy - int(p.h / h) - 3:cy, cx].astype(int)  # up from its centre: the yellow outline
+        above = img[cy - int(p.h / h) - 3 : cy, cx].astype(int)  # up from its centre: the yellow outline
         assert ((above[:, 0] > 200) & (above[:, 1] > 160) & (above[:, 2] < 120)).any(), above
     bx0, by0, bx1, by1 = (int(v) for v in box)  # the window is drawn where the panes were
     assert np.abs(img[by0:by1, bx0:bx1].astype(int) - before[by0:by1, bx0:bx1]).mean() > 5

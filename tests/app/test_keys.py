@@ -10,10 +10,10 @@ from types import SimpleNamespace
 
 import pytest
 
-from gbviewer.app.ui import keys
 from gbviewer.app.difference.views import PaneAnalysis
 from gbviewer.app.inspector.state import Inspector
 from gbviewer.app.state import AppState
+from gbviewer.app.ui import keys
 
 APP = Path(keys.__file__).resolve().parents[1]  # gbviewer/app
 
@@ -46,8 +46,10 @@ def test_every_key_names_an_action_of_its_owner_that_takes_its_args():
 
 def owners(missing: str = "") -> dict[str, SimpleNamespace]:
     """Stand-ins for the four owners, each with a method per action of its keys (but `missing`)."""
-    return {o: SimpleNamespace(**{k.action: (lambda *a, o=o: o) for k in keys.KEYS
-                                  if k.on == o and k.action != missing}) for o in keys.OWNERS}
+    return {
+        o: SimpleNamespace(**{k.action: (lambda *a, o=o: o) for k in keys.KEYS if k.on == o and k.action != missing})
+        for o in keys.OWNERS
+    }
 
 
 def test_the_action_table_resolves_each_action_on_its_one_owner():
@@ -59,12 +61,15 @@ def test_the_action_table_resolves_each_action_on_its_one_owner():
         keys.action_table(owners(missing="toggle_fly"))
 
 
-@pytest.mark.parametrize("extra, message", [
-    (keys.Key("f1", "toggle_info"), "key F1 is bound to toggle_help and toggle_info"),  # F1 with any Ctrl
-    (keys.Key("m", "toggle_info", shift=None), "key M is bound to next_mode and toggle_info"),
-    (keys.Key("f2", "escape"), "action 'escape' is on both window and state"),
-    (keys.Key("f2", "toggle_loupe", on="panel"), "toggle_loupe on 'panel', not one of"),
-])
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (keys.Key("f1", "toggle_info"), "key F1 is bound to toggle_help and toggle_info"),  # F1 with any Ctrl
+        (keys.Key("m", "toggle_info", shift=None), "key M is bound to next_mode and toggle_info"),
+        (keys.Key("f2", "escape"), "action 'escape' is on both window and state"),
+        (keys.Key("f2", "toggle_loupe", on="panel"), "toggle_loupe on 'panel', not one of"),
+    ],
+)
 def test_a_duplicate_binding_or_action_name_fails(extra, message):
     keys.check_bindings()  # the real table passes
     with pytest.raises(ValueError, match=re.escape(message)):
@@ -77,11 +82,21 @@ def test_each_help_row_names_its_keys():
             assert k.hint in s.label.replace("/", " ").split() or k.hint == s.label, (k.hint, s.label)
 
 
-@pytest.mark.parametrize("action,args,text", [("open_dialog", (), "Ctrl+O"), ("quit", (), "Ctrl+Q"),
-                                              ("screenshot_window", (), "F12"), ("set_pane_count", (3,), "3"),
-                                              ("step_camera", (1,), "]"), ("step_camera", (-1,), "["),
-                                              ("toggle_help", (), "F1"), ("next_mode", (-1,), "Shift+M"),
-                                              ("fly_move", (1, 0, 0), ""), ("open", (), "")])
+@pytest.mark.parametrize(
+    "action,args,text",
+    [
+        ("open_dialog", (), "Ctrl+O"),
+        ("quit", (), "Ctrl+Q"),
+        ("screenshot_window", (), "F12"),
+        ("set_pane_count", (3,), "3"),
+        ("step_camera", (1,), "]"),
+        ("step_camera", (-1,), "["),
+        ("toggle_help", (), "F1"),
+        ("next_mode", (-1,), "Shift+M"),
+        ("fly_move", (1, 0, 0), ""),
+        ("open", (), ""),
+    ],
+)
 def test_menu_hints(action, args, text):
     assert keys.hint(action, *args) == text
 

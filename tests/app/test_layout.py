@@ -7,8 +7,17 @@ import pytest
 from gbviewer.app.ui.layout import grid_shape, loupe_uv, pane_rects, split_parts
 
 
-@pytest.mark.parametrize("n,layout,shape", [(1, "row", (1, 1)), (2, "row", (1, 2)), (4, "row", (1, 4)),
-                                            (2, "grid", (1, 2)), (3, "grid", (2, 2)), (4, "grid", (2, 2))])
+@pytest.mark.parametrize(
+    "n,layout,shape",
+    [
+        (1, "row", (1, 1)),
+        (2, "row", (1, 2)),
+        (4, "row", (1, 4)),
+        (2, "grid", (1, 2)),
+        (3, "grid", (2, 2)),
+        (4, "grid", (2, 2)),
+    ],
+)
 def test_pane_rects_tile_the_viewport_without_overlap(n, layout, shape):
     assert grid_shape(n, layout) == shape
     rects = pane_rects(100, 30, 1001, 700, n, layout, gap=4)

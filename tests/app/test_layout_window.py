@@ -13,17 +13,19 @@ import shutil
 from pathlib import Path
 
 import pytest
-
-from gbviewer.app.ui.keys import hint
-from gbviewer.app.overlays.labels import FLY_HINT, part_box
 from helpers import skip_or_fail
 from soak_viewer import xvfb_display
 from window_helpers import press
 
+from gbviewer.app.overlays.labels import FLY_HINT, part_box
+from gbviewer.app.ui.keys import hint
+
 SIZES = ((1280, 720), (1600, 900), (1920, 1080))
-LONG_ERROR = ("could not open /data/captures/garden/point_cloud/iteration_30000/point_cloud_with_a_long_name.ply: "
-              "the vertex element has 62 properties but f_rest_44 is missing; expected the 3DGS layout (x, y, z, "
-              "f_dc_0..2, f_rest_0..44, opacity, scale_0..2, rot_0..3): re-export it from the trainer")
+LONG_ERROR = (
+    "could not open /data/captures/garden/point_cloud/iteration_30000/point_cloud_with_a_long_name.ply: "
+    "the vertex element has 62 properties but f_rest_44 is missing; expected the 3DGS layout (x, y, z, "
+    "f_dc_0..2, f_rest_0..44, opacity, scale_0..2, rot_0..3): re-export it from the trainer"
+)
 
 
 @pytest.fixture(scope="module")
@@ -80,13 +82,19 @@ def check(app, name: str, out: Path, sideways: bool = True) -> None:
     placed = list(app.placed)
     for a, b in itertools.combinations(placed, 2):
         assert not a.overlaps(b), f"{name}: {a.full!r} overlaps {b.full!r}"
-    boxes = [part_box(p.rect, app.state.settings.panes[p.index].split, app.state.settings.panes[p.index].split_pos,
-                      part) for p in app.state.visible for part in app.state.parts(p.index)]
+    boxes = [
+        part_box(p.rect, app.state.settings.panes[p.index].split, app.state.settings.panes[p.index].split_pos, part)
+        for p in app.state.visible
+        for part in app.state.parts(p.index)
+    ]
     for item in placed:
         home = [b for b in boxes if b.contains(item.x, item.y)] or [app.state.viewport]
         assert item.inside(home[0]) or item.inside(app.state.viewport), f"{name}: {item.full!r} outside its box"
-    wide = [(w.name, w.scroll_max.x) for w in imgui.get_current_context().windows
-            if w.active and w.scroll_max.x > 0 and w.name.startswith("Inspector")]
+    wide = [
+        (w.name, w.scroll_max.x)
+        for w in imgui.get_current_context().windows
+        if w.active and w.scroll_max.x > 0 and w.name.startswith("Inspector")
+    ]
     assert sideways or not wide, f"{name}: the Inspector scrolls sideways: {wide}"
     cut = cut_glyphs(imgui.get_draw_data())
     assert not cut, f"{name}: {len(cut)} glyphs cut at a window's side, e.g. {cut[:3]}"
@@ -154,16 +162,16 @@ def test_layout_at_three_screen_sizes(big_xvfb, capture, tmp_path, monkeypatch):
                     app.step()
                     if app.inspector.pin is not None and app.inspector.current():
                         break
-                assert s.dock_rect is not None and all(p.rect.y + p.rect.h <= s.dock_rect.y or
-                                                       p.rect.x + p.rect.w <= s.dock_rect.x for p in s.visible)
+                assert s.dock_rect is not None and all(
+                    p.rect.y + p.rect.h <= s.dock_rect.y or p.rect.x + p.rect.w <= s.dock_rect.x for p in s.visible
+                )
                 check(app, f"{tag}-{name}", out, sideways=False)
             s.settings.layout = "row"
             s.set_pane_count(3)
             press(app, imgui.Key.t)
             s.toggle_fly()  # one line under pane A's label says the fly keys
             check(app, f"{tag}-fly", out)
-            assert [i.full for i in app.placed if i.full.startswith("fly:")] == [
-                FLY_HINT.format(hint("toggle_fly"))]
+            assert [i.full for i in app.placed if i.full.startswith("fly:")] == [FLY_HINT.format(hint("toggle_fly"))]
             s.toggle_fly()
             s.show_help = True
             check(app, f"{tag}-help", out)

@@ -61,9 +61,22 @@ def test_scene_loader_picks_up_cameras_json_beside_the_scene(tmp_path):
     shutil.copy(gb.DEFAULT_SCENE, scene)
     cam = gb.Camera.look_at([0, 0, -3.0], [0, 0, 0], width=64, height=48)
     c2w = cam.R.T
-    (tmp_path / "cameras.json").write_text(json.dumps([{"id": 0, "img_name": "v0", "width": 64, "height": 48,
-                                                        "fx": cam.fx, "fy": cam.fy, "position": cam.position.tolist(),
-                                                        "rotation": c2w.tolist()}]))
+    (tmp_path / "cameras.json").write_text(
+        json.dumps(
+            [
+                {
+                    "id": 0,
+                    "img_name": "v0",
+                    "width": 64,
+                    "height": 48,
+                    "fx": cam.fx,
+                    "fy": cam.fy,
+                    "position": cam.position.tolist(),
+                    "rotation": c2w.tolist(),
+                }
+            ]
+        )
+    )
     ld = SceneLoader(scene)
     while not ld.done():
         time.sleep(0.01)
@@ -94,8 +107,10 @@ def test_scene_loader_progress_is_determinate_and_cancel_stops_it():
         wait_for(lambda: ld.progress is not None and ld.progress[0] > 0)
         size = gb.DEFAULT_SCENE.stat().st_size
         assert ld.progress[1:] == (size, "bytes") and 0 < ld.fraction < 1
-        assert ld.describe().startswith(f"reading {100 * ld.fraction:.0f}% (") and f"/ {size / 1e6:.1f} MB" in \
-            ld.describe()
+        assert (
+            ld.describe().startswith(f"reading {100 * ld.fraction:.0f}% (")
+            and f"/ {size / 1e6:.1f} MB" in ld.describe()
+        )
         ld.cancel()
     finally:
         gate.set()

@@ -6,17 +6,18 @@ from __future__ import annotations
 
 import time
 
+from test_state import loaded
+
 import gbviewer as gb
-from gbviewer.app.threads import loading
+from gbviewer.app import state as state_module
 from gbviewer.app.frames import rates
 from gbviewer.app.panes import PaneRenders
 from gbviewer.app.settings import AppSettings, PaneSettings
-from gbviewer.app import state as state_module
 from gbviewer.app.state import AppState
+from gbviewer.app.threads import loading
 from gbviewer.app.threads.worker import RenderResult
 from gbviewer.render import BACKENDS
 from gbviewer.render.glsl.context import standalone_context
-from test_state import loaded
 
 
 class FakeWorker:
@@ -116,8 +117,14 @@ def test_scenes_without_a_hierarchy_preview_by_resolution_alone(monkeypatch):
 def test_a_large_scene_starts_its_previews_coarse(monkeypatch):
     """A new scene's panes start at the cut its size calls for (a 6 M-splat scene at 8 px, not 1), whatever the
     previous scene's previews had come to."""
-    assert [rates.first_preview_lod(n) for n in (1, 999_999, 1_000_000, 2_100_000, 6_109_840, 10**9)] == \
-        [1.0, 1.0, 2.0, 4.0, 8.0, 8.0]
+    assert [rates.first_preview_lod(n) for n in (1, 999_999, 1_000_000, 2_100_000, 6_109_840, 10**9)] == [
+        1.0,
+        1.0,
+        2.0,
+        4.0,
+        8.0,
+        8.0,
+    ]
     state = opened(monkeypatch, [True])
     assert all(p.preview_lod == rates.PREVIEW_LOD_PX for p in state.panes)  # the bundled scene: 1 px
     state.panes[0].preview_lod = 32.0  # where a large scene's previews had gone

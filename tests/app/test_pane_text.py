@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import itertools
 
-from gbviewer.app.ui.layout import Rect
 from gbviewer.app.overlays.labels import part_box
+from gbviewer.app.ui.layout import Rect
 from gbviewer.app.ui.text import ELLIPSIS, elide, lay_out_banner, lay_out_part, wrap
 
 
@@ -32,8 +32,11 @@ def test_wrap_breaks_at_spaces_within_the_width():
 def test_pane_parts_never_overlap_and_stay_in_their_boxes():
     label = ("B'  gaussian_blending  x1/4  187x125  [difference]  B - A (scalar)", 0)
     msg = ("photo: the camera left v00.png ([ ] to snap back)", 0)
-    info = [("12.1 ms: pre 1.0 + sort 2.0 + blend 9.1  30.0 fps", 0), ("1,234 splats visible  12 evals/px", 0),
-            ("preview 10 ms  first tiles 20 ms  final 90 ms", 0)]
+    info = [
+        ("12.1 ms: pre 1.0 + sort 2.0 + blend 9.1  30.0 fps", 0),
+        ("1,234 splats visible  12 evals/px", 0),
+        ("preview 10 ms  first tiles 20 ms  final 90 ms", 0),
+    ]
     for w, h, split in itertools.product((90, 187, 400), (40, 80, 300), (None, 0.3, 0.5, 0.95)):
         r = Rect(10, 20, w, h)
         items = []
@@ -55,8 +58,9 @@ def test_pane_parts_never_overlap_and_stay_in_their_boxes():
 
 def test_a_banner_wraps_and_ends_inside_the_panes():
     area = Rect(300, 20, 400, 200)
-    items = lay_out_banner(area, "could not open " + "very-long-name-" * 3 + ".ply: " + "no vertex element " * 6,
-                           200, 0, measure)
+    items = lay_out_banner(
+        area, "could not open " + "very-long-name-" * 3 + ".ply: " + "no vertex element " * 6, 200, 0, measure
+    )
     assert len(items) > 2 and all(i.inside(area) for i in items)
     for a, b in itertools.combinations(items, 2):
         assert not a.overlaps(b)

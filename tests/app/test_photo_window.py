@@ -12,14 +12,14 @@ import time
 
 import numpy as np
 import pytest
-
-import gbviewer as gb
-from gbviewer.outputs import metrics
-from gbviewer.app.overlays import labels as overlays
-from gbviewer.eval import camera_for_rate, ground_truth
-from gbviewer.outputs.figure import to_uint8, upscale_nearest
 from test_difference_window import wait_analysed
 from window_helpers import GBVIEWER_ROOT, LABEL_BAND, agree, pane_pixels, press, shot, wait
+
+import gbviewer as gb
+from gbviewer.app.overlays import labels as overlays
+from gbviewer.eval import camera_for_rate, ground_truth
+from gbviewer.outputs import metrics
+from gbviewer.outputs.figure import to_uint8, upscale_nearest
 
 pytestmark = pytest.mark.display
 RATE = 0.25
@@ -89,28 +89,31 @@ def test_photo_pane_beside_scalar_and_gaussian_blending(photo_app):
         text, stale = app.analysis.fidelity_line((i, "a"))  # on the photos' backdrop: black, as their borders
         assert not stale and text.startswith(f"PSNR {psnr:.2f} dB") and text.endswith("vs photo (bg 0.00 0.00 0.00)")
         line = next(i for i in app.placed if i.full == text)  # the pane's message line: white text on its dark box
-        label = img[round(line.y):round(line.y + line.h), round(line.x):round(line.x + line.w)]
+        label = img[round(line.y) : round(line.y + line.h), round(line.x) : round(line.x + line.w)]
         assert (label.min(axis=2) > 200).sum() > 30
     assert app.analysis.fidelity_line((0, "a")) is None
 
 
 def test_gbviewer_scene_data_opens_the_window_with_the_dataset(xvfb, capture, tmp_path):
     """`gbviewer SCENE --data DATASET`: the window opens with the dataset's views (closed once it is in)."""
-    code = ("import glfw, sys\n"
-            "from gbviewer.app import window\n"
-            "orig = window.ViewerApp.step\n"
-            "def step(self, poll=True):\n"
-            "    orig(self, poll)\n"
-            "    d = self.state.dataset\n"
-            "    if self.state.scene is not None and d.loader is None:\n"
-            "        print('views', len(d.dataset.views) if d.dataset else d.error, d.images)\n"
-            "        glfw.set_window_should_close(self.window, True)\n"
-            "window.ViewerApp.step = step\n"
-            "from gbviewer.cli import main\n"
-            f"sys.exit(main([{str(gb.DEFAULT_SCENE)!r}, '--data', {str(capture)!r}, '--images', 'images']))\n")
+    code = (
+        "import glfw, sys\n"
+        "from gbviewer.app import window\n"
+        "orig = window.ViewerApp.step\n"
+        "def step(self, poll=True):\n"
+        "    orig(self, poll)\n"
+        "    d = self.state.dataset\n"
+        "    if self.state.scene is not None and d.loader is None:\n"
+        "        print('views', len(d.dataset.views) if d.dataset else d.error, d.images)\n"
+        "        glfw.set_window_should_close(self.window, True)\n"
+        "window.ViewerApp.step = step\n"
+        "from gbviewer.cli import main\n"
+        f"sys.exit(main([{str(gb.DEFAULT_SCENE)!r}, '--data', {str(capture)!r}, '--images', 'images']))\n"
+    )
     env = dict(os.environ, XDG_CONFIG_HOME=str(tmp_path / "cfg"), PYTHONPATH=GBVIEWER_ROOT)
-    proc = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path, capture_output=True, text=True,
-                          timeout=180)
+    proc = subprocess.run(
+        [sys.executable, "-c", code], env=env, cwd=tmp_path, capture_output=True, text=True, timeout=180
+    )
     assert proc.returncode == 0, proc.stderr
     assert "views 9 images" in proc.stdout
     assert not (tmp_path / "out").exists()  # the window opened: no fallback images

@@ -30,7 +30,7 @@ def test_rate_slider_is_log2_snaps_to_steps_and_clamps():
     for r in rates.RATE_STEPS:
         assert rates.slider_to_rate(rates.rate_to_slider(r)) == pytest.approx(r)
     assert rates.slider_to_rate(-3.02) == 1 / 8  # snapped
-    assert rates.slider_to_rate(0.5) == pytest.approx(2 ** 0.5)  # continuous in between
+    assert rates.slider_to_rate(0.5) == pytest.approx(2**0.5)  # continuous in between
     assert rates.slider_to_rate(9) == 8 and rates.slider_to_rate(-9) == 1 / 8
     assert rates.clamp_rate(float("nan")) == 1.0 and rates.clamp_rate(100) == 8
 

@@ -33,9 +33,20 @@ def test_bad_settings_fall_back_to_defaults_with_a_warning(tmp_path):
     p.write_text("{not json")
     s, warning = settings.load_settings(p)
     assert s == AppSettings() and "unreadable" in warning
-    p.write_text(json.dumps({"pane_count": 99, "rate": -1, "layout": "spiral", "panes": [{"mode": "nope",
-                             "supersample": 40, "view": "x", "extra": 1}], "up": "sideways", "window": "big",
-                             "unknown_key": 1, "projection": "fisheye"}))
+    p.write_text(
+        json.dumps(
+            {
+                "pane_count": 99,
+                "rate": -1,
+                "layout": "spiral",
+                "panes": [{"mode": "nope", "supersample": 40, "view": "x", "extra": 1}],
+                "up": "sideways",
+                "window": "big",
+                "unknown_key": 1,
+                "projection": "fisheye",
+            }
+        )
+    )
     s, warning = settings.load_settings(p)
     assert warning == ""
     assert s.pane_count == 4 and s.rate == 1.0 and s.layout == "row" and s.up == "-y"
@@ -62,9 +73,11 @@ def test_display_detection():
 def test_hostile_settings_values_fall_back_without_stopping_the_viewer(tmp_path):
     p = tmp_path / "settings.json"
     big = "9" * 4000  # an integer too large for a float
-    p.write_text(f'{{"rate": {big}, "fov_y_deg": {big}, "background": [{big}, 0, 0], "pane_count": {big}, '
-                 f'"window": [{big}, "x"], "panes": [{{"split_pos": {big}, "supersample": "x", "view": []}}], '
-                 f'"loupe_zoom": "nan", "fly_speed": "1e400", "up": [], "layout": {{}}, "recent": 5}}')
+    p.write_text(
+        f'{{"rate": {big}, "fov_y_deg": {big}, "background": [{big}, 0, 0], "pane_count": {big}, '
+        f'"window": [{big}, "x"], "panes": [{{"split_pos": {big}, "supersample": "x", "view": []}}], '
+        f'"loupe_zoom": "nan", "fly_speed": "1e400", "up": [], "layout": {{}}, "recent": 5}}'
+    )
     s, warning = settings.load_settings(p)
     assert warning == ""
     assert (s.rate, s.fov_y_deg, s.background, s.pane_count) == (1.0, 50.0, (0.0, 0.0, 0.0), 4)
@@ -77,11 +90,16 @@ def test_hostile_settings_values_fall_back_without_stopping_the_viewer(tmp_path)
 
 
 @settings_hyp(max_examples=150, deadline=None)
-@given(st.dictionaries(st.sampled_from(sorted(AppSettings.__dataclass_fields__)),
-                       st.recursive(st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=4),
-                                    lambda kids: st.lists(kids, max_size=4) | st.dictionaries(st.text(max_size=3), kids,
-                                                                                               max_size=3),
-                                    max_leaves=12)))
+@given(
+    st.dictionaries(
+        st.sampled_from(sorted(AppSettings.__dataclass_fields__)),
+        st.recursive(
+            st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=4),
+            lambda kids: st.lists(kids, max_size=4) | st.dictionaries(st.text(max_size=3), kids, max_size=3),
+            max_leaves=12,
+        ),
+    )
+)
 def test_any_settings_object_normalises_to_valid_settings(doc):
     s = AppSettings.from_doc(doc)
     assert 1 <= s.pane_count <= settings.MAX_PANES and len(s.panes) == settings.MAX_PANES

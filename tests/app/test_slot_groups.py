@@ -63,8 +63,12 @@ def test_a_newer_request_restarts_the_group_with_the_others_requeued():
         wait_for(lambda: not t.busy())
         assert sorted(t.groups[1]) == [("a", 0), ("b", 1), ("c", 0)]
         out = t.results()
-        assert sorted((r.req.slot, r.req.n, r.cancelled) for r in out) == [("a", 0, False), ("b", 0, True),
-                                                                            ("b", 1, False), ("c", 0, False)]
+        assert sorted((r.req.slot, r.req.n, r.cancelled) for r in out) == [
+            ("a", 0, False),
+            ("b", 0, True),
+            ("b", 1, False),
+            ("c", 0, False),
+        ]
     finally:
         t.stop()
 
@@ -97,8 +101,10 @@ def test_the_render_thread_renders_the_panes_of_one_camera_together(bundled_scen
 
     cam = gb.orbit_camera(bundled_scene, width=640, height=480)
     specs = ("scalar:2", "gaussian_blending:2")
-    jobs = [RenderJob((k, "a"), bundled_scene, cam, RenderSettings.parse(s), "cpu", progressive=True)
-            for k, s in enumerate(specs)]
+    jobs = [
+        RenderJob((k, "a"), bundled_scene, cam, RenderSettings.parse(s), "cpu", progressive=True)
+        for k, s in enumerate(specs)
+    ]
     other = RenderJob((2, "a"), bundled_scene, cam.at_sampling_rate(0.5), RenderSettings(), "cpu")
     preview = RenderJob((3, "a"), bundled_scene, cam, RenderSettings(), "cpu", preview=True)
     assert companions(jobs[0], [jobs[1], other, preview]) == [jobs[1]] and companions(preview, jobs) == []

@@ -4,7 +4,6 @@ switched and superseded in the real window with renders, backend switches and vi
 from __future__ import annotations
 
 import pytest
-
 from soak_viewer import run_soak
 
 pytestmark = [pytest.mark.display, pytest.mark.slow]

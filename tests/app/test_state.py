@@ -9,10 +9,10 @@ import time
 import pytest
 
 import gbviewer as gb
-from gbviewer.app.ui.layout import PANEL_W
-from gbviewer.app.settings import MODE_NAMES, AppSettings
 from gbviewer.app.pane_state import RateMeter
+from gbviewer.app.settings import MODE_NAMES, AppSettings
 from gbviewer.app.state import AppState, is_cameras_file
+from gbviewer.app.ui.layout import PANEL_W
 from gbviewer.render import Mode
 
 
@@ -151,8 +151,22 @@ def test_open_a_scene_then_training_cameras(tmp_path):
     assert "no training cameras" in s.messages[-1][1] and s.messages[-1][2] == "warn"
     cam = gb.orbit_camera(s.scene, 40, 10, width=320, height=240)
     path = tmp_path / "cams.json"
-    path.write_text(json.dumps([{"id": 0, "img_name": "v", "width": 320, "height": 240, "fx": cam.fx,
-                                 "fy": cam.fy, "position": cam.position.tolist(), "rotation": cam.R.T.tolist()}]))
+    path.write_text(
+        json.dumps(
+            [
+                {
+                    "id": 0,
+                    "img_name": "v",
+                    "width": 320,
+                    "height": 240,
+                    "fx": cam.fx,
+                    "fy": cam.fy,
+                    "position": cam.position.tolist(),
+                    "rotation": cam.R.T.tolist(),
+                }
+            ]
+        )
+    )
     assert is_cameras_file(path) and not is_cameras_file(gb.DEFAULT_SCENE)
     s.open(path)
     assert s.loader is None and s.cam_index == 0 and s.cameras_path == path

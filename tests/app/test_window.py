@@ -10,11 +10,11 @@ import json
 
 import numpy as np
 import pytest
+from window_helpers import LABEL_BAND, agree, expected_pane, pane_pixels, press, shot, wait
 
 import gbviewer as gb
 from gbviewer.app.frames.rates import render_size
 from gbviewer.app.frames.views import decode_png16
-from window_helpers import LABEL_BAND, agree, expected_pane, pane_pixels, press, shot, wait
 
 pytestmark = pytest.mark.display
 
@@ -65,8 +65,8 @@ def test_split_view_loupe_help_debug_views_and_pane_screenshot(app, tmp_path):
     got = pane_pixels(img, p.rect)
     half = p.rect.w // 2
     left, right = expected_pane(app, 0, "a"), expected_pane(app, 0, "b")
-    assert agree(got[LABEL_BAND:, :half - 6], left[LABEL_BAND:, :half - 6]) > 0.995
-    assert agree(got[LABEL_BAND:, half + 6:], right[LABEL_BAND:, half + 6:]) > 0.995
+    assert agree(got[LABEL_BAND:, : half - 6], left[LABEL_BAND:, : half - 6]) > 0.995
+    assert agree(got[LABEL_BAND:, half + 6 :], right[LABEL_BAND:, half + 6 :]) > 0.995
 
     # drag the divider with the mouse
     from imgui_bundle import imgui
@@ -146,8 +146,19 @@ def test_four_panes_grid_camera_input_and_training_cameras(app, tmp_path):
     assert app.state.controller.R == pytest.approx(R0)
     # training cameras from an opened cameras.json: snap to the first, step to the next
     cams = [gb.orbit_camera(app.state.scene, az, 10, width=320, height=240) for az in (0, 90)]
-    entries = [{"id": k, "img_name": f"view{k}", "width": 320, "height": 240, "fx": c.fx, "fy": c.fy,
-                "position": c.position.tolist(), "rotation": c.R.T.tolist()} for k, c in enumerate(cams)]
+    entries = [
+        {
+            "id": k,
+            "img_name": f"view{k}",
+            "width": 320,
+            "height": 240,
+            "fx": c.fx,
+            "fy": c.fy,
+            "position": c.position.tolist(),
+            "rotation": c.R.T.tolist(),
+        }
+        for k, c in enumerate(cams)
+    ]
     path = tmp_path / "cameras.json"
     path.write_text(json.dumps(entries))
     app.state.open(path)
@@ -158,8 +169,6 @@ def test_four_panes_grid_camera_input_and_training_cameras(app, tmp_path):
     assert app.state.cam_index == 1 and app.state.controller.camera(320, 240).t == pytest.approx(cams[1].t)
     wait(app)
     shot(app, "viewer-training-camera")
-
-
 
 
 def test_keyboard_shortcuts(app, tmp_path):

@@ -9,10 +9,10 @@ import time
 
 import numpy as np
 import pytest
+from window_helpers import LABEL_BAND, pane_pixels, shot, wait
 
 import gbviewer as gb
 from gbviewer.app.settings import load_settings, settings_path
-from window_helpers import LABEL_BAND, pane_pixels, shot, wait
 
 pytestmark = pytest.mark.display
 
@@ -47,8 +47,6 @@ def test_bad_file_keeps_the_scene_and_shows_the_error_then_settings_persist(app,
     assert warning == "" and s.pane_count == 3 and s.layout == "grid" and s.rate == 1 / 8
     assert s.panes[2].mode == "analytic" and s.panes[2].supersample == 2
     assert str(gb.DEFAULT_SCENE.resolve()) in s.recent
-
-
 
 
 def test_drop_a_file_glsl_backend_and_render_limit(app, tmp_path):
@@ -124,8 +122,6 @@ def test_record_zoom_video_in_the_background(app, tmp_path):
     assert job.finished() and not (tmp_path / "cancelled.mp4").exists()
 
 
-
-
 def test_scene_switches_keep_one_texture_per_pane_part(app, tmp_path):
     """Opening a scene reuses the panes' textures: the window's live GL textures do not grow with scene switches."""
     from soak_viewer import gl_object_counts
@@ -151,8 +147,10 @@ def test_bad_file_and_new_scene_while_a_load_and_renders_are_in_flight(app, tmp_
     scene = app.state.scene
     good, bad = tmp_path / "good.ply", tmp_path / "bad.ply"
     shutil.copy(gb.DEFAULT_SCENE, good)
-    bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 1099511627776\nproperty float x\n"
-                    b"end_header\n" + bytes(16))
+    bad.write_bytes(
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 1099511627776\nproperty float x\n"
+        b"end_header\n" + bytes(16)
+    )
     app.state.controller.orbit(40, 5)  # renders in flight
     app.state.moved()
     app.step()

@@ -12,6 +12,7 @@ import weakref
 
 import numpy as np
 import pytest
+from test_state import loaded
 
 import gbviewer as gb
 from gbviewer.app.inspector.state import TraceRequest, TraceThread
@@ -21,7 +22,6 @@ from gbviewer.app.state import AppState
 from gbviewer.app.threads.worker import RENDER_NICE, RenderJob, RenderPolicy, RenderWorker
 from gbviewer.render import BACKENDS, CpuRenderer, RenderSettings
 from gbviewer.render.glsl.context import standalone_context
-from test_state import loaded
 
 
 def test_worker_renders_latest_request_per_slot_and_drops_stale_ones(bundled_scene):
@@ -29,8 +29,11 @@ def test_worker_renders_latest_request_per_slot_and_drops_stale_ones(bundled_sce
     try:
         cam = gb.orbit_camera(bundled_scene, width=64, height=48)
         for k in range(5):  # five requests for one slot in a burst: at most the first and the last are rendered
-            w.submit(RenderJob(("p", "a"), bundled_scene, cam.at_sampling_rate(1 + k / 10), RenderSettings(), "cpu",
-                               {"k": k}))
+            w.submit(
+                RenderJob(
+                    ("p", "a"), bundled_scene, cam.at_sampling_rate(1 + k / 10), RenderSettings(), "cpu", {"k": k}
+                )
+            )
         w.submit(RenderJob(("q", "a"), bundled_scene, cam, RenderSettings("gaussian_blending"), "cpu", {"k": 9}))
         results, t0 = [], time.time()
         while (w.busy() or not results) and time.time() - t0 < 60:
@@ -241,13 +244,15 @@ def test_a_backend_that_stops_working_is_reported_and_its_pane_renders_on_the_ne
         assert w.failed == {"flaky": "device lost"} and w.backends["flaky"] == (False, "stopped working: device lost")
         assert w.backend_for("flaky") == w.backend_for("auto") == "cpu" and w.auto.name == "cpu"
         assert [m[1] for m in state.messages if m[2] == "error"] == [
-            "flaky stopped working: device lost; rendering on cpu"]
+            "flaky stopped working: device lost; rendering on cpu"
+        ]
         render_once()  # on the next pick, by the same render thread
         shown = pane.parts["a"]
         assert shown.job.backend == "cpu" and shown.error is None and w._thread.is_alive()
-        np.testing.assert_array_equal(shown.frame.rgb, gb.render(state.scene, shown.job.camera,
-                                                                 shown.job.settings.mode,
-                                                                 shown.job.settings.supersample).rgb)
+        np.testing.assert_array_equal(
+            shown.frame.rgb,
+            gb.render(state.scene, shown.job.camera, shown.job.settings.mode, shown.job.settings.supersample).rgb,
+        )
         w.submit(RenderJob(9, state.scene, shown.job.camera, RenderSettings(), "flaky"))  # asked for by name
         out = _collect(w, lambda o: bool(o))
         assert out[0].failed and out[0].frame is None and Flaky.renders == 2  # no new renderer was made

@@ -26,7 +26,7 @@ def shot(app, name: str) -> np.ndarray:
 
 
 def pane_pixels(img: np.ndarray, rect) -> np.ndarray:
-    return img[rect.y:rect.y + rect.h, rect.x:rect.x + rect.w]
+    return img[rect.y : rect.y + rect.h, rect.x : rect.x + rect.w]
 
 
 def expected_pane(app, i: int, part: str = "a", view: str = "color") -> np.ndarray:
@@ -35,8 +35,9 @@ def expected_pane(app, i: int, part: str = "a", view: str = "color") -> np.ndarr
     current beside it), nearest-upscaled to the pane."""
     p = app.state.panes[i]
     job = p.parts[part].job
-    frame = gb.render(app.state.scene, job.camera, job.settings.mode, job.settings.supersample, "cpu",
-                      debug=job.settings.debug)
+    frame = gb.render(
+        app.state.scene, job.camera, job.settings.mode, job.settings.supersample, "cpu", debug=job.settings.debug
+    )
     rgb, _ = visualize(frame, view)
     return upscale_nearest(to_uint8(rgb), p.rect.h, p.rect.w)
 
@@ -50,7 +51,6 @@ def agree(a: np.ndarray, b: np.ndarray, border: int = 1) -> float:
 
 def wait(app):
     assert app.wait_rendered(180), "the panes did not finish rendering"
-
 
 
 def press(app, key, shift: bool = False, frames: int = 1) -> None:

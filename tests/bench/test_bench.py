@@ -12,10 +12,10 @@ import pytest
 
 import gbviewer as gb
 from gbviewer import bench
-from gbviewer.outputs import metrics
-from gbviewer.model.camera import parse_rates
 from gbviewer.cli import build_parser, main
 from gbviewer.cli.bench import BENCH_DEFAULTS, BENCH_FULL, resolve_bench_options
+from gbviewer.model.camera import parse_rates
+from gbviewer.outputs import metrics
 
 
 def test_bench_sizes_align_with_every_zoom_factor(bundled_scene):
@@ -43,20 +43,60 @@ def test_fidelity_references(bundled_scene):
 
 def test_bench_command_end_to_end(tmp_path, capsys):
     out, plots = tmp_path / "b.json", tmp_path / "plots"
-    args = ["bench", str(gb.DEFAULT_SCENE), "--modes", "scalar,gaussian_blending,supersample:2", "--views", "2",
-            "--repeat", "2", "--size", "64x48", "--rates", "2,1,1/2", "--simd", "current", "--json", str(out),
-            "--plots", str(plots), "--flicker-pairs", "2", "--flicker-size", "48x32"]
+    args = [
+        "bench",
+        str(gb.DEFAULT_SCENE),
+        "--modes",
+        "scalar,gaussian_blending,supersample:2",
+        "--views",
+        "2",
+        "--repeat",
+        "2",
+        "--size",
+        "64x48",
+        "--rates",
+        "2,1,1/2",
+        "--simd",
+        "current",
+        "--json",
+        str(out),
+        "--plots",
+        str(plots),
+        "--flicker-pairs",
+        "2",
+        "--flicker-size",
+        "48x32",
+    ]
     assert main(args) == 0
     doc = json.loads(out.read_text())
     assert {"cpu", "cores", "python"} <= set(doc["machine"])
     speed = doc["speed"]
     assert len(speed) == 3 * 3  # modes x rates on the cpu backend, one SIMD path
-    fields = {"scene", "backend", "mode", "rate", "width", "height", "median_ms", "min_ms", "max_ms", "stages_ms",
-              "visible", "sort_length", "evals_per_pixel", "mevals_per_s_per_core", "simd", "simd_requested",
-              "blend_mevals_per_s_per_core", "exp_mevals_per_s_per_core", "simd_max_abs_diff"}
+    fields = {
+        "scene",
+        "backend",
+        "mode",
+        "rate",
+        "width",
+        "height",
+        "median_ms",
+        "min_ms",
+        "max_ms",
+        "stages_ms",
+        "visible",
+        "sort_length",
+        "evals_per_pixel",
+        "mevals_per_s_per_core",
+        "simd",
+        "simd_requested",
+        "blend_mevals_per_s_per_core",
+        "exp_mevals_per_s_per_core",
+        "simd_max_abs_diff",
+    }
     assert all(set(r) >= fields and set(r["stages_ms"]) >= {"preprocess_ms", "sort_ms", "blend_ms"} for r in speed)
-    assert {(r["mode"], r["rate"]) for r in speed} == {(m, k) for m in ("scalar", "gaussian_blending", "scalar:2")
-                                                       for k in (2.0, 1.0, 0.5)}
+    assert {(r["mode"], r["rate"]) for r in speed} == {
+        (m, k) for m in ("scalar", "gaussian_blending", "scalar:2") for k in (2.0, 1.0, 0.5)
+    }
     assert {r["simd_requested"] for r in speed} == {doc["simd"]["in_use"]} == {bench.current_simd()}
     assert {r["simd"] for r in speed} <= set(doc["simd"]["paths"])
     fid = doc["fidelity"]
@@ -66,8 +106,14 @@ def test_bench_command_end_to_end(tmp_path, capsys):
     assert [p.suffix for p in plots.iterdir()] == [".png"]
     flicker = doc["flicker"]  # every mode, with the reference's floor
     assert [r["mode"] for r in flicker] == ["scalar", "gaussian_blending", "scalar:2"]
-    assert all(r["flicker"] >= 0 and r["floor"] > 0 and r["pairs"] == 2 and r["reference"] == "scalar:8"
-               and (r["width"], r["height"]) == (48, 32) for r in flicker)
+    assert all(
+        r["flicker"] >= 0
+        and r["floor"] > 0
+        and r["pairs"] == 2
+        and r["reference"] == "scalar:8"
+        and (r["width"], r["height"]) == (48, 32)
+        for r in flicker
+    )
     assert "Flicker along a zoom" in capsys.readouterr().out
     assert main(args) == 2  # the JSON exists now: refused without --force
     assert "--force" in capsys.readouterr().err
@@ -118,8 +164,9 @@ def test_measure_speed_compares_every_path_and_restores_the_one_in_use(bundled_s
     rows = bench.measure_speed(bundled_scene, "b", cams, settings, ["cpu"], [1.0, 0.5], 2, units.append, paths, exp)
     assert bench.current_simd() == before
     assert sum(units) == pytest.approx(bench.speed_cost(bundled_scene, cams, settings, ["cpu"], [1.0, 0.5], 2, paths))
-    assert {(r.simd_requested, r.mode, r.rate) for r in rows} == {(p, s.spec, k) for p in paths for s in settings
-                                                                  for k in (1.0, 0.5)}
+    assert {(r.simd_requested, r.mode, r.rate) for r in rows} == {
+        (p, s.spec, k) for p in paths for s in settings for k in (1.0, 0.5)
+    }
     for r in rows:
         assert r.simd in paths and r.exp_mevals_per_s_per_core == pytest.approx(exp[r.simd] / 1e6)
         assert r.blend_mevals_per_s_per_core >= r.mevals_per_s_per_core > 0  # the blend is a part of the frame
@@ -130,8 +177,9 @@ def test_measure_speed_compares_every_path_and_restores_the_one_in_use(bundled_s
     for (_p, mode, rate), r in by.items():  # the paths differ in the blend only: same splats, same tile lists
         assert (r.visible, r.sort_length) == (by["scalar", mode, rate].visible, by["scalar", mode, rate].sort_length)
     speedups = [x for x in bench.ratios(rows) if x["ratio"].startswith("blend speedup")]
-    assert {(x["simd"], x["mode"], x["rate"]) for x in speedups} == {(p, s.spec, k) for p in paths[1:]
-                                                                     for s in settings for k in (1.0, 0.5)}
+    assert {(x["simd"], x["mode"], x["rate"]) for x in speedups} == {
+        (p, s.spec, k) for p in paths[1:] for s in settings for k in (1.0, 0.5)
+    }
     for x in speedups:
         base, r = by["scalar", x["mode"], x["rate"]], by[x["simd"], x["mode"], x["rate"]]
         assert x["value"] == pytest.approx(base.stages_ms["blend_ms"] / r.stages_ms["blend_ms"])
@@ -164,8 +212,24 @@ def test_bench_flicker_pairs_0_turns_the_measure_off():
 def test_bench_simd_comparison_end_to_end(tmp_path, capsys):
     out = tmp_path / "b.json"
     paths = bench.simd_paths()
-    args = ["bench", str(gb.DEFAULT_SCENE), "--modes", "scalar,gaussian_blending,supersample:2", "--views", "1",
-            "--repeat", "1", "--size", "32x24", "--rates", "1", "--simd", "all", "--json", str(out)]
+    args = [
+        "bench",
+        str(gb.DEFAULT_SCENE),
+        "--modes",
+        "scalar,gaussian_blending,supersample:2",
+        "--views",
+        "1",
+        "--repeat",
+        "1",
+        "--size",
+        "32x24",
+        "--rates",
+        "1",
+        "--simd",
+        "all",
+        "--json",
+        str(out),
+    ]
     assert main(args) == 0
     printed = capsys.readouterr().out
     doc = json.loads(out.read_text())
@@ -173,14 +237,18 @@ def test_bench_simd_comparison_end_to_end(tmp_path, capsys):
     assert info["paths"] == paths and info["measured"] == paths and info["in_use"] in paths
     assert set(info["exp_per_s_per_core"]) == set(paths) and all(v > 0 for v in info["exp_per_s_per_core"].values())
     assert {(r["simd_requested"], r["mode"]) for r in doc["speed"]} == {
-        (p, m) for p in paths for m in ("scalar", "gaussian_blending", "scalar:2")}
+        (p, m) for p in paths for m in ("scalar", "gaussian_blending", "scalar:2")
+    }
     assert all(r["simd"] in paths for r in doc["speed"])
     names = {(x["ratio"], x.get("mode"), x["simd"]) for x in doc["ratios"]}
     for p in paths:
         assert {("gaussian_blending / scalar", None, p), ("scalar:2 / gaussian_blending", None, p)} <= names
     for p in paths[1:]:
-        assert {(f"{k} speedup {p} over scalar", m, p) for k in ("blend", "frame")
-                for m in ("scalar", "gaussian_blending", "scalar:2")} <= names
+        assert {
+            (f"{k} speedup {p} over scalar", m, p)
+            for k in ("blend", "frame")
+            for m in ("scalar", "gaussian_blending", "scalar:2")
+        } <= names
     assert f"SIMD paths {', '.join(paths)}" in printed and "exp per core" in printed
     if len(paths) > 1:
         assert "SIMD paths of the CPU backend" in printed
@@ -200,8 +268,13 @@ def test_bench_presets():
     parse = lambda *a: resolve_bench_options(build_parser().parse_args(["bench", "s.ply", *a]))  # noqa: E731
     d = parse()
     assert (d.modes, d.rates, d.views, d.repeat, d.simd, d.size) == (
-        BENCH_DEFAULTS["modes"], parse_rates(BENCH_DEFAULTS["rates"]), BENCH_DEFAULTS["views"], BENCH_DEFAULTS["repeat"], None,
-        (640, 480))
+        BENCH_DEFAULTS["modes"],
+        parse_rates(BENCH_DEFAULTS["rates"]),
+        BENCH_DEFAULTS["views"],
+        BENCH_DEFAULTS["repeat"],
+        None,
+        (640, 480),
+    )
     f = parse("--full")
     assert (f.modes, f.views, f.repeat, f.simd) == tuple(BENCH_FULL[k] for k in ("modes", "views", "repeat", "simd"))
     assert f.rates == parse_rates(BENCH_FULL["rates"])
@@ -226,20 +299,39 @@ def test_run_all_targets_check_the_simd_targets():
     ra = _run_all()
 
     def row(scene, mode, ms, blend, simd="avx2", rate=1.0, size=(320, 240)):
-        return bench.SpeedRow(scene, "cpu", mode, rate, *size, ms, ms, ms, {"preprocess_ms": 0, "sort_ms": 0,
-                              "blend_ms": blend, "total_ms": ms}, 1, 1, 1.0, 1.0, simd, simd)
+        return bench.SpeedRow(
+            scene,
+            "cpu",
+            mode,
+            rate,
+            *size,
+            ms,
+            ms,
+            ms,
+            {"preprocess_ms": 0, "sort_ms": 0, "blend_ms": blend, "total_ms": ms},
+            1,
+            1,
+            1.0,
+            1.0,
+            simd,
+            simd,
+        )
 
     names = ["bundled: a.ply", "b.ply", "c.ply"]
     speed, fidelity, simd = [], [], []
     for n in names:
         speed += [row(n, "scalar", 10, 8), row(n, "gaussian_blending", 14, 12), row(n, "scalar:3", 50, 45)]
-        fidelity += [bench.FidelityRow(n, m, 0.125, "zoom-out", p, 0.9) for m, p in
-                     (("scalar", 20.0), ("gaussian_blending", 30.0), ("scalar:3", 29.0))]
+        fidelity += [
+            bench.FidelityRow(n, m, 0.125, "zoom-out", p, 0.9)
+            for m, p in (("scalar", 20.0), ("gaussian_blending", 30.0), ("scalar:3", 29.0))
+        ]
     for n, gb_vec, sc_vec in (("bundled: a.ply", 60, 10), ("b.ply", 90, 30), ("c.ply", 120, 20)):
-        simd += [row(n, "gaussian_blending", 600, 600, "scalar", size=(640, 480)),
-                 row(n, "gaussian_blending", gb_vec, gb_vec, size=(640, 480)),
-                 row(n, "scalar", 100, 100, "scalar", size=(640, 480)),
-                 row(n, "scalar", sc_vec, sc_vec, size=(640, 480))]
+        simd += [
+            row(n, "gaussian_blending", 600, 600, "scalar", size=(640, 480)),
+            row(n, "gaussian_blending", gb_vec, gb_vec, size=(640, 480)),
+            row(n, "scalar", 100, 100, "scalar", size=(640, 480)),
+            row(n, "scalar", sc_vec, sc_vec, size=(640, 480)),
+        ]
     rows = ra.targets(speed, fidelity, names, simd, in_use="avx2")
     assert len(rows) == len(names) + 1 and all(len(r) == len(ra.target_header(in_use="avx2")) for r in rows)
     assert rows[0][1:5] == ["1.40 ok", "3.57 ok", "30.00 vs 29.00 ok", "+10.00 ok"]

@@ -16,8 +16,26 @@ from gbviewer.cli import main
 
 def test_bench_measures_the_lod_variants(tmp_path):
     out = tmp_path / "b.json"
-    argv = ["bench", str(gb.DEFAULT_SCENE), "--modes", "scalar", "--lod", "2", "--rates", "1,1/2", "--views", "1",
-            "--repeat", "1", "--size", "32x24", "--simd", "current", "--json", str(out)]
+    argv = [
+        "bench",
+        str(gb.DEFAULT_SCENE),
+        "--modes",
+        "scalar",
+        "--lod",
+        "2",
+        "--rates",
+        "1,1/2",
+        "--views",
+        "1",
+        "--repeat",
+        "1",
+        "--size",
+        "32x24",
+        "--simd",
+        "current",
+        "--json",
+        str(out),
+    ]
     assert main(argv) == 0
     doc = json.loads(out.read_text())
     fid = {(r["mode"], r["rate"]) for r in doc["fidelity"]}
@@ -27,12 +45,21 @@ def test_bench_measures_the_lod_variants(tmp_path):
 
 def test_quality_cost_plots_psnr_against_the_fastest_time():
     pytest.importorskip("matplotlib", reason="the [eval] extra")
-    fid = [FidelityRow("s", m, rate, "zoom-out", psnr, 0.9) for m, rate, psnr in
-           [("scalar", 0.5, 30.0), ("scalar", 0.25, 25.0), ("scalar+lod:1", 0.25, 27.0)]]
+    fid = [
+        FidelityRow("s", m, rate, "zoom-out", psnr, 0.9)
+        for m, rate, psnr in [("scalar", 0.5, 30.0), ("scalar", 0.25, 25.0), ("scalar+lod:1", 0.25, 27.0)]
+    ]
     fid.append(FidelityRow("s", "scalar", 2.0, "zoom-in", 40.0, 0.99))  # not a zoom-out point
-    speed = [SimpleNamespace(mode=m, rate=rate, median_ms=ms) for m, rate, ms in
-             [("scalar", 0.5, 9.0), ("scalar", 0.5, 7.0), ("scalar", 0.25, 5.0), ("scalar+lod:1", 0.25, 2.0),
-              ("scalar", 2.0, 50.0)]]
+    speed = [
+        SimpleNamespace(mode=m, rate=rate, median_ms=ms)
+        for m, rate, ms in [
+            ("scalar", 0.5, 9.0),
+            ("scalar", 0.5, 7.0),
+            ("scalar", 0.25, 5.0),
+            ("scalar+lod:1", 0.25, 2.0),
+            ("scalar", 2.0, 50.0),
+        ]
+    ]
     plt = pyplot()
     fig, ax = plt.subplots()
     quality_cost(ax, "s", speed, fid)

@@ -49,12 +49,15 @@ def test_built_deterministically_and_reused_while_the_record_matches(tmp_path):
 
 def test_run_scale_reports_every_measurement(tmp_path):
     path = tiled_scene(2, SOURCE, tmp_path, log=lambda _: None)
-    r = run_scale(path, 1, ["scalar", "gaussian_blending"], [1.0, 0.5], [0.0], width=32, height=18,
-                  log=lambda _: None)
+    r = run_scale(path, 1, ["scalar", "gaussian_blending"], [1.0, 0.5], [0.0], width=32, height=18, log=lambda _: None)
     assert r["splats"] == 24 and r["load"]["arrays_bytes"] == 24 * (3 + 3 + 4 + 1 + 48) * 4
     assert r["load"]["raw_s"] > 0 and r["load"]["peak_rss_above_baseline"] > 0
     assert [(s["mode"], s["rate"], s["width"]) for s in r["stages"]] == [
-        ("scalar", 1.0, 32), ("scalar", 0.5, 16), ("gaussian_blending", 1.0, 32), ("gaussian_blending", 0.5, 16)]
+        ("scalar", 1.0, 32),
+        ("scalar", 0.5, 16),
+        ("gaussian_blending", 1.0, 32),
+        ("gaussian_blending", 0.5, 16),
+    ]
     panes = r["two_pane"]["panes"]
     assert [p["mode"] for p in panes] == ["scalar", "gaussian_blending"]
     assert [p["stage_reused"] for p in panes] == [False, True]
@@ -63,5 +66,12 @@ def test_run_scale_reports_every_measurement(tmp_path):
     assert [p["order_reused"] for p in panes] == [False, True]
     cancels = r["cancel"]
     assert [(c["stage"], c["supersample"]) for c in cancels] == [
-        ("preprocess", 1), ("order+bin", 1), ("blend", 1), ("", 1), ("preprocess", 4), ("order+bin", 4), ("blend", 4)]
+        ("preprocess", 1),
+        ("order+bin", 1),
+        ("blend", 1),
+        ("", 1),
+        ("preprocess", 4),
+        ("order+bin", 4),
+        ("blend", 4),
+    ]
     assert all(c["finished"] != (c["latency_ms"] is not None) for c in cancels)

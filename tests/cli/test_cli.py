@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import patch_commands
 from PIL import Image
 
 import gbviewer as gb
 from gbviewer import cli
 from gbviewer.cli import main
 from gbviewer.core.files import check_writable
-from helpers import patch_commands
 
 GBVIEWER = [sys.executable, "-m", "gbviewer"]
 ENV = dict(os.environ, PYTHONPATH=str(Path(gb.__file__).resolve().parents[1]))  # the gbviewer under test
@@ -62,11 +62,37 @@ def test_render_orthographic(tmp_path):
     assert (arr.max(axis=2) > 0.1).mean() > 0.2
     np.testing.assert_array_equal(arr, gb.render(scene, cam).rgb)
     cams = tmp_path / "cameras.json"
-    cams.write_text(json.dumps([{"width": 64, "height": 48, "fx": cam.fx, "fy": cam.fy, "projection":
-                                 "orthographic", "position": cam.position.tolist(), "rotation": cam.R.T.tolist()}]))
+    cams.write_text(
+        json.dumps(
+            [
+                {
+                    "width": 64,
+                    "height": 48,
+                    "fx": cam.fx,
+                    "fy": cam.fy,
+                    "projection": "orthographic",
+                    "position": cam.position.tolist(),
+                    "rotation": cam.R.T.tolist(),
+                }
+            ]
+        )
+    )
     persp = tmp_path / "p.npy"
-    assert main(["render", str(gb.DEFAULT_SCENE), "--cameras", str(cams), "--projection", "perspective",
-                 "--out", str(persp)]) == 0
+    assert (
+        main(
+            [
+                "render",
+                str(gb.DEFAULT_SCENE),
+                "--cameras",
+                str(cams),
+                "--projection",
+                "perspective",
+                "--out",
+                str(persp),
+            ]
+        )
+        == 0
+    )
     assert (np.load(persp).max(axis=2) > 0.1).mean() > 0.2
     proc = run("render", str(gb.DEFAULT_SCENE), "--projection", "fisheye", "--out", "x.png", cwd=tmp_path)
     assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1
@@ -92,8 +118,9 @@ def test_backend_defaults_to_auto_and_says_its_choice_once(tmp_path):
 
 def test_view_passes_an_explicit_backend_to_the_viewer(monkeypatch):
     opened = []
-    monkeypatch.setattr("gbviewer.app.open_window",
-                        lambda scene, cameras, backend=None, **_: opened.append(backend) or (True, ""))
+    monkeypatch.setattr(
+        "gbviewer.app.open_window", lambda scene, cameras, backend=None, **_: opened.append(backend) or (True, "")
+    )
     assert main([str(gb.DEFAULT_SCENE), "--backend", "cpu"]) == 0 and main([]) == 0
     assert opened == ["cpu", None]
 
@@ -108,13 +135,16 @@ def test_render_refuses_to_overwrite(tmp_path, capsys):
     assert Image.open(out).size == (32, 32)
 
 
-@pytest.mark.parametrize("args, message", [
-    (["render", "missing.ply", "--out", "x.png"], "no such file"),
-    (["render", "{scene}", "--scale", "0", "--out", "x.png"], "sampling rate"),
-    (["render", "{scene}", "--out", "x.jpg"], ".png or .npy"),
-    (["render", "{scene}", "--cameras", "{bad}", "--out", "x.png"], "cameras.json"),
-    (["info", "{bad}"], "cameras.json"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["render", "missing.ply", "--out", "x.png"], "no such file"),
+        (["render", "{scene}", "--scale", "0", "--out", "x.png"], "sampling rate"),
+        (["render", "{scene}", "--out", "x.jpg"], ".png or .npy"),
+        (["render", "{scene}", "--cameras", "{bad}", "--out", "x.png"], "cameras.json"),
+        (["info", "{bad}"], "cameras.json"),
+    ],
+)
 def test_bad_input_one_line_exit_2(tmp_path, args, message):
     bad = tmp_path / "cameras.json"
     bad.write_text("{not json")
@@ -152,8 +182,9 @@ def test_demo_writes_comparison_and_zoom_video(tmp_path):
 def test_argparse_errors_are_one_line_with_a_hint(tmp_path):
     proc = run("video", str(gb.DEFAULT_SCENE), "--fps", "inf", "--out", "v.mp4", cwd=tmp_path)
     assert proc.returncode == 2 and proc.stdout == ""
-    assert proc.stderr == ("gbviewer video: error: argument --fps: expected a finite number, got 'inf' "
-                           "(see gbviewer video --help)\n")
+    assert proc.stderr == (
+        "gbviewer video: error: argument --fps: expected a finite number, got 'inf' (see gbviewer video --help)\n"
+    )
     proc = run("render", "--mode", "nope", cwd=tmp_path)
     assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1 and "usage" not in proc.stderr
 
@@ -161,9 +192,26 @@ def test_argparse_errors_are_one_line_with_a_hint(tmp_path):
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
 def test_signal_during_video_leaves_no_temporary(tmp_path, sig):
     """SIGTERM and SIGHUP clean up like Ctrl-C: ffmpeg stopped, the hidden temporary removed, exit 128 + N."""
-    proc = subprocess.Popen([*GBVIEWER, "video", str(gb.DEFAULT_SCENE), "--modes", "scalar", "--size", "32x24",
-                             "--frames", "100000", "--out", "zoom.mp4"], cwd=tmp_path, env=ENV,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            *GBVIEWER,
+            "video",
+            str(gb.DEFAULT_SCENE),
+            "--modes",
+            "scalar",
+            "--size",
+            "32x24",
+            "--frames",
+            "100000",
+            "--out",
+            "zoom.mp4",
+        ],
+        cwd=tmp_path,
+        env=ENV,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         deadline = time.monotonic() + 120
         while not list(tmp_path.glob(".zoom-*")) and proc.poll() is None and time.monotonic() < deadline:
@@ -181,8 +229,14 @@ def test_signal_during_video_leaves_no_temporary(tmp_path, sig):
 
 def test_closed_stdout_exits_quietly(tmp_path):
     """`gbviewer info scene.ply | head -0`: the reader is gone before anything is written."""
-    proc = subprocess.Popen([*GBVIEWER, "info", str(gb.DEFAULT_SCENE)], cwd=tmp_path, env=ENV,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [*GBVIEWER, "info", str(gb.DEFAULT_SCENE)],
+        cwd=tmp_path,
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     proc.stdout.close()
     err = proc.stderr.read()
     assert proc.wait(timeout=120) == 128 + signal.SIGPIPE and err == ""
@@ -193,10 +247,12 @@ def test_check_writable(tmp_path):
     assert check_writable(tmp_path / "new" / "deeper" / "a.json") == tmp_path / "new" / "deeper" / "a.json"
     assert check_writable(tmp_path / "file", force=True) and check_writable(tmp_path, folder=True)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]  # creates nothing
-    for path, kwargs, message in [(tmp_path / "file", {}, "exists; pass --force"),
-                                  (tmp_path, {}, "is a folder"),
-                                  (tmp_path / "file", {"folder": True}, "not a folder"),
-                                  (tmp_path / "file" / "a.json", {}, "file is not a folder")]:
+    for path, kwargs, message in [
+        (tmp_path / "file", {}, "exists; pass --force"),
+        (tmp_path, {}, "is a folder"),
+        (tmp_path / "file", {"folder": True}, "not a folder"),
+        (tmp_path / "file" / "a.json", {}, "file is not a folder"),
+    ]:
         with pytest.raises(gb.GBViewerError, match=message):
             check_writable(path, **kwargs)
 
@@ -207,16 +263,19 @@ def test_check_writable_where_nothing_can_be_written():
         check_writable(Path("/proc/gbviewer/a.png"))
 
 
-@pytest.mark.parametrize("argv", [
-    ["bench", "{scene}", "--json", "{file}/b.json"],
-    ["bench", "{scene}", "--plots", "{file}"],
-    ["bench", "{scene}", "--plots", "{plots}"],
-    ["video", "{scene}", "--out", "{file}/v.mp4"],
-    ["render", "{scene}", "--out", "{file}/a.png"],
-    ["compare", "{scene}", "--out", "{file}"],
-    ["convert", "{scene}", "{file}/a.ply"],
-    ["demo", "--out", "{file}"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["bench", "{scene}", "--json", "{file}/b.json"],
+        ["bench", "{scene}", "--plots", "{file}"],
+        ["bench", "{scene}", "--plots", "{plots}"],
+        ["video", "{scene}", "--out", "{file}/v.mp4"],
+        ["render", "{scene}", "--out", "{file}/a.png"],
+        ["compare", "{scene}", "--out", "{file}"],
+        ["convert", "{scene}", "{file}/a.ply"],
+        ["demo", "--out", "{file}"],
+    ],
+)
 def test_unwritable_outputs_fail_before_the_work(argv, tmp_path, capsys, monkeypatch):
     """An output that cannot be written is refused before any scene is loaded (not after the whole benchmark)."""
     file, plots = tmp_path / "file", tmp_path / "plots"
@@ -232,8 +291,15 @@ def test_unwritable_outputs_fail_before_the_work(argv, tmp_path, capsys, monkeyp
     assert file.read_text() == "x" and sorted(p.name for p in tmp_path.iterdir()) == ["file", "plots"]
 
 
-@pytest.mark.parametrize("length", [["--seconds", "1e9"], ["--fps", "1000", "--seconds", "1000"],
-                                    ["--frames", "6", "--max-frames", "5"], ["--path", "{keys}"]])
+@pytest.mark.parametrize(
+    "length",
+    [
+        ["--seconds", "1e9"],
+        ["--fps", "1000", "--seconds", "1000"],
+        ["--frames", "6", "--max-frames", "5"],
+        ["--path", "{keys}"],
+    ],
+)
 def test_video_length_is_bounded_before_any_frame(length, tmp_path, capsys, monkeypatch):
     keys = tmp_path / "keys.json"
     keys.write_text(json.dumps([{"orbit": [0, 20, 0], "time": 0}, {"orbit": [90, 20, 0], "time": 1e9}]))

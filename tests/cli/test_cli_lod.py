@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import patch_commands
 
 import gbviewer as gb
 from gbviewer.cli import main
 from gbviewer.cli.options import with_lod
 from gbviewer.outputs.figure import drawable
-from helpers import patch_commands
 
 COMMON = ["--width", "48", "--height", "36", "--orbit", "10,20,0", "--backend", "cpu"]
 
@@ -32,10 +32,17 @@ def test_render_lod_is_the_settings_image(tmp_path, capsys):
 def test_with_lod_adds_each_modes_variant_once():
     settings = gb.RenderSettings.parse_list("scalar,gaussian_blending+lod:2,scalar:3")
     assert [s.spec for s in with_lod(settings, 1.0)] == [
-        "scalar", "scalar+lod:1", "gaussian_blending+lod:2", "scalar:3", "scalar:3+lod:1"]
+        "scalar",
+        "scalar+lod:1",
+        "gaussian_blending+lod:2",
+        "scalar:3",
+        "scalar:3+lod:1",
+    ]
     assert with_lod(settings, None) is settings
     assert [s.spec for s in with_lod(gb.RenderSettings.parse_list("scalar,scalar+lod:1"), 1.0)] == [
-        "scalar", "scalar+lod:1"]
+        "scalar",
+        "scalar+lod:1",
+    ]
 
 
 @pytest.mark.parametrize("cmd", ["render", "compare", "bench", "eval", "video", "flicker"])
@@ -47,8 +54,14 @@ def test_bad_lod_one_line_exit_2(cmd, value, capsys, monkeypatch):
     assert len(err.splitlines()) == 1 and err.startswith(f"gbviewer {cmd}: error: argument --lod: "), err
 
 
-@pytest.mark.parametrize("spec, says", [("scalar+lod:x", "LOD pixels 'x' is not a number"), ("scalar+lod:-2", "lod"),
-                                         ("scalar+fog", "expected MODE[:N][+fast|+exact][+lod[:TAU]]")])
+@pytest.mark.parametrize(
+    "spec, says",
+    [
+        ("scalar+lod:x", "LOD pixels 'x' is not a number"),
+        ("scalar+lod:-2", "lod"),
+        ("scalar+fog", "expected MODE[:N][+fast|+exact][+lod[:TAU]]"),
+    ],
+)
 def test_bad_lod_spec_one_line_exit_2(spec, says, tmp_path, capsys):
     argv = ["compare", str(gb.DEFAULT_SCENE), "--modes", spec, "--out", str(tmp_path / "c.png")]
     assert main(argv) == 2
@@ -59,8 +72,19 @@ def test_bad_lod_spec_one_line_exit_2(spec, says, tmp_path, capsys):
 
 def test_compare_lod_adds_the_lod_columns_with_spelled_out_tau(tmp_path, capsys):
     out = tmp_path / "c.png"
-    argv = ["compare", str(gb.DEFAULT_SCENE), *COMMON, "--modes", "scalar", "--lod", "2", "--rates", "1,1/2",
-            "--out", str(out)]
+    argv = [
+        "compare",
+        str(gb.DEFAULT_SCENE),
+        *COMMON,
+        "--modes",
+        "scalar",
+        "--lod",
+        "2",
+        "--rates",
+        "1,1/2",
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert "2 rates x 2 modes" in text and "scalar LOD \u03c4=2 px" in text

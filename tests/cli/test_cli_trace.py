@@ -18,13 +18,29 @@ VIEW = ["--orbit", "30,20,0", "--width", "320", "--height", "240", "--scale", "1
 
 
 def run(*args: str, cwd) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "gbviewer", "trace", str(gb.DEFAULT_SCENE), *args],
-                          capture_output=True, text=True, cwd=cwd, env=ENV, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "gbviewer", "trace", str(gb.DEFAULT_SCENE), *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env=ENV,
+        timeout=300,
+    )
 
 
 def test_tables_and_json(tmp_path, bundled_scene):
-    out = run(*VIEW, "--pixel", "20,15", "--modes", "scalar,gaussian_blending:2", "--top", "3", "--json", "t.json",
-              cwd=tmp_path)
+    out = run(
+        *VIEW,
+        "--pixel",
+        "20,15",
+        "--modes",
+        "scalar,gaussian_blending:2",
+        "--top",
+        "3",
+        "--json",
+        "t.json",
+        cwd=tmp_path,
+    )
     assert out.returncode == 0, out.stderr
     assert "scalar: pixel (20, 15) of 40x30" in out.stdout
     assert "gaussian_blending 2x2: pixel (20, 15) of 40x30" in out.stdout
@@ -45,8 +61,9 @@ def test_tables_and_json(tmp_path, bundled_scene):
     again = run(*VIEW, "--pixel", "20,15", "--json", "t.json", cwd=tmp_path)
     assert again.returncode == 2 and "exists; pass --force" in again.stderr
     assert json.loads((tmp_path / "t.json").read_text()) == doc
-    forced = run(*VIEW, "--pixel", "3,4", "--modes", "wsr", "--supersample", "3", "--json", "t.json", "--force",
-                 cwd=tmp_path)
+    forced = run(
+        *VIEW, "--pixel", "3,4", "--modes", "wsr", "--supersample", "3", "--json", "t.json", "--force", cwd=tmp_path
+    )
     assert forced.returncode == 0, forced.stderr
     (trace,) = json.loads((tmp_path / "t.json").read_text())["traces"]
     assert (trace["mode"], trace["x"], trace["y"]) == ("wsr 3x3", 3, 4)
@@ -55,8 +72,9 @@ def test_tables_and_json(tmp_path, bundled_scene):
 def test_pixel_outside_the_image_is_one_line_exit_2(tmp_path):
     out = run(*VIEW, "--pixel", "40,3", "--json", "t.json", cwd=tmp_path)
     assert out.returncode == 2 and out.stdout == ""
-    assert out.stderr.splitlines() == ["gbviewer: error: --pixel 40,3: outside the 40x30 image at --scale 0.125 "
-                                       "(x in 0..39, y in 0..29)"]
+    assert out.stderr.splitlines() == [
+        "gbviewer: error: --pixel 40,3: outside the 40x30 image at --scale 0.125 (x in 0..39, y in 0..29)"
+    ]
     assert not (tmp_path / "t.json").exists()
     bad = run(*VIEW, "--pixel=-1,3", cwd=tmp_path)
     assert bad.returncode == 2 and len(bad.stderr.splitlines()) == 1 and "argument --pixel: X" in bad.stderr

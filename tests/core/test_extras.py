@@ -47,28 +47,38 @@ CHILD = textwrap.dedent("""
 
 def run_blocked(tmp_path: Path, *argvs: list[str], env: dict | None = None) -> tuple[dict, list[str]]:
     """Run CHILD with BLOCKED blocked and the command lines `argvs`: its summary and its stderr lines."""
-    proc = subprocess.run([sys.executable, "-c", CHILD, ",".join(BLOCKED), json.dumps(list(argvs))],
-                          capture_output=True, text=True, cwd=tmp_path, timeout=300,
-                          env={**os.environ, "PYTHONPATH": str(REPO), **(env or {})})
+    proc = subprocess.run(
+        [sys.executable, "-c", CHILD, ",".join(BLOCKED), json.dumps(list(argvs))],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=300,
+        env={**os.environ, "PYTHONPATH": str(REPO), **(env or {})},
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.splitlines()[-1]), proc.stderr.splitlines()
 
 
 def test_core_imports_renders_and_runs_the_render_command_without_any_extra(tmp_path):
     out = tmp_path / "a.png"
-    summary, err = run_blocked(tmp_path, ["render", str(gb.DEFAULT_SCENE), "--width", "32", "--height", "24",
-                                          "--backend", "cpu", "--out", str(out)])
+    summary, err = run_blocked(
+        tmp_path,
+        ["render", str(gb.DEFAULT_SCENE), "--width", "32", "--height", "24", "--backend", "cpu", "--out", str(out)],
+    )
     assert summary["imported"] > 50 and summary["shape"] == [16, 24, 3] and summary["leaked"] == []
     assert summary["status"] == {"render": 0} and out.stat().st_size > 0 and err == []
 
 
-@pytest.mark.parametrize("argv, extra, module", [
-    (["view", "{scene}"], "viewer", "imgui_bundle"),
-    (["video", "{scene}", "--frames", "2", "--out", "{tmp}/v.mp4"], "video", "imageio_ffmpeg"),
-    (["demo", "--out", "{tmp}/demo"], "video", "imageio_ffmpeg"),
-    (["bench", "{scene}", "--plots", "{tmp}/plots"], "eval", "matplotlib"),
-    (["eval", "{scene}", "--data", "{tmp}"], "eval", "skimage"),
-])
+@pytest.mark.parametrize(
+    "argv, extra, module",
+    [
+        (["view", "{scene}"], "viewer", "imgui_bundle"),
+        (["video", "{scene}", "--frames", "2", "--out", "{tmp}/v.mp4"], "video", "imageio_ffmpeg"),
+        (["demo", "--out", "{tmp}/demo"], "video", "imageio_ffmpeg"),
+        (["bench", "{scene}", "--plots", "{tmp}/plots"], "eval", "matplotlib"),
+        (["eval", "{scene}", "--data", "{tmp}"], "eval", "skimage"),
+    ],
+)
 def test_a_feature_without_its_extra_says_which_to_install_in_one_line(tmp_path, argv, extra, module):
     argv = [a.format(scene=gb.DEFAULT_SCENE, tmp=tmp_path) for a in argv]
     summary, err = run_blocked(tmp_path, argv, env={"DISPLAY": ":0"})  # view: a display, so the window is asked for
@@ -90,16 +100,25 @@ def test_require_imports_checks_and_names_the_extra():
 def test_missing_extra_is_one_line_and_a_gbviewer_error():
     exc = MissingExtra("video", "imageio_ffmpeg", "an MP4 video", "No module named\n'imageio_ffmpeg'")
     assert isinstance(exc, gb.GBViewerError) and exc.extra == "video" and "\n" not in str(exc)
-    assert str(exc) == ("an MP4 video needs imageio_ffmpeg (No module named 'imageio_ffmpeg'): "
-                        "pip install 'gbviewer[video]'")
+    assert str(exc) == (
+        "an MP4 video needs imageio_ffmpeg (No module named 'imageio_ffmpeg'): pip install 'gbviewer[video]'"
+    )
 
 
 def test_pyproject_extras_hold_the_packages_require_names():
     import tomllib
 
     project = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text())["project"]
-    pip_name = {"glfw": "glfw", "imgui_bundle": "imgui-bundle", "skimage": "scikit-image", "matplotlib": "matplotlib",
-                "pycolmap": "pycolmap", "imageio_ffmpeg": "imageio-ffmpeg", "ray": "ray", "torch": "torch"}
+    pip_name = {
+        "glfw": "glfw",
+        "imgui_bundle": "imgui-bundle",
+        "skimage": "scikit-image",
+        "matplotlib": "matplotlib",
+        "pycolmap": "pycolmap",
+        "imageio_ffmpeg": "imageio-ffmpeg",
+        "ray": "ray",
+        "torch": "torch",
+    }
     core = " ".join(project["dependencies"])
     for extra, modules in EXTRAS.items():
         listed = " ".join(project["optional-dependencies"][extra])

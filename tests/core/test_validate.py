@@ -14,8 +14,9 @@ from gbviewer.core.errors import GBViewerError, InvalidValue
 from gbviewer.core.validate import F32_MAX, array, declared_count, field, integer, parse_json, read_json, real
 
 
-@pytest.mark.parametrize("bad", ["nan", "inf", "-inf", "1e400", float("nan"), float("inf"), "x", "", None, True,
-                                 [1.0], "1,5"])
+@pytest.mark.parametrize(
+    "bad", ["nan", "inf", "-inf", "1e400", float("nan"), float("inf"), "x", "", None, True, [1.0], "1,5"]
+)
 def test_real_rejects_what_is_not_a_finite_number(bad):
     with pytest.raises(InvalidValue, match="^--fps: expected"):
         real(bad, "--fps")
@@ -68,11 +69,19 @@ def test_declared_count_is_bounded_by_the_bytes_present():
         declared_count(-1, "vertex", item_bytes=4, available=40)
 
 
-@pytest.mark.parametrize("text,match", [
-    ('{"w": Infinity}', "not a finite number"), ('[NaN]', "not a finite number"), ('[1e400]', "not a finite"),
-    ('{"w": ' + "9" * 5000 + "}", "not valid JSON"), ("[" * 100_000 + "]" * 100_000, "nested deeper"),
-    ("[" * 40 + "]" * 40, "nested deeper"), ('{"a": 1', "not valid JSON"), (b"\xff\xfe{", "not valid JSON"),
-])
+@pytest.mark.parametrize(
+    "text,match",
+    [
+        ('{"w": Infinity}', "not a finite number"),
+        ("[NaN]", "not a finite number"),
+        ("[1e400]", "not a finite"),
+        ('{"w": ' + "9" * 5000 + "}", "not valid JSON"),
+        ("[" * 100_000 + "]" * 100_000, "nested deeper"),
+        ("[" * 40 + "]" * 40, "nested deeper"),
+        ('{"a": 1', "not valid JSON"),
+        (b"\xff\xfe{", "not valid JSON"),
+    ],
+)
 def test_parse_json_rejects_hostile_documents(text, match):
     with pytest.raises(InvalidValue, match=f"^doc.json: .*{match}"):
         parse_json(text, "doc.json")
@@ -98,9 +107,16 @@ def test_parse_json_size_cap_and_field(tmp_path):
 def test_array_checks_shape_and_values():
     np.testing.assert_array_equal(array([[1, 0, 0], [0, 1, 0], [0, 0, 1]], "R", (3, 3)), np.eye(3))
     assert array(np.ones(3), "t", (3,), f32=True).dtype == np.float64
-    for bad, match in [([1, 2], "3 numbers, got"), ("123", "3 numbers"), ({"x": 1}, "3 numbers"),
-                       ([1, [2], 3], "3 numbers"), ([1, 2, 10 ** 400], "3 numbers"), ([1, "a", 3], "3 numbers"),
-                       ([1, 2, float("nan")], "finite float32 numbers, got nan"), ([0, 0, 1e39], "finite float32 numbers")]:
+    for bad, match in [
+        ([1, 2], "3 numbers, got"),
+        ("123", "3 numbers"),
+        ({"x": 1}, "3 numbers"),
+        ([1, [2], 3], "3 numbers"),
+        ([1, 2, 10**400], "3 numbers"),
+        ([1, "a", 3], "3 numbers"),
+        ([1, 2, float("nan")], "finite float32 numbers, got nan"),
+        ([0, 0, 1e39], "finite float32 numbers"),
+    ]:
         with pytest.raises(InvalidValue, match=f"^position: expected {match}"):
             array(bad, "position", (3,), f32=True)
     with pytest.raises(InvalidValue, match="^R: expected a 3x3 matrix"):
@@ -108,8 +124,11 @@ def test_array_checks_shape_and_values():
     assert array([0, 0, 1e39], "p", (3,))[2] == 1e39  # without f32: any finite float64
 
 
-@given(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(), st.text(max_size=50),
-                 st.booleans(), st.none()))
+@given(
+    st.one_of(
+        st.floats(allow_nan=True, allow_infinity=True), st.integers(), st.text(max_size=50), st.booleans(), st.none()
+    )
+)
 def test_real_either_returns_a_finite_bounded_value_or_raises_one_line(value):
     try:
         x = real(value, "opt", lo=0, hi=1e6, f32=True)
@@ -119,9 +138,13 @@ def test_real_either_returns_a_finite_bounded_value_or_raises_one_line(value):
         assert math.isfinite(x) and 0 <= x <= 1e6
 
 
-@given(st.recursive(st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=5),
-                    lambda kids: st.lists(kids, max_size=3) | st.dictionaries(st.text(max_size=3), kids, max_size=3),
-                    max_leaves=30))
+@given(
+    st.recursive(
+        st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=5),
+        lambda kids: st.lists(kids, max_size=3) | st.dictionaries(st.text(max_size=3), kids, max_size=3),
+        max_leaves=30,
+    )
+)
 def test_parse_json_roundtrip_or_one_line_error(doc):
     text = json.dumps(doc)  # may contain NaN / Infinity, which must be refused
     try:

@@ -13,20 +13,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from dataset_builders import H, W, save_rgba, shots, write_blender
+from helpers import skip_or_fail
 from PIL import Image
 
 import gbviewer as gb
 from gbviewer import cli
-from gbviewer.model.camera import parse_rates
 from gbviewer import eval as ev
-from gbviewer.eval import multiscale as gt_module, report as report_module
-from gbviewer.eval.memory import view_bytes
 from gbviewer.cli.eval_args import scene_pairs
+from gbviewer.eval import multiscale as gt_module
+from gbviewer.eval import report as report_module
+from gbviewer.eval.memory import view_bytes
 from gbviewer.io.datasets import load_dataset, read_photo
+from gbviewer.model.camera import parse_rates
 from gbviewer.outputs.metrics import box_downsample, composite, premultiplied_box_downsample, psnr, ssim
 from gbviewer.render import RenderSettings
-from dataset_builders import H, W, save_rgba, shots, write_blender
-from helpers import skip_or_fail
 
 PACKAGE_ROOT = Path(gb.__file__).resolve().parents[1]
 WHITE = (1.0, 1.0, 1.0)
@@ -72,7 +73,7 @@ def direct_truth(path: Path, k: int, background) -> np.ndarray:
     px = np.asarray(Image.open(path), np.float64) / 255
     rgb = px[..., :3] * px[..., 3:] + (1 - px[..., 3:]) * np.asarray(background) if px.shape[-1] == 4 else px
     h, w = rgb.shape[0] // k, rgb.shape[1] // k
-    return rgb[:h * k, :w * k].reshape(h, k, w, k, 3).mean(axis=(1, 3))
+    return rgb[: h * k, : w * k].reshape(h, k, w, k, 3).mean(axis=(1, 3))
 
 
 def test_ground_truth_and_its_camera(blender):
@@ -110,8 +111,9 @@ def test_cache_is_keyed_by_the_photo_and_stays_out_of_the_dataset(tmp_path, bund
 def test_eval_numbers_are_the_metrics_computed_directly(blender, bundled_scene, tmp_path):
     settings = RenderSettings.parse_list("scalar,gaussian_blending,scalar:2")
     rates = [1.0, 1 / 2, 1 / 8]
-    result = ev.run_eval([(gb.DEFAULT_SCENE, blender)], settings, rates, background=WHITE, backend="cpu",
-                         cache=tmp_path / "cache")
+    result = ev.run_eval(
+        [(gb.DEFAULT_SCENE, blender)], settings, rates, background=WHITE, backend="cpu", cache=tmp_path / "cache"
+    )
     doc = ev.to_json(result)
     scene = doc["scenes"][0]
     assert [v["name"] for v in scene["views"]] == ["test/v00", "test/v08"]
@@ -120,15 +122,27 @@ def test_eval_numbers_are_the_metrics_computed_directly(blender, bundled_scene, 
         for r in v["results"]:
             s = RenderSettings.parse(r["mode"], background=WHITE)
             k = round(1 / r["rate"])
-            cam = gb.Camera(W // k, H // k, view.camera.fx / k, view.camera.fy / k, view.camera.cx / k,
-                            view.camera.cy / k, view.camera.R, view.camera.t)
+            cam = gb.Camera(
+                W // k,
+                H // k,
+                view.camera.fx / k,
+                view.camera.fy / k,
+                view.camera.cx / k,
+                view.camera.cy / k,
+                view.camera.R,
+                view.camera.t,
+            )
             img = gb.get_renderer(bundled_scene).render(cam, s).rgb
             truth = direct_truth(view.image, k, WHITE)
             assert r["psnr"] == pytest.approx(psnr(img, truth), abs=1e-4)
             assert r["ssim"] == pytest.approx(ssim(img, truth), abs=1e-6)
     for row in scene["table"]:
-        per_view = [x["psnr"] for v in scene["views"] for x in v["results"]
-                    if (x["mode"], x["rate"]) == (row["mode"], row["rate"])]
+        per_view = [
+            x["psnr"]
+            for v in scene["views"]
+            for x in v["results"]
+            if (x["mode"], x["rate"]) == (row["mode"], row["rate"])
+        ]
         assert row["psnr"] == pytest.approx(np.mean(per_view), rel=1e-12)
     avg = {a["mode"]: a["psnr"] for a in scene["average"]}
     assert avg["scalar"] == pytest.approx(np.mean([r["psnr"] for r in scene["table"] if r["mode"] == "scalar"]))
@@ -136,35 +150,48 @@ def test_eval_numbers_are_the_metrics_computed_directly(blender, bundled_scene, 
 
 
 def test_several_scenes_give_a_table_each_and_their_mean(blender, capture, tmp_path, capsys):
-    result = ev.run_eval([(gb.DEFAULT_SCENE, capture), (gb.DEFAULT_SCENE, blender)],
-                         RenderSettings.parse_list("scalar"), [1.0, 1 / 4], backend="cpu", cache=tmp_path / "c")
+    result = ev.run_eval(
+        [(gb.DEFAULT_SCENE, capture), (gb.DEFAULT_SCENE, blender)],
+        RenderSettings.parse_list("scalar"),
+        [1.0, 1 / 4],
+        backend="cpu",
+        cache=tmp_path / "c",
+    )
     doc = ev.to_json(result)
     for i, row in enumerate(doc["mean"]["table"]):
-        assert row["psnr"] == pytest.approx((doc["scenes"][0]["table"][i]["psnr"]
-                                             + doc["scenes"][1]["table"][i]["psnr"]) / 2)
+        assert row["psnr"] == pytest.approx(
+            (doc["scenes"][0]["table"][i]["psnr"] + doc["scenes"][1]["table"][i]["psnr"]) / 2
+        )
     ev.print_tables(result)
     out = capsys.readouterr().out
     assert out.count("PSNR x1/4") == 3 and "Mean over 2 scenes" in out
     paths = ev.write_plots(tmp_path / "plots", result)
-    assert [p.name for p in paths] == [f"fruit_drops_minimal_vs_{capture.name}.png",
-                                       f"fruit_drops_minimal_vs_{blender.name}.png", "mean.png"]
+    assert [p.name for p in paths] == [
+        f"fruit_drops_minimal_vs_{capture.name}.png",
+        f"fruit_drops_minimal_vs_{blender.name}.png",
+        "mean.png",
+    ]
     assert all(p.is_file() for p in paths)
 
 
-NEW_MODES = "scalar,mip,analytic,gaussian_blending,scalar:2,stochastic,stochastic:2,stochastic_popfree,eval3d," \
+NEW_MODES = (
+    "scalar,mip,analytic,gaussian_blending,scalar:2,stochastic,stochastic:2,stochastic_popfree,eval3d,"
     "stopthepop,stopthepop:0,preset:spark-stochastic"
+)
 
 
 def test_every_mode_has_its_rows_and_its_own_line(blender, tmp_path, monkeypatch):
     """The newer modes are evaluated under their own specs (stopthepop's queue, a stochastic preset) and each of
     more modes than matplotlib has cycle colours is drawn in a line no other mode shares."""
     settings = RenderSettings.parse_list(NEW_MODES, background=WHITE)
-    result = ev.run_eval([(gb.DEFAULT_SCENE, blender)], settings, [1.0, 1 / 8], background=WHITE, backend="cpu",
-                         cache=tmp_path / "cache")
+    result = ev.run_eval(
+        [(gb.DEFAULT_SCENE, blender)], settings, [1.0, 1 / 8], background=WHITE, backend="cpu", cache=tmp_path / "cache"
+    )
     doc = ev.to_json(result)
     assert doc["modes"] == NEW_MODES.split(",")
-    assert [(r["mode"], r["rate"]) for r in doc["scenes"][0]["table"]] == \
-        [(m, r) for m in NEW_MODES.split(",") for r in (1.0, 1 / 8)]
+    assert [(r["mode"], r["rate"]) for r in doc["scenes"][0]["table"]] == [
+        (m, r) for m in NEW_MODES.split(",") for r in (1.0, 1 / 8)
+    ]
     assert all(r["psnr"] is not None for r in doc["scenes"][0]["table"])
     figures = []
     monkeypatch.setattr(report_module, "save_figure", lambda fig, path, force: figures.append(fig))
@@ -181,9 +208,13 @@ def test_scene_pairs(tmp_path):
     for name in ("b.ply", "a.spz", "notes.txt"):
         (tmp_path / "scenes" / name).write_bytes(b"")
     assert scene_pairs([str(tmp_path / "scenes")], tmp_path / "data") == [
-        (tmp_path / "scenes" / "a.spz", tmp_path / "data" / "a"), (tmp_path / "scenes" / "b.ply", tmp_path / "data" / "b")]
-    assert scene_pairs(["x.ply:/d/x", "z.ply:/d/z"], None) == [(Path("x.ply"), Path("/d/x")),
-                                                               (Path("z.ply"), Path("/d/z"))]
+        (tmp_path / "scenes" / "a.spz", tmp_path / "data" / "a"),
+        (tmp_path / "scenes" / "b.ply", tmp_path / "data" / "b"),
+    ]
+    assert scene_pairs(["x.ply:/d/x", "z.ply:/d/z"], None) == [
+        (Path("x.ply"), Path("/d/x")),
+        (Path("z.ply"), Path("/d/z")),
+    ]
     assert scene_pairs(["y.ply"], Path("/d/y")) == [(Path("y.ply"), Path("/d/y"))]
     with pytest.raises(gb.GBViewerError, match=r"^x.ply:/d/x: SCENE:DATASET names its dataset; --data /d/y too"):
         scene_pairs(["y.ply", "x.ply:/d/x"], Path("/d/y"))  # --data was silently ignored for x.ply
@@ -193,16 +224,19 @@ def test_scene_pairs(tmp_path):
 
 def run_cli(args: list[str], cwd: Path, env: dict | None = None) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(PACKAGE_ROOT), "XDG_CACHE_HOME": str(cwd / "xdg"), **(env or {})}
-    return subprocess.run([sys.executable, "-m", "gbviewer", "eval", *args], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "gbviewer", "eval", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=600
+    )
 
 
 def numbers(path: Path) -> dict:
     """The JSON without what depends on the run: times, the machine, how it ran."""
+
     def strip(d):
         if isinstance(d, dict):
             return {k: strip(v) for k, v in d.items() if k not in ("render_ms", "elapsed_s", "machine", "runner")}
         return [strip(v) for v in d] if isinstance(d, list) else d
+
     return strip(json.loads(path.read_text(), parse_constant=lambda c: pytest.fail(f"{c} in the JSON")))
 
 
@@ -211,8 +245,9 @@ ARGS = ["--modes", "scalar,gaussian_blending", "--rates", "1,1/2,1/8", "--backen
 
 def test_workers_2_give_the_same_json_as_1(capture, tmp_path):
     """A process pool gives the numbers of one process, in the same order; plots and the table are written."""
-    one = run_cli([str(gb.DEFAULT_SCENE), "--data", str(capture), *ARGS, "--json", "one.json", "--plots", "p"],
-                  tmp_path)
+    one = run_cli(
+        [str(gb.DEFAULT_SCENE), "--data", str(capture), *ARGS, "--json", "one.json", "--plots", "p"], tmp_path
+    )
     assert one.returncode == 0, one.stderr
     assert "gaussian_blending" in one.stdout and "PSNR x1/8" in one.stdout and "9 views" in one.stdout
     assert (tmp_path / "p" / "fruit_drops_minimal.png").is_file()
@@ -239,11 +274,14 @@ def test_ray_local_gives_the_same_json(capture, tmp_path):
     assert numbers(tmp_path / "local.json") == numbers(tmp_path / "ray.json")
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--rates", "2"], "rate x2 is finer than the photos"),
-    (["--rates", "1,0.3"], "is not 1/k for an integer k"),
-    (["--split", "test", "--data", "nowhere"], "no such dataset folder"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--rates", "2"], "rate x2 is finer than the photos"),
+        (["--rates", "1,0.3"], "is not 1/k for an integer k"),
+        (["--split", "test", "--data", "nowhere"], "no such dataset folder"),
+    ],
+)
 def test_cli_errors_are_one_line(args, message, capsys, tmp_path):
     status = cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(tmp_path), *args, "--cache", str(tmp_path / "c")])
     err = capsys.readouterr().err
@@ -254,11 +292,13 @@ def test_existing_outputs_are_refused_before_the_work(tmp_path, capsys, monkeypa
     (tmp_path / "p").mkdir()
     (tmp_path / "p" / "fruit_drops_minimal.png").write_bytes(b"mine")
     monkeypatch.setattr(ev, "run_eval", lambda *a, **k: pytest.fail("evaluated despite an existing output"))
-    status = cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(tmp_path / "data"), "--plots",
-                       str(tmp_path / "p")])  # (a file inside the dataset folder would be refused as an input)
+    status = cli.main(
+        ["eval", str(gb.DEFAULT_SCENE), "--data", str(tmp_path / "data"), "--plots", str(tmp_path / "p")]
+    )  # (a file inside the dataset folder would be refused as an input)
     err = capsys.readouterr().err
-    assert status == 2 and err.splitlines() == [f"gbviewer: error: {tmp_path / 'p' / 'fruit_drops_minimal.png'}: "
-                                                "exists; pass --force to overwrite"]
+    assert status == 2 and err.splitlines() == [
+        f"gbviewer: error: {tmp_path / 'p' / 'fruit_drops_minimal.png'}: exists; pass --force to overwrite"
+    ]
     assert (tmp_path / "p" / "fruit_drops_minimal.png").read_bytes() == b"mine"
 
 
@@ -274,8 +314,22 @@ def test_a_huge_photo_is_refused_before_the_work(blender, capture, tmp_path, cap
     monkeypatch.setattr(gt_module, "read_photo", lambda path: pytest.fail("decoded a photo beyond the budget"))
     monkeypatch.setenv("GBVIEWER_MEMORY_BUDGET", "1M")
     for data, hint in ((blender, False), (capture, True)):
-        status = cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(data), "--rates", "1", "--modes", "scalar",
-                           "--cache", str(tmp_path / "c"), "--json", str(tmp_path / "out.json")])
+        status = cli.main(
+            [
+                "eval",
+                str(gb.DEFAULT_SCENE),
+                "--data",
+                str(data),
+                "--rates",
+                "1",
+                "--modes",
+                "scalar",
+                "--cache",
+                str(tmp_path / "c"),
+                "--json",
+                str(tmp_path / "out.json"),
+            ]
+        )
         err = capsys.readouterr().err
         assert status == 2 and len(err.splitlines()) == 1, err
         assert f"x{H} photo needs about" in err and "0.000977 GiB budget (GBVIEWER_MEMORY_BUDGET)" in err, err
@@ -283,20 +337,33 @@ def test_a_huge_photo_is_refused_before_the_work(blender, capture, tmp_path, cap
         assert not (tmp_path / "out.json").exists()
 
 
-@pytest.mark.parametrize("address, message", [
-    ("256.1.1.1:1", "256.1.1.1 is not a valid IPv4 address"),
-    ("127.0.0.1:1", "nothing accepts a connection at 127.0.0.1 port 1 within 5 s"),
-    ("ray://127.0.0.1:1", "nothing accepts a connection at 127.0.0.1 port 1"),
-    ("127.0.0.1", "expected host:port"),
-    ("127.0.0.1:0", "expected host:port (port 1..65535)"),
-    ("127.0.0.1:http", "expected host:port"),
-])
+@pytest.mark.parametrize(
+    "address, message",
+    [
+        ("256.1.1.1:1", "256.1.1.1 is not a valid IPv4 address"),
+        ("127.0.0.1:1", "nothing accepts a connection at 127.0.0.1 port 1 within 5 s"),
+        ("ray://127.0.0.1:1", "nothing accepts a connection at 127.0.0.1 port 1"),
+        ("127.0.0.1", "expected host:port"),
+        ("127.0.0.1:0", "expected host:port (port 1..65535)"),
+        ("127.0.0.1:http", "expected host:port"),
+    ],
+)
 def test_a_wrong_ray_address_is_one_line_before_ray(address, message, capsys, tmp_path, monkeypatch):
     """The address is checked (syntax, the host, a TCP connect with a 5 s timeout) before the datasets and before
     ray.init, which retried for minutes with 20 lines of warnings. (.invalid never resolves: RFC 6761.)"""
     monkeypatch.setattr("gbviewer.eval.cluster.require", lambda *a, **k: pytest.fail("ray.init with a bad address"))
-    status = cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(tmp_path / "none"), "--ray", address,
-                       "--cache", str(tmp_path / "c")])
+    status = cli.main(
+        [
+            "eval",
+            str(gb.DEFAULT_SCENE),
+            "--data",
+            str(tmp_path / "none"),
+            "--ray",
+            address,
+            "--cache",
+            str(tmp_path / "c"),
+        ]
+    )
     err = capsys.readouterr().err
     assert status == 2 and len(err.splitlines()) == 1 and err.startswith(f"gbviewer: error: --ray {address}: "), err
     assert message in err, err
@@ -306,28 +373,42 @@ def test_repeated_or_empty_rates_and_modes_are_refused():
     """A repeated rate (1/2 and 0.5 are one) would count twice in the average, a repeated mode (SCALAR, scalar:1
     and supersample:1 are scalar) is the same work twice; an empty item is a typo."""
     assert parse_rates("1, 1/2,1/8") == [1.0, 0.5, 0.125]
-    assert [s.spec for s in RenderSettings.parse_list("scalar,scalar:2,supersample:3")] == ["scalar", "scalar:2",
-                                                                                          "scalar:3"]
-    for text, message in (("1,1/2,1/2", "'1/2' repeats '1/2'"), ("1,0.5,1/2", "'1/2' repeats '0.5'"),
-                          ("1,,1/2", "empty item in '1,,1/2'"), ("1,", "empty item"), ("", "empty item")):
+    assert [s.spec for s in RenderSettings.parse_list("scalar,scalar:2,supersample:3")] == [
+        "scalar",
+        "scalar:2",
+        "scalar:3",
+    ]
+    for text, message in (
+        ("1,1/2,1/2", "'1/2' repeats '1/2'"),
+        ("1,0.5,1/2", "'1/2' repeats '0.5'"),
+        ("1,,1/2", "empty item in '1,,1/2'"),
+        ("1,", "empty item"),
+        ("", "empty item"),
+    ):
         with pytest.raises(gb.GBViewerError, match=f"^rates: {message}"):
             parse_rates(text)
-    for text, message in (("scalar,scalar,SCALAR", "'scalar' repeats 'scalar'"),
-                          ("SCALAR,scalar:1", "'scalar:1' repeats 'SCALAR'"),
-                          ("supersample:2,scalar:2", "'scalar:2' repeats 'supersample:2'"),
-                          ("scalar,", "empty item in 'scalar,'"), (" ", "empty item")):
+    for text, message in (
+        ("scalar,scalar,SCALAR", "'scalar' repeats 'scalar'"),
+        ("SCALAR,scalar:1", "'scalar:1' repeats 'SCALAR'"),
+        ("supersample:2,scalar:2", "'scalar:2' repeats 'supersample:2'"),
+        ("scalar,", "empty item in 'scalar,'"),
+        (" ", "empty item"),
+    ):
         with pytest.raises(gb.GBViewerError, match=f"^--modes: {message}"):
             RenderSettings.parse_list(text)
 
 
-@pytest.mark.parametrize("command, args, message", [
-    ("eval", ["--data", "nowhere", "--rates", "1,1/2,1/2"], "argument --rates: '1/2' repeats '1/2'"),
-    ("eval", ["--data", "nowhere", "--rates", "1,,1/2"], "argument --rates: empty item in '1,,1/2'"),
-    ("eval", ["--data", "nowhere", "--modes", "scalar,scalar,SCALAR"], "--modes: 'scalar' repeats 'scalar'"),
-    ("eval", ["--data", "nowhere", "--modes", "scalar,"], "--modes: empty item in 'scalar,'"),
-    ("trace", ["--pixel", "1,1", "--modes", "scalar,scalar"], "--modes: 'scalar' repeats 'scalar'"),
-    ("bench", ["--modes", "mip,,scalar"], "--modes: empty item in 'mip,,scalar'"),
-])
+@pytest.mark.parametrize(
+    "command, args, message",
+    [
+        ("eval", ["--data", "nowhere", "--rates", "1,1/2,1/2"], "argument --rates: '1/2' repeats '1/2'"),
+        ("eval", ["--data", "nowhere", "--rates", "1,,1/2"], "argument --rates: empty item in '1,,1/2'"),
+        ("eval", ["--data", "nowhere", "--modes", "scalar,scalar,SCALAR"], "--modes: 'scalar' repeats 'scalar'"),
+        ("eval", ["--data", "nowhere", "--modes", "scalar,"], "--modes: empty item in 'scalar,'"),
+        ("trace", ["--pixel", "1,1", "--modes", "scalar,scalar"], "--modes: 'scalar' repeats 'scalar'"),
+        ("bench", ["--modes", "mip,,scalar"], "--modes: empty item in 'mip,,scalar'"),
+    ],
+)
 def test_repeated_or_empty_items_are_one_cli_line(command, args, message, capsys, tmp_path):
     status = cli.main([command, str(gb.DEFAULT_SCENE), *args])
     err = capsys.readouterr().err
@@ -340,11 +421,16 @@ def test_a_cache_in_the_dataset_is_refused(blender, capture, tmp_path, capsys):
     cameras = tmp_path / "set" / "cameras.json"
     cameras.parent.mkdir()
     cameras.write_text("[]")
-    for data, cache in ((blender, blender), (blender, blender / "sub" / "cache"), (capture, capture / "images"),
-                        (cameras, cameras.parent / "images" / "c")):
+    for data, cache in (
+        (blender, blender),
+        (blender, blender / "sub" / "cache"),
+        (capture, capture / "images"),
+        (cameras, cameras.parent / "images" / "c"),
+    ):
         before = sorted(data.parent.rglob("*"))
-        status = cli.main(["eval", f"{gb.DEFAULT_SCENE}:{data}", "--rates", "1,1/2", "--modes", "scalar",
-                           "--cache", str(cache)])
+        status = cli.main(
+            ["eval", f"{gb.DEFAULT_SCENE}:{data}", "--rates", "1,1/2", "--modes", "scalar", "--cache", str(cache)]
+        )
         err = capsys.readouterr().err
         assert status == 2 and len(err.splitlines()) == 1, err
         assert f"--cache {cache}: is inside the dataset {data if data.is_dir() else data.parent / 'images'}" in err
@@ -356,13 +442,37 @@ def test_an_8000x6000_photo_is_refused_under_an_8g_budget(tmp_path, capsys, monk
     one line before it is decoded, naming the photo, its size, the estimate and the budget."""
     (tmp_path / "images").mkdir()
     Image.new("L", (8000, 6000)).save(tmp_path / "images" / "a.png", compress_level=1)
-    cams = [{"id": 0, "img_name": "a", "width": 800, "height": 600, "position": [0, 0, 0],
-             "rotation": np.eye(3).tolist(), "fx": 700.0, "fy": 700.0}]
+    cams = [
+        {
+            "id": 0,
+            "img_name": "a",
+            "width": 800,
+            "height": 600,
+            "position": [0, 0, 0],
+            "rotation": np.eye(3).tolist(),
+            "fx": 700.0,
+            "fy": 700.0,
+        }
+    ]
     (tmp_path / "cameras.json").write_text(json.dumps(cams))
     monkeypatch.setattr(gt_module, "read_photo", lambda path: pytest.fail("decoded the photo"))
     monkeypatch.setenv("GBVIEWER_MEMORY_BUDGET", "8G")
-    status = cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(tmp_path / "cameras.json"), "--rates", "1",
-                       "--modes", "scalar", "--split", "all", "--cache", str(tmp_path / "c")])
+    status = cli.main(
+        [
+            "eval",
+            str(gb.DEFAULT_SCENE),
+            "--data",
+            str(tmp_path / "cameras.json"),
+            "--rates",
+            "1",
+            "--modes",
+            "scalar",
+            "--split",
+            "all",
+            "--cache",
+            str(tmp_path / "c"),
+        ]
+    )
     err = capsys.readouterr().err
     assert status == 2 and len(err.splitlines()) == 1, err
     assert f"{tmp_path / 'images' / 'a.png'}: the 8000x6000 photo needs about 1" in err, err

@@ -8,6 +8,8 @@ import os
 import shutil
 
 import numpy as np
+from dataset_builders import shots, write_blender
+from helpers import random_scene
 from PIL import Image
 
 import gbviewer as gb
@@ -17,8 +19,6 @@ from gbviewer.io.datasets import load_dataset, read_photo
 from gbviewer.io.write import write_inria_ply
 from gbviewer.outputs.metrics import composite, premultiplied_box_downsample
 from gbviewer.render import RenderSettings
-from dataset_builders import shots, write_blender
-from helpers import random_scene
 
 WHITE = (1.0, 1.0, 1.0)
 
@@ -62,8 +62,9 @@ def test_a_replaced_scene_file_is_evaluated_anew_in_the_same_process(tmp_path, b
     shutil.copy(gb.DEFAULT_SCENE, scene)
 
     def scores() -> list[float]:
-        r = ev.run_eval([(scene, data)], RenderSettings.parse_list("scalar"), [1.0], backend="cpu",
-                        cache=tmp_path / "c")
+        r = ev.run_eval(
+            [(scene, data)], RenderSettings.parse_list("scalar"), [1.0], backend="cpu", cache=tmp_path / "c"
+        )
         return [x["psnr"] for s in r.scenes for v in s.results for x in v.results]
 
     first = scores()

@@ -5,16 +5,31 @@ from __future__ import annotations
 
 import json
 
+from dataset_builders import shots, write_blender
+
 import gbviewer as gb
 from gbviewer.cli import main
-from dataset_builders import shots, write_blender
 
 
 def test_eval_lod_rows_beside_the_modes(bundled_scene, tmp_path):
     data = write_blender(tmp_path / "blender", shots(bundled_scene, vary=False))
     out = tmp_path / "e.json"
-    argv = ["eval", f"{gb.DEFAULT_SCENE}:{data}", "--modes", "scalar", "--lod", "3", "--rates", "1,1/2",
-            "--backend", "cpu", "--cache", str(tmp_path / "c"), "--json", str(out)]
+    argv = [
+        "eval",
+        f"{gb.DEFAULT_SCENE}:{data}",
+        "--modes",
+        "scalar",
+        "--lod",
+        "3",
+        "--rates",
+        "1,1/2",
+        "--backend",
+        "cpu",
+        "--cache",
+        str(tmp_path / "c"),
+        "--json",
+        str(out),
+    ]
     assert main(argv) == 0
     doc = json.loads(out.read_text())
     table = doc["scenes"][0]["table"]

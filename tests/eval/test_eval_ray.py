@@ -16,29 +16,32 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
+from helpers import skip_or_fail
 
 import gbviewer as gb
 from gbviewer.eval import cluster
 from gbviewer.eval.cluster import run_on_ray, task_cpus
 from gbviewer.eval.tasks import ViewTask
-from helpers import skip_or_fail
 
 PACKAGE_ROOT = Path(gb.__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("threads, tasks, nodes, expected", [
-    (0, 9, [2], 1),          # 2 cores, 9 views: two tasks at once, as --workers 2
-    (0, 1, [2], 2),          # one task takes the node
-    (0, 4, [64], 16),        # four tasks share 64 CPUs
-    (0, 3, [32, 32], 16),    # 21 each would fit one task per node: 2 of the 3 at once
-    (0, 100, [8, 8], 1),
-    (4, 9, [2], 2),          # --threads 4 on 2-CPU nodes: a task needs a node that can hold it
-    (3, 9, [16], 3),
-    (0, 0, [], 1),
-    (8, 9, [0, 16], 8),      # a head node without CPUs runs no task: it capped every task at 1 CPU
-    (0, 4, [0, 16], 4),
-    (0, 2, [2, 64], 32),     # both tasks fit the large node
-])
+@pytest.mark.parametrize(
+    "threads, tasks, nodes, expected",
+    [
+        (0, 9, [2], 1),  # 2 cores, 9 views: two tasks at once, as --workers 2
+        (0, 1, [2], 2),  # one task takes the node
+        (0, 4, [64], 16),  # four tasks share 64 CPUs
+        (0, 3, [32, 32], 16),  # 21 each would fit one task per node: 2 of the 3 at once
+        (0, 100, [8, 8], 1),
+        (4, 9, [2], 2),  # --threads 4 on 2-CPU nodes: a task needs a node that can hold it
+        (3, 9, [16], 3),
+        (0, 0, [], 1),
+        (8, 9, [0, 16], 8),  # a head node without CPUs runs no task: it capped every task at 1 CPU
+        (0, 4, [0, 16], 4),
+        (0, 2, [2, 64], 32),  # both tasks fit the large node
+    ],
+)
 def test_task_cpus_share_the_cluster(threads, tasks, nodes, expected):
     assert task_cpus(threads, tasks, nodes) == expected
 
@@ -47,10 +50,16 @@ class FakeRay(SimpleNamespace):
     """The parts of Ray `run_on_ray` uses; runs each task in this process and records the options asked for."""
 
     def __init__(self, cpus: list[float], signal_in_wait: bool = False):
-        super().__init__(asked={}, cpus=cpus, signal_in_wait=signal_in_wait, exited=[],
-                         exceptions=SimpleNamespace(RayTaskError=RuntimeError),
-                         _private=SimpleNamespace(utils=SimpleNamespace(set_sigterm_handler=self._set_handler),
-                                                  ray_constants=SimpleNamespace()))
+        super().__init__(
+            asked={},
+            cpus=cpus,
+            signal_in_wait=signal_in_wait,
+            exited=[],
+            exceptions=SimpleNamespace(RayTaskError=RuntimeError),
+            _private=SimpleNamespace(
+                utils=SimpleNamespace(set_sigterm_handler=self._set_handler), ray_constants=SimpleNamespace()
+            ),
+        )
 
     def _set_handler(self, handler):
         signal.signal(signal.SIGTERM, handler)
@@ -137,18 +146,50 @@ def test_sigterm_while_ray_starts_is_one_line(capture, tmp_path):
     except ImportError:
         skip_or_fail("ray is not installed (pip install 'gbviewer[ray]')")
     ray_tmp = Path(tempfile.mkdtemp(prefix="ray", dir="/tmp"))  # short: Ray's socket paths must fit 107 bytes
-    env = {**os.environ, "PYTHONPATH": str(PACKAGE_ROOT), "XDG_CACHE_HOME": str(tmp_path / "xdg"),
-           "RAY_USAGE_STATS_ENABLED": "0", "RAY_TMPDIR": str(ray_tmp)}
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(PACKAGE_ROOT),
+        "XDG_CACHE_HOME": str(tmp_path / "xdg"),
+        "RAY_USAGE_STATS_ENABLED": "0",
+        "RAY_TMPDIR": str(ray_tmp),
+    }
     cache = tmp_path / "c"
-    proc = subprocess.Popen([sys.executable, "-m", "gbviewer", "eval", str(gb.DEFAULT_SCENE), "--data", str(capture),
-                             "--modes", "scalar,gaussian_blending", "--rates", "1,1/2", "--backend", "cpu", "--split",
-                             "all", "--cache", str(cache), "--ray", "local"], cwd=tmp_path, env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "gbviewer",
+            "eval",
+            str(gb.DEFAULT_SCENE),
+            "--data",
+            str(capture),
+            "--modes",
+            "scalar,gaussian_blending",
+            "--rates",
+            "1,1/2",
+            "--backend",
+            "cpu",
+            "--split",
+            "all",
+            "--cache",
+            str(cache),
+            "--ray",
+            "local",
+        ],
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     sessions = ray_tmp / "ray"
     try:
         deadline = time.monotonic() + 180
-        while not (sessions.is_dir() and any(sessions.glob("session_*"))) and proc.poll() is None \
-                and time.monotonic() < deadline:
+        while (
+            not (sessions.is_dir() and any(sessions.glob("session_*")))
+            and proc.poll() is None
+            and time.monotonic() < deadline
+        ):
             time.sleep(0.05)
         assert proc.poll() is None and any(sessions.glob("session_*")), "Ray never started"
         proc.send_signal(signal.SIGTERM)

@@ -35,8 +35,16 @@ class GltfFile:
     """A glTF document under construction: one BIN buffer of bufferViews."""
 
     bin: bytearray = field(default_factory=bytearray)
-    doc: dict = field(default_factory=lambda: {"asset": {"version": "2.0"}, "extensionsUsed": [EXT],
-                                               "accessors": [], "bufferViews": [], "meshes": [], "nodes": []})
+    doc: dict = field(
+        default_factory=lambda: {
+            "asset": {"version": "2.0"},
+            "extensionsUsed": [EXT],
+            "accessors": [],
+            "bufferViews": [],
+            "meshes": [],
+            "nodes": [],
+        }
+    )
 
     def view(self, data: bytes, stride: int = 0) -> int:
         self.bin += b"\0" * (-len(self.bin) % 4)
@@ -47,8 +55,15 @@ class GltfFile:
         self.doc["bufferViews"].append(v)
         return len(self.doc["bufferViews"]) - 1
 
-    def accessor(self, values: np.ndarray, ctype: int = 5126, normalized: bool = False, stride: int = 0,
-                 sparse: tuple[np.ndarray, np.ndarray] | None = None, no_view: bool = False) -> int:
+    def accessor(
+        self,
+        values: np.ndarray,
+        ctype: int = 5126,
+        normalized: bool = False,
+        stride: int = 0,
+        sparse: tuple[np.ndarray, np.ndarray] | None = None,
+        no_view: bool = False,
+    ) -> int:
         """An accessor of (N, width) `values` (already of `ctype`); `stride` pads each element, `sparse`
         (rows, values) adds a substitution, `no_view` leaves the base all zeros."""
         values = np.asarray(values, DTYPES[ctype]).reshape(len(values), -1)
@@ -66,10 +81,11 @@ class GltfFile:
                 acc["bufferView"] = self.view(values.tobytes())
         if sparse is not None:
             rows, sub = sparse
-            acc["sparse"] = {"count": len(rows),
-                             "indices": {"bufferView": self.view(np.asarray(rows, "<u2").tobytes()),
-                                         "componentType": 5123},
-                             "values": {"bufferView": self.view(np.asarray(sub, DTYPES[ctype]).tobytes())}}
+            acc["sparse"] = {
+                "count": len(rows),
+                "indices": {"bufferView": self.view(np.asarray(rows, "<u2").tobytes()), "componentType": 5123},
+                "values": {"bufferView": self.view(np.asarray(sub, DTYPES[ctype]).tobytes())},
+            }
         self.doc["accessors"].append(acc)
         return len(self.doc["accessors"]) - 1
 
@@ -86,9 +102,12 @@ class GltfFile:
 
     def splats(self, s: dict, sh_degree: int | None = None) -> dict:
         """A float primitive of splats `s` (means, scales, quats (w,x,y,z), opacities, sh) in glTF's axes."""
-        attrs = {"POSITION": self.accessor(s["means"]),
-                 P + "ROTATION": self.accessor(np.concatenate([s["quats"][:, 1:], s["quats"][:, :1]], 1)),
-                 P + "SCALE": self.accessor(s["scales"]), P + "OPACITY": self.accessor(s["opacities"])}
+        attrs = {
+            "POSITION": self.accessor(s["means"]),
+            P + "ROTATION": self.accessor(np.concatenate([s["quats"][:, 1:], s["quats"][:, :1]], 1)),
+            P + "SCALE": self.accessor(s["scales"]),
+            P + "OPACITY": self.accessor(s["opacities"]),
+        }
         k = s["sh"].shape[1] if sh_degree is None else (sh_degree + 1) ** 2
         names = [f"SH_DEGREE_{d}_COEF_{i}" for d in range(4) for i in range(2 * d + 1)]
         attrs.update({P + names[i]: self.accessor(s["sh"][:, i]) for i in range(k)})
@@ -98,8 +117,18 @@ class GltfFile:
         """As a .glb ("glb"), or a .gltf with its buffer in a data URI ("embedded") or a file beside it."""
         doc = dict(self.doc, buffers=[{"byteLength": len(self.bin)}])
         if "scenes" not in doc:
-            doc["scenes"], doc["scene"] = [{"nodes": [i for i in range(len(doc["nodes"]))
-                                                      if not any(i in n.get("children", []) for n in doc["nodes"])]}], 0
+            doc["scenes"], doc["scene"] = (
+                [
+                    {
+                        "nodes": [
+                            i
+                            for i in range(len(doc["nodes"]))
+                            if not any(i in n.get("children", []) for n in doc["nodes"])
+                        ]
+                    }
+                ],
+                0,
+            )
         if how == "embedded":
             doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(self.bin).decode()
         elif how == "external":

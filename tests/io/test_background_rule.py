@@ -9,6 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from dataset_builders import shots, write_colmap
 
 import gbviewer as gb
 from gbviewer import cli
@@ -17,7 +18,6 @@ from gbviewer.io.datasets import load_dataset, read_photo
 from gbviewer.io.datasets.backdrop import DEFAULT, GIVEN, PHOTOS, Backdrop, choose_background, estimate_backdrop
 from gbviewer.outputs.metrics import psnr
 from gbviewer.render import RenderSettings
-from dataset_builders import shots, write_colmap
 
 pytest.importorskip("skimage")
 GREY = 0.45
@@ -37,15 +37,38 @@ def test_the_rule():
     assert (choose_background(None, opaque).colour, choose_background(None, opaque).source) == ((0.5,) * 3, PHOTOS)
     assert choose_background(None, rgba).source == DEFAULT and choose_background(None, rgba).colour == (0.0,) * 3
     assert choose_background(None, None).source == DEFAULT
-    assert choose_background((1, 1, 1), opaque).colour == (1.0,) * 3 and choose_background((1, 1, 1), opaque).source \
-        == GIVEN
+    assert (
+        choose_background((1, 1, 1), opaque).colour == (1.0,) * 3
+        and choose_background((1, 1, 1), opaque).source == GIVEN
+    )
 
 
 def test_eval_scores_on_the_photos_backdrop_and_says_so(grey_capture, bundled_scene, tmp_path, capsys):
     settings = RenderSettings.parse_list("scalar")
     out = tmp_path / "e.json"
-    assert cli.main(["eval", str(gb.DEFAULT_SCENE), "--data", str(grey_capture), "--modes", "scalar", "--rates", "1",
-                     "--split", "all", "--backend", "cpu", "--cache", str(tmp_path / "c"), "--json", str(out)]) == 0
+    assert (
+        cli.main(
+            [
+                "eval",
+                str(gb.DEFAULT_SCENE),
+                "--data",
+                str(grey_capture),
+                "--modes",
+                "scalar",
+                "--rates",
+                "1",
+                "--split",
+                "all",
+                "--backend",
+                "cpu",
+                "--cache",
+                str(tmp_path / "c"),
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     doc = json.loads(out.read_text())
     used = doc["scenes"][0]["background"]
@@ -60,22 +83,47 @@ def test_eval_scores_on_the_photos_backdrop_and_says_so(grey_capture, bundled_sc
         assert scores[view.name] == pytest.approx(psnr(img, read_photo(view.image)), abs=1e-4)
         black = gb.render(bundled_scene, view.camera, "scalar").rgb
         assert scores[view.name] > psnr(black, read_photo(view.image)) + 6  # what eval used to report
-    given = ev.run_eval([(gb.DEFAULT_SCENE, grey_capture)], settings, [1.0], split="all", background=(0, 0, 0),
-                        backend="cpu", cache=tmp_path / "c")
+    given = ev.run_eval(
+        [(gb.DEFAULT_SCENE, grey_capture)],
+        settings,
+        [1.0],
+        split="all",
+        background=(0, 0, 0),
+        backend="cpu",
+        cache=tmp_path / "c",
+    )
     assert given.scenes[0].background.source == GIVEN
     assert ev.to_json(given)["scenes"][0]["views"][0]["results"][0]["psnr"] < min(scores.values()) - 6
 
 
 def test_compare_and_bench_report_their_background(tmp_path, capsys, bundled_scene):
     view = ["--orbit", "30,20,0", "--width", "64", "--height", "48", "--rates", "1", "--backend", "cpu"]
-    assert cli.main(["compare", str(gb.DEFAULT_SCENE), *view, "--modes", "scalar", "--out", str(tmp_path / "a.png")]) \
-        == 0
+    assert (
+        cli.main(["compare", str(gb.DEFAULT_SCENE), *view, "--modes", "scalar", "--out", str(tmp_path / "a.png")]) == 0
+    )
     assert "modes on background 0.00 0.00 0.00 (default: no photos)" in capsys.readouterr().out
-    assert cli.main(["compare", str(gb.DEFAULT_SCENE), *view, "--modes", "scalar", "--background", "0.5,0.5,0.5",
-                     "--out", str(tmp_path / "b.png")]) == 0
+    assert (
+        cli.main(
+            [
+                "compare",
+                str(gb.DEFAULT_SCENE),
+                *view,
+                "--modes",
+                "scalar",
+                "--background",
+                "0.5,0.5,0.5",
+                "--out",
+                str(tmp_path / "b.png"),
+            ]
+        )
+        == 0
+    )
     assert "modes on background 0.50 0.50 0.50 (given)" in capsys.readouterr().out
     from gbviewer import bench
 
     doc = json.loads(bench.write_json(tmp_path / "b.json", [], []).read_text())
-    assert doc["background"] == {"rgb": [0.0, 0.0, 0.0], "source": DEFAULT,
-                                 "describe": "0.00 0.00 0.00 (default: no photos)"}
+    assert doc["background"] == {
+        "rgb": [0.0, 0.0, 0.0],
+        "source": DEFAULT,
+        "describe": "0.00 0.00 0.00 (default: no photos)",
+    }

@@ -65,8 +65,14 @@ def bombs() -> dict[str, bytes]:
     header = struct.pack("<4sIIBBBBI12x", b"NGSP", 4, 20_000_000, 0, 12, 0, 5, 32)
     zstd = zstandard.ZstdCompressor().compress(bytes(60_000_000))  # one stream of the declared size
     spz_zstd = header + struct.pack("<QQ", len(zstd), 60_000_000) * 5 + zstd
-    return {"sog_image": _zip(big_image), "sog_meta": _zip(big_meta), "spz_gzip": spz_gzip, "spz_zstd": spz_zstd,
-            "valid_sog": _zip(sog), "valid_spz": encode_spz(s, 2)}
+    return {
+        "sog_image": _zip(big_image),
+        "sog_meta": _zip(big_meta),
+        "spz_gzip": spz_gzip,
+        "spz_zstd": spz_zstd,
+        "valid_sog": _zip(sog),
+        "valid_spz": encode_spz(s, 2),
+    }
 
 
 @pytest.fixture(scope="module")
@@ -79,8 +85,15 @@ def files(tmp_path_factory):
     return paths
 
 
-@pytest.mark.parametrize("name,match", [("sog_image", "6000x6000"), ("sog_meta", "meta.json"),
-                                        ("spz_gzip", "compressed bytes"), ("spz_zstd", "compressed bytes")])
+@pytest.mark.parametrize(
+    "name,match",
+    [
+        ("sog_image", "6000x6000"),
+        ("sog_meta", "meta.json"),
+        ("spz_gzip", "compressed bytes"),
+        ("spz_zstd", "compressed bytes"),
+    ],
+)
 def test_bomb_is_refused_with_one_line(files, name, match):
     assert files[name].stat().st_size < 2 << 20
     with pytest.raises(SceneFormatError, match=match) as err:
@@ -89,8 +102,10 @@ def test_bomb_is_refused_with_one_line(files, name, match):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name,valid", [("sog_image", "valid_sog"), ("sog_meta", "valid_sog"),
-                                        ("spz_gzip", "valid_spz"), ("spz_zstd", "valid_spz")])
+@pytest.mark.parametrize(
+    "name,valid",
+    [("sog_image", "valid_sog"), ("sog_meta", "valid_sog"), ("spz_gzip", "valid_spz"), ("spz_zstd", "valid_spz")],
+)
 def test_bomb_peak_memory_stays_near_a_valid_load(files, name, valid):
     ok, base = load_peak_mb(files[valid])
     assert ok == "ok"
@@ -121,12 +136,17 @@ def test_sog_image_budget_allows_power_of_two_padding(tmp_path):
 SEED_PLY = Path(__file__).parent / "fuzz" / "seeds" / "inria"
 
 
-@pytest.mark.parametrize("seed,element,count", [
-    ("sh1.ply", "vertex", "99999999999999999999"),  # does not fit an index
-    ("sh1.ply", "vertex", str(2**40)), ("ascii.ply", "vertex", str(2**40)),
-    ("sh1.ply", "junk", str(2**40)),  # an extra element after the vertices
-    ("sh1.ply", "vertex", "-3"), ("sh1.ply", "vertex", "1e3"),
-])
+@pytest.mark.parametrize(
+    "seed,element,count",
+    [
+        ("sh1.ply", "vertex", "99999999999999999999"),  # does not fit an index
+        ("sh1.ply", "vertex", str(2**40)),
+        ("ascii.ply", "vertex", str(2**40)),
+        ("sh1.ply", "junk", str(2**40)),  # an extra element after the vertices
+        ("sh1.ply", "vertex", "-3"),
+        ("sh1.ply", "vertex", "1e3"),
+    ],
+)
 def test_ply_declared_counts_are_checked_against_the_bytes_present(tmp_path, seed, element, count):
     head, body = (SEED_PLY / seed).read_bytes().split(b"end_header\n", 1)
     if element == "vertex":
@@ -152,8 +172,9 @@ def test_ply_elements_after_the_vertices_are_not_read(tmp_path, monkeypatch, see
     path.write_bytes(head + b"element face 100\nproperty list uchar int vertex_indices\nend_header\n" + body + faces)
     read = []
     original = plyfile.PlyElement._read
-    monkeypatch.setattr(plyfile.PlyElement, "_read", lambda self, *a, **k: (read.append(self.name),
-                                                                            original(self, *a, **k))[1])
+    monkeypatch.setattr(
+        plyfile.PlyElement, "_read", lambda self, *a, **k: (read.append(self.name), original(self, *a, **k))[1]
+    )
     scene = gb.load(path)
     assert scene.num_splats == 12 and read == ([] if binary else ["vertex"])  # binary: streamed, plyfile reads none
     np.testing.assert_array_equal(scene.means, gb.load(SEED_PLY / seed).means)
@@ -161,8 +182,9 @@ def test_ply_elements_after_the_vertices_are_not_read(tmp_path, monkeypatch, see
 
 def test_ply_without_splat_elements_is_one_line(tmp_path):
     path = tmp_path / "faces.ply"
-    path.write_bytes(b"ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
-                     b"3 0 1 2\n")
+    path.write_bytes(
+        b"ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n3 0 1 2\n"
+    )
     with pytest.raises(SceneFormatError, match="vertex") as err:
         gb.load(path)
     assert "\n" not in str(err.value)

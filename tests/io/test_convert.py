@@ -9,9 +9,9 @@ import numpy as np
 import plyfile
 import pytest
 from encoders import encode_compressed_ply, encode_splat, encode_spz, random_params, sog_files, write_sog
+from helpers import skip_or_fail
 
 import gbviewer as gb
-from helpers import skip_or_fail
 from gbviewer.cli import main
 
 SCENES = Path(__file__).resolve().parents[2].parent / "shared" / "scenes"
@@ -31,8 +31,11 @@ def raw_inria_ply(path: Path, n: int = 3000, degree: int = 2, seed: int = 0) -> 
     raw values over wide ranges (saturating sigmoid and exp at the ends)."""
     rng = np.random.default_rng(seed)
     k = 3 * ((degree + 1) ** 2 - 1)
-    names = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(k)] + [
-        "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3", "filter_3D"]
+    names = (
+        ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"]
+        + [f"f_rest_{i}" for i in range(k)]
+        + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3", "filter_3D"]
+    )
     dtype = [(name, "<f4") for name in names] + [("red", "u1"), ("confidence", "<f8")]
     v = np.zeros(n, dtype=dtype)
     for name in names:
@@ -66,9 +69,11 @@ def test_written_ply_is_standard(tmp_path):
     scene = gb.Scene.from_arrays(s["means"], s["scales"], s["quats"], s["opacities"], s["sh"])
     ply = plyfile.PlyData.read(str(gb.io.write_inria_ply(scene, tmp_path / "o.ply")))
     names = [p.name for p in ply["vertex"].properties]
-    assert names == (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
-                     + [f"f_rest_{i}" for i in range(45)]
-                     + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    assert names == (
+        ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+        + [f"f_rest_{i}" for i in range(45)]
+        + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    )
     assert all(p.val_dtype in ("f4", "float32") for p in ply["vertex"].properties)
     v = ply["vertex"].data
     np.testing.assert_allclose(1 / (1 + np.exp(-v["opacity"])), s["opacities"], atol=1e-6)
@@ -98,15 +103,24 @@ def test_convert_cli(tmp_path, capsys):
 
 def test_info_reports_format_and_version(tmp_path, capsys):
     s = random_params(300, seed=3)
-    files = {"a.spz": encode_spz(s, 3), "b.ply": encode_compressed_ply(s, color_ranges=False),
-             "c.splat": encode_splat(s)}
+    files = {
+        "a.spz": encode_spz(s, 3),
+        "b.ply": encode_compressed_ply(s, color_ranges=False),
+        "c.splat": encode_splat(s),
+    }
     for name, data in files.items():
         (tmp_path / name).write_bytes(data)
     write_sog(sog_files(s), tmp_path / "d.sog")
-    expected = {"a.spz": ("spz", "3"), "b.ply": ("compressed-ply", "12-property chunks"), "c.splat": ("splat", "None"),
-                "d.sog": ("sog", "2")}
+    expected = {
+        "a.spz": ("spz", "3"),
+        "b.ply": ("compressed-ply", "12-property chunks"),
+        "c.splat": ("splat", "None"),
+        "d.sog": ("sog", "2"),
+    }
     for name, (fmt, version) in expected.items():
         assert main(["info", str(tmp_path / name)]) == 0
-        lines = {line.split(":", 1)[0].strip(): line.split(":", 1)[1].strip()
-                 for line in capsys.readouterr().out.splitlines()}
+        lines = {
+            line.split(":", 1)[0].strip(): line.split(":", 1)[1].strip()
+            for line in capsys.readouterr().out.splitlines()
+        }
         assert (lines["format"], lines["version"], lines["splats"]) == (fmt, version, "300")

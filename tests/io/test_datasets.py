@@ -12,12 +12,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from dataset_builders import H, W, save_rgb, shots, write_blender, write_cameras_json, write_colmap
 
 import gbviewer as gb
 from gbviewer import cli
 from gbviewer.core.errors import DatasetError
 from gbviewer.io.datasets import colmap, load_dataset, read_photo
-from dataset_builders import H, W, save_rgb, shots, write_blender, write_cameras_json, write_colmap
 
 pytest.importorskip("pycolmap")
 
@@ -39,7 +39,7 @@ def assert_same_cameras(scene, loaded, originals, renders=True):
         c = view.camera
         assert (c.width, c.height, c.fx, c.fy, c.cx, c.cy) == (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
         assert np.abs(c.R - cam.R).max() < 1e-15 and np.abs(c.t - cam.t).max() < 1e-15
-    for view, cam in list(zip(loaded, originals))[:3 if renders else 0]:
+    for view, cam in list(zip(loaded, originals))[: 3 if renders else 0]:
         for mode in ("scalar", "gaussian_blending"):
             assert np.array_equal(gb.render(scene, view.camera, mode).rgb, gb.render(scene, cam, mode).rgb)
 
@@ -73,10 +73,14 @@ def test_blender_round_trip_with_rgba_photos(tmp_path, bundled_scene, centred):
     for view in loaded:  # camera_angle_x is a float round trip of the focal length
         cam = by_name[view.name.split("/")[1]]
         assert view.camera.fx == pytest.approx(cam.fx, rel=1e-14) and view.camera.fy == view.camera.fx
-    fixed = [replace(v, camera=replace(v.camera, fx=by_name[v.name.split("/")[1]].fx,
-                                       fy=by_name[v.name.split("/")[1]].fy)) for v in loaded]
+    fixed = [
+        replace(v, camera=replace(v.camera, fx=by_name[v.name.split("/")[1]].fx, fy=by_name[v.name.split("/")[1]].fy))
+        for v in loaded
+    ]
     assert_same_cameras(bundled_scene, fixed, [s.camera for s in centred])
-    assert np.array_equal(gb.render(bundled_scene, loaded[0].camera).rgb, gb.render(bundled_scene, centred[0].camera).rgb)
+    assert np.array_equal(
+        gb.render(bundled_scene, loaded[0].camera).rgb, gb.render(bundled_scene, centred[0].camera).rgb
+    )
     assert read_photo(loaded[0].image).shape == (H, W, 4)
 
 
@@ -127,17 +131,30 @@ def test_missing_photos_and_other_aspect_ratio(tmp_path, views):
     bomb = tmp_path / "images" / "v05.png"  # a valid header claiming 13000 x 10000 pixels, and no pixel data
     ihdr = b"IHDR" + struct.pack(">IIBBBBB", 13000, 10000, 8, 2, 0, 0, 0)
     idat = b"IDAT" + b"\0" * 8
-    bomb.write_bytes(b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + ihdr + struct.pack(">I", zlib.crc32(ihdr))
-                     + struct.pack(">I", 8) + idat + struct.pack(">I", zlib.crc32(idat)))
+    bomb.write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + struct.pack(">I", 13)
+        + ihdr
+        + struct.pack(">I", zlib.crc32(ihdr))
+        + struct.pack(">I", 8)
+        + idat
+        + struct.pack(">I", zlib.crc32(idat))
+    )
     with pytest.raises(DatasetError) as exc:
         load_dataset(tmp_path)
     one_line(exc, "v05.png", "claims 13000x10000 pixels in 53 bytes")
 
 
-@pytest.mark.parametrize("model, extra, accepted", [
-    ("SIMPLE_RADIAL", (0.0,), True), ("OPENCV", (0.0,) * 4, True), ("SIMPLE_RADIAL", (0.01,), False),
-    ("SIMPLE_RADIAL_FISHEYE", (0.0,), False), ("OPENCV_FISHEYE", (0.0,) * 4, False),
-])
+@pytest.mark.parametrize(
+    "model, extra, accepted",
+    [
+        ("SIMPLE_RADIAL", (0.0,), True),
+        ("OPENCV", (0.0,) * 4, True),
+        ("SIMPLE_RADIAL", (0.01,), False),
+        ("SIMPLE_RADIAL_FISHEYE", (0.0,), False),
+        ("OPENCV_FISHEYE", (0.0,) * 4, False),
+    ],
+)
 def test_camera_models(tmp_path, views, model, extra, accepted):
     write_colmap(tmp_path, views, model=model, extra=extra)
     if accepted:
@@ -159,16 +176,21 @@ def test_empty_split(tmp_path, centred):
 def truncate_name(model):
     """images.bin cut inside the first image's name: pycolmap 4.2.1's reader loops forever on it."""
     path = model / "images.bin"
-    path.write_bytes(path.read_bytes()[:8 + 4 + 7 * 8 + 4 + 2])
+    path.write_bytes(path.read_bytes()[: 8 + 4 + 7 * 8 + 4 + 2])
 
 
-@pytest.mark.parametrize("damage, expect", [
-    (lambda d: (d / "cameras.bin").write_bytes(b"not a camera file" * 3), "Camera model does not exist"),
-    (lambda d: (d / "images.bin").write_bytes(struct.pack("<Q", 1) + b"\0" * 60 + struct.pack("<Q", 1 << 40)),
-     "an image refers to camera 0, which the model's cameras file does not define"),
-    (truncate_name, "still reading after"),
-    (lambda d: (d / "images.bin").unlink(), "images.bin missing"),
-])
+@pytest.mark.parametrize(
+    "damage, expect",
+    [
+        (lambda d: (d / "cameras.bin").write_bytes(b"not a camera file" * 3), "Camera model does not exist"),
+        (
+            lambda d: (d / "images.bin").write_bytes(struct.pack("<Q", 1) + b"\0" * 60 + struct.pack("<Q", 1 << 40)),
+            "an image refers to camera 0, which the model's cameras file does not define",
+        ),
+        (truncate_name, "still reading after"),
+        (lambda d: (d / "images.bin").unlink(), "images.bin missing"),
+    ],
+)
 def test_unreadable_sparse_model(tmp_path, views, monkeypatch, damage, expect):
     write_colmap(tmp_path, views[:2])
     for name in ("rigs.bin", "frames.bin"):
@@ -180,15 +202,20 @@ def test_unreadable_sparse_model(tmp_path, views, monkeypatch, damage, expect):
     one_line(exc, str(tmp_path / "sparse" / "0"), expect)
 
 
-@pytest.mark.parametrize("text, expect", [
-    ('{"frames": []}', "missing 'camera_angle_x'"),
-    ('{"camera_angle_x": 0.7, "frames": [{"file_path": "./a"}]}', "frame 0: missing 'transform_matrix'"),
-    ('{"camera_angle_x": 0.7, "frames": [{"file_path": "./a", "transform_matrix": [[1]]}]}', "a 4x4 matrix"),
-    ('{"camera_angle_x": "wide", "frames": []}', "expected a number"),
-    ('{"camera_angle_x": 0.7, "frames": [{"file_path": "./a", "transform_matrix": '
-     '[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 1, 1]]}]}',
-     "frame 0: 'transform_matrix': expected a bottom row"),
-])
+@pytest.mark.parametrize(
+    "text, expect",
+    [
+        ('{"frames": []}', "missing 'camera_angle_x'"),
+        ('{"camera_angle_x": 0.7, "frames": [{"file_path": "./a"}]}', "frame 0: missing 'transform_matrix'"),
+        ('{"camera_angle_x": 0.7, "frames": [{"file_path": "./a", "transform_matrix": [[1]]}]}', "a 4x4 matrix"),
+        ('{"camera_angle_x": "wide", "frames": []}', "expected a number"),
+        (
+            '{"camera_angle_x": 0.7, "frames": [{"file_path": "./a", "transform_matrix": '
+            "[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 1, 1]]}]}",
+            "frame 0: 'transform_matrix': expected a bottom row",
+        ),
+    ],
+)
 def test_bad_transforms(tmp_path, text, expect):
     (tmp_path / "transforms_test.json").write_text(text)
     with pytest.raises(DatasetError) as exc:

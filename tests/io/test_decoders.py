@@ -11,13 +11,14 @@ import struct
 
 import numpy as np
 import pytest
-from encoders import (SH_C0, encode_compressed_ply, encode_splat, encode_spz, random_params, sog_files, write_sog)
+from encoders import SH_C0, encode_compressed_ply, encode_splat, encode_spz, random_params, sog_files, write_sog
 
 import gbviewer as gb
 
 
-def check(scene: gb.Scene, s: dict, pos: float, log_scale: float, opacity: float, dc: float, rest: float,
-          quat: float | None) -> None:
+def check(
+    scene: gb.Scene, s: dict, pos: float, log_scale: float, opacity: float, dc: float, rest: float, quat: float | None
+) -> None:
     """Loaded scene vs the encoded values, each within its tolerance (quat: max component error)."""
     assert scene.num_splats == len(s["means"])
     np.testing.assert_allclose(scene.means, s["means"], rtol=0, atol=pos)
@@ -56,7 +57,7 @@ def test_spz(tmp_path, version, degree):
     # v1 float16 positions (|x| <= 3: half ulp 2^-10); else 12 fractional bits; log scale 1/16 steps;
     # colour 1/(0.15*255) steps; SH (v-128)/128; v2 quaternion xyz bytes /127.5 (w rebuilt), v3+ 9-bit
     # smallest three of magnitude <= 1/sqrt2, largest rebuilt.
-    pos = 2.0 ** -10 if version == 1 else 2.0 ** -13
+    pos = 2.0**-10 if version == 1 else 2.0**-13
     quat = None if version <= 2 else 3 * math.sqrt(0.5) * (math.sqrt(0.5) / 511 / 2) / 0.5 + 1e-6
     check(scene, s, pos + 1e-6, 1 / 32 + 1e-6, HALF_BYTE, 0.5 / (0.15 * 255) + 1e-6, 0.5 / 128 + 1e-6, quat)
     if version <= 2:  # xyz bytes: half step 0.5/127.5 each; w = sqrt(1 - |xyz|^2) errs by |xyz| * d / w
@@ -70,13 +71,17 @@ def test_spz_containers_and_extensions(tmp_path):
     s = random_params(300, sh_degree=1, seed=5)
     ext = struct.pack("<II", 0xADBE0002, 12) + struct.pack("<3f", 0.1, 0.2, 0.3)
     ref = None
-    for name, data in {"raw_v3": encode_spz(s, 3, gzipped=False), "ext_v3": encode_spz(s, 3, extensions=ext),
-                       "ext_v4": encode_spz(s, 4, extensions=ext), "frac8": encode_spz(s, 4, frac_bits=8)}.items():
+    for name, data in {
+        "raw_v3": encode_spz(s, 3, gzipped=False),
+        "ext_v3": encode_spz(s, 3, extensions=ext),
+        "ext_v4": encode_spz(s, 4, extensions=ext),
+        "frac8": encode_spz(s, 4, frac_bits=8),
+    }.items():
         (tmp_path / name).write_bytes(data)
         scene = gb.load(tmp_path / name)
         if ref is None:
             ref = scene
-        tol = 2.0 ** -9 if name == "frac8" else 0
+        tol = 2.0**-9 if name == "frac8" else 0
         np.testing.assert_allclose(scene.means, ref.means, atol=tol, err_msg=name)
         np.testing.assert_array_equal(scene.sh, ref.sh, err_msg=name)
 
@@ -122,8 +127,16 @@ def test_compressed_ply(tmp_path, color_ranges, degree):
     span_p, span_s = 6.0, 7.0
     dc = (1.0 if not color_ranges else np.ptp(0.5 + SH_C0 * s["sh"][:, 0])) / (2 * 255) / SH_C0
     quat = 3 * math.sqrt(0.5) * (math.sqrt(2) / 1023 / 2) / 0.5
-    check(scene, s, span_p / (2 * 1023) + 1e-5, span_s / (2 * 1023) + 1e-5, HALF_BYTE, dc + 1e-5, 4 / 256 + 1e-6,
-          quat + 1e-6)
+    check(
+        scene,
+        s,
+        span_p / (2 * 1023) + 1e-5,
+        span_s / (2 * 1023) + 1e-5,
+        HALF_BYTE,
+        dc + 1e-5,
+        4 / 256 + 1e-6,
+        quat + 1e-6,
+    )
 
 
 @pytest.mark.parametrize("form", ["bundled", "folder", "meta.json"])
@@ -144,5 +157,13 @@ def test_sog(tmp_path, form):
     t_span = 2 * math.log1p(3)
     half = lambda a: np.ptp(a) / 255 / 2 + 1e-5  # noqa: E731
     quat = 3 * math.sqrt(0.5) * (math.sqrt(2) / 255 / 2) / 0.5
-    check(scene, s, 4 * t_span / 65535 / 2 + 1e-5, half(np.log(s["scales"])), HALF_BYTE, half(s["sh"][:, 0]),
-          half(palette), quat + 1e-6)
+    check(
+        scene,
+        s,
+        4 * t_span / 65535 / 2 + 1e-5,
+        half(np.log(s["scales"])),
+        HALF_BYTE,
+        half(s["sh"][:, 0]),
+        half(palette),
+        quat + 1e-6,
+    )

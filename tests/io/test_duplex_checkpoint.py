@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import skip_or_fail
 
 import gbviewer as gb
-from helpers import skip_or_fail
 from gbviewer.core.errors import SceneFormatError
 from gbviewer.model.scene import SH_C0
 
@@ -27,8 +27,9 @@ nn = torch.nn
 pytestmark = pytest.mark.filterwarnings("ignore:`torch.jit:DeprecationWarning")  # the published format is TorchScript
 
 
-def write_anchor_ply(path: Path, anchors, offsets, feats, log_sizes, sh_vi, info, levels=None, extra=None,
-                     rots=None) -> None:
+def write_anchor_ply(
+    path: Path, anchors, offsets, feats, log_sizes, sh_vi, info, levels=None, extra=None, rots=None
+) -> None:
     """The published save_ply layout (f_offset channel-major, info in the first rows)."""
     from plyfile import PlyData, PlyElement
 
@@ -37,9 +38,15 @@ def write_anchor_ply(path: Path, anchors, offsets, feats, log_sizes, sh_vi, info
     extra = np.zeros(n) if extra is None else extra
     rots = np.tile([1.0, 0, 0, 0], (n, 1)) if rots is None else rots
     infos = np.zeros(n)
-    infos[:len(info)] = info
-    cols = [("x", anchors[:, 0]), ("y", anchors[:, 1]), ("z", anchors[:, 2]), ("level", levels),
-            ("extra_level", extra), ("info", infos)]
+    infos[: len(info)] = info
+    cols = [
+        ("x", anchors[:, 0]),
+        ("y", anchors[:, 1]),
+        ("z", anchors[:, 2]),
+        ("level", levels),
+        ("extra_level", extra),
+        ("info", infos),
+    ]
     off = offsets.transpose(0, 2, 1).reshape(n, 3 * k)
     cols += [(f"f_offset_{i}", off[:, i]) for i in range(3 * k)]
     cols += [(f"f_anchor_feat_{i}", feats[:, i]) for i in range(feats.shape[1])]
@@ -68,8 +75,12 @@ def mlp(n_in, hidden, n_out, act=None, weights=True, seed=0, const=None):
 
 
 def save_mlps(folder: Path, mlps: dict) -> None:
-    names = {"opacity": "opacity_mlp.pt", "cov": "cov_mlp.pt", "color": "color_mlp.pt",
-             "feature_bank": "feature_bank_mlp.pt"}
+    names = {
+        "opacity": "opacity_mlp.pt",
+        "cov": "cov_mlp.pt",
+        "color": "color_mlp.pt",
+        "feature_bank": "feature_bank_mlp.pt",
+    }
     for kind, m in mlps.items():
         torch.jit.script(m).save(str(folder / names[kind]))
 
@@ -92,11 +103,14 @@ def hand_checkpoint(folder: Path, E=2.0, wbg_raw=0.15):
     info = [0.01, 10.0, 6.0, wbg_raw, E]
     write_anchor_ply(folder / "point_cloud.ply", anchors, offsets, np.ones((n, F)), log_sizes, sh_vi, info)
     colours = [(0.9, 0.2, 0.1), (0.1, 0.3, 0.8)]
-    save_mlps(folder, {
-        "opacity": mlp(F + 3, F, k, nn.Tanh(), const=[math.atanh(0.6), math.atanh(0.5)]),
-        "cov": mlp(F + 3, F, 7 * k, const=[20.0, 20.0, 20.0, 1.0, 0.0, 0.0, 0.0] * k),
-        "color": mlp(F + 3, F, 3 * k, nn.Sigmoid(), const=[logit(c) for col in colours for c in col]),
-    })
+    save_mlps(
+        folder,
+        {
+            "opacity": mlp(F + 3, F, k, nn.Tanh(), const=[math.atanh(0.6), math.atanh(0.5)]),
+            "cov": mlp(F + 3, F, 7 * k, const=[20.0, 20.0, 20.0, 1.0, 0.0, 0.0, 0.0] * k),
+            "color": mlp(F + 3, F, 3 * k, nn.Sigmoid(), const=[logit(c) for col in colours for c in col]),
+        },
+    )
     return folder / "point_cloud.ply", colours
 
 
@@ -156,9 +170,12 @@ def test_decode_matches_numpy(tmp_path, projection):
     sh_vi = rng.normal(0, 0.5, (n, 16))
     info = [0.01, 10.0, 6.0, -0.3, 4.0]
     write_anchor_ply(tmp_path / "point_cloud.ply", anchors, offsets, feats, log_sizes, sh_vi, info)
-    mlps = {"opacity": mlp(F + 4, F, k, nn.Tanh(), seed=1), "cov": mlp(F + 3, F, 7 * k, seed=2),
-            "color": mlp(F + 3, F, 3 * k, nn.Sigmoid(), seed=3),
-            "feature_bank": mlp(3, F, 3, nn.Softmax(dim=1), seed=4)}
+    mlps = {
+        "opacity": mlp(F + 4, F, k, nn.Tanh(), seed=1),
+        "cov": mlp(F + 3, F, 7 * k, seed=2),
+        "color": mlp(F + 3, F, 3 * k, nn.Sigmoid(), seed=3),
+        "feature_bank": mlp(3, F, 3, nn.Softmax(dim=1), seed=4),
+    }
     save_mlps(tmp_path, mlps)
     scene = gb.load(tmp_path / "point_cloud.ply")
     assert scene.oit.weight_background == pytest.approx(0.1)  # relu(-0.3) + 0.1
@@ -200,8 +217,10 @@ def test_unite_checkpoint(tmp_path, camera):
     """The same model saved as one checkpoints.pth of state dicts renders the same image."""
     path, _ = hand_checkpoint(tmp_path)
     ref = gb.render(gb.load(path), camera, "duplex").rgb
-    state = {f"{kind}_mlp": torch.jit.load(str(tmp_path / f"{kind}_mlp.pt")).state_dict()
-             for kind in ("opacity", "cov", "color")}
+    state = {
+        f"{kind}_mlp": torch.jit.load(str(tmp_path / f"{kind}_mlp.pt")).state_dict()
+        for kind in ("opacity", "cov", "color")
+    }
     for kind in ("opacity", "cov", "color"):
         (tmp_path / f"{kind}_mlp.pt").unlink()
     torch.save(state, tmp_path / "checkpoints.pth")

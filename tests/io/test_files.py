@@ -66,6 +66,7 @@ def test_the_folder_is_synced_after_the_file_is_moved_into_it(tmp_path, monkeypa
             else:
                 events.append("move")
             return fn(*args)
+
         return call
 
     monkeypatch.setattr(os, "fsync", record("fsync", fsync))

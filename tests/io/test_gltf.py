@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from encoders import random_params
 from fuzz_loaders import check_load
-from gltf_files import P, GltfFile, quantise
+from gltf_files import GltfFile, P, quantise
 
 import gbviewer as gb
-from gbviewer.model.cells import rotation_matrices
 from gbviewer.cli import main
 from gbviewer.io.transform import sh_basis
+from gbviewer.model.cells import rotation_matrices
 
 TO_OURS = np.diag([-1.0, -1.0, 1.0])  # glTF -> INRIA: 180 degrees about z
 
@@ -44,8 +44,9 @@ def test_float_splats_load_exactly_with_axes_turned(tmp_path, how):
     np.testing.assert_array_equal(scene.means, s["means"] * np.float32([-1, -1, 1]))
     np.testing.assert_array_equal(scene.scales, s["scales"])
     np.testing.assert_array_equal(scene.opacities, s["opacities"])
-    np.testing.assert_allclose(covariances(scene.quats, scene.scales),
-                               TO_OURS @ covariances(s["quats"], s["scales"]) @ TO_OURS, atol=1e-6)
+    np.testing.assert_allclose(
+        covariances(scene.quats, scene.scales), TO_OURS @ covariances(s["quats"], s["scales"]) @ TO_OURS, atol=1e-6
+    )
     dirs = np.random.default_rng(0).normal(size=(20, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     np.testing.assert_allclose(colours(scene.sh, dirs), colours(s["sh"], dirs @ TO_OURS), atol=1e-5)
@@ -55,13 +56,17 @@ def test_axes_on_an_asymmetric_scene(tmp_path):
     """glTF +Y up, +Z forward, +X left: a splat up (+Y) and one left (+X) land at -y (up in the INRIA frame, y down)
     and -x; a splat stretched along glTF's X stays stretched along x; an SH that is brighter looking along +X
     stays brighter looking along our -x."""
-    s = {"means": np.array([[0, 1, 5], [1, 0, 5]], np.float32), "scales": np.array([[1, .1, .1]] * 2, np.float32),
-         "quats": np.array([[1, 0, 0, 0]] * 2, np.float32), "opacities": np.ones(2, np.float32),
-         "sh": np.zeros((2, 4, 3), np.float32)}
+    s = {
+        "means": np.array([[0, 1, 5], [1, 0, 5]], np.float32),
+        "scales": np.array([[1, 0.1, 0.1]] * 2, np.float32),
+        "quats": np.array([[1, 0, 0, 0]] * 2, np.float32),
+        "opacities": np.ones(2, np.float32),
+        "sh": np.zeros((2, 4, 3), np.float32),
+    }
     s["sh"][:, 3] = -1.0  # coefficient of -c1 x: brighter towards +x
     scene = simple(s, tmp_path)
     np.testing.assert_array_equal(scene.means, [[0, -1, 5], [-1, 0, 5]])
-    np.testing.assert_allclose(covariances(scene.quats, scene.scales)[0], np.diag([1, .01, .01]), atol=1e-7)
+    np.testing.assert_allclose(covariances(scene.quats, scene.scales)[0], np.diag([1, 0.01, 0.01]), atol=1e-7)
     brighter = colours(scene.sh, np.array([[-1.0, 0, 0], [1.0, 0, 0]]))[0, :, 0]
     assert brighter[0] > 0 > brighter[1]
 
@@ -80,8 +85,12 @@ def test_every_allowed_component_type(tmp_path, attr, ctype, norm):
     s["means"] = np.abs(s["means"]) / 3 if ctype == 5123 else s["means"] / 3  # inside the integer ranges
     s["scales"] = s["scales"] * 0.5
     width = COMPONENTS[attr][0]
-    values = {"POSITION": s["means"], P + "ROTATION": np.concatenate([s["quats"][:, 1:], s["quats"][:, :1]], 1),
-              P + "SCALE": s["scales"] * (1 if norm or ctype == 5126 else 100), P + "OPACITY": s["opacities"]}[attr]
+    values = {
+        "POSITION": s["means"],
+        P + "ROTATION": np.concatenate([s["quats"][:, 1:], s["quats"][:, :1]], 1),
+        P + "SCALE": s["scales"] * (1 if norm or ctype == 5126 else 100),
+        P + "OPACITY": s["opacities"],
+    }[attr]
     stored, decoded = quantise(values.reshape(40, width), ctype, norm)
     f = GltfFile()
     prim = f.splats(s)
@@ -96,9 +105,11 @@ def test_every_allowed_component_type(tmp_path, attr, ctype, norm):
         np.testing.assert_array_equal(scene.opacities, decoded[:, 0])
     else:
         q = np.concatenate([decoded[:, 3:], decoded[:, :3]], 1)
-        np.testing.assert_allclose(covariances(scene.quats, scene.scales),
-                                   TO_OURS @ covariances(q / np.linalg.norm(q, axis=1, keepdims=True),
-                                                         s["scales"]) @ TO_OURS, atol=1e-6)
+        np.testing.assert_allclose(
+            covariances(scene.quats, scene.scales),
+            TO_OURS @ covariances(q / np.linalg.norm(q, axis=1, keepdims=True), s["scales"]) @ TO_OURS,
+            atol=1e-6,
+        )
 
 
 def test_disallowed_component_type_is_one_line(tmp_path, capsys):
@@ -152,9 +163,12 @@ def test_node_hierarchy_trs_and_matrix(tmp_path, child_scale):
     world = parent @ child
     a = world[:3, :3]
     np.testing.assert_allclose(scene.means, (s["means"] @ a.T + world[:3, 3]) @ TO_OURS, rtol=1e-5, atol=1e-5)
-    np.testing.assert_allclose(covariances(scene.quats, scene.scales),
-                               TO_OURS @ a @ covariances(s["quats"], s["scales"]) @ a.T @ TO_OURS, rtol=1e-4,
-                               atol=1e-7)
+    np.testing.assert_allclose(
+        covariances(scene.quats, scene.scales),
+        TO_OURS @ a @ covariances(s["quats"], s["scales"]) @ a.T @ TO_OURS,
+        rtol=1e-4,
+        atol=1e-7,
+    )
     u, _, vt = np.linalg.svd(a)
     rot = u @ vt
     dirs = np.random.default_rng(1).normal(size=(30, 3))
@@ -194,7 +208,10 @@ def test_extension_properties_reported_and_unsupported_said(tmp_path, capsys):
     assert any("kernel customShape is not supported" in m for m in lines)
     assert any("colorSpace lin_rec709_display is not supported" in m for m in lines)
     assert (scene.meta["kernel"], scene.meta["projection"], scene.meta["sortingMethod"]) == (
-        "customShape", "perspective", "cameraDistance")
+        "customShape",
+        "perspective",
+        "cameraDistance",
+    )
     with pytest.warns(UserWarning):
         assert main(["info", str(path)]) == 0
     out = capsys.readouterr().out
@@ -209,22 +226,33 @@ def hostile(tmp_path, edit) -> str:
     return check_load(f.write(tmp_path / "h.glb"))
 
 
-@pytest.mark.parametrize("name,edit", [
-    ("count beyond bytes", lambda f: f.doc["accessors"][0].update(count=1 << 27)),
-    ("zeros beyond bytes", lambda f: (f.doc["accessors"][0].pop("bufferView"), f.doc["accessors"][0].update(
-        count=1 << 40))),
-    ("offset beyond view", lambda f: f.doc["accessors"][1].update(byteOffset=4000)),
-    ("view beyond buffer", lambda f: f.doc["bufferViews"][0].update(byteLength=1 << 30)),
-    ("bad index", lambda f: f.doc["accessors"][2].update(bufferView=99)),
-    ("node cycle", lambda f: f.doc["nodes"].append({"children": [1]}) or f.doc["nodes"][0].update(children=[1])),
-    ("sparse out of range", lambda f: f.doc["accessors"][0].update(
-        sparse={"count": 1, "indices": {"bufferView": 0, "componentType": 5123}, "values": {"bufferView": 0}})),
-    ("partial SH", lambda f: f.doc["meshes"][0]["primitives"][0]["attributes"].update(
-        {P + "SH_DEGREE_1_COEF_0": 0})),
-    ("no splat primitive", lambda f: f.doc["meshes"][0]["primitives"][0].pop("extensions")),
-    ("lines mode", lambda f: f.doc["meshes"][0]["primitives"][0].update(mode=1)),
-    ("deep json", lambda f: f.doc.update(extras=json.loads("[" * 40 + "]" * 40))),
-])
+@pytest.mark.parametrize(
+    "name,edit",
+    [
+        ("count beyond bytes", lambda f: f.doc["accessors"][0].update(count=1 << 27)),
+        (
+            "zeros beyond bytes",
+            lambda f: (f.doc["accessors"][0].pop("bufferView"), f.doc["accessors"][0].update(count=1 << 40)),
+        ),
+        ("offset beyond view", lambda f: f.doc["accessors"][1].update(byteOffset=4000)),
+        ("view beyond buffer", lambda f: f.doc["bufferViews"][0].update(byteLength=1 << 30)),
+        ("bad index", lambda f: f.doc["accessors"][2].update(bufferView=99)),
+        ("node cycle", lambda f: f.doc["nodes"].append({"children": [1]}) or f.doc["nodes"][0].update(children=[1])),
+        (
+            "sparse out of range",
+            lambda f: f.doc["accessors"][0].update(
+                sparse={"count": 1, "indices": {"bufferView": 0, "componentType": 5123}, "values": {"bufferView": 0}}
+            ),
+        ),
+        (
+            "partial SH",
+            lambda f: f.doc["meshes"][0]["primitives"][0]["attributes"].update({P + "SH_DEGREE_1_COEF_0": 0}),
+        ),
+        ("no splat primitive", lambda f: f.doc["meshes"][0]["primitives"][0].pop("extensions")),
+        ("lines mode", lambda f: f.doc["meshes"][0]["primitives"][0].update(mode=1)),
+        ("deep json", lambda f: f.doc.update(extras=json.loads("[" * 40 + "]" * 40))),
+    ],
+)
 def test_hostile_files_are_one_line(tmp_path, name, edit):
     assert hostile(tmp_path, edit) == "error"
 

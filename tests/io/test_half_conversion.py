@@ -18,9 +18,25 @@ def test_equal_to_f16c_on_every_float():
 
 
 def test_equal_to_numpy_through_the_loader():
-    bits = np.concatenate([np.arange(0, 2**32, 65537, dtype=np.uint64).astype(np.uint32),
-                           np.array([0x477FEFFF, 0x477FF000, 0x33000000, 0x33000001, 0x387FFFFF, 0x38800000,
-                                     0x38FFF000, 0x37FFE000, 0x7F800000], np.uint32)])
+    bits = np.concatenate(
+        [
+            np.arange(0, 2**32, 65537, dtype=np.uint64).astype(np.uint32),
+            np.array(
+                [
+                    0x477FEFFF,
+                    0x477FF000,
+                    0x33000000,
+                    0x33000001,
+                    0x387FFFFF,
+                    0x38800000,
+                    0x38FFF000,
+                    0x37FFE000,
+                    0x7F800000,
+                ],
+                np.uint32,
+            ),
+        ]
+    )
     values = bits.view(np.float32)
     values = np.concatenate([values, -values])
     values = values[np.isfinite(values)]  # the loader drops non-finite rows; its range check drops |v| > max_sh

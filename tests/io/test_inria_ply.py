@@ -59,8 +59,12 @@ def test_variants_without_normals_or_rest_and_with_extras(tmp_path):
 
 def test_filter_3d_is_kept_and_applied(tmp_path):
     path = tmp_path / "mip.ply"
-    write_inria(path, degree=0, filter_3d=0.05,
-                values={"x": np.zeros(5, np.float32), "y": np.zeros(5, np.float32), "z": np.full(5, 3, np.float32)})
+    write_inria(
+        path,
+        degree=0,
+        filter_3d=0.05,
+        values={"x": np.zeros(5, np.float32), "y": np.zeros(5, np.float32), "z": np.full(5, 3, np.float32)},
+    )
     scene = gb.load(path)
     np.testing.assert_allclose(scene.filter_3d, 0.05)
     plain = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh)
@@ -116,8 +120,24 @@ def test_inconsistent_rest_count(tmp_path):
 def test_non_numeric_property(tmp_path):
     path = tmp_path / "list.ply"
     n = 3
-    dt = [(nm, "f4") for nm in ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "scale_0", "scale_1", "scale_2",
-                                "rot_0", "rot_1", "rot_2", "rot_3"]] + [("opacity", "O")]
+    dt = [
+        (nm, "f4")
+        for nm in [
+            "x",
+            "y",
+            "z",
+            "f_dc_0",
+            "f_dc_1",
+            "f_dc_2",
+            "scale_0",
+            "scale_1",
+            "scale_2",
+            "rot_0",
+            "rot_1",
+            "rot_2",
+            "rot_3",
+        ]
+    ] + [("opacity", "O")]
     arr = np.empty(n, dtype=dt)
     for nm, _ in dt[:-1]:
         arr[nm] = 0.5
@@ -169,8 +189,19 @@ def test_degenerate_splats_render_without_nan(tmp_path):
     rot0 = np.ones(n, np.float32)
     rot0[3:6] = 0.0
     zero = np.zeros(n, np.float32)
-    values = {"x": np.linspace(-0.5, 0.5, n).astype(np.float32), "y": zero, "z": z, "scale_0": sc, "scale_1": sc,
-              "scale_2": sc, "rot_0": rot0, "rot_1": zero, "rot_2": zero, "rot_3": zero, "opacity": np.full(n, 5.0, np.float32)}
+    values = {
+        "x": np.linspace(-0.5, 0.5, n).astype(np.float32),
+        "y": zero,
+        "z": z,
+        "scale_0": sc,
+        "scale_1": sc,
+        "scale_2": sc,
+        "rot_0": rot0,
+        "rot_1": zero,
+        "rot_2": zero,
+        "rot_3": zero,
+        "opacity": np.full(n, 5.0, np.float32),
+    }
     write_inria(path, n=n, degree=0, values=values)
     scene = gb.load(path)
     assert scene.num_splats == n

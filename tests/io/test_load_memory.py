@@ -49,18 +49,26 @@ print(json.dumps({"before": before, "peak": peak, "loaded": loaded, "arrays": ar
 
 
 def _file(path, n: int, seed: int):
-    names = (["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(45)]
-             + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    names = (
+        ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"]
+        + [f"f_rest_{i}" for i in range(45)]
+        + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    )
     body = np.random.default_rng(seed).normal(0, 1, (n, len(names))).astype("<f4")
-    body[:, names.index("scale_0"):names.index("scale_2") + 1] -= 4  # small splats: a quick render
+    body[:, names.index("scale_0") : names.index("scale_2") + 1] -= 4  # small splats: a quick render
     path.write_bytes(ply_header(n, names) + body.tobytes())
     return path
 
 
 def _measure(tmp_path, render: bool) -> dict:
     big, small = _file(tmp_path / "big.ply", N, 1), _file(tmp_path / "small.ply", 1000, 2)
-    out = subprocess.run([sys.executable, "-c", CHILD, str(big), str(small), "1" if render else "0"],
-                         check=True, capture_output=True, text=True, cwd=tmp_path)  # not the checkout's gbviewer
+    out = subprocess.run(
+        [sys.executable, "-c", CHILD, str(big), str(small), "1" if render else "0"],
+        check=True,
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )  # not the checkout's gbviewer
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 

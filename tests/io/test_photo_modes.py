@@ -10,12 +10,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from dataset_builders import H, W, save_rgb, shots, write_cameras_json, write_colmap
 from PIL import Image
 
 from gbviewer.core.errors import DatasetError
-from gbviewer.io.datasets import load_dataset, read_photo
-from gbviewer.io.datasets import photos
-from dataset_builders import H, W, save_rgb, shots, write_cameras_json, write_colmap
+from gbviewer.io.datasets import load_dataset, photos, read_photo
 
 RNG = np.random.default_rng(7)
 GREY16 = RNG.integers(0, 65536, (5, 6), dtype=np.uint16)
@@ -25,6 +24,7 @@ RGBA16 = RNG.integers(0, 65536, (5, 6, 4), dtype=np.uint16)
 
 def png(path: Path, rows: np.ndarray, depth: int, colour_type: int, extra: bytes = b"") -> Path:
     """A PNG written chunk by chunk (Pillow writes no 16-bit colour): `rows` big-endian samples, filter 0."""
+
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
@@ -34,10 +34,11 @@ def png(path: Path, rows: np.ndarray, depth: int, colour_type: int, extra: bytes
     else:
         data = rows.astype(">u2" if depth == 16 else np.uint8).tobytes()
     stride = len(data) // h
-    raw = b"".join(b"\0" + data[i * stride:(i + 1) * stride] for i in range(h))
+    raw = b"".join(b"\0" + data[i * stride : (i + 1) * stride] for i in range(h))
     ihdr = struct.pack(">IIBBBBB", w, h, depth, colour_type, 0, 0, 0)
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + extra + chunk(b"IDAT", zlib.compress(raw))
-                     + chunk(b"IEND", b""))
+    path.write_bytes(
+        b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + extra + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b"")
+    )
     return path
 
 
@@ -98,17 +99,22 @@ def test_16_bit_colour_within_an_8_bit_step(tmp_path):
 
 def test_jpeg_grey_and_colour(tmp_path):
     flat = np.full((16, 16), 100, np.uint8)
-    np.testing.assert_allclose(read_photo(pillow(tmp_path / "g.jpg", flat, quality=100)), grey(flat / 255),
-                               atol=2 / 255)
-    np.testing.assert_allclose(read_photo(pillow(tmp_path / "c.jpg", np.dstack([flat] * 3), quality=100)),
-                               grey(flat / 255), atol=2 / 255)
+    np.testing.assert_allclose(
+        read_photo(pillow(tmp_path / "g.jpg", flat, quality=100)), grey(flat / 255), atol=2 / 255
+    )
+    np.testing.assert_allclose(
+        read_photo(pillow(tmp_path / "c.jpg", np.dstack([flat] * 3), quality=100)), grey(flat / 255), atol=2 / 255
+    )
 
 
-@pytest.mark.parametrize("make, says", [
-    (lambda p: Image.new("CMYK", (8, 8), (0, 255, 0, 0)).save(p, "JPEG"), "a CMYK photo"),
-    (lambda p: Image.fromarray(np.ones((4, 4), np.float32)).save(p, "TIFF"), "not a PNG or JPEG"),
-    (lambda p: Image.new("I", (4, 4), 70000).save(p, "TIFF"), "not a PNG or JPEG"),
-])
+@pytest.mark.parametrize(
+    "make, says",
+    [
+        (lambda p: Image.new("CMYK", (8, 8), (0, 255, 0, 0)).save(p, "JPEG"), "a CMYK photo"),
+        (lambda p: Image.fromarray(np.ones((4, 4), np.float32)).save(p, "TIFF"), "not a PNG or JPEG"),
+        (lambda p: Image.new("I", (4, 4), 70000).save(p, "TIFF"), "not a PNG or JPEG"),
+    ],
+)
 def test_other_modes_are_refused_in_one_line(tmp_path, make, says):
     path = tmp_path / "x.img"
     make(path)
@@ -129,8 +135,15 @@ def header_only(path: Path, w: int, h: int) -> None:
     data = path.read_bytes()
     ihdr = b"IHDR" + struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
     idat = b"IDAT" + b"\x01" * (w * h // photos.PIXELS_PER_BYTE + 1)
-    path.write_bytes(data[:8] + struct.pack(">I", 13) + ihdr + struct.pack(">I", zlib.crc32(ihdr)) +
-                     struct.pack(">I", len(idat) - 4) + idat + struct.pack(">I", zlib.crc32(idat)))
+    path.write_bytes(
+        data[:8]
+        + struct.pack(">I", 13)
+        + ihdr
+        + struct.pack(">I", zlib.crc32(ihdr))
+        + struct.pack(">I", len(idat) - 4)
+        + idat
+        + struct.pack(">I", zlib.crc32(idat))
+    )
 
 
 def test_a_photo_larger_than_its_colmap_camera_is_refused_from_its_header(tmp_path, views, monkeypatch):
@@ -161,6 +174,8 @@ def test_a_cameras_json_may_be_an_integer_fraction_of_its_photos(tmp_path, views
     """A cameras.json may hold a training size below its photos' (an integer upscale fits); 12000x12000 does not."""
     write_cameras_json(tmp_path, views)
     header_only(tmp_path / "images" / "v01.png", 12000, 12000)
-    with pytest.raises(DatasetError, match="12000x12000 but its camera 'v01' is 130x100; expected that size or an "
-                                           "integer down- or upscale"):
+    with pytest.raises(
+        DatasetError,
+        match="12000x12000 but its camera 'v01' is 130x100; expected that size or an integer down- or upscale",
+    ):
         load_dataset(tmp_path / "cameras.json")

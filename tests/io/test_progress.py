@@ -34,9 +34,13 @@ def _write(kind: str, folder):
     path = folder / kind
     if kind in ("inria", "ascii"):
         return _inria(path, s, text=kind == "ascii")
-    data = {"compressed": lambda: encode_compressed_ply(s), "spz-gzip": lambda: encode_spz(s, 2),
-            "spz-raw": lambda: encode_spz(s, 3, gzipped=False), "spz-zstd": lambda: encode_spz(s, 4),
-            "splat": lambda: encode_splat(s0)}.get(kind)
+    data = {
+        "compressed": lambda: encode_compressed_ply(s),
+        "spz-gzip": lambda: encode_spz(s, 2),
+        "spz-raw": lambda: encode_spz(s, 3, gzipped=False),
+        "spz-zstd": lambda: encode_spz(s, 4),
+        "splat": lambda: encode_splat(s0),
+    }.get(kind)
     if data is not None:
         path.write_bytes(data())
         return path
@@ -138,14 +142,18 @@ def test_cancel_set_before_the_load_reports_nothing(files, kind):
 @pytest.mark.parametrize("cancel", [object(), True, lambda: False])
 def test_a_cancel_without_is_set_is_refused(files, cancel):
     """One line naming `cancel` and what it takes (not an AttributeError, not blamed on the file)."""
-    with pytest.raises(gb.GBViewerError, match=r"^cancel: expected a gbviewer.CancelToken, a threading.Event or an "
-                                               r"object with an is_set\(\) method") as exc:
+    with pytest.raises(
+        gb.GBViewerError,
+        match=r"^cancel: expected a gbviewer.CancelToken, a threading.Event or an "
+        r"object with an is_set\(\) method",
+    ) as exc:
         gb.load(files["inria"], cancel=cancel)
     assert not isinstance(exc.value, gb.SceneFormatError)
 
 
-@pytest.mark.parametrize("kind, unit", [(k, u) for k in KINDS for u in ("bytes", "splats")
-                                        if u == "bytes" or k in SPLATS_REPORTED])
+@pytest.mark.parametrize(
+    "kind, unit", [(k, u) for k in KINDS for u in ("bytes", "splats") if u == "bytes" or k in SPLATS_REPORTED]
+)
 @pytest.mark.parametrize("error", [ValueError, OSError, KeyError, gb.GBViewerError])
 def test_a_raising_progress_callback_is_not_blamed_on_the_file(files, kind, unit, error, small_chunks):
     """A progress callback that raises (midway, in either phase, with exceptions the loaders catch from the file):
@@ -165,8 +173,15 @@ def test_a_raising_progress_callback_is_not_blamed_on_the_file(files, kind, unit
     same_scene(gb.load(files[kind]), gb.load(files[kind], cancel=gb.CancelToken()))
 
 
-@pytest.mark.parametrize("kind, unit", [(k, u) for k in ("inria", "ascii", "spz-gzip", "spz-zstd", "splat", "sog-zip")
-                                        for u in ("bytes", "splats") if u == "bytes" or k in SPLATS_REPORTED])
+@pytest.mark.parametrize(
+    "kind, unit",
+    [
+        (k, u)
+        for k in ("inria", "ascii", "spz-gzip", "spz-zstd", "splat", "sog-zip")
+        for u in ("bytes", "splats")
+        if u == "bytes" or k in SPLATS_REPORTED
+    ],
+)
 def test_cancel_midway_stops_within_a_chunk(files, kind, unit, small_chunks):
     """Set halfway through reading (a mapped PLY, ASCII lines, a gzip stream, a whole file, images) or decoding:
     the next chunk raises, so the last report is the one that set it."""

@@ -32,9 +32,15 @@ def _sog_zip(s: dict) -> bytes:
 def samples(tmp_path_factory) -> dict[str, bytes]:
     s = random_params(300, sh_degree=1, seed=3)
     s0 = random_params(300, seed=4)
-    return {"inria": _inria(s, tmp_path_factory.mktemp("inria")), "compressed": encode_compressed_ply(s),
-            "spz2": encode_spz(s, 2), "spz3raw": encode_spz(s, 3, gzipped=False), "spz4": encode_spz(s, 4),
-            "splat": encode_splat(s0), "sog": _sog_zip(s0)}
+    return {
+        "inria": _inria(s, tmp_path_factory.mktemp("inria")),
+        "compressed": encode_compressed_ply(s),
+        "spz2": encode_spz(s, 2),
+        "spz3raw": encode_spz(s, 3, gzipped=False),
+        "spz4": encode_spz(s, 4),
+        "splat": encode_splat(s0),
+        "sog": _sog_zip(s0),
+    }
 
 
 def outcome(path) -> str:
@@ -93,7 +99,7 @@ def test_corrupt_zstd_stream_is_named(samples, tmp_path):
     toc = struct.unpack_from("<I", data, 16)[0]
     first = struct.unpack_from("<Q", data, toc)[0]  # compressed size of stream 0 (positions)
     start = toc + data[15] * 16 + first + 1  # inside stream 1 (alphas)
-    data[start:start + 8] = b"\xff" * 8
+    data[start : start + 8] = b"\xff" * 8
     (tmp_path / "bad.spz").write_bytes(bytes(data))
     assert "stream 'alphas'" in _message(tmp_path / "bad.spz")
 
@@ -160,7 +166,9 @@ def test_a_sog_folder_file_that_is_a_fifo_is_one_line(tmp_path, name):
         (tmp_path / n).write_bytes(data)
     (tmp_path / name).unlink()
     os.mkfifo(tmp_path / name)
-    run = subprocess.run([sys.executable, "-m", "gbviewer", "info", str(tmp_path)], capture_output=True, text=True,
-                         timeout=60)
+    run = subprocess.run(
+        [sys.executable, "-m", "gbviewer", "info", str(tmp_path)], capture_output=True, text=True, timeout=60
+    )
     assert run.returncode == 2 and run.stderr.strip().splitlines() == [
-        f"gbviewer: error: {tmp_path}: field '{name}': cannot read it (not a regular file)"]
+        f"gbviewer: error: {tmp_path}: field '{name}': cannot read it (not a regular file)"
+    ]

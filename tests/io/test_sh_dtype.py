@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.model.camera import orbit_camera
 from gbviewer.io.write import ply_header
+from gbviewer.model.camera import orbit_camera
 from gbviewer.render import Mode, RenderSettings, get_renderer
 
 SEEDS = Path(__file__).parent / "fuzz" / "seeds"
@@ -33,8 +33,22 @@ def test_float16_is_the_float32_load_rounded(path):
 
 
 def _raw_ply(path: Path, dc: float) -> Path:
-    names = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
-             "rot_0", "rot_1", "rot_2", "rot_3"]
+    names = [
+        "x",
+        "y",
+        "z",
+        "f_dc_0",
+        "f_dc_1",
+        "f_dc_2",
+        "opacity",
+        "scale_0",
+        "scale_1",
+        "scale_2",
+        "rot_0",
+        "rot_1",
+        "rot_2",
+        "rot_3",
+    ]
     body = np.zeros((4, len(names)), "<f4")
     body[:, 3], body[:, 10] = dc, 1.0
     path.write_bytes(ply_header(4, names) + body.tobytes())

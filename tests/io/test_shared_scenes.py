@@ -9,13 +9,15 @@ from pathlib import Path
 import numpy as np
 import plyfile
 import pytest
+from helpers import IN_CI
 
 import gbviewer as gb
-from helpers import IN_CI
 from gbviewer.model.scene import SH_C0
 
 SCENES = Path(__file__).resolve().parents[2].parent / "shared" / "scenes"
-needs_scenes = pytest.mark.skipif(not SCENES.is_dir() and not IN_CI, reason=f"{SCENES} absent (shared/ is not beside the repo)")
+needs_scenes = pytest.mark.skipif(
+    not SCENES.is_dir() and not IN_CI, reason=f"{SCENES} absent (shared/ is not beside the repo)"
+)
 
 # name: (format, version, splats, SH degree), from shared/scenes/SOURCES.md
 EXPECTED = {
@@ -72,7 +74,7 @@ def test_biker_spz_matches_compressed_ply():
         return np.repeat(rng, 256, axis=0)[:n]
 
     bits = np.array([2047, 1023, 2047])
-    pos_tol = 2.0 ** -13 + per_splat("", "xyz") / (2 * bits) + 1e-6
+    pos_tol = 2.0**-13 + per_splat("", "xyz") / (2 * bits) + 1e-6
     assert (np.abs(spz.means - cply.means) <= pos_tol).all()
 
     log_c = np.log(cply.scales)

@@ -25,9 +25,19 @@ BASE = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
 TAIL = ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
 
 
-def raw_ply(path: Path, n: int, degree: int = 3, seed: int = 0, extra: tuple = (), dtypes: dict | None = None,
-            byte_order: str = "<", shuffle: bool = False, sort_free: int | None = None, faces: int = 0,
-            extremes: np.ndarray | None = None) -> Path:
+def raw_ply(
+    path: Path,
+    n: int,
+    degree: int = 3,
+    seed: int = 0,
+    extra: tuple = (),
+    dtypes: dict | None = None,
+    byte_order: str = "<",
+    shuffle: bool = False,
+    sort_free: int | None = None,
+    faces: int = 0,
+    extremes: np.ndarray | None = None,
+) -> Path:
     """An INRIA vertex table of random raw values: SH `degree`, `extra` columns (filter_3D, ...), `dtypes` per
     column (default float32), shuffled columns, the sort-free columns of view-weight degree `sort_free`, and
     `faces` mesh faces after the vertices. `extremes`: values planted in 2% of each float column's rows, and
@@ -88,11 +98,11 @@ def decode(path: Path) -> gb.Scene:
     if "f_do_0" in names:
         ro = sorted((c for c in names if c.startswith("f_ro_")), key=lambda c: int(c[5:]))
         info = np.asarray(v["info"], np.float32)
-        extra = {"view_weight_sh": col("f_do_0", *ro), "weight_background": float(info[0]),
-                 "wsr_sigma": float(info[1])}
+        extra = {"view_weight_sh": col("f_do_0", *ro), "weight_background": float(info[0]), "wsr_sigma": float(info[1])}
     filt = col("filter_3D")[:, 0] if "filter_3D" in names else None
-    return gb.Scene.from_arrays(col("x", "y", "z"), scales, col("rot_0", "rot_1", "rot_2", "rot_3"), opac, sh, filt,
-                                source=str(path), **extra)
+    return gb.Scene.from_arrays(
+        col("x", "y", "z"), scales, col("rot_0", "rot_1", "rot_2", "rot_3"), opac, sh, filt, source=str(path), **extra
+    )
 
 
 def arrays(scene: gb.Scene) -> dict[str, np.ndarray | None]:
@@ -125,22 +135,63 @@ def load_quietly(path: Path) -> gb.Scene:
 
 # Values at the edges of Scene.from_arrays's checks: non-finite, the SH limit 1e30 and the next float32, a raw scale
 # either side of log(MAX_SCALE) = 41.4465 and of exp's overflow, opacities whose sigmoid is 0 or 1, float16's range.
-EDGES = np.array([np.nan, np.inf, -np.inf, 1e30, np.nextafter(np.float32(1e30), np.float32(np.inf)), -1e30, -3e38,
-                  0.0, -0.0, 1e-30, 41.4465, 41.4466, 88.72, 89.0, -104.0, 65504.0, -65504.0, 1.00048828125], np.float32)
-HALF_EDGES = np.array([np.nan, 65504.0, -65504.0, 0.0, -0.0, 1e-8, 2.98e-8, 6e-8, 3e-5, 1.00048828125, 41.4466,
-                       89.0, -104.0], np.float32)  # all within float16's range (NaN: a dropped splat)
+EDGES = np.array(
+    [
+        np.nan,
+        np.inf,
+        -np.inf,
+        1e30,
+        np.nextafter(np.float32(1e30), np.float32(np.inf)),
+        -1e30,
+        -3e38,
+        0.0,
+        -0.0,
+        1e-30,
+        41.4465,
+        41.4466,
+        88.72,
+        89.0,
+        -104.0,
+        65504.0,
+        -65504.0,
+        1.00048828125,
+    ],
+    np.float32,
+)
+HALF_EDGES = np.array(
+    [np.nan, 65504.0, -65504.0, 0.0, -0.0, 1e-8, 2.98e-8, 6e-8, 3e-5, 1.00048828125, 41.4466, 89.0, -104.0], np.float32
+)  # all within float16's range (NaN: a dropped splat)
 # Quaternions at the edges of the normalisation: squares that overflow, norms under 1e-12, within and just beyond
 # 4 float32 eps of unit length, zero, non-finite.
-QUATS = np.array([[3e38, 3e38, 3e38, 3e38], [-3e38, 1.0, 0.0, 0.0], [1e-13, 0, 0, 0], [0, 0, 0, 0], [1, 0, 0, 0],
-                  [1 + 2**-22, 0, 0, 0], [1 + 2**-20, 0, 0, 0], [0.5, 0.5, 0.5, 0.5], [1e-20, 1e-20, 0, 0],
-                  [np.inf, 0, 0, 1], [np.nan, 1, 0, 0], [1e-7, 1e-7, 1e-7, 1.0]], np.float32)
+QUATS = np.array(
+    [
+        [3e38, 3e38, 3e38, 3e38],
+        [-3e38, 1.0, 0.0, 0.0],
+        [1e-13, 0, 0, 0],
+        [0, 0, 0, 0],
+        [1, 0, 0, 0],
+        [1 + 2**-22, 0, 0, 0],
+        [1 + 2**-20, 0, 0, 0],
+        [0.5, 0.5, 0.5, 0.5],
+        [1e-20, 1e-20, 0, 0],
+        [np.inf, 0, 0, 1],
+        [np.nan, 1, 0, 0],
+        [1e-7, 1e-7, 1e-7, 1.0],
+    ],
+    np.float32,
+)
 
 LAYOUTS = {
-    "sh3": {}, "sh0": {"degree": 0}, "sh1": {"degree": 1}, "sh2": {"degree": 2},
-    "filter": {"extra": ("filter_3D",)}, "shuffled": {"shuffle": True, "extra": ("filter_3D",)},
-    "big-endian": {"byte_order": ">"}, "mixed-types": {"dtypes": {"x": "f8", "nx": "u1", "scale_1": "f8",
-                                                                   "f_rest_4": "i2", "opacity": "f8"}},
-    "sort-free": {"sort_free": 2}, "sort-free-sh0": {"sort_free": 0, "degree": 1},
+    "sh3": {},
+    "sh0": {"degree": 0},
+    "sh1": {"degree": 1},
+    "sh2": {"degree": 2},
+    "filter": {"extra": ("filter_3D",)},
+    "shuffled": {"shuffle": True, "extra": ("filter_3D",)},
+    "big-endian": {"byte_order": ">"},
+    "mixed-types": {"dtypes": {"x": "f8", "nx": "u1", "scale_1": "f8", "f_rest_4": "i2", "opacity": "f8"}},
+    "sort-free": {"sort_free": 2},
+    "sort-free-sh0": {"sort_free": 0, "degree": 1},
     "faces-after": {"faces": 50},
 }
 
@@ -156,8 +207,9 @@ def chunks(request, monkeypatch):
     return request.param
 
 
-@pytest.mark.parametrize("layout, n", [(lay, n) for lay in LAYOUTS for n in (1, 2, 7, 3001)
-                                       if n > 1 or "sort_free" not in LAYOUTS[lay]])  # sort-free needs 2 rows
+@pytest.mark.parametrize(
+    "layout, n", [(lay, n) for lay in LAYOUTS for n in (1, 2, 7, 3001) if n > 1 or "sort_free" not in LAYOUTS[lay]]
+)  # sort-free needs 2 rows
 def test_streamed_equals_reference_and_mapped_path(tmp_path, layout, n, chunks):
     path = raw_ply(tmp_path / "s.ply", n, seed=n, **LAYOUTS[layout])
     with warnings.catch_warnings():
@@ -251,12 +303,15 @@ def outcome(fn, path: Path) -> tuple:
 @pytest.mark.parametrize("sh_dtype", ["float32", "float16"])
 @pytest.mark.parametrize("layout", list(LAYOUTS))
 def test_values_at_the_edges_of_the_checks_load_as_the_full_checks_do(tmp_path, layout, sh_dtype, chunks):
-    path = raw_ply(tmp_path / "e.ply", 2000, seed=5, extremes=EDGES if sh_dtype == "float32" else HALF_EDGES,
-                   **LAYOUTS[layout])
+    path = raw_ply(
+        tmp_path / "e.ply", 2000, seed=5, extremes=EDGES if sh_dtype == "float32" else HALF_EDGES, **LAYOUTS[layout]
+    )
     if LAYOUTS[layout].get("sort_free") is not None:  # the globals row stays valid
         patch_info(path)
-    got, want = (outcome(lambda: gb.load(path, sh_dtype=sh_dtype), path),
-                 outcome(lambda: full_checks(path, sh_dtype), path))
+    got, want = (
+        outcome(lambda: gb.load(path, sh_dtype=sh_dtype), path),
+        outcome(lambda: full_checks(path, sh_dtype), path),
+    )
     assert got[0] == want[0] == "ok", (got[:2], want[:2])
     assert got[2] == want[2] and any("dropped" in w for w in got[2])  # the same splats dropped, the same words
     assert_same(got[1], want[1])
@@ -288,7 +343,11 @@ def test_quaternion_norms_sum_in_einsums_order():
     normalised the quaternions before them, gives the same bits."""
     from gbviewer.model.scene import _norms
 
-    q = np.concatenate([np.random.default_rng(1).normal(0, 1, (200_000, 4)) * np.logspace(-20, 19, 200_000)[:, None],
-                        QUATS[np.isfinite(QUATS).all(axis=1)]]).astype(np.float32)
+    q = np.concatenate(
+        [
+            np.random.default_rng(1).normal(0, 1, (200_000, 4)) * np.logspace(-20, 19, 200_000)[:, None],
+            QUATS[np.isfinite(QUATS).all(axis=1)],
+        ]
+    ).astype(np.float32)
     with np.errstate(over="ignore"):
         np.testing.assert_array_equal(_norms(q), np.sqrt(np.einsum("ij,ij->i", q, q)), strict=True)

@@ -17,8 +17,14 @@ from gbviewer.io.write import inria_columns, ply_header
 
 def write_ply(path, comments=(), filter_3d=False):
     s = random_params(6, seed=3)
-    scene = gb.Scene.from_arrays(s["means"], s["scales"], s["quats"], s["opacities"], s["sh"],
-                                 np.full(6, 0.01, np.float32) if filter_3d else None)
+    scene = gb.Scene.from_arrays(
+        s["means"],
+        s["scales"],
+        s["quats"],
+        s["opacities"],
+        s["sh"],
+        np.full(6, 0.01, np.float32) if filter_3d else None,
+    )
     cols = inria_columns(scene)
     body = np.stack(list(cols.values()), axis=1).astype("<f4")
     path.write_bytes(ply_header(6, list(cols), tuple(comments)) + body.tobytes())
@@ -29,10 +35,15 @@ def trained(scene):
     return scene.meta["trained_as"], scene.meta["trained_as_source"], scene.meta["trained_as_conflict"]
 
 
-@pytest.mark.parametrize("comment, expected", [("SplatRenderMode: mip", ANTIALIASED),
-                                               ("SplatRenderMode: default", THREEDGS),
-                                               ("  splatrendermode:MIP ", ANTIALIASED),
-                                               ("SplatRenderMode: 2dgs", UNKNOWN)])
+@pytest.mark.parametrize(
+    "comment, expected",
+    [
+        ("SplatRenderMode: mip", ANTIALIASED),
+        ("SplatRenderMode: default", THREEDGS),
+        ("  splatrendermode:MIP ", ANTIALIASED),
+        ("SplatRenderMode: 2dgs", UNKNOWN),
+    ],
+)
 def test_ply_comment(tmp_path, comment, expected):
     scene = gb.load(write_ply(tmp_path / "s.ply", ["Exported from Brush", comment]))
     assert trained(scene) == (expected, f"PLY comment 'SplatRenderMode: {comment.split(':')[1].strip()}'", None)
@@ -73,8 +84,10 @@ def test_filter_3d_column(tmp_path):
 def test_conflicts_follow_the_rule(tmp_path):
     data_wins = gb.load(write_ply(tmp_path / "a.ply", ["SplatRenderMode: default"], filter_3d=True))
     assert trained(data_wins)[:2] == (MIP_3D, "filter_3D column")
-    assert trained(data_wins)[2] == ("3dgs: PLY comment 'SplatRenderMode: default' overruled by mip-splatting "
-                                     "(3D filter): filter_3D column (the filter_3D column outranks a declaration)")
+    assert trained(data_wins)[2] == (
+        "3dgs: PLY comment 'SplatRenderMode: default' overruled by mip-splatting "
+        "(3D filter): filter_3D column (the filter_3D column outranks a declaration)"
+    )
     last_wins = gb.load(write_ply(tmp_path / "b.ply", ["SplatRenderMode: mip", "SplatRenderMode: default"]))
     assert trained(last_wins)[:2] == (THREEDGS, "PLY comment 'SplatRenderMode: default'")
     assert "the last declaration wins" in trained(last_wins)[2]
@@ -111,5 +124,24 @@ def test_an_option_against_the_mode_the_file_says_names_the_file(tmp_path, capsy
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
     assert f"{path} says it was trained as antialiased" in err and "unless --mode says otherwise" in err
-    assert main(["render", str(path), "--mode", "scalar", "--sh-degree", "1", "--width", "8", "--height", "8",
-                 "--out", out, "--backend", "cpu"]) == 0
+    assert (
+        main(
+            [
+                "render",
+                str(path),
+                "--mode",
+                "scalar",
+                "--sh-degree",
+                "1",
+                "--width",
+                "8",
+                "--height",
+                "8",
+                "--out",
+                out,
+                "--backend",
+                "cpu",
+            ]
+        )
+        == 0
+    )

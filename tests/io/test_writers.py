@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from encoders import random_params
+from helpers import skip_or_fail
 from test_convert import assert_same, raw_inria_ply
 
 import gbviewer as gb
@@ -18,7 +19,6 @@ from gbviewer.cli import main
 from gbviewer.io.write_packed import fractional_bits
 from gbviewer.io.write_playcanvas import codebook, order
 from gbviewer.model.scene import SH_C0
-from helpers import skip_or_fail
 
 SCENES = Path(__file__).resolve().parents[2].parent / "shared" / "scenes"
 
@@ -52,8 +52,9 @@ def test_ply_glb_ply_is_bit_exact(tmp_path):
     assert direct.read_bytes() == via.read_bytes()
 
 
-@pytest.mark.parametrize("name", ["fruit_drops_minimal.ply", "biker.spz", "plant.splat", "guitar.compressed.ply",
-                                  "st-peter.sog"])
+@pytest.mark.parametrize(
+    "name", ["fruit_drops_minimal.ply", "biker.spz", "plant.splat", "guitar.compressed.ply", "st-peter.sog"]
+)
 def test_shared_scene_renders_equal_after_glb(tmp_path, name):
     if not (SCENES / name).exists():
         skip_or_fail(f"{SCENES / name} absent (shared/ is not beside the repo)")
@@ -149,10 +150,18 @@ def test_sog_within_its_precision(tmp_path, n):
         assert rest_error.mean() < np.abs(src.sh[:, 1:] - src.sh[:, 1:].mean(axis=0)).mean()
 
 
-@pytest.mark.parametrize("out,fmt,keeps", [("a.glb", "glb", True), ("a.spz.glb", "glb-spz", True),
-                                           ("a.spz", "spz", True), ("a.compressed.ply", "compressed-ply", True),
-                                           ("a.sog", "sog", True), ("a.splat", "splat", False),
-                                           ("a.ply", "ply", True)])
+@pytest.mark.parametrize(
+    "out,fmt,keeps",
+    [
+        ("a.glb", "glb", True),
+        ("a.spz.glb", "glb-spz", True),
+        ("a.spz", "spz", True),
+        ("a.compressed.ply", "compressed-ply", True),
+        ("a.sog", "sog", True),
+        ("a.splat", "splat", False),
+        ("a.ply", "ply", True),
+    ],
+)
 def test_convert_keeps_training_mode_and_says_what_is_dropped(tmp_path, capsys, out, fmt, keeps):
     src = tmp_path / "in.ply"
     s = scene_of(300, seed=3)

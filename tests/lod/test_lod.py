@@ -22,9 +22,20 @@ from gbviewer.lod.tree import BRANCHING
 def rotations(quats: np.ndarray) -> np.ndarray:
     """(N,3,3) rotation matrices of unit quaternions (w,x,y,z), float64."""
     w, x, y, z = np.asarray(quats, np.float64).T
-    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-                     2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-                     2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1).reshape(-1, 3, 3)
+    return np.stack(
+        [
+            1 - 2 * (y * y + z * z),
+            2 * (x * y - w * z),
+            2 * (x * z + w * y),
+            2 * (x * y + w * z),
+            1 - 2 * (x * x + z * z),
+            2 * (y * z - w * x),
+            2 * (x * z - w * y),
+            2 * (y * z + w * x),
+            1 - 2 * (x * x + y * y),
+        ],
+        1,
+    ).reshape(-1, 3, 3)
 
 
 def covariances(scales: np.ndarray, quats: np.ndarray) -> np.ndarray:
@@ -43,14 +54,13 @@ def leaves_under(tree: lod.Hierarchy, node: int) -> np.ndarray:
     level = int(np.searchsorted(tree.levels, node, side="right")) - 1
     q = node - int(tree.levels[level])
     span = BRANCHING**level
-    return tree.order[q * span:min((q + 1) * span, tree.num_leaves)]
+    return tree.order[q * span : min((q + 1) * span, tree.num_leaves)]
 
 
 def paired_scene(alpha: float) -> gb.Scene:
     """Two identical splats."""
     q = np.array([[0.9, 0.1, -0.3, 0.2]] * 2)
-    return gb.Scene.from_arrays([[0.1, 0.2, 3.0]] * 2, [[0.3, 0.05, 0.1]] * 2, q, [alpha] * 2,
-                                np.full((2, 4, 3), 0.25))
+    return gb.Scene.from_arrays([[0.1, 0.2, 3.0]] * 2, [[0.3, 0.05, 0.1]] * 2, q, [alpha] * 2, np.full((2, 4, 3), 0.25))
 
 
 @pytest.mark.parametrize("rule, expected", [("depth", lambda a: 1 - (1 - a) ** 2), ("sum", lambda a: min(1, 2 * a))])
@@ -60,8 +70,9 @@ def test_parent_of_identical_children_is_the_child(rule, expected, alpha):
     tree = lod.build(scene, rule)
     assert tree.levels.tolist() == [0, 2, 3] and list(tree.children(2)) == [0, 1]
     np.testing.assert_allclose(tree.means[0], scene.means[0], atol=1e-7)
-    np.testing.assert_allclose(covariances(tree.scales, tree.quats)[0], covariances(scene.scales, scene.quats)[0],
-                               atol=1e-7)
+    np.testing.assert_allclose(
+        covariances(tree.scales, tree.quats)[0], covariances(scene.scales, scene.quats)[0], atol=1e-7
+    )
     np.testing.assert_allclose(tree.sh[0], scene.sh[0], atol=1e-7)
     np.testing.assert_allclose(tree.opacities[0], expected(alpha), rtol=1e-6)
 
@@ -93,11 +104,16 @@ def test_merged_moments_are_the_weighted_moments_of_the_leaves(seed, rule):
         ww, mean, d, second = mixture_moments(scene, idx, w[idx])
         i = node - n
         np.testing.assert_allclose(tree.means[i], mean, rtol=1e-6, atol=1e-6)
-        np.testing.assert_allclose(covariances(tree.scales[i:i + 1], tree.quats[i:i + 1])[0], second,
-                                   rtol=1e-5, atol=1e-6 * np.abs(second).max())
-        np.testing.assert_allclose(tree.sh[i], np.einsum("i,ijk->jk", ww, scene.sh[idx].astype(np.float64)),
-                                   rtol=1e-5, atol=1e-6)
-        expect_alpha = -np.expm1(-tau[idx].sum() / areas(tree.scales[i:i + 1])[0])
+        np.testing.assert_allclose(
+            covariances(tree.scales[i : i + 1], tree.quats[i : i + 1])[0],
+            second,
+            rtol=1e-5,
+            atol=1e-6 * np.abs(second).max(),
+        )
+        np.testing.assert_allclose(
+            tree.sh[i], np.einsum("i,ijk->jk", ww, scene.sh[idx].astype(np.float64)), rtol=1e-5, atol=1e-6
+        )
+        expect_alpha = -np.expm1(-tau[idx].sum() / areas(tree.scales[i : i + 1])[0])
         np.testing.assert_allclose(tree.opacities[i], expect_alpha, rtol=1e-5)
         d_max = np.linalg.norm(d, axis=1).max()
         assert tree.radius[i] >= d_max * (1 - 1e-6)
@@ -128,8 +144,9 @@ def test_leaf_order_is_the_morton_order(layout):
         means[: n - 10] = means[: n - 10] * 1e-4 + 0.3  # far splats stretch the bounds around a dense cluster
     if layout == "ties":
         means = np.round(means * 4) / 4  # 9^3 distinct centres
-    scene = gb.Scene.from_arrays(means, np.full((n, 3), 0.01), np.tile([1.0, 0, 0, 0], (n, 1)), np.full(n, 0.5),
-                                 np.zeros((n, 1, 3)))
+    scene = gb.Scene.from_arrays(
+        means, np.full((n, 3), 0.01), np.tile([1.0, 0, 0, 0], (n, 1)), np.full(n, 0.5), np.zeros((n, 1, 3))
+    )
     np.testing.assert_array_equal(lod.build(scene).order, morton_order(scene.means))
 
 
@@ -143,9 +160,12 @@ def test_merged_covariance_of_degenerate_and_extreme_children(case):
     if case == "aligned_needles":
         q[:] = q[0]
     means = np.zeros((8, 3))
-    scales = {"spheres": np.full((8, 3), 0.1), "spheroids": np.tile([0.2, 0.2, 0.05], (8, 1)),
-              "needles": np.tile([1.0, 1e-4, 1e-4], (8, 1)),
-              "aligned_needles": np.tile([1.0, 1e-4, 2e-4], (8, 1))}.get(case, np.full((8, 3), 1e-3))
+    scales = {
+        "spheres": np.full((8, 3), 0.1),
+        "spheroids": np.tile([0.2, 0.2, 0.05], (8, 1)),
+        "needles": np.tile([1.0, 1e-4, 1e-4], (8, 1)),
+        "aligned_needles": np.tile([1.0, 1e-4, 2e-4], (8, 1)),
+    }.get(case, np.full((8, 3), 1e-3))
     if case == "line":
         means[:, 0] = np.linspace(-1, 1, 8)
     if case == "plane":
@@ -249,8 +269,15 @@ def test_cut_scene_renders_in_every_mode_with_its_label():
     cut = lod.cut_scene(scene, cam, 2.0)
     drawn, total = cut.meta["lod"]
     assert drawn == cut.num_splats and total == scene.num_splats and cut.sh.shape[1:] == scene.sh.shape[1:]
-    for spec in ("scalar+lod:2", "mip+lod:2", "analytic+lod:2", "gaussian_blending+lod:2", "scalar:2+lod:2",
-                 "wsr+lod:2", "duplex+lod:2"):
+    for spec in (
+        "scalar+lod:2",
+        "mip+lod:2",
+        "analytic+lod:2",
+        "gaussian_blending+lod:2",
+        "scalar:2+lod:2",
+        "wsr+lod:2",
+        "duplex+lod:2",
+    ):
         settings = gb.RenderSettings.parse(spec)
         assert settings.lod == 2.0 and gb.RenderSettings.parse(settings.spec) == settings
         frame = gb.get_renderer(scene, "cpu").render(cam, settings)
@@ -266,8 +293,9 @@ def test_cut_scene_renders_in_every_mode_with_its_label():
 
 def test_cut_refuses_scenes_with_order_independent_data():
     base = random_scene(50, seed=7)
-    scene = gb.Scene.from_arrays(base.means, base.scales, base.quats, base.opacities, base.sh,
-                                 view_weight_sh=np.ones((50, 1)))
+    scene = gb.Scene.from_arrays(
+        base.means, base.scales, base.quats, base.opacities, base.sh, view_weight_sh=np.ones((50, 1))
+    )
     with pytest.raises(GBViewerError, match="level of detail is for plain splat scenes"):
         lod.cut_scene(scene, gb.Camera(8, 8, 8.0, 8.0, 4, 4, np.eye(3), np.zeros(3)), 1.0)
 
@@ -387,8 +415,12 @@ def test_render_many_mixing_lod_and_full_panes_matches_single_renders():
     view scene: its own batch), each bit-identical to its own render."""
     scene = random_scene(2000, seed=12, sh_degree=1, spread=3.0)
     cam = gb.Camera(64, 48, 20.0, 20.0, 32, 24, np.eye(3), np.zeros(3))
-    settings = [gb.RenderSettings(), gb.RenderSettings(lod=2.0), gb.RenderSettings(),
-                gb.RenderSettings("gaussian_blending", lod=4.0)]
+    settings = [
+        gb.RenderSettings(),
+        gb.RenderSettings(lod=2.0),
+        gb.RenderSettings(),
+        gb.RenderSettings("gaussian_blending", lod=4.0),
+    ]
     renderer = gb.get_renderer(scene, "cpu")
     many = renderer.render_many([(cam, s) for s in settings])
     for s, frame in zip(settings, many):

@@ -26,8 +26,9 @@ from gbviewer.lod.entry import read_entry
 def entry_of(tmp_path: Path, n: int = 600, filter3d: bool = False) -> tuple[gb.Scene, lod.Hierarchy, Path]:
     scene = random_scene(n, seed=5, sh_degree=1)
     if filter3d:
-        scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
-                                     np.full(n, 0.01))
+        scene = gb.Scene.from_arrays(
+            scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, np.full(n, 0.01)
+        )
     scene = gb.load(write_inria_ply(scene, tmp_path / "s.ply"))
     cache = tmp_path / "cache"
     tree = cached_build(scene, "depth", cache)
@@ -45,6 +46,7 @@ def set_(name, index, value):
     def edit(a):
         a[name] = a[name].copy()
         a[name][index] = value
+
     return edit
 
 
@@ -107,17 +109,27 @@ def test_an_entry_is_refused_from_its_headers_before_its_data(tmp_path, case):
         for name, a in arrays.items():
             if name == "radius":
                 if case == "lying shape":
-                    z.writestr(*member(name, b"{'descr': '<f4', 'fortran_order': False, 'shape': (10000000,), }",
-                                       a.tobytes()))
+                    z.writestr(
+                        *member(name, b"{'descr': '<f4', 'fortran_order': False, 'shape': (10000000,), }", a.tobytes())
+                    )
                 elif case == "trailing data":
-                    z.writestr(*member(name, f"{{'descr': '<f4', 'fortran_order': False, 'shape': ({len(a)},), }}"
-                                       .encode(), a.tobytes() + b"\0" * 4))
+                    z.writestr(
+                        *member(
+                            name,
+                            f"{{'descr': '<f4', 'fortran_order': False, 'shape': ({len(a)},), }}".encode(),
+                            a.tobytes() + b"\0" * 4,
+                        )
+                    )
                 elif case == "pickled object array":
                     z.writestr(*member(name, b"{'descr': '|O', 'fortran_order': False, 'shape': (3,), }", b"\x80"))
                 else:
                     with z.open(f"{name}.npy", "w", force_zip64=True) as fh:
-                        fh.write(b"\x93NUMPY\x01\x00" + (74).to_bytes(2, "little") +
-                                 b"{'descr': '<f4', 'fortran_order': False, 'shape': (250000000,), }".ljust(73) + b"\n")
+                        fh.write(
+                            b"\x93NUMPY\x01\x00"
+                            + (74).to_bytes(2, "little")
+                            + b"{'descr': '<f4', 'fortran_order': False, 'shape': (250000000,), }".ljust(73)
+                            + b"\n"
+                        )
                         for _ in range(1000):
                             fh.write(bytes(1 << 20))
                 continue
@@ -136,8 +148,9 @@ def npz_member(a: np.ndarray) -> bytes:
 def test_a_valid_entry_reads_back_bit_identical_with_a_3d_filter(tmp_path):
     scene, tree, entry = entry_of(tmp_path, filter3d=True)
     back = read_entry(entry, scene, "depth")
-    assert all(np.array_equal(a, b) and a.dtype == b.dtype for a, b in zip(tree.arrays().values(),
-                                                                            back.arrays().values()))
+    assert all(
+        np.array_equal(a, b) and a.dtype == b.dtype for a, b in zip(tree.arrays().values(), back.arrays().values())
+    )
 
 
 def test_flicker_over_a_repeated_leaf_entry_rebuilds_it(tmp_path):
@@ -151,10 +164,34 @@ def test_flicker_over_a_repeated_leaf_entry_rebuilds_it(tmp_path):
     folder = tmp_path / "xdg" / "gbviewer" / "lod"
     folder.mkdir(parents=True)
     os.replace(entry, folder / entry.name)
-    out = subprocess.run([sys.executable, "-m", "gbviewer", "flicker", str(tmp_path / "s.ply"), "--modes",
-                          "scalar+lod:2,scalar+lod:4", "--pairs", "2", "--frames", "8", "--width", "64", "--height",
-                          "48", "--backend", "cpu", "--out", str(tmp_path / "out")],
-                         capture_output=True, cwd=tmp_path, text=True, env=env, timeout=300)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "gbviewer",
+            "flicker",
+            str(tmp_path / "s.ply"),
+            "--modes",
+            "scalar+lod:2,scalar+lod:4",
+            "--pairs",
+            "2",
+            "--frames",
+            "8",
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--backend",
+            "cpu",
+            "--out",
+            str(tmp_path / "out"),
+        ],
+        capture_output=True,
+        cwd=tmp_path,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stderr.count("damaged level-of-detail cache entry") == 1
     assert "not a permutation" in out.stderr and str(folder / entry.name) in out.stderr
@@ -170,13 +207,23 @@ def test_the_native_cut_stays_in_bounds_whatever_order_it_is_given(tmp_path):
     order[::7] = 2**31 - 1
     order[1::7] = -(2**31)
     eye = np.array([0, 0, -50], np.float32)
-    code = ("import numpy as np, sys; from gbviewer._native import lod as n; d = np.load(sys.argv[1]); "
-            "out = n.cut(d['means'], d['radius'], d['size'], d['levels'], d['order'], d['eye'], 500.0, False, 0.5, "
-            "1.0, 0, None); assert out is not None; print('ok')")
-    np.savez(tmp_path / "t.npz", means=tree.means, radius=tree.radius, size=tree.size, levels=tree.levels,
-             order=order, eye=eye)
-    done = subprocess.run([sys.executable, "-c", code, str(tmp_path / "t.npz")], capture_output=True, cwd=tmp_path,
-                          text=True, timeout=120)
+    code = (
+        "import numpy as np, sys; from gbviewer._native import lod as n; d = np.load(sys.argv[1]); "
+        "out = n.cut(d['means'], d['radius'], d['size'], d['levels'], d['order'], d['eye'], 500.0, False, 0.5, "
+        "1.0, 0, None); assert out is not None; print('ok')"
+    )
+    np.savez(
+        tmp_path / "t.npz",
+        means=tree.means,
+        radius=tree.radius,
+        size=tree.size,
+        levels=tree.levels,
+        order=order,
+        eye=eye,
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path / "t.npz")], capture_output=True, cwd=tmp_path, text=True, timeout=120
+    )
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-2000:]
     levels = tree.levels.copy()
     levels[2] += 1000  # interior arrays no longer match; the walk would index past them
@@ -198,8 +245,9 @@ def test_upload_lod_refuses_a_tree_the_stage_cannot_draw(case):
     r = Renderer()
     r.upload(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None)
     with pytest.raises(ValueError, match="permutation" if case == "repeated leaf" else "not finite"):
-        r.upload_lod(tree.means, tree.scales, tree.quats, tree.opacities, tree.sh, None, radius, tree.size,
-                     tree.levels, order)
+        r.upload_lod(
+            tree.means, tree.scales, tree.quats, tree.opacities, tree.sh, None, radius, tree.size, tree.levels, order
+        )
 
 
 def test_a_cache_write_that_raises_leaves_no_tree_behind(tmp_path, monkeypatch):
@@ -231,16 +279,30 @@ def test_an_entry_that_is_not_a_regular_file_is_rebuilt_without_blocking(tmp_pat
         os.mkfifo(entry)
     else:
         os.symlink("/dev/zero", entry)
-    out = subprocess.run([sys.executable, "-c", (
-        "import sys, warnings; from pathlib import Path; import gbviewer as gb; "
-        "from gbviewer.lod.cache import cached_build; scene = gb.load(sys.argv[1]); "
-        "warnings.simplefilter('always'); cached_build(scene, 'depth', Path(sys.argv[2]))"),
-        str(tmp_path / "s.ply"), str(entry.parent)], capture_output=True, cwd=tmp_path, text=True, timeout=120)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            (
+                "import sys, warnings; from pathlib import Path; import gbviewer as gb; "
+                "from gbviewer.lod.cache import cached_build; scene = gb.load(sys.argv[1]); "
+                "warnings.simplefilter('always'); cached_build(scene, 'depth', Path(sys.argv[2]))"
+            ),
+            str(tmp_path / "s.ply"),
+            str(entry.parent),
+        ],
+        capture_output=True,
+        cwd=tmp_path,
+        text=True,
+        timeout=120,
+    )
     assert out.returncode == 0, out.stderr
     assert out.stderr.count("damaged level-of-detail cache entry") == 1 and "not a regular file" in out.stderr
     assert not entry.is_symlink() and entry.is_file()
-    assert all(np.array_equal(a, b) for a, b in zip(tree.arrays().values(), read_entry(entry, scene,
-                                                                                      "depth").arrays().values()))
+    assert all(
+        np.array_equal(a, b)
+        for a, b in zip(tree.arrays().values(), read_entry(entry, scene, "depth").arrays().values())
+    )
 
 
 def test_the_shared_tree_is_read_only():

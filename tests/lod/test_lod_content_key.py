@@ -45,8 +45,19 @@ def rewrite_keeping_stat(path, edit) -> None:
     assert os.stat(path).st_size == st.st_size
 
 
-@pytest.mark.parametrize("name", ["inria/sh1.ply", "inria/ascii.ply", "compressed/sh1.ply", "spz/v2.spz",
-                                  "spz/v3raw.spz", "spz/v4.spz", "splat/a.splat", "sog/a.sog"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "inria/sh1.ply",
+        "inria/ascii.ply",
+        "compressed/sh1.ply",
+        "spz/v2.spz",
+        "spz/v3raw.spz",
+        "spz/v4.spz",
+        "splat/a.splat",
+        "sog/a.sog",
+    ],
+)
 def test_every_format_loads_with_a_content_digest(name):
     a, b = gb.load(f"{SEEDS}/{name}"), gb.load(f"{SEEDS}/{name}")
     assert a.content is not None and a.content == b.content

@@ -18,8 +18,15 @@ def filtered_scene(seed: int, sh_dtype: str = "float32") -> gb.Scene:
     """A random scene with a 3D filter (the hierarchy merges it too), SH stored as `sh_dtype`."""
     base = random_scene(3000, seed=seed, sh_degree=2, spread=3.0)
     rng = np.random.default_rng(seed)
-    return gb.Scene(base.means, base.scales, base.quats, base.opacities, base.sh.astype(sh_dtype),
-                    rng.uniform(0.0, 0.02, base.num_splats).astype(np.float32), source="test")
+    return gb.Scene(
+        base.means,
+        base.scales,
+        base.quats,
+        base.opacities,
+        base.sh.astype(sh_dtype),
+        rng.uniform(0.0, 0.02, base.num_splats).astype(np.float32),
+        source="test",
+    )
 
 
 @pytest.mark.parametrize("sh_dtype", ["float32", "float16"])
@@ -45,6 +52,7 @@ def test_leaves_in_the_tree_order_are_read_row_by_row():
     """A cut's leaves come in the tree's (Morton) order unless they are over half the splats: in a scene laid out so
     that every level-1 node's children are rows 8q, 8q+2, 8q+1, 8q+3 ... 8q+7, each group of 8 leaves spans 8
     consecutive rows out of order, which the stage must not load as one run."""
+
     def rows(s: gb.Scene, index) -> gb.Scene:
         return gb.Scene(*(a[index] for a in (s.means, s.scales, s.quats, s.opacities, s.sh, s.filter_3d)))
 
@@ -84,7 +92,9 @@ def test_the_stage_is_kept_per_camera_and_tau():
     renderer.upload(other)
     frame = renderer.render(CAM, lod2)
     assert not frame.stats.stage_reused
-    assert np.array_equal(frame.rgb, gb.get_renderer(lod.cut_scene(other, CAM, 2.0), "cpu").render(CAM, gb.RenderSettings()).rgb)
+    assert np.array_equal(
+        frame.rgb, gb.get_renderer(lod.cut_scene(other, CAM, 2.0), "cpu").render(CAM, gb.RenderSettings()).rgb
+    )
 
 
 def test_traces_of_an_in_place_cut_are_its_pixels():
@@ -113,9 +123,24 @@ def test_the_native_upload_checks_the_hierarchy():
     with pytest.raises(ValueError, match="upload_lod: the interior arrays"):
         native.upload_lod(*args[:5], None, *args[6:], tree.levels, tree.order)
     with pytest.raises(ValueError, match="level of detail needs the scene's hierarchy"):
-        native.render(np.eye(3, dtype=np.float32), np.zeros(3, np.float32), 20.0, 20.0, 32.0, 24.0, 64, 48, 0.2, 0,
-                      0, 1, 3, np.zeros(3, np.float32), False,
-                      lod=(1.0, 1.0, np.zeros(3, np.float32), 20.0, False))
+        native.render(
+            np.eye(3, dtype=np.float32),
+            np.zeros(3, np.float32),
+            20.0,
+            20.0,
+            32.0,
+            24.0,
+            64,
+            48,
+            0.2,
+            0,
+            0,
+            1,
+            3,
+            np.zeros(3, np.float32),
+            False,
+            lod=(1.0, 1.0, np.zeros(3, np.float32), 20.0, False),
+        )
 
 
 def test_a_coarse_cut_keeps_the_full_frames_buffers():
@@ -142,7 +167,9 @@ def test_cells_of_a_duplex_frame_do_not_stop_the_other_modes_cuts():
     renderer.render(CAM, gb.RenderSettings("duplex"))
     for spec in ("scalar+lod:2", "gaussian_blending+lod:2", "duplex+lod:2"):
         frame = renderer.render(CAM, gb.RenderSettings.parse(spec))
-        ref = gb.get_renderer(lod.cut_scene(scene, CAM, 2.0), "cpu").render(CAM, gb.RenderSettings.parse(spec.split("+")[0]))
+        ref = gb.get_renderer(lod.cut_scene(scene, CAM, 2.0), "cpu").render(
+            CAM, gb.RenderSettings.parse(spec.split("+")[0])
+        )
         assert np.array_equal(frame.rgb, ref.rgb), spec
     both = renderer.render_many([(CAM, gb.RenderSettings("duplex")), (CAM, gb.RenderSettings(lod=2.0))])
     assert both[1].stats.lod_splats is not None
@@ -192,8 +219,10 @@ def test_a_trace_names_the_scenes_splat_or_the_hierarchy_node_drawn_in_place():
     c = lod.cut(lod.hierarchy_for(scene), cam, tau)
     gathered = gb.trace_pixel(lod.cut_scene(scene, cam, tau), cam, 32, 24, "scalar")
     nl, n = len(c.leaves), scene.num_splats
-    want = [(int(c.leaves[s.index]), False) if s.index < nl else (n + int(c.nodes[s.index - nl]), True)
-            for s in gathered.steps]
+    want = [
+        (int(c.leaves[s.index]), False) if s.index < nl else (n + int(c.nodes[s.index - nl]), True)
+        for s in gathered.steps
+    ]
     traced = gb.trace_pixel(scene, cam, 32, 24, "scalar", lod=tau)
     assert [(s.index, s.node) for s in traced.steps] == want
     assert {s.node for s in traced.steps} == {False, True}  # both kinds at this pixel

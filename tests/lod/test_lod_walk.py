@@ -141,8 +141,11 @@ def test_the_cut_equals_its_definition_computed_in_numpy_at_the_band_edges():
         finite = np.flatnonzero(np.isfinite(p) & (p > 0))
         for k in rng.choice(finite, 4, replace=False):
             for nudge in (-1e-13, 0.0, 1e-13):
-                for tau, band in ((p[k] * (1 + nudge), 1.0), (p[k] * (1 + nudge), 0.0),
-                                  (p[k] / (1 + 1e-9) * (1 + nudge), 1e-9)):
+                for tau, band in (
+                    (p[k] * (1 + nudge), 1.0),
+                    (p[k] * (1 + nudge), 0.0),
+                    (p[k] / (1 + 1e-9) * (1 + nudge), 1e-9),
+                ):
                     want = cut_by_numpy(tree, cam, tau, band)
                     assert_same_cut(lod.cut(tree, cam, tau, band), want, (cam.name, k, nudge, band))
                     checked += 1

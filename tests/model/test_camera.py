@@ -32,8 +32,16 @@ def test_sampling_rate_keeps_the_view():
 def test_cameras_json_round_trip(tmp_path):
     R_w2c = rot(np.array([0.2, 1.0, -0.4]), 1.1)
     centre = np.array([1.0, -2.0, 0.5])
-    entry = {"id": 0, "img_name": "00001", "width": 800, "height": 600, "position": centre.tolist(),
-             "rotation": R_w2c.T.tolist(), "fx": 700.0, "fy": 710.0}
+    entry = {
+        "id": 0,
+        "img_name": "00001",
+        "width": 800,
+        "height": 600,
+        "position": centre.tolist(),
+        "rotation": R_w2c.T.tolist(),
+        "fx": 700.0,
+        "fy": 710.0,
+    }
     path = tmp_path / "cameras.json"
     path.write_text(json.dumps([entry]))
     (cam,) = gb.load_cameras_json(path)
@@ -45,8 +53,23 @@ def test_cameras_json_round_trip(tmp_path):
     np.testing.assert_allclose(project(cam, ahead), [400, 300], atol=1e-9)
 
 
-@pytest.mark.parametrize("bad", [[], [{"width": 10}], [{"width": 10, "height": 10, "fx": 5, "fy": 5,
-                                                          "position": [0, 0, 0], "rotation": [[2, 0, 0], [0, 1, 0], [0, 0, 1]]}]])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        [],
+        [{"width": 10}],
+        [
+            {
+                "width": 10,
+                "height": 10,
+                "fx": 5,
+                "fy": 5,
+                "position": [0, 0, 0],
+                "rotation": [[2, 0, 0], [0, 1, 0], [0, 0, 1]],
+            }
+        ],
+    ],
+)
 def test_cameras_json_errors_name_the_file(tmp_path, bad):
     path = tmp_path / "cameras.json"
     path.write_text(json.dumps(bad))
@@ -67,8 +90,12 @@ def test_default_camera_ignores_stray_splats():
     rng = np.random.default_rng(1)
     n = 2000
     means = rng.uniform(-1, 1, (n, 3))
-    base = dict(scales=np.full((n, 3), 0.01), quats=np.tile([1.0, 0, 0, 0], (n, 1)), opacities=np.full(n, 0.5),
-                sh=np.zeros((n, 1, 3)))
+    base = dict(
+        scales=np.full((n, 3), 0.01),
+        quats=np.tile([1.0, 0, 0, 0], (n, 1)),
+        opacities=np.full(n, 0.5),
+        sh=np.zeros((n, 1, 3)),
+    )
     scene = gb.Scene.from_arrays(means, **base)
     stray = means.copy()
     stray[:10] = rng.uniform(-1, 1, (10, 3)) * 1000.0  # 0.5% of splats far away
@@ -91,11 +118,16 @@ def test_invalid_cameras_raise():
         gb.Camera(10, 10, 1, 1, 0, 0, np.eye(3) * 2, np.zeros(3))
 
 
-@pytest.mark.parametrize("kwargs, says", [
-    ({"width": 0, "height": 5}, "orbit width: expected >= 1"), ({"height": 0}, "orbit height: expected >= 1"),
-    ({"fov_y_deg": 0}, "orbit field of view"), ({"elevation_deg": float("inf")}, "orbit elevation"),
-    ({"azimuth_deg": "x"}, "orbit azimuth"),
-])
+@pytest.mark.parametrize(
+    "kwargs, says",
+    [
+        ({"width": 0, "height": 5}, "orbit width: expected >= 1"),
+        ({"height": 0}, "orbit height: expected >= 1"),
+        ({"fov_y_deg": 0}, "orbit field of view"),
+        ({"elevation_deg": float("inf")}, "orbit elevation"),
+        ({"azimuth_deg": "x"}, "orbit azimuth"),
+    ],
+)
 def test_orbit_camera_arguments_are_one_line(bundled_scene, kwargs, says):
     """A zero height or field of view divided by zero (ZeroDivisionError), an infinite elevation failed in math."""
     with pytest.raises(gb.CameraError, match=says):
@@ -197,14 +229,14 @@ def test_orthographic_orbit_frames_the_scene_like_the_perspective_one(bundled_sc
 
 
 def test_cameras_json_projection(tmp_path):
-    entry = {"width": 80, "height": 60, "position": [0, 0, -5], "rotation": np.eye(3).tolist(), "fx": 20.0,
-             "fy": 20.0}
+    entry = {"width": 80, "height": 60, "position": [0, 0, -5], "rotation": np.eye(3).tolist(), "fx": 20.0, "fy": 20.0}
     path = tmp_path / "cameras.json"
     path.write_text(json.dumps([entry, dict(entry, projection="orthographic"), dict(entry, projection="perspective")]))
     assert [c.projection for c in gb.load_cameras_json(path)] == ["perspective", "orthographic", "perspective"]
     path.write_text(json.dumps([entry, dict(entry, projection=3)]))
-    with pytest.raises(gb.CameraError, match="cameras.json: entry 1: 'projection': expected perspective or "
-                                             "orthographic, got '3'"):
+    with pytest.raises(
+        gb.CameraError, match="cameras.json: entry 1: 'projection': expected perspective or orthographic, got '3'"
+    ):
         gb.load_cameras_json(path)
 
 
@@ -212,12 +244,20 @@ def test_robust_bounds_are_the_percentiles_over_the_splats(bundled_scene):
     """Column by column, the very values np.percentile gives over axis 0 (the framing of every camera rests on them),
     on the bundled scene and on spread, clustered and repeated coordinates."""
     rng = np.random.default_rng(5)
-    cases = [bundled_scene.means, rng.normal(0, 1e3, (1001, 3)), np.round(rng.normal(0, 2, (999, 3))),
-             np.concatenate([rng.uniform(-1, 1, (500, 3)), np.full((7, 3), 1e30)])]
+    cases = [
+        bundled_scene.means,
+        rng.normal(0, 1e3, (1001, 3)),
+        np.round(rng.normal(0, 2, (999, 3))),
+        np.concatenate([rng.uniform(-1, 1, (500, 3)), np.full((7, 3), 1e30)]),
+    ]
     for means in cases:
-        scene = gb.Scene.from_arrays(means.astype(np.float32), np.full((len(means), 3), 0.1, np.float32),
-                                     np.tile(np.float32([1, 0, 0, 0]), (len(means), 1)),
-                                     np.full(len(means), 0.5, np.float32), np.zeros((len(means), 1, 3), np.float32))
+        scene = gb.Scene.from_arrays(
+            means.astype(np.float32),
+            np.full((len(means), 3), 0.1, np.float32),
+            np.tile(np.float32([1, 0, 0, 0]), (len(means), 1)),
+            np.full(len(means), 0.5, np.float32),
+            np.zeros((len(means), 1, 3), np.float32),
+        )
         for pct in (2.0, 0.0, 37.5):
             want = np.percentile(scene.means.astype(np.float64), [pct, 100 - pct], axis=0).astype(np.float32)
             got = scene.robust_bounds(pct)

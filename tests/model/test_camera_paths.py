@@ -1,4 +1,5 @@
-"""Camera paths of zoom videos (gbviewer.model.camera_paths): zoom, dolly and rate sweeps scale the content as stated."""
+"""Camera paths of zoom videos (gbviewer.model.camera_paths): zoom, dolly and rate sweeps scale the content as
+stated."""
 
 from __future__ import annotations
 
@@ -6,10 +7,10 @@ import math
 
 import numpy as np
 import pytest
+from helpers import OUTPUT_W as W
 
 import gbviewer as gb
 from gbviewer.model import camera_paths
-from helpers import OUTPUT_W as W
 
 
 def test_zoom_and_dolly_scale_the_content(bundled_scene, output_view):
@@ -29,7 +30,6 @@ def test_zoom_and_dolly_scale_the_content(bundled_scene, output_view):
     assert z[-1].map_box((cx - 8, cy, 16, 8)) == pytest.approx((cx - 1, cy, 2, 1))
     r = camera_paths.rate_path(output_view, 2, 1.0, 0.25)
     assert (r[-1].camera.width, r[-1].camera.height, r[-1].width) == (24, 16, W)
-
 
 
 def test_orthographic_zoom_scales_the_pixels_per_unit(bundled_scene, output_view):

@@ -1,4 +1,5 @@
-"""Keyframed camera paths (gbviewer.model.keyframes): exact at the keys, smooth between them, JSON forms and round trip."""
+"""Keyframed camera paths (gbviewer.model.keyframes): exact at the keys, smooth between them, JSON forms and round
+trip."""
 
 from __future__ import annotations
 
@@ -8,17 +9,20 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from helpers import OUTPUT_H as H
+from helpers import OUTPUT_W as W
 
 import gbviewer as gb
+from gbviewer.core.errors import InvalidValue
 from gbviewer.model import keyframes
 from gbviewer.model.camera_paths import keyframe_path
-from gbviewer.core.errors import InvalidValue
-from helpers import OUTPUT_H as H, OUTPUT_W as W
 
 
 def keys_for(bundled_scene) -> list[keyframes.Keyframe]:
-    cams = [gb.orbit_camera(bundled_scene, az, el, width=W, height=H)
-            for az, el in ((0, 10), (70, 30), (150, -20), (200, 40))]
+    cams = [
+        gb.orbit_camera(bundled_scene, az, el, width=W, height=H)
+        for az, el in ((0, 10), (70, 30), (150, -20), (200, 40))
+    ]
     cams[2] = cams[2].with_size(W, H)
     cams[1] = replace(cams[1], fx=cams[1].fx * 1.7, fy=cams[1].fy * 1.7, cx=50.0)
     return [keyframes.Keyframe(c, r, t) for c, r, t in zip(cams, (1.0, 0.5, 0.125, 2.0), (0.0, 0.5, 2.0, 3.0))]
@@ -38,8 +42,9 @@ def test_keyframes_pass_exactly_through_their_keys(bundled_scene):
     path = keyframes.interpolate_keyframes(keys, ts)
     for a, b in zip(path, path[1:]):
         assert np.abs(a.camera.R @ a.camera.R.T - np.eye(3)).max() < 1e-9
-        assert np.abs(a.camera.R - b.camera.R).max() < 0.05 and np.linalg.norm(a.camera.position
-                                                                                - b.camera.position) < 0.1
+        assert (
+            np.abs(a.camera.R - b.camera.R).max() < 0.05 and np.linalg.norm(a.camera.position - b.camera.position) < 0.1
+        )
     rates = np.array([p.rate for p in path])
     assert rates.min() >= 0.125 - 1e-12 and rates.max() <= 2.0 + 1e-12
     # a keyframe path whose frames fall on the key times renders the keys' cameras
@@ -65,12 +70,14 @@ def test_two_keys_slerp_the_rotation(output_view):
 
 
 def test_keyframes_json_forms_and_round_trip(bundled_scene, output_view, tmp_path):
-    doc = {"keyframes": [
-        {"time": 0, "orbit": [30, 20, 0]},
-        {"time": 1, "position": [0.5, -0.5, 2.0], "look_at": [0, 0, 0], "rate": "1/4", "fov_y_deg": 40},
-        {"time": 2, "R": np.eye(3).tolist(), "t": [0, 0, 3], "rate": 0.5},
-        {"time": 3, "rotation": np.eye(3).tolist(), "position": [0, 0, -4]},
-    ]}
+    doc = {
+        "keyframes": [
+            {"time": 0, "orbit": [30, 20, 0]},
+            {"time": 1, "position": [0.5, -0.5, 2.0], "look_at": [0, 0, 0], "rate": "1/4", "fov_y_deg": 40},
+            {"time": 2, "R": np.eye(3).tolist(), "t": [0, 0, 3], "rate": 0.5},
+            {"time": 3, "rotation": np.eye(3).tolist(), "position": [0, 0, -4]},
+        ]
+    }
     f = tmp_path / "keys.json"
     f.write_text(json.dumps(doc))
     keys = keyframes.load_keyframes(f, output_view, bundled_scene)
@@ -88,7 +95,6 @@ def test_keyframes_json_forms_and_round_trip(bundled_scene, output_view, tmp_pat
     bad.write_text(json.dumps([{"time": 1, "orbit": [0, 0, 0]}, {"time": 0, "orbit": [9, 0, 0]}]))
     with pytest.raises(gb.GBViewerError, match="increasing"):
         keyframes.load_keyframes(bad, output_view, bundled_scene)
-
 
 
 def test_orthographic_keys_round_trip(bundled_scene, output_view, tmp_path):
@@ -111,11 +117,14 @@ def test_orthographic_keys_round_trip(bundled_scene, output_view, tmp_path):
         keyframes.interpolate_keyframes(mixed, [0.5])
 
 
-@pytest.mark.parametrize("key, message", [
-    ({"orbit": [0, 0], "projection": "fisheye"}, "keyframe 0: 'projection': expected perspective or orthographic"),
-    ({"orbit": [0, 0], "projection": "orthographic"}, "give 'fx' and 'fy' too"),
-    ({"orbit": [0, 0], "projection": "orthographic", "fx": 5, "fy": 5, "fov_y_deg": 40}, "'fov_y_deg' has no"),
-])
+@pytest.mark.parametrize(
+    "key, message",
+    [
+        ({"orbit": [0, 0], "projection": "fisheye"}, "keyframe 0: 'projection': expected perspective or orthographic"),
+        ({"orbit": [0, 0], "projection": "orthographic"}, "give 'fx' and 'fy' too"),
+        ({"orbit": [0, 0], "projection": "orthographic", "fx": 5, "fy": 5, "fov_y_deg": 40}, "'fov_y_deg' has no"),
+    ],
+)
 def test_bad_projection_keys(bundled_scene, output_view, tmp_path, key, message):
     f = tmp_path / "keys.json"
     f.write_text(json.dumps([key]))
@@ -123,18 +132,25 @@ def test_bad_projection_keys(bundled_scene, output_view, tmp_path, key, message)
         keyframes.load_keyframes(f, output_view, bundled_scene)
 
 
-@pytest.mark.parametrize("keys, message", [
-    ([{"orbit": [0, 0], "rat": 2}], "keyframe 0: unknown field 'rat'"),
-    ([{"orbit": [0, 0]}, {"orbit": [0, 0], "position": [0, 0, 1], "look_at": [0, 0, 0]}],
-     "keyframe 1: 'look_at' and 'orbit' are two poses"),
-    ([{"orbit": [0, 0], "position": [0, 0, 1]}], "keyframe 0: 'position' does not belong to a 'orbit' pose"),
-    ([{"R": np.eye(3).tolist(), "t": [0, 0, 3], "up": [0, 1, 0]}], "keyframe 0: 'up' does not belong"),
-    ([{"orbit": [0, 0], "fov_y_deg": 40, "fx": 50}], "keyframe 0: 'fov_y_deg' and 'fx' both set"),
-    ([{"orbit": [0, 0], "time": "0"}], "keyframe 0: 'time': expected a JSON number, got the string '0'"),
-    ([{"orbit": ["30", 0]}], "keyframe 0: 'orbit' azimuth: expected a JSON number"),
-    ([{"orbit": [0, 0]}, {"orbit": [9, 0], "projection": "orthographic", "fx": 5, "fy": 5}],
-     "keyframe 1: 'projection' orthographic differs from keyframe 0's"),
-])
+@pytest.mark.parametrize(
+    "keys, message",
+    [
+        ([{"orbit": [0, 0], "rat": 2}], "keyframe 0: unknown field 'rat'"),
+        (
+            [{"orbit": [0, 0]}, {"orbit": [0, 0], "position": [0, 0, 1], "look_at": [0, 0, 0]}],
+            "keyframe 1: 'look_at' and 'orbit' are two poses",
+        ),
+        ([{"orbit": [0, 0], "position": [0, 0, 1]}], "keyframe 0: 'position' does not belong to a 'orbit' pose"),
+        ([{"R": np.eye(3).tolist(), "t": [0, 0, 3], "up": [0, 1, 0]}], "keyframe 0: 'up' does not belong"),
+        ([{"orbit": [0, 0], "fov_y_deg": 40, "fx": 50}], "keyframe 0: 'fov_y_deg' and 'fx' both set"),
+        ([{"orbit": [0, 0], "time": "0"}], "keyframe 0: 'time': expected a JSON number, got the string '0'"),
+        ([{"orbit": ["30", 0]}], "keyframe 0: 'orbit' azimuth: expected a JSON number"),
+        (
+            [{"orbit": [0, 0]}, {"orbit": [9, 0], "projection": "orthographic", "fx": 5, "fy": 5}],
+            "keyframe 1: 'projection' orthographic differs from keyframe 0's",
+        ),
+    ],
+)
 def test_keyframe_mistakes_are_refused(bundled_scene, output_view, tmp_path, keys, message):
     """A typo, a second pose, two ways of giving the intrinsics, a number as text or mixed projections: one line
     naming the file, the key and the field (not a silently ignored field)."""

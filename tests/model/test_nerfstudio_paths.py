@@ -14,16 +14,21 @@ import math
 import imageio_ffmpeg
 import numpy as np
 import pytest
+from helpers import OUTPUT_H as H
+from helpers import OUTPUT_W as W
 
 import gbviewer as gb
-from gbviewer.model.camera import camera_key
-from gbviewer.model.camera_paths import nerfstudio_frames
 from gbviewer.cli import main
 from gbviewer.core.errors import InvalidValue
+from gbviewer.model.camera import camera_key
+from gbviewer.model.camera_paths import nerfstudio_frames
 from gbviewer.model.keyframes import Keyframe
-from gbviewer.model.nerfstudio_paths import (load_nerfstudio_path, nerfstudio_json, path_from_keyframes,
-                                       save_nerfstudio_path)
-from helpers import OUTPUT_H as H, OUTPUT_W as W
+from gbviewer.model.nerfstudio_paths import (
+    load_nerfstudio_path,
+    nerfstudio_json,
+    path_from_keyframes,
+    save_nerfstudio_path,
+)
 
 UP = np.array([0.0, 0.0, 1.0])
 
@@ -52,14 +57,28 @@ def nerfstudio_doc(scene, frames=6, fps=24.0, seconds=0.25) -> dict:
     c, eyes = centre_and_eyes(scene, 3)
     _, path_eyes = centre_and_eyes(scene, frames)
     return {
-        "default_fov": 50.0, "default_transition_sec": 0.1,
-        "keyframes": [{"matrix": gl_look_at(e, c), "fov": 50.0 + 5 * i, "aspect": W / H,
-                       "override_transition_enabled": i == 2, "override_transition_sec": 0.15 if i == 2 else None}
-                      for i, e in enumerate(eyes)],
-        "camera_type": "perspective", "render_height": float(H), "render_width": float(W), "fps": fps,
-        "seconds": seconds, "is_cycle": False, "smoothness_value": 0.0,
-        "camera_path": [{"camera_to_world": gl_look_at(e, c), "fov": 50.0 + i, "aspect": W / H}
-                        for i, e in enumerate(path_eyes)],
+        "default_fov": 50.0,
+        "default_transition_sec": 0.1,
+        "keyframes": [
+            {
+                "matrix": gl_look_at(e, c),
+                "fov": 50.0 + 5 * i,
+                "aspect": W / H,
+                "override_transition_enabled": i == 2,
+                "override_transition_sec": 0.15 if i == 2 else None,
+            }
+            for i, e in enumerate(eyes)
+        ],
+        "camera_type": "perspective",
+        "render_height": float(H),
+        "render_width": float(W),
+        "fps": fps,
+        "seconds": seconds,
+        "is_cycle": False,
+        "smoothness_value": 0.0,
+        "camera_path": [
+            {"camera_to_world": gl_look_at(e, c), "fov": 50.0 + i, "aspect": W / H} for i, e in enumerate(path_eyes)
+        ],
     }
 
 
@@ -93,8 +112,10 @@ def test_nerfstudio_file_round_trips(bundled_scene, tmp_path):
 
 
 def test_keyframes_exported_and_imported_are_themselves(tmp_path):
-    keys = [Keyframe(gb.Camera.look_at(e, [0, 0, 0], [0, 0, 1], W, H, fov), 1.0, t)
-            for e, fov, t in (([3, 0, 1], 40, 0.0), ([0, 3, 1], 50, 0.5), ([-3, 0, 1], 60, 1.25))]
+    keys = [
+        Keyframe(gb.Camera.look_at(e, [0, 0, 0], [0, 0, 1], W, H, fov), 1.0, t)
+        for e, fov, t in (([3, 0, 1], 40, 0.0), ([0, 3, 1], 50, 0.5), ([-3, 0, 1], 60, 1.25))
+    ]
     p = path_from_keyframes(keys, fps=8)
     assert len(p.frames) == 10 and p.seconds == 1.25  # int(fps x seconds) at i / fps, as nerfstudio's viewer
     back = load_nerfstudio_path(save_nerfstudio_path(p, tmp_path / "k.json"))
@@ -135,15 +156,20 @@ def test_cycle_orthographic_and_refusals(bundled_scene, tmp_path):
     (tmp_path / "o.json").write_text(json.dumps(ortho))
     o = load_nerfstudio_path(tmp_path / "o.json")
     assert o.frames[0].orthographic and o.frames[0].fy == H / 2.0
-    assert_docs_equal(nerfstudio_json(load_nerfstudio_path(save_nerfstudio_path(o, tmp_path / "o2.json"))),
-                      nerfstudio_json(o))
+    assert_docs_equal(
+        nerfstudio_json(load_nerfstudio_path(save_nerfstudio_path(o, tmp_path / "o2.json"))), nerfstudio_json(o)
+    )
     for change, line in [
-        ({"camera_type": "equirectangular"}, "camera_type 'equirectangular': gbviewer renders perspective or "
-                                             "orthographic cameras only"),
+        (
+            {"camera_type": "equirectangular"},
+            "camera_type 'equirectangular': gbviewer renders perspective or orthographic cameras only",
+        ),
         ({"camera_type": "fisheye"}, "camera_type 'fisheye'"),
         ({"render_width": 0}, "'render_width': expected >= 1"),
-        ({"camera_path": [{"camera_to_world": [1] * 16, "fov": 50}]}, "camera_path 0: camera-to-world matrix: "
-                                                                      "expected a last row of 0, 0, 0, 1"),
+        (
+            {"camera_path": [{"camera_to_world": [1] * 16, "fov": 50}]},
+            "camera_path 0: camera-to-world matrix: expected a last row of 0, 0, 0, 1",
+        ),
         ({"camera_path": [{"camera_to_world": gl_look_at([1, 0, 0], [0, 0, 0]), "fov": 190}]}, "camera_path 0: 'fov'"),
         ({"keyframes": "x"}, "'keyframes': expected a list"),
     ]:
@@ -158,15 +184,44 @@ def test_cli_video_along_a_camera_path(bundled_scene, tmp_path, capsys):
     src = tmp_path / "camera_path.json"
     src.write_text(json.dumps(doc))
     out = tmp_path / "v.webm"
-    assert main(["video", str(gb.DEFAULT_SCENE), "--modes", "scalar", "--camera-path", str(src), "--codec", "vp9",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "video",
+                str(gb.DEFAULT_SCENE),
+                "--modes",
+                "scalar",
+                "--camera-path",
+                str(src),
+                "--codec",
+                "vp9",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     gen = imageio_ffmpeg.read_frames(str(out))
     meta = next(gen)
     assert sum(1 for _ in gen) == 5 and meta["fps"] == 10 and meta["size"][0] == W  # ns-render's 5 / 0.5 s
     frames = nerfstudio_frames(load_nerfstudio_path(src))
     assert [f.camera for f in frames] == list(load_nerfstudio_path(src).frames)
     capsys.readouterr()
-    assert main(["video", str(gb.DEFAULT_SCENE), "--camera-path", str(src), "--frames", "3",
-                 "--out", str(tmp_path / "x.mp4")]) == 2
+    assert (
+        main(
+            [
+                "video",
+                str(gb.DEFAULT_SCENE),
+                "--camera-path",
+                str(src),
+                "--frames",
+                "3",
+                "--out",
+                str(tmp_path / "x.mp4"),
+            ]
+        )
+        == 2
+    )
     assert capsys.readouterr().err.splitlines() == [
-        "gbviewer: error: the camera path file lists its frames; drop --frames and --seconds"]
+        "gbviewer: error: the camera path file lists its frames; drop --frames and --seconds"
+    ]

@@ -47,8 +47,13 @@ def test_an_edited_copy_renders_the_edit():
     edited = dataclasses.replace(scene, **arrays)
     again = gb.render(edited, cam)
     assert not np.array_equal(again.rgb, first.rgb)
-    fresh = gb.Scene.from_arrays(np.array(scene.means), np.array(scene.scales), np.array(scene.quats),
-                                 np.array(scene.opacities), -np.array(scene.sh))
+    fresh = gb.Scene.from_arrays(
+        np.array(scene.means),
+        np.array(scene.scales),
+        np.array(scene.quats),
+        np.array(scene.opacities),
+        -np.array(scene.sh),
+    )
     assert np.array_equal(again.rgb, gb.render(fresh, cam).rgb)
     assert np.array_equal(gb.render(scene, cam).rgb, first.rgb)  # the original, unchanged
 
@@ -56,9 +61,14 @@ def test_an_edited_copy_renders_the_edit():
 def test_arrays_handed_to_a_scene_are_read_only_and_computations_on_them_plain():
     means = np.zeros((4, 3), np.float32)
     weights = np.ones((4, 1), np.float32)
-    scene = gb.Scene(means, np.ones((4, 3), np.float32), np.tile(np.float32([1, 0, 0, 0]), (4, 1)),
-                     np.ones(4, np.float32), np.zeros((4, 1, 3), np.float32),
-                     oit=OitData(view_weight_sh=weights))
+    scene = gb.Scene(
+        means,
+        np.ones((4, 3), np.float32),
+        np.tile(np.float32([1, 0, 0, 0]), (4, 1)),
+        np.ones(4, np.float32),
+        np.zeros((4, 1, 3), np.float32),
+        oit=OitData(view_weight_sh=weights),
+    )
     with pytest.raises(ValueError):
         means[0, 0] = 1.0  # not through the array it was given as either
     with pytest.raises(ValueError, match="read-only"):
@@ -90,9 +100,13 @@ def test_the_arrays_a_scene_views_are_read_only_too(tmp_path):
             assert not a.flags.writeable
             a = a.base
     memory = bytearray(np.ones(4, np.float32).tobytes())
-    handed = gb.Scene(np.zeros((4, 3), np.float32), np.ones((4, 3), np.float32),
-                      np.tile(np.float32([1, 0, 0, 0]), (4, 1)), np.frombuffer(memory, np.float32),
-                      np.zeros((4, 1, 3), np.float32))
+    handed = gb.Scene(
+        np.zeros((4, 3), np.float32),
+        np.ones((4, 3), np.float32),
+        np.tile(np.float32([1, 0, 0, 0]), (4, 1)),
+        np.frombuffer(memory, np.float32),
+        np.zeros((4, 1, 3), np.float32),
+    )
     memory[:4] = bytes(4)
     assert handed.opacities[0] == 1.0 and handed.intact
 
@@ -126,18 +140,25 @@ def test_an_array_made_writable_again_is_an_edit_every_cache_sees(tmp_path, monk
 
 
 def splats(n: int = 4, **change) -> dict[str, np.ndarray]:
-    arrays = {"means": np.zeros((n, 3), np.float32), "scales": np.full((n, 3), 0.1, np.float32),
-              "quats": np.tile(np.float32([1, 0, 0, 0]), (n, 1)), "opacities": np.full(n, 0.5, np.float32),
-              "sh": np.zeros((n, 1, 3), np.float32)}
+    arrays = {
+        "means": np.zeros((n, 3), np.float32),
+        "scales": np.full((n, 3), 0.1, np.float32),
+        "quats": np.tile(np.float32([1, 0, 0, 0]), (n, 1)),
+        "opacities": np.full(n, 0.5, np.float32),
+        "sh": np.zeros((n, 1, 3), np.float32),
+    }
     return {**arrays, **change}
 
 
-@pytest.mark.parametrize("change, says", [
-    ({"opacities": np.ones(3, np.float32)}, "field 'opacities': shape \\(3,\\), expected \\(4,\\)"),
-    ({"sh": np.zeros((4, 3), np.float32)}, "field 'sh': shape \\(4, 3\\), expected \\(4, K, 3\\)"),
-    ({"sh": np.zeros((4, 5, 3), np.float32)}, "sh has 5 coefficients"),
-    ({"filter_3d": np.zeros(5, np.float32)}, "field 'filter_3d'"),
-])
+@pytest.mark.parametrize(
+    "change, says",
+    [
+        ({"opacities": np.ones(3, np.float32)}, "field 'opacities': shape \\(3,\\), expected \\(4,\\)"),
+        ({"sh": np.zeros((4, 3), np.float32)}, "field 'sh': shape \\(4, 3\\), expected \\(4, K, 3\\)"),
+        ({"sh": np.zeros((4, 5, 3), np.float32)}, "sh has 5 coefficients"),
+        ({"filter_3d": np.zeros(5, np.float32)}, "field 'filter_3d'"),
+    ],
+)
 def test_a_scene_of_arrays_that_disagree_is_one_line(change, says):
     """Scene(...) took arrays of different splat counts (or an SH count of no degree): the renders raised the
     native module's ValueError, or drew K=5 as some degree. Its shapes are checked as from_arrays checks them."""

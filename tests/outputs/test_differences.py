@@ -1,5 +1,5 @@
-"""Difference and error images (gbviewer.outputs.differences): hand-built frames through the colour map, the robust scale, the
-colour bar, and the references against renders made here."""
+"""Difference and error images (gbviewer.outputs.differences): hand-built frames through the colour map, the robust
+scale, the colour bar, and the references against renders made here."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.outputs import differences, metrics
 from gbviewer.model.camera import camera_key
+from gbviewer.outputs import differences, metrics
 from gbviewer.outputs.differences import DIVERGING
 
 
@@ -38,9 +38,17 @@ def test_colour_map_at_minus_max_zero_plus_max_and_clipping_beyond():
     np.testing.assert_allclose(rgb[1, 2], 0.75 * DIVERGING[4] + 0.25 * DIVERGING[5], atol=1e-5)
     np.testing.assert_allclose(rgb[1, 3], DIVERGING[5], atol=1e-6)  # no difference
     # exact values of the table's ends and middle (Crameri's berlin): light blue, near black, light red
-    np.testing.assert_allclose(differences.diverging(np.array([-1.0, 0.0, 1.0, -7.0, np.nan])),
-                               [[0.6211, 0.6902, 0.9995], [0.0983, 0.0470, 0.0347], [0.9999, 0.6801, 0.68],
-                                [0.6211, 0.6902, 0.9995], [0.0983, 0.0470, 0.0347]], atol=1e-6)
+    np.testing.assert_allclose(
+        differences.diverging(np.array([-1.0, 0.0, 1.0, -7.0, np.nan])),
+        [
+            [0.6211, 0.6902, 0.9995],
+            [0.0983, 0.0470, 0.0347],
+            [0.9999, 0.6801, 0.68],
+            [0.6211, 0.6902, 0.9995],
+            [0.0983, 0.0470, 0.0347],
+        ],
+        atol=1e-6,
+    )
     with pytest.raises(ValueError, match="different sizes"):
         differences.signed_difference(img, ref[:1])
 
@@ -89,8 +97,9 @@ def test_box_reference_is_the_x1_render_box_downsampled(bundled_scene, output_vi
     x1 = gb.render(bundled_scene, output_view.with_size(64, 48), "scalar").rgb
     assert ref.shape == (12, 16, 3)
     np.testing.assert_allclose(ref, metrics.box_downsample(x1, 4), atol=1e-6)
-    np.testing.assert_array_equal(differences.reference_image(renderer, cam, 1.0, "box"),
-                                  gb.render(bundled_scene, cam, "scalar").rgb)  # at x1: the scalar render itself
+    np.testing.assert_array_equal(
+        differences.reference_image(renderer, cam, 1.0, "box"), gb.render(bundled_scene, cam, "scalar").rgb
+    )  # at x1: the scalar render itself
     assert differences.reference_image(renderer, cam, 2.0, "box") is None
     assert differences.reference_image(renderer, cam, 1 / 2.5, "box") is None
     assert differences.reference_note("box", 2.0) == "no box reference at x2 (only at 1/k): choose dense"
@@ -103,8 +112,16 @@ def test_box_reference_is_the_x1_render_box_downsampled(bundled_scene, output_vi
 def test_camera_key_tells_cameras_apart(output_view):
     assert camera_key(output_view) == camera_key(output_view.at_sampling_rate(1.0))
     assert camera_key(output_view) != camera_key(output_view.at_sampling_rate(0.5))
-    moved = gb.Camera(output_view.width, output_view.height, output_view.fx, output_view.fy, output_view.cx,
-                      output_view.cy, output_view.R, output_view.t + np.float32(0.01))
+    moved = gb.Camera(
+        output_view.width,
+        output_view.height,
+        output_view.fx,
+        output_view.fy,
+        output_view.cx,
+        output_view.cy,
+        output_view.R,
+        output_view.t + np.float32(0.01),
+    )
     assert camera_key(moved) != camera_key(output_view)
     ortho = dataclasses.replace(output_view, projection="orthographic")
     assert camera_key(ortho) != camera_key(output_view)  # the same numbers, other pixels

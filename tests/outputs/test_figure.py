@@ -1,5 +1,5 @@
-"""The comparison figure (gbviewer.outputs.figure.compare_figure; `gbviewer compare`): cells are exactly the renders, PSNR
-against the zoom-out reference, inset, refusal to overwrite."""
+"""The comparison figure (gbviewer.outputs.figure.compare_figure; `gbviewer compare`): cells are exactly the renders,
+PSNR against the zoom-out reference, inset, refusal to overwrite."""
 
 from __future__ import annotations
 
@@ -7,14 +7,15 @@ import math
 
 import numpy as np
 import pytest
+from helpers import OUTPUT_H as H
+from helpers import OUTPUT_W as W
 from PIL import Image
 
 import gbviewer as gb
-from gbviewer.outputs import differences, figure
 from gbviewer.cli import main
+from gbviewer.outputs import differences, figure
 from gbviewer.outputs.figure import to_uint8, upscale_nearest
 from gbviewer.outputs.metrics import box_downsample, psnr
-from helpers import OUTPUT_H as H, OUTPUT_W as W
 
 
 def test_compare_cells_equal_the_renders(bundled_scene, output_view):
@@ -29,7 +30,7 @@ def test_compare_cells_equal_the_renders(bundled_scene, output_view):
         for c, s in enumerate(settings):
             rgb = gb.get_renderer(bundled_scene).render(output_view.at_sampling_rate(rate), s).rgb
             x, y = cmp.layout.origin(r, c)
-            np.testing.assert_array_equal(img[y:y + H, x:x + W], upscale_nearest(to_uint8(rgb), H, W))
+            np.testing.assert_array_equal(img[y : y + H, x : x + W], upscale_nearest(to_uint8(rgb), H, W))
             p = cmp.psnr[r][c]
             if rate > 1:
                 assert p is None
@@ -41,8 +42,24 @@ def test_compare_cells_equal_the_renders(bundled_scene, output_view):
 
 def test_cli_compare_with_inset_and_refusal(tmp_path, output_view, bundled_scene, capsys):
     out = tmp_path / "fig.png"
-    args = ["compare", str(gb.DEFAULT_SCENE), "--modes", "gaussian_blending", "--rates", "1,1/4", "--width", str(W),
-            "--height", str(H), "--orbit", "30,20,0", "--inset", "10,10,16,12", "--out", str(out)]
+    args = [
+        "compare",
+        str(gb.DEFAULT_SCENE),
+        "--modes",
+        "gaussian_blending",
+        "--rates",
+        "1,1/4",
+        "--width",
+        str(W),
+        "--height",
+        str(H),
+        "--orbit",
+        "30,20,0",
+        "--inset",
+        "10,10,16,12",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     assert "PSNR" in capsys.readouterr().out
     img = np.asarray(Image.open(out).convert("RGB"))
@@ -54,8 +71,8 @@ def test_cli_compare_with_inset_and_refusal(tmp_path, output_view, bundled_scene
         rgb = gb.render(bundled_scene, output_view.at_sampling_rate(rate), "gaussian_blending", backend="auto").rgb
         y = r * (H + cap + 4)
         # rows between the region's outline (y <= 22) and the magnified inset (bottom-right, from y = 41)
-        np.testing.assert_array_equal(img[y + 24:y + 40], upscale_nearest(to_uint8(rgb), H, W)[24:40])
-        assert not np.array_equal(img[y + 41:y + H], upscale_nearest(to_uint8(rgb), H, W)[41:])  # inset drawn
+        np.testing.assert_array_equal(img[y + 24 : y + 40], upscale_nearest(to_uint8(rgb), H, W)[24:40])
+        assert not np.array_equal(img[y + 41 : y + H], upscale_nearest(to_uint8(rgb), H, W)[41:])  # inset drawn
     before = out.read_bytes()
     assert main(args) == 2 and out.read_bytes() == before
     assert "--force" in capsys.readouterr().err
@@ -82,7 +99,7 @@ def test_compare_diff_rows_show_the_colour_mapped_differences_and_the_colour_bar
         ref = rgbs[0] if kind == "first" else gb.render(bundled_scene, cam, "scalar", supersample=8).rgb
         for c, rgb in enumerate(rgbs):
             x, y = cmp.origin(r, c)  # the renders, as without --diff
-            np.testing.assert_array_equal(img[y:y + H, x:x + W], upscale_nearest(to_uint8(rgb), H, W))
+            np.testing.assert_array_equal(img[y : y + H, x : x + W], upscale_nearest(to_uint8(rgb), H, W))
             d = differences.signed_difference(rgb, ref)
             ds.append((r, c, d))
             assert cmp.diff.psnr[r][c] == psnr(rgb, ref)
@@ -91,21 +108,36 @@ def test_compare_diff_rows_show_the_colour_mapped_differences_and_the_colour_bar
     for r, c, d in ds:
         x, y = cmp.origin(r, c, diff=True)
         expected = upscale_nearest(to_uint8(differences.colour_difference(d, scale)), H, W)
-        np.testing.assert_array_equal(img[y:y + H, x:x + W], expected)
+        np.testing.assert_array_equal(img[y : y + H, x : x + W], expected)
         if kind == "first" and c == 0:
             assert cmp.diff.psnr[r][c] == math.inf
             assert (expected == to_uint8(differences.DIVERGING[5])).all()  # zero everywhere
     bx, by, bw, bh = cmp.bar
     assert by > grid_h
-    np.testing.assert_array_equal(img[by:by + bh, bx:bx + bw], to_uint8(differences.colour_bar(bw, bh)))
+    np.testing.assert_array_equal(img[by : by + bh, bx : bx + bw], to_uint8(differences.colour_bar(bw, bh)))
     with pytest.raises(gb.GBViewerError, match="expected one of first, ref"):
         figure.compare_figure(bundled_scene, output_view, settings, rates, diff="second")
 
 
 def test_cli_compare_diff(tmp_path, capsys):
     out = tmp_path / "fig.png"
-    args = ["compare", str(gb.DEFAULT_SCENE), "--modes", "scalar,gaussian_blending", "--rates", "1/4", "--width",
-            str(W), "--height", str(H), "--orbit", "30,20,0", "--diff", "--out", str(out)]
+    args = [
+        "compare",
+        str(gb.DEFAULT_SCENE),
+        "--modes",
+        "scalar,gaussian_blending",
+        "--rates",
+        "1/4",
+        "--width",
+        str(W),
+        "--height",
+        str(H),
+        "--orbit",
+        "30,20,0",
+        "--diff",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     printed = capsys.readouterr().out
     assert "mean over RGB" in printed and "vs scalar" in printed

@@ -14,8 +14,8 @@ from PIL import Image
 
 import gbviewer as gb
 from gbviewer import cli
-from gbviewer.outputs import flicker as fl
 from gbviewer.io.write import write_inria_ply
+from gbviewer.outputs import flicker as fl
 from gbviewer.render import RenderSettings
 
 MODES = RenderSettings.parse_list("scalar,mip,analytic,gaussian_blending,supersample:2")
@@ -27,16 +27,26 @@ def camera(width: int = 64, height: int = 48) -> gb.Camera:
 
 def one_large_splat() -> gb.Scene:
     """One splat about 12 px across (sigma) at x1, seen by `camera()` 4 units away."""
-    return gb.Scene.from_arrays(np.array([[0.05, 0.0, 4.0]]), np.full((1, 3), 0.8), np.array([[1.0, 0, 0, 0]]),
-                                np.array([0.9]), np.full((1, 1, 3), 0.5))
+    return gb.Scene.from_arrays(
+        np.array([[0.05, 0.0, 4.0]]),
+        np.full((1, 3), 0.8),
+        np.array([[1.0, 0, 0, 0]]),
+        np.array([0.9]),
+        np.full((1, 1, 3), 0.5),
+    )
 
 
 def subpixel_splats(n: int = 8000, seed: int = 1) -> gb.Scene:
     """n splats of 0.24 px (sigma, x1) filling `camera()`'s view at depth 4: all sub-pixel, more so zoomed out."""
     rng = np.random.default_rng(seed)
     means = np.stack([rng.uniform(-2.2, 2.2, n), rng.uniform(-1.7, 1.7, n), rng.uniform(3.9, 4.1, n)], 1)
-    return gb.Scene.from_arrays(means, np.full((n, 3), 0.016), np.tile([1.0, 0, 0, 0], (n, 1)), np.full(n, 0.8),
-                                rng.uniform(-1.5, 1.5, (n, 1, 3)))
+    return gb.Scene.from_arrays(
+        means,
+        np.full((n, 3), 0.016),
+        np.tile([1.0, 0, 0, 0], (n, 1)),
+        np.full(n, 0.8),
+        rng.uniform(-1.5, 1.5, (n, 1, 3)),
+    )
 
 
 def test_static_camera_is_zero_for_every_mode():
@@ -128,13 +138,35 @@ def test_cli_writes_table_heat_maps_and_video(tmp_path, capsys):
     scene = tmp_path / "s.ply"
     write_inria_ply(subpixel_splats(1000), scene)
     out = tmp_path / "out"
-    argv = ["flicker", str(scene), "--modes", "scalar,preset:supersplat", "--size", "48x32", "--frames", "4",
-            "--pairs", "2", "--reference", "supersample:2", "--backend", "cpu", "--out", str(out), "--video"]
+    argv = [
+        "flicker",
+        str(scene),
+        "--modes",
+        "scalar,preset:supersplat",
+        "--size",
+        "48x32",
+        "--frames",
+        "4",
+        "--pairs",
+        "2",
+        "--reference",
+        "supersample:2",
+        "--backend",
+        "cpu",
+        "--out",
+        str(out),
+        "--video",
+    ]
     assert cli.main(argv) == 0
     text = capsys.readouterr().out
     assert "preset:supersplat" in text and "floor" in text
-    assert sorted(p.name for p in out.iterdir()) == ["flicker.csv", "flicker.json", "heat-preset_supersplat.png",
-                                                      "heat-scalar.png", "heat.mp4"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "flicker.csv",
+        "flicker.json",
+        "heat-preset_supersplat.png",
+        "heat-scalar.png",
+        "heat.mp4",
+    ]
     doc = json.loads((out / "flicker.json").read_text())
     assert doc["reference"] == "scalar:2" and doc["floor"]["mode"] == "scalar" and len(doc["pair_starts"]) == 2
     before = (out / "flicker.csv").read_bytes()
@@ -143,13 +175,16 @@ def test_cli_writes_table_heat_maps_and_video(tmp_path, capsys):
     assert cli.main(argv + ["--force"]) == 0
 
 
-@pytest.mark.parametrize("extra, message", [
-    (["--path", "circle"], "--path circle: expected zoom, dolly, rate, orbit or a keyframes FILE.json"),
-    (["--reference", "bogus"], "--reference bogus: unknown mode 'bogus'"),
-    (["--modes", "scalar,scalar"], "--modes"),
-    (["--frames", "1"], "argument --frames: expected >= 2, got 1"),
-    (["--pairs", "0"], "argument --pairs: expected >= 1, got 0"),
-])
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--path", "circle"], "--path circle: expected zoom, dolly, rate, orbit or a keyframes FILE.json"),
+        (["--reference", "bogus"], "--reference bogus: unknown mode 'bogus'"),
+        (["--modes", "scalar,scalar"], "--modes"),
+        (["--frames", "1"], "argument --frames: expected >= 2, got 1"),
+        (["--pairs", "0"], "argument --pairs: expected >= 1, got 0"),
+    ],
+)
 def test_cli_bad_input_one_line_exit_2(tmp_path, capsys, extra, message):
     scene = tmp_path / "s.ply"
     write_inria_ply(subpixel_splats(10), scene)
@@ -172,6 +207,7 @@ def test_accumulate_shows_the_mean_of_the_stochastic_frames_and_leaves_other_mod
     assert not np.array_equal(frames[0], frames[1])  # the frames are different samples
     np.testing.assert_array_equal(fl.pane_image(renderer, pf, sc, accumulate=4), fl.pane_image(renderer, pf, sc))
     path = fl.flicker_path("orbit", camera(), scene, 3, degrees=1.0)
-    one, many = (fl.measure_flicker(scene, path, [st], pairs=2, with_floor=False, accumulate=k).modes[0].flicker
-                 for k in (1, 32))
+    one, many = (
+        fl.measure_flicker(scene, path, [st], pairs=2, with_floor=False, accumulate=k).modes[0].flicker for k in (1, 32)
+    )
     assert many < 0.7 * one  # measured: 6.36 levels at 1 frame, 3.51 at 32

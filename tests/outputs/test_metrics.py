@@ -31,7 +31,9 @@ def test_ssim_hand_cases():
     assert metrics.ssim(x, x) == pytest.approx(1.0)
     # constant images: SSIM = (2ab + C1) / (a^2 + b^2 + C1), C1 = (0.01)^2
     a, b, c1 = 0.5, 0.25, 1e-4
-    assert metrics.ssim(np.full((16, 16, 3), a), np.full((16, 16, 3), b)) == pytest.approx((2 * a * b + c1) / (a * a + b * b + c1), abs=1e-9)
+    assert metrics.ssim(np.full((16, 16, 3), a), np.full((16, 16, 3), b)) == pytest.approx(
+        (2 * a * b + c1) / (a * a + b * b + c1), abs=1e-9
+    )
     assert math.isnan(metrics.ssim(x[:10, :10], x[:10, :10]))  # the 11x11 window does not fit
 
 

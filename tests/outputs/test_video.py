@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.outputs import video
-from gbviewer.model.camera_paths import PathFrame, camera_path, zoom_path
 from gbviewer.cli import main
+from gbviewer.model.camera_paths import PathFrame, camera_path, zoom_path
+from gbviewer.outputs import video
 from gbviewer.outputs.figure import to_uint8, upscale_nearest
 
 MAX_ERR, MEAN_ERR = 16, 2.5  # codec tolerance at crf 0 (see the module docstring)
@@ -39,7 +39,7 @@ def pane_render(bundled_scene, pf: PathFrame, settings: gb.RenderSettings) -> np
 
 def pane(img: np.ndarray, layout, i: int) -> np.ndarray:
     x, y = layout.origin(0, i)
-    return img[y:y + layout.height, x:x + layout.width]
+    return img[y : y + layout.height, x : x + layout.width]
 
 
 @pytest.mark.parametrize("kind", ["zoom", "rate"])
@@ -48,8 +48,9 @@ def test_video_frames_size_fps_and_end_frames(bundled_scene, output_view, tmp_pa
     path = camera_path(kind, output_view, 7, 1.0, 1.0 / 8.0, bundled_scene)
     seen = []
     out = tmp_path / "z.mp4"
-    info = video.record_video(bundled_scene, path, settings, out, fps=24, crf=0,
-                              progress=lambda done, total: seen.append((done, total)))
+    info = video.record_video(
+        bundled_scene, path, settings, out, fps=24, crf=0, progress=lambda done, total: seen.append((done, total))
+    )
     assert seen == [(i, 7) for i in range(1, 8)]
     layout = video.video_layout(path[0], len(settings))
     assert (info.width, info.height) == layout.size and info.width % 2 == 0 and info.height % 2 == 0
@@ -86,15 +87,35 @@ def test_interruption_leaves_no_file(bundled_scene, output_view, tmp_path, how):
 
     expected = {"exception": Boom, "ctrl-c": KeyboardInterrupt}.get(how, gb.VideoCancelled)
     with pytest.raises(expected):
-        video.record_video(bundled_scene, zoom_path(output_view, 5), [gb.RenderSettings()], tmp_path / "v.mp4",
-                           progress=progress, cancel=cancel)
+        video.record_video(
+            bundled_scene,
+            zoom_path(output_view, 5),
+            [gb.RenderSettings()],
+            tmp_path / "v.mp4",
+            progress=progress,
+            cancel=cancel,
+        )
     assert list(tmp_path.iterdir()) == []
 
 
 def test_cli_video_even_size_and_refusal(tmp_path, capsys):
     out = tmp_path / "r.mp4"
-    args = ["video", str(gb.DEFAULT_SCENE), "--modes", "scalar", "--path", "rate", "--size", "95x63", "--frames",
-            "5", "--fps", "10", "--out", str(out)]
+    args = [
+        "video",
+        str(gb.DEFAULT_SCENE),
+        "--modes",
+        "scalar",
+        "--path",
+        "rate",
+        "--size",
+        "95x63",
+        "--frames",
+        "5",
+        "--fps",
+        "10",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     n, secs = imageio_ffmpeg.count_frames_and_secs(str(out))
     meta, _ = decode(out)
@@ -106,19 +127,24 @@ def test_cli_video_even_size_and_refusal(tmp_path, capsys):
     assert "--force" in capsys.readouterr().err and out.read_bytes() == before
     assert main(args[:-1] + [str(tmp_path / "x.gif")]) == 2  # not .mp4
     i = args.index("--frames")
-    assert main(args[:i] + ["--seconds", "0.3"] + args[i + 2:] + ["--force"]) == 0
+    assert main(args[:i] + ["--seconds", "0.3"] + args[i + 2 :] + ["--force"]) == 0
     assert imageio_ffmpeg.count_frames_and_secs(str(out))[0] == 3
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.mp4"]
 
 
-@pytest.mark.parametrize("extra, line", [
-    (["--path", "{tmp}"], "--path {tmp}: expected zoom, dolly, rate or a keyframes FILE.json, got a folder"),
-    (["--path", "{tmp}/none.json"], "--path {tmp}/none.json: expected zoom, dolly, rate or a keyframes FILE.json, "
-                                    "got no such file"),
-    (["--inset", "1000,1000,5,5"], "--inset 1000,1000,5,5: expected a region inside the 96x64 x1 image"),
-    (["--inset", "90,10,8,8"], "--inset 90,10,8,8: expected a region inside the 96x64 x1 image"),
-    (["--inset=-1,0,8,8"], "--inset -1,0,8,8: expected a region inside"),
-])
+@pytest.mark.parametrize(
+    "extra, line",
+    [
+        (["--path", "{tmp}"], "--path {tmp}: expected zoom, dolly, rate or a keyframes FILE.json, got a folder"),
+        (
+            ["--path", "{tmp}/none.json"],
+            "--path {tmp}/none.json: expected zoom, dolly, rate or a keyframes FILE.json, got no such file",
+        ),
+        (["--inset", "1000,1000,5,5"], "--inset 1000,1000,5,5: expected a region inside the 96x64 x1 image"),
+        (["--inset", "90,10,8,8"], "--inset 90,10,8,8: expected a region inside the 96x64 x1 image"),
+        (["--inset=-1,0,8,8"], "--inset -1,0,8,8: expected a region inside"),
+    ],
+)
 def test_cli_video_bad_path_or_inset_is_one_line(tmp_path, capsys, extra, line):
     """A folder as --path is not "an output inside the input"; an inset off the image is not silently dropped."""
     out = tmp_path / "v.mp4"

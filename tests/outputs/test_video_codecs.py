@@ -12,14 +12,20 @@ import numpy as np
 import pytest
 
 import gbviewer as gb
-from gbviewer.outputs import video
-from gbviewer.model.camera_paths import zoom_path
 from gbviewer.cli import main
+from gbviewer.model.camera_paths import zoom_path
+from gbviewer.outputs import video
 from gbviewer.outputs.figure import to_uint8
 
 MAX_ERR, MEAN_ERR = 24, 3.0
-COMBOS = [("h264", ".mp4", "h264"), ("h265", ".mp4", "hevc"), ("vp9", ".webm", "vp9"), ("vp9", ".mp4", "vp9"),
-          ("av1", ".webm", "av1"), ("av1", ".mp4", "av1")]
+COMBOS = [
+    ("h264", ".mp4", "h264"),
+    ("h265", ".mp4", "hevc"),
+    ("vp9", ".webm", "vp9"),
+    ("vp9", ".mp4", "vp9"),
+    ("av1", ".webm", "av1"),
+    ("av1", ".mp4", "av1"),
+]
 BEST = {"h264": 0, "h265": 0, "vp9": 0, "av1": 1}  # each codec's lowest crf
 
 
@@ -43,7 +49,7 @@ def test_codec_writes_what_ffmpeg_decodes(bundled_scene, output_view, tmp_path, 
     x, y = layout.origin(0, 0)
     renders = [to_uint8(gb.get_renderer(bundled_scene).render(pf.camera, settings[0]).rgb).astype(int) for pf in path]
     for i, frame in enumerate(frames):
-        got = frame[y:y + layout.height, x:x + layout.width].astype(int)
+        got = frame[y : y + layout.height, x : x + layout.width].astype(int)
         err = np.abs(got - renders[i])
         assert err.max() <= MAX_ERR and err.mean() <= MEAN_ERR, (codec, i, err.max(), err.mean())
         other = renders[i + 1 if i + 1 < len(renders) else i - 1]
@@ -52,14 +58,29 @@ def test_codec_writes_what_ffmpeg_decodes(bundled_scene, output_view, tmp_path, 
     assert list(tmp_path.iterdir()) == [out]
 
 
-@pytest.mark.parametrize("codec, out, line", [
-    ("h264", "v.webm", "v.webm: a WEBM file cannot hold h264; use vp9, av1 or write .mp4"),
-    ("h265", "v.webm", "v.webm: a WEBM file cannot hold h265; use vp9, av1 or write .mp4"),
-    ("vp9", "v.gif", "v.gif: output must end in .mp4 or .webm"),
-])
+@pytest.mark.parametrize(
+    "codec, out, line",
+    [
+        ("h264", "v.webm", "v.webm: a WEBM file cannot hold h264; use vp9, av1 or write .mp4"),
+        ("h265", "v.webm", "v.webm: a WEBM file cannot hold h265; use vp9, av1 or write .mp4"),
+        ("vp9", "v.gif", "v.gif: output must end in .mp4 or .webm"),
+    ],
+)
 def test_impossible_combination_is_one_line(tmp_path, capsys, codec, out, line):
-    args = ["video", str(gb.DEFAULT_SCENE), "--modes", "scalar", "--size", "96x64", "--frames", "2", "--codec", codec,
-            "--out", str(tmp_path / out)]
+    args = [
+        "video",
+        str(gb.DEFAULT_SCENE),
+        "--modes",
+        "scalar",
+        "--size",
+        "96x64",
+        "--frames",
+        "2",
+        "--codec",
+        codec,
+        "--out",
+        str(tmp_path / out),
+    ]
     assert main(args) == 2
     err = capsys.readouterr().err
     assert err.splitlines() == [f"gbviewer: error: {tmp_path / line}"], err
@@ -68,8 +89,20 @@ def test_impossible_combination_is_one_line(tmp_path, capsys, codec, out, line):
 
 def test_missing_encoder_is_named(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(video, "available_encoders", lambda: frozenset({"libx264"}))
-    args = ["video", str(gb.DEFAULT_SCENE), "--modes", "scalar", "--size", "96x64", "--frames", "2", "--codec", "av1",
-            "--out", str(tmp_path / "v.webm")]
+    args = [
+        "video",
+        str(gb.DEFAULT_SCENE),
+        "--modes",
+        "scalar",
+        "--size",
+        "96x64",
+        "--frames",
+        "2",
+        "--codec",
+        "av1",
+        "--out",
+        str(tmp_path / "v.webm"),
+    ]
     assert main(args) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and "codec av1" in err[0] and "no libsvtav1 or libaom-av1 encoder" in err[0], err
@@ -81,7 +114,24 @@ def test_missing_encoder_is_named(tmp_path, monkeypatch, capsys):
 
 def test_cli_codec_h265(tmp_path):
     out = tmp_path / "v.mp4"
-    assert main(["video", str(gb.DEFAULT_SCENE), "--modes", "scalar", "--size", "96x64", "--frames", "3",
-                 "--codec", "h265", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "video",
+                str(gb.DEFAULT_SCENE),
+                "--modes",
+                "scalar",
+                "--size",
+                "96x64",
+                "--frames",
+                "3",
+                "--codec",
+                "h265",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     meta, frames = decode(out)
     assert meta["codec"] == "hevc" and len(frames) == 3

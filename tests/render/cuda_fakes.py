@@ -8,7 +8,7 @@ import numpy as np
 
 from gbviewer.render import CudaRenderer
 
-TIMEOUT = ("CUDA device 0 failed: CUDA error in cudaStreamSynchronize(0): the launch timed out and was terminated")
+TIMEOUT = "CUDA device 0 failed: CUDA error in cudaStreamSynchronize(0): the launch timed out and was terminated"
 
 
 class FakeDeviceFailed(RuntimeError):
@@ -55,8 +55,12 @@ class FakeNative:
     def render(self, *args, view_filter=None, seed=0, frame=0, fast=False, cut=False):
         self._call("render cut" if cut else "render")
         w, h = args[6], args[7]
-        return dict(rgb=np.zeros((h, w, 3), np.float32), alpha=np.zeros((h, w), np.float32),
-                    evals=np.zeros((h, w), np.int32), **STATS)
+        return dict(
+            rgb=np.zeros((h, w, 3), np.float32),
+            alpha=np.zeros((h, w), np.float32),
+            evals=np.zeros((h, w), np.int32),
+            **STATS,
+        )
 
     def render_to_gl_texture(self, texture, *args, view_filter=None, seed=0, frame=0, fast=False, cut=False):
         self._call("render_to_gl_texture")
@@ -69,8 +73,17 @@ class FakeNative:
         self._call("release_buffers")
 
 
-STATS = dict(preprocess_ms=1.0, sort_ms=2.0, blend_ms=3.0, visible=5, sort_length=6, pairs=7, evaluations=96,
-             cells_visible=2, cell_misses=1)
+STATS = dict(
+    preprocess_ms=1.0,
+    sort_ms=2.0,
+    blend_ms=3.0,
+    visible=5,
+    sort_length=6,
+    pairs=7,
+    evaluations=96,
+    cells_visible=2,
+    cell_misses=1,
+)
 
 
 def fake_renderer(fake: FakeNative) -> CudaRenderer:

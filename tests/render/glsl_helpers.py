@@ -18,8 +18,8 @@ pixels of an image, i.e. the 1e-4 stop fell one splat apart). The 0.2% bound lea
 (NVIDIA/AMD/Intel evaluate exp/log and contract FMAs differently) without hiding a real formula difference, which
 moves most pixels of an image by more than 1/255.
 
-`visible` and `pairs` (tile-list entries) must match exactly up to the same kind of flip (bounded by 1e-4 of the splats).
-"""
+`visible` and `pairs` (tile-list entries) must match exactly up to the same kind of flip (bounded by 1e-4 of the
+splats)."""
 
 from __future__ import annotations
 
@@ -48,8 +48,14 @@ def gl():
         skip_or_fail(why)
 
 
-def compare(scene: gb.Scene, cam: gb.Camera, spec: str, renderer: GlslRenderer | None = None,
-            background=(0.0, 0.0, 0.0), **options) -> dict:
+def compare(
+    scene: gb.Scene,
+    cam: gb.Camera,
+    spec: str,
+    renderer: GlslRenderer | None = None,
+    background=(0.0, 0.0, 0.0),
+    **options,
+) -> dict:
     """Render with both backends; assert the tolerances of the module docstring; return the measurements."""
     settings = RenderSettings.parse(spec, background=background, **options)
     ref = gb.get_renderer(scene, "cpu").render(cam, settings)
@@ -73,7 +79,6 @@ def compare(scene: gb.Scene, cam: gb.Camera, spec: str, renderer: GlslRenderer |
     return m
 
 
-
 def awkward_scene(seed: int, n: int = 1500, filter3d: bool = False) -> gb.Scene:
     """conftest.random_scene plus the cases that stress binning and culling: splats behind the near plane, far
     off-screen, huge (covering many tiles), degenerate (zero scale), and exact depth ties (copies of splats with
@@ -84,9 +89,9 @@ def awkward_scene(seed: int, n: int = 1500, filter3d: bool = False) -> gb.Scene:
     opac, sh = base.opacities.copy(), base.sh.copy()
     k = n // 10
     means[:k, 2] = rng.uniform(-1.0, 0.25, k)  # behind / at the near plane
-    means[k:2 * k, :2] = rng.uniform(-40, 40, (k, 2))  # far off-screen (Jacobian clamp)
-    scales[2 * k:2 * k + 10] = rng.uniform(0.3, 1.0, (10, 3))  # huge
-    scales[2 * k + 10:2 * k + 20, 0] = 0.0  # flat
+    means[k : 2 * k, :2] = rng.uniform(-40, 40, (k, 2))  # far off-screen (Jacobian clamp)
+    scales[2 * k : 2 * k + 10] = rng.uniform(0.3, 1.0, (10, 3))  # huge
+    scales[2 * k + 10 : 2 * k + 20, 0] = 0.0  # flat
     dup = rng.choice(np.arange(3 * k, n), 50, replace=False)
     means = np.concatenate([means, means[dup]])
     scales, quats = np.concatenate([scales, scales[dup]]), np.concatenate([quats, quats[dup]])
@@ -94,4 +99,3 @@ def awkward_scene(seed: int, n: int = 1500, filter3d: bool = False) -> gb.Scene:
     sh = np.concatenate([sh, rng.normal(0, 1.0, sh[dup].shape).astype(np.float32)])
     f3d = rng.uniform(0.0, 0.02, len(means)) if filter3d else None
     return gb.Scene.from_arrays(means, scales, quats, opac, sh, f3d, source=f"awkward({seed}, filter3d={filter3d})")
-

@@ -77,8 +77,13 @@ def tie_scene(z: np.ndarray, seed: int, xy: float = 0.6, scale: float = 0.02) ->
     rng = np.random.default_rng(seed)
     n = len(z)
     means = np.c_[rng.uniform(-xy, xy, n) * z, rng.uniform(-xy, xy, n) * z, z]
-    return gb.Scene.from_arrays(means, np.full((n, 3), scale) * np.abs(z)[:, None], rng.normal(size=(n, 4)),
-                                rng.uniform(0.1, 0.9, n), rng.normal(0, 0.5, (n, 1, 3)))
+    return gb.Scene.from_arrays(
+        means,
+        np.full((n, 3), scale) * np.abs(z)[:, None],
+        rng.normal(size=(n, 4)),
+        rng.uniform(0.1, 0.9, n),
+        rng.normal(0, 0.5, (n, 1, 3)),
+    )
 
 
 def tie_depths(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -156,8 +161,12 @@ def test_cancel_at_random_moments_ends_cancelled_or_exact(big_frame):
     returns the uncancelled frame, and the next render is exact."""
     r, cam, frame, small, small_frame = big_frame
     s = frame.stats
-    moments = [s.preprocess_ms / 2, s.preprocess_ms + s.sort_ms / 4, s.preprocess_ms + s.sort_ms * 3 / 4,
-               s.preprocess_ms + s.sort_ms + s.blend_ms / 2]
+    moments = [
+        s.preprocess_ms / 2,
+        s.preprocess_ms + s.sort_ms / 4,
+        s.preprocess_ms + s.sort_ms * 3 / 4,
+        s.preprocess_ms + s.sort_ms + s.blend_ms / 2,
+    ]
     rng = np.random.default_rng(23)
     moments += list(rng.uniform(0, s.total_ms * 1.1, 6))
     outcomes = []

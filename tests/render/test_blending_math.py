@@ -12,10 +12,10 @@ import math
 
 import numpy as np
 import pytest
+from reference_preprocess import SH_C0, preprocess
 from scipy.special import erf
 
 import gbviewer as gb
-from reference_preprocess import SH_C0, preprocess
 
 F = 100.0  # focal length in pixels
 WHITE_DC = 0.5 / SH_C0  # SH DC coefficient that evaluates to colour 1.0
@@ -40,7 +40,12 @@ def camera_2d(W, H, cx, cy, f=F):
 
 def box_mean_gauss_1d(lo, hi, mu, s):
     """Mean of exp(-(x-mu)^2 / 2 s^2) over [lo, hi] (closed form with erf)."""
-    return math.sqrt(math.pi / 2) * s * (erf((hi - mu) / (math.sqrt(2) * s)) - erf((lo - mu) / (math.sqrt(2) * s))) / (hi - lo)
+    return (
+        math.sqrt(math.pi / 2)
+        * s
+        * (erf((hi - mu) / (math.sqrt(2) * s)) - erf((lo - mu) / (math.sqrt(2) * s)))
+        / (hi - lo)
+    )
 
 
 def dense_grid(x0, y0, n):
@@ -76,7 +81,7 @@ def test_gb_single_axis_aligned_splat_is_exact_pixel_integral(sig, angle):
     expected = np.where(expected >= 1 / 256, expected, 0.0)  # Gaussian Blending's alpha cut
     # independent check of the closed form by dense sampling of the centre pixel
     X, Y = dense_grid(11, 12, 2000)
-    dense = (o * np.exp(-0.5 * ((X - mx) ** 2 / sx ** 2 + (Y - my) ** 2 / sy ** 2))).mean()
+    dense = (o * np.exp(-0.5 * ((X - mx) ** 2 / sx**2 + (Y - my) ** 2 / sy**2))).mean()
     assert abs(dense - expected[12, 11]) < 1e-7
     got = frame.alpha  # 1 - T_final
     err = np.abs(got - expected).max()
@@ -95,8 +100,16 @@ def test_weights_plus_transmittance_sum_to_one(mode, supersample):
     cx, cy = 20.0, 16.0
     centres = np.c_[rng.uniform(0, W, n), rng.uniform(0, H, n)]
     sig = np.exp(rng.uniform(np.log(0.2), np.log(6.0), (n, 2)))
-    scene = splats_2d(centres, sig, rng.uniform(0, math.pi, n), rng.uniform(0.05, 1.0, n), np.ones((n, 3)),
-                      rng.uniform(2, 8, n), cx, cy)
+    scene = splats_2d(
+        centres,
+        sig,
+        rng.uniform(0, math.pi, n),
+        rng.uniform(0.05, 1.0, n),
+        np.ones((n, 3)),
+        rng.uniform(2, 8, n),
+        cx,
+        cy,
+    )
     frame = gb.render(scene, camera_2d(W, H, cx, cy), mode=mode, supersample=supersample)
     T = 1.0 - frame.alpha
     assert (T < 0.5).mean() > 0.3, "scene should be fairly opaque"
@@ -113,14 +126,13 @@ def _fig3(mu_x, sigma, o=0.999):
     cx, cy = 8.0, 8.0
     p = np.array([8.5, 8.5])  # centre of pixel (8, 8)
     centres = [p + (mu_x, -0.1), p + (mu_x, 0.1)]
-    scene = splats_2d(centres, [(sigma, sigma)] * 2, [0.0, 0.0], [o, o], [(1.0, 1.0, 1.0)] * 2, [10.0, 10.01],
-                      cx, cy)
+    scene = splats_2d(centres, [(sigma, sigma)] * 2, [0.0, 0.0], [o, o], [(1.0, 1.0, 1.0)] * 2, [10.0, 10.01], cx, cy)
     cam = camera_2d(W, H, cx, cy)
     # exact remaining transmittance: mean over the pixel of (1 - a1(x)) (1 - a2(x)), undilated Gaussians
     X, Y = dense_grid(8.0, 8.0, 2000)
     rem = np.ones_like(X)
     for c in centres:
-        rem *= 1.0 - o * np.exp(-0.5 * ((X - c[0]) ** 2 + (Y - c[1]) ** 2) / sigma ** 2)
+        rem *= 1.0 - o * np.exp(-0.5 * ((X - c[0]) ** 2 + (Y - c[1]) ** 2) / sigma**2)
     T_exact = rem.mean()
     T = {m: 1.0 - float(gb.render(scene, cam, mode=m).alpha[8, 8]) for m in ("scalar", "gaussian_blending")}
     return T_exact, T["scalar"], T["gaussian_blending"]
@@ -128,16 +140,27 @@ def _fig3(mu_x, sigma, o=0.999):
 
 # (mu_x, sigma): Figure 3 left (sigma = 1, varying mu_x) and right (mu_x = 0.5, varying sigma). mu_x = 0 is left
 # out: both scalar alphas clamp to 0.99 and T(1 - alpha) lands exactly on the 1e-4 early-stop cut.
-FIG3_CASES = [(0.25, 1.0), (0.5, 1.0), (0.75, 1.0), (1.0, 1.0), (1.5, 1.0), (0.5, 0.5), (0.5, 0.75), (0.5, 1.5),
-              (0.5, 2.0)]
+FIG3_CASES = [
+    (0.25, 1.0),
+    (0.5, 1.0),
+    (0.75, 1.0),
+    (1.0, 1.0),
+    (1.5, 1.0),
+    (0.5, 0.5),
+    (0.5, 0.75),
+    (0.5, 1.5),
+    (0.5, 2.0),
+]
 
 
 @pytest.mark.parametrize("mu_x,sigma", FIG3_CASES)
 def test_fig3_two_splats_transmittance(mu_x, sigma):
     T_exact, T_scalar, T_gb = _fig3(mu_x, sigma)
     d_scalar, d_gb = T_scalar - T_exact, T_gb - T_exact
-    msg = (f"mu_x={mu_x} sigma={sigma}: T_exact={T_exact:.5f} T_scalar={T_scalar:.5f} (dT {d_scalar:+.5f}) "
-           f"T_gb={T_gb:.5f} (dT {d_gb:+.5f})")
+    msg = (
+        f"mu_x={mu_x} sigma={sigma}: T_exact={T_exact:.5f} T_scalar={T_scalar:.5f} (dT {d_scalar:+.5f}) "
+        f"T_gb={T_gb:.5f} (dT {d_gb:+.5f})"
+    )
     assert d_scalar < 0, "scalar blending should leave too little transmittance (dilation): " + msg
     assert abs(d_gb) * 5 <= abs(d_scalar), "gaussian_blending |dT| should be >= 5x smaller: " + msg
 
@@ -157,9 +180,21 @@ def exact_render(scene, cam, samples=24, background=(0.0, 0.0, 0.0)):
     C = np.zeros((H * n, W * n, 3))
     T = np.ones((H * n, W * n))
     idx = np.nonzero(pre["opacity"] > 0)[0]
-    idx = idx[(pre["depth"][idx] > 0.2) & (np.linalg.det(np.stack([
-        np.stack([pre["cov"][idx, 0], pre["cov"][idx, 1]], -1),
-        np.stack([pre["cov"][idx, 1], pre["cov"][idx, 2]], -1)], -2)) > 0)]
+    idx = idx[
+        (pre["depth"][idx] > 0.2)
+        & (
+            np.linalg.det(
+                np.stack(
+                    [
+                        np.stack([pre["cov"][idx, 0], pre["cov"][idx, 1]], -1),
+                        np.stack([pre["cov"][idx, 1], pre["cov"][idx, 2]], -1),
+                    ],
+                    -2,
+                )
+            )
+            > 0
+        )
+    ]
     for k in idx[np.argsort(pre["depth"][idx], kind="stable")]:
         a, b, c = pre["cov"][k]
         x, y = pre["xy"][k]
@@ -190,8 +225,14 @@ def two_surface_scene(seed, W=24, H=24, density=2.5):
                 pts.append(p)
         sig = np.exp(rng.uniform(np.log(0.2), np.log(0.6), (n, 2)))
         col = np.clip(np.asarray(color) + rng.normal(scale=0.05, size=(n, 3)), 0, 1)
-        return (np.array(pts), sig, rng.uniform(0, math.pi, n), rng.uniform(o_lo, o_hi, n), col,
-                depth + rng.uniform(0, 0.05, n))
+        return (
+            np.array(pts),
+            sig,
+            rng.uniform(0, math.pi, n),
+            rng.uniform(o_lo, o_hi, n),
+            col,
+            depth + rng.uniform(0, 0.05, n),
+        )
 
     r = 7.0
     disk = lambda p: (p[0] - cx) ** 2 + (p[1] - cy) ** 2 < r * r  # noqa: E731
@@ -206,16 +247,21 @@ def test_gb_closest_to_physically_exact_colour():
     for seed in (7, 8):
         scene, cam = two_surface_scene(seed)
         exact, _ = exact_render(scene, cam)
-        runs = {"scalar": ("scalar", 1), "analytic": ("analytic", 1), "scalar 2x2": ("scalar", 2),
-                "gaussian_blending": ("gaussian_blending", 1)}
+        runs = {
+            "scalar": ("scalar", 1),
+            "analytic": ("analytic", 1),
+            "scalar 2x2": ("scalar", 2),
+            "gaussian_blending": ("gaussian_blending", 1),
+        }
         for name, (mode, ss) in runs.items():
             rgb = gb.render(scene, cam, mode=mode, supersample=ss).rgb
             errs.setdefault(name, []).append(np.abs(rgb - exact).mean())
         # sanity check of the exact renderer: N x N supersampling converges to eq. 6 (its 0.3/N^2 dilation
         # vanishes), so its error must fall steadily with N
         ss_err = [np.abs(gb.render(scene, cam, mode="scalar", supersample=n).rgb - exact).mean() for n in (1, 2, 4, 8)]
-        assert all(a > 1.5 * b for a, b in zip(ss_err, ss_err[1:])) and ss_err[-1] < 0.01, \
+        assert all(a > 1.5 * b for a, b in zip(ss_err, ss_err[1:])) and ss_err[-1] < 0.01, (
             f"supersampling does not converge to the exact render: {np.round(ss_err, 4)}"
+        )
     mean = {k: float(np.mean(v)) for k, v in errs.items()}
     msg = "mean |rgb - exact| per mode: " + ", ".join(f"{k} {v:.4f}" for k, v in mean.items())
     for other in ("scalar", "analytic", "scalar 2x2"):

@@ -8,10 +8,10 @@ import threading
 
 import numpy as np
 import pytest
+from helpers import front_camera, random_scene
 
 import gbviewer as gb
 from gbviewer.render.glsl import GlslRenderer
-from helpers import front_camera, random_scene
 
 
 @pytest.fixture(scope="module")
@@ -63,8 +63,14 @@ def test_event_set_during_the_render_cancels_it(scene):
     """Set from the progress callback, i.e. while the blend runs: the call raises instead of returning a frame."""
     cancel = threading.Event()
     with pytest.raises(gb.RenderCancelled):
-        gb.render(scene, front_camera(320, 240), "gaussian_blending", supersample=2, cancel=cancel,
-                  on_progress=lambda done, total: cancel.set())
+        gb.render(
+            scene,
+            front_camera(320, 240),
+            "gaussian_blending",
+            supersample=2,
+            cancel=cancel,
+            on_progress=lambda done, total: cancel.set(),
+        )
     frame = gb.render(scene, front_camera(320, 240), "gaussian_blending", supersample=2)  # the renderer still works
     assert np.isfinite(frame.rgb).all() and frame.rgb.max() > 0
 
@@ -100,28 +106,37 @@ def test_partial_frame_ends_equal_to_the_frame(scene, backend, ss):
     frame = r.render(cam, _settings(ss=ss), partial=partial)
     exact = np.ones((70, 100), bool)
     if backend == "cpu" and 16 % ss:
+
         def one_tile(n: int) -> np.ndarray:  # output pixels along an axis whose samples lie in one tile
             return np.ptp(np.arange(n * ss).reshape(-1, ss) // 16, axis=1) == 0
+
         exact = np.outer(one_tile(70), one_tile(100))
         assert 0.5 < exact.mean() < 1 and np.isfinite(partial).all()
     np.testing.assert_array_equal(partial[exact], frame.rgb[exact])
 
 
 def test_partial_tiles_of_a_cancelled_render_equal_the_final_tiles(scene):
-    """Cancelled at the first report of a finished tile: the tiles written so far are the final frame's, the rest untouched,
-    and they were blended from the centre out."""
+    """Cancelled at the first report of a finished tile: the tiles written so far are the final frame's, the rest
+    untouched, and they were blended from the centre out."""
     cam = front_camera(640, 480)
     final = gb.render(scene, cam, "gaussian_blending", supersample=2)
     partial = np.full((480, 640, 3), np.nan, np.float32)
     cancel = threading.Event()
     with pytest.raises(gb.RenderCancelled):
-        gb.render(scene, cam, "gaussian_blending", supersample=2, cancel=cancel, partial=partial,
-                  on_progress=lambda done, total: done and cancel.set())
+        gb.render(
+            scene,
+            cam,
+            "gaussian_blending",
+            supersample=2,
+            cancel=cancel,
+            partial=partial,
+            on_progress=lambda done, total: done and cancel.set(),
+        )
     filled = np.isfinite(partial).all(axis=2)
     assert filled.any() and not filled.all()
     np.testing.assert_array_equal(partial[filled], final.rgb[filled])
     tiles = filled[::8, ::8]  # one entry per 16x16 tile of the 2x2-supersampled frame (8x8 output pixels)
-    ty, tx = np.mgrid[0:tiles.shape[0], 0:tiles.shape[1]]
+    ty, tx = np.mgrid[0 : tiles.shape[0], 0 : tiles.shape[1]]
     dist = np.hypot(tx + 0.5 - tiles.shape[1] / 2, ty + 0.5 - tiles.shape[0] / 2)
     assert dist[tiles].max() <= dist[~tiles].min() + 2.0  # centre out (up to the tiles in flight)
 
@@ -140,8 +155,11 @@ class _NotCallable:
 @pytest.mark.parametrize("cancel", [object(), True, lambda: False, "stop", _NotCallable()])
 def test_a_cancel_without_is_set_is_refused(scene, cancel):
     """Not a raw AttributeError from inside the render: one RenderError naming `cancel` and what it takes."""
-    with pytest.raises(gb.RenderError, match=r"^cancel: expected a gbviewer.CancelToken, a threading.Event or an "
-                                             r"object with an is_set\(\) method \(or None\), got \w+$"):
+    with pytest.raises(
+        gb.RenderError,
+        match=r"^cancel: expected a gbviewer.CancelToken, a threading.Event or an "
+        r"object with an is_set\(\) method \(or None\), got \w+$",
+    ):
         gb.render(scene, front_camera(64, 48), "scalar", cancel=cancel)
 
 
@@ -158,8 +176,14 @@ def test_a_cancel_token_set_during_the_render_cancels_it(scene):
     helper = threading.Thread(target=setter)
     helper.start()
     with pytest.raises(gb.RenderCancelled):
-        gb.render(scene, front_camera(640, 480), "gaussian_blending", supersample=3, cancel=token,
-                  on_progress=lambda done, total: started.set())
+        gb.render(
+            scene,
+            front_camera(640, 480),
+            "gaussian_blending",
+            supersample=3,
+            cancel=token,
+            on_progress=lambda done, total: started.set(),
+        )
     helper.join()
     assert token.is_set() and token.wait(0)
     token.clear()
@@ -172,8 +196,14 @@ def test_no_helper_thread_runs_during_a_render(scene):
     """Progress is reported from the rendering thread itself, and no thread is started for the render."""
     before = set(threading.enumerate())
     seen: list[tuple[threading.Thread, set[threading.Thread]]] = []
-    gb.render(scene, front_camera(320, 240), "gaussian_blending", supersample=2, cancel=threading.Event(),
-              on_progress=lambda done, total: seen.append((threading.current_thread(), set(threading.enumerate()))))
+    gb.render(
+        scene,
+        front_camera(320, 240),
+        "gaussian_blending",
+        supersample=2,
+        cancel=threading.Event(),
+        on_progress=lambda done, total: seen.append((threading.current_thread(), set(threading.enumerate()))),
+    )
     assert seen and all(t is threading.current_thread() and during <= before for t, during in seen)
 
 
@@ -238,7 +268,8 @@ def test_rendering_from_inside_on_progress_with_the_same_renderer_is_an_error_no
     own = create_renderer("cpu")
     own.upload(scene)
     inner: list[gb.Frame] = []
-    frame = gb.render(scene, cam, on_progress=lambda d, t: inner.append(own.render(front_camera(16, 16),
-                                                                                      gb.RenderSettings())))
+    frame = gb.render(
+        scene, cam, on_progress=lambda d, t: inner.append(own.render(front_camera(16, 16), gb.RenderSettings()))
+    )
     np.testing.assert_array_equal(frame.rgb, gb.render(scene, cam).rgb)
     assert inner and all(np.array_equal(f.rgb, inner[0].rgb) for f in inner)

@@ -7,9 +7,9 @@ import threading
 import time
 
 import pytest
+from helpers import skip_or_fail
 
 import gbviewer as gb
-from helpers import skip_or_fail
 from gbviewer.core.errors import RenderError
 from gbviewer.render import choice, registry
 from gbviewer.render.choice import BackendChoice, GlProbe, decide
@@ -48,21 +48,31 @@ def test_this_machine_gets_what_its_probes_say():
     assert isinstance(picked, BackendChoice) and picked == decide(cuda, None if cuda[0] else gl)
     if not cuda[0] and (gl.error or gl.software):
         assert picked.name == "cpu" and "CUDA unavailable" in picked.reason
-        assert (gl.renderer in picked.reason and "software rasterizer" in picked.reason) if gl.software \
+        assert (
+            (gl.renderer in picked.reason and "software rasterizer" in picked.reason)
+            if gl.software
             else gl.error in picked.reason
+        )
     assert str(picked) == f"{picked.name} (auto: {picked.reason})"
     assert registry.resolve_backend("auto") == picked.name
 
 
-@pytest.mark.parametrize("cuda, gl, name, words", [
-    ((True, ""), LLVMPIPE, "cuda", ["CUDA device is usable"]),
-    ((False, "no CUDA device found"), RTX, "glsl", ["no CUDA device found", "RTX 4090", "4.6"]),
-    ((False, "no CUDA device found"), LLVMPIPE, "cpu", ["no CUDA device found", "llvmpipe", "software"]),
-    ((False, "not built"), GlProbe("softpipe", 450), "cpu", ["not built", "softpipe", "software"]),
-    ((False, "not built"), GlProbe("Apple M1", 410), "cpu", ["4.1 on Apple M1", "compute shaders"]),
-    ((False, "not built"), GlProbe(error="no OpenGL 4.3 context: EGL_NOT_INITIALIZED"), "cpu",
-     ["not built", "EGL_NOT_INITIALIZED"]),
-])
+@pytest.mark.parametrize(
+    "cuda, gl, name, words",
+    [
+        ((True, ""), LLVMPIPE, "cuda", ["CUDA device is usable"]),
+        ((False, "no CUDA device found"), RTX, "glsl", ["no CUDA device found", "RTX 4090", "4.6"]),
+        ((False, "no CUDA device found"), LLVMPIPE, "cpu", ["no CUDA device found", "llvmpipe", "software"]),
+        ((False, "not built"), GlProbe("softpipe", 450), "cpu", ["not built", "softpipe", "software"]),
+        ((False, "not built"), GlProbe("Apple M1", 410), "cpu", ["4.1 on Apple M1", "compute shaders"]),
+        (
+            (False, "not built"),
+            GlProbe(error="no OpenGL 4.3 context: EGL_NOT_INITIALIZED"),
+            "cpu",
+            ["not built", "EGL_NOT_INITIALIZED"],
+        ),
+    ],
+)
 def test_choice_from_probes(monkeypatch, cuda, gl, name, words):
     calls = fake_probes(monkeypatch, cuda, gl)
     picked = gb.choose_backend()

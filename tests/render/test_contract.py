@@ -9,13 +9,13 @@ import threading
 
 import numpy as np
 import pytest
+from helpers import run_threads
 
 import gbviewer as gb
 from gbviewer.bench import SIMD_NAMES
 from gbviewer.core.errors import BackendFailed, RenderCancelled, RenderError
 from gbviewer.render import BACKENDS, Capabilities, Renderer, RenderSettings, capable, create_gl_context, get_renderer
 from gbviewer.render.glsl.context import standalone_context
-from helpers import run_threads
 
 GB = RenderSettings("gaussian_blending")
 TILED = RenderSettings("gaussian_blending", supersample=2)  # at 320x240: 1200 tiles, progress and partial between
@@ -56,8 +56,14 @@ def long_render(renderer: Renderer, scene: gb.Scene) -> tuple[gb.Camera, RenderS
 
 def half(scene: gb.Scene) -> gb.Scene:
     """Every other splat of `scene`: another scene with other pixels."""
-    return gb.Scene.from_arrays(scene.means[::2], scene.scales[::2], scene.quats[::2], scene.opacities[::2],
-                                scene.sh[::2], None if scene.filter_3d is None else scene.filter_3d[::2])
+    return gb.Scene.from_arrays(
+        scene.means[::2],
+        scene.scales[::2],
+        scene.quats[::2],
+        scene.opacities[::2],
+        scene.sh[::2],
+        None if scene.filter_3d is None else scene.filter_3d[::2],
+    )
 
 
 def test_the_contract_is_declared(backend):
@@ -244,8 +250,9 @@ def test_render_many_equals_render_per_job(renderer, bundled_scene):
     """Every backend's render_many (the CPU's shared stage, or the contract's default loop over render) gives each
     job the frame `render` gives it, with progress per job."""
     cam = view(bundled_scene)
-    jobs = [(cam, RenderSettings.parse(s)) for s in ("scalar", "gaussian_blending")] + [(view(bundled_scene, 64, 48),
-                                                                                         RenderSettings())]
+    jobs = [(cam, RenderSettings.parse(s)) for s in ("scalar", "gaussian_blending")] + [
+        (view(bundled_scene, 64, 48), RenderSettings())
+    ]
     seen: set[int] = set()
     frames = renderer.render_many(jobs, on_progress=lambda job, done, total: seen.add(job))
     assert len(frames) == len(jobs)

@@ -2,11 +2,10 @@
 handling run without a GPU; runtime comparisons with the CPU backend run only where a CUDA device is present (they
 skip, saying why, elsewhere).
 
-Exactness on a GPU: `visible` and `pairs` (tile-list entries) must equal the CPU's. The preprocess decisions are bit-identical on
-every backend (products rounded through mul_rn, tests/render/test_fp_contract.py), and duplex orders each cell's splats
-canonically on both (gbv/order.h), so the only float differences left are in the blend (fused multiply-adds, device
-expf/logf), bounded per image below.
-"""
+Exactness on a GPU: `visible` and `pairs` (tile-list entries) must equal the CPU's. The preprocess decisions are
+bit-identical on every backend (products rounded through mul_rn, tests/render/test_fp_contract.py), and duplex orders
+each cell's splats canonically on both (gbv/order.h), so the only float differences left are in the blend (fused
+multiply-adds, device expf/logf), bounded per image below."""
 
 from __future__ import annotations
 
@@ -15,12 +14,12 @@ import shutil
 
 import numpy as np
 import pytest
+from helpers import front_camera, random_scene, shared_scene
+from test_render import check_concurrent_renders
 
 import gbviewer as gb
-from helpers import front_camera, random_scene, shared_scene
 from gbviewer.model.cells import Cells, build_cells
 from gbviewer.render import CudaRenderer
-from test_render import check_concurrent_renders
 
 MODES = ["scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex"]
 CUDA_OK, CUDA_WHY = CudaRenderer.available()
@@ -120,7 +119,7 @@ def duplex_scene_with_ties(seed: int = 52) -> tuple[gb.Scene, Cells, int]:
     cells = build_cells(scene, 6)
     ties = 0
     for c in range(cells.num_cells):
-        z = scene.means[cells.members[cells.offsets[c]:cells.offsets[c + 1]], 2]
+        z = scene.means[cells.members[cells.offsets[c] : cells.offsets[c + 1]], 2]
         ties += len(z) - len(np.unique(z))
     scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, cells=cells)
     return scene, cells, ties
@@ -142,8 +141,7 @@ def test_cuda_duplex_order_inside_cells_is_canonical():
             lo, hi = cells.offsets[c], cells.offsets[c + 1]
             members[lo:hi] = rng.permutation(members[lo:hi])
         shuffled = Cells(cells.means, cells.scales, cells.quats, cells.offsets, members)
-        other = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
-                                     cells=shuffled)
+        other = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, cells=shuffled)
         b = gb.render(other, cam, "duplex", backend="cuda")
         assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.alpha, b.alpha), f"member permutation {seed}"
     mean, worst, frac = compare(cpu, a)
@@ -173,10 +171,27 @@ def test_cuda_renderer_device():
 
 # ---- without a GPU: argument checks (gbviewer._native_cuda.check_render_args runs Renderer.render's) -------------
 
-GOOD = dict(R=np.eye(3, dtype=np.float32), t=np.zeros(3, np.float32), fx=60.0, fy=60.0, cx=32.0, cy=24.0, width=64,
-            height=48, near_plane=0.2, projection=0, mode=0, supersample=1, sh_degree=3,
-            background=np.zeros(3, np.float32), want_window=False, sigma=10.0, weight_background=1.0, et_grade=4.0,
-            depth_correct=False)
+GOOD = dict(
+    R=np.eye(3, dtype=np.float32),
+    t=np.zeros(3, np.float32),
+    fx=60.0,
+    fy=60.0,
+    cx=32.0,
+    cy=24.0,
+    width=64,
+    height=48,
+    near_plane=0.2,
+    projection=0,
+    mode=0,
+    supersample=1,
+    sh_degree=3,
+    background=np.zeros(3, np.float32),
+    want_window=False,
+    sigma=10.0,
+    weight_background=1.0,
+    et_grade=4.0,
+    depth_correct=False,
+)
 DUPLEX, WSR = int(gb.Mode.DUPLEX), int(gb.Mode.WSR)
 # (changed arguments, message)
 BAD_ARGS = [
@@ -217,9 +232,17 @@ def test_cuda_binding_rejects_bad_render_args(changes, message):
 
 
 @needs_module
-@pytest.mark.parametrize("changes", [dict(mode=0, et_grade=0.0), dict(mode=DUPLEX), dict(mode=WSR, sigma=0.0),
-                                     dict(width=1, height=1, supersample=8), dict(cx=-1e6, cy=1e6),
-                                     dict(projection=1)])
+@pytest.mark.parametrize(
+    "changes",
+    [
+        dict(mode=0, et_grade=0.0),
+        dict(mode=DUPLEX),
+        dict(mode=WSR, sigma=0.0),
+        dict(width=1, height=1, supersample=8),
+        dict(cx=-1e6, cy=1e6),
+        dict(projection=1),
+    ],
+)
 def test_cuda_binding_accepts_unused_or_odd_args(changes):
     """et_grade matters for duplex only, sigma with depth correction only; off-image principal points are fine."""
     _native_cuda.check_render_args(**dict(GOOD, **changes))

@@ -36,8 +36,10 @@ def test_cuda_renders_images_taller_than_the_grid_rows(supersample):
     height = 1_050_000 // supersample
     cam = gb.Camera(2, height, 60, 60, 1, height / 2, np.eye(3), np.zeros(3))
     scene = random_scene(300, seed=7, spread=0.05)
-    close(gb.render(scene, cam, "scalar", supersample=supersample, backend="cuda"),
-          gb.render(scene, cam, "scalar", supersample=supersample, backend="cpu"))
+    close(
+        gb.render(scene, cam, "scalar", supersample=supersample, backend="cuda"),
+        gb.render(scene, cam, "scalar", supersample=supersample, backend="cpu"),
+    )
 
 
 def test_cuda_cell_uploads_racing_scene_uploads():
@@ -60,10 +62,13 @@ def test_cuda_cell_uploads_racing_scene_uploads():
                 assert "another scene" in str(exc) or "partition" in str(exc) or "cell_of" in str(exc), exc
 
     run_threads(work, 2, timeout=120)
-    scene = gb.Scene.from_arrays(scenes[1].means, scenes[1].scales, scenes[1].quats, scenes[1].opacities,
-                                 scenes[1].sh, cells=cells[1])
-    close(gb.render(scene, front_camera(), "duplex", backend="cuda"),
-          gb.render(scene, front_camera(), "duplex", backend="cpu"))
+    scene = gb.Scene.from_arrays(
+        scenes[1].means, scenes[1].scales, scenes[1].quats, scenes[1].opacities, scenes[1].sh, cells=cells[1]
+    )
+    close(
+        gb.render(scene, front_camera(), "duplex", backend="cuda"),
+        gb.render(scene, front_camera(), "duplex", backend="cpu"),
+    )
 
 
 def test_cuda_duplex_large_cell_at_one_depth():
@@ -77,8 +82,12 @@ def test_cuda_duplex_large_cell_at_one_depth():
     sh = rng.normal(0, 0.5, (n, 1, 3))
     base = gb.Scene.from_arrays(means, scales, quats, rng.uniform(0.2, 0.9, n), sh)
     members = np.arange(n, dtype=np.int32)
-    one = lambda m: Cells(np.float32([[0, 0, 3]]), np.float32([[1, 1, 0.01]]),  # noqa: E731
-                          np.float32([[1, 0, 0, 0]]), np.int32([0, n]), m)
+
+    def one(m):
+        return Cells(
+            np.float32([[0, 0, 3]]), np.float32([[1, 1, 0.01]]), np.float32([[1, 0, 0, 0]]), np.int32([0, n]), m
+        )
+
     cam = front_camera(128, 96)
     frames = []
     for m in (members, rng.permutation(members).astype(np.int32)):
@@ -166,8 +175,9 @@ def test_cuda_release_frees_the_device_memory():
     close(first, again)
 
 
-@pytest.mark.parametrize("spec", ["eval3d", "eval3d:2", "stopthepop", "stopthepop:0", "stopthepop:1",
-                                  "stopthepop:16:2"])
+@pytest.mark.parametrize(
+    "spec", ["eval3d", "eval3d:2", "stopthepop", "stopthepop:0", "stopthepop:1", "stopthepop:16:2"]
+)
 def test_cuda_sorted_modes_render_as_on_the_cpu(spec):
     """The same fragments and order rules (gbv/ray3d.h, gbv/resort.h; the exact order by selection on the GPU, by a
     stable sort on the CPU): the CPU's image up to the exp's last bits, with every awkward kind of splat."""

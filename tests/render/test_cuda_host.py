@@ -14,11 +14,18 @@ from pathlib import Path
 from helpers import skip_or_fail
 
 REPO = Path(__file__).resolve().parents[2]
-CASES = ["guard_on_a_fresh_thread_restores_nothing", "guard_restores_the_chosen_device",
-         "guard_on_the_same_device_switches_nothing", "failed_switch_marks_the_target_device",
-         "plain_switch_error_marks_nothing", "sticky_error_marks_the_current_device", "out_of_memory_is_not_fatal",
-         "stale_derived_upload_keeps_the_data", "derived_upload_before_a_scene_is_refused",
-         "current_derived_upload_clears_then_copies"]
+CASES = [
+    "guard_on_a_fresh_thread_restores_nothing",
+    "guard_restores_the_chosen_device",
+    "guard_on_the_same_device_switches_nothing",
+    "failed_switch_marks_the_target_device",
+    "plain_switch_error_marks_nothing",
+    "sticky_error_marks_the_current_device",
+    "out_of_memory_is_not_fatal",
+    "stale_derived_upload_keeps_the_data",
+    "derived_upload_before_a_scene_is_refused",
+    "current_derived_upload_clears_then_copies",
+]
 
 
 def test_host_logic_on_a_stand_in_runtime(tmp_path):
@@ -26,9 +33,22 @@ def test_host_logic_on_a_stand_in_runtime(tmp_path):
     if cxx is None:
         skip_or_fail("no C++ compiler (c++, g++ or clang++)")
     exe = tmp_path / "cuda_host_check"
-    build = subprocess.run([cxx, "-std=c++17", "-Wall", "-Wextra", "-Werror", f"-I{REPO / 'native' / 'cuda'}",
-                            str(Path(__file__).with_name("cuda_host_check.cpp")), "-o", str(exe)],
-                           capture_output=True, text=True, timeout=120)
+    build = subprocess.run(
+        [
+            cxx,
+            "-std=c++17",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            f"-I{REPO / 'native' / 'cuda'}",
+            str(Path(__file__).with_name("cuda_host_check.cpp")),
+            "-o",
+            str(exe),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert build.returncode == 0, build.stderr[-3000:]
     run = subprocess.run([str(exe)], capture_output=True, text=True, timeout=30)
     assert run.returncode == 0 and run.stdout.split() == [w for c in CASES for w in ("ok", c)], run.stdout

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import random_scene
 
 import gbviewer as gb
-from helpers import random_scene
 
 try:
     from gbviewer import _native_cuda
@@ -17,16 +17,19 @@ needs_module = pytest.mark.skipif(_native_cuda is None, reason="gbviewer._native
 
 
 @needs_module
-@pytest.mark.parametrize("code, name, fatal", [
-    (702, "cudaErrorLaunchTimeout", True),  # the display watchdog
-    (700, "cudaErrorIllegalAddress", True),
-    (719, "cudaErrorLaunchFailure", True),
-    (710, "cudaErrorAssert", True),
-    (46, "cudaErrorDevicesUnavailable", True),
-    (2, "cudaErrorMemoryAllocation", False),  # out of memory: the device stays usable
-    (9, "cudaErrorInvalidConfiguration", False),
-    (1, "cudaErrorInvalidValue", False),
-])
+@pytest.mark.parametrize(
+    "code, name, fatal",
+    [
+        (702, "cudaErrorLaunchTimeout", True),  # the display watchdog
+        (700, "cudaErrorIllegalAddress", True),
+        (719, "cudaErrorLaunchFailure", True),
+        (710, "cudaErrorAssert", True),
+        (46, "cudaErrorDevicesUnavailable", True),
+        (2, "cudaErrorMemoryAllocation", False),  # out of memory: the device stays usable
+        (9, "cudaErrorInvalidConfiguration", False),
+        (1, "cudaErrorInvalidValue", False),
+    ],
+)
 def test_error_classification(code, name, fatal):
     """Sticky errors raise DeviceFailed (the renderer unusable) without asking the device; others are asked about
     with a synchronise, and out of memory never is."""
@@ -75,9 +78,22 @@ def test_cpu_refuses_sh_without_coefficients():
 def test_tall_images_pass_the_checks():
     """Heights past CUDA's 65,535-block grid rows (1,048,560 px) are allowed where the pixel count is: the kernels
     number tiles along one grid dimension (the GPU run is tests/render/test_cuda_gpu.py)."""
-    args = dict(R=np.eye(3, dtype=np.float32), t=np.zeros(3, np.float32), fx=60.0, fy=60.0, cx=1.0, cy=24.0,
-                width=1, height=1_100_000, near_plane=0.2, projection=0, mode=0, supersample=1, sh_degree=3,
-                background=np.zeros(3, np.float32))
+    args = dict(
+        R=np.eye(3, dtype=np.float32),
+        t=np.zeros(3, np.float32),
+        fx=60.0,
+        fy=60.0,
+        cx=1.0,
+        cy=24.0,
+        width=1,
+        height=1_100_000,
+        near_plane=0.2,
+        projection=0,
+        mode=0,
+        supersample=1,
+        sh_degree=3,
+        background=np.zeros(3, np.float32),
+    )
     _native_cuda.check_render_args(**args)
     _native_cuda.check_render_args(**dict(args, height=600_000, supersample=2))
 
@@ -86,7 +102,14 @@ def test_tall_images_pass_the_checks():
 def test_the_wrapper_finds_its_native_calls():
     """The names gbviewer/render/cuda.py and the GPU tests call exist in the built module (a stand-in answers them
     without a GPU)."""
-    for name in ("upload", "upload_weights", "upload_cells", "render", "render_to_gl_texture", "release_gl_texture",
-                 "release_buffers"):
+    for name in (
+        "upload",
+        "upload_weights",
+        "upload_cells",
+        "render",
+        "render_to_gl_texture",
+        "release_gl_texture",
+        "release_buffers",
+    ):
         assert callable(getattr(_native_cuda.Renderer, name, None)), name
     assert callable(_native_cuda.memory_info)

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-import gbviewer as gb
 from cuda_fakes import TIMEOUT, FakeNative, fake_renderer
 from helpers import front_camera, random_scene
+
+import gbviewer as gb
 from gbviewer.cli import main
 from gbviewer.core.errors import BackendFailed, RenderError
 from gbviewer.render.cuda import interop_status
@@ -94,8 +94,12 @@ def test_cli_says_a_failed_device_in_one_line(monkeypatch, tmp_path, capsys):
     broken = fake_renderer(FakeNative(device_fails={"render"}))
     monkeypatch.setattr("gbviewer.cli.render.get_renderer", lambda scene, backend: (broken.upload(scene), broken)[1])
     out = tmp_path / "a.png"
-    assert main(["render", str(gb.DEFAULT_SCENE), "--width", "32", "--height", "24", "--backend", "cpu", "--out",
-                 str(out)]) == 2
+    assert (
+        main(
+            ["render", str(gb.DEFAULT_SCENE), "--width", "32", "--height", "24", "--backend", "cpu", "--out", str(out)]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert err.count("\n") == 1, err
     assert err.startswith("gbviewer: error: cuda backend stopped working: CUDA device 0 failed:"), err
@@ -132,8 +136,15 @@ def test_a_reused_texture_name_drops_the_stale_registration():
     r.render_to_texture(reused, cam, settings)
     r.render_to_texture(Texture(8), cam, settings)
     r.release_texture(7)
-    assert fake.calls == ["upload", "render_to_gl_texture", "render_to_gl_texture", "release 7",
-                          "render_to_gl_texture", "render_to_gl_texture", "release 7"]
+    assert fake.calls == [
+        "upload",
+        "render_to_gl_texture",
+        "render_to_gl_texture",
+        "release 7",
+        "render_to_gl_texture",
+        "render_to_gl_texture",
+        "release 7",
+    ]
     assert len(r._textures) == 1
 
 
@@ -162,12 +173,15 @@ def test_gl_finish_after_the_cuda_writes():
     assert tex.ctx.finished == 1
 
 
-@pytest.mark.parametrize("gl, device, ok, words", [
-    ([], 0, False, "does not run on a CUDA device"),
-    ([0], 0, True, ""),
-    ([1], 0, False, "runs on CUDA device 1, the cuda renderer on device 0: frames are copied"),
-    ([0, 1], 1, True, ""),
-])
+@pytest.mark.parametrize(
+    "gl, device, ok, words",
+    [
+        ([], 0, False, "does not run on a CUDA device"),
+        ([0], 0, True, ""),
+        ([1], 0, False, "runs on CUDA device 1, the cuda renderer on device 0: frames are copied"),
+        ([0, 1], 1, True, ""),
+    ],
+)
 def test_interop_only_on_the_renderers_device(gl, device, ok, words):
     """The GPU display path is taken only where the GL context runs on the device of the renderer that writes it
     (else the viewer copies frames instead of failing every one)."""

@@ -17,9 +17,23 @@ CXX = shutil.which("c++") or shutil.which("g++")
 @pytest.mark.skipif(CXX is None, reason="no C++ compiler on PATH")
 def test_linear_run_sort_equals_the_former_order(tmp_path):
     exe = tmp_path / "duplex_order_check"
-    subprocess.run([CXX, "-std=c++17", "-O1", "-Wall", "-Wextra", "-Werror", "-I", str(REPO / "native" / "include"),
-                    str(Path(__file__).with_name("duplex_order_check.cpp")), "-o", str(exe)], check=True,
-                   timeout=120)
+    subprocess.run(
+        [
+            CXX,
+            "-std=c++17",
+            "-O1",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-I",
+            str(REPO / "native" / "include"),
+            str(Path(__file__).with_name("duplex_order_check.cpp")),
+            "-o",
+            str(exe),
+        ],
+        check=True,
+        timeout=120,
+    )
     out = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stdout + out.stderr
     word, slots, runs = out.stdout.split()

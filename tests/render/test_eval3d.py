@@ -14,19 +14,23 @@ import math
 
 import numpy as np
 import pytest
-
-import gbviewer as gb
 from helpers import rotation
 from reference_preprocess import MIN_ALPHA_3DGS, camera_params
 from reference_ray import pixel_ray, precisions, ray_maximum, ray_maximum_brute, render_sorted
+
+import gbviewer as gb
 
 W, H = 48, 40
 
 
 def one_splat(mean, scales, quat=(1.0, 0.0, 0.0, 0.0), opacity=0.9) -> gb.Scene:
-    return gb.Scene.from_arrays(np.array([mean], np.float32), np.array([scales], np.float32),
-                                np.array([quat], np.float32), np.array([opacity], np.float32),
-                                np.full((1, 1, 3), 1.0, np.float32))
+    return gb.Scene.from_arrays(
+        np.array([mean], np.float32),
+        np.array([scales], np.float32),
+        np.array([quat], np.float32),
+        np.array([opacity], np.float32),
+        np.full((1, 1, 3), 1.0, np.float32),
+    )
 
 
 def camera(R=None, t=None, f=40.0, projection="perspective") -> gb.Camera:
@@ -42,12 +46,20 @@ def unit_quat(rng) -> tuple:
 CASES = {  # name: (mean, scales, quat, camera)
     "isotropic": ((0.1, -0.05, 3.0), (0.08, 0.08, 0.08), (1, 0, 0, 0), camera()),
     "anisotropic": ((0.2, 0.1, 2.5), (0.4, 0.02, 0.07), unit_quat(np.random.default_rng(1)), camera()),
-    "oblique": ((1.6, -1.1, 2.0), (0.3, 0.05, 0.6), unit_quat(np.random.default_rng(2)),
-                camera(R=rotation(np.random.default_rng(3), 0.4), f=18.0)),
+    "oblique": (
+        (1.6, -1.1, 2.0),
+        (0.3, 0.05, 0.6),
+        unit_quat(np.random.default_rng(2)),
+        camera(R=rotation(np.random.default_rng(3), 0.4), f=18.0),
+    ),
     "camera_inside": ((0.05, 0.1, 0.4), (1.5, 0.8, 1.2), unit_quat(np.random.default_rng(4)), camera()),
     "straddling": ((0.3, 0.0, 0.5), (0.05, 0.05, 2.0), (math.cos(0.3), 0.0, math.sin(0.3), 0.0), camera()),
-    "orthographic": ((0.1, 0.2, 3.0), (0.3, 0.03, 0.1), unit_quat(np.random.default_rng(5)),
-                     camera(f=12.0, projection="orthographic")),
+    "orthographic": (
+        (0.1, 0.2, 3.0),
+        (0.3, 0.03, 0.1),
+        unit_quat(np.random.default_rng(5)),
+        camera(f=12.0, projection="orthographic"),
+    ),
 }
 
 

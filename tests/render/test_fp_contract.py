@@ -7,13 +7,12 @@ the near plane, the depth-correction cut and integer tile edges, so the CPU and 
 `visible` and `sort_length`. native/include/gbv routes every product that is added or subtracted through mul_rn
 (common.h), which no compiler can fuse.
 
-This builds tests/render/native/preprocess_parity.cpp (make_camera, preprocess_splat in every mode, preprocess_cell) with
-g++ twice, -O2 -ffp-contract=off and -O2 -ffp-contract=fast with FMA instructions (-mfma on x86-64), runs both on
-~100k awkward splats (needles and discs seen edge-on, opacities and view weights at their cuts, depths at the near
-plane and at sigma, screen positions on tile edges) and requires identical bytes: every decision, tile rectangle
-and the fields the CPU's canonical duplex order (splat_less) compares. A third build with the guard disabled
-(GBV_UNGUARDED_PRODUCTS) and contraction on must differ, or these inputs no longer exercise contraction.
-"""
+This builds tests/render/native/preprocess_parity.cpp (make_camera, preprocess_splat in every mode, preprocess_cell)
+with g++ twice, -O2 -ffp-contract=off and -O2 -ffp-contract=fast with FMA instructions (-mfma on x86-64), runs both on
+~100k awkward splats (needles and discs seen edge-on, opacities and view weights at their cuts, depths at the near plane
+and at sigma, screen positions on tile edges) and requires identical bytes: every decision, tile rectangle and the
+fields the CPU's canonical duplex order (splat_less) compares. A third build with the guard disabled
+(GBV_UNGUARDED_PRODUCTS) and contraction on must differ, or these inputs no longer exercise contraction."""
 
 from __future__ import annotations
 
@@ -41,8 +40,15 @@ W, H, FX, FY, CX, CY, SIGMA = 640, 480, 523.7, 517.3, 333.1, 229.9, 7.3
 ORTHO_Z = 5.0
 SH_C1 = 0.4886025119029199
 SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
-SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154, -0.4570457994644658,
-         1.445305721320277, -0.5900435899266435)
+SH_C3 = (
+    -0.5900435899266435,
+    2.890611442640554,
+    -0.4570457994644658,
+    0.3731763325901154,
+    -0.4570457994644658,
+    1.445305721320277,
+    -0.5900435899266435,
+)
 
 
 def _contract_flags() -> list[str]:
@@ -69,12 +75,24 @@ def builds(tmp_path_factory) -> dict[str, Path]:
         skip_or_fail("no C++ compiler (g++) on PATH")
     contract = _contract_flags()
     out = tmp_path_factory.mktemp("fp_contract")
-    variants = {"off": ["-ffp-contract=off"], "contracted": contract,
-                "unguarded": contract + ["-DGBV_UNGUARDED_PRODUCTS"]}
+    variants = {
+        "off": ["-ffp-contract=off"],
+        "contracted": contract,
+        "unguarded": contract + ["-DGBV_UNGUARDED_PRODUCTS"],
+    }
     procs = {}
     for name, flags in variants.items():
-        cmd = [cxx, "-std=c++17", "-O2", *flags, "-I", str(REPO / "native" / "include"), str(SOURCE), "-o",
-               str(out / name)]
+        cmd = [
+            cxx,
+            "-std=c++17",
+            "-O2",
+            *flags,
+            "-I",
+            str(REPO / "native" / "include"),
+            str(SOURCE),
+            "-o",
+            str(out / name),
+        ]
         procs[name] = (cmd, subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True))
     for cmd, p in procs.values():
         log = p.communicate()[0]
@@ -85,20 +103,40 @@ def builds(tmp_path_factory) -> dict[str, Path]:
 def _rotation(rng: np.random.Generator) -> np.ndarray:
     q = rng.normal(size=4)
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _sh_basis(d: np.ndarray) -> np.ndarray:
     """preprocess.h's sh_basis (degree 3) in float64 for unit directions d (n, 3)."""
     x, y, z = d.T
     xx, yy, zz = x * x, y * y, z * z
-    return np.stack([np.full_like(x, SH_C0), -SH_C1 * y, SH_C1 * z, -SH_C1 * x,
-                     SH_C2[0] * x * y, SH_C2[1] * y * z, SH_C2[2] * (2 * zz - xx - yy), SH_C2[3] * x * z,
-                     SH_C2[4] * (xx - yy), SH_C3[0] * y * (3 * xx - yy), SH_C3[1] * x * y * z,
-                     SH_C3[2] * y * (4 * zz - xx - yy), SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy),
-                     SH_C3[4] * x * (4 * zz - xx - yy), SH_C3[5] * z * (xx - yy), SH_C3[6] * x * (xx - 3 * yy)], 1)
+    return np.stack(
+        [
+            np.full_like(x, SH_C0),
+            -SH_C1 * y,
+            SH_C1 * z,
+            -SH_C1 * x,
+            SH_C2[0] * x * y,
+            SH_C2[1] * y * z,
+            SH_C2[2] * (2 * zz - xx - yy),
+            SH_C2[3] * x * z,
+            SH_C2[4] * (xx - yy),
+            SH_C3[0] * y * (3 * xx - yy),
+            SH_C3[1] * x * y * z,
+            SH_C3[2] * y * (4 * zz - xx - yy),
+            SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy),
+            SH_C3[4] * x * (4 * zz - xx - yy),
+            SH_C3[5] * z * (xx - yy),
+            SH_C3[6] * x * (xx - 3 * yy),
+        ],
+        1,
+    )
 
 
 def scene_file(path: Path, projection: int = 0, per_kind: int = 12_500, seed: int = 18) -> Path:
@@ -202,7 +240,8 @@ def test_preprocess_identical_with_contraction(outputs):
     assert all(v > 1000 for v in visible.values()), f"too few visible splats to test anything: {visible}"
     diff = differences(ref, got)
     assert all(d == (0, 0, 0) for d in diff.values()), (
-        f"(decisions, tile rects, fields) that differ with contraction on, per mode: {diff}")
+        f"(decisions, tile rects, fields) that differ with contraction on, per mode: {diff}"
+    )
 
 
 def test_inputs_exercise_contraction(outputs):

@@ -18,9 +18,25 @@ CXX = shutil.which("c++") or shutil.which("g++")
 @pytest.mark.skipif(CXX is None, reason="no C++ compiler on PATH")
 def test_window_cutoff_box_holds_every_visible_window(tmp_path):
     exe = tmp_path / "gb_bounds_check"
-    subprocess.run([CXX, "-std=c++17", "-O1", "-Wall", "-Wextra", "-Werror", "-I", str(REPO / "native" / "include"),
-                    "-I", str(REPO / "native" / "cpu"), str(Path(__file__).with_name("gb_bounds_check.cpp")), "-o",
-                    str(exe)], check=True, timeout=120)
+    subprocess.run(
+        [
+            CXX,
+            "-std=c++17",
+            "-O1",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-I",
+            str(REPO / "native" / "include"),
+            "-I",
+            str(REPO / "native" / "cpu"),
+            str(Path(__file__).with_name("gb_bounds_check.cpp")),
+            "-o",
+            str(exe),
+        ],
+        check=True,
+        timeout=120,
+    )
     out = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stdout + out.stderr
     word, windows, taken, edge, tighter = out.stdout.split()

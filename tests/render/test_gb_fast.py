@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from helpers import SHARED_SCENES, front_camera, shared_scene
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from test_simd import VECTOR_PATHS, assert_close_to_scalar, render
 
 import gbviewer as gb
@@ -83,20 +84,31 @@ def generated_scene(n: int, seed: int, log_scale: float, layered: bool) -> gb.Sc
     xy = rng.uniform(-spread, spread, (n, 2))
     depth = np.sort(rng.uniform(2.0, 6.0, n))
     log_scales = log_scale + rng.uniform(-1.5, 1.5, (n, 3))
-    return _splats(n, xy, depth, log_scales, rng.uniform(0.01, 0.99, n), rng.uniform(0, 1, (n, 3)),
-                   rng.normal(size=4))
+    return _splats(n, xy, depth, log_scales, rng.uniform(0.01, 0.99, n), rng.uniform(0, 1, (n, 3)), rng.normal(size=4))
 
 
-def _splats(n: int, xy: np.ndarray, depth: np.ndarray, log_scales: np.ndarray, opacities: np.ndarray,
-            colors: np.ndarray, quat: np.ndarray) -> gb.Scene:
+def _splats(
+    n: int,
+    xy: np.ndarray,
+    depth: np.ndarray,
+    log_scales: np.ndarray,
+    opacities: np.ndarray,
+    colors: np.ndarray,
+    quat: np.ndarray,
+) -> gb.Scene:
     means = np.concatenate([xy, depth[:, None]], axis=1)
     sh = ((colors - 0.5) / 0.28209479177387814)[:, None, :]
     return gb.Scene.from_arrays(means, np.exp(log_scales), np.repeat(quat[None], n, 0), opacities, sh)
 
 
 # generated_scene's arguments and the sampling rate: sizes from sub-pixel to covering the image
-GENERATED = {"n": st.integers(1, 60), "seed": st.integers(0, 2**31 - 1), "log_scale": st.floats(-5.5, -0.5),
-             "rate": st.sampled_from((8.0, 2.0, 1.0, 0.5, 1 / 8)), "layered": st.booleans()}
+GENERATED = {
+    "n": st.integers(1, 60),
+    "seed": st.integers(0, 2**31 - 1),
+    "log_scale": st.floats(-5.5, -0.5),
+    "rate": st.sampled_from((8.0, 2.0, 1.0, 0.5, 1 / 8)),
+    "layered": st.booleans(),
+}
 
 
 def check_generated(n: int, seed: int, log_scale: float, rate: float, layered: bool, backend: str = "cpu") -> None:
@@ -117,8 +129,11 @@ def test_fast_vector_paths_match_scalar(path, name):
     scene = gb.load(shared_scene(name))
     cam = gb.orbit_camera(scene, 40, 25, width=160, height=120)
     for c in (cam, cam.at_sampling_rate(1 / 4), cam.at_sampling_rate(4)):
-        assert_close_to_scalar(render(path, scene, c, "gaussian_blending+fast"),
-                               render("scalar", scene, c, "gaussian_blending+fast"), f"{path} fast {name}")
+        assert_close_to_scalar(
+            render(path, scene, c, "gaussian_blending+fast"),
+            render("scalar", scene, c, "gaussian_blending+fast"),
+            f"{path} fast {name}",
+        )
 
 
 def test_precision_reaches_the_frame_and_label():

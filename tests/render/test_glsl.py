@@ -87,8 +87,14 @@ def test_long_tile_lists(gl):
     rng = np.random.default_rng(7)
     n = 70_000
     means = np.stack([rng.uniform(-0.25, 0.25, n), rng.uniform(-0.25, 0.25, n), rng.uniform(2.0, 3.0, n)], 1)
-    scene = gb.Scene.from_arrays(means, np.full((n, 3), 0.002), rng.normal(size=(n, 4)), rng.uniform(0.01, 0.3, n),
-                                 rng.uniform(-1, 1, (n, 1, 3)), source="long lists")
+    scene = gb.Scene.from_arrays(
+        means,
+        np.full((n, 3), 0.002),
+        rng.normal(size=(n, 4)),
+        rng.uniform(0.01, 0.3, n),
+        rng.uniform(-1, 1, (n, 1, 3)),
+        source="long lists",
+    )
     cam = front_camera(16, 16, 30.0)
     compare(scene, cam, "scalar")
     out = gb.get_renderer(scene, "glsl").render(cam, RenderSettings.parse("scalar"))
@@ -98,8 +104,9 @@ def test_long_tile_lists(gl):
     np.testing.assert_array_equal(out.debug["evals"], ref.debug["evals"])
 
 
-@pytest.mark.parametrize("spec", ["scalar", "gaussian_blending", "analytic:2", "gaussian_blending:3", "wsr",
-                                  "duplex:2"])
+@pytest.mark.parametrize(
+    "spec", ["scalar", "gaussian_blending", "analytic:2", "gaussian_blending:3", "wsr", "duplex:2"]
+)
 def test_blend_split_over_dispatches(gl, monkeypatch, spec):
     """The multi-dispatch blend (groups of render tiles, windows of the lists, state kept in buffers) that drivers
     with a loop cap need, forced here with a cap of 2000 iterations (lists of 768 splats per dispatch)."""
@@ -119,13 +126,26 @@ def test_order_independent_options(gl):
     rng = np.random.default_rng(9)
     vw = rng.normal(0.0, 0.3, (base.num_splats, 9))
     vw[:, 0] = rng.uniform(-0.3, 3.0, base.num_splats)
-    scene = gb.Scene.from_arrays(base.means, base.scales, base.quats, base.opacities, base.sh, view_weight_sh=vw,
-                                 wsr_sigma=5.0, weight_background=0.1)
+    scene = gb.Scene.from_arrays(
+        base.means,
+        base.scales,
+        base.quats,
+        base.opacities,
+        base.sh,
+        view_weight_sh=vw,
+        wsr_sigma=5.0,
+        weight_background=0.1,
+    )
     r = GlslRenderer()
     r.upload(scene)
     cam = front_camera(64, 48)
-    for spec, opts in [("wsr", {"depth_correct": True}), ("wsr:2", {}), ("duplex", {"depth_correct": True}),
-                       ("duplex:3", {"et_grade": 1.5, "cell_size": 3}), ("duplex", {"cell_size": 9})]:
+    for spec, opts in [
+        ("wsr", {"depth_correct": True}),
+        ("wsr:2", {}),
+        ("duplex", {"depth_correct": True}),
+        ("duplex:3", {"et_grade": 1.5, "cell_size": 3}),
+        ("duplex", {"cell_size": 9}),
+    ]:
         m = compare(scene, cam, spec, renderer=r, background=(0.3, 0.2, 0.1), **opts)
         assert m["max"] < 1e-3, (spec, opts, m)
     r.release()
@@ -137,8 +157,9 @@ def test_wsr_huge_view_weights(gl):
     base = awkward_scene(10, n=1500)
     vw = np.zeros((base.num_splats, 4))
     vw[:, 0] = np.random.default_rng(10).uniform(1e6, 1e9, base.num_splats)
-    scene = gb.Scene.from_arrays(base.means, base.scales, base.quats, base.opacities, base.sh, view_weight_sh=vw,
-                                 weight_background=0.5)
+    scene = gb.Scene.from_arrays(
+        base.means, base.scales, base.quats, base.opacities, base.sh, view_weight_sh=vw, weight_background=0.5
+    )
     for spec in ("wsr", "wsr:2"):
         m = compare(scene, front_camera(64, 48), spec, background=(0.3, 0.2, 0.1))
         assert m["max"] < 1e-3, (spec, m)
@@ -155,4 +176,3 @@ def test_debug_planes(gl, bundled_scene):
     assert out.stats.evals_per_pixel == pytest.approx(out.stats.evaluations / (cam.width * cam.height))
     assert out.stats.total_ms > 0 and min(out.stats.preprocess_ms, out.stats.sort_ms, out.stats.blend_ms) >= 0
     assert out.stats.backend == "glsl" and out.stats.mode == s.label
-

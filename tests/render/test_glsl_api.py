@@ -23,8 +23,7 @@ from gbviewer.render.glsl.sort import radix_sort, scan
 pytestmark = pytest.mark.gl
 
 
-@pytest.mark.parametrize("n, bits, high", [(1, 4, 3), (5, 8, 4), (2049, 12, 100), (100_000, 32, 2**32),
-                                           (70_000, 8, 7)])
+@pytest.mark.parametrize("n, bits, high", [(1, 4, 3), (5, 8, 4), (2049, 12, 100), (100_000, 32, 2**32), (70_000, 8, 7)])
 def test_radix_sort_is_stable(gl, n, bits, high):
     r = GlslRenderer()
     rng = np.random.default_rng(n)
@@ -65,6 +64,7 @@ def test_dispatch_over_two_axes(gl, monkeypatch):
 
 
 # ---- buffers, scenes, contexts ------------------------------------------------------------------------------------
+
 
 def test_buffers_reused_and_grown(gl):
     small, large = awkward_scene(4, n=300), awkward_scene(5, n=3000)
@@ -145,6 +145,7 @@ def test_scene_too_large_is_clear(gl):
 
 # ---- command line -------------------------------------------------------------------------------------------------
 
+
 def test_cli_render_glsl(gl, tmp_path):
     npy = tmp_path / "g.npy"
     args = [str(gb.DEFAULT_SCENE), "--width", "64", "--height", "48", "--mode", "gaussian_blending", "--out"]
@@ -156,8 +157,29 @@ def test_cli_render_glsl(gl, tmp_path):
 
 def test_cli_bench_cpu_and_glsl(gl, tmp_path, capsys):
     out = tmp_path / "bench.json"
-    assert main(["bench", str(gb.DEFAULT_SCENE), "--backends", "cpu,glsl", "--modes", "scalar,gaussian_blending",
-                 "--views", "1", "--repeat", "1", "--size", "64x48", "--rates", "1,1/2", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "bench",
+                str(gb.DEFAULT_SCENE),
+                "--backends",
+                "cpu,glsl",
+                "--modes",
+                "scalar,gaussian_blending",
+                "--views",
+                "1",
+                "--repeat",
+                "1",
+                "--size",
+                "64x48",
+                "--rates",
+                "1,1/2",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     doc = json.loads(out.read_text())
     rows = [r for r in doc["speed"] if r["backend"] == "glsl"]
     assert len(rows) == 4 and all(r["visible"] > 0 for r in rows)

@@ -60,14 +60,20 @@ def cpp_layout(tmp_path_factory) -> dict[str, dict[str, int]]:
     lines = []
     for struct in STRUCTS:
         lines.append(f'    std::printf("{struct} sizeof %zu\\n", sizeof(gbv::{struct}));')
-        lines += [f'    std::printf("{struct} {f} %zu\\n", offsetof(gbv::{struct}, {f}));'
-                  for f, _ in glsl_fields(struct)]
-    includes = "".join(f"#include {h}\n" for h in ("<cstddef>", "<cstdio>", '"gbv/common.h"', '"gbv/preprocess_stage.h"'))
+        lines += [
+            f'    std::printf("{struct} {f} %zu\\n", offsetof(gbv::{struct}, {f}));' for f, _ in glsl_fields(struct)
+        ]
+    includes = "".join(
+        f"#include {h}\n" for h in ("<cstddef>", "<cstdio>", '"gbv/common.h"', '"gbv/preprocess_stage.h"')
+    )
     src = includes + "int main() {\n" + "\n".join(lines) + "\n}\n"
     out = tmp_path_factory.mktemp("layout")
     (out / "layout.cpp").write_text(src)
-    build = subprocess.run([cxx, "-std=c++17", "-I", str(REPO / "native" / "include"), str(out / "layout.cpp"), "-o",
-                            str(out / "layout")], capture_output=True, text=True)
+    build = subprocess.run(
+        [cxx, "-std=c++17", "-I", str(REPO / "native" / "include"), str(out / "layout.cpp"), "-o", str(out / "layout")],
+        capture_output=True,
+        text=True,
+    )
     assert build.returncode == 0, f"a GLSL field has no C++ namesake:\n{build.stderr}"
     layout: dict[str, dict[str, int]] = {}
     for line in subprocess.run([str(out / "layout")], capture_output=True, text=True, check=True).stdout.splitlines():
@@ -93,11 +99,24 @@ def test_rect_and_oit_records_match_the_cpp_structs(cpp_layout):
     assert cpp_layout["OitParams"]["sizeof"] == 2 * gi.VEC4_BYTES + 3 * gi.WORD_BYTES
     for f in fields:
         assert getattr(gi, f"OIT_{f.upper()}") * gi.WORD_BYTES == cpp_layout["OitParams"][f], f
-    values = {"sigma": 2.0, "weight_background": 3.0, "et_grade": 4.0, "depth_correct": 1.0, "dilation": 0.5,
-              "pre_dilation": 0.25, "cull_lambda": 0.75, "compensate": 1.0, "dc_clamp": 1.0, "support": 2.5,
-              "sort_radial": 1.0}
-    packed = (gi.oit_uniform(2.0, 3.0, 4.0, True) + gi.view_filter_uniform(0.5, 0.25, 0.75, True)
-              + gi.view_rules_uniform(True, 2.5, True))
+    values = {
+        "sigma": 2.0,
+        "weight_background": 3.0,
+        "et_grade": 4.0,
+        "depth_correct": 1.0,
+        "dilation": 0.5,
+        "pre_dilation": 0.25,
+        "cull_lambda": 0.75,
+        "compensate": 1.0,
+        "dc_clamp": 1.0,
+        "support": 2.5,
+        "sort_radial": 1.0,
+    }
+    packed = (
+        gi.oit_uniform(2.0, 3.0, 4.0, True)
+        + gi.view_filter_uniform(0.5, 0.25, 0.75, True)
+        + gi.view_rules_uniform(True, 2.5, True)
+    )
     assert packed == tuple(values[f] for f in fields)
 
 
@@ -158,7 +177,7 @@ def test_stage_storage_round_trips_every_field():
         at = 0
         for arg in args.split(","):
             if m := re.fullmatch(r"\s*s\.(\w+)\s*", arg):
-                stored.append((m.group(1), f"p{i}." + "xyzw"[at:at + dict(fields)[m.group(1)]]))
+                stored.append((m.group(1), f"p{i}." + "xyzw"[at : at + dict(fields)[m.group(1)]]))
                 at += dict(fields)[m.group(1)]
             else:
                 flag += [f"p{i}.{'xyzw'[at]}"] if "kept" in arg else []

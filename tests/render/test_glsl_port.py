@@ -15,8 +15,8 @@ import pytest
 from helpers import skip_or_fail
 
 import gbviewer as gb
-from gbviewer.render.glsl import shader_source, standalone_context
 from gbviewer.render.glsl import context as gl_context
+from gbviewer.render.glsl import shader_source, standalone_context
 
 pytestmark = pytest.mark.gl
 
@@ -50,8 +50,9 @@ def cpp_text(name: str) -> str:
     return re.sub(r"//[^\n]*", "", (NATIVE / name).read_text())
 
 
-@pytest.mark.parametrize("headers, shader", [(["common.h"], "common.glsl"),
-                                             (["preprocess.h", "sh.h", "footprint.h"], "preprocess.glsl")])
+@pytest.mark.parametrize(
+    "headers, shader", [(["common.h"], "common.glsl"), (["preprocess.h", "sh.h", "footprint.h"], "preprocess.glsl")]
+)
 def test_constants_identical(headers, shader):
     """Every constant of the native headers (and enum value) has a GLSL constant of the same name, type and float32
     value, and the GLSL file has no others."""
@@ -79,19 +80,19 @@ def test_mode_values_identical():
 # C++ functions without a GLSL function of the same name, and why.
 NOT_PORTED = {
     "blend_alpha_pixel": "the shared body of C++'s one-pixel blend_scalar / blend_analytic wrappers around the lane "
-                         "templates; GLSL has those two functions themselves",
+    "templates; GLSL has those two functions themselves",
     "dot": "GLSL built-in",
     "stage_reach": "the stage key's reach, a uniform of stage.comp that the driver computes (glsl/renderer.py "
-                   "_stage) as it keys the kept stage",
+    "_stage) as it keys the kept stage",
     "stage_rules": "the stage key's preset rules, a uniform of stage.comp that the driver computes (ViewFilter."
-                   "stage_rules) as it keys the kept stage",
+    "stage_rules) as it keys the kept stage",
     "preprocess_splat": "the one-splat composition of stage_splat and finish_splat (the C++ reference of "
-                        "test_fp_contract); GLSL runs the two as kernels of their own, stage.comp and preprocess.comp",
+    "test_fp_contract); GLSL runs the two as kernels of their own, stage.comp and preprocess.comp",
     "float_bits": "GLSL built-in floatBitsToUint",
     "splat_less": "the GLSL duplex keeps each cell's member order (cells.comp), which differs from the CPU's canonical "
-                  "order only by float rounding, within the tolerances above",
+    "order only by float rounding, within the tolerances above",
     "splat_key": "the field-by-field key of splat_less (same reason)",
-    "in_depth_run": "CUDA's linear canonical order of equal-depth runs (splat_less's order; not used by GLSL, as above)",
+    "in_depth_run": "CUDA's linear canonical order of equal-depth runs (splat_less's order; unused by GLSL, as above)",
     "same_depth_run": "CUDA's linear canonical order (as in_depth_run)",
     "run_pass_key": "CUDA's linear canonical order (as in_depth_run)",
     "mul_rn": "GLSL declares the values that C++ multiplies through it `precise` (test_preprocess_is_not_contracted)",
@@ -116,9 +117,24 @@ def test_function_names_ported():
 
 
 # Functions whose C++ products go through mul_rn (common.h): no multiply-add of theirs may be contracted.
-NOT_CONTRACTED = {"make_camera", "sh_basis", "sh_to_rgb", "sh_to_weight", "covariance_3d", "project_covariance",
-                  "splat_radius", "tile_rect", "view_point", "view_direction", "screen_position", "screen_footprint",
-                  "preprocess_stage", "stage_on_screen", "preprocess_finish", "preprocess_cell"}
+NOT_CONTRACTED = {
+    "make_camera",
+    "sh_basis",
+    "sh_to_rgb",
+    "sh_to_weight",
+    "covariance_3d",
+    "project_covariance",
+    "splat_radius",
+    "tile_rect",
+    "view_point",
+    "view_direction",
+    "screen_position",
+    "screen_footprint",
+    "preprocess_stage",
+    "stage_on_screen",
+    "preprocess_finish",
+    "preprocess_cell",
+}
 
 
 @pytest.mark.parametrize("shader", ["stage.comp", "preprocess.comp", "cells.comp"])
@@ -133,8 +149,9 @@ def test_preprocess_is_not_contracted(shader, tmp_path, monkeypatch):
     monkeypatch.setattr(gl_context, "SHADER_DIR", SHADERS)  # this checkout's shaders, not the installed copy
     src = tmp_path / shader
     src.write_text(shader_source(shader, {"GBV_PRECISE_MATH": 1}))
-    p = subprocess.run([exe, "-G", "--aml", "-H", str(src), "-o", str(tmp_path / "out.spv")], capture_output=True,
-                       text=True)
+    p = subprocess.run(
+        [exe, "-G", "--aml", "-H", str(src), "-o", str(tmp_path / "out.spv")], capture_output=True, text=True
+    )
     assert p.returncode == 0, p.stdout + p.stderr
     exact = set(re.findall(r"Decorate (\d+) NoContraction", p.stdout))
     function, ops, seen, fused = None, {}, set(), []
@@ -156,12 +173,16 @@ def test_preprocess_is_not_contracted(shader, tmp_path, monkeypatch):
 def _eval_glsl(fn: str, xs: np.ndarray) -> np.ndarray:
     """Evaluate the GLSL `float f(float x)` (which may call the shaders' math and blend functions) on xs."""
     ctx = standalone_context()
-    src = ("#version 430\n#define GBV_PRECISE_MATH 1\n" + "".join(glsl_text(f) for f in ("common.glsl", "mathf.glsl",
-           "blend.glsl")) + fn + """
+    src = (
+        "#version 430\n#define GBV_PRECISE_MATH 1\n"
+        + "".join(glsl_text(f) for f in ("common.glsl", "mathf.glsl", "blend.glsl"))
+        + fn
+        + """
 layout(local_size_x = 64) in;
 layout(std430, binding = 0) buffer X { float xs[]; };
 void main() { uint i = gl_GlobalInvocationID.x; if (i < xs.length()) xs[i] = f(xs[i]); }
-""")
+"""
+    )
     prog = ctx.compute_shader(src)
     buf = ctx.buffer(xs.astype(np.float32).tobytes())
     buf.bind_to_storage_buffer(0)
@@ -188,4 +209,3 @@ def test_math_functions(gl):
     g = _eval_glsl("float f(float x) { return gaussian_moment0(x, expf(-0.5 * x * x)); }", z)
     ref = np.array([math.sqrt(math.pi / 2) * math.erf(v / math.sqrt(2)) for v in z.astype(np.float64)])
     assert np.abs(g - ref).max() < 1e-6
-

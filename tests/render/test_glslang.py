@@ -10,11 +10,11 @@ import shutil
 import subprocess
 
 import pytest
-
 from helpers import skip_or_fail
+
+from gbviewer.render import Mode
 from gbviewer.render.glsl import SHADER_DIR, shader_source
 from gbviewer.render.glsl.renderer import blend_defines
-from gbviewer.render import Mode
 
 
 def variants() -> list[tuple[str, dict]]:
@@ -22,9 +22,13 @@ def variants() -> list[tuple[str, dict]]:
     for path in sorted(SHADER_DIR.glob("*.comp")):
         for precise in (0, 1):
             if path.name == "blend.comp":
-                out += [(path.name, {**blend_defines(m, ss, p), "GBV_PRECISE_MATH": precise})
-                        for m in Mode for ss in (1, 2) for p in ("exact", "fast")
-                        if p == "exact" or m == Mode.GAUSSIAN_BLENDING]
+                out += [
+                    (path.name, {**blend_defines(m, ss, p), "GBV_PRECISE_MATH": precise})
+                    for m in Mode
+                    for ss in (1, 2)
+                    for p in ("exact", "fast")
+                    if p == "exact" or m == Mode.GAUSSIAN_BLENDING
+                ]
             else:
                 out.append((path.name, {"GBV_PRECISE_MATH": precise}))
     return out
@@ -36,8 +40,9 @@ def test_every_shader_has_variants():
     assert "blend.comp" in names and "preprocess.comp" in names and len(names) == len(list(SHADER_DIR.glob("*.comp")))
 
 
-@pytest.mark.parametrize("name,defines", variants(), ids=lambda v: v if isinstance(v, str) else
-                         "-".join(f"{k}={v}" for k, v in v.items()))
+@pytest.mark.parametrize(
+    "name,defines", variants(), ids=lambda v: v if isinstance(v, str) else "-".join(f"{k}={v}" for k, v in v.items())
+)
 def test_glslang_accepts(tmp_path, name, defines):
     exe = shutil.which("glslangValidator")
     if exe is None:

@@ -20,16 +20,34 @@ SCENE_UPLOADS = {"glsl": 2, "cuda": 1}
 CAM = gb.Camera(64, 48, 20.0, 20.0, 32, 24, np.eye(3), np.zeros(3))
 # every mode; eval3d on cuda only: its exact per-pixel order of these tile lists needs more loop iterations than
 # llvmpipe allows (glsl/limits.py)
-SPECS = ["scalar", "gaussian_blending", "mip", "analytic", "scalar:2", "preset:spark", "wsr", "duplex", "stochastic",
-         "stochastic_popfree", "stopthepop"]
+SPECS = [
+    "scalar",
+    "gaussian_blending",
+    "mip",
+    "analytic",
+    "scalar:2",
+    "preset:spark",
+    "wsr",
+    "duplex",
+    "stochastic",
+    "stochastic_popfree",
+    "stopthepop",
+]
 
 
 def filtered_scene(seed: int, sh_dtype: str = "float32") -> gb.Scene:
     """A random scene with a 3D filter (the hierarchy merges it too), SH stored as `sh_dtype`."""
     base = random_scene(3000, seed=seed, sh_degree=2, spread=3.0)
     rng = np.random.default_rng(seed)
-    return gb.Scene(base.means, base.scales, base.quats, base.opacities, base.sh.astype(sh_dtype),
-                    rng.uniform(0.0, 0.02, base.num_splats).astype(np.float32), source="test")
+    return gb.Scene(
+        base.means,
+        base.scales,
+        base.quats,
+        base.opacities,
+        base.sh.astype(sh_dtype),
+        rng.uniform(0.0, 0.02, base.num_splats).astype(np.float32),
+        source="test",
+    )
 
 
 @pytest.fixture(params=["glsl", "cuda"])
@@ -78,8 +96,13 @@ def test_the_hierarchy_goes_up_once_and_a_cut_when_it_changes(backend):
     near, far = CAM, CAM.at_sampling_rate(0.25)
     gb_lod = RenderSettings.parse("gaussian_blending+lod:2")
     counts = []
-    for cam, settings in ((near, gb_lod), (near, RenderSettings.parse("mip+lod:2")), (far, gb_lod),
-                          (far, RenderSettings.parse("gaussian_blending")), (far, gb_lod)):
+    for cam, settings in (
+        (near, gb_lod),
+        (near, RenderSettings.parse("mip+lod:2")),
+        (far, gb_lod),
+        (far, RenderSettings.parse("gaussian_blending")),
+        (far, gb_lod),
+    ):
         before = r.uploads
         frame = r.render(cam, settings)
         counts.append((r.uploads - before, frame.stats.stage_reused))

@@ -5,12 +5,13 @@ leaves unset and one that disagrees with it is one line, exit 2."""
 from __future__ import annotations
 
 import dataclasses
-
 import json
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from helpers import random_scene
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import gbviewer as gb
 from gbviewer import cli
@@ -20,7 +21,6 @@ from gbviewer.render import Mode, RenderSettings
 from gbviewer.render.modes import MAX_QUEUE, STOPTHEPOP_QUEUE
 from gbviewer.render.presets import PRESETS
 from gbviewer.render.view_filter import ViewFilter
-from helpers import random_scene
 
 VIEW = ["--orbit", "30,20,0", "--width", "320", "--height", "240", "--scale", "1/8"]  # 40x30 pixels
 
@@ -40,8 +40,22 @@ def test_render_keeps_the_specs_supersampling(tmp_path, capsys, bundled_scene, s
 
 def test_trace_keeps_presets_and_lod(tmp_path, bundled_scene):
     specs = ["preset:antimatter15", "scalar+lod:40"]
-    assert main(["trace", str(gb.DEFAULT_SCENE), *VIEW, "--pixel", "20,15", "--modes", ",".join(specs),
-                 "--json", str(tmp_path / "t.json")]) == 0
+    assert (
+        main(
+            [
+                "trace",
+                str(gb.DEFAULT_SCENE),
+                *VIEW,
+                "--pixel",
+                "20,15",
+                "--modes",
+                ",".join(specs),
+                "--json",
+                str(tmp_path / "t.json"),
+            ]
+        )
+        == 0
+    )
     traces = json.loads((tmp_path / "t.json").read_text())["traces"]
     assert [t["mode"] for t in traces] == [RenderSettings.parse(s).label for s in specs]
     cam = spec_view(bundled_scene)
@@ -50,12 +64,15 @@ def test_trace_keeps_presets_and_lod(tmp_path, bundled_scene):
     assert traces[0]["color"] != pytest.approx(gb.render(bundled_scene, cam, "scalar").rgb[15, 20], abs=1e-5)
 
 
-@pytest.mark.parametrize("command, extra, says", [
-    ("render", ["--mode", "scalar:3", "--supersample", "2", "--out", "x.png"], "sets supersample 3; supersample 2"),
-    ("render", ["--mode", "scalar+lod:4", "--lod", "8", "--out", "x.png"], "sets lod 4; lod 8"),
-    ("render", ["--mode", "preset:antimatter15", "--sh-degree", "3", "--out", "x.png"], "sets sh degree 0"),
-    ("trace", ["--modes", "scalar,mip:3", "--supersample", "2", "--pixel", "1,1"], "'mip:3' sets supersample 3"),
-])
+@pytest.mark.parametrize(
+    "command, extra, says",
+    [
+        ("render", ["--mode", "scalar:3", "--supersample", "2", "--out", "x.png"], "sets supersample 3; supersample 2"),
+        ("render", ["--mode", "scalar+lod:4", "--lod", "8", "--out", "x.png"], "sets lod 4; lod 8"),
+        ("render", ["--mode", "preset:antimatter15", "--sh-degree", "3", "--out", "x.png"], "sets sh degree 0"),
+        ("trace", ["--modes", "scalar,mip:3", "--supersample", "2", "--pixel", "1,1"], "'mip:3' sets supersample 3"),
+    ],
+)
 def test_an_option_that_disagrees_with_the_spec_is_one_line(tmp_path, capsys, monkeypatch, command, extra, says):
     monkeypatch.chdir(tmp_path)
     assert main([command, str(gb.DEFAULT_SCENE), *VIEW, *extra]) == 2
@@ -93,8 +110,9 @@ def test_a_spec_with_an_exponent_reads_back():
     for lod in (1e6, 1e-5, 123456.7):
         s = RenderSettings(supersample=2, lod=lod)
         assert "e+" not in s.spec and RenderSettings.parse(s.spec) == s
-    assert RenderSettings.parse("scalar+lod:1e+06") == RenderSettings.parse("scalar+lod:1e06") == RenderSettings(
-        lod=1e6)
+    assert (
+        RenderSettings.parse("scalar+lod:1e+06") == RenderSettings.parse("scalar+lod:1e06") == RenderSettings(lod=1e6)
+    )
     with pytest.raises(RenderError, match="expected MODE"):
         RenderSettings.parse("scalar+06")
 
@@ -108,8 +126,10 @@ def test_render_and_trace_take_a_render_settings_alike():
     frame = gb.render(scene, cam, settings)
     assert np.array_equal(frame.rgb, gb.render(scene, cam, "preset:spark:2+lod:3", background=(0.2, 0.3, 0.4)).rgb)
     assert np.allclose(gb.trace_pixel(scene, cam, 5, 4, settings).color, frame.rgb[4, 5], atol=1e-6)
-    for call in (lambda: gb.render(scene, cam, settings, supersample=2),
-                 lambda: gb.trace_pixel(scene, cam, 5, 4, settings, background=(1, 1, 1))):
+    for call in (
+        lambda: gb.render(scene, cam, settings, supersample=2),
+        lambda: gb.trace_pixel(scene, cam, 5, 4, settings, background=(1, 1, 1)),
+    ):
         with pytest.raises(RenderError, match="a RenderSettings says everything"):
             call()
 
@@ -129,8 +149,9 @@ def specs(draw) -> tuple[str, RenderSettings]:
     tail = (f":{n}" if explicit_n else "") + ("" if lod is None else f"+lod:{lod!r}")
     if draw(st.booleans()):
         p = PRESETS[draw(st.sampled_from(PRESET_NAMES))]
-        expected = RenderSettings(Mode.parse(p.mode), n, sh_degree=p.sh_degree, view_filter=p.view_filter,
-                                  preset=p.name, lod=lod)
+        expected = RenderSettings(
+            Mode.parse(p.mode), n, sh_degree=p.sh_degree, view_filter=p.view_filter, preset=p.name, lod=lod
+        )
         return f"preset:{draw(st.sampled_from([p.name, p.name.upper()]))}{tail}", expected
     name = draw(st.sampled_from([*MODES, "supersample"]))
     mode = Mode.SCALAR if name == "supersample" else Mode.parse(name)
@@ -166,6 +187,7 @@ def read_modes(monkeypatch, argv: list[str]) -> list[RenderSettings]:
         raise Seen("read")
 
     from gbviewer.cli import options
+
     real = options.settings_of
     for module in cli.COMMANDS:
         if hasattr(module, "settings_of"):

@@ -11,7 +11,6 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 from helpers import random_view
@@ -44,8 +43,17 @@ def with_view_weights(scene: gb.Scene, seed: int, sigma: float | None = None) ->
     rng = np.random.default_rng(seed)
     vw = rng.normal(0.0, 0.4, (scene.num_splats, 16))
     vw[:, 0] = rng.uniform(-0.5, 4.0, scene.num_splats)
-    return gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, scene.filter_3d,
-                                view_weight_sh=vw, wsr_sigma=sigma, weight_background=0.3)
+    return gb.Scene.from_arrays(
+        scene.means,
+        scene.scales,
+        scene.quats,
+        scene.opacities,
+        scene.sh,
+        scene.filter_3d,
+        view_weight_sh=vw,
+        wsr_sigma=sigma,
+        weight_background=0.3,
+    )
 
 
 def check(frame, ref):
@@ -66,7 +74,9 @@ def test_wsr_matches_reference(seed, weights, depth_correct, supersample):
     if weights:
         scene = with_view_weights(scene, seed, sigma=4.0)
     frame = gb.render(scene, cam, "wsr", supersample, background=BACKGROUND, depth_correct=depth_correct)
-    params = oit("wsr", wbg=oit_of(scene).weight_background, sigma=oit_of(scene).sigma or 10.0, depth_correct=depth_correct)
+    params = oit(
+        "wsr", wbg=oit_of(scene).weight_background, sigma=oit_of(scene).sigma or 10.0, depth_correct=depth_correct
+    )
     check(frame, reference_render_oit(scene, cam, "wsr", params, None, supersample, BACKGROUND))
     assert frame.stats.sort_length == 0 and frame.stats.pairs > 0
 
@@ -95,9 +105,16 @@ def permuted(scene: gb.Scene, perm: np.ndarray, cells: Cells | None = None) -> g
         inv = np.empty_like(perm)
         inv[perm] = np.arange(len(perm))
         new_cells = Cells.from_groups(cells.means, cells.scales, cells.quats, cells.cell_of(len(perm))[perm])
-    return gb.Scene.from_arrays(scene.means[perm], scene.scales[perm], scene.quats[perm], scene.opacities[perm],
-                                scene.sh[perm], view_weight_sh=vw, weight_background=oit_of(scene).weight_background,
-                                cells=new_cells)
+    return gb.Scene.from_arrays(
+        scene.means[perm],
+        scene.scales[perm],
+        scene.quats[perm],
+        scene.opacities[perm],
+        scene.sh[perm],
+        view_weight_sh=vw,
+        weight_background=oit_of(scene).weight_background,
+        cells=new_cells,
+    )
 
 
 @pytest.mark.parametrize("supersample", [1, 2])
@@ -122,7 +139,7 @@ def test_duplex_bitwise_invariant_to_order_inside_cells():
         # shuffle the members of every cell among their own positions, and the cells' splats across the scene
         perm = np.arange(scene.num_splats)
         for c in range(cells.num_cells):
-            mem = cells.members[cells.offsets[c]:cells.offsets[c + 1]]
+            mem = cells.members[cells.offsets[c] : cells.offsets[c + 1]]
             perm[mem] = rng.permutation(mem)
         b = gb.render(permuted(scene, perm, cells), cam, "duplex", background=BACKGROUND)
         assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.alpha, b.alpha)

@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 from helpers import random_scene, random_view
+from test_oit import with_view_weights
 
 import gbviewer as gb
-from gbviewer.model.cells import Cells, build_cells, cells_for
 from gbviewer.core.errors import GBViewerError, SceneFormatError
 from gbviewer.io import load, write_inria_ply
-from test_oit import with_view_weights
+from gbviewer.model.cells import Cells, build_cells, cells_for
 
 
 def test_cells_must_partition_the_splats():
@@ -23,10 +23,14 @@ def test_cells_must_partition_the_splats():
     scene, cam = random_view(94, n=12, sh_degree=0)
     g = build_cells(scene, 4)
     geom = (g.means, g.scales, g.quats)
-    for offsets, members, what in [([1, 4, 8, 12], g.members, "offsets"), ([0, 8, 4, 12], g.members, "offsets"),
-                                   ([0, 4, 8, 11], g.members, "offsets"), ([0, 4, 8], g.members, "offsets"),
-                                   (g.offsets, np.r_[g.members[:-1], -1], "members"),
-                                   (g.offsets, g.members.astype(np.float32), "members")]:
+    for offsets, members, what in [
+        ([1, 4, 8, 12], g.members, "offsets"),
+        ([0, 8, 4, 12], g.members, "offsets"),
+        ([0, 4, 8, 11], g.members, "offsets"),
+        ([0, 4, 8], g.members, "offsets"),
+        (g.offsets, np.r_[g.members[:-1], -1], "members"),
+        (g.offsets, g.members.astype(np.float32), "members"),
+    ]:
         with pytest.raises(GBViewerError, match=what):
             Cells(*geom, np.asarray(offsets), np.asarray(members))
     with pytest.raises(GBViewerError, match="quats"):
@@ -39,8 +43,9 @@ def test_cells_must_partition_the_splats():
         cells_for(sc)
     with pytest.raises(GBViewerError, match="more than once"):
         gb.render(sc, cam, "duplex")
-    assert cells_for(gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
-                                          cells=g)) is g
+    assert (
+        cells_for(gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, cells=g)) is g
+    )
 
     # the native module on its own: the same partition check, and every result key the renderers read
     from gbviewer import _native
@@ -57,8 +62,20 @@ def test_cells_must_partition_the_splats():
     with pytest.raises(ValueError, match="partition"):
         native(np.r_[g.members[:-1], 12])
     out = native(g.members)
-    assert {"rgb", "alpha", "evals", "preprocess_ms", "sort_ms", "blend_ms", "visible", "sort_length", "pairs",
-            "cells_visible", "cell_misses", "evaluations"} <= set(out)
+    assert {
+        "rgb",
+        "alpha",
+        "evals",
+        "preprocess_ms",
+        "sort_ms",
+        "blend_ms",
+        "visible",
+        "sort_length",
+        "pairs",
+        "cells_visible",
+        "cell_misses",
+        "evaluations",
+    } <= set(out)
     assert 0 < out["cells_visible"] <= g.num_cells and out["evaluations"] == out["evals"].sum()
 
 
@@ -135,8 +152,12 @@ def test_cli_render_new_modes(tmp_path):
 
     for mode in ("wsr", "duplex"):
         out = tmp_path / f"{mode}.npy"
-        assert main(["render", str(gb.DEFAULT_SCENE), "--width", "48", "--height", "32", "--mode", mode,
-                     "--out", str(out)]) == 0
+        assert (
+            main(
+                ["render", str(gb.DEFAULT_SCENE), "--width", "48", "--height", "32", "--mode", mode, "--out", str(out)]
+            )
+            == 0
+        )
         img = np.load(out)
         assert img.shape == (32, 48, 3) and np.isfinite(img).all() and img.max() > 0.05
     assert math.isfinite(float(img.mean()))
@@ -148,15 +169,38 @@ def test_cli_bench_order_independent(tmp_path):
     from gbviewer.cli import main
 
     out = tmp_path / "b.json"
-    assert main(["bench", str(gb.DEFAULT_SCENE), "--modes", "wsr,duplex", "--views", "1", "--repeat", "1",
-                 "--size", "48x32", "--rates", "1", "--flicker-frames", "3", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "bench",
+                str(gb.DEFAULT_SCENE),
+                "--modes",
+                "wsr,duplex",
+                "--views",
+                "1",
+                "--repeat",
+                "1",
+                "--size",
+                "48x32",
+                "--rates",
+                "1",
+                "--flicker-frames",
+                "3",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     rows = {r["mode"]: r for r in json.loads(out.read_text())["order_independent"]}
     assert set(rows) == {"scalar", "wsr", "duplex"}
     assert rows["wsr"]["sort_length"] == 0 and rows["wsr"]["pairs"] == rows["scalar"]["pairs"] > 0
     assert 0 < rows["duplex"]["sort_length"] and rows["duplex"]["cells_visible"] <= rows["duplex"]["cells"]
     assert rows["scalar"]["psnr_vs_scalar"] is None  # infinite (identical images): strict JSON writes it as null
     assert rows["duplex"]["psnr_vs_scalar"] > 10
-    assert all(r["flicker"] >= 0 and set(r["stages_ms"]) >= {"preprocess_ms", "sort_ms", "blend_ms"} for r in rows.values())
+    assert all(
+        r["flicker"] >= 0 and set(r["stages_ms"]) >= {"preprocess_ms", "sort_ms", "blend_ms"} for r in rows.values()
+    )
 
 
 def test_cells_follow_dropped_splats():

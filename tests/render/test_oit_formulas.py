@@ -4,16 +4,15 @@ splat per cell, where duplex is alpha blending of alpha/E in cell order (3DGS's 
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 from helpers import random_view
 from reference import reference_render_oit
+from test_oit import BACKGROUND, check, oit
 
 import gbviewer as gb
 from gbviewer.model.cells import Cells
 from gbviewer.model.scene import SH_C0
-from test_oit import BACKGROUND, check, oit
 
 
 def flat_cells(layers, E=4.0, wbg=0.25, W=16, H=12):
@@ -30,10 +29,19 @@ def flat_cells(layers, E=4.0, wbg=0.25, W=16, H=12):
     sh = ((colours - 0.5) / SH_C0)[:, None, :]
     m = cell_of.max() + 1
     cz = np.array([Z[cell_of == c].mean() for c in range(m)])
-    cells = Cells.from_groups(np.stack([np.zeros(m), np.zeros(m), cz], -1), np.full((m, 3), 1e3),
-                              np.tile([1.0, 0, 0, 0], (m, 1)), cell_of)
-    scene = gb.Scene.from_arrays(means, scales, np.tile([1.0, 0, 0, 0], (n, 1)), [o for _, _, o, _ in layers], sh,
-                                 cells=cells, et_grade=E, weight_background=wbg)
+    cells = Cells.from_groups(
+        np.stack([np.zeros(m), np.zeros(m), cz], -1), np.full((m, 3), 1e3), np.tile([1.0, 0, 0, 0], (m, 1)), cell_of
+    )
+    scene = gb.Scene.from_arrays(
+        means,
+        scales,
+        np.tile([1.0, 0, 0, 0], (n, 1)),
+        [o for _, _, o, _ in layers],
+        sh,
+        cells=cells,
+        et_grade=E,
+        weight_background=wbg,
+    )
     return scene, gb.Camera(W, H, f, f, W / 2, H / 2, np.eye(3), np.zeros(3))
 
 
@@ -75,9 +83,15 @@ def test_duplex_cell_termination_hand_computed():
 def test_wsr_hand_computed():
     c = [(1.0, 0.2, 0.1), (0.1, 0.9, 0.3), (0.2, 0.3, 1.0)]
     scene, cam = flat_cells([(0, 2.0, 0.6, c[0]), (1, 3.0, 0.5, c[1]), (2, 4.0, 0.3, c[2])])
-    scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
-                                 view_weight_sh=np.array([[2.0], [1.0], [0.5]]) / SH_C0,
-                                 weight_background=0.2)
+    scene = gb.Scene.from_arrays(
+        scene.means,
+        scene.scales,
+        scene.quats,
+        scene.opacities,
+        scene.sh,
+        view_weight_sh=np.array([[2.0], [1.0], [0.5]]) / SH_C0,
+        weight_background=0.2,
+    )
     frame = gb.render(scene, cam, "wsr", background=BACKGROUND)
     w = np.array([0.6 * 2.0, 0.5 * 1.0, 0.3 * 0.5])  # opacity * v; no clamp, no transmittance
     expect = ((w[:, None] * np.array(c)).sum(0) + 0.2 * np.array(BACKGROUND)) / (w.sum() + 0.2)
@@ -90,8 +104,15 @@ def test_wsr_huge_view_weights_stay_in_int64():
     the grid) overflowed int64 with two such terms and gave a negative weight sum."""
     c = [(1.0, 0.2, 0.1), (0.1, 0.9, 0.3), (0.2, 0.3, 1.0)]
     scene, cam = flat_cells([(0, 2.0, 0.6, c[0]), (1, 3.0, 0.5, c[1]), (2, 4.0, 0.3, c[2])])
-    scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
-                                 view_weight_sh=np.full((3, 1), 1e9 / SH_C0), weight_background=0.2)
+    scene = gb.Scene.from_arrays(
+        scene.means,
+        scene.scales,
+        scene.quats,
+        scene.opacities,
+        scene.sh,
+        view_weight_sh=np.full((3, 1), 1e9 / SH_C0),
+        weight_background=0.2,
+    )
     frame = gb.render(scene, cam, "wsr", background=BACKGROUND)
     w = np.full(3, 64.0)  # every splat at the cap: equal weights, each keeps its colour
     expect = ((w[:, None] * np.array(c)).sum(0) + 0.2 * np.array(BACKGROUND)) / (w.sum() + 0.2)
@@ -101,8 +122,9 @@ def test_wsr_huge_view_weights_stay_in_int64():
     scene, cam = random_view(34, n=120, sh_degree=3)
     vw = np.zeros((scene.num_splats, 16))
     vw[:, 0] = np.random.default_rng(34).uniform(1e6, 1e9, scene.num_splats)
-    scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
-                                 view_weight_sh=vw, weight_background=0.3)
+    scene = gb.Scene.from_arrays(
+        scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, view_weight_sh=vw, weight_background=0.3
+    )
     frame = gb.render(scene, cam, "wsr", background=BACKGROUND)
     check(frame, reference_render_oit(scene, cam, "wsr", oit("wsr", wbg=0.3), None, 1, BACKGROUND))
 
@@ -144,8 +166,7 @@ def test_one_splat_per_cell_is_3dgs_when_E_1():
     op = np.minimum(scene.opacities, 0.05)
     # each cell is its splat's ellipsoid at twice the scale: the cell's 2-sigma radius covers the splat's 3 sigma
     one = Cells.from_groups(scene.means, 2 * scene.scales, scene.quats, np.arange(scene.num_splats))
-    sc = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, op, scene.sh, cells=one,
-                              weight_background=1.0)
+    sc = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, op, scene.sh, cells=one, weight_background=1.0)
     scalar = gb.render(sc, cam, "scalar")
     duplex = gb.render(sc, cam, "duplex", et_grade=1.0)
     assert (scalar.alpha < 0.99).all()

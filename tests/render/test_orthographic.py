@@ -51,8 +51,7 @@ def test_order_independent_modes_match_reference(mode, supersample):
     else:
         frame = gb.render(scene, cam, "duplex", supersample, background=BACKGROUND, et_grade=2.5, cell_size=5)
         params = oit("duplex", 2.5, wbg=oit_of(scene).weight_background)
-        check(frame, reference_render_oit(scene, cam, "duplex", params, cells_for(scene, 5), supersample,
-                                          BACKGROUND))
+        check(frame, reference_render_oit(scene, cam, "duplex", params, cells_for(scene, 5), supersample, BACKGROUND))
         assert 0 < frame.stats.cells_visible <= frame.stats.cells
 
 
@@ -74,8 +73,9 @@ def test_splat_is_the_linear_projection():
     ok = valid & (sigma2 > 0.09)
     assert ok.sum() > 100, ok.sum()
     s = rec["splat"][ok]
-    np.testing.assert_allclose(f32(s["xy"]), np.c_[cam.fx * view[ok, 0] + cam.cx, cam.fy * view[ok, 1] + cam.cy],
-                               rtol=0, atol=1e-3)
+    np.testing.assert_allclose(
+        f32(s["xy"]), np.c_[cam.fx * view[ok, 0] + cam.cx, cam.fy * view[ok, 1] + cam.cy], rtol=0, atol=1e-3
+    )
     np.testing.assert_allclose(f32(s["depth"]), view[ok, 2], rtol=1e-6)
     inv = np.linalg.inv(cov[ok])
     want = np.c_[inv[:, 0, 0], inv[:, 0, 1], inv[:, 1, 1]]  # the conic (a, b, c) is the inverse covariance

@@ -13,10 +13,10 @@ import pytest
 from reference import reference_render
 
 import gbviewer as gb
-from gbviewer.render import RenderSettings
-from gbviewer.render.view_filter import ViewFilter
-from gbviewer.render.presets import PRESETS, QUAD_SIGMAS
 from gbviewer.model.scene import SH_C0
+from gbviewer.render import RenderSettings
+from gbviewer.render.presets import PRESETS, QUAD_SIGMAS
+from gbviewer.render.view_filter import ViewFilter
 
 SH_C1 = 0.4886025119029199
 TOL = 1e-4  # as test_presets.py
@@ -66,8 +66,13 @@ def test_base_colour_above_one_is_clamped_before_the_sh_bands():
 def test_dc_clamp_alone_reproduces_the_scalar_mode_inside_zero_one():
     """The clamp changes nothing where every base colour lies in [0, 1]: bit for bit."""
     rng = np.random.default_rng(5)
-    scene = splats(rng.uniform(-1, 1, (60, 3)) + [0, 0, 6], rng.uniform(0.05, 0.3, 60), rng.uniform(0.2, 0.9, 60),
-                   rng.uniform(0.0, 1.0, (60, 3)), rest=0.1)
+    scene = splats(
+        rng.uniform(-1, 1, (60, 3)) + [0, 0, 6],
+        rng.uniform(0.05, 0.3, 60),
+        rng.uniform(0.2, 0.9, 60),
+        rng.uniform(0.0, 1.0, (60, 3)),
+        rest=0.1,
+    )
     cam = camera(48, 40, 40.0)
     a, b = render(scene, cam, ViewFilter(dc_clamp=True)), render(scene, cam, ViewFilter())
     assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.alpha, b.alpha)
@@ -131,10 +136,12 @@ def bright_splat() -> tuple[gb.Scene, gb.Camera]:
     return splats([[0.0, 0.3, 4.0]], [0.2], [0.9], [[1.4, 0.3, -0.3]], rest=-0.3), camera(32, 32, 30.0)
 
 
-@pytest.mark.parametrize("vf,view", [(ViewFilter(sort_radial=True), radial_pair),
-                                     (ViewFilter(dc_clamp=True, support=QUAD_SIGMAS), bright_splat)],
-                         ids=["radial", "clamp-support"])
-def test_glsl_rules_match_the_cpu(gl, vf, view):  # noqa: F811 (the fixture)
+@pytest.mark.parametrize(
+    "vf,view",
+    [(ViewFilter(sort_radial=True), radial_pair), (ViewFilter(dc_clamp=True, support=QUAD_SIGMAS), bright_splat)],
+    ids=["radial", "clamp-support"],
+)
+def test_glsl_rules_match_the_cpu(gl, vf, view):
     scene, cam = view()
     ref = render(scene, cam, vf)
     assert not np.array_equal(ref.rgb, render(scene, cam, ViewFilter()).rgb)  # the rule shows in this view

@@ -15,9 +15,9 @@ from helpers import random_view
 from reference import reference_render
 
 import gbviewer as gb
+from gbviewer.model.scene import SH_C0
 from gbviewer.render import RenderSettings, create_renderer
 from gbviewer.render.presets import PRESETS, differences
-from gbviewer.model.scene import SH_C0
 
 TOL = 1e-4  # as tests/render/test_render_reference.py (float32 noise is ~1e-6; a wrong rule shows at >= 1e-3)
 BACKGROUND = (0.1, 0.5, 0.9)
@@ -86,12 +86,20 @@ def test_presets_match_the_float64_reference(name, seed):
     preset = PRESETS[name]
     scene, cam = random_view(seed, sh_degree=3)
     if preset.sh_degree < 3:
-        scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities,
-                                     scene.sh[:, : (preset.sh_degree + 1) ** 2])
+        scene = gb.Scene.from_arrays(
+            scene.means, scene.scales, scene.quats, scene.opacities, scene.sh[:, : (preset.sh_degree + 1) ** 2]
+        )
     for supersample in (1, 2):
         frame = render(scene, cam, f"preset:{name}:{supersample}", background=BACKGROUND)
-        rgb, alpha, ties = reference_render(scene, cam, "scalar", supersample, background=BACKGROUND,
-                                            return_ties=True, view_filter=asdict(preset.view_filter))
+        rgb, alpha, ties = reference_render(
+            scene,
+            cam,
+            "scalar",
+            supersample,
+            background=BACKGROUND,
+            return_ties=True,
+            view_filter=asdict(preset.view_filter),
+        )
         err = np.maximum(np.abs(frame.rgb - rgb).max(-1), np.abs(frame.alpha - alpha))
         assert np.where(ties, 0.0, err).max() <= TOL, f"{name} ss{supersample}: {err.max():.3e}"
         assert ties.sum() <= 4 and err.max() <= 2e-2
@@ -119,13 +127,17 @@ def test_presets_with_a_modes_parameters_render_it_bit_for_bit():
 def test_differences_name_the_parameters():
     s = {n: RenderSettings.parse(f"preset:{n}") for n in PRESETS}
     assert differences(s["inria"], s["gsplat-antialiased"]) == ["compensate 0 vs 1"]
-    assert differences(s["supersplat"], s["antimatter15"]) == ["dilation 0.3 vs 0", "cull_lambda 0.5 vs 0",
-                                                                 "dc_clamp 0 vs 1", "SH 3 vs 0"]
+    assert differences(s["supersplat"], s["antimatter15"]) == [
+        "dilation 0.3 vs 0",
+        "cull_lambda 0.5 vs 0",
+        "dc_clamp 0 vs 1",
+        "SH 3 vs 0",
+    ]
     assert differences(s["inria"], RenderSettings.parse("gaussian_blending")) == ["mode scalar vs gaussian_blending"]
 
 
 @pytest.mark.parametrize("name", ["gsplat-antialiased", "supersplat", "spark", "antimatter15"])
-def test_glsl_presets_match_the_cpu(gl, name):  # noqa: F811 (the fixture)
+def test_glsl_presets_match_the_cpu(gl, name):
     scene, cam = random_view(34, n=400, sh_degree=3, W=96, H=80)
     compare(scene, cam, f"preset:{name}")
     compare(scene, cam, f"preset:{name}:2")

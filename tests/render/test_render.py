@@ -8,10 +8,10 @@ import weakref
 
 import numpy as np
 import pytest
+from helpers import front_camera, random_scene, run_threads, skip_or_fail
 
 import gbviewer as gb
 from gbviewer.render import BACKENDS
-from helpers import front_camera, random_scene, run_threads, skip_or_fail
 
 
 def test_get_renderer_reuses_and_releases_scenes():
@@ -37,8 +37,9 @@ def check_concurrent_renders(backend: str, scene: gb.Scene, threads: int = 2, ro
     starting together, each in another order (so different modes run at the same time, duplex's cells included);
     every frame must equal the same job rendered alone, bit for bit, stats included."""
     cams = [front_camera(96, 72), front_camera(80, 56, f=45.0)]
-    jobs = [(cam, gb.RenderSettings.parse(spec, background=(0.2, 0.3, 0.4))) for cam in cams
-            for spec in CONCURRENT_SPECS]
+    jobs = [
+        (cam, gb.RenderSettings.parse(spec, background=(0.2, 0.3, 0.4))) for cam in cams for spec in CONCURRENT_SPECS
+    ]
     renderer = gb.get_renderer(scene, backend)
     alone = [renderer.render(cam, settings) for cam, settings in jobs]
     barrier = threading.Barrier(threads)
@@ -90,12 +91,12 @@ except MemoryError:
 
 
 def test_tile_list_that_does_not_fit_is_a_memory_error(tmp_path):
-    """A frame whose tile lists exceed the memory left raises MemoryError; nothing aborts inside the parallel binning."""
+    """A frame whose tile lists exceed the memory left raises MemoryError; nothing aborts inside the parallel
+    binning."""
     import subprocess
     import sys
 
-    res = subprocess.run([sys.executable, "-c", _OOM_SCRIPT], capture_output=True, text=True, timeout=300,
-                         cwd=tmp_path)
+    res = subprocess.run([sys.executable, "-c", _OOM_SCRIPT], capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert res.returncode == 0 and res.stdout.strip() == "MemoryError", (res.returncode, res.stdout, res.stderr[-2000:])
 
 
@@ -204,10 +205,12 @@ def test_a_frame_of_other_types_is_one_line(call):
     from inside the backend; it is one line naming the call, before the backend's lock."""
     scene = random_scene(20, seed=33)
     cam, handle = front_camera(8, 8), gb.get_renderer(scene, "cpu")
-    calls = {"render str camera": lambda: gb.render(scene, "front"),
-             "render str settings": lambda: handle.render(cam, "scalar"),
-             "trace": lambda: handle.trace(None, gb.RenderSettings(), 1, 1),
-             "render_many triple": lambda: handle.render_many([(cam, gb.RenderSettings(), 1)])}
+    calls = {
+        "render str camera": lambda: gb.render(scene, "front"),
+        "render str settings": lambda: handle.render(cam, "scalar"),
+        "trace": lambda: handle.trace(None, gb.RenderSettings(), 1, 1),
+        "render_many triple": lambda: handle.render_many([(cam, gb.RenderSettings(), 1)]),
+    }
     with pytest.raises(gb.GBViewerError, match=r"expected a gbviewer.Camera and a RenderSettings"):
         calls[call]()
     assert handle.render(camera=cam, settings=gb.RenderSettings()).rgb.shape == (8, 8, 3)

@@ -23,11 +23,11 @@ import warnings
 
 import numpy as np
 import pytest
+from helpers import random_view
+from reference import MODES, reference_render
 
 import gbviewer as gb
 from gbviewer.model.scene import SH_C0
-from helpers import random_view
-from reference import MODES, reference_render
 
 TOL = 1e-4
 BACKGROUND = (0.1, 0.5, 0.9)
@@ -54,8 +54,10 @@ def _check_strict(frame, scene, cam, mode, supersample):
     strict = np.where(ties, 0.0, err)
     i, j = np.unravel_index(strict.argmax(), strict.shape)
     label = f"{mode} ss={supersample}"
-    assert strict.max() <= TOL, (f"{label}: max |native - reference| = {strict.max():.3e} at pixel ({i},{j}) "
-                                 f"(no threshold tie there); {(strict > TOL).sum()} pixels above {TOL}")
+    assert strict.max() <= TOL, (
+        f"{label}: max |native - reference| = {strict.max():.3e} at pixel ({i},{j}) "
+        f"(no threshold tie there); {(strict > TOL).sum()} pixels above {TOL}"
+    )
     assert ties.sum() <= MAX_TIE_PIXELS, f"{label}: {ties.sum()} tie pixels; re-seed the scene"
     assert err.max() <= TIE_MAX_ERR, f"{label}: tie pixel error {err.max():.3e} > {TIE_MAX_ERR}"
     return err, ties, alpha
@@ -87,8 +89,9 @@ def test_gaussian_blending_well_conditioned(supersample, seed, sh_degree, filter
     including the final window size (debug plane) at supersample 1."""
     p = [0.6, 0.2, 0.05, 0.05, 0.05, 0.0, 0.05]
     scene, cam = random_view(seed, n=200, sh_degree=sh_degree, filter3d=filter3d, max_px_sigma=3.0, kinds_p=p)
-    frame = gb.render(scene, cam, mode="gaussian_blending", supersample=supersample, background=BACKGROUND,
-                      debug="window")
+    frame = gb.render(
+        scene, cam, mode="gaussian_blending", supersample=supersample, background=BACKGROUND, debug="window"
+    )
     err, ties, alpha = _check_strict(frame, scene, cam, "gaussian_blending", supersample)
     assert (alpha > 0.05).mean() > 0.5, "scene should cover most of the image"
     if supersample == 1:
@@ -102,21 +105,45 @@ def test_isolated_cases_match_reference():
     degenerate, one covering the whole image, needle-thin; all modes, supersample 1 and 3."""
     W, H = 32, 24
     cam = gb.Camera(W, H, 30.0, 30.0, 16.0, 12.0, np.eye(3), np.zeros(3))
-    means = np.array([
-        [0.1, 0.0, -1.0],  # behind
-        [0.0, 0.0, 0.19999],  # just behind the near plane (Z == 0.2 exactly is a float32/float64 tie)
-        [0.02, 0.01, 0.2002],  # just in front of the near plane: huge on screen
-        [9.0, 0.1, 1.0],  # far right off-screen (clamped Jacobian), big enough to reach the image
-        [0.1, 0.1, 2.0],  # zero scale
-        [-0.2, 0.1, 2.5],  # zero quaternion
-        [0.0, 0.0, 20.0],  # huge
-        [0.3, -0.2, 1.5],  # needle
-        [-0.3, -0.2, 1.7],  # ordinary
-    ])
-    scales = np.array([[0.1] * 3, [0.1] * 3, [0.001] * 3, [3.0, 0.5, 0.5], [0.0] * 3, [0.05, 0.02, 0.01],
-                       [30.0, 20.0, 1.0], [0.3, 0.0005, 0.0005], [0.05, 0.03, 0.02]])
-    quats = np.array([[1, 0, 0, 0], [1, 0, 0, 0], [1, 0, 0, 0], [0.9, 0.1, 0.3, 0.1], [1, 0, 0, 0],
-                      [0, 0, 0, 0], [0.7, 0.2, 0.1, 0.4], [0.8, 0.1, 0.2, 0.5], [0.6, 0.3, -0.2, 0.1]])
+    means = np.array(
+        [
+            [0.1, 0.0, -1.0],  # behind
+            [0.0, 0.0, 0.19999],  # just behind the near plane (Z == 0.2 exactly is a float32/float64 tie)
+            [0.02, 0.01, 0.2002],  # just in front of the near plane: huge on screen
+            [9.0, 0.1, 1.0],  # far right off-screen (clamped Jacobian), big enough to reach the image
+            [0.1, 0.1, 2.0],  # zero scale
+            [-0.2, 0.1, 2.5],  # zero quaternion
+            [0.0, 0.0, 20.0],  # huge
+            [0.3, -0.2, 1.5],  # needle
+            [-0.3, -0.2, 1.7],  # ordinary
+        ]
+    )
+    scales = np.array(
+        [
+            [0.1] * 3,
+            [0.1] * 3,
+            [0.001] * 3,
+            [3.0, 0.5, 0.5],
+            [0.0] * 3,
+            [0.05, 0.02, 0.01],
+            [30.0, 20.0, 1.0],
+            [0.3, 0.0005, 0.0005],
+            [0.05, 0.03, 0.02],
+        ]
+    )
+    quats = np.array(
+        [
+            [1, 0, 0, 0],
+            [1, 0, 0, 0],
+            [1, 0, 0, 0],
+            [0.9, 0.1, 0.3, 0.1],
+            [1, 0, 0, 0],
+            [0, 0, 0, 0],
+            [0.7, 0.2, 0.1, 0.4],
+            [0.8, 0.1, 0.2, 0.5],
+            [0.6, 0.3, -0.2, 0.1],
+        ]
+    )
     op = np.array([0.9, 0.9, 0.5, 0.7, 0.9, 0.8, 0.3, 0.95, 0.6])
     sh = np.random.default_rng(5).normal(scale=0.5, size=(len(op), 16, 3))
     scene = gb.Scene.from_arrays(means, scales, quats, op, sh)

@@ -85,6 +85,7 @@ def test_glsl_render_to_texture_can_be_cancelled(glsl, bundled_scene):
 
 # ---- cuda (GPU only) ----------------------------------------------------------------------------------------------
 
+
 def cuda_gl_context():
     """A GL context CUDA can write, current in this thread (the process's headless EGL one); skips where none."""
     ok, why = CudaRenderer.available()
@@ -135,8 +136,9 @@ def test_cuda_wrapper_passes_the_texture_and_the_render_arguments(bundled_scene,
         def render_to_gl_texture(self, texture, *args, view_filter=None, seed=0, frame=0, fast=False, cut=False):
             assert texture == 7 and len(args) == (19 if spec == "duplex" else 15) and not cut  # + the oit globals
             _native_cuda.check_render_args(*args, view_filter=view_filter, seed=seed, frame=frame, fast=fast)
-            return super().render_to_gl_texture(texture, *args, view_filter=view_filter, seed=seed, frame=frame,
-                                                fast=fast)
+            return super().render_to_gl_texture(
+                texture, *args, view_filter=view_filter, seed=seed, frame=frame, fast=fast
+            )
 
     class Texture:
         glo, size, components, dtype = 7, (32, 24), 4, "f4"

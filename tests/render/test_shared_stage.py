@@ -87,8 +87,12 @@ def test_render_many_builds_one_stage_per_camera_and_keeps_the_jobs_order(staged
     jobs), and the frames come back in the jobs' order, each as a fresh renderer draws it."""
     scene = gb.load(shared_scene("plant.splat"))
     a, b = (gb.orbit_camera(scene, az, 10, width=96, height=72) for az in (20, 60))
-    jobs = [(a, RenderSettings.parse("scalar")), (b, RenderSettings.parse("scalar")),
-            (a, RenderSettings.parse("gaussian_blending")), (b, RenderSettings.parse("mip"))]
+    jobs = [
+        (a, RenderSettings.parse("scalar")),
+        (b, RenderSettings.parse("scalar")),
+        (a, RenderSettings.parse("gaussian_blending")),
+        (b, RenderSettings.parse("mip")),
+    ]
     r = create_renderer(staged)
     r.upload(scene)
     frames = r.render_many(jobs)
@@ -179,8 +183,13 @@ def test_a_wide_view_filter_keeps_splats_the_stage_would_call_off_screen(staged,
     spreads it into the image. The narrow image equals the same columns of a wider image (same cx; the splat on
     screen, inside both frustum clamps of the EWA Jacobian), where the stage's on-screen bound cannot cull it; a
     3DGS-filter frame of the same camera (another stage reach) sees nothing."""
-    scene = gb.Scene.from_arrays(np.array([[8 / 3, 0.0, 4.0]]), np.full((1, 3), 0.01), np.array([[1.0, 0, 0, 0]]),
-                                 np.array([0.9]), np.full((1, 1, 3), 0.5))
+    scene = gb.Scene.from_arrays(
+        np.array([[8 / 3, 0.0, 4.0]]),
+        np.full((1, 3), 0.01),
+        np.array([[1.0, 0, 0, 0]]),
+        np.array([0.9]),
+        np.full((1, 1, 3), 0.5),
+    )
     narrow = gb.Camera(64, 48, 60.0, 60.0, 32.0, 24.0, np.eye(3), np.zeros(3))
     wide = gb.Camera(160, 48, 60.0, 60.0, 32.0, 24.0, np.eye(3), np.zeros(3))
     wide_filter = RenderSettings(view_filter=ViewFilter(dilation, pre_dilation=pre_dilation))

@@ -18,19 +18,19 @@ from __future__ import annotations
 
 import os
 import subprocess
-import tempfile
 import sys
+import tempfile
 from contextlib import contextmanager
 
 import numpy as np
 import pytest
+from helpers import random_view, skip_or_fail
+from test_render_reference import BACKGROUND, SCENES, _check_strict
 
 import gbviewer as gb
 from gbviewer import _native, lod
 from gbviewer.model.cells import build_cells
 from gbviewer.render import create_renderer
-from helpers import random_view, skip_or_fail
-from test_render_reference import BACKGROUND, SCENES, _check_strict
 
 ALL_PATHS = ("scalar", "avx2", "avx512", "neon")
 VECTOR_PATHS = ("avx2", "avx512", "neon")
@@ -87,8 +87,17 @@ def test_paths_and_stats():
     assert gb.render(scene, cam).stats.simd == _native.simd()
 
 
-@pytest.mark.parametrize("mode, ran", [("stopthepop", "scalar"), ("stopthepop:0", "scalar"), ("eval3d", "scalar"),
-                                       ("stochastic_popfree", None), ("stochastic", None), ("gaussian_blending", None)])
+@pytest.mark.parametrize(
+    "mode, ran",
+    [
+        ("stopthepop", "scalar"),
+        ("stopthepop:0", "scalar"),
+        ("eval3d", "scalar"),
+        ("stochastic_popfree", None),
+        ("stochastic", None),
+        ("gaussian_blending", None),
+    ],
+)
 def test_stats_name_the_path_the_blend_ran(mode, ran):
     """FrameStats.simd is the path the blend ran: the per-pixel sorted modes walk one pixel at a time (no vector
     lanes) whichever path is selected; the others run the selected one."""
@@ -149,9 +158,22 @@ def test_reference_gaussian_blending_each_path(path):
 
 
 # captured_preprocess(): per splat its valid byte, then (when valid) Splat2D and TileRect, zeros when culled
-SPLAT2D = np.dtype([("xy", "<u4", 2), ("depth", "<u4"), ("opacity", "<u4"), ("conic", "<u4", 3), ("color", "<u4", 3),
-                    ("v1", "<u4", 2), ("sigma", "<u4", 2), ("inv_sigma", "<u4", 2), ("log_min_alpha", "<u4"),
-                    ("radius", "<u4"), ("cell", "<i4"), ("id", "<i4")])
+SPLAT2D = np.dtype(
+    [
+        ("xy", "<u4", 2),
+        ("depth", "<u4"),
+        ("opacity", "<u4"),
+        ("conic", "<u4", 3),
+        ("color", "<u4", 3),
+        ("v1", "<u4", 2),
+        ("sigma", "<u4", 2),
+        ("inv_sigma", "<u4", 2),
+        ("log_min_alpha", "<u4"),
+        ("radius", "<u4"),
+        ("cell", "<i4"),
+        ("id", "<i4"),
+    ]
+)
 PREPROCESS_RECORD = np.dtype([("valid", "u1"), ("splat", SPLAT2D), ("rect", "<i4", 4)])
 
 
@@ -182,8 +204,8 @@ def _cut_scene(seed):
     op = rng.uniform(0.003, 1.0, n).astype(np.float32)
     for i, o in enumerate((1 / 255, 1 / 256)):
         base = np.float32(o)
-        op[100 + 30 * i:130 + 30 * i] = np.nextafter(base, np.float32([0.0, 1.0, 1.0] * 10))
-        op[160 + 10 * i:170 + 10 * i] = base
+        op[100 + 30 * i : 130 + 30 * i] = np.nextafter(base, np.float32([0.0, 1.0, 1.0] * 10))
+        op[160 + 10 * i : 170 + 10 * i] = base
     quats = rng.normal(size=(n, 4))
     quats[80:90] = 0.0
     sh = rng.uniform(-1, 1, (n, 16, 3))
@@ -192,8 +214,9 @@ def _cut_scene(seed):
     vw[200:300, 1:] = 0.0
     vw[200:300, 0] = np.float32(rng.choice([0.0, 1e-30, -1e-30, 1e-3], 100))
     f3d = np.where(rng.random(n) < 0.5, rng.uniform(0.0, 0.05, n), 0.0)
-    scene = gb.Scene.from_arrays(means, scales, quats, op, sh, f3d, view_weight_sh=vw, wsr_sigma=5.0,
-                                 weight_background=0.3)
+    scene = gb.Scene.from_arrays(
+        means, scales, quats, op, sh, f3d, view_weight_sh=vw, wsr_sigma=5.0, weight_background=0.3
+    )
     R = np.array([[0.98, -0.17, 0.1], [0.17, 0.985, 0.0], [-0.1, 0.02, 0.995]])
     R = np.linalg.qr(R)[0] * np.sign(np.diag(np.linalg.qr(R)[1]))
     return scene, gb.Camera(97, 61, 52.3, 47.9, 50.1, 29.7, R, np.array([0.03, -0.02, 0.1]))
@@ -208,8 +231,14 @@ def _gapped_scene():
     means = np.c_[rng.uniform(-1, 1, n), rng.uniform(-0.6, 0.6, n), rng.uniform(2.5, 4, n)]
     means[14, 2] = -1.0
     quats = rng.normal(size=(n, 4))
-    scene = gb.Scene(means, np.full((n, 3), 0.05), quats / np.linalg.norm(quats, axis=1, keepdims=True),
-                     np.full(n, 0.8), rng.uniform(-0.5, 0.5, (n, 16, 3)), source="gapped")
+    scene = gb.Scene(
+        means,
+        np.full((n, 3), 0.05),
+        quats / np.linalg.norm(quats, axis=1, keepdims=True),
+        np.full(n, 0.8),
+        rng.uniform(-0.5, 0.5, (n, 16, 3)),
+        source="gapped",
+    )
     return scene, gb.Camera(64, 48, 40.0, 40.0, 32, 24, np.eye(3), np.zeros(3))
 
 
@@ -234,9 +263,16 @@ def test_preprocess_bitwise(path, mode):
         if mode in ("wsr", "duplex"):
             variants.append({"depth_correct": True})
         if mode == "duplex":
-            scene = gb.Scene.from_arrays(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
-                                         scene.filter_3d, view_weight_sh=scene.oit and scene.oit.view_weight_sh,
-                                         cells=build_cells(scene, 6))
+            scene = gb.Scene.from_arrays(
+                scene.means,
+                scene.scales,
+                scene.quats,
+                scene.opacities,
+                scene.sh,
+                scene.filter_3d,
+                view_weight_sh=scene.oit and scene.oit.view_weight_sh,
+                cells=build_cells(scene, 6),
+            )
         for kw in variants + [{"sh_degree": 1}, {"sh_degree": 2}]:
             ref, ref_frame = preprocessed("scalar", scene, cam, mode, **kw)
             vec, vec_frame = preprocessed(path, scene, cam, mode, **kw)
@@ -248,8 +284,10 @@ def test_preprocess_bitwise(path, mode):
                 fields = [f for f in SPLAT2D.names if (ref["splat"][f][bad] != vec["splat"][f][bad]).any()]
                 decided = (ref["valid"][bad] != vec["valid"][bad]).sum()
                 rects = (ref["rect"][bad] != vec["rect"][bad]).any(axis=1).sum()
-                pytest.fail(f"{what}: {len(bad)} splats differ (first {bad[:5]}): {decided} decisions, {rects} "
-                            f"rectangles, fields {fields}")
+                pytest.fail(
+                    f"{what}: {len(bad)} splats differ (first {bad[:5]}): {decided} decisions, {rects} "
+                    f"rectangles, fields {fields}"
+                )
             for stat in ("visible", "sort_length", "pairs"):
                 assert getattr(vec_frame.stats, stat) == getattr(ref_frame.stats, stat), what
 
@@ -367,8 +405,9 @@ def _python(code: str, simd_env: str | None) -> subprocess.CompletedProcess:
     if simd_env is not None:
         env["GBVIEWER_SIMD"] = simd_env
     # outside the checkout, so that the installed package (with its built module) is the one imported
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120,
-                          cwd=tempfile.gettempdir())
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120, cwd=tempfile.gettempdir()
+    )
 
 
 def test_env_var_forces_path():
@@ -420,8 +459,9 @@ def emulated_env() -> dict[str, str]:
     """The emulated child's environment without what selects CPU code paths: OPENBLAS_CORETYPE=Haswell (set on some
     hosts) makes numpy's OpenBLAS run AVX2 on the emulated Nehalem and die of SIGILL, NPY_* dispatch variables and
     GBVIEWER_SIMD would force paths the emulated CPU may lack; the child must choose for the CPU it runs on."""
-    return {k: v for k, v in os.environ.items()
-            if not k.startswith(("OPENBLAS_", "NPY_", "GOTO", "MKL_", "GBVIEWER_SIMD"))}
+    return {
+        k: v for k, v in os.environ.items() if not k.startswith(("OPENBLAS_", "NPY_", "GOTO", "MKL_", "GBVIEWER_SIMD"))
+    }
 
 
 @pytest.mark.skipif(os.uname().machine != "x86_64", reason="the x86-64 build's instruction sets")
@@ -435,15 +475,26 @@ def test_module_runs_on_an_older_cpu(tmp_path, cpu, paths):
     qemu = shutil.which("qemu-x86_64")
     if qemu is None:
         skip_or_fail("qemu-x86_64 not installed (Debian: qemu-user)")
-    res = subprocess.run([qemu, "-cpu", cpu, sys.executable, "-c", _EMULATED, str(tmp_path)], capture_output=True,
-                         text=True, timeout=300, cwd=tempfile.gettempdir(), env=emulated_env())
+    res = subprocess.run(
+        [qemu, "-cpu", cpu, sys.executable, "-c", _EMULATED, str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tempfile.gettempdir(),
+        env=emulated_env(),
+    )
     assert res.returncode == 0, res.stderr[-3000:]
     out = json.loads(res.stdout.strip().splitlines()[-1])
     assert out["paths"] == paths
     rng = np.random.default_rng(0)
     n = 300
-    scene = gb.Scene.from_arrays(np.c_[rng.uniform(-1, 1, (n, 2)), rng.uniform(2, 4, n)], np.full((n, 3), 0.05),
-                                 rng.normal(size=(n, 4)), rng.uniform(0.1, 1, n), rng.uniform(-1, 1, (n, 1, 3)))
+    scene = gb.Scene.from_arrays(
+        np.c_[rng.uniform(-1, 1, (n, 2)), rng.uniform(2, 4, n)],
+        np.full((n, 3), 0.05),
+        rng.normal(size=(n, 4)),
+        rng.uniform(0.1, 1, n),
+        rng.uniform(-1, 1, (n, 1, 3)),
+    )
     cam = gb.Camera(48, 32, 40.0, 40.0, 24.0, 16.0, np.eye(3), np.zeros(3))
     for mode in ("scalar", "gaussian_blending", "wsr", "duplex", "analytic"):
         assert out[mode] == paths[-1]

@@ -29,8 +29,12 @@ def _scene(seed=2):
 
 
 def _mean(scene, cam, supersample, frames=FRAMES, seed=0, mode="stochastic", background=BACKGROUND):
-    frames_rgb = [gb.render(scene, cam, mode=mode, supersample=supersample, background=background,
-                            seed=seed, frame=f).rgb.astype(np.float64) for f in range(frames)]
+    frames_rgb = [
+        gb.render(scene, cam, mode=mode, supersample=supersample, background=background, seed=seed, frame=f).rgb.astype(
+            np.float64
+        )
+        for f in range(frames)
+    ]
     return np.mean(frames_rgb, axis=0)
 
 
@@ -97,8 +101,10 @@ def test_trace_names_discarded_fragments():
     trace = gb.get_renderer(scene, "cpu").trace(cam, RenderSettings(Mode.STOCHASTIC), int(x), int(y))
     rejected = [step.rejected for sample in trace.samples for step in sample.steps]
     assert "" in rejected  # the kept fragment
-    assert all(r in ("", "discarded", "outside_box", "invalid_exponent", "below_cutoff", "alpha_below_min",
-                     "terminated") for r in rejected)
+    assert all(
+        r in ("", "discarded", "outside_box", "invalid_exponent", "below_cutoff", "alpha_below_min", "terminated")
+        for r in rejected
+    )
 
 
 def test_settings_and_spec():
@@ -167,8 +173,13 @@ def _parallel_disks(yaw_deg: float):
     disk's centre is the nearer one, while along every ray the red disk stays in front."""
     c0 = 0.28209479177387814
     sh = np.array([[[0.5 / c0, -0.5 / c0, -0.5 / c0]], [[-0.5 / c0, -0.5 / c0, 0.5 / c0]]])
-    scene = gb.Scene.from_arrays(np.array([[-0.5, 0.0, 5.0], [0.5, 0.0, 5.2]]), np.array([[1.0, 1.0, 1e-4]] * 2),
-                                 np.array([[1.0, 0.0, 0.0, 0.0]] * 2), np.array([0.9, 0.9]), sh)
+    scene = gb.Scene.from_arrays(
+        np.array([[-0.5, 0.0, 5.0], [0.5, 0.0, 5.2]]),
+        np.array([[1.0, 1.0, 1e-4]] * 2),
+        np.array([[1.0, 0.0, 0.0, 0.0]] * 2),
+        np.array([0.9, 0.9]),
+        sh,
+    )
     a = np.radians(yaw_deg)
     R = np.array([[np.cos(a), 0.0, -np.sin(a)], [0.0, 1.0, 0.0], [np.sin(a), 0.0, np.cos(a)]])
     return scene, gb.Camera(32, 24, 30.0, 30.0, 16.0, 12.0, R, np.zeros(3))

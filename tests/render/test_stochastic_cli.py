@@ -44,8 +44,24 @@ def test_render_is_the_library_image_for_that_seed_and_frame(tmp_path):
     images = {}
     for seed, frame in ((5, 2), (5, 3), (6, 2)):
         out = tmp_path / f"{seed}-{frame}.npy"
-        assert main(["render", SCENE, "--mode", "stochastic", "--seed", str(seed), "--frame", str(frame), *size,
-                     "--out", str(out)]) == 0
+        assert (
+            main(
+                [
+                    "render",
+                    SCENE,
+                    "--mode",
+                    "stochastic",
+                    "--seed",
+                    str(seed),
+                    "--frame",
+                    str(frame),
+                    *size,
+                    "--out",
+                    str(out),
+                ]
+            )
+            == 0
+        )
         images[seed, frame] = np.load(out)
     scene = gb.load(SCENE)
     lib = gb.render(scene, gb.orbit_camera(scene, width=48, height=36), "stochastic", seed=5, frame=2)
@@ -53,14 +69,21 @@ def test_render_is_the_library_image_for_that_seed_and_frame(tmp_path):
     assert not np.array_equal(images[5, 2], images[5, 3]) and not np.array_equal(images[5, 2], images[6, 2])
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["render", SCENE, "--mode", "scalar", "--seed", "3"], "--seed 3 applies to the stochastic modes"),
-    (["trace", SCENE, "--pixel", "1,1", "--modes", "scalar,stopthepop", "--frame", "1"],
-     "--frame 1 applies to the stochastic modes .* given \\(scalar, stopthepop\\) have none"),
-    (["render", SCENE, "--mode", "stochastic", "--seed", "-1"], "argument --seed: expected >= 0, got -1"),
-    (["flicker", SCENE, "--modes", "stochastic", "--frame", "4294967296"],
-     "argument --frame: expected <= 4294967295"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["render", SCENE, "--mode", "scalar", "--seed", "3"], "--seed 3 applies to the stochastic modes"),
+        (
+            ["trace", SCENE, "--pixel", "1,1", "--modes", "scalar,stopthepop", "--frame", "1"],
+            "--frame 1 applies to the stochastic modes .* given \\(scalar, stopthepop\\) have none",
+        ),
+        (["render", SCENE, "--mode", "stochastic", "--seed", "-1"], "argument --seed: expected >= 0, got -1"),
+        (
+            ["flicker", SCENE, "--modes", "stochastic", "--frame", "4294967296"],
+            "argument --frame: expected <= 4294967295",
+        ),
+    ],
+)
 def test_bad_seed_or_frame_is_one_line_exit_2(argv, message, tmp_path, capsys):
     out = [] if argv[0] == "trace" else ["--out", str(tmp_path / ("x" if argv[0] == "flicker" else "x.png"))]
     assert main([*argv, *out]) == 2

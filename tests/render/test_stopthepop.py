@@ -9,19 +9,19 @@ import math
 
 import numpy as np
 import pytest
-
-import gbviewer as gb
-from gbviewer.outputs import flicker as fl
-from gbviewer import lod
-from gbviewer.core.errors import RenderError
-from gbviewer.render import RenderSettings, create_renderer
-from gbviewer.render.view_filter import ViewFilter
-from gbviewer.model.scene import SH_C0
 from helpers import random_view
 from reference_ray import render_sorted
 from reference_stopthepop import render_hierarchical
 from test_simd import ALL_PATHS
 from test_simd import render as render_on
+
+import gbviewer as gb
+from gbviewer import lod
+from gbviewer.core.errors import RenderError
+from gbviewer.model.scene import SH_C0
+from gbviewer.outputs import flicker as fl
+from gbviewer.render import RenderSettings, create_renderer
+from gbviewer.render.view_filter import ViewFilter
 
 W, H = 48, 40
 
@@ -33,8 +33,13 @@ def camera() -> gb.Camera:
 def random_scene(seed: int = 7, n: int = 40) -> gb.Scene:
     rng = np.random.default_rng(seed)
     means = np.stack([rng.uniform(-0.6, 0.6, n), rng.uniform(-0.5, 0.5, n), rng.uniform(2.0, 3.0, n)], 1)
-    return gb.Scene.from_arrays(means, np.exp(rng.uniform(-3.0, -0.8, (n, 3))), rng.normal(size=(n, 4)),
-                                rng.uniform(0.3, 1.0, n), rng.normal(0, 0.8, (n, 1, 3)))
+    return gb.Scene.from_arrays(
+        means,
+        np.exp(rng.uniform(-3.0, -0.8, (n, 3))),
+        rng.normal(size=(n, 4)),
+        rng.uniform(0.3, 1.0, n),
+        rng.normal(0, 0.8, (n, 1, 3)),
+    )
 
 
 def crossing_splats(y: float = 0.0) -> gb.Scene:
@@ -48,8 +53,9 @@ def crossing_splats(y: float = 0.0) -> gb.Scene:
     quats = np.tile(quat, (5, 1))
     quats[:, 2] *= -1  # x axis -> (1, 0, 1) / sqrt 2
     colours = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [0.2, 0.2, 0.2]], np.float64)
-    return gb.Scene.from_arrays(means, np.tile([1.2, 0.03, 0.03], (5, 1)), quats, np.full(5, 0.8),
-                                ((colours - 0.5) / SH_C0)[:, None, :])
+    return gb.Scene.from_arrays(
+        means, np.tile([1.2, 0.03, 0.03], (5, 1)), quats, np.full(5, 0.8), ((colours - 0.5) / SH_C0)[:, None, :]
+    )
 
 
 def test_unbounded_queue_is_the_exact_per_pixel_sort():
@@ -81,8 +87,13 @@ def test_every_simd_path_is_bit_identical(path, mode):
 
 def test_grammar():
     s = RenderSettings.parse("stopthepop:8")
-    assert (s.mode, s.queue, s.supersample, s.spec, s.label) == (gb.Mode.STOPTHEPOP, 8, 1, "stopthepop:8",
-                                                                 "stopthepop:8")
+    assert (s.mode, s.queue, s.supersample, s.spec, s.label) == (
+        gb.Mode.STOPTHEPOP,
+        8,
+        1,
+        "stopthepop:8",
+        "stopthepop:8",
+    )
     s = RenderSettings.parse("stopthepop:4:2")
     assert (s.queue, s.supersample, s.spec, s.label) == (4, 2, "stopthepop:4:2", "stopthepop 2x2")
     assert RenderSettings.parse(s.spec) == s
@@ -110,8 +121,13 @@ def wall_and_ball() -> gb.Scene:
     ball stays in front."""
     means = np.array([[0.0, 0.0, 4.0], [0.9, 0.0, 3.6]])
     colours = np.array([[1.0, 0.1, 0.1], [0.1, 1.0, 0.1]])
-    return gb.Scene.from_arrays(means, np.array([[0.8, 0.8, 0.01], [0.2, 0.2, 0.2]]), np.tile([1.0, 0, 0, 0], (2, 1)),
-                                np.array([0.95, 0.95]), ((colours - 0.5) / SH_C0)[:, None, :])
+    return gb.Scene.from_arrays(
+        means,
+        np.array([[0.8, 0.8, 0.01], [0.2, 0.2, 0.2]]),
+        np.tile([1.0, 0, 0, 0], (2, 1)),
+        np.array([0.95, 0.95]),
+        ((colours - 0.5) / SH_C0)[:, None, :],
+    )
 
 
 def test_stopthepop_does_not_pop_on_an_orbit():
@@ -120,12 +136,14 @@ def test_stopthepop_does_not_pop_on_an_orbit():
     scene = wall_and_ball()
     base = gb.Camera(64, 48, 50.0, 50.0, 32, 24, np.eye(3), np.zeros(3))
     path = fl.orbit_path(base, scene, 17, -60.0)
-    depths = [(pf.camera.R @ scene.means[1] + pf.camera.t)[2] - (pf.camera.R @ scene.means[0] + pf.camera.t)[2]
-              for pf in path]
+    depths = [
+        (pf.camera.R @ scene.means[1] + pf.camera.t)[2] - (pf.camera.R @ scene.means[0] + pf.camera.t)[2] for pf in path
+    ]
     assert min(depths) < 0 < max(depths)  # the centre order swaps along the path
     modes = RenderSettings.parse_list("scalar,stopthepop")
-    rep = fl.measure_flicker(scene, path, modes, reference=RenderSettings.parse("stopthepop:0:4"), pairs=16,
-                             with_floor=False)
+    rep = fl.measure_flicker(
+        scene, path, modes, reference=RenderSettings.parse("stopthepop:0:4"), pairs=16, with_floor=False
+    )
     scalar, stp = rep.modes
     assert scalar.flicker > 4 * stp.flicker, (scalar.flicker, stp.flicker)
 
@@ -162,8 +180,13 @@ def test_level_of_detail_drawn_in_place_is_the_cut_scene(spec):
     rng = np.random.default_rng(4)
     n = 3000
     means = np.stack([rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(2, 6, n)], 1)
-    scene = gb.Scene.from_arrays(means, np.exp(rng.uniform(-4.0, -1.5, (n, 3))), rng.normal(size=(n, 4)),
-                                 rng.uniform(0.05, 1.0, n), rng.normal(0, 0.5, (n, 1, 3)))
+    scene = gb.Scene.from_arrays(
+        means,
+        np.exp(rng.uniform(-4.0, -1.5, (n, 3))),
+        rng.normal(size=(n, 4)),
+        rng.uniform(0.05, 1.0, n),
+        rng.normal(0, 0.5, (n, 1, 3)),
+    )
     cam = gb.Camera(64, 48, 60.0, 60.0, 32, 24, np.eye(3), np.zeros(3))
     frame = gb.render(scene, cam, f"{spec}+lod:2")
     assert frame.stats.lod_splats != n  # interior nodes drawn

@@ -15,8 +15,8 @@ from reference_stopthepop import render_hierarchical
 from test_stopthepop import camera, crossing_splats, random_scene
 
 import gbviewer as gb
-from gbviewer.render import RenderSettings, create_renderer
 from gbviewer.model.scene import SH_C0
+from gbviewer.render import RenderSettings, create_renderer
 
 
 def late_near_splat(walls: int = 66) -> gb.Scene:
@@ -33,8 +33,9 @@ def late_near_splat(walls: int = 66) -> gb.Scene:
     scales = np.vstack([np.tile([0.3, 0.3, 0.01], (walls, 1)), [3.0, 0.03, 0.03]])
     quats = np.vstack([np.tile([1.0, 0.0, 0.0, 0.0], (walls, 1)), [math.cos(angle / 2), 0.0, math.sin(angle / 2), 0.0]])
     colours = np.vstack([np.tile([0.9, 0.9, 0.9], (walls, 1)), [1.0, 0.0, 0.0]])
-    return gb.Scene.from_arrays(means, scales, quats, np.append(np.full(walls, 0.05), 0.8),
-                                ((colours - 0.5) / SH_C0)[:, None, :])
+    return gb.Scene.from_arrays(
+        means, scales, quats, np.append(np.full(walls, 0.05), 0.8), ((colours - 0.5) / SH_C0)[:, None, :]
+    )
 
 
 def assert_matches(frame: gb.Frame, ref: tuple[np.ndarray, np.ndarray]) -> None:

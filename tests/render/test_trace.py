@@ -9,17 +9,17 @@ import json
 
 import numpy as np
 import pytest
+from helpers import random_view
+from reference import pixel_contributors
 
 import gbviewer as gb
 from gbviewer import _native
-from gbviewer.model.cells import cells_for
 from gbviewer.core.errors import RenderError
+from gbviewer.model.cells import cells_for
 from gbviewer.render import Mode, RenderSettings
+from gbviewer.render.modes import PER_PIXEL_SORTED
 from gbviewer.render.prepare import oit_params
 from gbviewer.render.trace import SKIP_REASONS
-from gbviewer.render.modes import PER_PIXEL_SORTED
-from helpers import random_view
-from reference import pixel_contributors
 
 MODES = [m.label for m in Mode]
 TOL = 1e-5
@@ -51,7 +51,7 @@ def check_trace(trace: gb.PixelTrace, frame: gb.Frame, x: int, y: int) -> None:
                 assert s.weight == 0 and s.T_after == s.T_before
         stops = [i for i, s in enumerate(steps) if s.stopped]
         assert len(stops) <= 1
-        after = steps[stops[0] + 1:] if stops else []
+        after = steps[stops[0] + 1 :] if stops else []
         assert all(s.rejected == "terminated" for s in after)
         assert sum(s.rejected == "terminated" for s in steps) == len(after)
         if trace.mode.split()[0] in SORTED:
@@ -105,8 +105,15 @@ def test_trace_of_a_preset_is_its_rendered_pixel(spec):
 
 
 @pytest.mark.parametrize("supersample", [1, 2])
-@pytest.mark.parametrize("mode", [m for m in MODES if not m.startswith("stochastic")  # test_stochastic.py
-                                  and Mode[m.upper()] not in PER_PIXEL_SORTED])  # test_stopthepop.py
+@pytest.mark.parametrize(
+    "mode",
+    [
+        m
+        for m in MODES
+        if not m.startswith("stochastic")  # test_stochastic.py
+        and Mode[m.upper()] not in PER_PIXEL_SORTED
+    ],
+)  # test_stopthepop.py
 @pytest.mark.parametrize("seed", [11, 13])
 def test_added_splats_are_the_references(seed, mode, supersample):
     """Per sample, the splats the trace adds (rejected == "") are those the float64 reference renderer adds, in

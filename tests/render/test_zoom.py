@@ -4,9 +4,9 @@ x1 render box-downsampled by 8 (the multi-scale Blender construction, docs/cli.m
 from __future__ import annotations
 
 import pytest
+from helpers import shared_scene
 
 import gbviewer as gb
-from helpers import shared_scene
 from gbviewer.outputs.metrics import box_downsample, psnr
 
 

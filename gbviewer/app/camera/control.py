@@ -63,15 +63,22 @@ class CameraController:
         cam = replace(cam, t=-self.R @ (self.target - back * self.R[2]))
         return cam.with_projection(self.projection, self.distance)
 
-    def frame_bounds(self, lo: np.ndarray, hi: np.ndarray, azimuth_deg: float = 30.0, elevation_deg: float = 20.0,
-                     aspect: float = 4 / 3) -> None:
+    def frame_bounds(
+        self,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        azimuth_deg: float = 30.0,
+        elevation_deg: float = 20.0,
+        aspect: float = 4 / 3,
+    ) -> None:
         """Default framing of the box lo..hi (as gbviewer.orbit_camera): orbit around its centre, far enough to see
         all of it."""
         lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
         self.centre, self.radius, self.distance = frame_box(lo, hi, self.fov_y_deg, aspect)
         self.target = self.centre.copy()
-        self._look(self.target + self.distance * orbit_direction(self.up_vector, azimuth_deg, elevation_deg),
-                   self.target)
+        self._look(
+            self.target + self.distance * orbit_direction(self.up_vector, azimuth_deg, elevation_deg), self.target
+        )
 
     def _look(self, eye: np.ndarray, target: np.ndarray) -> None:
         cam = Camera.look_at(eye, target, self.up_vector, 64, 64, self.fov_y_deg)
@@ -117,7 +124,7 @@ class CameraController:
 
     def dolly(self, steps: float) -> None:
         """Wheel: move towards (steps > 0) or away from the target, 10% of the distance per step."""
-        self.distance = float(min(max(self.distance * 0.9 ** steps, 1e-3 * self.radius), 1e3 * self.radius))
+        self.distance = float(min(max(self.distance * 0.9**steps, 1e-3 * self.radius), 1e3 * self.radius))
 
     def fly(self, forward: float, right: float, upward: float, dt: float, speed: float = 1.0) -> None:
         """WASD/QE: move eye and target together, `speed` scene radii per second (upward is along the scene up)."""
@@ -142,11 +149,17 @@ class CameraController:
         self.R = camera.R.copy()
         dist = float(np.linalg.norm(self.centre - camera.position))
         self.distance = dist if dist > 1e-6 else self.distance
-        self.fov_y_deg = float(min(self.MAX_FOV, max(self.MIN_FOV, fov_of(camera.with_projection("perspective",
-                                                                                                 self.distance)))))
+        self.fov_y_deg = float(
+            min(self.MAX_FOV, max(self.MIN_FOV, fov_of(camera.with_projection("perspective", self.distance))))
+        )
         self.target = camera.position + self.distance * self.R[2]
 
     def state(self) -> tuple:
         """A hashable summary (changes whenever the rendered view would)."""
-        return (tuple(np.round(self.R.ravel(), 12)), tuple(np.round(self.target, 12)), round(self.distance, 12),
-                round(self.fov_y_deg, 9), self.projection)
+        return (
+            tuple(np.round(self.R.ravel(), 12)),
+            tuple(np.round(self.target, 12)),
+            round(self.distance, 12),
+            round(self.fov_y_deg, 9),
+            self.projection,
+        )

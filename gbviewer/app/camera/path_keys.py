@@ -6,13 +6,18 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+from ...core.errors import GBViewerError
+from ...core.validate import read_json
 from ...model.camera import Camera
 from ...model.camera_paths import PathFrame, nerfstudio_frames
 from ...model.keyframes import Keyframe
-from ...core.errors import GBViewerError
-from ...model.nerfstudio_paths import (NerfstudioPath, is_nerfstudio_path, load_nerfstudio_path, path_from_keyframes,
-                                save_nerfstudio_path)
-from ...core.validate import read_json
+from ...model.nerfstudio_paths import (
+    NerfstudioPath,
+    is_nerfstudio_path,
+    load_nerfstudio_path,
+    path_from_keyframes,
+    save_nerfstudio_path,
+)
 
 SECONDS_PER_KEY = 2.0  # between keys added in the viewer (nerfstudio's viewer's default transition)
 PATH_FPS = 30.0

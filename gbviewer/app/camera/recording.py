@@ -7,11 +7,11 @@ import time
 import traceback
 from pathlib import Path
 
-from ...model.camera_paths import PathFrame
 from ...core.cancel import CancelToken
 from ...core.errors import GBViewerError
-from ...render import RenderSettings
+from ...model.camera_paths import PathFrame
 from ...model.scene import Scene
+from ...render import RenderSettings
 from ..threads.slots import lower_priority
 
 VIDEO_CONTAINERS = {"h264": ".mp4", "h265": ".mp4", "vp9": ".webm", "av1": ".webm"}  # the Record button's codecs
@@ -21,8 +21,16 @@ class VideoJob:
     """A video along `path` (one column per mode) written by gbviewer.outputs.video.record_video in a thread, in `codec`
     (the container: `out`'s extension)."""
 
-    def __init__(self, scene: Scene, path: list[PathFrame], settings: list[RenderSettings], out: Path,
-                 fps: float = 30.0, backend: str = "cpu", codec: str = "h264") -> None:
+    def __init__(
+        self,
+        scene: Scene,
+        path: list[PathFrame],
+        settings: list[RenderSettings],
+        out: Path,
+        fps: float = 30.0,
+        backend: str = "cpu",
+        codec: str = "h264",
+    ) -> None:
         from ...outputs.video import record_video
 
         self.out = Path(out)
@@ -40,8 +48,17 @@ class VideoJob:
         def run() -> None:
             lower_priority()  # the window keeps its core while the video renders
             try:
-                self.info = record_video(scene, path, settings, self.out, fps=fps, backend=backend, codec=codec,
-                                         progress=progress, cancel=self._cancel)
+                self.info = record_video(
+                    scene,
+                    path,
+                    settings,
+                    self.out,
+                    fps=fps,
+                    backend=backend,
+                    codec=codec,
+                    progress=progress,
+                    cancel=self._cancel,
+                )
             except GBViewerError as exc:
                 self.error = str(exc)
             except Exception as exc:  # noqa: BLE001 - shown in the window

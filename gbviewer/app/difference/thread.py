@@ -14,17 +14,24 @@ from typing import Callable, Hashable
 
 import numpy as np
 
-from ...model.camera import Camera, camera_key
-from ...outputs.differences import (DENSE_SUPERSAMPLE, fidelity, reference_image, reference_note, reference_settings,
-                        robust_scale, signed_difference)
 from ...core.cancel import CancelToken
 from ...core.errors import GBViewerError, RenderCancelled
 from ...eval import default_cache, ground_truth
-from ...outputs.flicker import view_flicker
 from ...io.datasets import View
+from ...model.camera import Camera, camera_key
+from ...model.scene import Scene
+from ...outputs.differences import (
+    DENSE_SUPERSAMPLE,
+    fidelity,
+    reference_image,
+    reference_note,
+    reference_settings,
+    robust_scale,
+    signed_difference,
+)
+from ...outputs.flicker import view_flicker
 from ...outputs.metrics import zoom_out_factor
 from ...render import Frame, RenderSettings
-from ...model.scene import Scene
 from ..panes import MAX_SAMPLES
 from ..threads.slots import SlotThread
 
@@ -38,7 +45,9 @@ class Spec:
 
     reference: str | None = None  # 'box', 'dense' or PHOTO: the difference to it, PSNR and SSIM
     to_pane: RenderSettings | None = None  # pane A's settings: the difference to pane A
-    flicker: bool = False  # the flicker heat map of an orbit step from this view (gbviewer.outputs.flicker.view_flicker)
+    flicker: bool = (
+        False  # the flicker heat map of an orbit step from this view (gbviewer.outputs.flicker.view_flicker)
+    )
 
     @property
     def empty(self) -> bool:
@@ -110,18 +119,23 @@ class AnalysisThread(SlotThread):
             self._renderer_for(req.scene)
             cam = camera_key(req.camera)
             if spec.reference == PHOTO:
-                ref = out.photo = self._cached(("photo", req.photo.image, req.rate, req.settings.background),
-                                               lambda: photo_truth(req.photo, req.rate, req.settings.background))
+                ref = out.photo = self._cached(
+                    ("photo", req.photo.image, req.rate, req.settings.background),
+                    lambda: photo_truth(req.photo, req.rate, req.settings.background),
+                )
                 out.photo_name = req.photo.name
                 if ref.shape != rgb.shape:
-                    raise GBViewerError(f"the photo at this rate is {ref.shape[1]}x{ref.shape[0]}, the render "
-                                        f"{rgb.shape[1]}x{rgb.shape[0]}")
+                    raise GBViewerError(
+                        f"the photo at this rate is {ref.shape[1]}x{ref.shape[0]}, the render "
+                        f"{rgb.shape[1]}x{rgb.shape[0]}"
+                    )
             elif spec.reference is not None:
                 kind = spec.reference
                 check_samples(req.camera, req.rate, kind)
-                ref = self._cached(("ref", kind, cam, req.rate, reference_settings(kind, req.settings)),
-                                   lambda: reference_image(self._renderer, req.camera, req.rate, kind, req.settings,
-                                                           cancel))
+                ref = self._cached(
+                    ("ref", kind, cam, req.rate, reference_settings(kind, req.settings)),
+                    lambda: reference_image(self._renderer, req.camera, req.rate, kind, req.settings, cancel),
+                )
             if spec.reference is not None:
                 if ref is None:
                     out.note = reference_note(spec.reference, req.rate)
@@ -130,9 +144,14 @@ class AnalysisThread(SlotThread):
                     out.error_scale = robust_scale(out.error)
                     out.psnr, out.ssim = fidelity(rgb, ref)
             if spec.to_pane is not None:
-                a = req.pane_a.rgb if req.pane_a is not None else self._cached(
-                    ("pane", cam, spec.to_pane), lambda: self._renderer.render(req.camera, spec.to_pane,
-                                                                               cancel=cancel).rgb)
+                a = (
+                    req.pane_a.rgb
+                    if req.pane_a is not None
+                    else self._cached(
+                        ("pane", cam, spec.to_pane),
+                        lambda: self._renderer.render(req.camera, spec.to_pane, cancel=cancel).rgb,
+                    )
+                )
                 out.diff = signed_difference(rgb, a)
                 out.diff_scale = robust_scale(out.diff)
             if spec.flicker:
@@ -164,5 +183,7 @@ def check_samples(camera: Camera, rate: float, kind: str) -> None:
     k = DENSE_SUPERSAMPLE if kind == "dense" else (zoom_out_factor(rate) or 1)
     samples = camera.width * camera.height * k * k
     if samples > MAX_SAMPLES:
-        raise GBViewerError(f"the {kind} reference would take {samples / 1e6:.0f}M samples, over the "
-                            f"{MAX_SAMPLES // 1_000_000}M limit: lower the rate")
+        raise GBViewerError(
+            f"the {kind} reference would take {samples / 1e6:.0f}M samples, over the "
+            f"{MAX_SAMPLES // 1_000_000}M limit: lower the rate"
+        )

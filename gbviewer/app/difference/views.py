@@ -1,15 +1,14 @@
 """Difference and error views and live PSNR/SSIM per pane, computed off the UI thread.
 
-`PaneAnalysis` (UI side, no imgui) looks after each UI frame at every visible pane part's newest full-resolution
-frame and asks `thread.AnalysisThread` for what it needs: for the 'difference' view, the signed difference
-to pane A (pane A's mode rendered at this pane's camera, or pane A's own frame where it is at the same camera); for
-the 'error' view and the PSNR/SSIM labels, the difference to the chosen reference ('box' or 'dense' of
-`gbviewer.outputs.differences`, or 'photo': the snapped dataset view's photo at the rate, asked only for frames rendered at that
-view's camera) with PSNR and SSIM; for the 'photo' view, that photo, shown instead of the render. Nothing is asked
-while the camera moves: the labels keep their last values, marked stale, and a pane in one of these views shows its
-plain render, saying why, until the analysis of its frame is in (`visualize`, which `panes.PaneRenders` calls for
-every upload). Snapping to a dataset view turns the labels on against the photo.
-"""
+`PaneAnalysis` (UI side, no imgui) looks after each UI frame at every visible pane part's newest full-resolution frame
+and asks `thread.AnalysisThread` for what it needs: for the 'difference' view, the signed difference to pane A (pane A's
+mode rendered at this pane's camera, or pane A's own frame where it is at the same camera); for the 'error' view and the
+PSNR/SSIM labels, the difference to the chosen reference ('box' or 'dense' of `gbviewer.outputs.differences`, or
+'photo': the snapped dataset view's photo at the rate, asked only for frames rendered at that view's camera) with PSNR
+and SSIM; for the 'photo' view, that photo, shown instead of the render. Nothing is asked while the camera moves: the
+labels keep their last values, marked stale, and a pane in one of these views shows its plain render, saying why, until
+the analysis of its frame is in (`visualize`, which `panes.PaneRenders` calls for every upload). Snapping to a dataset
+view turns the labels on against the photo."""
 
 from __future__ import annotations
 
@@ -17,20 +16,20 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ...io.datasets import View
+from ...io.datasets.backdrop import format_rgb
 from ...model.camera import camera_key, format_rate
+from ...model.scene import Scene
 from ...outputs.differences import REFERENCES, colour_difference
 from ...outputs.flicker import DEFAULT_REFERENCE, VIEW_STEP, heat_colours, heat_scale
-from ...io.datasets import View
 from ...render import Frame
 from ...render.presets import differences
-from ...model.scene import Scene
-from ...io.datasets.backdrop import format_rgb
-from .thread import PHOTO, Analysis, AnalysisThread, Request, Spec
-from ..settings import PANE_NAMES
-from ..pane_state import Shown
-from ..state import AppState
 from ..frames.views import visualize as visualize_view
+from ..pane_state import Shown
+from ..settings import PANE_NAMES
+from ..state import AppState
 from ..threads.worker import RenderWorker
+from .thread import PHOTO, Analysis, AnalysisThread, Request, Spec
 
 ANALYSIS_VIEWS = ("difference", "error", PHOTO, "flicker")
 REFERENCE_KINDS = {**REFERENCES, PHOTO: "the dataset view's photo"}
@@ -48,8 +47,7 @@ class AnalysisOptions:
 def is_final(shown: Shown, scene: Scene | None) -> bool:
     """Whether a pane part shows the final full-resolution frame of `scene` (previews, quick stages and refining
     frames are not analysed)."""
-    return (shown.frame is not None and shown.job is not None and shown.job.scene is scene
-            and shown.stage == "final")
+    return shown.frame is not None and shown.job is not None and shown.job.scene is scene and shown.stage == "final"
 
 
 def shows_photo(shown: Shown) -> bool:
@@ -161,18 +159,31 @@ class PaneAnalysis:
                     continue
                 same_a = None
                 if spec.to_pane is not None:
-                    if (is_final(pane_a, s.scene) and replace(pane_a.job.settings, debug="none") == spec.to_pane
-                            and camera_key(pane_a.job.camera) == camera_key(shown.job.camera)):
+                    if (
+                        is_final(pane_a, s.scene)
+                        and replace(pane_a.job.settings, debug="none") == spec.to_pane
+                        and camera_key(pane_a.job.camera) == camera_key(shown.job.camera)
+                    ):
                         same_a = pane_a.frame
                     elif self.worker is not None and self.worker.busy((0, "a")):
                         continue  # pane A's frame is on its way: wait for it rather than render it twice
                 for frame in (shown.frame, same_a):  # a frame drawn from GPU memory is read back here, in the UI
-                    if frame is not None:                 # thread (the analysis thread may not touch its texture)
+                    if frame is not None:  # thread (the analysis thread may not touch its texture)
                         _ = frame.rgb
                 self._asked[slot] = (shown.frame, spec)
-                self.thread.submit(Request(slot, s.scene, shown.frame, shown.job.camera,
-                                           shown.job.info.get("rate", s.settings.rate), shown.job.settings, spec,
-                                           same_a, photo))
+                self.thread.submit(
+                    Request(
+                        slot,
+                        s.scene,
+                        shown.frame,
+                        shown.job.camera,
+                        shown.job.info.get("rate", s.settings.rate),
+                        shown.job.settings,
+                        spec,
+                        same_a,
+                        photo,
+                    )
+                )
                 self.recolour(slot)
 
     def recolour(self, slot: Slot | None = None) -> None:
@@ -222,8 +233,10 @@ class PaneAnalysis:
             if not fresh or a.heat is None:
                 return frame.rgb, f"flicker: {self._waiting(slot, a, frame, view)}"
             top = heat_scale([a.heat])
-            return heat_colours(a.heat, top), (f"{name} flicker {a.flicker:.3f} levels ({VIEW_STEP:g} deg orbit "
-                                               f"step vs {DEFAULT_REFERENCE}), red {top:.3g}")
+            return heat_colours(a.heat, top), (
+                f"{name} flicker {a.flicker:.3f} levels ({VIEW_STEP:g} deg orbit "
+                f"step vs {DEFAULT_REFERENCE}), red {top:.3g}"
+            )
         if view == "difference" and spec.reference == PHOTO:
             plane, auto = (a.error, a.error_scale) if fresh and a.spec == spec else (None, 0.0)
             what = f"{name} - A (photo {a.photo_name})" if a is not None else ""

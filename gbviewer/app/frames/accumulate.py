@@ -48,8 +48,12 @@ class Accumulation:
         self.rgb += frame.rgb
         self.alpha += frame.alpha
         self.frames += 1
-        return Frame((self.rgb / self.frames).astype(np.float32), (self.alpha / self.frames).astype(np.float32),
-                     frame.stats, frame.debug)
+        return Frame(
+            (self.rgb / self.frames).astype(np.float32),
+            (self.alpha / self.frames).astype(np.float32),
+            frame.stats,
+            frame.debug,
+        )
 
     def samples(self, supersample: int) -> int:
         """Samples per pixel of the mean on screen."""

@@ -62,6 +62,7 @@ def describe(path: str) -> str:
 
 # ---- the shared context -------------------------------------------------------------------------------------------
 
+
 @dataclass(eq=False)
 class SharedContext:
     """The hidden glfw window whose OpenGL 4.3 context shares objects with the viewer window's (None, and why not,
@@ -78,14 +79,20 @@ class SharedContext:
         if request == "copy":
             return cls(request, None, f"{ENV}=copy")
         if request == "auto" and is_software(gl_renderer):
-            return cls(request, None, f"{gl_renderer} renders in software: frames are copied ({ENV}=gpu forces "
-                                      "the GPU path)")
+            return cls(
+                request, None, f"{gl_renderer} renders in software: frames are copied ({ENV}=gpu forces the GPU path)"
+            )
         import glfw
 
         glfw.default_window_hints()
-        for hint, value in ((glfw.CONTEXT_VERSION_MAJOR, 4), (glfw.CONTEXT_VERSION_MINOR, 3),
-                            (glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE), (glfw.OPENGL_FORWARD_COMPAT, True),
-                            (glfw.VISIBLE, False), (glfw.FOCUSED, False)):
+        for hint, value in (
+            (glfw.CONTEXT_VERSION_MAJOR, 4),
+            (glfw.CONTEXT_VERSION_MINOR, 3),
+            (glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE),
+            (glfw.OPENGL_FORWARD_COMPAT, True),
+            (glfw.VISIBLE, False),
+            (glfw.FOCUSED, False),
+        ):
             glfw.window_hint(hint, value)
         window = glfw.create_window(1, 1, "gbviewer render", None, main_window)
         glfw.default_window_hints()
@@ -138,10 +145,12 @@ def _gl(name: str):
                 raise RuntimeError(f"{n} is not available")
             return ctypes.CFUNCTYPE(restype, *args)(addr)
 
-        _GL.update(glFenceSync=fn("glFenceSync", ctypes.c_void_p, ctypes.c_uint, ctypes.c_uint),
-                   glClientWaitSync=fn("glClientWaitSync", ctypes.c_uint, ctypes.c_void_p, ctypes.c_uint,
-                                       ctypes.c_uint64),
-                   glDeleteSync=fn("glDeleteSync", None, ctypes.c_void_p), glFlush=fn("glFlush", None))
+        _GL.update(
+            glFenceSync=fn("glFenceSync", ctypes.c_void_p, ctypes.c_uint, ctypes.c_uint),
+            glClientWaitSync=fn("glClientWaitSync", ctypes.c_uint, ctypes.c_void_p, ctypes.c_uint, ctypes.c_uint64),
+            glDeleteSync=fn("glDeleteSync", None, ctypes.c_void_p),
+            glFlush=fn("glFlush", None),
+        )
     return _GL[name]
 
 
@@ -167,6 +176,7 @@ def wait_and_delete(sync: int) -> bool:
 
 
 # ---- display textures and the frames in them ----------------------------------------------------------------------
+
 
 class DisplayTextures:
     """The GPU display path's textures (RGBA32F): made, reused and deleted by the render thread on the shared

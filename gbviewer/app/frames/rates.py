@@ -40,7 +40,7 @@ def slider_to_rate(value: float, snap: float = 0.04) -> float:
     nearest = round(value)
     if abs(value - nearest) <= snap:
         value = nearest
-    return clamp_rate(2.0 ** value)
+    return clamp_rate(2.0**value)
 
 
 def render_size(width: int, height: int, rate: float) -> tuple[int, int]:

@@ -38,8 +38,16 @@ def companions(first: "Job", waiting: list) -> list:
     if first.display == "gpu":
         return []
     key = camera_key(first.camera)
-    return [j for j in waiting if j.scene is first.scene and j.backend == first.backend and j.preview == first.preview
-            and j.stand_in == first.stand_in and j.display != "gpu" and camera_key(j.camera) == key]
+    return [
+        j
+        for j in waiting
+        if j.scene is first.scene
+        and j.backend == first.backend
+        and j.preview == first.preview
+        and j.stand_in == first.stand_in
+        and j.display != "gpu"
+        and camera_key(j.camera) == key
+    ]
 
 
 def _poster(job: "Job", partial: np.ndarray, post: Post) -> Callable[[int, int], None]:
@@ -75,12 +83,14 @@ def render_jobs(renderer: Renderer, jobs: list, cancel: CancelToken, post: Post)
         partials.append(scaled_nearest(base, w, h) if base is not None else np.zeros((h, w, 3), np.float32))
         hooks.append(_poster(job, partials[-1], post))
     if len(jobs) == 1:
-        return [renderer.render(jobs[0].camera, jobs[0].settings, cancel=cancel, on_progress=hooks[0],
-                                partial=partials[0])]
+        return [
+            renderer.render(jobs[0].camera, jobs[0].settings, cancel=cancel, on_progress=hooks[0], partial=partials[0])
+        ]
 
     def on_progress(k: int, done: int, total: int) -> None:
         if hooks[k] is not None:
             hooks[k](done, total)
 
-    return renderer.render_many([(j.camera, j.settings) for j in jobs], cancel=cancel, on_progress=on_progress,
-                                partials=partials)
+    return renderer.render_many(
+        [(j.camera, j.settings) for j in jobs], cancel=cancel, on_progress=on_progress, partials=partials
+    )

@@ -18,15 +18,29 @@ VIEW_HELP = {
     "evals": "splats evaluated per pixel, viridis 0..max",
     "difference": "this pane minus pane A (mean over RGB; blue: darker, red: brighter), colour bar in the pane",
     "error": "this pane minus the reference chosen in 'Difference and error' (box-downsampled x1, dense 8x8 or the "
-             "photo)",
+    "photo)",
     "photo": "the snapped dataset view's photo at the rate (box-downsampled, alpha-aware) instead of the render",
     "flicker": "heat map of this pane's flicker over a 0.1 degree orbit step from here, against scalar 8x8 "
-               "(gbviewer flicker)",
+    "(gbviewer flicker)",
 }
 
-_VIRIDIS = np.array([[0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.530], [0.207, 0.372, 0.553],
-                     [0.164, 0.471, 0.558], [0.128, 0.567, 0.551], [0.135, 0.659, 0.518], [0.267, 0.749, 0.441],
-                     [0.478, 0.821, 0.318], [0.741, 0.873, 0.150], [0.993, 0.906, 0.144]], np.float32)
+_VIRIDIS = np.array(
+    [
+        [0.267, 0.005, 0.329],
+        [0.283, 0.141, 0.458],
+        [0.254, 0.265, 0.530],
+        [0.207, 0.372, 0.553],
+        [0.164, 0.471, 0.558],
+        [0.128, 0.567, 0.551],
+        [0.135, 0.659, 0.518],
+        [0.267, 0.749, 0.441],
+        [0.478, 0.821, 0.318],
+        [0.741, 0.873, 0.150],
+        [0.993, 0.906, 0.144],
+    ],
+    np.float32,
+)
+
 
 def viridis(x: np.ndarray) -> np.ndarray:
     """Values in [0, 1] to RGB (an 11-point approximation of matplotlib's viridis)."""
@@ -34,6 +48,7 @@ def viridis(x: np.ndarray) -> np.ndarray:
     i = np.minimum(x.astype(np.int32), len(_VIRIDIS) - 2)
     t = (x - i)[..., None]
     return _VIRIDIS[i] * (1 - t) + _VIRIDIS[i + 1] * t
+
 
 def visualize(frame, view: str) -> tuple[np.ndarray, str]:
     """The RGB image (H, W, 3 float in [0, 1]) a pane shows for `view`, and a legend ('' for colour).
@@ -59,6 +74,7 @@ def visualize(frame, view: str) -> tuple[np.ndarray, str]:
         return viridis(size / top), f"window size 0..{top:.2f} px"
     return frame.rgb, ""
 
+
 def encode_png16(rgb: np.ndarray) -> bytes:
     """A 16-bit-per-channel RGB PNG of a float image in [0, 1] (clipped): a pane's render at full precision."""
     img = np.clip(np.nan_to_num(np.asarray(rgb, np.float64)), 0, 1)
@@ -72,12 +88,13 @@ def encode_png16(rgb: np.ndarray) -> bytes:
     header = struct.pack(">IIBBBBB", w, h, 16, 2, 0, 0, 0)
     return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
 
+
 def decode_png16(data: bytes) -> np.ndarray:
     """Inverse of encode_png16 (unfiltered rows only): (H, W, 3) uint16."""
     pos, idat, w, h = 8, b"", 0, 0
     while pos < len(data):
-        (n,) = struct.unpack(">I", data[pos:pos + 4])
-        tag, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
+        (n,) = struct.unpack(">I", data[pos : pos + 4])
+        tag, body = data[pos + 4 : pos + 8], data[pos + 8 : pos + 8 + n]
         if tag == b"IHDR":
             w, h = struct.unpack(">II", body[:8])
         elif tag == b"IDAT":

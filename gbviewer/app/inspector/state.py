@@ -18,19 +18,19 @@ from typing import Any, Callable, Hashable
 
 import numpy as np
 
-from ...model.camera import Camera
 from ...core.cancel import CancelToken
 from ...core.errors import GBViewerError
-from ...render import Frame, PixelTrace, RenderSettings, capable
-from ...render.choice import FALLBACK
+from ...model.camera import Camera
 from ...model.scene import Scene
 from ...outputs.trace_report import write_traces, write_traces_csv
+from ...render import Frame, PixelTrace, RenderSettings, capable
+from ...render.choice import FALLBACK
 from ..difference.views import is_final
-from ..ui.layout import Rect
 from ..screenshots import shot_name
 from ..settings import PANE_NAMES
-from ..threads.slots import SlotPolicy, SlotThread
 from ..state import AppState
+from ..threads.slots import SlotPolicy, SlotThread
+from ..ui.layout import Rect
 
 Slot = tuple[int, str]  # (pane index, part)
 EDGE_EPS = 1e-6  # of a render pixel: rounding below a pixel edge (render_pixel)
@@ -41,6 +41,7 @@ def render_pixel(u: float, v: float, width: int, height: int) -> tuple[int, int]
     """The pixel of a width x height render drawn at pane-relative (u, v) (the render covers the pane, nearest).
     Zoomed in by an even factor a display pixel's centre lies on a pixel edge: it takes the pixel right of (below)
     it, as exact arithmetic and `figure.upscale_nearest` do (u * width may round to just below the edge)."""
+
     def cell(t: float, n: int) -> int:
         return min(n - 1, max(0, math.floor(t * n + EDGE_EPS)))
 
@@ -69,8 +70,9 @@ def pixel_box(rect: Rect, x: int, y: int, width: int, height: int) -> tuple[floa
     return rect.x + x * sx, rect.y + y * sy, rect.x + (x + 1) * sx, rect.y + (y + 1) * sy
 
 
-def ellipse_points(mean: tuple[float, float], covariance: tuple[float, float, float], radius: float,
-                   n: int = 48) -> np.ndarray | None:
+def ellipse_points(
+    mean: tuple[float, float], covariance: tuple[float, float, float], radius: float, n: int = 48
+) -> np.ndarray | None:
     """n points (n, 2) on the ellipse of Mahalanobis `radius` of a 2D Gaussian (covariance xx, xy, yy); None when it
     is degenerate or not finite."""
     xx, xy, yy = covariance
@@ -86,6 +88,7 @@ def ellipse_points(mean: tuple[float, float], covariance: tuple[float, float, fl
 
 
 # ---- the thread ----------------------------------------------------------------------------------------------------
+
 
 @dataclass(eq=False)
 class TraceRequest:
@@ -136,6 +139,7 @@ class TraceThread(SlotThread):
 
 
 # ---- the UI side ---------------------------------------------------------------------------------------------------
+
 
 @dataclass
 class InspectorOptions:
@@ -201,13 +205,17 @@ class Inspector:
             return
         cam = self.state.pane_camera(0)
         old, self._pinned_on = self._pinned_on, cam
-        if old is not None and same_pose(old, cam) and (old.width, old.height, old.fx, old.fy, old.cx, old.cy) != (
-                cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy):
+        if (
+            old is not None
+            and same_pose(old, cam)
+            and (old.width, old.height, old.fx, old.fy, old.cx, old.cy)
+            != (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+        ):
             self.pin = remap(self.pin, old, cam)
 
     def zoom(self, wheel: float) -> None:
         """The drawing's margin around the pixel, 1.25x smaller per wheel step up (zoom in), bounded."""
-        self.options.margin = min(MARGIN_MAX, max(MARGIN_MIN, self.options.margin * 1.25 ** -wheel))
+        self.options.margin = min(MARGIN_MAX, max(MARGIN_MIN, self.options.margin * 1.25**-wheel))
 
     def unpin(self) -> None:
         self.pin = self._pinned_on = None
@@ -273,8 +281,9 @@ class Inspector:
                 if xy is None or (asked is not None and asked.frame is shown.frame and (asked.x, asked.y) == xy):
                     continue
                 job = shown.job
-                self._asked[slot] = req = TraceRequest(slot, s.scene, shown.frame, job.camera,
-                                                       replace(job.settings, debug="none"), *xy, job.backend)
+                self._asked[slot] = req = TraceRequest(
+                    slot, s.scene, shown.frame, job.camera, replace(job.settings, debug="none"), *xy, job.backend
+                )
                 self.thread.submit(req)
 
     def entries(self) -> list[Entry]:
@@ -284,8 +293,9 @@ class Inspector:
             for part in self.state.parts(p.index):
                 slot, shown, xy = (p.index, part), p.parts[part], self.pixel(p.index, part)
                 res = self.results.get(slot)
-                stale = res is not None and (res.request.frame is not shown.frame
-                                             or (res.request.x, res.request.y) != xy)
+                stale = res is not None and (
+                    res.request.frame is not shown.frame or (res.request.x, res.request.y) != xy
+                )
                 out.append(Entry(slot, PANE_NAMES[p.index] + ("'" if part == "b" else ""), xy, res, stale))
         return out
 

@@ -32,26 +32,37 @@ COLUMNS: tuple[tuple[str, Cell, str, int], ...] = (
 def describe(s: TraceStep, k: int) -> str:
     """Step k (0-based) in words, with every value the table has."""
     what = s.rejected or ("added" + (" (fallback)" if s.fallback else "") + (", stops the pixel" if s.stopped else ""))
-    line = (f"#{k + 1} {s.source}  depth {s.depth:.4g}  {what}  alpha {s.alpha:.4f}  weight {s.weight:.4f}  "
-            f"T {s.T_before:.4f} -> {s.T_after:.4f}")
+    line = (
+        f"#{k + 1} {s.source}  depth {s.depth:.4g}  {what}  alpha {s.alpha:.4f}  weight {s.weight:.4f}  "
+        f"T {s.T_before:.4f} -> {s.T_after:.4f}"
+    )
     if s.window_center is not None:
-        line += (f"  window after: centre {s.window_center[0]:.3f}, {s.window_center[1]:.3f}  size "
-                 f"{s.window_size[0]:.3f} x {s.window_size[1]:.3f}")
+        line += (
+            f"  window after: centre {s.window_center[0]:.3f}, {s.window_center[1]:.3f}  size "
+            f"{s.window_size[0]:.3f} x {s.window_size[1]:.3f}"
+        )
     if s.cell is not None:
         line += f"  cell {s.cell}  T_cell {s.T_cell:.4f}"
     return line
 
 
-def columns(t: PixelTrace, steps: tuple, width: float, measure: Callable[[str], float], pad: float
-            ) -> list[tuple[str, Cell]]:
+def columns(
+    t: PixelTrace, steps: tuple, width: float, measure: Callable[[str], float], pad: float
+) -> list[tuple[str, Cell]]:
     """The columns after "#" that fit `width` (each as wide as its header or widest value plus `pad`; at least
     one), in table order."""
     s0 = steps[0]
-    present = [c for c in COLUMNS if (c[0] != "sample" or t.supersample > 1)
-               and (c[0] not in ("window centre", "window size") or s0.window_center is not None)
-               and (c[0] not in ("cell", "T_cell") or s0.cell is not None)]
-    widest = {"splat": max((s.short for s in steps), key=len), "note": max(
-        (r for r in (*t.rejected_counts(), "fallback")), key=measure)}
+    present = [
+        c
+        for c in COLUMNS
+        if (c[0] != "sample" or t.supersample > 1)
+        and (c[0] not in ("window centre", "window size") or s0.window_center is not None)
+        and (c[0] not in ("cell", "T_cell") or s0.cell is not None)
+    ]
+    widest = {
+        "splat": max((s.short for s in steps), key=len),
+        "note": max((r for r in (*t.rejected_counts(), "fallback")), key=measure),
+    }
     used = measure(str(len(steps))) + pad
     kept = []
     for c in sorted(present, key=lambda c: c[3]):
@@ -70,8 +81,13 @@ def draw_table(insp: Inspector, e: Entry, t: PixelTrace, steps: tuple, current: 
     pad = 2 * style.cell_padding.x + 1  # a cell's padding and the inner border
     cols = columns(t, steps, avail.x - style.scrollbar_size - 2, lambda x: imgui.calc_text_size(x).x, pad)
     rows = insp.order(t, insp.options.by_weight)
-    flags = (imgui.TableFlags_.scroll_y | imgui.TableFlags_.scroll_x | imgui.TableFlags_.row_bg
-             | imgui.TableFlags_.borders_inner_v | imgui.TableFlags_.sizing_fixed_fit).value
+    flags = (
+        imgui.TableFlags_.scroll_y
+        | imgui.TableFlags_.scroll_x
+        | imgui.TableFlags_.row_bg
+        | imgui.TableFlags_.borders_inner_v
+        | imgui.TableFlags_.sizing_fixed_fit
+    ).value
     if not imgui.begin_table("##steps", len(cols) + 1, flags, (0, max(90.0, avail.y))):
         return
     imgui.table_setup_scroll_freeze(0, 1)
@@ -83,7 +99,7 @@ def draw_table(insp: Inspector, e: Entry, t: PixelTrace, steps: tuple, current: 
     clipper.begin(len(rows))
     span = (imgui.SelectableFlags_.span_all_columns | imgui.SelectableFlags_.allow_overlap).value
     while clipper.step():
-        for k in rows[clipper.display_start:clipper.display_end]:
+        for k in rows[clipper.display_start : clipper.display_end]:
             s = steps[k]
             imgui.table_next_row()
             imgui.table_next_column()

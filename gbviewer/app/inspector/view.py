@@ -13,10 +13,10 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ...render import PixelTrace
+from ..overlays.labels import GREY, WHITE, YELLOW, col
+from ..ui.keys import hint
 from .state import Entry, Inspector, pixel_box, render_pixel
 from .table import describe, draw_table
-from ..ui.keys import hint
-from ..overlays.labels import GREY, WHITE, YELLOW, col
 
 if TYPE_CHECKING:
     from ..window import ViewerApp
@@ -135,16 +135,21 @@ def _flow(right: float, label: str, box: bool = False, plain: bool = False) -> N
 def _entry(app: ViewerApp, insp: Inspector, e: Entry) -> None:
     t = e.trace
     if t is None:
-        why = e.result.error if e.result is not None else (
-            "tracing..." if e.pixel is not None else "waiting for the pane's final frame")
+        why = (
+            e.result.error
+            if e.result is not None
+            else ("tracing..." if e.pixel is not None else "waiting for the pane's final frame")
+        )
         imgui.text(f"{e.name}  {app.state.settings_for(*e.slot).label}")
         imgui.text_disabled(why)
         return
     imgui.text(f"{e.name}  {t.mode}")
     imgui.push_style_color(imgui.Col_.text.value, imgui.get_style().color_(imgui.Col_.text_disabled.value))
-    imgui.text_wrapped(f"pixel ({t.x}, {t.y}) of {t.width}x{t.height}"
-                       + (f", {t.supersample}x{t.supersample} samples" if t.supersample > 1 else "")
-                       + ("  (stale)" if e.stale else ""))
+    imgui.text_wrapped(
+        f"pixel ({t.x}, {t.y}) of {t.width}x{t.height}"
+        + (f", {t.supersample}x{t.supersample} samples" if t.supersample > 1 else "")
+        + ("  (stale)" if e.stale else "")
+    )
     imgui.pop_style_color()
     steps = insp.steps(t)
     blend = insp.slider_steps(t)
@@ -160,17 +165,22 @@ def _entry(app: ViewerApp, insp: Inspector, e: Entry) -> None:
     imgui.text_wrapped(f"RGB {t.color[0]:.4f} {t.color[1]:.4f} {t.color[2]:.4f}   T {t.transmittance:.4g}")
     added = sum(1 for s in steps if not s.rejected)
     rejected = sorted(t.rejected_counts().items(), key=lambda kv: -kv[1])
-    imgui.text_wrapped(f"{len(steps)} list entries, {added} added; rejected: "
-                       + (", ".join(f"{why} {n}" for why, n in rejected) or "none"))
+    imgui.text_wrapped(
+        f"{len(steps)} list entries, {added} added; rejected: "
+        + (", ".join(f"{why} {n}" for why, n in rejected) or "none")
+    )
     if e.result is not None and e.result.request.backend != insp.thread.backend:
-        imgui.text_disabled(f"traced on the {insp.thread.backend} kernel (the pane renders on "
-                            f"{e.result.request.backend})")
+        imgui.text_disabled(
+            f"traced on the {insp.thread.backend} kernel (the pane renders on {e.result.request.backend})"
+        )
     if blend:
         imgui.set_next_item_width(-1)
         changed, value = imgui.slider_int("##step", pos + 1, 1, len(blend), f"step %d/{len(blend)}: #{blend[pos] + 1}")
         if imgui.is_item_hovered():
-            imgui.set_tooltip("the steps in blend order: those that added to the pixel (all list entries: every "
-                              "one); #: the entry's number in the list, as in the table")
+            imgui.set_tooltip(
+                "the steps in blend order: those that added to the pixel (all list entries: every "
+                "one); #: the entry's number in the list, as in the table"
+            )
         if changed:
             pos = value - 1
             insp.options.step[e.slot] = blend[pos]
@@ -220,21 +230,25 @@ def _canvas(insp: Inspector, t: PixelTrace, steps: tuple, blend: list[int], pos:
         if pts is None:
             continue
         sr, sg, sb = (round(min(1.0, max(0.0, c)) * 255) for c in s.color)
-        colour, width = ((YELLOW, 3.0) if k == current else (col(sr, sg, sb, 210), 1.5) if k in top
-                         else (col(sr, sg, sb, 45), 1.0))
-        dl.add_polyline([imgui.ImVec2(*at(*p)) for p in pts], col=colour, thickness=width,
-                        flags=imgui.ImDrawFlags_.closed.value)
+        colour, width = (
+            (YELLOW, 3.0) if k == current else (col(sr, sg, sb, 210), 1.5) if k in top else (col(sr, sg, sb, 45), 1.0)
+        )
+        dl.add_polyline(
+            [imgui.ImVec2(*at(*p)) for p in pts], col=colour, thickness=width, flags=imgui.ImDrawFlags_.closed.value
+        )
     s = steps[current]
     mx, my = at(*s.mean)  # its centre; out of view: a ring on the edge towards it
     inside = p0.x <= mx <= p0.x + side and p0.y <= my <= p0.y + side
     if inside:
         dl.add_circle_filled((mx, my), 4.0, YELLOW)
     elif math.isfinite(mx) and math.isfinite(my):
-        dl.add_circle((min(max(mx, p0.x + 6), p0.x + side - 6), min(max(my, p0.y + 6), p0.y + side - 6)), 5.0,
-                      YELLOW, 0, 2.0)
+        dl.add_circle(
+            (min(max(mx, p0.x + 6), p0.x + side - 6), min(max(my, p0.y + 6), p0.y + side - 6)), 5.0, YELLOW, 0, 2.0
+        )
     if s.window_center is not None:  # the window's centre, pixel to now (this sample), and the window now
-        path = [at(*t.samples[s.sample].position)] + [at(*steps[k].window_center) for k in blend[:pos + 1]
-                                                     if steps[k].sample == s.sample]
+        path = [at(*t.samples[s.sample].position)] + [
+            at(*steps[k].window_center) for k in blend[: pos + 1] if steps[k].sample == s.sample
+        ]
         if len(path) > 1:
             dl.add_polyline([imgui.ImVec2(*q) for q in path], col=PATH_COLOUR, thickness=1.5, flags=0)
         (cx, cy), (w, h) = s.window_center, s.window_size

@@ -9,8 +9,8 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ...outputs.differences import DIVERGING, format_scale
-from .labels import WHITE, col, part_box
 from ..ui.text import PAD
+from .labels import WHITE, col, part_box
 
 if TYPE_CHECKING:
     from ..window import ViewerApp
@@ -33,8 +33,11 @@ def draw_colour_bar(app: ViewerApp, dl, x0: float, y: float, scale: float) -> fl
         dl.add_rect_filled_multi_color((x0 + 4 + k * seg, y + 4), (x0 + 4 + (k + 1) * seg, y + 4 + BAR_H), a, b, b, a)
     if app.mono is not None:
         imgui.push_font(app.mono, 15.0)
-    for label, u, align in ((f"-{format_scale(scale)}", 0.0, 0.0), ("0", 0.5, 0.5),
-                            (f"+{format_scale(scale)}", 1.0, 1.0)):
+    for label, u, align in (
+        (f"-{format_scale(scale)}", 0.0, 0.0),
+        ("0", 0.5, 0.5),
+        (f"+{format_scale(scale)}", 1.0, 1.0),
+    ):
         w = imgui.calc_text_size(label).x
         dl.add_text((x0 + 4 + u * BAR_W - align * w, y + BAR_H + 6), WHITE, label)
     if app.mono is not None:

@@ -9,17 +9,17 @@ from typing import TYPE_CHECKING, Callable
 
 from imgui_bundle import imgui
 
-from ...model.camera import format_rate
 from ...io.trained_as import describe
+from ...model.camera import format_rate
 from ...render import AUTO
 from ...render.presets import trained_spec
-from ..frames.accumulate import is_stochastic
 from ..difference.views import shows_photo
+from ..frames.accumulate import is_stochastic
+from ..pane_state import PaneState
+from ..panes import pane_fps
 from ..ui.keys import hint
 from ..ui.layout import Rect, loupe_uv
 from ..ui.text import PAD, Item, lay_out_banner, lay_out_part
-from ..panes import pane_fps
-from ..pane_state import PaneState
 
 if TYPE_CHECKING:
     from ..window import ViewerApp
@@ -30,17 +30,25 @@ def col(r: int, g: int, b: int, a: int = 255) -> int:
     return (a << 24) | (b << 16) | (g << 8) | r
 
 
-WHITE, BLACK_A, YELLOW, RED, GREY, ACCENT = (col(255, 255, 255), col(0, 0, 0, 170), col(255, 205, 60),
-                                               col(255, 90, 80), col(150, 150, 150), col(90, 170, 255))
+WHITE, BLACK_A, YELLOW, RED, GREY, ACCENT = (
+    col(255, 255, 255),
+    col(0, 0, 0, 170),
+    col(255, 205, 60),
+    col(255, 90, 80),
+    col(150, 150, 150),
+    col(90, 170, 255),
+)
 LEVEL_COLOURS = {"info": WHITE, "warn": YELLOW, "error": RED}
 FLY_HINT = "fly: WASD QE move, drag looks, {} ends"
 
 
 def measure(app: ViewerApp) -> Callable[[str], tuple[float, float]]:
     """The size of a text in the overlays' font (push it first: `mono`)."""
+
     def size(s: str) -> tuple[float, float]:
         v = imgui.calc_text_size(s)
         return v.x, v.y
+
     return size
 
 
@@ -86,8 +94,10 @@ def pane_label(app: ViewerApp, p: PaneState, part: str) -> str:
     job = shown.job
     if job is None:  # nothing rendered yet: what it will be
         w, h = p.render_size
-        return (f"{p.name}{chr(39) if part == 'b' else ''}  {ps.mode if part == 'a' else ps.split_mode}  "
-                f"{format_rate(state.settings.rate)}  {w}x{h}")
+        return (
+            f"{p.name}{chr(39) if part == 'b' else ''}  {ps.mode if part == 'a' else ps.split_mode}  "
+            f"{format_rate(state.settings.rate)}  {w}x{h}"
+        )
     label = job.settings.label_for(state.scene) if state.scene is not None else job.settings.label
     if state.scene is not None and job.settings.name == trained_spec(state.scene.meta):
         label += f" (as trained: {describe(state.scene.meta)})"
@@ -111,9 +121,11 @@ def stats_lines(p: PaneState, part: str) -> list[str]:
         return []  # (no render on screen: its timings would describe something else)
     st = shown.frame.stats
     tag = f"{p.name}' " if part == "b" else ""
-    lines = [f"{tag}{st.total_ms:.1f} ms: pre {st.preprocess_ms:.1f} + sort {st.sort_ms:.1f} + blend "
-             f"{st.blend_ms:.1f}  {pane_fps(p, part):.1f} fps",
-             f"{tag}{st.visible:,} splats visible  {st.evals_per_pixel:.0f} evals/px"]
+    lines = [
+        f"{tag}{st.total_ms:.1f} ms: pre {st.preprocess_ms:.1f} + sort {st.sort_ms:.1f} + blend "
+        f"{st.blend_ms:.1f}  {pane_fps(p, part):.1f} fps",
+        f"{tag}{st.visible:,} splats visible  {st.evals_per_pixel:.0f} evals/px",
+    ]
     if shown.pacing:
         names = {"preview": "preview", "tiles": "first tiles", "final": "final"}
         lines.append(tag + "  ".join(f"{names[k]} {v:.0f} ms" for k, v in shown.pacing.items()))
@@ -181,8 +193,11 @@ def draw_pane_overlays(app: ViewerApp) -> None:
                 label = pane_label(app, p, part)
                 if shown.legend and not shows_photo(shown):  # (the photo's legend is its label)
                     label = f"{label}  {shown.legend}"
-                info = ([(line, col(220, 220, 220)) for line in stats_lines(p, part)]
-                        if state.settings.show_info and shown.frame is not None else [])
+                info = (
+                    [(line, col(220, 220, 220)) for line in stats_lines(p, part)]
+                    if state.settings.show_info and shown.frame is not None
+                    else []
+                )
                 box = part_box(r, ps.split, ps.split_pos, part)
                 items, below = lay_out_part(box, (label, WHITE), message(app, p, part), info, measure(app))
                 for item in items:
@@ -202,14 +217,25 @@ def draw_status(app: ViewerApp) -> None:
     h = imgui.get_frame_height() + 6
     imgui.set_next_window_pos((0, io.display_size.y - h))
     imgui.set_next_window_size((io.display_size.x, h))
-    flags = (imgui.WindowFlags_.no_decoration | imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_inputs
-             | imgui.WindowFlags_.no_saved_settings).value
+    flags = (
+        imgui.WindowFlags_.no_decoration
+        | imgui.WindowFlags_.no_move
+        | imgui.WindowFlags_.no_inputs
+        | imgui.WindowFlags_.no_saved_settings
+    ).value
     imgui.push_style_var(imgui.StyleVar_.window_padding.value, imgui.ImVec2(8, 3))
     imgui.begin("##status", None, flags)
     sizes = "  ".join(f"{p.name} {p.render_size[0]}x{p.render_size[1]}" for p in state.visible)
     backend = app.worker.backend_for(s.backend)
-    simd = next((part.frame.stats.simd for p in state.visible for part in p.parts.values()
-                 if part.frame is not None and part.frame.stats.simd), "")
+    simd = next(
+        (
+            part.frame.stats.simd
+            for p in state.visible
+            for part in p.parts.values()
+            if part.frame is not None and part.frame.stats.simd
+        ),
+        "",
+    )
     if app.worker.capabilities(backend).simd and simd:
         backend = f"{backend} {simd}"  # the blend's SIMD path (GBVIEWER_SIMD forces one)
     if s.backend == AUTO:
@@ -218,9 +244,11 @@ def draw_status(app: ViewerApp) -> None:
     imgui.same_line(0, 16)
     imgui.text_disabled(f"render {sizes}")
     imgui.same_line(0, 16)
-    imgui.text_disabled(f"{backend} | display {app.worker.display_path(app.worker.backend_for(s.backend))[0]} | "
-                        f"{'fly' if state.fly else 'orbit'} | up {s.up} | "
-                        f"fov {state.controller.fov_y_deg:.0f}{' ortho' if s.projection == 'orthographic' else ''}")
+    imgui.text_disabled(
+        f"{backend} | display {app.worker.display_path(app.worker.backend_for(s.backend))[0]} | "
+        f"{'fly' if state.fly else 'orbit'} | up {s.up} | "
+        f"fov {state.controller.fov_y_deg:.0f}{' ortho' if s.projection == 'orthographic' else ''}"
+    )
     now = time.perf_counter()
     recent = [m for m in state.messages if now - m[0] < 8.0]
     if recent:

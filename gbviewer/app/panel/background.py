@@ -18,8 +18,7 @@ def draw(state: AppState) -> None:
     if imgui.radio_button("colour", state.background_source == FIXED):
         state.set_background(state.settings.background)
     imgui.same_line()
-    ch, rgb = imgui.color_edit3("##background", list(state.settings.background),
-                                imgui.ColorEditFlags_.float.value)
+    ch, rgb = imgui.color_edit3("##background", list(state.settings.background), imgui.ColorEditFlags_.float.value)
     if ch:
         state.set_background(rgb)
     imgui.begin_disabled(backdrop is None)
@@ -34,5 +33,7 @@ def draw(state: AppState) -> None:
         imgui.same_line()
         imgui.text_disabled(f"found {backdrop.describe().split(',')[0]}")
         if imgui.is_item_hovered():
-            imgui.set_tooltip(f"{backdrop.describe()}; the default for opaque photos: a render on another colour "
-                              "than the photos' backdrop reads a low PSNR however good the scene is")
+            imgui.set_tooltip(
+                f"{backdrop.describe()}; the default for opaque photos: a render on another colour "
+                "than the photos' backdrop reads a low PSNR however good the scene is"
+            )

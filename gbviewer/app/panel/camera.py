@@ -23,8 +23,9 @@ def draw(state: AppState, open_dialog: Callable[[], None]) -> None:
     if imgui.checkbox(f"orthographic ({hint('toggle_projection')})", s.projection == "orthographic")[0]:
         state.toggle_projection()
     imgui.set_next_item_width(170)
-    ch, fov = imgui.slider_float("field of view", state.controller.fov_y_deg, CameraController.MIN_FOV,
-                                 CameraController.MAX_FOV, "%.0f deg")
+    ch, fov = imgui.slider_float(
+        "field of view", state.controller.fov_y_deg, CameraController.MIN_FOV, CameraController.MAX_FOV, "%.0f deg"
+    )
     if ch:
         state.set_fov(fov)
     axes = list(UP_AXES)
@@ -34,8 +35,9 @@ def draw(state: AppState, open_dialog: Callable[[], None]) -> None:
         state.set_up(axes[k])
     if state.fly:
         imgui.set_next_item_width(170)
-        _, s.fly_speed = imgui.slider_float("fly speed", s.fly_speed, 0.05, 5.0, "%.2f radii/s",
-                                            imgui.SliderFlags_.logarithmic.value)
+        _, s.fly_speed = imgui.slider_float(
+            "fly speed", s.fly_speed, 0.05, 5.0, "%.2f radii/s", imgui.SliderFlags_.logarithmic.value
+        )
     if state.dataset.dataset is not None:
         imgui.text_disabled(f"{hint('step_camera', -1)} {hint('step_camera', 1)} step the dataset's views (Dataset)")
     elif state.cameras:

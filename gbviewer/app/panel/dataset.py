@@ -15,18 +15,20 @@ from ..ui.keys import hint
 from ..ui.layout import PANEL_W
 
 if TYPE_CHECKING:
-    from ..ui.dialogs import FileDialogs
     from ..state import AppState
+    from ..ui.dialogs import FileDialogs
 
 LIST_H = 150  # pixels of the views list
 
 
 def open_dataset_dialog(state: AppState, dialogs: FileDialogs) -> None:
     """The system's folder dialog (or the built-in browser) to open a dataset folder beside the scene."""
-    start = state.dataset.dataset.root.parent if state.dataset.dataset is not None else (
-        state.scene_path.parent if state.scene_path else Path.cwd())
-    dialogs.open_folder(start, "Open a dataset folder (COLMAP, Blender or cameras.json)",
-                        state.dataset.open)
+    start = (
+        state.dataset.dataset.root.parent
+        if state.dataset.dataset is not None
+        else (state.scene_path.parent if state.scene_path else Path.cwd())
+    )
+    dialogs.open_folder(start, "Open a dataset folder (COLMAP, Blender or cameras.json)", state.dataset.open)
 
 
 def draw(state: AppState, dialogs: FileDialogs) -> None:
@@ -37,8 +39,10 @@ def draw(state: AppState, dialogs: FileDialogs) -> None:
     imgui.set_next_item_width(110)
     _, ds.images = imgui.input_text("photos", ds.images)
     if imgui.is_item_hovered():
-        imgui.set_tooltip("the photo folder of a COLMAP capture or a cameras.json (images_4: quarter size; x1 is "
-                          "the photos' resolution)")
+        imgui.set_tooltip(
+            "the photo folder of a COLMAP capture or a cameras.json (images_4: quarter size; x1 is "
+            "the photos' resolution)"
+        )
     if ds.loader is not None:
         imgui.text(f"Loading {ds.loader.path.name} ...")
         imgui.progress_bar(-1.0 * ds.loader.elapsed, (PANEL_W - 24, 0), f"{ds.loader.elapsed:.1f} s")
@@ -81,13 +85,18 @@ def draw(state: AppState, dialogs: FileDialogs) -> None:
     imgui.end_child()
     view = ds.view
     pos = f"{listed.index(ds.index) + 1}/{len(listed)}" if ds.index in listed else f"-/{len(listed)}"
-    where = "free camera" if view is None else (
-        view.name if ds.snapped(state.controller.state()) is not None else f"left {view.name}")
+    where = (
+        "free camera"
+        if view is None
+        else (view.name if ds.snapped(state.controller.state()) is not None else f"left {view.name}")
+    )
     imgui.text(f"{hint('step_camera', -1)} {hint('step_camera', 1)}  {pos}: {where}")
     a = state.settings.panes[0]
     ch, on = imgui.checkbox("pane A shows the photo", a.view == PHOTO)
     if ch:
         state.set_pane(0, view=PHOTO if on else "color")
     if imgui.is_item_hovered():
-        imgui.set_tooltip("the snapped view's photo box-downsampled to the rate (any pane: its view 'photo'); the "
-                          "other panes' PSNR / SSIM are against it")
+        imgui.set_tooltip(
+            "the snapped view's photo box-downsampled to the rate (any pane: its view 'photo'); the "
+            "other panes' PSNR / SSIM are against it"
+        )

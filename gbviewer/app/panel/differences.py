@@ -26,10 +26,12 @@ def draw(state: AppState, analysis: PaneAnalysis) -> None:
     if ch:
         analysis.set_reference(kinds[k])
     if imgui.is_item_hovered():
-        imgui.set_tooltip("box: the x1 scalar render box-downsampled by k at rate 1/k (what gbviewer bench uses)\n"
-                          "dense: scalar with 8x8 supersampling at the current rate (any rate, 64x the work)\n"
-                          "photo: the snapped dataset view's photo box-downsampled to the rate (x1/k; snapping to a "
-                          "view chooses it)")
+        imgui.set_tooltip(
+            "box: the x1 scalar render box-downsampled by k at rate 1/k (what gbviewer bench uses)\n"
+            "dense: scalar with 8x8 supersampling at the current rate (any rate, 64x the work)\n"
+            "photo: the snapped dataset view's photo box-downsampled to the rate (x1/k; snapping to a "
+            "view chooses it)"
+        )
     ch, on = imgui.checkbox(f"PSNR / SSIM on the panes ({hint('toggle_fidelity')})", o.fidelity)
     if ch:
         analysis.toggle_fidelity()
@@ -40,7 +42,7 @@ def draw(state: AppState, analysis: PaneAnalysis) -> None:
     imgui.set_next_item_width(220)
     ch, lg = imgui.slider_float("fixed scale", math.log10(o.scale), -3.0, 0.0, f"{o.scale:.3g}")
     if ch:
-        analysis.set_scale(False, 10 ** lg)
+        analysis.set_scale(False, 10**lg)
     imgui.end_disabled()
     for p in state.visible:
         for part in state.parts(p.index):

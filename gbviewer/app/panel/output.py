@@ -6,17 +6,21 @@ from typing import TYPE_CHECKING, Callable
 
 from imgui_bundle import imgui
 
+from ..camera.recording import VIDEO_CONTAINERS
+from ..screenshots import shot_dir
 from ..ui.keys import hint
 from ..ui.layout import PANEL_W
-from ..screenshots import shot_dir
-from ..camera.recording import VIDEO_CONTAINERS
 
 if TYPE_CHECKING:
     from ..state import AppState
 
 
-def draw(state: AppState, screenshot_window: Callable[[], object], screenshot_pane: Callable[[int], object],
-         open_dialog: Callable[[], None]) -> None:
+def draw(
+    state: AppState,
+    screenshot_window: Callable[[], object],
+    screenshot_pane: Callable[[int], object],
+    open_dialog: Callable[[], None],
+) -> None:
     s = state.settings
     _, s.loupe = imgui.checkbox(f"loupe ({hint('toggle_loupe')})", s.loupe)
     imgui.same_line()

@@ -7,8 +7,8 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from ..settings import MAX_PANE_LOD, MODE_NAMES
 from ..frames.views import VIEW_HELP, VIEWS
+from ..settings import MAX_PANE_LOD, MODE_NAMES
 
 if TYPE_CHECKING:
     from ..state import AppState
@@ -44,13 +44,21 @@ def draw(state: AppState) -> None:
         if ch:
             state.set_pane(p.index, lod=1.0 if on else 0.0)
         if imgui.is_item_hovered():
-            imgui.set_tooltip("draw the splat hierarchy's cut at tau projected pixels, still frames too (off: "
-                              "previews use a cut while the camera moves, still frames every splat)")
+            imgui.set_tooltip(
+                "draw the splat hierarchy's cut at tau projected pixels, still frames too (off: "
+                "previews use a cut while the camera moves, still frames every splat)"
+            )
         imgui.same_line()
         imgui.begin_disabled(ps.lod == 0)
         imgui.set_next_item_width(120)
-        ch, tau = imgui.slider_float("##lod", ps.lod if ps.lod > 0 else 1.0, 0.25, MAX_PANE_LOD,
-                                     "tau %.2f px" if ps.lod > 0 else "off", imgui.SliderFlags_.logarithmic.value)
+        ch, tau = imgui.slider_float(
+            "##lod",
+            ps.lod if ps.lod > 0 else 1.0,
+            0.25,
+            MAX_PANE_LOD,
+            "tau %.2f px" if ps.lod > 0 else "off",
+            imgui.SliderFlags_.logarithmic.value,
+        )
         if ch and ps.lod > 0:
             state.set_pane(p.index, lod=tau)
         imgui.end_disabled()

@@ -7,8 +7,8 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 
 from ...model.camera import format_rate
-from ..ui.layout import PANEL_W
 from ..frames.rates import RATE_STEPS, rate_to_slider, slider_to_rate
+from ..ui.layout import PANEL_W
 
 if TYPE_CHECKING:
     from ..state import AppState

@@ -16,8 +16,10 @@ if TYPE_CHECKING:
 def draw(state: AppState, open_dialog: Callable[[], None]) -> None:
     if state.scene is not None:
         imgui.text(state.scene_path.name if state.scene_path else "?")
-        imgui.text_disabled(f"{state.scene.num_splats:,} splats, SH degree {state.scene.sh_degree}, "
-                            f"{state.scene.meta.get('format', '?')}")
+        imgui.text_disabled(
+            f"{state.scene.num_splats:,} splats, SH degree {state.scene.sh_degree}, "
+            f"{state.scene.meta.get('format', '?')}"
+        )
     if state.loader is not None:
         ld = state.loader
         imgui.text(f"Loading {ld.path.name}")

@@ -28,12 +28,19 @@ def draw(state: AppState, worker: RenderWorker, ui_fps: RateMeter) -> None:
                 continue
             st = frame.stats
             imgui.table_next_row()
-            cells = (p.name + ("'" if part == "b" else ""), f"{st.total_ms:.0f}", f"{st.preprocess_ms:.1f}",
-                     f"{st.sort_ms:.1f}", f"{st.blend_ms:.0f}", f"{pane_fps(p, part):.1f}")
+            cells = (
+                p.name + ("'" if part == "b" else ""),
+                f"{st.total_ms:.0f}",
+                f"{st.preprocess_ms:.1f}",
+                f"{st.sort_ms:.1f}",
+                f"{st.blend_ms:.0f}",
+                f"{pane_fps(p, part):.1f}",
+            )
             for c in cells:
                 imgui.table_next_column()
                 imgui.text(c)
     imgui.end_table()
     imgui.text_disabled("ms per stage; fps = finished renders per second")
-    imgui.text_disabled(f"UI {ui_fps.rate():.0f} fps, {worker.dropped} stale requests dropped, "
-                        f"{worker.cancelled} stale renders stopped")
+    imgui.text_disabled(
+        f"UI {ui_fps.rate():.0f} fps, {worker.dropped} stale requests dropped, {worker.cancelled} stale renders stopped"
+    )

@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ...model.camera import Camera, load_cameras_json
 from ...core.cancel import CancelToken
 from ...core.errors import GBViewerError, LoadCancelled
 from ...lod import hierarchy_for
+from ...model.camera import Camera, load_cameras_json
 from ...model.scene import Scene
 from .slots import lower_priority
 
@@ -124,8 +124,9 @@ class SceneLoader:
         self._result = res
         self._done.set()
         if isinstance(res.scene, Scene) and res.scene.oit is None:
-            threading.Thread(target=prepare_lod, args=(res.scene, res.pictured), name="gbviewer-lod",
-                             daemon=True).start()
+            threading.Thread(
+                target=prepare_lod, args=(res.scene, res.pictured), name="gbviewer-lod", daemon=True
+            ).start()
 
     def done(self) -> bool:
         return self._done.is_set()

@@ -13,10 +13,9 @@ from dataclasses import dataclass
 from typing import Any, Callable, Hashable
 
 from ...core.cancel import CancelToken
+from ...model.scene import Scene
 from ...render import create_renderer
 from ...render.choice import FALLBACK
-from ...model.scene import Scene
-
 
 RENDER_NICE = 10  # added to a render thread's (and its OpenMP threads') niceness: the UI gets a core when it asks
 
@@ -64,8 +63,13 @@ class SlotThread:
 
     NAME = "gbviewer-slots"
 
-    def __init__(self, policy: SlotPolicy = SlotPolicy(), backend: str = FALLBACK, nice: int = 0,
-                 on_result: Callable[[], None] | None = None) -> None:
+    def __init__(
+        self,
+        policy: SlotPolicy = SlotPolicy(),
+        backend: str = FALLBACK,
+        nice: int = 0,
+        on_result: Callable[[], None] | None = None,
+    ) -> None:
         self.policy, self._backend, self._nice, self._on_result = policy, backend, nice, on_result
         self._lock = threading.Condition()
         self._pending: dict[Hashable, tuple[int, Any]] = {}  # slot -> (seq, request)
@@ -189,6 +193,7 @@ class SlotThread:
     def _next(self) -> list:
         """The waiting request the policy ranks first and its companions (taken off the queue), with a fresh cancel
         token."""
+
         def rank(slot: Hashable) -> tuple:
             seq, request = self._pending[slot]
             return self.policy.rank(request, seq, self._served.get(slot, 0.0))

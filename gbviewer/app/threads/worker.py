@@ -22,18 +22,16 @@ from typing import Callable, Hashable
 
 import numpy as np
 
-from ...model.camera import Camera
 from ...core.cancel import CancelToken
 from ...core.errors import BackendFailed, BackendUnavailable, GBViewerError, RenderCancelled, RenderError
 from ...lod import stand_in as sparse_stand_in
+from ...model.camera import Camera
+from ...model.scene import Scene
 from ...render import AUTO, BACKENDS, BackendChoice, Capabilities, Frame, Renderer, RenderSettings, create_gl_context
 from ...render.choice import FALLBACK, decide_measured
-from ...model.scene import Scene
 from ..frames.display import DisplayTextures, SharedContext
 from ..frames.refine import companions, render_jobs
 from .slots import RENDER_NICE, SlotPolicy, SlotThread
-
-
 
 
 @dataclass(eq=False)
@@ -97,8 +95,12 @@ class RenderWorker(SlotThread):
 
     NAME = "gbviewer-render"
 
-    def __init__(self, shared: SharedContext | None = None, on_result: Callable[[], None] | None = None,
-                 backends: Mapping[str, type[Renderer]] = BACKENDS) -> None:
+    def __init__(
+        self,
+        shared: SharedContext | None = None,
+        on_result: Callable[[], None] | None = None,
+        backends: Mapping[str, type[Renderer]] = BACKENDS,
+    ) -> None:
         """`on_result`: called from the render thread after each result is posted (the window wakes its event
         loop with it, so a frame or its first tiles are drawn at once)."""
         self._shared = shared
@@ -321,8 +323,9 @@ class RenderWorker(SlotThread):
             traceback.print_exc()
             return each(error=f"{type(exc).__name__}: {exc}")
 
-    def _post_stage(self, job: RenderJob, stage: str, frame: Frame | None, partial: np.ndarray | None,
-                    progress: float) -> None:
+    def _post_stage(
+        self, job: RenderJob, stage: str, frame: Frame | None, partial: np.ndarray | None, progress: float
+    ) -> None:
         self._post(RenderResult(job, frame, "", time.perf_counter(), stage=stage, partial=partial, progress=progress))
 
     def _render_to_texture(self, renderer, job: RenderJob, cancel: CancelToken) -> Frame:

@@ -71,12 +71,14 @@ class FileDialogs:
         if b is None:
             return
         io = imgui.get_io()
-        imgui.set_next_window_pos((io.display_size.x / 2, io.display_size.y / 2), imgui.Cond_.appearing.value,
-                                  (0.5, 0.5))
+        imgui.set_next_window_pos(
+            (io.display_size.x / 2, io.display_size.y / 2), imgui.Cond_.appearing.value, (0.5, 0.5)
+        )
         imgui.set_next_window_size((620, 460), imgui.Cond_.appearing.value)
         folders = b.get("pick") is not None  # choosing a folder
-        opened, keep = imgui.begin(b.get("title", "Open a scene or cameras.json"), True,
-                                   imgui.WindowFlags_.no_collapse.value)
+        opened, keep = imgui.begin(
+            b.get("title", "Open a scene or cameras.json"), True, imgui.WindowFlags_.no_collapse.value
+        )
         if opened:
             d: Path = b["dir"]
             if imgui.button("Up"):
@@ -128,8 +130,12 @@ def draw_help(shown: bool) -> bool:
     imgui.set_next_window_pos((io.display_size.x / 2, io.display_size.y / 2), 0, (0.5, 0.5))
     imgui.set_next_window_size((w, h))
     imgui.set_next_window_bg_alpha(0.98)
-    flags = (imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_saved_settings
-             | imgui.WindowFlags_.no_move).value
+    flags = (
+        imgui.WindowFlags_.no_resize
+        | imgui.WindowFlags_.no_collapse
+        | imgui.WindowFlags_.no_saved_settings
+        | imgui.WindowFlags_.no_move
+    ).value
     opened, keep = imgui.begin(f"Keyboard and mouse ({label('toggle_help')} to close)", True, flags)
     if opened and imgui.begin_table("keys", 2, imgui.TableFlags_.row_bg.value):
         imgui.table_setup_column("key", imgui.TableColumnFlags_.width_fixed.value, 170)
@@ -143,4 +149,3 @@ def draw_help(shown: bool) -> bool:
         imgui.end_table()
     imgui.end()
     return keep
-

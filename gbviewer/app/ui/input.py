@@ -45,8 +45,11 @@ def handle_mouse(app: ViewerApp) -> None:
         r = state.panes[over].rect
         if abs(mx - (r.x + panes[over].split_pos * r.w)) <= SPLIT_GRAB_PX:
             state.dragging_split = over
-    dragging_view = (any(imgui.is_mouse_dragging(b, 0.0) for b in (0, 1, 2)) and state.hover is not None
-                     and not io.want_capture_mouse)
+    dragging_view = (
+        any(imgui.is_mouse_dragging(b, 0.0) for b in (0, 1, 2))
+        and state.hover is not None
+        and not io.want_capture_mouse
+    )
     if over is None and not dragging_view:
         return
     c = state.controller

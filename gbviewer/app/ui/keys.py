@@ -45,50 +45,93 @@ class Shortcut:
 
 
 SHORTCUTS = (
-    Shortcut("F1 or ?", "show / hide this help",
-             (Key("f1", "toggle_help", ctrl=None), Key("slash", "toggle_help", shift=True, ctrl=None))),
+    Shortcut(
+        "F1 or ?",
+        "show / hide this help",
+        (Key("f1", "toggle_help", ctrl=None), Key("slash", "toggle_help", shift=True, ctrl=None)),
+    ),
     Shortcut("Ctrl+O", "open a scene (or a cameras.json)", (Key("o", "open_dialog", ctrl=True, on="window"),)),
     Shortcut("drop a file", "open it (scene or cameras.json)"),
     Shortcut("Left drag", "orbit around the target (fly mode: look around)"),
     Shortcut("Right / middle drag", "pan"),
     Shortcut("Wheel", "dolly towards / away from the target"),
     Shortcut("F", "fly mode on / off", (Key("f", "toggle_fly"),)),
-    Shortcut("W A S D", "fly forward / left / back / right (fly mode)",
-             (Key("w", "fly_move", (1, 0, 0), held=True), Key("a", "fly_move", (0, -1, 0), held=True),
-              Key("s", "fly_move", (-1, 0, 0), held=True), Key("d", "fly_move", (0, 1, 0), held=True))),
-    Shortcut("Q E", "fly down / up (fly mode)",
-             (Key("q", "fly_move", (0, 0, -1), held=True), Key("e", "fly_move", (0, 0, 1), held=True))),
+    Shortcut(
+        "W A S D",
+        "fly forward / left / back / right (fly mode)",
+        (
+            Key("w", "fly_move", (1, 0, 0), held=True),
+            Key("a", "fly_move", (0, -1, 0), held=True),
+            Key("s", "fly_move", (-1, 0, 0), held=True),
+            Key("d", "fly_move", (0, 1, 0), held=True),
+        ),
+    ),
+    Shortcut(
+        "Q E",
+        "fly down / up (fly mode)",
+        (Key("q", "fly_move", (0, 0, -1), held=True), Key("e", "fly_move", (0, 0, 1), held=True)),
+    ),
     Shortcut("Shift", "fly 4x faster"),
     Shortcut("R", "reset the camera to the default framing and field of view", (Key("r", "reset_camera"),)),
-    Shortcut("[ ]", "previous / next dataset view of the listed split (Dataset panel; after leaving a view: back "
-             "to it), else training camera",
-             (Key("left_bracket", "step_camera", (-1,), repeat=True),
-              Key("right_bracket", "step_camera", (1,), repeat=True))),
+    Shortcut(
+        "[ ]",
+        "previous / next dataset view of the listed split (Dataset panel; after leaving a view: back "
+        "to it), else training camera",
+        (
+            Key("left_bracket", "step_camera", (-1,), repeat=True),
+            Key("right_bracket", "step_camera", (1,), repeat=True),
+        ),
+    ),
     Shortcut("U", "next up axis (-y, +y, +z, -z)", (Key("u", "next_up"),)),
     Shortcut("O", "perspective / orthographic projection", (Key("o", "toggle_projection"),)),
-    Shortcut("- =", "sampling rate one step down / up (x1/8 .. x8)",
-             (Key("minus", "step_rate", (-1,), repeat=True), Key("equal", "step_rate", (1,), repeat=True))),
+    Shortcut(
+        "- =",
+        "sampling rate one step down / up (x1/8 .. x8)",
+        (Key("minus", "step_rate", (-1,), repeat=True), Key("equal", "step_rate", (1,), repeat=True)),
+    ),
     Shortcut("0", "sampling rate x1", (Key("_0", "set_rate", (1.0,)),)),
     Shortcut("1 2 3 4", "number of panes", tuple(Key(f"_{n}", "set_pane_count", (n,)) for n in range(1, 5))),
     Shortcut("G", "panes side by side / 2x2 grid", (Key("g", "toggle_layout"),)),
-    Shortcut("M / Shift+M", "next / previous mode of the pane under the cursor",
-             (Key("m", "next_mode", (1,), shift=False), Key("m", "next_mode", (-1,), shift=True))),
+    Shortcut(
+        "M / Shift+M",
+        "next / previous mode of the pane under the cursor",
+        (Key("m", "next_mode", (1,), shift=False), Key("m", "next_mode", (-1,), shift=True)),
+    ),
     Shortcut("V", "split view in the pane under the cursor (drag the line)", (Key("v", "toggle_split"),)),
-    Shortcut("X / Shift+X", "difference to pane A / error view (difference to the reference) in the pane under the "
-             "cursor", (Key("x", "toggle_difference", shift=False, on="analysis"),
-                        Key("x", "toggle_error", shift=True, on="analysis"))),
-    Shortcut("P / Shift+P", "PSNR / SSIM against the reference on the panes / next reference (box, dense, photo)",
-             (Key("p", "toggle_fidelity", shift=False, on="analysis"),
-              Key("p", "next_reference", shift=True, on="analysis"))),
+    Shortcut(
+        "X / Shift+X",
+        "difference to pane A / error view (difference to the reference) in the pane under the cursor",
+        (
+            Key("x", "toggle_difference", shift=False, on="analysis"),
+            Key("x", "toggle_error", shift=True, on="analysis"),
+        ),
+    ),
+    Shortcut(
+        "P / Shift+P",
+        "PSNR / SSIM against the reference on the panes / next reference (box, dense, photo)",
+        (
+            Key("p", "toggle_fidelity", shift=False, on="analysis"),
+            Key("p", "next_reference", shift=True, on="analysis"),
+        ),
+    ),
     Shortcut("L", "magnifier loupe under the cursor", (Key("l", "toggle_loupe"),)),
-    Shortcut("T / Ctrl+click", "pin the pixel under the cursor in every pane and inspect its traces (T again or Esc "
-             "unpins)", (Key("t", "toggle_pin", on="inspector"),)),
+    Shortcut(
+        "T / Ctrl+click",
+        "pin the pixel under the cursor in every pane and inspect its traces (T again or Esc unpins)",
+        (Key("t", "toggle_pin", on="inspector"),),
+    ),
     Shortcut("I", "information overlay on the panes", (Key("i", "toggle_info"),)),
     Shortcut("F12", "screenshot of the window (PNG)", (Key("f12", "screenshot_window", shift=False, on="window"),)),
-    Shortcut("Shift+F12", "screenshot of the pane under the cursor (16-bit PNG at render resolution)",
-             (Key("f12", "screenshot_hovered_pane", shift=True, on="window"),)),
-    Shortcut("Esc", "close help, leave fly mode, unpin the inspected pixel; else cancel a scene load",
-             (Key("escape", "escape", ctrl=None, on="window"),)),
+    Shortcut(
+        "Shift+F12",
+        "screenshot of the pane under the cursor (16-bit PNG at render resolution)",
+        (Key("f12", "screenshot_hovered_pane", shift=True, on="window"),),
+    ),
+    Shortcut(
+        "Esc",
+        "close help, leave fly mode, unpin the inspected pixel; else cancel a scene load",
+        (Key("escape", "escape", ctrl=None, on="window"),),
+    ),
     Shortcut("Ctrl+Q", "quit", (Key("q", "quit", ctrl=True, on="window"),)),
 )
 
@@ -115,8 +158,8 @@ def check_bindings(keys: Sequence[Key] = KEYS) -> None:
             raise ValueError(f"key {k.hint}: {k.action} on {k.on!r}, not one of {', '.join(OWNERS)}")
         if owner.setdefault(k.action, k.on) != k.on:
             raise ValueError(f"action {k.action!r} is on both {owner[k.action]} and {k.on}")
-        for shift in ((False, True) if k.shift is None else (k.shift,)):
-            for ctrl in ((False, True) if k.ctrl is None else (k.ctrl,)):
+        for shift in (False, True) if k.shift is None else (k.shift,):
+            for ctrl in (False, True) if k.ctrl is None else (k.ctrl,):
                 if (k.key, shift, ctrl) in bound:
                     raise ValueError(f"key {k.hint} is bound to {bound[k.key, shift, ctrl]} and {k.action}")
                 bound[k.key, shift, ctrl] = k.action

@@ -47,8 +47,9 @@ def fit_aspect(r: Rect, aspect: float) -> Rect:
     return Rect(r.x + (r.w - w) // 2, r.y + (r.h - h) // 2, w, h)
 
 
-def loupe_uv(u: float, v: float, pane_w: int, pane_h: int, radius_px: float, zoom: float
-             ) -> tuple[float, float, float, float]:
+def loupe_uv(
+    u: float, v: float, pane_w: int, pane_h: int, radius_px: float, zoom: float
+) -> tuple[float, float, float, float]:
     """Texture rectangle (u0, v0, u1, v1) that a loupe of `radius_px` (display pixels, half its side) magnifying
     `zoom` times shows around the normalised pane position (u, v); kept inside the pane."""
     half_u = radius_px / zoom / pane_w

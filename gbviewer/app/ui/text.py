@@ -34,12 +34,20 @@ class Item:
         return self.text != self.full
 
     def overlaps(self, other: Item) -> bool:
-        return (self.x < other.x + other.w and other.x < self.x + self.w
-                and self.y < other.y + other.h and other.y < self.y + self.h)
+        return (
+            self.x < other.x + other.w
+            and other.x < self.x + self.w
+            and self.y < other.y + other.h
+            and other.y < self.y + self.h
+        )
 
     def inside(self, box: Rect) -> bool:
-        return (box.x <= self.x and self.x + self.w <= box.x + box.w
-                and box.y <= self.y and self.y + self.h <= box.y + box.h)
+        return (
+            box.x <= self.x
+            and self.x + self.w <= box.x + box.w
+            and box.y <= self.y
+            and self.y + self.h <= box.y + box.h
+        )
 
 
 def elide(text: str, width: float, measure: Measure) -> str:
@@ -77,8 +85,9 @@ def _item(x: float, y: float, text: str, role: str, colour: int, width: float, m
     return Item(x, y, w + 2 * PAD, h + PAD, shown, text, role, colour)
 
 
-def lay_out_part(box: Rect, label: tuple[str, int], message: tuple[str, int] | None,
-                 info: list[tuple[str, int]], measure: Measure) -> tuple[list[Item], float]:
+def lay_out_part(
+    box: Rect, label: tuple[str, int], message: tuple[str, int] | None, info: list[tuple[str, int]], measure: Measure
+) -> tuple[list[Item], float]:
     """The items of one pane part in `box` (label, message, info lines bottom up) and the y below its top lines
     (where a colour bar may go)."""
     items: list[Item] = []
@@ -108,8 +117,9 @@ def lay_out_banner(area: Rect, text: str, y: float, colour: int, measure: Measur
     out = []
     for line in wrap(text, area.w - 8 * PAD, measure):
         w, h = measure(line)
-        out.append(Item(area.x + max(PAD, (area.w - w) / 2 - PAD), y, w + 2 * PAD, h + PAD, line, line, "banner",
-                        colour))
+        out.append(
+            Item(area.x + max(PAD, (area.w - w) / 2 - PAD), y, w + 2 * PAD, h + PAD, line, line, "banner", colour)
+        )
         y += h + PAD + 2
     over = max(0.0, out[-1].y + out[-1].h - (area.y + area.h - PAD))
     return [replace(i, y=max(area.y + PAD, i.y - over)) for i in out]

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ...model.camera import load_cameras_json
 from ...core.errors import CameraError, DatasetError
+from ...model.camera import load_cameras_json
 from .blender import is_blender, load_blender
 from .colmap import load_colmap, model_folder
 from .dataset import HOLDOUT, SPLITS, Dataset, View, holdout_splits
@@ -17,8 +17,10 @@ from .photos import find_photo, fit_to_photo, missing_photos, read_photo
 
 __all__ = ["HOLDOUT", "SPLITS", "Dataset", "View", "load_dataset", "read_photo"]
 
-FORMATS = "a COLMAP capture (sparse/0 and images/), a Blender folder (transforms_train/test.json) or a 3DGS " \
-          "cameras.json with its photos"
+FORMATS = (
+    "a COLMAP capture (sparse/0 and images/), a Blender folder (transforms_train/test.json) or a 3DGS "
+    "cameras.json with its photos"
+)
 
 
 def load_cameras_dataset(path: Path, images: str = "images") -> Dataset:
@@ -35,8 +37,11 @@ def load_cameras_dataset(path: Path, images: str = "images") -> Dataset:
     if len(split) != len(cams):
         raise DatasetError(f"{path}: {len(cams) - len(split)} cameras share an img_name with another")
     pairs = sorted(zip(cams, photos), key=lambda pair: pair[0].name)
-    return Dataset(path.parent, "cameras.json",
-                   tuple(View(c.name, fit_to_photo(c, p, larger=True), p, split[c.name]) for c, p in pairs))
+    return Dataset(
+        path.parent,
+        "cameras.json",
+        tuple(View(c.name, fit_to_photo(c, p, larger=True), p, split[c.name]) for c, p in pairs),
+    )
 
 
 def load_dataset(path: str | Path, images: str = "images") -> Dataset:
@@ -46,8 +51,11 @@ def load_dataset(path: str | Path, images: str = "images") -> Dataset:
     if path.is_file() and path.suffix == ".json":
         return load_cameras_dataset(path, images)
     if not path.is_dir():
-        raise DatasetError(f"{path}: no such dataset folder" if not path.exists() else
-                           f"{path}: expected a dataset folder or a cameras.json")
+        raise DatasetError(
+            f"{path}: no such dataset folder"
+            if not path.exists()
+            else f"{path}: expected a dataset folder or a cameras.json"
+        )
     if is_blender(path):
         return load_blender(path)
     model = model_folder(path)

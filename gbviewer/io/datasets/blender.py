@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...model.camera import Camera
 from ...core.errors import CameraError, DatasetError, InvalidValue
 from ...core.validate import array, field, read_json, real
+from ...model.camera import Camera
 from .dataset import BOTH, Dataset, View
 from .photos import find_photo, missing_photos, photo_size
 
@@ -36,8 +36,13 @@ def _views(root: Path, split: str, path: Path) -> list[View]:
     """The views of one transforms file, each at its photo's size."""
     try:
         doc = read_json(path)
-        angle = real(field(doc, "camera_angle_x", str(path)), f"{path}: 'camera_angle_x'", lo=0.0, lo_open=True,
-                     hi=math.pi - 1e-6)
+        angle = real(
+            field(doc, "camera_angle_x", str(path)),
+            f"{path}: 'camera_angle_x'",
+            lo=0.0,
+            lo_open=True,
+            hi=math.pi - 1e-6,
+        )
         frames = field(doc, "frames", str(path))
         if not isinstance(frames, list):
             raise InvalidValue(f"{path}: 'frames': expected a list")
@@ -49,8 +54,10 @@ def _views(root: Path, split: str, path: Path) -> list[View]:
                 raise InvalidValue(f"{where}: 'file_path': expected a relative path")
             c2w = array(field(frame, "transform_matrix", where), f"{where}: 'transform_matrix'", (4, 4))
             if not np.array_equal(c2w[3], [0, 0, 0, 1]):
-                raise InvalidValue(f"{where}: 'transform_matrix': expected a bottom row [0, 0, 0, 1] (a rigid "
-                                   f"camera-to-world pose), got {np.round(c2w[3], 6).tolist()}")
+                raise InvalidValue(
+                    f"{where}: 'transform_matrix': expected a bottom row [0, 0, 0, 1] (a rigid "
+                    f"camera-to-world pose), got {np.round(c2w[3], 6).tolist()}"
+                )
             entries.append((name.removeprefix("./"), c2w, where))
     except InvalidValue as exc:
         raise DatasetError(str(exc)) from None
@@ -72,16 +79,19 @@ def load_blender(root: Path) -> Dataset:
     for name in SPLIT_FILES.values():  # one that is there but not a file (a folder, a FIFO, a broken link) is no split
         if not (root / name).is_file() and ((root / name).exists() or (root / name).is_symlink()):
             raise DatasetError(f"{root / name}: not a readable file; expected the split's transforms JSON")
-    views = [v for split, name in SPLIT_FILES.items() if (root / name).is_file()
-             for v in _views(root, split, root / name)]
+    views = [
+        v for split, name in SPLIT_FILES.items() if (root / name).is_file() for v in _views(root, split, root / name)
+    ]
     seen: dict[Path, View] = {}
     for v in views:
         first = seen.setdefault(v.image, v)
         if first is v:
             continue
         if not same_camera(first.camera, v.camera):
-            raise DatasetError(f"{root}: {v.image.name!r:.300} is the photo of two frames ({first.split} and "
-                               f"{v.split}) with different cameras; expected one pose per photo")
+            raise DatasetError(
+                f"{root}: {v.image.name!r:.300} is the photo of two frames ({first.split} and "
+                f"{v.split}) with different cameras; expected one pose per photo"
+            )
         if v.split != first.split:
             seen[v.image] = replace(first, split=BOTH)
     return Dataset(root, "blender", tuple(seen.values()))
@@ -89,6 +99,7 @@ def load_blender(root: Path) -> Dataset:
 
 def same_camera(a: Camera, b: Camera) -> bool:
     """Whether two cameras agree to within float rounding (a pose written twice, through float32 or text)."""
+
     def numbers(c: Camera) -> np.ndarray:
         return np.concatenate([[c.width, c.height, c.fx, c.fy, c.cx, c.cy], np.ravel(c.R), np.ravel(c.t)])
 

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...model.camera import Camera
 from ...core.errors import CameraError, DatasetError, InvalidValue
 from ...core.extras import require
 from ...core.validate import array, real
+from ...model.camera import Camera
 from .colmap_text import check_text_model
 from .dataset import Dataset, View, holdout_splits
 from .photos import fit_to_photo, missing_photos, photo_path
@@ -67,10 +67,16 @@ def read_colmap(model: Path) -> dict:
         size = _stage(model, Path(tmp))
         limit, seconds = BASE_MEMORY + MEMORY_PER_BYTE * size, BASE_SECONDS + size / BYTES_PER_SECOND
         try:
-            out = subprocess.run([sys.executable, str(child), tmp, str(limit)], capture_output=True, timeout=seconds,
-                                 env={**os.environ, **SINGLE_THREADED})
+            out = subprocess.run(
+                [sys.executable, str(child), tmp, str(limit)],
+                capture_output=True,
+                timeout=seconds,
+                env={**os.environ, **SINGLE_THREADED},
+            )
         except subprocess.TimeoutExpired:
-            raise DatasetError(f"{model}: unreadable COLMAP model (pycolmap still reading after {seconds:.0f} s)") from None
+            raise DatasetError(
+                f"{model}: unreadable COLMAP model (pycolmap still reading after {seconds:.0f} s)"
+            ) from None
     if out.returncode != 0 or not out.stdout:
         why = (out.stderr.decode(errors="replace").strip().splitlines() or [f"exit status {out.returncode}"])[-1]
         raise DatasetError(f"{model}: unreadable COLMAP model (pycolmap: {why[:200]})")
@@ -81,8 +87,9 @@ def read_colmap(model: Path) -> dict:
     if "error" in doc:
         rig = re.search(r"Rig with ID (\d+) does not exist", doc["error"])
         if rig and not any((model / f"rigs{s}").is_file() for s in MODEL_FILES):  # a trivial rig per camera
-            raise DatasetError(f"{model}: an image refers to camera {rig[1]}, which the model's cameras file does "
-                               "not define")
+            raise DatasetError(
+                f"{model}: an image refers to camera {rig[1]}, which the model's cameras file does not define"
+            )
         raise DatasetError(f"{model}: unreadable COLMAP model ({doc['error'][:200]})")
     return doc
 
@@ -93,9 +100,11 @@ def pinhole(cam: dict, where: str) -> tuple[float, float, float, float]:
     distortion = {k: v for k, v in values.items() if k not in ("f", "fx", "fy", "cx", "cy")}
     if model not in PINHOLE | RADIAL or any(v != 0 for v in distortion.values()):
         terms = ", ".join(f"{k}={v:g}" for k, v in distortion.items())
-        raise DatasetError(f"{where}: camera model {model}{f' with distortion {terms}' if model in RADIAL else ''} "
-                           "is not supported; expected PINHOLE or SIMPLE_PINHOLE (undistort the photos: colmap "
-                           f"image_undistorter), or {', '.join(sorted(RADIAL))} with zero distortion")
+        raise DatasetError(
+            f"{where}: camera model {model}{f' with distortion {terms}' if model in RADIAL else ''} "
+            "is not supported; expected PINHOLE or SIMPLE_PINHOLE (undistort the photos: colmap "
+            f"image_undistorter), or {', '.join(sorted(RADIAL))} with zero distortion"
+        )
     fx, fy = (values["f"], values["f"]) if "f" in values else (values["fx"], values["fy"])
     return fx, fy, values["cx"], values["cy"]
 
@@ -123,8 +132,10 @@ def load_colmap(root: Path, model: Path, images: str = "images") -> Dataset:
         try:
             q = array(im["q"], f"{where}: rotation quaternion", (4,))
             if np.linalg.norm(q) < MIN_QUATERNION_NORM:
-                raise InvalidValue(f"{where}: rotation quaternion is zero ({' '.join(f'{v:g}' for v in q)}); "
-                                   "expected a unit quaternion")
+                raise InvalidValue(
+                    f"{where}: rotation quaternion is zero ({' '.join(f'{v:g}' for v in q)}); "
+                    "expected a unit quaternion"
+                )
             R, t = array(im["R"], f"{where}: R", (3, 3)), array(im["t"], f"{where}: translation", (3,))
             intrinsics = pinhole(cam, f"{where}: camera {im['camera']}")
             fx, fy, cx, cy = (real(v, f"{where}: intrinsics") for v in intrinsics)
@@ -137,4 +148,3 @@ def load_colmap(root: Path, model: Path, images: str = "images") -> Dataset:
             raise DatasetError(f"{where}: camera {im['camera']}: {why}") from None
         views.append(View(im["name"], fit_to_photo(camera, path), path, split[im["name"]]))
     return Dataset(root, "colmap", tuple(views))
-

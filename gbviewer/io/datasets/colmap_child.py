@@ -16,17 +16,30 @@ def describe(folder: str) -> dict:
 
     rec = pycolmap.Reconstruction()
     rec.read(folder)
-    cameras = {str(cid): {"model": c.model_name, "width": c.width, "height": c.height,
-                          "params": [float(p) for p in c.params],
-                          "names": [n.strip() for n in c.params_info.split(",")]}
-               for cid, c in rec.cameras.items()}
+    cameras = {
+        str(cid): {
+            "model": c.model_name,
+            "width": c.width,
+            "height": c.height,
+            "params": [float(p) for p in c.params],
+            "names": [n.strip() for n in c.params_info.split(",")],
+        }
+        for cid, c in rec.cameras.items()
+    }
     images = []
     for image in rec.images.values():
         if not image.has_pose:
             continue
         pose = image.cam_from_world()
-        images.append({"name": image.name, "camera": str(image.camera_id), "q": [float(v) for v in pose.rotation.quat],
-                       "R": pose.rotation.matrix().tolist(), "t": pose.translation.tolist()})
+        images.append(
+            {
+                "name": image.name,
+                "camera": str(image.camera_id),
+                "q": [float(v) for v in pose.rotation.quat],
+                "R": pose.rotation.matrix().tolist(),
+                "t": pose.translation.tolist(),
+            }
+        )
     return {"cameras": cameras, "images": images}
 
 

@@ -10,9 +10,20 @@ from typing import Iterator
 from ...core.errors import DatasetError
 
 PARAMS = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL": 5, "OPENCV": 8, "FULL_OPENCV": 12}
-OTHER_MODELS = {"SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE", "OPENCV_FISHEYE", "FOV", "THIN_PRISM_FISHEYE",
-                "RAD_TAN_THIN_PRISM_FISHEYE", "SIMPLE_DIVISION", "DIVISION", "SIMPLE_FISHEYE", "FISHEYE", "EUCM",
-                "EQUIRECTANGULAR"}  # COLMAP's other models: read, then refused by name (`colmap.pinhole`)
+OTHER_MODELS = {
+    "SIMPLE_RADIAL_FISHEYE",
+    "RADIAL_FISHEYE",
+    "OPENCV_FISHEYE",
+    "FOV",
+    "THIN_PRISM_FISHEYE",
+    "RAD_TAN_THIN_PRISM_FISHEYE",
+    "SIMPLE_DIVISION",
+    "DIVISION",
+    "SIMPLE_FISHEYE",
+    "FISHEYE",
+    "EUCM",
+    "EQUIRECTANGULAR",
+}  # COLMAP's other models: read, then refused by name (`colmap.pinhole`)
 IMAGE_FIELDS = 9  # IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID, then NAME
 
 
@@ -67,12 +78,14 @@ def check_images(path: Path) -> None:
         if points_next:
             points_next = False
             if len(tokens) % 3:
-                raise DatasetError(f"{where}: expected X Y POINT3D_ID triples (the image line's points), got "
-                                   f"{len(tokens)} items")
+                raise DatasetError(
+                    f"{where}: expected X Y POINT3D_ID triples (the image line's points), got {len(tokens)} items"
+                )
         elif tokens and not tokens[0].startswith("#"):
             if len(tokens) < IMAGE_FIELDS + 1:
-                raise DatasetError(f"{where}: expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, got "
-                                   f"{len(tokens)} items")
+                raise DatasetError(
+                    f"{where}: expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, got {len(tokens)} items"
+                )
             _numbers(tokens[:IMAGE_FIELDS], where, ints=(0, 8))
             points_next = True
 

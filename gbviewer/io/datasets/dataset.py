@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from ...model.camera import Camera
 from ...core.errors import DatasetError
+from ...model.camera import Camera
 
 SPLITS = ("train", "test", "all")
 BOTH = "train+test"  # the split of a view in both

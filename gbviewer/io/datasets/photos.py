@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from ...model.camera import MAX_IMAGE_SIZE, Camera
 from ...core.errors import DatasetError
+from ...model.camera import MAX_IMAGE_SIZE, Camera
 
 PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".JPG", ".JPEG", ".PNG")  # tried for a name given without one
 PIXELS_PER_BYTE = 4096  # beyond what PNG (deflate: < 1032:1) or JPEG can compress: a header claiming more is false
@@ -39,8 +39,10 @@ def photo_format(path: Path) -> str:
     for name, magic in MAGIC.items():
         if head.startswith(magic):
             return name
-    raise DatasetError(f"{path}: not a PNG or JPEG photo (it starts with {head.hex(' ') or 'nothing'}); a dataset's "
-                       "photos must be PNG or JPEG")
+    raise DatasetError(
+        f"{path}: not a PNG or JPEG photo (it starts with {head.hex(' ') or 'nothing'}); a dataset's "
+        "photos must be PNG or JPEG"
+    )
 
 
 def _open(path: Path) -> Image.Image:
@@ -84,11 +86,15 @@ def photo_size(path: Path) -> tuple[int, int]:
     if w * h > PIXELS_PER_BYTE * size:
         raise DatasetError(f"{path}: header claims {w}x{h} pixels in {size} bytes; not a real photo")
     if decoded > MAX_DECODED_BYTES:
-        raise DatasetError(f"{path}: a {w}x{h} photo decodes to {decoded / (1 << 30):.3g} GiB; at most "
-                           f"{MAX_DECODED_BYTES >> 30} GiB per photo")
+        raise DatasetError(
+            f"{path}: a {w}x{h} photo decodes to {decoded / (1 << 30):.3g} GiB; at most "
+            f"{MAX_DECODED_BYTES >> 30} GiB per photo"
+        )
     if scans > MAX_JPEG_SCANS:
-        raise DatasetError(f"{path}: JPEG of {scans} scans; at most {MAX_JPEG_SCANS} (a progressive JPEG of many "
-                           "scans takes minutes to decode)")
+        raise DatasetError(
+            f"{path}: JPEG of {scans} scans; at most {MAX_JPEG_SCANS} (a progressive JPEG of many "
+            "scans takes minutes to decode)"
+        )
     return w, h
 
 
@@ -102,9 +108,11 @@ def read_photo(path: Path) -> np.ndarray:
     try:
         with _open(path) as im:
             if im.mode not in PHOTO_RANGES and im.mode not in ("P", "PA"):
-                raise DatasetError(f"{path}: a {im.mode} photo; expected greyscale, RGB or RGBA (8 or 16 bits, a "
-                                   "palette or 1 bit)" + (": convert it to RGB (its colours depend on a print "
-                                                           "profile)" if im.mode == "CMYK" else ""))
+                raise DatasetError(
+                    f"{path}: a {im.mode} photo; expected greyscale, RGB or RGBA (8 or 16 bits, a "
+                    "palette or 1 bit)"
+                    + (": convert it to RGB (its colours depend on a print profile)" if im.mode == "CMYK" else "")
+                )
             return _pixels(im)
     except DECODE_ERRORS as exc:
         raise DatasetError(f"{path}: cannot decode the photo ({exc})") from None
@@ -161,16 +169,19 @@ def is_photo_file(path: Path) -> bool:
         if exc.errno != errno.ENAMETOOLONG:
             raise DatasetError(f"{path}: cannot look for this photo ({exc.strerror or exc})") from None
         longest = max(len(p.encode(errors="surrogateescape")) for p in path.parts)
-        raise DatasetError(f"{str(path)[:100]}...: photo name of {longest} bytes; a file name holds at most "
-                           f"{os.pathconf(path.anchor or '.', 'PC_NAME_MAX')} bytes") from None
+        raise DatasetError(
+            f"{str(path)[:100]}...: photo name of {longest} bytes; a file name holds at most "
+            f"{os.pathconf(path.anchor or '.', 'PC_NAME_MAX')} bytes"
+        ) from None
 
 
 def missing_photos(paths: list[Path], where: str) -> None:
     """One line naming how many of `paths` do not exist and the first of them."""
     missing = [p for p in paths if not is_photo_file(p)]
     if missing:
-        raise DatasetError(f"{where}: {len(missing)} of the {len(paths)} photos it names are missing "
-                           f"(first: {missing[0]})")
+        raise DatasetError(
+            f"{where}: {len(missing)} of the {len(paths)} photos it names are missing (first: {missing[0]})"
+        )
 
 
 def fit_to_photo(camera: Camera, path: Path, larger: bool = False) -> Camera:
@@ -183,9 +194,11 @@ def fit_to_photo(camera: Camera, path: Path, larger: bool = False) -> Camera:
         return camera
     if _divided((camera.width, camera.height), (w, h)) or (larger and _divided((w, h), (camera.width, camera.height))):
         return camera.with_size(w, h)
-    raise DatasetError(f"{path}: photo is {w}x{h} but its camera {camera.name!r} is {camera.width}x{camera.height}; "
-                       f"expected that size or an integer {'down- or upscale' if larger else 'downscale'} of it "
-                       "(images_2, images_4, ...)")
+    raise DatasetError(
+        f"{path}: photo is {w}x{h} but its camera {camera.name!r} is {camera.width}x{camera.height}; "
+        f"expected that size or an integer {'down- or upscale' if larger else 'downscale'} of it "
+        "(images_2, images_4, ...)"
+    )
 
 
 def _divided(big: tuple[int, int], small: tuple[int, int]) -> bool:

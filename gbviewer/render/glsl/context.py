@@ -47,14 +47,17 @@ def _new_context():
 def create_context():
     """A new headless context, current in the calling thread; raises BackendUnavailable with the reason."""
     if sys.platform == "darwin":
-        raise BackendUnavailable(f"glsl backend unavailable: macOS has no OpenGL {GL_REQUIRED // 100}."
-                                 f"{GL_REQUIRED % 100 // 10} (its OpenGL ends at 4.1, without compute shaders): "
-                                 "use the cpu backend")
+        raise BackendUnavailable(
+            f"glsl backend unavailable: macOS has no OpenGL {GL_REQUIRED // 100}."
+            f"{GL_REQUIRED % 100 // 10} (its OpenGL ends at 4.1, without compute shaders): "
+            "use the cpu backend"
+        )
     try:
         import moderngl  # noqa: F401
     except ImportError as exc:
-        raise BackendUnavailable(f"glsl backend unavailable: moderngl is not installed ({exc}); "
-                                 "pip install 'moderngl>=5.8'") from None
+        raise BackendUnavailable(
+            f"glsl backend unavailable: moderngl is not installed ({exc}); pip install 'moderngl>=5.8'"
+        ) from None
     try:
         return _new_context()
     except Exception as exc:  # noqa: BLE001 - glcontext raises plain Exceptions with the driver's message

@@ -125,8 +125,9 @@ class Gpu:
             try:
                 prog = self.ctx.compute_shader(src)
             except Exception as exc:  # noqa: BLE001 - moderngl raises its Error with the compiler log
-                raise BackendUnavailable(f"glsl backend: {name} does not compile on "
-                                         f"{self.ctx.info.get('GL_RENDERER', '?')}: {exc}") from None
+                raise BackendUnavailable(
+                    f"glsl backend: {name} does not compile on {self.ctx.info.get('GL_RENDERER', '?')}: {exc}"
+                ) from None
             cache[key] = prog
         return prog
 

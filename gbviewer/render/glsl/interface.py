@@ -58,8 +58,12 @@ def totals_init() -> np.ndarray:
 
 def oit_uniform(sigma: float, weight_background: float, et_grade: float, depth_correct: bool) -> tuple:
     """The `oit` vec4 uniform (OitParams) with its components at their OIT_* positions."""
-    values = {"OIT_SIGMA": sigma, "OIT_WEIGHT_BACKGROUND": weight_background, "OIT_ET_GRADE": et_grade,
-              "OIT_DEPTH_CORRECT": float(depth_correct)}
+    values = {
+        "OIT_SIGMA": sigma,
+        "OIT_WEIGHT_BACKGROUND": weight_background,
+        "OIT_ET_GRADE": et_grade,
+        "OIT_DEPTH_CORRECT": float(depth_correct),
+    }
     out = [0.0] * 4
     for name, value in values.items():
         out[DEFINITIONS[name]] = float(value)
@@ -68,8 +72,12 @@ def oit_uniform(sigma: float, weight_background: float, et_grade: float, depth_c
 
 def view_filter_uniform(dilation: float, pre_dilation: float, cull_lambda: float, compensate: bool) -> tuple:
     """preprocess.comp's `view_filter` vec4 uniform (OitParams' scalar filter) at its OIT_* - 4 positions."""
-    values = {"OIT_DILATION": dilation, "OIT_PRE_DILATION": pre_dilation, "OIT_CULL_LAMBDA": cull_lambda,
-              "OIT_COMPENSATE": float(compensate)}
+    values = {
+        "OIT_DILATION": dilation,
+        "OIT_PRE_DILATION": pre_dilation,
+        "OIT_CULL_LAMBDA": cull_lambda,
+        "OIT_COMPENSATE": float(compensate),
+    }
     out = [0.0] * 4
     for name, value in values.items():
         out[DEFINITIONS[name] - 4] = float(value)

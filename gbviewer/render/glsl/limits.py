@@ -71,14 +71,17 @@ def plan_sorted(supersample: int, longest: int, limit: int | None, queue: int) -
     if limit is not None:
         per_tile = longest * (queue + 80) + 2 * queue + 160 if queue > 0 else (longest + 1) * (longest + 2) + 8
         if tiles * per_tile + 2 * tiles + 1024 > limit:
-            raise RenderError(f"glsl backend: a per-pixel sorted frame with tile lists of {longest} splats needs up to "
-                              f"{tiles * per_tile} loop iterations per pixel, more than this driver allows ({limit}); "
-                              "use the cpu or cuda backend")
+            raise RenderError(
+                f"glsl backend: a per-pixel sorted frame with tile lists of {longest} splats needs up to "
+                f"{tiles * per_tile} loop iterations per pixel, more than this driver allows ({limit}); "
+                "use the cpu or cuda backend"
+            )
     return [(0, tiles, 0, FULL)]
 
 
-def blend_plan(gpu: Gpu, supersample: int, ranges, num_tiles: int, pairs: int, queue: int | None = None
-               ) -> tuple[list, int]:
+def blend_plan(
+    gpu: Gpu, supersample: int, ranges, num_tiles: int, pairs: int, queue: int | None = None
+) -> tuple[list, int]:
     """The blend dispatches for this frame and its longest tile list (0 when the context has no cap: not measured);
     `queue`: a per-pixel sorted mode's queue length (0: the exact order; None: not such a mode)."""
     limit = loop_limit(gpu.ctx)

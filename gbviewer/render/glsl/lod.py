@@ -51,5 +51,6 @@ def upload_tree(gpu: Gpu, tree: Hierarchy, scene: Scene) -> None:
 
 def upload_rows(gpu: Gpu, cut: CutRows) -> None:
     """The cut's rows and weights as lod_rows.glsl's uvec2 (row, weight bits) into "lod_rows"."""
-    gpu.upload("lod_rows", np.column_stack((cut.rows.view(np.uint32), cut.weights.view(np.uint32))),
-               "level-of-detail rows")
+    gpu.upload(
+        "lod_rows", np.column_stack((cut.rows.view(np.uint32), cut.weights.view(np.uint32))), "level-of-detail rows"
+    )

@@ -48,18 +48,18 @@ import time
 
 import numpy as np
 
-from . import interface as gi
-from ...model.camera import Camera
 from ...core.cancel import Cancellable
-from ...model.cells import Cells
 from ...core.errors import BackendUnavailable, RenderError
+from ...model.camera import Camera
+from ...model.cells import Cells
 from ...model.scene import Scene
 from ..control import Progress, RenderControl
+from ..modes import PER_PIXEL_SORTED
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
 from ..presets import FILTERED_MODES
-from ..modes import PER_PIXEL_SORTED
 from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
 from ..view_filter import DILATION_3DGS
+from . import interface as gi
 from .binning import bin_duplex, bin_splats, read_totals
 from .context import check_context, standalone_context
 from .gpu import WG, Gpu
@@ -133,7 +133,8 @@ class GlslRenderer(Renderer):
 
     @classmethod
     def describe(cls) -> str:
-        """GL renderer and version of the headless context (for benchmark reports: gbviewer.bench.machine_description)."""
+        """GL renderer and version of the headless context (for benchmark reports:
+        gbviewer.bench.machine_description)."""
         try:
             ctx = standalone_context()
         except BackendUnavailable as exc:
@@ -171,8 +172,9 @@ class GlslRenderer(Renderer):
         weight_sh = scene.oit.view_weight_sh if scene.oit is not None else None
         self._weight_k = 0 if weight_sh is None else int(weight_sh.shape[1])
         if self._weight_k:
-            self.gpu.upload("weight_sh", np.ascontiguousarray(weight_sh, np.float32),
-                            f"scene {scene.source}: view-weight SH")
+            self.gpu.upload(
+                "weight_sh", np.ascontiguousarray(weight_sh, np.float32), f"scene {scene.source}: view-weight SH"
+            )
         self._n = n
         self._sh_k = int(scene.sh.shape[1])
         self._cells = None
@@ -199,8 +201,15 @@ class GlslRenderer(Renderer):
         if prep.tree is not None:
             self._lod.sync(self.gpu, prep, settings.threads, flag)
 
-    def render(self, camera: Camera, settings: RenderSettings, *, cancel: Cancellable | None = None,
-               on_progress: Progress | None = None, partial: np.ndarray | None = None) -> Frame:
+    def render(
+        self,
+        camera: Camera,
+        settings: RenderSettings,
+        *,
+        cancel: Cancellable | None = None,
+        on_progress: Progress | None = None,
+        partial: np.ndarray | None = None,
+    ) -> Frame:
         control = RenderControl(cancel, on_progress, partial)
         control.check_partial(camera.width, camera.height)
         want_window = settings.debug == "window" and settings.mode == Mode.GAUSSIAN_BLENDING
@@ -212,13 +221,19 @@ class GlslRenderer(Renderer):
         if want_window:
             window = self.gpu.buffers["window"].read(size=W * H * gi.WINDOW_WORDS * WORD)
             debug["window"] = np.frombuffer(window, np.float32).reshape(H, W, gi.WINDOW_WORDS).copy()
-        stats = frame_stats(prep, camera, settings, self.name, t0, evaluations=int(evals.sum(dtype=np.int64)),
-                            **counts)
+        stats = frame_stats(prep, camera, settings, self.name, t0, evaluations=int(evals.sum(dtype=np.int64)), **counts)
         control.fill_partial(img[:, :, :3])
         return Frame(img[:, :, :3].copy(), img[:, :, 3].copy(), stats, debug)
 
-    def render_to_texture(self, texture, camera: Camera, settings: RenderSettings, *,
-                          cancel: Cancellable | None = None, on_progress: Progress | None = None) -> FrameStats:
+    def render_to_texture(
+        self,
+        texture,
+        camera: Camera,
+        settings: RenderSettings,
+        *,
+        cancel: Cancellable | None = None,
+        on_progress: Progress | None = None,
+    ) -> FrameStats:
         """Render into `texture` (a moderngl RGBA32F texture of the camera's size, of this renderer's context or
         one sharing objects with it): rgb and alpha as `render`'s Frame, row 0 the image's top. The pixels stay on
         the GPU; what comes back is the stats (the evaluation counts summed per 1024 pixels on the GPU, 1/1024 of
@@ -229,8 +244,9 @@ class GlslRenderer(Renderer):
         evaluations = self._sum_evals(camera.width * camera.height)
         return frame_stats(prep, camera, settings, self.name, t0, evaluations=evaluations, **counts)
 
-    def _run(self, camera: Camera, settings: RenderSettings, control: RenderControl, want_window: bool,
-             target=None) -> tuple[Prepared, dict, float]:
+    def _run(
+        self, camera: Camera, settings: RenderSettings, control: RenderControl, want_window: bool, target=None
+    ) -> tuple[Prepared, dict, float]:
         """One frame into `target` (None: the renderer's own output texture); its inputs, counts and start time."""
         self._make_current()
         t0 = time.perf_counter()
@@ -245,8 +261,14 @@ class GlslRenderer(Renderer):
         place: the evals buffer holds prefix sums afterwards), added up here in 64 bits."""
         blocks = -(-n // SCAN_BLOCK)
         sums = self.gpu.ensure("evals_sums", blocks * WORD, "evaluation sums")
-        self.gpu.run("scan_blocks.comp", blocks, (self.gpu.buffers["evals"], sums, self.gpu.buffers["totals"]), n=n,
-                     num_blocks=blocks, total_slot=gi.NO_TOTAL)
+        self.gpu.run(
+            "scan_blocks.comp",
+            blocks,
+            (self.gpu.buffers["evals"], sums, self.gpu.buffers["totals"]),
+            n=n,
+            num_blocks=blocks,
+            total_slot=gi.NO_TOTAL,
+        )
         return int(np.frombuffer(sums.read(size=blocks * WORD), np.uint32).sum(dtype=np.int64))
 
     def __del__(self) -> None:
@@ -265,8 +287,15 @@ class GlslRenderer(Renderer):
 
     # ---- pipeline ------------------------------------------------------------------------------------------------
 
-    def _frame(self, camera: Camera, settings: RenderSettings, prep: Prepared, want_window: bool,
-               control: RenderControl, target=None) -> dict:
+    def _frame(
+        self,
+        camera: Camera,
+        settings: RenderSettings,
+        prep: Prepared,
+        want_window: bool,
+        control: RenderControl,
+        target=None,
+    ) -> dict:
         """Preprocess, bin and sort, blend into `target` or the output texture (`control` checked between the stages
         and the blend's dispatches); returns the stage times and counts."""
         gpu = self.gpu
@@ -295,22 +324,51 @@ class GlslRenderer(Renderer):
         totals.write(gi.totals_init().tobytes())
 
         cam_uniforms = dict(
-            grid=(gx, gy), cam_R=np.ascontiguousarray(camera.R, f32).reshape(9),
+            grid=(gx, gy),
+            cam_R=np.ascontiguousarray(camera.R, f32).reshape(9),
             cam_t=np.ascontiguousarray(camera.t, f32),
-            cam_f=(float(f32(camera.fx) * Nf), float(f32(camera.fy) * Nf), float(f32(camera.cx) * Nf),
-                   float(f32(camera.cy) * Nf)),
-            cam_size=(RW, RH), cam_near=float(f32(camera.near)), cam_projection=camera.projection_code,
+            cam_f=(
+                float(f32(camera.fx) * Nf),
+                float(f32(camera.fy) * Nf),
+                float(f32(camera.cx) * Nf),
+                float(f32(camera.cy) * Nf),
+            ),
+            cam_size=(RW, RH),
+            cam_near=float(f32(camera.near)),
+            cam_projection=camera.projection_code,
         )
         weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", VEC4)
         lod = dict(lod_in_place=int(in_place))
         rows = gpu.buffers["lod_rows"] if in_place else gpu.ensure("dummy", VEC4)
         stage, stage_reused, stage_ms = self._stage(settings, n, sh_deg, cam_uniforms, rows, lod)
         rays = gpu.ensure("rays", n * gi.RAY_VEC4S * VEC4, "ray data") if mode in PER_PIXEL_SORTED else None
-        gpu.run("preprocess.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], splats, rects, flags, totals,
-                weight, stage, self._planes(settings, n), rays or gpu.ensure("dummy", VEC4), rows), num_splats=n,
-                sh_k=self._sh_k, sh_deg=sh_deg, mode=int(mode), weight_k=self._weight_k, oit=oit,
-                view_filter=gi.view_filter_uniform(*settings.view_filter.native()[:4]),
-                view_rules=gi.view_rules_uniform(*settings.view_filter.native()[4:]), **lod, **cam_uniforms)
+        gpu.run(
+            "preprocess.comp",
+            -(-n // WG),
+            (
+                gpu.buffers["geom"],
+                gpu.buffers["sh"],
+                splats,
+                rects,
+                flags,
+                totals,
+                weight,
+                stage,
+                self._planes(settings, n),
+                rays or gpu.ensure("dummy", VEC4),
+                rows,
+            ),
+            num_splats=n,
+            sh_k=self._sh_k,
+            sh_deg=sh_deg,
+            mode=int(mode),
+            weight_k=self._weight_k,
+            oit=oit,
+            view_filter=gi.view_filter_uniform(*settings.view_filter.native()[:4]),
+            view_rules=gi.view_rules_uniform(*settings.view_filter.native()[4:]),
+            **lod,
+            **cam_uniforms,
+        )
         scan(gpu, flags, n, total_slot=gi.TOTAL_VISIBLE)
         gpu.run("compact.comp", -(-n // WG), (splats, rects, flags, totals, dkeys[0], dvals[0]), num_splats=n)
         t = read_totals(gpu)
@@ -322,12 +380,14 @@ class GlslRenderer(Renderer):
             raise RenderError(f"glsl backend: more than 2^32 tile-splat pairs at {RW}x{RH}; render a smaller image")
         counts = {}
         if mode == Mode.DUPLEX:
-            tvals, ranges, sort_length, pairs, counts["cells_visible"] = bin_duplex(gpu, prep.cells, cam_uniforms,
-                                                                                    num_tiles)
+            tvals, ranges, sort_length, pairs, counts["cells_visible"] = bin_duplex(
+                gpu, prep.cells, cam_uniforms, num_tiles
+            )
         else:
             resort = mode == Mode.STOPTHEPOP and settings.queue > 0
-            tvals, ranges = bin_splats(gpu, mode, visible, pairs, dmin, dmax, num_tiles, gx,
-                                       cam_uniforms["cam_f"] if resort else None)
+            tvals, ranges = bin_splats(
+                gpu, mode, visible, pairs, dmin, dmax, num_tiles, gx, cam_uniforms["cam_f"] if resort else None
+            )
             sort_length = 0 if mode == Mode.WSR else pairs
         queue = (0 if mode == Mode.EVAL3D else settings.queue) if mode in PER_PIXEL_SORTED else None
         plan, longest = blend_plan(gpu, N, ranges, num_tiles, pairs, queue)
@@ -336,9 +396,19 @@ class GlslRenderer(Renderer):
         control.check()
         self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, rays, oit, control, target)
         self.ctx.finish()
-        return dict(preprocess_ms=(t1 - t0) * 1e3, sort_ms=(t2 - t1) * 1e3, blend_ms=(time.perf_counter() - t2) * 1e3,
-                    visible=visible, sort_length=sort_length, pairs=pairs, stage_reused=stage_reused,
-                    stage_ms=stage_ms, lod_splats=n if in_place else None, fast=settings.precision == "fast", **counts)
+        return dict(
+            preprocess_ms=(t1 - t0) * 1e3,
+            sort_ms=(t2 - t1) * 1e3,
+            blend_ms=(time.perf_counter() - t2) * 1e3,
+            visible=visible,
+            sort_length=sort_length,
+            pairs=pairs,
+            stage_reused=stage_reused,
+            stage_ms=stage_ms,
+            lod_splats=n if in_place else None,
+            fast=settings.precision == "fast",
+            **counts,
+        )
 
     def _stage(self, settings: RenderSettings, n: int, sh_deg: int, cam_uniforms: dict, rows, lod: dict) -> tuple:
         """The `stage` buffer for this frame's camera (at its sampling grid), whether it was kept from an earlier
@@ -354,14 +424,30 @@ class GlslRenderer(Renderer):
         if settings.mode == Mode.EVAL3D:
             reach = 1e30  # eval3d: its footprint is the ray's: the stage keeps every splat in front of the plane
         camera_bytes = tuple(np.asarray(v).tobytes() for v in cam_uniforms.values())
-        key = (self._generation, self._lod.cut.generation if lod["lod_in_place"] else None, camera_bytes, sh_deg, reach,
-               rules)
+        key = (
+            self._generation,
+            self._lod.cut.generation if lod["lod_in_place"] else None,
+            camera_bytes,
+            sh_deg,
+            reach,
+            rules,
+        )
         if key == self._stage_key:
             return stage, True, 0.0
         self._stage_key = None
         t0 = time.perf_counter()
-        gpu.run("stage.comp", -(-n // WG), (gpu.buffers["geom"], gpu.buffers["sh"], stage, rows), num_splats=n,
-                sh_k=self._sh_k, sh_deg=sh_deg, reach=reach, rules=rules, **lod, **cam_uniforms)
+        gpu.run(
+            "stage.comp",
+            -(-n // WG),
+            (gpu.buffers["geom"], gpu.buffers["sh"], stage, rows),
+            num_splats=n,
+            sh_k=self._sh_k,
+            sh_deg=sh_deg,
+            reach=reach,
+            rules=rules,
+            **lod,
+            **cam_uniforms,
+        )
         self.ctx.finish()
         self._stage_key = key
         return stage, False, (time.perf_counter() - t0) * 1e3
@@ -373,8 +459,21 @@ class GlslRenderer(Renderer):
             return self.gpu.ensure("dummy", VEC4)
         return self.gpu.buffers["planes"] if n is None else self.gpu.ensure("planes", n * VEC4, "depth planes")
 
-    def _blend(self, camera: Camera, settings: RenderSettings, want_window: bool, plan, longest: int, splats, tvals,
-               ranges, rays, oit: tuple, control: RenderControl, target=None) -> None:
+    def _blend(
+        self,
+        camera: Camera,
+        settings: RenderSettings,
+        want_window: bool,
+        plan,
+        longest: int,
+        splats,
+        tvals,
+        ranges,
+        rays,
+        oit: tuple,
+        control: RenderControl,
+        target=None,
+    ) -> None:
         """blend.comp into `target` or the output texture, in the dispatches of `plan` (one unless the driver caps
         loops); `rays`: the per-pixel sorted modes' ray data (else None)."""
         gpu = self.gpu
@@ -390,21 +489,38 @@ class GlslRenderer(Renderer):
         state = gpu.ensure("blend_state", invocations * gi.BLEND_STATE_VEC4S * VEC4, "blend state")
         accum = gpu.ensure("blend_accum", invocations * gi.BLEND_ACCUM_VEC4S * VEC4, "blend sums")
         prog = gpu.program("blend.comp", **blend_defines(settings.mode, N, settings.precision))
-        gpu.set(prog, out_size=(W, H), supersample=N, grid=(gx, gy), background=tuple(settings.background),
-                  want_window=int(want_window), oit=oit, stochastic=(settings.seed, settings.frame),
-                  queue=settings.queue)
+        gpu.set(
+            prog,
+            out_size=(W, H),
+            supersample=N,
+            grid=(gx, gy),
+            background=tuple(settings.background),
+            want_window=int(want_window),
+            oit=oit,
+            stochastic=(settings.seed, settings.frame),
+            queue=settings.queue,
+        )
         cell_of = gpu.buffers["cell_of"] if settings.mode == Mode.DUPLEX else gpu.ensure("dummy", VEC4)
         planes = self._planes(settings)
-        for i, buf in enumerate((splats, tvals, ranges, evals, window, state, accum, cell_of, planes,
-                                 rays or gpu.ensure("dummy", VEC4))):
+        for i, buf in enumerate(
+            (splats, tvals, ranges, evals, window, state, accum, cell_of, planes, rays or gpu.ensure("dummy", VEC4))
+        ):
             buf.bind_to_storage_buffer(i)
         tex.bind_to_image(0, read=False, write=True)
         tiles = N * N
         for step, (sub0, sub1, c0, c1) in enumerate(plan):
             control.step(step, len(plan))
-            gpu.set(prog, subtile_begin=sub0, subtile_end=sub1, chunk_begin=c0, chunk_end=c1,
-                      load_state=int(c0 > 0), store_state=int(c1 < longest), load_accum=int(sub0 > 0),
-                      store_accum=int(sub1 < tiles))
+            gpu.set(
+                prog,
+                subtile_begin=sub0,
+                subtile_end=sub1,
+                chunk_begin=c0,
+                chunk_end=c1,
+                load_state=int(c0 > 0),
+                store_state=int(c1 < longest),
+                load_accum=int(sub0 > 0),
+                store_accum=int(sub1 < tiles),
+            )
             prog.run(bx, by, 1)
             self.ctx.memory_barrier()
         control.step(len(plan), len(plan))

@@ -18,8 +18,14 @@ def scan(gpu: Gpu, buf, n: int, total_slot: int = gi.NO_TOTAL, level: int = 0) -
         return
     blocks = -(-n // SCAN_BLOCK)
     sums = gpu.ensure(f"scan_sums{level}", blocks * gi.WORD_BYTES)
-    gpu.run("scan_blocks.comp", blocks, (buf, sums, gpu.ensure("totals", gi.TOTALS_BYTES)), n=n, num_blocks=blocks,
-            total_slot=total_slot)
+    gpu.run(
+        "scan_blocks.comp",
+        blocks,
+        (buf, sums, gpu.ensure("totals", gi.TOTALS_BYTES)),
+        n=n,
+        num_blocks=blocks,
+        total_slot=total_slot,
+    )
     if blocks > 1:
         scan(gpu, sums, blocks, total_slot, level + 1)
         gpu.run("scan_add.comp", blocks, (buf, sums), n=n, num_blocks=blocks)
@@ -36,8 +42,9 @@ def radix_sort(gpu: Gpu, keys, vals, keys_tmp, vals_tmp, n: int, bits: int):
         shift = p * RADIX_BITS
         gpu.run("radix_count.comp", blocks, (keys, counts), n=n, shift=shift, num_blocks=blocks)
         scan(gpu, counts, (1 << RADIX_BITS) * blocks)
-        gpu.run("radix_scatter.comp", blocks, (keys, vals, keys_tmp, vals_tmp, counts), n=n, shift=shift,
-                num_blocks=blocks)
+        gpu.run(
+            "radix_scatter.comp", blocks, (keys, vals, keys_tmp, vals_tmp, counts), n=n, shift=shift, num_blocks=blocks
+        )
         keys, vals, keys_tmp, vals_tmp = keys_tmp, vals_tmp, keys, vals
     return keys, vals
 
@@ -51,12 +58,19 @@ def pairs_by_tile(gpu: Gpu, order, rects, counts, n: int, pairs: int, gx: int, n
     """One (tile, item) pair for every tile each of the n ordered items touches (`rects`), stably radix-sorted by
     tile, so every tile keeps the items' order; writes each tile's [start, end) into `ranges` and returns the pairs'
     tiles and items in tile order."""
-    keys0, vals0, keys1, vals1 = (gpu.ensure(f"tile_{k}{i}", pairs * gi.WORD_BYTES, what) for i in (0, 1)
-                                  for k in ("keys", "vals"))
+    keys0, vals0, keys1, vals1 = (
+        gpu.ensure(f"tile_{k}{i}", pairs * gi.WORD_BYTES, what) for i in (0, 1) for k in ("keys", "vals")
+    )
     gpu.run("gather_counts.comp", -(-n // WG), (order, rects, counts), n=n)
     scan(gpu, counts, n)
-    gpu.run("duplicate.comp", -(-pairs // WG), (order, rects, counts, keys0, vals0), num_pairs=pairs, num_splats=n,
-            grid_x=gx)
+    gpu.run(
+        "duplicate.comp",
+        -(-pairs // WG),
+        (order, rects, counts, keys0, vals0),
+        num_pairs=pairs,
+        num_splats=n,
+        grid_x=gx,
+    )
     tkeys, tvals = radix_sort(gpu, keys0, vals0, keys1, vals1, pairs, (num_tiles - 1).bit_length())
     gpu.run("tile_ranges.comp", -(-pairs // WG), (tkeys, ranges), n=pairs)
     return tkeys, tvals
