@@ -1,6 +1,7 @@
 """The house style, enforced: ruff (lint and format, `[tool.ruff]` in pyproject.toml) on every Python file and
 clang-format (`.clang-format`) on the C++, CUDA and GLSL sources. A file either would change fails here, naming it;
-`ruff check --fix . && ruff format . && clang-format -i FILES` fixes it (docs/architecture.md#style)."""
+`ruff check --fix . && ruff format . && clang-format -i FILES` fixes it (docs/architecture.md#style). And every source
+file reads in one sitting: at most MAX_LINES lines."""
 
 from __future__ import annotations
 
@@ -14,6 +15,8 @@ REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 NATIVE = ("*.h", "*.cpp", "*.cu")
 GLSL = ("*.glsl", "*.comp")
+MAX_LINES = 400
+SOURCE_DIRS = ("gbviewer", "native", "shaders", "tests", "bench", "tools", "scripts")
 
 
 def tool(name: str) -> str:
@@ -48,8 +51,11 @@ def test_clang_format():
     files = c_sources()
     assert len(files) > 50, files  # the sources were found
     # GLSL is formatted as C++ (clang-format has no GLSL mode); the shaders share the headers' style
-    bad = [str(f.relative_to(REPO)) for f in files
-           if run(tool("clang-format"), "--dry-run", "-Werror", f"--assume-filename={f.stem}.cpp", str(f)).returncode]
+    bad = [
+        str(f.relative_to(REPO))
+        for f in files
+        if run(tool("clang-format"), "--dry-run", "-Werror", f"--assume-filename={f.stem}.cpp", str(f)).returncode
+    ]
     assert not bad, f"clang-format would change: {', '.join(bad)}"
 
 
@@ -68,3 +74,10 @@ def test_clang_format_catches_a_violation(tmp_path):
     bad.write_text("int f( int a ){return a;}\n")
     out = subprocess.run([tool("clang-format"), "--dry-run", "-Werror", str(bad)], cwd=tmp_path, capture_output=True)
     assert out.returncode != 0
+
+
+def test_every_source_file_reads_in_one_sitting():
+    files = [p for d in SOURCE_DIRS for pat in ("*.py", *NATIVE, *GLSL, "*.sh") for p in (REPO / d).rglob(pat)]
+    assert len(files) > 300, len(files)  # the sources were found
+    long = {str(p.relative_to(REPO)): n for p in files if (n := len(p.read_text().splitlines())) > MAX_LINES}
+    assert not long, f"over {MAX_LINES} lines: {long}"
