@@ -303,7 +303,8 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
         job.oit = fr.oit;
         job.frame_key = fr.frame_key;
         job.fast = fr.fast;
-        job.group_rows = fr.fast && fr.mode == GAUSSIAN_BLENDING && blend_tile != blend_tile_scalar ? FAST_GB_GROUP_ROWS : 1;
+        job.group_rows =
+            fr.fast && fr.mode == GAUSSIAN_BLENDING && blend_tile != blend_tile_scalar ? FAST_GB_GROUP_ROWS : 1;
         job.planes = fr.buf->planes.empty() ? nullptr : fr.buf->planes.data();
         job.queue = fr.queue;
         for (int c = 0; c < 3; ++c) job.bg[c] = fr.bg[c];

@@ -77,7 +77,7 @@ struct TileJob {
     const DepthPlane* planes;  // stochastic_popfree: per splat (Splat2D::id), else null
     const RaySplat* rays;  // eval3d, stopthepop: one per list entry (ray3d.h), else null
     bool fast = false;     // gaussian_blending at the fast precision (blend_gaussian's Fast)
-    int group_rows = 1;    // pixel rows per lane group and per band (blend_tile: a vector path's fast gaussian_blending)
+    int group_rows = 1;    // pixel rows per lane group and per band (FAST_GB_GROUP_ROWS: a vector path, fast GB)
 };
 
 // Pixel rows per lane group of a vector path's fast gaussian_blending: a square group of 16 lanes (4 x 4) meets a
