@@ -84,25 +84,13 @@ struct Box {
     float xa, xb, ya, yb;
 };
 
-// Fast gaussian_blending stops a lane once its window mass T is below fast_stop_mass(job): blending on until
-// T < T_STOP would add sum w_i c_i and take sum w_i <= T from the mass, which changes rgb = C + T bg by
-// sum w_i (c_i - bg) and alpha = 1 - T by sum w_i, so by at most T max(1, |c_i - bg|) over the tile's list:
-// FAST_STOP_ERROR, half the fast precision's error bound of 1/1024 (tests/render/test_gb_fast.py).
-constexpr float FAST_STOP_ERROR = 1.0f / 2048.0f;
-inline float fast_stop_mass(const TileJob& job) {
-    float d = 1.0f;
-    for (int i = 0; i < job.n; ++i)
-        for (int c = 0; c < 3; ++c) d = std::max(d, fabsf(job.list[i].color[c] - job.bg[c]));
-    return std::max(FAST_STOP_ERROR / d, T_STOP);  // std::max keeps d against a NaN colour
-}
-
 // gaussian_blending on a group of two halves (AVX2's 2 x 8 lanes), each with its own window box: a splat whose bounds
 // miss one half's box cannot pass the cut-off in any of its lanes, so the other half takes it alone at half the work.
 // Bit-identical to stepping both halves: a step changes only lanes that pass the cut-off, and everything it decides
 // for the whole group (which branches run, the series length) depends on those lanes only.
 template <class L, bool Fast>
 void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries, WindowState<L>& win,
-                          Out<L::N>& out, float stop_mass) {
+                          Out<L::N>& out) {
     using H = typename HalfOf<L>::type;
     Box box[2];
     bool alive[2] = {H::any(live.a), H::any(live.b)};
@@ -131,7 +119,6 @@ void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries
             if (H::any(took)) window_box<H>(half, box[k]);
             stop = k ? typename L::M{H::none(), s} : typename L::M{s, H::none()};
         }
-        if constexpr (Fast) stop = L::or_(stop, L::and_(live, win.T < L::set(stop_mass)));
         const uint32_t bits = L::bits(stop);
         if (!bits) continue;
         for (int k = 0; k < L::N; ++k)
@@ -143,19 +130,17 @@ void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries
     }
 }
 
-// stop_mass: a lane stops once its window mass is below it (T_STOP, or Fast's fast_stop_mass).
 template <class L, class Tr, bool Fast>
-void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out, float stop_mass) {
+void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out) {
     const typename L::F one = L::set(1.0f), zero = L::set(0.0f);
     WindowState<L> win = {one, g.px, g.py, one, one, {zero, zero, zero}};
     if constexpr (!std::is_void_v<typename HalfOf<L>::type> && std::is_same_v<Tr, NoTrace>) {
-        walk_gaussian_halves<L, Fast>(job, g.live, g.entries, win, out, stop_mass);
+        walk_gaussian_halves<L, Fast>(job, g.live, g.entries, win, out);
     } else {
         window_box<L>(win, g);
         walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
             typename L::M took = L::none();
-            typename L::M stop = blend_gaussian<L, Tr, Fast>(s, live, win, &took);
-            if constexpr (Fast) stop = L::or_(stop, L::and_(live, win.T < L::set(stop_mass)));
+            const typename L::M stop = blend_gaussian<L, Tr, Fast>(s, live, win, &took);
             if (L::any(took)) window_box<L>(win, g);
             GBV_TRACE(Tr, after(win));
             return stop;
@@ -255,7 +240,6 @@ void blend_tile(const TileJob& job) {
     for (int k = 0; k < N; ++k) offsets[k] = (float)(k % cols) + 0.5f, row_offsets[k] = (float)(k / cols) + 0.5f;
     const typename L::F lane_offset = L::load(offsets), row_offset = L::load(row_offsets);
     tile::Out<N> out = {};  // S stays 0 where the mode has no weight sum
-    const float stop_mass = job.mode == GAUSSIAN_BLENDING && job.fast ? tile::fast_stop_mass(job) : T_STOP;
     for (int y = job.y0; y < job.y1; y += rows) {
         for (int x = job.x0; x < job.x1; x += cols) {
             tile::Group<L> g;
@@ -281,9 +265,9 @@ void blend_tile(const TileJob& job) {
             switch (job.mode) {
                 case GAUSSIAN_BLENDING:
                     if (job.fast)
-                        tile::group_gaussian<L, Tr, true>(job, g, out, stop_mass);
+                        tile::group_gaussian<L, Tr, true>(job, g, out);
                     else
-                        tile::group_gaussian<L, Tr, false>(job, g, out, stop_mass);
+                        tile::group_gaussian<L, Tr, false>(job, g, out);
                     break;
                 case WSR: tile::group_wsr<L, Tr>(job, g, out); break;
                 case DUPLEX: tile::group_duplex<L, Tr>(job, g, out); break;
