@@ -139,6 +139,9 @@ def target_header(in_use: str | None = None) -> list[str]:
     ]
 
 
+FAST_GB_HEADING = "## Fast Gaussian Blending against scalar on the CPU"
+
+
 def kept_section(path: Path, heading: str) -> list[str]:
     """The lines of the section `heading` of the markdown file `path` (up to the next "## "), or none."""
     lines = path.read_text().splitlines() if path.exists() else []
@@ -328,6 +331,7 @@ def main() -> int:
     lines += ["## Loading speed", "", "```", (load.stdout or load.stderr).strip(), "```", ""]
     lines += ["## Viewer frame pacing", ""] + pacing_lines + [""]
     lines += kept_section(HERE / "RESULTS.md", "## Scale")  # bench/scale.py's, run on its own (minutes per scene)
+    lines += kept_section(HERE / "RESULTS.md", FAST_GB_HEADING)  # measured by hand: CPU-time ratios, alternating runs
     lines += ["## Plots", ""] + [f"![{p.stem}](results/{p.name})" for p in plots] + [""]
     times["total"] = time.perf_counter() - started
     lines += ["## Run time", "", ", ".join(f"{k} {v / 60:.1f} min" for k, v in times.items()), ""]

@@ -10,14 +10,16 @@
 
 namespace gbv {
 
-// Fills `out` for the n entries' bounds of a tile whose rows are y0 .. y0 + rows - 1; false (and `out` unspecified)
-// when the bands would not save work: a short list, or entries reaching most rows of the tile on average.
-inline bool build_bands(const SplatBounds* b, int n, int y0, int rows, float margin, Bands& out) {
-    if (n < 64 || rows < 2 || rows > TILE) return false;
+// Fills `out` for the n entries' bounds of a tile whose pixel rows are y0 .. y0 + pixel_rows - 1, one band per `step`
+// rows (a lane group's rows, TileJob::group_rows); false (and `out` unspecified) when the bands would not save work: a
+// short list, or entries reaching most bands of the tile on average.
+inline bool build_bands(const SplatBounds* b, int n, int y0, int pixel_rows, int step, float margin, Bands& out) {
+    const int rows = (pixel_rows + step - 1) / step;  // bands
+    if (n < 64 || rows < 2 || pixel_rows > TILE) return false;
     for (int r = 0; r < rows; ++r) {
-        const float yc = (float)(y0 + r) + 0.5f;  // as blend_tile's group box
+        const float yc = (float)(y0 + r * step) + 0.5f;  // as blend_tile's group box: its first and last rows' centres
         out.lo[r] = yc - margin;
-        out.hi[r] = yc + margin;
+        out.hi[r] = yc + (float)(std::min(step, pixel_rows - r * step) - 1) + margin;
     }
     out.first.resize(n);
     out.last.resize(n);
@@ -27,12 +29,12 @@ inline bool build_bands(const SplatBounds* b, int n, int y0, int rows, float mar
         const float y0 = b[i].y0, y1 = b[i].y1;
         int f = 0, l = rows - 1;  // a NaN bound meets every band (as `outside`, whose tests a NaN fails)
         if (y0 == y0 && y1 == y1) {
-            // f: the first row with hi >= y0; l: the last with lo <= y1 (both monotone in r): from a guess within
-            // one row (a truncation), then exact against the bands themselves
-            f = (int)std::min(std::max(y0 - out.hi[0], 0.0f), rows_f);
+            // f: the first band with hi >= y0; l: the last with lo <= y1 (both monotone in r): from a guess within
+            // one band (a truncation), then exact against the bands themselves
+            f = (int)std::min(std::max((y0 - out.hi[0]) / (float)step, 0.0f), rows_f);
             while (f > 0 && out.hi[f - 1] >= y0) --f;
             while (f < rows && out.hi[f] < y0) ++f;
-            l = (int)std::min(std::max(y1 - out.lo[0], -1.0f), rows_f - 1.0f);
+            l = (int)std::min(std::max((y1 - out.lo[0]) / (float)step, -1.0f), rows_f - 1.0f);
             while (l < rows - 1 && out.lo[l + 1] <= y1) ++l;
             while (l >= 0 && out.lo[l] > y1) --l;
         }

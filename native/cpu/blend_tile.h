@@ -231,31 +231,35 @@ void group_duplex(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
 }  // namespace tile
 
 // Blend every pixel of the job's tile and write its finished colour and alpha (resolve_pixel), evals and
-// (gaussian_blending) the final window size.
+// (gaussian_blending) the final window size. A lane group is one row segment of L::N pixels, or a block of
+// job.group_rows rows of L::N / group_rows pixels where the job asks for it (a lane per pixel either way).
 template <class L, class Tr = NoTrace>
 void blend_tile(const TileJob& job) {
     constexpr int N = L::N;
-    float offsets[N];
-    for (int k = 0; k < N; ++k) offsets[k] = (float)k + 0.5f;
-    const typename L::F lane_offset = L::load(offsets);
+    const int rows = N % job.group_rows == 0 ? job.group_rows : 1, cols = N / rows;
+    float offsets[N], row_offsets[N];
+    for (int k = 0; k < N; ++k) offsets[k] = (float)(k % cols) + 0.5f, row_offsets[k] = (float)(k / cols) + 0.5f;
+    const typename L::F lane_offset = L::load(offsets), row_offset = L::load(row_offsets);
     tile::Out<N> out = {};  // S stays 0 where the mode has no weight sum
-    for (int y = job.y0; y < job.y1; ++y) {
-        for (int x = job.x0; x < job.x1; x += N) {
+    for (int y = job.y0; y < job.y1; y += rows) {
+        for (int x = job.x0; x < job.x1; x += cols) {
             tile::Group<L> g;
             g.x = x;
             g.y = y;
-            g.count = job.x1 - x < N ? job.x1 - x : N;
+            g.count = job.x1 - x < cols ? job.x1 - x : cols;  // pixels per row
             g.px = L::set((float)x) + lane_offset;  // x + k + 0.5 exactly, as one pixel computes it
-            g.py = L::set((float)y + 0.5f);
-            g.live = L::first_n(g.count);
+            g.py = L::set((float)y) + row_offset;
+            g.live = rows == 1 ? L::first_n(g.count)
+                               : L::and_(g.px < L::set((float)job.x1), g.py < L::set((float)job.y1));
             g.xa = (float)x + 0.5f;
             g.xb = (float)(x + g.count - 1) + 0.5f;
-            g.ya = g.yb = (float)y + 0.5f;
+            g.ya = (float)y + 0.5f;
+            g.yb = (float)(std::min(y + rows, job.y1) - 1) + 0.5f;
             g.entries = {nullptr, 0, 0.0f, 0.0f};
             if constexpr (std::is_same_v<Tr, NoTrace>) {  // a trace records every entry's test: the whole list
                 if (job.bands) {
                     const Bands& b = *job.bands;
-                    const int r = y - job.y0;
+                    const int r = (y - job.y0) / job.group_rows;
                     g.entries = {b.idx.data() + b.start[r], (int)(b.start[r + 1] - b.start[r]), b.lo[r], b.hi[r]};
                 }
             }
@@ -276,8 +280,9 @@ void blend_tile(const TileJob& job) {
                     break;
                 default: tile::group_alpha<L, Tr>(job, g, out); break;
             }
-            for (int k = 0; k < g.count; ++k) {
-                const size_t p = (size_t)(y - job.y0) * job.width + (x - job.x0) + k;
+            for (int k = 0; k < N; ++k) {
+                if (k % cols >= g.count || y + k / cols >= job.y1) continue;
+                const size_t p = (size_t)(y + k / cols - job.y0) * job.width + (x - job.x0) + k % cols;
                 const PixelSums sums = {{out.C[0][k], out.C[1][k], out.C[2][k]}, out.T[k], out.S[k]};
                 const float total =
                     resolve_pixel(job.mode, sums, job.oit.weight_background, job.bg, job.rgb + p * 3, job.alpha + p);

@@ -139,7 +139,7 @@ void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTile
     const float margin =
         f.mode == GAUSSIAN_BLENDING ? testing::gaussian_band_margin.load(std::memory_order_relaxed) : 0.0f;
     const bool banded = testing::row_bands.load(std::memory_order_relaxed) &&
-                        build_bands(job.bounds, job.n, job.y0, job.y1 - job.y0, margin, bands);
+                        build_bands(job.bounds, job.n, job.y0, job.y1 - job.y0, job.group_rows, margin, bands);
     job.bands = banded ? &bands : nullptr;
     Image& img = *f.img;
     const size_t origin = (size_t)(job.y0 - reg.y0) * (reg.x1 - reg.x0) + (job.x0 - reg.x0);
@@ -312,6 +312,8 @@ void blend_frames(const std::vector<BlendFrame>& frames, BlendTileFn blend_tile,
         job.oit = fr.oit;
         job.frame_key = fr.frame_key;
         job.fast = fr.fast;
+        job.group_rows =
+            fr.fast && fr.mode == GAUSSIAN_BLENDING && blend_tile != blend_tile_scalar ? FAST_GB_GROUP_ROWS : 1;
         job.planes = fr.buf->planes.empty() ? nullptr : fr.buf->planes.data();
         job.queue = fr.queue;
         for (int c = 0; c < 3; ++c) job.bg[c] = fr.bg[c];

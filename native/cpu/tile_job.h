@@ -83,7 +83,12 @@ struct TileJob {
     const DepthPlane* planes;  // stochastic_popfree: per splat (Splat2D::id), else null
     const RaySplat* rays;  // eval3d, stopthepop: one per list entry (ray3d.h), else null
     bool fast = false;     // gaussian_blending at the fast precision (blend_gaussian's Fast)
+    int group_rows = 1;    // pixel rows per lane group and per band (FAST_GB_GROUP_ROWS: a vector path, fast GB)
 };
+
+// Pixel rows per lane group of a vector path's fast gaussian_blending: a square group of 16 lanes (4 x 4) meets a
+// small splat in more of its lanes, and fewer groups meet it, than one row of 16 pixels does.
+constexpr int FAST_GB_GROUP_ROWS = 4;
 
 using BlendTileFn = void (*)(const TileJob&);
 void blend_tile_scalar(const TileJob& job);  // the scalar path's (blend_scalar.cpp)

@@ -1,6 +1,7 @@
 """Row bands (native/cpu/blend_bands.h): a lane group walks only the tile-list entries whose pixel box meets its row's
-band, until a gaussian_blending window leaves the band and the group walks the rest of the whole list. Exact: the same
-pixels, alpha, evaluation counts and final windows as every group walking the whole list, on every SIMD path."""
+band, until a gaussian_blending window leaves the band and the group walks the rest of the whole list (fast
+gaussian_blending on a vector path: one band per block of rows, its lane groups' rows). Exact: the same pixels, alpha,
+evaluation counts and final windows as every group walking the whole list, on every SIMD path."""
 
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ def _zoomed_out_scene(seed):
 
 
 def _debug(mode):
-    return "window" if mode == "gaussian_blending" else "none"  # evaluation counts: always
+    return "window" if mode.startswith("gaussian_blending") else "none"  # evaluation counts: always
 
 
 def _whole_lists(path, scene, cam, mode, supersample):
@@ -38,13 +39,13 @@ def _whole_lists(path, scene, cam, mode, supersample):
 
 
 @pytest.mark.parametrize("path", ALL_PATHS)
-@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("mode", MODES + ("gaussian_blending+fast",))
 @pytest.mark.parametrize("make_scene", [_zoomed_out_scene, _small_opaque_scene, _needle_scene])
 def test_row_bands_change_no_pixel(path, mode, make_scene):
     scene, cam = make_scene(7)
     # gaussian_blending: the default band; one just wider than the group box's start, which windows leave as they
     # move (the walk then goes on over the whole list from there); one narrower, left before the first entry
-    margins = (2.0, 1.02, 0.5) if mode == "gaussian_blending" else (2.0,)
+    margins = (2.0, 1.02, 0.5) if mode.startswith("gaussian_blending") else (2.0,)
     for c in (cam, cam.at_sampling_rate(1 / 2), cam.at_sampling_rate(1 / 4)):
         for supersample in (1, 2):
             ref = _whole_lists(path, scene, c, mode, supersample)

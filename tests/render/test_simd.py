@@ -354,7 +354,7 @@ def _small_opaque_scene(seed):
 
 
 @pytest.mark.parametrize("path", ALL_PATHS)
-@pytest.mark.parametrize("mode", ["scalar", "mip", "gaussian_blending", "wsr", "duplex"])
+@pytest.mark.parametrize("mode", ["scalar", "mip", "gaussian_blending", "gaussian_blending+fast", "wsr", "duplex"])
 @pytest.mark.parametrize("make_scene", [_needle_scene, _small_opaque_scene])
 def test_pixel_boxes_change_no_pixel(path, mode, make_scene):
     """Skipping lane groups outside a splat's pixel box (gaussian_blending: outside the group's window box) is exact:
@@ -392,7 +392,7 @@ def test_hostile_splats_no_nan(path):
     with pytest.warns(UserWarning):
         scene = gb.Scene.from_arrays(means, scales, quats, op, sh)
     cam = gb.Camera(80, 60, 70.0, 70.0, 40.0, 30.0, np.eye(3), np.zeros(3))
-    for mode in MODES:
+    for mode in MODES + ("gaussian_blending+fast",):
         vec = render(path, scene, cam, mode, supersample=2)
         assert np.isfinite(vec.rgb).all() and np.isfinite(vec.alpha).all(), mode
         if path != "scalar":
