@@ -54,9 +54,12 @@ def main() -> None:
                     t, evals[m] = cpu_ms(renderer, cam, settings[m])
                     ms[m].append(t)
             med = {m: float(np.median(ms[m])) for m in MODES}
-            print(f"{name} {path}: scalar {med['scalar']:.0f} ms, fast {med[MODES[1]]:.0f} ms, "
-                  f"ratio {med[MODES[1]] / med['scalar']:.2f}; evaluations {evals['scalar'] / 1e6:.1f}M, "
-                  f"{evals[MODES[1]] / 1e6:.1f}M", flush=True)
+            print(
+                f"{name} {path}: scalar {med['scalar']:.0f} ms, fast {med[MODES[1]]:.0f} ms, "
+                f"ratio {med[MODES[1]] / med['scalar']:.2f}; evaluations {evals['scalar'] / 1e6:.1f}M, "
+                f"{evals[MODES[1]] / 1e6:.1f}M",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

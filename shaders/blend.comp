@@ -124,7 +124,6 @@ bool list_fragment(uint first, int i, vec2 pix, out Fragment f) {
 
 vec3 list_color(uint first, Fragment f) { return list_splat(tile_vals[first + uint(f.entry)]).color; }
 
-
 // One pixel (rpix; its render tile's first pixel: corner) of a per-pixel sorted mode (CUDA's sorted_kernel):
 // stopthepop's hierarchy ending in a queue of K over the list in its tile order (the binning's), or (K = 0) the
 // exact order by selection. Returns its evals (hier_walk's; the exact order: n).
@@ -178,8 +177,8 @@ void main() {
         const int begin = min(n, chunk_begin), end = min(n, chunk_end);
         const vec2 pix = vec2(rpix) + 0.5;
 #if defined(BLEND_MODE_STOCHASTIC) || defined(BLEND_MODE_STOCHASTIC_POPFREE)
-        const uint key = stochastic_sample_key(stochastic_frame_key(stochastic.x, stochastic.y), uint(rpix.x),
-                                               uint(rpix.y));
+        const uint key =
+            stochastic_sample_key(stochastic_frame_key(stochastic.x, stochastic.y), uint(rpix.x), uint(rpix.y));
 #endif
 #if defined(BLEND_MODE_GAUSSIAN_BLENDING)
         TransmittanceWindow win = TransmittanceWindow(1.0, pix, vec2(1.0, 1.0));

@@ -43,8 +43,8 @@ void main() {
     flags[c] = 0u;
     cell_rects[c] = ivec4(0);
     if (count == 0u) return;
-    const CameraParams cam = make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y,
-                                         cam_near, cam_projection);
+    const CameraParams cam =
+        make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y, cam_near, cam_projection);
     const CellIn in_ = CellIn(cell_geom[CELL_GEOM_VEC4S * c].xyz, cell_geom[CELL_GEOM_VEC4S * c + 1u].xyz,
                               cell_geom[CELL_GEOM_VEC4S * c + 2u]);
     Cell2D cell;

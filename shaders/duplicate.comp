@@ -21,8 +21,10 @@ void main() {
     uint lo = 0u, hi = num_splats;  // offsets[lo] <= k < offsets[hi] (offsets[num_splats] = num_pairs)
     while (hi - lo > 1u) {
         const uint mid = (lo + hi) >> 1;
-        if (offsets[mid] <= k) lo = mid;
-        else hi = mid;
+        if (offsets[mid] <= k)
+            lo = mid;
+        else
+            hi = mid;
     }
     const uint s = vals[lo];
     const ivec4 r = rects[s];

@@ -5,7 +5,7 @@
 
 layout(local_size_x = 256) in;
 layout(std430, binding = 0) readonly buffer PairCells { uint pair_cells[]; };  // cell of each tile-sorted pair
-layout(std430, binding = 1) readonly buffer CellOut { vec4 cell_out[]; };   // .w: visible member count
+layout(std430, binding = 1) readonly buffer CellOut { vec4 cell_out[]; };  // .w: visible member count
 layout(std430, binding = 2) readonly buffer Offsets { int cell_offsets[]; };
 layout(std430, binding = 3) readonly buffer Vis { uint vis[]; };
 layout(std430, binding = 4) buffer Counts { uint counts[]; };

@@ -38,4 +38,3 @@ Splat2D unpack_splat(vec4 p0, vec4 p1, vec4 p2, vec4 p3) {
     s.id = -1;  // blend.comp sets the splat's index
     return s;
 }
-

@@ -24,7 +24,7 @@ layout(std430, binding = 9) writeonly buffer Rays { vec4 rays[]; };  // eval3d, 
 #include "lod_rows.glsl"
 
 uniform uint num_splats;
-uniform int sh_k;    // SH coefficients per channel stored in the scene
+uniform int sh_k;  // SH coefficients per channel stored in the scene
 uniform int sh_deg;  // degree evaluated
 uniform int mode;
 uniform ivec2 grid;
@@ -35,9 +35,9 @@ uniform ivec2 cam_size;
 uniform float cam_near;
 uniform int cam_projection;  // PERSPECTIVE or ORTHOGRAPHIC
 uniform int weight_k;  // view-weight SH coefficients per splat, 0: none (v = 1)
-uniform vec4 oit;      // OitParams (wsr, duplex): components OIT_* (interface.glsl)
+uniform vec4 oit;  // OitParams (wsr, duplex): components OIT_* (interface.glsl)
 uniform vec4 view_filter;  // OitParams' scalar filter: components OIT_* - 4 (interface.glsl)
-uniform vec3 view_rules;   // OitParams' preset rules: components OIT_* - 8 (interface.glsl)
+uniform vec3 view_rules;  // OitParams' preset rules: components OIT_* - 8 (interface.glsl)
 
 float load_sh(uint splat, int coeff, int channel) {
     return sh_data[splat_row(splat) * uint(3 * sh_k) + uint(coeff * 3 + channel)];
@@ -48,20 +48,20 @@ float load_weight_sh(uint splat, int coeff) { return weight_sh[splat * uint(weig
 void main() {
     const uint i = group_index() * 256u + gl_LocalInvocationID.x;
     if (i >= num_splats) return;
-    const CameraParams cam = make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y,
-                                         cam_near, cam_projection);
+    const CameraParams cam =
+        make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y, cam_near, cam_projection);
     const uint row = splat_row(i);
     const vec4 g0 = geom[GEOM_VEC4S * row], g1 = geom[GEOM_VEC4S * row + 1u], g2 = geom[GEOM_VEC4S * row + 2u];
     precise const float opacity = g0.w * splat_weight(i);  // in float32 as the gathered cut's (lod gather)
     const SplatIn in_ = SplatIn(g0.xyz, g1.xyz, g2, opacity, i, g1.w, weight_k > 0, sh_degree_for_coeffs(weight_k), -1);
-    const OitParams params = OitParams(oit[OIT_SIGMA], oit[OIT_WEIGHT_BACKGROUND], oit[OIT_ET_GRADE],
-                                        int(oit[OIT_DEPTH_CORRECT]), view_filter[OIT_DILATION - 4],
-                                        view_filter[OIT_PRE_DILATION - 4], view_filter[OIT_CULL_LAMBDA - 4],
-                                        int(view_filter[OIT_COMPENSATE - 4]), int(view_rules[OIT_DC_CLAMP - 8]),
-                                        view_rules[OIT_SUPPORT - 8], int(view_rules[OIT_SORT_RADIAL - 8]));
+    const OitParams params =
+        OitParams(oit[OIT_SIGMA], oit[OIT_WEIGHT_BACKGROUND], oit[OIT_ET_GRADE], int(oit[OIT_DEPTH_CORRECT]),
+                  view_filter[OIT_DILATION - 4], view_filter[OIT_PRE_DILATION - 4], view_filter[OIT_CULL_LAMBDA - 4],
+                  int(view_filter[OIT_COMPENSATE - 4]), int(view_rules[OIT_DC_CLAMP - 8]), view_rules[OIT_SUPPORT - 8],
+                  int(view_rules[OIT_SORT_RADIAL - 8]));
     bool kept;
-    const StageSplat st = unpack_stage(stage[STAGE_VEC4S * i], stage[STAGE_VEC4S * i + 1u],
-                                       stage[STAGE_VEC4S * i + 2u], kept);
+    const StageSplat st =
+        unpack_stage(stage[STAGE_VEC4S * i], stage[STAGE_VEC4S * i + 1u], stage[STAGE_VEC4S * i + 2u], kept);
     Splat2D s;
     TileRect r;
     bool valid = kept && (mode == EVAL3D || finish_splat(in_, st, sh_deg, cam, mode, params, grid.x, grid.y, s, r));

@@ -259,12 +259,12 @@ vec4 popfree_plane(CameraParams cam, vec3 pv, float cov3[6]) {
     float V[9];
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) V[i * 3 + j] = dot3_rn(RS[i], rows[j]);
-    const vec3 adj0 = vec3(minor_rn(V[4], V[8], V[5], V[7]), minor_rn(V[2], V[7], V[1], V[8]),
-                           minor_rn(V[1], V[5], V[2], V[4]));
-    const vec3 adj1 = vec3(minor_rn(V[5], V[6], V[3], V[8]), minor_rn(V[0], V[8], V[2], V[6]),
-                           minor_rn(V[2], V[3], V[0], V[5]));
-    const vec3 adj2 = vec3(minor_rn(V[3], V[7], V[4], V[6]), minor_rn(V[1], V[6], V[0], V[7]),
-                           minor_rn(V[0], V[4], V[1], V[3]));
+    const vec3 adj0 =
+        vec3(minor_rn(V[4], V[8], V[5], V[7]), minor_rn(V[2], V[7], V[1], V[8]), minor_rn(V[1], V[5], V[2], V[4]));
+    const vec3 adj1 =
+        vec3(minor_rn(V[5], V[6], V[3], V[8]), minor_rn(V[0], V[8], V[2], V[6]), minor_rn(V[2], V[3], V[0], V[5]));
+    const vec3 adj2 =
+        vec3(minor_rn(V[3], V[7], V[4], V[6]), minor_rn(V[1], V[6], V[0], V[7]), minor_rn(V[0], V[4], V[1], V[3]));
     const bool ortho = cam.projection == ORTHOGRAPHIC;
     const vec3 dir = ortho ? vec3(0.0, 0.0, 1.0) : pv;
     const vec3 n = vec3(dot3_rn(adj0, dir), dot3_rn(adj1, dir), dot3_rn(adj2, dir));

@@ -39,8 +39,7 @@ void project_covariance(CameraParams cam, float cov3[6], vec3 pv, precise out ve
     const float S[9] = float[](cov3[0], cov3[1], cov3[2], cov3[1], cov3[3], cov3[4], cov3[2], cov3[4], cov3[5]);
     precise float TS[6];
     for (int r = 0; r < 2; ++r)
-        for (int c = 0; c < 3; ++c)
-            TS[r * 3 + c] = T[r * 3] * S[c] + T[r * 3 + 1] * S[3 + c] + T[r * 3 + 2] * S[6 + c];
+        for (int c = 0; c < 3; ++c) TS[r * 3 + c] = T[r * 3] * S[c] + T[r * 3 + 1] * S[3 + c] + T[r * 3 + 2] * S[6 + c];
     result[0] = TS[0] * T[0] + TS[1] * T[1] + TS[2] * T[2];
     result[1] = TS[0] * T[3] + TS[1] * T[4] + TS[2] * T[5];
     result[2] = TS[3] * T[3] + TS[4] * T[4] + TS[5] * T[5];
@@ -56,7 +55,7 @@ struct SplatIn {
     float filter_3d;  // 0 when the scene has none
     bool has_weight;  // the scene has view-weight SH (C++: weight_sh != null)
     int weight_deg;
-    int cell;         // the splat's cell (duplex), -1 when none
+    int cell;  // the splat's cell (duplex), -1 when none
 };
 
 // port of preprocess_stage.h: view_point

@@ -126,8 +126,8 @@ TileRect footprint_tiles(vec2 xy, int kind, double box[4], int gx, int gy) {
     if (kind == 2) return TileRect(0, 0, gx, gy);
     if (kind == 0) return TileRect(0, 0, 0, 0);
     precise double slack = 1e-6 * (abs(double(xy.x)) + abs(double(xy.y)));
-    const double p[4] = double[4](double(xy.x) - slack, double(xy.x) + slack, double(xy.y) - slack,
-                                  double(xy.y) + slack);
+    const double p[4] =
+        double[4](double(xy.x) - slack, double(xy.x) + slack, double(xy.y) - slack, double(xy.y) + slack);
     int r[4];  // x0, x1, y0, y1
     for (int k = 0; k < 4; ++k) {
         const double t = floor((p[k] + box[k] - 0.5) / double(TILE)) + double(k % 2);

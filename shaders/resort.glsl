@@ -41,9 +41,7 @@ void queue_pop(inout Fragment q[MAX_QUEUE], inout int n) {
 }
 
 // port of resort.h: fragment_before
-bool fragment_before(Fragment a, Fragment b) {
-    return a.depth < b.depth || (a.depth == b.depth && a.entry < b.entry);
-}
+bool fragment_before(Fragment a, Fragment b) { return a.depth < b.depth || (a.depth == b.depth && a.entry < b.entry); }
 
 // port of resort.h: blend_fragment
 bool blend_fragment(Fragment f, vec3 color, inout float T, inout vec3 C) {
@@ -117,7 +115,8 @@ void hier_arrive(uint first, int entry, int loaded, int K, HierPixel g, inout Hi
 
 // port of resort.h: hier_finish
 void hier_finish(uint first, inout HierState h, inout float T, inout vec3 C) {
-    for (int k = 0; k < h.qn && !h.done; ++k) h.done = blend_fragment(h.q[k], hier_splat(first, h.q[k].entry).color, T, C);
+    for (int k = 0; k < h.qn && !h.done; ++k)
+        h.done = blend_fragment(h.q[k], hier_splat(first, h.q[k].entry).color, T, C);
 }
 
 // port of resort.h: hier_group (what goes on goes to the pixel: hier_arrive, as hier_walk's emit)
@@ -138,8 +137,8 @@ void hier_group(uint first, int from, int count, int loaded, int K, HierPixel g,
 }
 
 // port of resort.h: hier_release
-void hier_release(uint first, int count, int loaded, int K, HierPixel g, inout HierState h, inout float T,
-                  inout vec3 C, inout int ev) {
+void hier_release(uint first, int count, int loaded, int K, HierPixel g, inout HierState h, inout float T, inout vec3 C,
+                  inout int ev) {
     for (int k = 0; k < count; k += HIER_GROUP)
         hier_group(first, k, min(count - k, HIER_GROUP), loaded, K, g, h, T, C, ev);
     queue_drop(h.tail, h.tn, count);
@@ -153,8 +152,7 @@ void hier_load(uint first, int i, HierPixel g, inout HierState h) {
 }
 
 // port of resort.h: hier_stream (emitting to the pixel)
-void hier_stream(uint first, int n, int K, HierPixel g, inout HierState h, inout float T, inout vec3 C,
-                 inout int ev) {
+void hier_stream(uint first, int n, int K, HierPixel g, inout HierState h, inout float T, inout vec3 C, inout int ev) {
     h.tn = 0;
     h.mn = -1;
     for (int base = 0; base < n && !h.done; base += HIER_LOAD) {

@@ -14,11 +14,11 @@ layout(std430, binding = 2) writeonly buffer Stage { vec4 stage[]; };
 #include "lod_rows.glsl"
 
 uniform uint num_splats;
-uniform int sh_k;    // SH coefficients per channel stored in the scene
+uniform int sh_k;  // SH coefficients per channel stored in the scene
 uniform int sh_deg;  // degree evaluated
 uniform ivec2 grid;
 uniform float reach;  // the largest diagonal a mode's 2D filter adds (stage_on_screen)
-uniform int rules;    // the presets' stage rules (stage_rules)
+uniform int rules;  // the presets' stage rules (stage_rules)
 uniform float cam_R[9];
 uniform float cam_t[3];
 uniform vec4 cam_f;  // fx, fy, cx, cy
@@ -35,8 +35,8 @@ float load_weight_sh(uint splat, int coeff) { return 0.0; }  // the finish's (vi
 void main() {
     const uint i = group_index() * 256u + gl_LocalInvocationID.x;
     if (i >= num_splats) return;
-    const CameraParams cam = make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y,
-                                         cam_near, cam_projection);
+    const CameraParams cam =
+        make_camera(cam_R, cam_t, cam_f.x, cam_f.y, cam_f.z, cam_f.w, cam_size.x, cam_size.y, cam_near, cam_projection);
     const uint row = splat_row(i);
     const vec4 g0 = geom[GEOM_VEC4S * row], g1 = geom[GEOM_VEC4S * row + 1u], g2 = geom[GEOM_VEC4S * row + 2u];
     precise const float opacity = g0.w * splat_weight(i);  // in float32 as the gathered cut's (lod gather)

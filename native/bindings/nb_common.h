@@ -43,8 +43,9 @@ inline int64_t check_scene(const char* where, const FArr& means, const FArr& sca
     if (n < 0 || means.shape(1) != 3 || scales.size() != (size_t)n * 3 || quats.size() != (size_t)n * 4 ||
         opacities.size() != (size_t)n || sh.ndim() != 3 || sh.shape(0) != (size_t)n || sh.shape(2) != 3 ||
         (filter_3d && filter_3d->size() != (size_t)n))
-        fail(where, "array shapes do not match (N,3) means/scales, (N,4) quats, (N,) opacities, (N,K,3) sh, "
-                    "(N,) filter_3d");
+        fail(where,
+             "array shapes do not match (N,3) means/scales, (N,4) quats, (N,) opacities, (N,K,3) sh, "
+             "(N,) filter_3d");
     if (sh.shape(1) < 1) fail(where, "sh must hold K >= 1 coefficients per splat (N,K,3), the DC term first");
     return n;
 }
@@ -93,8 +94,7 @@ inline RenderArgs parse_render_args(const char* where, const FArr& R, const FArr
             if (!std::isfinite(a.data()[i])) return false;
         return true;
     };
-    if (!all_finite(R) || !all_finite(t) || !all_finite(background))
-        fail(where, "R, t and background must be finite");
+    if (!all_finite(R) || !all_finite(t) || !all_finite(background)) fail(where, "R, t and background must be finite");
     const int N = supersample;
     const int64_t hi_w = (int64_t)width * N, hi_h = (int64_t)height * N;  // each < 2^34: the product fits
     if (width < 1 || height < 1 || hi_w * hi_h > INT32_MAX)
@@ -109,8 +109,7 @@ inline RenderArgs parse_render_args(const char* where, const FArr& R, const FArr
     }
     if (md == DUPLEX && !(std::isfinite(et_grade) && et_grade > 0)) fail(where, "et_grade must be finite and > 0");
     RenderArgs a;
-    a.cam = make_camera(R.data(), t.data(), fx * N, fy * N, cx * N, cy * N, width * N, height * N, near_plane,
-                        proj);
+    a.cam = make_camera(R.data(), t.data(), fx * N, fy * N, cx * N, cy * N, width * N, height * N, near_plane, proj);
     a.mode = md;
     a.supersample = supersample;
     a.width = width;
@@ -194,8 +193,9 @@ inline std::vector<int32_t> partition_cell_of(const char* where, const int32_t* 
         }
     }
     if (!ok)
-        fail(where, "cell_offsets / cell_members are not a partition of splats into cells (offsets from 0 to "
-                    "len(members), each splat in at most one cell)");
+        fail(where,
+             "cell_offsets / cell_members are not a partition of splats into cells (offsets from 0 to "
+             "len(members), each splat in at most one cell)");
     return cell_of;
 }
 

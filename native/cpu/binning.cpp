@@ -20,10 +20,10 @@ namespace gbv::cpu {
 // of the binning at 6 M splats). An empty rect marks a splat that is not valid (the finish writes one), so the gather
 // reads no valid[] besides.
 constexpr int BIN_THREADS = 8;  // bounds the counts buffer (ranges x tiles) on many-core machines
-constexpr int64_t AHEAD = 16;   // prefetch distance of the gather, in splats
+constexpr int64_t AHEAD = 16;  // prefetch distance of the gather, in splats
 
-void bin_splats(const std::vector<TileRect>& rects, const uint64_t* order,
-                int64_t count, int gx, std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids, std::vector<RankedRect>& ranked,
+void bin_splats(const std::vector<TileRect>& rects, const uint64_t* order, int64_t count, int gx,
+                std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids, std::vector<RankedRect>& ranked,
                 Stats& st, FrameRun& run) {
     const int num_tiles = (int)tile_start.size() - 1;
     auto t0 = Clock::now();

@@ -89,8 +89,7 @@ struct Box {
 // Bit-identical to stepping both halves: a step changes only lanes that pass the cut-off, and everything it decides
 // for the whole group (which branches run, the series length) depends on those lanes only.
 template <class L, bool Fast>
-void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries, WindowState<L>& win,
-                          Out<L::N>& out) {
+void walk_gaussian_halves(const TileJob& job, typename L::M live, Cursor entries, WindowState<L>& win, Out<L::N>& out) {
     using H = typename HalfOf<L>::type;
     Box box[2];
     bool alive[2] = {H::any(live.a), H::any(live.b)};
@@ -208,8 +207,8 @@ void group_sorted(const TileJob& job, const Group<L>& g, Out<L::N>& out) {
     AlphaState<Lanes1> st = {1.0f, {0.0f, 0.0f, 0.0f}};
     const int queue = job.mode == EVAL3D ? 0 : job.queue;
     const int x = (int)floorf(L::reduce_max(g.px)), y = (int)floorf(L::reduce_max(g.py));
-    out.evals[0] = blend_sorted_pixel<Tr>(job.list, job.rays, job.n, job.mode, queue, job.tile_x0, job.tile_y0, x,
-                                          y, job.hier, st);
+    out.evals[0] = blend_sorted_pixel<Tr>(job.list, job.rays, job.n, job.mode, queue, job.tile_x0, job.tile_y0, x, y,
+                                          job.hier, st);
     for (int c = 0; c < 3; ++c) out.C[c][0] = st.C[c];
     out.T[0] = st.T;
 }
@@ -249,8 +248,8 @@ void blend_tile(const TileJob& job) {
             g.count = job.x1 - x < cols ? job.x1 - x : cols;  // pixels per row
             g.px = L::set((float)x) + lane_offset;  // x + k + 0.5 exactly, as one pixel computes it
             g.py = L::set((float)y) + row_offset;
-            g.live = rows == 1 ? L::first_n(g.count)
-                               : L::and_(g.px < L::set((float)job.x1), g.py < L::set((float)job.y1));
+            g.live =
+                rows == 1 ? L::first_n(g.count) : L::and_(g.px < L::set((float)job.x1), g.py < L::set((float)job.y1));
             g.xa = (float)x + 0.5f;
             g.xb = (float)(x + g.count - 1) + 0.5f;
             g.ya = (float)y + 0.5f;
@@ -270,15 +269,25 @@ void blend_tile(const TileJob& job) {
                     else
                         tile::group_gaussian<L, Tr, false>(job, g, out);
                     break;
-                case WSR: tile::group_wsr<L, Tr>(job, g, out); break;
-                case DUPLEX: tile::group_duplex<L, Tr>(job, g, out); break;
-                case STOCHASTIC: tile::group_stochastic<L, Tr>(job, g, out); break;
-                case STOCHASTIC_POPFREE: tile::group_popfree<L, Tr>(job, g, out); break;
+                case WSR:
+                    tile::group_wsr<L, Tr>(job, g, out);
+                    break;
+                case DUPLEX:
+                    tile::group_duplex<L, Tr>(job, g, out);
+                    break;
+                case STOCHASTIC:
+                    tile::group_stochastic<L, Tr>(job, g, out);
+                    break;
+                case STOCHASTIC_POPFREE:
+                    tile::group_popfree<L, Tr>(job, g, out);
+                    break;
                 case EVAL3D:
                 case STOPTHEPOP:
                     if constexpr (L::N == 1) tile::group_sorted<L, Tr>(job, g, out);
                     break;
-                default: tile::group_alpha<L, Tr>(job, g, out); break;
+                default:
+                    tile::group_alpha<L, Tr>(job, g, out);
+                    break;
             }
             for (int k = 0; k < N; ++k) {
                 if (k % cols >= g.count || y + k / cols >= job.y1) continue;

@@ -85,15 +85,15 @@ void splat_boxes(const std::vector<Splat2D>& splats, Mode mode, std::vector<Spla
 #pragma omp parallel for schedule(static)
     for (int64_t b = 0; b < (n + BOX_BLOCK - 1) / BOX_BLOCK; ++b) {
         if (run.cancelled()) continue;
-        for (int64_t i = b * BOX_BLOCK; i < std::min(n, (b + 1) * BOX_BLOCK); ++i) boxes[i] = splat_bounds(splats[i], mode);
+        for (int64_t i = b * BOX_BLOCK; i < std::min(n, (b + 1) * BOX_BLOCK); ++i)
+            boxes[i] = splat_bounds(splats[i], mode);
     }
 }
 
 // One tile of one frame (blend_frames): copy its splats (and their boxes) into contiguous per-thread buffers, then
 // the selected SIMD path blends its pixels in lane groups.
-void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTileFn blend_tile,
-                    Plane<Splat2D>& local, Plane<SplatBounds>& bounds, Plane<RaySplat>& rays, Bands& bands,
-                    float* partial) {
+void blend_one_tile(const BlendFrame& f, const TileJob& shared, int t, BlendTileFn blend_tile, Plane<Splat2D>& local,
+                    Plane<SplatBounds>& bounds, Plane<RaySplat>& rays, Bands& bands, float* partial) {
     const TileRegion& reg = f.reg;
     const int gx = reg.gx();
     const FrameBuffers& b = *f.buf;
@@ -220,9 +220,22 @@ void build_stage(const SceneView& sc, const StageKey& key, const simd::Path& pat
     stage.valid.resize(n);
     stage.depth.resize(n);
     const CameraParams& cam = key.cam;
-    StageJob job{sc.means,  sc.scales, sc.quats, sc.opacities, sc.sh, sc.filter_3d, sc.k, key.sh_deg, cam,
-                 key.reach, key.rules, (cam.width + TILE - 1) / TILE, (cam.height + TILE - 1) / TILE, stage.splats.data(),
-                 stage.valid.data(), stage.depth.data()};
+    StageJob job{sc.means,
+                 sc.scales,
+                 sc.quats,
+                 sc.opacities,
+                 sc.sh,
+                 sc.filter_3d,
+                 sc.k,
+                 key.sh_deg,
+                 cam,
+                 key.reach,
+                 key.rules,
+                 (cam.width + TILE - 1) / TILE,
+                 (cam.height + TILE - 1) / TILE,
+                 stage.splats.data(),
+                 stage.valid.data(),
+                 stage.depth.data()};
     job.n_scene = sc.n;
     if (cut) {
         const SceneView::Hierarchy& t = sc.tree;
@@ -256,10 +269,24 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
     valid.resize(n);
     buf.planes.resize(mode == STOCHASTIC_POPFREE ? n : 0);
     // in blocks of PREPROCESS_BLOCK splats through the SIMD path's finish (bit-identical on every path)
-    const FinishJob job{sc.means, sc.scales, sc.quats, sc.filter_3d, sc.weight_sh, sc.weight_k,
+    const FinishJob job{sc.means,
+                        sc.scales,
+                        sc.quats,
+                        sc.filter_3d,
+                        sc.weight_sh,
+                        sc.weight_k,
                         mode == DUPLEX ? sc.cell_of.data() : nullptr,
-                        stage.key.sh_deg, cam, mode, oit, full_gx, full_gy, stage.splats.data(), stage.valid.data(),
-                        splats.data(), rects.data(), valid.data(),
+                        stage.key.sh_deg,
+                        cam,
+                        mode,
+                        oit,
+                        full_gx,
+                        full_gy,
+                        stage.splats.data(),
+                        stage.valid.data(),
+                        splats.data(),
+                        rects.data(),
+                        valid.data(),
                         mode == STOCHASTIC_POPFREE ? buf.planes.data() : nullptr};
     if (mode != EVAL3D) for_blocks(n, run, [&](int64_t begin, int64_t end) { path.finish(job, begin, end); });
     if (per_pixel_sorted(mode) && !run.cancelled()) finish_rays(sc, stage, mode, buf, run);
@@ -289,8 +316,7 @@ void bin_frame(const SceneView& sc, Stage& stage, Mode mode, const OitParams& oi
             st.order_reused = true;
         }
         st.sort_length += (int64_t)stage.order.size();
-        bin_splats(rects, stage.order.data(), (int64_t)stage.order.size(), gx, tile_start, ids,
-                   buf.ranked, st, run);
+        bin_splats(rects, stage.order.data(), (int64_t)stage.order.size(), gx, tile_start, ids, buf.ranked, st, run);
     }
     if (run.cancelled()) return;
     if (ids.capacity() > 4 * ids.size() + (1u << 20)) ids.shrink_to_fit();  // after a much larger frame
@@ -353,9 +379,20 @@ PixelTrace trace_frame_pixel(const SceneView& sc, Stage& stage, Mode mode, const
     bin_frame(sc, stage, mode, oit, path, buf, st, run, TileRegion::whole(stage.key.cam));
     splat_boxes(buf.splats, mode, buf.boxes, run);
     const CameraParams& cam = stage.key.cam;
-    FrameLists lists = {buf.splats.data(), buf.boxes.data(), buf.tile_start.data(), buf.ids.data(),
-                        per_pixel_sorted(mode) ? buf.rays.data() : nullptr, cam.width, cam.height, mode, oit, queue,
-                        {bg[0], bg[1], bg[2]}, frame_key, buf.planes.empty() ? nullptr : buf.planes.data(), fast,
+    FrameLists lists = {buf.splats.data(),
+                        buf.boxes.data(),
+                        buf.tile_start.data(),
+                        buf.ids.data(),
+                        per_pixel_sorted(mode) ? buf.rays.data() : nullptr,
+                        cam.width,
+                        cam.height,
+                        mode,
+                        oit,
+                        queue,
+                        {bg[0], bg[1], bg[2]},
+                        frame_key,
+                        buf.planes.empty() ? nullptr : buf.planes.data(),
+                        fast,
                         &cam};
     FlushDenormals ftz;
     return trace_pixel(lists, x, y, N);

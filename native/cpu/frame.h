@@ -102,7 +102,7 @@ struct Stage {
     Plane<float> weights;
     std::vector<StageSplat> splats;
     std::vector<uint8_t> valid;  // in front of the near plane and on screen in some mode
-    Plane<uint32_t> depth;       // StageJob::depth: a valid splat's depth bits, else NO_DEPTH
+    Plane<uint32_t> depth;  // StageJob::depth: a valid splat's depth bits, else NO_DEPTH
     // One depth order of the stage's valid splats (depth_order's keys), computed by the first frame that bins in
     // depth order and shared by every later one: each bins in it, skipping the splats its finish culls (a superset's
     // order gives the same tile lists). Not ready after build_stage or a cancelled sort.
@@ -110,8 +110,7 @@ struct Stage {
     bool order_ready = false;
     size_t bytes() const {
         return splats.capacity() * sizeof(StageSplat) + valid.capacity() + depth.capacity() * sizeof(uint32_t) +
-               rows.capacity() * sizeof(int32_t) +
-               weights.capacity() * sizeof(float) +
+               rows.capacity() * sizeof(int32_t) + weights.capacity() * sizeof(float) +
                (order.capacity() + order_scratch.capacity()) * sizeof(uint64_t);
     }
 };
@@ -131,7 +130,7 @@ struct FrameBuffers {
     std::vector<SplatBounds> boxes;
     std::vector<RankedRect> ranked;  // bin_splats' scratch
     std::vector<DepthPlane> planes;  // stochastic_popfree: per splat (others: empty)
-    std::vector<RaySplat> rays;      // eval3d, stopthepop: each splat's ray data (finish_rays)
+    std::vector<RaySplat> rays;  // eval3d, stopthepop: each splat's ray data (finish_rays)
 };
 
 // A running call's cancel state and progress (Control) for its frames: the caller's flag or a report that asked to
@@ -139,7 +138,7 @@ struct FrameBuffers {
 // good: a flag that the caller clears again while the frames stop (to reuse it) cannot resume a stage that stopped
 // half-way.
 class FrameRun {
-public:
+  public:
     FrameRun(const Control& c, int frames) : c_(c), done_(frames), total_(frames, 0), last_(Clock::now()) {
         for (std::atomic<int64_t>& d : done_) d.store(0, std::memory_order_relaxed);
     }
@@ -168,7 +167,7 @@ public:
                 stop_.store(true, std::memory_order_relaxed);
     }
 
-private:
+  private:
     const Control& c_;
     std::atomic<bool> stop_{false};
     mutable std::atomic<bool> seen_{false};  // the caller's flag was seen set
@@ -181,7 +180,7 @@ private:
 // (entries read or written), a fraction of a millisecond, so that the check costs nothing in the loop.
 constexpr int64_t CANCEL_WORK = 1 << 15;
 class CancelPoll {
-public:
+  public:
     explicit CancelPoll(const FrameRun& run) : run_(run) {}
     bool operator()(int64_t work) {
         if ((left_ -= work) > 0) return false;
@@ -189,7 +188,7 @@ public:
         return run_.cancelled();
     }
 
-private:
+  private:
     const FrameRun& run_;
     int64_t left_ = CANCEL_WORK;
 };
@@ -205,9 +204,9 @@ void depth_order(const Plane<uint32_t>& depth, std::vector<uint64_t>& order, std
 // `order` is null (wsr); tile_start (num_tiles + 1 entries) gets each tile's first entry. duplex: the tiles' cells front to back,
 // each expanded to its visible splats in canonical order. Both stop early once cancelled (tile_start and ids then
 // unspecified).
-void bin_splats(const std::vector<TileRect>& rects, const uint64_t* order,
-                int64_t count, int gx, std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids,
-                std::vector<RankedRect>& ranked, Stats& st, FrameRun& run);
+void bin_splats(const std::vector<TileRect>& rects, const uint64_t* order, int64_t count, int gx,
+                std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids, std::vector<RankedRect>& ranked,
+                Stats& st, FrameRun& run);
 void bin_duplex(const SceneView& sc, const CameraParams& cam, const std::vector<Splat2D>& splats,
                 const std::vector<TileRect>& rects, const std::vector<uint8_t>& valid, int gx, int gy,
                 std::vector<int64_t>& tile_start, std::vector<uint32_t>& ids, Stats& st, FrameRun& run);
@@ -254,8 +253,8 @@ struct BlendFrame {
     int N;
     Stats* st;
     uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
-    TileRegion reg;      // what of the camera's image `img` holds (bin_frame's region)
-    bool fast;           // gaussian_blending's fast precision
+    TileRegion reg;  // what of the camera's image `img` holds (bin_frame's region)
+    bool fast;  // gaussian_blending's fast precision
 };
 // Blend every frame's tiles in one parallel loop, interleaved (each frame's tiles centre out, the frames' i-th tiles
 // together, in proportion to their tile counts); each frame's blend_ms is the loop's time.

@@ -16,9 +16,9 @@ inline uint16_t half_bits(float f) {
     if (ax >= 0x7f800000u)  // infinity, NaN
         return (uint16_t)(sign | 0x7c00u | (ax > 0x7f800000u ? 0x200u | ((ax >> 13) & 0x3ffu) : 0u));
     if (ax >= 0x477ff000u) return (uint16_t)(sign | 0x7c00u);  // 65520 and above round to infinity
-    if (ax >= 0x38800000u) {                                   // a normal float16 (2^-14 and above)
-        uint32_t r = ax - 0x38000000u;                           // exponent rebiased from 127 to 15
-        r += 0xfffu + ((r >> 13) & 1u);                          // round the 13 dropped bits to nearest even
+    if (ax >= 0x38800000u) {  // a normal float16 (2^-14 and above)
+        uint32_t r = ax - 0x38000000u;  // exponent rebiased from 127 to 15
+        r += 0xfffu + ((r >> 13) & 1u);  // round the 13 dropped bits to nearest even
         return (uint16_t)(sign | (r >> 13));
     }
     if (ax < 0x33000000u) return (uint16_t)sign;  // below 2^-25: zero (2^-25 itself ties to even, zero, below)

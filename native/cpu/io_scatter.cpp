@@ -43,7 +43,8 @@ inline void normalise(float* q) {
     auto norm = [q] { return std::sqrt((q[0] * q[0] + q[1] * q[1]) + (q[2] * q[2] + q[3] * q[3])); };
     float n = norm();
     if (std::isinf(n)) {
-        const float m = std::max(std::max(std::fabs(q[0]), std::fabs(q[1])), std::max(std::fabs(q[2]), std::fabs(q[3])));
+        const float m =
+            std::max(std::max(std::fabs(q[0]), std::fabs(q[1])), std::max(std::fabs(q[2]), std::fabs(q[3])));
         for (int i = 0; i < 4; ++i) q[i] /= m;
         n = norm();
     }
@@ -121,7 +122,8 @@ std::pair<float, float> scatter_inria(const Table& table, const Cols& cols, Out 
              (!filter_3d || filter_3d->size() == (size_t)rows) && (!weights || weights->size() == (size_t)rows * w),
          "output arrays must hold the table's rows");
     need(cols.shape(0) == (size_t)(REST + 3 * (k - 1) + (filter_3d ? 1 : 0) + w), "one column position per value");
-    for (size_t i = 0; i < cols.shape(0); ++i) need(cols(i) >= 0 && cols(i) < stride, "column position outside the table");
+    for (size_t i = 0; i < cols.shape(0); ++i)
+        need(cols(i) >= 0 && cols(i) < stride, "column position outside the table");
     const bool half = sh.dtype() == nb::dlpack::dtype{(uint8_t)nb::dlpack::dtype_code::Float, 16, 1};
     need(half || sh.dtype() == nb::dtype<float>(), "sh must be float32 or float16");
     Maxima mx;

@@ -81,7 +81,8 @@ struct LanesOf {
         const F xs = hn::IfThenElse(sub, x * set(16777216.0f), x);
         const I bits = hn::BitCast(di, xs);
         const I field = hn::And(hn::ShiftRight<23>(bits), hn::Set(di, 0xff));
-        const M special = hn::Or(hn::RebindMask(D(), field == hn::Zero(di)), hn::RebindMask(D(), field == hn::Set(di, 0xff)));
+        const M special =
+            hn::Or(hn::RebindMask(D(), field == hn::Zero(di)), hn::RebindMask(D(), field == hn::Set(di, 0xff)));
         const I mbits = hn::Or(hn::And(bits, hn::Set(di, (int32_t)0x807fffff)), hn::Set(di, 126 << 23));
         const I ex = field - hn::IfThenElse(hn::RebindMask(di, sub), hn::Set(di, 126 + 24), hn::Set(di, 126));
         *e = hn::IfThenElse(hn::RebindMask(di, special), hn::Zero(di), ex);
@@ -144,17 +145,25 @@ struct Pair {
     V a, b;
 };
 template <class V>
-HWY_INLINE Pair<V> operator+(Pair<V> x, Pair<V> y) { return {x.a + y.a, x.b + y.b}; }
+HWY_INLINE Pair<V> operator+(Pair<V> x, Pair<V> y) {
+    return {x.a + y.a, x.b + y.b};
+}
 template <class V>
-HWY_INLINE Pair<V> operator-(Pair<V> x, Pair<V> y) { return {x.a - y.a, x.b - y.b}; }
+HWY_INLINE Pair<V> operator-(Pair<V> x, Pair<V> y) {
+    return {x.a - y.a, x.b - y.b};
+}
 template <class V>
-HWY_INLINE Pair<V> operator*(Pair<V> x, Pair<V> y) { return {x.a * y.a, x.b * y.b}; }
+HWY_INLINE Pair<V> operator*(Pair<V> x, Pair<V> y) {
+    return {x.a * y.a, x.b * y.b};
+}
 template <class V>
-HWY_INLINE Pair<V> operator/(Pair<V> x, Pair<V> y) { return {x.a / y.a, x.b / y.b}; }
-#define GBV_PAIR_CMP(op)                                                                            \
-    template <class V>                                                                              \
-    HWY_INLINE Pair<decltype(V() op V())> operator op(Pair<V> x, Pair<V> y) {                       \
-        return {x.a op y.a, x.b op y.b};                                                            \
+HWY_INLINE Pair<V> operator/(Pair<V> x, Pair<V> y) {
+    return {x.a / y.a, x.b / y.b};
+}
+#define GBV_PAIR_CMP(op)                                                      \
+    template <class V>                                                        \
+    HWY_INLINE Pair<decltype(V() op V())> operator op(Pair<V> x, Pair<V> y) { \
+        return {x.a op y.a, x.b op y.b};                                      \
     }
 GBV_PAIR_CMP(<)
 GBV_PAIR_CMP(>)

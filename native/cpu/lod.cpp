@@ -20,7 +20,7 @@ namespace {
 
 constexpr double PI = 3.14159265358979323846;
 constexpr double MAX_ALPHA = 1.0 - 1e-7;  // a leaf's optical depth is finite
-constexpr int MAX_K = 16;                 // SH coefficients per channel (degree 3)
+constexpr int MAX_K = 16;  // SH coefficients per channel (degree 3)
 
 // Spread the low 21 bits of v to every third bit.
 uint64_t spread(uint64_t v) {
@@ -80,8 +80,8 @@ void cross(const double a[3], const double b[3], double out[3]) {
 // A unit eigenvector of symmetric B (rows b) for its eigenvalue e of multiplicity 1: the longest cross product of
 // two rows of B - e I.
 void vector_of(const double b[3][3], double e, double v[3]) {
-    const double r[3][3] = {{b[0][0] - e, b[0][1], b[0][2]}, {b[1][0], b[1][1] - e, b[1][2]},
-                            {b[2][0], b[2][1], b[2][2] - e}};
+    const double r[3][3] = {
+        {b[0][0] - e, b[0][1], b[0][2]}, {b[1][0], b[1][1] - e, b[1][2]}, {b[2][0], b[2][1], b[2][2] - e}};
     double c[3][3], best = -1.0;
     cross(r[0], r[1], c[0]), cross(r[0], r[2], c[1]), cross(r[1], r[2], c[2]);
     for (int i = 0; i < 3; ++i)
@@ -141,8 +141,9 @@ void eigen(const double cov[6], double l[3], double V[3][3]) {
     const double c00 = b[0][0] - q, c11 = b[1][1] - q, c22 = b[2][2] - q;
     const double p = std::sqrt((c00 * c00 + c11 * c11 + c22 * c22 + 2.0 * n) / 6.0);
     const double b01 = b[0][1] / p, b02 = b[0][2] / p, b12 = b[1][2] / p, d00 = c00 / p, d11 = c11 / p, d22 = c22 / p;
-    const double half = std::clamp(0.5 * (d00 * (d11 * d22 - b12 * b12) - b01 * (b01 * d22 - b12 * b02) +
-                                          b02 * (b01 * b12 - d11 * b02)), -1.0, 1.0);
+    const double half = std::clamp(
+        0.5 * (d00 * (d11 * d22 - b12 * b12) - b01 * (b01 * d22 - b12 * b02) + b02 * (b01 * b12 - d11 * b02)), -1.0,
+        1.0);
     const double angle = std::acos(half) / 3.0;
     // the largest root when it is the farthest from the middle one (half >= 0), else the smallest
     const double root = q + p * 2.0 * std::cos(half >= 0 ? angle : angle + 2.0 * PI / 3.0);
@@ -229,10 +230,10 @@ void merge(const Moments* kids, int count, const float* const* rows, int k, Opac
 Plane<int32_t> morton_order(const Splats& s, int nt) {
     const int64_t n = s.n;
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(min : lo[:3]) reduction(max : hi[:3])
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(min : lo[ : 3]) reduction(max : hi[ : 3])
     for (int64_t i = 0; i < n; ++i)
-        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], (double)s.means[3 * i + a]),
-                                    hi[a] = std::max(hi[a], (double)s.means[3 * i + a]);
+        for (int a = 0; a < 3; ++a)
+            lo[a] = std::min(lo[a], (double)s.means[3 * i + a]), hi[a] = std::max(hi[a], (double)s.means[3 * i + a]);
     const auto code = [&](int64_t i) {
         uint64_t c = 0;
         for (int a = 0; a < 3; ++a) {

@@ -31,15 +31,15 @@ struct Splats {
 // l > 0 has the children levels[l-1] + 8 (q - levels[l]) ... up to the level's end. The interior arrays below are
 // indexed by id - N (M = interior nodes).
 struct Tree {
-    Plane<int32_t> order;                // (N,)
-    std::vector<int64_t> levels;         // (L+1,)
-    Plane<float> means, scales;          // (M,3): the merged Gaussian; scales the square roots of its eigenvalues
-    Plane<float> quats;                  // (M,4) w,x,y,z: its eigenvectors
-    Plane<float> opacities;              // (M,)
-    Plane<float> sh;                     // (M,K,3): the leaf-weighted mean of the leaves' SH
-    Plane<float> filter;                 // (M,) the weighted mean of the leaves' 3D filters (empty without one)
-    Plane<float> radius;                 // (M,) a sphere about the mean holding every leaf's centre
-    Plane<float> size;                   // (M,) world footprint of the merged Gaussian: 2 sqrt(largest eigenvalue)
+    Plane<int32_t> order;  // (N,)
+    std::vector<int64_t> levels;  // (L+1,)
+    Plane<float> means, scales;  // (M,3): the merged Gaussian; scales the square roots of its eigenvalues
+    Plane<float> quats;  // (M,4) w,x,y,z: its eigenvectors
+    Plane<float> opacities;  // (M,)
+    Plane<float> sh;  // (M,K,3): the leaf-weighted mean of the leaves' SH
+    Plane<float> filter;  // (M,) the weighted mean of the leaves' 3D filters (empty without one)
+    Plane<float> radius;  // (M,) a sphere about the mean holding every leaf's centre
+    Plane<float> size;  // (M,) world footprint of the merged Gaussian: 2 sqrt(largest eigenvalue)
 };
 
 Tree build(const Splats& s, OpacityRule rule, int threads);

@@ -34,10 +34,9 @@ inline int64_t check_levels(const char* where, const L64& levels, int64_t n) {
 // scene's SH size, every value finite, order a permutation of the splats (the cut's scatter by splat writes each
 // weight once: a repeated index would leave one unwritten). What the cut and the stage read is checked here (O(n),
 // once per upload); that it was built from this scene is the caller's (Hierarchy.check).
-inline void check_lod_upload(int64_t n, const FArr& means, const FArr& scales, const FArr& quats,
-                             const FArr& opacities, const FArr& sh, const std::optional<FArr>& filter_3d,
-                             const FArr& radius, const FArr& size, const L64& levels, const IArr& order, int scene_k,
-                             bool scene_filter) {
+inline void check_lod_upload(int64_t n, const FArr& means, const FArr& scales, const FArr& quats, const FArr& opacities,
+                             const FArr& sh, const std::optional<FArr>& filter_3d, const FArr& radius, const FArr& size,
+                             const L64& levels, const IArr& order, int scene_k, bool scene_filter) {
     const char* where = "upload_lod";
     const int64_t m = check_levels(where, levels, n);
     if (check_scene(where, means, scales, quats, opacities, sh, filter_3d) != m || radius.size() != (size_t)m ||

@@ -28,8 +28,14 @@ nb::dict build(FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, std
     if (rule < lod::DEPTH || rule > lod::OPACITY_WEIGHTS)
         fail("lod build", "rule must be 0 (depth), 1 (sum) or 2 (opacity weights)");
     const int k = (int)sh.shape(1);
-    const lod::Splats s{means.data(), scales.data(), quats.data(), opacities.data(), sh.data(),
-                        filter ? filter->data() : nullptr, n, k};
+    const lod::Splats s{means.data(),
+                        scales.data(),
+                        quats.data(),
+                        opacities.data(),
+                        sh.data(),
+                        filter ? filter->data() : nullptr,
+                        n,
+                        k};
     lod::Tree t;
     {
         nb::gil_scoped_release release;
@@ -79,8 +85,8 @@ nb::object cut(FArr means, FArr radius, FArr size, LArr levels, IArr order, FArr
 }
 
 // Rows `leaves` of a then `nodes` of b, `width` floats each, into a new (len, width) array.
-nb::ndarray<nb::numpy, float> rows(const FArr& a, const FArr& b, const IArr& leaves, const IArr& nodes,
-                                   size_t width, std::initializer_list<size_t> tail, int nt) {
+nb::ndarray<nb::numpy, float> rows(const FArr& a, const FArr& b, const IArr& leaves, const IArr& nodes, size_t width,
+                                   std::initializer_list<size_t> tail, int nt) {
     const int64_t nl = (int64_t)leaves.size(), ni = (int64_t)nodes.size();
     if (a.size() % width || b.size() % width) fail("lod gather", "row widths of the leaf and node arrays differ");
     const int64_t na = (int64_t)(a.size() / width), nb_ = (int64_t)(b.size() / width);

@@ -18,7 +18,7 @@ namespace {
 // The caller's stop, asked by every thread at most once per 4096 nodes of its loop (at(i)) or between phases
 // (now()); sticky once it said true.
 class Halt {
-public:
+  public:
     explicit Halt(const Stop& stop) : stop_(stop) {}
     bool at(int64_t i) { return hit_.load(std::memory_order_relaxed) || ((i & 4095) == 0 && now()); }
     bool now() {
@@ -26,7 +26,7 @@ public:
         return hit_.load(std::memory_order_relaxed);
     }
 
-private:
+  private:
     const Stop& stop_;
     std::atomic<bool> hit_{false};
 };
@@ -138,18 +138,21 @@ Cut cut_flat(const float* means, const float* radius, const float* size, const i
 #pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : drawn)
     for (int64_t id = 0; id < n; ++id) drawn += leaf(id) > 0.0f;
     if (splat_order(drawn, n))
-        by_splat(n, [&](float* w) {
+        by_splat(
+            n,
+            [&](float* w) {
 #pragma omp parallel for num_threads(nt) schedule(static)
-            for (int64_t id = 0; id < n; ++id)
-                if (in_range(order[id], n)) w[order[id]] = leaf(id);
-        }, c, nt, halt);
+                for (int64_t id = 0; id < n; ++id)
+                    if (in_range(order[id], n)) w[order[id]] = leaf(id);
+            },
+            c, nt, halt);
     else
         compact(n, leaf, [&](int64_t id) { return order[id]; }, c, nt, halt);
     c.leaves = (int64_t)c.rows.size();
     if (halt.now()) return c;
     compact(
-        m, [&](int64_t i) { return weight[i] * (1.0f - open[i]); },
-        [&](int64_t i) { return (int32_t)(node_base + i); }, c, nt, halt);
+        m, [&](int64_t i) { return weight[i] * (1.0f - open[i]); }, [&](int64_t i) { return (int32_t)(node_base + i); },
+        c, nt, halt);
     return c;
 }
 
@@ -168,8 +171,8 @@ constexpr int64_t WALK_PARALLEL_MIN = 1 << 15;
 // drawn at w (1 - o), w o passed to each of its children (level 1's: leaves, as splats). Counted per thread, then
 // written at each thread's offsets, so both outputs stay ascending.
 void walk_level(const Reached& frontier, Plane<float>& o, int l, const float* means, const float* radius,
-                const float* size, const int64_t* levels, const int32_t* order, const View& v, double tau,
-                double band, int nt, Halt& halt, Reached& drawn, Reached& down) {
+                const float* size, const int64_t* levels, const int32_t* order, const View& v, double tau, double band,
+                int nt, Halt& halt, Reached& drawn, Reached& down) {
     const int64_t len = frontier.size(), n = levels[1];
     if (len * BRANCHING < WALK_PARALLEL_MIN) nt = 1;
     const bool known = !o.empty();
@@ -262,16 +265,19 @@ Cut cut_walk(const float* means, const float* radius, const float* size, const i
     for (int l = 1; l < num_levels; ++l) total += drawn[l].size();
     c.rows.reserve(total), c.weights.reserve(total);
     if (splat_order(leaves.size(), n)) {
-        by_splat(n, [&](float* w) {
+        by_splat(
+            n,
+            [&](float* w) {
 #pragma omp parallel num_threads(nt)
-            {
+                {
 #pragma omp for schedule(static)
-                for (int64_t i = 0; i < n; ++i) w[i] = 0.0f;
+                    for (int64_t i = 0; i < n; ++i) w[i] = 0.0f;
 #pragma omp for schedule(static)
-                for (int64_t j = 0; j < leaves.size(); ++j)
-                    if (in_range(leaves.id[j], n)) w[leaves.id[j]] = leaves.w[j];
-            }
-        }, c, nt, halt);
+                    for (int64_t j = 0; j < leaves.size(); ++j)
+                        if (in_range(leaves.id[j], n)) w[leaves.id[j]] = leaves.w[j];
+                }
+            },
+            c, nt, halt);
     } else {  // in the walk's order: the tree's
         c.rows.assign(leaves.id.begin(), leaves.id.end());
         c.weights.assign(leaves.w.begin(), leaves.w.end());

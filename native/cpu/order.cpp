@@ -33,9 +33,8 @@ bool input_key(const uint32_t* depth, const uint64_t* src, int64_t i, uint64_t& 
 // between its two parallel loops: an allocation failure is a MemoryError, not an abort inside OpenMP). False when
 // cancelled, dst then unspecified.
 template <bool FIRST>
-bool radix_pass(int pass, int64_t len, const uint32_t* depth, const uint64_t* src,
-                std::vector<uint64_t>& dst, std::vector<uint64_t>& also, std::vector<int64_t>& hist, int ranges,
-                FrameRun& run) {
+bool radix_pass(int pass, int64_t len, const uint32_t* depth, const uint64_t* src, std::vector<uint64_t>& dst,
+                std::vector<uint64_t>& also, std::vector<int64_t>& hist, int ranges, FrameRun& run) {
 #pragma omp parallel for num_threads(ranges) schedule(static, 1)
     for (int k = 0; k < ranges; ++k) {
         int64_t* h = hist.data() + (size_t)k * BUCKETS;
@@ -80,8 +79,7 @@ void depth_order(const Plane<uint32_t>& depth, std::vector<uint64_t>& order, std
     const int ranges = std::max(1, std::min(omp_get_max_threads(), MAX_RANGES));
     std::vector<int64_t> hist((size_t)ranges * BUCKETS);
     // depth -> order -> scratch -> order
-    if (!radix_pass<true>(0, (int64_t)depth.size(), depth.data(), nullptr, order, scratch, hist, ranges, run))
-        return;
+    if (!radix_pass<true>(0, (int64_t)depth.size(), depth.data(), nullptr, order, scratch, hist, ranges, run)) return;
     static_assert(PASSES == 3, "the passes below alternate order and scratch and end in order");
     const int64_t count = (int64_t)order.size();
     if (!radix_pass<false>(1, count, nullptr, order.data(), scratch, order, hist, ranges, run)) return;

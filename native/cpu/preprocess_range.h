@@ -33,7 +33,7 @@ struct StageJob {
     int sh_deg;
     CameraParams cam;
     float reach;  // StageKey::reach (stage_on_screen)
-    int rules;    // StageKey::rules (stage_rules)
+    int rules;  // StageKey::rules (stage_rules)
     int grid_x, grid_y;
     StageSplat* stage;
     uint8_t* valid;
@@ -186,8 +186,8 @@ void stage_range(const StageJob& job, int64_t begin, int64_t end) {
                     L::load4(job.at(job.quats, job.node_quats, 4, r), in.quat);
                     in.opacity = L::load(job.at(job.opacities, job.node_opacities, 1, r));
                     if (job.weights) in.opacity = in.opacity * L::load(job.weights + i0);
-                    in.filter_3d = job.filter_3d ? L::load(job.at(job.filter_3d, job.node_filter_3d, 1, r))
-                                                 : L::set(0.0f);
+                    in.filter_3d =
+                        job.filter_3d ? L::load(job.at(job.filter_3d, job.node_filter_3d, 1, r)) : L::set(0.0f);
                     moved = true;
                 }
             if (!moved) {
@@ -292,8 +292,8 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
                 const int64_t i = i0 + (j < count ? j : count - 1);  // spare lanes repeat the last splat
                 ids[j] = i;
                 const StageSplat& s = job.stage[i];
-                const float f[8] = {s.xy[0], s.xy[1], s.depth, s.opacity, s.cov[0], s.cov[1], s.cov[2],
-                                    job.stage_valid[i] ? 1.0f : 0.0f};
+                const float f[8] = {s.xy[0],  s.xy[1],  s.depth,  s.opacity,
+                                    s.cov[0], s.cov[1], s.cov[2], job.stage_valid[i] ? 1.0f : 0.0f};
                 for (int c = 0; c < 8; ++c) sb[c][j] = f[c];
             }
             st.xy[0] = L::load(sb[0]);
@@ -318,8 +318,9 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
             if (!((ok >> j) & 1u)) job.rects[i0 + j] = TileRect{0, 0, 0, 0};
         }
         if (!ok) continue;
-        const F fields[14] = {out.xy[0], out.xy[1], out.depth, out.opacity, out.conic[0], out.conic[1], out.conic[2],
-                              out.v1[0], out.v1[1], out.sigma1, out.sigma2, out.inv_sigma1, out.inv_sigma2, out.radius};
+        const F fields[14] = {out.xy[0],    out.xy[1],      out.depth,      out.opacity, out.conic[0],
+                              out.conic[1], out.conic[2],   out.v1[0],      out.v1[1],   out.sigma1,
+                              out.sigma2,   out.inv_sigma1, out.inv_sigma2, out.radius};
         for (int f = 0; f < 14; ++f) L::store(fields[f], o[f]);
         if constexpr (N == 1) {
             rb[0][0] = rect.x0, rb[1][0] = rect.y0, rb[2][0] = rect.x1, rb[3][0] = rect.y1;
@@ -333,10 +334,10 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
         if constexpr (L::TRANSPOSES) {
             static_assert(offsetof(Splat2D, color) == 28 && offsetof(Splat2D, inv_sigma2) == 60 &&
                           offsetof(Splat2D, log_min_alpha) == 64);
-            const F rows_a[N] = {out.xy[0], out.xy[1], out.depth, out.opacity, out.conic[0], out.conic[1],
-                                 out.conic[2], cols[7]};
-            const F rows_b[N] = {color[6], color[7], out.v1[0], out.v1[1], out.sigma1, out.sigma2, out.inv_sigma1,
-                                 out.inv_sigma2};
+            const F rows_a[N] = {out.xy[0],    out.xy[1],    out.depth,    out.opacity,
+                                 out.conic[0], out.conic[1], out.conic[2], cols[7]};
+            const F rows_b[N] = {color[6],   color[7],   out.v1[0],      out.v1[1],
+                                 out.sigma1, out.sigma2, out.inv_sigma1, out.inv_sigma2};
             std::copy(rows_a, rows_a + N, a);
             std::copy(rows_b, rows_b + N, b);
             L::transpose(a);
@@ -366,8 +367,15 @@ void finish_range(const FinishJob& job, int64_t begin, int64_t end) {
             s.cell = job.cell_of ? job.cell_of[i] : -1;
             s.id = (int32_t)i;
             if (job.planes) {
-                const SplatIn in{job.means + 3 * i, job.scales + 3 * i, job.quats + 4 * i, 0.0f, nullptr,
-                                 job.filter_3d ? job.filter_3d[i] : 0.0f, nullptr, 0, -1};
+                const SplatIn in{job.means + 3 * i,
+                                 job.scales + 3 * i,
+                                 job.quats + 4 * i,
+                                 0.0f,
+                                 nullptr,
+                                 job.filter_3d ? job.filter_3d[i] : 0.0f,
+                                 nullptr,
+                                 0,
+                                 -1};
                 job.planes[i] = splat_popfree_plane(job.cam, in);
             }
             job.rects[i] = TileRect{rb[0][j], rb[1][j], rb[2][j], rb[3][j]};

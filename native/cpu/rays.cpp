@@ -28,9 +28,15 @@ void finish_rays(const SceneView& sc, const Stage& stage, Mode mode, FrameBuffer
                 const bool node = r >= sc.n;
                 const int64_t k = node ? r - sc.n : r;
                 const float* filter = node ? sc.tree.filter_3d : sc.filter_3d;
-                const SplatIn in{(node ? sc.tree.means : sc.means) + 3 * k, (node ? sc.tree.scales : sc.scales) + 3 * k,
-                                 (node ? sc.tree.quats : sc.quats) + 4 * k, 0.0f, nullptr, filter ? filter[k] : 0.0f,
-                                 nullptr, 0, -1};
+                const SplatIn in{(node ? sc.tree.means : sc.means) + 3 * k,
+                                 (node ? sc.tree.scales : sc.scales) + 3 * k,
+                                 (node ? sc.tree.quats : sc.quats) + 4 * k,
+                                 0.0f,
+                                 nullptr,
+                                 filter ? filter[k] : 0.0f,
+                                 nullptr,
+                                 0,
+                                 -1};
                 TileRect rect = buf.rects[i];
                 ok = finish_ray_splat(in, stage.splats[i], cam, mode, gx, gy, &buf.splats[i], &rect, &buf.rays[i]);
                 if (eval3d) buf.splats[i].id = (int32_t)i;  // Splat2D::id, as the finish it replaces sets it

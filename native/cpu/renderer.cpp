@@ -17,8 +17,8 @@ struct Renderer::Impl {
     SceneView scene;
     std::shared_ptr<const void> scene_owner, weights_owner, cells_owner, lod_owner;  // keep the caller's arrays alive
     std::atomic<int64_t> n{0};
-    uint64_t generation = 0;            // of the uploaded scene, weights and cells (StageKey::scene)
-    std::vector<Stage> stages;          // the last call's, one per distinct key
+    uint64_t generation = 0;  // of the uploaded scene, weights and cells (StageKey::scene)
+    std::vector<Stage> stages;  // the last call's, one per distinct key
     std::vector<FrameBuffers> buffers;  // the last call's, one per frame
 
     // The stages of `keys` (distinct): a cached one reused where its key matches and it is ready, the others built
@@ -160,7 +160,8 @@ int sh_degree_of(const RenderArgs& a, const SceneView& sc) {
 // same scene are not read by the other modes).
 void check_uploads(const RenderArgs& a, const SceneView& sc, const char* where) {
     if (a.rw && a.mode == DUPLEX)
-        throw std::invalid_argument(std::string(where) + ": duplex renders whole images only (its cells cull by "
+        throw std::invalid_argument(std::string(where) +
+                                    ": duplex renders whole images only (its cells cull by "
                                     "the image's tiles)");
     if (a.mode == DUPLEX && sc.cell_of.size() != (size_t)sc.n)
         throw std::invalid_argument(std::string(where) + ": duplex needs the scene's cells (upload_cells)");
@@ -168,7 +169,8 @@ void check_uploads(const RenderArgs& a, const SceneView& sc, const char* where) 
     if (sc.tree.num_levels < 2)
         throw std::invalid_argument(std::string(where) + ": level of detail needs the scene's hierarchy (upload_lod)");
     if (a.mode == DUPLEX || (a.mode == WSR && sc.weight_sh))
-        throw std::invalid_argument(std::string(where) + ": level of detail is for plain splat scenes, not duplex "
+        throw std::invalid_argument(std::string(where) +
+                                    ": level of detail is for plain splat scenes, not duplex "
                                     "or wsr with view weights");
 }
 
@@ -181,8 +183,12 @@ TileRegion region_of(const RenderArgs& a) {
 
 // The StageKey of a frame: everything its stage depends on (add a field here and to StageKey::operator==).
 StageKey stage_key(const RenderArgs& a, const SceneView& sc, uint64_t generation) {
-    return StageKey{generation, a.cam, sh_degree_of(a, sc), stage_reach(a.mode, a.oit),
-                    a.lod.on() ? a.lod : LodArgs{}, stage_rules(a.mode, a.oit)};
+    return StageKey{generation,
+                    a.cam,
+                    sh_degree_of(a, sc),
+                    stage_reach(a.mode, a.oit),
+                    a.lod.on() ? a.lod : LodArgs{},
+                    stage_rules(a.mode, a.oit)};
 }
 
 }  // namespace
@@ -232,8 +238,8 @@ std::vector<RenderResult> Renderer::render_many(const std::vector<RenderArgs>& f
         const TileRegion reg = region_of(a);
         bin_frame(sc, stage, a.mode, a.oit, path, impl_->buffers[f], r.stats, run, reg);
         Image* img = a.supersample > 1 ? &hi[f] : &r.image;
-        blend.push_back({&impl_->buffers[f], &stage.key.cam, a.mode, a.oit, a.queue, a.bg, img, a.supersample,
-                         &r.stats, stochastic_frame_key(a.seed, a.frame), reg, a.fast});
+        blend.push_back({&impl_->buffers[f], &stage.key.cam, a.mode, a.oit, a.queue, a.bg, img, a.supersample, &r.stats,
+                         stochastic_frame_key(a.seed, a.frame), reg, a.fast});
     }
     if (!run.cancelled()) blend_frames(blend, path.blend_tile, run);
     for (int f = 0; f < count; ++f) {

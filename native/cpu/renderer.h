@@ -45,11 +45,11 @@ struct Control {
 };
 
 struct RenderResult {
-    Image image;       // output size: rgb, alpha, evals, window (gaussian_blending with want_window)
+    Image image;  // output size: rgb, alpha, evals, window (gaussian_blending with want_window)
     Stats stats;
     const char* simd;  // the SIMD path the frame ran
     bool cancelled = false;  // stopped by the cancel flag or by report: the image is incomplete
-    bool stopped = false;    // stopped because report returned false
+    bool stopped = false;  // stopped because report returned false
 };
 
 // One renderer owns its per-frame buffers and the per-camera stages of its last call (StageKey, frame.h): renders of
@@ -57,7 +57,7 @@ struct RenderResult {
 // one); the scene stays the caller's: upload references its arrays (no copy) and keeps `owner` until the next upload
 // or the renderer's end, so the arrays must stay unchanged while uploaded.
 class Renderer {
-public:
+  public:
     Renderer();
     ~Renderer();
     Renderer(const Renderer&) = delete;
@@ -108,7 +108,7 @@ public:
     void release_buffers();
     size_t buffer_bytes() const;
 
-private:
+  private:
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };

@@ -59,17 +59,17 @@ inline SplatBounds gaussian_blending_bounds(const Splat2D& s) {
 // miss the box in y, so the walk's `outside` test would skip it anyway.
 struct Bands {
     float lo[TILE], hi[TILE];  // row r's band
-    int64_t start[TILE + 1];   // row r's entries: idx[start[r] .. start[r + 1])
+    int64_t start[TILE + 1];  // row r's entries: idx[start[r] .. start[r + 1])
     std::vector<int32_t> idx;
     std::vector<int8_t> first, last;  // each entry's rows first .. last (none when last < first)
 };
 
 struct TileJob {
-    const Splat2D* list;        // the tile's splats in blend order
+    const Splat2D* list;  // the tile's splats in blend order
     const SplatBounds* bounds;  // one per list entry
     int n;
     int x0, y0, x1, y1;  // pixel rectangle [x0, x1) x [y0, y1)
-    int width;           // row stride of the planes in pixels
+    int width;  // row stride of the planes in pixels
     Mode mode;
     OitParams oit;
     int queue;  // stopthepop's K (0: unbounded)
@@ -82,8 +82,8 @@ struct TileJob {
     uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
     const DepthPlane* planes;  // stochastic_popfree: per splat (Splat2D::id), else null
     const RaySplat* rays;  // eval3d, stopthepop: one per list entry (ray3d.h), else null
-    bool fast = false;     // gaussian_blending at the fast precision (blend_gaussian's Fast)
-    int group_rows = 1;    // pixel rows per lane group and per band (FAST_GB_GROUP_ROWS: a vector path, fast GB)
+    bool fast = false;  // gaussian_blending at the fast precision (blend_gaussian's Fast)
+    int group_rows = 1;  // pixel rows per lane group and per band (FAST_GB_GROUP_ROWS: a vector path, fast GB)
 };
 
 // Pixel rows per lane group of a vector path's fast gaussian_blending: a square group of 16 lanes (4 x 4) meets a

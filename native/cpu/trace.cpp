@@ -14,8 +14,8 @@ namespace {
 
 // The trace of one sub-sample: its records so far and the pixel state after the last one.
 struct TraceLog {
-    const Splat2D* list;    // the tile's list as blended
-    const uint32_t* ids;    // splat id of each entry
+    const Splat2D* list;  // the tile's list as blended
+    const uint32_t* ids;  // splat id of each entry
     int32_t sample;
     float window[4];
     std::vector<TraceStep>* steps;
@@ -131,8 +131,8 @@ PixelTrace trace_pixel(const FrameLists& f, int x, int y, int N) {
             job.window = nullptr;  // the steps hold the window after each entry
             job.evals = out.samples.evals.data() + q;
             // the window a pixel starts with: itself
-            TraceLog log = {list.data(), ids.data(), (int32_t)q, {(float)hx + 0.5f, (float)hy + 0.5f, 1.0f, 1.0f},
-                            &out.steps};
+            TraceLog log = {
+                list.data(), ids.data(), (int32_t)q, {(float)hx + 0.5f, (float)hy + 0.5f, 1.0f, 1.0f}, &out.steps};
             PixelTracer::log = &log;
             blend_tile<Lanes1, PixelTracer>(job);
             PixelTracer::log = nullptr;

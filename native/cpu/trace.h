@@ -26,8 +26,8 @@ struct FrameLists {
     float bg[3];
     uint32_t frame_key;  // stochastic: stochastic_frame_key(seed, frame)
     const DepthPlane* planes;  // stochastic_popfree: per splat, or null
-    bool fast;                 // gaussian_blending's fast precision
-    const CameraParams* cam;   // stopthepop:K: the camera of the tile stage's key (tile_depth_order)
+    bool fast;  // gaussian_blending's fast precision
+    const CameraParams* cam;  // stopthepop:K: the camera of the tile stage's key (tile_depth_order)
 };
 
 // One list entry at one sub-sample: the splat as the blend saw it and what it did there. alpha and weight are 0
@@ -37,18 +37,18 @@ struct TraceStep {
     int32_t sample, index, skip, flags;  // flags: TRACE_FALLBACK, TRACE_STOPPED
     float alpha, weight, T_before, T_after;
     float window[4];  // gaussian_blending: centre x, y and size w, h after the entry
-    float T_cell;     // duplex
+    float T_cell;  // duplex
     int32_t cell;
     Splat2D splat;
 };
 constexpr int32_t TRACE_FALLBACK = 1;  // gaussian_blending's scalar fallback (window too narrow or too wide)
-constexpr int32_t TRACE_STOPPED = 2;   // the pixel stopped at this entry
+constexpr int32_t TRACE_STOPPED = 2;  // the pixel stopped at this entry
 
 struct PixelTrace {
     std::vector<TraceStep> steps;  // sample by sample (row-major sub-samples), each in list order
-    std::vector<float> totals;     // per sample: the sum its weights were divided by (wsr, duplex; 1 otherwise)
-    Image samples;                 // N x N: each sub-sample as the render writes it
-    Image pixel;                   // 1 x 1: their box average, as the render writes the pixel
+    std::vector<float> totals;  // per sample: the sum its weights were divided by (wsr, duplex; 1 otherwise)
+    Image samples;  // N x N: each sub-sample as the render writes it
+    Image pixel;  // 1 x 1: their box average, as the render writes the pixel
 };
 
 // Trace output pixel (x, y) of a frame whose lists are at N x its size. Run with flush-to-zero like the render.

@@ -21,15 +21,21 @@ __device__ inline int64_t splat_row(const int32_t* rows, int64_t i) { return row
 // as the gathered cut's: never fused into a later operation), else null.
 __global__ void __launch_bounds__(THREADS)
     stage_kernel(int64_t n, const int32_t* rows, const float* weights, const float* means, const float* scales,
-                 const float* quats, const float* opacities, const float* sh, const float* filter_3d, int k,
-                 int sh_deg, CameraParams cam, int gx, int gy, float reach, int rules, StageSplat* stage,
-                 unsigned char* stage_ok) {
+                 const float* quats, const float* opacities, const float* sh, const float* filter_3d, int k, int sh_deg,
+                 CameraParams cam, int gx, int gy, float reach, int rules, StageSplat* stage, unsigned char* stage_ok) {
     const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     if (i >= n) return;
     const int64_t row = splat_row(rows, i);
     const float opacity = weights ? __fmul_rn(opacities[row], weights[i]) : opacities[row];
-    const SplatIn in{means + 3 * row, scales + 3 * row, quats + 4 * row, opacity, sh + (size_t)k * 3 * row,
-                     filter_3d ? filter_3d[row] : 0.0f, nullptr, 0, -1};
+    const SplatIn in{means + 3 * row,
+                     scales + 3 * row,
+                     quats + 4 * row,
+                     opacity,
+                     sh + (size_t)k * 3 * row,
+                     filter_3d ? filter_3d[row] : 0.0f,
+                     nullptr,
+                     0,
+                     -1};
     stage_ok[i] = stage_splat(in, sh_deg, rules, cam, gx, gy, reach, &stage[i]) ? 1 : 0;
 }
 
@@ -39,20 +45,24 @@ __global__ void __launch_bounds__(THREADS)
 // rows: as stage_kernel's.
 __global__ void __launch_bounds__(THREADS)
     finish_kernel(int64_t n, const int32_t* rows, const float* means, const float* scales, const float* quats,
-                  const float* filter_3d,
-                  DepthPlane* planes, const StageSplat* stage, const unsigned char* stage_ok, int sh_deg,
-                  const float* weight_sh, int weight_k, const int32_t* cell_of, OitParams oit, CameraParams cam,
-                  Mode mode, int gx, int gy, Splat2D* splats, RaySplat* rays, TileRect* rects, uint32_t* touched,
-                  unsigned long long* visible) {
+                  const float* filter_3d, DepthPlane* planes, const StageSplat* stage, const unsigned char* stage_ok,
+                  int sh_deg, const float* weight_sh, int weight_k, const int32_t* cell_of, OitParams oit,
+                  CameraParams cam, Mode mode, int gx, int gy, Splat2D* splats, RaySplat* rays, TileRect* rects,
+                  uint32_t* touched, unsigned long long* visible) {
     const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     bool valid = false;
     if (i < n) {
         uint32_t count = 0;
         if (stage_ok[i]) {
             const int64_t row = splat_row(rows, i);
-            const SplatIn in{means + 3 * row, scales + 3 * row, quats + 4 * row, 0.0f, nullptr,
+            const SplatIn in{means + 3 * row,
+                             scales + 3 * row,
+                             quats + 4 * row,
+                             0.0f,
+                             nullptr,
                              filter_3d ? filter_3d[row] : 0.0f,
-                             weight_sh ? weight_sh + (size_t)weight_k * row : nullptr, sh_degree_for_coeffs(weight_k),
+                             weight_sh ? weight_sh + (size_t)weight_k * row : nullptr,
+                             sh_degree_for_coeffs(weight_k),
                              cell_of ? cell_of[row] : -1};
             TileRect r;
             bool ok = mode == EVAL3D || finish_splat(in, stage[i], sh_deg, cam, mode, oit, gx, gy, &splats[i], &r);
@@ -230,17 +240,16 @@ void State::run(const RenderArgs& a, RenderResult& res, bool cut) {
     CUDA_CHECK(cudaEventRecord(ev[0].e));
     // the stage: kept while its key holds (scene generation, the cut drawn in place, camera, SH degree, the
     // on-screen cull's reach, the presets' stage rules)
-    const StageKey key{generation, in_cut ? cut_generation : 0, cam, sh_deg, stage_reach(a.mode, a.oit),
-                       stage_rules(a.mode, a.oit)};
+    const StageKey key{generation, in_cut ? cut_generation : 0, cam,
+                       sh_deg,     stage_reach(a.mode, a.oit),  stage_rules(a.mode, a.oit)};
     res.stage_reused = stage_ready && stage_key == key;
     if (drawn > 0 && !res.stage_reused) {
         stage_ready = false;
         stage.ensure(drawn);
         stage_ok.ensure(drawn);
-        stage_kernel<<<blocks(drawn), THREADS>>>(drawn, rows, in_cut ? cut_weights.ptr : nullptr, means.ptr,
-                                                 scales.ptr, quats.ptr, opacities.ptr, sh.ptr,
-                                                 has_filter ? filter_3d.ptr : nullptr, k, sh_deg, cam, gx, gy,
-                                                 key.reach, key.rules, stage.ptr, stage_ok.ptr);
+        stage_kernel<<<blocks(drawn), THREADS>>>(drawn, rows, in_cut ? cut_weights.ptr : nullptr, means.ptr, scales.ptr,
+                                                 quats.ptr, opacities.ptr, sh.ptr, has_filter ? filter_3d.ptr : nullptr,
+                                                 k, sh_deg, cam, gx, gy, key.reach, key.rules, stage.ptr, stage_ok.ptr);
         launched("stage_kernel");
         stage_key = key;
         stage_ready = true;
@@ -270,8 +279,8 @@ void State::run(const RenderArgs& a, RenderResult& res, bool cut) {
     CUDA_CHECK(cudaEventRecord(ev[2].e));
     blend(a, gx, gy, a.mode == DUPLEX ? list.ptr : values_out.ptr);
     CUDA_CHECK(cudaEventRecord(ev[3].e));
-    CUDA_CHECK(cudaMemcpyAsync(totals.p, counters.ptr, NUM_COUNTERS * sizeof(unsigned long long),
-                               cudaMemcpyDeviceToHost));
+    CUDA_CHECK(
+        cudaMemcpyAsync(totals.p, counters.ptr, NUM_COUNTERS * sizeof(unsigned long long), cudaMemcpyDeviceToHost));
     CUDA_CHECK(cudaEventSynchronize(ev[3].e));
     CUDA_CHECK(cudaStreamSynchronize(0));
     float ms[3];
@@ -302,9 +311,8 @@ void State::bin_splats(int64_t count, Mode mode, int queue, const CameraParams& 
     if (total == 0) return;
     tile_lists(count, splats.ptr, rects.ptr, touched.ptr, offsets.ptr, gx, bits, mode != WSR, total, ranges.ptr);
     if (mode == STOPTHEPOP && queue > 0) {
-        tile_depth_keys_kernel<<<blocks((int64_t)total), THREADS>>>((int64_t)total, keys_out.ptr, values_out.ptr,
-                                                                    splats.ptr, rays.ptr, cam, gx, keys_in.ptr,
-                                                                    values_in.ptr);
+        tile_depth_keys_kernel<<<blocks((int64_t)total), THREADS>>>(
+            (int64_t)total, keys_out.ptr, values_out.ptr, splats.ptr, rays.ptr, cam, gx, keys_in.ptr, values_in.ptr);
         launched("tile_depth_keys_kernel");
         sort_pairs((int64_t)total, 0, 32 + bits);
     }

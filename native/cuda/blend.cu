@@ -17,8 +17,8 @@ constexpr int BLOCK = TILE * TILE;
 // Fast: gaussian_blending at the fast precision (blend_gaussian's Fast).
 template <int M, bool Fast>
 __global__ void __launch_bounds__(BLOCK)
-    render_kernel(const uint2* ranges, const uint32_t* values, const Splat2D* splats, int W, int H, int gx,
-                  float3 bg, OitParams oit, uint32_t frame_key, const DepthPlane* planes, float* rgb, float* alpha, int32_t* evals,
+    render_kernel(const uint2* ranges, const uint32_t* values, const Splat2D* splats, int W, int H, int gx, float3 bg,
+                  OitParams oit, uint32_t frame_key, const DepthPlane* planes, float* rgb, float* alpha, int32_t* evals,
                   float* window) {
     __shared__ Splat2D batch[BLOCK];
     const int tile = blockIdx.x;
@@ -88,8 +88,7 @@ struct DeviceListSource {
 // after the last one blended (depth, then list position) until the pixel stops. evals as the CPU's.
 __global__ void __launch_bounds__(BLOCK)
     sorted_kernel(const uint2* ranges, const uint32_t* values, const Splat2D* splats, const RaySplat* rays, Mode mode,
-                  int queue, int W, int H, int gx, float3 bg, OitParams oit, float* rgb, float* alpha,
-                  int32_t* evals) {
+                  int queue, int W, int H, int gx, float3 bg, OitParams oit, float* rgb, float* alpha, int32_t* evals) {
     const int tile = blockIdx.x;
     const int x = (tile % gx) * TILE + threadIdx.x, y = (tile / gx) * TILE + threadIdx.y;
     if (x >= W || y >= H) return;
@@ -128,9 +127,9 @@ __global__ void __launch_bounds__(BLOCK)
 
 // Box-average N x N blocks (supersampling), one thread per output pixel; evaluations are summed, window sizes
 // converted to output pixels.
-__global__ void downsample_kernel(int N, int w, int64_t px, const float* rgb, const float* alpha,
-                                  const int32_t* evals, const float* window, float* o_rgb, float* o_alpha,
-                                  int32_t* o_evals, float* o_window) {
+__global__ void downsample_kernel(int N, int w, int64_t px, const float* rgb, const float* alpha, const int32_t* evals,
+                                  const float* window, float* o_rgb, float* o_alpha, int32_t* o_evals,
+                                  float* o_window) {
     const int64_t p = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     if (p >= px) return;
     const int64_t x = p % w, y = p / w;
@@ -169,8 +168,8 @@ void launch_blend(const State& s, int num_tiles, const uint32_t* values, int W, 
                   const RenderArgs& a, float* win) {
     const uint32_t frame_key = stochastic_frame_key(a.seed, a.frame);
     render_kernel<M, Fast><<<num_tiles, dim3(TILE, TILE)>>>(s.ranges.ptr, values, s.splats.ptr, W, H, gx, bg, a.oit,
-                                                       frame_key, M == STOCHASTIC_POPFREE ? s.planes.ptr : nullptr,
-                                                       s.rgb.ptr, s.alpha.ptr, s.evals.ptr, win);
+                                                            frame_key, M == STOCHASTIC_POPFREE ? s.planes.ptr : nullptr,
+                                                            s.rgb.ptr, s.alpha.ptr, s.evals.ptr, win);
 }
 
 }  // namespace
@@ -191,7 +190,7 @@ void State::blend(const RenderArgs& a, int gx, int gy, const uint32_t* tile_valu
         case EVAL3D:
         case STOPTHEPOP:
             sorted_kernel<<<num_tiles, dim3(TILE, TILE)>>>(ranges.ptr, v, splats.ptr, rays.ptr, a.mode, a.queue, W, H,
-                                                            gx, bgc, a.oit, rgb.ptr, alpha.ptr, evals.ptr);
+                                                           gx, bgc, a.oit, rgb.ptr, alpha.ptr, evals.ptr);
             break;
         case GAUSSIAN_BLENDING:
             if (a.fast)
@@ -199,12 +198,23 @@ void State::blend(const RenderArgs& a, int gx, int gy, const uint32_t* tile_valu
             else
                 launch_blend<GAUSSIAN_BLENDING>(*this, num_tiles, v, W, H, gx, bgc, a, win);
             break;
-        case ANALYTIC: launch_blend<ANALYTIC>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
-        case WSR: launch_blend<WSR>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
-        case DUPLEX: launch_blend<DUPLEX>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
-        case STOCHASTIC: launch_blend<STOCHASTIC>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
-        case STOCHASTIC_POPFREE: launch_blend<STOCHASTIC_POPFREE>(*this, num_tiles, v, W, H, gx, bgc, a, win); break;
-        default: launch_blend<SCALAR>(*this, num_tiles, v, W, H, gx, bgc, a, win);
+        case ANALYTIC:
+            launch_blend<ANALYTIC>(*this, num_tiles, v, W, H, gx, bgc, a, win);
+            break;
+        case WSR:
+            launch_blend<WSR>(*this, num_tiles, v, W, H, gx, bgc, a, win);
+            break;
+        case DUPLEX:
+            launch_blend<DUPLEX>(*this, num_tiles, v, W, H, gx, bgc, a, win);
+            break;
+        case STOCHASTIC:
+            launch_blend<STOCHASTIC>(*this, num_tiles, v, W, H, gx, bgc, a, win);
+            break;
+        case STOCHASTIC_POPFREE:
+            launch_blend<STOCHASTIC_POPFREE>(*this, num_tiles, v, W, H, gx, bgc, a, win);
+            break;
+        default:
+            launch_blend<SCALAR>(*this, num_tiles, v, W, H, gx, bgc, a, win);
     }
     launched(per_pixel_sorted(a.mode) ? "sorted_kernel" : "render_kernel");
     if (N > 1) {

@@ -37,13 +37,13 @@ std::pair<bool, std::string> usable(int device);
 // runtime's current device is per thread: a renderer must not change its callers'; host::leave_device says what
 // is restored on a thread that had chosen none).
 class DeviceGuard {
-public:
+  public:
     explicit DeviceGuard(int device);
     ~DeviceGuard();
     DeviceGuard(const DeviceGuard&) = delete;
     DeviceGuard& operator=(const DeviceGuard&) = delete;
 
-private:
+  private:
     host::ThreadDevice before_;
     int device_;
 };

@@ -47,8 +47,8 @@ __global__ void run_flags_kernel(int64_t num_members, const uint32_t* keys, cons
 }
 
 // One thread per run slot i (run_slots: the slots in runs, in slot order): 1 where a new run starts.
-__global__ void run_heads_kernel(int64_t count, const uint32_t* run_slots, const uint32_t* keys,
-                                 const uint32_t* values, const int32_t* cell_of, uint32_t* heads) {
+__global__ void run_heads_kernel(int64_t count, const uint32_t* run_slots, const uint32_t* keys, const uint32_t* values,
+                                 const int32_t* cell_of, uint32_t* heads) {
     const int64_t i = blockIdx.x * (int64_t)blockDim.x + threadIdx.x;
     if (i < count) heads[i] = i == 0 || !same_depth_run(run_slots[i - 1], run_slots[i], keys, values, cell_of);
 }
@@ -138,8 +138,8 @@ __global__ void expand_ranges_kernel(int num_tiles, const uint2* cell_ranges, co
     const int t = blockIdx.x * blockDim.x + threadIdx.x;
     if (t >= num_tiles) return;
     const uint2 r = cell_ranges[t];
-    ranges[t] = r.y > r.x ? make_uint2(r.x > 0 ? (uint32_t)ends[r.x - 1] : 0u, (uint32_t)ends[r.y - 1])
-                          : make_uint2(0u, 0u);
+    ranges[t] =
+        r.y > r.x ? make_uint2(r.x > 0 ? (uint32_t)ends[r.x - 1] : 0u, (uint32_t)ends[r.y - 1]) : make_uint2(0u, 0u);
 }
 
 }  // namespace
@@ -160,12 +160,12 @@ static void sort_members(State& s) {
     launched("member_keys_kernel");
     size_t temp_bytes = 0;
     CUDA_CHECK(cub::DeviceSegmentedSort::StableSortPairs(nullptr, temp_bytes, s.mkeys_in.ptr, s.mkeys_out.ptr,
-                                                         s.mvalues_in.ptr, s.mvalues_out.ptr, nm, s.m,
-                                                         s.coffsets.ptr, s.coffsets.ptr + 1));
+                                                         s.mvalues_in.ptr, s.mvalues_out.ptr, nm, s.m, s.coffsets.ptr,
+                                                         s.coffsets.ptr + 1));
     s.temp.ensure(temp_bytes);
     CUDA_CHECK(cub::DeviceSegmentedSort::StableSortPairs(s.temp.ptr, temp_bytes, s.mkeys_in.ptr, s.mkeys_out.ptr,
-                                                         s.mvalues_in.ptr, s.mvalues_out.ptr, nm, s.m,
-                                                         s.coffsets.ptr, s.coffsets.ptr + 1));
+                                                         s.mvalues_in.ptr, s.mvalues_out.ptr, nm, s.m, s.coffsets.ptr,
+                                                         s.coffsets.ptr + 1));
     launched("cub::DeviceSegmentedSort::StableSortPairs");
     run_flags_kernel<<<blocks(nm), THREADS>>>(nm, s.mkeys_out.ptr, s.mvalues_out.ptr, s.cell_of.ptr, s.vis.ptr,
                                               s.run_flags.ptr);
@@ -196,15 +196,15 @@ static void sort_runs(State& s, int64_t count) {
     iota_kernel<<<blocks(count), THREADS>>>(count, perm);
     launched("iota_kernel");
     size_t temp_bytes = 0;
-    CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, s.run_keys[0].ptr, s.run_keys[1].ptr, perm,
-                                               sorted, (int)count));
+    CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, s.run_keys[0].ptr, s.run_keys[1].ptr, perm, sorted,
+                                               (int)count));
     s.temp.ensure(temp_bytes);
     for (int pass = 0; pass < RUN_PASSES; ++pass) {
         run_keys_kernel<<<blocks(count), THREADS>>>(count, pass, perm, s.run_slots.ptr, s.run_numbers.ptr,
                                                     s.mvalues_out.ptr, s.splats.ptr, s.run_keys[0].ptr);
         launched("run_keys_kernel");
-        CUDA_CHECK(cub::DeviceRadixSort::SortPairs(s.temp.ptr, temp_bytes, s.run_keys[0].ptr, s.run_keys[1].ptr,
-                                                   perm, sorted, (int)count));
+        CUDA_CHECK(cub::DeviceRadixSort::SortPairs(s.temp.ptr, temp_bytes, s.run_keys[0].ptr, s.run_keys[1].ptr, perm,
+                                                   sorted, (int)count));
         launched("cub::DeviceRadixSort::SortPairs (depth runs)");
         std::swap(perm, sorted);
     }
@@ -228,13 +228,13 @@ void State::bin_duplex(const CameraParams& cam, int gx, int gy, int num_tiles, i
     CUDA_CHECK(cudaMemsetAsync(vis_count.ptr, 0, sizeof(uint32_t) * m));
     CUDA_CHECK(cudaMemsetAsync(cell_ranges.ptr, 0, sizeof(uint2) * num_tiles));
     if (num_members > 0) sort_members(*this);
-    cells_kernel<<<blocks(m), THREADS>>>(m, cmeans.ptr, cscales.ptr, cquats.ptr, vis_count.ptr, cam, gx, gy,
-                                         cells.ptr, crects.ptr, cell_touched.ptr, counters.ptr);
+    cells_kernel<<<blocks(m), THREADS>>>(m, cmeans.ptr, cscales.ptr, cquats.ptr, vis_count.ptr, cam, gx, gy, cells.ptr,
+                                         crects.ptr, cell_touched.ptr, counters.ptr);
     launched("cells_kernel");
     if (num_members > 0) {
         cell_misses_kernel<<<blocks(num_members), THREADS>>>(num_members, cmembers.ptr, cell_of.ptr, touched.ptr,
-                                                              rects.ptr, cell_touched.ptr, crects.ptr,
-                                                              counters.ptr + CELL_MISSES);
+                                                             rects.ptr, cell_touched.ptr, crects.ptr,
+                                                             counters.ptr + CELL_MISSES);
         launched("cell_misses_kernel");
     }
     inclusive_sum(cell_touched.ptr, cell_offsets.ptr, (int)m, "cub::DeviceScan::InclusiveSum (tile-cell pairs)");
@@ -251,8 +251,7 @@ void State::bin_duplex(const CameraParams& cam, int gx, int gy, int num_tiles, i
     pair_counts.ensure(pairs);
     pair_ends.ensure(pairs);
     list.ensure(total);
-    tile_lists(m, cells.ptr, crects.ptr, cell_touched.ptr, cell_offsets.ptr, gx, bits, true, pairs,
-               cell_ranges.ptr);
+    tile_lists(m, cells.ptr, crects.ptr, cell_touched.ptr, cell_offsets.ptr, gx, bits, true, pairs, cell_ranges.ptr);
     pair_counts_kernel<<<blocks(pairs), THREADS>>>((int64_t)pairs, values_out.ptr, vis_count.ptr, pair_counts.ptr);
     launched("pair_counts_kernel");
     // expanded entries per pair; the scan's total equals `expanded` (cells_kernel counted the same products)

@@ -58,8 +58,8 @@ void State::copy_to_texture(unsigned int texture, int w, int h) {
         auto it = textures.find(texture);
         if (it == textures.end()) {
             cudaGraphicsResource_t resource;
-            CUDA_CHECK(cudaGraphicsGLRegisterImage(&resource, texture, GL_TEXTURE_2D,
-                                                   cudaGraphicsRegisterFlagsWriteDiscard));
+            CUDA_CHECK(
+                cudaGraphicsGLRegisterImage(&resource, texture, GL_TEXTURE_2D, cudaGraphicsRegisterFlagsWriteDiscard));
             it = textures.emplace(texture, resource).first;
         }
         cudaGraphicsResource_t resource = it->second;

@@ -64,8 +64,8 @@ Renderer::Renderer(int device) {
         throw std::runtime_error(std::string("no usable CUDA device: ") + cudaGetErrorString(e));
     }
     if (device < 0 || device >= count)
-        throw std::runtime_error("CUDA device " + std::to_string(device) + " does not exist (" +
-                                 std::to_string(count) + " found)");
+        throw std::runtime_error("CUDA device " + std::to_string(device) + " does not exist (" + std::to_string(count) +
+                                 " found)");
     const auto [ok, why] = usable(device);  // the requested device's architecture, not the current one's
     if (!ok) throw std::runtime_error(why);
     device_ = device;
@@ -161,8 +161,9 @@ void Renderer::upload_lod(const float* means, const float* scales, const float* 
             },
             [&] {
                 if (k != s.k || (filter_3d != nullptr) != s.has_filter)
-                    throw std::runtime_error("CUDA renderer: level-of-detail nodes need the scene's SH size and 3D "
-                                             "filter");
+                    throw std::runtime_error(
+                        "CUDA renderer: level-of-detail nodes need the scene's SH size and 3D "
+                        "filter");
                 if (s.n + m >= (1ll << 31)) throw std::runtime_error("CUDA renderer: more than 2^31 - 1 rows");
                 const size_t n = (size_t)s.n;
                 put_after(s.means, n * 3, means, m * 3);
@@ -206,8 +207,7 @@ RenderResult Renderer::render(const RenderArgs& a, bool cut) {
         get(res.rgb, ss ? s.o_rgb.ptr : s.rgb.ptr, px * 3);
         get(res.alpha, ss ? s.o_alpha.ptr : s.alpha.ptr, px);
         get(res.evals, ss ? s.o_evals.ptr : s.evals.ptr, px);
-        if (a.want_window && a.mode == GAUSSIAN_BLENDING)
-            get(res.window, ss ? s.o_window.ptr : s.window.ptr, px * 2);
+        if (a.want_window && a.mode == GAUSSIAN_BLENDING) get(res.window, ss ? s.o_window.ptr : s.window.ptr, px * 2);
         return res;
     });
 }
@@ -217,8 +217,9 @@ RenderResult Renderer::render_to_gl_texture(unsigned int texture, const RenderAr
     return call(s, [&] {
         const std::vector<int> gl = gl_devices();
         if (gl.empty())
-            throw std::runtime_error("render_to_gl_texture: the OpenGL context current on this thread does not run "
-                                     "on a CUDA device (or none is current)");
+            throw std::runtime_error(
+                "render_to_gl_texture: the OpenGL context current on this thread does not run "
+                "on a CUDA device (or none is current)");
         if (std::find(gl.begin(), gl.end(), s.device) == gl.end())
             throw std::runtime_error("render_to_gl_texture: the current OpenGL context runs on CUDA device " +
                                      std::to_string(gl[0]) + ", this renderer on device " + std::to_string(s.device) +

@@ -24,7 +24,7 @@ struct RenderResult {
     int64_t cells_visible = 0, cell_misses = 0;  // duplex, as the CPU module defines them (0 otherwise)
     int64_t evaluations = 0;  // render_to_gl_texture: the sum of the evaluation counts (render: see `evals`)
     bool stage_reused = false;  // the per-camera stage was an earlier frame's (same scene, camera, SH degree, reach)
-    double stage_ms = 0;        // building the stage in this frame (0 when reused; part of preprocess_ms)
+    double stage_ms = 0;  // building the stage in this frame (0 when reused; part of preprocess_ms)
 };
 
 // A CUDA error after which the device is unusable in this process (a fault in a kernel, a watchdog timeout, the
@@ -66,7 +66,7 @@ struct State;  // device buffers and per-frame state (state.h, nvcc only)
 // one (the Python binding releases the GIL before it takes the mutex); each call makes the renderer's device current
 // on the calling thread for its duration and restores the thread's previous device after.
 class Renderer {
-public:
+  public:
     // device < 0: default_device(). Checks that this device exists, has not failed and is sm_75 or newer.
     explicit Renderer(int device = -1);
     ~Renderer();
@@ -130,7 +130,7 @@ public:
     // allocate again. A scene is uploaded again before the next render.
     void release_buffers();
 
-private:
+  private:
     int device_;
     std::unique_ptr<State> state_;
 };

@@ -114,9 +114,9 @@ struct State {
         free(means, scales, quats, opacities, sh, filter_3d, weight_sh, cmeans, cscales, cquats, coffsets, cmembers,
              cell_of, mkeys_in, mkeys_out, mvalues_in, mvalues_out, vis, vis_count, cell_touched, pair_counts, list,
              run_flags, run_slots, run_heads, run_keys[0], run_keys[1], run_perm[0], run_perm[1], run_numbers,
-             cell_offsets, pair_ends, cells, crects, cell_ranges, stage, stage_ok, splats, planes, rays, rects,
-             touched, values_in, values_out, offsets, keys_in, keys_out, ranges, temp, counters, rgb, alpha, window,
-             o_rgb, o_alpha, o_window, evals, o_evals, rgba, evals_total, cut_rows, cut_weights);
+             cell_offsets, pair_ends, cells, crects, cell_ranges, stage, stage_ok, splats, planes, rays, rects, touched,
+             values_in, values_out, offsets, keys_in, keys_out, ranges, temp, counters, rgb, alpha, window, o_rgb,
+             o_alpha, o_window, evals, o_evals, rgba, evals_total, cut_rows, cut_weights);
     }
 
     // binning.cu

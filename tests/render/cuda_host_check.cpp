@@ -71,9 +71,7 @@ template <class E, class F>
 static bool throws(F&& f) {
     try {
         f();
-    } catch (const E&) {
-        return true;
-    }
+    } catch (const E&) { return true; }
     return false;
 }
 
@@ -137,8 +135,8 @@ int main() {
     {  // a stale derived upload (checked against generation 1, scene 2 uploaded since) leaves scene 2's data
         std::vector<std::string> steps;
         const bool threw = throws<std::runtime_error>([&] {
-            replace_derived(true, 2, 1, "view weights", [&] { steps.push_back("clear"); },
-                            [&] { steps.push_back("copy"); });
+            replace_derived(
+                true, 2, 1, "view weights", [&] { steps.push_back("clear"); }, [&] { steps.push_back("copy"); });
         });
         expect(threw && steps.empty(), "stale_derived_upload_keeps_the_data", std::to_string(steps.size()) + " steps");
         steps.clear();

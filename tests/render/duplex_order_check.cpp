@@ -69,8 +69,8 @@ int main() {
             }
             int64_t rank = 0;
             for (int64_t i = a; i < b; ++i)
-                if (i != j && (splat_less(splats[vals[i]], splats[s]) ||
-                               (i < j && !splat_less(splats[s], splats[vals[i]]))))
+                if (i != j &&
+                    (splat_less(splats[vals[i]], splats[s]) || (i < j && !splat_less(splats[s], splats[vals[i]]))))
                     ++rank;
             old_vis[a + rank] = s;
         }
@@ -81,14 +81,14 @@ int main() {
         const size_t R = run_slots.size();
         std::vector<uint32_t> run_numbers(R), perm(R);
         for (size_t i = 0; i < R; ++i)
-            run_numbers[i] = (i == 0 || !same_depth_run(run_slots[i - 1], run_slots[i], keys.data(), vals.data(),
-                                                        cell_of.data())) + (i ? run_numbers[i - 1] : 0);
+            run_numbers[i] =
+                (i == 0 || !same_depth_run(run_slots[i - 1], run_slots[i], keys.data(), vals.data(), cell_of.data())) +
+                (i ? run_numbers[i - 1] : 0);
         std::iota(perm.begin(), perm.end(), 0u);
         for (int pass = 0; pass < RUN_PASSES; ++pass) {
             std::vector<uint32_t> key(R);
             for (size_t i = 0; i < R; ++i)
-                key[perm[i]] = run_pass_key(pass, run_slots[perm[i]], run_numbers[perm[i]], vals.data(),
-                                            splats.data());
+                key[perm[i]] = run_pass_key(pass, run_slots[perm[i]], run_numbers[perm[i]], vals.data(), splats.data());
             std::stable_sort(perm.begin(), perm.end(), [&](uint32_t a, uint32_t b) { return key[a] < key[b]; });
         }
         for (size_t i = 0; i < R; ++i) vis[run_slots[i]] = vals[run_slots[perm[i]]];

@@ -70,7 +70,8 @@ int main() {
         const double kappa = U(rng) < 0.3 ? 1.0 + U(rng) * 0.01 : std::exp(U(rng) * std::log(3000.0));
         const double s2 = std::max(s1 / kappa, 2e-3), th = U(rng) * M_PI;
         const double ct = std::cos(th), st = std::sin(th);
-        const float a = (float)(s1 * s1 * ct * ct + s2 * s2 * st * st), c = (float)(s1 * s1 * st * st + s2 * s2 * ct * ct);
+        const float a = (float)(s1 * s1 * ct * ct + s2 * s2 * st * st),
+                    c = (float)(s1 * s1 * st * st + s2 * s2 * ct * ct);
         const float b = (float)((s1 * s1 - s2 * s2) * ct * st);
         const double pick = U(rng);
         const float o = pick < 0.3   ? 1.0f

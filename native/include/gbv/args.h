@@ -22,22 +22,22 @@ struct LodArgs {
 };
 
 struct RenderArgs {
-    CameraParams cam;   // at supersample x the output size: supersampling renders there and box-averages
+    CameraParams cam;  // at supersample x the output size: supersampling renders there and box-averages
     Mode mode;
-    int supersample;    // N, 1..8
+    int supersample;  // N, 1..8
     int width, height;  // output size
     float bg[3];
-    OitParams oit;      // wsr / duplex globals
+    OitParams oit;  // wsr / duplex globals
     int sh_degree = 3;  // SH degree cap, 0..3
     bool want_window = false;  // Gaussian Blending's final window size per pixel as a debug plane
     int queue = STOPTHEPOP_QUEUE;  // stopthepop: the per-pixel queue length K (0: unbounded, the exact sort)
-    LodArgs lod;               // CPU only: the CUDA renderer draws a cut gathered into a scene of its own
+    LodArgs lod;  // CPU only: the CUDA renderer draws a cut gathered into a scene of its own
     uint32_t seed = 0, frame = 0;  // stochastic: the hash's seed and frame index (stochastic.h)
     // CPU only: the part of the output image rendered, [rx, rx + rw) x [ry, ry + rh) output pixels (rw = 0: all of
     // it), every pixel as the whole image's (the camera, its culling and its tile grid stay the whole image's);
     // rx x supersample and ry x supersample are multiples of TILE.
     int rx = 0, ry = 0, rw = 0, rh = 0;
-    bool fast = false;             // gaussian_blending at the fast precision (blend.h: blend_gaussian's Fast)
+    bool fast = false;  // gaussian_blending at the fast precision (blend.h: blend_gaussian's Fast)
 };
 
 }  // namespace gbv

@@ -56,8 +56,8 @@ GBV_HD typename L::M composite_scalar(typename L::M pass, typename L::F alpha, c
 // least log_min_alpha = ln((1/255) / opacity) (below it alpha < 1/255: skipped before the exp). False when no lane
 // passes (alpha not computed). The centre alpha of `scalar`, `mip` and the stochastic modes (stochastic.h).
 template <class L, class Tr = NoTrace>
-GBV_HD bool centre_alpha(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
-                         typename L::M& pass, typename L::F& alpha) {
+GBV_HD bool centre_alpha(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live, typename L::M& pass,
+                         typename L::F& alpha) {
     using F = typename L::F;
     const F power = gaussian_power<L>(s, L::set(s.xy.x) - px, L::set(s.xy.y) - py);
     pass = L::and_(live, L::and_(power <= L::set(0.0f), power >= L::set(s.log_min_alpha)));
@@ -77,7 +77,6 @@ GBV_HD typename L::M blend_scalar(const Splat2D& s, typename L::F px, typename L
     if (!centre_alpha<L, Tr>(s, px, py, live, pass, alpha)) return L::none();
     return composite_scalar<L, Tr>(pass, alpha, s.color, st);
 }
-
 
 // `analytic`: mean alpha over the unit pixel, separable in the splat's eigen-frame (Analytic-Splatting).
 template <class L, class Tr = NoTrace>
@@ -211,7 +210,6 @@ GBV_HD typename L::M blend_gaussian(const Splat2D& s, typename L::M live, Window
     return L::or_(stop, L::and_(take, win.T < L::set(T_STOP)));
 }
 
-
 // ---- finishing a pixel ---------------------------------------------------------------------------------------------
 
 // A pixel's sums at the end of its list, in every mode: colour C, transmittance T (scalar, mip, analytic: T;
@@ -263,8 +261,8 @@ using DuplexState = DuplexLanes<Lanes1>;
 template <bool Analytic>
 GBV_HD bool blend_alpha_pixel(const Splat2D& s, Vec2 pix, float& T, float C[3]) {
     AlphaState<Lanes1> st = {T, {C[0], C[1], C[2]}};
-    const bool stop = Analytic ? blend_analytic<Lanes1>(s, pix.x, pix.y, true, st)
-                               : blend_scalar<Lanes1>(s, pix.x, pix.y, true, st);
+    const bool stop =
+        Analytic ? blend_analytic<Lanes1>(s, pix.x, pix.y, true, st) : blend_scalar<Lanes1>(s, pix.x, pix.y, true, st);
     T = st.T;
     for (int c = 0; c < 3; ++c) C[c] = st.C[c];
     return stop;

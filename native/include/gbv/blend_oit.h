@@ -29,8 +29,7 @@ GBV_HD int64_t to_fixed(float x) { return (int64_t)rintf(minf(x, WSR_FIXED_MAX) 
 // capped at WSR_FIXED_MAX (the fixed-point bound; only huge trained view weights reach it) before it multiplies
 // the colour, so a capped splat keeps its colour. The fixed-point sums are added lane by lane.
 template <class L, class Tr = NoTrace>
-GBV_HD void blend_wsr(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live,
-                      WsrSumsN<L::N>& acc) {
+GBV_HD void blend_wsr(const Splat2D& s, typename L::F px, typename L::F py, typename L::M live, WsrSumsN<L::N>& acc) {
     using F = typename L::F;
     using M = typename L::M;
     const F power = gaussian_power<L>(s, L::set(s.xy.x) - px, L::set(s.xy.y) - py);

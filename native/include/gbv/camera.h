@@ -9,8 +9,8 @@ namespace gbv {
 // published 1.3 * tan(fov/2) clamp for a centred principal point (docs/modes.md#covariance-and-projection); an
 // orthographic camera has no use for them. `projection`: PERSPECTIVE or ORTHOGRAPHIC (fx, fy then in pixels per world
 // unit).
-inline CameraParams make_camera(const float R[9], const float t[3], float fx, float fy, float cx, float cy,
-                                int width, int height, float near_plane, Projection projection) {
+inline CameraParams make_camera(const float R[9], const float t[3], float fx, float fy, float cx, float cy, int width,
+                                int height, float near_plane, Projection projection) {
     CameraParams c;
     for (int i = 0; i < 9; ++i) c.R[i] = R[i];
     for (int i = 0; i < 3; ++i) c.t[i] = t[i];

@@ -27,9 +27,16 @@ namespace gbv {
 
 // Blending modes; the integer values are the Python enum's values (gbviewer/render/modes.py).
 enum Mode : int32_t {
-    SCALAR = 0, MIP = 1, ANALYTIC = 2, GAUSSIAN_BLENDING = 3, WSR = 4, DUPLEX = 5, STOCHASTIC = 6,
+    SCALAR = 0,
+    MIP = 1,
+    ANALYTIC = 2,
+    GAUSSIAN_BLENDING = 3,
+    WSR = 4,
+    DUPLEX = 5,
+    STOCHASTIC = 6,
     STOCHASTIC_POPFREE = 7,
-    EVAL3D = 8, STOPTHEPOP = 9,  // per-pixel sorted along the ray (ray3d.h)
+    EVAL3D = 8,
+    STOPTHEPOP = 9,  // per-pixel sorted along the ray (ray3d.h)
 };
 // The modes whose alpha is 3DGS's at the pixel centre, with the viewer presets' 2D filter (view_filter.h): scalar and
 // the stochastic modes, which keep fragments with that alpha (gbviewer.render.presets.FILTERED_MODES). stopthepop
@@ -43,27 +50,27 @@ GBV_HD bool per_pixel_sorted(Mode m) { return m == EVAL3D || m == STOPTHEPOP; }
 // Camera projections; the values are the indices of gbviewer.model.camera.PROJECTIONS.
 enum Projection : int32_t { PERSPECTIVE = 0, ORTHOGRAPHIC = 1 };
 
-constexpr int TILE = 16;                       // BLOCK_X = BLOCK_Y (docs/modes.md#culling-radius-tiles)
-constexpr float DILATION_3DGS = 0.3f;          // +0.3 px^2, no compensation (§0.3)
-constexpr float MIP_KERNEL_SIZE = 0.1f;        // Mip-Splatting 2D filter (§2)
+constexpr int TILE = 16;  // BLOCK_X = BLOCK_Y (docs/modes.md#culling-radius-tiles)
+constexpr float DILATION_3DGS = 0.3f;  // +0.3 px^2, no compensation (§0.3)
+constexpr float MIP_KERNEL_SIZE = 0.1f;  // Mip-Splatting 2D filter (§2)
 constexpr float MAX_ALPHA = 0.99f;
 constexpr float MIN_ALPHA_3DGS = 1.0f / 255.0f;
 constexpr float MIN_ALPHA_GB = 1.0f / 256.0f;  // Gaussian Blending uses 1/256 (§6.1)
-constexpr float T_STOP = 1e-4f;                // early termination threshold
+constexpr float T_STOP = 1e-4f;  // early termination threshold
 constexpr float RADIUS_SIGMAS_3DGS = 3.0f;
 constexpr float RADIUS_SIGMAS_GB = 3.33021844f;  // sqrt(-2 ln(1/256))
-constexpr float GB_MIN_UV_DIFF = 0.1f;         // window narrower than 0.1 sigma -> scalar fallback
+constexpr float GB_MIN_UV_DIFF = 0.1f;  // window narrower than 0.1 sigma -> scalar fallback
 constexpr float GB_MAX_UV_DIFF = 1e6f;
-constexpr float GB_MIN_VAR = 0.001f;           // window variance floor
+constexpr float GB_MIN_VAR = 0.001f;  // window variance floor
 constexpr float GB_SERIES_MAX_HALF_WIDTH = 1.0f;  // window moments: Hermite series up to this half side (sigmas)
 constexpr int GB_SERIES_TERMS = 12;
-constexpr int GB_FAST_SERIES_TERMS = 8;        // the fast precision's longest series (window_side_moments' Fast)
+constexpr int GB_FAST_SERIES_TERMS = 8;  // the fast precision's longest series (window_side_moments' Fast)
 constexpr float SQRT_PI_2 = 1.2533141373155003f;
-constexpr float WSR_EMPTY_SUM = 1e-4f;         // LC-WSR: a weight sum of exactly 0 becomes 1e-4 (§7.2)
+constexpr float WSR_EMPTY_SUM = 1e-4f;  // LC-WSR: a weight sum of exactly 0 becomes 1e-4 (§7.2)
 constexpr float WSR_FIXED_SCALE = 68719476736.0f;  // 2^36: CPU weighted sums in 64-bit fixed point (blend.h)
-constexpr float WSR_FIXED_MAX = 64.0f;         // 2^6: per-term clamp; 2^21 - 1 such terms fit a fixed-point int64
-constexpr float DUPLEX_CELL_SIGMAS = 2.0f;     // cell radius ceil(2 sqrt(lambda1)) (§8.3)
-constexpr float DUPLEX_T_STOP = 0.01f;         // CUMMULT_THRESHOLD: cell-level early termination (§8.1)
+constexpr float WSR_FIXED_MAX = 64.0f;  // 2^6: per-term clamp; 2^21 - 1 such terms fit a fixed-point int64
+constexpr float DUPLEX_CELL_SIGMAS = 2.0f;  // cell radius ceil(2 sqrt(lambda1)) (§8.3)
+constexpr float DUPLEX_T_STOP = 0.01f;  // CUMMULT_THRESHOLD: cell-level early termination (§8.1)
 constexpr float TWO_PI = 6.283185307179586f;
 // StopThePop's published per-pixel queue length (SortQueueSizes.per_pixel = 4; tile_4x4 = 64, tile_2x2 = 8:
 // r4dl/StopThePop-Rasterization diff_gaussian_rasterization/__init__.py; the sub-tile queues: resort.h).
@@ -143,18 +150,18 @@ struct CameraParams {
 
 // Per-splat output of preprocess; everything the blend step needs, computed once per frame.
 struct Splat2D {
-    Vec2 xy;       // screen position (pixel centres at half-integers)
-    float depth;   // view-space z
-    float opacity; // after the mode's compensation and the 3D filter
+    Vec2 xy;  // screen position (pixel centres at half-integers)
+    float depth;  // view-space z
+    float opacity;  // after the mode's compensation and the 3D filter
     float conic[3];  // inverse 2D covariance (a, b, c)
     float color[3];
-    Vec2 v1;       // unit major eigenvector (v2 = perp(v1))
+    Vec2 v1;  // unit major eigenvector (v2 = perp(v1))
     float sigma1, sigma2;  // sqrt of the eigenvalues of the 2D covariance
     float inv_sigma1, inv_sigma2;
-    float log_min_alpha;   // ln(min_alpha / opacity): lowest log-Gaussian value that can give a visible alpha
+    float log_min_alpha;  // ln(min_alpha / opacity): lowest log-Gaussian value that can give a visible alpha
     float radius;  // screen-space bounding radius in pixels (duplex rejects pixels outside this circle)
     int32_t cell;  // index of the splat's cell (duplex), -1 otherwise
-    int32_t id;    // the splat's index in the frame's splats (stochastic hashes it: stochastic.h)
+    int32_t id;  // the splat's index in the frame's splats (stochastic hashes it: stochastic.h)
 };
 
 // Per-frame mode globals. The order-independent modes (wsr, duplex): LC-WSR's depth correction max(0, 1 - z/sigma)
@@ -170,8 +177,8 @@ struct OitParams {
     float pre_dilation = 0.0f;
     float cull_lambda = 0.0f;
     int32_t compensate = 0;
-    int32_t dc_clamp = 0;     // base colour clamped to [0, 1] before the view-dependent SH terms are added
-    float support = 0.0f;     // alpha 0 beyond this Mahalanobis radius (sigmas); 0: no such cut
+    int32_t dc_clamp = 0;  // base colour clamped to [0, 1] before the view-dependent SH terms are added
+    float support = 0.0f;  // alpha 0 beyond this Mahalanobis radius (sigmas); 0: no such cut
     int32_t sort_radial = 0;  // sort by distance from the eye instead of view-space z (perspective)
 };
 

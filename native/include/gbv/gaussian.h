@@ -11,8 +11,7 @@ namespace gbv {
 // Exponent of the splat's Gaussian at offset (dx, dy) from its centre (eq. 5; either sign of the offset).
 template <class L>
 GBV_HD typename L::F gaussian_power(const Splat2D& s, typename L::F dx, typename L::F dy) {
-    return L::set(-0.5f) * (L::set(s.conic[0]) * dx * dx + L::set(s.conic[2]) * dy * dy) -
-           L::set(s.conic[1]) * dx * dy;
+    return L::set(-0.5f) * (L::set(s.conic[0]) * dx * dx + L::set(s.conic[2]) * dy * dy) - L::set(s.conic[1]) * dx * dy;
 }
 
 // Analytic-Splatting's logistic approximation of the standard normal CDF (docs/modes.md#analytic):
@@ -83,9 +82,13 @@ GBV_HD SideMoments<L> window_side_moments(typename L::F c, typename L::F h, type
         // terms for the widest lane: float accuracy (< 6e-7 relative) with 6 up to h = 1/4, 10 up to 1/2, 12 up to 1
         const int wide = L::any(L::and_(series, hs > L::set(0.5f)))    ? 2
                          : L::any(L::and_(series, hs > L::set(0.25f))) ? 1
-                                                                      : 0;
-        const int terms = Fast ? (wide == 2 ? GB_FAST_SERIES_TERMS : wide == 1 ? 6 : 4)
-                               : (wide == 2 ? GB_SERIES_TERMS : wide == 1 ? 10 : 6);
+                                                                       : 0;
+        const int terms = Fast ? (wide == 2   ? GB_FAST_SERIES_TERMS
+                                  : wide == 1 ? 6
+                                              : 4)
+                               : (wide == 2   ? GB_SERIES_TERMS
+                                  : wide == 1 ? 10
+                                              : 6);
         GBV_UNROLL
         for (int n = 2; n <= GB_SERIES_TERMS; ++n) {
             if (n > terms) break;

@@ -24,18 +24,30 @@ GBV_HD uint32_t float_bits(float v) {
 // Field i (0..11) of a splat for splat_less: depth first.
 GBV_HD float splat_key(const Splat2D& s, int i) {
     switch (i) {
-        case 0: return s.depth;
-        case 1: return s.xy.x;
-        case 2: return s.xy.y;
-        case 3: return s.opacity;
-        case 4: return s.conic[0];
-        case 5: return s.conic[1];
-        case 6: return s.conic[2];
-        case 7: return s.color[0];
-        case 8: return s.color[1];
-        case 9: return s.color[2];
-        case 10: return s.radius;
-        default: return s.log_min_alpha;
+        case 0:
+            return s.depth;
+        case 1:
+            return s.xy.x;
+        case 2:
+            return s.xy.y;
+        case 3:
+            return s.opacity;
+        case 4:
+            return s.conic[0];
+        case 5:
+            return s.conic[1];
+        case 6:
+            return s.conic[2];
+        case 7:
+            return s.color[0];
+        case 8:
+            return s.color[1];
+        case 9:
+            return s.color[2];
+        case 10:
+            return s.radius;
+        default:
+            return s.log_min_alpha;
     }
 }
 

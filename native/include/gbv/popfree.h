@@ -36,11 +36,10 @@ GBV_HD DepthPlane popfree_plane(const CameraParams& cam, const float pv[3], cons
         for (int j = 0; j < 3; ++j) RS[i * 3 + j] = dot3_rn(R + i * 3, 1, S + j, 3);
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) V[i * 3 + j] = dot3_rn(RS + i * 3, 1, R + j * 3, 1);
-    const float adj[9] = {minor_rn(V[4], V[8], V[5], V[7]), minor_rn(V[2], V[7], V[1], V[8]),
-                          minor_rn(V[1], V[5], V[2], V[4]), minor_rn(V[5], V[6], V[3], V[8]),
-                          minor_rn(V[0], V[8], V[2], V[6]), minor_rn(V[2], V[3], V[0], V[5]),
-                          minor_rn(V[3], V[7], V[4], V[6]), minor_rn(V[1], V[6], V[0], V[7]),
-                          minor_rn(V[0], V[4], V[1], V[3])};
+    const float adj[9] = {
+        minor_rn(V[4], V[8], V[5], V[7]), minor_rn(V[2], V[7], V[1], V[8]), minor_rn(V[1], V[5], V[2], V[4]),
+        minor_rn(V[5], V[6], V[3], V[8]), minor_rn(V[0], V[8], V[2], V[6]), minor_rn(V[2], V[3], V[0], V[5]),
+        minor_rn(V[3], V[7], V[4], V[6]), minor_rn(V[1], V[6], V[0], V[7]), minor_rn(V[0], V[4], V[1], V[3])};
     const bool ortho = cam.projection == ORTHOGRAPHIC;
     const float dir[3] = {ortho ? 0.0f : pv[0], ortho ? 0.0f : pv[1], ortho ? 1.0f : pv[2]};
     float n[3];

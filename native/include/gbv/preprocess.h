@@ -61,9 +61,9 @@ GBV_HD typename L::M screen_footprint(const CameraParams& cam, const typename L:
 // depth correction into the opacity: o' = o * (v * (depth_correct ? 1 - z/sigma : 1)), culled when z >= sigma
 // (depth_correct), v * dc <= 0 or o' < 1/255. The outputs of culled lanes are unspecified.
 template <class L>
-GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLanes<L>& st, typename L::M ok,
-                                       int sh_deg, const CameraParams& cam, Mode mode, const OitParams& oit,
-                                       int grid_x, int grid_y, Splat2DLanes<L>* out, TileRectLanes<L>* rect) {
+GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLanes<L>& st, typename L::M ok, int sh_deg,
+                                       const CameraParams& cam, Mode mode, const OitParams& oit, int grid_x, int grid_y,
+                                       Splat2DLanes<L>* out, TileRectLanes<L>* rect) {
     using F = typename L::F;
     F cov[3] = {st.cov[0], st.cov[1], st.cov[2]};
     F opacity = st.opacity;
@@ -81,8 +81,7 @@ GBV_HD typename L::M preprocess_finish(const SplatInLanes<L>& in, const StageLan
         cov[0] = cov[0] + L::set(MIP_KERNEL_SIZE);
         cov[2] = cov[2] + L::set(MIP_KERNEL_SIZE);
         const F det1 = L::fmax(eps, L::mul_rn(cov[0], cov[2]) - L::mul_rn(cov[1], cov[1]));
-        const F coef = L::select(L::or_(det0 <= eps, det1 <= eps), L::set(0.0f),
-                                 L::sqrt(det0 / (det1 + eps) + eps));
+        const F coef = L::select(L::or_(det0 <= eps, det1 <= eps), L::set(0.0f), L::sqrt(det0 / (det1 + eps) + eps));
         opacity = opacity * coef;
     } else if (mode == GAUSSIAN_BLENDING) {
         sigmas = RADIUS_SIGMAS_GB;
@@ -175,8 +174,7 @@ GBV_HD bool finish_splat(const SplatIn& in, const StageSplat& stage, int sh_deg,
     for (int c = 0; c < 3; ++c) st.cov[c] = stage.cov[c];
     Splat2DLanes<Lanes1> o;
     TileRectLanes<Lanes1> r;
-    if (!preprocess_finish<Lanes1>(l, st, true, sh_deg, cam, mode, oit, grid_x, grid_y, &o, &r))
-        return false;
+    if (!preprocess_finish<Lanes1>(l, st, true, sh_deg, cam, mode, oit, grid_x, grid_y, &o, &r)) return false;
     *rect = TileRect{r.x0, r.y0, r.x1, r.y1};
     out->xy = Vec2{o.xy[0], o.xy[1]};
     out->depth = o.depth;

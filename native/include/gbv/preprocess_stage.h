@@ -14,7 +14,7 @@ namespace gbv {
 
 // The viewer presets' rules that change the stage (stage_rules): a bit each.
 constexpr int STAGE_DC_CLAMP = 1;  // sh_to_rgb's dc_clamp
-constexpr int STAGE_RADIAL = 2;    // the depth (the sort key) is the distance from the eye (perspective)
+constexpr int STAGE_RADIAL = 2;  // the depth (the sort key) is the distance from the eye (perspective)
 
 // The stage rules of a frame: OitParams' dc_clamp and sort_radial, the presets' (of the modes their 2D filter applies
 // to: view_filtered); 0 for every other mode. Part of every backend's stage key, like stage_reach.
@@ -33,9 +33,9 @@ GBV_HD void covariance_3d(const typename L::F q[4], const typename L::F s[3], ty
             xz = L::mul_rn(x, z), yz = L::mul_rn(y, z), rx = L::mul_rn(r, x), ry = L::mul_rn(r, y),
             rz = L::mul_rn(r, z);
     const F one = L::set(1.0f), two = L::set(2.0f);
-    const F R[9] = {one - L::mul_rn(two, yy + zz), two * (xy - rz),                two * (xz + ry),
-                    two * (xy + rz),                one - L::mul_rn(two, xx + zz), two * (yz - rx),
-                    two * (xz - ry),                two * (yz + rx),                one - L::mul_rn(two, xx + yy)};
+    const F R[9] = {one - L::mul_rn(two, yy + zz), two * (xy - rz), two * (xz + ry), two * (xy + rz),
+                    one - L::mul_rn(two, xx + zz), two * (yz - rx), two * (xz - ry), two * (yz + rx),
+                    one - L::mul_rn(two, xx + yy)};
     F M[9];  // M = R S
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) M[i * 3 + j] = R[i * 3 + j] * s[j];
@@ -76,8 +76,8 @@ GBV_HD void project_covariance(const CameraParams& cam, const typename L::F cov3
     F TS[6];
     for (int r = 0; r < 2; ++r)
         for (int c = 0; c < 3; ++c)
-            TS[r * 3 + c] = L::mul_rn(T[r * 3], S[c]) + L::mul_rn(T[r * 3 + 1], S[3 + c]) +
-                            L::mul_rn(T[r * 3 + 2], S[6 + c]);
+            TS[r * 3 + c] =
+                L::mul_rn(T[r * 3], S[c]) + L::mul_rn(T[r * 3 + 1], S[3 + c]) + L::mul_rn(T[r * 3 + 2], S[6 + c]);
     out[0] = L::mul_rn(TS[0], T[0]) + L::mul_rn(TS[1], T[1]) + L::mul_rn(TS[2], T[2]);
     out[1] = L::mul_rn(TS[0], T[3]) + L::mul_rn(TS[1], T[4]) + L::mul_rn(TS[2], T[5]);
     out[2] = L::mul_rn(TS[3], T[3]) + L::mul_rn(TS[4], T[4]) + L::mul_rn(TS[5], T[5]);
@@ -85,15 +85,15 @@ GBV_HD void project_covariance(const CameraParams& cam, const typename L::F cov3
 
 // Inputs of one splat (activated parameters, see gbviewer.Scene).
 struct SplatIn {
-    const float* mean;   // 3
+    const float* mean;  // 3
     const float* scale;  // 3
-    const float* quat;   // 4 (w, x, y, z), unit
+    const float* quat;  // 4 (w, x, y, z), unit
     float opacity;
-    const float* sh;     // K*3
-    float filter_3d;     // 0 when the scene has none
+    const float* sh;  // K*3
+    float filter_3d;  // 0 when the scene has none
     const float* weight_sh;  // sort-free view weight, weight_deg's (deg+1)^2 coefficients; null: v = 1
     int weight_deg;
-    int32_t cell;        // the splat's cell (duplex), -1 when none
+    int32_t cell;  // the splat's cell (duplex), -1 when none
 };
 
 // Inputs of L::N splats, one per lane (SplatIn's values; sh[i * 3 + c] and weight_sh[i] as lanes).
@@ -234,8 +234,8 @@ template <class L>
 GBV_HD typename L::M stage_on_screen(const StageLanes<L>& st, int grid_x, int grid_y, float reach) {
     using F = typename L::F;
     const F h = L::set(3.34f) * L::sqrt(st.cov[0] + st.cov[2] + L::set(2.0f * reach + 0.4f)) + L::set(2.0f);
-    const typename L::M off = L::or_(L::or_(st.xy[0] + h < L::set(0.0f), st.xy[0] - h > L::set(TILE * grid_x + 1.0f)),
-                                     L::or_(st.xy[1] + h < L::set(0.0f), st.xy[1] - h > L::set(TILE * grid_y + 1.0f)));
+    const typename L::M off = L::or_(L::or_(st.xy[0] + h<L::set(0.0f), st.xy[0] - h> L::set(TILE * grid_x + 1.0f)),
+                                     L::or_(st.xy[1] + h<L::set(0.0f), st.xy[1] - h> L::set(TILE * grid_y + 1.0f)));
     return L::and_not(L::first_n(L::N), off);
 }
 

@@ -201,8 +201,8 @@ GBV_HD TileRect footprint_tiles(Vec2 xy, int kind, const double box[4], int gx, 
 // (eval3d), degenerate ray data (both).
 GBV_HD bool finish_ray_splat(const SplatIn& in, const StageSplat& st, const CameraParams& cam, Mode mode, int gx,
                              int gy, Splat2D* out, TileRect* rect, RaySplat* ray) {
-    const bool ok = ray_splat(cam, in.mean, in.quat, in.scale, in.filter_3d,
-                              mode == STOPTHEPOP ? STOPTHEPOP_MIN_SCALE : 0.0f, ray);
+    const bool ok =
+        ray_splat(cam, in.mean, in.quat, in.scale, in.filter_3d, mode == STOPTHEPOP ? STOPTHEPOP_MIN_SCALE : 0.0f, ray);
     if (mode != EVAL3D) return ok;
     *out = Splat2D{};
     out->xy = {st.xy[0], st.xy[1]};

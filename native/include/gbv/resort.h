@@ -184,8 +184,7 @@ GBV_HD void hier_finish(const Src& src, HierState& h, AlphaState<Lanes1>& st) {
 // Stage 3: the 4x4 queue's entries tail[first .. first + count) as one group through the 2x2 queue; what goes on
 // is emit(entry, loaded).
 template <class Src, class Emit>
-GBV_HD void hier_group(const Src& src, int first, int count, int loaded, const HierPixel& g, HierState& h,
-                       Emit& emit) {
+GBV_HD void hier_group(const Src& src, int first, int count, int loaded, const HierPixel& g, HierState& h, Emit& emit) {
     if (h.done) return;
     Fragment m[HIER_MID];
     int mn = 0;

@@ -21,17 +21,17 @@ namespace gbv {
 // fails is reported). Values are gbviewer.render.trace.SKIP_REASONS' positions.
 enum Skip : int32_t {
     SKIP_NONE = 0,
-    SKIP_BOX,        // the pixel centre (gaussian_blending: window) is outside the splat's box: not evaluated
-    SKIP_RADIUS,     // outside the splat's radius (duplex: the pixel; gaussian_blending: the window's reach)
-    SKIP_POWER,      // Gaussian exponent > 0 or NaN
-    SKIP_CUTOFF,     // exponent below ln(min_alpha / opacity), before the exp (gaussian_blending: the splat's
-                     // largest value on the window is below 1/256)
-    SKIP_ALPHA,      // alpha below 1/255 (gaussian_blending: 1/256)
-    SKIP_STOP,       // T (1 - alpha) < 1e-4: the pixel stops without this splat
+    SKIP_BOX,  // the pixel centre (gaussian_blending: window) is outside the splat's box: not evaluated
+    SKIP_RADIUS,  // outside the splat's radius (duplex: the pixel; gaussian_blending: the window's reach)
+    SKIP_POWER,  // Gaussian exponent > 0 or NaN
+    SKIP_CUTOFF,  // exponent below ln(min_alpha / opacity), before the exp (gaussian_blending: the splat's
+    // largest value on the window is below 1/256)
+    SKIP_ALPHA,  // alpha below 1/255 (gaussian_blending: 1/256)
+    SKIP_STOP,  // T (1 - alpha) < 1e-4: the pixel stops without this splat
     SKIP_CELL_STOP,  // duplex: a new cell entered with T < 0.01: the pixel stops
-    SKIP_DONE,       // the pixel had stopped before this entry: not evaluated
-    SKIP_DISCARD,    // stochastic: the fragment's uniform is not below its alpha (discarded)
-    SKIP_DEPTH,      // stochastic_popfree: kept, but behind the nearest fragment kept so far (depth test)
+    SKIP_DONE,  // the pixel had stopped before this entry: not evaluated
+    SKIP_DISCARD,  // stochastic: the fragment's uniform is not below its alpha (discarded)
+    SKIP_DEPTH,  // stochastic_popfree: kept, but behind the nearest fragment kept so far (depth test)
 };
 
 // The tracer of renders: records nothing. A recording tracer has `records = true` and these static functions (masks:

@@ -72,15 +72,22 @@ int main(int argc, char** argv) {
     for (const Run& run : runs) {
         const OitParams oit{nears[1], 1.0f, 4.0f, run.depth_correct};
         for (int64_t i = 0; i < n; ++i) {
-            SplatIn s{&means[3 * i], &scales[3 * i], &quats[4 * i], opac[i], &sh[(size_t)k * 3 * i], filt[i],
-                      run.weights && wk ? &w[(size_t)wk * i] : nullptr, sh_degree_for_coeffs(wk),
+            SplatIn s{&means[3 * i],
+                      &scales[3 * i],
+                      &quats[4 * i],
+                      opac[i],
+                      &sh[(size_t)k * 3 * i],
+                      filt[i],
+                      run.weights && wk ? &w[(size_t)wk * i] : nullptr,
+                      sh_degree_for_coeffs(wk),
                       run.mode == DUPLEX ? (int32_t)(i % 7) : -1};
             Splat2D p;
             std::memset(&p, 0, sizeof(p));
             Record r;
             std::memset(&r, 0, sizeof(r));
             r.valid = preprocess_splat(s, sh_degree_for_coeffs(k), cam, run.mode, oit, gx, gy, &p, &r.rect);
-            if (!r.valid) r.rect = TileRect{0, 0, 0, 0};  // unspecified when culled
+            if (!r.valid)
+                r.rect = TileRect{0, 0, 0, 0};  // unspecified when culled
             else {
                 r.depth = p.depth;
                 r.x = p.xy.x;
@@ -103,7 +110,8 @@ int main(int argc, char** argv) {
         Record r;
         std::memset(&r, 0, sizeof(r));
         r.valid = preprocess_cell(c, cam, gx, gy, &p, &r.rect);
-        if (!r.valid) r.rect = TileRect{0, 0, 0, 0};
+        if (!r.valid)
+            r.rect = TileRect{0, 0, 0, 0};
         else {
             r.depth = p.depth;
             r.x = p.xy.x;
