@@ -189,9 +189,8 @@ void for_blocks(int64_t n, FrameRun& run, Fn fn) {
 
 // The level-of-detail cut of `key` (lod.h) as the stage's rows and weights: drawn leaves (scene rows, in the cut's
 // order) first, then drawn interior nodes (rows n_scene + node, ascending), the order gbviewer.lod.cut_scene gathers
-// them in.
-// False, and no rows, for a cut that is the scene's leaves (drawn as the scene itself, bit for bit). Stops early
-// once `run` is cancelled (the rows then unspecified: the stage is not ready).
+// them in. False, and no rows, for a cut that is the scene's leaves (drawn as the scene itself, bit for bit). Stops
+// early once `run` is cancelled (the rows then unspecified: the stage is not ready).
 bool cut_rows(const SceneView& sc, const LodArgs& a, Stage& stage, FrameRun& run) {
     const SceneView::Hierarchy& t = sc.tree;
     const lod::View view{{a.eye[0], a.eye[1], a.eye[2]}, a.focal, a.orthographic};
