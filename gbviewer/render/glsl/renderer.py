@@ -53,11 +53,12 @@ from ...core.errors import BackendUnavailable, RenderError
 from ...model.camera import Camera
 from ...model.cells import Cells
 from ...model.scene import Scene
+from ..contract import Capabilities, Renderer
 from ..control import Progress, RenderControl
 from ..modes import PER_PIXEL_SORTED
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
 from ..presets import FILTERED_MODES
-from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
+from ..types import Frame, FrameStats, Mode, RenderSettings
 from ..view_filter import DILATION_3DGS
 from . import interface as gi
 from .binning import bin_duplex, bin_splats, read_totals
