@@ -1,10 +1,11 @@
-"""Rendering: the types every backend shares (`types`), the per-frame preparation (`prepare`), the backends
-(`cpu`, `cuda`, `glsl/`), the registry that creates them by name (`get_renderer`, `render`), the choice of the best
-one here (`choice`: `backend="auto"`), the pixel trace of the CPU kernel (`trace`) and how the native modules were
-built (`build_info`)."""
+"""Rendering: the types every backend shares (`types`), the contract each subclasses (`contract`), the per-frame
+preparation (`prepare`), the backends (`cpu`, `cuda`, `glsl/`), the registry that creates them by name
+(`get_renderer`, `render`), the choice of the best one here (`choice`: `backend="auto"`), the pixel trace of the CPU
+kernel (`trace`) and how the native modules were built (`build_info`)."""
 
 from .build_info import build_info, compiler_line, simd_line
 from .choice import AUTO, BackendChoice, choose_backend
+from .contract import Capabilities, Renderer
 from .cpu import CpuRenderer
 from .cuda import CudaRenderer
 from .registry import (
@@ -18,7 +19,7 @@ from .registry import (
     resolve_backend,
 )
 from .trace import PixelTrace, SampleTrace, TraceStep, trace_pixel
-from .types import SORT_ENTRY_BYTES, Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
+from .types import SORT_ENTRY_BYTES, Frame, FrameStats, Mode, RenderSettings
 
 __all__ = [
     "AUTO",

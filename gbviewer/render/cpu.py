@@ -12,10 +12,11 @@ from ..core.errors import BackendUnavailable, RenderError
 from ..model.camera import Camera
 from ..model.cells import Cells
 from ..model.scene import Scene
+from .contract import Capabilities, Renderer, job_partials
 from .control import FrameLock, Progress, RenderControl
 from .prepare import NativeUploads, OitParams, Prepared, camera_args, native_frame, prepare
 from .trace import PixelTrace, from_native
-from .types import DEFAULT_ET_GRADE, DEFAULT_SIGMA, Capabilities, Frame, Mode, Renderer, RenderSettings, job_partials
+from .types import DEFAULT_ET_GRADE, DEFAULT_SIGMA, Frame, Mode, RenderSettings
 
 NO_OIT = OitParams(DEFAULT_SIGMA, 1.0, DEFAULT_ET_GRADE, False)  # the native defaults, unused outside wsr and duplex
 Region = tuple[int, int, int, int]  # x, y, w, h of the output pixels a frame renders

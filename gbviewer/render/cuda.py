@@ -13,6 +13,7 @@ from ..lod import Hierarchy
 from ..model.camera import Camera
 from ..model.cells import Cells
 from ..model.scene import Scene
+from .contract import Capabilities, Renderer
 from .control import Progress, RenderControl
 from .cuda_textures import TextureRegistrations
 from .prepare import (
@@ -25,7 +26,7 @@ from .prepare import (
     native_stats,
     prepare,
 )
-from .types import Capabilities, Frame, FrameStats, Renderer, RenderSettings
+from .types import Frame, FrameStats, RenderSettings
 
 
 class CudaRenderer(NativeUploads, Renderer):

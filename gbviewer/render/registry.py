@@ -15,8 +15,9 @@ from ..core.errors import InvalidValue, RenderError
 from ..model.camera import Camera
 from ..model.scene import Scene
 from .choice import AUTO, choose_backend
+from .contract import Renderer
 from .control import FrameLock
-from .types import Frame, Mode, Renderer, RenderSettings, settings_from
+from .types import Frame, Mode, RenderSettings, settings_from
 
 _MODULES = {"cpu": ("cpu", "CpuRenderer"), "cuda": ("cuda", "CudaRenderer"), "glsl": ("glsl", "GlslRenderer")}
 

@@ -24,8 +24,9 @@ from ..core.cancel import Cancellable
 from ..core.errors import RenderCancelled, RenderError
 from ..model.camera import Camera
 from .budget import BUDGET_ENV, frame_bytes, gib, memory_budget
+from .contract import Renderer
 from .cpu import REGION_ALIGN, Region
-from .types import Frame, FrameStats, Mode, Renderer, RenderSettings
+from .types import Frame, FrameStats, Mode, RenderSettings
 
 STITCH_BYTES = 20  # per output pixel held while the parts render: rgb and alpha (float32), evaluations (int32)
 WINDOW_STITCH_BYTES = 8  # and Gaussian Blending's window plane (2 x float32) when asked for

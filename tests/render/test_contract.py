@@ -1,4 +1,4 @@
-"""The backend contract (`gbviewer.render.types.Renderer`): one behavioural suite run over every registered backend
+"""The backend contract (`gbviewer.render.contract.Renderer`): one behavioural suite run over every registered backend
 (`BACKENDS`, so a new backend is checked by its one registry line): render, cancel, progress, partial, release,
 re-upload, use from two threads, and each of its `Capabilities` honoured. A backend that cannot run here (cuda
 without a GPU) skips with its reason."""

@@ -82,8 +82,8 @@ NOT_PORTED = {
     "blend_alpha_pixel": "the shared body of C++'s one-pixel blend_scalar / blend_analytic wrappers around the lane "
     "templates; GLSL has those two functions themselves",
     "dot": "GLSL built-in",
-    "stage_reach": "the stage key's reach, a uniform of stage.comp that the driver computes (glsl/renderer.py "
-    "_stage) as it keys the kept stage",
+    "stage_reach": "the stage key's reach, a uniform of stage.comp that the driver computes (glsl/stage.py "
+    "Stage.build) as it keys the kept stage",
     "stage_rules": "the stage key's preset rules, a uniform of stage.comp that the driver computes (ViewFilter."
     "stage_rules) as it keys the kept stage",
     "preprocess_splat": "the one-splat composition of stage_splat and finish_splat (the C++ reference of "

@@ -14,7 +14,7 @@ from helpers import skip_or_fail
 
 from gbviewer.render import Mode
 from gbviewer.render.glsl import SHADER_DIR, shader_source
-from gbviewer.render.glsl.renderer import blend_defines
+from gbviewer.render.glsl.blend import blend_defines
 
 
 def variants() -> list[tuple[str, dict]]:

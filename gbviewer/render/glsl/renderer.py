@@ -5,7 +5,7 @@ same function names and constants):
 
 1. stage.comp: the per-camera stage (`stage_splat`: view-space position and depth, 3D filter, 2D covariance before the
    mode's filter, screen position, SH colour, near and on-screen cull) of every splat, kept in the `stage` buffer
-   while the scene, the camera, the SH degree and the on-screen cull's reach hold (`_stage_key`: a mode, supersample
+   while the scene, the camera, the SH degree and the on-screen cull's reach hold (`stage.Stage`: a mode, supersample
    or rate switch of one camera reuses it, as on the CPU); then preprocess.comp: the mode's `finish_splat` per splat
    -> Splat2D, tile rectangle, survivor flag; atomics count the tile-splat pairs and the depth range.
 2. scan of the flags, compact.comp: survivors in splat-index order, key = depth bits - min depth bits.
@@ -27,9 +27,10 @@ steps 3-5 with cells.comp (each cell's visible splats, its screen proxy), a dept
 list of their splats; blend.comp reads each splat's cell from the scene's cell buffer.
 
 Drivers that cap the loop iterations of one invocation (Mesa's llvmpipe) get the blend split into several dispatches:
-see `limits`. Buffers, programs and dispatch are `gpu.Gpu`; the scan, radix sort and pair sort are in `sort`, the tile
-lists of steps 3-5 in `binning`. Counter slots, record sizes and the `oit` uniform's layout are the shaders' own
-(shaders/interface.glsl, read by `interface`).
+see `limits`. Buffers, programs and dispatch are `gpu.Gpu`; the camera's uniforms and the stage of step 1 are in
+`stage`, the scan, radix sort and pair sort in `sort`, the tile lists of steps 3-5 in `binning`, the blend of step 6
+in `blend`. Counter slots, record sizes and the `oit` uniform's layout are the shaders' own (shaders/interface.glsl,
+read by `interface`).
 
 The scene is uploaded once (`upload`), a level-of-detail cut's hierarchy after it and the cut's rows as they change
 (`lod`); per frame the camera goes up as uniforms, the counter buffer comes back (visible splats, pairs and depth
@@ -53,28 +54,23 @@ from ...core.errors import BackendUnavailable, RenderError
 from ...model.camera import Camera
 from ...model.cells import Cells
 from ...model.scene import Scene
+from ..contract import Capabilities, Renderer
 from ..control import Progress, RenderControl
 from ..modes import PER_PIXEL_SORTED
 from ..prepare import Prepared, check_display_texture, frame_stats, prepare
-from ..presets import FILTERED_MODES
-from ..types import Capabilities, Frame, FrameStats, Mode, Renderer, RenderSettings
-from ..view_filter import DILATION_3DGS
+from ..types import Frame, FrameStats, Mode, RenderSettings
 from . import interface as gi
 from .binning import bin_duplex, bin_splats, read_totals
+from .blend import blend, planes
 from .context import check_context, standalone_context
 from .gpu import WG, Gpu
 from .limits import blend_plan
 from .lod import GpuCut
 from .sort import SCAN_BLOCK, scan
+from .stage import Stage, camera_uniforms
 
 NO_OIT = gi.oit_uniform(0.0, 0.0, 1.0, False)  # the shaders' oit uniform outside wsr and duplex
 WORD, VEC4 = gi.WORD_BYTES, gi.VEC4_BYTES
-
-
-def blend_defines(mode: Mode, supersample: int, precision: str = "exact") -> dict[str, int]:
-    """The defines of blend.comp's variant for a frame (its header lists them); precision as RenderSettings'."""
-    fast = {"GB_FAST": 1} if precision == "fast" and mode == Mode.GAUSSIAN_BLENDING else {}
-    return {f"BLEND_MODE_{mode.name}": 1, "SUPERSAMPLED": int(supersample > 1), **fast}
 
 
 class GlslRenderer(Renderer):
@@ -101,7 +97,7 @@ class GlslRenderer(Renderer):
         self._cells: Cells | None = None
         self._lod = GpuCut()  # a level-of-detail cut drawn in place: its hierarchy and rows on the GPU
         self._generation = 0  # of the splats on the GPU: every upload starts a new one
-        self._stage_key: tuple | None = None  # what the `stage` buffer holds (None: nothing usable)
+        self._stage = Stage(self.gpu)  # the per-camera stage and what it holds
 
     @property
     def allocations(self) -> int:
@@ -161,7 +157,7 @@ class GlslRenderer(Renderer):
 
     def _upload_splats(self, scene: Scene) -> None:
         self._uploaded = None  # nothing on the GPU is this scene's (or a stage of it) until every buffer is up
-        self._stage_key = None
+        self._stage.forget()
         self._lod.forget()
         n = scene.num_splats
         f3d = scene.filter_3d if scene.filter_3d is not None else np.zeros(n, np.float32)
@@ -283,7 +279,7 @@ class GlslRenderer(Renderer):
         self._scene = self._uploaded = None
         self._cells = None
         self._lod.forget()
-        self._stage_key = None
+        self._stage.forget()
 
     # ---- pipeline ------------------------------------------------------------------------------------------------
 
@@ -303,14 +299,8 @@ class GlslRenderer(Renderer):
         oit = NO_OIT if prep.oit is None else gi.oit_uniform(*prep.oit[:3], prep.oit.depth_correct)
         in_place = prep.tree is not None  # a level-of-detail cut: splat i is row lod_rows[i] (lod_rows.glsl)
         n, N = self._lod.cut.count if in_place else self._n, settings.supersample
-        W, H = camera.width, camera.height
-        RW, RH = W * N, H * N
-        gx, gy = -(-RW // gi.TILE), -(-RH // gi.TILE)
-        num_tiles = gx * gy
         max_deg = {1: 0, 4: 1, 9: 2, 16: 3}[self._sh_k]
         sh_deg = max(0, min(settings.sh_degree, max_deg))
-        f32 = np.float32
-        Nf = f32(N)
 
         t0 = time.perf_counter()
         # per-scene buffers (sized by the splat count; allocated on the first frame, grown with the scene)
@@ -323,24 +313,16 @@ class GlslRenderer(Renderer):
         totals = gpu.ensure("totals", gi.TOTALS_BYTES)
         totals.write(gi.totals_init().tobytes())
 
-        cam_uniforms = dict(
-            grid=(gx, gy),
-            cam_R=np.ascontiguousarray(camera.R, f32).reshape(9),
-            cam_t=np.ascontiguousarray(camera.t, f32),
-            cam_f=(
-                float(f32(camera.fx) * Nf),
-                float(f32(camera.fy) * Nf),
-                float(f32(camera.cx) * Nf),
-                float(f32(camera.cy) * Nf),
-            ),
-            cam_size=(RW, RH),
-            cam_near=float(f32(camera.near)),
-            cam_projection=camera.projection_code,
-        )
+        cam_uniforms = camera_uniforms(camera, N)
+        (RW, RH), (gx, gy) = cam_uniforms["cam_size"], cam_uniforms["grid"]
+        num_tiles = gx * gy
         weight = gpu.buffers["weight_sh"] if self._weight_k else gpu.ensure("dummy", VEC4)
         lod = dict(lod_in_place=int(in_place))
         rows = gpu.buffers["lod_rows"] if in_place else gpu.ensure("dummy", VEC4)
-        stage, stage_reused, stage_ms = self._stage(settings, n, sh_deg, cam_uniforms, rows, lod)
+        generations = (self._generation, self._lod.cut.generation if in_place else None)
+        stage, stage_reused, stage_ms = self._stage.build(
+            settings, n, self._sh_k, sh_deg, cam_uniforms, rows, lod, generations
+        )
         rays = gpu.ensure("rays", n * gi.RAY_VEC4S * VEC4, "ray data") if mode in PER_PIXEL_SORTED else None
         gpu.run(
             "preprocess.comp",
@@ -354,7 +336,7 @@ class GlslRenderer(Renderer):
                 totals,
                 weight,
                 stage,
-                self._planes(settings, n),
+                planes(gpu, settings, n),
                 rays or gpu.ensure("dummy", VEC4),
                 rows,
             ),
@@ -394,7 +376,7 @@ class GlslRenderer(Renderer):
         self.ctx.finish()
         t2 = time.perf_counter()
         control.check()
-        self._blend(camera, settings, want_window, plan, longest, splats, tvals, ranges, rays, oit, control, target)
+        blend(gpu, camera, settings, want_window, plan, longest, splats, tvals, ranges, rays, oit, control, target)
         self.ctx.finish()
         return dict(
             preprocess_ms=(t1 - t0) * 1e3,
@@ -409,118 +391,3 @@ class GlslRenderer(Renderer):
             fast=settings.precision == "fast",
             **counts,
         )
-
-    def _stage(self, settings: RenderSettings, n: int, sh_deg: int, cam_uniforms: dict, rows, lod: dict) -> tuple:
-        """The `stage` buffer for this frame's camera (at its sampling grid), whether it was kept from an earlier
-        frame and the ms spent building it: stage.comp runs (and the GL work finishes, for that time) only when the
-        scene's generation, the camera, the SH degree or the on-screen cull's reach (the largest diagonal the
-        frame's 2D filter adds, at least 3DGS's +0.3: stage_reach in preprocess_stage.h), the presets' stage rules
-        (stage_rules) or the level-of-detail rows drawn in place (`rows`, `lod`: its uniform) changed."""
-        gpu = self.gpu
-        stage = gpu.ensure("stage", n * gi.STAGE_VEC4S * VEC4, "per-camera stage")
-        vf = settings.view_filter.native() if settings.mode.label in FILTERED_MODES else np.zeros(2, np.float32)
-        reach = float(max(np.float32(DILATION_3DGS), vf[0] + vf[1]))  # gbv::stage_reach, in float32
-        rules = settings.view_filter.stage_rules if settings.mode.label in FILTERED_MODES else 0
-        if settings.mode == Mode.EVAL3D:
-            reach = 1e30  # eval3d: its footprint is the ray's: the stage keeps every splat in front of the plane
-        camera_bytes = tuple(np.asarray(v).tobytes() for v in cam_uniforms.values())
-        key = (
-            self._generation,
-            self._lod.cut.generation if lod["lod_in_place"] else None,
-            camera_bytes,
-            sh_deg,
-            reach,
-            rules,
-        )
-        if key == self._stage_key:
-            return stage, True, 0.0
-        self._stage_key = None
-        t0 = time.perf_counter()
-        gpu.run(
-            "stage.comp",
-            -(-n // WG),
-            (gpu.buffers["geom"], gpu.buffers["sh"], stage, rows),
-            num_splats=n,
-            sh_k=self._sh_k,
-            sh_deg=sh_deg,
-            reach=reach,
-            rules=rules,
-            **lod,
-            **cam_uniforms,
-        )
-        self.ctx.finish()
-        self._stage_key = key
-        return stage, False, (time.perf_counter() - t0) * 1e3
-
-    def _planes(self, settings: RenderSettings, n: int | None = None):
-        """stochastic_popfree's per-splat depth planes (popfree.h), sized for n splats (None: as preprocess sized
-        them); a dummy in the other modes."""
-        if settings.mode != Mode.STOCHASTIC_POPFREE:
-            return self.gpu.ensure("dummy", VEC4)
-        return self.gpu.buffers["planes"] if n is None else self.gpu.ensure("planes", n * VEC4, "depth planes")
-
-    def _blend(
-        self,
-        camera: Camera,
-        settings: RenderSettings,
-        want_window: bool,
-        plan,
-        longest: int,
-        splats,
-        tvals,
-        ranges,
-        rays,
-        oit: tuple,
-        control: RenderControl,
-        target=None,
-    ) -> None:
-        """blend.comp into `target` or the output texture, in the dispatches of `plan` (one unless the driver caps
-        loops); `rays`: the per-pixel sorted modes' ray data (else None)."""
-        gpu = self.gpu
-        N = settings.supersample
-        W, H = camera.width, camera.height
-        RW, RH = W * N, H * N
-        gx, gy = -(-RW // gi.TILE), -(-RH // gi.TILE)
-        tex = gpu.ensure_texture(W, H) if target is None else target
-        evals = gpu.ensure("evals", W * H * WORD, "evaluation counts")
-        window = gpu.ensure("window", W * H * gi.WINDOW_WORDS * WORD if want_window else VEC4, "window sizes")
-        bx, by = -(-W // gi.TILE), -(-H // gi.TILE)
-        invocations = bx * by * gi.TILE * gi.TILE if len(plan) > 1 else 0  # state kept between dispatches
-        state = gpu.ensure("blend_state", invocations * gi.BLEND_STATE_VEC4S * VEC4, "blend state")
-        accum = gpu.ensure("blend_accum", invocations * gi.BLEND_ACCUM_VEC4S * VEC4, "blend sums")
-        prog = gpu.program("blend.comp", **blend_defines(settings.mode, N, settings.precision))
-        gpu.set(
-            prog,
-            out_size=(W, H),
-            supersample=N,
-            grid=(gx, gy),
-            background=tuple(settings.background),
-            want_window=int(want_window),
-            oit=oit,
-            stochastic=(settings.seed, settings.frame),
-            queue=settings.queue,
-        )
-        cell_of = gpu.buffers["cell_of"] if settings.mode == Mode.DUPLEX else gpu.ensure("dummy", VEC4)
-        planes = self._planes(settings)
-        for i, buf in enumerate(
-            (splats, tvals, ranges, evals, window, state, accum, cell_of, planes, rays or gpu.ensure("dummy", VEC4))
-        ):
-            buf.bind_to_storage_buffer(i)
-        tex.bind_to_image(0, read=False, write=True)
-        tiles = N * N
-        for step, (sub0, sub1, c0, c1) in enumerate(plan):
-            control.step(step, len(plan))
-            gpu.set(
-                prog,
-                subtile_begin=sub0,
-                subtile_end=sub1,
-                chunk_begin=c0,
-                chunk_end=c1,
-                load_state=int(c0 > 0),
-                store_state=int(c1 < longest),
-                load_accum=int(sub0 > 0),
-                store_accum=int(sub1 < tiles),
-            )
-            prog.run(bx, by, 1)
-            self.ctx.memory_barrier()
-        control.step(len(plan), len(plan))
