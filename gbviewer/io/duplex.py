@@ -350,7 +350,7 @@ def _eval_sh(coeffs: np.ndarray, dirs: np.ndarray) -> np.ndarray:
 def load_duplex(path: Path, ply: plyfile.PlyData) -> Scene:
     """A Duplex-GS anchor ply and its MLPs. The returned Scene renders through `neural.decode`; its splat arrays
     only hold the view-independent child centres (for bounds and framing)."""
-    from .ply import vertex_columns
+    from .ply_read import vertex_columns
 
     names = list(ply["vertex"].data.dtype.names or ())
     n = ply["vertex"].count
