@@ -17,7 +17,9 @@ from .compressed_ply import is_compressed_ply, load_compressed_ply
 from .duplex import is_duplex_ply, load_duplex
 from .gltf import is_glb, looks_like_gltf
 from .gltf_splats import load_gltf
-from .ply import check_sh_range, load_inria_ply, load_streamed_ply, read_ply
+from .ply import check_sh_range, load_inria_ply
+from .ply_read import read_ply
+from .ply_stream import load_streamed_ply
 from .progress import LoadProgress, Progress
 from .save import WRITE_FORMATS, dropped, format_for, save
 from .sog import ZIP_MAGIC, load_sog

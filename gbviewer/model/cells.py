@@ -1,7 +1,7 @@
 """Duplex-GS cells: ellipsoids that group splats, so that only cells are depth-sorted (docs/modes.md#duplex).
 
-A trained Duplex-GS checkpoint has its own cells (the anchors, decoded per view by `gbviewer.io.duplex`). Any other
-scene gets cells built once, on first use, by `build_cells`:
+A trained Duplex-GS checkpoint has its own cells (the anchors, decoded per view by `gbviewer.io.duplex_model`). Any
+other scene gets cells built once, on first use, by `build_cells`:
 
 - Grouping: a k-d partition of the splat centres. Every group is split at a multiple of K along the longest axis of
   its bounding box (its coordinate median, rounded to a multiple of K) until groups have at most K splats, so all

@@ -102,7 +102,7 @@ def sealed(a: np.ndarray | None) -> bool:
 
 
 class ViewDecoder(Protocol):
-    """A trained model whose splats depend on the view (Duplex-GS: `gbviewer.io.duplex.DuplexModel`)."""
+    """A trained model whose splats depend on the view (Duplex-GS: `gbviewer.io.duplex_model.DuplexModel`)."""
 
     def decode(self, camera: Camera) -> Scene:
         """The splats (and their cells) to render for this camera."""

@@ -200,7 +200,7 @@ def test_decode_matches_numpy(tmp_path, projection):
     off = np.clip(offsets, -1, 1).reshape(-1, 3)
     a_scale = np.repeat(np.exp(log_sizes), k, 0)
     scale = a_scale * np.minimum(1 / (1 + np.exp(-sr[:, :3])), (2 - np.linalg.norm(off, axis=1, keepdims=True)) / 3)
-    from gbviewer.io.duplex import _eval_sh
+    from gbviewer.io.duplex_model import _eval_sh
 
     vi = np.repeat(1 / (1 + np.exp(-_eval_sh(sh_vi, view_dir))), k)
     np.testing.assert_allclose(view.means, np.repeat(anchors, k, 0) + off * a_scale, atol=1e-5)

@@ -1,4 +1,4 @@
-"""The streamed INRIA `.ply` loader (`gbviewer.io.ply.load_streamed_ply`): the same arrays, bit for bit, as an
+"""The streamed INRIA `.ply` loader (`gbviewer.io.ply_stream.load_streamed_ply`): the same arrays, bit for bit, as an
 independent whole-file decode with plyfile and as the memory-mapped path (`read_ply` + `load_inria_ply`), on every
 vertex layout, the fuzz seeds and the shared scenes, in one chunk or a hundred."""
 
@@ -15,9 +15,11 @@ import pytest
 from helpers import shared_scene
 
 import gbviewer as gb
-from gbviewer.io import ply
+from gbviewer.io import ply_stream
 from gbviewer.io import progress as load_progress
-from gbviewer.io.ply import check_sh_range, load_inria_ply, load_streamed_ply, read_ply
+from gbviewer.io.ply import check_sh_range, load_inria_ply
+from gbviewer.io.ply_read import read_ply
+from gbviewer.io.ply_stream import load_streamed_ply
 from gbviewer.io.write import ply_header
 
 SEEDS = Path(__file__).parent / "fuzz" / "seeds"
@@ -203,7 +205,7 @@ def chunks(request, monkeypatch):
         monkeypatch.setattr(load_progress, "MIN_SPLATS", 1)
         monkeypatch.setattr(os, "cpu_count", lambda: 3)  # several workers whatever the machine
     if request.param == 2:  # each worker reads and scatters its range a few rows at a time (the last block shorter)
-        monkeypatch.setattr(ply, "SCATTER_BYTES", 1000)
+        monkeypatch.setattr(ply_stream, "SCATTER_BYTES", 1000)
     return request.param
 
 
@@ -235,7 +237,7 @@ def test_without_preadv_the_workers_read_the_file_under_a_lock(tmp_path, monkeyp
     """Where os.preadv is missing (Windows), the workers seek and read the one open file in turn: the same arrays."""
     path = raw_ply(tmp_path / "s.ply", 3001, seed=4, extra=("filter_3D",))
     monkeypatch.setattr(load_progress, "MIN_BYTES", 1)
-    monkeypatch.setattr(ply, "SCATTER_BYTES", 1000)
+    monkeypatch.setattr(ply_stream, "SCATTER_BYTES", 1000)
     monkeypatch.setattr(os, "cpu_count", lambda: 3)
     monkeypatch.delattr(os, "preadv", raising=False)
     assert_same(load_quietly(path), reference(path))

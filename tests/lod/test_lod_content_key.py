@@ -15,7 +15,7 @@ from PIL import Image
 
 import gbviewer as gb
 from gbviewer import lod
-from gbviewer.io import ply as ply_module
+from gbviewer.io import ply_stream
 from gbviewer.io.progress import ContentDigest
 from gbviewer.io.write import write_inria_ply
 from gbviewer.lod.cache import cache_key, cached_build
@@ -117,10 +117,10 @@ def test_a_replaced_or_reopened_scene_is_never_stored_under_its_files_key(tmp_pa
 
 def test_the_parallel_loader_digest_does_not_depend_on_its_workers(tmp_path, monkeypatch):
     path = write_inria_ply(random_scene(20000, seed=3, sh_degree=3), tmp_path / "p.ply")
-    monkeypatch.setattr(ply_module, "SCATTER_BYTES", 1 << 16)  # many blocks per range
+    monkeypatch.setattr(ply_stream, "SCATTER_BYTES", 1 << 16)  # many blocks per range
     digests = set()
     for workers in (1, 3, 8):
-        monkeypatch.setattr(ply_module, "MAX_LOAD_WORKERS", workers)
+        monkeypatch.setattr(ply_stream, "MAX_LOAD_WORKERS", workers)
         monkeypatch.setattr(os, "cpu_count", lambda: 8)
         digests.add(gb.load(path).content)
     assert len(digests) == 1 and None not in digests
