@@ -5,20 +5,17 @@
 Pieces: the CUDA test files; CUDA vs CPU images for every mode and supersample 1-3 on the shared scenes (the
 tolerances of tests/render/test_cuda.py); the GLSL backend on the machine's EGL driver vs CPU (test_glsl.py's
 tolerances); CUDA-GL interop and the GLSL display path under a headless EGL context; timings (ms per mode at
-1920x1080 per shared scene and on a 6 M-splat synthetic scene) next to the paper's GB/3DGS time ratio. Each piece
-is one line of OUT_DIR/report.txt (and an entry of report.json): ok, failed, "no GPU: why", "skipped: why" or
-"partial: why" (comparisons cut short by the time budget, none of those made failing); a comparison the backend
-refuses in one line (RenderError: its stated limits, e.g. a driver's loop limit) is named on the line with the
-refusal, not counted as failing.
+1920x1080 per shared scene and on a 6 M-splat synthetic scene) next to the paper's GB/3DGS time ratio. Each piece is
+one line of OUT_DIR/report.txt (and an entry of report.json; gpu_session_report.py writes them): ok, failed, "no
+GPU: why", "skipped: why" or "partial: why" (comparisons cut short by the time budget, none of those made failing);
+a comparison the backend refuses in one line (RenderError: its stated limits, e.g. a driver's loop limit) is named
+on the line with the refusal, not counted as failing.
 Without a CUDA device the GLSL pieces still run (on whatever EGL driver there is, Mesa llvmpipe included). A piece
 that runs past the deadline is cut short and says so. Exit status 1 when a piece failed or a file is missing."""
 
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import subprocess
 import sys
 import time
@@ -31,10 +28,12 @@ REPO = Path(__file__).resolve().parents[1]
 if any((REPO / "gbviewer").glob("_native*")):  # the checkout's build (gpu_session.sh's), else the installed package
     sys.path.insert(0, str(REPO))
 
+from gpu_session_report import Session  # noqa: E402
+
 import gbviewer as gb  # noqa: E402
 from gbviewer.render import CudaRenderer, RenderSettings  # noqa: E402
 
-# The test files only a GPU runs in full (bench/cuda_check.py runs them too); tests/bench/test_gpu_session.py checks
+# The test files only a GPU runs in full (bench/cuda_check.py runs them too); tests/build/test_gpu_session.py checks
 # that they exist.
 CUDA_TEST_FILES = (
     "tests/render/test_cuda.py",
@@ -63,62 +62,6 @@ def default_scenes() -> Path:
         if d.is_dir():
             return d
     return REPO.parent / "shared" / "scenes"
-
-
-class Session:
-    """The report being written: pieces in order, each {name, status, detail, data}; written after every piece."""
-
-    def __init__(self, out: Path, deadline: float) -> None:
-        self.out, self.deadline, self.pieces = out, deadline, []
-        out.mkdir(parents=True, exist_ok=True)
-
-    def left(self) -> float:
-        return self.deadline - time.time()
-
-    def add(self, name: str, status: str, detail: str, data: object = None) -> None:
-        self.pieces.append(dict(name=name, status=status, detail=" ".join(detail.split()), data=data))
-        self.write()
-
-    def write(self) -> None:
-        report = dict(machine=machine(), pieces=self.pieces)
-        lines = [f"{p['name']}: {p['status']}" + (f" - {p['detail']}" if p["detail"] else "") for p in self.pieces]
-        for p in self.pieces:
-            if isinstance(p["data"], list) and p["data"] and isinstance(p["data"][0], dict):
-                lines += ["", f"## {p['name']}", *table(p["data"])]
-        for name, text in (
-            ("report.json", json.dumps(report, indent=1, default=str)),
-            ("report.txt", "\n".join(lines) + "\n"),
-        ):
-            tmp = self.out / f".{name}.tmp"
-            tmp.write_text(text)
-            os.replace(tmp, self.out / name)
-
-
-def table(rows: list[dict]) -> list[str]:
-    keys = list(rows[0])
-    fmt = lambda v: f"{v:.3g}" if isinstance(v, float) else str(v)  # noqa: E731
-    return [
-        " | ".join(keys),
-        " | ".join("---" for _ in keys),
-        *(" | ".join(fmt(r.get(k, "")) for k in keys) for r in rows),
-    ]
-
-
-def machine() -> dict:
-    smi = run_quiet(["nvidia-smi", "--query-gpu=name,driver_version,memory.total", "--format=csv,noheader"])
-    return dict(
-        python=platform.python_version(),
-        host=platform.node(),
-        gpu=smi or "nvidia-smi: none",
-        cuda=CudaRenderer.available(),
-    )
-
-
-def run_quiet(cmd: list[str]) -> str:
-    try:
-        return subprocess.run(cmd, capture_output=True, text=True, timeout=20).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return ""
 
 
 def check_paths(s: Session, scenes_dir: Path) -> list[Path]:

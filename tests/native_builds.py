@@ -20,10 +20,10 @@ import gbviewer as gb
 from gbviewer import _native
 
 ROOT = Path(__file__).resolve().parents[1]
-# five of the six modes; analytic is left to test_simd.py's NEON tests (its renders are ~50x slower under emulation)
+# five of the six modes; analytic is left to test_simd*.py's NEON tests (its renders are ~50x slower under emulation)
 MODES = ("scalar", "mip", "gaussian_blending", "wsr", "duplex")
 # Tolerance between two builds' renders (another compiler, FMA contraction, libm, another vector width): as
-# test_simd.py's between a vector path and the scalar one, colours and alphas within TOL but for pixels where an
+# simd_helpers.py's between a vector path and the scalar one, colours and alphas within TOL but for pixels where an
 # alpha or transmittance cut went the other way (at most FLIP_FRACTION of the pixels plus 2, each within FLIP_MAX).
 TOL, FLIP_FRACTION, FLIP_MAX = 1e-5, 2e-3, 2e-2
 

@@ -1,7 +1,7 @@
 """The aarch64 build (docs/install.md#aarch64), cross-built here and run under qemu-aarch64 with an aarch64 Python
 (scripts/check_aarch64.sh; slow, CI runs it): NEON built and selected; renders of two shared scenes in five modes
 equal to x86-64's (this process's scalar path, the reference every vector path is held to) within the tolerance of
-native_builds.py; and test_simd.py's NEON tests (NEON against the scalar path of the same aarch64 module, the
+native_builds.py; and test_simd*.py's NEON tests (NEON against the scalar path of the same aarch64 module, the
 preprocess bit for bit) pass under emulation. Skips, saying why, only where the cross tools or the aarch64 Python are
 missing (CI installs them: scripts/setup.sh as root, and this test runs the script with --install as root)."""
 
@@ -53,9 +53,9 @@ def test_aarch64_build_runs_neon_and_renders_as_x86(aarch64_pkg, tmp_path):
 
 
 def test_simd_tests_pass_on_neon_under_emulation(aarch64_pkg):
-    """test_simd.py -k neon in the aarch64 Python (its 45 NEON tests, ~90 s here)."""
-    tests = aarch64_pkg / "tests" / "render" / "test_simd.py"
-    proc = subprocess.run([*PYTHON, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tests), "-k", "neon"],
+    """test_simd.py and test_simd_preprocess.py -k neon in the aarch64 Python (their 48 NEON tests, ~90 s here)."""
+    tests = [str(aarch64_pkg / "tests" / "render" / name) for name in ("test_simd.py", "test_simd_preprocess.py")]
+    proc = subprocess.run([*PYTHON, "-m", "pytest", "-q", "-p", "no:cacheprovider", *tests, "-k", "neon"],
                           capture_output=True, text=True, timeout=600, cwd="/",
                           env={**ENV, "PYTHONPATH": str(aarch64_pkg)})
     summary = proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else proc.stderr[-2000:]

@@ -11,7 +11,7 @@ import threading
 import numpy as np
 import pytest
 from helpers import SHARED_SCENES, front_camera, shared_scene
-from test_simd import PREPROCESS_RECORD
+from simd_helpers import PREPROCESS_RECORD
 
 import gbviewer as gb
 from gbviewer import _native

@@ -6,7 +6,7 @@ discontinuous where a splat's window-mean alpha crosses 1/256 (it is added or sk
 approximation can hold a pointwise bound there: a pixel beyond the bound must be such a crossing, which the test
 checks on the kernels' pixel traces (a splat whose exact alpha lies within 1% of 1/256, where the traces part if they
 do), and such pixels must be rare. The fast path's scalar and vector implementations agree as the exact
-ones do (test_simd's tolerance)."""
+ones do (simd_helpers' tolerance)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import pytest
 from helpers import SHARED_SCENES, front_camera, shared_scene
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_simd import VECTOR_PATHS, assert_close_to_scalar, render
+from simd_helpers import VECTOR_PATHS, assert_close_to_scalar, render
 
 import gbviewer as gb
 from gbviewer.render import RenderSettings, create_renderer

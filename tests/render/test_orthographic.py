@@ -12,9 +12,9 @@ import pytest
 from helpers import front_camera, random_scene, random_view
 from reference import MODES, reference_render_oit
 from reference_preprocess import quat_to_rotmat
+from simd_helpers import preprocessed
 from test_oit import check, oit, oit_of, with_view_weights
 from test_render_reference import BACKGROUND, SCENES, _check_strict
-from test_simd import preprocessed
 
 import gbviewer as gb
 from gbviewer.model.cells import cells_for

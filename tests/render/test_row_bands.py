@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_simd import ALL_PATHS, MODES, _needle_scene, _small_opaque_scene, render
+from simd_helpers import ALL_PATHS, MODES, _needle_scene, _small_opaque_scene, render
 
 import gbviewer as gb
 from gbviewer import _native

@@ -1,15 +1,6 @@
 """The CPU blend's SIMD paths (scalar, avx2, avx512; aarch64: neon) against each other and against the float64
-reference.
-
-The preprocess (gbv/preprocess.h) runs on the same SIMD path as the blend (8 or 16 splats per call) and is bit-identical
-to the scalar path's: every Splat2D field, tile rectangle and culling decision (test_preprocess_bitwise).
-
-Tolerance between a vector path and the scalar path: the vector exp (Highway, 1 ulp) and libm's expf differ by up to
-1 ulp, and FMA contraction differs, so colours and alphas agree to ~1e-6 (asserted: 1e-5) except where an alpha within
-~1e-6 of the 1/255 (1/256) cut, or a transmittance that close to the 1e-4 stop, is decided the other way. One flipped
-decision costs up to ~alpha x colour (< 2e-2, as in test_render_reference's ties) in that pixel (and, in Gaussian
-Blending, a slightly different window for later splats there). Such pixels are counted: at most FLIP_FRACTION of an
-image's pixels plus 2. Visible splats, sort lengths and tile-list entries are identical (preprocess is shared).
+reference, within simd_helpers' tolerance; which path is chosen (GBVIEWER_SIMD, the CPU, an emulated older CPU).
+The preprocess's paths, bit for bit: test_simd_preprocess.py.
 
 Every path the CPU has runs; a path the CPU lacks (AVX-512 on an AVX2 machine) is skipped with that reason.
 """
@@ -20,60 +11,24 @@ import os
 import subprocess
 import sys
 import tempfile
-from contextlib import contextmanager
 
 import numpy as np
 import pytest
 from helpers import random_view, skip_or_fail
+from simd_helpers import (
+    ALL_PATHS,
+    MODES,
+    VECTOR_PATHS,
+    _needle_scene,
+    _small_opaque_scene,
+    assert_close_to_scalar,
+    render,
+    simd,
+)
 from test_render_reference import BACKGROUND, SCENES, _check_strict
 
 import gbviewer as gb
-from gbviewer import _native, lod
-from gbviewer.model.cells import build_cells
-from gbviewer.render import create_renderer
-
-ALL_PATHS = ("scalar", "avx2", "avx512", "neon")
-VECTOR_PATHS = ("avx2", "avx512", "neon")
-MODES = ("scalar", "mip", "analytic", "gaussian_blending", "wsr", "duplex")
-TOL = 1e-5
-FLIP_FRACTION = 2e-3
-FLIP_MAX_ERR = 2e-2
-
-
-@contextmanager
-def simd(path: str):
-    """Renders inside use `path`; skips when this CPU or build has no such path."""
-    if path not in _native.simd_paths():
-        pytest.skip(f"this CPU/build has no {path} path (it has {', '.join(_native.simd_paths())})")
-    before = _native.simd()
-    _native.testing.set_simd(path)
-    try:
-        yield
-    finally:
-        _native.testing.set_simd(before)
-
-
-def render(path, scene, cam, mode, supersample=1, **kw):
-    """A frame on `path` from a renderer of its own: a renderer keeps its per-camera stage, and one that another
-    path built would be reused (the paths' stages would then never be compared)."""
-    with simd(path):
-        renderer = create_renderer("cpu")
-        renderer.upload(scene)
-        return renderer.render(cam, gb.RenderSettings.parse(mode, supersample=supersample, **kw))
-
-
-def assert_close_to_scalar(vec, ref, what):
-    tol, fraction, max_err = TOL, FLIP_FRACTION, FLIP_MAX_ERR
-    for name in ("visible", "sort_length", "pairs"):
-        assert getattr(vec.stats, name) == getattr(ref.stats, name), f"{what}: {name} differs"
-    diff = np.maximum(np.abs(vec.rgb - ref.rgb).max(axis=2), np.abs(vec.alpha - ref.alpha))
-    flips = diff > tol
-    allowed = 2 + fraction * diff.size
-    assert flips.sum() <= allowed, f"{what}: {flips.sum()} pixels beyond {tol} (allowed {allowed:.0f})"
-    assert diff.max() <= max_err, f"{what}: max difference {diff.max():.2e}"
-    evals_differ = (vec.debug["evals"] != ref.debug["evals"]).sum()
-    assert evals_differ <= allowed, f"{what}: {evals_differ} pixels stop at another list entry"
-    assert np.isfinite(vec.rgb).all() and np.isfinite(vec.alpha).all()
+from gbviewer import _native
 
 
 def test_paths_and_stats():
@@ -155,202 +110,6 @@ def test_reference_gaussian_blending_each_path(path):
     with simd(path):
         frame = gb.render(scene, cam, mode="gaussian_blending", background=BACKGROUND)
         _check_strict(frame, scene, cam, "gaussian_blending", 1)
-
-
-# captured_preprocess(): per splat its valid byte, then (when valid) Splat2D and TileRect, zeros when culled
-SPLAT2D = np.dtype(
-    [
-        ("xy", "<u4", 2),
-        ("depth", "<u4"),
-        ("opacity", "<u4"),
-        ("conic", "<u4", 3),
-        ("color", "<u4", 3),
-        ("v1", "<u4", 2),
-        ("sigma", "<u4", 2),
-        ("inv_sigma", "<u4", 2),
-        ("log_min_alpha", "<u4"),
-        ("radius", "<u4"),
-        ("cell", "<i4"),
-        ("id", "<i4"),
-    ]
-)
-PREPROCESS_RECORD = np.dtype([("valid", "u1"), ("splat", SPLAT2D), ("rect", "<i4", 4)])
-
-
-def preprocessed(path, scene, cam, mode, **kw):
-    """The preprocess output of a render on `path`, as PREPROCESS_RECORD per splat, and the frame."""
-    _native.testing.set_capture_preprocess(True)
-    try:
-        frame = render(path, scene, cam, mode, **kw)
-        rec = np.frombuffer(_native.testing.captured_preprocess(), PREPROCESS_RECORD)
-    finally:
-        _native.testing.set_capture_preprocess(False)
-    assert len(rec) == scene.num_splats
-    return rec, frame
-
-
-def _cut_scene(seed):
-    """Splats at the preprocess's cuts: opacities at and next to 1/255 and 1/256 (after the mip compensation too),
-    depths at and next to the near plane, view weights near 0 (a sum of terms), 3D filters, subnormal and zero
-    scales; n = 1003 leaves a partial vector at the end."""
-    rng = np.random.default_rng(seed)
-    n = 1003
-    z = rng.uniform(0.15, 8.0, n)
-    z[:40] = np.nextafter(np.float32(0.2), np.float32([0.0, 1.0] * 20))
-    means = np.c_[rng.uniform(-1.3, 1.3, n) * z, rng.uniform(-1.3, 1.3, n) * z, z]
-    scales = np.exp(rng.uniform(np.log(1e-4), np.log(0.5), (n, 3)))
-    scales[40:60] = 0.0
-    scales[60:80, :2] = 1e-38
-    op = rng.uniform(0.003, 1.0, n).astype(np.float32)
-    for i, o in enumerate((1 / 255, 1 / 256)):
-        base = np.float32(o)
-        op[100 + 30 * i : 130 + 30 * i] = np.nextafter(base, np.float32([0.0, 1.0, 1.0] * 10))
-        op[160 + 10 * i : 170 + 10 * i] = base
-    quats = rng.normal(size=(n, 4))
-    quats[80:90] = 0.0
-    sh = rng.uniform(-1, 1, (n, 16, 3))
-    vw = rng.normal(0.0, 0.4, (n, 16))
-    vw[:, 0] = rng.uniform(-0.5, 4.0, n)
-    vw[200:300, 1:] = 0.0
-    vw[200:300, 0] = np.float32(rng.choice([0.0, 1e-30, -1e-30, 1e-3], 100))
-    f3d = np.where(rng.random(n) < 0.5, rng.uniform(0.0, 0.05, n), 0.0)
-    scene = gb.Scene.from_arrays(
-        means, scales, quats, op, sh, f3d, view_weight_sh=vw, wsr_sigma=5.0, weight_background=0.3
-    )
-    R = np.array([[0.98, -0.17, 0.1], [0.17, 0.985, 0.0], [-0.1, 0.02, 0.995]])
-    R = np.linalg.qr(R)[0] * np.sign(np.diag(np.linalg.qr(R)[1]))
-    return scene, gb.Camera(97, 61, 52.3, 47.9, 50.1, 29.7, R, np.array([0.03, -0.02, 0.1]))
-
-
-def _gapped_scene():
-    """16 splats, all on screen but splat 14 (behind the camera), SH degree 3: the stage's second colour group holds
-    splats 8-13 and 15 with a spare lane, whose first and last rows are 7 apart though they are not 8 consecutive rows
-    (a vector path that took them for a run would read splat 14's mean for splat 15's view direction)."""
-    rng = np.random.default_rng(3)
-    n = 16
-    means = np.c_[rng.uniform(-1, 1, n), rng.uniform(-0.6, 0.6, n), rng.uniform(2.5, 4, n)]
-    means[14, 2] = -1.0
-    quats = rng.normal(size=(n, 4))
-    scene = gb.Scene(
-        means,
-        np.full((n, 3), 0.05),
-        quats / np.linalg.norm(quats, axis=1, keepdims=True),
-        np.full(n, 0.8),
-        rng.uniform(-0.5, 0.5, (n, 16, 3)),
-        source="gapped",
-    )
-    return scene, gb.Camera(64, 48, 40.0, 40.0, 32, 24, np.eye(3), np.zeros(3))
-
-
-def _preprocess_cases():
-    yield "gapped", _gapped_scene()
-    for seed, sh_degree, filter3d in SCENES[:3]:
-        yield f"random{seed}", random_view(seed, n=777, sh_degree=sh_degree, filter3d=filter3d, W=61, H=37)
-    yield "needles", _needle_scene(5)
-    yield "cuts", _cut_scene(7)
-    scene, cam = _cut_scene(7)
-    yield "cuts orthographic", (scene, cam.with_projection("orthographic", 2.0))
-
-
-@pytest.mark.parametrize("path", VECTOR_PATHS)
-@pytest.mark.parametrize("mode", MODES)
-def test_preprocess_bitwise(path, mode):
-    """The vector preprocess gives every splat's Splat2D (every field, bit for bit), tile rectangle and culling decision
-    exactly as the scalar one, in every mode, SH degree, with 3D filters, view weights, depth correction and cells,
-    for perspective and orthographic cameras."""
-    for name, (scene, cam) in _preprocess_cases():
-        variants = [{}]
-        if mode in ("wsr", "duplex"):
-            variants.append({"depth_correct": True})
-        if mode == "duplex":
-            scene = gb.Scene.from_arrays(
-                scene.means,
-                scene.scales,
-                scene.quats,
-                scene.opacities,
-                scene.sh,
-                scene.filter_3d,
-                view_weight_sh=scene.oit and scene.oit.view_weight_sh,
-                cells=build_cells(scene, 6),
-            )
-        for kw in variants + [{"sh_degree": 1}, {"sh_degree": 2}]:
-            ref, ref_frame = preprocessed("scalar", scene, cam, mode, **kw)
-            vec, vec_frame = preprocessed(path, scene, cam, mode, **kw)
-            what = f"{path} {mode} {name} {kw}"
-            assert ref["valid"].sum() > 0 and (ref["valid"] == 0).sum() > 0, what
-            as_bytes = lambda r: r.view(np.uint8).reshape(len(r), -1)  # noqa: E731
-            bad = np.flatnonzero((as_bytes(ref) != as_bytes(vec)).any(axis=1))
-            if len(bad):
-                fields = [f for f in SPLAT2D.names if (ref["splat"][f][bad] != vec["splat"][f][bad]).any()]
-                decided = (ref["valid"][bad] != vec["valid"][bad]).sum()
-                rects = (ref["rect"][bad] != vec["rect"][bad]).any(axis=1).sum()
-                pytest.fail(
-                    f"{what}: {len(bad)} splats differ (first {bad[:5]}): {decided} decisions, {rects} "
-                    f"rectangles, fields {fields}"
-                )
-            for stat in ("visible", "sort_length", "pairs"):
-                assert getattr(vec_frame.stats, stat) == getattr(ref_frame.stats, stat), what
-
-
-@pytest.mark.parametrize("path", VECTOR_PATHS)
-@pytest.mark.parametrize("preset", ["spark", "antimatter15"])
-def test_preset_rules_preprocess_bitwise(path, preset):
-    """The presets' rules (base-colour clamp, support cut, radial depth) keep the vector preprocess the scalar one's,
-    bit for bit."""
-    for name, (scene, cam) in _preprocess_cases():
-        ref, _ = preprocessed("scalar", scene, cam, f"preset:{preset}")
-        vec, _ = preprocessed(path, scene, cam, f"preset:{preset}")
-        assert ref["valid"].sum() > 0 and ref.tobytes() == vec.tobytes(), f"{path} {preset} {name}"
-
-
-@pytest.mark.parametrize("path", VECTOR_PATHS)
-def test_lod_preprocess_bitwise(path):
-    """A level-of-detail frame's preprocess (the stage reads a cut's scattered rows: scene leaves, then hierarchy
-    nodes, opacities times the cut's weights) is the scalar path's, bit for bit, with a 3D filter and every SH
-    degree."""
-    seed = SCENES[2][0]
-    scene, cam = random_view(seed, n=3000, sh_degree=3, filter3d=True, W=61, H=37)
-    tree = lod.build(scene)  # the hierarchy the renderer draws (the same build; its cache is not needed here)
-    for tau in (32.0, 64.0):  # these splats are large against the 61 x 37 image: cuts of 150-200 nodes
-        for degree in (3, 2, 0):
-            out = []
-            for p in ("scalar", path):
-                _native.testing.set_capture_preprocess(True)
-                try:
-                    frame = render(p, scene, cam, "gaussian_blending", lod=tau, sh_degree=degree)
-                    out.append(_native.testing.captured_preprocess())
-                finally:
-                    _native.testing.set_capture_preprocess(False)
-            what = f"{path} lod {tau} sh {degree}"
-            assert len(lod.cut(tree, cam, tau).nodes) > 100 and frame.stats.lod_splats > 100, what
-            assert out[0] == out[1], what
-
-
-def _needle_scene(seed):
-    """Needle-thin, rotated, huge and tiny splats: where the pixel boxes are tightest and float rounding largest."""
-    rng = np.random.default_rng(seed)
-    n = 400
-    means = np.c_[rng.uniform(-2, 2, n), rng.uniform(-1.5, 1.5, n), rng.uniform(2, 6, n)]
-    scales = np.exp(rng.uniform(np.log(1e-4), np.log(2.0), (n, 3)))
-    scales[: n // 3, 0] = rng.uniform(1.0, 8.0, n // 3)  # long in x, thin in y and z
-    scales[: n // 3, 1:] = rng.uniform(1e-5, 1e-3, (n // 3, 2))
-    quats = rng.normal(size=(n, 4))
-    op = rng.uniform(0.004, 1.0, n)
-    sh = rng.uniform(-1, 1, (n, 1, 3))
-    cam = gb.Camera(96, 72, 80.0, 70.0, 48.3, 35.7, np.eye(3), np.zeros(3))
-    return gb.Scene.from_arrays(means, scales, quats, op, sh), cam
-
-
-def _small_opaque_scene(seed):
-    """Opaque splats of 0.2-1.5 px sigma: their cut-off reach is a few pixels, so a window's own extent decides."""
-    rng = np.random.default_rng(seed)
-    n = 1500
-    z = rng.uniform(2, 4, n)
-    means = np.c_[rng.uniform(-1.2, 1.2, n) * z, rng.uniform(-0.9, 0.9, n) * z, z]
-    scales = rng.uniform(0.2, 1.5, (n, 3)) * z[:, None] / 40.0
-    op = rng.uniform(0.3, 1.0, n)
-    cam = gb.Camera(64, 48, 40.0, 40.0, 32.0, 24.0, np.eye(3), np.zeros(3))
-    return gb.Scene.from_arrays(means, scales, rng.normal(size=(n, 4)), op, rng.uniform(-1, 1, (n, 1, 3))), cam
 
 
 @pytest.mark.parametrize("path", ALL_PATHS)

@@ -12,7 +12,7 @@ import pytest
 from helpers import random_view
 from reference import box_down
 from reference_stochastic import expectation
-from test_simd import VECTOR_PATHS, render
+from simd_helpers import VECTOR_PATHS, render
 
 import gbviewer as gb
 from gbviewer.render import CudaRenderer, Mode, RenderSettings

@@ -12,8 +12,8 @@ import pytest
 from helpers import random_view
 from reference_ray import render_sorted
 from reference_stopthepop import render_hierarchical
-from test_simd import ALL_PATHS
-from test_simd import render as render_on
+from simd_helpers import ALL_PATHS
+from simd_helpers import render as render_on
 
 import gbviewer as gb
 from gbviewer import lod
