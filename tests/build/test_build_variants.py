@@ -18,11 +18,10 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import skip_or_fail
+from native_builds import assert_renders_match, build, cmake_env, configure, hidden_highway, run_child, stage_package
 
 from gbviewer.render import compiler_line, simd_line
-from helpers import skip_or_fail
-from native_builds import (assert_renders_match, build, cmake_env, configure, hidden_highway, run_child,
-                           stage_package)
 
 X86 = platform.machine() in ("x86_64", "AMD64")
 HWY = "highway-1.0.3"
@@ -30,8 +29,11 @@ NO_HWY_LINE = "gbviewer: Google Highway's headers (hwy/highway.h) not found and 
 SIZE = 96
 SCENE = Path(__file__).resolve().parents[2] / "assets" / "fruit_drops_minimal.ply"  # the bundled scene
 
-pytestmark = [pytest.mark.slow, pytest.mark.skipif(shutil.which("cmake") is None, reason="cmake is not installed"),
-              pytest.mark.skipif(not X86, reason="x86-64's builds (aarch64's: test_aarch64.py)")]
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(shutil.which("cmake") is None, reason="cmake is not installed"),
+    pytest.mark.skipif(not X86, reason="x86-64's builds (aarch64's: test_aarch64.py)"),
+]
 
 
 def one_line(proc, start: str) -> str:
@@ -80,14 +82,24 @@ def test_clang_build_from_the_archive(tmp_path, archive):
     Highway from the archive, no download: the vector paths, the F16C check of its float16 conversion on every
     float, and renders as this module's on the same path."""
     b = tmp_path / "b"
-    proc = configure(b, *hidden_highway(), "-DCMAKE_CXX_COMPILER=clang++", env=cmake_env(
-        GBVIEWER_HIGHWAY_ARCHIVE=str(archive), GBVIEWER_FETCH_HIGHWAY="OFF"))
+    proc = configure(
+        b,
+        *hidden_highway(),
+        "-DCMAKE_CXX_COMPILER=clang++",
+        env=cmake_env(GBVIEWER_HIGHWAY_ARCHIVE=str(archive), GBVIEWER_FETCH_HIGHWAY="OFF"),
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert f"(Highway 1.0.3: the archive {archive})" in proc.stdout
     pkg = stage_package(build(b), tmp_path / "pkg")
     code = "import gbviewer._native as n; print(n.testing.half_mismatches(0, 2**32))"
-    half = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd="/",
-                          env={**cmake_env(), "PYTHONPATH": str(pkg)})
+    half = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd="/",
+        env={**cmake_env(), "PYTHONPATH": str(pkg)},
+    )
     assert half.returncode == 0 and half.stdout.strip() in ("0", "-1"), half.stdout + half.stderr
     out = tmp_path / "out"
     report = run_child([sys.executable], pkg, out, [SCENE], SIZE, cmake_env(), 300)

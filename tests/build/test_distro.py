@@ -11,7 +11,6 @@ import subprocess
 from pathlib import Path
 
 import pytest
-
 from helpers import HOST_ONLY, skip_or_fail
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -23,8 +22,13 @@ def test_readme_commands_on_debian_13():
     if os.geteuid() != 0 or shutil.which("debootstrap") is None:
         skip_or_fail("the Debian 13 check needs root and debootstrap (apt-get install debootstrap)")
     env = {k: v for k, v in os.environ.items() if k in ("PATH", "HOME", "XDG_CACHE_HOME", "LANG")}
-    proc = subprocess.run(["bash", str(ROOT / "scripts" / "check_distro.sh"), "trixie"], capture_output=True,
-                          text=True, timeout=4500, env=env)
+    proc = subprocess.run(
+        ["bash", str(ROOT / "scripts" / "check_distro.sh"), "trixie"],
+        capture_output=True,
+        text=True,
+        timeout=4500,
+        env=env,
+    )
     report = proc.stdout + proc.stderr
     if proc.returncode == 3:
         skip_or_fail(report.strip())

@@ -23,11 +23,16 @@ QUICK = "glsl vs cpu,display path + interop"  # the GLSL pieces that take second
 
 
 def run_session(repo: Path, out: Path, env: dict, *args: str) -> tuple[subprocess.CompletedProcess, dict]:
-    proc = subprocess.run(["bash", str(repo / "bench" / "gpu_session.sh"), str(out), *args], capture_output=True,
-                          text=True, timeout=150, env=dict(env, GBV_SESSION_SECONDS="120"))
+    proc = subprocess.run(
+        ["bash", str(repo / "bench" / "gpu_session.sh"), str(out), *args],
+        capture_output=True,
+        text=True,
+        timeout=150,
+        env=dict(env, GBV_SESSION_SECONDS="120"),
+    )
     report = json.loads((out / "report.json").read_text()) if (out / "report.json").exists() else {"pieces": []}
     text = (out / "report.txt").read_text().splitlines() if (out / "report.txt").exists() else []
-    assert [line.split(":")[0] for line in text[:len(report["pieces"])]] == [p["name"] for p in report["pieces"]]
+    assert [line.split(":")[0] for line in text[: len(report["pieces"])]] == [p["name"] for p in report["pieces"]]
     return proc, {p["name"]: p for p in report["pieces"]}
 
 
@@ -95,16 +100,22 @@ exec {bare} "$@"
 def test_the_sessions_test_files_collect():
     files = [*CUDA_TEST_FILES, *GLSL_TEST_FILES]
     assert all((REPO / f).is_file() for f in files), [f for f in files if not (REPO / f).is_file()]
-    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "--collect-only", "-p", "no:cacheprovider", *files],
-                          cwd=REPO, capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "--collect-only", "-p", "no:cacheprovider", *files],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 0 and " collected" in proc.stdout, proc.stdout[-2000:] + proc.stderr
 
 
 def test_cuda_check_finds_its_test_files():
     """bench/cuda_check.py imports the session's list (its own once pointed at a moved file); without a device it
     stops with one line."""
-    proc = subprocess.run([sys.executable, str(REPO / "bench" / "cuda_check.py")], capture_output=True, text=True,
-                          timeout=60)
+    proc = subprocess.run(
+        [sys.executable, str(REPO / "bench" / "cuda_check.py")], capture_output=True, text=True, timeout=60
+    )
     from gbviewer.render import CudaRenderer
 
     if not CudaRenderer.available()[0]:

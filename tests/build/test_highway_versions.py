@@ -12,20 +12,34 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from helpers import HOST_ONLY, skip_or_fail
-from native_builds import (HIGHWAY_RELEASES, assert_renders_match, build, cmake_env, configure, fetch_highway,
-                           hidden_highway, run_child, stage_package)
+from native_builds import (
+    HIGHWAY_RELEASES,
+    assert_renders_match,
+    build,
+    cmake_env,
+    configure,
+    fetch_highway,
+    hidden_highway,
+    run_child,
+    stage_package,
+)
 
 SIZE = 96
 SCENE = Path(__file__).resolve().parents[2] / "assets" / "fruit_drops_minimal.ply"
 # what each release's AVX3 target needs beyond AVX2 on GCC 12 (hwy/ops/set_macros-inl.h: 1.2 added avx512cd)
-AVX3_NEEDS = {"1.1.0": {"-mavx512f", "-mavx512vl", "-mavx512dq", "-mavx512bw"},
-              "1.2.0": {"-mavx512f", "-mavx512cd", "-mavx512vl", "-mavx512dq", "-mavx512bw"},
-              "1.3.0": {"-mavx512f", "-mavx512cd", "-mavx512vl", "-mavx512dq", "-mavx512bw"}}
+AVX3_NEEDS = {
+    "1.1.0": {"-mavx512f", "-mavx512vl", "-mavx512dq", "-mavx512bw"},
+    "1.2.0": {"-mavx512f", "-mavx512cd", "-mavx512vl", "-mavx512dq", "-mavx512bw"},
+    "1.3.0": {"-mavx512f", "-mavx512cd", "-mavx512vl", "-mavx512dq", "-mavx512bw"},
+}
 
-pytestmark = [pytest.mark.slow, HOST_ONLY, pytest.mark.skipif(shutil.which("cmake") is None, reason="cmake is not installed"),
-              pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86-64's AVX targets")]
+pytestmark = [
+    pytest.mark.slow,
+    HOST_ONLY,
+    pytest.mark.skipif(shutil.which("cmake") is None, reason="cmake is not installed"),
+    pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86-64's AVX targets"),
+]
 
 
 @pytest.mark.parametrize("version", sorted(HIGHWAY_RELEASES))
@@ -40,8 +54,9 @@ def test_builds_and_renders_with_highway(version, tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert f"CPU blend paths scalar, avx2, avx512 (Highway {version}: installed, {headers})" in proc.stdout
     commands = json.loads((b / "compile_commands.json").read_text())
-    avx512 = next(c["command"] for c in commands
-                  if c["file"].endswith("blend_isa.cpp") and "gbv_blend_avx512" in c["command"])
+    avx512 = next(
+        c["command"] for c in commands if c["file"].endswith("blend_isa.cpp") and "gbv_blend_avx512" in c["command"]
+    )
     assert AVX3_NEEDS[version] <= set(avx512.split()), avx512
     pkg = stage_package(build(b), tmp_path / "pkg")
     out = tmp_path / "out"

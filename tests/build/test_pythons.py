@@ -13,15 +13,23 @@ import tomllib
 from pathlib import Path
 
 import pytest
-
 from helpers import HOST_ONLY, skip_or_fail
 from native_builds import CACHE, ROOT, build, cmake_env, configure, hidden_highway
 
 PYTHONS = ("3.11", "3.12", "3.13")
-TESTS = ["tests/model/test_camera.py", "tests/test_dataclass_equality.py", "tests/model/test_keyframes.py",
-         "tests/io/test_inria_ply.py", "tests/render/test_render.py"]
+TESTS = [
+    "tests/model/test_camera.py",
+    "tests/test_dataclass_equality.py",
+    "tests/model/test_keyframes.py",
+    "tests/io/test_inria_ply.py",
+    "tests/render/test_render.py",
+]
 
-pytestmark = [pytest.mark.slow, HOST_ONLY, pytest.mark.skipif(shutil.which("cmake") is None, reason="cmake is not installed")]
+pytestmark = [
+    pytest.mark.slow,
+    HOST_ONLY,
+    pytest.mark.skipif(shutil.which("cmake") is None, reason="cmake is not installed"),
+]
 
 
 def test_requires_python_states_what_is_tested():
@@ -44,15 +52,25 @@ def interpreter(version: str) -> str | None:
 def venv_for(python: str, version: str) -> Path:
     """A venv of `python` with the package's dependencies, the viewer extra and the test tools (kept in the cache)."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    wanted = [*project["dependencies"], *project["optional-dependencies"]["viewer"], "pytest", "hypothesis", "scipy",
-              "nanobind"]
+    wanted = [
+        *project["dependencies"],
+        *project["optional-dependencies"]["viewer"],
+        "pytest",
+        "hypothesis",
+        "scipy",
+        "nanobind",
+    ]
     venv = CACHE / "pythons" / version
     stamp = venv / "gbviewer-requirements.txt"
     if not stamp.exists() or stamp.read_text() != "\n".join(wanted):
         shutil.rmtree(venv, ignore_errors=True)
         subprocess.run([python, "-m", "venv", str(venv)], check=True, timeout=300)
-        proc = subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "-q", *wanted],
-                              capture_output=True, text=True, timeout=1200)
+        proc = subprocess.run(
+            [str(venv / "bin" / "python"), "-m", "pip", "install", "-q", *wanted],
+            capture_output=True,
+            text=True,
+            timeout=1200,
+        )
         if proc.returncode:
             skip_or_fail(f"could not install the dependencies for Python {version}: {proc.stderr.strip()[-500:]}")
         stamp.write_text("\n".join(wanted))
@@ -79,7 +97,13 @@ def test_the_suite_part_passes_on(version, tmp_path):
     shutil.copy2(module, work / "gbviewer" / module.name)
     env = {k: v for k, v in cmake_env().items() if not k.startswith(("PYTHON", "VIRTUAL_ENV"))}
     env["PYTHONPATH"] = str(work)  # the staged package, for the tests' own child processes too
-    proc = subprocess.run([str(vpython), "-m", "pytest", "-q", "-p", "no:cacheprovider", *TESTS], cwd=work, env=env,
-                          capture_output=True, text=True, timeout=900)
+    proc = subprocess.run(
+        [str(vpython), "-m", "pytest", "-q", "-p", "no:cacheprovider", *TESTS],
+        cwd=work,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     summary = proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else proc.stderr[-2000:]
     assert proc.returncode == 0 and " passed" in summary, proc.stdout[-4000:] + proc.stderr[-2000:]

@@ -78,10 +78,17 @@ def test_missing_tools_are_named_with_their_packages(bin_dir, check):
     proc = as_nobody([BASH, str(check)], {"PATH": str(bin_dir)})
     out = lines(proc)
     assert proc.returncode == 1
-    for tool, pkg in [("a C++ compiler (c++)", "build-essential"), ("cmake", "cmake"), ("Xvfb", "xvfb xauth"),
-                      ("glslangValidator", "glslang-tools"), ("qemu-x86_64", "qemu-user"),
-                      ("aarch64-linux-gnu-g++", "crossbuild-essential-arm64"), ("qemu-aarch64", "qemu-user"),
-                      ("clang++", "clang libomp-dev"), ("debootstrap", "debootstrap")]:
+    for tool, pkg in [
+        ("a C++ compiler (c++)", "build-essential"),
+        ("cmake", "cmake"),
+        ("Xvfb", "xvfb xauth"),
+        ("glslangValidator", "glslang-tools"),
+        ("qemu-x86_64", "qemu-user"),
+        ("aarch64-linux-gnu-g++", "crossbuild-essential-arm64"),
+        ("qemu-aarch64", "qemu-user"),
+        ("clang++", "clang libomp-dev"),
+        ("debootstrap", "debootstrap"),
+    ]:
         assert sum(ln.startswith(f"setup: missing {tool}: apt-get install {pkg} (") for ln in out) == 1, (tool, out)
     assert not any("Highway" in ln for ln in out)  # no compiler: the headers are looked for in /usr/include
 
@@ -102,9 +109,11 @@ def test_missing_highway_is_downloaded_unless_the_download_is_off(bin_dir, check
     assert proc.returncode == (1 if any(ln.endswith("(the build needs it)") for ln in out) else 0), out
     out = lines(as_nobody([BASH, str(check)], {**env, "GBVIEWER_FETCH_HIGHWAY": "OFF"}))
     hwy = [ln for ln in out if "Highway" in ln]
-    assert hwy == ["setup: missing Google Highway's headers (hwy/highway.h; the CPU module's vector paths; "
-                   "GBVIEWER_FETCH_HIGHWAY is off): apt-get install libhwy-dev, or set GBVIEWER_SCALAR_ONLY=1 for a "
-                   "slower scalar-only build (the build needs it)"], out
+    assert hwy == [
+        "setup: missing Google Highway's headers (hwy/highway.h; the CPU module's vector paths; "
+        "GBVIEWER_FETCH_HIGHWAY is off): apt-get install libhwy-dev, or set GBVIEWER_SCALAR_ONLY=1 for a "
+        "slower scalar-only build (the build needs it)"
+    ], out
     proc = as_nobody([BASH, str(check)], {**env, "GBVIEWER_SCALAR_ONLY": "1"})
     out = lines(proc)
     hwy = [ln for ln in out if "Highway" in ln]
@@ -139,12 +148,12 @@ def test_the_viewer_setup_installs_no_torch_and_no_ray(work, args, installs):
     venv_bin = work / ".venv" / "bin"
     venv_bin.mkdir(parents=True)
     log = work / "pip-calls.log"
-    (venv_bin / "python").write_text(f'#!/bin/sh\necho "$*" >> {log}\ncase "$1" in scripts/pick_torch.py) exit 1;; '
-                                     'esac\nexit 0\n')
+    (venv_bin / "python").write_text(
+        f'#!/bin/sh\necho "$*" >> {log}\ncase "$1" in scripts/pick_torch.py) exit 1;; esac\nexit 0\n'
+    )
     for p in (work, work / ".venv", venv_bin, venv_bin / "python"):
         p.chmod(0o777)
-    proc = as_nobody([BASH, str(work / "scripts" / "setup.sh"), *args],
-                     {"PATH": os.environ["PATH"], "PYTHON": SYS_PY})
+    proc = as_nobody([BASH, str(work / "scripts" / "setup.sh"), *args], {"PATH": os.environ["PATH"], "PYTHON": SYS_PY})
     assert proc.returncode == 0 and log.exists(), lines(proc)
     calls = log.read_text().splitlines()
     pip = [c.split()[-1] for c in calls if c.startswith("-m pip install") and "--upgrade pip" not in c]
@@ -155,4 +164,5 @@ def test_the_viewer_setup_installs_no_torch_and_no_ray(work, args, installs):
 def test_an_unknown_setup_option_is_one_line(work):
     proc = subprocess.run([BASH, str(work / "scripts" / "setup.sh"), "--tests"], capture_output=True, text=True)
     assert proc.returncode == 2 and lines(proc) == [
-        "setup: unknown option --tests: expected nothing (the viewer) or --dev (the tests too)"]
+        "setup: unknown option --tests: expected nothing (the viewer) or --dev (the tests too)"
+    ]
