@@ -10,7 +10,7 @@ import pytest
 
 import gbviewer as gb
 from gbviewer.bench.fidelity import FidelityRow
-from gbviewer.bench.report import pyplot, quality_cost
+from gbviewer.bench.report import line_style, pyplot, quality_cost
 from gbviewer.cli import main
 
 
@@ -62,7 +62,7 @@ def test_quality_cost_plots_psnr_against_the_fastest_time():
     ]
     plt = pyplot()
     fig, ax = plt.subplots()
-    quality_cost(ax, "s", speed, fid)
+    quality_cost(ax, "s", speed, fid, {m: line_style(i) for i, m in enumerate(["scalar", "scalar+lod:1"])})
     lines = {line.get_label(): (list(line.get_xdata()), list(line.get_ydata())) for line in ax.get_lines()}
     plt.close(fig)
     assert lines == {"scalar": ([5.0, 7.0], [25.0, 30.0]), "scalar+lod:1": ([2.0], [27.0])}
