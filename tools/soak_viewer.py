@@ -254,6 +254,7 @@ class Soak:
                 "rss_trimmed_kib": rss_kib(),
                 "traced_kib": tracemalloc.get_traced_memory()[0] // 1024 if tracemalloc.is_tracing() else None,
                 "gl": gl_object_counts(),
+                "pane_textures": len(self.app.panes._textures),  # one per pane part shown: varies with the layout
                 "renderers": len(w._renderers),
                 "threads": threading.active_count(),
                 "scene": self.app.state.scene_path.name if self.app.state.scene_path else None,
@@ -280,6 +281,8 @@ def summarise(samples: list[dict], warmup: int) -> dict:
         "rss_after_warmup_max_mib": rss.max() / 1024,
         "gl_after_warmup": after[0]["gl"],
         "gl_last": samples[-1]["gl"],
+        "pane_textures_after_warmup": after[0]["pane_textures"],
+        "pane_textures_last": samples[-1]["pane_textures"],
         "gl_max": {k: max(r["gl"][k] for r in samples) for k in samples[0]["gl"]},
         "threads_max": max(r["threads"] for r in samples),
     }

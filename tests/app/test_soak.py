@@ -15,8 +15,11 @@ def test_short_soak_keeps_the_app_alive_and_its_gl_objects_bounded(xvfb):
     assert report["problems"] == []
     assert report["bad_files_opened"] >= 6 and report["bad_file_messages"] == report["bad_files_opened"]
     s = report["summary"]
-    # a leak grows with the cycles (15 after the warm-up); one object more at the end than after the warm-up is a
-    # feature first used later in the run (seen in the full suite: 9 textures against 8), not a leak
-    assert all(s["gl_last"][k] <= s["gl_after_warmup"][k] + 1 for k in s["gl_last"]), s
-    assert s["rss_max_mib"] < s["rss_first_mib"] + 1024  # generous: RSS follows the open scene and the allocator
-    # (report["ok"] is the long soak's stricter verdict: every GL count back at its warm-up value)
+    # a leak grows with the cycles (15 after the warm-up). The panes' textures (one per pane part shown) follow the
+    # random layout of the sampled cycle, so they are counted apart; one object more at the end than after the
+    # warm-up is a feature first used later in the run, not a leak
+    warm, last = dict(s["gl_after_warmup"]), dict(s["gl_last"])
+    warm["texture"] -= s["pane_textures_after_warmup"]
+    last["texture"] -= s["pane_textures_last"]
+    assert all(last[k] <= warm[k] + 1 for k in last), f"GL objects besides the panes' textures: {warm} -> {last}"
+    assert s["pane_textures_last"] <= 8  # at most 4 panes of 2 parts
