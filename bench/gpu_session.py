@@ -33,7 +33,7 @@ from gpu_session_report import Session  # noqa: E402
 import gbviewer as gb  # noqa: E402
 from gbviewer.render import CudaRenderer, RenderSettings  # noqa: E402
 
-# The test files only a GPU runs in full (bench/cuda_check.py runs them too); tests/build/test_gpu_session.py checks
+# The test files only a GPU runs in full (bench/cuda_check.py runs them too); tests/install/test_gpu_session.py checks
 # that they exist.
 CUDA_TEST_FILES = (
     "tests/render/test_cuda.py",

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Cross-build the CPU module for aarch64 (Debian's aarch64-linux-gnu-g++, cmake/aarch64-linux-gnu.cmake) and run it
-# under qemu-aarch64 with an aarch64 Python: prints the module's SIMD line (NEON selected). tests/build/test_aarch64.py
+# under qemu-aarch64 with an aarch64 Python: prints the module's SIMD line (NEON selected). tests/install/test_aarch64.py
 # runs this and compares its renders with x86-64's.
 #
 #   scripts/check_aarch64.sh [--install] [BUILD_DIR]      (BUILD_DIR: build/aarch64)

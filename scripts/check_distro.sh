@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Run the README's two commands exactly as written in a fresh root of another Debian release, as a new user there
-# would: by default Debian 13 "trixie" (Python 3.13, g++ 14, libhwy-dev 1.2). tests/build/test_distro.py runs it.
+# would: by default Debian 13 "trixie" (Python 3.13, g++ 14, libhwy-dev 1.2). tests/install/test_distro.py runs it.
 #
 #   scripts/check_distro.sh [SUITE]        (SUITE: trixie)
 #

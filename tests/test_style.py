@@ -5,6 +5,7 @@ file reads in one sitting: at most MAX_LINES lines."""
 
 from __future__ import annotations
 
+import fnmatch
 import subprocess
 import sys
 from pathlib import Path
@@ -81,3 +82,15 @@ def test_every_source_file_reads_in_one_sitting():
     assert len(files) > 300, len(files)  # the sources were found
     long = {str(p.relative_to(REPO)): n for p in files if (n := len(p.read_text().splitlines())) > MAX_LINES}
     assert not long, f"over {MAX_LINES} lines: {long}"
+
+
+def test_every_test_file_lies_where_pytest_looks():
+    """pytest skips folders named like build or dist (its norecursedirs) without a word: none of ours may be."""
+    skipped = ("*.egg", ".*", "_darcs", "build", "CVS", "dist", "node_modules", "venv", "{arch}")
+    tests = REPO / "tests"
+    hidden = [
+        str(p.relative_to(REPO))
+        for p in tests.rglob("test_*.py")
+        if any(fnmatch.fnmatch(part, pat) for part in p.relative_to(tests).parts[:-1] for pat in skipped)
+    ]
+    assert not hidden, f"pytest would not collect: {hidden}"
