@@ -76,6 +76,24 @@ def random_scene(n: int = 100, seed: int = 0, sh_degree: int = 0, spread: float 
     return gb.Scene.from_arrays(means, scales, quats, opac, sh)
 
 
+LOD_CAM = gb.Camera(64, 48, 20.0, 20.0, 32, 24, np.eye(3), np.zeros(3))  # the level-of-detail tests' view
+
+
+def filtered_scene(seed: int, sh_dtype: str = "float32") -> gb.Scene:
+    """A random scene with a 3D filter (the hierarchy merges it too), SH stored as `sh_dtype`."""
+    base = random_scene(3000, seed=seed, sh_degree=2, spread=3.0)
+    rng = np.random.default_rng(seed)
+    return gb.Scene(
+        base.means,
+        base.scales,
+        base.quats,
+        base.opacities,
+        base.sh.astype(sh_dtype),
+        rng.uniform(0.0, 0.02, base.num_splats).astype(np.float32),
+        source="test",
+    )
+
+
 def front_camera(width: int = 64, height: int = 48, f: float = 60.0) -> gb.Camera:
     return gb.Camera(width, height, f, f, width / 2, height / 2, np.eye(3), np.zeros(3))
 

@@ -15,6 +15,7 @@ import urllib.request
 from pathlib import Path
 
 import numpy as np
+from helpers import skip_or_fail
 
 import gbviewer as gb
 from gbviewer import _native
@@ -41,6 +42,18 @@ for i, path in enumerate(scenes):
         res["simd"].append(f.stats.simd)
 print(json.dumps(res))
 """ % (MODES,)
+
+
+def compile_check(source: Path, exe: Path, includes: list[Path], optimise: bool = True) -> None:
+    """Build a standalone C++ check (`source`, beside its test) with warnings as errors into `exe`: a missing compiler
+    skips (fails in CI), a failed build fails with the compiler's message."""
+    cxx = shutil.which("c++") or shutil.which("g++") or shutil.which("clang++")
+    if cxx is None:
+        skip_or_fail("no C++ compiler (c++, g++ or clang++)")
+    flags = ["-std=c++17", *(["-O1"] if optimise else []), "-Wall", "-Wextra", "-Werror"]
+    cmd = [cxx, *flags, *(f"-I{p}" for p in includes), str(source), "-o", str(exe)]
+    build = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert build.returncode == 0, build.stderr[-3000:]
 
 
 def cmake_env(**extra: str) -> dict[str, str]:

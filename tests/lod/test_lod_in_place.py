@@ -6,27 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import front_camera, random_scene
+from helpers import LOD_CAM as CAM
+from helpers import filtered_scene, front_camera, random_scene
 
 import gbviewer as gb
 from gbviewer import lod
-
-CAM = gb.Camera(64, 48, 20.0, 20.0, 32, 24, np.eye(3), np.zeros(3))
-
-
-def filtered_scene(seed: int, sh_dtype: str = "float32") -> gb.Scene:
-    """A random scene with a 3D filter (the hierarchy merges it too), SH stored as `sh_dtype`."""
-    base = random_scene(3000, seed=seed, sh_degree=2, spread=3.0)
-    rng = np.random.default_rng(seed)
-    return gb.Scene(
-        base.means,
-        base.scales,
-        base.quats,
-        base.opacities,
-        base.sh.astype(sh_dtype),
-        rng.uniform(0.0, 0.02, base.num_splats).astype(np.float32),
-        source="test",
-    )
 
 
 @pytest.mark.parametrize("sh_dtype", ["float32", "float16"])

@@ -7,11 +7,10 @@ release_buffers frees."""
 from __future__ import annotations
 
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
-from helpers import skip_or_fail
+from native_builds import compile_check
 
 REPO = Path(__file__).resolve().parents[2]
 CASES = [
@@ -29,27 +28,8 @@ CASES = [
 
 
 def test_host_logic_on_a_stand_in_runtime(tmp_path):
-    cxx = shutil.which("c++") or shutil.which("g++") or shutil.which("clang++")
-    if cxx is None:
-        skip_or_fail("no C++ compiler (c++, g++ or clang++)")
     exe = tmp_path / "cuda_host_check"
-    build = subprocess.run(
-        [
-            cxx,
-            "-std=c++17",
-            "-Wall",
-            "-Wextra",
-            "-Werror",
-            f"-I{REPO / 'native' / 'cuda'}",
-            str(Path(__file__).with_name("cuda_host_check.cpp")),
-            "-o",
-            str(exe),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert build.returncode == 0, build.stderr[-3000:]
+    compile_check(Path(__file__).with_name("cuda_host_check.cpp"), exe, [REPO / "native" / "cuda"], optimise=False)
     run = subprocess.run([str(exe)], capture_output=True, text=True, timeout=30)
     assert run.returncode == 0 and run.stdout.split() == [w for c in CASES for w in ("ok", c)], run.stdout
 

@@ -5,38 +5,18 @@ float64 window-integrated alpha reaches 1/256, has its centre inside the box gro
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 from pathlib import Path
 
-import pytest
+from native_builds import compile_check
 
 REPO = Path(__file__).resolve().parents[2]
-CXX = shutil.which("c++") or shutil.which("g++")
 
 
-@pytest.mark.skipif(CXX is None, reason="no C++ compiler on PATH")
 def test_window_cutoff_box_holds_every_visible_window(tmp_path):
     exe = tmp_path / "gb_bounds_check"
-    subprocess.run(
-        [
-            CXX,
-            "-std=c++17",
-            "-O1",
-            "-Wall",
-            "-Wextra",
-            "-Werror",
-            "-I",
-            str(REPO / "native" / "include"),
-            "-I",
-            str(REPO / "native" / "cpu"),
-            str(Path(__file__).with_name("gb_bounds_check.cpp")),
-            "-o",
-            str(exe),
-        ],
-        check=True,
-        timeout=120,
-    )
+    includes = [REPO / "native" / "include", REPO / "native" / "cpu"]
+    compile_check(Path(__file__).with_name("gb_bounds_check.cpp"), exe, includes)
     out = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stdout + out.stderr
     word, windows, taken, edge, tighter = out.stdout.split()

@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import random_scene, skip_or_fail
+from helpers import LOD_CAM as CAM
+from helpers import filtered_scene, skip_or_fail
 
 import gbviewer as gb
 from gbviewer import lod
@@ -17,7 +18,6 @@ from gbviewer.render import BACKENDS, RenderSettings, create_renderer
 TREE_UPLOADS = {"glsl": 2, "cuda": 1}
 SCENE_UPLOADS = {"glsl": 2, "cuda": 1}
 
-CAM = gb.Camera(64, 48, 20.0, 20.0, 32, 24, np.eye(3), np.zeros(3))
 # every mode; eval3d and stopthepop on cuda only: their per-pixel orders (the exact one; StopThePop's 4x4 and 2x2
 # stages) of these tile lists need more loop iterations than llvmpipe allows (glsl/limits.py)
 SPECS = [
@@ -32,21 +32,6 @@ SPECS = [
     "stochastic",
     "stochastic_popfree",
 ]
-
-
-def filtered_scene(seed: int, sh_dtype: str = "float32") -> gb.Scene:
-    """A random scene with a 3D filter (the hierarchy merges it too), SH stored as `sh_dtype`."""
-    base = random_scene(3000, seed=seed, sh_degree=2, spread=3.0)
-    rng = np.random.default_rng(seed)
-    return gb.Scene(
-        base.means,
-        base.scales,
-        base.quats,
-        base.opacities,
-        base.sh.astype(sh_dtype),
-        rng.uniform(0.0, 0.02, base.num_splats).astype(np.float32),
-        source="test",
-    )
 
 
 @pytest.fixture(params=["glsl", "cuda"])
