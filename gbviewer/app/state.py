@@ -17,7 +17,6 @@ from ..model.camera_paths import zoom_path
 from ..model.scene import Scene
 from ..render import Mode, RenderSettings
 from ..render.presets import trained_spec
-from ..render.spec import spec_parts
 from .background import FIXED, PHOTOS
 from .camera.control import CameraController
 from .camera.path_keys import PathKeys, is_nerfstudio_file
@@ -314,11 +313,13 @@ class AppState(CameraActions):
         """What pane i's part ('a', or 'b' of a split) renders with."""
         ps: PaneSettings = self.settings.panes[i]
         spec = ps.split_mode if part == "b" else ps.mode
-        settings = RenderSettings.parse(
-            spec, supersample=ps.supersample, background=self.background, lod=ps.lod if ps.lod > 0 else None
+        settings = RenderSettings.parse(  # interactive frames: fast unless the pane asks for exact
+            spec,
+            default_precision="fast",
+            supersample=ps.supersample,
+            background=self.background,
+            lod=ps.lod if ps.lod > 0 else None,
         )
-        if "precision" not in spec_parts(str(spec)):  # interactive frames: fast unless the pane asks for exact
-            settings = replace(settings, precision="fast")
         debug = "window" if ps.view == "window" and settings.mode == Mode.GAUSSIAN_BLENDING else "none"
         return replace(settings, debug=debug)
 

@@ -158,17 +158,18 @@ def with_stochastic(settings: list[RenderSettings], args: argparse.Namespace) ->
 MODE_OPTIONS = ("supersample", "sh_degree", "background")  # the options some commands have beside their modes
 
 
-def settings_of(args: argparse.Namespace, default: str = "scalar") -> list[RenderSettings]:
+def settings_of(args: argparse.Namespace, default: str = "scalar", precision: str = "exact") -> list[RenderSettings]:
     """What a command renders: its --modes, or its one --mode (`default` when not given, at --lod), each parsed by
     `RenderSettings.parse` with the command's --supersample, --sh-degree and --background filling what the spec leaves
-    unset (one disagreeing with the spec is one line); --lod with --modes adds each mode's cut beside it
-    (`with_lod`); --seed and --frame set the stochastic ones (`with_stochastic`). The one way every command reads its
-    modes."""
+    unset (one disagreeing with the spec is one line) and gaussian_blending at `precision` unless the spec says
+    '+exact' or '+fast'; --lod with --modes adds each mode's cut beside it (`with_lod`); --seed and --frame set the
+    stochastic ones (`with_stochastic`). The one way every command reads its modes."""
     fill = {key: getattr(args, key, None) for key in MODE_OPTIONS}
     if hasattr(args, "modes"):
-        parsed = with_lod(RenderSettings.parse_list(args.modes, **fill), getattr(args, "lod", None))
+        parsed = RenderSettings.parse_list(args.modes, default_precision=precision, **fill)
+        parsed = with_lod(parsed, getattr(args, "lod", None))
     else:
-        parsed = [RenderSettings.parse(args.mode or default, lod=args.lod, **fill)]
+        parsed = [RenderSettings.parse(args.mode or default, default_precision=precision, lod=args.lod, **fill)]
     return with_stochastic(parsed, args)
 
 

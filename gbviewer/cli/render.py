@@ -43,7 +43,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     cam = cam.at_sampling_rate(args.scale)
     trained = trained_spec(scene.meta)
     try:
-        settings = settings_of(args, trained or "scalar")[0]
+        settings = settings_of(args, trained or "scalar", precision="fast")[0]
     except RenderError as exc:  # an option against the file's mode, which the user did not give
         if args.mode is not None or not trained:
             raise
@@ -79,9 +79,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_camera_args(p)
     p.add_argument(
         "--mode",
-        help=f"MODE[:N][+lod[:PX]], MODE one of {', '.join(m.label for m in Mode)} or "
+        help=f"MODE[:N][+exact][+lod[:PX]], MODE one of {', '.join(m.label for m in Mode)} or "
         f"preset:NAME ({', '.join(PRESETS)}); default: the mode the file says the scene was trained with "
-        "(gbviewer info: trained_as), else scalar",
+        "(gbviewer info: trained_as), else scalar; gaussian_blending draws its fast kernel, within 1/1024 of +exact",
     )
     p.add_argument(
         "--supersample",

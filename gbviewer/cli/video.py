@@ -33,7 +33,7 @@ VIDEO_PANE = (480, 360)  # default pane size of `gbviewer video`
 def cmd_video(args: argparse.Namespace) -> int:
     """Side-by-side zoom video of several modes (H.264, H.265, VP9 or AV1; MP4 or WebM)."""
     require("video", "imageio_ffmpeg", "a video", load=False)
-    settings = settings_of(args)
+    settings = settings_of(args, precision="fast")
     if args.camera_path is not None:
         return _camera_path_video(args, settings)
     args.path = args.path or "zoom"
@@ -136,8 +136,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--modes",
         default="scalar,supersample:3,gaussian_blending",
-        help="comma-separated MODE[:N][+lod[:PX]] (N x N supersampling, supersample:N = scalar:N; the "
-        "level-of-detail cut at PX)",
+        help="comma-separated MODE[:N][+exact][+lod[:PX]] (N x N supersampling, supersample:N = scalar:N; the "
+        "level-of-detail cut at PX; gaussian_blending draws its fast kernel, within 1/1024 of +exact)",
     )
     add_lod_arg(p)
     add_stochastic_args(p)

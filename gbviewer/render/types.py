@@ -53,8 +53,9 @@ class RenderSettings:
         unbounded, the exact per-pixel sort without the hierarchy; default 4, as published), spelled 'stopthepop:K'
         (and 'stopthepop:K:N' with N x N supersampling).
     precision (gaussian_blending): "exact", or "fast" (spec suffix '+fast'): the fast kernel stays within 1/1024 of
-        the exact one per channel and in alpha (tests/render/test_gb_fast.py); the library renders exact unless asked,
-        the viewer's panes fast. Other modes have one kernel: their precision is always "exact".
+        the exact one per channel and in alpha (tests/render/test_gb_fast.py). The library, `eval`, `flicker`,
+        `bench` and `trace` render exact unless asked; the viewer's panes and the pictures of `render`, `compare`,
+        `video` and `demo` fast (`parse`'s default_precision). Other modes have one kernel: always "exact".
     """
 
     mode: Mode = Mode.SCALAR
@@ -186,7 +187,7 @@ class RenderSettings:
         return name + (f":{self.supersample}" if self.supersample > 1 else "") + fast + lod
 
     @classmethod
-    def parse(cls, spec: "str | Mode", **options) -> "RenderSettings":
+    def parse(cls, spec: "str | Mode", *, default_precision: str = "exact", **options) -> "RenderSettings":
         """'MODE' or 'MODE:N' (N x N supersampling); 'stopthepop:K[:N]' (K: its queue length); 'supersample:N'
         means scalar with N x N samples; 'preset:NAME[:N]' a viewer preset (gbviewer.render.presets: its mode, view
         filter and SH bands); a suffix '+fast' or '+exact' sets the precision; '+lod' or '+lod:TAU' draws the
@@ -194,11 +195,12 @@ class RenderSettings:
 
         The one parser of every surface that takes a mode (commands, viewer panes, the library): `options`
         (RenderSettings fields; None: not given) fill what the spec leaves unset, and one that disagrees with a part
-        the spec sets is a one-line RenderError, never a silent override."""
+        the spec sets is a one-line RenderError, never a silent override. `default_precision`: the precision where
+        neither sets one (the surfaces that make pictures pass "fast"; measurements keep "exact")."""
         text = spec.label if isinstance(spec, Mode) else str(spec)
         parts = spec_parts(text)
         given = {k: v for k, v in options.items() if v is not None}
-        settings = cls(**{**given, **parts})
+        settings = cls(**{"precision": default_precision, **given, **parts})
         for key in sorted(given.keys() & parts.keys()):
             ours = getattr(settings, key)
             theirs = getattr(replace(settings, preset="", **{key: given[key]}), key)  # the option as a field holds it
@@ -210,11 +212,16 @@ class RenderSettings:
         return settings
 
     @classmethod
-    def parse_list(cls, specs: str, **options) -> "list[RenderSettings]":
+    def parse_list(cls, specs: str, *, default_precision: str = "exact", **options) -> "list[RenderSettings]":
         """Comma-separated mode specs, each through `parse` with `options`, e.g. 'scalar,supersample:3,
         gaussian_blending': at least one, each once (SCALAR, scalar:1 and supersample:1 are scalar), none empty."""
         try:
-            return distinct_items(specs, "--modes", lambda s: cls.parse(s, **options), key=lambda s: s.spec)
+            return distinct_items(
+                specs,
+                "--modes",
+                lambda s: cls.parse(s, default_precision=default_precision, **options),
+                key=lambda s: s.spec,
+            )
         except InvalidValue as exc:
             raise RenderError(str(exc)) from None
 

@@ -46,7 +46,12 @@ def test_render_png_and_npy(tmp_path):
     assert arr.shape == (24, 32, 3) and arr.dtype == np.float32
     scene = gb.load(gb.DEFAULT_SCENE)
     cam = gb.orbit_camera(scene, 10, 20, width=64, height=48).at_sampling_rate(0.5)
-    np.testing.assert_array_equal(arr, gb.render(scene, cam, "gaussian_blending", backend="auto").rgb)
+    # a picture-making command draws gaussian_blending's fast kernel unless the spec says +exact (the library: exact)
+    np.testing.assert_array_equal(arr, gb.render(scene, cam, "gaussian_blending+fast", backend="auto").rgb)
+    exact = tmp_path / "exact.npy"
+    assert main(["render", *common, "--mode", "gaussian_blending+exact", "--scale", "1/2", "--out", str(exact)]) == 0
+    np.testing.assert_array_equal(np.load(exact), gb.render(scene, cam, "gaussian_blending", backend="auto").rgb)
+    assert not np.array_equal(np.load(exact), arr)
     assert not list(tmp_path.glob(".*"))  # no temporary files left behind
 
 
