@@ -80,10 +80,6 @@ void set_half(W& w, int k, const WindowState<H>& v) {
     for (int c = 0; c < 3; ++c) h(w.C[c]) = v.C[c];
 }
 
-struct Box {
-    float xa, xb, ya, yb;
-};
-
 // gaussian_blending on a group of two halves (AVX2's 2 x 8 lanes), each with its own window box: a splat whose bounds
 // miss one half's box cannot pass the cut-off in any of its lanes, so the other half takes it alone at half the work.
 // Bit-identical to stepping both halves: a step changes only lanes that pass the cut-off, and everything it decides
@@ -137,7 +133,8 @@ void group_gaussian(const TileJob& job, Group<L> g, Out<L::N>& out) {
         walk_gaussian_halves<L, Fast>(job, g.live, g.entries, win, out);
     } else {
         window_box<L>(win, g);
-        walk<L, Tr>(job, g, out, [&](const Splat2D& s, typename L::M live) {
+        // chunks of entries on vector lanes (a one-pixel group's box moves at nearly every take: there they cost more)
+        walk<L, Tr, (L::N > 1)>(job, g, out, [&](const Splat2D& s, typename L::M live) {
             typename L::M took = L::none();
             const typename L::M stop = blend_gaussian<L, Tr, Fast>(s, live, win, &took);
             if (L::any(took)) window_box<L>(win, g);

@@ -5,7 +5,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
+#include <type_traits>
 #include <vector>
 
 #include "gbv/blend.h"
@@ -110,6 +113,65 @@ struct Cursor {
     }
 };
 
+static inline bool outside(const SplatBounds& b, float xa, float xb, float ya, float yb) {
+    return yb < b.y0 || ya > b.y1 || xb < b.x0 || xa > b.x1;
+}
+
+struct Box {  // a group box: [xa, xb] x [ya, yb]
+    float xa, xb, ya, yb;
+};
+
+// The entries of a Cursor whose SplatBounds meet a group box, tested CHUNK at a time without a branch per entry
+// (gaussian_blending's groups skip most entries of their long lists). When the box changes (its windows moved) the
+// rest of the chunk is tested again, and a box that left the cursor's band sends it to the whole list after the last
+// entry returned, as Cursor::next would: the same entries come back in the same order as testing each against the
+// box of the moment.
+struct Filtered {
+    static constexpr int CHUNK = 32;
+    Cursor src;
+    Box box{};
+    int idx[CHUNK];  // the chunk's entries
+    int n = 0, at = 0, last = -1;  // entries in the chunk, the position after the last returned, that entry
+    uint32_t hits = 0;  // chunk positions >= at that meet `box`
+    bool boxed = false;
+
+    explicit Filtered(const Cursor& c) : src(c) {}
+
+    // The next entry meeting box b, -1 after the last.
+    int next(int count, const SplatBounds* bounds, const Box& b) {
+        if (!boxed || std::memcmp(&b, &box, sizeof(Box)) != 0) {
+            box = b;
+            boxed = true;
+            if (src.band && !(b.ya >= src.lo && b.yb <= src.hi)) {  // as Cursor::next: on from the last returned
+                src.band = nullptr;
+                src.i = last;
+                n = at = 0;
+            }
+            test(bounds);
+        }
+        while (!hits) {
+            n = at = 0;
+            for (int e; n < CHUNK && (e = src.next(count, b.ya, b.yb)) >= 0;) idx[n++] = e;
+            if (!n) return -1;
+            test(bounds);
+        }
+        const int p = __builtin_ctz(hits);
+        hits &= hits - 1;
+        at = p + 1;
+        return last = idx[p];
+    }
+
+  private:
+    void test(const SplatBounds* bounds) {
+        uint32_t h = 0;
+        for (int p = at; p < n; ++p) {
+            const SplatBounds& e = bounds[idx[p]];  // `outside`'s test, without its branches
+            h |= (uint32_t)!((box.yb < e.y0) | (box.ya > e.y1) | (box.xb < e.x0) | (box.xa > e.x1)) << p;
+        }
+        hits = h;
+    }
+};
+
 // A lane group: N pixels of one row, `count` of them inside the tile. [xa, xb] x [ya, yb]: the box a splat's
 // SplatBounds must meet to matter to any lane (the lanes' pixel centres; for gaussian_blending the lanes' window
 // centres grown by their largest half perimeter, updated as the windows move).
@@ -123,10 +185,6 @@ struct Group {
     Cursor entries;
 };
 
-static inline bool outside(const SplatBounds& b, float xa, float xb, float ya, float yb) {
-    return yb < b.y0 || ya > b.y1 || xb < b.x0 || xa > b.x1;
-}
-
 // Per-lane outputs of a group before they are written to the image.
 template <int N>
 struct Out {
@@ -136,17 +194,26 @@ struct Out {
 
 // Walk the list for one group: `step(splat, live) -> stopped lanes`. A lane's evals is the list position where it
 // stopped (+1), else n: the same count as one pixel walking the list (skipped entries count as walked).
-template <class L, class Tr, class Step>
+// Filter: the entries through Filtered (gaussian_blending's vector groups, which skip most of their lists; the alpha
+// modes' groups meet most entries of theirs, and there the chunks cost more than they save). A trace tests entry by
+// entry.
+template <class L, class Tr, bool Filter = false, class Step>
 void walk(const TileJob& job, const Group<L>& g, Out<L::N>& out, Step step) {
     typename L::M live = g.live;
     for (int i = 0; i < L::N; ++i) out.evals[i] = job.n;
     Cursor entries = g.entries;
-    for (int i; (i = entries.next(job.n, g.ya, g.yb)) >= 0;) {
-        if (outside(job.bounds[i], g.xa, g.xb, g.ya, g.yb)) {
-            GBV_TRACE(Tr, entry(i, SKIP_BOX));
-            continue;
+    Filtered hits(g.entries);
+    for (int i;;) {
+        if constexpr (Filter && std::is_same_v<Tr, NoTrace>) {
+            if ((i = hits.next(job.n, job.bounds, Box{g.xa, g.xb, g.ya, g.yb})) < 0) break;
+        } else {
+            if ((i = entries.next(job.n, g.ya, g.yb)) < 0) break;
+            if (outside(job.bounds[i], g.xa, g.xb, g.ya, g.yb)) {
+                GBV_TRACE(Tr, entry(i, SKIP_BOX));
+                continue;
+            }
+            GBV_TRACE(Tr, entry(i, SKIP_NONE));
         }
-        GBV_TRACE(Tr, entry(i, SKIP_NONE));
         const typename L::M stop = step(job.list[i], live);
         const uint32_t bits = L::bits(stop);
         if (!bits) continue;
