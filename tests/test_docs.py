@@ -1,9 +1,11 @@
 """The documentation stays inside the repository and whole: no file under gbviewer/, native/, shaders/, docs/ or the
-README refers to a path outside the repository or to a tracker number, and every relative link of the README and
-docs/*.md reaches an existing file and, with a #fragment, an existing heading (GitHub's anchors)."""
+README refers to a path outside the repository or to a tracker number, every relative link of the README and
+docs/*.md reaches an existing file and, with a #fragment, an existing heading (GitHub's anchors), and every gbviewer
+import of their Python examples resolves."""
 
 from __future__ import annotations
 
+import importlib
 import re
 import unicodedata
 from pathlib import Path
@@ -141,3 +143,51 @@ def test_broken_links_are_found(tmp_path: Path):
 def test_relative_links_resolve(doc: Path):
     broken = broken_links(doc)
     assert not broken, f"{doc.relative_to(REPO)}: " + "; ".join(broken)
+
+
+PYTHON_BLOCK = re.compile(r"```python\n(.*?)```", re.S)
+IMPORT = re.compile(r"^\s*from (gbviewer[\w.]*) import ([\w, ]+?)\s*(?:#.*)?$|^\s*import (gbviewer[\w.]*)", re.M)
+
+
+def is_module(name: str) -> bool:
+    try:
+        importlib.import_module(name)
+    except ImportError:
+        return False
+    return True
+
+
+def unresolved_imports(text: str) -> list[str]:
+    """The gbviewer imports of `text`'s Python examples that do not resolve: 'module: no name' or 'module: why'."""
+    out = []
+    for block in PYTHON_BLOCK.findall(text):
+        for m in IMPORT.finditer(block):
+            module = m.group(1) or m.group(3)
+            try:
+                found = importlib.import_module(module)
+            except ImportError as exc:
+                out.append(f"{module}: {exc}")
+                continue
+            for name in (m.group(2) or "").replace(" ", "").split(","):
+                if name and not hasattr(found, name) and not is_module(f"{module}.{name}"):
+                    out.append(f"{module}: no {name}")
+    return out
+
+
+def test_unresolved_imports_are_found():
+    sample = (
+        "```python\nfrom gbviewer import camera_paths, render  # x\nfrom gbviewer.outputs import video\n"
+        "import gbviewer.nowhere\n```\nfrom gbviewer import x\n"
+    )
+    assert unresolved_imports(sample) == [
+        "gbviewer: no camera_paths",
+        "gbviewer.nowhere: No module named 'gbviewer.nowhere'",
+    ]
+
+
+@pytest.mark.parametrize(
+    "doc", [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))], ids=lambda p: str(p.relative_to(REPO))
+)
+def test_python_examples_import(doc: Path):
+    missing = unresolved_imports(doc.read_text())
+    assert not missing, f"{doc.relative_to(REPO)}: " + "; ".join(missing)

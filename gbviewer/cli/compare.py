@@ -66,7 +66,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--modes",
         default="scalar,supersample:3,gaussian_blending",
-        help="comma-separated MODE[:N][+exact][+lod[:PX]] (N x N supersampling, the level-of-detail cut at PX; "
+        help="comma-separated MODE[:N][+fast|+exact][+lod[:PX]] (N x N supersampling, the level-of-detail cut at PX; "
         "gaussian_blending draws its fast kernel, within 1/1024 of +exact)",
     )
     add_lod_arg(p)

@@ -79,7 +79,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_camera_args(p)
     p.add_argument(
         "--mode",
-        help=f"MODE[:N][+exact][+lod[:PX]], MODE one of {', '.join(m.label for m in Mode)} or "
+        help=f"MODE[:N][+fast|+exact][+lod[:PX]], MODE one of {', '.join(m.label for m in Mode)} or "
         f"preset:NAME ({', '.join(PRESETS)}); default: the mode the file says the scene was trained with "
         "(gbviewer info: trained_as), else scalar; gaussian_blending draws its fast kernel, within 1/1024 of +exact",
     )

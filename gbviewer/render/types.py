@@ -179,8 +179,8 @@ class RenderSettings:
 
     @property
     def spec(self) -> str:
-        """The inverse of `parse`: 'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1',
-        'gaussian_blending:2+fast', ..."""
+        """The inverse of `parse` at its default precision (exact: a fast gaussian_blending says '+fast'):
+        'gaussian_blending', 'scalar:3', 'preset:spark', 'scalar+lod:1', 'gaussian_blending:2+fast', ..."""
         lod = f"+lod:{shortest(self.lod)}" if self.lod is not None else ""
         name = f"stopthepop:{self.queue}" if self.mode == Mode.STOPTHEPOP and self.supersample > 1 else self.name
         fast = "+fast" if self.precision == "fast" else ""

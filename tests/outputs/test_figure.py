@@ -63,12 +63,12 @@ def test_cli_compare_with_inset_and_refusal(tmp_path, output_view, bundled_scene
     assert main(args) == 0
     assert "PSNR" in capsys.readouterr().out
     img = np.asarray(Image.open(out).convert("RGB"))
-    gb_only = [gb.RenderSettings(gb.Mode.GAUSSIAN_BLENDING)]
+    gb_only = [gb.RenderSettings(gb.Mode.GAUSSIAN_BLENDING, precision="fast")]  # compare's default: fast
     cmp_layout = figure.compare_figure(bundled_scene, output_view, gb_only, [1.0]).layout
     cap = cmp_layout.caption_height
     assert img.shape[:2] == (2 * (H + cap) + 4, W)
     for r, rate in enumerate((1.0, 0.25)):
-        rgb = gb.render(bundled_scene, output_view.at_sampling_rate(rate), "gaussian_blending", backend="auto").rgb
+        rgb = gb.render(bundled_scene, output_view.at_sampling_rate(rate), "gaussian_blending+fast", backend="auto").rgb
         y = r * (H + cap + 4)
         # rows between the region's outline (y <= 22) and the magnified inset (bottom-right, from y = 41)
         np.testing.assert_array_equal(img[y + 24 : y + 40], upscale_nearest(to_uint8(rgb), H, W)[24:40])

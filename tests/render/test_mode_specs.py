@@ -141,8 +141,9 @@ MODES = [m.label for m in Mode]
 
 
 @st.composite
-def specs(draw) -> tuple[str, RenderSettings]:
-    """A spec text and the RenderSettings it means, built field by field (not through parse)."""
+def specs(draw) -> tuple[str, RenderSettings, bool]:
+    """A spec text, the RenderSettings it means (built field by field, not through parse) where the default precision
+    is exact, and whether the text names a precision."""
     n = draw(st.integers(1, 8))
     lod = draw(st.none() | st.floats(0, 1e6, allow_nan=False, allow_subnormal=False))
     explicit_n = n > 1 or draw(st.booleans())
@@ -152,15 +153,30 @@ def specs(draw) -> tuple[str, RenderSettings]:
         expected = RenderSettings(
             Mode.parse(p.mode), n, sh_degree=p.sh_degree, view_filter=p.view_filter, preset=p.name, lod=lod
         )
-        return f"preset:{draw(st.sampled_from([p.name, p.name.upper()]))}{tail}", expected
+        return f"preset:{draw(st.sampled_from([p.name, p.name.upper()]))}{tail}", expected, False
     name = draw(st.sampled_from([*MODES, "supersample"]))
     mode = Mode.SCALAR if name == "supersample" else Mode.parse(name)
     spelled = draw(st.sampled_from([name, name.upper(), name.replace("_", "-")]))
+    if mode == Mode.GAUSSIAN_BLENDING:  # its precision named or not: '+fast', '+exact' before '+lod'
+        named = draw(st.sampled_from(["", "fast", "exact"]))
+        head = (f":{n}" if explicit_n else "") + (f"+{named}" if named else "")
+        spec = spelled + head + ("" if lod is None else f"+lod:{lod!r}")
+        return spec, RenderSettings(mode, n, lod=lod, precision=named or "exact"), bool(named)
     if mode != Mode.STOPTHEPOP:
-        return spelled + tail, RenderSettings(mode, n, lod=lod)
+        return spelled + tail, RenderSettings(mode, n, lod=lod), False
     queue = draw(st.integers(0, MAX_QUEUE))  # 'stopthepop:K[:N]': its queue length comes before the supersampling
     explicit_k = queue != STOPTHEPOP_QUEUE or explicit_n or draw(st.booleans())
-    return spelled + (f":{queue}" if explicit_k else "") + tail, RenderSettings(mode, n, lod=lod, queue=queue)
+    spec = spelled + (f":{queue}" if explicit_k else "") + tail
+    return spec, RenderSettings(mode, n, lod=lod, queue=queue), False
+
+
+PICTURES = {"render", "compare", "video"}  # commands whose unnamed gaussian_blending precision is fast
+
+
+def expected_by(command: str, case: tuple[str, RenderSettings, bool]) -> RenderSettings:
+    """What `command` makes of a drawn spec: the picture commands draw gaussian_blending fast unless it says +exact."""
+    _, settings, named = case
+    return settings if named or command not in PICTURES else dataclasses.replace(settings, precision="fast")
 
 
 class Seen(GBViewerError):
@@ -202,10 +218,11 @@ def read_modes(monkeypatch, argv: list[str]) -> list[RenderSettings]:
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(case=specs(), other=specs())
 def test_a_spec_reaches_each_command_whole(tmp_path, monkeypatch, command, case, other):
-    spec, expected = case
-    assert RenderSettings.parse(spec) == expected and RenderSettings.parse(expected.spec) == expected
+    spec, exact, _ = case
+    assert RenderSettings.parse(spec) == exact and RenderSettings.parse(exact.spec) == exact
+    expected, also = expected_by(command, case), expected_by(command, other)
     got = read_modes(monkeypatch, COMMANDS[command](spec, tmp_path))
     assert got == [expected]
-    if command != "render" and other[1].spec != expected.spec:  # a list keeps each one's parts too
+    if command != "render" and also.spec != expected.spec:  # a list keeps each one's parts too
         got = read_modes(monkeypatch, COMMANDS[command](f"{spec},{other[0]}", tmp_path))
-        assert got == [expected, other[1]]
+        assert got == [expected, also]
