@@ -48,7 +48,11 @@ fi
 mounted=()
 cleanup() { for ((i = ${#mounted[@]} - 1; i >= 0; i--)); do umount -l "${mounted[i]}" 2>/dev/null || true; done; }
 trap cleanup EXIT
-mnt() { mkdir -p "${@: -1}" && mount "$@" && mounted+=("${@: -1}"); }
+trap 'exit 130' INT TERM  # a killed run unmounts too (the EXIT trap runs)
+# a run killed before its cleanup (SIGKILL) leaves its mounts: take them down before mounting again
+mnt() {
+  mkdir -p "${@: -1}" && { ! mountpoint -q "${@: -1}" || umount -l "${@: -1}"; } && mount "$@" && mounted+=("${@: -1}")
+}
 mnt -t proc proc "$ROOTFS/proc"
 mnt -t sysfs sys "$ROOTFS/sys"
 mnt --bind /dev "$ROOTFS/dev"
