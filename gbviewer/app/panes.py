@@ -26,6 +26,7 @@ from .frames.rates import first_preview, preview_factor, preview_lod
 from .frames.views import visualize
 from .pane_state import PaneError, PaneState, Shown
 from .state import AppState
+from .threads import loading
 from .threads.worker import RenderJob, RenderResult, RenderWorker
 from .ui.blit import Blitter
 from .ui.layout import split_parts
@@ -192,12 +193,12 @@ class PaneRenders:
         for res in self.worker.results():
             self._take(res)
         s = self.state
-        if (
-            not s.pictured.is_set()
-            and s.scene is not None
-            and all(p.parts[part].job is not None for p in s.visible for part in s.parts(p.index))
+        if s.lod_due is not None and (
+            time.perf_counter() >= s.lod_due
+            or all(p.parts[part].job is not None for p in s.visible for part in s.parts(p.index))
         ):
-            s.pictured.set()  # every pane shows the scene: its hierarchy's build may begin (loading.prepare_lod)
+            s.lod_due = None  # every pane shows the scene (or it waited long enough): its hierarchy's build begins
+            loading.start_lod(s.scene)
         for p in self.state.visible:
             view = self.state.settings.panes[p.index].view
             for part, shown in p.parts.items():

@@ -3,7 +3,6 @@ all of it is unit-tested without a window (tests/app/test_state.py); `window.Vie
 
 from __future__ import annotations
 
-import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -27,7 +26,7 @@ from .frames.rates import clamp_rate, first_preview_lod, render_size, step_rate
 from .pane_state import PaneState
 from .screenshots import shot_name
 from .settings import MAX_PANES, MODE_NAMES, AppSettings, PaneSettings, add_recent
-from .threads.loading import SceneLoader
+from .threads.loading import FIRST_PICTURES_WAIT_S, SceneLoader
 from .ui.layout import PANEL_W, Rect, dock_split, fit_aspect, pane_rects
 
 VIDEO_PANE_W = 480
@@ -56,7 +55,8 @@ class AppState(CameraActions):
         self.cam_index = -1
         self.dataset = DatasetViews(self.message)  # the training photos, their views, the snapped one
         self.loader: SceneLoader | None = None
-        self.pictured = threading.Event()  # the scene's LoadResult.pictured: set once the panes show it
+        self.lod_due: float | None = None  # perf_counter time by which the scene's hierarchy build begins at the
+        # latest (PaneRenders.poll begins it sooner, once every pane shows the scene); None once begun, or for none
         self.load_error = self.load_error_short = ""
         self.fly = False
         self.show_help = False
@@ -133,7 +133,7 @@ class AppState(CameraActions):
             self.dataset.drop_for_new_scene(ds is not None and bounds_fit_cameras(lo, hi, [v.camera for v in ds.views]))
             self.background_source = FIXED
         self.scene, self.scene_path = res.scene, res.path
-        self.pictured = res.pictured
+        self.lod_due = time.perf_counter() + FIRST_PICTURES_WAIT_S if res.scene.oit is None else None
         self.load_error = ""
         self.settings.recent = add_recent(self.settings.recent, res.path)
         self.cameras, self.cameras_path, self.cam_index = (res.cameras or []), res.cameras_path, -1

@@ -64,7 +64,7 @@ def test_hierarchy_state_while_it_builds(monkeypatch, tmp_path):
 
 
 def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypatch, large):
-    monkeypatch.setattr(loading, "prepare_lod", lambda scene, after: None)  # no hierarchy: previews draw the stand-in
+    monkeypatch.setattr(loading, "prepare_lod", lambda scene: None)  # no hierarchy: previews draw the stand-in
     state = AppState(AppSettings())
     state.set_pane_count(2)
     state.layout(640, 480, 20, 26, (1.0, 1.0))
@@ -125,7 +125,7 @@ def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypa
 
 
 def test_moving_previews_draw_the_stand_in_until_the_hierarchy_is_there(monkeypatch, large):
-    monkeypatch.setattr(loading, "prepare_lod", lambda scene, after: None)
+    monkeypatch.setattr(loading, "prepare_lod", lambda scene: None)
     moving = [True]
     state = opened(monkeypatch, moving)
     for p in state.panes:  # something of the scene is on screen: no first preview

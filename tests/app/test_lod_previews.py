@@ -4,6 +4,9 @@ for it in the panel (then its cut, moving or not); the pane setting persists nor
 
 from __future__ import annotations
 
+import os
+import sys
+import threading
 import time
 
 from test_state import loaded
@@ -39,6 +42,12 @@ class FakeWorker:
         for job in jobs:
             job.submitted = time.perf_counter()
         self.jobs += jobs
+
+    def results(self) -> list:
+        return []
+
+    def return_textures(self) -> None:
+        pass
 
 
 def opened(monkeypatch, moving: list[bool]) -> AppState:
@@ -157,17 +166,51 @@ def test_pane_lod_setting_is_normalised():
     assert state.settings_for(0, "a").lod is None
 
 
-def test_the_loader_builds_the_hierarchy_in_the_background_after_the_first_pictures(monkeypatch):
-    built = []
-    monkeypatch.setattr(loading, "hierarchy_for", built.append)
-    loader = loading.SceneLoader(gb.DEFAULT_SCENE)
+def test_the_hierarchy_build_begins_once_every_pane_shows_the_scene(monkeypatch):
+    started = []
+    monkeypatch.setattr(loading, "start_lod", started.append)
+    state = AppState(AppSettings())
+    state.set_pane_count(2)
+    state.layout(640, 480, 20, 26, (1.0, 1.0))
+    loaded(state)
+    panes = PaneRenders(state, FakeWorker(), standalone_context())
+    try:
+        first = state.scene
+        panes.poll()
+        state.panes[0].parts["a"].job = object()
+        panes.poll()
+        assert started == []  # one pane of two shows the scene
+        state.panes[1].parts["a"].job = object()
+        panes.poll()
+        panes.poll()
+        assert started == [first]  # once
+        loaded(state)  # another scene: its own build, after its own pictures
+        panes.poll()
+        assert started == [first] and state.scene is not first
+        state.lod_due = time.perf_counter()  # its wait is over: the build begins without pictures
+        panes.poll()
+        assert started == [first, state.scene]
+        loaded(state)
+        replaced = state.scene
+        loaded(state)  # replaced before its pictures or its wait's end: it starts no build
+        state.lod_due = time.perf_counter()
+        panes.poll()
+        assert started[2:] == [state.scene] and state.scene is not replaced
+    finally:
+        panes.release()
+
+
+def test_the_hierarchy_builds_in_a_thread_at_the_lowest_priority(monkeypatch):
+    built, scene = [], gb.load(gb.DEFAULT_SCENE)
+    linux = sys.platform.startswith("linux")  # where a thread has a niceness of its own
+
+    def record(s):
+        built.append((s, os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) if linux else None))
+
+    monkeypatch.setattr(loading, "hierarchy_for", record)
+    loading.start_lod(scene)
     t0 = time.time()
-    while loader.poll() is None:
-        assert time.time() - t0 < 30
-        time.sleep(0.01)
-    assert built == []  # it waits for the panes' first pictures of the scene
-    loader.poll().pictured.set()
     while not built:
         assert time.time() - t0 < 30
         time.sleep(0.01)
-    assert built == [loader.poll().scene]
+    assert built == [(scene, loading.LOD_NICE if linux else None)]

@@ -7,7 +7,7 @@ from __future__ import annotations
 import threading
 import time
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -20,16 +20,20 @@ from .slots import lower_priority
 
 LOD_NICE = 19  # the hierarchy's build runs at the lowest priority: below the render thread, whose frames of the
 # scene it must not delay (nice 10 against 0 would leave the render a tenth of the cores it shares with it)
-FIRST_PICTURES_WAIT_S = 10.0  # the longest the build waits for the panes' first pictures of the scene
+FIRST_PICTURES_WAIT_S = 10.0  # the longest a scene's hierarchy build waits for the panes' first pictures of it
 
 
-def prepare_lod(scene: Scene, after: threading.Event | None = None) -> None:
-    """Build (or read from the cache) the scene's hierarchy for the previews' cuts (they draw the scene's sparse
-    stand-in until it is there): once `after` is set (the viewer's panes show their first pictures of the scene:
-    neither the build nor the read, which holds the GIL in stretches, competes with them), at the lowest priority.
-    A failure is left to the first render of a cut to report."""
-    if after is not None:
-        after.wait(FIRST_PICTURES_WAIT_S)
+def start_lod(scene: Scene) -> None:
+    """Build (or read from the cache) the scene's hierarchy for the previews' cuts in a background thread at the
+    lowest priority (the previews draw the scene's sparse stand-in until it is there). The viewer starts it once its
+    panes show their first pictures of the scene (neither the build nor the read, which holds the GIL in stretches,
+    competes with them), or FIRST_PICTURES_WAIT_S after the scene opened; a scene replaced (or a viewer closed)
+    before then starts none."""
+    threading.Thread(target=prepare_lod, args=(scene,), name="gbviewer-lod", daemon=True).start()
+
+
+def prepare_lod(scene: Scene) -> None:
+    """The body of `start_lod`'s thread. A failure is left to the first render of a cut to report."""
     lower_priority(LOD_NICE)  # this thread's, and the build's OpenMP threads' it starts
     try:
         hierarchy_for(scene)
@@ -47,8 +51,6 @@ class LoadResult:
     error: str = ""
     seconds: float = 0.0
     cancelled: bool = False  # stopped by `SceneLoader.cancel()`: no scene, no error
-    pictured: threading.Event = field(default_factory=threading.Event)  # set by the viewer once its panes show
-    # their first pictures of the scene: the hierarchy's build (`prepare_lod`) waits for it
 
 
 class SceneLoader:
@@ -123,10 +125,6 @@ class SceneLoader:
         res.seconds = self.elapsed
         self._result = res
         self._done.set()
-        if isinstance(res.scene, Scene) and res.scene.oit is None:
-            threading.Thread(
-                target=prepare_lod, args=(res.scene, res.pictured), name="gbviewer-lod", daemon=True
-            ).start()
 
     def done(self) -> bool:
         return self._done.is_set()
