@@ -50,6 +50,24 @@ inline int64_t check_scene(const char* where, const FArr& means, const FArr& sca
     return n;
 }
 
+// Whether every value of `a` is finite.
+inline bool all_finite(const FArr& a) {
+    for (size_t i = 0; i < a.size(); ++i)
+        if (!std::isfinite(a.data()[i])) return false;
+    return true;
+}
+
+// A hierarchy's interior nodes for upload_lod: upload's array shapes, and every value finite (the frame's stage
+// reads them as it reads the scene's rows, which the Scene checked); returns their count.
+inline int64_t check_lod_nodes(const char* where, const FArr& means, const FArr& scales, const FArr& quats,
+                               const FArr& opacities, const FArr& sh, const std::optional<FArr>& filter_3d) {
+    const int64_t m = check_scene(where, means, scales, quats, opacities, sh, filter_3d);
+    if (!(all_finite(means) && all_finite(scales) && all_finite(quats) && all_finite(opacities) && all_finite(sh) &&
+          (!filter_3d || all_finite(*filter_3d))))
+        fail(where, "the interior arrays hold values that are not finite");
+    return m;
+}
+
 // Camera pose and background colour.
 inline void check_view(const char* where, const FArr& R, const FArr& t, const FArr& background) {
     if (R.size() != 9 || t.size() != 3 || background.size() != 3)
@@ -89,11 +107,6 @@ inline RenderArgs parse_render_args(const char* where, const FArr& R, const FArr
     const Mode md = check_mode(where, mode);
     const Projection proj = check_projection(where, projection);
     check_supersample(where, supersample);
-    auto all_finite = [](const FArr& a) {
-        for (size_t i = 0; i < a.size(); ++i)
-            if (!std::isfinite(a.data()[i])) return false;
-        return true;
-    };
     if (!all_finite(R) || !all_finite(t) || !all_finite(background)) fail(where, "R, t and background must be finite");
     const int N = supersample;
     const int64_t hi_w = (int64_t)width * N, hi_h = (int64_t)height * N;  // each < 2^34: the product fits

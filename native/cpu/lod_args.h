@@ -39,7 +39,7 @@ inline void check_lod_upload(int64_t n, const FArr& means, const FArr& scales, c
                              const L64& levels, const IArr& order, int scene_k, bool scene_filter) {
     const char* where = "upload_lod";
     const int64_t m = check_levels(where, levels, n);
-    if (check_scene(where, means, scales, quats, opacities, sh, filter_3d) != m || radius.size() != (size_t)m ||
+    if (check_lod_nodes(where, means, scales, quats, opacities, sh, filter_3d) != m || radius.size() != (size_t)m ||
         size.size() != (size_t)m || order.size() != (size_t)n || (int)sh.shape(1) != scene_k ||
         filter_3d.has_value() != scene_filter || n + m > INT32_MAX)
         fail(where, "the interior arrays must hold one row per interior node, with the scene's SH size and 3D filter");
@@ -49,14 +49,7 @@ inline void check_lod_upload(int64_t n, const FArr& means, const FArr& scales, c
         if (s < 0 || s >= n) fail(where, "order holds indices outside the scene");
         if (seen[s]++) fail(where, "order is not a permutation of the splats (an index repeats)");
     }
-    auto finite = [](const FArr& a) {
-        for (size_t i = 0; i < a.size(); ++i)
-            if (!std::isfinite(a.data()[i])) return false;
-        return true;
-    };
-    if (!(finite(means) && finite(scales) && finite(quats) && finite(opacities) && finite(sh) && finite(radius) &&
-          finite(size) && (!filter_3d || finite(*filter_3d))))
-        fail(where, "the interior arrays hold values that are not finite");
+    if (!(all_finite(radius) && all_finite(size))) fail(where, "the interior arrays hold values that are not finite");
 }
 
 // A frame's level of detail: None, or (tau >= 0, band >= 0, eye float32 (3,), focal > 0, orthographic).

@@ -71,6 +71,13 @@ NB_MODULE(_native_cuda, m) {
         },
         nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"),
         nb::arg("filter_3d").none(), "Renderer.upload's array checks, without a device; returns N.");
+    m.def(
+        "check_lod_nodes",
+        [](FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, std::optional<FArr> filter_3d) {
+            return check_lod_nodes("upload_lod", means, scales, quats, opacities, sh, filter_3d);
+        },
+        nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"),
+        nb::arg("filter_3d").none(), "Renderer.upload_lod's array checks, without a device; returns the node count.");
     nb::class_<cuda::Renderer>(m, "Renderer")
         .def(nb::init<int>(), nb::arg("device") = -1, "device < 0: default_device()")
         .def_prop_ro("device", &cuda::Renderer::device)
@@ -109,7 +116,7 @@ NB_MODULE(_native_cuda, m) {
             "upload_lod",
             [](cuda::Renderer& r, FArr means, FArr scales, FArr quats, FArr opacities, FArr sh,
                std::optional<FArr> filter_3d) {
-                const int64_t m = check_scene("upload_lod", means, scales, quats, opacities, sh, filter_3d);
+                const int64_t m = check_lod_nodes("upload_lod", means, scales, quats, opacities, sh, filter_3d);
                 nb::gil_scoped_release release;
                 r.upload_lod(means.data(), scales.data(), quats.data(), opacities.data(), sh.data(),
                              filter_3d ? filter_3d->data() : nullptr, m, (int)sh.shape(1), r.scene().generation);

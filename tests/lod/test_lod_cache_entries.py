@@ -231,22 +231,24 @@ def test_the_native_cut_stays_in_bounds_whatever_order_it_is_given(tmp_path):
         native.cut(tree.means, tree.radius, tree.size, levels, tree.order, eye, 500.0, False, 0.5, 1.0, 0, None)
 
 
-@pytest.mark.parametrize("case", ["repeated leaf", "NaN radius"])
+@pytest.mark.parametrize("case", ["repeated leaf", "NaN radius", "infinite node opacity"])
 def test_upload_lod_refuses_a_tree_the_stage_cannot_draw(case):
     from gbviewer._native import Renderer
 
     scene = random_scene(500, seed=4)
     tree = lod.build(scene)
-    order, radius = tree.order.copy(), tree.radius.copy()
+    order, radius, opacities = tree.order.copy(), tree.radius.copy(), tree.opacities.copy()
     if case == "repeated leaf":
         order[1] = order[0]
-    else:
+    elif case == "NaN radius":
         radius[0] = np.nan
+    else:
+        opacities[3] = np.inf
     r = Renderer()
     r.upload(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, None)
     with pytest.raises(ValueError, match="permutation" if case == "repeated leaf" else "not finite"):
         r.upload_lod(
-            tree.means, tree.scales, tree.quats, tree.opacities, tree.sh, None, radius, tree.size, tree.levels, order
+            tree.means, tree.scales, tree.quats, opacities, tree.sh, None, radius, tree.size, tree.levels, order
         )
 
 

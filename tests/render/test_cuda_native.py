@@ -99,6 +99,29 @@ def test_tall_images_pass_the_checks():
 
 
 @needs_module
+def test_cuda_refuses_lod_nodes_that_are_not_finite():
+    """upload_lod's checks, shared with the CPU's: upload's shapes, and every value of the nodes finite (the stage
+    reads them as scene rows)."""
+    tree = gb.lod.build(random_scene(500, seed=4))
+    nodes = [tree.means, tree.scales, tree.quats, tree.opacities, tree.sh]
+    m = len(tree.means)
+    assert _native_cuda.check_lod_nodes(*nodes, None) == m > 0
+    assert _native_cuda.check_lod_nodes(*nodes, np.ones(m, np.float32)) == m
+    bad_filter = np.ones(m, np.float32)
+    bad_filter[-1] = np.inf
+    for i in range(len(nodes) + 1):
+        args = [a.copy() for a in nodes] + [None]
+        if i < len(nodes):
+            args[i].flat[args[i].size // 2] = np.nan
+        else:
+            args[i] = bad_filter
+        with pytest.raises(ValueError, match="^upload_lod: the interior arrays hold values that are not finite"):
+            _native_cuda.check_lod_nodes(*args)
+    with pytest.raises(ValueError, match="^upload_lod: array shapes do not match"):
+        _native_cuda.check_lod_nodes(*nodes[:4], tree.sh[:-1], None)
+
+
+@needs_module
 def test_the_wrapper_finds_its_native_calls():
     """The names gbviewer/render/cuda.py and the GPU tests call exist in the built module (a stand-in answers them
     without a GPU)."""
@@ -106,6 +129,8 @@ def test_the_wrapper_finds_its_native_calls():
         "upload",
         "upload_weights",
         "upload_cells",
+        "upload_lod",
+        "upload_cut",
         "render",
         "render_to_gl_texture",
         "release_gl_texture",
