@@ -96,6 +96,6 @@ inside "bash scripts/setup.sh --dev && .venv/bin/pytest -q" >> "$LOG" 2>&1 ||
   { status=1; say "the test command failed"; }
 grep -E "^(setup: torch|[0-9]+ (passed|failed)|FAILED|ERROR)" "$LOG" | tail -40 | sed 's/^/check_distro: /'
 # where each failure failed and what it said: pytest's summary line cuts the message at the terminal's width
-grep -E "^(E   |[a-z_/]+\.py:[0-9]+: [A-Za-z]*Error)" "$LOG" | head -40 | sed 's/^/check_distro: /' || true
+grep -E "^(E   |[A-Za-z0-9_./-]+\.py:[0-9]+: [A-Za-z]*(Error|Exception))" "$LOG" | head -40 | sed 's/^/check_distro: /' || true
 say "log: $LOG"
 exit $status

@@ -26,7 +26,8 @@ from .frames.rates import clamp_rate, first_preview_lod, render_size, step_rate
 from .pane_state import PaneState
 from .screenshots import shot_name
 from .settings import MAX_PANES, MODE_NAMES, AppSettings, PaneSettings, add_recent
-from .threads.loading import FIRST_PICTURES_WAIT_S, SceneLoader
+from .threads import loading
+from .threads.loading import SceneLoader
 from .ui.layout import PANEL_W, Rect, dock_split, fit_aspect, pane_rects
 
 VIDEO_PANE_W = 480
@@ -133,7 +134,7 @@ class AppState(CameraActions):
             self.dataset.drop_for_new_scene(ds is not None and bounds_fit_cameras(lo, hi, [v.camera for v in ds.views]))
             self.background_source = FIXED
         self.scene, self.scene_path = res.scene, res.path
-        self.lod_due = time.perf_counter() + FIRST_PICTURES_WAIT_S if res.scene.oit is None else None
+        self.lod_due = time.perf_counter() + loading.FIRST_PICTURES_WAIT_S if res.scene.oit is None else None
         self.load_error = ""
         self.settings.recent = add_recent(self.settings.recent, res.path)
         self.cameras, self.cameras_path, self.cam_index = (res.cameras or []), res.cameras_path, -1

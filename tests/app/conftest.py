@@ -4,11 +4,23 @@ synthetic training dataset for the photo pane."""
 from __future__ import annotations
 
 import shutil
+import threading
 
 import pytest
 from dataset_builders import shots, write_colmap
 from helpers import skip_or_fail
 from soak_viewer import xvfb_display
+
+
+@pytest.fixture(autouse=True)
+def _builds_end_with_their_test():
+    """A hierarchy build the viewer started (`loading.start_lod`) ends within its test: one still running would write
+    its tree into the cache folder of the next test (the folder is read from XDG_CACHE_HOME when it looks)."""
+    yield
+    for t in threading.enumerate():
+        if t.name == "gbviewer-lod":
+            t.join(120)
+            assert not t.is_alive(), "a hierarchy build of this test ran on for 120 s after it"
 
 
 @pytest.fixture(scope="module")

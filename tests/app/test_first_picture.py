@@ -64,7 +64,6 @@ def test_hierarchy_state_while_it_builds(monkeypatch, tmp_path):
 
 
 def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypatch, large):
-    monkeypatch.setattr(loading, "prepare_lod", lambda scene: None)  # no hierarchy: previews draw the stand-in
     state = AppState(AppSettings())
     state.set_pane_count(2)
     state.layout(640, 480, 20, 26, (1.0, 1.0))
@@ -125,7 +124,6 @@ def test_first_request_is_a_preview_then_the_full_frame_refines_over_it(monkeypa
 
 
 def test_moving_previews_draw_the_stand_in_until_the_hierarchy_is_there(monkeypatch, large):
-    monkeypatch.setattr(loading, "prepare_lod", lambda scene: None)
     moving = [True]
     state = opened(monkeypatch, moving)
     for p in state.panes:  # something of the scene is on screen: no first preview
@@ -191,7 +189,7 @@ def test_panes_get_pictures_while_the_hierarchy_build_is_held_back(xvfb, tmp_pat
     viewer = []  # the app, once made
 
     def slow_build(scene, rule):
-        if not viewer or scene is not viewer[0].state.scene:  # an earlier test's build thread, woken late
+        if not viewer or scene is not viewer[0].state.scene:  # not this test's scene
             return real(scene, rule)
         if sys.platform.startswith("linux"):
             priority.append(os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))

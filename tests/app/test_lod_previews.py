@@ -8,6 +8,7 @@ import os
 import sys
 import threading
 import time
+from pathlib import Path
 
 from test_state import loaded
 
@@ -19,6 +20,7 @@ from gbviewer.app.settings import AppSettings, PaneSettings
 from gbviewer.app.state import AppState
 from gbviewer.app.threads import loading
 from gbviewer.app.threads.worker import RenderResult
+from gbviewer.model.scene import OitData
 from gbviewer.render import BACKENDS
 from gbviewer.render.glsl.context import standalone_context
 
@@ -205,7 +207,8 @@ def test_the_hierarchy_builds_in_a_thread_at_the_lowest_priority(monkeypatch):
     linux = sys.platform.startswith("linux")  # where a thread has a niceness of its own
 
     def record(s):
-        built.append((s, os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) if linux else None))
+        nice = os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) if linux else None
+        built.append((s, threading.current_thread().name, nice))
 
     monkeypatch.setattr(loading, "hierarchy_for", record)
     loading.start_lod(scene)
@@ -213,4 +216,26 @@ def test_the_hierarchy_builds_in_a_thread_at_the_lowest_priority(monkeypatch):
     while not built:
         assert time.time() - t0 < 30
         time.sleep(0.01)
-    assert built == [(scene, loading.LOD_NICE if linux else None)]
+    assert built == [(scene, "gbviewer-lod", loading.LOD_NICE if linux else None)]
+
+
+def test_a_scene_opened_is_built_for_at_the_latest_after_the_wait(monkeypatch):
+    """The deadline `PaneRenders.poll` starts the build at without pictures: FIRST_PICTURES_WAIT_S (read when the
+    scene opens) after it opened; none for a scene carrying wsr / duplex data (level of detail refuses it)."""
+    monkeypatch.setattr(loading, "FIRST_PICTURES_WAIT_S", 37.0)
+    state = AppState(AppSettings())
+    t0 = time.perf_counter()
+    loaded(state)
+    assert t0 + 37.0 <= state.lod_due <= time.perf_counter() + 37.0
+    s = state.scene
+    oit = gb.Scene(s.means, s.scales, s.quats, s.opacities, s.sh, oit=OitData(weight_background=1.0))
+
+    class Done:
+        def done(self):
+            return True
+
+        def poll(self):
+            return loading.LoadResult(Path("oit.ply"), scene=oit)
+
+    state.loader = Done()
+    assert state.poll_loader() == Path("oit.ply") and state.scene is oit and state.lod_due is None
