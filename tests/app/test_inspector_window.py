@@ -28,12 +28,18 @@ def inspector_rect(app) -> tuple[float, float, float, float] | None:
 
 
 def wait_traced(app, timeout: float = 120.0) -> None:
+    """Until every pane shows its latest request in full and each pane's trace is of the frame it shows, and still
+    so two UI frames later (what the test then reads: a frame arriving after the traces makes them stale)."""
     t0 = time.perf_counter()
-    while not app.inspector.current():
-        assert time.perf_counter() - t0 < timeout, "the traces did not come"
+    while True:
+        left = timeout - (time.perf_counter() - t0)
+        assert left > 0, "the traces did not come"
+        if app.wait_rendered(left) and app.inspector.current():
+            app.run_frames(2)
+            if app.panes.all_current() and app.inspector.current():
+                return
         app.step()
         time.sleep(0.01)
-    app.run_frames(2)
 
 
 def differing_pixel(a: np.ndarray, b: np.ndarray, top: int) -> tuple[int, int]:
