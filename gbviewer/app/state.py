@@ -27,7 +27,6 @@ from .pane_state import PaneState
 from .screenshots import shot_name
 from .settings import MAX_PANES, MODE_NAMES, AppSettings, PaneSettings, add_recent
 from .threads import loading
-from .threads.loading import SceneLoader
 from .ui.layout import PANEL_W, Rect, dock_split, fit_aspect, pane_rects
 
 VIDEO_PANE_W = 480
@@ -55,7 +54,7 @@ class AppState(CameraActions):
         self.cameras_path: Path | None = None
         self.cam_index = -1
         self.dataset = DatasetViews(self.message)  # the training photos, their views, the snapped one
-        self.loader: SceneLoader | None = None
+        self.loader: loading.SceneLoader | None = None
         self.lod_due: float | None = None  # perf_counter time by which the scene's hierarchy build begins at the
         # latest (PaneRenders.poll begins it sooner, once every pane shows the scene); None once begun, or for none
         self.load_error = self.load_error_short = ""
@@ -95,7 +94,7 @@ class AppState(CameraActions):
         self.load_error = self.load_error_short = ""
         if self.loader is not None:
             self.loader.cancel()  # the newest request wins; the older load stops within a chunk
-        self.loader = SceneLoader(path)
+        self.loader = loading.SceneLoader(path)
 
     def cancel_load(self) -> None:
         """Stop the scene load in progress (within a chunk of it) and keep the current scene."""

@@ -36,6 +36,11 @@ nb::ndarray<nb::numpy, T> to_numpy(std::vector<T, A>&& v, std::initializer_list<
     return nb::ndarray<nb::numpy, T>(heap->data(), shape, owner);
 }
 
+// The keyword names of a scene's arrays, as check_scene takes them (upload, upload_lod and their checks).
+#define GBV_SCENE_ARGS                                                                          \
+    nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"), \
+        nb::arg("filter_3d").none()
+
 // The scene arrays (activated parameters, as gbviewer.Scene); returns N.
 inline int64_t check_scene(const char* where, const FArr& means, const FArr& scales, const FArr& quats,
                            const FArr& opacities, const FArr& sh, const std::optional<FArr>& filter_3d) {

@@ -241,8 +241,7 @@ NB_MODULE(_native, m) {
                 r.upload(means.data(), scales.data(), quats.data(), opacities.data(), sh.data(), f3d, n,
                          (int)sh.shape(1), std::move(owner));
             },
-            nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"),
-            nb::arg("filter_3d").none(),
+            GBV_SCENE_ARGS,
             "The scene (activated parameters, gbviewer.Scene's arrays), referenced until the next upload: keep "
             "them unchanged meanwhile. Forgets the view weights and cells.")
         .def_prop_ro("num_splats", &Renderer::num_splats)
@@ -266,8 +265,7 @@ NB_MODULE(_native, m) {
                              radius.data(), size.data(), levels.data(), (int)levels.size(), order.data(),
                              std::move(owner));
             },
-            nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"),
-            nb::arg("filter_3d").none(), nb::arg("radius"), nb::arg("size"), nb::arg("levels"), nb::arg("order"),
+            GBV_SCENE_ARGS, nb::arg("radius"), nb::arg("size"), nb::arg("levels"), nb::arg("order"),
             "The uploaded scene's splat hierarchy (gbviewer.lod.Hierarchy's arrays: interior nodes' Gaussians, "
             "radius, size, levels, order), referenced until the next upload; render(lod=...) draws its cuts.")
         .def(

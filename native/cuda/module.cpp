@@ -69,15 +69,13 @@ NB_MODULE(_native_cuda, m) {
         [](FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, std::optional<FArr> filter_3d) {
             return check_scene("upload", means, scales, quats, opacities, sh, filter_3d);
         },
-        nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"),
-        nb::arg("filter_3d").none(), "Renderer.upload's array checks, without a device; returns N.");
+        GBV_SCENE_ARGS, "Renderer.upload's array checks, without a device; returns N.");
     m.def(
         "check_lod_nodes",
         [](FArr means, FArr scales, FArr quats, FArr opacities, FArr sh, std::optional<FArr> filter_3d) {
             return check_lod_nodes("upload_lod", means, scales, quats, opacities, sh, filter_3d);
         },
-        nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"),
-        nb::arg("filter_3d").none(), "Renderer.upload_lod's array checks, without a device; returns the node count.");
+        GBV_SCENE_ARGS, "Renderer.upload_lod's array checks, without a device; returns the node count.");
     nb::class_<cuda::Renderer>(m, "Renderer")
         .def(nb::init<int>(), nb::arg("device") = -1, "device < 0: default_device()")
         .def_prop_ro("device", &cuda::Renderer::device)
@@ -121,8 +119,7 @@ NB_MODULE(_native_cuda, m) {
                 r.upload_lod(means.data(), scales.data(), quats.data(), opacities.data(), sh.data(),
                              filter_3d ? filter_3d->data() : nullptr, m, (int)sh.shape(1), r.scene().generation);
             },
-            nb::arg("means"), nb::arg("scales"), nb::arg("quats"), nb::arg("opacities"), nb::arg("sh"),
-            nb::arg("filter_3d").none(),
+            GBV_SCENE_ARGS,
             "A level-of-detail hierarchy's interior nodes (as upload's arrays), rows N.. after the scene's.")
         .def(
             "upload_cut",
